@@ -1,0 +1,33 @@
+"""Arenas as data files: the paper's R1..R5 (``r1.json`` ... ``r5.json``) and user files.
+
+See ``arenas/README.md`` for the JSON format.
+"""
+from arenas.spec import (
+    WALL_THICKNESS,
+    ArenaError,
+    ArenaSpec,
+    Block,
+    StartSpec,
+    builtin_arena_names,
+    load_arena,
+    parse_arena,
+)
+
+__all__ = [
+    "WALL_THICKNESS",
+    "ArenaError",
+    "ArenaSpec",
+    "Block",
+    "StartSpec",
+    "build_arena",
+    "builtin_arena_names",
+    "load_arena",
+    "parse_arena",
+]
+
+
+def build_arena(spec: ArenaSpec, client: int):  # noqa: ANN201 - re-export without importing pybullet eagerly
+    """Create ``spec`` in pybullet client ``client``; see :func:`arenas.builder.build_arena`."""
+    from arenas.builder import build_arena as _build
+
+    return _build(spec, client)

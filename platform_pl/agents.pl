@@ -1,0 +1,577 @@
+:- module(agents,
+          [ agent_create/4,             % ?Name, +Handler, +Options, +Node
+            agent_execute/4,            % +Node, +Name, +Link, +Event
+            agent_purge/2,              % +Node, +Name
+            agent_exists/2,             % ?Node, ?Name
+            agent_property/3,           % ?Node, ?Name, ?Property
+            agent_list/2,               % +Node, -Agents
+            agent_add_payload/3,        % +Node, +Name, +Preds
+            agent_remove_payload/3,     % +Node, +Name, +Preds
+            agent_add_tokens/3,         % +Node, +Name, +Tokens
+            agent_remove_tokens/3,      % +Node, +Name, +Tokens
+            agent_module/3,             % +Node, +Name, -Module
+            agent_export/3,             % +Node, +Name, -Record
+            agent_install/4,            % +Node, +Record, +Status, -Name
+            agent_remove/2,             % +Node, +Name
+            agent_set_status/3,         % +Node, +Name, +Status
+            agent_status/3,             % +Node, +Name, -Status
+            agent_hop_times/3,          % +Node, +Name, -Millis
+            agent_fresh_name/3,         % +Node, +Base, -Name
+            current_agent/1,            % -Name
+            replace_guid/4,             % +Term0, +From, +To, -Term
+            with_agents_locked/1        % :Goal
+          ]).
+:- use_module(node, [current_node/1, node_set_current/1, node_property/2]).
+:- autoload(library(error),
+            [must_be/2, existence_error/2, permission_error/3, domain_error/2]).
+:- autoload(library(option), [option/2, option/3]).
+:- autoload(library(lists), [member/2, subtract/3, union/3, max_member/2]).
+:- autoload(library(apply), [maplist/3, include/3]).
+
+:- meta_predicate with_agents_locked(0).
+
+/** <module> Agents on a node: registry, code, payload, tokens, threads
+
+An agent is a name, a handler predicate, a kind (mobile or static), a
+list of tokens and a private module that holds its code: the handler's
+clauses and the payload facts, with the atom `guid` replaced by the
+agent's name (on terms, never on text). Goals in the handler run in that
+module, which inherits from `user`, so helper predicates of the program
+are visible and the agent's own asserts land in its module, i.e. they
+are the agent's state and travel with it.
+
+A running agent has a thread. When its handler returns the agent stays
+on the node, idle, until it is executed again, moved or purged.
+*/
+
+:- dynamic
+    agent_entry/4,              % Node, Name, Handler, Kind
+    agent_tokens_/3,            % Node, Name, Tokens
+    agent_status_/3,            % Node, Name, Status
+    agent_payload_/3,           % Node, Name, Pred/Arity
+    agent_hops_/3.              % Node, Name, Hops
+
+:- thread_local
+    current_agent_tl/1.
+
+:- multifile
+    node:node_stopping/1.
+
+node:node_stopping(Node) :-
+    forall(agent_entry(Node, Name, _, _),
+           catch(agent_purge(Node, Name), _, true)).
+
+%!  with_agents_locked(:Goal) is semidet.
+%
+%   Run Goal holding the registry mutex. Goal must be quick and must
+%   not do any I/O with peers.
+
+with_agents_locked(Goal) :-
+    with_mutex(dfrl_agents, Goal).
+
+%!  agent_module(+Node, +Name, -Module) is det.
+%
+%   The module holding the code and payload of agent Name on Node.
+
+agent_module(Node, Name, Module) :-
+    format(atom(Module), 'dfrl_agent@~w/~q', [Node, Name]).
+
+%!  agent_create(?Name, +Handler, +Options, +Node) is det.
+%
+%   Register a new agent on Node without starting it. An unbound Name is
+%   bound to a fresh one. The clauses of Handler/N (N >= 3) in the
+%   source module are copied into the agent's module with `guid`
+%   replaced by Name. Options:
+%
+%     - kind(+Kind)        `mobile` (default) or `static`
+%     - tokens(+List)      tokens the agent carries (default: the node's)
+%     - payload(+Preds)    payload predicates, as for agent_add_payload/3
+%     - module(+Module)    where Handler and payload are defined
+%                          (default `user`)
+%
+%   @error permission_error(create, agent, Name) if the name is taken.
+%   @error existence_error(handler, Handler/3) if Handler has no clauses.
+
+agent_create(Name, Handler0, Options, Node) :-
+    must_be(list, Options),
+    strip_handler(Handler0, Options, SrcModule, Handler),
+    option(kind(Kind), Options, mobile),
+    must_be(oneof([mobile, static]), Kind),
+    (   option(tokens(Tokens), Options)
+    ->  must_be(list, Tokens)
+    ;   node_property(Node, tokens(Tokens))
+    ->  true
+    ;   existence_error(platform, Node)
+    ),
+    handler_clauses(SrcModule, Handler, Templates),
+    (   Templates == []
+    ->  existence_error(handler, Handler/3)
+    ;   true
+    ),
+    with_agents_locked(reserve_name(Node, Name, Handler, Kind)),
+    agent_module(Node, Name, M),
+    replace_guid(Templates, guid, Name, Clauses),
+    install_clauses(M, Clauses),
+    assertz(agent_tokens_(Node, Name, Tokens)),
+    assertz(agent_hops_(Node, Name, [])),
+    assertz(agent_status_(Node, Name, idle)),
+    (   option(payload(Preds), Options)
+    ->  agent_add_payload(Node, Name, Preds)
+    ;   true
+    ).
+
+strip_handler(M:H, _, M, H) :-
+    !,
+    must_be(atom, H).
+strip_handler(H, Options, M, H) :-
+    must_be(atom, H),
+    option(module(M), Options, user).
+
+reserve_name(Node, Name, Handler, Kind) :-
+    (   var(Name)
+    ->  agent_fresh_name(Node, agent, Name)
+    ;   must_be(atom, Name),
+        (   agent_entry(Node, Name, _, _)
+        ->  permission_error(create, agent, Name)
+        ;   true
+        )
+    ),
+    assertz(agent_entry(Node, Name, Handler, Kind)).
+
+%!  agent_fresh_name(+Node, +Base, -Name) is det.
+%
+%   Name is Base_N, not yet used on Node.
+
+agent_fresh_name(Node, Base, Name) :-
+    flag(dfrl_agent_names, N0, N0+1),
+    N is N0 + 1,
+    format(atom(Try), '~w_~d', [Base, N]),
+    (   agent_entry(Node, Try, _, _)
+    ->  agent_fresh_name(Node, Base, Name)
+    ;   Name = Try
+    ).
+
+handler_clauses(M, Handler, Clauses) :-
+    findall((H:-B),
+            ( between(3, 16, A),
+              functor(H, Handler, A),
+              current_predicate(M:Handler/A),
+              \+ predicate_property(M:H, imported_from(_)),
+              clause(M:H, B)
+            ),
+            Clauses).
+
+%!  replace_guid(+Term0, +From, +To, -Term) is det.
+%
+%   Term is Term0 with every occurrence of the atom From replaced by To.
+%   Strings, numbers and atoms that merely contain From are untouched;
+%   variables keep their sharing.
+
+replace_guid(T0, From, To, T) :-
+    (   T0 == From
+    ->  T = To
+    ;   compound(T0)
+    ->  compound_name_arguments(T0, F, Args0),
+        maplist(replace_in(From, To), Args0, Args),
+        compound_name_arguments(T, F, Args)
+    ;   T = T0
+    ).
+
+replace_in(From, To, A0, A) :-
+    replace_guid(A0, From, To, A).
+
+install_clauses(M, Clauses) :-
+    forall(member(Cl, Clauses), install_clause(M, Cl)).
+
+install_clause(M, (H:-B)) :-
+    !,
+    ensure_dynamic(M, H),
+    (   B == true
+    ->  assertz(M:H)
+    ;   assertz(M:(H:-B))
+    ).
+install_clause(M, H) :-
+    ensure_dynamic(M, H),
+    assertz(M:H).
+
+ensure_dynamic(M, H) :-
+    (   predicate_property(M:H, dynamic),
+        \+ predicate_property(M:H, imported_from(_))
+    ->  true
+    ;   functor(H, F, A),
+        dynamic(M:F/A)
+    ).
+
+%!  agent_exists(?Node, ?Name) is nondet.
+
+agent_exists(Node, Name) :-
+    agent_entry(Node, Name, _, _).
+
+%!  agent_property(?Node, ?Name, ?Property) is nondet.
+%
+%   Properties: handler(H), kind(K), tokens(L), status(S), payload(L),
+%   module(M), hops(N).
+
+agent_property(Node, Name, Property) :-
+    agent_entry(Node, Name, Handler, Kind),
+    agent_property_(Property, Node, Name, Handler, Kind).
+
+agent_property_(handler(H), _, _, H, _).
+agent_property_(kind(K), _, _, _, K).
+agent_property_(tokens(T), Node, Name, _, _) :-
+    agent_tokens_(Node, Name, T).
+agent_property_(status(S), Node, Name, _, _) :-
+    agent_status_(Node, Name, S).
+agent_property_(payload(L), Node, Name, _, _) :-
+    findall(P, agent_payload_(Node, Name, P), L).
+agent_property_(module(M), Node, Name, _, _) :-
+    agent_module(Node, Name, M).
+agent_property_(hops(N), Node, Name, _, _) :-
+    agent_hops_(Node, Name, Hops),
+    length(Hops, N).
+
+%!  agent_list(+Node, -Agents) is det.
+%
+%   Agents is a list of agent(Name, Handler, Kind, Status).
+
+agent_list(Node, Agents) :-
+    findall(agent(Name, Handler, Kind, Status),
+            ( agent_entry(Node, Name, Handler, Kind),
+              agent_status_(Node, Name, Status0),
+              public_status(Status0, Status)
+            ),
+            Agents).
+
+public_status(running(_), running) :- !.
+public_status(departing(_), departing) :- !.
+public_status(staged(_), staged) :- !.
+public_status(S, S).
+
+%!  agent_status(+Node, +Name, -Status) is det.
+%
+%   @error existence_error(agent, Name)
+
+agent_status(Node, Name, Status) :-
+    (   agent_status_(Node, Name, S)
+    ->  Status = S
+    ;   existence_error(agent, Name)
+    ).
+
+%!  agent_set_status(+Node, +Name, +Status) is det.
+
+agent_set_status(Node, Name, Status) :-
+    retractall(agent_status_(Node, Name, _)),
+    assertz(agent_status_(Node, Name, Status)).
+
+must_exist(Node, Name) :-
+    (   agent_entry(Node, Name, _, _)
+    ->  true
+    ;   existence_error(agent, Name)
+    ).
+
+		 /*******************************
+		 *            PAYLOAD		*
+		 *******************************/
+
+%!  agent_add_payload(+Node, +Name, +Preds) is det.
+%
+%   Preds is a list of Pred/Arity or (Pred,Arity). The clauses of each in
+%   `user` whose first argument is `guid` or Name (and all clauses of a
+%   predicate with arity 0) are copied into the agent, specialised to
+%   it. A predicate with no clauses is declared (empty) so the agent can
+%   assert into it. Payload travels with the agent.
+
+agent_add_payload(Node, Name, Preds) :-
+    must_be(list, Preds),
+    must_exist(Node, Name),
+    agent_module(Node, Name, M),
+    forall(member(P0, Preds),
+           ( pred_indicator(P0, F/A),
+             copy_payload(M, Name, F, A),
+             (   agent_payload_(Node, Name, F/A)
+             ->  true
+             ;   assertz(agent_payload_(Node, Name, F/A))
+             )
+           )).
+
+pred_indicator(F/A, F/A) :-
+    !,
+    must_be(atom, F),
+    must_be(nonneg, A).
+pred_indicator((F,A), F/A) :-
+    !,
+    must_be(atom, F),
+    must_be(nonneg, A).
+pred_indicator(X, _) :-
+    throw(error(type_error(predicate_indicator, X), _)).
+
+copy_payload(M, Name, F, A) :-
+    dynamic(M:F/A),
+    functor(H, F, A),
+    (   current_predicate(user:F/A),
+        \+ predicate_property(user:H, imported_from(_))
+    ->  findall(Cl, payload_template(H, Name, Cl), Templates),
+        replace_guid(Templates, guid, Name, Clauses),
+        forall(member(Cl, Clauses),
+               ( Cl = (H1:-B1),
+                 (   clause(M:H1, B1)
+                 ->  true
+                 ;   install_clause(M, Cl)
+                 )
+               ))
+    ;   true
+    ).
+
+payload_template(H, Name, (H:-B)) :-
+    clause(user:H, B),
+    (   compound(H)
+    ->  arg(1, H, First),
+        ( First == guid ; First == Name )
+    ;   true
+    ).
+
+%!  agent_remove_payload(+Node, +Name, +Preds) is det.
+%
+%   Remove the payload predicates Preds (their clauses) from the agent.
+
+agent_remove_payload(Node, Name, Preds) :-
+    must_be(list, Preds),
+    must_exist(Node, Name),
+    agent_module(Node, Name, M),
+    forall(member(P0, Preds),
+           ( pred_indicator(P0, F/A),
+             functor(H, F, A),
+             (   predicate_property(M:H, dynamic)
+             ->  retractall(M:H)
+             ;   true
+             ),
+             retractall(agent_payload_(Node, Name, F/A))
+           )).
+
+		 /*******************************
+		 *            TOKENS		*
+		 *******************************/
+
+%!  agent_add_tokens(+Node, +Name, +Tokens) is det.
+
+agent_add_tokens(Node, Name, Tokens) :-
+    must_be(list, Tokens),
+    maplist(must_be(ground), Tokens),
+    must_exist(Node, Name),
+    with_agents_locked(
+        ( retract(agent_tokens_(Node, Name, Old)),
+          union(Old, Tokens, New),
+          assertz(agent_tokens_(Node, Name, New))
+        )).
+
+%!  agent_remove_tokens(+Node, +Name, +Tokens) is det.
+
+agent_remove_tokens(Node, Name, Tokens) :-
+    must_be(list, Tokens),
+    must_exist(Node, Name),
+    with_agents_locked(
+        ( retract(agent_tokens_(Node, Name, Old)),
+          subtract(Old, Tokens, New),
+          assertz(agent_tokens_(Node, Name, New))
+        )).
+
+		 /*******************************
+		 *           EXECUTION		*
+		 *******************************/
+
+%!  agent_execute(+Node, +Name, +Link, +Event) is det.
+%
+%   Start agent Name in a new thread: its handler is called as
+%   Handler(Name, Link, Event) in the agent's module.
+%
+%   @error existence_error(agent, Name)
+%   @error permission_error(execute, agent, Name) if it is already
+%   running or in transit.
+
+agent_execute(Node, Name, Link, Event) :-
+    must_exist(Node, Name),
+    with_agents_locked(start_thread(Node, Name, Link, Event)).
+
+start_thread(Node, Name, Link, Event) :-
+    agent_status_(Node, Name, Status),
+    (   Status == idle
+    ->  true
+    ;   Status = running(Tid), thread_self(Tid)
+    ->  true                    % re-executed from its own handler
+    ;   permission_error(execute, agent, Name)
+    ),
+    thread_create(agent_run(Node, Name, Link, Event), NewTid,
+                  [detached(true)]),
+    agent_set_status(Node, Name, running(NewTid)).
+
+agent_run(Node, Name, Link, Event) :-
+    thread_self(Me),
+    catch(node_set_current(Node), _, true),
+    assertz(current_agent_tl(Name)),
+    (   agent_entry(Node, Name, Handler, _)
+    ->  agent_module(Node, Name, M),
+        Goal =.. [Handler, Name, Link, Event],
+        catch(run_handler(Node, Name, M:Goal), E, handler_error(Node, Name, E))
+    ;   true
+    ),
+    with_agents_locked(
+        (   agent_status_(Node, Name, running(Me))
+        ->  agent_set_status(Node, Name, idle)
+        ;   true
+        )).
+
+run_handler(Node, Name, Goal) :-
+    (   call(Goal)
+    ->  true
+    ;   debug(dfrl(agent), 'Handler of ~p on ~w failed', [Name, Node])
+    ).
+
+handler_error(_, _, '$dfrl_purged') :- !.
+handler_error(Node, Name, E) :-
+    print_message(warning, dfrl(agent_crashed(Node, Name, E))).
+
+%!  current_agent(-Name) is semidet.
+%
+%   Name is the agent whose handler runs in the calling thread.
+
+current_agent(Name) :-
+    current_agent_tl(Name).
+
+%!  agent_purge(+Node, +Name) is det.
+%
+%   Stop agent Name (if running, its thread is interrupted) and forget
+%   it with its code and payload.
+%
+%   @error existence_error(agent, Name)
+
+agent_purge(Node, Name) :-
+    must_exist(Node, Name),
+    (   agent_status_(Node, Name, running(Tid)),
+        \+ thread_self(Tid)
+    ->  catch(thread_signal(Tid, throw('$dfrl_purged')), _, true)
+    ;   true
+    ),
+    agent_remove(Node, Name).
+
+%!  agent_remove(+Node, +Name) is det.
+%
+%   Forget agent Name and its code on Node (without touching a thread).
+
+agent_remove(Node, Name) :-
+    agent_module(Node, Name, M),
+    forall(( current_predicate(_, M:H),
+             \+ predicate_property(M:H, imported_from(_)),
+             predicate_property(M:H, dynamic)
+           ),
+           retractall(M:H)),
+    with_agents_locked(
+        ( retractall(agent_entry(Node, Name, _, _)),
+          retractall(agent_tokens_(Node, Name, _)),
+          retractall(agent_status_(Node, Name, _)),
+          retractall(agent_payload_(Node, Name, _)),
+          retractall(agent_hops_(Node, Name, _))
+        )).
+
+		 /*******************************
+		 *        EXPORT / INSTALL		*
+		 *******************************/
+
+%!  agent_export(+Node, +Name, -Record) is det.
+%
+%   Record is a self-contained copy of the agent: everything needed to
+%   install it on another node, save it to a file or clone it:
+%   agent(Name, Handler, Kind, Tokens, Payload, Preds, Clauses, Hops).
+
+agent_export(Node, Name, agent(Name, Handler, Kind, Tokens, Payload,
+                               Preds, Clauses, Hops)) :-
+    must_exist(Node, Name),
+    agent_entry(Node, Name, Handler, Kind),
+    agent_tokens_(Node, Name, Tokens),
+    findall(P, agent_payload_(Node, Name, P), Payload),
+    agent_hops_(Node, Name, Hops),
+    agent_module(Node, Name, M),
+    findall(F/A,
+            ( current_predicate(_, M:H),
+              \+ predicate_property(M:H, imported_from(_)),
+              predicate_property(M:H, dynamic),
+              functor(H, F, A)
+            ),
+            Preds),
+    findall(Cl,
+            ( member(F/A, Preds),
+              functor(H, F, A),
+              clause(M:H, B),
+              Cl = (H:-B)
+            ),
+            Clauses).
+
+%!  agent_install(+Node, +Record, +Status, -Name) is det.
+%
+%   Install an agent from its Record with Status. If Record's name is
+%   taken on Node, Name is the name of Record unless the record asks for
+%   a fresh one: rename(Base) as name makes a fresh name Base_N and
+%   replaces the old name by it in all clauses.
+%
+%   @error permission_error(create, agent, Name) if the name is taken.
+%   @error type_error(agent_record, Record) for a malformed record.
+
+agent_install(Node, Record, Status, Name) :-
+    check_record(Record),
+    Record = agent(Name0, Handler, Kind, Tokens, Payload, Preds, Clauses0, Hops),
+    with_agents_locked(install_entry(Node, Name0, Handler, Kind, Name)),
+    (   Name0 = rename(Old, _)
+    ->  replace_guid(Clauses0, Old, Name, Clauses)
+    ;   Clauses = Clauses0
+    ),
+    agent_module(Node, Name, M),
+    forall(member(F/A, Preds), dynamic(M:F/A)),
+    install_clauses(M, Clauses),
+    assertz(agent_tokens_(Node, Name, Tokens)),
+    forall(member(P, Payload), assertz(agent_payload_(Node, Name, P))),
+    assertz(agent_hops_(Node, Name, Hops)),
+    assertz(agent_status_(Node, Name, Status)).
+
+install_entry(Node, rename(_, Base), Handler, Kind, Name) :-
+    !,
+    agent_fresh_name(Node, Base, Name),
+    assertz(agent_entry(Node, Name, Handler, Kind)).
+install_entry(Node, Name, Handler, Kind, Name) :-
+    (   agent_entry(Node, Name, _, _)
+    ->  permission_error(create, agent, Name)
+    ;   assertz(agent_entry(Node, Name, Handler, Kind))
+    ).
+
+check_record(Record) :-
+    (   Record = agent(Name, Handler, Kind, Tokens, Payload, Preds, Clauses, Hops),
+        ( atom(Name) ; Name = rename(O, B), atom(O), atom(B) ),
+        atom(Handler),
+        memberchk(Kind, [mobile, static]),
+        is_list(Tokens), ground(Tokens),
+        is_list(Payload),
+        is_list(Preds),
+        forall(member(P, Preds), (P = F/A, atom(F), integer(A), A >= 0)),
+        is_list(Clauses),
+        forall(member(C, Clauses), valid_clause(C)),
+        is_list(Hops)
+    ->  true
+    ;   throw(error(type_error(agent_record, Record), _))
+    ).
+
+valid_clause((H:-_)) :-
+    !,
+    callable(H),
+    \+ H = (_:_).
+valid_clause(H) :-
+    callable(H),
+    \+ H = (_:_).
+
+%!  agent_hop_times(+Node, +Name, -Millis) is det.
+%
+%   Millis lists the duration of each hop the agent made, oldest first,
+%   measured from the start of move_agent at the source to the start of
+%   its handler at the destination.
+
+agent_hop_times(Node, Name, Millis) :-
+    must_exist(Node, Name),
+    agent_hops_(Node, Name, Hops),
+    findall(Ms, ( member(hop(_, _, T0, T1), Hops), Ms is (T1-T0)*1000 ), Millis).

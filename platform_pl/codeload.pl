@@ -1,0 +1,120 @@
+:- module(codeload,
+          [ load_program/1,             % +File
+            load_program_at/3,          % +Address, +File, +Options
+            load_program_text/4         % +Address, +Id, +Text, +Options
+          ]).
+:- use_module(node, [current_node/1, node_property/2, node_for_address/2,
+                     node_option/3]).
+:- use_module(transport).
+:- autoload(library(error), [must_be/2]).
+:- autoload(library(option), [option/2, option/3]).
+:- autoload(library(readutil), [read_file_to_string/3]).
+
+/** <module> Loading agent programs into running nodes
+
+A node can load a program (handlers, helper predicates, aggregation
+methods) while it runs: from a local file, or sent by a peer that proves
+one of the node's tokens. The program is loaded into `user`, where new
+agents find their handlers. Errors and warnings raised while loading are
+collected and returned to the sender.
+*/
+
+:- multifile node:platform_request/4.
+:- multifile user:message_hook/3.
+:- dynamic user:message_hook/3.
+
+:- thread_local collecting/0, collected/1.
+
+%!  load_program(+File) is det.
+%
+%   Load File into `user` on this process (and so into every node it
+%   runs). Loading again replaces the file's previous definitions.
+
+load_program(File) :-
+    must_be(atomic, File),
+    load_files(user:File, [if(true)]).
+
+%!  load_program_at(+Address, +File, +Options) is det.
+%
+%   Send the text of File to the platform at Address, which loads it
+%   into its `user` module without a restart. Options: tokens(List), the
+%   tokens to prove (default the current node's), and the timeouts of
+%   transport_open/3.
+%
+%   @error permission_error(load, platform, Address) if no token fits.
+%   @error load_errors(Messages) if the program had errors there.
+
+load_program_at(Address, File, Options) :-
+    read_file_to_string(File, Text, []),
+    file_base_name(File, Base),
+    load_program_text(Address, Base, Text, Options).
+
+%!  load_program_text(+Address, +Id, +Text, +Options) is det.
+%
+%   Like load_program_at/3 for program Text, known there as Id.
+
+load_program_text(Address0, Id, Text, Options) :-
+    must_be(atomic, Id),
+    must_be(string, Text),
+    address_normalize(Address0, Address),
+    (   node_for_address(Address, _)
+    ->  load_text(Id, Text)
+    ;   tokens(Options, Tokens),
+        transport_request(Address, load_code(Id, Text), _,
+                          [tokens(Tokens)|Options])
+    ).
+
+tokens(Options, Tokens) :-
+    (   option(tokens(Tokens), Options)
+    ->  true
+    ;   catch(current_node(Node), _, fail),
+        node_property(Node, tokens(Tokens))
+    ->  true
+    ;   Tokens = []
+    ).
+
+load_text(Id, Text) :-
+    format(atom(SourceId), 'dfrl_program://~w', [Id]),
+    setup_call_cleanup(
+        ( open_string(Text, In), assertz(collecting) ),
+        load_files(user:SourceId, [stream(In), if(true)]),
+        ( close(In), retractall(collecting) )),
+    findall(M, retract(collected(M)), Errors),
+    (   Errors == []
+    ->  true
+    ;   throw(error(load_errors(Errors), _))
+    ).
+
+user:message_hook(Term, error, _Lines) :-
+    collecting,
+    message_to_codes(Term, Text),
+    assertz(collected(Text)),
+    fail.
+
+message_to_codes(Term, Text) :-
+    message_to_codes_(Term, Text),
+    !.
+message_to_codes(Term, Text) :-
+    format(string(Text), '~p', [Term]).
+
+message_to_codes_(Term, Text) :-
+    '$messages':translate_message(Term, Lines, []),
+    with_output_to(string(Text), print_message_lines(current_output, '', Lines)).
+
+node:platform_request(load_code(Id, Text), Ctx, Reply, true) :-
+    Ctx = ctx(Node, _, _, _, _, Auth),
+    (   Auth == true
+    ->  load_text(Id, Text),
+        Reply = ok(loaded(Id))
+    ;   node_property(Node, address(Here)),
+        Reply = error(error(permission_error(load, platform, Here), _))
+    ).
+
+:- multifile prolog:error_message//1.
+
+prolog:error_message(load_errors(Errors)) -->
+    [ 'The program did not load cleanly:'-[] ],
+    error_lines(Errors).
+
+error_lines([]) --> [].
+error_lines([E|Es]) --> [ nl, '  ~w'-[E] ], error_lines(Es).

@@ -1,0 +1,135 @@
+:- module(messages,
+          [ agent_post/5,               % +Address, +Agent, +Handler, +Link, +Args
+            platform_event/1,           % +Name/Arity
+            remote_agents/3,            % +Address, -Agents, +Options
+            remote_execute/4            % +Address, +Agent, +Event, +Options
+          ]).
+:- use_module(node, [current_node/1, node_property/2, node_for_address/2,
+                     node_option/3]).
+:- use_module(agents).
+:- use_module(transport).
+:- autoload(library(error), [must_be/2, existence_error/2]).
+:- autoload(library(option), [option/2]).
+
+/** <module> Messages to agents and to declared platform events
+
+A posted message names an agent and its handler: the receiving platform
+calls Handler(Agent, Link, Args...) in the agent's module, in a fresh
+thread, and only if Agent is registered there with that handler. A node
+may also declare platform events (platform_event/1): posting to the
+pseudo-agent `platform` calls user:Handler(platform, Link, Args...) if
+Handler/N was declared. Nothing else can be called by a peer.
+*/
+
+:- dynamic declared_event/1.
+
+:- multifile node:platform_request/4.
+
+%!  platform_event(+NameArity) is det.
+%
+%   Declare user:Name/Arity (Arity >= 2) as a platform event that peers
+%   may trigger with a posted message to the pseudo-agent `platform`.
+
+platform_event(Name/Arity) :-
+    must_be(atom, Name),
+    must_be(integer, Arity),
+    (   declared_event(Name/Arity)
+    ->  true
+    ;   assertz(declared_event(Name/Arity))
+    ).
+
+%!  agent_post(+Address, +Agent, +Handler, +Link, +Args) is det.
+%
+%   Post a message to Agent at the platform at Address: the platform
+%   calls Handler(Agent, Link, Args...) there, in a new thread. Succeeds
+%   once the platform accepted the message.
+%
+%   @error existence_error(agent, Agent) if the platform does not host
+%   Agent with Handler (nor declares Handler as a platform event).
+
+agent_post(Address0, Agent, Handler, Link, Args) :-
+    must_be(atom, Handler),
+    must_be(list, Args),
+    address_normalize(Address0, Address),
+    (   node_for_address(Address, Node)
+    ->  deliver(Node, Agent, Handler, Link, Args)
+    ;   request_options(Options),
+        transport_request(Address, post(Agent, Handler, Link, Args), _, Options)
+    ).
+
+request_options([connect_timeout(CT), reply_timeout(RT)]) :-
+    (   catch(current_node(Node), _, fail)
+    ->  node_option(Node, connect_timeout, CT),
+        node_option(Node, reply_timeout, RT)
+    ;   CT = 5,
+        RT = 30
+    ).
+
+deliver(Node, Agent, Handler, Link, Args) :-
+    Goal0 =.. [Handler, Agent, Link | Args],
+    (   agent_property(Node, Agent, handler(Handler))
+    ->  agent_module(Node, Agent, M),
+        Goal = M:Goal0
+    ;   Agent == platform,
+        length(Args, N),
+        Arity is N + 2,
+        declared_event(Handler/Arity)
+    ->  Goal = user:Goal0
+    ;   existence_error(agent, Agent)
+    ),
+    thread_create(run_message(Node, Agent, Goal), _, [detached(true)]).
+
+run_message(Node, Agent, Goal) :-
+    node:node_set_current(Node),
+    catch(( call(Goal) -> true ; true ), E,
+          print_message(warning, dfrl(agent_crashed(Node, Agent, E)))).
+
+%!  remote_agents(+Address, -Agents, +Options) is det.
+%
+%   Agents (agent(Name, Handler, Kind, Status)) on the platform at
+%   Address, local or remote.
+
+remote_agents(Address0, Agents, Options) :-
+    address_normalize(Address0, Address),
+    (   node_for_address(Address, Node)
+    ->  agent_list(Node, Agents)
+    ;   transport_request(Address, agents, Agents, Options)
+    ).
+
+%!  remote_execute(+Address, +Agent, +Event, +Options) is det.
+%
+%   Start Agent on the platform at Address with Event. A remote platform
+%   requires a proof of one of its tokens (option tokens(List), default
+%   the current node's tokens).
+
+remote_execute(Address0, Agent, Event, Options) :-
+    address_normalize(Address0, Address),
+    (   node_for_address(Address, Node)
+    ->  node_property(Node, link(Link)),
+        agent_execute(Node, Agent, Link, Event)
+    ;   (   option(tokens(_), Options)
+        ->  Options1 = Options
+        ;   catch(current_node(Here), _, fail),
+            node_property(Here, tokens(Tokens))
+        ->  Options1 = [tokens(Tokens)|Options]
+        ;   Options1 = [tokens([])|Options]
+        ),
+        transport_request(Address, execute(Agent, Event), _, Options1)
+    ).
+
+node:platform_request(post(Agent, Handler, Link, Args),
+                      ctx(Node, _, _, _, _, _), ok(delivered), true) :-
+    must_be(atom, Handler),
+    must_be(list, Args),
+    deliver(Node, Agent, Handler, Link, Args).
+node:platform_request(agents, ctx(Node, _, _, _, _, _), ok(Agents), true) :-
+    agent_list(Node, Agents).
+node:platform_request(execute(Agent, Event), Ctx, Reply, true) :-
+    Ctx = ctx(Node, _, _, _, _, Auth),
+    (   Auth == true
+    ->  node_property(Node, link(Link)),
+        agent_execute(Node, Agent, Link, Event),
+        Reply = ok(started)
+    ;   node_property(Node, address(Here)),
+        Reply = error(error(permission_error(execute, platform, Here), _))
+    ).

@@ -1,0 +1,95 @@
+:- module(platform_errors,
+          [ transport_error/2,          % +Address, +Reason
+            wire_error/1                % +Reason
+          ]).
+/** <module> Error terms of the agent platform and their messages
+
+The platform throws only error(Formal, Context) terms. It reuses the ISO
+formals where they fit (existence_error/2, permission_error/3, type_error/2,
+domain_error/2) and adds:
+
+  - transport_error(Address, Reason)
+    Talking to the platform at Address failed: Reason is one of
+    connect(Detail), timeout(Phase), closed(Phase) or protocol(Detail).
+  - wire_error(Reason)
+    A frame could not be read: bad_magic, bad_version(V),
+    too_large(Size, Max), binary_not_allowed, syntax(Detail) or truncated.
+  - remote_error(Address, Error)
+    The platform at Address answered a request with Error.
+
+Each has a prolog:error_message//1 clause, so the toplevel prints a
+readable message.
+*/
+
+:- multifile prolog:error_message//1, prolog:message//1.
+
+%!  transport_error(+Address, +Reason) is det.
+%
+%   Throw error(transport_error(Address, Reason), _).
+
+transport_error(Address, Reason) :-
+    throw(error(transport_error(Address, Reason), _)).
+
+%!  wire_error(+Reason) is det.
+%
+%   Throw error(wire_error(Reason), _).
+
+wire_error(Reason) :-
+    throw(error(wire_error(Reason), _)).
+
+prolog:error_message(transport_error(Address, Reason)) -->
+    [ 'Platform at ~p: '-[Address] ],
+    transport_reason(Reason).
+prolog:error_message(wire_error(Reason)) -->
+    [ 'Malformed frame: ' ],
+    wire_reason(Reason).
+prolog:error_message(remote_error(Address, Error)) -->
+    [ 'Platform at ~p answered with an error: '-[Address] ],
+    (   { Error = error(Formal, _) }
+    ->  '$messages':translate_message(error(Formal, _))
+    ;   [ '~p'-[Error] ]
+    ).
+
+transport_reason(connect(Detail)) -->
+    !, [ 'cannot connect (~p)'-[Detail] ].
+transport_reason(timeout(Phase)) -->
+    !, [ 'no answer in time (while ~w)'-[Phase] ].
+transport_reason(closed(Phase)) -->
+    !, [ 'connection closed by the peer (while ~w)'-[Phase] ].
+transport_reason(protocol(Detail)) -->
+    !, [ 'protocol violation (~p)'-[Detail] ].
+transport_reason(Other) -->
+    [ '~p'-[Other] ].
+
+wire_reason(bad_magic) -->
+    !, [ 'not a dfrl frame (bad magic bytes)' ].
+wire_reason(bad_version(V)) -->
+    !, [ 'unsupported protocol version ~w'-[V] ].
+wire_reason(too_large(Size, Max)) -->
+    !, [ 'frame of ~D bytes exceeds the limit of ~D bytes'-[Size, Max] ].
+wire_reason(binary_not_allowed) -->
+    !, [ 'binary frame on a connection that has not proved a token' ].
+wire_reason(syntax(Detail)) -->
+    !, [ 'unreadable term (~p)'-[Detail] ].
+wire_reason(truncated) -->
+    !, [ 'connection closed in the middle of a frame' ].
+wire_reason(Other) -->
+    [ '~p'-[Other] ].
+
+prolog:message(dfrl(Message)) -->
+    dfrl_message(Message).
+
+dfrl_message(node_started(Node)) -->
+    [ 'dfrl platform listening on ~w'-[Node] ].
+dfrl_message(node_stopped(Node)) -->
+    [ 'dfrl platform ~w stopped'-[Node] ].
+dfrl_message(agent_crashed(Node, Agent, Error)) -->
+    [ 'Agent ~p on ~w stopped with an error: '-[Agent, Node] ],
+    '$messages':translate_message(Error).
+dfrl_message(connection_error(Node, Peer, Error)) -->
+    [ 'Platform ~w: request from ~p failed: '-[Node, Peer] ],
+    '$messages':translate_message(Error).
+dfrl_message(agent_in_doubt(Node, Agent, Source)) -->
+    [ 'Platform ~w: migration of agent ~p from ~p was not confirmed; '-[Node, Agent, Source],
+      'the agent is kept as in_doubt (see agent_resolve/2)'
+    ].

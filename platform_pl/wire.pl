@@ -1,0 +1,195 @@
+:- module(wire,
+          [ frame_write/3,              % +Stream, +Kind, +Term
+            frame_read/3,               % +Stream, -Frame, +Options
+            wire_version/1,             % -Version
+            text_term_bytes/2           % ?Term, ?Bytes
+          ]).
+:- use_module(platform_errors, [wire_error/1]).
+:- autoload(library(utf8), [utf8_codes//1]).
+:- autoload(library(option), [option/3]).
+
+/** <module> Length-prefixed frames on a binary stream
+
+A frame is a 12-byte header followed by a body:
+
+  | bytes | meaning                                        |
+  |-------|------------------------------------------------|
+  | 0-3   | magic "DFRL"                                   |
+  | 4     | protocol version (1)                           |
+  | 5     | kind: "T" (text term) or "B" (binary term)     |
+  | 6-7   | reserved, zero                                 |
+  | 8-11  | body length in bytes, unsigned big-endian      |
+
+A text body is the term written canonically (UTF-8) and is read back
+with read_term/3, so any peer may send one. A binary body is the term
+in SWI-Prolog's fast_term_serialized/2 form: quick for large float lists,
+but the C reader trusts its input, so frame_read/3 accepts a binary frame
+only when the caller says the connection is authenticated. The body size
+is checked against a limit before a single body byte is read.
+*/
+
+wire_version(1).
+
+magic([0'D, 0'F, 0'R, 0'L]).
+
+kind_byte(text,   0'T).
+kind_byte(binary, 0'B).
+
+%!  frame_write(+Stream, +Kind, +Term) is det.
+%
+%   Write Term as one frame of Kind (`text` or `binary`) and flush.
+
+frame_write(Stream, Kind, Term) :-
+    body_bytes(Kind, Term, Body),
+    string_length(Body, Len),
+    (   Len > 0xffffffff
+    ->  wire_error(too_large(Len, 0xffffffff))
+    ;   true
+    ),
+    kind_byte(Kind, K),
+    wire_version(V),
+    magic(M),
+    forall(member(B, M), put_byte(Stream, B)),
+    put_byte(Stream, V),
+    put_byte(Stream, K),
+    put_byte(Stream, 0),
+    put_byte(Stream, 0),
+    put_u32(Stream, Len),
+    write(Stream, Body),
+    flush_output(Stream).
+
+body_bytes(text, Term, Body) :-
+    text_term_bytes(Term, Codes),
+    string_codes(Body, Codes).
+body_bytes(binary, Term, Body) :-
+    fast_term_serialized(Term, Body).
+
+%!  text_term_bytes(?Term, ?Bytes) is det.
+%
+%   Bytes is the UTF-8 encoding of Term written canonically and
+%   terminated by " .". In mode (-,+) the term is read with read_term/3;
+%   a syntax error raises wire_error(syntax(Detail)).
+
+text_term_bytes(Term, Bytes) :-
+    var(Bytes),
+    !,
+    format(string(Text), "~k .~n", [Term]),
+    string_codes(Text, Codes),
+    phrase(utf8_codes(Codes), Bytes).
+text_term_bytes(Term, Bytes) :-
+    (   phrase(utf8_codes(Codes), Bytes)
+    ->  true
+    ;   wire_error(syntax(not_utf8))
+    ),
+    setup_call_cleanup(
+        open_codes_stream(Codes, In),
+        read_text_term(In, Term),
+        close(In)).
+
+read_text_term(In, Term) :-
+    catch(read_term(In, Term0, [syntax_errors(error)]), E, bad_syntax(E)),
+    (   Term0 == end_of_file
+    ->  wire_error(syntax(empty))
+    ;   true
+    ),
+    catch(read_term(In, Rest, [syntax_errors(error)]), E2, bad_syntax(E2)),
+    (   Rest == end_of_file
+    ->  Term = Term0
+    ;   wire_error(syntax(trailing_data))
+    ).
+
+bad_syntax(error(syntax_error(What), _)) :-
+    !,
+    wire_error(syntax(What)).
+bad_syntax(error(resource_error(What), _)) :-
+    !,
+    wire_error(syntax(resource_error(What))).
+bad_syntax(E) :-
+    throw(E).
+
+open_codes_stream(Codes, In) :-
+    string_codes(String, Codes),
+    open_string(String, In).
+
+%!  frame_read(+Stream, -Frame, +Options) is det.
+%
+%   Read one frame. Frame is frame(Kind, Term), or `end_of_file` if the
+%   peer closed the connection between frames. Options:
+%
+%     - max_size(+Bytes)
+%       Largest body accepted (default 1 MiB).
+%     - binary(+Boolean)
+%       Whether binary frames are accepted (default `false`).
+%
+%   @error wire_error(Reason) for a malformed, oversized or refused frame.
+
+frame_read(Stream, Frame, Options) :-
+    option(max_size(Max), Options, 1048576),
+    option(binary(AllowBinary), Options, false),
+    get_byte(Stream, B0),
+    (   B0 == -1
+    ->  Frame = end_of_file
+    ;   read_bytes(Stream, 11, Rest),
+        Header = [B0|Rest],
+        parse_header(Header, Kind, Len),
+        (   Len > Max
+        ->  wire_error(too_large(Len, Max))
+        ;   true
+        ),
+        (   Kind == binary, AllowBinary \== true
+        ->  wire_error(binary_not_allowed)
+        ;   true
+        ),
+        read_body(Stream, Len, Body),
+        decode_body(Kind, Body, Term),
+        Frame = frame(Kind, Term)
+    ).
+
+parse_header([M0,M1,M2,M3,V,K,_,_,L0,L1,L2,L3], Kind, Len) :-
+    (   magic([M0,M1,M2,M3])
+    ->  true
+    ;   wire_error(bad_magic)
+    ),
+    (   wire_version(V)
+    ->  true
+    ;   wire_error(bad_version(V))
+    ),
+    (   kind_byte(Kind, K)
+    ->  true
+    ;   wire_error(protocol(kind(K)))
+    ),
+    Len is (L0<<24) \/ (L1<<16) \/ (L2<<8) \/ L3.
+
+read_bytes(_, 0, []) :- !.
+read_bytes(Stream, N, [B|Bs]) :-
+    get_byte(Stream, B),
+    (   B == -1
+    ->  wire_error(truncated)
+    ;   true
+    ),
+    N1 is N - 1,
+    read_bytes(Stream, N1, Bs).
+
+read_body(Stream, Len, Body) :-
+    read_string(Stream, Len, Body),
+    string_length(Body, Got),
+    (   Got =:= Len
+    ->  true
+    ;   wire_error(truncated)
+    ).
+
+decode_body(text, Body, Term) :-
+    string_codes(Body, Bytes),
+    text_term_bytes(Term, Bytes).
+decode_body(binary, Body, Term) :-
+    fast_term_serialized(Term, Body).
+
+put_u32(Stream, N) :-
+    B0 is (N >> 24) /\ 0xff,
+    B1 is (N >> 16) /\ 0xff,
+    B2 is (N >> 8) /\ 0xff,
+    B3 is N /\ 0xff,
+    put_byte(Stream, B0),
+    put_byte(Stream, B1),
+    put_byte(Stream, B2),
+    put_byte(Stream, B3).
