@@ -1,0 +1,137 @@
+"""Q-table files: ``NAME.npy`` (the array) + ``NAME.json`` (what it means) [+ ``NAME.visits.npy``].
+
+The ``.npy`` holds the float64 array of shape ``(n_states, n_actions)``. The JSON sidecar holds
+``format`` (``"dfrl-qtable/1"``), ``shape``, ``dtype``, ``algorithm``, ``arena``, ``seed``,
+``iterations``, ``actions`` (names by column index), ``state`` (the discretisation, see
+:meth:`robots.state.Discretiser.describe`) and free ``extra`` fields. The optional
+``NAME.visits.npy`` holds the int64 update counts of each entry.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robots.learners import validate_table
+
+TABLE_FORMAT = "dfrl-qtable/1"
+
+
+@dataclass(frozen=True)
+class TableMeta:
+    """What a saved Q-table means.
+
+    Attributes
+    ----------
+    algorithm : str
+        Learner name (``"qlearning"``, ``"sarsa"``).
+    arena : str
+        Arena name.
+    seed : int
+    iterations : int
+        Control steps of learning behind the table.
+    actions : list[str]
+        Action names, index-aligned with the table's columns.
+    state : dict
+        Discretisation description (rows).
+    extra : dict
+        Anything else worth keeping (JSON-serialisable).
+    """
+
+    algorithm: str
+    arena: str
+    seed: int
+    iterations: int
+    actions: list[str]
+    state: dict[str, Any]
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class LoadedTable:
+    """A table read back by :func:`load_table`.
+
+    Attributes
+    ----------
+    q : np.ndarray, shape (n_states, n_actions), float64
+    meta : TableMeta
+    visits : np.ndarray or None, shape (n_states, n_actions), int64
+    """
+
+    q: np.ndarray
+    meta: TableMeta
+    visits: np.ndarray | None
+
+
+def _paths(path: str | Path) -> tuple[Path, Path, Path]:
+    base = Path(path)
+    if base.suffix == ".npy":
+        base = base.with_suffix("")
+    elif base.suffix == ".json":
+        base = base.with_suffix("")
+    return (base.with_name(base.name + ".npy"), base.with_name(base.name + ".json"),
+            base.with_name(base.name + ".visits.npy"))
+
+
+def save_table(path: str | Path, q: np.ndarray, meta: TableMeta,
+               visits: np.ndarray | None = None) -> Path:
+    """Write a Q-table and its sidecar JSON (and visits when given).
+
+    Parameters
+    ----------
+    path : str or Path
+        ``DIR/NAME`` or ``DIR/NAME.npy``.
+    q : np.ndarray, shape (n_states, n_actions)
+    meta : TableMeta
+    visits : np.ndarray, shape (n_states, n_actions), optional
+
+    Returns
+    -------
+    Path
+        The ``.npy`` path.
+    """
+    q = validate_table(q, np.shape(q))
+    if q.ndim != 2:
+        raise ValueError(f"a Q-table is 2-D (n_states, n_actions), got shape {q.shape}")
+    if len(meta.actions) != q.shape[1]:
+        raise ValueError(f"{len(meta.actions)} action names for {q.shape[1]} table columns")
+    npy, js, vis = _paths(path)
+    npy.parent.mkdir(parents=True, exist_ok=True)
+    np.save(npy, q)
+    doc = {"format": TABLE_FORMAT, "shape": list(q.shape), "dtype": "float64", **asdict(meta)}
+    if visits is not None:
+        visits = np.asarray(visits, dtype=np.int64)
+        if visits.shape != q.shape:
+            raise ValueError(f"visits shape {visits.shape} differs from table shape {q.shape}")
+        np.save(vis, visits)
+        doc["visits_file"] = vis.name
+    js.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    return npy
+
+
+def load_table(path: str | Path) -> LoadedTable:
+    """Read a table written by :func:`save_table`, checking it against its sidecar.
+
+    Raises
+    ------
+    ValueError
+        Missing sidecar, unknown format, or an array that does not match the recorded shape.
+    """
+    npy, js, vis = _paths(path)
+    if not js.exists():
+        raise ValueError(f"{npy}: missing sidecar {js.name} describing the table")
+    doc = json.loads(js.read_text(encoding="utf-8"))
+    if doc.get("format") != TABLE_FORMAT:
+        raise ValueError(f"{js}: unknown table format {doc.get('format')!r}, expected {TABLE_FORMAT!r}")
+    q = validate_table(np.load(npy, allow_pickle=False), tuple(doc["shape"]))
+    meta = TableMeta(**{k: doc[k] for k in ("algorithm", "arena", "seed", "iterations",
+                                            "actions", "state")}, extra=doc.get("extra", {}))
+    visits = None
+    if doc.get("visits_file"):
+        visits = np.load(vis, allow_pickle=False).astype(np.int64)
+        if visits.shape != q.shape:
+            raise ValueError(f"{vis}: shape {visits.shape} differs from the table's {q.shape}")
+    return LoadedTable(q=q, meta=meta, visits=visits)

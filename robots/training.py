@@ -1,0 +1,381 @@
+"""A steppable training loop: one :meth:`Trainer.step` = one 64 ms control iteration.
+
+The federated layer drives :class:`Trainer` from its own loop and reads/replaces the Q-table
+between steps (``q_table``, ``set_q_table``, ``visits``). ``step()`` never blocks or prints.
+
+Collision handling (the robots run continuously, as in the paper): a step that ends in contact
+with a wall or a block is counted, penalised, treated as terminal for the TD update (no
+bootstrap), and the robot respawns at a random free pose. If the robot moves less than
+``stuck_distance`` in ``stuck_steps`` steps it also respawns (a truncation: the update still
+bootstraps). ``iteration`` keeps counting across respawns.
+"""
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import time
+from dataclasses import dataclass, field
+from enum import Enum
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from robots.env import ActionSet, CollisionResponse, EnvConfig, EPuckEnv, RewardConfig
+from robots.epuck import EPuckConfig
+from robots.learners import EpsilonSchedule, LearnerParams, TabularLearner, make_learner
+from robots.state import DiscretisationConfig, Discretiser
+from robots.tables import TableMeta, save_table
+from robots.world import SimConfig
+
+#: Training budget (iterations) of the 5-robot demo: learning clearly shows by then.
+DEMO_ITERATIONS: int = 8000
+
+
+@dataclass(frozen=True)
+class TrainerConfig:
+    """Everything that defines a training run; the same config and seed give the same run.
+
+    Attributes
+    ----------
+    arena : str
+        Built-in arena name or arena file path.
+    algo : str
+        Learner name, a key of :data:`robots.learners.LEARNERS`.
+    seed : int
+        Seeds the environment (start/respawn poses, sensor noise) and the learner
+        (exploration) through independent streams.
+    iterations : int
+        Budget used by :func:`train` (a :class:`Trainer` can step beyond it).
+    learner : LearnerParams
+    discretisation : DiscretisationConfig
+    sim : SimConfig
+        Control/physics rates, solver, robot.
+    actions : ActionSet
+    reward : RewardConfig
+    collision_response : CollisionResponse
+    stuck_steps : int
+    stuck_distance : float
+    """
+
+    arena: str = "r4"
+    algo: str = "qlearning"
+    seed: int = 0
+    iterations: int = DEMO_ITERATIONS
+    learner: LearnerParams = field(default_factory=LearnerParams)
+    discretisation: DiscretisationConfig = field(default_factory=DiscretisationConfig)
+    sim: SimConfig = field(default_factory=SimConfig)
+    actions: ActionSet = ActionSet.BASIC
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    collision_response: CollisionResponse = CollisionResponse.RESPAWN
+    stuck_steps: int = 150
+    stuck_distance: float = 0.03
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "actions", ActionSet(self.actions))
+        object.__setattr__(self, "collision_response", CollisionResponse(self.collision_response))
+        if self.iterations < 0:
+            raise ValueError("iterations must be >= 0")
+
+    def env_config(self) -> EnvConfig:
+        """The environment part of the configuration."""
+        return EnvConfig(
+            arena=str(self.arena), sim=self.sim, actions=self.actions, reward=self.reward,
+            collision_response=self.collision_response, stuck_steps=self.stuck_steps,
+            stuck_distance=self.stuck_distance,
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready nested dict (enums as their values)."""
+        return _to_jsonable(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "TrainerConfig":
+        """Inverse of :meth:`to_dict`."""
+        d = dict(data)
+        learner = dict(d.pop("learner", {}))
+        if "epsilon" in learner:
+            learner["epsilon"] = EpsilonSchedule(**learner["epsilon"])
+        sim = dict(d.pop("sim", {}))
+        if "robot" in sim:
+            robot = dict(sim["robot"])
+            if "sensor_angles" in robot:
+                robot["sensor_angles"] = tuple(robot["sensor_angles"])
+            sim["robot"] = EPuckConfig(**robot)
+        return cls(
+            learner=LearnerParams(**learner),
+            discretisation=DiscretisationConfig(**d.pop("discretisation", {})),
+            sim=SimConfig(**sim),
+            reward=RewardConfig(**d.pop("reward", {})),
+            **d,
+        )
+
+    def replace(self, **changes: Any) -> "TrainerConfig":
+        """A copy with some fields changed."""
+        return dataclasses.replace(self, **changes)
+
+
+def _to_jsonable(obj: Any) -> Any:
+    if dataclasses.is_dataclass(obj):
+        return {f.name: _to_jsonable(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    if isinstance(obj, Enum):
+        return obj.value
+    if isinstance(obj, (list, tuple)):
+        return [_to_jsonable(v) for v in obj]
+    return obj
+
+
+@dataclass(frozen=True, slots=True)
+class StepMetrics:
+    """What happened in one iteration.
+
+    Attributes
+    ----------
+    iteration : int
+        1-based count of control steps so far.
+    q_sum : float
+        Sum of all Q-table entries after the update.
+    cumulative_reward : float
+        Sum of rewards over iterations ``1 .. iteration``.
+    collisions : int
+        Collisions so far (cumulative).
+    reward : float
+        This step's reward.
+    collided : bool
+        This step ended in a collision.
+    respawns : int
+        Respawns so far (collisions with RESPAWN, and stuck detections).
+    epsilon : float
+        Exploration probability used for the next action.
+    state, action : int
+        State and action of the updated entry.
+    x, y : float
+        Robot position after the step (m).
+    """
+
+    iteration: int
+    q_sum: float
+    cumulative_reward: float
+    collisions: int
+    reward: float
+    collided: bool
+    respawns: int
+    epsilon: float
+    state: int
+    action: int
+    x: float
+    y: float
+
+    FIELDS = ("iteration", "q_sum", "cumulative_reward", "collisions", "reward", "collided",
+              "respawns", "epsilon", "state", "action", "x", "y")
+
+    def as_row(self) -> tuple[Any, ...]:
+        """Values in :attr:`FIELDS` order."""
+        return tuple(getattr(self, f) for f in self.FIELDS)
+
+
+class Trainer:
+    """One robot learning in one arena, advanced one control step at a time.
+
+    Parameters
+    ----------
+    config : TrainerConfig
+
+    Attributes
+    ----------
+    env : EPuckEnv
+    discretiser : Discretiser
+    learner : TabularLearner
+    """
+
+    def __init__(self, config: TrainerConfig | None = None) -> None:
+        self.config = config or TrainerConfig()
+        c = self.config
+        env_seq, learner_seq = np.random.SeedSequence(c.seed).spawn(2)
+        self.env = EPuckEnv(arena=c.arena, config=c.env_config())
+        self.discretiser = Discretiser(c.discretisation)
+        n_actions = int(self.env.action_space.n)
+        self.learner: TabularLearner = make_learner(
+            c.algo, self.discretiser.n_states, n_actions, c.learner, np.random.default_rng(learner_seq)
+        )
+        obs, _ = self.env.reset(seed=int(env_seq.generate_state(1)[0]))
+        self._state = self.discretiser(obs)
+        self._action = self.learner.select_action(self._state)
+        self.iteration = 0
+        self.cumulative_reward = 0.0
+        self.collisions = 0
+        self.respawns = 0
+
+    # -- the table, for the federated layer --------------------------------------------------
+    @property
+    def q_table(self) -> np.ndarray:
+        """The live Q-table, float64, shape (n_states, n_actions). Writes go straight in."""
+        return self.learner.q
+
+    def set_q_table(self, table: np.ndarray) -> None:
+        """Replace the Q-table (copied in place after checking shape and finiteness).
+
+        Raises
+        ------
+        ValueError
+            Wrong shape or a non-finite entry.
+        """
+        self.learner.set_table(table)
+
+    @property
+    def visits(self) -> np.ndarray:
+        """Update counts per state-action pair, int64, shape (n_states, n_actions)."""
+        return self.learner.visits
+
+    @property
+    def n_states(self) -> int:
+        """Rows of the table."""
+        return self.discretiser.n_states
+
+    @property
+    def action_names(self) -> list[str]:
+        """Column names of the table."""
+        return self.config.actions.names
+
+    @property
+    def sim_time(self) -> float:
+        """Simulated seconds so far."""
+        return self.iteration * self.config.sim.control_dt
+
+    # -- the loop ----------------------------------------------------------------------------
+    def step(self) -> StepMetrics:
+        """One iteration: act, simulate 64 ms, sense, reward, update the table, choose next."""
+        env = self.env
+        state, action = self._state, self._action
+        obs, reward, terminated, truncated, info = env.step(action)
+        next_state = self.discretiser(obs)
+        next_action = self.learner.learn(state, action, reward, next_state, terminated)
+        if terminated or truncated:
+            obs, _ = env.reset()
+            next_state = self.discretiser(obs)
+            next_action = self.learner.select_action(next_state)
+            self.respawns += 1
+        self._state, self._action = next_state, next_action
+        self.iteration += 1
+        self.cumulative_reward += reward
+        collided = bool(info["collision"])
+        self.collisions += collided
+        x, y, _ = info["pose"]
+        return StepMetrics(
+            iteration=self.iteration, q_sum=float(self.learner.q.sum()),
+            cumulative_reward=self.cumulative_reward, collisions=self.collisions, reward=reward,
+            collided=collided, respawns=self.respawns, epsilon=self.learner.epsilon,
+            state=state, action=action, x=x, y=y,
+        )
+
+    def table_meta(self, **extra: Any) -> TableMeta:
+        """Sidecar description of the current table."""
+        c = self.config
+        return TableMeta(
+            algorithm=c.algo, arena=self.env.arena.name, seed=c.seed, iterations=self.iteration,
+            actions=self.action_names, state=self.discretiser.describe(), extra=dict(extra),
+        )
+
+    def save_table(self, path: str | Path) -> Path:
+        """Save the table, its sidecar and the visit counts (see :mod:`robots.tables`)."""
+        return save_table(path, self.q_table, self.table_meta(), visits=self.visits)
+
+    def close(self) -> None:
+        """Release the simulation."""
+        self.env.close()
+
+    def __enter__(self) -> "Trainer":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+@dataclass(frozen=True)
+class TrainingResult:
+    """Outputs of :func:`train`.
+
+    Attributes
+    ----------
+    metrics : np.ndarray, structured, shape (iterations,)
+        One record per iteration with the fields of :class:`StepMetrics`.
+    q_table : np.ndarray, shape (n_states, n_actions)
+    visits : np.ndarray, shape (n_states, n_actions)
+    wall_time : float
+        Seconds spent stepping.
+    output_dir : Path or None
+    """
+
+    metrics: np.ndarray
+    q_table: np.ndarray
+    visits: np.ndarray
+    wall_time: float
+    output_dir: Path | None
+
+
+_METRIC_DTYPE = np.dtype([
+    ("iteration", np.int64), ("q_sum", np.float64), ("cumulative_reward", np.float64),
+    ("collisions", np.int64), ("reward", np.float64), ("collided", np.bool_),
+    ("respawns", np.int64), ("epsilon", np.float64), ("state", np.int64), ("action", np.int64),
+    ("x", np.float64), ("y", np.float64),
+])
+
+
+def train(
+    config: TrainerConfig,
+    output_dir: str | Path | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> TrainingResult:
+    """Run ``config.iterations`` steps; optionally write the results into ``output_dir``.
+
+    Writes ``config.json``, ``metrics.csv`` (one row per iteration, columns of
+    :class:`StepMetrics`), ``q_table.npy`` + ``q_table.json`` + ``q_table.visits.npy``.
+
+    Parameters
+    ----------
+    config : TrainerConfig
+    output_dir : str or Path, optional
+    progress : callable, optional
+        Called with the number of new iterations done (e.g. a tqdm ``update``).
+    """
+    rows = np.empty(config.iterations, dtype=_METRIC_DTYPE)
+    with Trainer(config) as trainer:
+        t0 = time.perf_counter()
+        chunk = max(1, config.iterations // 200)
+        for i in range(config.iterations):
+            rows[i] = trainer.step().as_row()
+            if progress is not None and (i + 1) % chunk == 0:
+                progress(chunk)
+        wall = time.perf_counter() - t0
+        if progress is not None and config.iterations % chunk:
+            progress(config.iterations % chunk)
+        result = TrainingResult(metrics=rows, q_table=trainer.q_table.copy(),
+                                visits=trainer.visits.copy(), wall_time=wall,
+                                output_dir=Path(output_dir) if output_dir is not None else None)
+        if output_dir is not None:
+            out = Path(output_dir)
+            out.mkdir(parents=True, exist_ok=True)
+            (out / "config.json").write_text(json.dumps(config.to_dict(), indent=2) + "\n",
+                                             encoding="utf-8")
+            write_metrics_csv(out / "metrics.csv", rows)
+            save_table(out / "q_table", trainer.q_table,
+                       trainer.table_meta(wall_time_s=round(wall, 3)), visits=trainer.visits)
+    return result
+
+
+def write_metrics_csv(path: str | Path, metrics: np.ndarray) -> None:
+    """Write a metrics record array as CSV with a header row."""
+    names = metrics.dtype.names
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(names)
+        for rec in metrics.tolist():
+            writer.writerow([int(v) if isinstance(v, bool) else
+                             (repr(v) if isinstance(v, float) else v) for v in rec])
+
+
+def read_metrics_csv(path: str | Path) -> np.ndarray:
+    """Read a ``metrics.csv`` back into a structured array."""
+    data = np.genfromtxt(path, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    return np.atleast_1d(data)
