@@ -1,1 +1,58 @@
-"""pybridge package."""
+"""The bridge that makes a Python robot process a node of the agent platform.
+
+``pybridge.errors`` and ``pybridge.terms`` are plain Python. :class:`RobotNode` (and
+everything that needs the embedded SWI-Prolog) is imported on first use, so importing
+``pybridge`` alone does not start Prolog.
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from pybridge.errors import (
+    BridgeError,
+    CodecError,
+    NodeStateError,
+    PrologError,
+    PrologFailure,
+    TermConversionError,
+)
+from pybridge.terms import Atom, Blob, Term, Var
+
+if TYPE_CHECKING:
+    from pybridge.codec import Codec
+    from pybridge.node import RobotNode, TableProvider
+
+__all__ = [
+    "BridgeError",
+    "CodecError",
+    "NodeStateError",
+    "PrologError",
+    "PrologFailure",
+    "TermConversionError",
+    "Atom",
+    "Blob",
+    "Term",
+    "Var",
+    "Codec",
+    "RobotNode",
+    "Bridge",
+    "TableProvider",
+]
+
+_LAZY = {
+    "RobotNode": "pybridge.node",
+    "Bridge": "pybridge.node",
+    "TableProvider": "pybridge.node",
+    "Codec": "pybridge.codec",
+}
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'pybridge' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(module), "RobotNode" if name == "Bridge" else name)
+    globals()[name] = value
+    return value

@@ -1,0 +1,518 @@
+:- module(robot_bridge,
+          [ bridge_register_robot/2,    % +Robot, +Props
+            bridge_unregister_robot/1,  % +Robot
+            bridge_robot/2,             % ?Robot, ?Props
+            get_qtable/2,               % +Robot, -Table
+            get_qtable/3,               % +Robot, -Table, +Options
+            set_qtable/2,               % +Robot, +Table
+            set_qtable/3,               % +Robot, +Table, +Options
+            get_visits/2,               % +Robot, -Table
+            get_visits/3,               % +Robot, -Table, +Options
+            bridge_next_request/2,      % -Request, +TimeoutSeconds
+            bridge_reply/2,             % +Id, +Reply
+            bridge_set_codec/1,         % +Codec
+            bridge_codec/1,             % -Codec
+            bridge_attach_server/0,
+            bridge_detach_server/0,
+            bridge_shutdown/0,
+            bridge_stop_threads/2       % +Timeout, -Remaining
+          ]).
+:- autoload(library(error),
+            [must_be/2, domain_error/2, existence_error/2, type_error/2]).
+:- autoload(library(option), [option/3]).
+:- autoload(library(lists), [member/2]).
+:- autoload(library(apply), [maplist/3, include/3]).
+:- autoload(library(debug), [debug/3]).
+
+/** <module> Robot tables for agents, served by the Python host between control steps
+
+A robot node is one Python process that embeds SWI-Prolog. Its control loop
+registers each robot with bridge_register_robot/2 and, once per control
+step, serves the requests that agents have queued (bridge_next_request/2 and
+bridge_reply/2, called from the Python main thread by `pybridge`).
+
+Agents, running in their own Prolog threads, call get_qtable/2,
+set_qtable/2 and get_visits/2. These never call Python: they post a request
+on the message queue `robot_bridge_requests` and wait on a private reply
+queue until the host answers or the timeout expires (option timeout(Seconds),
+default the flag `robot_bridge_timeout`, 30 s). Because the host serves
+requests between two learning steps, a table read or written by an agent is
+a consistent snapshot.
+
+A table is the term qtable(Shape, Values): Shape = [NStates, NActions]
+(positive integers), Values the flat row-major list of NStates*NActions
+floats. Between the agent thread and the host the values travel in a
+compact form, selected with bridge_set_codec/1:
+
+  - `fts`: the string produced by fast_term_serialized/2, whose bytes the
+    Python side reads and writes with numpy. The host selects it only after
+    a start-up self-test showed that its encoder produces exactly the bytes
+    this Prolog produces (fast_term_serialized/2 crashes the process on
+    malformed input, so it is never given bytes of unknown origin).
+  - `text`: comma-separated float text, slower but safe (the default).
+
+This module loads in plain `swipl` as well; there, some thread must call
+bridge_next_request/2 and bridge_reply/2 for the requests to be answered.
+*/
+
+:- dynamic
+    robot_/2,                   % Robot, Props
+    pending_/3,                 % Id, ReplyQueue, Robot
+    codec_/1,                   % fts | text
+    server_/1.                  % ThreadId of the serving thread
+
+:- create_prolog_flag(robot_bridge_timeout, 30.0, [type(float), keep(true)]).
+
+codec_(text).
+
+request_queue(robot_bridge_requests).
+
+%!  bridge_register_robot(+Robot, +Props) is det.
+%
+%   Register a robot hosted by this process, replacing an earlier
+%   registration of the same robot. Robot is an atom or an integer. Props
+%   is a list that holds at least shape([NStates, NActions]) and usually
+%   algorithm(Name), e.g. `[algorithm(qlearning), shape([64, 4])]`.
+%
+%   @error type_error(list, Props)
+%   @error domain_error(robot_props, Props) without a valid shape/1.
+
+bridge_register_robot(Robot, Props) :-
+    must_be(atomic, Robot),
+    must_be(list, Props),
+    (   memberchk(shape(Shape), Props)
+    ->  check_shape(Shape)
+    ;   domain_error(robot_props, Props)
+    ),
+    ensure_request_queue,
+    with_mutex(robot_bridge,
+               ( retractall(robot_(Robot, _)),
+                 assertz(robot_(Robot, Props)) )),
+    debug(robot_bridge, 'registered robot ~q ~q', [Robot, Props]).
+
+%!  bridge_unregister_robot(+Robot) is det.
+%
+%   Forget Robot. Requests already queued for it are answered with
+%   existence_error(robot, Robot) when the host serves them. Succeeds
+%   silently if Robot was not registered.
+
+bridge_unregister_robot(Robot) :-
+    must_be(atomic, Robot),
+    with_mutex(robot_bridge, retractall(robot_(Robot, _))).
+
+%!  bridge_robot(?Robot, ?Props) is nondet.
+%
+%   True when Robot is registered in this process with Props.
+
+bridge_robot(Robot, Props) :-
+    robot_(Robot, Props).
+
+%!  get_qtable(+Robot, -Table) is det.
+%!  get_qtable(+Robot, -Table, +Options) is det.
+%
+%   Table is qtable(Shape, Values), a snapshot of Robot's Q-table taken by
+%   the host between two learning steps. Options: timeout(Seconds).
+%
+%   @error existence_error(robot, Robot) if Robot is not registered here.
+%   @error timeout_error(bridge, Robot) if the host did not answer in time.
+%   @error python_error(Class, Message) if serving failed in Python.
+
+get_qtable(Robot, Table) :-
+    get_qtable(Robot, Table, []).
+
+get_qtable(Robot, Table, Options) :-
+    table_request(get_qtable(Robot), get_qtable/2, Options, Table).
+
+%!  get_visits(+Robot, -Table) is det.
+%!  get_visits(+Robot, -Table, +Options) is det.
+%
+%   As get_qtable/3 for the visit counts of Robot: Table is
+%   qtable(Shape, Values) with the counts as floats.
+
+get_visits(Robot, Table) :-
+    get_visits(Robot, Table, []).
+
+get_visits(Robot, Table, Options) :-
+    table_request(get_visits(Robot), get_visits/2, Options, Table).
+
+table_request(Op, PI, Options, qtable(Shape, Values)) :-
+    arg(1, Op, Robot),
+    must_be(atomic, Robot),
+    must_be(list, Options),
+    registered(Robot),
+    bridge_call(Robot, Op, PI, Options, Reply),
+    (   Reply = table(Shape, Data)
+    ->  decode_values(Data, Values)
+    ;   reply_error(Reply, PI)
+    ).
+
+%!  set_qtable(+Robot, +Table) is det.
+%!  set_qtable(+Robot, +Table, +Options) is det.
+%
+%   Replace Robot's Q-table with Table = qtable(Shape, Values). Shape must
+%   be the registered shape and Values NStates*NActions finite numbers
+%   (integers are converted to floats). If anything is wrong the robot's
+%   table is left unchanged. Options: timeout(Seconds).
+%
+%   @error existence_error(robot, Robot) if Robot is not registered here.
+%   @error domain_error(shape(Registered), Shape) on a shape mismatch.
+%   @error domain_error(qtable_size(N), Len) if Values has Len elements.
+%   @error type_error(number, X) for a non-number in Values.
+%   @error domain_error(finite_float, X) for an infinite or NaN value.
+%   @error timeout_error(bridge, Robot) if the host did not answer in time.
+
+set_qtable(Robot, Table) :-
+    set_qtable(Robot, Table, []).
+
+set_qtable(Robot, Table, Options) :-
+    must_be(atomic, Robot),
+    must_be(list, Options),
+    registered(Robot, Props),
+    (   Table = qtable(Shape, Values0)
+    ->  true
+    ;   type_error(qtable, Table)
+    ),
+    must_be(list, Values0),
+    memberchk(shape(Registered), Props),
+    (   Shape == Registered
+    ->  true
+    ;   domain_error(shape(Registered), Shape)
+    ),
+    Shape = [NS, NA],
+    N is NS*NA,
+    length(Values0, Len),
+    (   Len =:= N
+    ->  true
+    ;   domain_error(qtable_size(N), Len)
+    ),
+    float_list(Values0, Values),
+    encode_values(Values, Data),
+    bridge_call(Robot, set_qtable(Robot, Shape, Data), set_qtable/2,
+                Options, Reply),
+    (   Reply == ok
+    ->  true
+    ;   reply_error(Reply, set_qtable/2)
+    ).
+
+check_timeout(Timeout) :-
+    must_be(number, Timeout),
+    (   Timeout >= 0
+    ->  true
+    ;   domain_error(nonneg_number, Timeout)
+    ).
+
+check_shape(Shape) :-
+    (   Shape = [NS, NA],
+        integer(NS), NS > 0,
+        integer(NA), NA > 0
+    ->  true
+    ;   domain_error(shape([nstates, nactions]), Shape)
+    ).
+
+registered(Robot) :-
+    registered(Robot, _).
+
+registered(Robot, Props) :-
+    (   robot_(Robot, Props)
+    ->  true
+    ;   existence_error(robot, Robot)
+    ).
+
+reply_error(error(Formal), PI) :-
+    !,
+    throw(error(Formal, context(PI, _))).
+reply_error(Reply, PI) :-
+    throw(error(domain_error(bridge_reply, Reply), context(PI, _))).
+
+%!  float_list(+Values0, -Values) is det.
+%
+%   Values is Values0 with every number as a float. The common case (all
+%   floats already) is one tight pass and no copy.
+
+float_list(Values, Values) :-
+    all_floats(Values),
+    !.
+float_list(Values0, Values) :-
+    maplist(to_float, Values0, Values).
+
+all_floats([]).
+all_floats([X|T]) :-
+    float(X),
+    all_floats(T).
+
+to_float(X, F) :-
+    must_be(number, X),
+    F is float(X).
+
+		 /*******************************
+		 *      REQUEST / REPLY         *
+		 *******************************/
+
+%!  bridge_call(+Robot, +Op, +PI, +Options, -Reply) is det.
+%
+%   Post request(Id, Deadline, Op) on the request queue and wait for
+%   reply(Id, Reply) on a private queue that exists only during the call.
+
+bridge_call(Robot, Op, PI, Options, Reply) :-
+    current_prolog_flag(robot_bridge_timeout, Default),
+    option(timeout(Timeout), Options, Default),
+    check_timeout(Timeout),
+    thread_self(Me),
+    (   server_(Me)
+    ->  throw(error(permission_error(wait, bridge_reply, Me),
+                    context(PI, 'the thread that serves bridge requests cannot wait for them')))
+    ;   true
+    ),
+    flag(robot_bridge_request_id, Id0, Id0+1),
+    Id is Id0 + 1,
+    get_time(Now),
+    Deadline is Now + Timeout,
+    request_queue(RQ),
+    setup_call_cleanup(
+        ( message_queue_create(Q),
+          assertz(pending_(Id, Q, Robot))
+        ),
+        ( catch(thread_send_message(RQ, request(Id, Deadline, Op)),
+                error(existence_error(message_queue, _), _),
+                existence_error(robot, Robot)),
+          (   thread_get_message(Q, reply(Id, Reply0), [timeout(Timeout)])
+          ->  Reply = Reply0
+          ;   format(atom(Msg), 'no reply within ~w s', [Timeout]),
+              throw(error(timeout_error(bridge, Robot), context(PI, Msg)))
+          )
+        ),
+        ( retractall(pending_(Id, _, _)),
+          message_queue_destroy(Q)
+        )).
+
+%!  bridge_next_request(-Request, +Timeout) is semidet.
+%
+%   Take the next request for the host, waiting at most Timeout seconds (0
+%   polls). Request is request(Id, Op) with Op one of
+%
+%     - get_qtable(Robot)
+%     - get_visits(Robot)
+%     - set_qtable(Robot, Shape, Data)  where Data is fts(String) or
+%       text(String) (see bridge_set_codec/1)
+%
+%   Requests whose caller has already given up are dropped. Fails if no
+%   request arrived in time. Answer every request with bridge_reply/2.
+
+bridge_next_request(Request, Timeout) :-
+    check_timeout(Timeout),
+    get_time(Now),
+    Until is Now + Timeout,
+    request_queue(RQ),
+    catch(next_request(RQ, Until, Request),
+          error(existence_error(message_queue, _), _),
+          fail).
+
+next_request(RQ, Until, Request) :-
+    get_time(Now),
+    Wait is max(0, Until - Now),
+    thread_get_message(RQ, request(Id, Deadline, Op), [timeout(Wait)]),
+    (   pending_(Id, _, _),
+        get_time(T),
+        T =< Deadline
+    ->  Request = request(Id, Op)
+    ;   debug(robot_bridge, 'dropped expired request ~q', [Id]),
+        next_request(RQ, Until, Request)
+    ).
+
+%!  bridge_reply(+Id, +Reply) is det.
+%
+%   Answer request Id. Reply is one of
+%
+%     - table(Shape, Data)  for get_qtable/get_visits, Data as in
+%       bridge_next_request/2 (an fts string must come from pybridge's
+%       encoder, see bridge_set_codec/1)
+%     - ok                  for set_qtable
+%     - error(Formal)       the caller throws error(Formal, Context)
+%
+%   A reply to a caller that has timed out is dropped silently.
+
+bridge_reply(Id, Reply) :-
+    must_be(integer, Id),
+    must_be(nonvar, Reply),
+    (   retract(pending_(Id, Q, _))
+    ->  catch(thread_send_message(Q, reply(Id, Reply)),
+              error(existence_error(message_queue, _), _),
+              true)
+    ;   debug(robot_bridge, 'late reply to ~q dropped', [Id])
+    ).
+
+%!  bridge_attach_server is det.
+%
+%   Declare the calling thread the one that serves requests (the Python
+%   main thread). get_qtable/2 and friends called from that thread throw a
+%   permission error instead of waiting forever for themselves.
+
+bridge_attach_server :-
+    thread_self(Me),
+    ensure_request_queue,
+    with_mutex(robot_bridge,
+               ( retractall(server_(_)),
+                 assertz(server_(Me)) )).
+
+%!  bridge_detach_server is det.
+%
+%   Undo bridge_attach_server/0.
+
+bridge_detach_server :-
+    retractall(server_(_)).
+
+%!  bridge_shutdown is det.
+%
+%   Forget all robots, answer every waiting caller with
+%   existence_error(robot, Robot) and destroy the request queue. Called by
+%   the host before it stops.
+
+bridge_shutdown :-
+    with_mutex(robot_bridge,
+               ( retractall(robot_(_, _)),
+                 retractall(server_(_)),
+                 forall(retract(pending_(Id, Q, Robot)),
+                        catch(thread_send_message(
+                                  Q, reply(Id, error(existence_error(robot, Robot)))),
+                              _, true)),
+                 request_queue(RQ),
+                 (   is_message_queue(RQ)
+                 ->  message_queue_destroy(RQ)
+                 ;   true
+                 ) )).
+
+%!  bridge_stop_threads(+Timeout, -Remaining) is det.
+%
+%   Abort every Prolog thread except the caller (and the system's `gc`
+%   thread), wait at most Timeout seconds for them to stop and join them.
+%   Remaining lists the threads still running (e.g. blocked in a system call
+%   that a signal cannot interrupt because the host runs Prolog without
+%   signal handling; the platform must stop those itself). Used by the host
+%   before the interpreter exits, since live threads make the embedding's
+%   cleanup unsafe.
+
+bridge_stop_threads(Timeout, Remaining) :-
+    check_timeout(Timeout),
+    thread_self(Me),
+    findall(T, other_thread(Me, T), Threads),
+    forall(( member(T, Threads),
+             catch(thread_property(T, status(running)), _, fail)
+           ),
+           catch(thread_signal(T, abort), _, true)),
+    get_time(Now),
+    Deadline is Now + Timeout,
+    wait_stopped(Threads, Deadline),
+    include(running_thread, Threads, Remaining),
+    forall(( member(T, Threads),
+             \+ memberchk(T, Remaining)
+           ),
+           catch(thread_join(T, _), _, true)).
+
+other_thread(Me, T) :-
+    thread_property(T, status(_)),
+    T \== Me,
+    \+ thread_property(T, alias(gc)).
+
+running_thread(T) :-
+    catch(thread_property(T, status(running)), _, fail).
+
+wait_stopped(Threads, Deadline) :-
+    (   \+ ( member(T, Threads), running_thread(T) )
+    ->  true
+    ;   get_time(Now),
+        Now >= Deadline
+    ->  true
+    ;   sleep(0.01),
+        wait_stopped(Threads, Deadline)
+    ).
+
+ensure_request_queue :-
+    request_queue(RQ),
+    with_mutex(robot_bridge,
+               (   is_message_queue(RQ)
+               ->  true
+               ;   message_queue_create(_, [alias(RQ)])
+               )).
+
+is_message_queue(Q) :-
+    catch(message_queue_property(Q, size(_)), _, fail).
+
+		 /*******************************
+		 *            CODEC             *
+		 *******************************/
+
+%!  bridge_set_codec(+Codec) is det.
+%
+%   Select how values travel between agents and the host: `fts`
+%   (fast_term_serialized/2 bytes) or `text`. The host sets `fts` only
+%   after its start-up self-test passed.
+
+bridge_set_codec(Codec) :-
+    must_be(oneof([fts, text]), Codec),
+    with_mutex(robot_bridge,
+               ( retractall(codec_(_)),
+                 assertz(codec_(Codec)) )).
+
+%!  bridge_codec(-Codec) is det.
+%
+%   Codec is the value codec in use (`fts` or `text`).
+
+bridge_codec(Codec) :-
+    codec_(Codec), !.
+
+encode_values(Values, Data) :-
+    bridge_codec(Codec),
+    encode_values(Codec, Values, Data).
+
+encode_values(fts, Values, fts(String)) :-
+    fast_term_serialized(Values, String).
+encode_values(text, Values, text(String)) :-
+    atomic_list_concat(Values, ',', Atom),
+    atom_string(Atom, String).
+
+decode_values(fts(String), Values) :-
+    !,
+    fts_check(String),
+    fast_term_serialized(Values, String).
+decode_values(text(String), Values) :-
+    !,
+    must_be(string, String),
+    (   String == ""
+    ->  Values = []
+    ;   split_string(String, ",", "", Parts),
+        maplist(text_float, Parts, Values)
+    ).
+decode_values(Data, _) :-
+    domain_error(bridge_values, Data).
+
+text_float(Text, Float) :-
+    number_string(Number, Text),
+    Float is float(Number).
+
+%   fts_check(+String)
+%
+%   Cheap sanity check before fast_term_serialized/2 sees String (which
+%   must come from pybridge's encoder): the header and the last byte of a
+%   float list in the format the host's self-test verified.
+
+fts_check(String) :-
+    must_be(string, String),
+    (   String == "\u007a\u0009"          % []
+    ->  true
+    ;   string_code(1, String, 0'r),
+        string_length(String, Len),
+        sub_string(String, _, 1, 0, "\u0009")
+    ->  Len > 3
+    ;   domain_error(fts_float_list, String)
+    ).
+
+		 /*******************************
+		 *           MESSAGES           *
+		 *******************************/
+
+:- multifile prolog:error_message//1.
+
+prolog:error_message(timeout_error(bridge, Robot)) -->
+    [ 'No reply from the robot host for robot ~q (is its control loop serving requests?)'-[Robot] ].
+prolog:error_message(python_error(Class, Message)) -->
+    [ 'Python ~w: ~w'-[Class, Message] ].
