@@ -22,7 +22,7 @@ import numpy as np
 from gymnasium import spaces
 
 from arenas.spec import ArenaSpec, load_arena
-from robots.world import ConnectionMode, SimConfig, World
+from robots.world import SimConfig, World
 
 
 class ActionSet(str, Enum):
@@ -133,13 +133,17 @@ class EPuckEnv(gym.Env):
         Overrides ``config.arena``: a built-in name like ``"r4"``, a file path, or a spec.
     config : EnvConfig, optional
         Full configuration.
-    render_mode : {"human", "rgb_array"} or None
-        "human" opens a pybullet GUI window; "rgb_array" returns a top view.
+    render_mode : {"rgb_array"} or None
+        "rgb_array" returns a top view (headless). For a GUI window pass
+        ``sim=SimConfig(connection="gui")``.
     **overrides
         Fields of :class:`EnvConfig` (e.g. ``stuck_steps=0``), for ``gym.make`` convenience.
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 15}
+    #: "rgb_array" renders a top view headless. The pybullet GUI window is opened with
+    #: ``sim=SimConfig(connection="gui")`` rather than a "human" render mode, so that headless
+    #: machines (and ``check_env``, which tries every listed mode) never need a display.
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
 
     def __init__(
         self,
@@ -154,9 +158,6 @@ class EPuckEnv(gym.Env):
             config = EnvConfig(**{**config.__dict__, **overrides})
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
-        if render_mode == "human" and config.sim.connection is not ConnectionMode.GUI:
-            config = EnvConfig(**{**config.__dict__,
-                                  "sim": SimConfig(**{**config.sim.__dict__, "connection": "gui"})})
         self.config = config
         self.render_mode = render_mode
         if isinstance(arena, ArenaSpec):
@@ -223,7 +224,7 @@ class EPuckEnv(gym.Env):
         return obs, reward, terminated, stuck and not terminated, self._info(collision, stuck, progress)
 
     def render(self) -> np.ndarray | None:
-        """Top view as an RGB array (``rgb_array``); nothing to do for ``human``."""
+        """Top view as an RGB array, shape (480, 480, 3), uint8 (``rgb_array`` mode)."""
         if self.render_mode == "rgb_array":
             return self.world.render_top()
         return None

@@ -1,0 +1,298 @@
+"""Standalone robot commands: ``dfrl train``, ``dfrl eval``, ``dfrl baselines``, ``dfrl render-arenas``.
+
+Thin CLI over :mod:`robots.training`, :mod:`robots.evaluation` and :mod:`robots.plots`.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+from robots.learners import LEARNERS, EpsilonSchedule, LearnerParams, ScheduleKind
+from robots.training import DEMO_ITERATIONS, TrainerConfig
+
+#: Evaluation threshold of the issue: greedy collisions at most half the random ones.
+REQUIRED_REDUCTION: float = 0.5
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``train``, ``eval``, ``baselines`` and ``render-arenas``."""
+    p = subparsers.add_parser("train", help="train one robot standalone (Q-learning or SARSA)")
+    _add_config_arguments(p)
+    p.add_argument("--out", type=Path, default=None,
+                   help="output folder (default results/train/ARENA_ALGO_sSEED)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-plot", action="store_true", help="do not draw learning_curves.png")
+    p.set_defaults(func=cmd_train)
+
+    p = subparsers.add_parser(
+        "eval", help="greedy learned policy vs random policy: collisions per 1,000 steps")
+    _add_config_arguments(p, seed=False)
+    p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="training seeds")
+    p.add_argument("--steps", type=int, default=2000, help="evaluation steps per policy and seed")
+    p.add_argument("--table", type=Path, default=None,
+                   help="evaluate this saved table (q_table.npy) instead of training one per seed")
+    p.add_argument("--jobs", type=int, default=2, help="worker processes")
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.set_defaults(func=cmd_eval)
+
+    p = subparsers.add_parser(
+        "baselines", help="standalone Q-learning and SARSA in R1 and R4 (the paper's baseline figures)")
+    p.add_argument("--out", type=Path, default=Path("results/baselines"))
+    p.add_argument("--iterations", type=int, default=20_000)
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--arenas", nargs="+", default=["r1", "r4"])
+    p.add_argument("--algos", nargs="+", choices=sorted(LEARNERS), default=["qlearning", "sarsa"])
+    p.add_argument("--jobs", type=int, default=2, help="worker processes")
+    p.set_defaults(func=cmd_baselines)
+
+    p = subparsers.add_parser("render-arenas", help="draw a top view of each arena to PNG")
+    p.add_argument("--out", type=Path, default=Path("results/arenas"))
+    p.add_argument("--arena", nargs="+", default=None,
+                   help="arena names or files (default: every built-in arena)")
+    p.add_argument("--size", type=int, default=480, help="image size in pixels")
+    p.set_defaults(func=cmd_render_arenas)
+
+
+def _add_config_arguments(p: argparse.ArgumentParser, seed: bool = True) -> None:
+    from robots.env import ActionSet, CollisionResponse
+    from robots.state import SensorGrouping
+
+    d = TrainerConfig()
+    g = p.add_argument_group("run")
+    g.add_argument("--config", type=Path, default=None,
+                   help="a config.json written by a previous run (flags below override it)")
+    g.add_argument("--arena", default=None, help=f"arena name (r1..r5) or JSON file (default {d.arena})")
+    g.add_argument("--algo", choices=sorted(LEARNERS), default=None, help=f"learner (default {d.algo})")
+    g.add_argument("--iterations", type=int, default=None,
+                   help=f"control steps of 64 ms (default {DEMO_ITERATIONS})")
+    if seed:
+        g.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
+    g = p.add_argument_group("learner")
+    g.add_argument("--alpha", type=float, default=None, help=f"learning rate ({d.learner.alpha})")
+    g.add_argument("--gamma", type=float, default=None, help=f"discount ({d.learner.gamma})")
+    g.add_argument("--epsilon-schedule", choices=[k.value for k in ScheduleKind], default=None)
+    g.add_argument("--epsilon-start", type=float, default=None, help=f"({d.learner.epsilon.start})")
+    g.add_argument("--epsilon-end", type=float, default=None, help=f"({d.learner.epsilon.end})")
+    g.add_argument("--epsilon-decay", type=int, default=None,
+                   help=f"decay steps ({d.learner.epsilon.decay_steps})")
+    g = p.add_argument_group("state, actions, simulation")
+    g.add_argument("--grouping", choices=[s.value for s in SensorGrouping], default=None,
+                   help=f"sensor groups ({d.discretisation.grouping.value})")
+    g.add_argument("--levels", type=int, default=None,
+                   help=f"levels per group ({d.discretisation.levels})")
+    g.add_argument("--actions", choices=[a.value for a in ActionSet], default=None)
+    g.add_argument("--collision-response", choices=[c.value for c in CollisionResponse], default=None)
+    g.add_argument("--control-dt", type=float, default=None, help=f"s ({d.sim.control_dt})")
+    g.add_argument("--physics-dt", type=float, default=None, help=f"s ({d.sim.physics_dt})")
+    g.add_argument("--sensor-noise", type=float, default=None,
+                   help=f"IR noise std in m ({d.sim.robot.sensor_noise_std})")
+
+
+def config_from_args(args: argparse.Namespace) -> TrainerConfig:
+    """Build a :class:`TrainerConfig` from ``--config`` and the flags that override it."""
+    from robots.epuck import EPuckConfig
+    from robots.state import DiscretisationConfig
+    from robots.world import SimConfig
+
+    if getattr(args, "config", None) is not None:
+        cfg = TrainerConfig.from_dict(json.loads(args.config.read_text(encoding="utf-8")))
+    else:
+        cfg = TrainerConfig()
+    top: dict[str, Any] = {}
+    for name in ("arena", "algo", "iterations", "seed", "actions", "collision_response"):
+        value = getattr(args, name, None)
+        if value is not None:
+            top[name] = value
+    eps = cfg.learner.epsilon
+    eps_changes = {k: v for k, v in (("kind", args.epsilon_schedule), ("start", args.epsilon_start),
+                                      ("end", args.epsilon_end), ("decay_steps", args.epsilon_decay))
+                   if v is not None}
+    learner_changes: dict[str, Any] = {k: v for k, v in (("alpha", args.alpha), ("gamma", args.gamma))
+                                       if v is not None}
+    if eps_changes:
+        learner_changes["epsilon"] = EpsilonSchedule(**{**eps.__dict__, **eps_changes})
+    if learner_changes:
+        top["learner"] = LearnerParams(**{**cfg.learner.__dict__, **learner_changes})
+    disc = {k: v for k, v in (("grouping", args.grouping), ("levels", args.levels)) if v is not None}
+    if disc:
+        top["discretisation"] = DiscretisationConfig(**{**cfg.discretisation.__dict__, **disc})
+    sim = {k: v for k, v in (("control_dt", args.control_dt), ("physics_dt", args.physics_dt))
+           if v is not None}
+    if args.sensor_noise is not None:
+        sim["robot"] = EPuckConfig(**{**cfg.sim.robot.__dict__, "sensor_noise_std": args.sensor_noise})
+    if sim:
+        top["sim"] = SimConfig(**{**cfg.sim.__dict__, **sim})
+    return cfg.replace(**top) if top else cfg
+
+
+def _fail(message: str) -> int:
+    print(f"dfrl: error: {message}", file=sys.stderr)
+    return 2
+
+
+# -- train -----------------------------------------------------------------------------------
+def cmd_train(args: argparse.Namespace) -> int:
+    """``dfrl train``: one run, writing table, config, metrics and the learning curves."""
+    from tqdm import tqdm
+
+    from robots.training import train
+
+    try:
+        cfg = config_from_args(args)
+    except (ValueError, KeyError) as exc:
+        return _fail(str(exc))
+    out = args.out or Path("results/train") / f"{Path(cfg.arena).stem}_{cfg.algo}_s{cfg.seed}"
+    with tqdm(total=cfg.iterations, desc=f"{cfg.algo} {cfg.arena} seed {cfg.seed}", unit="it",
+              disable=args.no_progress, file=sys.stderr) as bar:
+        try:
+            result = train(cfg, out, progress=bar.update)
+        except ValueError as exc:
+            return _fail(str(exc))
+    m = result.metrics
+    if not args.no_plot and len(m):
+        from robots.plots import plot_learning_curves
+
+        plot_learning_curves({f"{cfg.arena} {cfg.algo}": m}, out / "learning_curves.png",
+                             f"{cfg.algo} in {cfg.arena}, seed {cfg.seed}")
+    rate = cfg.iterations / result.wall_time if result.wall_time > 0 else float("nan")
+    last = m[-1] if len(m) else None
+    print(f"trained {cfg.algo} in {cfg.arena} for {cfg.iterations} iterations in "
+          f"{result.wall_time:.1f} s ({rate:.0f} it/s, "
+          f"{rate * cfg.sim.control_dt:.0f}x real time)")
+    if last is not None:
+        print(f"collisions {int(last['collisions'])}, cumulative reward "
+              f"{float(last['cumulative_reward']):.1f}, sum of Q {float(last['q_sum']):.2f}")
+    print(f"results in {out}")
+    return 0
+
+
+# -- eval ------------------------------------------------------------------------------------
+def _eval_job(cfg_dict: dict[str, Any], seed: int, steps: int, table_path: str | None) -> dict[str, Any]:
+    from robots.evaluation import PolicyKind, evaluate_policy
+    from robots.tables import load_table
+    from robots.training import train
+
+    cfg = TrainerConfig.from_dict(cfg_dict).replace(seed=seed)
+    t0 = time.perf_counter()
+    if table_path is None:
+        q = train(cfg).q_table
+    else:
+        q = load_table(table_path).q
+    train_s = time.perf_counter() - t0
+    eval_seed = 10_000 + seed
+    greedy = evaluate_policy(cfg, PolicyKind.GREEDY, steps, eval_seed, q_table=q)
+    rand = evaluate_policy(cfg, PolicyKind.RANDOM, steps, eval_seed)
+    return {"seed": seed, "train_s": round(train_s, 2), "greedy": greedy.__dict__,
+            "random": rand.__dict__}
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    """``dfrl eval``: exit 0 when greedy collides at least 50% less than random over all seeds."""
+    try:
+        cfg = config_from_args(args)
+    except (ValueError, KeyError) as exc:
+        return _fail(str(exc))
+    table = str(args.table) if args.table is not None else None
+    jobs = max(1, min(args.jobs, len(args.seeds)))
+    if jobs == 1:
+        rows = [_eval_job(cfg.to_dict(), s, args.steps, table) for s in args.seeds]
+    else:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            rows = list(pool.map(_eval_job, [cfg.to_dict()] * len(args.seeds), args.seeds,
+                                 [args.steps] * len(args.seeds), [table] * len(args.seeds)))
+    g_total = sum(r["greedy"]["collisions"] for r in rows)
+    r_total = sum(r["random"]["collisions"] for r in rows)
+    steps_total = args.steps * len(rows)
+    g_rate = 1000.0 * g_total / steps_total
+    r_rate = 1000.0 * r_total / steps_total
+    reduction = 1.0 - g_rate / r_rate if r_rate > 0 else float("nan")
+    ok = r_rate > 0 and reduction >= REQUIRED_REDUCTION
+    summary = {
+        "arena": cfg.arena, "algo": cfg.algo, "iterations": cfg.iterations, "seeds": args.seeds,
+        "eval_steps": args.steps, "table": table, "runs": rows,
+        "greedy_collisions_per_1000": g_rate, "random_collisions_per_1000": r_rate,
+        "reduction": reduction, "required_reduction": REQUIRED_REDUCTION, "passed": ok,
+    }
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        src = table or f"{cfg.iterations} training iterations"
+        print(f"{cfg.algo} in {cfg.arena}, {src}; {args.steps} evaluation steps per policy")
+        print(f"{'seed':>4} {'train s':>8} {'greedy coll/1000':>17} {'random coll/1000':>17} "
+              f"{'greedy m':>9} {'random m':>9}")
+        for r in rows:
+            print(f"{r['seed']:>4} {r['train_s']:>8.1f} {r['greedy']['collisions_per_1000']:>17.2f} "
+                  f"{r['random']['collisions_per_1000']:>17.2f} {r['greedy']['distance']:>9.2f} "
+                  f"{r['random']['distance']:>9.2f}")
+        print(f"all  {'':>8} {g_rate:>17.2f} {r_rate:>17.2f}")
+        print(f"reduction {100 * reduction:.0f}% (required {100 * REQUIRED_REDUCTION:.0f}%): "
+              f"{'PASS' if ok else 'FAIL'}")
+    return 0 if ok else 1
+
+
+# -- baselines -------------------------------------------------------------------------------
+def _baseline_job(cfg_dict: dict[str, Any], out: str) -> tuple[str, str, float]:
+    from robots.training import train
+
+    cfg = TrainerConfig.from_dict(cfg_dict)
+    result = train(cfg, out)
+    return cfg.algo, cfg.arena, result.wall_time
+
+
+def cmd_baselines(args: argparse.Namespace) -> int:
+    """``dfrl baselines``: train every (algo, arena) pair and draw one figure per algorithm."""
+    from tqdm import tqdm
+
+    from robots.plots import plot_learning_curves
+    from robots.training import read_metrics_csv
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    jobs = [(TrainerConfig(arena=a, algo=al, seed=args.seed, iterations=args.iterations),
+             args.out / f"{al}_{a}") for al in args.algos for a in args.arenas]
+    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+        futures = [pool.submit(_baseline_job, c.to_dict(), str(o)) for c, o in jobs]
+        for fut in tqdm(futures, desc="baseline runs", unit="run", file=sys.stderr):
+            algo, arena, wall = fut.result()
+            print(f"{algo} {arena}: {args.iterations} iterations in {wall:.1f} s", file=sys.stderr)
+    for algo in args.algos:
+        curves = {a.upper(): read_metrics_csv(args.out / f"{algo}_{a}" / "metrics.csv")
+                  for a in args.arenas}
+        name = {"qlearning": "Q-learning", "sarsa": "SARSA"}.get(algo, algo)
+        path = plot_learning_curves(curves, args.out / f"baseline_{algo}.png",
+                                    f"Standalone {name} (seed {args.seed})")
+        print(path)
+    return 0
+
+
+# -- render-arenas ---------------------------------------------------------------------------
+def cmd_render_arenas(args: argparse.Namespace) -> int:
+    """``dfrl render-arenas``: one PNG per arena plus ``arenas.png`` with all of them."""
+    from arenas.spec import ArenaError, builtin_arena_names, load_arena
+    from robots.plots import plot_arena, plot_arena_overview
+    from robots.world import World
+
+    names = args.arena or builtin_arena_names()
+    images = {}
+    for name in names:
+        try:
+            spec = load_arena(name)
+        except ArenaError as exc:
+            return _fail(str(exc))
+        world = World(spec)
+        try:
+            if spec.start.pose is not None:
+                world.place_robot(*spec.start.pose)
+            else:  # a random start: keep the robot out of the picture
+                world.place_robot(10.0 * max(spec.size), 0.0, 0.0)
+            img = world.render_top(args.size, args.size)
+        finally:
+            world.close()
+        images[spec.name] = img
+        print(plot_arena(img, spec, args.out / f"arena_{spec.name}.png"))
+    print(plot_arena_overview(images, args.out / "arenas.png"))
+    return 0

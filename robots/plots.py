@@ -1,0 +1,112 @@
+"""Figures (matplotlib, Agg backend, PNG): learning curves and arena top views.
+
+matplotlib is an optional dependency (``pip install dfrl[plot]``); it is imported here only.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+_COLOURS = ("tab:blue", "tab:red", "tab:green", "tab:orange", "tab:purple", "tab:brown")
+
+
+def _pyplot():  # noqa: ANN202 - matplotlib module
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_learning_curves(
+    curves: Mapping[str, np.ndarray], path: str | Path, title: str
+) -> Path:
+    """Sum of Q-values and cumulative reward against iterations, one line per run.
+
+    Parameters
+    ----------
+    curves : mapping of str to np.ndarray
+        Label -> structured metrics array with fields ``iteration``, ``q_sum`` and
+        ``cumulative_reward`` (as returned by :func:`robots.training.train`).
+    path : str or Path
+        PNG file to write.
+    title : str
+        Figure title.
+
+    Returns
+    -------
+    Path
+    """
+    plt = _pyplot()
+    fig, (ax_q, ax_r) = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+    for (label, m), colour in zip(curves.items(), _COLOURS):
+        ax_q.plot(m["iteration"], m["q_sum"], color=colour, lw=1.4, label=label)
+        ax_r.plot(m["iteration"], m["cumulative_reward"], color=colour, lw=1.4, label=label)
+    ax_q.set_xlabel("iterations")
+    ax_q.set_ylabel("sum of Q-values")
+    ax_q.set_title("Sum of Q-values")
+    ax_r.set_xlabel("iterations")
+    ax_r.set_ylabel("cumulative reward")
+    ax_r.set_title("Cumulative reward")
+    for ax in (ax_q, ax_r):
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="best")
+    fig.suptitle(title)
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def plot_arena(image: np.ndarray, spec, path: str | Path) -> Path:  # noqa: ANN001 - ArenaSpec
+    """Save a rendered top view with metric axes, block outlines and the start pose.
+
+    Parameters
+    ----------
+    image : np.ndarray, shape (h, w, 3), uint8
+        Top view from :meth:`robots.world.World.render_top` (covers the floor plus 5 cm).
+    spec : ArenaSpec
+    path : str or Path
+    """
+    plt = _pyplot()
+    w, d = spec.size
+    half = (max(w, d) + 0.1) / 2
+    fig, ax = plt.subplots(figsize=(5.2, 5.2), constrained_layout=True)
+    ax.imshow(image, extent=(-half, half, -half, half), origin="upper")
+    if spec.start.pose is not None:
+        x, y, yaw = spec.start.pose
+        ax.annotate("", xy=(x + 0.09 * math.cos(yaw), y + 0.09 * math.sin(yaw)), xytext=(x, y),
+                    arrowprops={"arrowstyle": "->", "color": "black", "lw": 1.5})
+        ax.text(x, y - 0.07, "start", ha="center", va="top", fontsize=8)
+    else:
+        ax.text(0, -half + 0.01, "start: random free pose", ha="center", va="bottom", fontsize=8)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    n = len(spec.blocks)
+    ax.set_title(f"{spec.name.upper()}: {w:g} m x {d:g} m, {n} block{'s' if n != 1 else ''}")
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=100)
+    plt.close(fig)
+    return out
+
+
+def plot_arena_overview(images: Mapping[str, np.ndarray], path: str | Path) -> Path:
+    """All arenas side by side (one row)."""
+    plt = _pyplot()
+    n = len(images)
+    fig, axes = plt.subplots(1, n, figsize=(2.6 * n, 2.9), constrained_layout=True)
+    for ax, (name, img) in zip(np.atleast_1d(axes), images.items()):
+        ax.imshow(img)
+        ax.set_title(name.upper())
+        ax.axis("off")
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=100)
+    plt.close(fig)
+    return out
