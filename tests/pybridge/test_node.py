@@ -1,0 +1,232 @@
+"""RobotNode and robot_bridge.pl together: agents in Prolog threads, the test's main thread
+serving their requests like a control loop."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pybridge import Atom, Codec, NodeStateError, PrologError, RobotNode, Term, Var
+from tests.pybridge.conftest import ArrayRobot, run_agent
+
+
+def _bits(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64).view(np.int64)
+
+
+def _table(result: Term) -> tuple[list[int], np.ndarray]:
+    assert isinstance(result, Term) and result.name == "true", result
+    goal = result.args[0]
+    qtable = goal.args[1]
+    assert qtable.name == "qtable"
+    shape, values = qtable.args
+    return shape, np.array(values, dtype=np.float64)
+
+
+def _error_formal(result: Term):
+    assert isinstance(result, Term) and result.name == "error", result
+    err = result.args[0]
+    assert err.name == "error", err
+    return err.args[0]
+
+
+def test_self_test_selects_fts(node) -> None:
+    assert node.self_test_report.fts_ok and node.self_test_report.text_ok
+    assert node.codec is Codec.FTS
+    assert node.call("bridge_codec", Var("C"), module="robot_bridge") == {"C": Atom("fts")}
+
+
+def test_register_and_list_robots(node) -> None:
+    node.register_robot("r1", ArrayRobot(3, 2), algorithm="sarsa")
+    node.register_robot(7, ArrayRobot(2, 2))
+    robots = dict(node.robots())
+    assert robots[Atom("r1")] == [Term("algorithm", Atom("sarsa")), Term("shape", [3, 2])]
+    assert robots[7][1] == Term("shape", [2, 2])
+    node.unregister_robot(7)
+    assert [r for r, _ in node.robots()] == [Atom("r1")]
+
+
+@pytest.mark.parametrize("codec", ["fts", "text"])
+def test_get_qtable_bit_exact_from_prolog_thread(node, codec) -> None:
+    node.codec = codec
+    robot = ArrayRobot(500, 8, seed=3)
+    q = robot.q_table
+    q[0, :4] = [-0.0, 5e-324, 1.7976931348623157e308, 0.1]
+    robot.set_q_table(q)
+    node.register_robot("r1", robot)
+    shape, values = _table(run_agent(node, Term("get_qtable", Atom("r1"), Var())))
+    assert shape == [500, 8]
+    assert np.array_equal(_bits(values), _bits(robot.q_table.reshape(-1)))
+
+
+@pytest.mark.parametrize("codec", ["fts", "text"])
+def test_python_prolog_python_round_trip(node, codec) -> None:
+    """get then set the same table from an agent: the robot's table is unchanged bit for bit,
+    and a table made in Prolog arrives exactly."""
+    node.codec = codec
+    robot = ArrayRobot(64, 4, seed=5)
+    node.register_robot("r1", robot)
+    before = robot.q_table
+    goal = Term(",", Term("get_qtable", Atom("r1"), Var("T")), Term("set_qtable", Atom("r1"), Var("T")))
+    assert run_agent(node, goal).name == "true"
+    assert robot.sets == 1
+    assert np.array_equal(_bits(robot.q_table), _bits(before))
+    # a table built by the agent: each value halved in Prolog arithmetic
+    halve = Term(",", Term("get_qtable", Atom("r1"), Term("qtable", Var("S"), Var("V"))),
+                 Term(",", Term("maplist", Term(">>", [Var("X"), Var("Y")], Term("is", Var("Y"), Term("/", Var("X"), 2))),
+                                Var("V"), Var("W")),
+                      Term("set_qtable", Atom("r1"), Term("qtable", Var("S"), Var("W")))))
+    assert run_agent(node, halve).name == "true"
+    assert np.array_equal(_bits(robot.q_table), _bits(before / 2))
+
+
+def test_get_visits_as_floats(node) -> None:
+    robot = ArrayRobot(10, 3)
+    node.register_robot("r1", robot)
+    shape, values = _table(run_agent(node, Term("get_visits", Atom("r1"), Var())))
+    assert shape == [10, 3]
+    assert np.array_equal(values, robot.visits.reshape(-1).astype(np.float64))
+
+
+def test_set_accepts_integers(node) -> None:
+    robot = ArrayRobot(2, 2)
+    node.register_robot("r1", robot)
+    table = Term("qtable", [2, 2], [1, 2.5, 3, -4])
+    assert run_agent(node, Term("set_qtable", Atom("r1"), table)).name == "true"
+    assert np.array_equal(robot.q_table, np.array([[1.0, 2.5], [3.0, -4.0]]))
+
+
+def test_unknown_robot_is_existence_error(node) -> None:
+    node.register_robot("r1", ArrayRobot(2, 2))
+    for goal in (Term("get_qtable", Atom("nobody"), Var()),
+                 Term("get_visits", Atom("nobody"), Var()),
+                 Term("set_qtable", Atom("nobody"), Term("qtable", [2, 2], [0.0] * 4))):
+        formal = _error_formal(run_agent(node, goal))
+        assert formal == Term("existence_error", Atom("robot"), Atom("nobody"))
+
+
+def test_robot_unregistered_while_request_queued(node) -> None:
+    """The Python side checks too: a request for a robot forgotten in the meantime."""
+    node.register_robot("r1", ArrayRobot(2, 2))
+    node.call("spawn", Atom("late_agent"), Term("get_qtable", Atom("r1"), Var()), module="bridge_test_agents")
+    import time
+
+    deadline = time.monotonic() + 5
+    while node.call("message_queue_property", Atom("robot_bridge_requests"), Term("size", 1)) is None:
+        assert time.monotonic() < deadline
+        time.sleep(0.001)
+    node._robots.clear()  # as if the Python side had lost the robot
+    result = run_agent(node, Atom("true"))  # serves the queued request
+    assert result.name == "true"
+    sol = node.call("agent_result", Atom("late_agent"), Var("R"), module="bridge_test_agents")
+    assert _error_formal(sol["R"]) == Term("existence_error", Atom("robot"), Atom("r1"))
+
+
+@pytest.mark.parametrize("table", [
+    Term("qtable", [2, 3], [0.0] * 6),             # wrong shape
+    Term("qtable", [2, 2], [0.0] * 3),             # wrong number of values
+    Term("qtable", [2, 2], [0.0, 1.0, Atom("x"), 2.0]),  # not a number
+    Term("qtable", [2, 2], [0.0, float("inf"), 1.0, 2.0]),  # non-finite
+    Term("qtable", [2, 2], [0.0, float("nan"), 1.0, 2.0]),  # non-finite
+    Term("table", [2, 2], [0.0] * 4),              # not a qtable term
+])
+@pytest.mark.parametrize("codec", ["fts", "text"])
+def test_bad_set_is_an_error_and_table_unchanged(node, table, codec) -> None:
+    node.codec = codec
+    robot = ArrayRobot(2, 2)
+    node.register_robot("r1", robot)
+    before = robot.q_table
+    formal = _error_formal(run_agent(node, Term("set_qtable", Atom("r1"), table)))
+    assert formal.name in {"domain_error", "type_error"}, formal
+    if not all(isinstance(v, float) and np.isfinite(v) for v in table.args[1] if isinstance(v, float)):
+        assert formal == Term("domain_error", Atom("finite_float"), formal.args[1])
+    assert np.array_equal(_bits(robot.q_table), _bits(before))
+    assert robot.sets == 0
+
+
+def test_python_failure_becomes_python_error(node) -> None:
+    class Broken(ArrayRobot):
+        broken = False
+
+        @property
+        def q_table(self) -> np.ndarray:
+            if self.broken:
+                raise RuntimeError("sensor down")
+            return super().q_table
+
+    robot = Broken(2, 2)
+    node.register_robot("r1", robot)
+    robot.broken = True
+    formal = _error_formal(run_agent(node, Term("get_qtable", Atom("r1"), Var())))
+    assert formal == Term("python_error", Atom("RuntimeError"), "sensor down")
+
+
+def test_python_failure_in_set_becomes_python_error(node) -> None:
+    class Refusing(ArrayRobot):
+        def set_q_table(self, table: np.ndarray) -> None:
+            raise ValueError("learning in progress")
+
+    node.register_robot("r1", Refusing(2, 2))
+    goal = Term("set_qtable", Atom("r1"), Term("qtable", [2, 2], [0.0] * 4))
+    formal = _error_formal(run_agent(node, goal))
+    assert formal == Term("python_error", Atom("ValueError"), "learning in progress")
+
+
+def test_timeout_when_nobody_serves(node) -> None:
+    node.register_robot("r1", ArrayRobot(2, 2))
+    goal = Term("get_qtable", Atom("r1"), Var(), [Term("timeout", 0.2)])
+    result = run_agent(node, goal, serve=False)
+    assert _error_formal(result) == Term("timeout_error", Atom("bridge"), Atom("r1"))
+    # the expired request is dropped, not served later
+    assert node.serve_pending() == 0
+    # the default timeout comes from the flag
+    node.request_timeout = 0.1
+    assert node.request_timeout == pytest.approx(0.1)
+    result = run_agent(node, Term("set_qtable", Atom("r1"), Term("qtable", [2, 2], [0.0] * 4)), serve=False)
+    assert _error_formal(result) == Term("timeout_error", Atom("bridge"), Atom("r1"))
+
+
+def test_waiting_from_the_serving_thread_is_refused(node) -> None:
+    node.register_robot("r1", ArrayRobot(2, 2))
+    with pytest.raises(PrologError) as info:
+        node.call("get_qtable", Atom("r1"), Var("T"))
+    assert info.value.formal.name == "permission_error"
+
+
+def test_prolog_errors_arrive_as_terms(node) -> None:
+    with pytest.raises(PrologError) as info:
+        node.call("bridge_register_robot", Atom("r1"), [Term("shape", [0, 2])], module="robot_bridge")
+    assert info.value.formal == Term("domain_error", Term("shape", [Atom("nstates"), Atom("nactions")]), [0, 2])
+
+
+def test_serve_pending_respects_max(node) -> None:
+    node.register_robot("r1", ArrayRobot(2, 2))
+    for i in range(3):
+        node.call("spawn", Atom(f"many_{i}"), Term("get_qtable", Atom("r1"), Var()), module="bridge_test_agents")
+    import time
+
+    served, deadline = 0, time.monotonic() + 5
+    while served < 3 and time.monotonic() < deadline:
+        n = node.serve_pending(max_requests=1)
+        assert n <= 1
+        served += n
+    assert served == 3
+    for i in range(3):
+        assert run_agent(node, Atom("true")).name == "true"
+        deadline = time.monotonic() + 5
+        while (sol := node.call("agent_result", Atom(f"many_{i}"), Var("R"), module="bridge_test_agents")) is None:
+            assert time.monotonic() < deadline
+            time.sleep(0.001)
+        assert sol["R"].name == "true"
+
+
+def test_one_node_at_a_time_and_close(node) -> None:
+    with pytest.raises(NodeStateError):
+        RobotNode()
+    node.register_robot("r1", ArrayRobot(2, 2))
+    node.call("spawn", Atom("stuck_agent"), Term("get_qtable", Atom("r1"), Var()), module="bridge_test_agents")
+    assert node.close() == []
+    assert node.closed
+    with pytest.raises(NodeStateError):
+        node.serve_pending()
+    again = RobotNode()
+    again.close()
