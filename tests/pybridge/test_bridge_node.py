@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from pybridge import Atom, Codec, NodeStateError, PrologError, RobotNode, Term, Var
-from tests.pybridge.conftest import ArrayRobot, run_agent
+from bridge_helpers import ArrayRobot, run_agent
 
 
 def _bits(a: np.ndarray) -> np.ndarray:

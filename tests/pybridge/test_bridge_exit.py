@@ -1,0 +1,24 @@
+"""Process exit with live agent threads (blocked in get_qtable, busy, sleeping) is clean:
+each case runs in its own interpreter, since embedded Prolog exists once per process."""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+SCRIPT = Path(__file__).with_name("exit_script.py")
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.mark.parametrize("mode, code", [("atexit", 0), ("close", 0), ("raise", 3)])
+def test_exit_with_live_agent_threads(mode: str, code: int) -> None:
+    proc = subprocess.run([sys.executable, str(SCRIPT), mode], cwd=ROOT, capture_output=True,
+                          text=True, timeout=60)
+    assert proc.returncode == code, proc.stderr
+    assert "READY" in proc.stdout
+    for bad in ("Segmentation", "Assertion", "Failed to stop", "Traceback", "core dumped"):
+        assert bad not in proc.stderr, proc.stderr
+    if mode == "close":
+        assert "LEFT []" in proc.stdout

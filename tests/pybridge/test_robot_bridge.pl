@@ -1,0 +1,117 @@
+:- module(test_robot_bridge, []).
+/** <module> robot_bridge.pl in plain swipl: a Prolog thread plays the Python host
+*/
+:- use_module(library(plunit)).
+:- use_module('../../pybridge/robot_bridge').
+
+:- begin_tests(robot_bridge, [cleanup(bridge_shutdown)]).
+
+%   serve_one(+Table, -Op): answer one request from Table (a qtable term) as
+%   the host would, in this thread.
+serve_one(qtable(Shape, Values), Op) :-
+    bridge_next_request(request(Id, Op), 5),
+    (   Op = set_qtable(_, _, _)
+    ->  bridge_reply(Id, ok)
+    ;   bridge_codec(Codec),
+        encode(Codec, Values, Data),
+        bridge_reply(Id, table(Shape, Data))
+    ).
+
+encode(fts, Values, fts(S)) :- fast_term_serialized(Values, S).
+encode(text, Values, text(S)) :- atomic_list_concat(Values, ',', A), atom_string(A, S).
+
+with_host(Table, Goal, Ops) :-
+    thread_self(Me),
+    thread_create(( findall(Op, (between(1, 2, _), serve_one(Table, Op)), Ops0),
+                    thread_send_message(Me, served(Ops0)) ), Id, []),
+    call(Goal),
+    thread_get_message(served(Ops)),
+    thread_join(Id, _).
+
+reset :-
+    bridge_shutdown,
+    bridge_set_codec(text),
+    bridge_register_robot(r1, [algorithm(qlearning), shape([2, 2])]).
+
+test(register, [setup(reset), Props == [algorithm(qlearning), shape([2, 2])]]) :-
+    bridge_robot(r1, Props).
+test(unregister, [setup(reset), fail]) :-
+    bridge_unregister_robot(r1),
+    bridge_robot(r1, _).
+test(bad_props, [setup(reset), error(domain_error(robot_props, [algorithm(q)]))]) :-
+    bridge_register_robot(r2, [algorithm(q)]).
+test(bad_shape, [setup(reset), error(domain_error(_, [2]))]) :-
+    bridge_register_robot(r2, [shape([2])]).
+
+test(round_trip_text, [setup(reset), Got-Ops == qtable([2,2], [1.0,-0.0,5.0e-324,0.1])-[get_qtable(r1), set_qtable(r1, [2,2], text("1.0,-0.0,5.0e-324,0.1"))]]) :-
+    T = qtable([2,2], [1.0,-0.0,5.0e-324,0.1]),
+    with_host(T, (get_qtable(r1, Got), set_qtable(r1, Got)), Ops).
+test(round_trip_fts, [setup(reset), Got == T]) :-
+    bridge_set_codec(fts),
+    T = qtable([2,2], [1.0,-0.0,5.0e-324,0.1]),
+    with_host(T, (get_qtable(r1, Got), set_qtable(r1, Got)), [_, set_qtable(r1, [2,2], fts(S))]),
+    fast_term_serialized(Values, S),
+    assertion(Values == [1.0,-0.0,5.0e-324,0.1]).
+
+test(unknown_robot, [setup(reset), error(existence_error(robot, nobody))]) :-
+    get_qtable(nobody, _).
+test(wrong_shape, [setup(reset), error(domain_error(shape([2,2]), [4,1]))]) :-
+    set_qtable(r1, qtable([4,1], [1.0,2.0,3.0,4.0])).
+test(wrong_size, [setup(reset), error(domain_error(qtable_size(4), 3))]) :-
+    set_qtable(r1, qtable([2,2], [1.0,2.0,3.0])).
+test(not_a_number, [setup(reset), error(type_error(number, x))]) :-
+    set_qtable(r1, qtable([2,2], [1.0,2.0,3.0,x])).
+
+test(timeout, [setup(reset), error(timeout_error(bridge, r1))]) :-
+    get_qtable(r1, _, [timeout(0.05)]).
+test(timeout_flag, [setup(reset), error(timeout_error(bridge, r1)),
+                    cleanup(set_prolog_flag(robot_bridge_timeout, 30.0))]) :-
+    set_prolog_flag(robot_bridge_timeout, 0.05),
+    get_qtable(r1, _).
+test(expired_request_dropped, [setup(reset), fail]) :-
+    catch(get_qtable(r1, _, [timeout(0.01)]), error(timeout_error(_, _), _), true),
+    bridge_next_request(_, 0).
+test(late_reply_ignored, [setup(reset)]) :-
+    bridge_reply(123456, ok).
+
+test(serving_thread_refused, [setup(reset), error(permission_error(wait, bridge_reply, _)),
+                              cleanup(bridge_detach_server)]) :-
+    bridge_attach_server,
+    get_qtable(r1, _).
+
+test(reply_error_is_thrown, [setup(reset), error(python_error('KeyError', "r1"))]) :-
+    thread_create(( bridge_next_request(request(Id, _), 5),
+                    bridge_reply(Id, error(python_error('KeyError', "r1"))) ), T, []),
+    call_cleanup(get_qtable(r1, _), thread_join(T, _)).
+
+test(shutdown_wakes_waiters, [setup(reset), Formal == existence_error(robot, r1)]) :-
+    thread_self(Me),
+    thread_create(( catch(get_qtable(r1, _), error(F, _), true),
+                    thread_send_message(Me, formal(F)) ), T, []),
+    wait_queued,
+    bridge_shutdown,
+    thread_get_message(formal(Formal)),
+    thread_join(T, _).
+
+test(messages, [setup(reset)]) :-
+    message_to_codes(error(timeout_error(bridge, r1), _), Text1),
+    once(sub_string(Text1, _, _, _, "robot host")),
+    message_to_codes(error(python_error('ValueError', "bad"), _), Text2),
+    once(sub_string(Text2, _, _, _, "ValueError")).
+
+message_to_codes(Term, Text) :-
+    message_to_codes(Term, [], Codes), string_codes(Text, Codes).
+message_to_codes(Term, _, Codes) :-
+    '$messages':translate_message(Term, Lines, []),
+    with_output_to(codes(Codes), print_message_lines(current_output, '', Lines)).
+
+wait_queued :-
+    between(1, 500, _),
+    (   message_queue_property(robot_bridge_requests, size(N)),
+        N > 0
+    ->  !
+    ;   sleep(0.01),
+        fail
+    ).
+
+:- end_tests(robot_bridge).
