@@ -22,6 +22,7 @@
             with_agents_locked/1        % :Goal
           ]).
 :- use_module(node, [current_node/1, node_set_current/1, node_property/2]).
+:- use_module(worker_pool, [pool_run/3, pool_signal/3]).
 :- autoload(library(error),
             [must_be/2, existence_error/2, permission_error/3, domain_error/2]).
 :- autoload(library(option), [option/2, option/3]).
@@ -400,30 +401,58 @@ start_thread(Node, Name, Link, Event) :-
     ->  true                    % re-executed from its own handler
     ;   permission_error(execute, agent, Name)
     ),
-    thread_create(agent_run(Node, Name, Link, Event), NewTid,
-                  [detached(true)]),
-    agent_set_status(Node, Name, running(NewTid)).
+    agent_set_status(Node, Name, starting),
+    pool_run(agents, agent_run(Node, Name, Link, Event), []).
 
 agent_run(Node, Name, Link, Event) :-
     thread_self(Me),
+    with_agents_locked(
+        (   agent_status_(Node, Name, starting)
+        ->  agent_set_status(Node, Name, running(Me)),
+            Run = true
+        ;   Run = false                 % purged or moved before it started
+        )),
+    (   Run == true
+    ->  setup_call_cleanup(
+            enter_agent(Node, Name),
+            run_agent(Node, Name, Link, Event),
+            leave_agent),
+        with_agents_locked(
+            (   agent_status_(Node, Name, running(Me))
+            ->  agent_set_status(Node, Name, idle)
+            ;   true
+            ))
+    ;   true
+    ).
+
+enter_agent(Node, Name) :-
     catch(node_set_current(Node), _, true),
-    assertz(current_agent_tl(Name)),
+    assertz(current_agent_tl(Name)).
+
+leave_agent :-
+    retractall(current_agent_tl(_)),
+    retractall(node:current_node_tl(_)).
+
+run_agent(Node, Name, Link, Event) :-
     (   agent_entry(Node, Name, Handler, _)
     ->  agent_module(Node, Name, M),
         Goal =.. [Handler, Name, Link, Event],
         catch(run_handler(Node, Name, M:Goal), E, handler_error(Node, Name, E))
     ;   true
-    ),
-    with_agents_locked(
-        (   agent_status_(Node, Name, running(Me))
-        ->  agent_set_status(Node, Name, idle)
-        ;   true
-        )).
+    ).
 
 run_handler(Node, Name, Goal) :-
     (   call(Goal)
     ->  true
     ;   debug(dfrl(agent), 'Handler of ~p on ~w failed', [Name, Node])
+    ).
+
+%   Signalled to the worker running agent Name when it is purged; the
+%   worker may have moved on to another job, then nothing happens.
+purge_if_running(Name) :-
+    (   current_agent_tl(Name)
+    ->  throw('$dfrl_purged')
+    ;   true
     ).
 
 handler_error(_, _, '$dfrl_purged') :- !.
@@ -448,7 +477,7 @@ agent_purge(Node, Name) :-
     must_exist(Node, Name),
     (   agent_status_(Node, Name, running(Tid)),
         \+ thread_self(Tid)
-    ->  catch(thread_signal(Tid, throw('$dfrl_purged')), _, true)
+    ->  pool_signal(agents, Tid, agents:purge_if_running(Name))
     ;   true
     ),
     agent_remove(Node, Name).

@@ -57,12 +57,9 @@ load_program_text(Address0, Id, Text, Options) :-
     must_be(atomic, Id),
     must_be(string, Text),
     address_normalize(Address0, Address),
-    (   node_for_address(Address, _)
-    ->  load_text(Id, Text)
-    ;   tokens(Options, Tokens),
-        transport_request(Address, load_code(Id, Text), _,
-                          [tokens(Tokens)|Options])
-    ).
+    tokens(Options, Tokens),
+    transport_request(Address, load_code(Id, Text), _,
+                      [tokens(Tokens), action(load)|Options]).
 
 tokens(Options, Tokens) :-
     (   option(tokens(Tokens), Options)

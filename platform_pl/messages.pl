@@ -7,6 +7,7 @@
 :- use_module(node, [current_node/1, node_property/2, node_for_address/2,
                      node_option/3]).
 :- use_module(agents).
+:- use_module(worker_pool, [pool_run/3]).
 :- use_module(transport).
 :- autoload(library(error), [must_be/2, existence_error/2]).
 :- autoload(library(option), [option/2]).
@@ -77,12 +78,14 @@ deliver(Node, Agent, Handler, Link, Args) :-
     ->  Goal = user:Goal0
     ;   existence_error(agent, Agent)
     ),
-    thread_create(run_message(Node, Agent, Goal), _, [detached(true)]).
+    pool_run(messages, run_message(Node, Agent, Goal), []).
 
 run_message(Node, Agent, Goal) :-
-    node:node_set_current(Node),
-    catch(( call(Goal) -> true ; true ), E,
-          print_message(warning, dfrl(agent_crashed(Node, Agent, E)))).
+    setup_call_cleanup(
+        node:node_set_current(Node),
+        catch(( call(Goal) -> true ; true ), E,
+              print_message(warning, dfrl(agent_crashed(Node, Agent, E)))),
+        retractall(node:current_node_tl(_))).
 
 %!  remote_agents(+Address, -Agents, +Options) is det.
 %
@@ -114,7 +117,8 @@ remote_execute(Address0, Agent, Event, Options) :-
         ->  Options1 = [tokens(Tokens)|Options]
         ;   Options1 = [tokens([])|Options]
         ),
-        transport_request(Address, execute(Agent, Event), _, Options1)
+        transport_request(Address, execute(Agent, Event), _,
+                          [action(execute)|Options1])
     ).
 
 node:platform_request(post(Agent, Handler, Link, Args),

@@ -131,21 +131,22 @@ transfer(Node, Name, Address, Mode, MigId, Final, Options) :-
     node_property(Node, address(Source)),
     node_option(Node, connect_timeout, CT),
     node_option(Node, reply_timeout, RT),
-    merge_timeouts(Options, CT, RT, ConnOptions),
-    setup_call_cleanup(
-        transport_open(Address, Conn, ConnOptions),
-        hand_over(Node, Conn, Address, Mode, MigId, Source, Departed,
-                  Record, Tokens, Final),
-        transport_close(Conn)).
+    merge_timeouts(Options, CT, RT, ConnOptions0),
+    ConnOptions = [action(enter)|ConnOptions0],
+    transport_acquire(Address, Tokens, Conn, ConnOptions),
+    catch(hand_over(Node, Conn, Address, Mode, MigId, Source, Departed,
+                    Record, Final),
+          E,
+          ( transport_discard(Conn), throw(E) )),
+    transport_release(Conn).
 
 merge_timeouts(Options, CT, RT, [connect_timeout(C), reply_timeout(R)]) :-
     option(connect_timeout(C), Options, CT),
     option(reply_timeout(R), Options, RT).
 
 hand_over(Node, Conn, Address, Mode, MigId, Source, Departed, Record,
-          Tokens, Final) :-
-    catch(( transport_auth(Conn, Tokens),
-            transport_send(Conn, binary,
+          Final) :-
+    catch(( transport_send(Conn, binary,
                            transfer(MigId, Mode, Source, Departed, Record)),
             transport_receive(Conn, Reply, [phase(transfer)])
           ),
@@ -153,7 +154,7 @@ hand_over(Node, Conn, Address, Mode, MigId, Source, Departed, Record,
           ( decide(Node, MigId, aborted), throw(E) )),
     (   Reply = ok(staged(Final))
     ->  decide(Node, MigId, committed),
-        catch(transport_send(Conn, text, commit(MigId)), _, true)
+        transport_send(Conn, text, commit(MigId))
     ;   decide(Node, MigId, aborted),
         (   Reply = error(error(Formal, _))
         ->  throw(error(Formal, remote(Address)))
@@ -192,7 +193,8 @@ node:platform_request(transfer(MigId, Mode, Source, Departed, Record),
         After = close
     ;   stage(Node, MigId, Mode, Record, Name),
         Reply = ok(staged(Name)),
-        After = migration:await_commit(Ctx, MigId, Name, Source, Departed)
+        After = continue(migration:await_commit(Ctx, MigId, Name, Source,
+                                                Departed))
     ).
 node:platform_request(migration_status(MigId), ctx(Node, _, _, _, _, _),
                       ok(Decision), true) :-
@@ -212,11 +214,14 @@ stage(Node, MigId, Mode, Record, Name) :-
 
 await_commit(ctx(Node, _, _, In, _, _), MigId, Name, Source, Departed) :-
     node_option(Node, commit_timeout, Timeout),
+    node_option(Node, idle_timeout, Idle),
     set_stream(In, timeout(Timeout)),
     catch(frame_read(In, Frame, [max_size(4096)]), _, Frame = lost),
+    set_stream(In, timeout(Idle)),
     (   Frame = frame(_, commit(MigId))
     ->  activate(Node, Name, Source, Departed)
-    ;   resolve_with_source(Node, MigId, Name, Source, Departed)
+    ;   resolve_with_source(Node, MigId, Name, Source, Departed),
+        throw(connection_lost)
     ).
 
 resolve_with_source(Node, MigId, Name, Source, Departed) :-

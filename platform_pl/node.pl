@@ -14,6 +14,7 @@
           ]).
 :- use_module(wire, [frame_write/3, frame_read/3, wire_version/1]).
 :- use_module(transport, [address_normalize/2, token_proof/3, open_key/1]).
+:- use_module(worker_pool, [pool_run/3, pool_signal/3]).
 :- autoload(library(socket),
             [ tcp_socket/1, tcp_setopt/2, tcp_bind/2, tcp_listen/2,
               tcp_accept/3, tcp_open_socket/2, tcp_close_socket/1,
@@ -157,8 +158,8 @@ node_stop(Node) :-
     ),
     assertz(stopping(Node)),
     forall(node_stopping(Node), true),
-    forall(retract(connection(Node, T)),
-           catch(thread_signal(T, throw(node_stopping)), _, true)),
+    forall(connection(Node, T),
+           pool_signal(connections, T, node:stop_if_serving(Node))),
     wake_acceptor(Address),
     (   retract(node_acceptor(Node, Tid))
     ->  catch(thread_join(Tid, _), _, true)
@@ -169,6 +170,7 @@ node_stop(Node) :-
     retractall(node_tokens(Node, _)),
     retractall(node_opt(Node, _)),
     retractall(stopping(Node)),
+    retractall(connection(Node, _)),
     (   retract(default_node(Node))
     ->  (   node_info(Other, _, _)
         ->  assertz(default_node(Other))
@@ -335,6 +337,11 @@ node_accepts(Node, Proofs/Nonce) :-
     memberchk(P, Proofs),
     !.
 
+:- at_halt(stop_all_nodes).
+
+stop_all_nodes :-
+    forall(node_info(Node, _, _), catch(node_stop(Node), _, true)).
+
 		 /*******************************
 		 *           ACCEPTOR		*
 		 *******************************/
@@ -355,10 +362,19 @@ dispatch(Node, Client, Peer) :-
     aggregate_all(count, connection(Node, _), Open),
     (   Open >= Max
     ->  refuse_busy(Client)
-    ;   catch(thread_create(serve_connection(Node, Client, Peer), Tid,
-                            [detached(true)]),
+    ;   catch(pool_run(connections, serve_connection(Node, Client, Peer),
+                       [max(10000)]),
               E, (print_message(warning, E), refuse_busy(Client)))
-    ->  assertz(connection(Node, Tid))
+    ->  true
+    ;   true
+    ).
+
+%   Signalled to a pooled worker when Node stops; harmless if the worker
+%   has moved on to another job.
+stop_if_serving(Node) :-
+    thread_self(Me),
+    (   connection(Node, Me)
+    ->  throw(node_stopping)
     ;   true
     ).
 
@@ -379,14 +395,18 @@ refuse_busy(Client) :-
 
 serve_connection(Node, Client, Peer) :-
     thread_self(Me),
-    node_set_current_if_alive(Node),
+    assertz(connection(Node, Me)),
     catch(setup_call_cleanup(
-              tcp_open_socket(Client, Pair),
+              ( node_set_current_if_alive(Node),
+                catch(tcp_setopt(Client, nodelay), _, true),
+                tcp_open_socket(Client, Pair)
+              ),
               serve_pair(Node, Pair, Peer),
               close(Pair, [force(true)])),
           E,
           connection_ended(Node, Peer, E)),
-    retractall(connection(Node, Me)).
+    retractall(connection(Node, Me)),
+    retractall(current_node_tl(_)).
 
 node_set_current_if_alive(Node) :-
     (   node_info(Node, _, _)
@@ -395,6 +415,9 @@ node_set_current_if_alive(Node) :-
     ).
 
 connection_ended(_, _, node_stopping) :- !.
+connection_ended(_, _, '$aborted') :- !.
+connection_ended(_, _, unwind(_)) :- !.
+connection_ended(_, _, error(existence_error(platform, _), _)) :- !.
 connection_ended(_, _, error(timeout_error(_, _), _)) :- !.
 connection_ended(_, _, error(io_error(_, _), _)) :- !.
 connection_ended(_, _, error(socket_error(_, _), _)) :- !.
@@ -448,18 +471,23 @@ serve_frames(Ctx) :-
 
 serve_term(auth(Proofs), Ctx, true) :-
     !,
-    Ctx = ctx(Node, _, Nonce, _, _, Auth),
+    Ctx = ctx(Node, _, Nonce, _, Out, Auth),
     (   is_list(Proofs),
         node_accepts(Node, Proofs/Nonce)
-    ->  nb_setarg(6, Ctx, true)
-    ;   var(Auth)
-    ->  nb_setarg(6, Ctx, false)
-    ;   true
+    ->  nb_setarg(6, Ctx, true),
+        reply(Out, ok(authenticated))
+    ;   (   var(Auth)
+        ->  nb_setarg(6, Ctx, false)
+        ;   true
+        ),
+        node_info(Node, Here, _),
+        reply(Out, error(error(permission_error(authenticate, platform, Here), _)))
     ).
 serve_term(Request, Ctx, Continue) :-
     Ctx = ctx(Node, Peer, _, _, Out, _),
     debug(dfrl(request), '~w: ~p from ~p', [Node, Request, Peer]),
-    catch(handle(Request, Ctx, Reply, After), E, Reply = error(E)),
+    catch(handle(Request, Ctx, Reply, After), E,
+          ( Reply = error(E), After = true )),
     (   Reply == none
     ->  true
     ;   reply(Out, Reply)
@@ -468,9 +496,17 @@ serve_term(Request, Ctx, Continue) :-
     ->  Continue = false
     ;   After == true
     ->  Continue = true
+    ;   After = continue(Goal)
+    ->  catch(( Goal -> Continue = true ; Continue = false ), E2,
+              after_failed(E2, Continue))
     ;   catch(After, E2, print_message(warning, E2)),
         Continue = false
     ).
+
+after_failed(connection_lost, false) :- !.
+after_failed('$aborted', _) :- !, throw('$aborted').
+after_failed(E, false) :-
+    print_message(warning, E).
 
 handle(Request, Ctx, Reply, After) :-
     (   platform_request(Request, Ctx, Reply0, After0)

@@ -3,10 +3,14 @@
             address_link/2,             % ?Host:Port, ?(Host,Port)
             transport_open/3,           % +Address, -Conn, +Options
             transport_close/1,          % +Conn
-            transport_auth/2,           % +Conn, +Tokens
+            transport_auth/3,           % +Conn, +Tokens, +Action
             transport_send/3,           % +Conn, +Kind, +Term
             transport_receive/3,        % +Conn, -Reply, +Options
             transport_request/4,        % +Address, +Request, -Result, +Options
+            transport_acquire/4,        % +Address, +Tokens, -Conn, +Options
+            transport_release/1,        % +Conn
+            transport_discard/1,        % +Conn
+            transport_drop_pool/0,
             token_proof/3,              % +Token, +Nonce, -Proof
             open_key/1                  % -Token
           ]).
@@ -138,23 +142,116 @@ receive_hello(Conn, Nonce, Info) :-
     ;   transport_error(Address, protocol(expected_hello))
     ).
 
+		 /*******************************
+		 *       CONNECTION REUSE		*
+		 *******************************/
+
+:- dynamic pooled/4.            % Address, Tokens, Conn, LastUsed
+
+%!  transport_acquire(+Address, +Tokens, -Conn, +Options) is det.
+%
+%   A connection to Address on which Tokens have been proved (option
+%   action(Action) names the permission error if they are refused): a pooled
+%   one if a healthy one is idle, else a new one. Give it back with
+%   transport_release/1 after a complete request/reply exchange, or
+%   transport_discard/1 after any error. Pooled connections idle for
+%   more than 5 seconds are closed (servers close idle ones after 10).
+
+transport_acquire(Address0, Tokens, Conn, Options) :-
+    address_normalize(Address0, Address),
+    msort(Tokens, Key),
+    get_time(Now),
+    Fresh is Now - 5,
+    (   with_mutex(dfrl_transport_pool,
+                   take_pooled(Address, Key, Fresh, Conn0))
+    ->  Conn = Conn0
+    ;   transport_open(Address, Conn, Options),
+        option(action(Action), Options, access),
+        catch(transport_auth(Conn, Key, Action), E,
+              ( transport_close(Conn), throw(E) )),
+        remember_key(Conn, Key)
+    ).
+
+take_pooled(Address, Key, Fresh, Conn) :-
+    retract(pooled(Address, Key, C, Used)),
+    (   Used >= Fresh,
+        healthy(C)
+    ->  Conn = C
+    ;   transport_close(C),
+        take_pooled(Address, Key, Fresh, Conn)
+    ).
+
+%   An idle pooled connection must have nothing to read: readable means
+%   the server closed it (or sent garbage).
+healthy(conn(_, Pair, _, _, _)) :-
+    stream_pair(Pair, In, _),
+    catch(wait_for_input([In], Ready, 0), _, fail),
+    Ready == [].
+
+remember_key(conn(_, Pair, _, _, _), Key) :-
+    retractall(conn_key(Pair, _)),
+    assertz(conn_key(Pair, Key)).
+
+:- dynamic conn_key/2.
+
+%!  transport_release(+Conn) is det.
+%
+%   Return Conn to the pool for reuse.
+
+transport_release(Conn) :-
+    Conn = conn(Address, Pair, _, _, _),
+    (   conn_key(Pair, Key)
+    ->  get_time(Now),
+        with_mutex(dfrl_transport_pool, assertz(pooled(Address, Key, Conn, Now)))
+    ;   transport_close(Conn)
+    ).
+
+%!  transport_discard(+Conn) is det.
+%
+%   Close Conn instead of returning it to the pool.
+
+transport_discard(Conn) :-
+    transport_close(Conn).
+
+%!  transport_drop_pool is det.
+%
+%   Close every pooled connection.
+
+transport_drop_pool :-
+    with_mutex(dfrl_transport_pool,
+               forall(retract(pooled(_, _, C, _)), transport_close(C))).
+
 %!  transport_close(+Conn) is det.
 
 transport_close(conn(_, Pair, _, _, _)) :-
+    retractall(conn_key(Pair, _)),
     close(Pair, [force(true)]).
 
-%!  transport_auth(+Conn, +Tokens) is det.
+%!  transport_auth(+Conn, +Tokens, +Action) is det.
 %
 %   Prove to the server that we hold Tokens, by sending one HMAC of its
-%   nonce per token. The open key is always included, so an open
-%   platform (one without tokens) accepts any client.
+%   nonce per token, and wait for its verdict. The open key is always
+%   included, so an open platform (one without tokens) accepts any
+%   client.
+%
+%   @error permission_error(Action, platform, Address) if the server
+%   accepts none of the tokens.
 
-transport_auth(conn(_, Pair, Nonce, _, _), Tokens) :-
+transport_auth(Conn, Tokens, Action) :-
+    Conn = conn(Address, Pair, Nonce, _, _),
     open_key(Open),
     findall(P, ( member(T, [Open|Tokens]), token_proof(T, Nonce, P) ), Proofs0),
     sort(Proofs0, Proofs),
     stream_pair(Pair, _, Out),
-    frame_write(Out, text, auth(Proofs)).
+    frame_write(Out, text, auth(Proofs)),
+    receive_frame(Conn, auth, Verdict),
+    (   Verdict == ok(authenticated)
+    ->  true
+    ;   Verdict = error(error(permission_error(_, _, _), _))
+    ->  throw(error(permission_error(Action, platform, Address),
+                    context(_, 'the platform accepts none of the tokens')))
+    ;   transport_error(Address, protocol(unexpected_reply(Verdict)))
+    ).
 
 %!  open_key(-Token) is det.
 %
@@ -251,7 +348,8 @@ transport_request(Address, Request, Result, Options) :-
 
 request_on(Conn, Request, Reply, Options) :-
     (   option(tokens(Tokens), Options)
-    ->  transport_auth(Conn, Tokens)
+    ->  option(action(Action), Options, access),
+        transport_auth(Conn, Tokens, Action)
     ;   true
     ),
     option(kind(Kind), Options, text),

@@ -21,11 +21,13 @@ A frame is a 12-byte header followed by a body:
   | 8-11  | body length in bytes, unsigned big-endian      |
 
 A text body is the term written canonically (UTF-8) and is read back
-with read_term/3, so any peer may send one. A binary body is the term
-in SWI-Prolog's fast_term_serialized/2 form: quick for large float lists,
-but the C reader trusts its input, so frame_read/3 accepts a binary frame
-only when the caller says the connection is authenticated. The body size
-is checked against a limit before a single body byte is read.
+with read_term/3, so any peer may send one; its size is checked against
+a limit before a single body byte is read. A binary body is the term as
+fast_write/2 writes it (SWI-Prolog's fast serialization, self-delimiting;
+the length field is 0): it is quick for large float lists, but the C
+reader trusts its input and crashes the process on garbage, so
+frame_read/3 accepts a binary frame only when the caller says the
+connection is authenticated (the peer proved a token of this node).
 */
 
 wire_version(1).
@@ -39,6 +41,11 @@ kind_byte(binary, 0'B).
 %
 %   Write Term as one frame of Kind (`text` or `binary`) and flush.
 
+frame_write(Stream, binary, Term) :-
+    !,
+    write_header(Stream, binary, 0),
+    fast_write(Stream, Term),
+    flush_output(Stream).
 frame_write(Stream, Kind, Term) :-
     body_bytes(Kind, Term, Body),
     string_length(Body, Len),
@@ -46,6 +53,11 @@ frame_write(Stream, Kind, Term) :-
     ->  wire_error(too_large(Len, 0xffffffff))
     ;   true
     ),
+    write_header(Stream, Kind, Len),
+    write(Stream, Body),
+    flush_output(Stream).
+
+write_header(Stream, Kind, Len) :-
     kind_byte(Kind, K),
     wire_version(V),
     magic(M),
@@ -54,15 +66,11 @@ frame_write(Stream, Kind, Term) :-
     put_byte(Stream, K),
     put_byte(Stream, 0),
     put_byte(Stream, 0),
-    put_u32(Stream, Len),
-    write(Stream, Body),
-    flush_output(Stream).
+    put_u32(Stream, Len).
 
 body_bytes(text, Term, Body) :-
     text_term_bytes(Term, Codes),
     string_codes(Body, Codes).
-body_bytes(binary, Term, Body) :-
-    fast_term_serialized(Term, Body).
 
 %!  text_term_bytes(?Term, ?Bytes) is det.
 %
@@ -140,8 +148,11 @@ frame_read(Stream, Frame, Options) :-
         ->  wire_error(binary_not_allowed)
         ;   true
         ),
-        read_body(Stream, Len, Body),
-        decode_body(Kind, Body, Term),
+        (   Kind == binary
+        ->  fast_read(Stream, Term)
+        ;   read_body(Stream, Len, Body),
+            decode_body(Kind, Body, Term)
+        ),
         Frame = frame(Kind, Term)
     ).
 
@@ -181,8 +192,6 @@ read_body(Stream, Len, Body) :-
 decode_body(text, Body, Term) :-
     string_codes(Body, Bytes),
     text_term_bytes(Term, Bytes).
-decode_body(binary, Body, Term) :-
-    fast_term_serialized(Term, Body).
 
 put_u32(Stream, N) :-
     B0 is (N >> 24) /\ 0xff,

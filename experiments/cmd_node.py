@@ -1,0 +1,66 @@
+"""``dfrl node``: run one platform node in its own SWI-Prolog process."""
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import sys
+
+from platform_pl import PLATFORM_DIR
+
+
+def node_command(
+    host: str = "localhost",
+    port: int = 0,
+    tokens: list[str] | None = None,
+    consult: list[str] | None = None,
+    interactive: bool = False,
+) -> list[str]:
+    """The ``swipl`` command line that runs one node.
+
+    Parameters
+    ----------
+    host, port
+        Address to listen on (port 0: the OS chooses; the node prints it).
+    tokens
+        Tokens an arriving agent must carry (none: an open node).
+    consult
+        Agent programs to load before serving.
+    interactive
+        Open a Prolog toplevel on the node.
+    """
+    if not 0 <= port <= 65535:
+        raise ValueError(f"port {port} is outside 0..65535")
+    swipl = shutil.which("swipl")
+    if swipl is None:
+        raise FileNotFoundError("swipl is not installed (run scripts/setup.sh)")
+    cmd = [swipl, "-q", str(PLATFORM_DIR / "node_main.pl"), "--host", host, "--port", str(port)]
+    for token in tokens or []:
+        cmd += ["--token", token]
+    for path in consult or []:
+        cmd += ["--consult", os.path.abspath(path)]
+    if interactive:
+        cmd.append("--interactive")
+    return cmd
+
+
+def _run(args: argparse.Namespace) -> int:
+    try:
+        cmd = node_command(args.host, args.port, args.token, args.consult, args.interactive)
+    except (ValueError, FileNotFoundError) as exc:
+        print(f"dfrl node: {exc}", file=sys.stderr)
+        return 2
+    os.execv(cmd[0], cmd)
+    return 0  # not reached
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``node`` subcommand."""
+    p = subparsers.add_parser("node", help="run one platform node (prints its address)")
+    p.add_argument("--host", default="localhost", help="address to bind (default localhost)")
+    p.add_argument("--port", type=int, default=0, help="port (default 0: the OS chooses)")
+    p.add_argument("--token", action="append", default=[], help="platform token (repeatable)")
+    p.add_argument("--consult", action="append", default=[], metavar="FILE",
+                   help="agent program to load (repeatable)")
+    p.add_argument("--interactive", action="store_true", help="open a Prolog toplevel on the node")
+    p.set_defaults(func=_run)
