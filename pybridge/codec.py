@@ -39,6 +39,9 @@ __all__ = [
 
 _EMPTY = bytes([122, 9])
 _FLOAT_TAG = (8, 14)
+#: one list element: the 2 tag bytes (8, 14) then the little-endian double, packed (10 bytes)
+_ELEMENT = np.dtype([("tag", "<u2"), ("value", "<f8")])
+_TAG_WORD = _FLOAT_TAG[0] | (_FLOAT_TAG[1] << 8)
 
 
 class Codec(str, enum.Enum):
@@ -77,7 +80,7 @@ def _read_varint(buf: bytes, pos: int) -> tuple[int, int]:
     raise CodecError("varint too long")
 
 
-def encode_fts(values: npt.ArrayLike) -> bytes:
+def encode_fts(values: npt.ArrayLike) -> bytes | bytearray:
     """Encode values (any shape, flattened row-major) as fts bytes.
 
     Parameters
@@ -86,21 +89,25 @@ def encode_fts(values: npt.ArrayLike) -> bytes:
 
     Returns
     -------
-    bytes
-        ``fast_term_serialized/2`` form of the list of ``values.size`` floats.
+    bytes-like
+        ``fast_term_serialized/2`` form of the list of ``values.size`` floats (a
+        ``bytearray`` filled in place: one allocation, no copy).
     """
-    flat = np.ascontiguousarray(values, dtype="<f8").reshape(-1)
+    flat = np.asarray(values, dtype="<f8").reshape(-1)
     n = flat.size
     if n == 0:
         return _EMPTY
-    body = np.empty((n, 10), dtype=np.uint8)
-    body[:, 0] = _FLOAT_TAG[0]
-    body[:, 1] = _FLOAT_TAG[1]
-    body[:, 2:] = flat.view(np.uint8).reshape(n, 8)
-    return b"".join((b"r", varint(10 * n + 1), varint(6 * n), body.tobytes(), b"\t"))
+    header = b"r" + varint(10 * n + 1) + varint(6 * n)
+    buf = bytearray(len(header) + 10 * n + 1)
+    buf[: len(header)] = header
+    buf[-1] = 9
+    body = np.frombuffer(buf, dtype=_ELEMENT, count=n, offset=len(header))
+    body["tag"] = _TAG_WORD
+    body["value"] = flat
+    return buf
 
 
-def decode_fts(data: bytes, expected: int | None = None) -> np.ndarray:
+def decode_fts(data: bytes | bytearray, expected: int | None = None) -> np.ndarray:
     """Decode fts bytes into a float64 array of shape (N,).
 
     Parameters
@@ -128,10 +135,10 @@ def decode_fts(data: bytes, expected: int | None = None) -> np.ndarray:
         n = (size - 1) // 10
         if cells != 6 * n or len(data) != pos + 10 * n + 1:
             raise CodecError("not an fts float list (length mismatch: not all elements are floats?)")
-        body = np.frombuffer(data, dtype=np.uint8, count=10 * n, offset=pos).reshape(n, 10)
-        if not (np.all(body[:, 0] == _FLOAT_TAG[0]) and np.all(body[:, 1] == _FLOAT_TAG[1])):
+        body = np.frombuffer(data, dtype=_ELEMENT, count=n, offset=pos)
+        if not np.all(body["tag"] == _TAG_WORD):
             raise CodecError("not an fts float list (an element is not a float)")
-        out = np.ascontiguousarray(body[:, 2:]).view("<f8").reshape(n).astype(np.float64)
+        out = body["value"].astype(np.float64)
     if expected is not None and n != expected:
         raise CodecError(f"expected {expected} values, got {n}")
     return out
@@ -179,7 +186,7 @@ def decode_text(data: bytes | str, expected: int | None = None) -> np.ndarray:
     return out
 
 
-def encode(codec: Codec, values: npt.ArrayLike) -> bytes:
+def encode(codec: Codec, values: npt.ArrayLike) -> bytes | bytearray:
     """Encode with the given codec."""
     return encode_fts(values) if codec is Codec.FTS else encode_text(values)
 

@@ -32,7 +32,7 @@ PL_VARIABLE, PL_ATOM, PL_INTEGER, PL_RATIONAL, PL_FLOAT, PL_STRING, PL_TERM = 1,
 PL_NIL, PL_BLOB, PL_LIST_PAIR, PL_DICT = 8, 9, 10, 44
 PL_Q_NODEBUG, PL_Q_CATCH_EXCEPTION = 0x04, 0x08
 CVT_ATOM, CVT_STRING, CVT_INTEGER, CVT_RATIONAL, CVT_WRITEQ = 0x01, 0x02, 0x08, 0x10, 0x200
-BUF_STACK = 0x10000
+BUF_STACK, BUF_ALLOW_STACK = 0x10000, 0x40000
 REP_ISO_LATIN_1, REP_UTF8 = 0x0, 0x100000
 
 term_t = c_size_t
@@ -63,7 +63,7 @@ class _Lib:
         self.new_term_refs = fn("PL_new_term_refs", term_t, c_int)
         self.put_variable = fn("PL_put_variable", c_int, term_t)
         self.put_term = fn("PL_put_term", c_int, term_t, term_t)
-        self.put_chars = fn("PL_put_chars", c_int, term_t, c_int, c_size_t, c_char_p)
+        self.put_chars = fn("PL_put_chars", c_int, term_t, c_int, c_size_t, c_void_p)
         self.put_int64 = fn("PL_put_int64", c_int, term_t, c_int64)
         self.put_float = fn("PL_put_float", c_int, term_t, c_double)
         self.put_nil = fn("PL_put_nil", c_int, term_t)
@@ -219,9 +219,12 @@ class Prolog:
         elif isinstance(value, str):
             raw = value.encode("utf-8")
             ok = lib.put_chars(t, PL_STRING | REP_UTF8, len(raw), raw)
-        elif isinstance(value, (bytes, bytearray, memoryview)):
-            raw = bytes(value)
-            ok = lib.put_chars(t, PL_STRING | REP_ISO_LATIN_1, len(raw), raw)
+        elif isinstance(value, bytes):
+            ok = lib.put_chars(t, PL_STRING | REP_ISO_LATIN_1, len(value), value)
+        elif isinstance(value, (bytearray, memoryview)):
+            buf = value if isinstance(value, bytearray) else bytearray(value)
+            view = (ctypes.c_char * len(buf)).from_buffer(buf) if buf else b""
+            ok = lib.put_chars(t, PL_STRING | REP_ISO_LATIN_1, len(buf), view)
         elif isinstance(value, (bool, np.bool_)):
             raw = b"true" if value else b"false"
             ok = lib.put_chars(t, PL_ATOM | REP_UTF8, len(raw), raw)
@@ -277,12 +280,16 @@ class Prolog:
 
     # -- Prolog -> Python ---------------------------------------------------------------------
     def _text(self, t: int, flags: int) -> str | None:
+        """Text of t. Latin-1 first (no conversion; strings carrying fts bytes are Latin-1,
+        and a pointer into the stack is fine as we copy at once), UTF-8 otherwise."""
         lib = self._lib
         n = c_size_t()
         s = c_void_p()
         mark = buf_mark_t()
         lib.mark_string_buffers(byref(mark))
         try:
+            if lib.get_nchars(t, byref(n), byref(s), flags | BUF_ALLOW_STACK | REP_ISO_LATIN_1):
+                return ctypes.string_at(s, n.value).decode("latin-1")
             if not lib.get_nchars(t, byref(n), byref(s), flags | BUF_STACK | REP_UTF8):
                 return None
             return ctypes.string_at(s, n.value).decode("utf-8")

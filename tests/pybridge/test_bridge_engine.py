@@ -117,3 +117,10 @@ def test_partial_list_and_blob(pl) -> None:
     from pybridge import Blob
 
     assert isinstance(sol["Q"], Blob)
+
+
+def test_bytearray_and_memoryview_strings(pl) -> None:
+    data = bytearray(b"\x00a\xff\x00")
+    assert pl.call("string_length", data, Var("N")) == {"N": 4}
+    assert pl.call("=", Var("S"), memoryview(b"\x00\x01"))["S"] == "\x00\x01"
+    assert pl.call("=", Var("S"), bytearray())["S"] == ""
