@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +18,9 @@ import numpy as np
 #: Thickness of the boundary walls (m). The walls stand just outside the floor rectangle,
 #: so the free floor is exactly ``size[0]`` by ``size[1]``.
 WALL_THICKNESS: float = 0.02
+
+#: Folder of the built-in arena files (package data).
+_ARENA_DIR = Path(__file__).resolve().parent
 
 _TOP_LEVEL_KEYS = {"name", "size", "wall_height", "blocks", "start", "description"}
 _BLOCK_KEYS = {"center", "size", "yaw"}
@@ -303,8 +305,7 @@ def parse_arena(data: Any, source: str = "<dict>") -> ArenaSpec:
 
 def builtin_arena_names() -> list[str]:
     """Names of the arenas shipped with the package (``r1`` ... ``r5``)."""
-    files = resources.files("arenas")
-    return sorted(p.name[:-5] for p in files.iterdir() if p.name.endswith(".json"))
+    return sorted(p.stem for p in _ARENA_DIR.glob("*.json"))
 
 
 def load_arena(name_or_path: str | Path) -> ArenaSpec:
@@ -333,7 +334,7 @@ def load_arena(name_or_path: str | Path) -> ArenaSpec:
                 f"unknown arena '{text_name}': not a built-in arena "
                 f"({', '.join(builtin_arena_names())}) nor an existing file"
             )
-        resource = resources.files("arenas") / f"{lowered}.json"
+        resource = _ARENA_DIR / f"{lowered}.json"
         return _parse_text(resource.read_text(encoding="utf-8"), f"arenas/{lowered}.json")
     try:
         text = path.read_text(encoding="utf-8")

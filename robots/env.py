@@ -57,15 +57,19 @@ class CollisionResponse(str, Enum):
 class RewardConfig:
     """Reward for obstacle avoidance, computed every control step.
 
-    ``r = forward_weight * v / v_max
+    ``r = alive_bonus + forward_weight * v / v_max
           - near_penalty * max(0, (p_max - near_threshold) / (1 - near_threshold))
           - collision_penalty * [collision]``
 
-    where ``v`` is the measured speed along the heading during the step (so pushing against
-    a wall earns nothing), ``v_max`` the top speed, and ``p_max`` the largest IR proximity.
+    where ``v`` is the measured speed along the heading during the step (clipped to
+    ``[-v_max, v_max]``; pushing against a wall earns nothing), ``v_max`` the top speed, and
+    ``p_max`` the largest IR proximity. The alive bonus is what a collision (which ends the
+    episode) takes away; driving ahead freely is worth twice as much as turning on the spot.
 
     Attributes
     ----------
+    alive_bonus : float
+        Reward for every step, whatever the action.
     forward_weight : float
         Reward for driving straight ahead at top speed for one step.
     near_threshold : float
@@ -77,7 +81,8 @@ class RewardConfig:
         Penalty for a step that ends in contact with a wall or a block.
     """
 
-    forward_weight: float = 1.0
+    alive_bonus: float = 0.5
+    forward_weight: float = 0.5
     near_threshold: float = 0.5
     near_penalty: float = 1.0
     collision_penalty: float = 10.0
@@ -238,7 +243,7 @@ class EPuckEnv(gym.Env):
     # -- hooks -----------------------------------------------------------------------------
     def _reward(self, obs: np.ndarray, progress: float, collision: bool) -> float:
         rc = self.config.reward
-        r = rc.forward_weight * min(max(progress, -1.0), 1.0)
+        r = rc.alive_bonus + rc.forward_weight * min(max(progress, -1.0), 1.0)
         p_max = float(obs.max())
         if p_max > rc.near_threshold:
             r -= rc.near_penalty * (p_max - rc.near_threshold) / (1.0 - rc.near_threshold)

@@ -58,11 +58,12 @@ class DiscretisationConfig:
 
     Examples
     --------
-    THREE x 3 levels: 27 states (81 entries with 3 actions); FIVE x 3: 243 states (the
-    default, 729 entries); EIGHT x 3: 6,561 states (19,683 entries).
+    THREE x 3 levels: 27 states (81 entries with 3 actions); FOUR x 3: 81 states (the
+    default, 243 entries); FIVE x 3: 243 states (729 entries); EIGHT x 3: 6,561 states
+    (19,683 entries).
     """
 
-    grouping: SensorGrouping = SensorGrouping.FIVE
+    grouping: SensorGrouping = SensorGrouping.FOUR
     levels: int = 3
 
     def __post_init__(self) -> None:

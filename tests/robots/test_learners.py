@@ -1,0 +1,90 @@
+"""Learner maths on hand-computed values, the registry, schedules, table files."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from robots.learners import (LEARNERS, EpsilonSchedule, LearnerParams, QLearning, Sarsa,
+                             epsilon_greedy, greedy_action, make_learner, q_learning_target,
+                             sarsa_target, td_update, validate_table)
+from robots.tables import TableMeta, load_table, save_table
+
+
+def test_registry_has_both_learners() -> None:
+    assert LEARNERS == {"qlearning": QLearning, "sarsa": Sarsa}
+    with pytest.raises(KeyError, match="registered"):
+        make_learner("dqn", 2, 2, LearnerParams(), np.random.default_rng(0))
+
+
+def test_targets_and_update_by_hand() -> None:
+    row = np.array([1.0, 3.0, -2.0])
+    assert q_learning_target(0.5, row, 0.9, False) == pytest.approx(0.5 + 0.9 * 3.0)
+    assert q_learning_target(-10.0, row, 0.9, True) == -10.0
+    assert sarsa_target(0.5, -2.0, 0.9, False) == pytest.approx(0.5 - 1.8)
+    assert sarsa_target(1.0, 5.0, 0.9, True) == 1.0
+    assert td_update(2.0, 4.0, 0.25) == pytest.approx(2.5)
+
+
+def test_qlearning_and_sarsa_one_step_by_hand() -> None:
+    params = LearnerParams(alpha=0.5, gamma=0.5, epsilon=EpsilonSchedule("constant", 0.0, 0.0, 1))
+    for cls, expected in ((QLearning, 0.5 * (1.0 + 0.5 * 4.0)), (Sarsa, 0.5 * (1.0 + 0.5 * 4.0))):
+        learner = cls(2, 2, params, np.random.default_rng(0))
+        learner.q[1] = [4.0, -1.0]
+        nxt = learner.learn(0, 1, 1.0, 1, False)
+        assert nxt == 0  # greedy in state 1
+        assert learner.q[0, 1] == pytest.approx(expected)
+        assert learner.visits.tolist() == [[0, 1], [0, 0]]
+    # SARSA bootstraps on the action it actually picks: force exploration of action 1
+    sarsa = Sarsa(2, 2, LearnerParams(alpha=1.0, gamma=0.5,
+                                      epsilon=EpsilonSchedule("constant", 1.0, 1.0, 1)),
+                  np.random.default_rng(3))
+    sarsa.q[1] = [4.0, -1.0]
+    a2 = sarsa.learn(0, 0, 1.0, 1, False)
+    assert sarsa.q[0, 0] == pytest.approx(1.0 + 0.5 * sarsa.q[1, a2])
+
+
+def test_greedy_ties_and_epsilon() -> None:
+    rng = np.random.default_rng(0)
+    assert greedy_action(np.array([0.0, 2.0, 1.0])) == 1
+    picks = {greedy_action(np.array([1.0, 1.0, 0.0]), rng) for _ in range(50)}
+    assert picks == {0, 1}
+    assert all(epsilon_greedy(np.array([0.0, 5.0]), 0.0, rng) == 1 for _ in range(20))
+    explored = [epsilon_greedy(np.array([0.0, 5.0]), 1.0, rng) for _ in range(200)]
+    assert 0 in explored and 1 in explored
+
+
+def test_epsilon_schedules() -> None:
+    lin = EpsilonSchedule("linear", 0.5, 0.1, 100)
+    assert [lin.value(t) for t in (0, 50, 100, 1000)] == pytest.approx([0.5, 0.3, 0.1, 0.1])
+    exp = EpsilonSchedule("exponential", 1.0, 0.0, 10)
+    assert exp.value(10) == pytest.approx(np.exp(-1))
+    assert EpsilonSchedule("constant", 0.2, 0.0, 1).value(99) == 0.2
+    with pytest.raises(ValueError):
+        EpsilonSchedule("linear", 1.5, 0.1, 10)
+
+
+def test_validate_table() -> None:
+    assert validate_table([[1, 2]], (1, 2)).dtype == np.float64
+    with pytest.raises(ValueError, match="shape"):
+        validate_table(np.zeros((2, 3)), (3, 3))
+    bad = np.zeros((2, 2))
+    bad[1, 0] = np.nan
+    with pytest.raises(ValueError, match=r"non-finite entry at \(state, action\) = \(1, 0\)"):
+        validate_table(bad, (2, 2))
+
+
+def test_table_file_round_trip(tmp_path: Path) -> None:
+    q = np.arange(12, dtype=float).reshape(4, 3)
+    visits = np.arange(12, dtype=np.int64).reshape(4, 3)
+    meta = TableMeta(algorithm="sarsa", arena="r4", seed=3, iterations=100,
+                     actions=["forward", "left", "right"], state={"n_states": 4})
+    path = save_table(tmp_path / "t", q, meta, visits=visits)
+    assert path.name == "t.npy" and (tmp_path / "t.json").exists()
+    loaded = load_table(tmp_path / "t.npy")
+    np.testing.assert_array_equal(loaded.q, q)
+    np.testing.assert_array_equal(loaded.visits, visits)
+    assert loaded.meta == meta
+    with pytest.raises(ValueError, match="action names"):
+        save_table(tmp_path / "u", q, TableMeta("sarsa", "r4", 0, 0, ["a"], {}))
