@@ -296,11 +296,11 @@ class Prolog:
         finally:
             lib.release_string_buffers_from_mark(mark)
 
-    def _atom_text(self, a: int) -> str:
+    def _atom_text(self, a: int) -> str | None:
         n = c_size_t()
         s = c_void_p()
         if not self._lib.atom_mbchars(a, byref(n), byref(s), REP_UTF8):
-            raise TermConversionError("atom without text")
+            return None  # a reserved symbol (e.g. the functor of a dict)
         return ctypes.string_at(s, n.value).decode("utf-8")
 
     def _get(self, t: int) -> Any:
@@ -341,12 +341,15 @@ class Prolog:
             for item in reversed(items):
                 tail = Term("[|]", item, tail)
             return tail
-        # compound (or dict)
+        if kind == PL_DICT:
+            return Blob(self._text(t, CVT_WRITEQ) or "<dict>")
         name = atom_t()
         arity = c_size_t()
-        if not lib.get_name_arity_sz(t, byref(name), byref(arity)):
+        fname = None
+        if lib.get_name_arity_sz(t, byref(name), byref(arity)):
+            fname = self._atom_text(name.value)
+        if fname is None:
             return Blob(self._text(t, CVT_WRITEQ) or "<term>")
-        fname = self._atom_text(name.value)
         a = lib.new_term_ref()
         args = []
         for i in range(1, arity.value + 1):

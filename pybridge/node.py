@@ -287,6 +287,13 @@ class RobotNode:
         self._nodes.append(node)
         return node
 
+    def address(self, node: Any) -> tuple[Atom, int]:
+        """(host, port) a platform node of this process listens on (e.g. from :meth:`start`)."""
+        self._check_open()
+        sol = self._must("node_property", node, Term("address", Var("A")))
+        host, port = sol["A"].args
+        return Atom(host), int(port)
+
     def start_tartarus(self, ip: str, port: int, token: int) -> None:
         """Tartarus-style start: ``start_tartarus(Ip, Port, Token)``."""
         self._check_open()

@@ -59,7 +59,8 @@ bridge_next_request/2 and bridge_reply/2 for the requests to be answered.
     robot_/2,                   % Robot, Props
     pending_/3,                 % Id, ReplyQueue, Robot
     codec_/1,                   % fts | text
-    server_/1.                  % ThreadId of the serving thread
+    server_/1,                  % ThreadId of the serving thread
+    stopping_threads_/0.        % bridge_stop_threads/2 has aborted threads
 
 :- create_prolog_flag(robot_bridge_timeout, 30.0, [type(float), keep(true)]).
 
@@ -349,6 +350,7 @@ bridge_reply(Id, Reply) :-
 
 bridge_attach_server :-
     thread_self(Me),
+    retractall(stopping_threads_),
     ensure_request_queue,
     with_mutex(robot_bridge,
                ( retractall(server_(_)),
@@ -393,6 +395,10 @@ bridge_shutdown :-
 
 bridge_stop_threads(Timeout, Remaining) :-
     check_timeout(Timeout),
+    (   stopping_threads_
+    ->  true
+    ;   assertz(stopping_threads_)
+    ),
     thread_self(Me),
     findall(T, other_thread(Me, T), Threads),
     forall(( member(T, Threads),
@@ -510,7 +516,18 @@ fts_check(String) :-
 		 *           MESSAGES           *
 		 *******************************/
 
-:- multifile prolog:error_message//1.
+:- multifile prolog:error_message//1, user:message_hook/3.
+
+%   Threads aborted by bridge_stop_threads/2 (e.g. idle pool workers) would
+%   each print "Thread running ... died on exception: Execution Aborted".
+%   That is the expected end of them, so it is not printed.
+
+user:message_hook(abnormal_thread_completion(_, exception(E)), warning, _) :-
+    stopping_threads_,
+    aborted(E).
+
+aborted('$aborted').
+aborted(unwind(abort)).
 
 prolog:error_message(timeout_error(bridge, Robot)) -->
     [ 'No reply from the robot host for robot ~q (is its control loop serving requests?)'-[Robot] ].

@@ -124,3 +124,10 @@ def test_bytearray_and_memoryview_strings(pl) -> None:
     assert pl.call("string_length", data, Var("N")) == {"N": 4}
     assert pl.call("=", Var("S"), memoryview(b"\x00\x01"))["S"] == "\x00\x01"
     assert pl.call("=", Var("S"), bytearray())["S"] == ""
+
+
+def test_dicts_and_reserved_functors_come_back_as_blobs(pl) -> None:
+    from pybridge import Blob
+
+    sol = pl.call("dict_create", Var("D"), Atom("t"), [Term("-", Atom("a"), 1)])
+    assert sol["D"] == Blob("t{a:1}")

@@ -1,0 +1,61 @@
+"""Run by test_bridge_platform.py in its own process: the real platform in a robot node.
+
+Two platform nodes in this process; an agent created on the first moves to the second,
+reads the robot's table through the bridge and writes it back plus one. Prints JSON.
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from bridge_helpers import ArrayRobot
+
+from pybridge import Atom, RobotNode, Term, Var
+
+AGENT = Path(__file__).with_name("hop_agent.pl")
+
+
+def main() -> int:
+    out: dict = {}
+    node = RobotNode(request_timeout=10.0)
+    node.load_platform()
+    # Embedded Prolog runs without signal handling, so node_stop/1 cannot interrupt a
+    # connection worker blocked in a read: it ends at its idle timeout (default 10 s).
+    home = node.start("127.0.0.1", 0, idle_timeout=1)
+    robot_node = node.start("127.0.0.1", 0, idle_timeout=1)
+    home_host, home_port = node.address(home)
+    robot_host, robot_port = node.address(robot_node)
+    robot = ArrayRobot(100, 4, seed=9)
+    before = robot.q_table
+    node.register_robot("r1", robot)
+    node.call("dynamic", Term("/", Atom("agent_done"), 3))
+    node.call("assertz", Term("robot_port", robot_port))
+    node.assert_file_to_tartarus(AGENT)
+    name = node.create_mobile_agent(None, (home_host, home_port), "hop", [])
+    out["listed_before"] = [str(a) for a in node.list_agents()]
+    node.execute_agent(name, (home_host, home_port), "hop")
+    deadline = time.monotonic() + 20
+    done = None
+    while time.monotonic() < deadline:
+        node.serve_pending()
+        done = node.call("agent_done", Var("A"), Var("P"), Var("S"))
+        if done:
+            break
+        time.sleep(0.001)
+    out["done"] = done is not None
+    if done:
+        out["agent"] = str(done["A"])
+        out["port_ok"] = done["P"] == robot_port
+        out["sum_ok"] = bool(np.isclose(done["S"], before.sum()))
+    out["table_plus_one"] = bool(np.array_equal(robot.q_table, before + 1.0))
+    out["name"] = str(name)
+    out["left"] = [str(t) for t in node.close(thread_timeout=5.0)]
+    print(json.dumps(out), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
