@@ -316,10 +316,14 @@ class RobotNode:
         sol = self._must("create_mobile_agent", name_arg, self._link(link), Atom(handler), list(tokens))
         return sol.get("Name", Atom(name)) if name is None else Atom(name)
 
-    def execute_agent(self, name: str, link: Sequence[Any], handler: str) -> None:
-        """``execute_agent(Name, (Ip,Port), Handler)``."""
+    def execute_agent(self, name: str, link: Sequence[Any], handler: str, event: Any = None) -> None:
+        """``execute_agent(Name, (Ip,Port), Handler)``, or ``execute_agent/4`` with a start
+        ``event`` other than ``main``."""
         self._check_open()
-        self._must("execute_agent", Atom(name), self._link(link), Atom(handler))
+        if event is None:
+            self._must("execute_agent", Atom(name), self._link(link), Atom(handler))
+        else:
+            self._must("execute_agent", Atom(name), self._link(link), Atom(handler), atom_or_self(event))
 
     def move_agent(self, name: str, link: Sequence[Any]) -> None:
         """``move_agent(Name, (Ip,Port))``."""

@@ -230,3 +230,16 @@ def test_one_node_at_a_time_and_close(node) -> None:
         node.serve_pending()
     again = RobotNode()
     again.close()
+
+
+def test_any_float_layout_is_served_row_major(node) -> None:
+    class Fortran(ArrayRobot):
+        @property
+        def q_table(self) -> np.ndarray:
+            return np.asfortranarray(self._q.astype(np.float32))
+
+    robot = Fortran(6, 3)
+    node.register_robot("r1", robot)
+    shape, values = _table(run_agent(node, Term("get_qtable", Atom("r1"), Var())))
+    assert shape == [6, 3]
+    assert np.array_equal(values, robot._q.astype(np.float32).astype(np.float64).reshape(-1))
