@@ -81,8 +81,8 @@ class RewardConfig:
         Penalty for a step that ends in contact with a wall or a block.
     """
 
-    alive_bonus: float = 0.5
-    forward_weight: float = 0.5
+    alive_bonus: float = 0.3
+    forward_weight: float = 0.7
     near_threshold: float = 0.5
     near_penalty: float = 1.0
     collision_penalty: float = 10.0

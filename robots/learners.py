@@ -132,7 +132,7 @@ class LearnerParams:
     """
 
     alpha: float = 0.2
-    gamma: float = 0.9
+    gamma: float = 0.95
     epsilon: EpsilonSchedule = field(default_factory=EpsilonSchedule)
     initial_q: float = 0.0
 
