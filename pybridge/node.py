@@ -498,10 +498,14 @@ class RobotNode:
                 except BridgeError:
                     log.warning("stopping platform node %r failed", node, exc_info=True)
             self._nodes.clear()
-            self.prolog.call("bridge_shutdown", module=_MODULE)
             self._robots.clear()
-            sol = self.prolog.call("bridge_stop_threads", float(thread_timeout), Var("Left"), module=_MODULE)
-            remaining = list(sol["Left"]) if sol else []
+            try:
+                self.prolog.call("bridge_shutdown", module=_MODULE)
+                sol = self.prolog.call("bridge_stop_threads", float(thread_timeout), Var("Left"),
+                                       module=_MODULE)
+                remaining = list(sol["Left"]) if sol else []
+            except BridgeError:
+                log.warning("closing the bridge failed", exc_info=True)
             if remaining:
                 log.warning("Prolog threads still running after close(): %r", remaining)
         finally:

@@ -18,7 +18,8 @@
             bridge_stop_threads/2       % +Timeout, -Remaining
           ]).
 :- autoload(library(error),
-            [must_be/2, domain_error/2, existence_error/2, type_error/2]).
+            [ must_be/2, domain_error/2, existence_error/2, type_error/2,
+              instantiation_error/1 ]).
 :- autoload(library(option), [option/3]).
 :- autoload(library(lists), [member/2]).
 :- autoload(library(apply), [maplist/3, include/3]).
@@ -143,8 +144,19 @@ table_request(Op, PI, Options, qtable(Shape, Values)) :-
     registered(Robot),
     bridge_call(Robot, Op, PI, Options, Reply),
     (   Reply = table(Shape, Data)
-    ->  decode_values(Data, Values)
+    ->  decode_values(Data, Values),
+        check_size(Shape, Values)
     ;   reply_error(Reply, PI)
+    ).
+
+check_size(Shape, Values) :-
+    check_shape(Shape),
+    Shape = [NS, NA],
+    N is NS*NA,
+    length(Values, Len),
+    (   Len =:= N
+    ->  true
+    ;   domain_error(qtable_size(N), Len)
     ).
 
 %!  set_qtable(+Robot, +Table) is det.
@@ -169,23 +181,20 @@ set_qtable(Robot, Table, Options) :-
     must_be(atomic, Robot),
     must_be(list, Options),
     registered(Robot, Props),
-    (   Table = qtable(Shape, Values0)
+    (   var(Table)
+    ->  instantiation_error(Table)
+    ;   Table = qtable(Shape, Values0)
     ->  true
     ;   type_error(qtable, Table)
     ),
+    must_be(ground, Shape),
     must_be(list, Values0),
     memberchk(shape(Registered), Props),
     (   Shape == Registered
     ->  true
     ;   domain_error(shape(Registered), Shape)
     ),
-    Shape = [NS, NA],
-    N is NS*NA,
-    length(Values0, Len),
-    (   Len =:= N
-    ->  true
-    ;   domain_error(qtable_size(N), Len)
-    ),
+    check_size(Shape, Values0),
     float_list(Values0, Values),
     encode_values(Values, Data),
     bridge_call(Robot, set_qtable(Robot, Shape, Data), set_qtable/2,

@@ -60,10 +60,18 @@ def test_get_qtable_bit_exact_from_prolog_thread(node, codec) -> None:
 
 @pytest.mark.parametrize("codec", ["fts", "text"])
 def test_python_prolog_python_round_trip(node, codec) -> None:
-    """get then set the same table from an agent: the robot's table is unchanged bit for bit,
-    and a table made in Prolog arrives exactly."""
+    """get then set the same table from an agent: the robot's table is unchanged bit for bit
+    (random bit patterns: every exponent, subnormals, -0.0), and a table made in Prolog
+    arrives exactly."""
     node.codec = codec
     robot = ArrayRobot(64, 4, seed=5)
+    rng = np.random.default_rng(11)
+    bits = rng.integers(-(2**63), 2**63 - 1, (64, 4), dtype=np.int64)
+    awkward = bits.view(np.float64).copy()
+    awkward[~np.isfinite(awkward)] = -0.0
+    awkward[0, :3] = [5e-324, -0.0, 1.7976931348623157e308]
+    robot.set_q_table(awkward)
+    robot.sets = 0
     node.register_robot("r1", robot)
     before = robot.q_table
     goal = Term(",", Term("get_qtable", Atom("r1"), Var("T")), Term("set_qtable", Atom("r1"), Var("T")))

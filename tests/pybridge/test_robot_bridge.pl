@@ -20,13 +20,20 @@ serve_one(qtable(Shape, Values), Op) :-
 encode(fts, Values, fts(S)) :- fast_term_serialized(Values, S).
 encode(text, Values, text(S)) :- atomic_list_concat(Values, ',', A), atom_string(A, S).
 
+%   with_host(+Table, :Goal, -Ops): run Goal (which makes two requests)
+%   while a host thread serves them; Ops are the requests it saw.
+%   with_host/4 takes the number of requests.
+
 with_host(Table, Goal, Ops) :-
+    with_host(Table, Goal, Ops, 2).
+
+with_host(Table, Goal, Ops, Count) :-
     thread_self(Me),
-    thread_create(( findall(Op, (between(1, 2, _), serve_one(Table, Op)), Ops0),
+    thread_create(( findall(Op, (between(1, Count, _), serve_one(Table, Op)), Ops0),
                     thread_send_message(Me, served(Ops0)) ), Id, []),
-    call(Goal),
-    thread_get_message(served(Ops)),
-    thread_join(Id, _).
+    call_cleanup(call(Goal),
+                 ( thread_get_message(served(Ops)),
+                   thread_join(Id, _) )).
 
 reset :-
     bridge_shutdown,
@@ -61,6 +68,15 @@ test(wrong_size, [setup(reset), error(domain_error(qtable_size(4), 3))]) :-
     set_qtable(r1, qtable([2,2], [1.0,2.0,3.0])).
 test(not_a_number, [setup(reset), error(type_error(number, x))]) :-
     set_qtable(r1, qtable([2,2], [1.0,2.0,3.0,x])).
+
+test(unbound_table, [setup(reset), error(instantiation_error)]) :-
+    set_qtable(r1, _).
+test(unbound_shape, [setup(reset), error(instantiation_error)]) :-
+    set_qtable(r1, qtable(_, [1.0, 2.0, 3.0, 4.0])).
+test(not_a_qtable, [setup(reset), error(type_error(qtable, foo(1)))]) :-
+    set_qtable(r1, foo(1)).
+test(reply_of_wrong_size, [setup(reset), error(domain_error(qtable_size(4), 3))]) :-
+    with_host(qtable([2,2], [1.0,2.0,3.0]), get_qtable(r1, _), _, 1).
 
 test(timeout, [setup(reset), error(timeout_error(bridge, r1))]) :-
     get_qtable(r1, _, [timeout(0.05)]).
