@@ -27,6 +27,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="output folder (default results/train/ARENA_ALGO_sSEED)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-plot", action="store_true", help="do not draw learning_curves.png")
+    p.add_argument("--gui", action="store_true",
+                   help="watch in a pybullet window (needs a display; not paced to real time)")
     p.set_defaults(func=cmd_train)
 
     p = subparsers.add_parser(
@@ -125,6 +127,8 @@ def config_from_args(args: argparse.Namespace) -> TrainerConfig:
            if v is not None}
     if args.sensor_noise is not None:
         sim["robot"] = EPuckConfig(**{**cfg.sim.robot.__dict__, "sensor_noise_std": args.sensor_noise})
+    if getattr(args, "gui", False):
+        sim["connection"] = "gui"
     if sim:
         top["sim"] = SimConfig(**{**cfg.sim.__dict__, **sim})
     return cfg.replace(**top) if top else cfg
