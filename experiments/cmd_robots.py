@@ -46,7 +46,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "baselines", help="standalone Q-learning and SARSA in R1 and R4 (the paper's baseline figures)")
     p.add_argument("--out", type=Path, default=Path("results/baselines"))
     p.add_argument("--iterations", type=int, default=20_000)
-    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--seed", type=int, default=1, help="first seed")
+    p.add_argument("--seeds", type=int, default=1,
+                   help="runs per curve (seeds SEED, SEED+1, ...): mean line and min-max band")
     p.add_argument("--arenas", nargs="+", default=["r1", "r4"])
     p.add_argument("--algos", nargs="+", choices=sorted(LEARNERS), default=["qlearning", "sarsa"])
     p.add_argument("--jobs", type=int, default=2, help="worker processes")
@@ -256,19 +258,25 @@ def cmd_baselines(args: argparse.Namespace) -> int:
     from robots.training import read_metrics_csv
 
     args.out.mkdir(parents=True, exist_ok=True)
-    jobs = [(TrainerConfig(arena=a, algo=al, seed=args.seed, iterations=args.iterations),
-             args.out / f"{al}_{a}") for al in args.algos for a in args.arenas]
+    seeds = [args.seed + k for k in range(max(1, args.seeds))]
+
+    def run_dir(algo: str, arena: str, seed: int) -> Path:
+        return args.out / (f"{algo}_{arena}" if len(seeds) == 1 else f"{algo}_{arena}_s{seed}")
+
+    jobs = [(TrainerConfig(arena=a, algo=al, seed=s, iterations=args.iterations), run_dir(al, a, s))
+            for al in args.algos for a in args.arenas for s in seeds]
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
         futures = [pool.submit(_baseline_job, c.to_dict(), str(o)) for c, o in jobs]
         for fut in tqdm(futures, desc="baseline runs", unit="run", file=sys.stderr):
             algo, arena, wall = fut.result()
             print(f"{algo} {arena}: {args.iterations} iterations in {wall:.1f} s", file=sys.stderr)
     for algo in args.algos:
-        curves = {a.upper(): read_metrics_csv(args.out / f"{algo}_{a}" / "metrics.csv")
+        curves = {a.upper(): [read_metrics_csv(run_dir(algo, a, s) / "metrics.csv") for s in seeds]
                   for a in args.arenas}
         name = {"qlearning": "Q-learning", "sarsa": "SARSA"}.get(algo, algo)
+        which = f"seed {seeds[0]}" if len(seeds) == 1 else f"seeds {seeds[0]}-{seeds[-1]}"
         path = plot_learning_curves(curves, args.out / f"baseline_{algo}.png",
-                                    f"Standalone {name} (seed {args.seed})")
+                                    f"Standalone {name}, {args.iterations} iterations ({which})")
         print(path)
     return 0
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Mapping
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -23,15 +23,17 @@ def _pyplot():  # noqa: ANN202 - matplotlib module
 
 
 def plot_learning_curves(
-    curves: Mapping[str, np.ndarray], path: str | Path, title: str
+    curves: Mapping[str, np.ndarray | Sequence[np.ndarray]], path: str | Path, title: str
 ) -> Path:
-    """Sum of Q-values and cumulative reward against iterations, one line per run.
+    """Sum of Q-values and cumulative reward against iterations, one line per label.
 
     Parameters
     ----------
-    curves : mapping of str to np.ndarray
+    curves : mapping of str to np.ndarray or a sequence of them
         Label -> structured metrics array with fields ``iteration``, ``q_sum`` and
-        ``cumulative_reward`` (as returned by :func:`robots.training.train`).
+        ``cumulative_reward`` (as returned by :func:`robots.training.train`), or several
+        such arrays of equal length (runs with different seeds): then the line is their mean
+        and a band shows their minimum and maximum.
     path : str or Path
         PNG file to write.
     title : str
@@ -43,9 +45,15 @@ def plot_learning_curves(
     """
     plt = _pyplot()
     fig, (ax_q, ax_r) = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
-    for (label, m), colour in zip(curves.items(), _COLOURS):
-        ax_q.plot(m["iteration"], m["q_sum"], color=colour, lw=1.4, label=label)
-        ax_r.plot(m["iteration"], m["cumulative_reward"], color=colour, lw=1.4, label=label)
+    for (label, runs), colour in zip(curves.items(), _COLOURS):
+        runs = [runs] if isinstance(runs, np.ndarray) else list(runs)
+        it = runs[0]["iteration"]
+        for ax, field in ((ax_q, "q_sum"), (ax_r, "cumulative_reward")):
+            ys = np.stack([r[field] for r in runs])
+            name = label if len(runs) == 1 else f"{label} (mean of {len(runs)} seeds)"
+            ax.plot(it, ys.mean(axis=0), color=colour, lw=1.4, label=name)
+            if len(runs) > 1:
+                ax.fill_between(it, ys.min(axis=0), ys.max(axis=0), color=colour, alpha=0.18, lw=0)
     ax_q.set_xlabel("iterations")
     ax_q.set_ylabel("sum of Q-values")
     ax_q.set_title("Sum of Q-values")
