@@ -467,7 +467,8 @@ class RobotNode:
         try:
             values = _codec.decode(Codec(data.name), data.args[0].encode("latin-1"), expected=n)
         except (CodecError, ValueError) as exc:
-            raise _RequestError(Term("domain_error", Atom("qtable_values"), str(exc))) from None
+            # not all floats: the agent side converts the values and asks again
+            raise _RequestError(Term("type_error", Atom("float_list"), str(exc))) from None
         finite = np.isfinite(values)
         if not finite.all():
             bad = float(values[np.argmin(finite)])

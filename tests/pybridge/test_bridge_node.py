@@ -251,3 +251,17 @@ def test_any_float_layout_is_served_row_major(node) -> None:
     shape, values = _table(run_agent(node, Term("get_qtable", Atom("r1"), Var())))
     assert shape == [6, 3]
     assert np.array_equal(values, robot._q.astype(np.float32).astype(np.float64).reshape(-1))
+
+
+def test_non_floats_that_look_like_floats_are_converted_or_refused(node) -> None:
+    """[1, 10**23] serialises to exactly the length of two floats, so the agent side sends it
+    as is; the host's tag check refuses it and the agent converts and asks again."""
+    robot = ArrayRobot(2, 2)
+    node.register_robot("r1", robot)
+    goal = Term("set_qtable", Atom("r1"), Term("qtable", [2, 2], [1, 10**23, 2.0, 3.0]))
+    assert run_agent(node, goal).name == "true"
+    assert np.array_equal(robot.q_table, np.array([[1.0, 1e23], [2.0, 3.0]]))
+    assert robot.sets == 1
+    goal = Term("set_qtable", Atom("r1"), Term("qtable", [2, 2], [Atom("a"), 10**23, 2.0, 3.0]))
+    assert _error_formal(run_agent(node, goal)) == Term("type_error", Atom("number"), Atom("a"))
+    assert robot.sets == 1
