@@ -137,7 +137,7 @@ get_visits(Robot, Table) :-
 get_visits(Robot, Table, Options) :-
     table_request(get_visits(Robot), get_visits/2, Options, Table).
 
-table_request(Op, PI, Options, qtable(Shape, Values)) :-
+table_request(Op, PI, Options, Table) :-
     arg(1, Op, Robot),
     must_be(atomic, Robot),
     must_be(list, Options),
@@ -145,7 +145,8 @@ table_request(Op, PI, Options, qtable(Shape, Values)) :-
     bridge_call(Robot, Op, PI, Options, Reply),
     (   Reply = table(Shape, Data)
     ->  decode_values(Data, Values),
-        check_size(Shape, Values)
+        check_size(Shape, Values),
+        Table = qtable(Shape, Values)
     ;   reply_error(Reply, PI)
     ).
 

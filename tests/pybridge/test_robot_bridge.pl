@@ -60,6 +60,9 @@ test(round_trip_fts, [setup(reset), Got == T]) :-
     fast_term_serialized(Values, S),
     assertion(Values == [1.0,-0.0,5.0e-324,0.1]).
 
+test(steadfast_get, [setup(reset), fail]) :-
+    with_host(qtable([2,2], [1.0,2.0,3.0,4.0]), get_qtable(r1, qtable([4,1], _)), _, 1).
+
 test(unknown_robot, [setup(reset), error(existence_error(robot, nobody))]) :-
     get_qtable(nobody, _).
 test(wrong_shape, [setup(reset), error(domain_error(shape([2,2]), [4,1]))]) :-
