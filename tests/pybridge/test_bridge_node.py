@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pybridge import Atom, Codec, NodeStateError, PrologError, RobotNode, Term, Var
-from bridge_helpers import ArrayRobot, run_agent
+from pybridge import Atom, BridgeError, Codec, NodeStateError, PrologError, RobotNode, Term, Var
+from bridge_helpers import HELPER, ArrayRobot, run_agent
 
 
 def _bits(a: np.ndarray) -> np.ndarray:
@@ -265,3 +265,32 @@ def test_non_floats_that_look_like_floats_are_converted_or_refused(node) -> None
     goal = Term("set_qtable", Atom("r1"), Term("qtable", [2, 2], [Atom("a"), 10**23, 2.0, 3.0]))
     assert _error_formal(run_agent(node, goal)) == Term("type_error", Atom("number"), Atom("a"))
     assert robot.sets == 1
+
+
+def test_fts_self_test_failure_falls_back_to_text(monkeypatch) -> None:
+    """An encoder that disagrees with this Prolog (here: a wrong size field) must be caught
+    before Prolog ever deserialises its bytes; the node then uses the text codec."""
+    from pybridge import codec as codec_module
+
+    real = codec_module.encode_fts
+
+    def skewed(values):
+        data = bytearray(real(values))
+        if len(data) > 2:
+            data[1] ^= 0x01
+        return data
+
+    monkeypatch.setattr(codec_module, "encode_fts", skewed)
+    n = RobotNode()
+    try:
+        assert not n.self_test_report.fts_ok and n.self_test_report.text_ok
+        assert n.codec is Codec.TEXT
+        with pytest.raises(BridgeError):
+            n.codec = "fts"
+        robot = ArrayRobot(3, 3)
+        n.register_robot("r1", robot)
+        n.call("use_module", Atom(str(HELPER)))
+        shape, values = _table(run_agent(n, Term("get_qtable", Atom("r1"), Var())))
+        assert np.array_equal(_bits(values), _bits(robot.q_table.reshape(-1)))
+    finally:
+        n.close()
