@@ -67,7 +67,7 @@ def varint(n: int) -> bytes:
     return bytes(reversed(out))
 
 
-def _read_varint(buf: bytes, pos: int) -> tuple[int, int]:
+def _read_varint(buf: bytes | bytearray, pos: int) -> tuple[int, int]:
     value = 0
     for _ in range(10):
         if pos >= len(buf):

@@ -199,7 +199,8 @@ class Prolog:
                         if not lib.next_solution(qid):
                             ex = lib.exception(qid)
                             if ex:
-                                raise PrologError(self._get(ex), goal=f"{module + ':' if module else ''}{name}/{len(args)}")
+                                where = f"{module}:{name}" if module else name
+                                raise PrologError(self._get(ex), goal=f"{where}/{len(args)}")
                             break
                         solutions.append({k: self._get(t) for k, t in names.items()})
                 finally:
@@ -318,13 +319,13 @@ class Prolog:
             v = c_int64()
             if lib.get_int64(t, byref(v)):
                 return v.value
-            return int(self._text(t, CVT_INTEGER))
+            return int(self._text(t, CVT_INTEGER) or "0")  # beyond int64: via its digits
         if kind == PL_FLOAT:
             d = c_double()
             lib.get_float(t, byref(d))
             return d.value
         if kind == PL_RATIONAL:
-            num, _, den = self._text(t, CVT_RATIONAL).partition("r")
+            num, _, den = (self._text(t, CVT_RATIONAL) or "0").partition("r")
             return Fraction(int(num), int(den or 1))
         if kind == PL_BLOB:
             return Blob(self._text(t, CVT_WRITEQ) or "<blob>")

@@ -12,7 +12,6 @@ import atexit
 import logging
 import math
 import threading
-import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,7 +22,7 @@ import numpy as np
 from pybridge import codec as _codec
 from pybridge.codec import Codec
 from pybridge.engine import Prolog, prolog
-from pybridge.errors import BridgeError, CodecError, NodeStateError, PrologError, PrologFailure
+from pybridge.errors import BridgeError, CodecError, NodeStateError, PrologFailure
 from pybridge.terms import Atom, Term, Var, atom_or_self
 
 __all__ = ["TableProvider", "RobotNode", "Bridge", "BRIDGE_FILE", "SelfTestReport"]
@@ -135,14 +134,15 @@ class RobotNode:
             self.request_timeout = request_timeout
             self._must("bridge_attach_server", module=_MODULE)
             self.self_test_report = self.self_test()
+            report = self.self_test_report
             if codec is None:
-                chosen = Codec.FTS if self.self_test_report.fts_ok else Codec.TEXT
-                if not self.self_test_report.fts_ok:
-                    log.warning("fts codec self-test failed, using text: %s", self.self_test_report.detail)
+                chosen = Codec.FTS if report.fts_ok else Codec.TEXT
+                if not report.fts_ok:
+                    log.warning("fts codec self-test failed, using text: %s", report.detail)
             else:
                 chosen = Codec(codec)
-                if not (self.self_test_report.fts_ok if chosen is Codec.FTS else self.self_test_report.text_ok):
-                    raise BridgeError(f"codec {chosen.value} failed its self-test: {self.self_test_report.detail}")
+                if not (report.fts_ok if chosen is Codec.FTS else report.text_ok):
+                    raise BridgeError(f"codec {chosen.value} failed its self-test: {report.detail}")
             self.codec = chosen
             if load_platform:
                 self.load_platform()

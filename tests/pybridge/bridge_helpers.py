@@ -45,7 +45,7 @@ _counter = iter(range(10**9))
 def run_agent(node: Any, goal: Any, timeout: float = 10.0, serve: bool = True) -> Any:
     """Run goal in a new Prolog thread while this (main) thread serves bridge requests
     like a control loop; return true(Goal) / false / error(E) as Python terms."""
-    from pybridge import Atom, Term, Var
+    from pybridge import Atom, Var
 
     alias = Atom(f"test_agent_{next(_counter)}")
     node.call("spawn", alias, goal, module="bridge_test_agents")
@@ -58,3 +58,26 @@ def run_agent(node: Any, goal: Any, timeout: float = 10.0, serve: bool = True) -
             return sol["R"]
         time.sleep(0.001)
     raise AssertionError(f"agent {alias} did not finish in {timeout} s")
+
+
+def spawn(node: Any, alias: str, goal: Any) -> None:
+    """Start goal in a Prolog thread named alias (outcome: :func:`agent_result`)."""
+    from pybridge import Atom
+
+    node.call("spawn", Atom(alias), goal, module="bridge_test_agents")
+
+
+def agent_result(node: Any, alias: str, timeout: float = 5.0, serve: bool = False) -> Any:
+    """Wait for the outcome of a spawned agent (true(Goal) / false / error(E))."""
+    from pybridge import Atom, Var
+
+    deadline = time.monotonic() + timeout
+    while True:
+        if serve:
+            node.serve_pending()
+        sol = node.call("agent_result", Atom(alias), Var("R"), module="bridge_test_agents")
+        if sol is not None:
+            return sol["R"]
+        if time.monotonic() > deadline:
+            raise AssertionError(f"agent {alias} did not finish in {timeout} s")
+        time.sleep(0.001)

@@ -6,7 +6,6 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-
 from bridge_helpers import HELPER, _atom
 
 

@@ -2,11 +2,13 @@
 serving their requests like a control loop."""
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
+from bridge_helpers import HELPER, ArrayRobot, agent_result, run_agent, spawn
 
 from pybridge import Atom, BridgeError, Codec, NodeStateError, PrologError, RobotNode, Term, Var
-from bridge_helpers import HELPER, ArrayRobot, run_agent
 
 
 def _bits(a: np.ndarray) -> np.ndarray:
@@ -79,9 +81,9 @@ def test_python_prolog_python_round_trip(node, codec) -> None:
     assert robot.sets == 1
     assert np.array_equal(_bits(robot.q_table), _bits(before))
     # a table built by the agent: each value halved in Prolog arithmetic
+    half = Term(">>", [Var("X"), Var("Y")], Term("is", Var("Y"), Term("/", Var("X"), 2)))
     halve = Term(",", Term("get_qtable", Atom("r1"), Term("qtable", Var("S"), Var("V"))),
-                 Term(",", Term("maplist", Term(">>", [Var("X"), Var("Y")], Term("is", Var("Y"), Term("/", Var("X"), 2))),
-                                Var("V"), Var("W")),
+                 Term(",", Term("maplist", half, Var("V"), Var("W")),
                       Term("set_qtable", Atom("r1"), Term("qtable", Var("S"), Var("W")))))
     assert run_agent(node, halve).name == "true"
     assert np.array_equal(_bits(robot.q_table), _bits(before / 2))
@@ -115,18 +117,15 @@ def test_unknown_robot_is_existence_error(node) -> None:
 def test_robot_unregistered_while_request_queued(node) -> None:
     """The Python side checks too: a request for a robot forgotten in the meantime."""
     node.register_robot("r1", ArrayRobot(2, 2))
-    node.call("spawn", Atom("late_agent"), Term("get_qtable", Atom("r1"), Var()), module="bridge_test_agents")
-    import time
-
+    spawn(node, "late_agent", Term("get_qtable", Atom("r1"), Var()))
+    queued = Term("size", 1)
     deadline = time.monotonic() + 5
-    while node.call("message_queue_property", Atom("robot_bridge_requests"), Term("size", 1)) is None:
+    while node.call("message_queue_property", Atom("robot_bridge_requests"), queued) is None:
         assert time.monotonic() < deadline
         time.sleep(0.001)
     node._robots.clear()  # as if the Python side had lost the robot
-    result = run_agent(node, Atom("true"))  # serves the queued request
-    assert result.name == "true"
-    sol = node.call("agent_result", Atom("late_agent"), Var("R"), module="bridge_test_agents")
-    assert _error_formal(sol["R"]) == Term("existence_error", Atom("robot"), Atom("r1"))
+    result = agent_result(node, "late_agent", serve=True)
+    assert _error_formal(result) == Term("existence_error", Atom("robot"), Atom("r1"))
 
 
 @pytest.mark.parametrize("table", [
@@ -203,15 +202,14 @@ def test_waiting_from_the_serving_thread_is_refused(node) -> None:
 def test_prolog_errors_arrive_as_terms(node) -> None:
     with pytest.raises(PrologError) as info:
         node.call("bridge_register_robot", Atom("r1"), [Term("shape", [0, 2])], module="robot_bridge")
-    assert info.value.formal == Term("domain_error", Term("shape", [Atom("nstates"), Atom("nactions")]), [0, 2])
+    domain = Term("shape", [Atom("nstates"), Atom("nactions")])
+    assert info.value.formal == Term("domain_error", domain, [0, 2])
 
 
 def test_serve_pending_respects_max(node) -> None:
     node.register_robot("r1", ArrayRobot(2, 2))
     for i in range(3):
-        node.call("spawn", Atom(f"many_{i}"), Term("get_qtable", Atom("r1"), Var()), module="bridge_test_agents")
-    import time
-
+        spawn(node, f"many_{i}", Term("get_qtable", Atom("r1"), Var()))
     served, deadline = 0, time.monotonic() + 5
     while served < 3 and time.monotonic() < deadline:
         n = node.serve_pending(max_requests=1)
@@ -219,19 +217,14 @@ def test_serve_pending_respects_max(node) -> None:
         served += n
     assert served == 3
     for i in range(3):
-        assert run_agent(node, Atom("true")).name == "true"
-        deadline = time.monotonic() + 5
-        while (sol := node.call("agent_result", Atom(f"many_{i}"), Var("R"), module="bridge_test_agents")) is None:
-            assert time.monotonic() < deadline
-            time.sleep(0.001)
-        assert sol["R"].name == "true"
+        assert agent_result(node, f"many_{i}").name == "true"
 
 
 def test_one_node_at_a_time_and_close(node) -> None:
     with pytest.raises(NodeStateError):
         RobotNode()
     node.register_robot("r1", ArrayRobot(2, 2))
-    node.call("spawn", Atom("stuck_agent"), Term("get_qtable", Atom("r1"), Var()), module="bridge_test_agents")
+    spawn(node, "stuck_agent", Term("get_qtable", Atom("r1"), Var()))
     assert node.close() == []
     assert node.closed
     with pytest.raises(NodeStateError):
