@@ -113,3 +113,29 @@ def test_learning_shows_on_a_small_budget() -> None:
     rand = evaluate_policy(cfg, PolicyKind.RANDOM, 1500, 77)
     assert rand.collisions >= 8
     assert greedy.collisions <= 0.5 * rand.collisions
+
+
+def test_interleaved_trainers_do_not_disturb_each_other() -> None:
+    """Several robots in one process (own pybullet clients) give the same runs as alone."""
+    alone, _, _ = _run(TrainerConfig(arena="r3", seed=11), 300)
+    with Trainer(TrainerConfig(arena="r3", seed=11)) as a, \
+            Trainer(TrainerConfig(arena="r1", seed=12)) as b:
+        together = []
+        for _ in range(300):
+            together.append(a.step())
+            b.step()
+    assert together == alone
+
+
+@pytest.mark.slow
+def test_keeps_learning_for_tens_of_thousands_of_iterations() -> None:
+    """30,000 iterations in R4: the robot keeps moving around the whole arena."""
+    with Trainer(TrainerConfig(arena="r4", seed=5)) as t:
+        ms = [t.step() for _ in range(30_000)]
+    late = np.array([(m.x, m.y) for m in ms[-5000:]])
+    # it visits every quadrant of the floor in the last 5,000 steps
+    quadrants = {(bool(x > 0), bool(y > 0)) for x, y in late}
+    assert len(quadrants) == 4
+    assert np.all(np.isfinite(t.q_table))
+    # fewer collisions per step at the end than at the start
+    assert ms[-1].collisions - ms[-10_000].collisions < ms[9_999].collisions
