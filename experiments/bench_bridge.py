@@ -27,8 +27,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--repeats", type=int, default=50, help="timed read+write pairs per codec")
     parser.add_argument("--warmup", type=int, default=5, help="untimed pairs first")
     parser.add_argument("--codec", choices=["fts", "text", "both"], default="both")
-    parser.add_argument("--sim", choices=["pybullet", "none"], default="pybullet",
-                        help="what the main loop steps between two serve_pending calls")
+    parser.add_argument("--sim", choices=["pybullet", "epuck", "none"], default="pybullet",
+                        help="what the main loop steps between two serve_pending calls: a pybullet "
+                             "world of falling boxes, a training e-puck (robots.training.Trainer: "
+                             "one 64 ms control step of sense, learn, act), or nothing")
     parser.add_argument("--bodies", type=int, default=30, help="falling boxes in the pybullet world")
     parser.add_argument("--physics-steps", type=int, default=1,
                         help="pybullet steps per control step (serve_pending once per control step)")
@@ -61,6 +63,11 @@ class _Sim:
         self.kind = kind
         self.physics_steps = physics_steps
         self.client = None
+        self.trainer = None
+        if kind == "epuck":
+            from robots.training import Trainer, TrainerConfig
+
+            self.trainer = Trainer(TrainerConfig(seed=seed))
         if kind == "pybullet":
             import pybullet
             import pybullet_data
@@ -78,11 +85,15 @@ class _Sim:
                 pybullet.createMultiBody(0.1, box, basePosition=pos, physicsClientId=self.client)
 
     def step(self) -> None:
+        if self.trainer is not None:
+            self.trainer.step()
         if self.client is not None:
             for _ in range(self.physics_steps):
                 self.p.stepSimulation(physicsClientId=self.client)
 
     def close(self) -> None:
+        if self.trainer is not None:
+            self.trainer.close()
         if self.client is not None:
             self.p.disconnect(physicsClientId=self.client)
 
