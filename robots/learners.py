@@ -37,7 +37,7 @@ def q_learning_target(reward: float, next_q_row: np.ndarray, gamma: float, termi
     """
     if terminal:
         return float(reward)
-    return float(reward + gamma * float(np.max(next_q_row)))
+    return float(reward + gamma * max(next_q_row.tolist()))
 
 
 def sarsa_target(reward: float, next_q: float, gamma: float, terminal: bool) -> float:
@@ -60,10 +60,12 @@ def greedy_action(q_row: np.ndarray, rng: np.random.Generator | None = None) -> 
     q_row : np.ndarray, shape (n_actions,)
     rng : np.random.Generator, optional
     """
-    best = np.flatnonzero(q_row == q_row.max())
-    if rng is None or best.size == 1:
-        return int(best[0])
-    return int(best[rng.integers(best.size)])
+    row = q_row.tolist()  # plain floats: faster than numpy for a handful of actions
+    top = max(row)
+    best = [i for i, v in enumerate(row) if v == top]
+    if rng is None or len(best) == 1:
+        return best[0]
+    return best[int(rng.integers(len(best)))]
 
 
 def epsilon_greedy(q_row: np.ndarray, epsilon: float, rng: np.random.Generator) -> int:

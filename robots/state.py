@@ -14,6 +14,7 @@ significant digit), so ``n_states = levels ** n_groups``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 from enum import Enum
 from typing import Any
 
@@ -107,11 +108,12 @@ class Discretiser:
             One level in ``0 .. levels-1`` per group.
         """
         top = self.levels - 1
+        prox = proximity.tolist() if isinstance(proximity, np.ndarray) else list(proximity)
         out = []
         for group in self.groups:
-            value = max(float(proximity[i]) for i in group)
-            level = int(np.ceil(value * top)) if value > 0.0 else 0
-            out.append(min(max(level, 0), top))
+            value = max([prox[i] for i in group])
+            level = math.ceil(value * top) if value > 0.0 else 0
+            out.append(min(level, top))
         return out
 
     def __call__(self, proximity: np.ndarray) -> int:
