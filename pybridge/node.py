@@ -22,7 +22,7 @@ import numpy as np
 from pybridge import codec as _codec
 from pybridge.codec import Codec
 from pybridge.engine import Prolog, prolog
-from pybridge.errors import BridgeError, CodecError, NodeStateError, PrologFailure
+from pybridge.errors import BridgeError, CodecError, NodeStateError, PrologError, PrologFailure
 from pybridge.terms import Atom, Term, Var, atom_or_self
 
 __all__ = ["TableProvider", "RobotNode", "Bridge", "BRIDGE_FILE", "SelfTestReport"]
@@ -287,6 +287,21 @@ class RobotNode:
         self._nodes.append(node)
         return node
 
+    def join(self) -> Any:
+        """Use the platform node already running in this process (started by other code, or
+        by a consulted node file); return its name, or ``None`` if none runs. A node joined
+        this way is not stopped by :meth:`close`."""
+        self._check_open()
+        if not self._platform_loaded:
+            self.load_platform()
+        try:
+            sol = self.prolog.call("current_node", Var("Node"))
+        except PrologError as exc:
+            if isinstance(exc.formal, Term) and exc.formal.name == "existence_error":
+                return None
+            raise
+        return sol["Node"] if sol else None
+
     def address(self, node: Any) -> tuple[Atom, int]:
         """(host, port) a platform node of this process listens on (e.g. from :meth:`start`)."""
         self._check_open()
@@ -294,13 +309,21 @@ class RobotNode:
         host, port = sol["A"].args
         return Atom(host), int(port)
 
-    def start_tartarus(self, ip: str, port: int, token: int) -> None:
-        """Tartarus-style start: ``start_tartarus(Ip, Port, Token)``."""
+    def start_tartarus(self, ip: str, port: int, token: int | None = None) -> Any:
+        """Tartarus-style start: ``start_tartarus(Ip, Port[, Token])`` (port 0: OS-chosen).
+
+        Returns the node's name; the node becomes the process's default platform.
+        """
         self._check_open()
         if not self._platform_loaded:
             self.load_platform()
-        self._must("start_tartarus", Atom(ip), int(port), int(token))
-        self._nodes.append(Term("tartarus", Atom(ip), int(port)))
+        if token is None:
+            self._must("start_tartarus", Atom(ip), int(port))
+        else:
+            self._must("start_tartarus", Atom(ip), int(port), int(token))
+        node = self._must("current_node", Var("Node"))["Node"]
+        self._nodes.append(node)
+        return node
 
     # Tartarus-style commands, always with bound arguments. Links are (Ip, Port) tuples.
     @staticmethod
@@ -492,10 +515,7 @@ class RobotNode:
         try:
             for node in self._nodes:
                 try:
-                    if isinstance(node, Term) and node.name == "tartarus":
-                        self.prolog.call("close_tartarus")
-                    else:
-                        self.prolog.call("node_stop", node)
+                    self.prolog.call("node_stop", node)
                 except BridgeError:
                     log.warning("stopping platform node %r failed", node, exc_info=True)
             self._nodes.clear()

@@ -22,12 +22,14 @@ def main() -> int:
     out: dict = {}
     node = RobotNode(request_timeout=10.0)
     node.load_platform()
+    out["joined_none"] = node.join() is None
     # Embedded Prolog runs without signal handling, so node_stop/1 cannot interrupt a
     # connection worker blocked in a read: it ends at its idle timeout (default 10 s).
     home = node.start("127.0.0.1", 0, idle_timeout=1)
     robot_node = node.start("127.0.0.1", 0, idle_timeout=1)
     home_host, home_port = node.address(home)
     robot_host, robot_port = node.address(robot_node)
+    out["joined_home"] = node.join() == home   # the first node started is the default
     robot = ArrayRobot(100, 4, seed=9)
     before = robot.q_table
     node.register_robot("r1", robot)
@@ -52,6 +54,9 @@ def main() -> int:
         out["sum_ok"] = bool(np.isclose(done["S"], before.sum()))
     out["table_plus_one"] = bool(np.array_equal(robot.q_table, before + 1.0))
     out["name"] = str(name)
+    # Tartarus-style start on an OS-chosen port, with a token
+    tnode = node.start_tartarus("127.0.0.1", 0, 1111)
+    out["tartarus_ok"] = node.address(tnode)[1] > 0 and node.join() == tnode
     out["left"] = [str(t) for t in node.close(thread_timeout=5.0)]
     print(json.dumps(out), flush=True)
     return 0
