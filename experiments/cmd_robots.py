@@ -204,13 +204,26 @@ def cmd_eval(args: argparse.Namespace) -> int:
     except (ValueError, KeyError) as exc:
         return _fail(str(exc))
     table = str(args.table) if args.table is not None else None
+    if table is not None and args.grouping is None and args.levels is None:
+        # evaluate with the table's own discretisation, as recorded in its sidecar
+        from robots.state import DiscretisationConfig
+        from robots.tables import load_table
+
+        try:
+            state = load_table(table).meta.state
+            cfg = cfg.replace(discretisation=DiscretisationConfig(state["grouping"], state["levels"]))
+        except (ValueError, OSError, KeyError) as exc:
+            return _fail(str(exc))
     jobs = max(1, min(args.jobs, len(args.seeds)))
-    if jobs == 1:
-        rows = [_eval_job(cfg.to_dict(), s, args.steps, table) for s in args.seeds]
-    else:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            rows = list(pool.map(_eval_job, [cfg.to_dict()] * len(args.seeds), args.seeds,
-                                 [args.steps] * len(args.seeds), [table] * len(args.seeds)))
+    try:
+        if jobs == 1:
+            rows = [_eval_job(cfg.to_dict(), s, args.steps, table) for s in args.seeds]
+        else:
+            with ProcessPoolExecutor(max_workers=jobs) as pool:
+                rows = list(pool.map(_eval_job, [cfg.to_dict()] * len(args.seeds), args.seeds,
+                                     [args.steps] * len(args.seeds), [table] * len(args.seeds)))
+    except (ValueError, OSError) as exc:  # bad table, arena or configuration
+        return _fail(str(exc))
     g_total = sum(r["greedy"]["collisions"] for r in rows)
     r_total = sum(r["random"]["collisions"] for r in rows)
     steps_total = args.steps * len(rows)

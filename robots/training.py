@@ -216,6 +216,10 @@ class Trainer:
     def set_q_table(self, table: np.ndarray) -> None:
         """Replace the Q-table (copied in place after checking shape and finiteness).
 
+        Call it between two :meth:`step` calls. The action already chosen for the next step
+        (from the old table) is kept; every later choice and update uses the new table.
+        Visit counts are left as they are.
+
         Raises
         ------
         ValueError
