@@ -10,6 +10,7 @@ import argparse
 import json
 import os
 import platform
+import sys
 import time
 from typing import Any
 
@@ -70,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         sim = SimConfig(control_dt=args.control_dt, physics_dt=args.physics_dt)
     except ValueError as exc:
-        print(f"dfrl bench sim: error: {exc}")
+        print(f"dfrl bench sim: error: {exc}", file=sys.stderr)
         return 2
     config = TrainerConfig(arena=args.arena, algo=args.algo, seed=0, sim=sim)
     rows = [measure(config, n, args.steps, args.warmup) for n in args.robots]
