@@ -473,6 +473,9 @@ class RobotNode:
             return self._table_reply(self._robot(op.args[0]).provider.q_table)
         if op.name == "get_visits" and op.arity == 1:
             return self._table_reply(self._robot(op.args[0]).provider.visits)
+        if op.name == "get_qtable_and_visits" and op.arity == 1:
+            provider = self._robot(op.args[0]).provider
+            return Term("tables", self._table_reply(provider.q_table), self._table_reply(provider.visits))
         if op.name == "set_qtable" and op.arity == 3:
             rid, shape, data = op.args
             robot = self._robot(rid)

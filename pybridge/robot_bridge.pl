@@ -8,6 +8,8 @@
             set_qtable/3,               % +Robot, +Table, +Options
             get_visits/2,               % +Robot, -Table
             get_visits/3,               % +Robot, -Table, +Options
+            get_qtable_and_visits/3,    % +Robot, -Table, -Visits
+            get_qtable_and_visits/4,    % +Robot, -Table, -Visits, +Options
             bridge_next_request/2,      % -Request, +TimeoutSeconds
             bridge_reply/2,             % +Id, +Reply
             bridge_set_codec/1,         % +Codec
@@ -137,6 +139,28 @@ get_visits(Robot, Table) :-
 get_visits(Robot, Table, Options) :-
     table_request(get_visits(Robot), get_visits/2, Options, Table).
 
+%!  get_qtable_and_visits(+Robot, -Table, -Visits) is det.
+%!  get_qtable_and_visits(+Robot, -Table, -Visits, +Options) is det.
+%
+%   Table and Visits (as get_qtable/3 and get_visits/3) taken in the same
+%   pause between two learning steps, so that they belong together (e.g.
+%   for visit-weighted aggregation).
+
+get_qtable_and_visits(Robot, Table, Visits) :-
+    get_qtable_and_visits(Robot, Table, Visits, []).
+
+get_qtable_and_visits(Robot, Table, Visits, Options) :-
+    PI = get_qtable_and_visits/3,
+    must_be(atomic, Robot),
+    must_be(list, Options),
+    registered(Robot),
+    bridge_call(Robot, get_qtable_and_visits(Robot), PI, Options, Reply),
+    (   Reply = tables(table(QShape, QData), table(VShape, VData))
+    ->  decode_table(QShape, QData, Table),
+        decode_table(VShape, VData, Visits)
+    ;   reply_error(Reply, PI)
+    ).
+
 table_request(Op, PI, Options, Table) :-
     arg(1, Op, Robot),
     must_be(atomic, Robot),
@@ -144,11 +168,13 @@ table_request(Op, PI, Options, Table) :-
     registered(Robot),
     bridge_call(Robot, Op, PI, Options, Reply),
     (   Reply = table(Shape, Data)
-    ->  decode_values(Data, Values),
-        check_size(Shape, Values),
-        Table = qtable(Shape, Values)
+    ->  decode_table(Shape, Data, Table)
     ;   reply_error(Reply, PI)
     ).
+
+decode_table(Shape, Data, qtable(Shape, Values)) :-
+    decode_values(Data, Values),
+    check_size(Shape, Values).
 
 check_size(Shape, Values) :-
     check_shape(Shape),
@@ -347,6 +373,7 @@ bridge_call(Robot, Op, PI, Options, Reply) :-
 %
 %     - get_qtable(Robot)
 %     - get_visits(Robot)
+%     - get_qtable_and_visits(Robot)
 %     - set_qtable(Robot, Shape, Data)  where Data is fts(String) or
 %       text(String) (see bridge_set_codec/1)
 %
@@ -381,6 +408,8 @@ next_request(RQ, Until, Request) :-
 %     - table(Shape, Data)  for get_qtable/get_visits, Data as in
 %       bridge_next_request/2 (an fts string must come from pybridge's
 %       encoder, see bridge_set_codec/1)
+%     - tables(table(Shape, QData), table(Shape, VData)) for
+%       get_qtable_and_visits
 %     - ok                  for set_qtable
 %     - error(Formal)       the caller throws error(Formal, Context)
 %

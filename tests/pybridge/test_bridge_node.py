@@ -97,6 +97,19 @@ def test_get_visits_as_floats(node) -> None:
     assert np.array_equal(values, robot.visits.reshape(-1).astype(np.float64))
 
 
+def test_qtable_and_visits_together(node) -> None:
+    robot = ArrayRobot(7, 3)
+    node.register_robot("r1", robot)
+    result = run_agent(node, Term("get_qtable_and_visits", Atom("r1"), Var(), Var()))
+    assert result.name == "true", result
+    _, table, visits = result.args[0].args
+    assert table.args[0] == [7, 3] and visits.args[0] == [7, 3]
+    assert np.array_equal(_bits(np.array(table.args[1])), _bits(robot.q_table.reshape(-1)))
+    assert np.array_equal(np.array(visits.args[1]), robot.visits.reshape(-1).astype(np.float64))
+    formal = _error_formal(run_agent(node, Term("get_qtable_and_visits", Atom("zz"), Var(), Var())))
+    assert formal == Term("existence_error", Atom("robot"), Atom("zz"))
+
+
 def test_set_accepts_integers(node) -> None:
     robot = ArrayRobot(2, 2)
     node.register_robot("r1", robot)

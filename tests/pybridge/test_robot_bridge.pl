@@ -63,6 +63,12 @@ test(round_trip_fts, [setup(reset), Got == T]) :-
 test(steadfast_get, [setup(reset), fail]) :-
     with_host(qtable([2,2], [1.0,2.0,3.0,4.0]), get_qtable(r1, qtable([4,1], _)), _, 1).
 
+test(qtable_and_visits, [setup(reset), T-V == qtable([2,2],[1.0,2.0,3.0,4.0])-qtable([2,2],[0.0,1.0,0.0,5.0])]) :-
+    thread_create(( bridge_next_request(request(Id, get_qtable_and_visits(r1)), 5),
+                    bridge_reply(Id, tables(table([2,2], text("1.0,2.0,3.0,4.0")),
+                                            table([2,2], text("0,1,0,5")))) ), H, []),
+    call_cleanup(get_qtable_and_visits(r1, T, V), thread_join(H, _)).
+
 test(unknown_robot, [setup(reset), error(existence_error(robot, nobody))]) :-
     get_qtable(nobody, _).
 test(wrong_shape, [setup(reset), error(domain_error(shape([2,2]), [4,1]))]) :-
