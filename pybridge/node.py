@@ -117,6 +117,9 @@ class RobotNode:
 
     _active: ClassVar[RobotNode | None] = None
     _class_lock: ClassVar[threading.Lock] = threading.Lock()
+    #: set when close() had to abort platform threads: the platform's own bookkeeping (its
+    #: worker pools) no longer matches its threads, so it cannot run again in this process
+    _platform_spent: ClassVar[bool] = False
 
     def __init__(self, *, request_timeout: float = 30.0, codec: Codec | str | None = None,
                  load_platform: bool = False) -> None:
@@ -260,8 +263,18 @@ class RobotNode:
 
     # -- platform -----------------------------------------------------------------------------
     def load_platform(self, entry: str | Path | None = None) -> None:
-        """Load the agent platform into this process (default ``platform_pl/tartarus.pl``)."""
+        """Load the agent platform into this process (default ``platform_pl/tartarus.pl``).
+
+        Raises
+        ------
+        NodeStateError
+            If an earlier node of this process had to abort the platform's threads at
+            :meth:`close` (its worker pools cannot be revived): use a new process.
+        """
         self._check_open()
+        if RobotNode._platform_spent:
+            raise NodeStateError("the platform's threads were stopped by an earlier close() in "
+                                 "this process; it cannot run again here (use a new process)")
         if entry is None:
             from platform_pl import ENTRY_POINT
 
@@ -524,10 +537,19 @@ class RobotNode:
             self._nodes.clear()
             self._robots.clear()
             try:
+                if self._platform_loaded and self.prolog.call(
+                        "current_predicate", Term("/", Atom("platform_shutdown"), 0)) is not None:
+                    self.prolog.call("platform_shutdown")   # the platform's own clean stop
+            except BridgeError:
+                log.warning("platform_shutdown/0 failed", exc_info=True)
+            try:
                 self.prolog.call("bridge_shutdown", module=_MODULE)
                 sol = self.prolog.call("bridge_stop_threads", float(thread_timeout), Var("Left"),
-                                       module=_MODULE)
+                                       Var("Aborted"), module=_MODULE)
                 remaining = list(sol["Left"]) if sol else []
+                aborted = sol["Aborted"] if sol else 0
+                if self._platform_loaded and aborted:
+                    RobotNode._platform_spent = True
             except BridgeError:
                 log.warning("closing the bridge failed", exc_info=True)
             if remaining:

@@ -17,7 +17,8 @@
             bridge_attach_server/0,
             bridge_detach_server/0,
             bridge_shutdown/0,
-            bridge_stop_threads/2       % +Timeout, -Remaining
+            bridge_stop_threads/2,      % +Timeout, -Remaining
+            bridge_stop_threads/3       % +Timeout, -Remaining, -Aborted
           ]).
 :- autoload(library(error),
             [ must_be/2, domain_error/2, existence_error/2, type_error/2,
@@ -467,6 +468,7 @@ bridge_shutdown :-
                  ) )).
 
 %!  bridge_stop_threads(+Timeout, -Remaining) is det.
+%!  bridge_stop_threads(+Timeout, -Remaining, -Aborted) is det.
 %
 %   Abort every Prolog thread except the caller (and the system's `gc`
 %   thread), wait at most Timeout seconds for them to stop and join them.
@@ -474,9 +476,12 @@ bridge_shutdown :-
 %   that a signal cannot interrupt because the host runs Prolog without
 %   signal handling; the platform must stop those itself). Used by the host
 %   before the interpreter exits, since live threads make the embedding's
-%   cleanup unsafe.
+%   cleanup unsafe. Aborted is the number of threads that were running.
 
 bridge_stop_threads(Timeout, Remaining) :-
+    bridge_stop_threads(Timeout, Remaining, _).
+
+bridge_stop_threads(Timeout, Remaining, Aborted) :-
     check_timeout(Timeout),
     (   stopping_threads_
     ->  true
@@ -484,9 +489,9 @@ bridge_stop_threads(Timeout, Remaining) :-
     ),
     thread_self(Me),
     findall(T, other_thread(Me, T), Threads),
-    forall(( member(T, Threads),
-             catch(thread_property(T, status(running)), _, fail)
-           ),
+    include(running_thread, Threads, Running),
+    length(Running, Aborted),
+    forall(member(T, Running),
            catch(thread_signal(T, abort), _, true)),
     get_time(Now),
     Deadline is Now + Timeout,

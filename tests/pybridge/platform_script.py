@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 from bridge_helpers import ArrayRobot
 
-from pybridge import Atom, RobotNode, Term, Var
+from pybridge import Atom, NodeStateError, RobotNode, Term, Var
 
 AGENT = Path(__file__).with_name("hop_agent.pl")
 
@@ -58,6 +58,15 @@ def main() -> int:
     tnode = node.start_tartarus("127.0.0.1", 0, 1111)
     out["tartarus_ok"] = node.address(tnode)[1] > 0 and node.join() == tnode
     out["left"] = [str(t) for t in node.close(thread_timeout=5.0)]
+    # the platform's pool workers were aborted: it refuses to run again in this process
+    again = RobotNode()
+    try:
+        again.load_platform()
+        out["reload_refused"] = False
+    except NodeStateError:
+        out["reload_refused"] = True
+    finally:
+        again.close()
     print(json.dumps(out), flush=True)
     return 0
 
