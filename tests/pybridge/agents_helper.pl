@@ -1,4 +1,4 @@
-:- module(bridge_test_agents, [spawn/2, agent_result/2]).
+:- module(bridge_test_agents, [spawn/2, agent_result/2, stress/4]).
 /** <module> Test helper: run a goal in a fresh Prolog thread (an "agent") and keep its outcome
 
 agent_result(Alias, Result) gives true(Goal) (Goal with its bindings), false or
@@ -17,3 +17,24 @@ run(Alias, Goal) :-
 agent_result(Alias, Result) :-
     retract(result_(Alias, Result)),
     thread_join(Alias, _).
+
+%!  stress(+Robot, +K, +N, -Mixed) is det.
+%
+%   N times: write a table filled with K, read the table back. Mixed counts
+%   the reads that were not uniform (a torn snapshot).
+stress(Robot, K, N, Mixed) :-
+    robot_bridge:bridge_robot(Robot, Props),
+    memberchk(shape([S, A]), Props),
+    Len is S*A,
+    F is float(K),
+    length(Values, Len),
+    maplist(=(F), Values),
+    aggregate_all(count,
+                  ( between(1, N, _),
+                    user:set_qtable(Robot, qtable([S, A], Values)),
+                    user:get_qtable(Robot, qtable(_, Got)),
+                    \+ uniform(Got)
+                  ),
+                  Mixed).
+
+uniform([X|T]) :- maplist(==(X), T).

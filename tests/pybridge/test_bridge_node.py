@@ -300,3 +300,19 @@ def test_fts_self_test_failure_falls_back_to_text(monkeypatch) -> None:
         assert np.array_equal(_bits(values), _bits(robot.q_table.reshape(-1)))
     finally:
         n.close()
+
+
+def test_concurrent_agents_see_whole_tables_only(node) -> None:
+    """Four agents each write a table filled with their own number and read it back, many
+    times, while the main thread serves: every read is one whole table (never torn)."""
+    robot = ArrayRobot(100, 4)
+    node.register_robot("r1", robot)
+    for k in range(4):
+        spawn(node, f"stress_{k}", Term("stress", Atom("r1"), k, 15, Var()))
+    results = [agent_result(node, f"stress_{k}", timeout=20, serve=True) for k in range(4)]
+    for k, result in enumerate(results):
+        assert result.name == "true", result
+        assert result.args[0].args[3] == 0, f"agent {k} saw a torn table"
+    q = robot.q_table
+    assert np.all(q == q.flat[0]) and q.flat[0] in {0.0, 1.0, 2.0, 3.0}
+    assert robot.sets == 60
