@@ -350,7 +350,15 @@ class RobotNode:
         self._check_open()
         name_arg: Any = Var("Name") if name is None else Atom(name)
         sol = self._must("create_mobile_agent", name_arg, self._link(link), Atom(handler), list(tokens))
-        return sol.get("Name", Atom(name)) if name is None else Atom(name)
+        return Atom(sol["Name"]) if name is None else Atom(name)
+
+    def create_static_agent(self, name: str | None, link: Sequence[Any], handler: str,
+                            tokens: Iterable[int] = ()) -> Atom:
+        """``create_static_agent(?Name, (Ip,Port), Handler, Tokens)``: an agent that never moves."""
+        self._check_open()
+        name_arg: Any = Var("Name") if name is None else Atom(name)
+        sol = self._must("create_static_agent", name_arg, self._link(link), Atom(handler), list(tokens))
+        return Atom(sol["Name"]) if name is None else Atom(name)
 
     def execute_agent(self, name: str, link: Sequence[Any], handler: str, event: Any = None) -> None:
         """``execute_agent(Name, (Ip,Port), Handler)``, or ``execute_agent/4`` with a start

@@ -18,6 +18,18 @@ from pybridge import Atom, NodeStateError, RobotNode, Term, Var
 AGENT = Path(__file__).with_name("hop_agent.pl")
 
 
+def wait_for(node: RobotNode, goal: Term, timeout: float = 10.0):
+    """Serve bridge requests like a control loop until goal succeeds (bindings) or timeout."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        node.serve_pending()
+        sol = node.call(goal.name, *goal.args)
+        if sol is not None:
+            return sol
+        time.sleep(0.001)
+    return None
+
+
 def main() -> int:
     out: dict = {}
     node = RobotNode(request_timeout=10.0)
@@ -34,26 +46,48 @@ def main() -> int:
     before = robot.q_table
     node.register_robot("r1", robot)
     node.call("dynamic", Term("/", Atom("agent_done"), 3))
+    node.call("dynamic", Term("/", Atom("got_mail"), 2))
     node.call("assertz", Term("robot_port", robot_port))
     node.assert_file_to_tartarus(AGENT)
     name = node.create_mobile_agent(None, (home_host, home_port), "hop", [])
     out["listed_before"] = [str(a) for a in node.list_agents()]
     node.execute_agent(name, (home_host, home_port), "hop")
-    deadline = time.monotonic() + 20
-    done = None
-    while time.monotonic() < deadline:
-        node.serve_pending()
-        done = node.call("agent_done", Var("A"), Var("P"), Var("S"))
-        if done:
-            break
-        time.sleep(0.001)
+    done = wait_for(node, Term("agent_done", Var("A"), Var("P"), Var("S")))
     out["done"] = done is not None
     if done:
         out["agent"] = str(done["A"])
         out["port_ok"] = done["P"] == robot_port
-        out["sum_ok"] = bool(np.isclose(done["S"], before.sum()))
+        out["sum_ok"] = bool(done["S"].name == "-" and np.isclose(done["S"].args[0], before.sum())
+                             and done["S"].args[1] == Atom("none"))
     out["table_plus_one"] = bool(np.array_equal(robot.q_table, before + 1.0))
     out["name"] = str(name)
+    home_link, robot_link = (home_host, home_port), (robot_host, robot_port)
+
+    # moved from Python, with a payload fact that travels with it
+    after_first = robot.q_table
+    node.create_mobile_agent("mover", home_link, "hop", [])
+    node.call("assertz", Term("carried", Atom("mover"), "from python"))
+    node.add_payload("mover", [("carried", 2)])
+    node.move_agent("mover", robot_link)
+    done = wait_for(node, Term("agent_done", Atom("mover"), Var("P"), Var("R")))
+    out["moved_ok"] = bool(done and done["P"] == robot_port
+                           and done["R"] == Term("-", done["R"].args[0], "from python")
+                           and np.isclose(done["R"].args[0], after_first.sum())
+                           and np.array_equal(robot.q_table, after_first + 1.0))
+
+    # list and purge
+    node.create_mobile_agent("idle", home_link, "hop", [])
+    listed = [str(a) for a in node.list_agents()]
+    node.purge_agent("idle")
+    out["purge_ok"] = "idle" in listed and "idle" not in [str(a) for a in node.list_agents()]
+
+    # a message posted to a static agent on the robot's platform
+    node.create_static_agent("mbox", robot_link, "mailbox", [])
+    node.execute_agent("mbox", robot_link, "mailbox")
+    node.post_agent("platform", robot_link, [Atom("mailbox"), Atom("mbox"), robot_link, "hello"])
+    mail = wait_for(node, Term("got_mail", Atom("mbox"), Var("T")))
+    out["post_ok"] = bool(mail and mail["T"] == "hello")
+
     # Tartarus-style start on an OS-chosen port, with a token
     tnode = node.start_tartarus("127.0.0.1", 0, 1111)
     out["tartarus_ok"] = node.address(tnode)[1] > 0 and node.join() == tnode

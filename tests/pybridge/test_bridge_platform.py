@@ -24,5 +24,6 @@ def test_agent_moves_to_robot_node_and_updates_table() -> None:
     assert out["left"] == []
     assert out["joined_none"] and out["joined_home"] and out["tartarus_ok"]
     assert out["reload_refused"]
+    assert out["moved_ok"] and out["purge_ok"] and out["post_ok"], out
     for bad in ("Warning", "ERROR", "Traceback", "Segmentation"):
         assert bad not in proc.stderr, proc.stderr
