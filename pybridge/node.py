@@ -505,7 +505,7 @@ class RobotNode:
         raise BridgeError(f"unknown request {op!r}")
 
     def _set(self, robot: _Robot, shape: Any, data: Any) -> None:
-        current = np.asarray(robot.provider.q_table).shape
+        current = robot.shape
         if not (isinstance(shape, list) and tuple(shape) == tuple(current)):
             raise _RequestError(Term("domain_error", Term("shape", list(current)), shape))
         if not (isinstance(data, Term) and data.arity == 1 and isinstance(data.args[0], str)):
