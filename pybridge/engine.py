@@ -202,7 +202,11 @@ class Prolog:
                                 where = f"{module}:{name}" if module else name
                                 raise PrologError(self._get(ex), goal=f"{where}/{len(args)}")
                             break
-                        solutions.append({k: self._get(t) for k, t in names.items()})
+                        try:
+                            solutions.append({k: self._get(t) for k, t in names.items()})
+                        except RecursionError:
+                            raise TermConversionError("a binding is cyclic or nested too deeply "
+                                                      "to convert") from None
                 finally:
                     lib.close_query(qid)
                 return solutions

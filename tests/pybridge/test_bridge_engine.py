@@ -131,3 +131,10 @@ def test_dicts_and_reserved_functors_come_back_as_blobs(pl) -> None:
 
     sol = pl.call("dict_create", Var("D"), Atom("t"), [Term("-", Atom("a"), 1)])
     assert sol["D"] == Blob("t{a:1}")
+
+
+def test_cyclic_binding_is_a_conversion_error(pl) -> None:
+    x = Var("X")
+    with pytest.raises(TermConversionError):
+        pl.call("=", x, Term("f", x))
+    assert pl.call("true") == {}  # the query was closed
