@@ -74,6 +74,7 @@ class _Lib:
         self.unregister_atom = fn("PL_unregister_atom", None, atom_t)
         self.new_functor_sz = fn("PL_new_functor_sz", functor_t, atom_t, c_size_t)
         self.term_type = fn("PL_term_type", c_int, term_t)
+        self.is_acyclic = fn("PL_is_acyclic", c_int, term_t)
         self.get_nchars = fn("PL_get_nchars", c_int, term_t, POINTER(c_size_t), POINTER(c_void_p), c_uint)
         self.get_int64 = fn("PL_get_int64", c_int, term_t, POINTER(c_int64))
         self.get_float = fn("PL_get_float", c_int, term_t, POINTER(c_double))
@@ -200,13 +201,9 @@ class Prolog:
                             ex = lib.exception(qid)
                             if ex:
                                 where = f"{module}:{name}" if module else name
-                                raise PrologError(self._get(ex), goal=f"{where}/{len(args)}")
+                                raise PrologError(self._get_top(ex), goal=f"{where}/{len(args)}")
                             break
-                        try:
-                            solutions.append({k: self._get(t) for k, t in names.items()})
-                        except RecursionError:
-                            raise TermConversionError("a binding is cyclic or nested too deeply "
-                                                      "to convert") from None
+                        solutions.append({k: self._get_top(t) for k, t in names.items()})
                 finally:
                     lib.close_query(qid)
                 return solutions
@@ -307,6 +304,17 @@ class Prolog:
         if not self._lib.atom_mbchars(a, byref(n), byref(s), REP_UTF8):
             return None  # a reserved symbol (e.g. the functor of a dict)
         return ctypes.string_at(s, n.value).decode("utf-8")
+
+    def _get_top(self, t: int) -> Any:
+        """:meth:`_get` for a whole binding: refuses cyclic terms and too deep nesting."""
+        if not self._lib.is_acyclic(t):
+            raise TermConversionError("a cyclic term has no Python form")
+        try:
+            return self._get(t)
+        except (RecursionError, ctypes.ArgumentError) as exc:
+            if isinstance(exc, ctypes.ArgumentError) and "RecursionError" not in str(exc):
+                raise
+            raise TermConversionError("a term nested too deeply to convert") from None
 
     def _get(self, t: int) -> Any:
         lib = self._lib

@@ -138,3 +138,11 @@ def test_cyclic_binding_is_a_conversion_error(pl) -> None:
     with pytest.raises(TermConversionError):
         pl.call("=", x, Term("f", x))
     assert pl.call("true") == {}  # the query was closed
+
+
+def test_deep_term_is_a_conversion_error(pl) -> None:
+    step = Term(">>", [Var(), Var("A0"), Var("A")], Term("=", Var("A"), Term("f", Var("A0"))))
+    with pytest.raises(TermConversionError):
+        pl.call("foldl", step, list(range(5000)), Atom("x"), Var("T"))   # f(f(...f(x)...))
+    sol = pl.call("foldl", step, list(range(50)), Atom("x"), Var("T"))
+    assert sol["T"].name == "f"
