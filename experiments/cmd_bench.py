@@ -1,6 +1,7 @@
 """``dfrl bench ...``: benchmarks that print their figures (JSON with ``--json``).
 
-Each benchmark is a module with ``add_arguments(parser)`` and ``run(args) -> int``.
+Each benchmark is a module with ``add_arguments(parser)`` and ``run_cli(args) -> int``
+(or ``run(args) -> int``).
 """
 from __future__ import annotations
 
@@ -29,4 +30,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             raise
         sub = inner.add_parser(name, help=(module.__doc__ or "").strip().splitlines()[0])
         module.add_arguments(sub)
-        sub.set_defaults(func=module.run)
+        sub.set_defaults(func=getattr(module, "run_cli", None) or module.run)

@@ -107,7 +107,7 @@ worker_loop(Pool, Q, Keep, Idle) :-
     worker_wait(Pool, Q, Keep, Idle).
 
 worker_wait(Pool, Q, Keep, Idle) :-
-    catch(thread_get_message(Q, Msg, [timeout(Idle)]), _, Msg = interrupted),
+    catch(thread_get_message(Q, Msg, [timeout(Idle)]), E, interrupted(E, Msg)),
     (   Msg = run(Goal)
     ->  run_goal(Goal),
         worker_loop(Pool, Q, Keep, Idle)
@@ -133,6 +133,10 @@ may_exit(Pool, Q, Keep, Exit) :-
         Exit = exit
     ;   Exit = stay
     ).
+
+interrupted('$aborted', _) :- !, throw('$aborted').
+interrupted(unwind(A), _) :- !, throw(unwind(A)).
+interrupted(_, interrupted).
 
 run_goal(Goal) :-
     catch(( call(Goal) -> true ; true ), E, job_error(E)).
