@@ -18,6 +18,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "experiments.cmd_demo",
     "experiments.cmd_bench",
     "experiments.cmd_robots",
+    "experiments.cmd_transfer",
 )
 
 

@@ -1,0 +1,109 @@
+"""``dfrl transfer``: train in a new arena from a saved table and from zeros, compare.
+
+Thin CLI over :func:`experiments.transfer.run`.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+from robots.learners import LEARNERS
+from robots.state import SensorGrouping
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``transfer``."""
+    p = subparsers.add_parser(
+        "transfer",
+        help="learn in a new arena from a saved table vs from zeros (collisions, reward)",
+        description="For each seed, train one robot whose Q-table starts as a copy of --init "
+                    "and one that starts from zeros, in the same arena, with the same seed and "
+                    "budget; report collisions per 1,000 steps (whole run, first 1,000 steps, "
+                    "first 10%%), cumulative reward and a greedy evaluation after training.")
+    p.add_argument("--init", type=Path, required=True,
+                   help="saved table (NAME.npy with its NAME.json sidecar)")
+    p.add_argument("--arena", required=True,
+                   help="arena name or JSON file, preferably one the table was not trained in")
+    p.add_argument("--iterations", type=int, default=3000, help="training steps per run (3000)")
+    p.add_argument("--seeds", type=int, default=5, help="number of seeds (5)")
+    p.add_argument("--first-seed", type=int, default=1,
+                   help="seeds are FIRST_SEED .. FIRST_SEED+SEEDS-1 (1)")
+    p.add_argument("--algo", choices=sorted(LEARNERS), default=None,
+                   help="learner (default: the table's algorithm)")
+    p.add_argument("--grouping", choices=[s.value for s in SensorGrouping], default=None,
+                   help="sensor groups (default: the table's)")
+    p.add_argument("--levels", type=int, default=None, help="levels per group (default: the table's)")
+    p.add_argument("--eval-steps", type=int, default=2000,
+                   help="greedy evaluation steps per table, 0 to skip (2000)")
+    p.add_argument("--jobs", type=int, default=2, help="worker processes (2)")
+    p.add_argument("--out", type=Path, default=None,
+                   help="write config.json, runs.csv, curves.csv, summary.json, transfer.png here")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    p.set_defaults(func=cmd_transfer)
+
+
+#: Rows of the readable report: metric name, label.
+_ROWS = (
+    ("collisions_per_1000", "collisions/1000, training"),
+    ("head_collisions_per_1000", "collisions/1000, first {head} steps"),
+    ("head10_collisions_per_1000", "collisions/1000, first 10% ({head10})"),
+    ("cumulative_reward", "cumulative reward"),
+    ("mean_reward", "mean reward per step"),
+    ("eval_collisions_per_1000", "greedy eval collisions/1000, after"),
+    ("initial_eval_collisions_per_1000", "greedy eval collisions/1000, before"),
+)
+
+
+def _fmt(x: float, width: int = 8) -> str:
+    return f"{x:>{width}.2f}" if math.isfinite(x) else f"{'-':>{width}}"
+
+
+def cmd_transfer(args: argparse.Namespace) -> int:
+    """``dfrl transfer``: exit 0 on success, 2 on a bad table, arena or argument."""
+    from experiments.transfer import TransferConfig, run
+
+    if args.seeds < 1:
+        print("dfrl: error: --seeds must be >= 1", file=sys.stderr)
+        return 2
+    try:
+        cfg = TransferConfig(
+            init=str(args.init), arena=args.arena, iterations=args.iterations,
+            seeds=tuple(range(args.first_seed, args.first_seed + args.seeds)), algo=args.algo,
+            grouping=args.grouping, levels=args.levels, eval_steps=args.eval_steps,
+            jobs=args.jobs)
+        result = run(cfg, args.out)
+    except (ValueError, OSError) as exc:
+        print(f"dfrl: error: {exc}", file=sys.stderr)
+        return 2
+    if result.same_arena:
+        print(f"dfrl: warning: the table was trained in '{result.table.arena}', the arena of "
+              f"this transfer", file=sys.stderr)
+    if args.json:
+        print(json.dumps(result.to_dict(), indent=2))
+        return 0
+    t, tc = result.table, result.trainer_config
+    origin = (f"{t.algorithm}, trained in {t.arena} for {t.iterations} iterations" if t.sidecar
+              else "no sidecar")
+    print(f"transfer of {t.path} ({origin}) into {result.arena_name}: {tc.algo}, "
+          f"{cfg.iterations} iterations x {len(cfg.seeds)} seeds "
+          f"({result.wall_time:.0f} s)")
+    r0 = result.runs[0]
+    print(f"{'':38} {'init mean':>9} {'± std':>7} {'zero mean':>9} {'± std':>7} {'init/zero':>9}")
+    for metric, label in _ROWS:
+        a, b = result.summary["init"][metric], result.summary["zero"][metric]
+        name = label.format(head=r0.head_steps, head10=r0.head10_steps)
+        print(f"{name:<38} {_fmt(a.mean, 9)} {_fmt(a.std, 7)} {_fmt(b.mean, 9)} {_fmt(b.std, 7)} "
+              f"{_fmt(result.ratio[metric], 9)}")
+    print(f"\n{'seed':>4} {'cond':>5} {'coll/1000':>9} {'head':>8} {'head10%':>8} "
+          f"{'cum reward':>10} {'eval after':>10} {'eval before':>11}")
+    for r in result.runs:
+        print(f"{r.seed:>4} {r.condition:>5} {_fmt(r.collisions_per_1000, 9)} "
+              f"{_fmt(r.head_collisions_per_1000)} {_fmt(r.head10_collisions_per_1000)} "
+              f"{_fmt(r.cumulative_reward, 10)} {_fmt(r.eval_collisions_per_1000, 10)} "
+              f"{_fmt(r.initial_eval_collisions_per_1000, 11)}")
+    if result.output_dir is not None:
+        print(f"results in {result.output_dir}")
+    return 0
