@@ -10,7 +10,8 @@
             node_set_tokens/2,          % +Node, +Tokens
             with_node/2,                % +Node, :Goal
             node_option/3,              % +Node, +Name, -Value
-            node_accepts/2              % +Node, +Proofs/Nonce
+            node_accepts/2,             % +Node, +Proofs/Nonce
+            platform_shutdown/0
           ]).
 :- use_module(wire, [frame_write/3, frame_read/3, wire_version/1]).
 :- use_module(transport, [address_normalize/2, token_proof/3, open_key/1]).
@@ -543,3 +544,14 @@ writable_term(T) :-
 		 *******************************/
 
 platform_request(ping, ctx(Node, _, _, _, _, _), ok(pong(Node)), true).
+
+%!  platform_shutdown is det.
+%
+%   Stop every node of this process, close pooled client connections and
+%   let idle pool workers exit. For hosts that must end cleanly without
+%   relying on signals (e.g. an embedded Prolog started with --nosignals).
+
+platform_shutdown :-
+    stop_all_nodes,
+    transport:transport_drop_pool,
+    worker_pool:pool_drain.

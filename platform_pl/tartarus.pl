@@ -34,7 +34,8 @@
           ]).
 :- reexport(node,
             [ node_start/3, node_stop/1, node_property/2, current_node/1,
-              with_node/2, node_set_default/1, node_set_tokens/2 ]).
+              with_node/2, node_set_default/1, node_set_tokens/2,
+              platform_shutdown/0 ]).
 :- reexport(migration, [agent_move/3, agent_clone/4, agent_resolve/2]).
 :- reexport(messages,
             [ agent_post/5, platform_event/1, remote_agents/3,

@@ -2,7 +2,8 @@
           [ pool_run/2,                 % +Pool, :Goal
             pool_run/3,                 % +Pool, :Goal, +Options
             pool_signal/3,              % +Pool, +Thread, :Goal
-            pool_statistics/2           % +Pool, -Stats
+            pool_statistics/2,          % +Pool, -Stats
+            pool_drain/0
           ]).
 :- autoload(library(error), [must_be/2, resource_error/1]).
 :- autoload(library(option), [option/3]).
@@ -111,6 +112,8 @@ worker_wait(Pool, Q, Keep, Idle) :-
     (   Msg = run(Goal)
     ->  run_goal(Goal),
         worker_loop(Pool, Q, Keep, Idle)
+    ;   Msg == exit
+    ->  true
     ;   with_mutex(dfrl_worker_pool, may_exit(Pool, Q, Keep, Exit)),
         (   Exit = run(Goal)
         ->  run_goal(Goal),
@@ -147,6 +150,21 @@ job_error('$aborted') :- !, throw('$aborted').
 job_error(unwind(A)) :- !, throw(unwind(A)).
 job_error(E) :-
     print_message(warning, E).
+
+%!  pool_drain is det.
+%
+%   Ask every idle worker of every pool to exit, and wait (at most a
+%   second) until they have. Busy workers finish their job first.
+
+pool_drain :-
+    with_mutex(dfrl_worker_pool,
+               findall(Pool-I, ( retract(pool_idle(Pool, I)), I > 0 ), Idle)),
+    forall(member(Pool-I, Idle),
+           ( pool_queue(Pool, Q),
+             forall(between(1, I, _), thread_send_message(Q, exit)),
+             with_mutex(dfrl_worker_pool, change(pool_size, Pool, -I))
+           )),
+    sleep(0.05).
 
 %!  pool_signal(+Pool, +Thread, :Goal) is det.
 %

@@ -22,4 +22,6 @@ def test_plunit_suite(path: Path) -> None:
     out = run.stdout + run.stderr
     assert run.returncode == 0, out
     assert re.search(r"All \d+ tests? passed", out), out
-    assert "Warning" not in out, out
+    expected = ("dfrl: skipping stop", "cannot connect")  # the skip test provokes these
+    unexpected = [l for l in out.splitlines() if "Warning" in l and not any(e in l for e in expected)]
+    assert not unexpected, out
