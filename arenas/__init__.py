@@ -2,6 +2,10 @@
 
 See ``arenas/README.md`` for the JSON format.
 """
+from arenas.pybullet_quiet import load as _load_pybullet
+
+_load_pybullet()
+
 from arenas.spec import (
     WALL_THICKNESS,
     ArenaError,

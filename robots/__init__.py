@@ -11,6 +11,10 @@ from __future__ import annotations
 
 import gymnasium as gym
 
+from arenas.pybullet_quiet import load as _load_pybullet
+
+_load_pybullet()
+
 ENV_ID = "dfrl/EPuck-v0"
 
 if ENV_ID not in gym.registry:
