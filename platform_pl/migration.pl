@@ -154,7 +154,7 @@ hand_over(Node, Conn, Address, Mode, MigId, Source, Departed, Record,
           ( decide(Node, MigId, aborted), throw(E) )),
     (   Reply = ok(staged(Final))
     ->  decide(Node, MigId, committed),
-        transport_send(Conn, text, commit(MigId))
+        transport_send(Conn, binary, commit(MigId))
     ;   decide(Node, MigId, aborted),
         (   Reply = error(error(Formal, _))
         ->  throw(error(Formal, remote(Address)))
@@ -164,7 +164,11 @@ hand_over(Node, Conn, Address, Mode, MigId, Source, Departed, Record,
 
 decide(Node, MigId, Decision) :-
     get_time(Now),
-    prune_decisions(Now),
+    flag(dfrl_decisions, N, N+1),
+    (   N mod 512 =:= 0
+    ->  prune_decisions(Now)
+    ;   true
+    ),
     assertz(decision(Node, MigId, Decision, Now)).
 
 prune_decisions(Now) :-
@@ -216,7 +220,7 @@ await_commit(ctx(Node, _, _, In, _, _), MigId, Name, Source, Departed) :-
     node_option(Node, commit_timeout, Timeout),
     node_option(Node, idle_timeout, Idle),
     set_stream(In, timeout(Timeout)),
-    catch(frame_read(In, Frame, [max_size(4096)]), _, Frame = lost),
+    catch(frame_read(In, Frame, [max_size(4096), binary(true)]), _, Frame = lost),
     set_stream(In, timeout(Idle)),
     (   Frame = frame(_, commit(MigId))
     ->  activate(Node, Name, Source, Departed)
