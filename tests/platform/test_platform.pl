@@ -272,6 +272,54 @@ test(remote_load_needs_token, [cleanup(stop_all([N]))]) :-
 
 :- end_tests(bad_input).
 
+:- begin_tests(lost_messages).
+
+%   Play the source of a migration by hand: send the transfer, get the
+%   staged answer, then drop the connection without the commit.
+transfer_without_commit(Src, Dst, Name, MigId) :-
+    agents:agent_export(Src, Name, Record),
+    node_property(Src, address(SrcAddr)),
+    node_property(Dst, address(DstAddr)),
+    get_time(T),
+    transport_open(DstAddr, Conn, []),
+    transport_auth(Conn, [k], enter),
+    transport_send(Conn, binary, transfer(MigId, move, SrcAddr, T, Record)),
+    transport_receive(Conn, Reply, []),
+    transport_close(Conn),
+    assertion(Reply = ok(staged(Name))).
+
+lost_setup(A, B) :-
+    node_start(localhost:0, A, [token(k), default(false), connect_timeout(1)]),
+    node_start(localhost:0, B, [token(k), default(false), connect_timeout(1),
+                                commit_timeout(1)]),
+    with_node(A, ( create_mobile_agent(lm, cloner, [k]), add_payload(lm, [(counter,2)]) )).
+
+test(lost_commit_source_committed, [cleanup(stop_all([A,B]))]) :-
+    lost_setup(A, B),
+    migration:decide(A, m1, committed),
+    transfer_without_commit(A, B, lm, m1),
+    assertion(wait_for(user:seen(lm, at(_, _)))),
+    with_node(B, list_agents(L)),
+    assertion(L == [lm]).
+
+test(lost_commit_source_aborted, [cleanup(stop_all([A,B]))]) :-
+    lost_setup(A, B),
+    migration:decide(A, m2, aborted),
+    transfer_without_commit(A, B, lm, m2),
+    assertion(wait_for(( with_node(B, list_agents(L)), L == [] ))),
+    with_node(A, list_agents(LA)),
+    assertion(LA == [lm]).
+
+test(lost_commit_source_silent, [cleanup(stop_all([A,B]))]) :-
+    lost_setup(A, B),
+    transfer_without_commit(A, B, lm, m3),        % A never decided m3
+    assertion(wait_for(agent_property(B, lm, status(in_doubt(m3, _))), 300)),
+    with_node(B, agent_resolve(lm, discard)),
+    with_node(B, list_agents(L)),
+    assertion(L == []).
+
+:- end_tests(lost_messages).
+
 :- begin_tests(persistence).
 
 test(save_and_load_state, [cleanup((stop_all([A,B]), delete_file(F)))]) :-
