@@ -16,6 +16,7 @@ from collections.abc import Sequence
 COMMAND_MODULES: tuple[str, ...] = (
     "experiments.cmd_node",
     "experiments.cmd_demo",
+    "experiments.cmd_run",
     "experiments.cmd_bench",
     "experiments.cmd_robots",
     "experiments.cmd_transfer",

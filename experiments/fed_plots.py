@@ -80,7 +80,7 @@ def plot_both(curves: Mapping[str, np.ndarray], path: str | Path, title: str,
                         label=_label(robot, arenas or {}))
         ax.set_xlabel("iterations")
         ax.set_ylabel(_LABELS[field])
-        ax.set_title(_LABELS[field].capitalize())
+        ax.set_title(_LABELS[field][0].upper() + _LABELS[field][1:])
         ax.grid(True, alpha=0.3)
         ax.legend(loc="best", fontsize=8)
     fig.suptitle(title, fontsize=10)

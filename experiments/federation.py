@@ -487,27 +487,55 @@ class Launcher:
                 self.say(f"ROBOT {rid} CRASHED (exit code {rc}) at iteration {ch.iteration}; "
                          f"see {ch.err_path}\n{ch.err_tail()}")
 
+    def _join_requests(self) -> list[tuple[JoinSpec, int | None]]:
+        """Joins from the config whose round has come, and requests left by ``dfrl join``."""
+        c = self.config
+        due: list[tuple[JoinSpec, int | None]] = [(j, None) for j in c.joins]
+        req_dir = self.out / "join_requests"
+        if req_dir.is_dir():
+            for f in sorted(req_dir.glob("*.json")):
+                try:
+                    d = read_json(f)
+                    spec = JoinSpec(RobotSpec(**d["robot"]), after_round=0)
+                except (ValueError, TypeError, KeyError) as exc:
+                    self.say(f"ignoring join request {f.name}: {exc}")
+                    f.unlink()
+                    continue
+                if spec.robot.id in self.children and spec.robot.id not in self.joined:
+                    self.say(f"ignoring join request {f.name}: robot {spec.robot.id} exists")
+                    f.unlink()
+                    continue
+                due.append((spec, d.get("iterations")))
+        return due
+
     def _handle_joins(self) -> None:
         c = self.config
-        for join in c.joins:
+        for join, iterations in self._join_requests():
             rid = join.robot.id
             if rid in self.joined:
                 continue
             agent = f"fed_{join.robot.algo}"
             log = self.logs.get(agent)
+            if agent not in self.agents:
+                self.say(f"robot {rid} cannot join: no agent for {join.robot.algo}")
+                self.joined.add(rid)
+                continue
             if log is None or len(log.rounds) < join.after_round or log.finished is not None:
                 continue
             done = len(log.rounds)
-            remaining = max(1, c.iterations - done * c.respite)
+            remaining = int(iterations) if iterations else max(1, c.iterations - done * c.respite)
             self.joined.add(rid)
             child = self._spawn(join.robot, remaining)
             self._await_ready([child])
             host, port = child.address
             stop = {"host": host, "port": port, "robot": rid}
             self.agents[agent]["itinerary"].append(stop)
-            self._write_nodes()
             first = self.agents[agent]["itinerary"][0]
             send_control(first["host"], first["port"], c.token, {"join": stop})
+            self._write_nodes()
+            req = self.out / "join_requests" / f"{rid}.json"
+            if req.exists():
+                req.unlink()
             self.say(f"robot {rid} ({join.robot.arena}, {remaining} iterations) joins {agent} "
                      f"after round {done}")
 
@@ -702,3 +730,28 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
     if not told:
         raise ExperimentError(f"no agent {agent!r} in {results_dir}")
     return told
+
+
+def join_robot(results_dir: str | Path, robot: str, arena: str, algo: str = "qlearning",
+               iterations: int | None = None, seed: int | None = None,
+               timeout_s: float = 60.0) -> dict[str, Any]:
+    """Ask the launcher of a running experiment to start a robot and add it to the agent of
+    its algorithm (from the agent's next round). Returns the new node's ``nodes.json`` entry.
+
+    The launcher owns every process of an experiment: this leaves a request in
+    ``RESULTS_DIR/join_requests/`` and waits until ``nodes.json`` lists the robot.
+    """
+    info = nodes_of(results_dir)
+    if any(n["robot"] == robot for n in info["nodes"]):
+        raise ExperimentError(f"robot {robot} is already part of the experiment")
+    spec = RobotSpec(robot, arena, algo, seed)
+    req = {"robot": dataclasses.asdict(spec), "iterations": iterations}
+    write_json(Path(results_dir) / "join_requests" / f"{robot}.json", req)
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        time.sleep(0.2)
+        for n in nodes_of(results_dir)["nodes"]:
+            if n["robot"] == robot:
+                return n
+    raise ExperimentError(f"the launcher did not start robot {robot} within {timeout_s} s "
+                          "(is the experiment still running?)")
