@@ -551,6 +551,7 @@ class Launcher:
         c = self.config
         deadline = self._t0 + c.timeout_s
         robots_done_at: float | None = None
+        finished_at: float | None = None
         while True:
             time.sleep(0.1)
             self._poll_logs()
@@ -560,6 +561,13 @@ class Launcher:
             if self.progress is not None and now - self._last_status > 5.0:
                 self._last_status = now
                 self.say(self.status_line())
+            if c.mode is Mode.SYNC and self.agents and self._all_finished():
+                # no more shares will come: robots past their last boundary exit by
+                # themselves; one still waiting (a late joiner) is told to stop
+                finished_at = finished_at or now
+                if (all(ch.proc.poll() is not None for ch in self.children.values())
+                        or now - finished_at > 2.0):
+                    return
             if all(ch.proc.poll() is not None for ch in self.children.values()):
                 self._poll_logs()
                 if self._all_finished():

@@ -374,7 +374,9 @@ class RobotProcess:
         before = self.shares
         deadline = time.monotonic() + self.config.sync_timeout_s
         while self.shares == before:
-            self.node.serve_pending(timeout=0.05)
+            # one request at a time: the agent's read for the next round may already be
+            # queued right behind this round's write, and must wait for the next boundary
+            self.node.serve_pending(max_requests=1, timeout=0.05)
             if self.shares != before:
                 break
             if self.stdin.poll():

@@ -1,0 +1,165 @@
+"""Federated experiments on real processes: robot nodes on loopback and the Prolog agent."""
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from experiments.federation import (ExperimentConfig, JoinSpec, Results, RobotSpec, inject_method,
+                                    run)
+from experiments.results import read_metrics, read_rounds_log
+
+pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
+
+MEDIAN = Path(__file__).resolve().parents[2] / "platform_pl/agents/examples/median_method.pl"
+
+
+def _rounds(out: Path) -> list[dict[str, str]]:
+    with open(out / "rounds.csv", newline="", encoding="utf-8") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _config(n: int = 2, **kw: Any) -> ExperimentConfig:
+    arenas = ["r1", "r4", "r2", "r3", "r5"]
+    base: dict[str, Any] = dict(name="t", robots=tuple(RobotSpec(f"r{i + 1}", arenas[i])
+                                                       for i in range(n)),
+                                iterations=200, respite=50, seed=1, mode="sync", timeout_s=120)
+    base.update(kw)
+    return ExperimentConfig(**base)
+
+
+def test_two_robot_smoke_run(tmp_path: Path) -> None:
+    cfg = _config()
+    res = run(cfg, tmp_path, progress=None)
+    assert res.ok, (res.crashed, res.agents_finished)
+    for name in ("config.json", "nodes.json", "metrics.csv", "rounds.csv", "summary.md",
+                 "q_sum.png", "cumulative_reward.png", "curves.png"):
+        assert (tmp_path / name).is_file(), name
+    assert (tmp_path / "q_sum.png").stat().st_size > 10_000
+    assert ExperimentConfig.from_dict(json.loads((tmp_path / "config.json").read_text())) == cfg
+    nodes = json.loads((tmp_path / "nodes.json").read_text())
+    assert [n["robot"] for n in nodes["nodes"]] == ["r1", "r2"]
+    assert all(n["host"] == "127.0.0.1" and n["port"] > 0 for n in nodes["nodes"])
+    curves = read_metrics(tmp_path / "metrics.csv")
+    assert list(curves) == ["r1", "r2"]
+    for cur in curves.values():
+        assert cur["iteration"].tolist() == list(range(1, 201))
+        assert cur["q_sum"][-1] > 0 and cur["cumulative_reward"][-1] > 0
+    rows = _rounds(tmp_path)
+    assert [int(r["round"]) for r in rows] == [1, 2, 3, 4]
+    for r in rows:
+        # right after each backward pass every robot holds the same table
+        assert r["all_equal"] == "true"
+        assert r["digest_r1"] == r["digest_r2"] and len(r["digest_r1"]) == 64
+        assert r["visited"] == "r1 r2" and r["method"] == "average" and int(r["hops"]) == 2
+        assert int(r["bytes"]) > 0 and float(r["end"]) > float(r["start"])
+    assert len({r["digest_r1"] for r in rows}) == 4       # the tables moved on between rounds
+    summary = (tmp_path / "summary.md").read_text()
+    assert "4/4" in summary
+
+
+def test_sync_mode_same_seed_same_curves(tmp_path: Path) -> None:
+    cfg = _config()
+    run(cfg, tmp_path / "a", progress=None)
+    run(cfg, tmp_path / "b", progress=None)
+    assert (tmp_path / "a/metrics.csv").read_bytes() == (tmp_path / "b/metrics.csv").read_bytes()
+    da = [r["digest_r1"] for r in _rounds(tmp_path / "a")]
+    db = [r["digest_r1"] for r in _rounds(tmp_path / "b")]
+    assert da == db and len(da) == 4
+
+
+def test_itinerary_forward_then_backward_on_three_processes(tmp_path: Path) -> None:
+    res = run(_config(3, iterations=100), tmp_path, progress=None)
+    assert res.ok
+    rows = _rounds(tmp_path)
+    assert len(rows) == 2
+    shares = {}
+    for robot in ("r1", "r2", "r3"):
+        with open(tmp_path / f"shares_{robot}.csv", newline="") as fh:
+            shares[robot] = [float(r["wall_time"]) for r in csv.DictReader(fh)]
+        assert len(shares[robot]) == 2
+    for k, row in enumerate(rows):
+        assert row["visited"] == "r1 r2 r3" and int(row["hops"]) == 4   # 2 forward, 2 back
+        assert row["all_equal"] == "true"
+        # the aggregate is written into r3 first, then r2, then r1 on the way back
+        assert shares["r3"][k] < shares["r2"][k] < shares["r1"][k]
+
+
+def test_heterogeneous_one_agent_per_algorithm(tmp_path: Path) -> None:
+    robots = (RobotSpec("r1", "r1", "qlearning"), RobotSpec("r2", "r4", "sarsa"),
+              RobotSpec("r3", "r2", "qlearning"))
+    res = run(_config(robots=robots, methods={"sarsa": "max"}), tmp_path, progress=None)
+    assert res.ok
+    assert res.agents_finished == {"fed_qlearning": 4, "fed_sarsa": 4}
+    rows = _rounds(tmp_path)
+    q = [r for r in rows if r["agent"] == "fed_qlearning"]
+    s = [r for r in rows if r["agent"] == "fed_sarsa"]
+    assert all(r["visited"] == "r1 r3" and r["method"] == "average" for r in q)
+    assert all(r["visited"] == "r2" and r["method"] == "max" for r in s)
+    assert all(r["all_equal"] == "true" for r in rows)
+    assert all(r["digest_r2"] == "" for r in q)
+
+
+def _run_in_thread(cfg: ExperimentConfig, out: Path) -> tuple[threading.Thread, dict[str, Any]]:
+    box: dict[str, Any] = {}
+
+    def target() -> None:
+        try:
+            box["res"] = run(cfg, out, progress=None)
+        except BaseException as exc:  # noqa: BLE001
+            box["exc"] = exc
+
+    t = threading.Thread(target=target, daemon=True)
+    t.start()
+    return t, box
+
+
+def _wait_rounds(out: Path, agent: str, n: int, timeout: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if len(read_rounds_log(out / f"rounds_{agent}.log", agent).rounds) >= n:
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"fewer than {n} rounds after {timeout} s")
+
+
+def test_inject_method_into_running_experiment(tmp_path: Path) -> None:
+    # rtf 20: 100 iterations take 0.32 s, so the run lasts long enough to inject into
+    cfg = _config(iterations=2000, respite=100, rtf=20.0)
+    t, box = _run_in_thread(cfg, tmp_path)
+    _wait_rounds(tmp_path, "fed_qlearning", 2)
+    assert inject_method(tmp_path, MEDIAN, "median") == ["fed_qlearning"]
+    t.join(timeout=120)
+    assert not t.is_alive()
+    res: Results = box.get("res") or pytest.fail(f"run failed: {box.get('exc')!r}")
+    assert res.ok
+    methods = [r["method"] for r in _rounds(tmp_path)]
+    assert len(methods) == 20
+    first = methods.index("median")
+    assert 2 <= first < 19
+    assert set(methods[:first]) == {"average"} and set(methods[first:]) == {"median"}
+    assert all(r["all_equal"] == "true" for r in _rounds(tmp_path))
+
+
+def test_robot_joins_running_experiment(tmp_path: Path) -> None:
+    cfg = _config(iterations=1000, respite=100, rtf=20.0,
+                  joins=(JoinSpec(RobotSpec("r3", "r5"), after_round=2),))
+    res = run(cfg, tmp_path, progress=None)
+    assert res.ok, (res.crashed, res.agents_finished)
+    rows = _rounds(tmp_path)
+    visited = [r["visited"] for r in rows]
+    assert visited[:2] == ["r1 r2", "r1 r2"]
+    first = visited.index("r1 r2 r3")
+    assert all(v == "r1 r2 r3" for v in visited[first:])
+    assert 2 <= first < len(rows)
+    assert all(r["all_equal"] == "true" for r in rows)
+    curves = read_metrics(tmp_path / "metrics.csv")
+    assert "r3" in curves and 0 < len(curves["r3"]) <= 800
+    nodes = json.loads((tmp_path / "nodes.json").read_text())
+    assert [n["robot"] for n in nodes["nodes"]] == ["r1", "r2", "r3"]
