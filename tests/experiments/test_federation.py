@@ -163,3 +163,12 @@ def test_robot_joins_running_experiment(tmp_path: Path) -> None:
     assert "r3" in curves and 0 < len(curves["r3"]) <= 800
     nodes = json.loads((tmp_path / "nodes.json").read_text())
     assert [n["robot"] for n in nodes["nodes"]] == ["r1", "r2", "r3"]
+
+
+def test_bench_round_smoke() -> None:
+    from experiments.bench_round import bench
+
+    r = bench(entries=400, actions=4, robots=3, rounds=3, warmup=1)
+    assert r["rounds"] == 3 and r["hops"] == 4
+    assert r["all_equal_rounds"] == r["total_rounds"] == 4
+    assert 0 < r["median_ms"] < 5000
