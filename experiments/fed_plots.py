@@ -4,6 +4,7 @@ one line per robot against iterations, for the sum of Q-values and for the cumul
 from __future__ import annotations
 
 import csv
+import textwrap
 from pathlib import Path
 from typing import Mapping
 
@@ -58,7 +59,7 @@ def plot_metric(curves: Mapping[str, np.ndarray], field: str, path: str | Path, 
         ax.axvline(x, color="0.85", lw=0.6, zorder=0)
     ax.set_xlabel("iterations")
     ax.set_ylabel(_LABELS.get(field, field))
-    ax.set_title(title, fontsize=10)
+    ax.set_title(textwrap.fill(title, 70), fontsize=9)
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize=8)
     out = Path(path)

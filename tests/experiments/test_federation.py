@@ -172,3 +172,41 @@ def test_bench_round_smoke() -> None:
     assert r["rounds"] == 3 and r["hops"] == 4
     assert r["all_equal_rounds"] == r["total_rounds"] == 4
     assert 0 < r["median_ms"] < 5000
+
+
+def test_async_mode_with_real_time_factor(tmp_path: Path) -> None:
+    # rtf 10: 100 iterations take at least 0.64 s of wall time; robots never wait
+    cfg = _config(mode="async", iterations=100, respite=25, rtf=10.0, rest_s=0.05)
+    t0 = time.monotonic()
+    res = run(cfg, tmp_path, progress=None)
+    assert res.ok, (res.crashed, res.agents_finished)
+    assert time.monotonic() - t0 >= 100 * 0.064 / 10
+    rows = _rounds(tmp_path)
+    assert len(rows) == 4
+    assert all(r["all_equal"] == "true" for r in rows)
+    curves = read_metrics(tmp_path / "metrics.csv")
+    assert all(len(c) == 100 for c in curves.values())
+
+
+def test_crashed_robot_is_reported_and_results_still_written(tmp_path: Path) -> None:
+    import os
+    import signal
+
+    cfg = _config(3, iterations=1500, respite=100, rtf=20.0, timeout_s=90)
+    t, box = _run_in_thread(cfg, tmp_path)
+    _wait_rounds(tmp_path, "fed_qlearning", 2)
+    nodes = json.loads((tmp_path / "nodes.json").read_text())
+    pid = next(n["pid"] for n in nodes["nodes"] if n["robot"] == "r2")
+    os.kill(pid, signal.SIGKILL)
+    t.join(timeout=120)
+    assert not t.is_alive()
+    res: Results = box.get("res") or pytest.fail(f"run failed: {box.get('exc')!r}")
+    assert not res.ok
+    assert res.crashed == {"r2": -signal.SIGKILL}
+    assert "CRASHED" in (tmp_path / "summary.md").read_text()
+    rows = _rounds(tmp_path)
+    assert rows[0]["visited"] == "r1 r2 r3"
+    assert rows[-1]["visited"] == "r1 r3"          # the agent skips the dead stop
+    assert rows[-1]["all_equal"] == "true"
+    curves = read_metrics(tmp_path / "metrics.csv")
+    assert len(curves["r1"]) == 1500 and 0 < len(curves["r2"]) < 1500
