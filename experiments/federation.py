@@ -396,9 +396,15 @@ class Launcher:
         c = self.config
         grace = 10.0 if c.mode is Mode.SYNC else c.timeout_s
         return NodeConfig(robot=robot.id, out_dir=str(self.out), arena=robot.arena, algo=robot.algo,
-                          seed=c.robot_seed(robot), iterations=iterations, respite=c.respite,
+                          seed=self._seed(robot), iterations=iterations, respite=c.respite,
                           mode=c.mode, rtf=c.rtf, token=c.token, trainer=dict(c.trainer),
                           grace_s=grace, sync_timeout_s=max(60.0, c.timeout_s))
+
+    def _seed(self, robot: RobotSpec) -> int:
+        known = [r.id for r in self.config.robots] + [j.robot.id for j in self.config.joins]
+        if robot.seed is not None or robot.id in known:
+            return self.config.robot_seed(robot)
+        return self.config.seed + len(known) + len(self.joined)   # a joiner asked for at runtime
 
     def _spawn(self, robot: RobotSpec, iterations: int) -> _Child:
         child = _Child(robot, self._node_config(robot, iterations), self.out, self._on_event)
@@ -524,20 +530,29 @@ class Launcher:
                 continue
             done = len(log.rounds)
             remaining = int(iterations) if iterations else max(1, c.iterations - done * c.respite)
-            self.joined.add(rid)
-            child = self._spawn(join.robot, remaining)
-            self._await_ready([child])
-            host, port = child.address
-            stop = {"host": host, "port": port, "robot": rid}
-            self.agents[agent]["itinerary"].append(stop)
-            first = self.agents[agent]["itinerary"][0]
-            send_control(first["host"], first["port"], c.token, {"join": stop})
-            self._write_nodes()
+            try:
+                self._join(join, agent, remaining, done)
+            except (ExperimentError, OSError, ValueError) as exc:
+                self.say(f"robot {rid} could not join: {exc}")
             req = self.out / "join_requests" / f"{rid}.json"
             if req.exists():
                 req.unlink()
-            self.say(f"robot {rid} ({join.robot.arena}, {remaining} iterations) joins {agent} "
-                     f"after round {done}")
+
+    def _join(self, join: JoinSpec, agent: str, remaining: int, done: int) -> None:
+        """Start a joining robot's node and tell the agent (it adds the stop next round)."""
+        c = self.config
+        rid = join.robot.id
+        self.joined.add(rid)
+        child = self._spawn(join.robot, remaining)
+        self._await_ready([child])
+        host, port = child.address
+        stop = {"host": host, "port": port, "robot": rid}
+        self.agents[agent]["itinerary"].append(stop)
+        first = self.agents[agent]["itinerary"][0]
+        send_control(first["host"], first["port"], c.token, {"join": stop})
+        self._write_nodes()
+        self.say(f"robot {rid} ({join.robot.arena}, {remaining} iterations) joins {agent} "
+                 f"after round {done}")
 
     def _all_finished(self) -> bool:
         return all(self.logs.get(n) is not None and self.logs[n].finished is not None
@@ -606,7 +621,7 @@ class Launcher:
         c = self.config
         self.out.mkdir(parents=True, exist_ok=True)
         for stale in list(self.out.glob("rounds_*.log")) + list(self.out.glob("shares_*.csv")) + \
-                list(self.out.glob("metrics_*.csv")):
+                list(self.out.glob("metrics_*.csv")) + list(self.out.glob("join_requests/*.json")):
             stale.unlink()
         write_json(self.out / "config.json", c.to_dict())
         self._t0 = time.monotonic()
