@@ -53,7 +53,9 @@ _ROWS = (
     ("cumulative_reward", "cumulative reward"),
     ("mean_reward", "mean reward per step"),
     ("eval_collisions_per_1000", "greedy eval collisions/1000, after"),
+    ("eval_mean_reward", "greedy eval reward per step, after"),
     ("initial_eval_collisions_per_1000", "greedy eval collisions/1000, before"),
+    ("initial_eval_mean_reward", "greedy eval reward per step, before"),
 )
 
 
@@ -104,6 +106,7 @@ def cmd_transfer(args: argparse.Namespace) -> int:
               f"{_fmt(r.head_collisions_per_1000)} {_fmt(r.head10_collisions_per_1000)} "
               f"{_fmt(r.cumulative_reward, 10)} {_fmt(r.eval_collisions_per_1000, 10)} "
               f"{_fmt(r.initial_eval_collisions_per_1000, 11)}")
+    print("(before = the initial table, no training; for zero that is a uniformly random policy)")
     if result.output_dir is not None:
         print(f"results in {result.output_dir}")
     return 0

@@ -12,9 +12,9 @@ so the only difference is the initial table. Reported per run and aggregated ove
 * collisions per 1,000 training steps, overall, over the first ``min(1000, N)`` steps and over
   the first 10% of the steps (where a head start shows);
 * final cumulative reward and mean reward per step;
-* a greedy evaluation of the final table (collisions per 1,000 steps,
-  :func:`robots.evaluation.evaluate_policy`), and one of the initial table before any training
-  (for ``zero`` that is a uniformly random policy: all ties).
+* a greedy evaluation of the final table (collisions per 1,000 steps and mean reward per
+  step, :func:`robots.evaluation.evaluate_policy`), and one of the initial table before any
+  training (for ``zero`` that is a uniformly random policy: all ties), from the same poses.
 
 Usage::
 
@@ -64,6 +64,7 @@ METRICS: tuple[str, ...] = (
     "eval_collisions_per_1000",
     "eval_mean_reward",
     "initial_eval_collisions_per_1000",
+    "initial_eval_mean_reward",
 )
 
 
@@ -182,8 +183,9 @@ class RunResult:
         ``cumulative_reward / iterations``.
     eval_collisions_per_1000, eval_mean_reward : float
         Greedy policy of the final table (NaN when ``eval_steps`` is 0).
-    initial_eval_collisions_per_1000 : float
-        Greedy policy of the initial table, before training (NaN when ``eval_steps`` is 0).
+    initial_eval_collisions_per_1000, initial_eval_mean_reward : float
+        Greedy policy of the initial table, before training (NaN when ``eval_steps`` is 0);
+        for ``zero`` every action ties, so this is a uniformly random policy.
     respawns : int
     wall_time : float
         Seconds of training and evaluation.
@@ -208,6 +210,7 @@ class RunResult:
     eval_collisions_per_1000: float
     eval_mean_reward: float
     initial_eval_collisions_per_1000: float
+    initial_eval_mean_reward: float
     respawns: int
     wall_time: float
     curve_iteration: np.ndarray = field(repr=False)
@@ -219,7 +222,8 @@ class RunResult:
                   "head_steps", "head_collisions_per_1000", "head10_steps",
                   "head10_collisions_per_1000", "cumulative_reward", "mean_reward",
                   "eval_collisions_per_1000", "eval_mean_reward",
-                  "initial_eval_collisions_per_1000", "respawns", "wall_time")
+                  "initial_eval_collisions_per_1000", "initial_eval_mean_reward", "respawns",
+                  "wall_time")
 
     def scalars(self) -> dict[str, Any]:
         """The CSV fields as a JSON-ready dict."""
@@ -429,12 +433,13 @@ def run_one(trainer_config: TrainerConfig, condition: Condition | str, q0: np.nd
         final = trainer.q_table.copy()
         cum_reward, respawns = trainer.cumulative_reward, trainer.respawns
     nan = float("nan")
-    ev_c = ev_r = ev0 = nan
+    ev_c = ev_r = ev0_c = ev0_r = nan
     if eval_steps > 0:
         ev_seed = EVAL_SEED_OFFSET + int(seed)
         after = evaluate_policy(cfg, PolicyKind.GREEDY, eval_steps, ev_seed, q_table=final)
         before = evaluate_policy(cfg, PolicyKind.GREEDY, eval_steps, ev_seed, q_table=start)
-        ev_c, ev_r, ev0 = after.collisions_per_1000, after.mean_reward, before.collisions_per_1000
+        ev_c, ev_r = after.collisions_per_1000, after.mean_reward
+        ev0_c, ev0_r = before.collisions_per_1000, before.mean_reward
     total = int(collided.sum())
     return RunResult(
         seed=int(seed), condition=condition.value, iterations=n, collisions=total,
@@ -443,7 +448,8 @@ def run_one(trainer_config: TrainerConfig, condition: Condition | str, q0: np.nd
         head10_steps=head10, head10_collisions_per_1000=1000.0 * int(collided[:head10].sum()) / head10,
         cumulative_reward=float(cum_reward), mean_reward=float(cum_reward) / n,
         eval_collisions_per_1000=ev_c, eval_mean_reward=ev_r,
-        initial_eval_collisions_per_1000=ev0, respawns=int(respawns),
+        initial_eval_collisions_per_1000=ev0_c, initial_eval_mean_reward=ev0_r,
+        respawns=int(respawns),
         wall_time=round(time.perf_counter() - t0, 3),
         curve_iteration=np.asarray(points, dtype=np.int64), curve_collisions=curve_c,
         curve_reward=curve_r,
