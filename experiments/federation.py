@@ -218,6 +218,7 @@ class Results:
     iterations: dict[str, int]
     plots: list[Path]
     ok: bool
+    interrupted: str | None = None
 
 
 # -- children --------------------------------------------------------------------------------
@@ -360,6 +361,8 @@ class Launcher:
         self.logs: dict[str, AgentLog] = {}
         self.crashed: dict[str, int] = {}
         self.joined: set[str] = set()
+        self.killed: set[str] = set()          # children the launcher itself stopped
+        self.interrupted: str | None = None
         self._lock = threading.Lock()
         self._t0 = time.monotonic()
         self._printed_rounds: dict[str, int] = {}
@@ -488,7 +491,7 @@ class Launcher:
     def _check_children(self) -> None:
         for rid, ch in self.children.items():
             rc = ch.proc.poll()
-            if rc is not None and rc != 0 and rid not in self.crashed:
+            if rc is not None and rc != 0 and rid not in self.crashed and rid not in self.killed:
                 self.crashed[rid] = rc
                 self.say(f"ROBOT {rid} CRASHED (exit code {rc}) at iteration {ch.iteration}; "
                          f"see {ch.err_path}\n{ch.err_tail()}")
@@ -612,12 +615,26 @@ class Launcher:
                 ch.proc.wait(timeout=max(0.1, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
                 self.say(f"robot {ch.robot.id} did not exit; killing it")
+                self.killed.add(ch.robot.id)
                 ch.kill()
         for ch in self.children.values():
             ch.finish()
         self._check_children()
 
     def run(self) -> Results:
+        """Run the experiment (SIGTERM and SIGINT stop it cleanly when called from the main
+        thread: children are killed and the partial results written)."""
+        restore = []
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGTERM, signal.SIGINT):
+                restore.append((sig, signal.signal(sig, _interrupt)))
+        try:
+            return self._run()
+        finally:
+            for sig, handler in restore:
+                signal.signal(sig, handler)
+
+    def _run(self) -> Results:
         c = self.config
         self.out.mkdir(parents=True, exist_ok=True)
         for stale in list(self.out.glob("rounds_*.log")) + list(self.out.glob("shares_*.csv")) + \
@@ -634,9 +651,12 @@ class Launcher:
                 f"{rid}@{ch.address[1]}" for rid, ch in self.children.items()))
             self._launch_agents()
             self._monitor()
-        except BaseException:
+        except BaseException as exc:
             ok = False
+            self.interrupted = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
             for ch in self.children.values():
+                if ch.proc.poll() is None:
+                    self.killed.add(ch.robot.id)
                 ch.kill()
             raise
         finally:
@@ -664,9 +684,13 @@ class Launcher:
         iters = {rid: ch.iteration for rid, ch in self.children.items()}
         ok = ok and not self.crashed and all(v is not None for v in finished.values())
         result = Results(self.out, self.config, wall, rows, dict(self.crashed), finished, iters,
-                         plots, ok)
+                         plots, ok, self.interrupted)
         write_summary(result)
         return result
+
+
+def _interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
 
 
 def write_summary(r: Results) -> Path:
@@ -704,6 +728,9 @@ def write_summary(r: Results) -> Path:
               f"- agents finished: {r.agents_finished}"]
     if r.crashed:
         lines.append(f"- CRASHED robots (exit codes): {r.crashed}")
+    if r.interrupted:
+        lines.append(f"- INTERRUPTED ({r.interrupted}): partial results, robots stopped by "
+                     "the launcher")
     lines += ["", "Plots: " + ", ".join(p.name for p in r.plots), ""]
     path = r.output_dir / "summary.md"
     path.write_text("\n".join(lines), encoding="utf-8")
