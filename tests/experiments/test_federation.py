@@ -74,6 +74,14 @@ def test_sync_mode_same_seed_same_curves(tmp_path: Path) -> None:
     assert da == db and len(da) == 4
 
 
+def test_visit_weighted_average(tmp_path: Path) -> None:
+    res = run(_config(iterations=100, method="visit_average"), tmp_path, progress=None)
+    assert res.ok
+    rows = _rounds(tmp_path)
+    assert [r["method"] for r in rows] == ["visit_average", "visit_average"]
+    assert all(r["all_equal"] == "true" for r in rows)
+
+
 def test_itinerary_forward_then_backward_on_three_processes(tmp_path: Path) -> None:
     res = run(_config(3, iterations=100), tmp_path, progress=None)
     assert res.ok

@@ -1,0 +1,73 @@
+"""The robot node process on its own (no agent): protocol lines, files, stopping."""
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from experiments.robot_node import NodeConfig
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _start(tmp_path: Path, **kw) -> subprocess.Popen:
+    cfg = NodeConfig(robot="r7", out_dir=str(tmp_path), arena="r2", **kw)
+    path = tmp_path / "node.json"
+    path.write_text(json.dumps(cfg.to_dict()))
+    return subprocess.Popen([sys.executable, "-m", "experiments.robot_node", "--config", str(path)],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, cwd=REPO)
+
+
+def test_async_node_trains_then_waits_for_stdin(tmp_path: Path) -> None:
+    p = _start(tmp_path, iterations=120, progress_every=50, grace_s=30.0)
+    first = p.stdout.readline().split()
+    assert first[:3] == ["DFRL_NODE", "r7", "127.0.0.1"] and int(first[3]) > 0
+    assert p.stdout.readline().split() == ["DFRL_PROGRESS", "r7", "50"]
+    assert p.stdout.readline().split() == ["DFRL_PROGRESS", "r7", "100"]
+    assert p.stdout.readline().split() == ["DFRL_PROGRESS", "r7", "120"]
+    time.sleep(0.3)
+    assert p.poll() is None                       # lingers, serving, until stdin closes
+    out, _ = p.communicate("", timeout=30)
+    assert out.split() == ["DFRL_DONE", "r7", "120", "0"]
+    assert p.returncode == 0
+    with open(tmp_path / "metrics_r7.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [int(r["iteration"]) for r in rows] == list(range(1, 121))
+    assert set(rows[0]) == {"robot", "iteration", "q_sum", "cumulative_reward", "collisions"}
+    assert (tmp_path / "tables" / "r7.npy").is_file()
+    assert (tmp_path / "shares_r7.csv").read_text().startswith("robot,share_index,")
+
+
+def test_sync_node_stops_at_a_boundary_when_told(tmp_path: Path) -> None:
+    p = _start(tmp_path, iterations=1000, respite=40, mode="sync", progress_every=0)
+    assert p.stdout.readline().startswith("DFRL_NODE r7")
+    time.sleep(1.0)                                # waits at iteration 40 for a share
+    assert p.poll() is None
+    out, _ = p.communicate("stop\n", timeout=30)
+    assert out.split()[-4:] == ["DFRL_DONE", "r7", "40", "0"]
+    with open(tmp_path / "metrics_r7.csv", newline="") as fh:
+        assert len(list(csv.DictReader(fh))) == 40
+
+
+def test_bad_config_exits_2(tmp_path: Path) -> None:
+    path = tmp_path / "node.json"
+    path.write_text(json.dumps({"robot": "r1", "out_dir": str(tmp_path), "colour": "red"}))
+    p = subprocess.run([sys.executable, "-m", "experiments.robot_node", "--config", str(path)],
+                       capture_output=True, text=True, cwd=REPO, timeout=60)
+    assert p.returncode == 2 and "colour" in p.stderr
+
+
+@pytest.mark.parametrize("rtf", [10.0])
+def test_real_time_factor_paces_the_loop(tmp_path: Path, rtf: float) -> None:
+    p = _start(tmp_path, iterations=50, rtf=rtf, progress_every=0, grace_s=0.0)
+    assert p.stdout.readline().startswith("DFRL_NODE")
+    t0 = time.monotonic()
+    out, _ = p.communicate(timeout=30)
+    assert "DFRL_DONE r7 50" in out
+    assert time.monotonic() - t0 >= 50 * 0.064 / rtf * 0.95
