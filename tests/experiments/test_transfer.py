@@ -71,6 +71,7 @@ def test_command_json_output_and_files(setup: tuple[Path, Path], tmp_path: Path,
         assert r["collisions_per_1000"] == pytest.approx(1000 * r["collisions"] / 150)
         assert r["mean_reward"] == pytest.approx(r["cumulative_reward"] / 150)
         assert r["eval_collisions_per_1000"] is not None
+        assert r["initial_eval_mean_reward"] is not None
     for cond in ("init", "zero"):
         assert set(doc["summary"][cond]) == set(METRICS)
         assert doc["summary"][cond]["cumulative_reward"]["n"] == 2
@@ -93,6 +94,7 @@ def test_command_readable_table(setup: tuple[Path, Path], capsys: pytest.Capture
     assert rc == 0
     assert "into l6_test: sarsa, 100 iterations x 1 seeds" in text
     assert "collisions/1000, first 100 steps" in text and "init/zero" in text
+    assert "greedy eval reward per step, before" in text
 
 
 def test_same_seeds_give_identical_results(setup: tuple[Path, Path]) -> None:
