@@ -70,12 +70,21 @@ agent_move(Name, Address0, Options) :-
     (   node_for_address(Address, Node)
     ->  move_here(Node, Name)
     ;   with_agents_locked(begin_departure(Node, Name, MigId, Previous)),
-        catch(transfer(Node, Name, Address, move, MigId, _Final, Options),
+        catch(transfer(Node, Name, Address, move, MigId, _Final, Options,
+                       agent_remove(Node, Name)),
               E,
-              ( with_agents_locked(agent_set_status(Node, Name, Previous)),
-                throw(E)
-              )),
-        agent_remove(Node, Name)
+              restore_unless_gone(Node, Name, Previous, E))
+    ).
+
+%   The move failed. If it failed before the commit the agent is still
+%   here: give it back its status. (After the commit it is gone from here
+%   and the error is only about sending the commit, which the
+%   destination resolves by asking us.)
+restore_unless_gone(Node, Name, Previous, E) :-
+    (   agent_exists(Node, Name)
+    ->  with_agents_locked(agent_set_status(Node, Name, Previous)),
+        throw(E)
+    ;   print_message(warning, E)
     ).
 
 begin_departure(Node, Name, MigId, Previous) :-
@@ -116,9 +125,12 @@ agent_clone(Name, Address0, Clone, Options) :-
     ;   existence_error(agent, Name)
     ),
     new_migration_id(Node, Name, MigId),
-    transfer(Node, Name, Address, clone, MigId, Clone, Options).
+    transfer(Node, Name, Address, clone, MigId, Clone, Options, true).
 
-transfer(Node, Name, Address, Mode, MigId, Final, Options) :-
+%   OnCommit runs once the destination has staged the agent and before the
+%   commit is sent: the source's copy of a moved agent is gone before the
+%   agent can start at the destination (and, e.g., come straight back).
+transfer(Node, Name, Address, Mode, MigId, Final, Options, OnCommit) :-
     agent_export(Node, Name, Record0),
     get_time(Departed),
     (   Mode == clone
@@ -135,7 +147,7 @@ transfer(Node, Name, Address, Mode, MigId, Final, Options) :-
     ConnOptions = [action(enter)|ConnOptions0],
     transport_acquire(Address, Tokens, Conn, ConnOptions),
     catch(hand_over(Node, Conn, Address, Mode, MigId, Source, Departed,
-                    Record, Final),
+                    Record, Final, OnCommit),
           E,
           ( transport_discard(Conn), throw(E) )),
     transport_release(Conn).
@@ -145,7 +157,7 @@ merge_timeouts(Options, CT, RT, [connect_timeout(C), reply_timeout(R)]) :-
     option(reply_timeout(R), Options, RT).
 
 hand_over(Node, Conn, Address, Mode, MigId, Source, Departed, Record,
-          Final) :-
+          Final, OnCommit) :-
     catch(( transport_send(Conn, binary,
                            transfer(MigId, Mode, Source, Departed, Record)),
             transport_receive(Conn, Reply, [phase(transfer)])
@@ -154,6 +166,7 @@ hand_over(Node, Conn, Address, Mode, MigId, Source, Departed, Record,
           ( decide(Node, MigId, aborted), throw(E) )),
     (   Reply = ok(staged(Final))
     ->  decide(Node, MigId, committed),
+        call(OnCommit),
         transport_send(Conn, binary, commit(MigId))
     ;   decide(Node, MigId, aborted),
         (   Reply = error(error(Formal, _))
