@@ -136,6 +136,34 @@ test(static_agent_does_not_move, [cleanup(stop_all([A,B]))]) :-
 
 :- end_tests(itinerary).
 
+:- dynamic bouncer/3, bounces/2.
+bounces(guid, 0).
+bouncer(guid, (_, Port), main) :-
+    retract(bounces(guid, N0)), N is N0 + 1, assertz(bounces(guid, N)),
+    user:pair(P1, P2),
+    (   N >= 40 -> assertz(user:seen(guid, bounced(N)))
+    ;   Port =:= P1 -> move_agent(guid, (localhost, P2))
+    ;   move_agent(guid, (localhost, P1))
+    ).
+:- dynamic user:pair/2.
+
+:- begin_tests(bounce, [cleanup(retractall(user:seen(_, _)))]).
+
+% An agent that comes straight back must never find its old copy still
+% registered at the node it left (regression: the source removed its copy
+% only after sending the commit).
+test(straight_back_forty_times, [cleanup(stop_all([A,B]))]) :-
+    node_start(localhost:0, A, [default(false)]),
+    node_start(localhost:0, B, [default(false)]),
+    port(A, PA), port(B, PB),
+    retractall(user:pair(_, _)), assertz(user:pair(PA, PB)),
+    with_node(A, ( create_mobile_agent(b1, bouncer, []),
+                   add_payload(b1, [(bounces,2)]),
+                   execute_agent(b1, (localhost,PA), bouncer) )),
+    assertion(wait_for(user:seen(b1, bounced(40)))).
+
+:- end_tests(bounce).
+
 :- begin_tests(clone_post, [cleanup(retractall(user:seen(_, _)))]).
 
 test(clone_runs_with_own_name, [cleanup(stop_all([A,B]))]) :-
