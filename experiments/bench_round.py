@@ -109,6 +109,7 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
         "hops": timed[0].hops, "bytes_carried": timed[0].bytes,
         "all_equal_rounds": sum(1 for r in rows if r["all_equal"]), "total_rounds": len(rows),
         "wall_s": round(wall, 2), "target_ms": TARGET_MS,
+        "log_problems": agent_log.unreadable + agent_log.aborted,
         "meets_target": statistics.median(ms) < TARGET_MS,
     }
     if tmp is not None:

@@ -693,6 +693,19 @@ def _interrupt(signum: int, frame: Any) -> None:
     raise KeyboardInterrupt(f"signal {signum}")
 
 
+def node_warnings(out_dir: Path) -> list[str]:
+    """``Warning:`` / ``ERROR:`` lines the nodes and agent launchers printed (logs/)."""
+    found = []
+    for f in sorted((Path(out_dir) / "logs").glob("*")):
+        try:
+            text = f.read_text(encoding="utf-8", errors="replace")
+        except OSError:
+            continue
+        found += [f"{f.stem}: {ln.strip()}" for ln in text.splitlines()
+                  if ln.lstrip().startswith(("Warning:", "ERROR:"))]
+    return found
+
+
 def write_summary(r: Results) -> Path:
     """``summary.md``: what ran, what came out."""
     from experiments.results import read_metrics
@@ -726,6 +739,10 @@ def write_summary(r: Results) -> Path:
               f"- median round time: {med:.1f} ms",
               f"- methods used: {', '.join(sorted({row['method'] for row in r.rounds})) or '-'}",
               f"- agents finished: {r.agents_finished}"]
+    warnings = node_warnings(r.output_dir)
+    if warnings:
+        lines.append(f"- {len(warnings)} warning(s) in logs/ (agent and nodes), first ones:")
+        lines += [f"  - `{w[:200]}`" for w in warnings[:5]]
     if r.crashed:
         lines.append(f"- CRASHED robots (exit codes): {r.crashed}")
     if r.interrupted:

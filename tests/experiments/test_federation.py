@@ -25,6 +25,20 @@ def _rounds(out: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(fh))
 
 
+def _diagnose(*outs: Path) -> str:
+    """Rounds and node warnings of runs, for a failure message."""
+    text = []
+    for out in outs:
+        text.append(f"--- {out}")
+        text += [f"{r['round']} {r['method']} [{r['visited']}] {r['all_equal']}"
+                 for r in _rounds(out)]
+        for err in sorted((out / "logs").glob("*")):
+            lines = [ln for ln in err.read_text(errors="replace").splitlines()
+                     if ln and not ln.startswith("pybullet build time")]
+            text += [f"{err.name}: {ln}" for ln in lines[:10]]
+    return "\n".join(text)
+
+
 def _config(n: int = 2, **kw: Any) -> ExperimentConfig:
     arenas = ["r1", "r4", "r2", "r3", "r5"]
     base: dict[str, Any] = dict(name="t", robots=tuple(RobotSpec(f"r{i + 1}", arenas[i])
@@ -68,7 +82,8 @@ def test_sync_mode_same_seed_same_curves(tmp_path: Path) -> None:
     cfg = _config()
     run(cfg, tmp_path / "a", progress=None)
     run(cfg, tmp_path / "b", progress=None)
-    assert (tmp_path / "a/metrics.csv").read_bytes() == (tmp_path / "b/metrics.csv").read_bytes()
+    same = (tmp_path / "a/metrics.csv").read_bytes() == (tmp_path / "b/metrics.csv").read_bytes()
+    assert same, _diagnose(tmp_path / "a", tmp_path / "b")
     da = [r["digest_r1"] for r in _rounds(tmp_path / "a")]
     db = [r["digest_r1"] for r in _rounds(tmp_path / "b")]
     assert da == db and len(da) == 4
@@ -177,8 +192,8 @@ def test_bench_round_smoke() -> None:
     from experiments.bench_round import bench
 
     r = bench(entries=400, actions=4, robots=3, rounds=3, warmup=1)
-    assert r["rounds"] == 3 and r["hops"] == 4
-    assert r["all_equal_rounds"] == r["total_rounds"] == 4
+    assert r["rounds"] == 3 and r["hops"] == 4, r
+    assert r["all_equal_rounds"] == r["total_rounds"] == 4, r
     assert 0 < r["median_ms"] < 5000
 
 
