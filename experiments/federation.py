@@ -452,6 +452,8 @@ class Launcher:
             if not stops:
                 continue      # only joiners use it: nobody to start with
             name = f"fed_{algo}"
+            if c.mode is Mode.ASYNC:
+                self._await_first_respite([self.children[s["robot"]] for s in stops])
             log_path = self.out / f"rounds_{name}.log"
             launch = {"name": name, "itinerary": stops, "method": c.method_for(algo),
                       "rounds": c.rounds, "rest_s": self._rest_s(), "rounds_log": str(log_path),
@@ -474,6 +476,17 @@ class Launcher:
                                       f"{(proc.stderr or proc.stdout).strip()}")
             self.say(f"agent {name} ({c.method_for(algo)}, {c.rounds} rounds) launched to "
                      f"{' -> '.join(s['robot'] for s in stops)}")
+
+    def _await_first_respite(self, children: list[_Child]) -> None:
+        """Async: launch the agent when its robots reach the first respite boundary, so that
+        rounds fall near iterations respite, 2 x respite, ... (the agent rests in between)."""
+        target = min(self.config.respite, self.config.iterations)
+        deadline = time.monotonic() + self.config.timeout_s
+        while time.monotonic() < deadline:
+            self._check_children()
+            if all(ch.iteration >= target or ch.proc.poll() is not None for ch in children):
+                return
+            time.sleep(0.02)
 
     def _poll_logs(self) -> None:
         for name, info in self.agents.items():
