@@ -11,8 +11,8 @@ from pathlib import Path
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from experiments.cmd_run import apply_overrides, print_results, resolve_config
-    from experiments.federation import ExperimentConfig, ExperimentError, run
+    from experiments.cmd_run import apply_overrides, resolve_config, run_and_report
+    from experiments.federation import ExperimentConfig
     from robots.training import DEMO_ITERATIONS
 
     cfg = ExperimentConfig.load(resolve_config("demo"))
@@ -22,19 +22,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print(f"dfrl demo: {len(cfg.robots)} robots ({', '.join(r.arena.upper() for r in cfg.robots)}), "
           f"{cfg.method}, {cfg.iterations} iterations, a share every {cfg.respite} "
           f"({cfg.rounds} rounds), {cfg.mode.value} mode, seed {cfg.seed}", file=sys.stderr)
-    try:
-        results = run(cfg, args.out)
-    except ExperimentError as exc:
-        print(f"dfrl demo: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print(f"dfrl demo: interrupted; partial results in {args.out}", file=sys.stderr)
-        return 130
-    summary = results.output_dir / "summary.md"
-    if summary.is_file():
-        print(summary.read_text(encoding="utf-8"), file=sys.stderr)
-    print_results(results)
-    return 0 if results.ok else 1
+    return run_and_report(cfg, args.out, "dfrl demo", show_summary=True)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

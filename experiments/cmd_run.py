@@ -60,25 +60,34 @@ def print_results(results) -> None:  # noqa: ANN001 - federation.Results
     print(results.output_dir)
 
 
+def run_and_report(cfg, out: Path, prog: str, show_summary: bool = False) -> int:  # noqa: ANN001
+    """Run experiment ``cfg`` into ``out`` and report it; the command's exit code."""
+    from experiments.federation import ExperimentError, run
+
+    try:
+        results = run(cfg, out)
+    except ExperimentError as exc:
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted; partial results in {out}", file=sys.stderr)
+        return 130
+    summary = results.output_dir / "summary.md"
+    if show_summary and summary.is_file():
+        print(summary.read_text(encoding="utf-8"), file=sys.stderr)
+    print_results(results)
+    return 0 if results.ok else 1
+
+
 def cmd_run(args: argparse.Namespace) -> int:
-    from experiments.federation import ExperimentConfig, ExperimentError, run
+    from experiments.federation import ExperimentConfig
 
     try:
         cfg = apply_overrides(ExperimentConfig.load(resolve_config(args.config)), args)
     except (FileNotFoundError, ValueError) as exc:
         print(f"dfrl run: {exc}", file=sys.stderr)
         return 2
-    out = args.out or Path("results") / cfg.name
-    try:
-        results = run(cfg, out)
-    except ExperimentError as exc:
-        print(f"dfrl run: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print(f"dfrl run: interrupted; partial results in {out}", file=sys.stderr)
-        return 130
-    print_results(results)
-    return 0 if results.ok else 1
+    return run_and_report(cfg, args.out or Path("results") / cfg.name, "dfrl run")
 
 
 def cmd_inject(args: argparse.Namespace) -> int:

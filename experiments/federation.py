@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import os
 import shutil
 import signal
@@ -30,7 +29,8 @@ from typing import Any, Callable, TextIO
 
 from experiments.results import (AgentLog, read_json, read_rounds_log, read_shares,
                                  write_json)
-from experiments.robot_node import Mode, NodeConfig, boundaries
+from experiments.robot_node import (Mode, NodeConfig, boundaries, config_from_dict,
+                                    config_to_dict)
 
 REPO_ROOT: Path = Path(__file__).resolve().parent.parent
 
@@ -182,17 +182,11 @@ class ExperimentConfig:
 
     # -- (de)serialisation ---------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
-        d = dataclasses.asdict(self)
-        d["mode"] = self.mode.value
-        return d
+        return config_to_dict(self)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "ExperimentConfig":
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(data) - names - {"comment"}
-        if unknown:
-            raise ValueError(f"unknown experiment config keys: {sorted(unknown)}")
-        return cls(**{k: v for k, v in data.items() if k in names})
+        return config_from_dict(cls, data, "experiment", ignore=frozenset({"comment"}))
 
     @classmethod
     def load(cls, path: str | Path) -> "ExperimentConfig":

@@ -61,6 +61,23 @@ class Mode(str, Enum):
     SYNC = "sync"
 
 
+def config_to_dict(cfg: Any) -> dict[str, Any]:
+    """A config dataclass with a ``mode`` enum as a JSON-ready dict."""
+    d = dataclasses.asdict(cfg)
+    d["mode"] = cfg.mode.value
+    return d
+
+
+def config_from_dict(cls: type, data: dict[str, Any], what: str,
+                     ignore: frozenset[str] = frozenset()) -> Any:
+    """Build config dataclass ``cls`` from ``data``; unknown keys (but ``ignore``) are an error."""
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = set(data) - names - ignore
+    if unknown:
+        raise ValueError(f"unknown {what} config keys: {sorted(unknown)}")
+    return cls(**{k: v for k, v in data.items() if k in names})
+
+
 @dataclass(frozen=True)
 class NodeConfig:
     """Everything one robot node process needs (written as JSON by the launcher).
@@ -124,18 +141,12 @@ class NodeConfig:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict."""
-        d = dataclasses.asdict(self)
-        d["mode"] = self.mode.value
-        return d
+        return config_to_dict(self)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "NodeConfig":
         """Inverse of :meth:`to_dict` (unknown keys are an error)."""
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(data) - names
-        if unknown:
-            raise ValueError(f"unknown node config keys: {sorted(unknown)}")
-        return cls(**data)
+        return config_from_dict(cls, data, "node")
 
     def trainer_config(self):  # noqa: ANN201 - TrainerConfig (imported lazily)
         """The :class:`robots.training.TrainerConfig` of this robot."""
