@@ -22,7 +22,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from robots.env import ActionSet, CollisionResponse, EnvConfig, EPuckEnv, RewardConfig
+from robots.env import EnvConfig, EPuckEnv, RewardConfig
 from robots.epuck import EPuckConfig
 from robots.learners import EpsilonSchedule, LearnerParams, TabularLearner, make_learner
 from robots.state import DiscretisationConfig, Discretiser
@@ -34,8 +34,11 @@ DEMO_ITERATIONS: int = 8000
 
 
 @dataclass(frozen=True)
-class TrainerConfig:
+class TrainerConfig(EnvConfig):
     """Everything that defines a training run; the same config and seed give the same run.
+
+    The environment's fields (arena, sim, actions, reward, collision response, stuck
+    detector) come from :class:`robots.env.EnvConfig`; the learner's are added here.
 
     Attributes
     ----------
@@ -59,32 +62,22 @@ class TrainerConfig:
     stuck_distance : float
     """
 
-    arena: str = "r4"
     algo: str = "qlearning"
     seed: int = 0
     iterations: int = DEMO_ITERATIONS
     learner: LearnerParams = field(default_factory=LearnerParams)
     discretisation: DiscretisationConfig = field(default_factory=DiscretisationConfig)
-    sim: SimConfig = field(default_factory=SimConfig)
-    actions: ActionSet = ActionSet.BASIC
-    reward: RewardConfig = field(default_factory=RewardConfig)
-    collision_response: CollisionResponse = CollisionResponse.RESPAWN
-    stuck_steps: int = 150
-    stuck_distance: float = 0.03
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "actions", ActionSet(self.actions))
-        object.__setattr__(self, "collision_response", CollisionResponse(self.collision_response))
+        super().__post_init__()
         if self.iterations < 0:
             raise ValueError("iterations must be >= 0")
 
     def env_config(self) -> EnvConfig:
         """The environment part of the configuration."""
-        return EnvConfig(
-            arena=str(self.arena), sim=self.sim, actions=self.actions, reward=self.reward,
-            collision_response=self.collision_response, stuck_steps=self.stuck_steps,
-            stuck_distance=self.stuck_distance,
-        )
+        env = {f.name: getattr(self, f.name) for f in dataclasses.fields(EnvConfig)}
+        env["arena"] = str(self.arena)
+        return EnvConfig(**env)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready nested dict (enums as their values)."""
