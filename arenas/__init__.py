@@ -2,11 +2,11 @@
 
 See ``arenas/README.md`` for the JSON format.
 """
-from arenas.pybullet_quiet import load as _load_pybullet
+from dfrl.arenas.pybullet_quiet import load as _load_pybullet
 
 _load_pybullet()
 
-from arenas.spec import (
+from dfrl.arenas.spec import (
     WALL_THICKNESS,
     ArenaError,
     ArenaSpec,
@@ -31,7 +31,7 @@ __all__ = [
 
 
 def build_arena(spec: ArenaSpec, client: int):  # noqa: ANN201 - re-export without importing pybullet eagerly
-    """Create ``spec`` in pybullet client ``client``; see :func:`arenas.builder.build_arena`."""
-    from arenas.builder import build_arena as _build
+    """Create ``spec`` in pybullet client ``client``; see :func:`dfrl.arenas.builder.build_arena`."""
+    from dfrl.arenas.builder import build_arena as _build
 
     return _build(spec, client)

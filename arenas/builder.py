@@ -1,4 +1,4 @@
-"""Loading an :class:`~arenas.spec.ArenaSpec` into a pybullet client."""
+"""Loading an :class:`~dfrl.arenas.spec.ArenaSpec` into a pybullet client."""
 from __future__ import annotations
 
 import math
@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import pybullet as p
 
-from arenas.spec import WALL_THICKNESS, ArenaSpec
+from dfrl.arenas.spec import WALL_THICKNESS, ArenaSpec
 
 #: RGBA colours used for rendering.
 FLOOR_RGBA: tuple[float, float, float, float] = (0.93, 0.93, 0.90, 1.0)

@@ -1,6 +1,6 @@
 """``python -m experiments`` runs the ``dfrl`` command line."""
 import sys
 
-from experiments.cli import main
+from dfrl.experiments.cli import main
 
 sys.exit(main())

@@ -65,7 +65,7 @@ class _Sim:
         self.client = None
         self.trainer = None
         if kind == "epuck":
-            from robots.training import Trainer, TrainerConfig
+            from dfrl.robots.training import Trainer, TrainerConfig
 
             self.trainer = Trainer(TrainerConfig(seed=seed))
         if kind == "pybullet":
@@ -106,7 +106,7 @@ def _stats(values: list[float]) -> dict[str, float]:
 
 
 def _run_codec(node: Any, robot: _Robot, sim: _Sim, codec: str, args: argparse.Namespace) -> dict[str, Any]:
-    from pybridge import Atom, Term, Var
+    from dfrl.pybridge import Atom, Term, Var
 
     node.codec = codec
     before = robot.q_table
@@ -147,7 +147,7 @@ def _run_codec(node: Any, robot: _Robot, sim: _Sim, codec: str, args: argparse.N
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark; print figures (JSON with ``--json``). Exit 0 if the table stays
     bit-exact (the speed target is reported, not enforced)."""
-    from pybridge import RobotNode
+    from dfrl.pybridge import RobotNode
 
     n_actions = max(1, args.actions)
     n_states = max(1, args.entries // n_actions)
@@ -192,7 +192,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _atom(path: Path) -> Any:
-    from pybridge import Atom
+    from dfrl.pybridge import Atom
 
     return Atom(str(path))
 

@@ -1,6 +1,6 @@
 """One full dFRL round (forward and backward over N robot nodes), ms per round.
 
-Starts N robot node processes on loopback (:mod:`experiments.robot_node` in benchmark mode:
+Starts N robot node processes on loopback (:mod:`dfrl.experiments.robot_node` in benchmark mode:
 each holds a random table of ``--entries`` values and serves the agent's requests as soon as
 they arrive, no simulation), launches the real itinerary agent
 (``platform_pl/agents/dfrl_launch.pl``) for ``--warmup + --rounds`` rounds without rest and
@@ -19,9 +19,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from experiments.federation import REPO_ROOT, RobotSpec, _Child, agents_dir, swipl_path
-from experiments.results import read_rounds_log, read_shares, write_rounds_csv
-from experiments.robot_node import NodeConfig
+from dfrl.experiments.federation import REPO_ROOT, RobotSpec, _Child, agents_dir, swipl_path
+from dfrl.experiments.results import read_rounds_log, read_shares, write_rounds_csv
+from dfrl.experiments.robot_node import NodeConfig
 
 TARGET_MS = 50.0
 

@@ -1,6 +1,6 @@
 """Simulation + learning speed: control steps per second and real-time factor in one process.
 
-Each robot is a full :class:`robots.training.Trainer` (its own pybullet DIRECT client, the
+Each robot is a full :class:`dfrl.robots.training.Trainer` (its own pybullet DIRECT client, the
 arena, sensing, reward, learner update); the robots of one process are stepped round-robin on
 one core. ``realtime_factor`` is simulated seconds per wall-clock second.
 """
@@ -14,9 +14,9 @@ import sys
 import time
 from typing import Any
 
-from robots.learners import LEARNERS
-from robots.training import Trainer, TrainerConfig
-from robots.world import SimConfig
+from dfrl.robots.learners import LEARNERS
+from dfrl.robots.training import Trainer, TrainerConfig
+from dfrl.robots.world import SimConfig
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

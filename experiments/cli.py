@@ -14,12 +14,12 @@ from collections.abc import Sequence
 
 #: Modules that add subcommands, in the order they appear in ``dfrl --help``.
 COMMAND_MODULES: tuple[str, ...] = (
-    "experiments.cmd_node",
-    "experiments.cmd_demo",
-    "experiments.cmd_run",
-    "experiments.cmd_bench",
-    "experiments.cmd_robots",
-    "experiments.cmd_transfer",
+    "dfrl.experiments.cmd_node",
+    "dfrl.experiments.cmd_demo",
+    "dfrl.experiments.cmd_run",
+    "dfrl.experiments.cmd_bench",
+    "dfrl.experiments.cmd_robots",
+    "dfrl.experiments.cmd_transfer",
 )
 
 

@@ -10,10 +10,10 @@ import importlib
 
 #: benchmark name -> module implementing it
 BENCHMARKS: dict[str, str] = {
-    "migrate": "experiments.bench_migrate",
-    "sim": "experiments.bench_sim",
-    "round": "experiments.bench_round",
-    "bridge": "experiments.bench_bridge",
+    "migrate": "dfrl.experiments.bench_migrate",
+    "sim": "dfrl.experiments.bench_sim",
+    "round": "dfrl.experiments.bench_round",
+    "bridge": "dfrl.experiments.bench_bridge",
 }
 
 

@@ -11,9 +11,9 @@ from pathlib import Path
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from experiments.cmd_run import apply_overrides, resolve_config, run_and_report
-    from experiments.federation import ExperimentConfig
-    from robots.training import DEMO_ITERATIONS
+    from dfrl.experiments.cmd_run import apply_overrides, resolve_config, run_and_report
+    from dfrl.experiments.federation import ExperimentConfig
+    from dfrl.robots.training import DEMO_ITERATIONS
 
     cfg = ExperimentConfig.load(resolve_config("demo"))
     if cfg.iterations != DEMO_ITERATIONS:
@@ -27,7 +27,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``demo`` subcommand."""
-    from experiments.cmd_run import add_override_arguments
+    from dfrl.experiments.cmd_run import add_override_arguments
 
     p = subparsers.add_parser("demo", help="the 5-robot dFRL demo on loopback (plots + summary "
                                            "in results/demo)")

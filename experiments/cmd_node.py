@@ -6,7 +6,7 @@ import os
 import shutil
 import sys
 
-from platform_pl import PLATFORM_DIR
+from dfrl.platform_pl import PLATFORM_DIR
 
 
 def node_command(

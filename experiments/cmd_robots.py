@@ -1,6 +1,6 @@
 """Standalone robot commands: ``dfrl train``, ``dfrl eval``, ``dfrl baselines``, ``dfrl render-arenas``.
 
-Thin CLI over :mod:`robots.training`, :mod:`robots.evaluation` and :mod:`robots.plots`.
+Thin CLI over :mod:`dfrl.robots.training`, :mod:`dfrl.robots.evaluation` and :mod:`dfrl.robots.plots`.
 """
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
-from robots.learners import LEARNERS, EpsilonSchedule, LearnerParams, ScheduleKind
-from robots.training import DEMO_ITERATIONS, TrainerConfig
+from dfrl.robots.learners import LEARNERS, EpsilonSchedule, LearnerParams, ScheduleKind
+from dfrl.robots.training import DEMO_ITERATIONS, TrainerConfig
 
 #: Evaluation threshold of the issue: greedy collisions at most half the random ones.
 REQUIRED_REDUCTION: float = 0.5
@@ -63,8 +63,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _add_config_arguments(p: argparse.ArgumentParser, seed: bool = True) -> None:
-    from robots.env import ActionSet, CollisionResponse
-    from robots.state import SensorGrouping
+    from dfrl.robots.env import ActionSet, CollisionResponse
+    from dfrl.robots.state import SensorGrouping
 
     d = TrainerConfig()
     g = p.add_argument_group("run")
@@ -99,9 +99,9 @@ def _add_config_arguments(p: argparse.ArgumentParser, seed: bool = True) -> None
 
 def config_from_args(args: argparse.Namespace) -> TrainerConfig:
     """Build a :class:`TrainerConfig` from ``--config`` and the flags that override it."""
-    from robots.epuck import EPuckConfig
-    from robots.state import DiscretisationConfig
-    from robots.world import SimConfig
+    from dfrl.robots.epuck import EPuckConfig
+    from dfrl.robots.state import DiscretisationConfig
+    from dfrl.robots.world import SimConfig
 
     if getattr(args, "config", None) is not None:
         cfg = TrainerConfig.from_dict(json.loads(args.config.read_text(encoding="utf-8")))
@@ -146,7 +146,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     """``dfrl train``: one run, writing table, config, metrics and the learning curves."""
     from tqdm import tqdm
 
-    from robots.training import train
+    from dfrl.robots.training import train
 
     try:
         cfg = config_from_args(args)
@@ -161,7 +161,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             return _fail(str(exc))
     m = result.metrics
     if not args.no_plot and len(m):
-        from robots.plots import plot_learning_curves
+        from dfrl.robots.plots import plot_learning_curves
 
         plot_learning_curves({f"{cfg.arena} {cfg.algo}": m}, out / "learning_curves.png",
                              f"{cfg.algo} in {cfg.arena}, seed {cfg.seed}")
@@ -179,9 +179,9 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 # -- eval ------------------------------------------------------------------------------------
 def _eval_job(cfg_dict: dict[str, Any], seed: int, steps: int, table_path: str | None) -> dict[str, Any]:
-    from robots.evaluation import PolicyKind, evaluate_policy
-    from robots.tables import load_table
-    from robots.training import train
+    from dfrl.robots.evaluation import PolicyKind, evaluate_policy
+    from dfrl.robots.tables import load_table
+    from dfrl.robots.training import train
 
     cfg = TrainerConfig.from_dict(cfg_dict).replace(seed=seed)
     t0 = time.perf_counter()
@@ -206,8 +206,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     table = str(args.table) if args.table is not None else None
     if table is not None and args.grouping is None and args.levels is None:
         # evaluate with the table's own discretisation, as recorded in its sidecar
-        from robots.state import DiscretisationConfig
-        from robots.tables import load_table
+        from dfrl.robots.state import DiscretisationConfig
+        from dfrl.robots.tables import load_table
 
         try:
             state = load_table(table).meta.state
@@ -256,7 +256,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 # -- baselines -------------------------------------------------------------------------------
 def _baseline_job(cfg_dict: dict[str, Any], out: str) -> tuple[str, str, float]:
-    from robots.training import train
+    from dfrl.robots.training import train
 
     cfg = TrainerConfig.from_dict(cfg_dict)
     result = train(cfg, out)
@@ -267,8 +267,8 @@ def cmd_baselines(args: argparse.Namespace) -> int:
     """``dfrl baselines``: train every (algo, arena) pair and draw one figure per algorithm."""
     from tqdm import tqdm
 
-    from robots.plots import plot_learning_curves
-    from robots.training import read_metrics_csv
+    from dfrl.robots.plots import plot_learning_curves
+    from dfrl.robots.training import read_metrics_csv
 
     args.out.mkdir(parents=True, exist_ok=True)
     seeds = [args.seed + k for k in range(max(1, args.seeds))]
@@ -297,9 +297,9 @@ def cmd_baselines(args: argparse.Namespace) -> int:
 # -- render-arenas ---------------------------------------------------------------------------
 def cmd_render_arenas(args: argparse.Namespace) -> int:
     """``dfrl render-arenas``: one PNG per arena plus ``arenas.png`` with all of them."""
-    from arenas.spec import ArenaError, builtin_arena_names, load_arena
-    from robots.plots import plot_arena, plot_arena_overview
-    from robots.world import World
+    from dfrl.arenas.spec import ArenaError, builtin_arena_names, load_arena
+    from dfrl.robots.plots import plot_arena, plot_arena_overview
+    from dfrl.robots.world import World
 
     names = args.arena or builtin_arena_names()
     images = {}

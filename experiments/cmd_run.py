@@ -22,7 +22,7 @@ def resolve_config(name: str) -> Path:
 
 def add_override_arguments(p: argparse.ArgumentParser) -> None:
     """Flags that override fields of an experiment config."""
-    from experiments.robot_node import Mode
+    from dfrl.experiments.robot_node import Mode
 
     g = p.add_argument_group("overrides")
     g.add_argument("--iterations", type=int, default=None, help="iterations per robot")
@@ -62,7 +62,7 @@ def print_results(results) -> None:  # noqa: ANN001 - federation.Results
 
 def run_and_report(cfg, out: Path, prog: str, show_summary: bool = False) -> int:  # noqa: ANN001
     """Run experiment ``cfg`` into ``out`` and report it; the command's exit code."""
-    from experiments.federation import ExperimentError, run
+    from dfrl.experiments.federation import ExperimentError, run
 
     try:
         results = run(cfg, out)
@@ -80,7 +80,7 @@ def run_and_report(cfg, out: Path, prog: str, show_summary: bool = False) -> int
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from experiments.federation import ExperimentConfig
+    from dfrl.experiments.federation import ExperimentConfig
 
     try:
         cfg = apply_overrides(ExperimentConfig.load(resolve_config(args.config)), args)
@@ -91,7 +91,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_inject(args: argparse.Namespace) -> int:
-    from experiments.federation import ExperimentError, inject_method
+    from dfrl.experiments.federation import ExperimentError, inject_method
 
     try:
         told = inject_method(args.results_dir, args.program, args.method, args.agent)
@@ -103,7 +103,7 @@ def cmd_inject(args: argparse.Namespace) -> int:
 
 
 def cmd_join(args: argparse.Namespace) -> int:
-    from experiments.federation import ExperimentError, join_robot
+    from dfrl.experiments.federation import ExperimentError, join_robot
 
     try:
         info = join_robot(args.results_dir, args.robot, args.arena, args.algo,
@@ -117,7 +117,7 @@ def cmd_join(args: argparse.Namespace) -> int:
 
 
 def cmd_paper(args: argparse.Namespace) -> int:
-    from experiments.report import reproduce_paper
+    from dfrl.experiments.report import reproduce_paper
 
     return reproduce_paper(args.out, iterations=args.iterations, respite=args.respite,
                            seed=args.seed, baseline_iterations=args.baseline_iterations,

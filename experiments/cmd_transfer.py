@@ -1,6 +1,6 @@
 """``dfrl transfer``: train in a new arena from a saved table and from zeros, compare.
 
-Thin CLI over :func:`experiments.transfer.run`.
+Thin CLI over :func:`dfrl.experiments.transfer.run`.
 """
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import math
 import sys
 from pathlib import Path
 
-from robots.learners import LEARNERS
-from robots.state import SensorGrouping
+from dfrl.robots.learners import LEARNERS
+from dfrl.robots.state import SensorGrouping
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -65,7 +65,7 @@ def _fmt(x: float, width: int = 8) -> str:
 
 def cmd_transfer(args: argparse.Namespace) -> int:
     """``dfrl transfer``: exit 0 on success, 2 on a bad table, arena or argument."""
-    from experiments.transfer import TransferConfig, run
+    from dfrl.experiments.transfer import TransferConfig, run
 
     if args.seeds < 1:
         print("dfrl: error: --seeds must be >= 1", file=sys.stderr)

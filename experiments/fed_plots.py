@@ -10,7 +10,7 @@ from typing import Mapping
 
 import numpy as np
 
-from experiments.results import read_metrics
+from dfrl.experiments.results import read_metrics
 
 _COLOURS = ("tab:blue", "tab:red", "tab:green", "tab:orange", "tab:purple", "tab:brown",
             "tab:pink", "tab:gray", "tab:olive", "tab:cyan")

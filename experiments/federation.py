@@ -1,11 +1,11 @@
 """Launch a federated experiment on loopback: robot node processes, the agents, the results.
 
 ``run(config, output_dir) -> Results`` starts one robot node process per robot
-(:mod:`experiments.robot_node`), waits for their addresses, writes ``nodes.json``, launches one
+(:mod:`dfrl.experiments.robot_node`), waits for their addresses, writes ``nodes.json``, launches one
 dFRL itinerary agent per learning algorithm (``platform_pl/agents/dfrl_launch.pl``; the agent
 of an algorithm visits only the robots using it), follows the agents' round logs and the
 nodes' progress lines, starts robots that join during the run, and at the end writes
-``metrics.csv``, ``rounds.csv``, the plots and ``summary.md`` (see :mod:`experiments.results`).
+``metrics.csv``, ``rounds.csv``, the plots and ``summary.md`` (see :mod:`dfrl.experiments.results`).
 
 If a robot process crashes the launcher says so, goes on with the others (the agent skips a
 stop it cannot reach) and still writes what was collected. Every child process is killed on
@@ -27,9 +27,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, TextIO
 
-from experiments.results import (AgentLog, read_json, read_rounds_log, read_shares,
+from dfrl.experiments.results import (AgentLog, read_json, read_rounds_log, read_shares,
                                  write_json)
-from experiments.robot_node import (Mode, NodeConfig, boundaries, config_from_dict,
+from dfrl.experiments.robot_node import (Mode, NodeConfig, boundaries, config_from_dict,
                                     config_to_dict)
 
 REPO_ROOT: Path = Path(__file__).resolve().parent.parent
@@ -105,7 +105,7 @@ class ExperimentConfig:
         expected wall time of one respite.
     token : int
     trainer : dict
-        Extra :class:`robots.training.TrainerConfig` fields shared by all robots.
+        Extra :class:`dfrl.robots.training.TrainerConfig` fields shared by all robots.
     joins : tuple of JoinSpec
     timeout_s : float
         Whole-experiment limit (children are killed after it).
@@ -224,7 +224,7 @@ def swipl_path() -> str:
 
 
 def agents_dir() -> Path:
-    from platform_pl import AGENTS_DIR
+    from dfrl.platform_pl import AGENTS_DIR
 
     return AGENTS_DIR
 
@@ -244,7 +244,7 @@ class _Child:
         self._err = open(self.err_path, "w", encoding="utf-8")
         env = dict(os.environ, PYTHONUNBUFFERED="1")
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "experiments.robot_node", "--config", str(cfg_path)],
+            [sys.executable, "-m", "dfrl.experiments.robot_node", "--config", str(cfg_path)],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._err, cwd=REPO_ROOT,
             env=env, text=True, bufsize=1, start_new_session=True)
         self.address: tuple[str, int] | None = None
@@ -673,7 +673,7 @@ class Launcher:
         return results
 
     def _collect(self, wall: float, ok: bool) -> Results:
-        from experiments import results as res
+        from dfrl.experiments import results as res
 
         self._poll_logs()
         robots = list(self.children)
@@ -682,7 +682,7 @@ class Launcher:
         rows = res.write_rounds_csv(self.out / "rounds.csv", self.logs.values(), robots, shares)
         plots: list[Path] = []
         try:
-            from experiments.fed_plots import plot_experiment
+            from dfrl.experiments.fed_plots import plot_experiment
 
             plots = plot_experiment(self.out, title=self.config.default_title())
         except Exception as exc:  # noqa: BLE001 - plots are optional, results are not
@@ -715,7 +715,7 @@ def node_warnings(out_dir: Path) -> list[str]:
 
 def write_summary(r: Results) -> Path:
     """``summary.md``: what ran, what came out."""
-    from experiments.results import read_metrics
+    from dfrl.experiments.results import read_metrics
 
     c = r.config
     lines = [f"# {c.name}", "", c.default_title(), "",

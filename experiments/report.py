@@ -110,7 +110,7 @@ def stats_of(curves: dict[str, np.ndarray], arenas: dict[str, str]) -> list[RunS
 
 # -- the runs --------------------------------------------------------------------------------
 def _baseline_job(cfg_dict: dict[str, Any], out: str) -> tuple[str, str, float]:
-    from robots.training import TrainerConfig, train
+    from dfrl.robots.training import TrainerConfig, train
 
     cfg = TrainerConfig.from_dict(cfg_dict)
     result = train(cfg, out)
@@ -120,7 +120,7 @@ def _baseline_job(cfg_dict: dict[str, Any], out: str) -> tuple[str, str, float]:
 def run_baselines(out: Path, arenas: list[str], seeds: dict[str, int], iterations: int,
                   skip_existing: bool, jobs: int = 2) -> dict[tuple[str, str], Path]:
     """Standalone runs: every (algo, arena) with the seed its federated robot has."""
-    from robots.training import TrainerConfig
+    from dfrl.robots.training import TrainerConfig
 
     dirs = {}
     todo = []
@@ -142,7 +142,7 @@ def run_baselines(out: Path, arenas: list[str], seeds: dict[str, int], iteration
 
 def _standalone_curves(dirs: dict[tuple[str, str], Path], algo: str,
                        arenas: list[str]) -> dict[str, np.ndarray]:
-    from robots.training import read_metrics_csv
+    from dfrl.robots.training import read_metrics_csv
 
     return {a: read_metrics_csv(dirs[(algo, a)] / "metrics.csv") for a in arenas}
 
@@ -151,9 +151,9 @@ def reproduce_paper(out: Path, iterations: int | None = None, respite: int | Non
                     seed: int | None = None, baseline_iterations: int | None = None,
                     skip_existing: bool = False) -> int:
     """Run everything and write ``OUT/report.md``; returns an exit code."""
-    from experiments.cmd_run import resolve_config
-    from experiments.federation import ExperimentConfig, run
-    from experiments.results import read_metrics
+    from dfrl.experiments.cmd_run import resolve_config
+    from dfrl.experiments.federation import ExperimentConfig, run
+    from dfrl.experiments.results import read_metrics
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -194,7 +194,7 @@ def reproduce_paper(out: Path, iterations: int | None = None, respite: int | Non
     t1 = time.monotonic()
     dirs = run_baselines(out, arena_list, arena_seeds, b_iters, skip_existing)
     baseline_wall = time.monotonic() - t1
-    from robots.plots import plot_learning_curves
+    from dfrl.robots.plots import plot_learning_curves
 
     standalone = {}
     for algo in ("qlearning", "sarsa"):

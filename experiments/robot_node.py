@@ -1,8 +1,8 @@
 """One robot node process of a federated experiment.
 
-``python -m experiments.robot_node --config NODE.json`` embeds SWI-Prolog (``pybridge``),
+``python -m dfrl.experiments.robot_node --config NODE.json`` embeds SWI-Prolog (``pybridge``),
 loads the platform and the dFRL agent program, starts a platform node on loopback, registers
-its robot (a :class:`robots.training.Trainer`) and prints one line::
+its robot (a :class:`dfrl.robots.training.Trainer`) and prints one line::
 
     DFRL_NODE <robot> <host> <port>
 
@@ -89,7 +89,7 @@ class NodeConfig:
     out_dir : str
         Results folder (metrics and shares CSVs are written there).
     arena, algo, seed, iterations
-        Training run (see :class:`robots.training.TrainerConfig`).
+        Training run (see :class:`dfrl.robots.training.TrainerConfig`).
     respite : int
         Iterations between two shares (sync boundaries).
     mode : Mode
@@ -98,7 +98,7 @@ class NodeConfig:
     token : int
         Platform token agents must carry.
     trainer : dict
-        Extra :class:`robots.training.TrainerConfig` fields (``learner``, ``discretisation``, ...).
+        Extra :class:`dfrl.robots.training.TrainerConfig` fields (``learner``, ``discretisation``, ...).
     grace_s : float
         Seconds the node stays up after its last iteration (see module doc).
     sync_timeout_s : float
@@ -149,8 +149,8 @@ class NodeConfig:
         return config_from_dict(cls, data, "node")
 
     def trainer_config(self):  # noqa: ANN201 - TrainerConfig (imported lazily)
-        """The :class:`robots.training.TrainerConfig` of this robot."""
-        from robots.training import TrainerConfig
+        """The :class:`dfrl.robots.training.TrainerConfig` of this robot."""
+        from dfrl.robots.training import TrainerConfig
 
         base = TrainerConfig().to_dict()
         base.update(self.trainer)
@@ -299,15 +299,15 @@ class RobotProcess:
     # -- life cycle ----------------------------------------------------------------------------
     def start(self) -> tuple[str, int]:
         """Build the robot, start the platform node, register the robot; return the address."""
-        from platform_pl import AGENTS_DIR
-        from pybridge import RobotNode
+        from dfrl.platform_pl import AGENTS_DIR
+        from dfrl.pybridge import RobotNode
 
         c = self.config
         if c.bench_table is not None:
             s, a = c.bench_table
             self.static = _StaticTable((int(s), int(a)), c.seed)
         else:
-            from robots.training import Trainer
+            from dfrl.robots.training import Trainer
 
             self.trainer = Trainer(c.trainer_config())
         self.node = RobotNode()
@@ -428,8 +428,8 @@ class RobotProcess:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point: ``python -m experiments.robot_node --config NODE.json``."""
-    parser = argparse.ArgumentParser(prog="python -m experiments.robot_node",
+    """Entry point: ``python -m dfrl.experiments.robot_node --config NODE.json``."""
+    parser = argparse.ArgumentParser(prog="python -m dfrl.experiments.robot_node",
                                      description="one robot node of a federated experiment")
     parser.add_argument("--config", type=Path, required=True, help="node config (JSON)")
     args = parser.parse_args(argv)

@@ -5,7 +5,7 @@ For every seed, two robots train in the same arena, from the same seed, for the 
 * ``init``: its Q-table starts as a copy of the saved table (standalone or federated);
 * ``zero``: its Q-table starts at zero (the usual start).
 
-Both use the same learner settings (default :class:`robots.training.TrainerConfig` values,
+Both use the same learner settings (default :class:`dfrl.robots.training.TrainerConfig` values,
 with the algorithm, sensor grouping, levels and action set read from the table's sidecar),
 so the only difference is the initial table. Reported per run and aggregated over seeds:
 
@@ -13,12 +13,12 @@ so the only difference is the initial table. Reported per run and aggregated ove
   the first 10% of the steps (where a head start shows);
 * final cumulative reward and mean reward per step;
 * a greedy evaluation of the final table (collisions per 1,000 steps and mean reward per
-  step, :func:`robots.evaluation.evaluate_policy`), and one of the initial table before any
+  step, :func:`dfrl.robots.evaluation.evaluate_policy`), and one of the initial table before any
   training (for ``zero`` that is a uniformly random policy: all ties), from the same poses.
 
 Usage::
 
-    from experiments.transfer import TransferConfig, run
+    from dfrl.experiments.transfer import TransferConfig, run
     result = run(TransferConfig(init="results/r1/q_table.npy", arena="my_arena.json",
                                 iterations=3000, seeds=(1, 2, 3, 4, 5)), Path("results/transfer"))
     result.summary["init"]["collisions_per_1000"].mean, result.ratio["collisions_per_1000"]
@@ -37,9 +37,9 @@ from typing import Any
 
 import numpy as np
 
-from robots.env import ActionSet
-from robots.state import DiscretisationConfig
-from robots.training import TrainerConfig
+from dfrl.robots.env import ActionSet
+from dfrl.robots.state import DiscretisationConfig
+from dfrl.robots.training import TrainerConfig
 
 #: Length of the "head" window in steps (capped by the budget).
 HEAD_STEPS: int = 1000
@@ -315,8 +315,8 @@ def load_initial_table(path: str | Path) -> tuple[np.ndarray, TableInfo, dict[st
     ValueError
         Missing file, unreadable or inconsistent table, non-finite entries.
     """
-    from robots.learners import validate_table
-    from robots.tables import load_table
+    from dfrl.robots.learners import validate_table
+    from dfrl.robots.tables import load_table
 
     p = Path(path)
     npy = p if p.suffix == ".npy" else p.with_name(p.name + ".npy")
@@ -355,9 +355,9 @@ def trainer_config_for(config: TransferConfig, q: np.ndarray, info: TableInfo,
     ------
     ValueError
         The table's shape does not fit the resulting discretisation and action set, or its
-        action names match no :class:`robots.env.ActionSet`.
+        action names match no :class:`dfrl.robots.env.ActionSet`.
     """
-    from robots.learners import LEARNERS
+    from dfrl.robots.learners import LEARNERS
 
     base = TrainerConfig()
     algo = config.algo or info.algorithm or base.algo
@@ -405,8 +405,8 @@ def run_one(trainer_config: TrainerConfig, condition: Condition | str, q0: np.nd
     every : int
         Curve sampling interval.
     """
-    from robots.evaluation import PolicyKind, evaluate_policy
-    from robots.training import Trainer
+    from dfrl.robots.evaluation import PolicyKind, evaluate_policy
+    from dfrl.robots.training import Trainer
 
     condition = Condition(condition)
     cfg = trainer_config.replace(seed=int(seed))
@@ -497,7 +497,7 @@ def run(config: TransferConfig, output_dir: Path | None = None) -> TransferResul
         A missing or bad table, an unknown arena or learner, or a table whose shape does not
         fit the trainer.
     """
-    from arenas import load_arena
+    from dfrl.arenas import load_arena
 
     t0 = time.perf_counter()
     q, info, state = load_initial_table(config.init)

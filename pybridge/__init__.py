@@ -1,6 +1,6 @@
 """The bridge that makes a Python robot process a node of the agent platform.
 
-``pybridge.errors`` and ``pybridge.terms`` are plain Python. :class:`RobotNode` (and
+``dfrl.pybridge.errors`` and ``dfrl.pybridge.terms`` are plain Python. :class:`RobotNode` (and
 everything that needs the embedded SWI-Prolog) is imported on first use, so importing
 ``pybridge`` alone does not start Prolog.
 """
@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from pybridge.errors import (
+from dfrl.pybridge.errors import (
     BridgeError,
     CodecError,
     NodeStateError,
@@ -16,11 +16,11 @@ from pybridge.errors import (
     PrologFailure,
     TermConversionError,
 )
-from pybridge.terms import Atom, Blob, Term, Var
+from dfrl.pybridge.terms import Atom, Blob, Term, Var
 
 if TYPE_CHECKING:
-    from pybridge.codec import Codec
-    from pybridge.node import RobotNode, TableProvider
+    from dfrl.pybridge.codec import Codec
+    from dfrl.pybridge.node import RobotNode, TableProvider
 
 __all__ = [
     "BridgeError",
@@ -40,10 +40,10 @@ __all__ = [
 ]
 
 _LAZY = {
-    "RobotNode": "pybridge.node",
-    "Bridge": "pybridge.node",
-    "TableProvider": "pybridge.node",
-    "Codec": "pybridge.codec",
+    "RobotNode": "dfrl.pybridge.node",
+    "Bridge": "dfrl.pybridge.node",
+    "TableProvider": "dfrl.pybridge.node",
+    "Codec": "dfrl.pybridge.codec",
 }
 
 

@@ -4,11 +4,11 @@ pyswip initialises the embedded Prolog when imported; this module then talks to 
 ``libswipl`` through its own ctypes prototypes (pyswip's string-built goals, its
 NUL-truncating string getters and its process-wide open-query flag are avoided or
 respected). Goals are never built from text: every argument is converted from a Python
-value (see :mod:`pybridge.terms`) into a term with the foreign language interface, the
+value (see :mod:`dfrl.pybridge.terms`) into a term with the foreign language interface, the
 predicate is called through ``PL_open_query`` and the query is always closed.
 
 One process-wide lock serialises calls. A Prolog exception arrives as
-:class:`~pybridge.errors.PrologError` whose ``term`` is the exception term as data.
+:class:`~dfrl.pybridge.errors.PrologError` whose ``term`` is the exception term as data.
 """
 from __future__ import annotations
 
@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from pybridge.errors import BridgeError, NodeStateError, PrologError, TermConversionError
-from pybridge.terms import Atom, Blob, Term, Var
+from dfrl.pybridge.errors import BridgeError, NodeStateError, PrologError, TermConversionError
+from dfrl.pybridge.terms import Atom, Blob, Term, Var
 
 __all__ = ["Prolog", "prolog"]
 
@@ -119,7 +119,7 @@ class Prolog:
         Returns
         -------
         dict or None
-            Bindings of the named :class:`~pybridge.terms.Var` arguments on success,
+            Bindings of the named :class:`~dfrl.pybridge.terms.Var` arguments on success,
             ``None`` if the goal failed.
 
         Raises

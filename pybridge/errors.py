@@ -23,7 +23,7 @@ class PrologError(BridgeError):
     Attributes
     ----------
     term
-        The exception term converted to Python (see :mod:`pybridge.terms`), usually
+        The exception term converted to Python (see :mod:`dfrl.pybridge.terms`), usually
         ``Term("error", formal, context)``. It is data, never a flattened string.
     """
 
@@ -35,7 +35,7 @@ class PrologError(BridgeError):
     @property
     def formal(self) -> Any:
         """The formal part of an ``error(Formal, Context)`` term, else the whole term."""
-        from pybridge.terms import Term
+        from dfrl.pybridge.terms import Term
 
         if isinstance(self.term, Term) and self.term.name == "error" and len(self.term.args) == 2:
             return self.term.args[0]
@@ -44,7 +44,7 @@ class PrologError(BridgeError):
     @property
     def context(self) -> Any:
         """The context part of an ``error(Formal, Context)`` term, else ``None``."""
-        from pybridge.terms import Term
+        from dfrl.pybridge.terms import Term
 
         if isinstance(self.term, Term) and self.term.name == "error" and len(self.term.args) == 2:
             return self.term.args[1]

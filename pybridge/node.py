@@ -19,11 +19,11 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
-from pybridge import codec as _codec
-from pybridge.codec import Codec
-from pybridge.engine import Prolog, prolog
-from pybridge.errors import BridgeError, CodecError, NodeStateError, PrologError, PrologFailure
-from pybridge.terms import Atom, Term, Var, atom_or_self
+from dfrl.pybridge import codec as _codec
+from dfrl.pybridge.codec import Codec
+from dfrl.pybridge.engine import Prolog, prolog
+from dfrl.pybridge.errors import BridgeError, CodecError, NodeStateError, PrologError, PrologFailure
+from dfrl.pybridge.terms import Atom, Term, Var, atom_or_self
 
 __all__ = ["TableProvider", "RobotNode", "Bridge", "BRIDGE_FILE", "SelfTestReport"]
 
@@ -196,7 +196,7 @@ class RobotNode:
         return sol
 
     def call(self, name: str, *args: Any, module: str | None = None) -> dict[str, Any] | None:
-        """Call ``module:name(args...)`` once with bound arguments (see :mod:`pybridge.terms`).
+        """Call ``module:name(args...)`` once with bound arguments (see :mod:`dfrl.pybridge.terms`).
 
         Returns the bindings of named :class:`Var` arguments, or ``None`` on failure.
         """
@@ -276,7 +276,7 @@ class RobotNode:
             raise NodeStateError("the platform's threads were stopped by an earlier close() in "
                                  "this process; it cannot run again here (use a new process)")
         if entry is None:
-            from platform_pl import ENTRY_POINT
+            from dfrl.platform_pl import ENTRY_POINT
 
             entry = ENTRY_POINT
         path = Path(entry)
@@ -396,7 +396,7 @@ class RobotNode:
 
     def post_agent(self, target: str, link: Sequence[Any], args: Sequence[Any]) -> None:
         """``post_agent(Target, (Ip,Port), [Handler, Agent, Link | Args])``; ``args`` are
-        converted as described in :mod:`pybridge.terms`."""
+        converted as described in :mod:`dfrl.pybridge.terms`."""
         self._check_open()
         self._must("post_agent", Atom(target), self._link(link), list(args))
 

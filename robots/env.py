@@ -21,8 +21,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from arenas.spec import ArenaSpec, load_arena
-from robots.world import SimConfig, World
+from dfrl.arenas.spec import ArenaSpec, load_arena
+from dfrl.robots.world import SimConfig, World
 
 
 class ActionSet(str, Enum):

@@ -6,9 +6,9 @@ from enum import Enum
 
 import numpy as np
 
-from robots.learners import greedy_action
-from robots.state import Discretiser
-from robots.training import TrainerConfig
+from dfrl.robots.learners import greedy_action
+from dfrl.robots.state import Discretiser
+from dfrl.robots.training import TrainerConfig
 
 
 class PolicyKind(str, Enum):
@@ -65,7 +65,7 @@ def evaluate_policy(
     q_table : np.ndarray, shape (n_states, n_actions), optional
         Required for GREEDY.
     """
-    from robots.env import EPuckEnv
+    from dfrl.robots.env import EPuckEnv
 
     policy = PolicyKind(policy)
     disc = Discretiser(config.discretisation)

@@ -31,7 +31,7 @@ def plot_learning_curves(
     ----------
     curves : mapping of str to np.ndarray or a sequence of them
         Label -> structured metrics array with fields ``iteration``, ``q_sum`` and
-        ``cumulative_reward`` (as returned by :func:`robots.training.train`), or several
+        ``cumulative_reward`` (as returned by :func:`dfrl.robots.training.train`), or several
         such arrays of equal length (runs with different seeds): then the line is their mean
         and a band shows their minimum and maximum.
     path : str or Path
@@ -77,7 +77,7 @@ def plot_arena(image: np.ndarray, spec, path: str | Path) -> Path:  # noqa: ANN0
     Parameters
     ----------
     image : np.ndarray, shape (h, w, 3), uint8
-        Top view from :meth:`robots.world.World.render_top` (covers the floor plus 5 cm).
+        Top view from :meth:`dfrl.robots.world.World.render_top` (covers the floor plus 5 cm).
     spec : ArenaSpec
     path : str or Path
     """

@@ -3,7 +3,7 @@
 The ``.npy`` holds the float64 array of shape ``(n_states, n_actions)``. The JSON sidecar holds
 ``format`` (``"dfrl-qtable/1"``), ``shape``, ``dtype``, ``algorithm``, ``arena``, ``seed``,
 ``iterations``, ``actions`` (names by column index), ``state`` (the discretisation, see
-:meth:`robots.state.Discretiser.describe`) and free ``extra`` fields. The optional
+:meth:`dfrl.robots.state.Discretiser.describe`) and free ``extra`` fields. The optional
 ``NAME.visits.npy`` holds the int64 update counts of each entry.
 """
 from __future__ import annotations
@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from robots.learners import validate_table
+from dfrl.robots.learners import validate_table
 
 TABLE_FORMAT = "dfrl-qtable/1"
 

@@ -22,12 +22,12 @@ from typing import Any, Callable
 
 import numpy as np
 
-from robots.env import EnvConfig, EPuckEnv, RewardConfig
-from robots.epuck import EPuckConfig
-from robots.learners import EpsilonSchedule, LearnerParams, TabularLearner, make_learner
-from robots.state import DiscretisationConfig, Discretiser
-from robots.tables import TableMeta, save_table
-from robots.world import SimConfig
+from dfrl.robots.env import EnvConfig, EPuckEnv, RewardConfig
+from dfrl.robots.epuck import EPuckConfig
+from dfrl.robots.learners import EpsilonSchedule, LearnerParams, TabularLearner, make_learner
+from dfrl.robots.state import DiscretisationConfig, Discretiser
+from dfrl.robots.tables import TableMeta, save_table
+from dfrl.robots.world import SimConfig
 
 #: Training budget (iterations) of the 5-robot demo: learning clearly shows by then.
 DEMO_ITERATIONS: int = 8000
@@ -38,14 +38,14 @@ class TrainerConfig(EnvConfig):
     """Everything that defines a training run; the same config and seed give the same run.
 
     The environment's fields (arena, sim, actions, reward, collision response, stuck
-    detector) come from :class:`robots.env.EnvConfig`; the learner's are added here.
+    detector) come from :class:`dfrl.robots.env.EnvConfig`; the learner's are added here.
 
     Attributes
     ----------
     arena : str
         Built-in arena name or arena file path.
     algo : str
-        Learner name, a key of :data:`robots.learners.LEARNERS`.
+        Learner name, a key of :data:`dfrl.robots.learners.LEARNERS`.
     seed : int
         Seeds the environment (start/respawn poses, sensor noise) and the learner
         (exploration) through independent streams.
@@ -275,7 +275,7 @@ class Trainer:
         )
 
     def save_table(self, path: str | Path) -> Path:
-        """Save the table, its sidecar and the visit counts (see :mod:`robots.tables`)."""
+        """Save the table, its sidecar and the visit counts (see :mod:`dfrl.robots.tables`)."""
         return save_table(path, self.q_table, self.table_meta(), visits=self.visits)
 
     def close(self) -> None:

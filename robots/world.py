@@ -8,9 +8,9 @@ from enum import Enum
 import numpy as np
 import pybullet as p
 
-from arenas.builder import ArenaBodies, build_arena
-from arenas.spec import ArenaSpec
-from robots.epuck import EPuck, EPuckConfig
+from dfrl.arenas.builder import ArenaBodies, build_arena
+from dfrl.arenas.spec import ArenaSpec
+from dfrl.robots.epuck import EPuck, EPuckConfig
 
 
 class ConnectionMode(str, Enum):

@@ -11,9 +11,9 @@ from typing import Any
 
 import pytest
 
-from experiments.federation import (ExperimentConfig, JoinSpec, Results, RobotSpec, inject_method,
+from dfrl.experiments.federation import (ExperimentConfig, JoinSpec, Results, RobotSpec, inject_method,
                                     run)
-from experiments.results import read_metrics, read_rounds_log
+from dfrl.experiments.results import read_metrics, read_rounds_log
 
 pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
 
@@ -189,7 +189,7 @@ def test_robot_joins_running_experiment(tmp_path: Path) -> None:
 
 
 def test_bench_round_smoke() -> None:
-    from experiments.bench_round import bench
+    from dfrl.experiments.bench_round import bench
 
     r = bench(entries=400, actions=4, robots=3, rounds=3, warmup=1)
     assert r["rounds"] == 3 and r["hops"] == 4, r

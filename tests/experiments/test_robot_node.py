@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from experiments.robot_node import NodeConfig
+from dfrl.experiments.robot_node import NodeConfig
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -19,7 +19,7 @@ def _start(tmp_path: Path, **kw) -> subprocess.Popen:
     cfg = NodeConfig(robot="r7", out_dir=str(tmp_path), arena="r2", **kw)
     path = tmp_path / "node.json"
     path.write_text(json.dumps(cfg.to_dict()))
-    return subprocess.Popen([sys.executable, "-m", "experiments.robot_node", "--config", str(path)],
+    return subprocess.Popen([sys.executable, "-m", "dfrl.experiments.robot_node", "--config", str(path)],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, cwd=REPO)
 
@@ -58,7 +58,7 @@ def test_sync_node_stops_at_a_boundary_when_told(tmp_path: Path) -> None:
 def test_bad_config_exits_2(tmp_path: Path) -> None:
     path = tmp_path / "node.json"
     path.write_text(json.dumps({"robot": "r1", "out_dir": str(tmp_path), "colour": "red"}))
-    p = subprocess.run([sys.executable, "-m", "experiments.robot_node", "--config", str(path)],
+    p = subprocess.run([sys.executable, "-m", "dfrl.experiments.robot_node", "--config", str(path)],
                        capture_output=True, text=True, cwd=REPO, timeout=60)
     assert p.returncode == 2 and "colour" in p.stderr
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from experiments.cli import main
-from experiments.transfer import (
+from dfrl.experiments.cli import main
+from dfrl.experiments.transfer import (
     METRICS,
     RunResult,
     TransferConfig,
@@ -18,8 +18,8 @@ from experiments.transfer import (
     run,
     summarise,
 )
-from robots.tables import TableMeta, load_table, save_table
-from robots.training import TrainerConfig, train
+from dfrl.robots.tables import TableMeta, load_table, save_table
+from dfrl.robots.training import TrainerConfig, train
 
 #: An L-shaped room (a big block fills one corner) with five small pillars: none of r1..r5.
 L_ARENA = {

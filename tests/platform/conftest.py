@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from platform_pl import PLATFORM_DIR
+from dfrl.platform_pl import PLATFORM_DIR
 
 SWIPL = shutil.which("swipl")
 

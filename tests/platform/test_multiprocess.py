@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from platform_pl import PLATFORM_DIR
+from dfrl.platform_pl import PLATFORM_DIR
 
 from .conftest import SWIPL, Proc, free_port, start_node
 from .wire_client import connect, frame, read_frame, request

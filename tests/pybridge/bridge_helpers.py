@@ -34,7 +34,7 @@ class ArrayRobot:
 
 
 def _atom(text: str) -> Any:
-    from pybridge import Atom
+    from dfrl.pybridge import Atom
 
     return Atom(text)
 
@@ -45,7 +45,7 @@ _counter = iter(range(10**9))
 def run_agent(node: Any, goal: Any, timeout: float = 10.0, serve: bool = True) -> Any:
     """Run goal in a new Prolog thread while this (main) thread serves bridge requests
     like a control loop; return true(Goal) / false / error(E) as Python terms."""
-    from pybridge import Atom, Var
+    from dfrl.pybridge import Atom, Var
 
     alias = Atom(f"test_agent_{next(_counter)}")
     node.call("spawn", alias, goal, module="bridge_test_agents")
@@ -62,14 +62,14 @@ def run_agent(node: Any, goal: Any, timeout: float = 10.0, serve: bool = True) -
 
 def spawn(node: Any, alias: str, goal: Any) -> None:
     """Start goal in a Prolog thread named alias (outcome: :func:`agent_result`)."""
-    from pybridge import Atom
+    from dfrl.pybridge import Atom
 
     node.call("spawn", Atom(alias), goal, module="bridge_test_agents")
 
 
 def agent_result(node: Any, alias: str, timeout: float = 5.0, serve: bool = False) -> Any:
     """Wait for the outcome of a spawned agent (true(Goal) / false / error(E))."""
-    from pybridge import Atom, Var
+    from dfrl.pybridge import Atom, Var
 
     deadline = time.monotonic() + timeout
     while True:

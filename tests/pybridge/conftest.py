@@ -11,7 +11,7 @@ from bridge_helpers import HELPER, _atom
 
 @pytest.fixture
 def node() -> Iterator[Any]:
-    from pybridge import RobotNode
+    from dfrl.pybridge import RobotNode
 
     n = RobotNode(request_timeout=5.0)
     n.call("use_module", _atom(str(HELPER)))

@@ -10,7 +10,7 @@ import time
 
 from bridge_helpers import HELPER, ArrayRobot
 
-from pybridge import Atom, RobotNode, Term, Var
+from dfrl.pybridge import Atom, RobotNode, Term, Var
 
 
 def main(mode: str) -> int:

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 from bridge_helpers import ArrayRobot
 
-from pybridge import Atom, NodeStateError, RobotNode, Term, Var
+from dfrl.pybridge import Atom, NodeStateError, RobotNode, Term, Var
 
 AGENT = Path(__file__).with_name("hop_agent.pl")
 

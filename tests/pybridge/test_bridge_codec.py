@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pybridge import codec
-from pybridge.errors import CodecError
+from dfrl.pybridge import codec
+from dfrl.pybridge.errors import CodecError
 
 
 def test_varint_examples() -> None:

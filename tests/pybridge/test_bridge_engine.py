@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pybridge import Atom, NodeStateError, PrologError, Term, TermConversionError, Var
-from pybridge.engine import prolog
+from dfrl.pybridge import Atom, NodeStateError, PrologError, Term, TermConversionError, Var
+from dfrl.pybridge.engine import prolog
 
 
 @pytest.fixture(scope="module")
@@ -114,7 +114,7 @@ def test_partial_list_and_blob(pl) -> None:
     sol = pl.call("=", Var("X"), Term("[|]", 1, Var("T")))
     assert isinstance(sol["X"], Term) and sol["X"].name == "[|]"
     sol = pl.call("message_queue_create", Var("Q"))
-    from pybridge import Blob
+    from dfrl.pybridge import Blob
 
     assert isinstance(sol["Q"], Blob)
 
@@ -127,7 +127,7 @@ def test_bytearray_and_memoryview_strings(pl) -> None:
 
 
 def test_dicts_and_reserved_functors_come_back_as_blobs(pl) -> None:
-    from pybridge import Blob
+    from dfrl.pybridge import Blob
 
     sol = pl.call("dict_create", Var("D"), Atom("t"), [Term("-", Atom("a"), 1)])
     assert sol["D"] == Blob("t{a:1}")

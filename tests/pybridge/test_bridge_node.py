@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from bridge_helpers import HELPER, ArrayRobot, agent_result, run_agent, spawn
 
-from pybridge import Atom, BridgeError, Codec, NodeStateError, PrologError, RobotNode, Term, Var
+from dfrl.pybridge import Atom, BridgeError, Codec, NodeStateError, PrologError, RobotNode, Term, Var
 
 
 def _bits(a: np.ndarray) -> np.ndarray:
@@ -276,7 +276,7 @@ def test_non_floats_that_look_like_floats_are_converted_or_refused(node) -> None
 def test_fts_self_test_failure_falls_back_to_text(monkeypatch) -> None:
     """An encoder that disagrees with this Prolog (here: a wrong size field) must be caught
     before Prolog ever deserialises its bytes; the node then uses the text codec."""
-    from pybridge import codec as codec_module
+    from dfrl.pybridge import codec as codec_module
 
     real = codec_module.encode_fts
 

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from bridge_helpers import agent_result, spawn
 
-from pybridge import Atom, Term, Var
+from dfrl.pybridge import Atom, Term, Var
 
-training = pytest.importorskip("robots.training")
+training = pytest.importorskip("dfrl.robots.training")
 
 
 def test_agent_reads_and_writes_a_training_robot(node) -> None:

@@ -8,7 +8,7 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from arenas import ArenaError, build_arena, builtin_arena_names, load_arena, parse_arena
+from dfrl.arenas import ArenaError, build_arena, builtin_arena_names, load_arena, parse_arena
 
 
 def _good() -> dict:

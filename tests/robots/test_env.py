@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import robots  # noqa: F401 - registers dfrl/EPuck-v0
-from arenas import load_arena
-from robots.env import EnvConfig, EPuckEnv
-from robots.epuck import EPuckConfig
-from robots.world import SimConfig, World
+import dfrl.robots  # noqa: F401 - registers dfrl/EPuck-v0
+from dfrl.arenas import load_arena
+from dfrl.robots.env import EnvConfig, EPuckEnv
+from dfrl.robots.epuck import EPuckConfig
+from dfrl.robots.world import SimConfig, World
 
 
 def test_physics_rate_must_divide_control_rate() -> None:

@@ -6,10 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robots.learners import (LEARNERS, EpsilonSchedule, LearnerParams, QLearning, Sarsa,
+from dfrl.robots.learners import (LEARNERS, EpsilonSchedule, LearnerParams, QLearning, Sarsa,
                              epsilon_greedy, greedy_action, make_learner, q_learning_target,
                              sarsa_target, td_update, validate_table)
-from robots.tables import TableMeta, load_table, save_table
+from dfrl.robots.tables import TableMeta, load_table, save_table
 
 
 def test_registry_has_both_learners() -> None:

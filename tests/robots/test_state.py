@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robots.state import DiscretisationConfig, Discretiser, SensorGrouping
+from dfrl.robots.state import DiscretisationConfig, Discretiser, SensorGrouping
 
 
 def test_levels_by_hand() -> None:

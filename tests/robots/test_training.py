@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robots.evaluation import PolicyKind, evaluate_policy
-from robots.state import DiscretisationConfig
-from robots.tables import load_table
-from robots.training import StepMetrics, Trainer, TrainerConfig, read_metrics_csv, train
-from robots.world import SimConfig
+from dfrl.robots.evaluation import PolicyKind, evaluate_policy
+from dfrl.robots.state import DiscretisationConfig
+from dfrl.robots.tables import load_table
+from dfrl.robots.training import StepMetrics, Trainer, TrainerConfig, read_metrics_csv, train
+from dfrl.robots.world import SimConfig
 
 
 def _run(config: TrainerConfig, n: int) -> tuple[list[StepMetrics], np.ndarray, np.ndarray]:
