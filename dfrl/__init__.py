@@ -41,8 +41,8 @@ _API: dict[str, str] = {
     "Trainer": "dfrl.robots.training",
     "train": "dfrl.robots.training",
     "load_arena": "dfrl.arenas.spec",
-    "ExperimentConfig": "dfrl.experiments.federation",
-    "RobotSpec": "dfrl.experiments.federation",
+    "ExperimentConfig": "dfrl.experiments.config",
+    "RobotSpec": "dfrl.experiments.config",
     "run_experiment": "dfrl.experiments.federation",
 }
 

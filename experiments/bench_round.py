@@ -19,9 +19,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from dfrl.experiments.federation import REPO_ROOT, RobotSpec, _Child, agents_dir, swipl_path
+from dfrl.experiments.config import NodeConfig, RobotSpec
+from dfrl.experiments.federation import REPO_ROOT, _Child, agents_dir, swipl_path
 from dfrl.experiments.results import read_rounds_log, read_shares, write_rounds_csv
-from dfrl.experiments.robot_node import NodeConfig
 
 TARGET_MS = 50.0
 

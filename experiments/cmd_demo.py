@@ -11,8 +11,8 @@ from pathlib import Path
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from dfrl.experiments.cmd_run import apply_overrides, resolve_config, run_and_report
-    from dfrl.experiments.federation import ExperimentConfig
+    from dfrl.experiments.cmd_run import apply_overrides, run_and_report
+    from dfrl.experiments.config import ExperimentConfig, resolve_config
     from dfrl.robots.training import DEMO_ITERATIONS
 
     cfg = ExperimentConfig.load(resolve_config("demo"))

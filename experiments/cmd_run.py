@@ -5,24 +5,9 @@ import argparse
 import sys
 from pathlib import Path
 
-CONFIGS_DIR: Path = Path(__file__).resolve().parent / "configs"
-
-
-def resolve_config(name: str) -> Path:
-    """A config file path, or the name of one in ``experiments/configs`` (``.json`` optional)."""
-    p = Path(name)
-    if p.is_file():
-        return p
-    for cand in (CONFIGS_DIR / name, CONFIGS_DIR / f"{name}.json"):
-        if cand.is_file():
-            return cand
-    raise FileNotFoundError(f"no config {name!r} (neither a file nor one of "
-                            f"{sorted(q.stem for q in CONFIGS_DIR.glob('*.json'))})")
-
-
 def add_override_arguments(p: argparse.ArgumentParser) -> None:
     """Flags that override fields of an experiment config."""
-    from dfrl.experiments.robot_node import Mode
+    from dfrl.experiments.config import Mode
 
     g = p.add_argument_group("overrides")
     g.add_argument("--iterations", type=int, default=None, help="iterations per robot")
@@ -62,7 +47,8 @@ def print_results(results) -> None:  # noqa: ANN001 - federation.Results
 
 def run_and_report(cfg, out: Path, prog: str, show_summary: bool = False) -> int:  # noqa: ANN001
     """Run experiment ``cfg`` into ``out`` and report it; the command's exit code."""
-    from dfrl.experiments.federation import ExperimentError, run
+    from dfrl.experiments.errors import ExperimentError
+    from dfrl.experiments.federation import run
 
     try:
         results = run(cfg, out)
@@ -80,7 +66,7 @@ def run_and_report(cfg, out: Path, prog: str, show_summary: bool = False) -> int
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from dfrl.experiments.federation import ExperimentConfig
+    from dfrl.experiments.config import ExperimentConfig, resolve_config
 
     try:
         cfg = apply_overrides(ExperimentConfig.load(resolve_config(args.config)), args)
@@ -91,7 +77,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_inject(args: argparse.Namespace) -> int:
-    from dfrl.experiments.federation import ExperimentError, inject_method
+    from dfrl.experiments.errors import ExperimentError
+    from dfrl.experiments.federation import inject_method
 
     try:
         told = inject_method(args.results_dir, args.program, args.method, args.agent)
@@ -103,7 +90,8 @@ def cmd_inject(args: argparse.Namespace) -> int:
 
 
 def cmd_join(args: argparse.Namespace) -> int:
-    from dfrl.experiments.federation import ExperimentError, join_robot
+    from dfrl.experiments.errors import ExperimentError
+    from dfrl.experiments.federation import join_robot
 
     try:
         info = join_robot(args.results_dir, args.robot, args.arena, args.algo,

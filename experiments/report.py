@@ -151,8 +151,8 @@ def reproduce_paper(out: Path, iterations: int | None = None, respite: int | Non
                     seed: int | None = None, baseline_iterations: int | None = None,
                     skip_existing: bool = False) -> int:
     """Run everything and write ``OUT/report.md``; returns an exit code."""
-    from dfrl.experiments.cmd_run import resolve_config
-    from dfrl.experiments.federation import ExperimentConfig, run
+    from dfrl.experiments.config import ExperimentConfig, resolve_config
+    from dfrl.experiments.federation import run
     from dfrl.experiments.results import read_metrics
 
     out = Path(out)

@@ -33,141 +33,24 @@ from __future__ import annotations
 
 import argparse
 import csv
-import dataclasses
 import hashlib
 import json
 import os
 import select
 import sys
 import time
-from dataclasses import dataclass, field
-from enum import Enum
 from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
+
+from dfrl.experiments.config import Mode, NodeConfig, boundaries
 
 #: Wall-clock seconds of one control iteration at real-time factor 1 (the paper's 64 ms).
 CONTROL_PERIOD_S: float = 0.064
 
 METRIC_FIELDS: tuple[str, ...] = ("robot", "iteration", "q_sum", "cumulative_reward", "collisions")
 SHARE_FIELDS: tuple[str, ...] = ("robot", "share_index", "iteration", "wall_time", "digest")
-
-
-class Mode(str, Enum):
-    """How robots pace themselves against the agent."""
-
-    ASYNC = "async"
-    SYNC = "sync"
-
-
-def config_to_dict(cfg: Any) -> dict[str, Any]:
-    """A config dataclass with a ``mode`` enum as a JSON-ready dict."""
-    d = dataclasses.asdict(cfg)
-    d["mode"] = cfg.mode.value
-    return d
-
-
-def config_from_dict(cls: type, data: dict[str, Any], what: str,
-                     ignore: frozenset[str] = frozenset()) -> Any:
-    """Build config dataclass ``cls`` from ``data``; unknown keys (but ``ignore``) are an error."""
-    names = {f.name for f in dataclasses.fields(cls)}
-    unknown = set(data) - names - ignore
-    if unknown:
-        raise ValueError(f"unknown {what} config keys: {sorted(unknown)}")
-    return cls(**{k: v for k, v in data.items() if k in names})
-
-
-@dataclass(frozen=True)
-class NodeConfig:
-    """Everything one robot node process needs (written as JSON by the launcher).
-
-    Attributes
-    ----------
-    robot : str
-        Robot id, an atom in Prolog (``r1``).
-    out_dir : str
-        Results folder (metrics and shares CSVs are written there).
-    arena, algo, seed, iterations
-        Training run (see :class:`dfrl.robots.training.TrainerConfig`).
-    respite : int
-        Iterations between two shares (sync boundaries).
-    mode : Mode
-    rtf : float or None
-        Real-time factor: 1.0 = one iteration per 64 ms of wall time; None or 0 = flat out.
-    token : int
-        Platform token agents must carry.
-    trainer : dict
-        Extra :class:`dfrl.robots.training.TrainerConfig` fields (``learner``, ``discretisation``, ...).
-    grace_s : float
-        Seconds the node stays up after its last iteration (see module doc).
-    sync_timeout_s : float
-        Longest wait for a share at a sync boundary before training goes on without it.
-    progress_every : int
-        Iterations between two ``DFRL_PROGRESS`` lines (0: none).
-    events : bool
-        Print ``DFRL_EVENT`` lines.
-    bench_table : list of int or None
-        ``[S, A]``: no simulation; serve a random table of that shape until stdin closes.
-    host : str
-    """
-
-    robot: str
-    out_dir: str
-    arena: str = "r4"
-    algo: str = "qlearning"
-    seed: int = 0
-    iterations: int = 8000
-    respite: int = 500
-    mode: Mode = Mode.ASYNC
-    rtf: float | None = None
-    token: int = 1111
-    trainer: dict[str, Any] = field(default_factory=dict)
-    grace_s: float = 10.0
-    sync_timeout_s: float = 300.0
-    progress_every: int = 100
-    events: bool = True
-    bench_table: list[int] | None = None
-    host: str = "127.0.0.1"
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "mode", Mode(self.mode))
-        if self.respite < 1:
-            raise ValueError("respite must be >= 1")
-        if self.iterations < 0:
-            raise ValueError("iterations must be >= 0")
-        if self.rtf is not None and self.rtf < 0:
-            raise ValueError("rtf must be >= 0")
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict."""
-        return config_to_dict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "NodeConfig":
-        """Inverse of :meth:`to_dict` (unknown keys are an error)."""
-        return config_from_dict(cls, data, "node")
-
-    def trainer_config(self):  # noqa: ANN201 - TrainerConfig (imported lazily)
-        """The :class:`dfrl.robots.training.TrainerConfig` of this robot."""
-        from dfrl.robots.training import TrainerConfig
-
-        base = TrainerConfig().to_dict()
-        base.update(self.trainer)
-        base.update(arena=self.arena, algo=self.algo, seed=self.seed, iterations=self.iterations)
-        return TrainerConfig.from_dict(base)
-
-
-def boundaries(iterations: int, respite: int) -> list[int]:
-    """Iterations at which a sync robot waits for a share: ``k * respite`` and the last one.
-
-    >>> boundaries(1200, 500)
-    [500, 1000, 1200]
-    """
-    points = list(range(respite, iterations + 1, respite))
-    if iterations > 0 and (not points or points[-1] != iterations):
-        points.append(iterations)
-    return points
 
 
 def table_digest(table: np.ndarray) -> str:

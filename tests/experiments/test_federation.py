@@ -11,8 +11,8 @@ from typing import Any
 
 import pytest
 
-from dfrl.experiments.federation import (ExperimentConfig, JoinSpec, Results, RobotSpec, inject_method,
-                                    run)
+from dfrl.experiments.config import ExperimentConfig, JoinSpec, RobotSpec
+from dfrl.experiments.federation import Results, inject_method, run
 from dfrl.experiments.results import read_metrics, read_rounds_log
 
 pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")

@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dfrl.experiments.federation import ExperimentConfig, RobotSpec
+from dfrl.experiments.config import ExperimentConfig, NodeConfig, RobotSpec, boundaries
 from dfrl.experiments.results import (Fact, RoundRecord, Share, AgentLog, match_shares, merge_metrics,
                                  parse_fact, read_metrics, read_rounds_log, write_rounds_csv)
-from dfrl.experiments.robot_node import NodeConfig, boundaries, table_digest
+from dfrl.experiments.robot_node import table_digest
 
 
 def test_parse_round_fact() -> None:
@@ -100,7 +100,7 @@ def test_configs_round_trip_and_validate() -> None:
 
 
 def test_shipped_configs_load() -> None:
-    from dfrl.experiments.cmd_run import CONFIGS_DIR
+    from dfrl.experiments.config import CONFIGS_DIR
 
     names = sorted(p.stem for p in CONFIGS_DIR.glob("*.json"))
     assert {"demo", "paper_qlearning_average", "paper_qlearning_max", "paper_sarsa_average",

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from dfrl.experiments.robot_node import NodeConfig
+from dfrl.experiments.config import NodeConfig
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -1,0 +1,307 @@
+"""Experiment and robot-node configuration: the dataclasses, their JSON form, and where
+configs live.
+
+:class:`ExperimentConfig` (with its :class:`RobotSpec` and :class:`JoinSpec` entries) defines a
+federated experiment and is saved as ``config.json`` beside its results; :class:`NodeConfig` is
+what the launcher hands one robot node process. :func:`resolve_config` finds a config file by
+path or by the name of a shipped one (``experiments/configs``).
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+from enum import Enum
+from pathlib import Path
+from typing import Any
+
+#: Aggregation methods built into the agent (others can be injected at runtime).
+BUILTIN_METHODS: tuple[str, ...] = ("average", "max", "visit_average")
+
+
+class Mode(str, Enum):
+    """How robots pace themselves against the agent."""
+
+    ASYNC = "async"
+    SYNC = "sync"
+
+
+def config_to_dict(cfg: Any) -> dict[str, Any]:
+    """A config dataclass with a ``mode`` enum as a JSON-ready dict."""
+    d = dataclasses.asdict(cfg)
+    d["mode"] = cfg.mode.value
+    return d
+
+
+def config_from_dict(cls: type, data: dict[str, Any], what: str,
+                     ignore: frozenset[str] = frozenset()) -> Any:
+    """Build config dataclass ``cls`` from ``data``; unknown keys (but ``ignore``) are an error."""
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = set(data) - names - ignore
+    if unknown:
+        raise ValueError(f"unknown {what} config keys: {sorted(unknown)}")
+    return cls(**{k: v for k, v in data.items() if k in names})
+
+
+@dataclass(frozen=True)
+class NodeConfig:
+    """Everything one robot node process needs (written as JSON by the launcher).
+
+    Attributes
+    ----------
+    robot : str
+        Robot id, an atom in Prolog (``r1``).
+    out_dir : str
+        Results folder (metrics and shares CSVs are written there).
+    arena, algo, seed, iterations
+        Training run (see :class:`dfrl.robots.training.TrainerConfig`).
+    respite : int
+        Iterations between two shares (sync boundaries).
+    mode : Mode
+    rtf : float or None
+        Real-time factor: 1.0 = one iteration per 64 ms of wall time; None or 0 = flat out.
+    token : int
+        Platform token agents must carry.
+    trainer : dict
+        Extra :class:`dfrl.robots.training.TrainerConfig` fields (``learner``, ``discretisation``, ...).
+    grace_s : float
+        Seconds the node stays up after its last iteration (see module doc).
+    sync_timeout_s : float
+        Longest wait for a share at a sync boundary before training goes on without it.
+    progress_every : int
+        Iterations between two ``DFRL_PROGRESS`` lines (0: none).
+    events : bool
+        Print ``DFRL_EVENT`` lines.
+    bench_table : list of int or None
+        ``[S, A]``: no simulation; serve a random table of that shape until stdin closes.
+    host : str
+    """
+
+    robot: str
+    out_dir: str
+    arena: str = "r4"
+    algo: str = "qlearning"
+    seed: int = 0
+    iterations: int = 8000
+    respite: int = 500
+    mode: Mode = Mode.ASYNC
+    rtf: float | None = None
+    token: int = 1111
+    trainer: dict[str, Any] = field(default_factory=dict)
+    grace_s: float = 10.0
+    sync_timeout_s: float = 300.0
+    progress_every: int = 100
+    events: bool = True
+    bench_table: list[int] | None = None
+    host: str = "127.0.0.1"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "mode", Mode(self.mode))
+        if self.respite < 1:
+            raise ValueError("respite must be >= 1")
+        if self.iterations < 0:
+            raise ValueError("iterations must be >= 0")
+        if self.rtf is not None and self.rtf < 0:
+            raise ValueError("rtf must be >= 0")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict."""
+        return config_to_dict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "NodeConfig":
+        """Inverse of :meth:`to_dict` (unknown keys are an error)."""
+        return config_from_dict(cls, data, "node")
+
+    def trainer_config(self):  # noqa: ANN201 - TrainerConfig (imported lazily)
+        """The :class:`dfrl.robots.training.TrainerConfig` of this robot."""
+        from dfrl.robots.training import TrainerConfig
+
+        base = TrainerConfig().to_dict()
+        base.update(self.trainer)
+        base.update(arena=self.arena, algo=self.algo, seed=self.seed, iterations=self.iterations)
+        return TrainerConfig.from_dict(base)
+
+
+def boundaries(iterations: int, respite: int) -> list[int]:
+    """Iterations at which a sync robot waits for a share: ``k * respite`` and the last one.
+
+    >>> boundaries(1200, 500)
+    [500, 1000, 1200]
+    """
+    points = list(range(respite, iterations + 1, respite))
+    if iterations > 0 and (not points or points[-1] != iterations):
+        points.append(iterations)
+    return points
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """One robot of an experiment.
+
+    Attributes
+    ----------
+    id : str
+        Robot id (an atom in Prolog): lower case, e.g. ``r1``.
+    arena : str
+        Arena name or file.
+    algo : str
+        ``qlearning`` or ``sarsa``.
+    seed : int or None
+        None: the experiment seed plus the robot's position in the list.
+    """
+
+    id: str
+    arena: str
+    algo: str = "qlearning"
+    seed: int | None = None
+
+    def __post_init__(self) -> None:
+        if not self.id or not (self.id[0].islower() and self.id.replace("_", "").isalnum()):
+            raise ValueError(f"robot id {self.id!r}: use a lower-case name like r1")
+
+
+@dataclass(frozen=True)
+class JoinSpec:
+    """A robot that joins the running experiment once ``after_round`` rounds are logged."""
+
+    robot: RobotSpec
+    after_round: int = 1
+
+
+@dataclass(frozen=True)
+class ExperimentConfig:
+    """Everything that defines a federated experiment (saved as ``config.json``).
+
+    Attributes
+    ----------
+    name : str
+    robots : tuple of RobotSpec
+        In itinerary order (per algorithm).
+    iterations : int
+        Control iterations per robot.
+    respite : int
+        Iterations between two shares: the number of agent rounds is
+        ``ceil(iterations / respite)``.
+    seed : int
+    mode : Mode
+        ``async`` (robots flat out, default) or ``sync`` (robots wait for the agent at each
+        respite boundary: same seed, same curves).
+    rtf : float or None
+        Real-time factor (1.0: one iteration per 64 ms of wall time); None: flat out.
+    method : str
+        Aggregation method of every agent, unless ``methods`` names one for its algorithm.
+    methods : dict
+        Algorithm -> method.
+    rest_s : float or None
+        Async only: seconds the agent rests at its first stop between rounds. None: the
+        expected wall time of one respite.
+    token : int
+    trainer : dict
+        Extra :class:`dfrl.robots.training.TrainerConfig` fields shared by all robots.
+    joins : tuple of JoinSpec
+    timeout_s : float
+        Whole-experiment limit (children are killed after it).
+    title : str
+        Plot title (default: derived from the config).
+    """
+
+    name: str = "experiment"
+    robots: tuple[RobotSpec, ...] = ()
+    iterations: int = 8000
+    respite: int = 500
+    seed: int = 1
+    mode: Mode = Mode.ASYNC
+    rtf: float | None = None
+    method: str = "average"
+    methods: dict[str, str] = field(default_factory=dict)
+    rest_s: float | None = None
+    token: int = 1111
+    trainer: dict[str, Any] = field(default_factory=dict)
+    joins: tuple[JoinSpec, ...] = ()
+    timeout_s: float = 3600.0
+    title: str = ""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "mode", Mode(self.mode))
+        object.__setattr__(self, "robots", tuple(
+            r if isinstance(r, RobotSpec) else RobotSpec(**r) for r in self.robots))
+        object.__setattr__(self, "joins", tuple(
+            j if isinstance(j, JoinSpec) else
+            JoinSpec(robot=j["robot"] if isinstance(j["robot"], RobotSpec) else RobotSpec(**j["robot"]),
+                     after_round=int(j.get("after_round", 1)))
+            for j in self.joins))
+        if not self.robots:
+            raise ValueError("an experiment needs at least one robot")
+        ids = [r.id for r in self.robots] + [j.robot.id for j in self.joins]
+        if len(set(ids)) != len(ids):
+            raise ValueError(f"robot ids must be unique: {ids}")
+        if self.iterations < 1 or self.respite < 1:
+            raise ValueError("iterations and respite must be >= 1")
+        if self.rtf is not None and self.rtf < 0:
+            raise ValueError("rtf must be >= 0")
+
+    # -- derived -------------------------------------------------------------------------------
+    @property
+    def rounds(self) -> int:
+        """Agent rounds: one per respite boundary (the last iteration included)."""
+        return len(boundaries(self.iterations, self.respite))
+
+    def algorithms(self) -> list[str]:
+        """Algorithms in order of first appearance (one agent each)."""
+        seen: list[str] = []
+        for r in list(self.robots) + [j.robot for j in self.joins]:
+            if r.algo not in seen:
+                seen.append(r.algo)
+        return seen
+
+    def method_for(self, algo: str) -> str:
+        return self.methods.get(algo, self.method)
+
+    def robot_seed(self, robot: RobotSpec) -> int:
+        if robot.seed is not None:
+            return robot.seed
+        ids = [r.id for r in self.robots] + [j.robot.id for j in self.joins]
+        return self.seed + ids.index(robot.id)
+
+    def default_title(self) -> str:
+        if self.title:
+            return self.title
+        algos = "+".join({"qlearning": "Q-learning", "sarsa": "SARSA"}.get(a, a)
+                         for a in self.algorithms())
+        methods = "/".join(sorted({self.method_for(a) for a in self.algorithms()}))
+        return (f"dFRL {algos}, {methods}, {len(self.robots)} robots, "
+                f"{self.iterations} iterations, respite {self.respite} ({self.mode.value})")
+
+    # -- (de)serialisation ---------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        return config_to_dict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "ExperimentConfig":
+        return config_from_dict(cls, data, "experiment", ignore=frozenset({"comment"}))
+
+    @classmethod
+    def load(cls, path: str | Path) -> "ExperimentConfig":
+        try:
+            return cls.from_dict(json.loads(Path(path).read_text(encoding="utf-8")))
+        except (ValueError, TypeError) as exc:
+            raise ValueError(f"{path}: {exc}") from None
+
+    def replace(self, **changes: Any) -> "ExperimentConfig":
+        return dataclasses.replace(self, **changes)
+
+
+CONFIGS_DIR: Path = Path(__file__).resolve().parent / "configs"
+
+
+def resolve_config(name: str) -> Path:
+    """A config file path, or the name of one in ``experiments/configs`` (``.json`` optional)."""
+    p = Path(name)
+    if p.is_file():
+        return p
+    for cand in (CONFIGS_DIR / name, CONFIGS_DIR / f"{name}.json"):
+        if cand.is_file():
+            return cand
+    raise FileNotFoundError(f"no config {name!r} (neither a file nor one of "
+                            f"{sorted(q.stem for q in CONFIGS_DIR.glob('*.json'))})")
