@@ -24,7 +24,13 @@ that stay idle longer than a timeout exit, down to a number kept warm.
 Each goal runs in catch/3 with a clean thread-local state as far as this
 module is concerned; a goal that leaves thread-local facts behind must
 clean them itself (the platform's goals do).
+
+The default idle time is the flag `dfrl_pool_idle` (seconds, default
+30), so that a test can make workers expire quickly and check that a
+pool whose workers all timed out still takes jobs.
 */
+
+:- create_prolog_flag(dfrl_pool_idle, 30, [type(float), keep(true)]).
 
 :- dynamic
     pool_idle/2,                % Pool, Count
@@ -39,7 +45,7 @@ clean them itself (the platform's goals do).
 %     - max(+N)        most workers of this pool (default 1000)
 %     - keep(+N)       idle workers kept warm (default 8)
 %     - idle(+Sec)     idle time after which a surplus worker exits
-%                      (default 30)
+%                      (default: the flag `dfrl_pool_idle`, 30)
 %
 %   @error resource_error(workers(Pool)) if Pool is at its maximum and
 %   every worker is busy.
@@ -51,7 +57,8 @@ pool_run(Pool, Goal, Options) :-
     must_be(atom, Pool),
     option(max(Max), Options, 1000),
     option(keep(Keep), Options, 8),
-    option(idle(Idle), Options, 30),
+    current_prolog_flag(dfrl_pool_idle, DefaultIdle),
+    option(idle(Idle), Options, DefaultIdle),
     with_mutex(dfrl_worker_pool, take_worker(Pool, Max, How)),
     (   How == queue
     ->  pool_queue(Pool, Q),
@@ -107,8 +114,14 @@ worker_loop(Pool, Q, Keep, Idle) :-
     with_mutex(dfrl_worker_pool, change(pool_idle, Pool, 1)),
     worker_wait(Pool, Q, Keep, Idle).
 
+%   thread_get_message/3 *fails* when its timeout expires: that is the
+%   idle case, and must not end the worker while the pool still counts
+%   it as idle (jobs queued for it would never run).
 worker_wait(Pool, Q, Keep, Idle) :-
-    catch(thread_get_message(Q, Msg, [timeout(Idle)]), E, interrupted(E, Msg)),
+    (   catch(thread_get_message(Q, Msg0, [timeout(Idle)]), E, interrupted(E, Msg0))
+    ->  Msg = Msg0
+    ;   Msg = timeout
+    ),
     (   Msg = run(Goal)
     ->  run_goal(Goal),
         worker_loop(Pool, Q, Keep, Idle)
@@ -153,8 +166,9 @@ job_error(E) :-
 
 %!  pool_drain is det.
 %
-%   Ask every idle worker of every pool to exit, and wait (at most a
-%   second) until they have. Busy workers finish their job first.
+%   Ask every idle worker of every pool to exit, and give them 50 ms to
+%   do so (it does not wait for them to finish exiting). Busy workers
+%   finish their job first.
 
 pool_drain :-
     with_mutex(dfrl_worker_pool,
