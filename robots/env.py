@@ -197,6 +197,10 @@ class EPuckEnv(gym.Env):
         """
         super().reset(seed=seed)
         options = options or {}
+        if seed is not None:
+            # same seed, same world: a rebuilt client holds no contact state from before
+            self.world.rebuild()
+            self.robot = self.world.robot
         if "pose" in options:
             pose = tuple(float(v) for v in options["pose"])
         elif seed is not None and not self.arena.start.random:

@@ -97,6 +97,16 @@ class World:
         self.client: int = p.connect(mode)
         if self.client < 0:
             raise RuntimeError("could not connect to pybullet")
+        self.rebuild()
+
+    def rebuild(self) -> None:
+        """Empty the client and build the arena and the robot afresh.
+
+        A teleport alone (:meth:`place_robot`) keeps the solver's cached contacts and
+        warm-start state, so two seeded resets to the same pose could step differently (seen in
+        R1). A seeded reset therefore rebuilds the world; ``self.robot`` is a new
+        :class:`EPuck` afterwards.
+        """
         cid = self.client
         c = self.config
         p.resetSimulation(physicsClientId=cid)
@@ -108,7 +118,7 @@ class World:
             deterministicOverlappingPairs=1,
             physicsClientId=cid,
         )
-        self.bodies: ArenaBodies = build_arena(arena, cid)
+        self.bodies: ArenaBodies = build_arena(self.arena, cid)
         self.robot = EPuck(cid, c.robot)
         self.sim_time = 0.0
 

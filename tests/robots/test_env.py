@@ -9,7 +9,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import dfrl.robots  # noqa: F401 - registers dfrl/EPuck-v0
-from dfrl.arenas import load_arena
+from dfrl.arenas import builtin_arena_names, load_arena
 from dfrl.robots.env import EnvConfig, EPuckEnv
 from dfrl.robots.epuck import EPuckConfig
 from dfrl.robots.world import SimConfig, World
@@ -80,10 +80,27 @@ def test_sensor_noise_uses_the_given_rng() -> None:
         world.close()
 
 
-def test_check_env_passes() -> None:
-    env = gym.make("dfrl/EPuck-v0", arena="r4")
+@pytest.mark.parametrize("arena", builtin_arena_names())
+def test_check_env_passes(arena: str) -> None:
+    env = gym.make("dfrl/EPuck-v0", arena=arena)
     try:
         check_env(env.unwrapped)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("arena", builtin_arena_names())
+def test_same_seed_same_step_in_one_env(arena: str) -> None:
+    # A teleport kept the solver's contact state: in R1, reset(seed=123); step(0) alternated
+    # between two rewards. Seeded resets now rebuild the world.
+    env = EPuckEnv(arena, EnvConfig())
+    try:
+        steps = []
+        for _ in range(3):
+            env.reset(seed=123)
+            obs, reward, *_ = env.step(0)
+            steps.append((obs.tolist(), reward))
+        assert steps[0] == steps[1] == steps[2]
     finally:
         env.close()
 
