@@ -22,7 +22,13 @@ WALL_THICKNESS: float = 0.02
 #: Folder of the built-in arena files (package data).
 _ARENA_DIR = Path(__file__).resolve().parent
 
-_TOP_LEVEL_KEYS = {"name", "size", "wall_height", "blocks", "start", "description"}
+#: Clearance a fixed start pose needs from every block and wall (m): the e-puck's body
+#: radius (``dfrl.robots.epuck.EPuckConfig.body_radius``), so that a robot placed there
+#: touches nothing. The arena layer knows no robot; this is the robot it is made for.
+START_CLEARANCE: float = 0.037
+
+_TOP_LEVEL_KEYS = {"name", "size", "wall_height", "blocks", "start", "description",
+                   "allow_overlap"}
 _BLOCK_KEYS = {"center", "size", "yaw"}
 
 
@@ -107,6 +113,8 @@ class ArenaSpec:
         Free text.
     source : str
         Where the spec was read from (a path or ``"<dict>"``).
+    allow_overlap : bool
+        Blocks may overlap (otherwise overlapping blocks are an error).
     """
 
     name: str
@@ -116,6 +124,7 @@ class ArenaSpec:
     start: StartSpec = field(default_factory=StartSpec)
     description: str = ""
     source: str = "<dict>"
+    allow_overlap: bool = False
 
     def clearance(self, xy: np.ndarray) -> np.ndarray:
         """Distance from floor points to the nearest wall or block.
@@ -192,6 +201,8 @@ class ArenaSpec:
         }
         if self.description:
             out["description"] = self.description
+        if self.allow_overlap:
+            out["allow_overlap"] = True
         return out
 
 
@@ -213,6 +224,29 @@ def _vector(value: Any, n: int, source: str, where: str, positive: bool = False)
     if not isinstance(value, list) or len(value) != n:
         raise _fail(source, where, f"expected a list of {n} numbers, got {json.dumps(value)}")
     return tuple(_number(v, source, f"{where}[{i}]", positive) for i, v in enumerate(value))
+
+
+def _corners(block: Block) -> np.ndarray:
+    """The footprint's four corners, shape (4, 2)."""
+    c, s = math.cos(block.yaw), math.sin(block.yaw)
+    hx, hy = block.size[0] / 2.0, block.size[1] / 2.0
+    local = np.array([[hx, hy], [-hx, hy], [-hx, -hy], [hx, -hy]])
+    rot = np.array([[c, -s], [s, c]])
+    return local @ rot.T + np.asarray(block.center)
+
+
+def blocks_overlap(a: Block, b: Block, tolerance: float = 1e-9) -> bool:
+    """True when two footprints share area (touching edges do not count).
+
+    Separating-axis test on the two rectangles' edge normals.
+    """
+    ca, cb = _corners(a), _corners(b)
+    for yaw in (a.yaw, b.yaw):
+        for axis in ((math.cos(yaw), math.sin(yaw)), (-math.sin(yaw), math.cos(yaw))):
+            pa, pb = ca @ axis, cb @ axis
+            if pa.max() <= pb.min() + tolerance or pb.max() <= pa.min() + tolerance:
+                return False
+    return True
 
 
 def parse_arena(data: Any, source: str = "<dict>") -> ArenaSpec:
@@ -276,6 +310,16 @@ def parse_arena(data: Any, source: str = "<dict>") -> ArenaSpec:
             )
         blocks.append(Block(center=(center[0], center[1]), size=(bsize[0], bsize[1], bsize[2]), yaw=yaw))
 
+    allow_overlap = data.get("allow_overlap", False)
+    if not isinstance(allow_overlap, bool):
+        raise _fail(source, "allow_overlap", f"expected true or false, got {json.dumps(allow_overlap)}")
+    if not allow_overlap:
+        for i in range(len(blocks)):
+            for j in range(i + 1, len(blocks)):
+                if blocks_overlap(blocks[i], blocks[j]):
+                    raise _fail(source, f"blocks[{j}]",
+                                f"overlaps blocks[{i}] (set \"allow_overlap\": true if meant)")
+
     raw_start = data["start"]
     if not isinstance(raw_start, dict):
         raise _fail(source, "start", f"expected an object, got {json.dumps(raw_start)}")
@@ -295,11 +339,17 @@ def parse_arena(data: Any, source: str = "<dict>") -> ArenaSpec:
     spec = ArenaSpec(
         name=name.strip(), size=(size[0], size[1]), wall_height=wall_height,
         blocks=tuple(blocks), start=start, description=description, source=source,
+        allow_overlap=allow_overlap,
     )
     if start.pose is not None:
         x, y, _ = start.pose
-        if not spec.is_free(x, y, 0.0) or spec.clearance(np.array([[x, y]]))[0] <= 0.0:
-            raise _fail(source, "start.pose", f"({x}, {y}) is inside a block or outside the floor")
+        gap = float(spec.clearance(np.array([[x, y]]))[0])
+        if gap < START_CLEARANCE:
+            where = "inside a block or outside the floor" if gap <= 0.0 else (
+                f"only {gap:.3f} m from a block or wall")
+            raise _fail(source, "start.pose",
+                        f"({x}, {y}) is {where}; a start pose needs {START_CLEARANCE} m "
+                        "(the robot's radius) of free floor around it")
     return spec
 
 

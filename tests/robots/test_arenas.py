@@ -90,3 +90,40 @@ def test_arena_loads_into_pybullet_with_solid_blocks() -> None:
         assert bodies5.blocks is None
     finally:
         p.disconnect(physicsClientId=cid)
+
+
+def test_start_pose_must_clear_blocks_by_the_robot_radius() -> None:
+    # a pose 2 cm from the block's face: outside it, but the robot would touch it at step 1
+    near = _good()
+    near["blocks"][0]["yaw"] = 0.0
+    near["start"] = {"pose": [0.2, 0.1 - 0.1 - 0.02, 0.0]}
+    with pytest.raises(ArenaError, match=r"start\.pose: .* only 0\.020 m from a block or wall"):
+        parse_arena(near, "near.json")
+    # 2 cm from a wall
+    wall = _good()
+    wall["start"] = {"pose": [-0.48, 0.0, 0.0]}
+    with pytest.raises(ArenaError, match=r"only 0\.020 m"):
+        parse_arena(wall)
+    # 5 cm away is enough
+    ok = _good()
+    ok["blocks"][0]["yaw"] = 0.0
+    ok["start"] = {"pose": [0.2, 0.1 - 0.1 - 0.05, 0.0]}
+    assert parse_arena(ok).start.pose is not None
+
+
+def test_overlapping_blocks_are_an_error_unless_allowed() -> None:
+    data = _good()
+    data["blocks"] = [{"center": [0.2, 0.1], "size": [0.1, 0.2, 0.1]},
+                      {"center": [0.26, 0.1], "size": [0.1, 0.1, 0.1], "yaw": 0.7}]
+    with pytest.raises(ArenaError, match=r"blocks\[1\]: overlaps blocks\[0\]"):
+        parse_arena(data, "lshape.json")
+    data["allow_overlap"] = True
+    spec = parse_arena(data)
+    assert spec.allow_overlap and parse_arena(spec.to_dict()) == spec
+    # blocks that only touch along an edge do not overlap
+    touching = _good()
+    touching["blocks"] = [{"center": [0.2, 0.1], "size": [0.1, 0.2, 0.1]},
+                          {"center": [0.3, 0.1], "size": [0.1, 0.2, 0.1]}]
+    assert len(parse_arena(touching).blocks) == 2
+    with pytest.raises(ArenaError, match="allow_overlap: expected true or false"):
+        parse_arena({**_good(), "allow_overlap": "yes"})
