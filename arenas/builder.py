@@ -93,9 +93,9 @@ def build_arena(spec: ArenaSpec, client: int) -> ArenaBodies:
     """
     w, d = spec.size
     t = WALL_THICKNESS
-    margin = 0.2
-    floor_half = (w / 2 + t + margin, d / 2 + t + margin, 0.01)
-    # An infinite plane collides faster than a box; a thin box is what the camera sees.
+    # The floor the camera sees ends at the walls' inner faces; an infinite plane collides
+    # faster than a box, so the collision shape stays a plane.
+    floor_half = (w / 2, d / 2, 0.01)
     floor_col = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=client)
     floor_vis = p.createVisualShape(
         p.GEOM_BOX, halfExtents=floor_half, visualFramePosition=(0.0, 0.0, -floor_half[2]),

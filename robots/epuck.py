@@ -259,6 +259,28 @@ class EPuck:
             dist = np.where(seen, np.clip(dist + noise, 0.0, rng_), dist)
         return dist
 
+    def sensor_rays(self, distances: np.ndarray) -> np.ndarray:
+        """The sensors' rays in the world frame, from the body's rim to what each one sees.
+
+        Parameters
+        ----------
+        distances : np.ndarray, shape (n_sensors,)
+            As returned by :meth:`sense`.
+
+        Returns
+        -------
+        np.ndarray, shape (n_sensors, 2, 2)
+            ``[i, 0]`` is the rim point ``(x, y)`` of sensor ``i``, ``[i, 1]`` the end of its
+            ray (an obstacle, or ``sensor_range`` away).
+        """
+        x, y, yaw = self.pose()
+        angles = yaw + np.asarray(self.config.sensor_angles)
+        rim = self.config.body_radius
+        far = rim + np.asarray(distances, dtype=np.float64)
+        unit = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+        centre = np.array([x, y])
+        return np.stack([centre + rim * unit, centre + far[:, None] * unit], axis=1)
+
     def proximity(self, distances: np.ndarray) -> np.ndarray:
         """Map distances to proximities ``1 - d / sensor_range`` in ``[0, 1]`` (1 = touching)."""
         return 1.0 - distances / self.config.sensor_range

@@ -71,8 +71,9 @@ def plot_learning_curves(
     return out
 
 
-def plot_arena(image: np.ndarray, spec, path: str | Path) -> Path:  # noqa: ANN001 - ArenaSpec
-    """Save a rendered top view with metric axes, block outlines and the start pose.
+def plot_arena(image: np.ndarray, spec, path: str | Path,  # noqa: ANN001 - ArenaSpec
+               rays: np.ndarray | None = None) -> Path:
+    """Save a rendered top view with metric axes, the start pose and its heading.
 
     Parameters
     ----------
@@ -80,6 +81,8 @@ def plot_arena(image: np.ndarray, spec, path: str | Path) -> Path:  # noqa: ANN0
         Top view from :meth:`dfrl.robots.world.World.render_top` (covers the floor plus 5 cm).
     spec : ArenaSpec
     path : str or Path
+    rays : np.ndarray, shape (n_sensors, 2, 2), optional
+        Sensor rays to draw (:meth:`dfrl.robots.epuck.EPuck.sensor_rays`).
     """
     plt = _pyplot()
     w, d = spec.size
@@ -93,6 +96,9 @@ def plot_arena(image: np.ndarray, spec, path: str | Path) -> Path:  # noqa: ANN0
         ax.text(x, y - 0.07, "start", ha="center", va="top", fontsize=8)
     else:
         ax.text(0, -half + 0.01, "start: random free pose", ha="center", va="bottom", fontsize=8)
+    if rays is not None:
+        for (x0, y0), (x1, y1) in np.asarray(rays):
+            ax.plot([x0, x1], [y0, y1], color="tab:red", lw=0.8, alpha=0.8)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     n = len(spec.blocks)

@@ -166,3 +166,23 @@ def test_rgb_render_is_a_top_view() -> None:
         assert img[60, 400].min() > 180
     finally:
         env.close()
+
+
+def test_sensor_rays_end_where_the_sensors_see_a_wall() -> None:
+    # Prepare: the empty arena R5 (walls' inner faces at x, y = +-0.5), robot facing +x.
+    world = World(load_arena("r5"), SimConfig())
+    try:
+        world.place_robot(0.43, 0.0, 0.0)
+        # Execute
+        rays = world.robot.sensor_rays(world.robot.sense())
+        # Assert: the two front sensors (ps0, ps7 at -+0.3 rad) end on the wall, the side and
+        # rear ones a full range away from the rim; every ray starts on the rim.
+        rim = EPuckConfig().body_radius
+        assert rays.shape == (8, 2, 2)
+        assert np.allclose(np.hypot(rays[:, 0, 0] - 0.43, rays[:, 0, 1]), rim)
+        assert rays[0, 1, 0] == pytest.approx(0.5, abs=2e-3)
+        assert rays[7, 1, 0] == pytest.approx(0.5, abs=2e-3)
+        lengths = np.hypot(*(rays[:, 1] - rays[:, 0]).T)
+        assert np.allclose(lengths[2:6], EPuckConfig().sensor_range)
+    finally:
+        world.close()
