@@ -20,7 +20,8 @@ from dfrl.pybridge.terms import Atom, Blob, Term, Var
 
 if TYPE_CHECKING:
     from dfrl.pybridge.codec import Codec
-    from dfrl.pybridge.node import RobotNode, TableProvider
+    from dfrl.pybridge.node import RobotNode
+    from dfrl.pybridge.providers import StaticTable, TableProvider
 
 __all__ = [
     "BridgeError",
@@ -37,12 +38,14 @@ __all__ = [
     "RobotNode",
     "Bridge",
     "TableProvider",
+    "StaticTable",
 ]
 
 _LAZY = {
     "RobotNode": "dfrl.pybridge.node",
     "Bridge": "dfrl.pybridge.node",
-    "TableProvider": "dfrl.pybridge.node",
+    "TableProvider": "dfrl.pybridge.providers",
+    "StaticTable": "dfrl.pybridge.providers",
     "Codec": "dfrl.pybridge.codec",
 }
 

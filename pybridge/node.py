@@ -12,70 +12,31 @@ import atexit
 import logging
 import math
 import threading
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, ClassVar, Protocol, runtime_checkable
+from typing import Any, ClassVar
 
 import numpy as np
 
-from dfrl.pybridge import codec as _codec
 from dfrl.pybridge.codec import Codec
 from dfrl.pybridge.engine import Prolog, prolog
-from dfrl.pybridge.errors import BridgeError, CodecError, NodeStateError, PrologError, PrologFailure
+from dfrl.pybridge.errors import BridgeError, NodeStateError, PrologError, PrologFailure
+from dfrl.pybridge.providers import TableProvider
+from dfrl.pybridge.self_test import SelfTestReport, self_test
+from dfrl.pybridge.serving import MODULE as _MODULE
+from dfrl.pybridge.serving import RegisteredRobot, RequestServer
+from dfrl.pybridge.tartarus_commands import TartarusCommands
 from dfrl.pybridge.terms import Atom, Term, Var, atom_or_self
 
-__all__ = ["TableProvider", "RobotNode", "Bridge", "BRIDGE_FILE", "SelfTestReport"]
+__all__ = ["TableProvider", "RobotNode", "Bridge", "BRIDGE_FILE", "CODEC_FILE", "SelfTestReport"]
 
 log = logging.getLogger(__name__)
 
 BRIDGE_FILE: Path = Path(__file__).resolve().parent / "robot_bridge.pl"
 """The Prolog side of the bridge (module ``robot_bridge``)."""
 
-_MODULE = "robot_bridge"
-
-
-@runtime_checkable
-class TableProvider(Protocol):
-    """What a robot offers to the bridge.
-
-    ``q_table`` : float64 ndarray, shape (n_states, n_actions)
-    ``visits`` : int64 ndarray, shape (n_states, n_actions)
-    ``set_q_table(table)`` : replace the table with a float64 array of the same shape
-    """
-
-    @property
-    def q_table(self) -> np.ndarray: ...
-
-    @property
-    def visits(self) -> np.ndarray: ...
-
-    def set_q_table(self, table: np.ndarray) -> None: ...
-
-
-@dataclass
-class _Robot:
-    robot_id: Any
-    provider: TableProvider
-    shape: tuple[int, int]
-    algorithm: str
-
-
-@dataclass(frozen=True)
-class SelfTestReport:
-    """Outcome of the start-up codec self-test."""
-
-    fts_ok: bool
-    text_ok: bool
-    detail: str
-
-
-class _RequestError(Exception):
-    """Raised while serving a request; carries the Prolog formal term to reply with."""
-
-    def __init__(self, formal: Any) -> None:
-        super().__init__(formal)
-        self.formal = formal
+CODEC_FILE: Path = Path(__file__).resolve().parent / "table_codec.pl"
+"""The Prolog side of the table codecs (module ``table_codec``)."""
 
 
 def _robot_term(robot_id: Any) -> Any:
@@ -84,20 +45,7 @@ def _robot_term(robot_id: Any) -> Any:
     return atom_or_self(robot_id) if isinstance(robot_id, str) else int(robot_id)
 
 
-def _self_test_samples() -> list[np.ndarray]:
-    rng = np.random.default_rng(20240611)
-    special = np.array([0.0, -0.0, 1.0, -2.5, 0.1, 1 / 3, 5e-324, 2.2250738585072014e-308,
-                        1.7976931348623157e308, -1e-300, 1e22, 123456.789e-12])
-    return [
-        np.empty(0),
-        np.array([1.0]),
-        special,                                        # varints of 1 byte
-        rng.standard_normal(13) * 1e3,                  # 10*13+1 = 131: 2-byte varint
-        rng.uniform(-1e6, 1e6, 1700),                   # 17001: 3-byte varint
-    ]
-
-
-class RobotNode:
+class RobotNode(TartarusCommands):
     """One robot node: embedded Prolog, the bridge, optionally the platform, and robots.
 
     Only one node may be open in a process at a time (the bridge's request queue is
@@ -128,12 +76,14 @@ class RobotNode:
                 raise NodeStateError("another RobotNode is open in this process; close it first")
             RobotNode._active = self
         self._closed = False
-        self._robots: dict[Any, _Robot] = {}
         self._nodes: list[Any] = []
         self._platform_loaded = False
         try:
             self.prolog: Prolog = prolog()
             self._must("use_module", Atom(str(BRIDGE_FILE)))
+            self._must("use_module", Atom(str(CODEC_FILE)))
+            self._server = RequestServer(self.prolog)
+            self._robots = self._server.robots
             self.request_timeout = request_timeout
             self._must("bridge_attach_server", module=_MODULE)
             self.self_test_report = self.self_test()
@@ -178,6 +128,7 @@ class RobotNode:
             raise BridgeError("the fts codec failed its self-test; it cannot be used")
         self._must("bridge_set_codec", Atom(value.value), module=_MODULE)
         self._codec = value
+        self._server.codec = value
 
     @property
     def closed(self) -> bool:
@@ -210,56 +161,10 @@ class RobotNode:
 
     # -- codec self-test ----------------------------------------------------------------------
     def self_test(self) -> SelfTestReport:
-        """Check both codecs against this SWI-Prolog, bit for bit, in both directions.
-
-        The fts check first compares Prolog's own ``fast_term_serialized/2`` output with the
-        Python encoder's bytes; only if they are identical are Python-made bytes given to
-        Prolog to deserialize (malformed input would crash the process).
-        """
-        fts_ok, text_ok, notes = True, True, []
-        for values in _self_test_samples():
-            floats = [float(x) for x in values]
-            bits = values.view(np.int64)
-            if fts_ok:
-                try:
-                    made = self._must("fast_term_serialized", floats, Var("S"))["S"].encode("latin-1")
-                    if made != _codec.encode_fts(values):
-                        fts_ok = False
-                        notes.append(f"fts bytes differ for {values.size} floats")
-                    else:
-                        back = self._must("fast_term_serialized", Var("L"), made)["L"]
-                        if not np.array_equal(np.array(back, dtype=np.float64).view(np.int64), bits):
-                            fts_ok = False
-                            notes.append(f"fts read-back differs for {values.size} floats")
-                        elif not np.array_equal(_codec.decode_fts(made).view(np.int64), bits):
-                            fts_ok = False
-                            notes.append(f"fts Python decode differs for {values.size} floats")
-                except (BridgeError, UnicodeError) as exc:
-                    fts_ok = False
-                    notes.append(f"fts: {exc}")
-            if text_ok:
-                try:
-                    ok = self._text_round_trip(values, floats)
-                    if not ok:
-                        text_ok = False
-                        notes.append(f"text round trip differs for {values.size} floats")
-                except (BridgeError, UnicodeError) as exc:
-                    text_ok = False
-                    notes.append(f"text: {exc}")
-        if not text_ok:
-            raise BridgeError("the text codec failed its self-test: " + "; ".join(notes))
-        return SelfTestReport(fts_ok, text_ok, "; ".join(notes) or "ok")
-
-    def _text_round_trip(self, values: np.ndarray, floats: list[float]) -> bool:
-        bits = values.view(np.int64)
-        # Prolog -> Python: the writer used by robot_bridge's text encoder
-        sol = self._must("atomic_list_concat", floats, Atom(","), Var("A"))
-        if not np.array_equal(_codec.decode_text(str(sol["A"])).view(np.int64), bits):
-            return False
-        # Python -> Prolog: the reader used by robot_bridge's text decoder
-        data = _codec.encode_text(values)
-        sol = self._must("decode_values", Term("text", data), Var("L"), module=_MODULE)
-        return np.array_equal(np.array(sol["L"], dtype=np.float64).view(np.int64), bits)
+        """Check both codecs against this SWI-Prolog, bit for bit, in both directions
+        (see :mod:`dfrl.pybridge.self_test`)."""
+        self._check_open()
+        return self_test(self.prolog)
 
     # -- platform -----------------------------------------------------------------------------
     def load_platform(self, entry: str | Path | None = None) -> None:
@@ -338,71 +243,9 @@ class RobotNode:
         self._nodes.append(node)
         return node
 
-    # Tartarus-style commands, always with bound arguments. Links are (Ip, Port) tuples.
-    @staticmethod
-    def _link(link: Sequence[Any]) -> tuple[Any, Any]:
-        ip, port = link
-        return (atom_or_self(ip), int(port))
-
-    def create_mobile_agent(self, name: str | None, link: Sequence[Any], handler: str,
-                            tokens: Iterable[int] = ()) -> Atom:
-        """``create_mobile_agent(?Name, (Ip,Port), Handler, Tokens)``; returns the agent name."""
-        self._check_open()
-        name_arg: Any = Var("Name") if name is None else Atom(name)
-        sol = self._must("create_mobile_agent", name_arg, self._link(link), Atom(handler), list(tokens))
-        return Atom(sol["Name"]) if name is None else Atom(name)
-
-    def create_static_agent(self, name: str | None, link: Sequence[Any], handler: str,
-                            tokens: Iterable[int] = ()) -> Atom:
-        """``create_static_agent(?Name, (Ip,Port), Handler, Tokens)``: an agent that never moves."""
-        self._check_open()
-        name_arg: Any = Var("Name") if name is None else Atom(name)
-        sol = self._must("create_static_agent", name_arg, self._link(link), Atom(handler), list(tokens))
-        return Atom(sol["Name"]) if name is None else Atom(name)
-
-    def execute_agent(self, name: str, link: Sequence[Any], handler: str, event: Any = None) -> None:
-        """``execute_agent(Name, (Ip,Port), Handler)``, or ``execute_agent/4`` with a start
-        ``event`` other than ``main``."""
-        self._check_open()
-        if event is None:
-            self._must("execute_agent", Atom(name), self._link(link), Atom(handler))
-        else:
-            self._must("execute_agent", Atom(name), self._link(link), Atom(handler), atom_or_self(event))
-
-    def move_agent(self, name: str, link: Sequence[Any]) -> None:
-        """``move_agent(Name, (Ip,Port))``."""
-        self._check_open()
-        self._must("move_agent", Atom(name), self._link(link))
-
-    def purge_agent(self, name: str) -> None:
-        """``purge_agent(Name)``."""
-        self._check_open()
-        self._must("purge_agent", Atom(name))
-
-    def list_agents(self) -> list[Any]:
-        """``list_agents(List)``: the agents on this platform."""
-        self._check_open()
-        return list(self._must("list_agents", Var("L"))["L"])
-
-    def assert_file_to_tartarus(self, path: str | Path) -> None:
-        """``assert_file_to_tartarus(File)``: load agent code into the running platform."""
-        self._check_open()
-        self._must("assert_file_to_tartarus", Atom(str(path)))
-
-    def add_payload(self, name: str, predicates: Iterable[tuple[str, int]]) -> None:
-        """``add_payload(Name, [(Pred,Arity), ...])``."""
-        self._check_open()
-        self._must("add_payload", Atom(name), [(Atom(p), int(a)) for p, a in predicates])
-
-    def post_agent(self, target: str, link: Sequence[Any], args: Sequence[Any]) -> None:
-        """``post_agent(Target, (Ip,Port), [Handler, Agent, Link | Args])``; ``args`` are
-        converted as described in :mod:`dfrl.pybridge.terms`."""
-        self._check_open()
-        self._must("post_agent", Atom(target), self._link(link), list(args))
-
     # -- robots -------------------------------------------------------------------------------
     def register_robot(self, robot_id: str | int, provider: TableProvider, *,
-                       algorithm: str = "qlearning") -> None:
+                       shape: Sequence[int] | None = None, algorithm: str = "qlearning") -> None:
         """Register a robot whose tables agents on this node may read and write.
 
         Parameters
@@ -411,22 +254,28 @@ class RobotNode:
             The robot's id, an atom (str) or integer in Prolog.
         provider : TableProvider
             ``q_table`` (float64, shape (S, A)), ``visits`` (int64, (S, A)),
-            ``set_q_table(array)``.
+            ``set_q_table(array)``; e.g. a :class:`dfrl.robots.training.Trainer` or a
+            :class:`dfrl.pybridge.StaticTable`.
+        shape : (int, int), optional
+            (S, A): the shape of the robot's table, fixed for the registration (every
+            table write is checked against it). Give it: without it the provider's
+            ``q_table`` is read once to learn it.
         algorithm : str
             Learning algorithm name, given to agents in the robot's props.
         """
         self._check_open()
         rid = _robot_term(robot_id)
+        names = dir(provider)                  # (hasattr would read the properties)
         for attr in ("q_table", "visits", "set_q_table"):
-            if not hasattr(provider, attr):
+            if attr not in names:
                 raise TypeError(f"provider has no {attr!r}")
-        table = np.asarray(provider.q_table)
-        if table.ndim != 2 or 0 in table.shape:
-            raise ValueError(f"q_table must be a non-empty 2-D array, got shape {table.shape}")
-        shape = (int(table.shape[0]), int(table.shape[1]))
-        props = [Term("algorithm", Atom(algorithm)), Term("shape", list(shape))]
+        dims = tuple(np.shape(provider.q_table) if shape is None else shape)
+        if len(dims) != 2 or not all(isinstance(d, (int, np.integer)) and d > 0 for d in dims):
+            raise ValueError(f"a table shape is two positive integers, got {dims}")
+        table_shape = (int(dims[0]), int(dims[1]))
+        props = [Term("algorithm", Atom(algorithm)), Term("shape", list(table_shape))]
         self._must("bridge_register_robot", rid, props, module=_MODULE)
-        self._robots[rid] = _Robot(rid, provider, shape, algorithm)
+        self._robots[rid] = RegisteredRobot(rid, provider, table_shape, algorithm)
 
     def unregister_robot(self, robot_id: str | int) -> None:
         """Forget a robot; later requests for it get ``existence_error(robot, Id)``."""
@@ -447,80 +296,11 @@ class RobotNode:
 
         Call once per control step from the control loop (main thread). With the default
         ``timeout=0`` it never blocks; a positive timeout waits that long for the first
-        request (useful when idle).
+        request (useful when idle). A table write is validated here, where it enters
+        Python (see :func:`dfrl.pybridge.serving.validate_write`).
         """
         self._check_open()
-        served = 0
-        wait = float(timeout)
-        while served < max_requests:
-            sol = self.prolog.call("bridge_next_request", Var("R"), wait, module=_MODULE)
-            if sol is None:
-                break
-            wait = 0.0
-            request = sol["R"]
-            req_id, op = request.args
-            try:
-                reply = self._serve(op)
-            except _RequestError as exc:
-                reply = Term("error", exc.formal)
-            except Exception as exc:  # noqa: BLE001 - every failure becomes a Prolog error
-                log.debug("serving %r failed", op, exc_info=True)
-                reply = Term("error", Term("python_error", Atom(type(exc).__qualname__), str(exc)))
-            except BaseException as exc:
-                self.prolog.call("bridge_reply", req_id, Term("error", Term(
-                    "python_error", Atom(type(exc).__qualname__), str(exc))), module=_MODULE)
-                raise
-            self.prolog.call("bridge_reply", req_id, reply, module=_MODULE)
-            served += 1
-        return served
-
-    def _robot(self, rid: Any) -> _Robot:
-        robot = self._robots.get(rid)
-        if robot is None:
-            raise _RequestError(Term("existence_error", Atom("robot"), rid))
-        return robot
-
-    def _table_reply(self, table: np.ndarray) -> Term:
-        arr = np.asarray(table)
-        if arr.ndim != 2:
-            raise BridgeError(f"the robot's table has shape {arr.shape}, not 2-D")
-        data = _codec.encode(self._codec, arr.astype(np.float64, copy=False))
-        return Term("table", [int(arr.shape[0]), int(arr.shape[1])], Term(self._codec.value, data))
-
-    def _serve(self, op: Any) -> Any:
-        if not isinstance(op, Term):
-            raise BridgeError(f"unknown request {op!r}")
-        if op.name == "get_qtable" and op.arity == 1:
-            return self._table_reply(self._robot(op.args[0]).provider.q_table)
-        if op.name == "get_visits" and op.arity == 1:
-            return self._table_reply(self._robot(op.args[0]).provider.visits)
-        if op.name == "get_qtable_and_visits" and op.arity == 1:
-            provider = self._robot(op.args[0]).provider
-            return Term("tables", self._table_reply(provider.q_table), self._table_reply(provider.visits))
-        if op.name == "set_qtable" and op.arity == 3:
-            rid, shape, data = op.args
-            robot = self._robot(rid)
-            self._set(robot, shape, data)
-            return Atom("ok")
-        raise BridgeError(f"unknown request {op!r}")
-
-    def _set(self, robot: _Robot, shape: Any, data: Any) -> None:
-        current = robot.shape
-        if not (isinstance(shape, list) and tuple(shape) == tuple(current)):
-            raise _RequestError(Term("domain_error", Term("shape", list(current)), shape))
-        if not (isinstance(data, Term) and data.arity == 1 and isinstance(data.args[0], str)):
-            raise BridgeError(f"malformed table data {data!r:.80}")
-        n = int(np.prod(current))
-        try:
-            values = _codec.decode(Codec(data.name), data.args[0].encode("latin-1"), expected=n)
-        except (CodecError, ValueError) as exc:
-            # not all floats: the agent side converts the values and asks again
-            raise _RequestError(Term("type_error", Atom("float_list"), str(exc))) from None
-        finite = np.isfinite(values)
-        if not finite.all():
-            bad = float(values[np.argmin(finite)])
-            raise _RequestError(Term("domain_error", Atom("finite_float"), bad))
-        robot.provider.set_q_table(values.reshape(current))
+        return self._server.serve_pending(max_requests, timeout)
 
     # -- shutdown -----------------------------------------------------------------------------
     def close(self, thread_timeout: float = 2.0) -> list[Any]:

@@ -20,12 +20,15 @@
             bridge_stop_threads/2,      % +Timeout, -Remaining
             bridge_stop_threads/3       % +Timeout, -Remaining, -Aborted
           ]).
+:- use_module(table_codec,
+              [ encode_values/3, decode_values/2, fts_encoded/2, float_list/2 ]).
+:- use_module('../platform_pl/robot_resources', []).
 :- autoload(library(error),
             [ must_be/2, domain_error/2, existence_error/2, type_error/2,
               instantiation_error/1 ]).
 :- autoload(library(option), [option/3]).
 :- autoload(library(lists), [member/2]).
-:- autoload(library(apply), [maplist/3, include/3]).
+:- autoload(library(apply), [include/3]).
 :- autoload(library(debug), [debug/3]).
 
 /** <module> Robot tables for agents, served by the Python host between control steps
@@ -54,6 +57,17 @@ compact form, selected with bridge_set_codec/1:
     this Prolog produces (fast_term_serialized/2 crashes the process on
     malformed input, so it is never given bytes of unknown origin).
   - `text`: comma-separated float text, slower but safe (the default).
+
+Both formats are defined, on this side, in table_codec.pl only (their
+Python side is `dfrl.pybridge.codec`).
+
+A table write is validated once, by the host where it enters Python
+(registered shape, number of values, finite values); here set_qtable/3
+checks only what it needs to build the request.
+
+The bridge implements the platform's resource hook (robot_resources.pl):
+an agent that calls get_robot_table/3, get_robot_tables/4 or
+set_robot_table/3 reaches the robots registered here.
 
 This module loads in plain `swipl` as well; there, some thread must call
 bridge_next_request/2 and bridge_reply/2 for the requests to be answered.
@@ -192,13 +206,15 @@ check_size(Shape, Values) :-
 %
 %   Replace Robot's Q-table with Table = qtable(Shape, Values). Shape must
 %   be the registered shape and Values NStates*NActions finite numbers
-%   (integers are converted to floats). If anything is wrong the robot's
-%   table is left unchanged. Options: timeout(Seconds).
+%   (integers are converted to floats); the host checks that where the
+%   table enters Python. If anything is wrong the robot's table is left
+%   unchanged. Options: timeout(Seconds).
 %
 %   @error existence_error(robot, Robot) if Robot is not registered here.
+%   @error type_error(qtable, Table) if Table is not qtable(Shape, Values).
+%   @error type_error(number, X) for a non-number in Values.
 %   @error domain_error(shape(Registered), Shape) on a shape mismatch.
 %   @error domain_error(qtable_size(N), Len) if Values has Len elements.
-%   @error type_error(number, X) for a non-number in Values.
 %   @error domain_error(finite_float, X) for an infinite or NaN value.
 %   @error timeout_error(bridge, Robot) if the host did not answer in time.
 
@@ -208,7 +224,7 @@ set_qtable(Robot, Table) :-
 set_qtable(Robot, Table, Options) :-
     must_be(atomic, Robot),
     must_be(list, Options),
-    registered(Robot, Props),
+    registered(Robot),
     (   var(Table)
     ->  instantiation_error(Table)
     ;   Table = qtable(Shape, Values0)
@@ -217,13 +233,8 @@ set_qtable(Robot, Table, Options) :-
     ),
     must_be(ground, Shape),
     must_be(list, Values0),
-    memberchk(shape(Registered), Props),
-    (   Shape == Registered
-    ->  true
-    ;   domain_error(shape(Registered), Shape)
-    ),
-    check_size(Shape, Values0),
-    (   fts_floats(Values0, Data0)
+    (   bridge_codec(fts),
+        fts_encoded(Values0, Data0)
     ->  set_request(Robot, Shape, Data0, Options, Reply0),
         (   Reply0 = error(type_error(float_list, _))
         ->  set_request_floats(Robot, Shape, Values0, Options, Reply)
@@ -236,40 +247,10 @@ set_qtable(Robot, Table, Options) :-
     ;   reply_error(Reply, set_qtable/2)
     ).
 
-%   fts_floats(+Values, -Data) is semidet.
-%
-%   With the fts codec, Data is the encoding of Values if it has the exact
-%   length of an encoded list of floats. That is a cheap stand-in for a
-%   pass over Values: the host checks every element's tag and answers
-%   type_error(float_list, _) if one is not a float (only a contrived mix
-%   of other terms can have that length), and set_qtable/3 then converts.
-
-fts_floats(Values, fts(String)) :-
-    bridge_codec(fts),
-    fast_term_serialized(Values, String),
-    string_length(String, Len),
-    length(Values, N),
-    fts_length(N, Len).
-
-fts_length(0, 2) :- !.
-fts_length(N, Len) :-
-    Size is 10*N + 1,
-    Cells is 6*N,
-    varint_length(Size, L1),
-    varint_length(Cells, L2),
-    Len =:= 2 + L1 + L2 + 10*N.
-
-varint_length(X, L) :-
-    (   X < 128
-    ->  L = 1
-    ;   Y is X >> 7,
-        varint_length(Y, L0),
-        L is L0 + 1
-    ).
-
 set_request_floats(Robot, Shape, Values0, Options, Reply) :-
     float_list(Values0, Values),
-    encode_values(Values, Data),
+    bridge_codec(Codec),
+    encode_values(Codec, Values, Data),
     set_request(Robot, Shape, Data, Options, Reply).
 
 set_request(Robot, Shape, Data, Options, Reply) :-
@@ -292,10 +273,7 @@ check_shape(Shape) :-
     ).
 
 registered(Robot) :-
-    registered(Robot, _).
-
-registered(Robot, Props) :-
-    (   robot_(Robot, Props)
+    (   robot_(Robot, _)
     ->  true
     ;   existence_error(robot, Robot)
     ).
@@ -305,26 +283,6 @@ reply_error(error(Formal), PI) :-
     throw(error(Formal, context(PI, _))).
 reply_error(Reply, PI) :-
     throw(error(domain_error(bridge_reply, Reply), context(PI, _))).
-
-%!  float_list(+Values0, -Values) is det.
-%
-%   Values is Values0 with every number as a float. The common case (all
-%   floats already) is one tight pass and no copy.
-
-float_list(Values, Values) :-
-    all_floats(Values),
-    !.
-float_list(Values0, Values) :-
-    maplist(to_float, Values0, Values).
-
-all_floats([]).
-all_floats([X|T]) :-
-    float(X),
-    all_floats(T).
-
-to_float(X, F) :-
-    must_be(number, X),
-    F is float(X).
 
 		 /*******************************
 		 *      REQUEST / REPLY         *
@@ -554,56 +512,28 @@ bridge_set_codec(Codec) :-
 bridge_codec(Codec) :-
     codec_(Codec), !.
 
-encode_values(Values, Data) :-
-    bridge_codec(Codec),
-    encode_values(Codec, Values, Data).
+		 /*******************************
+		 *     RESOURCE HOOK (C1)       *
+		 *******************************/
 
-encode_values(fts, Values, fts(String)) :-
-    fast_term_serialized(Values, String).
-encode_values(text, Values, text(String)) :-
-    atomic_list_concat(Values, ',', Atom),
-    atom_string(Atom, String).
+%   The platform's resource hook, robot_resources.pl: the robots of this
+%   process are its resources. robot_resources checks the arguments and the
+%   robot's existence, then calls one of these; errors pass through.
 
-decode_values(fts(String), Values) :-
-    !,
-    fts_check(String),
-    fast_term_serialized(Values, String).
-decode_values(text(String), Values) :-
-    !,
-    must_be(string, String),
-    (   String == ""
-    ->  Values = []
-    ;   split_string(String, ",", "", Parts),
-        maplist(text_float, Parts, Values)
-    ).
-decode_values(Data, _) :-
-    domain_error(bridge_values, Data).
+:- multifile
+    robot_resources:robot/2,
+    robot_resources:table_get/3,
+    robot_resources:tables_get/4,
+    robot_resources:table_set/3.
 
-text_float(Text, Float) :-
-    number_string(Number, Text),
-    Float is float(Number).
-
-%   fts_check(+String)
-%
-%   Cheap sanity check before fast_term_serialized/2 sees String (which
-%   must come from pybridge's encoder): the header and the last byte of a
-%   float list in the format the host's self-test verified.
-
-fts_check(String) :-
-    must_be(string, String),
-    string_length(String, Len),
-    (   Len >= 2,                       % (string_code/3 copies the string:
-        sub_string(String, 0, 1, _, First), % sub_string/5 with a fixed start
-        Last is Len - 1,                    % does not)
-        sub_string(String, Last, 1, 0, "\t"),
-        (   First == "r"
-        ->  Len > 3
-        ;   First == "z"
-        ->  Len == 2
-        )
-    ->  true
-    ;   domain_error(fts_float_list, String)
-    ).
+robot_resources:robot(Robot, Props) :-
+    bridge_robot(Robot, Props).
+robot_resources:table_get(Robot, Table, Options) :-
+    get_qtable(Robot, Table, Options).
+robot_resources:tables_get(Robot, Table, Visits, Options) :-
+    get_qtable_and_visits(Robot, Table, Visits, Options).
+robot_resources:table_set(Robot, Table, Options) :-
+    set_qtable(Robot, Table, Options).
 
 		 /*******************************
 		 *           MESSAGES           *

@@ -7,30 +7,22 @@ from typing import Any
 
 import numpy as np
 
+from dfrl.pybridge.providers import StaticTable
+
 HELPER = Path(__file__).with_name("agents_helper.pl")
 
 
-class ArrayRobot:
-    """A table provider backed by numpy arrays (what a robot's learner offers)."""
+class ArrayRobot(StaticTable):
+    """The bridge's own static table provider, checking what the bridge promises a provider:
+    every table it is given is float64, of the registered shape, all finite."""
 
     def __init__(self, n_states: int, n_actions: int, seed: int = 0) -> None:
-        rng = np.random.default_rng(seed)
-        self._q = rng.standard_normal((n_states, n_actions))
-        self._visits = rng.integers(0, 1000, (n_states, n_actions), dtype=np.int64)
-        self.sets = 0
-
-    @property
-    def q_table(self) -> np.ndarray:
-        return self._q.copy()
-
-    @property
-    def visits(self) -> np.ndarray:
-        return self._visits.copy()
+        super().__init__((n_states, n_actions), seed)
 
     def set_q_table(self, table: np.ndarray) -> None:
-        assert table.shape == self._q.shape and table.dtype == np.float64
-        self._q = table.copy()
-        self.sets += 1
+        assert table.shape == self.shape and table.dtype == np.float64
+        assert np.isfinite(table).all()
+        super().set_q_table(table)
 
 
 def _atom(text: str) -> Any:

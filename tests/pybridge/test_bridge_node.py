@@ -141,26 +141,78 @@ def test_robot_unregistered_while_request_queued(node) -> None:
     assert _error_formal(result) == Term("existence_error", Atom("robot"), Atom("r1"))
 
 
-@pytest.mark.parametrize("table", [
-    Term("qtable", [2, 3], [0.0] * 6),             # wrong shape
-    Term("qtable", [2, 2], [0.0] * 3),             # wrong number of values
-    Term("qtable", [2, 2], [0.0, 1.0, Atom("x"), 2.0]),  # not a number
-    Term("qtable", [2, 2], [0.0, float("inf"), 1.0, 2.0]),  # non-finite
-    Term("qtable", [2, 2], [0.0, float("nan"), 1.0, 2.0]),  # non-finite
-    Term("table", [2, 2], [0.0] * 4),              # not a qtable term
+_NAN = float("nan")
+
+
+@pytest.mark.parametrize("table, expected", [
+    (Term("qtable", [2, 3], [0.0] * 6),                       # wrong shape
+     Term("domain_error", Term("shape", [2, 2]), [2, 3])),
+    (Term("qtable", [2, 2], [0.0] * 3),                       # wrong number of values
+     Term("domain_error", Term("qtable_size", 4), 3)),
+    (Term("qtable", [2, 2], [0.0] * 5),
+     Term("domain_error", Term("qtable_size", 4), 5)),
+    (Term("qtable", [2, 2], [0.0, 1.0, Atom("x"), 2.0]),      # not a number
+     Term("type_error", Atom("number"), Atom("x"))),
+    (Term("qtable", [2, 2], [0.0, float("inf"), 1.0, 2.0]),   # non-finite
+     Term("domain_error", Atom("finite_float"), float("inf"))),
+    (Term("qtable", [2, 2], [0.0, 1.0, 2.0, -float("inf")]),
+     Term("domain_error", Atom("finite_float"), -float("inf"))),
+    (Term("qtable", [2, 2], [0.0, _NAN, 1.0, 2.0]), None),     # NaN: checked below
+    (Term("table", [2, 2], [0.0] * 4),                        # not a qtable term
+     Term("type_error", Atom("qtable"), Term("table", [2, 2], [0.0] * 4))),
 ])
 @pytest.mark.parametrize("codec", ["fts", "text"])
-def test_bad_set_is_an_error_and_table_unchanged(node, table, codec) -> None:
+def test_bad_set_is_an_error_and_table_unchanged(node, table, expected, codec) -> None:
+    """Validated once, where the table enters Python; the message names what is wrong."""
     node.codec = codec
     robot = ArrayRobot(2, 2)
-    node.register_robot("r1", robot)
+    node.register_robot("r1", robot, shape=(2, 2))
     before = robot.q_table
     formal = _error_formal(run_agent(node, Term("set_qtable", Atom("r1"), table)))
-    assert formal.name in {"domain_error", "type_error"}, formal
-    if not all(isinstance(v, float) and np.isfinite(v) for v in table.args[1] if isinstance(v, float)):
-        assert formal == Term("domain_error", Atom("finite_float"), formal.args[1])
+    if expected is None:
+        assert formal.name == "domain_error" and formal.args[0] == Atom("finite_float"), formal
+        assert np.isnan(formal.args[1])
+    else:
+        assert formal == expected
     assert np.array_equal(_bits(robot.q_table), _bits(before))
     assert robot.sets == 0
+
+
+def test_validation_happens_in_python_only(node) -> None:
+    """The Prolog side sends a wrong table as it is; the host refuses it without calling
+    the provider."""
+    robot = ArrayRobot(2, 2)
+    node.register_robot("r1", robot, shape=(2, 2))
+    spawn(node, "bad_writer", Term("set_qtable", Atom("r1"), Term("qtable", [4, 1], [0.0] * 4)))
+    deadline = time.monotonic() + 5
+    request = None
+    while request is None:
+        assert time.monotonic() < deadline
+        sol = node.call("bridge_next_request", Var("R"), 0.05, module="robot_bridge")
+        request = sol and sol["R"]
+    req_id, op = request.args
+    assert op.name == "set_qtable" and op.args[1] == [4, 1]
+    from dfrl.pybridge.serving import RequestError, validate_write
+
+    with pytest.raises(RequestError) as info:
+        validate_write((2, 2), op.args[1], op.args[2])
+    node.call("bridge_reply", req_id, Term("error", info.value.formal), module="robot_bridge")
+    assert _error_formal(agent_result(node, "bad_writer")) == Term(
+        "domain_error", Term("shape", [2, 2]), [4, 1])
+    assert robot.sets == 0
+
+
+def test_shape_is_given_at_registration(node) -> None:
+    class Unreadable(ArrayRobot):
+        @property
+        def q_table(self) -> np.ndarray:
+            raise AssertionError("registration must not read the table")
+
+    node.register_robot("r1", Unreadable(3, 2), shape=(3, 2))
+    assert dict(node.robots())[Atom("r1")][1] == Term("shape", [3, 2])
+    for bad in ((3,), (0, 2), (3, 2.5)):
+        with pytest.raises(ValueError):
+            node.register_robot("r2", ArrayRobot(3, 2), shape=bad)
 
 
 def test_python_failure_becomes_python_error(node) -> None:
@@ -250,13 +302,13 @@ def test_any_float_layout_is_served_row_major(node) -> None:
     class Fortran(ArrayRobot):
         @property
         def q_table(self) -> np.ndarray:
-            return np.asfortranarray(self._q.astype(np.float32))
+            return np.asfortranarray(super().q_table.astype(np.float32))
 
     robot = Fortran(6, 3)
-    node.register_robot("r1", robot)
+    node.register_robot("r1", robot, shape=(6, 3))
     shape, values = _table(run_agent(node, Term("get_qtable", Atom("r1"), Var())))
     assert shape == [6, 3]
-    assert np.array_equal(values, robot._q.astype(np.float32).astype(np.float64).reshape(-1))
+    assert np.array_equal(values, robot.q_table.astype(np.float64).reshape(-1))
 
 
 def test_non_floats_that_look_like_floats_are_converted_or_refused(node) -> None:
