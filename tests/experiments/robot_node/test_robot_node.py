@@ -12,7 +12,7 @@ import pytest
 
 from dfrl.experiments.config import NodeConfig
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 
 def _start(tmp_path: Path, **kw) -> subprocess.Popen:
@@ -71,3 +71,32 @@ def test_real_time_factor_paces_the_loop(tmp_path: Path, rtf: float) -> None:
     out, _ = p.communicate(timeout=30)
     assert "DFRL_DONE r7 50" in out
     assert time.monotonic() - t0 >= 50 * 0.064 / rtf * 0.95
+
+
+def _paced_seconds(tmp_path: Path, **kw) -> float:
+    """Wall seconds between the progress lines of iterations 5 and 25 at rtf 10."""
+    tmp_path.mkdir()
+    p = _start(tmp_path, iterations=25, rtf=10.0, progress_every=5, grace_s=0.0, **kw)
+    try:
+        assert p.stdout.readline().startswith("DFRL_NODE")
+        assert p.stdout.readline().split() == ["DFRL_PROGRESS", "r7", "5"]
+        t0 = time.monotonic()
+        for i in (10, 15, 20, 25):
+            assert p.stdout.readline().split() == ["DFRL_PROGRESS", "r7", str(i)]
+        elapsed = time.monotonic() - t0
+        out, _ = p.communicate(timeout=30)
+        assert "DFRL_DONE r7 25" in out
+        return elapsed
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait(timeout=10)
+
+
+def test_pace_follows_the_trainers_control_dt(tmp_path: Path) -> None:
+    """20 iterations at rtf 10: 20 * control_dt / 10 s (0.128 s at the default 64 ms,
+    0.512 s at 256 ms)."""
+    default = _paced_seconds(tmp_path / "a")
+    slow = _paced_seconds(tmp_path / "b", trainer={"sim": {"control_dt": 0.256}})
+    assert 20 * 0.064 / 10 * 0.95 <= default < 0.45, default
+    assert slow >= 20 * 0.256 / 10 * 0.95, slow

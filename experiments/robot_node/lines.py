@@ -1,0 +1,75 @@
+"""The robot node's stdout protocol lines and its stdin watch (the launcher's two channels)."""
+from __future__ import annotations
+
+import os
+import select
+from typing import TextIO
+
+__all__ = ["ProtocolLines", "StdinWatch"]
+
+
+class ProtocolLines:
+    """Writes the ``DFRL_*`` lines the launcher reads, one flushed line each.
+
+    Parameters
+    ----------
+    out : TextIO
+    robot : str
+    events : bool
+        Whether ``DFRL_EVENT`` lines are written.
+    """
+
+    def __init__(self, out: TextIO, robot: str, events: bool = True) -> None:
+        self.out = out
+        self.robot = robot
+        self.events = events
+
+    def say(self, line: str) -> None:
+        """Write one line and flush."""
+        self.out.write(line + "\n")
+        self.out.flush()
+
+    def node(self, host: str, port: int) -> None:
+        """``DFRL_NODE <robot> <host> <port>``: the node listens."""
+        self.say(f"DFRL_NODE {self.robot} {host} {port}")
+
+    def progress(self, iteration: int) -> None:
+        """``DFRL_PROGRESS <robot> <iteration>``."""
+        self.say(f"DFRL_PROGRESS {self.robot} {iteration}")
+
+    def event(self, what: str, iteration: int) -> None:
+        """``DFRL_EVENT <robot> get|set <iteration>`` (if events are on)."""
+        if self.events:
+            self.say(f"DFRL_EVENT {self.robot} {what} {iteration}")
+
+    def done(self, iterations: int, shares: int) -> None:
+        """``DFRL_DONE <robot> <iterations> <shares>``."""
+        self.say(f"DFRL_DONE {self.robot} {iterations} {shares}")
+
+
+class StdinWatch:
+    """Non-blocking check whether the launcher closed our stdin (or asked us to stop)."""
+
+    def __init__(self, stream: TextIO | None) -> None:
+        self.fd = stream.fileno() if stream is not None and not stream.closed else None
+        self.closed = self.fd is None
+        self._buf = b""
+
+    def poll(self) -> bool:
+        """True once stdin reached EOF or a ``stop`` line arrived."""
+        if self.closed:
+            return True
+        try:
+            ready, _, _ = select.select([self.fd], [], [], 0)
+        except (OSError, ValueError):
+            self.closed = True
+            return True
+        if ready:
+            data = os.read(self.fd, 4096)
+            if not data:
+                self.closed = True
+            else:
+                self._buf += data
+                if b"stop" in self._buf:
+                    self.closed = True
+        return self.closed
