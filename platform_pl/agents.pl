@@ -6,6 +6,7 @@
             agent_property/3,           % ?Node, ?Name, ?Property
             agent_list/2,               % +Node, -Agents
             agent_add_payload/3,        % +Node, +Name, +Preds
+            agent_add_facts/3,          % +Node, +Name, +Facts
             agent_remove_payload/3,     % +Node, +Name, +Preds
             agent_add_tokens/3,         % +Node, +Name, +Tokens
             agent_remove_tokens/3,      % +Node, +Name, +Tokens
@@ -16,18 +17,21 @@
             agent_set_status/3,         % +Node, +Name, +Status
             agent_status/3,             % +Node, +Name, -Status
             agent_hop_times/3,          % +Node, +Name, -Millis
+            agent_record_hop/3,         % +Node, +Name, +Hop
             agent_fresh_name/3,         % +Node, +Base, -Name
             current_agent/1,            % -Name
             replace_guid/4,             % +Term0, +From, +To, -Term
             with_agents_locked/1        % :Goal
           ]).
-:- use_module(node, [current_node/1, node_set_current/1, node_property/2]).
+:- use_module(node,
+              [ current_node/1, node_set_current/1, node_clear_current/0,
+                node_property/2 ]).
 :- use_module(worker_pool, [pool_run/3, pool_signal/3]).
 :- autoload(library(error),
             [must_be/2, existence_error/2, permission_error/3, domain_error/2]).
 :- autoload(library(option), [option/2, option/3]).
-:- autoload(library(lists), [member/2, subtract/3, union/3, max_member/2]).
-:- autoload(library(apply), [maplist/3, include/3]).
+:- autoload(library(lists), [member/2, subtract/3, union/3, max_member/2, append/3]).
+:- autoload(library(apply), [maplist/2, maplist/3, include/3]).
 
 :- meta_predicate with_agents_locked(0).
 
@@ -43,6 +47,14 @@ are the agent's state and travel with it.
 
 A running agent has a thread. When its handler returns the agent stays
 on the node, idle, until it is executed again, moved or purged.
+
+This module owns the agents' modules: it creates them, asserts the
+agent's code and payload into them and retracts it all when the agent
+leaves. That is the one place where the platform writes into modules
+other than its own, and it is by design: an agent module holds nothing
+but the agent's own state. Other platform modules change an agent only
+through the predicates exported here (e.g. agent_record_hop/3); an agent
+program writes its own module, which is where its handler runs.
 */
 
 :- dynamic
@@ -331,6 +343,34 @@ payload_template(H, Name, (H:-B)) :-
     ;   true
     ).
 
+%!  agent_add_facts(+Node, +Name, +Facts) is det.
+%
+%   Assert each of Facts (a list of callable terms, not module
+%   qualified) into agent Name and make its predicate payload, so the
+%   facts travel with the agent. For a program that gives a new agent
+%   its initial state without asserting it into `user` first.
+%
+%   @error type_error(callable, Fact)
+
+agent_add_facts(Node, Name, Facts) :-
+    must_be(list, Facts),
+    maplist(must_be(callable), Facts),
+    forall(member(F, Facts),
+           (   F = _:_
+           ->  throw(error(type_error(unqualified_fact, F), _))
+           ;   true
+           )),
+    must_exist(Node, Name),
+    agent_module(Node, Name, M),
+    forall(member(F, Facts),
+           ( install_clause(M, F),
+             functor(F, P, A),
+             (   agent_payload_(Node, Name, P/A)
+             ->  true
+             ;   assertz(agent_payload_(Node, Name, P/A))
+             )
+           )).
+
 %!  agent_remove_payload(+Node, +Name, +Preds) is det.
 %
 %   Remove the payload predicates Preds (their clauses) from the agent.
@@ -425,13 +465,15 @@ agent_run(Node, Name, Link, Event) :-
     ;   true
     ).
 
+%   A node stopped since the agent was started is no error here: the
+%   agent then runs with the default node, and is purged by the stop.
 enter_agent(Node, Name) :-
-    catch(node_set_current(Node), _, true),
+    catch(node_set_current(Node), error(existence_error(platform, _), _), true),
     assertz(current_agent_tl(Name)).
 
 leave_agent :-
     retractall(current_agent_tl(_)),
-    retractall(node:current_node_tl(_)).
+    node_clear_current.
 
 run_agent(Node, Name, Link, Event) :-
     (   agent_entry(Node, Name, Handler, _)
@@ -604,3 +646,32 @@ agent_hop_times(Node, Name, Millis) :-
     must_exist(Node, Name),
     agent_hops_(Node, Name, Hops),
     findall(Ms, ( member(hop(_, _, T0, T1), Hops), Ms is (T1-T0)*1000 ), Millis).
+
+%!  agent_record_hop(+Node, +Name, +Hop) is semidet.
+%
+%   Append Hop, hop(From, To, Departed, Arrived) (get_time/1 stamps), to
+%   the hop record of agent Name on Node, keeping the last 1000 hops.
+%   Fails if Name is not on Node.
+
+agent_record_hop(Node, Name, Hop) :-
+    Hop = hop(_, _, T0, T1),
+    must_be(number, T0),
+    must_be(number, T1),
+    with_agents_locked(
+        (   retract(agent_hops_(Node, Name, Hops0))
+        ->  append(Hops0, [Hop], Hops1),
+            keep_last(Hops1, Hops),
+            assertz(agent_hops_(Node, Name, Hops))
+        )).
+
+max_hops_kept(1000).
+
+keep_last(List, Kept) :-
+    max_hops_kept(Max),
+    length(List, N),
+    (   N =< Max
+    ->  Kept = List
+    ;   Drop is N - Max,
+        length(Prefix, Drop),
+        append(Prefix, Kept, List)
+    ).

@@ -3,8 +3,9 @@
             load_program_at/3,          % +Address, +File, +Options
             load_program_text/4         % +Address, +Id, +Text, +Options
           ]).
-:- use_module(node, [current_node/1, node_property/2, node_for_address/2,
-                     node_option/3]).
+:- use_module(node, [current_node/1, node_property/2, ctx_node/2,
+                     ctx_authenticated/1]).
+:- use_module(platform_errors, [message_text/2]).
 :- use_module(transport).
 :- autoload(library(error), [must_be/2]).
 :- autoload(library(option), [option/2, option/3]).
@@ -84,23 +85,13 @@ load_text(Id, Text) :-
 
 user:message_hook(Term, error, _Lines) :-
     collecting,
-    message_to_codes(Term, Text),
+    message_text(Term, Text),
     assertz(collected(Text)),
     fail.
 
-message_to_codes(Term, Text) :-
-    message_to_codes_(Term, Text),
-    !.
-message_to_codes(Term, Text) :-
-    format(string(Text), '~p', [Term]).
-
-message_to_codes_(Term, Text) :-
-    '$messages':translate_message(Term, Lines, []),
-    with_output_to(string(Text), print_message_lines(current_output, '', Lines)).
-
 node:platform_request(load_code(Id, Text), Ctx, Reply, true) :-
-    Ctx = ctx(Node, _, _, _, _, Auth),
-    (   Auth == true
+    ctx_node(Ctx, Node),
+    (   ctx_authenticated(Ctx)
     ->  load_text(Id, Text),
         Reply = ok(loaded(Id))
     ;   node_property(Node, address(Here)),

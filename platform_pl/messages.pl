@@ -1,11 +1,12 @@
 :- module(messages,
           [ agent_post/5,               % +Address, +Agent, +Handler, +Link, +Args
-            platform_event/1,           % +Name/Arity
+            platform_event/1,           % +[Module:]Name/Arity
             remote_agents/3,            % +Address, -Agents, +Options
             remote_execute/4            % +Address, +Agent, +Event, +Options
           ]).
 :- use_module(node, [current_node/1, node_property/2, node_for_address/2,
-                     node_option/3]).
+                     node_option/3, with_node/2, ctx_node/2,
+                     ctx_authenticated/1]).
 :- use_module(agents).
 :- use_module(worker_pool, [pool_run/3]).
 :- use_module(transport).
@@ -18,8 +19,9 @@ A posted message names an agent and its handler: the receiving platform
 calls Handler(Agent, Link, Args...) in the agent's module, in a fresh
 thread, and only if Agent is registered there with that handler. A node
 may also declare platform events (platform_event/1): posting to the
-pseudo-agent `platform` calls user:Handler(platform, Link, Args...) if
-Handler/N was declared. Nothing else can be called by a peer.
+pseudo-agent `platform` calls Module:Handler(platform, Link, Args...) if
+Module:Handler/N was declared (Module `user` unless the declaration
+names one). Nothing else can be called by a peer.
 */
 
 :- dynamic declared_event/1.
@@ -28,15 +30,28 @@ Handler/N was declared. Nothing else can be called by a peer.
 
 %!  platform_event(+NameArity) is det.
 %
-%   Declare user:Name/Arity (Arity >= 2) as a platform event that peers
-%   may trigger with a posted message to the pseudo-agent `platform`.
+%   Declare Module:Name/Arity (Arity >= 2; Module defaults to `user`) as
+%   a platform event that peers may trigger with a posted message to the
+%   pseudo-agent `platform`: a message [Name, platform, Link | Args] with
+%   Arity-2 Args calls Module:Name(platform, Link, Args...). Peers name
+%   only Name; one Name/Arity is served by one module (the first
+%   declared).
+%
+%   @error type_error(predicate_indicator, NameArity)
 
-platform_event(Name/Arity) :-
+platform_event(Spec) :-
+    (   Spec = Module:Name/Arity
+    ->  true
+    ;   Spec = Name/Arity
+    ->  Module = user
+    ;   throw(error(type_error(predicate_indicator, Spec), _))
+    ),
+    must_be(atom, Module),
     must_be(atom, Name),
     must_be(integer, Arity),
-    (   declared_event(Name/Arity)
+    (   declared_event(_:Name/Arity)
     ->  true
-    ;   assertz(declared_event(Name/Arity))
+    ;   assertz(declared_event(Module:Name/Arity))
     ).
 
 %!  agent_post(+Address, +Agent, +Handler, +Link, +Args) is det.
@@ -74,18 +89,15 @@ deliver(Node, Agent, Handler, Link, Args) :-
     ;   Agent == platform,
         length(Args, N),
         Arity is N + 2,
-        declared_event(Handler/Arity)
-    ->  Goal = user:Goal0
+        declared_event(Module:Handler/Arity)
+    ->  Goal = Module:Goal0
     ;   existence_error(agent, Agent)
     ),
     pool_run(messages, run_message(Node, Agent, Goal), []).
 
 run_message(Node, Agent, Goal) :-
-    setup_call_cleanup(
-        node:node_set_current(Node),
-        catch(( call(Goal) -> true ; true ), E,
-              print_message(warning, dfrl(agent_crashed(Node, Agent, E)))),
-        retractall(node:current_node_tl(_))).
+    catch(with_node(Node, ( call(Goal) -> true ; true )), E,
+          print_message(warning, dfrl(agent_crashed(Node, Agent, E)))).
 
 %!  remote_agents(+Address, -Agents, +Options) is det.
 %
@@ -121,16 +133,18 @@ remote_execute(Address0, Agent, Event, Options) :-
                           [action(execute)|Options1])
     ).
 
-node:platform_request(post(Agent, Handler, Link, Args),
-                      ctx(Node, _, _, _, _, _), ok(delivered), true) :-
+node:platform_request(post(Agent, Handler, Link, Args), Ctx, ok(delivered),
+                      true) :-
+    ctx_node(Ctx, Node),
     must_be(atom, Handler),
     must_be(list, Args),
     deliver(Node, Agent, Handler, Link, Args).
-node:platform_request(agents, ctx(Node, _, _, _, _, _), ok(Agents), true) :-
+node:platform_request(agents, Ctx, ok(Agents), true) :-
+    ctx_node(Ctx, Node),
     agent_list(Node, Agents).
 node:platform_request(execute(Agent, Event), Ctx, Reply, true) :-
-    Ctx = ctx(Node, _, _, _, _, Auth),
-    (   Auth == true
+    ctx_node(Ctx, Node),
+    (   ctx_authenticated(Ctx)
     ->  node_property(Node, link(Link)),
         agent_execute(Node, Agent, Link, Event),
         Reply = ok(started)

@@ -6,7 +6,8 @@
           ]).
 :- use_module(node,
               [ current_node/1, node_property/2, node_option/3,
-                node_for_address/2 ]).
+                node_for_address/2, ctx_node/2, ctx_input/2,
+                ctx_authenticated/1 ]).
 :- use_module(agents).
 :- use_module(transport).
 :- use_module(platform_errors, [transport_error/2]).
@@ -14,7 +15,6 @@
 :- autoload(library(error),
             [must_be/2, existence_error/2, permission_error/3]).
 :- autoload(library(option), [option/2, option/3]).
-:- autoload(library(lists), [append/3, last/2]).
 :- autoload(library(debug), [debug/3]).
 
 /** <module> Weak migration and cloning of agents between nodes
@@ -44,8 +44,6 @@ neither loses nor duplicates an agent.
     decision/4.                 % Node, MigrationId, Decision, Time
 
 :- multifile node:platform_request/4.
-
-max_hops_kept(1000).
 
 %!  agent_move(+Name, +Address, +Options) is det.
 %
@@ -202,8 +200,8 @@ migration_decision(Node, MigId, Decision) :-
 
 node:platform_request(transfer(MigId, Mode, Source, Departed, Record),
                       Ctx, Reply, After) :-
-    Ctx = ctx(Node, _, _, _, _, Auth),
-    (   Auth \== true
+    ctx_node(Ctx, Node),
+    (   \+ ctx_authenticated(Ctx)
     ->  node_property(Node, address(Here)),
         Reply = error(error(permission_error(enter, platform, Here),
                             context(_, 'the agent carries no token of this platform'))),
@@ -213,8 +211,8 @@ node:platform_request(transfer(MigId, Mode, Source, Departed, Record),
         After = continue(migration:await_commit(Ctx, MigId, Name, Source,
                                                 Departed))
     ).
-node:platform_request(migration_status(MigId), ctx(Node, _, _, _, _, _),
-                      ok(Decision), true) :-
+node:platform_request(migration_status(MigId), Ctx, ok(Decision), true) :-
+    ctx_node(Ctx, Node),
     (   decision(Node, MigId, D, _)
     ->  Decision = D
     ;   Decision = unknown
@@ -229,7 +227,9 @@ stage(Node, MigId, Mode, Record, Name) :-
 %   Run by the worker after it answered staged: wait for the commit, or
 %   ask the source, then start or discard the staged agent.
 
-await_commit(ctx(Node, _, _, In, _, _), MigId, Name, Source, Departed) :-
+await_commit(Ctx, MigId, Name, Source, Departed) :-
+    ctx_node(Ctx, Node),
+    ctx_input(Ctx, In),
     node_option(Node, commit_timeout, Timeout),
     node_option(Node, idle_timeout, Idle),
     set_stream(In, timeout(Timeout)),
@@ -267,27 +267,13 @@ ask_source(Node, Source, MigId, Tries, Decision) :-
 activate(Node, Name, Source, Departed) :-
     get_time(Arrived),
     node_property(Node, link(Link)),
+    format(atom(Here), '~w', [Node]),
     with_agents_locked(
-        ( agents:agent_hops_(Node, Name, Hops0)
-        ->  retract(agents:agent_hops_(Node, Name, Hops0)),
-            format(atom(Here), '~w', [Node]),
-            append(Hops0, [hop(Source, Here, Departed, Arrived)], Hops1),
-            keep_last(Hops1, Hops),
-            assertz(agents:agent_hops_(Node, Name, Hops)),
-            agent_set_status(Node, Name, idle)
+        (   agent_record_hop(Node, Name, hop(Source, Here, Departed, Arrived))
+        ->  agent_set_status(Node, Name, idle)
         ;   true
         )),
     agent_execute(Node, Name, Link, main).
-
-keep_last(List, Kept) :-
-    max_hops_kept(Max),
-    length(List, N),
-    (   N =< Max
-    ->  Kept = List
-    ;   Drop is N - Max,
-        length(Prefix, Drop),
-        append(Prefix, Kept, List)
-    ).
 
 %!  agent_resolve(+Name, +Decision) is det.
 %

@@ -11,11 +11,18 @@
             with_node/2,                % +Node, :Goal
             node_option/3,              % +Node, +Name, -Value
             node_accepts/2,             % +Node, +Proofs/Nonce
+            node_listens_at/2,          % +Node, +Address
+            node_clear_current/0,
+            ctx_node/2,                 % +Ctx, -Node
+            ctx_peer/2,                 % +Ctx, -Peer
+            ctx_input/2,                % +Ctx, -InputStream
+            ctx_authenticated/1,        % +Ctx
             platform_shutdown/0
           ]).
 :- use_module(wire, [frame_write/3, frame_read/3, wire_version/1]).
-:- use_module(transport, [address_normalize/2, token_proof/3, open_key/1]).
-:- use_module(worker_pool, [pool_run/3, pool_signal/3]).
+:- use_module(transport,
+              [address_normalize/2, token_proof/3, open_key/1, transport_drop_pool/0]).
+:- use_module(worker_pool, [pool_run/3, pool_signal/3, pool_drain/0]).
 :- autoload(library(socket),
             [ tcp_socket/1, tcp_setopt/2, tcp_bind/2, tcp_listen/2,
               tcp_accept/3, tcp_open_socket/2, tcp_close_socket/1,
@@ -38,7 +45,13 @@ request with ok(Result) or error(Error). A malformed frame gets an error
 reply and the connection is closed; nothing a peer sends can stop the
 node or block other connections. Requests are served by clauses of the
 multifile hook node:platform_request/4, which the other platform modules
-define.
+define. A clause receives the connection context Ctx, an opaque term
+read with ctx_node/2, ctx_peer/2, ctx_input/2 and ctx_authenticated/1:
+
+```
+node:platform_request(ping_twice, Ctx, ok(pong(Node, Node)), true) :-
+    ctx_node(Ctx, Node).
+```
 
 Several nodes may run in one process. Each thread has a current node: the
 node an agent or worker thread belongs to, otherwise the process's
@@ -237,11 +250,25 @@ local_node(Node) :-
 %
 %   Node is the platform of this process listening on Address.
 
-node_for_address(Address0, Node) :-
-    address_normalize(Address0, Host:Port),
-    node_info(Node, H:Port, _),
-    same_host(Host, H),
+node_for_address(Address, Node) :-
+    node_info(Node, _, _),
+    node_listens_at(Node, Address),
     !.
+
+%!  node_listens_at(+Node, +Address) is semidet.
+%
+%   True if Address (Host:Port, (Host,Port) or a port) reaches the
+%   platform Node of this process: the same port, and the same host
+%   name or two names of the loopback interface (`localhost`,
+%   `127.0.0.1`). This is the one test of "is this address that node";
+%   it compares address text, so it does not know that another name of
+%   this host also reaches it.
+
+node_listens_at(Node, Address0) :-
+    address_normalize(Address0, Host:Port),
+    node_info(Node, H:P, _),
+    P =:= Port,
+    same_host(Host, H).
 
 same_host(H, H) :- !.
 same_host(A, B) :-
@@ -280,6 +307,15 @@ node_set_current(Node) :-
     ),
     retractall(current_node_tl(_)),
     assertz(current_node_tl(Node)).
+
+%!  node_clear_current is det.
+%
+%   Forget the current node of the calling thread: it falls back to the
+%   process's default node. For threads that leave a node's work (agent
+%   threads of the pool).
+
+node_clear_current :-
+    retractall(current_node_tl(_)).
 
 %!  node_set_default(+Node) is det.
 %
@@ -540,10 +576,46 @@ writable_term(T) :-
     \+ ( sub_term(S, T), blob(S, Type), \+ memberchk(Type, [text, reserved_symbol]) ).
 
 		 /*******************************
+		 *       CONNECTION CONTEXT	*
+		 *******************************/
+
+%   The context of a served connection: ctx(Node, Peer, Nonce, In, Out,
+%   Authenticated), where Authenticated is unbound until the peer sent
+%   auth(Proofs), then true or false (set destructively by serve_term/3).
+%   Other modules read it through the accessors below only.
+
+%!  ctx_node(+Ctx, -Node) is det.
+%
+%   Node is the platform that serves the connection.
+
+ctx_node(ctx(Node, _, _, _, _, _), Node).
+
+%!  ctx_peer(+Ctx, -Peer) is det.
+%
+%   Peer is the peer's address as tcp_accept/3 gave it.
+
+ctx_peer(ctx(_, Peer, _, _, _, _), Peer).
+
+%!  ctx_input(+Ctx, -In) is det.
+%
+%   In is the binary input stream of the connection (for a request that
+%   reads further frames after its reply, as a staged migration does).
+
+ctx_input(ctx(_, _, _, In, _, _), In).
+
+%!  ctx_authenticated(+Ctx) is semidet.
+%
+%   True if the peer proved one of the node's tokens on this connection.
+
+ctx_authenticated(ctx(_, _, _, _, _, Auth)) :-
+    Auth == true.
+
+		 /*******************************
 		 *          BUILT-IN		*
 		 *******************************/
 
-platform_request(ping, ctx(Node, _, _, _, _, _), ok(pong(Node)), true).
+platform_request(ping, Ctx, ok(pong(Node)), true) :-
+    ctx_node(Ctx, Node).
 
 %!  platform_shutdown is det.
 %
@@ -553,5 +625,5 @@ platform_request(ping, ctx(Node, _, _, _, _, _), ok(pong(Node)), true).
 
 platform_shutdown :-
     stop_all_nodes,
-    transport:transport_drop_pool,
-    worker_pool:pool_drain.
+    transport_drop_pool,
+    pool_drain.

@@ -5,16 +5,24 @@
 
     Prints "dfrl node listening on H:P" once it listens, then serves until
     killed (or, with --interactive, until the toplevel ends). Numeric tokens
-    are read as integers, as Tartarus tokens are.
+    are read as integers, as Tartarus tokens are. A malformed command line
+    is reported on stderr and exits with status 2.
+
+    The arguments are parsed here, not with library(optparse): --token and
+    --consult may be repeated, and optparse keeps only the last occurrence
+    of a flag.
 */
 :- use_module(tartarus).
 :- use_module(library(main)).
-:- use_module(library(optparse), []).
 
 :- initialization(main, main).
 
 main(Argv) :-
-    parse(Argv, opts(localhost, 0, [], [], false), opts(Host, Port, Tokens, Files, Interactive)),
+    catch(parse_args(Argv, Options), error(usage(Why), _), usage(Why)),
+    option_value(host, Options, localhost, Host),
+    option_value(port, Options, 0, Port),
+    findall(T, member(token(T), Options), Tokens),
+    findall(F, member(consult(F), Options), Files),
     (   Tokens == []
     ->  node_start(Host:Port, Node, [default(true)])
     ;   node_start(Host:Port, Node, [tokens(Tokens), default(true)])
@@ -23,21 +31,59 @@ main(Argv) :-
     node_property(Node, address(H:P)),
     format("dfrl node listening on ~w:~w~n", [H, P]),
     flush_output,
-    (   Interactive == true
+    (   memberchk(interactive, Options)
     ->  prolog
     ;   thread_get_message(_)          % serve until killed
     ).
 
-parse([], O, O).
-parse(['--host', H|T], opts(_, P, K, F, I), O) :- !, parse(T, opts(H, P, K, F, I), O).
-parse(['--port', P0|T], opts(H, _, K, F, I), O) :- !,
-    atom_number(P0, P), parse(T, opts(H, P, K, F, I), O).
-parse(['--token', T0|T], opts(H, P, K, F, I), O) :- !,
-    (   atom_number(T0, Tok) -> true ; Tok = T0 ),
-    append(K, [Tok], K1), parse(T, opts(H, P, K1, F, I), O).
-parse(['--consult', File|T], opts(H, P, K, F, I), O) :- !,
-    append(F, [File], F1), parse(T, opts(H, P, K, F1, I), O).
-parse(['--interactive'|T], opts(H, P, K, F, _), O) :- !, parse(T, opts(H, P, K, F, true), O).
-parse([X|_], _, _) :-
-    format(user_error, "Unknown argument: ~w~n", [X]),
+usage(Why) :-
+    format(user_error, "~w~n", [Why]),
+    format(user_error,
+           "usage: swipl node_main.pl [--host H] [--port P] [--token T]... \c
+            [--consult FILE]... [--interactive]~n", []),
     halt(2).
+
+%   parse_args(+Argv, -Options): Options in command-line order.
+parse_args([], []).
+parse_args([Flag|Argv0], [Option|Options]) :-
+    (   flag_arg(Flag, Name, Type)
+    ->  (   Argv0 = [Value0|Argv]
+        ->  typed_value(Type, Flag, Value0, Value),
+            Option =.. [Name, Value]
+        ;   usage_error("~w needs a value", [Flag])
+        )
+    ;   Flag == '--interactive'
+    ->  Option = interactive,
+        Argv = Argv0
+    ;   usage_error("Unknown argument: ~w", [Flag])
+    ),
+    parse_args(Argv, Options).
+
+flag_arg('--host', host, atom).
+flag_arg('--port', port, integer).
+flag_arg('--token', token, token).
+flag_arg('--consult', consult, atom).
+
+typed_value(atom, _, V, V).
+typed_value(integer, Flag, V0, V) :-
+    (   atom_number(V0, V), integer(V)
+    ->  true
+    ;   usage_error("~w needs an integer, not ~w", [Flag, V0])
+    ).
+typed_value(token, _, V0, V) :-
+    (   atom_number(V0, V) -> true ; V = V0 ).
+
+usage_error(Format, Args) :-
+    format(string(Why), Format, Args),
+    throw(error(usage(Why), _)).
+
+option_value(Name, Options, Default, Value) :-
+    Opt =.. [Name, V],
+    (   last_option(Options, Opt)
+    ->  Value = V
+    ;   Value = Default
+    ).
+
+last_option(Options, Opt) :-
+    reverse(Options, Rev),
+    memberchk(Opt, Rev).

@@ -1,6 +1,7 @@
 :- module(platform_errors,
           [ transport_error/2,          % +Address, +Reason
-            wire_error/1                % +Reason
+            wire_error/1,               % +Reason
+            message_text/2              % +Message, -String
           ]).
 /** <module> Error terms of the agent platform and their messages
 
@@ -14,14 +15,24 @@ domain_error/2) and adds:
   - wire_error(Reason)
     A frame could not be read: bad_magic, bad_version(V),
     too_large(Size, Max), binary_not_allowed, syntax(Detail) or truncated.
-  - remote_error(Address, Error)
-    The platform at Address answered a request with Error.
 
 Each has a prolog:error_message//1 clause, so the toplevel prints a
 readable message.
+
+An error that a remote platform answered with is rethrown here as
+error(Formal, remote(Address)): the formal as the peer raised it (its
+own context stays there) and, as context, the address of the platform
+that raised it. A prolog:message_context//1 clause prints that address
+after the message, e.g.
+
+```
+?- agent_post(127.0.0.1:7002, nobody, hello, x, []).
+ERROR: agent `nobody' does not exist (at 127.0.0.1:7002)
+```
 */
 
-:- multifile prolog:error_message//1, prolog:message//1.
+:- multifile prolog:error_message//1, prolog:message//1,
+             prolog:message_context//1.
 
 %!  transport_error(+Address, +Reason) is det.
 %
@@ -37,18 +48,31 @@ transport_error(Address, Reason) :-
 wire_error(Reason) :-
     throw(error(wire_error(Reason), _)).
 
+%!  message_text(+Message, -Text:string) is det.
+%
+%   Text is Message (an error term or any message term) as
+%   print_message/2 would print it, on one or more lines without the
+%   `ERROR:`/`Warning:` prefix; a term without a translation is written
+%   with ~p. For logs and replies that carry an error as text.
+
+message_text(Message, Text) :-
+    (   catch('$messages':translate_message(Message, Lines, []), _, fail)
+    ->  with_output_to(string(Text0),
+                       print_message_lines(current_output, '', Lines)),
+        split_string(Text0, "", "\n", [Text])
+    ;   format(string(Text), '~p', [Message])
+    ),
+    !.
+
 prolog:error_message(transport_error(Address, Reason)) -->
     [ 'Platform at ~p: '-[Address] ],
     transport_reason(Reason).
 prolog:error_message(wire_error(Reason)) -->
     [ 'Malformed frame: ' ],
     wire_reason(Reason).
-prolog:error_message(remote_error(Address, Error)) -->
-    [ 'Platform at ~p answered with an error: '-[Address] ],
-    (   { Error = error(Formal, _) }
-    ->  '$messages':translate_message(error(Formal, _))
-    ;   [ '~p'-[Error] ]
-    ).
+
+prolog:message_context(remote(Address)) -->
+    [ ' (at ~w)'-[Address] ].
 
 transport_reason(connect(Detail)) -->
     !, [ 'cannot connect (~p)'-[Detail] ].

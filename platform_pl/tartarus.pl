@@ -45,6 +45,7 @@
 :- use_module(agents).
 :- use_module(persist).
 :- use_module(transport, [address_normalize/2]).
+:- use_module(node, [node_for_address/2]).
 :- use_module(platform_errors, []).
 :- autoload(library(error), [must_be/2, existence_error/2, domain_error/2]).
 :- autoload(library(lists), [member/2, sum_list/2, max_list/2, min_list/2,
@@ -189,7 +190,7 @@ create_agent(Kind, Name, Link, Handler, Tokens0) :-
 
 link_node(Link, Node) :-
     address_normalize(Link, Address),
-    (   node:node_for_address(Address, Node)
+    (   node_for_address(Address, Node)
     ->  true
     ;   existence_error(platform, Link)
     ).
@@ -209,7 +210,7 @@ execute_agent(Name, Link, Handler) :-
 execute_agent(Name, Link, Handler, Event) :-
     must_be(atom, Name),
     address_normalize(Link, Address),
-    (   node:node_for_address(Address, Node)
+    (   node_for_address(Address, Node)
     ->  (   agent_property(Node, Name, handler(H))
         ->  (   H == Handler
             ->  true
@@ -218,7 +219,7 @@ execute_agent(Name, Link, Handler, Event) :-
         ;   existence_error(agent, Name)
         ),
         node_property(Node, link(L)),
-        agents:agent_execute(Node, Name, L, Event)
+        agent_execute(Node, Name, L, Event)
     ;   remote_execute(Address, Name, Event, [])
     ).
 
@@ -354,7 +355,7 @@ load_tartarus_state(File) :-
 
 agent_hop_times(Name, Millis) :-
     current_node(Node),
-    agents:agent_hop_times(Node, Name, Millis).
+    agent_hop_times(Node, Name, Millis).
 
 %!  agent_hop_statistics(+Name, -Stats) is det.
 %

@@ -2,15 +2,22 @@
           [ dfrl_tour/3,                % +Agent, +Link, +Event (the handler)
             dfrl_tour_main/2,           % +Agent, +Link
             dfrl_create/4,              % +Node, ?Name, +Plan, +Options
+            dfrl_pending/3,             % ?Node, ?Agent, ?Command
             aggregate_tables/3,         % +Method, +Tables, -Table
             dfrl_method/1               % ?Method
           ]).
 :- use_module('../tartarus').
-:- use_module('../agents', [agent_property/3, current_agent/1]).
+:- use_module('../agents',
+              [agent_property/3, agent_create/4, agent_add_facts/3]).
+:- use_module('../node', [node_listens_at/2]).
+:- use_module('../robot_resources',
+              [get_robot_table/3, get_robot_tables/4, set_robot_table/3]).
+:- use_module('../platform_errors', [message_text/2]).
 :- autoload(library(error), [must_be/2, domain_error/2]).
-:- autoload(library(lists), [nth0/3, append/3, last/2, sum_list/2]).
+:- autoload(library(lists), [nth0/3, append/3, sum_list/2]).
+:- autoload(library(apply), [maplist/3, foldl/4]).
 :- autoload(library(option), [option/2, option/3]).
-:- autoload(library(debug), [debug/3]).
+:- autoload(library(http/json), [json_write_dict/3]).
 
 /** <module> The dFRL itinerary agent (Algorithm 1 as a mobile agent)
 
@@ -27,12 +34,36 @@ Everything the agent needs travels as payload facts:
   - dfrl_plan(Agent, plan(Itinerary, Rounds, RestSeconds, LogFile, Timeout))
     Itinerary is a list of stop(Host, Port, Robot).
   - dfrl_method_of(Agent, Method)
-  - dfrl_state(Agent, State): where it is in the round and its aggregate.
+  - dfrl_state(Agent, State): where it is in the round, a dict
+    `state{round, phase, index, acc, visited, skipped, hops, bytes,
+    start, stop}` (acc packed, see get_state/3).
 
-Robots are reached through the bridge predicates get_qtable/3,
-set_qtable/3 and get_qtable_and_visits/4 (pybridge/robot_bridge.pl),
-which the robot node provides. Tables are qtable(Shape, Values) with
-Values a flat row-major list of floats.
+The agent's handler runs in the agent's own module (see agents.pl), so
+the updates of these facts are the agent writing its own state.
+
+Robots are reached through the resource hook of the host process
+(robot_resources.pl: get_robot_table/3, get_robot_tables/4,
+set_robot_table/3), which a robot node implements. Tables are
+qtable(Shape, Values) with Values a flat row-major list of floats.
+
+## Round log
+
+The agent appends one JSON object per line to LogFile (opened, written
+and closed per line):
+
+```
+{"event":"round","agent":"fed_q","round":3,"start":1764600000.12,
+ "end":1764600000.25,"hops":8,"bytes":4860,"method":"average",
+ "visited":["r1","r2","r3"],"skipped":[{"robot":"r4","reason":"..."}]}
+{"event":"control","agent":"fed_q","round":4,"command":"method(median)",
+ "status":"applied"}                      (or "ignored" with a "reason")
+{"event":"finished","agent":"fed_q","round":16}
+{"event":"aborted","agent":"fed_q","round":4,"error":"..."}
+```
+
+`visited` lists the robots whose tables went into the aggregate, in the
+order of the forward pass; `skipped` the robots of the itinerary that
+could not be read, reached or written, with the error as text.
 
 ## Aggregation methods
 
@@ -58,12 +89,15 @@ qtable_visits(Shape, Values, Visits).
 
 ## Control
 
-A node declares the platform event dfrl_control/3; posting
-[dfrl_control, platform, Link, Command] to the node of the first stop
-queues Command, which the agent applies when it starts its next round:
+Every node that loads this module declares the platform event
+dfrl_control/4. Posting [dfrl_control, platform, Link, Agent, Command]
+to the node of the agent's first stop queues Command for Agent (only
+for that agent, on that node). The agent takes its queued commands when
+it starts its next round there, and logs a `control` event for each:
 join(stop(Host, Port, Robot)) adds a robot at the end of the itinerary,
-method(Name) switches the aggregation method, stop ends after the
-current round.
+method(Name) switches the aggregation method (an unknown method is
+ignored and the old one kept), stop ends after the current round (a stop
+that arrives during a round also ends that round's tour).
 */
 
 :- multifile
@@ -73,24 +107,72 @@ current round.
     method_uses_visits/1.       % ?Method
 
 :- dynamic
-    pending/1,                  % Command queued on this node
+    pending/3,                  % Node, Agent, Command (queued control)
     dfrl_plan/2, dfrl_method_of/2, dfrl_state/2.
 
-:- initialization(platform_event(dfrl_control/3)).
+:- initialization(platform_event(dfrl_agent:dfrl_control/4)).
 
-%!  dfrl_control(+Platform, +Link, +Command) is det.
+		 /*******************************
+		 *            CONTROL		*
+		 *******************************/
+
+%!  dfrl_control(+Platform, +Link, +Agent, +Command) is det.
 %
-%   Platform event: queue Command for the agent's next round.
+%   The platform event dfrl_control/4: queue Command for Agent on the
+%   current node (the node the message was posted to), for the agent's
+%   next round start. Commands are checked when the agent takes them.
 
-user:dfrl_control(platform, _Link, Command) :-
-    (   valid_command(Command)
-    ->  assertz(dfrl_agent:pending(Command))
-    ;   print_message(warning, format("dfrl: ignored control command ~p", [Command]))
+dfrl_control(platform, _Link, Agent, Command) :-
+    must_be(atom, Agent),
+    must_be(ground, Command),
+    current_node(Node),
+    assertz(pending(Node, Agent, Command)).
+
+%!  dfrl_pending(?Node, ?Agent, ?Command) is nondet.
+%
+%   Command is queued on Node for Agent and not yet taken.
+
+dfrl_pending(Node, Agent, Command) :-
+    pending(Node, Agent, Command).
+
+take_commands(Agent, Commands) :-
+    current_node(Node),
+    findall(C, retract(pending(Node, Agent, C)), Commands).
+
+take_stop(Agent) :-
+    current_node(Node),
+    retract(pending(Node, Agent, stop)),
+    !,
+    retractall(pending(Node, Agent, stop)).
+
+%   apply_command(+Command, +Plan0-Method0-Stop0, -Plan-Method-Stop, -Status)
+apply_command(join(Stop), plan(I0, R, Re, L, T)-M-S, Plan-M-S, Status) :-
+    Stop = stop(H, P, Robot), atomic(H), integer(P), atom(Robot),
+    !,
+    (   memberchk(Stop, I0)
+    ->  Plan = plan(I0, R, Re, L, T),
+        Status = ignored("the stop is already in the itinerary")
+    ;   append(I0, [Stop], I),
+        Plan = plan(I, R, Re, L, T),
+        Status = applied
     ).
+apply_command(method(New), P-Old-S, P-M-S, Status) :-
+    atom(New),
+    !,
+    (   dfrl_method(New)
+    ->  M = New,
+        Status = applied
+    ;   M = Old,
+        format(string(Why), "unknown method ~q on this node; keeps ~q", [New, Old]),
+        Status = ignored(Why)
+    ).
+apply_command(stop, P-M-_, P-M-true, applied) :-
+    !.
+apply_command(_, X, X, ignored("not a control command")).
 
-valid_command(join(stop(H, P, R))) :- atomic(H), integer(P), atom(R).
-valid_command(method(M)) :- atom(M).
-valid_command(stop).
+		 /*******************************
+		 *            CREATE		*
+		 *******************************/
 
 %!  dfrl_method(?Method) is nondet.
 %
@@ -108,6 +190,9 @@ dfrl_method(M) :-
 %   Create the agent on Node (not started). Plan is
 %   plan(Itinerary, Rounds, RestSeconds, LogFile, Timeout). Options:
 %   method(M) (default average), tokens(List).
+%
+%   @error type_error(dfrl_plan, Plan), type_error(stop, Stop)
+%   @error domain_error(non_empty_itinerary, [])
 
 dfrl_create(Node, Name, Plan, Options) :-
     check_plan(Plan),
@@ -115,12 +200,12 @@ dfrl_create(Node, Name, Plan, Options) :-
     must_be(atom, Method),
     option(tokens(Tokens), Options, []),
     (   Tokens == [] -> TokOpts = [] ; TokOpts = [tokens(Tokens)] ),
-    agents:agent_create(Name, dfrl_agent:dfrl_tour, TokOpts, Node),
-    agent_property(Node, Name, module(M)),
-    assertz(M:dfrl_plan(Name, Plan)),
-    assertz(M:dfrl_method_of(Name, Method)),
-    assertz(M:dfrl_state(Name, state(1, forward, 0, none, [], 0, 0, 0))),
-    agents:agent_add_payload(Node, Name, [dfrl_plan/2, dfrl_method_of/2, dfrl_state/2]).
+    agent_create(Name, dfrl_agent:dfrl_tour, TokOpts, Node),
+    new_round(1, State),
+    pack_state(State, Packed),
+    agent_add_facts(Node, Name, [ dfrl_plan(Name, Plan),
+                                  dfrl_method_of(Name, Method),
+                                  dfrl_state(Name, Packed) ]).
 
 check_plan(plan(Itinerary, Rounds, Rest, Log, Timeout)) :-
     !,
@@ -137,6 +222,10 @@ check_plan(plan(Itinerary, Rounds, Rest, Log, Timeout)) :-
     must_be(number, Timeout).
 check_plan(Plan) :-
     throw(error(type_error(dfrl_plan, Plan), _)).
+
+new_round(Round, state{round:Round, phase:forward, index:0, acc:none,
+                       visited:[], skipped:[], hops:0, bytes:0, start:0,
+                       stop:false}).
 
 		 /*******************************
 		 *            HANDLER		*
@@ -160,47 +249,75 @@ dfrl_tour_main(Agent, _Link) :-
     step(M, Agent).
 
 step(M, Agent) :-
-    get_state(M, Agent, state(Round, Phase, Index, Acc, Visited, Hops, Bytes, Start)),
-    M:dfrl_plan(Agent, Plan0),
-    M:dfrl_method_of(Agent, Method0),
+    get_state(M, Agent, S0),
+    get_dict(phase, S0, Phase),
+    get_dict(index, S0, Index),
     (   Phase == forward, Index =:= 0
-    ->  apply_pending(Plan0, Plan, Method0, Method),
-        update(M, dfrl_plan(Agent, Plan)),
-        update(M, dfrl_method_of(Agent, Method)),
-        get_time(Start1)
-    ;   Plan = Plan0, Method = Method0, Start1 = Start
+    ->  start_round(M, Agent, S0, S1)
+    ;   S1 = S0
     ),
-    Plan = plan(Itinerary, _, _, _, Timeout),
+    M:dfrl_plan(Agent, plan(Itinerary, _, _, _, Timeout)),
+    M:dfrl_method_of(Agent, Method),
     nth0(Index, Itinerary, stop(_, _, Robot)),
     (   Phase == forward
-    ->  forward(Method, Robot, Timeout, Acc, Acc1, Visited, Visited1),
+    ->  forward(Method, Robot, Timeout, S1, S2),
         length(Itinerary, N),
         (   Index =:= N - 1
-        ->  finish(Method, Acc1, Final),
-            State1 = state(Round, backward, Index, Final, Visited1, Hops, Bytes, Start1),
-            put_state(M, Agent, State1),
-            step(M, Agent)                      % write into the last robot here
-        ;   State1 = state(Round, forward, Index, Acc1, Visited1, Hops, Bytes, Start1),
-            go(M, Agent, State1, +1)
+        ->  turn_back(M, Agent, Method, S2)     % writes the last robot here
+        ;   go(M, Agent, S2, +1)
         )
-    ;   write_back(Robot, Timeout, Acc),
+    ;   write_back(Robot, Timeout, S1, S2),
         (   Index =:= 0
-        ->  end_round(M, Agent, Round, Hops, Bytes, Start1, Method, Visited)
-        ;   go(M, Agent, state(Round, backward, Index, Acc, Visited, Hops, Bytes, Start1), -1)
+        ->  end_round(M, Agent, S2)
+        ;   go(M, Agent, S2, -1)
         )
     ).
+
+%   At the first stop, before the first table is read: take the queued
+%   control commands and note the start time.
+start_round(M, Agent, S0, S) :-
+    M:dfrl_plan(Agent, Plan0),
+    M:dfrl_method_of(Agent, Method0),
+    get_dict(round, S0, Round),
+    get_dict(stop, S0, Stop0),
+    arg(4, Plan0, Log),
+    take_commands(Agent, Commands),
+    foldl(take_command(Log, Agent, Round), Commands,
+          Plan0-Method0-Stop0, Plan-Method-Stop),
+    update(M, dfrl_plan(Agent, Plan)),
+    update(M, dfrl_method_of(Agent, Method)),
+    get_time(Start),
+    put_dict(_{start:Start, stop:Stop}, S0, S).
+
+take_command(Log, Agent, Round, Command, Acc0, Acc) :-
+    apply_command(Command, Acc0, Acc, Status),
+    log_control(Log, Agent, Round, Command, Status).
+
+turn_back(M, Agent, Method, S0) :-
+    get_dict(acc, S0, Acc),
+    finish(Method, Acc, Final),
+    put_dict(_{phase:backward, acc:Final}, S0, S),
+    put_state(M, Agent, S),
+    step(M, Agent).
 
 %   The aggregate travels packed (fast_term_serialized/2 string): a string
 %   is copied, asserted and sent as one block, where a list of 20,000
 %   floats costs milliseconds at each of those steps. It is unpacked only
 %   where the agent works on it.
-get_state(M, Agent, state(R, P, I, Acc, V, H, B, S)) :-
-    M:dfrl_state(Agent, state(R, P, I, Packed, V, H, B, S)),
-    unpack(Packed, Acc).
+get_state(M, Agent, S) :-
+    M:dfrl_state(Agent, S0),
+    get_dict(acc, S0, Packed),
+    unpack(Packed, Acc),
+    put_dict(acc, S0, Acc, S).
 
-put_state(M, Agent, state(R, P, I, Acc, V, H, B, S)) :-
+put_state(M, Agent, S) :-
+    pack_state(S, Packed),
+    update(M, dfrl_state(Agent, Packed)).
+
+pack_state(S0, S) :-
+    get_dict(acc, S0, Acc),
     pack(Acc, Packed),
-    update(M, dfrl_state(Agent, state(R, P, I, Packed, V, H, B, S))).
+    put_dict(acc, S0, Packed, S).
 
 pack(none, none) :- !.
 pack(Acc, packed(String)) :-
@@ -221,17 +338,32 @@ update(M, Fact) :-
     assertz(M:Fact).
 
 %   Forward: fold this robot's table into the aggregate. A robot that
-%   cannot be read is skipped.
-forward(Method, Robot, Timeout, Acc0, Acc, Visited0, Visited) :-
-    (   catch(read_robot(Method, Robot, Timeout, Table), E,
-              ( print_message(warning, E), fail )),
-        arg(1, Table, Shape),
-        catch(fold(Method, Acc0, Shape, Table, Acc1), E2,
-              ( print_message(warning, E2), fail ))
-    ->  Acc = Acc1,
-        append(Visited0, [Robot], Visited)
-    ;   Acc = Acc0,
-        Visited = Visited0
+%   cannot be read (or whose table does not fit) is skipped.
+forward(Method, Robot, Timeout, S0, S) :-
+    get_dict(acc, S0, Acc0),
+    (   catch(( read_robot(Method, Robot, Timeout, Table),
+                arg(1, Table, Shape),
+                fold(Method, Acc0, Shape, Table, Acc1)
+              ),
+              E, true)
+    ->  (   var(E)
+        ->  get_dict(visited, S0, V0),
+            append(V0, [Robot], V),
+            put_dict(_{acc:Acc1, visited:V}, S0, S)
+        ;   print_message(warning, E),
+            skip(Robot, E, S0, S)
+        )
+    ;   skip(Robot, failed(read_robot(Robot)), S0, S)
+    ).
+
+%   Record that Robot did not take part (once per robot and round).
+skip(Robot, Error, S0, S) :-
+    get_dict(skipped, S0, Skipped0),
+    (   memberchk(skip(Robot, _), Skipped0)
+    ->  S = S0
+    ;   message_text(Error, Text),
+        append(Skipped0, [skip(Robot, Text)], Skipped),
+        put_dict(skipped, S0, Skipped, S)
     ).
 
 fold(Method, none, Shape, Table, acc(Shape, A)) :-
@@ -243,54 +375,62 @@ fold(Method, acc(Shape0, A0), Shape, Table, acc(Shape0, A)) :-
 
 read_robot(Method, Robot, Timeout, Table) :-
     (   method_uses_visits(Method)
-    ->  user:get_qtable_and_visits(Robot, qtable(S, V), qtable(S, W), [timeout(Timeout)]),
+    ->  get_robot_tables(Robot, qtable(S, V), qtable(S, W), [timeout(Timeout)]),
         Table = qtable_visits(S, V, W)
-    ;   user:get_qtable(Robot, Table, [timeout(Timeout)])
+    ;   get_robot_table(Robot, Table, [timeout(Timeout)])
     ).
 
 finish(_, none, none) :- !.
 finish(Method, acc(Shape, A), qtable(Shape, Values)) :-
     aggregate_final(Method, A, Values).
 
-write_back(_, _, none) :- !.
-write_back(Robot, Timeout, Table) :-
-    catch(user:set_qtable(Robot, Table, [timeout(Timeout)]), E,
-          print_message(warning, E)).
+write_back(Robot, Timeout, S0, S) :-
+    get_dict(acc, S0, Table),
+    (   Table == none
+    ->  S = S0
+    ;   catch(set_robot_table(Robot, Table, [timeout(Timeout)]), E, true),
+        (   var(E)
+        ->  S = S0
+        ;   print_message(warning, E),
+            skip(Robot, E, S0, S)
+        )
+    ).
 
 %   Move to the next stop in direction Dir, skipping unreachable ones.
-go(M, Agent, State, Dir) :-
-    arg(3, State, Index),
+go(M, Agent, S, Dir) :-
+    get_dict(index, S, Index),
     Next is Index + Dir,
-    try_stop(M, Agent, State, Next, Dir).
+    try_stop(M, Agent, S, Next, Dir).
 
-try_stop(M, Agent, State, Next, Dir) :-
-    State = state(Round, Phase, Index, Acc, Visited, Hops, Bytes, Start),
+try_stop(M, Agent, S0, Next, Dir) :-
     M:dfrl_plan(Agent, plan(Itinerary, _, _, _, _)),
     length(Itinerary, N),
+    get_dict(phase, S0, Phase),
     (   Next >= 0, Next < N
-    ->  nth0(Next, Itinerary, stop(H, P, _)),
+    ->  nth0(Next, Itinerary, stop(H, P, Robot)),
+        get_dict(acc, S0, Acc),
         carried_bytes(Acc, B),
-        Hops1 is Hops + 1,
-        Bytes1 is Bytes + B,
-        put_state(M, Agent, state(Round, Phase, Next, Acc, Visited,
-                                          Hops1, Bytes1, Start)),
-        (   catch(move_agent(Agent, (H, P)), E,
-                  ( print_message(warning, E), fail ))
+        get_dict(hops, S0, Hops0),
+        get_dict(bytes, S0, Bytes0),
+        Hops is Hops0 + 1,
+        Bytes is Bytes0 + B,
+        put_dict(_{index:Next, hops:Hops, bytes:Bytes}, S0, S1),
+        put_state(M, Agent, S1),
+        catch(move_agent(Agent, (H, P)), E, true),
+        (   var(E)
         ->  true
-        ;   put_state(M, Agent, State),    % still here
+        ;   print_message(warning, E),
             print_message(warning, format("dfrl: skipping stop ~w", [Next])),
+            skip(Robot, E, S0, S2),
+            put_state(M, Agent, S2),            % still here
             Next1 is Next + Dir,
-            try_stop(M, Agent, State, Next1, Dir)
+            try_stop(M, Agent, S2, Next1, Dir)
         )
     ;   Phase == forward
     ->  % nothing reachable ahead: finish here and turn back
         M:dfrl_method_of(Agent, Method),
-        finish(Method, Acc, Final),
-        put_state(M, Agent, state(Round, backward, Index, Final, Visited,
-                                          Hops, Bytes, Start)),
-        step(M, Agent)
-    ;   M:dfrl_method_of(Agent, Method),
-        end_round(M, Agent, Round, Hops, Bytes, Start, Method, Visited)
+        turn_back(M, Agent, Method, S0)
+    ;   end_round(M, Agent, S0)
     ).
 
 %   Payload size of the aggregate in bytes: 10 per float in the fast
@@ -305,55 +445,95 @@ carried_bytes(Acc, B) :-
     ;   B = 0
     ).
 
-end_round(M, Agent, Round, Hops, Bytes, Start, Method0, Visited) :-
+end_round(M, Agent, S) :-
     get_time(End),
     M:dfrl_plan(Agent, plan(Itinerary, Rounds, Rest, Log, _)),
-    Method = Method0,
-    log_line(Log, round(Round, Start, End, Hops, Bytes, Method, Visited)),
-    (   ( Round >= Rounds ; retract(pending(stop)) )
-    ->  log_line(Log, finished(Round)),
+    M:dfrl_method_of(Agent, Method),
+    get_dict(round, S, Round),
+    log_round(Log, Agent, Method, End, S),
+    (   (   Round >= Rounds
+        ->  true
+        ;   get_dict(stop, S, true)
+        ->  true
+        ;   take_stop(Agent)
+        ->  log_control(Log, Agent, Round, stop, applied)
+        )
+    ->  take_commands(Agent, Left),             % too late for them
+        forall(member(C, Left),
+               log_control(Log, Agent, Round, C,
+                           ignored("the agent has finished its tour"))),
+        log_event(Log, _{event:finished, agent:Agent, round:Round}),
         purge_agent(Agent)
     ;   Round1 is Round + 1,
-        put_state(M, Agent, state(Round1, forward, 0, none, [], 0, 0, 0)),
+        new_round(Round1, S1),
+        put_state(M, Agent, S1),
         (   Rest > 0 -> sleep(Rest) ; true ),
         nth0(0, Itinerary, stop(H, P, _)),
-        (   current_node(Node),
-            node_property(Node, address(H0:P0)),
-            P0 =:= P,
-            same_host(H, H0)
+        current_node(Node),
+        (   node_listens_at(Node, H:P)
         ->  step(M, Agent)
         ;   catch(move_agent(Agent, (H, P)), E,
-                  ( log_line(Log, aborted(Round1, E)),
+                  ( message_text(E, Text),
+                    log_event(Log, _{event:aborted, agent:Agent, round:Round1,
+                                     error:Text}),
                     print_message(warning, E),
                     purge_agent(Agent) ))
         )
     ).
 
-same_host(H, H) :- !.
-same_host(A, B) :- loopback(A), loopback(B).
+		 /*******************************
+		 *            ROUND LOG		*
+		 *******************************/
 
-loopback(localhost).
-loopback('127.0.0.1').
+log_round(Log, Agent, Method, End, S) :-
+    get_dict(round, S, Round),
+    get_dict(start, S, Start),
+    get_dict(hops, S, Hops),
+    get_dict(bytes, S, Bytes),
+    get_dict(visited, S, Visited0),
+    get_dict(skipped, S, Skipped0),
+    maplist(text, Visited0, Visited),
+    maplist(skip_json, Skipped0, Skipped),
+    log_event(Log, _{event:round, agent:Agent, round:Round, start:Start,
+                     end:End, hops:Hops, bytes:Bytes, method:Method,
+                     visited:Visited, skipped:Skipped}).
 
-log_line(Log, Term) :-
+skip_json(skip(Robot, Reason), _{robot:R, reason:Reason}) :-
+    text(Robot, R).
+
+log_control(Log, Agent, Round, Command, Status) :-
+    format(string(C), '~q', [Command]),
+    (   Status = ignored(Why)
+    ->  log_event(Log, _{event:control, agent:Agent, round:Round, command:C,
+                         status:ignored, reason:Why})
+    ;   log_event(Log, _{event:control, agent:Agent, round:Round, command:C,
+                         status:applied})
+    ).
+
+%   Names become JSON strings (an atom `true` or `null` would otherwise
+%   be written as a JSON constant).
+text(X, S) :-
+    format(string(S), '~w', [X]).
+
+%!  log_event(+Log, +Dict) is det.
+%
+%   Append Dict as one JSON line to the file Log. The agent name and
+%   method, atoms, are written as strings.
+
+log_event(Log, Dict0) :-
+    foldl(stringify, [agent, method], Dict0, Dict),
     setup_call_cleanup(
         open(Log, append, Out, [encoding(utf8)]),
-        format(Out, '~k.~n', [Term]),
+        ( json_write_dict(Out, Dict, [width(0)]),
+          nl(Out)
+        ),
         close(Out)).
 
-apply_pending(Plan0, Plan, Method0, Method) :-
-    findall(C, retract(pending(C)), Cs0),
-    exclude(==(stop), Cs0, Cs),
-    (   memberchk(stop, Cs0) -> assertz(pending(stop)) ; true ),
-    foldl(apply_command, Cs, Plan0-Method0, Plan-Method).
-
-apply_command(join(Stop), plan(I0, R, Re, L, T)-M, plan(I, R, Re, L, T)-M) :-
-    (   memberchk(Stop, I0) -> I = I0 ; append(I0, [Stop], I) ).
-apply_command(method(New), P-Old, P-M) :-
-    (   dfrl_method(New)
-    ->  M = New
-    ;   print_message(warning, format("dfrl: unknown method ~p kept ~p", [New, Old])),
-        M = Old
+stringify(Key, D0, D) :-
+    (   get_dict(Key, D0, V)
+    ->  text(V, S),
+        put_dict(Key, D0, S, D)
+    ;   D = D0
     ).
 
 		 /*******************************

@@ -363,3 +363,109 @@ test(save_and_load_state, [cleanup((stop_all([A,B]), delete_file(F)))]) :-
     assertion(M:counter(p1, 0)).
 
 :- end_tests(persistence).
+
+% --- seams: accessors, same-node test, remote errors, resource hook ---
+
+:- dynamic user:module_event_seen/1.
+seam_event(platform, _Link, X) :-
+    assertz(user:module_event_seen(X)).
+
+:- multifile node:platform_request/4.
+node:platform_request(test_ctx, Ctx, ok(ctx(Node, Auth)), true) :-
+    node:ctx_node(Ctx, Node),
+    ( node:ctx_authenticated(Ctx) -> Auth = true ; Auth = false ).
+
+:- begin_tests(seams).
+
+test(node_listens_at, [cleanup(stop_all([N]))]) :-
+    node_start(localhost:0, N, [default(false)]),
+    port(N, P),
+    assertion(node:node_listens_at(N, localhost:P)),
+    assertion(node:node_listens_at(N, '127.0.0.1':P)),
+    assertion(node:node_listens_at(N, ('127.0.0.1', P))),
+    assertion(node:node_listens_at(N, P)),
+    P1 is P + 1,
+    assertion(\+ node:node_listens_at(N, localhost:P1)),
+    assertion(\+ node:node_listens_at(N, 'example.org':P)),
+    assertion(node:node_for_address('127.0.0.1':P, N)).
+
+test(ctx_accessors, [cleanup(stop_all([N]))]) :-
+    node_start(localhost:0, N, [token(s), default(false)]),
+    port(N, P),
+    transport_request(localhost:P, test_ctx, R1, []),
+    assertion(R1 == ctx(N, false)),
+    transport_request(localhost:P, test_ctx, R2, [tokens([s])]),
+    assertion(R2 == ctx(N, true)).
+
+test(module_platform_event, [cleanup(stop_all([B]))]) :-
+    node_start(localhost:0, B, [default(false)]),
+    port(B, PB),
+    platform_event(plunit_seams:seam_event/3),
+    agent_post(localhost:PB, platform, seam_event, x, [7]),
+    assertion(wait_for(user:module_event_seen(7))).
+
+test(remote_error_prints_address, [cleanup(stop_all([N]))]) :-
+    node_start(localhost:0, N, [default(false)]),
+    port(N, P),
+    catch(transport_request(localhost:P, post(nobody, hello, x, []), _, []), E, true),
+    assertion(E = error(existence_error(agent, nobody), remote(localhost:P))),
+    platform_errors:message_text(E, Text),
+    format(string(Expected), "(at localhost:~w)", [P]),
+    assertion(sub_string(Text, _, _, 0, Expected)).
+
+test(record_hop, [cleanup(stop_all([N]))]) :-
+    node_start(localhost:0, N, [default(false)]),
+    with_node(N, create_mobile_agent(h1, walker, [])),
+    assertion(agents:agent_record_hop(N, h1, hop(a, b, 1.0, 1.5))),
+    agents:agent_hop_times(N, h1, Ms),
+    assertion(Ms == [500.0]),
+    assertion(\+ agents:agent_record_hop(N, nobody, hop(a, b, 1.0, 1.5))).
+
+test(add_facts_travel_as_payload, [cleanup(stop_all([N]))]) :-
+    node_start(localhost:0, N, [default(false)]),
+    with_node(N, create_mobile_agent(f1, walker, [])),
+    agents:agent_add_facts(N, f1, [state_of(f1, s{a:1}), other(f1)]),
+    agent_property(N, f1, payload(Payload)),
+    assertion(Payload == [state_of/2, other/1]),
+    agents:agent_export(N, f1, Record),
+    arg(7, Record, Clauses),
+    assertion(memberchk((state_of(f1, s{a:1}) :- true), Clauses)).
+
+:- end_tests(seams).
+
+:- begin_tests(robot_resources).
+
+:- use_module('../../platform_pl/robot_resources').
+:- use_module(memory_robots).
+
+test(unknown_robot, [ setup(memory_robots_start([r1-[1.0, 2.0]])),
+                      cleanup(memory_robots_stop),
+                      error(existence_error(robot, r9)) ]) :-
+    get_robot_table(r9, _, []).
+
+test(read_write, [ setup(memory_robots_start([r1-[1.0, 2.0]])),
+                   cleanup(memory_robots_stop) ]) :-
+    get_robot_table(r1, T, [timeout(1)]),
+    assertion(T == qtable([1, 2], [1.0, 2.0])),
+    get_robot_tables(r1, T2, V, []),
+    assertion(T2 == T),
+    assertion(V == qtable([1, 2], [1.0, 1.0])),
+    set_robot_table(r1, qtable([1, 2], [5.0, 6.0]), []),
+    assertion(memory_robot_table(r1, [5.0, 6.0])),
+    assertion(hosted_robot(r1, [algorithm(test), shape([1, 2])])).
+
+test(bad_arguments, [ setup(memory_robots_start([r1-[1.0, 2.0]])),
+                      cleanup(memory_robots_stop) ]) :-
+    catch(get_robot_table(_, _, []), E1, true),
+    assertion(E1 = error(instantiation_error, _)),
+    catch(get_robot_table(r1, _, nolist), E2, true),
+    assertion(E2 = error(type_error(list, nolist), _)),
+    catch(set_robot_table(r1, _, []), E3, true),
+    assertion(E3 = error(instantiation_error, _)).
+
+test(hook_error_passes_through, [ setup(memory_robots_start([r1-[1.0, 2.0]])),
+                                  cleanup(memory_robots_stop),
+                                  error(type_error(qtable, foo(bar))) ]) :-
+    set_robot_table(r1, foo(bar), []).
+
+:- end_tests(robot_resources).

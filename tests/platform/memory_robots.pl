@@ -1,0 +1,80 @@
+:- module(memory_robots,
+          [ memory_robots_start/1,      % +Robot-Values pairs
+            memory_robots_stop/0,
+            memory_robot_table/2,       % ?Robot, ?Values
+            memory_robot_sets/2         % ?Robot, ?Count
+          ]).
+/** <module> Robots with in-memory tables, for the platform's tests
+
+A plain-Prolog implementation of the resource hook
+(platform_pl/robot_resources.pl): each robot has a table of 2 actions
+held in this module; reads return it, writes replace it and are counted
+(a write that is not qtable(Shape, List) raises type_error(qtable, T)).
+Visit counts are all 1.0.
+*/
+:- use_module('../../platform_pl/robot_resources', []).
+:- autoload(library(apply), [maplist/3]).
+:- autoload(library(lists), [member/2]).
+
+:- dynamic table_/2, sets_/2.
+
+:- multifile
+    robot_resources:robot/2,
+    robot_resources:table_get/3,
+    robot_resources:tables_get/4,
+    robot_resources:table_set/3.
+
+%!  memory_robots_start(+Robots) is det.
+%
+%   Host exactly Robots, a list Robot-Values (flat values, 2 actions).
+
+memory_robots_start(Robots) :-
+    memory_robots_stop,
+    forall(member(R-V, Robots),
+           ( assertz(table_(R, V)), assertz(sets_(R, 0)) )).
+
+%!  memory_robots_stop is det.
+%
+%   Host no robots.
+
+memory_robots_stop :-
+    retractall(table_(_, _)),
+    retractall(sets_(_, _)).
+
+%!  memory_robot_table(?Robot, ?Values) is nondet.
+
+memory_robot_table(R, V) :-
+    table_(R, V).
+
+%!  memory_robot_sets(?Robot, ?Count) is nondet.
+%
+%   Count is the number of writes Robot's table had.
+
+memory_robot_sets(R, N) :-
+    sets_(R, N).
+
+shape(V, [A, 2]) :-
+    length(V, N),
+    A is N // 2.
+
+robot_resources:robot(R, [algorithm(test), shape(S)]) :-
+    table_(R, V),
+    shape(V, S).
+robot_resources:table_get(R, qtable(S, V), _) :-
+    table_(R, V),
+    shape(V, S).
+robot_resources:tables_get(R, qtable(S, V), qtable(S, W), _) :-
+    table_(R, V),
+    shape(V, S),
+    maplist([_, 1.0]>>true, V, W).
+robot_resources:table_set(R, T, _) :-
+    (   T = qtable(_, V), is_list(V)
+    ->  true
+    ;   throw(error(type_error(qtable, T), _))
+    ),
+    with_mutex(memory_robots,
+               ( retract(table_(R, _)),
+                 assertz(table_(R, V)),
+                 retract(sets_(R, N)),
+                 N1 is N + 1,
+                 assertz(sets_(R, N1)) )).
