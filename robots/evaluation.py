@@ -1,6 +1,22 @@
-"""Evaluation of a fixed policy: collisions per 1,000 control steps, greedy vs random."""
+"""Evaluation of a fixed policy: a performance measure that tells driving from spinning.
+
+:func:`evaluate_policy` runs a policy without learning and reports, besides the reward,
+
+* ``collisions_per_1000``: collisions per 1,000 control steps;
+* ``progress``: the mean forward progress per step, as a fraction of the top speed
+  (``info["progress"]`` clipped to ``[-1, 1]``): 1 drives straight ahead flat out all the time,
+  0 spins in place or stands still;
+* ``coverage``: the share of the arena's free floor cells (5 cm grid, cells whose centre a robot
+  can occupy) that the robot's centre visited in an episode, averaged over the episodes: a
+  policy that drives around a small circle covers little.
+
+A policy that spins in place scores ``collisions_per_1000 = 0`` like a perfect one, but its
+progress and coverage are near 0; that is why the measure has three numbers. Policies are the
+greedy policy of a Q-table, uniform random actions, or any callable ``obs -> action``.
+"""
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
 
@@ -10,12 +26,19 @@ from dfrl.robots.learners import greedy_action
 from dfrl.robots.state import Discretiser
 from dfrl.robots.training import TrainerConfig
 
+#: Side of the coverage grid's cells (m).
+COVERAGE_CELL: float = 0.05
+
 
 class PolicyKind(str, Enum):
-    """Policies that can be evaluated."""
+    """Policies that can be evaluated by name."""
 
     GREEDY = "greedy"  #: argmax of the Q-table (ties broken at random), no learning
     RANDOM = "random"  #: uniform random actions
+
+
+Policy = Callable[[np.ndarray], int]
+"""A hand-made policy: IR proximities, shape (n_sensors,), in [0, 1] -> action index."""
 
 
 @dataclass(frozen=True)
@@ -31,6 +54,12 @@ class EvalResult:
     distance : float
         Path length driven (m).
     mean_reward : float
+    progress : float
+        Mean forward progress per step, fraction of top speed, in [-1, 1].
+    coverage : float
+        Share of the free floor's cells visited per episode (mean over episodes), in [0, 1].
+    episodes : int
+        Start poses used (one per episode; collisions respawn within an episode).
     """
 
     policy: str
@@ -39,16 +68,52 @@ class EvalResult:
     collisions_per_1000: float
     distance: float
     mean_reward: float
+    progress: float = 0.0
+    coverage: float = 0.0
+    episodes: int = 1
+
+
+class _Coverage:
+    """Visited cells of a grid over the free floor."""
+
+    def __init__(self, arena, clearance: float) -> None:  # noqa: ANN001 - ArenaSpec
+        w, d = arena.size
+        self.nx, self.ny = max(1, int(round(w / COVERAGE_CELL))), max(1, int(round(d / COVERAGE_CELL)))
+        self.x0, self.y0 = -w / 2, -d / 2
+        xs = self.x0 + (np.arange(self.nx) + 0.5) * (w / self.nx)
+        ys = self.y0 + (np.arange(self.ny) + 0.5) * (d / self.ny)
+        gx, gy = np.meshgrid(xs, ys, indexing="ij")
+        centres = np.stack([gx.ravel(), gy.ravel()], axis=1)
+        self.free = (arena.clearance(centres) >= clearance).reshape(self.nx, self.ny)
+        self.seen = np.zeros_like(self.free)
+        self.cw, self.cd = w / self.nx, d / self.ny
+
+    def visit(self, x: float, y: float) -> None:
+        i = min(self.nx - 1, max(0, int((x - self.x0) / self.cw)))
+        j = min(self.ny - 1, max(0, int((y - self.y0) / self.cd)))
+        self.seen[i, j] = True
+
+    def share(self) -> float:
+        """Share of free cells seen since the last :meth:`restart`."""
+        total = int(self.free.sum())
+        return float((self.seen & self.free).sum()) / total if total else 0.0
+
+    def restart(self) -> float:
+        """Forget the visited cells; return the share seen until now."""
+        share = self.share()
+        self.seen[:] = False
+        return share
 
 
 def evaluate_policy(
     config: TrainerConfig,
-    policy: PolicyKind,
+    policy: PolicyKind | str | Policy,
     steps: int,
     seed: int,
     q_table: np.ndarray | None = None,
+    episode_steps: int | None = None,
 ) -> EvalResult:
-    """Run a fixed policy in the configured arena and count collisions.
+    """Run a fixed policy in the configured arena and measure it (see the module doc).
 
     Collisions and respawns follow the training rules (a collision respawns the robot at a
     random free pose; so does being stuck).
@@ -57,49 +122,72 @@ def evaluate_policy(
     ----------
     config : TrainerConfig
         Arena, simulation, actions, reward and discretisation (the learner is unused).
-    policy : PolicyKind
+    policy : PolicyKind, its name, or a callable ``obs -> action``
     steps : int
-        Control steps to run.
+        Control steps to run in all.
     seed : int
         Seeds the start/respawn poses and the random choices.
     q_table : np.ndarray, shape (n_states, n_actions), optional
         Required for GREEDY.
+    episode_steps : int, optional
+        Start a new episode from a fresh random pose every so many steps (many short
+        episodes compare policies with fewer steps than one long run). Default: one episode.
     """
     from dfrl.robots.env import EPuckEnv
 
-    policy = PolicyKind(policy)
+    if callable(policy):
+        name, fn, kind = getattr(policy, "__name__", "custom"), policy, None
+    else:
+        kind = PolicyKind(policy)
+        name, fn = kind.value, None
+    if episode_steps is not None and episode_steps < 1:
+        raise ValueError("episode_steps must be >= 1")
     disc = Discretiser(config.discretisation)
     rng = np.random.default_rng([seed, 7])
     env = EPuckEnv(arena=config.arena, config=config.env_config())
     try:
         n_actions = int(env.action_space.n)
-        if policy is PolicyKind.GREEDY:
+        if kind is PolicyKind.GREEDY:
             if q_table is None:
                 raise ValueError("a greedy evaluation needs a Q-table")
             if q_table.shape != (disc.n_states, n_actions):
                 raise ValueError(f"Q-table shape {q_table.shape} does not fit the configuration "
                                  f"({disc.n_states}, {n_actions})")
+        cover = _Coverage(env.arena, env.robot.config.body_radius)
         obs, info = env.reset(seed=seed, options={"random": True})
         # a random start so that evaluation seeds differ even in arenas with a fixed start
         obs, info = env.reset()
-        collisions, distance, total = 0, 0.0, 0.0
+        collisions, distance, total, progress, episodes, covered = 0, 0.0, 0.0, 0.0, 1, 0.0
         x, y, _ = info["pose"]
-        for _ in range(steps):
-            if policy is PolicyKind.GREEDY:
+        cover.visit(x, y)
+        for k in range(steps):
+            if episode_steps is not None and k > 0 and k % episode_steps == 0:
+                obs, info = env.reset()
+                x, y, _ = info["pose"]
+                episodes += 1
+                covered += cover.restart()
+                cover.visit(x, y)
+            if fn is not None:
+                action = int(fn(obs))
+            elif kind is PolicyKind.GREEDY:
                 action = greedy_action(q_table[disc(obs)], rng)
             else:
                 action = int(rng.integers(n_actions))
             obs, reward, terminated, truncated, info = env.step(action)
             total += reward
+            progress += min(max(float(info["progress"]), -1.0), 1.0)
             collisions += bool(info["collision"])
             nx, ny, _ = info["pose"]
             distance += float(np.hypot(nx - x, ny - y))
             x, y = nx, ny
+            cover.visit(x, y)
             if terminated or truncated:
                 obs, info = env.reset()
                 x, y, _ = info["pose"]
-        return EvalResult(policy=policy.value, steps=steps, collisions=collisions,
-                          collisions_per_1000=1000.0 * collisions / max(steps, 1),
-                          distance=distance, mean_reward=total / max(steps, 1))
+        n = max(steps, 1)
+        return EvalResult(policy=name, steps=steps, collisions=collisions,
+                          collisions_per_1000=1000.0 * collisions / n,
+                          distance=distance, mean_reward=total / n, progress=progress / n,
+                          coverage=(covered + cover.share()) / episodes, episodes=episodes)
     finally:
         env.close()
