@@ -1,17 +1,23 @@
-/*  Send a control command to a running dFRL agent, through the node of its
-    first stop:
+/*  Send one control command to a running dFRL agent, through the node of
+    its first stop:
 
         swipl -q platform_pl/agents/dfrl_control.pl HOST PORT TOKEN COMMAND.json
 
-    COMMAND.json is one of
-      {"join":   {"host": "127.0.0.1", "port": 7006, "robot": "r6"}}
-      {"method": "median", "program": "/abs/median_method.pl",
-       "nodes": [["127.0.0.1", 7001], ...]}        load program on each node first
-      {"stop": true}
-    The agent applies it when it starts its next round.
+    COMMAND.json names the agent and holds one command
+    (dfrl_console:dfrl_command/2):
+      {"agent": "fed_qlearning", "join": {"host": "127.0.0.1", "port": 7006, "robot": "r6"}}
+      {"agent": "fed_qlearning", "method": "median", "program": "/abs/median_method.pl",
+       "nodes": [["127.0.0.1", 7001], ...]}       load the program on each node first
+      {"agent": "fed_qlearning", "stop": true}
+    It posts the platform event dfrl_control/4 with Args [Agent, Command]
+    (contract C3); the agent applies it when it starts its next round.
+
+    A long-lived console node (dfrl_console.pl) does the same with its
+    `control` and `load_program` requests, without a process per command.
 */
 :- use_module('../tartarus').
-:- use_module(library(http/json)).
+:- use_module(dfrl_console, [dfrl_command/2]).
+:- use_module(library(http/json), [json_read_dict/3]).
 :- use_module(library(main)).
 
 :- initialization(main, main).
@@ -27,23 +33,24 @@ main(_) :-
     halt(2).
 
 control(Host, Port, Token, File) :-
-    setup_call_cleanup(open(File, read, In), json_read_dict(In, C, [value_string_as(atom)]), close(In)),
-    command(C, Host, Port, Token, Command),
-    agent_post(Host:Port, platform, dfrl_control, (Host, Port), [Command]),
-    format("DFRL_CONTROL sent ~q~n", [Command]).
+    setup_call_cleanup(open(File, read, In, [encoding(utf8)]),
+                       json_read_dict(In, C, []),
+                       close(In)),
+    (   get_dict(agent, C, Agent0)
+    ->  atom_string(Agent, Agent0)
+    ;   throw(error(existence_error(key, agent, C), _))
+    ),
+    dfrl_command(C, Command),
+    load_first(C, Host, Port, Token),
+    agent_post(Host:Port, platform, dfrl_control, (Host, Port), [Agent, Command]),
+    format("DFRL_CONTROL sent ~q to ~q~n", [Command, Agent]).
 
-command(C, _, _, _, join(stop(H, P, R))) :-
-    get_dict(join, C, J), !,
-    get_dict(host, J, H), get_dict(port, J, P), get_dict(robot, J, R).
-command(C, Host, Port, Token, method(M)) :-
-    get_dict(method, C, M), !,
-    (   get_dict(program, C, Program)
-    ->  (   get_dict(nodes, C, Nodes) -> true ; Nodes = [[Host, Port]] ),
-        forall(member([H, P], Nodes),
-               load_program_at(H:P, Program, [tokens([Token])]))
+load_first(C, Host, Port, Token) :-
+    (   get_dict(program, C, Program0)
+    ->  atom_string(Program, Program0),
+        (   get_dict(nodes, C, Nodes) -> true ; Nodes = [[Host, Port]] ),
+        forall(member([H0, P], Nodes),
+               ( atom_string(H, H0),
+                 load_program_at(H:P, Program, [tokens([Token])]) ))
     ;   true
     ).
-command(C, _, _, _, stop) :-
-    get_dict(stop, C, true), !.
-command(C, _, _, _, _) :-
-    throw(error(domain_error(dfrl_command, C), _)).

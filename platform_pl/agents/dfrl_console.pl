@@ -1,0 +1,391 @@
+:- module(dfrl_console,
+          [ dfrl_console_serve/1,       % +Node
+            dfrl_launch_plan/4,         % +Dict, -Name, -Plan, -Options
+            dfrl_launch/3,              % +Node, +Dict, -Result
+            dfrl_command/2              % +Dict, -Command
+          ]).
+:- use_module('../tartarus').
+:- use_module(dfrl_agent, [dfrl_create/4]).
+:- use_module(library(http/json),
+              [atom_json_dict/3, json_write_dict/3]).
+:- use_module(library(main), [main/0, argv_options/3]).
+:- autoload(library(error), [must_be/2, domain_error/2, type_error/2]).
+:- autoload(library(readutil), [read_line_to_string/2]).
+:- autoload(library(option), [option/2, option/3]).
+:- autoload(library(lists), [member/2]).
+
+/** <module> The console node of an experiment, driven in JSON lines
+
+A long-lived platform node that an experiment driver (a Python process)
+starts once and talks to over stdin and stdout, one JSON object per line:
+
+    swipl -q platform_pl/agents/dfrl_console.pl [--host H] [--port P]
+                                                [--token T]...
+
+--host is the address to bind (default 127.0.0.1), --port the port (0,
+the default, lets the OS choose), --token a token of the node (repeat for
+several; numeric tokens are integers, as Tartarus tokens are). The node
+prints
+
+    {"event":"ready","host":H,"port":P}
+
+and then serves requests, one at a time in the order they arrive. Every
+request carries an `id` and gets one reply, `{"id":N,"ok":true,...}` or
+`{"id":N,"ok":false,"error":"<printable text>"}`; an error inside a
+request never stops the node. Requests:
+
+  - `{"id":1,"op":"launch","plan":Plan}`: create the dFRL agent of the
+    launch plan (dfrl_launch_plan/4) on this node and move it to its
+    first stop. Replies `{"agent":Name,"host":H,"port":P}` once it left.
+  - `{"id":2,"op":"control","agent":A,"host":H,"port":P,"command":C}`:
+    post the control command C (dfrl_command/2) for agent A to the node
+    H:P (the agent's first stop) as the platform event dfrl_control/4,
+    Args `[A, Command]`, Link this node's own (Host, Port).
+  - `{"id":3,"op":"load_program","program":File,"nodes":[[H,P],...]}`:
+    load the program file into each node (load_program_at/3 with this
+    node's tokens), in order; the first failure is the reply.
+  - `{"id":7,"op":"agents","node":[H,P]}`: the agents on the node H:P,
+    `{"agents":[{"name":N,"handler":H,"kind":K,"status":S},...]}`.
+  - `{"id":4,"op":"join","to":[H,P],"request":R,"robot":Spec,
+    "iterations":N}`: ask the driver whose console is H:P to add a robot
+    (Spec is passed on untouched; N may be null).
+  - `{"id":5,"op":"reply","to":[H,P],"request":R,"result":Result}`:
+    answer the join request R that came from the console H:P.
+  - `{"id":6,"op":"quit"}` (or end of input): stop the node and exit 0.
+
+Joins travel through the platform: this node declares the platform event
+dfrl_console:dfrl_driver/3. A peer posts `[dfrl_driver, platform, (H,P), Message]`,
+(H,P) being the peer's own console node, with Message one of
+`join(Request, SpecJSON, Iterations)` or `reply(Request, ResultJSON)`
+(the JSON objects as strings). The node prints them as event lines for
+its driver:
+
+    {"event":"join_request","request":R,"robot":Spec,"iterations":N,"from":[H,P]}
+    {"event":"reply","request":R,"result":Result,"from":[H,P]}
+
+and a message it cannot read as `{"event":"bad_message","error":...}`.
+Lines on stdout are written under one mutex, whole, and flushed.
+*/
+
+:- initialization(platform_event(dfrl_console:dfrl_driver/3)).
+:- initialization(main, main).
+
+opt_type(host,  host,  atom).
+opt_type(port,  port,  between(0, 65535)).
+opt_type(token, token, atom).
+
+opt_help(host,  "Address to bind (default 127.0.0.1)").
+opt_help(port,  "Port to bind (default 0: chosen by the OS)").
+opt_help(token, "A token of this node (repeat for several)").
+opt_help(help(usage), " [--host H] [--port P] [--token T]...").
+
+main(Argv) :-
+    catch(console(Argv), E, ( print_message(error, E), halt(1) )).
+
+console(Argv) :-
+    argv_options(Argv, _Positional, Options),
+    option(host(Host), Options, '127.0.0.1'),
+    option(port(Port), Options, 0),
+    findall(T, ( member(token(A), Options), token_term(A, T) ), Tokens),
+    set_stream(user_input, encoding(utf8)),
+    set_stream(user_output, encoding(utf8)),
+    (   Tokens == [] -> TokOpts = [] ; TokOpts = [tokens(Tokens)] ),
+    node_start(Host:Port, Node, [default(true)|TokOpts]),
+    node_property(Node, address(H:P)),
+    emit(_{event:ready, host:H, port:P}),
+    call_cleanup(dfrl_console_serve(Node), node_stop(Node)).
+
+%!  dfrl_console_serve(+Node) is det.
+%
+%   Serve JSON-line requests from user_input on behalf of Node until end
+%   of input or a `quit` request. Replies go to user_output.
+
+dfrl_console_serve(Node) :-
+    read_line_to_string(user_input, Line),
+    (   Line == end_of_file
+    ->  true
+    ;   serve_line(Node, Line, Continue),
+        (   Continue == true
+        ->  dfrl_console_serve(Node)
+        ;   true
+        )
+    ).
+
+serve_line(_, Line, true) :-
+    split_string(Line, "", " \t\r", [""]),
+    !.
+serve_line(Node, Line, Continue) :-
+    catch(atom_json_dict(Line, Request, []), E, true),
+    (   nonvar(E)
+    ->  reply(null, error(E)),
+        Continue = true
+    ;   is_dict(Request)
+    ->  request_id(Request, Id),
+        serve_request(Node, Id, Request, Continue)
+    ;   reply(null, error(error(type_error(json_object, Line), _))),
+        Continue = true
+    ).
+
+request_id(Request, Id) :-
+    (   get_dict(id, Request, Id) -> true ; Id = null ).
+
+serve_request(_, Id, Request, false) :-
+    get_dict(op, Request, "quit"),
+    !,
+    reply(Id, ok(_{})).
+serve_request(Node, Id, Request, true) :-
+    (   catch(request(Node, Request, Result), E, true)
+    ->  (   var(E)
+        ->  reply(Id, ok(Result))
+        ;   reply(Id, error(E))
+        )
+    ;   reply(Id, error(failed(Request)))
+    ).
+
+%   request(+Node, +Request, -Result) is semidet: one console operation.
+
+request(Node, Request, Result) :-
+    (   get_dict(op, Request, Op0)
+    ->  text_atom(Op0, Op)
+    ;   throw(error(existence_error(key, op, Request), _))
+    ),
+    op(Op, Node, Request, Result).
+
+op(launch, Node, Request, Result) :-
+    !,
+    key(plan, Request, Plan),
+    dfrl_launch(Node, Plan, Result).
+op(control, Node, Request, _{agent:Agent, command:Text}) :-
+    !,
+    key(agent, Request, Agent0), text_atom(Agent0, Agent),
+    key(host, Request, Host0), text_atom(Host0, Host),
+    key(port, Request, Port), must_be(integer, Port),
+    key(command, Request, C),
+    dfrl_command(C, Command),
+    node_property(Node, link(Link)),
+    agent_post(Host:Port, platform, dfrl_control, Link, [Agent, Command]),
+    format(string(Text), '~q', [Command]).
+op(load_program, _Node, Request, _{program:Program, loaded:Nodes}) :-
+    !,
+    key(program, Request, Program0), text_atom(Program0, Program),
+    key(nodes, Request, Nodes), must_be(list, Nodes),
+    forall(member(N, Nodes),
+           ( address(N, Address),
+             load_program_at(Address, Program, []) )).
+op(agents, _Node, Request, _{agents:Agents}) :-
+    !,
+    key(node, Request, N), address(N, Address),
+    remote_agents(Address, Agents0, []),
+    maplist(agent_dict, Agents0, Agents).
+op(join, Node, Request, _{posted:true}) :-
+    !,
+    key(to, Request, To), address(To, Address),
+    key(request, Request, R), request_ref(R),
+    key(robot, Request, Spec), must_be(dict, Spec),
+    (   get_dict(iterations, Request, It) -> true ; It = null ),
+    (   It == null -> true ; must_be(nonneg, It) ),
+    atom_json_dict(SpecText, Spec, [as(string), width(0)]),
+    node_property(Node, link(Link)),
+    agent_post(Address, platform, dfrl_driver, Link, [join(R, SpecText, It)]).
+op(reply, Node, Request, _{posted:true}) :-
+    !,
+    key(to, Request, To), address(To, Address),
+    key(request, Request, R), request_ref(R),
+    key(result, Request, Result), must_be(dict, Result),
+    atom_json_dict(ResultText, Result, [as(string), width(0)]),
+    node_property(Node, link(Link)),
+    agent_post(Address, platform, dfrl_driver, Link, [reply(R, ResultText)]).
+op(Op, _, _, _) :-
+    domain_error(console_op, Op).
+
+agent_dict(agent(Name, Handler, Kind, Status),
+           _{name:Name, handler:H, kind:Kind, status:S}) :-
+    format(string(H), '~q', [Handler]),
+    format(string(S), '~q', [Status]).
+
+key(Key, Dict, Value) :-
+    (   get_dict(Key, Dict, Value)
+    ->  true
+    ;   throw(error(existence_error(key, Key, Dict), _))
+    ).
+
+address([H0, P], H:P) :-
+    !,
+    text_atom(H0, H),
+    must_be(integer, P).
+address(A, _) :-
+    type_error(address_pair, A).
+
+request_ref(R) :-
+    (   ( string(R) ; number(R) )
+    ->  true
+    ;   type_error(request_id, R)
+    ).
+
+text_atom(X, A) :-
+    (   atom(X) -> A = X
+    ;   string(X) -> atom_string(A, X)
+    ;   type_error(text, X)
+    ).
+
+		 /*******************************
+		 *        LAUNCH AND CONTROL	*
+		 *******************************/
+
+%!  dfrl_launch_plan(+Dict, -Name, -Plan, -Options) is det.
+%
+%   Translate a launch plan (JSON object as a dict, strings as strings
+%   or atoms) into the arguments of dfrl_create/4:
+%
+%     { "name": "fed_q",                            agent name (dfrl)
+%       "itinerary": [{"host": H, "port": P, "robot": R}, ...],
+%       "method": "average",                        (average)
+%       "rounds": 16,                               round budget (1)
+%       "rest_s": 0.0,                              rest at the first stop
+%       "rounds_log": "/abs/rounds.log",            the agent's JSON-lines log
+%       "token": 1111,                              token of the robot nodes
+%       "timeout_s": 3600 }                         table read/write limit
+%
+%   Plan is plan(Stops, Rounds, Rest, Log, Timeout) with Stops a list of
+%   stop(Host, Port, Robot); Options are method(M) and tokens(List).
+
+dfrl_launch_plan(D, Name, plan(Stops, Rounds, Rest, Log, Timeout),
+                 [method(Method), tokens(Tokens)]) :-
+    must_be(dict, D),
+    key(itinerary, D, Stops0),
+    must_be(list, Stops0),
+    maplist(stop_term, Stops0, Stops),
+    dict_default(D, rounds, 1, Rounds),
+    dict_default(D, rest_s, 0.0, Rest0), must_be(number, Rest0), Rest is float(Rest0),
+    dict_default(D, rounds_log, 'rounds.log', Log0), text_atom(Log0, Log),
+    dict_default(D, timeout_s, 3600, Timeout),
+    dict_default(D, method, average, Method0), text_atom(Method0, Method),
+    dict_default(D, name, dfrl, Name0), text_atom(Name0, Name),
+    (   get_dict(token, D, Token0), Token0 \== null
+    ->  token_term(Token0, Token), Tokens = [Token]
+    ;   Tokens = []
+    ).
+
+stop_term(D, stop(H, P, R)) :-
+    must_be(dict, D),
+    key(host, D, H0), text_atom(H0, H),
+    key(port, D, P), must_be(integer, P),
+    key(robot, D, R0), text_atom(R0, R).
+
+%   A numeric token is an integer, as Tartarus tokens are.
+token_term(T, T) :- number(T), !.
+token_term(T, N) :- atom(T), atom_number(T, N), integer(N), !.
+token_term(T, A) :- text_atom(T, A).
+
+dict_default(D, K, Default, V) :-
+    (   get_dict(K, D, V0), V0 \== null -> V = V0 ; V = Default ).
+
+%!  dfrl_launch(+Node, +Dict, -Result) is det.
+%
+%   Create the agent of launch plan Dict on Node and move it to its first
+%   stop. Result is the dict `_{agent:Name, host:H, port:P}`. If the move
+%   fails the agent is purged from Node and the move's error is thrown.
+
+dfrl_launch(Node, Dict, _{agent:Name, host:H, port:P}) :-
+    dfrl_launch_plan(Dict, Name, Plan, Options),
+    dfrl_create(Node, Name, Plan, Options),
+    Plan = plan([stop(H, P, _)|_], _, _, _, _),
+    catch(with_node(Node, move_agent(Name, (H, P))), E,
+          ( catch(with_node(Node, purge_agent(Name)), E2,
+                  print_message(warning, E2)),
+            throw(E) )).
+
+%!  dfrl_command(+Dict, -Command) is det.
+%
+%   Translate a control command (JSON object as a dict) into the term of
+%   contract C3:
+%
+%     {"join": {"host": H, "port": P, "robot": R}}  join(stop(H, P, R))
+%     {"method": "median"}                          method(median)
+%     {"stop": true}                                stop
+%
+%   @error domain_error(dfrl_command, Dict) for anything else.
+
+dfrl_command(D, Command) :-
+    must_be(dict, D),
+    (   get_dict(join, D, J)
+    ->  stop_term(J, Stop),
+        Command = join(Stop)
+    ;   get_dict(method, D, M0)
+    ->  text_atom(M0, M),
+        Command = method(M)
+    ;   get_dict(stop, D, true)
+    ->  Command = stop
+    ;   domain_error(dfrl_command, D)
+    ).
+
+		 /*******************************
+		 *      JOINS THROUGH THE PLATFORM	*
+		 *******************************/
+
+%!  dfrl_driver(+Platform, +Link, +Message) is det.
+%
+%   Platform event: a peer console (at Link) asks this node's driver to
+%   add a robot, or answers such a request; printed as an event line.
+
+dfrl_driver(platform, Link, Message) :-
+    catch(driver_event(Link, Message, Event), E, true),
+    (   var(E)
+    ->  emit(Event)
+    ;   error_text(E, Text),
+        format(string(M), '~q', [Message]),
+        emit(_{event:bad_message, message:M, error:Text})
+    ).
+
+driver_event(Link, join(R, SpecText, It), Event) :-
+    !,
+    link_pair(Link, From),
+    request_ref(R),
+    json_object(SpecText, Spec),
+    (   It == null -> true ; must_be(nonneg, It) ),
+    Event = _{event:join_request, request:R, robot:Spec, iterations:It, from:From}.
+driver_event(Link, reply(R, ResultText), Event) :-
+    !,
+    link_pair(Link, From),
+    request_ref(R),
+    json_object(ResultText, Result),
+    Event = _{event:reply, request:R, result:Result, from:From}.
+driver_event(_, Message, _) :-
+    domain_error(dfrl_driver_message, Message).
+
+link_pair((H, P), [H, P]) :-
+    atomic(H), integer(P),
+    !.
+link_pair(Link, _) :-
+    type_error(link, Link).
+
+json_object(Text, Dict) :-
+    must_be(string, Text),
+    atom_json_dict(Text, Dict, []),
+    must_be(dict, Dict).
+
+		 /*******************************
+		 *            OUTPUT		*
+		 *******************************/
+
+reply(Id, ok(Result)) :-
+    put_dict(_{id:Id, ok:true}, Result, Reply),
+    emit(Reply).
+reply(Id, error(E)) :-
+    error_text(E, Text),
+    emit(_{id:Id, ok:false, error:Text}).
+
+error_text(failed(_), "the request failed") :- !.
+error_text(E, Text) :-
+    (   catch(message_to_string(E, Text0), _, fail)
+    ->  Text = Text0
+    ;   format(string(Text), '~p', [E])
+    ).
+
+%   One whole line per JSON object; replies (main thread) and events
+%   (message threads) may be written at the same time.
+emit(Dict) :-
+    with_mutex(dfrl_console_output,
+               ( json_write_dict(user_output, Dict, [width(0)]),
+                 nl(user_output),
+                 flush_output(user_output) )).
