@@ -31,8 +31,8 @@ stress(Robot, K, N, Mixed) :-
     maplist(=(F), Values),
     aggregate_all(count,
                   ( between(1, N, _),
-                    user:set_qtable(Robot, qtable([S, A], Values)),
-                    user:get_qtable(Robot, qtable(_, Got)),
+                    robot_bridge:set_qtable(Robot, qtable([S, A], Values)),
+                    robot_bridge:get_qtable(Robot, qtable(_, Got)),
                     \+ uniform(Got)
                   ),
                   Mixed).
