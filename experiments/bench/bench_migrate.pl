@@ -1,0 +1,64 @@
+/*  Migration benchmark agent: run by experiments/bench/migrate.py.
+
+    swipl bench_migrate.pl peer TOKEN
+        start a platform on an OS-chosen port, print "PORT <p>", serve until
+        standard input closes.
+    swipl bench_migrate.pl home TOKEN PEER_PORT FLOATS HOPS
+        start a platform, create an agent whose payload is a list of FLOATS
+        floats, bounce it HOPS times between home and peer, print one line
+        "LATENCIES_MS [..]" (one figure per hop, from the call of move_agent
+        at the source to the start of the handler at the destination).
+*/
+:- use_module('../../platform_pl/tartarus').
+:- use_module(library(main)).
+
+:- dynamic bench/3, data/2, departed/2, lat/2, plan/2, user:bench_done/1.
+
+:- initialization(main, main).
+
+main(['peer', Token0]) :-
+    atom_number(Token0, Token),
+    node_start(localhost:0, Node, [token(Token)]),
+    node_property(Node, address(_:Port)),
+    format("PORT ~w~n", [Port]),
+    flush_output,
+    read_term(user_input, _, []),   % until stdin closes
+    node_stop(Node).
+main(['home', Token0, Peer0, Floats0, Hops0]) :-
+    maplist(atom_number, [Token0, Peer0, Floats0, Hops0],
+            [Token, Peer, Floats, Hops]),
+    node_start(localhost:0, Node, [token(Token)]),
+    node_property(Node, address(_:Home)),
+    findall(F, ( between(1, Floats, I), F is I * 0.001 + 0.5 ), Data),
+    assertz(data(guid, Data)),
+    assertz(lat(guid, [])),
+    assertz(plan(guid, plan(Home, Peer, Hops))),
+    create_mobile_agent(bencher, (localhost, Home), bench, [Token]),
+    add_payload(bencher, [(data,2), (lat,2), (plan,2), (departed,2)]),
+    execute_agent(bencher, (localhost, Home), bench),
+    thread_get_message(user:bench_result(Lat)),
+    format("LATENCIES_MS ~w~n", [Lat]),
+    node_stop(Node).
+
+bench(guid, (_, Port), main) :-
+    get_time(Now),
+    (   retract(departed(guid, T0))
+    ->  Ms is (Now - T0) * 1000,
+        retract(lat(guid, L0)),
+        assertz(lat(guid, [Ms|L0]))
+    ;   true
+    ),
+    lat(guid, L),
+    length(L, Done),
+    plan(guid, plan(Home, Peer, Hops)),
+    (   Port =:= Home -> Next = Peer ; Next = Home ),
+    (   Done >= Hops
+    ->  (   Port =:= Home
+        ->  reverse(L, InOrder),
+            thread_send_message(main, user:bench_result(InOrder))
+        ;   move_agent(guid, (localhost, Home))
+        )
+    ;   get_time(T1),
+        assertz(departed(guid, T1)),
+        move_agent(guid, (localhost, Next))
+    ).

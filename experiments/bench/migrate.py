@@ -1,0 +1,94 @@
+"""Agent migration between two platform processes on loopback: ms per hop.
+
+Runs ``bench_migrate.pl`` (beside this module) as two ``swipl`` processes (a peer and a home
+node); an agent whose payload is a list of N floats bounces between them H times.
+Each hop is timed from the call of ``move_agent`` at the source to the start of
+the handler at the destination (same host, same clock).
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import statistics
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+
+SCRIPT = Path(__file__).resolve().parent / "bench_migrate.pl"
+
+
+@dataclass
+class MigrationResult:
+    """Per-hop latency figures of one run (milliseconds)."""
+
+    floats: int
+    hops: int
+    warmup: int
+    median_ms: float
+    p10_ms: float
+    p90_ms: float
+    min_ms: float
+    max_ms: float
+    mean_ms: float
+    payload_bytes: int
+
+
+def percentile(values: list[float], q: float) -> float:
+    """The q-quantile (0..1) by linear interpolation between order statistics."""
+    xs = sorted(values)
+    if not xs:
+        raise ValueError("no values")
+    pos = q * (len(xs) - 1)
+    lo = int(pos)
+    hi = min(lo + 1, len(xs) - 1)
+    return xs[lo] + (xs[hi] - xs[lo]) * (pos - lo)
+
+
+def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
+        timeout: float = 600) -> MigrationResult:
+    """Measure ``hops`` hops (after ``warmup`` uncounted ones) with a payload of ``floats`` floats.
+
+    Raises
+    ------
+    ValueError
+        Bad arguments.
+    FileNotFoundError
+        swipl is not installed.
+    RuntimeError
+        The benchmark scripts failed.
+    """
+    if floats < 0 or hops < 1 or warmup < 0:
+        raise ValueError("floats >= 0, hops >= 1 and warmup >= 0 are required")
+    swipl = shutil.which("swipl")
+    if swipl is None:
+        raise FileNotFoundError("swipl is not installed (run scripts/setup.sh)")
+    peer = subprocess.Popen([swipl, "-q", str(SCRIPT), "peer", str(token)],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert peer.stdout is not None
+        line = peer.stdout.readline()
+        if not line.startswith("PORT "):
+            raise RuntimeError(f"peer did not start: {line!r}")
+        port = int(line.split()[1])
+        home = subprocess.run(
+            [swipl, "-q", str(SCRIPT), "home", str(token), str(port), str(floats), str(hops + warmup)],
+            capture_output=True, text=True, timeout=timeout,
+        )
+    finally:
+        if peer.stdin:
+            peer.stdin.close()
+        try:
+            peer.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            peer.kill()
+    lat_line = next((l for l in home.stdout.splitlines() if l.startswith("LATENCIES_MS")), None)
+    if lat_line is None:
+        raise RuntimeError(f"benchmark failed:\n{home.stdout}\n{home.stderr}")
+    all_ms = json.loads(lat_line.split(" ", 1)[1])
+    ms = all_ms[warmup:]
+    return MigrationResult(
+        floats=floats, hops=len(ms), warmup=warmup,
+        median_ms=statistics.median(ms), p10_ms=percentile(ms, 0.1), p90_ms=percentile(ms, 0.9),
+        min_ms=min(ms), max_ms=max(ms), mean_ms=statistics.fmean(ms),
+        payload_bytes=10 * floats + 1,
+    )

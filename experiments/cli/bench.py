@@ -1,0 +1,165 @@
+"""``dfrl bench migrate|sim|round|bridge``: run a benchmark and print its figures (JSON with
+``--json``). The benchmarks themselves are :mod:`dfrl.experiments.bench`."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import asdict
+from pathlib import Path
+
+from dfrl.experiments.bench import bridge, migrate, round as round_bench, sim
+
+
+# -- migrate ---------------------------------------------------------------------------------
+def add_migrate_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--floats", type=int, nargs="+", default=[0, 1000, 10000, 100000],
+                        help="payload sizes (floats in the agent's payload list)")
+    parser.add_argument("--hops", type=int, default=50, help="timed hops per size")
+    parser.add_argument("--warmup", type=int, default=2, help="untimed hops first")
+    parser.add_argument("--json", action="store_true", help="print one JSON object per size")
+
+
+def cmd_migrate(args: argparse.Namespace) -> int:
+    for n in args.floats:
+        try:
+            result = migrate.run(n, args.hops, args.warmup)
+        except (ValueError, RuntimeError, FileNotFoundError) as exc:
+            print(f"dfrl bench migrate: {exc}", file=sys.stderr)
+            return 1
+        if args.json:
+            print(json.dumps(asdict(result)))
+        else:
+            print(f"floats={n:>7}  median {result.median_ms:8.3f} ms  p10 {result.p10_ms:8.3f}  "
+                  f"p90 {result.p90_ms:8.3f}  min {result.min_ms:8.3f}  max {result.max_ms:8.3f}  "
+                  f"(hops={result.hops})")
+        sys.stdout.flush()
+    return 0
+
+
+# -- sim -------------------------------------------------------------------------------------
+def add_sim_arguments(parser: argparse.ArgumentParser) -> None:
+    from dfrl.robots.learners import LEARNERS
+    from dfrl.robots.world import SimConfig
+
+    parser.add_argument("--steps", type=int, default=5000, help="timed control steps per robot")
+    parser.add_argument("--robots", type=int, nargs="+", default=[1, 2, 4],
+                        help="robots per process to measure (the first is the headline figure)")
+    parser.add_argument("--arena", default="r4")
+    parser.add_argument("--algo", choices=sorted(LEARNERS), default="qlearning")
+    parser.add_argument("--physics-dt", type=float, default=SimConfig().physics_dt)
+    parser.add_argument("--control-dt", type=float, default=SimConfig().control_dt)
+    parser.add_argument("--warmup", type=int, default=200, help="untimed steps per robot first")
+    parser.add_argument("--json", action="store_true", help="print JSON")
+
+
+def cmd_sim(args: argparse.Namespace) -> int:
+    try:
+        out = sim.bench(args.arena, args.algo, args.steps, args.robots, args.physics_dt,
+                        args.control_dt, args.warmup)
+    except ValueError as exc:
+        print(f"dfrl bench sim: error: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(out, indent=2))
+        return 0
+    print(f"sim bench: {args.algo} in {args.arena}, control {out['control_dt'] * 1000:g} ms, "
+          f"physics {out['physics_dt'] * 1000:g} ms ({out['substeps']} substeps), "
+          f"{args.steps} steps")
+    print(f"{'robots':>6} {'steps/s':>9} {'per robot':>10} {'x real time':>12} {'per robot':>10}")
+    for r in out["scaling"]:
+        print(f"{r['robots']:>6} {r['steps_per_s']:>9.0f} {r['steps_per_s_per_robot']:>10.0f} "
+              f"{r['realtime_factor']:>12.0f} {r['realtime_factor_per_robot']:>10.0f}")
+    return 0
+
+
+# -- round -----------------------------------------------------------------------------------
+def add_round_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--entries", type=int, default=20000, help="Q-table entries (default 20000)")
+    parser.add_argument("--actions", type=int, default=4, help="actions per state (default 4)")
+    parser.add_argument("--robots", type=int, default=5, help="robot nodes (default 5)")
+    parser.add_argument("--rounds", type=int, default=30, help="timed rounds (default 30)")
+    parser.add_argument("--warmup", type=int, default=3, help="untimed rounds first")
+    parser.add_argument("--method", default="average", help="aggregation method")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="keep the node logs and rounds.csv here (default: a temp folder)")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def cmd_round(args: argparse.Namespace) -> int:
+    try:
+        r = round_bench.bench(args.entries, args.actions, args.robots, args.rounds, args.warmup,
+                              args.method, args.out)
+    except (RuntimeError, ValueError) as exc:
+        print(f"dfrl bench round: {exc}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(r))
+    else:
+        print(f"{r['robots']} nodes, {r['entries']} entries, {r['method']}: one round "
+              f"(forward + backward, {r['hops']} hops, {r['bytes_carried']} bytes carried) "
+              f"median {r['median_ms']} ms, p90 {r['p90_ms']} ms over {r['rounds']} rounds "
+              f"(target < {round_bench.TARGET_MS:g} ms); identical tables after "
+              f"{r['all_equal_rounds']}/{r['total_rounds']} rounds")
+    for problem in r["log_problems"]:
+        print(f"dfrl bench round: agent log: {problem}", file=sys.stderr)
+    return 0
+
+
+# -- bridge ----------------------------------------------------------------------------------
+def add_bridge_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--entries", type=int, default=20000, help="Q-table entries (default 20000)")
+    parser.add_argument("--actions", type=int, default=4, help="actions per state (default 4)")
+    parser.add_argument("--repeats", type=int, default=50, help="timed read+write pairs per codec")
+    parser.add_argument("--warmup", type=int, default=5, help="untimed pairs first")
+    parser.add_argument("--codec", choices=["fts", "text", "both"], default="both")
+    parser.add_argument("--sim", choices=["pybullet", "epuck", "none"], default="pybullet",
+                        help="what the main loop steps between two serve_pending calls: a pybullet "
+                             "world of falling boxes, a training e-puck (robots.training.Trainer: "
+                             "one 64 ms control step of sense, learn, act), or nothing")
+    parser.add_argument("--bodies", type=int, default=30, help="falling boxes in the pybullet world")
+    parser.add_argument("--physics-steps", type=int, default=1,
+                        help="pybullet steps per control step (serve_pending once per control step)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def cmd_bridge(args: argparse.Namespace) -> int:
+    """Exit 0 if the table stays bit-exact (the speed target is reported, not enforced)."""
+    try:
+        report = bridge.bench(args.entries, args.actions, args.repeats, args.warmup, args.codec,
+                              args.sim, args.bodies, args.physics_steps, args.seed)
+    except RuntimeError as exc:
+        print(f"dfrl bench bridge: {exc}", file=sys.stderr)
+        return 1
+    results = report["codecs"]
+    if args.json:
+        print(json.dumps(report))
+    else:
+        print(f"bridge: {report['entries']} entries {report['shape']}, sim={args.sim}")
+        for c, r in results.items():
+            print(f"  {c:4s} read+write median {r['median_ms']:.3f} ms  p90 {r['p90_ms']:.3f} ms  "
+                  f"(get {r['get']['median_ms']:.3f}, set {r['set']['median_ms']:.3f}, "
+                  f"host serve/request {r['serve_per_request']['median_ms']:.3f} ms, "
+                  f"sim step {r['sim_step']['median_ms']:.3f} ms)  bit-exact={r['bit_exact']}")
+        print(f"  target < {bridge.TARGET_MS} ms: {'met' if report['meets_target'] else 'NOT met'}")
+    return 0 if all(r["bit_exact"] for r in results.values()) else 1
+
+
+#: benchmark name -> (its module, whose doc gives the help line; add arguments; run)
+BENCHMARKS = {
+    "migrate": (migrate, add_migrate_arguments, cmd_migrate),
+    "sim": (sim, add_sim_arguments, cmd_sim),
+    "round": (round_bench, add_round_arguments, cmd_round),
+    "bridge": (bridge, add_bridge_arguments, cmd_bridge),
+}
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``bench`` and one sub-command per benchmark."""
+    parser = subparsers.add_parser("bench", help="run a benchmark and print its figures")
+    inner = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK", required=True)
+    for name, (module, add_arguments, func) in BENCHMARKS.items():
+        sub = inner.add_parser(name, help=(module.__doc__ or "").strip().splitlines()[0])
+        add_arguments(sub)
+        sub.set_defaults(func=func)

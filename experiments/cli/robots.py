@@ -1,0 +1,273 @@
+"""Standalone robot commands: ``dfrl train``, ``dfrl eval``, ``dfrl baselines``, ``dfrl render-arenas``.
+
+Thin CLI over :mod:`dfrl.robots.training`, :mod:`dfrl.experiments.standalone` and
+:mod:`dfrl.robots.plots`.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from dfrl.robots.learners import LEARNERS, EpsilonSchedule, LearnerParams, ScheduleKind
+from dfrl.robots.training import DEMO_ITERATIONS, TrainerConfig
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``train``, ``eval``, ``baselines`` and ``render-arenas``."""
+    p = subparsers.add_parser("train", help="train one robot standalone (Q-learning or SARSA)")
+    _add_config_arguments(p)
+    p.add_argument("--out", type=Path, default=None,
+                   help="output folder (default results/train/ARENA_ALGO_sSEED)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-plot", action="store_true", help="do not draw learning_curves.png")
+    p.add_argument("--gui", action="store_true",
+                   help="watch in a pybullet window (needs a display; not paced to real time)")
+    p.set_defaults(func=cmd_train)
+
+    p = subparsers.add_parser(
+        "eval", help="greedy learned policy vs random policy: collisions per 1,000 steps")
+    _add_config_arguments(p, seed=False)
+    p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="training seeds")
+    p.add_argument("--steps", type=int, default=2000, help="evaluation steps per policy and seed")
+    p.add_argument("--table", type=Path, default=None,
+                   help="evaluate this saved table (q_table.npy) instead of training one per seed")
+    p.add_argument("--jobs", type=int, default=2, help="worker processes")
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.set_defaults(func=cmd_eval)
+
+    p = subparsers.add_parser(
+        "baselines", help="standalone Q-learning and SARSA in R1 and R4 (the paper's baseline figures)")
+    p.add_argument("--out", type=Path, default=Path("results/baselines"))
+    p.add_argument("--iterations", type=int, default=20_000)
+    p.add_argument("--seed", type=int, default=1, help="first seed")
+    p.add_argument("--seeds", type=int, default=1,
+                   help="runs per curve (seeds SEED, SEED+1, ...): mean line and min-max band")
+    p.add_argument("--arenas", nargs="+", default=["r1", "r4"])
+    p.add_argument("--algos", nargs="+", choices=sorted(LEARNERS), default=["qlearning", "sarsa"])
+    p.add_argument("--jobs", type=int, default=2, help="worker processes")
+    p.set_defaults(func=cmd_baselines)
+
+    p = subparsers.add_parser("render-arenas", help="draw a top view of each arena to PNG")
+    p.add_argument("--out", type=Path, default=Path("results/arenas"))
+    p.add_argument("--arena", nargs="+", default=None,
+                   help="arena names or files (default: every built-in arena)")
+    p.add_argument("--size", type=int, default=480, help="image size in pixels")
+    p.set_defaults(func=cmd_render_arenas)
+
+
+def _add_config_arguments(p: argparse.ArgumentParser, seed: bool = True) -> None:
+    from dfrl.robots.env import ActionSet, CollisionResponse
+    from dfrl.robots.state import SensorGrouping
+
+    d = TrainerConfig()
+    g = p.add_argument_group("run")
+    g.add_argument("--config", type=Path, default=None,
+                   help="a config.json written by a previous run (flags below override it)")
+    g.add_argument("--arena", default=None, help=f"arena name (r1..r5) or JSON file (default {d.arena})")
+    g.add_argument("--algo", choices=sorted(LEARNERS), default=None, help=f"learner (default {d.algo})")
+    g.add_argument("--iterations", type=int, default=None,
+                   help=f"control steps of 64 ms (default {DEMO_ITERATIONS})")
+    if seed:
+        g.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
+    g = p.add_argument_group("learner")
+    g.add_argument("--alpha", type=float, default=None, help=f"learning rate ({d.learner.alpha})")
+    g.add_argument("--gamma", type=float, default=None, help=f"discount ({d.learner.gamma})")
+    g.add_argument("--epsilon-schedule", choices=[k.value for k in ScheduleKind], default=None)
+    g.add_argument("--epsilon-start", type=float, default=None, help=f"({d.learner.epsilon.start})")
+    g.add_argument("--epsilon-end", type=float, default=None, help=f"({d.learner.epsilon.end})")
+    g.add_argument("--epsilon-decay", type=int, default=None,
+                   help=f"decay steps ({d.learner.epsilon.decay_steps})")
+    g = p.add_argument_group("state, actions, simulation")
+    g.add_argument("--grouping", choices=[s.value for s in SensorGrouping], default=None,
+                   help=f"sensor groups ({d.discretisation.grouping.value})")
+    g.add_argument("--levels", type=int, default=None,
+                   help=f"levels per group ({d.discretisation.levels})")
+    g.add_argument("--actions", choices=[a.value for a in ActionSet], default=None)
+    g.add_argument("--collision-response", choices=[c.value for c in CollisionResponse], default=None)
+    g.add_argument("--control-dt", type=float, default=None, help=f"s ({d.sim.control_dt})")
+    g.add_argument("--physics-dt", type=float, default=None, help=f"s ({d.sim.physics_dt})")
+    g.add_argument("--sensor-noise", type=float, default=None,
+                   help=f"IR noise std in m ({d.sim.robot.sensor_noise_std})")
+
+
+def config_from_args(args: argparse.Namespace) -> TrainerConfig:
+    """Build a :class:`TrainerConfig` from ``--config`` and the flags that override it."""
+    from dfrl.robots.epuck import EPuckConfig
+    from dfrl.robots.state import DiscretisationConfig
+    from dfrl.robots.world import SimConfig
+
+    if getattr(args, "config", None) is not None:
+        cfg = TrainerConfig.from_dict(json.loads(args.config.read_text(encoding="utf-8")))
+    else:
+        cfg = TrainerConfig()
+    top: dict[str, Any] = {}
+    for name in ("arena", "algo", "iterations", "seed", "actions", "collision_response"):
+        value = getattr(args, name, None)
+        if value is not None:
+            top[name] = value
+    eps = cfg.learner.epsilon
+    eps_changes = {k: v for k, v in (("kind", args.epsilon_schedule), ("start", args.epsilon_start),
+                                      ("end", args.epsilon_end), ("decay_steps", args.epsilon_decay))
+                   if v is not None}
+    learner_changes: dict[str, Any] = {k: v for k, v in (("alpha", args.alpha), ("gamma", args.gamma))
+                                       if v is not None}
+    if eps_changes:
+        learner_changes["epsilon"] = EpsilonSchedule(**{**eps.__dict__, **eps_changes})
+    if learner_changes:
+        top["learner"] = LearnerParams(**{**cfg.learner.__dict__, **learner_changes})
+    disc = {k: v for k, v in (("grouping", args.grouping), ("levels", args.levels)) if v is not None}
+    if disc:
+        top["discretisation"] = DiscretisationConfig(**{**cfg.discretisation.__dict__, **disc})
+    sim = {k: v for k, v in (("control_dt", args.control_dt), ("physics_dt", args.physics_dt))
+           if v is not None}
+    if args.sensor_noise is not None:
+        sim["robot"] = EPuckConfig(**{**cfg.sim.robot.__dict__, "sensor_noise_std": args.sensor_noise})
+    if getattr(args, "gui", False):
+        sim["connection"] = "gui"
+    if sim:
+        top["sim"] = SimConfig(**{**cfg.sim.__dict__, **sim})
+    return cfg.replace(**top) if top else cfg
+
+
+def _fail(message: str) -> int:
+    print(f"dfrl: error: {message}", file=sys.stderr)
+    return 2
+
+
+# -- train -----------------------------------------------------------------------------------
+def cmd_train(args: argparse.Namespace) -> int:
+    """``dfrl train``: one run, writing table, config, metrics and the learning curves."""
+    from tqdm import tqdm
+
+    from dfrl.robots.training import train
+
+    try:
+        cfg = config_from_args(args)
+    except (ValueError, KeyError) as exc:
+        return _fail(str(exc))
+    out = args.out or Path("results/train") / f"{Path(cfg.arena).stem}_{cfg.algo}_s{cfg.seed}"
+    with tqdm(total=cfg.iterations, desc=f"{cfg.algo} {cfg.arena} seed {cfg.seed}", unit="it",
+              disable=args.no_progress, file=sys.stderr) as bar:
+        try:
+            result = train(cfg, out, progress=bar.update)
+        except ValueError as exc:
+            return _fail(str(exc))
+    m = result.metrics
+    if not args.no_plot and len(m):
+        from dfrl.robots.plots import plot_learning_curves
+
+        plot_learning_curves({f"{cfg.arena} {cfg.algo}": m}, out / "learning_curves.png",
+                             f"{cfg.algo} in {cfg.arena}, seed {cfg.seed}")
+    rate = cfg.iterations / result.wall_time if result.wall_time > 0 else float("nan")
+    last = m[-1] if len(m) else None
+    print(f"trained {cfg.algo} in {cfg.arena} for {cfg.iterations} iterations in "
+          f"{result.wall_time:.1f} s ({rate:.0f} it/s, "
+          f"{rate * cfg.sim.control_dt:.0f}x real time)")
+    if last is not None:
+        print(f"collisions {int(last['collisions'])}, cumulative reward "
+              f"{float(last['cumulative_reward']):.1f}, sum of Q {float(last['q_sum']):.2f}")
+    print(f"results in {out}")
+    return 0
+
+
+# -- eval ------------------------------------------------------------------------------------
+def cmd_eval(args: argparse.Namespace) -> int:
+    """``dfrl eval``: greedy vs random collisions per 1,000 steps, per seed and over all."""
+    from dfrl.experiments.standalone import evaluate, with_table_discretisation
+
+    try:
+        cfg = config_from_args(args)
+    except (ValueError, KeyError) as exc:
+        return _fail(str(exc))
+    table = str(args.table) if args.table is not None else None
+    if table is not None and args.grouping is None and args.levels is None:
+        try:   # evaluate with the table's own discretisation, as recorded in its sidecar
+            cfg = with_table_discretisation(cfg, table)
+        except (ValueError, OSError, KeyError) as exc:
+            return _fail(str(exc))
+    try:
+        summary = evaluate(cfg, list(args.seeds), args.steps, table, args.jobs)
+    except (ValueError, OSError) as exc:  # bad table, arena or configuration
+        return _fail(str(exc))
+    if args.json:
+        print(json.dumps(summary.to_dict(), indent=2))
+        return 0
+    src = table or f"{cfg.iterations} training iterations"
+    print(f"{cfg.algo} in {cfg.arena}, {src}; {args.steps} evaluation steps per policy")
+    print(f"{'seed':>4} {'train s':>8} {'greedy coll/1000':>17} {'random coll/1000':>17} "
+          f"{'greedy m':>9} {'random m':>9}")
+    for r in summary.runs:
+        print(f"{r['seed']:>4} {r['train_s']:>8.1f} {r['greedy']['collisions_per_1000']:>17.2f} "
+              f"{r['random']['collisions_per_1000']:>17.2f} {r['greedy']['distance']:>9.2f} "
+              f"{r['random']['distance']:>9.2f}")
+    print(f"all  {'':>8} {summary.greedy_collisions_per_1000:>17.2f} "
+          f"{summary.random_collisions_per_1000:>17.2f}")
+    print(f"reduction {100 * summary.reduction:.0f}%")
+    return 0
+
+
+# -- baselines -------------------------------------------------------------------------------
+def cmd_baselines(args: argparse.Namespace) -> int:
+    """``dfrl baselines``: train every (algo, arena) pair and draw one figure per algorithm."""
+    from tqdm import tqdm
+
+    from dfrl.experiments.report.stats import ALGO_NAMES
+    from dfrl.experiments.standalone import run_jobs
+    from dfrl.robots.plots import plot_learning_curves
+    from dfrl.robots.training import read_metrics_csv
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    seeds = [args.seed + k for k in range(max(1, args.seeds))]
+
+    def run_dir(algo: str, arena: str, seed: int) -> Path:
+        return args.out / (f"{algo}_{arena}" if len(seeds) == 1 else f"{algo}_{arena}_s{seed}")
+
+    jobs = [(TrainerConfig(arena=a, algo=al, seed=s, iterations=args.iterations), run_dir(al, a, s))
+            for al in args.algos for a in args.arenas for s in seeds]
+    with tqdm(total=len(jobs), desc="baseline runs", unit="run", file=sys.stderr) as bar:
+        def done(algo: str, arena: str, wall: float) -> None:
+            bar.update()
+            print(f"{algo} {arena}: {args.iterations} iterations in {wall:.1f} s", file=sys.stderr)
+
+        run_jobs(jobs, args.jobs, done)
+    for algo in args.algos:
+        curves = {a.upper(): [read_metrics_csv(run_dir(algo, a, s) / "metrics.csv") for s in seeds]
+                  for a in args.arenas}
+        name = ALGO_NAMES.get(algo, algo)
+        which = f"seed {seeds[0]}" if len(seeds) == 1 else f"seeds {seeds[0]}-{seeds[-1]}"
+        path = plot_learning_curves(curves, args.out / f"baseline_{algo}.png",
+                                    f"Standalone {name}, {args.iterations} iterations ({which})")
+        print(path)
+    return 0
+
+
+# -- render-arenas ---------------------------------------------------------------------------
+def cmd_render_arenas(args: argparse.Namespace) -> int:
+    """``dfrl render-arenas``: one PNG per arena plus ``arenas.png`` with all of them."""
+    from dfrl.arenas.spec import ArenaError, builtin_arena_names, load_arena
+    from dfrl.robots.plots import plot_arena, plot_arena_overview
+    from dfrl.robots.world import World
+
+    names = args.arena or builtin_arena_names()
+    images = {}
+    for name in names:
+        try:
+            spec = load_arena(name)
+        except ArenaError as exc:
+            return _fail(str(exc))
+        world = World(spec)
+        try:
+            if spec.start.pose is not None:
+                world.place_robot(*spec.start.pose)
+            else:  # a random start: keep the robot out of the picture
+                world.place_robot(10.0 * max(spec.size), 0.0, 0.0)
+            img = world.render_top(args.size, args.size)
+        finally:
+            world.close()
+        images[spec.name] = img
+        print(plot_arena(img, spec, args.out / f"arena_{spec.name}.png"))
+    print(plot_arena_overview(images, args.out / "arenas.png"))
+    return 0

@@ -1,0 +1,126 @@
+"""Run one federated experiment on loopback: :func:`run` and the :class:`Launcher` behind it."""
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any, TextIO
+
+from dfrl.experiments.config import ExperimentConfig
+from dfrl.experiments.launcher.children import await_ready
+from dfrl.experiments.launcher.joins import JOIN_REQUESTS
+from dfrl.experiments.launcher.monitor import monitor, poll_logs
+from dfrl.experiments.launcher.shutdown import kill_all, shutdown
+from dfrl.experiments.launcher.spawn import launch_agents, spawn, write_nodes
+from dfrl.experiments.launcher.state import RunState
+from dfrl.experiments.report.plots import plot_experiment
+from dfrl.experiments.results.files import write_json
+from dfrl.experiments.results.metrics import merge_metrics
+from dfrl.experiments.results.rounds import read_shares, write_rounds_csv
+from dfrl.experiments.results.summary import Results, write_summary
+
+#: Per-robot and per-agent files of a previous run in the same folder, replaced by a new run.
+STALE = ("rounds_*.log", "shares_*.csv", "metrics_*.csv", f"{JOIN_REQUESTS}/*.json")
+
+
+class Launcher:
+    """Runs one experiment; see :func:`run`."""
+
+    def __init__(self, config: ExperimentConfig, output_dir: str | Path,
+                 progress: TextIO | None = sys.stderr) -> None:
+        self.state = RunState(config, Path(output_dir).resolve(), progress)
+
+    def run(self) -> Results:
+        """Run the experiment (SIGTERM and SIGINT stop it cleanly when called from the main
+        thread: children are killed and the partial results written)."""
+        restore = []
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGTERM, signal.SIGINT):
+                restore.append((sig, signal.signal(sig, _interrupt)))
+        try:
+            return self._run()
+        finally:
+            for sig, handler in restore:
+                signal.signal(sig, handler)
+
+    def _run(self) -> Results:
+        st = self.state
+        c = st.config
+        st.out.mkdir(parents=True, exist_ok=True)
+        for pattern in STALE:
+            for stale in list(st.out.glob(pattern)):
+                stale.unlink()
+        write_json(st.out / "config.json", c.to_dict())
+        st.t0 = time.monotonic()
+        ok = True
+        try:
+            children = [spawn(st, r, c.iterations) for r in c.robots]
+            await_ready(children)
+            write_nodes(st)
+            st.say(f"{len(children)} robot nodes up: " + ", ".join(
+                f"{rid}@{ch.address[1]}" for rid, ch in st.children.items()))
+            launch_agents(st)
+            monitor(st)
+        except BaseException as exc:
+            ok = False
+            st.interrupted = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+            kill_all(st)
+            raise
+        finally:
+            shutdown(st)
+            results = self._collect(time.monotonic() - st.t0, ok)
+        return results
+
+    def _collect(self, wall: float, ok: bool) -> Results:
+        st = self.state
+        poll_logs(st)
+        robots = list(st.children)
+        merge_metrics(st.out, robots)
+        shares = {rid: read_shares(st.out / f"shares_{rid}.csv") for rid in robots}
+        rows = write_rounds_csv(st.out / "rounds.csv", st.logs.values(), robots, shares)
+        plots: list[Path] = []
+        try:
+            plots = plot_experiment(st.out, title=st.config.default_title())
+        except Exception as exc:  # noqa: BLE001 - plots are optional, results are not
+            st.say(f"plots failed: {exc!r}")
+        finished = {n: lg.finished for n, lg in st.logs.items()}
+        problems = {n: [f"round {a.round} aborted: {a.error}" for a in lg.aborted]
+                    + [f"unreadable line: {u}" for u in lg.unreadable]
+                    for n, lg in st.logs.items()}
+        for name, lines in problems.items():
+            for line in lines:
+                st.say(f"{name}: {line}")
+        iters = {rid: ch.iteration for rid, ch in st.children.items()}
+        ok = ok and not st.crashed and all(v is not None for v in finished.values())
+        result = Results(st.out, st.config, wall, rows, dict(st.crashed), finished, iters,
+                         plots, ok, st.interrupted, problems)
+        write_summary(result)
+        return result
+
+
+def _interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+def run(config: ExperimentConfig, output_dir: str | Path,
+        progress: TextIO | None = sys.stderr) -> Results:
+    """Run a federated experiment on loopback and write its results folder.
+
+    Starts one robot node process per robot, waits for their addresses, writes
+    ``nodes.json``, launches one dFRL itinerary agent per learning algorithm (the agent of an
+    algorithm visits only the robots using it), follows the agents' round logs and the nodes'
+    progress lines, starts robots that join during the run, and at the end writes
+    ``metrics.csv``, ``rounds.csv``, the plots and ``summary.md``. A robot that crashes is
+    reported and the others go on; every child is killed on an exception or Ctrl-C.
+
+    Parameters
+    ----------
+    config : ExperimentConfig
+    output_dir : str or Path
+        Results folder (created; previous per-robot files in it are replaced).
+    progress : TextIO or None
+        Where progress lines go (None: quiet).
+    """
+    return Launcher(config, output_dir, progress).run()

@@ -1,0 +1,139 @@
+"""The dFRL agent's round log: one JSON object per line (contract C2), read with :mod:`json`.
+
+Events the agent writes (``platform_pl/agents/dfrl_agent.pl``)::
+
+    {"event": "round", "agent": A, "round": N, "start": T0, "end": T1, "hops": H,
+     "bytes": B, "method": M, "visited": [R, ...], "skipped": [{"robot": R, "reason": Text}]}
+    {"event": "finished", "agent": A, "round": N}
+    {"event": "aborted", "agent": A, "round": N, "error": Text}
+    {"event": "control", "agent": A, "round": N, "command": Text,
+     "status": "applied" | "ignored", "reason": Text}
+
+Times are the agent's ``get_time/1`` floats. A line that is not one of these objects is kept
+in :attr:`AgentLog.unreadable` (reported, never dropped).
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+
+@dataclass(frozen=True)
+class Skip:
+    """A stop the agent could not visit in a round, and why."""
+
+    robot: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class RoundRecord:
+    """One ``round`` event of an agent log (``visited`` in forward-pass order)."""
+
+    agent: str
+    round: int
+    start: float
+    end: float
+    hops: int
+    bytes: int
+    method: str
+    visited: tuple[str, ...]
+    skipped: tuple[Skip, ...] = ()
+
+    @property
+    def duration_ms(self) -> float:
+        return (self.end - self.start) * 1000.0
+
+
+@dataclass(frozen=True)
+class Aborted:
+    """An ``aborted`` event: the agent stopped in ``round`` because of ``error``."""
+
+    round: int
+    error: str
+
+
+@dataclass(frozen=True)
+class ControlEvent:
+    """A ``control`` event: a queued command the agent applied or ignored at a round start."""
+
+    round: int
+    command: str
+    status: str
+    reason: str = ""
+
+
+@dataclass
+class AgentLog:
+    """What an agent's rounds log holds so far."""
+
+    agent: str
+    rounds: list[RoundRecord] = field(default_factory=list)
+    finished: int | None = None
+    aborted: list[Aborted] = field(default_factory=list)
+    controls: list[ControlEvent] = field(default_factory=list)
+    unreadable: list[str] = field(default_factory=list)
+
+
+def parse_event(line: str) -> dict[str, Any]:
+    """One log line as its JSON object.
+
+    Raises
+    ------
+    ValueError
+        The line is not a JSON object with a string ``event``.
+    """
+    obj = json.loads(line)
+    if not isinstance(obj, dict) or not isinstance(obj.get("event"), str):
+        raise ValueError(f"not an event object: {line!r}")
+    return obj
+
+
+def _round(agent: str, ev: dict[str, Any]) -> RoundRecord:
+    skipped = tuple(Skip(str(s["robot"]), str(s["reason"])) for s in ev.get("skipped", []))
+    return RoundRecord(agent, int(ev["round"]), float(ev["start"]), float(ev["end"]),
+                       int(ev["hops"]), int(ev["bytes"]), str(ev["method"]),
+                       tuple(str(v) for v in ev["visited"]), skipped)
+
+
+def _add(log: AgentLog, ev: dict[str, Any]) -> bool:
+    """Add event ``ev`` to ``log``; False when it is not a known, well-formed event."""
+    if ev.get("agent", log.agent) != log.agent:
+        return False
+    kind = ev["event"]
+    if kind == "round":
+        log.rounds.append(_round(log.agent, ev))
+    elif kind == "finished":
+        log.finished = int(ev["round"])
+    elif kind == "aborted":
+        log.aborted.append(Aborted(int(ev["round"]), str(ev["error"])))
+    elif kind == "control":
+        log.controls.append(ControlEvent(int(ev["round"]), str(ev["command"]),
+                                         str(ev["status"]), str(ev.get("reason", ""))))
+    else:
+        return False
+    return True
+
+
+def read_rounds_log(path: str | Path, agent: str) -> AgentLog:
+    """Read an agent's rounds log (a missing file is an empty log).
+
+    A torn last line (the agent is still writing it) shows up in ``unreadable`` until the
+    next read.
+    """
+    log = AgentLog(agent)
+    p = Path(path)
+    if not p.is_file():
+        return log
+    for line in p.read_text(encoding="utf-8", errors="replace").splitlines():
+        if not line.strip():
+            continue
+        try:
+            known = _add(log, parse_event(line))
+        except (ValueError, KeyError, TypeError):
+            known = False
+        if not known:
+            log.unreadable.append(line)
+    return log

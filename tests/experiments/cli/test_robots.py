@@ -1,0 +1,61 @@
+"""Smoke tests of the standalone robot commands (train, eval, baselines, render-arenas), tiny budgets."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from dfrl.experiments.cli import main
+
+
+def test_train_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run"
+    rc = main(["train", "--arena", "r1", "--algo", "qlearning", "--iterations", "300",
+               "--seed", "1", "--out", str(out), "--no-progress", "--levels", "2"])
+    assert rc == 0
+    assert (out / "learning_curves.png").stat().st_size > 10_000
+    cfg = json.loads((out / "config.json").read_text())
+    assert cfg["discretisation"]["levels"] == 2 and cfg["iterations"] == 300
+    assert "trained qlearning in r1" in capsys.readouterr().out
+
+
+def test_train_rejects_bad_rates(capsys: pytest.CaptureFixture[str]) -> None:
+    rc = main(["train", "--physics-dt", "0.005", "--iterations", "1", "--no-progress"])
+    assert rc == 2 and "integer multiple" in capsys.readouterr().err
+
+
+def test_learner_choices_come_from_the_registry(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["train", "--algo", "dqn"])
+    assert "choose from 'qlearning', 'sarsa'" in capsys.readouterr().err
+
+
+def test_render_arenas(tmp_path: Path) -> None:
+    assert main(["render-arenas", "--out", str(tmp_path), "--size", "160"]) == 0
+    for name in ("r1", "r2", "r3", "r4", "r5"):
+        assert (tmp_path / f"arena_{name}.png").stat().st_size > 5_000
+    assert (tmp_path / "arenas.png").exists()
+
+
+def test_baselines_command(tmp_path: Path) -> None:
+    assert main(["baselines", "--out", str(tmp_path), "--iterations", "200", "--jobs", "2"]) == 0
+    for algo in ("qlearning", "sarsa"):
+        assert (tmp_path / f"baseline_{algo}.png").stat().st_size > 10_000
+        for arena in ("r1", "r4"):
+            assert (tmp_path / f"{algo}_{arena}" / "metrics.csv").exists()
+
+
+def test_eval_command_on_a_saved_table(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run"
+    assert main(["train", "--iterations", "200", "--out", str(out), "--no-progress",
+                 "--no-plot"]) == 0
+    capsys.readouterr()
+    rc = main(["eval", "--table", str(out / "q_table.npy"), "--seeds", "1", "--steps", "200",
+               "--jobs", "1", "--json"])
+    summary = json.loads(capsys.readouterr().out)
+    assert rc == 0
+    assert summary["runs"][0]["greedy"]["steps"] == 200
+    g, r = summary["greedy_collisions_per_1000"], summary["random_collisions_per_1000"]
+    assert summary["reduction"] == pytest.approx(1 - g / r) if r > 0 else True
+    assert "passed" not in summary      # the verdict is a test's job (tests/experiments/test_standalone.py)

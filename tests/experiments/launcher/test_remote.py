@@ -1,0 +1,37 @@
+"""Acting on a running experiment from outside: injecting a method (``dfrl inject``)."""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from dfrl.experiments.launcher import Results, inject_method
+from dfrl.platform_pl import AGENTS_DIR
+
+from .helpers import rounds_csv, run_in_thread, small_config, wait_rounds
+
+pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
+
+
+MEDIAN = AGENTS_DIR / "examples" / "median_method.pl"
+
+
+def test_inject_method_into_running_experiment(tmp_path: Path) -> None:
+    # rtf 20: 100 iterations take 0.32 s, so the run lasts long enough to inject into
+    cfg = small_config(iterations=2000, respite=100, rtf=20.0)
+    t, box = run_in_thread(cfg, tmp_path)
+    wait_rounds(tmp_path, "fed_qlearning", 2)
+    assert inject_method(tmp_path, MEDIAN, "median") == ["fed_qlearning"]
+    t.join(timeout=120)
+    assert not t.is_alive()
+    res: Results = box.get("res") or pytest.fail(f"run failed: {box.get('exc')!r}")
+    assert res.ok
+    methods = [r["method"] for r in rounds_csv(tmp_path)]
+    assert len(methods) == 20
+    first = methods.index("median")
+    assert 2 <= first < 19
+    assert set(methods[:first]) == {"average"} and set(methods[first:]) == {"median"}
+    assert all(r["all_equal"] == "true" for r in rounds_csv(tmp_path))
+
+
