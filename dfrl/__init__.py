@@ -43,7 +43,7 @@ _API: dict[str, str] = {
     "load_arena": "dfrl.arenas.spec",
     "ExperimentConfig": "dfrl.experiments.config",
     "RobotSpec": "dfrl.experiments.config",
-    "run_experiment": "dfrl.experiments.federation",
+    "run_experiment": "dfrl.experiments.launcher",
 }
 
 __all__ = ["ENV_ID", "__version__", *_API]

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from dfrl.experiments.cmd_node import node_command
+from dfrl.experiments.cli.node import node_command
 
 from .conftest import SWIPL, Proc
 from .wire_client import request
