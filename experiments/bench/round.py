@@ -3,7 +3,7 @@
 Starts N robot node processes on loopback (:mod:`dfrl.experiments.robot_node` in benchmark mode:
 each holds a random table of ``--entries`` values and serves the agent's requests as soon as
 they arrive, no simulation), launches the real itinerary agent
-(``platform_pl/agents/dfrl_launch.pl``) for ``--warmup + --rounds`` rounds without rest and
+(through a console node, :mod:`dfrl.experiments.control`) for ``--warmup + --rounds`` rounds without rest and
 reads the round times from its log (the agent stamps a round's start when it reads the first
 robot and its end after writing the first robot back). Checks that every robot holds the
 same table after each round. Target: median under 50 ms for 5 nodes and 20,000 entries.
@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 from dfrl.experiments.config import NodeConfig, RobotSpec
-from dfrl.experiments.launcher.agents import launch_agent
+from dfrl.experiments.launcher.agents import launch_agent, open_console
 from dfrl.experiments.launcher.children import RobotChild, await_ready
 from dfrl.experiments.results.agent_log import read_rounds_log
 from dfrl.experiments.results.rounds import count_equal, read_shares, write_rounds_csv
@@ -61,7 +61,8 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
                   "itinerary": [{"host": ch.address[0], "port": ch.address[1], "robot": ch.robot.id}
                                 for ch in children]}
         t0 = time.monotonic()
-        launch_agent(launch, out / "launch_bench.json", out / "logs" / "launch_bench.out")
+        with open_console(1111, out / "logs" / "console.err") as console:
+            launch_agent(console, launch)
         deadline = time.monotonic() + max(120.0, total * 2.0)
         agent_log = read_rounds_log(log, "bench")
         while agent_log.finished is None and time.monotonic() < deadline:

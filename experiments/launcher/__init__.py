@@ -8,11 +8,12 @@ one :class:`RunState` (:mod:`.state`). Agents are launched and sent control comm
 """
 from __future__ import annotations
 
-from dfrl.experiments.launcher.agents import agent_name, launch_agent, send_control, swipl_path
+from dfrl.experiments.launcher.agents import (agent_name, launch_agent, open_console,
+                                             send_control, swipl_path)
 from dfrl.experiments.launcher.children import RobotChild, await_ready
 from dfrl.experiments.launcher.remote import inject_method, join_robot, nodes_of
 from dfrl.experiments.launcher.run import Launcher, run
 from dfrl.experiments.results.summary import Results
 
 __all__ = ["Launcher", "Results", "RobotChild", "agent_name", "await_ready", "inject_method",
-           "join_robot", "launch_agent", "nodes_of", "run", "send_control", "swipl_path"]
+           "join_robot", "launch_agent", "nodes_of", "open_console", "run", "send_control", "swipl_path"]

@@ -1,23 +1,17 @@
-"""Where the launcher starts agents and sends them control commands.
-
-Both go through ``swipl`` scripts of :data:`dfrl.platform_pl.AGENTS_DIR` for now: one
-``dfrl_launch.pl`` process per agent launch, one ``dfrl_control.pl`` process per command.
-They sit behind these two functions so that a long-lived console node
-(:mod:`dfrl.experiments.control`) can replace both in one place.
-"""
+"""Where the launcher starts agents and sends them control commands: through one long-lived
+console node per experiment (:class:`dfrl.experiments.control.ConsoleNode`, a ``swipl`` child
+driven in JSON lines), never one ``swipl`` process per command."""
 from __future__ import annotations
 
-import json
-import os
 import shutil
-import subprocess
-import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from dfrl.experiments.control import ConsoleNode
 from dfrl.experiments.errors import ExperimentError
-from dfrl.experiments.results.files import write_json
-from dfrl.platform_pl import AGENTS_DIR
+
+Address = tuple[str, int]
 
 
 def agent_name(algo: str) -> str:
@@ -39,65 +33,45 @@ def swipl_path() -> str:
     return path
 
 
-def launch_agent(launch: dict[str, Any], launch_file: Path, output_file: Path | None = None,
-                 timeout_s: float = 60.0) -> None:
-    """Create a dFRL itinerary agent and send it to its first stop.
+def open_console(token: int | str, log_path: Path | None = None) -> ConsoleNode:
+    """Start the console node of an experiment (its token lets it load programs into the
+    robot nodes); its stderr goes to ``log_path``."""
+    if log_path is not None:
+        log_path.parent.mkdir(parents=True, exist_ok=True)
+    return ConsoleNode(tokens=token, log_path=log_path)
+
+
+def launch_agent(console: ConsoleNode, launch: dict[str, Any], timeout_s: float = 60.0) -> None:
+    """Create a dFRL itinerary agent on the console node and send it to its first stop.
 
     Parameters
     ----------
     launch : dict
         The launch plan (``name``, ``itinerary``, ``method``, ``rounds``, ``rest_s``,
-        ``rounds_log``, ``token``, ``timeout_s``; see ``dfrl_launch.pl``), written to
-        ``launch_file``.
-    output_file : Path, optional
-        Where the launcher script's stdout and stderr are kept.
+        ``rounds_log``, ``token``, ``timeout_s``).
 
     Raises
     ------
     ExperimentError
         The launch failed or timed out.
     """
-    write_json(launch_file, launch)
-    name = launch.get("name", "?")
-    try:
-        proc = subprocess.run([swipl_path(), "-q", str(AGENTS_DIR / "dfrl_launch.pl"),
-                               str(launch_file)], capture_output=True, text=True,
-                              timeout=timeout_s, cwd=launch_file.parent)
-    except subprocess.TimeoutExpired:
-        raise ExperimentError(f"launching agent {name} timed out after {timeout_s} s") from None
-    if output_file is not None:
-        output_file.parent.mkdir(parents=True, exist_ok=True)
-        output_file.write_text(proc.stdout + proc.stderr, encoding="utf-8")
-    if proc.returncode != 0:
-        raise ExperimentError(f"launching agent {name} failed (exit {proc.returncode}): "
-                              f"{(proc.stderr or proc.stdout).strip()}")
+    console.launch_agent(launch, timeout_s=timeout_s)
 
 
-def send_control(host: str, port: int, token: int, agent: str, command: dict[str, Any],
-                 timeout_s: float = 30.0) -> None:
-    """Post a control command to agent ``agent``, whose first stop is host:port.
+def send_control(console: ConsoleNode, first_stop: Address, agent: str,
+                 command: dict[str, Any], program: str | Path | None = None,
+                 nodes: Sequence[Address] = (), timeout_s: float = 30.0) -> None:
+    """Post a control command to ``agent`` at its first stop.
 
-    ``command``: ``{"join": {"host", "port", "robot"}}``, ``{"method": name, "program": file,
-    "nodes": [[host, port], ...]}`` or ``{"stop": true}`` (see ``dfrl_control.pl``); the
-    agent's name is added as ``"agent"``.
+    ``command``: ``{"join": {"host", "port", "robot"}}``, ``{"method": name}`` or
+    ``{"stop": True}``. With ``program``, the program is first loaded into each of ``nodes``
+    (a new aggregation method must exist wherever the agent goes).
 
     Raises
     ------
     ExperimentError
-        The control script failed or timed out.
+        Loading the program or posting the command failed.
     """
-    doc = {**command, "agent": agent}
-    with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False, encoding="utf-8") as fh:
-        json.dump(doc, fh)
-        cmd_file = fh.name
-    try:
-        proc = subprocess.run(
-            [swipl_path(), "-q", str(AGENTS_DIR / "dfrl_control.pl"), str(host), str(port),
-             str(token), cmd_file], capture_output=True, text=True, timeout=timeout_s)
-    except subprocess.TimeoutExpired:
-        raise ExperimentError(f"control command {doc} timed out after {timeout_s} s") from None
-    finally:
-        os.unlink(cmd_file)
-    if proc.returncode != 0:
-        raise ExperimentError(f"control command {doc} failed (exit {proc.returncode}): "
-                              f"{(proc.stderr or proc.stdout).strip()}")
+    if program is not None:
+        console.load_program(program, list(nodes), timeout_s=max(timeout_s, 60.0))
+    console.control(first_stop, agent, command, timeout_s=timeout_s)

@@ -1,6 +1,9 @@
-"""Robots joining a running experiment: from the config's ``joins`` or asked for by
-``dfrl join`` (a request file in ``RESULTS_DIR/join_requests/``)."""
+"""Robots joining a running experiment: from the config's ``joins``, or asked for by
+``dfrl join`` through the platform (a ``join_request`` event of the experiment's console node,
+answered with the new node's entry or an error)."""
 from __future__ import annotations
+
+from typing import Any
 
 from dfrl.experiments.config import JoinSpec, RobotSpec
 from dfrl.experiments.errors import ExperimentError
@@ -8,34 +11,11 @@ from dfrl.experiments.launcher.agents import agent_name, send_control
 from dfrl.experiments.launcher.children import await_ready
 from dfrl.experiments.launcher.spawn import spawn, write_nodes
 from dfrl.experiments.launcher.state import RunState
-from dfrl.experiments.results.files import read_json
-
-JOIN_REQUESTS = "join_requests"
 
 
-def join_requests(state: RunState) -> list[tuple[JoinSpec, int | None]]:
-    """Joins from the config, and requests left by ``dfrl join`` (bad ones said and removed)."""
-    due: list[tuple[JoinSpec, int | None]] = [(j, None) for j in state.config.joins]
-    req_dir = state.out / JOIN_REQUESTS
-    if req_dir.is_dir():
-        for f in sorted(req_dir.glob("*.json")):
-            try:
-                d = read_json(f)
-                spec = JoinSpec(RobotSpec(**d["robot"]), after_round=0)
-            except (ValueError, TypeError, KeyError) as exc:
-                state.say(f"ignoring join request {f.name}: {exc}")
-                f.unlink()
-                continue
-            if spec.robot.id in state.children and spec.robot.id not in state.joined:
-                state.say(f"ignoring join request {f.name}: robot {spec.robot.id} exists")
-                f.unlink()
-                continue
-            due.append((spec, d.get("iterations")))
-    return due
-
-
-def join(state: RunState, spec: JoinSpec, agent: str, remaining: int, done: int) -> None:
+def join(state: RunState, spec: JoinSpec, agent: str, remaining: int, done: int) -> dict[str, Any]:
     """Start a joining robot's node and tell the agent (it adds the stop next round).
+    Returns the node's ``nodes.json`` entry.
 
     Raises
     ------
@@ -51,33 +31,75 @@ def join(state: RunState, spec: JoinSpec, agent: str, remaining: int, done: int)
     info = state.agents[agent]
     info.itinerary.append(stop)
     first = info.itinerary[0]
-    send_control(first["host"], first["port"], state.config.token, agent, {"join": stop})
+    send_control(state.console, (first["host"], first["port"]), agent, {"join": stop})
     write_nodes(state)
     state.say(f"robot {rid} ({spec.robot.arena}, {remaining} iterations) joins {agent} "
               f"after round {done}")
+    return {"robot": rid, "algo": spec.robot.algo, "arena": spec.robot.arena, "host": host,
+            "port": port, "pid": child.proc.pid, "joined": True}
+
+
+def _due(state: RunState, spec: JoinSpec) -> tuple[str | None, str | None]:
+    """(agent, None) when ``spec`` can join now, (None, why not) when it never can,
+    (None, None) when its round has not come yet."""
+    rid = spec.robot.id
+    if rid in state.children:
+        return None, f"robot {rid} is already part of the experiment"
+    agent = agent_name(spec.robot.algo)
+    if agent not in state.agents:
+        return None, f"no agent for {spec.robot.algo}"
+    log = state.logs.get(agent)
+    if log is not None and log.finished is not None:
+        return None, f"agent {agent} has finished"
+    if log is None or len(log.rounds) < spec.after_round:
+        return None, None
+    return agent, None
+
+
+def _start(state: RunState, spec: JoinSpec, agent: str, iterations: int | None) -> dict[str, Any]:
+    c = state.config
+    log = state.logs.get(agent)
+    done = len(log.rounds) if log is not None else 0
+    remaining = int(iterations) if iterations else max(1, c.iterations - done * c.respite)
+    return join(state, spec, agent, remaining, done)
 
 
 def handle_joins(state: RunState) -> None:
-    """Start every join whose round has come (a failed join is said, the run goes on)."""
-    c = state.config
-    for spec, iterations in join_requests(state):
-        rid = spec.robot.id
-        if rid in state.joined:
+    """Start every config join whose round has come and answer every join request that came
+    in (a failed join is said and answered; the run goes on)."""
+    for spec in state.config.joins:
+        if spec.robot.id in state.joined:
             continue
-        agent = agent_name(spec.robot.algo)
-        log = state.logs.get(agent)
-        if agent not in state.agents:
-            state.say(f"robot {rid} cannot join: no agent for {spec.robot.algo}")
-            state.joined.add(rid)
-            continue
-        if log is None or len(log.rounds) < spec.after_round or log.finished is not None:
-            continue
-        done = len(log.rounds)
-        remaining = int(iterations) if iterations else max(1, c.iterations - done * c.respite)
-        try:
-            join(state, spec, agent, remaining, done)
-        except (ExperimentError, OSError, ValueError) as exc:
-            state.say(f"robot {rid} could not join: {exc}")
-        req = state.out / JOIN_REQUESTS / f"{rid}.json"
-        if req.exists():
-            req.unlink()
+        agent, why = _due(state, spec)
+        if why is not None:
+            state.say(f"robot {spec.robot.id} cannot join: {why}")
+            state.joined.add(spec.robot.id)
+        elif agent is not None:
+            try:
+                _start(state, spec, agent, None)
+            except (ExperimentError, OSError, ValueError) as exc:
+                state.say(f"robot {spec.robot.id} could not join: {exc}")
+    if state.console is None:
+        return
+    for event in state.console.events():
+        if event.get("event") == "join_request":
+            _answer(state, event)
+        else:
+            state.say(f"console node: {event}")
+
+
+def _answer(state: RunState, event: dict[str, Any]) -> None:
+    """Start the robot of a ``join_request`` event and reply to its sender."""
+    try:
+        spec = JoinSpec(RobotSpec(**event["robot"]), after_round=0)
+        agent, why = _due(state, spec)
+        if agent is None:
+            raise ExperimentError(why or "not now")
+        result: dict[str, Any] = _start(state, spec, agent, event.get("iterations"))
+    except (ExperimentError, OSError, ValueError, TypeError, KeyError) as exc:
+        state.say(f"join request refused: {exc}")
+        result = {"error": str(exc)}
+    try:
+        state.console.reply(tuple(event["from"]), event["request"], result)
+    except (ExperimentError, KeyError) as exc:
+        state.say(f"could not answer a join request ({event}): {exc}")

@@ -1,16 +1,13 @@
 """Acting on a running experiment from another process: ``dfrl inject`` and ``dfrl join``."""
 from __future__ import annotations
 
-import dataclasses
-import time
 from pathlib import Path
 from typing import Any
 
 from dfrl.experiments.config import RobotSpec
 from dfrl.experiments.errors import ExperimentError
-from dfrl.experiments.launcher.agents import send_control
-from dfrl.experiments.launcher.joins import JOIN_REQUESTS
-from dfrl.experiments.results.files import read_json, write_json
+from dfrl.experiments.launcher.agents import open_console, send_control
+from dfrl.experiments.results.files import read_json
 
 
 def nodes_of(results_dir: str | Path) -> dict[str, Any]:
@@ -41,18 +38,15 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
     prog = Path(program).resolve()
     if not prog.is_file():
         raise ExperimentError(f"program {prog} not found")
-    told = []
-    for a in info["agents"]:
-        if agent is not None and a["name"] != agent:
-            continue
-        nodes = [[s["host"], s["port"]] for s in a["itinerary"]]
-        first = a["itinerary"][0]
-        send_control(first["host"], first["port"], info["token"], a["name"],
-                     {"method": method, "program": str(prog), "nodes": nodes})
-        told.append(a["name"])
-    if not told:
+    targets = [a for a in info["agents"] if agent is None or a["name"] == agent]
+    if not targets:
         raise ExperimentError(f"no agent {agent!r} in {results_dir}")
-    return told
+    with open_console(info["token"]) as console:
+        for a in targets:
+            nodes = [(s["host"], s["port"]) for s in a["itinerary"]]
+            send_control(console, nodes[0], a["name"], {"method": method}, program=prog,
+                         nodes=nodes)
+    return [a["name"] for a in targets]
 
 
 def join_robot(results_dir: str | Path, robot: str, arena: str, algo: str = "qlearning",
@@ -61,25 +55,21 @@ def join_robot(results_dir: str | Path, robot: str, arena: str, algo: str = "qle
     """Ask the launcher of a running experiment to start a robot and add it to the agent of
     its algorithm (from the agent's next round). Returns the new node's ``nodes.json`` entry.
 
-    The launcher owns every process of an experiment: this leaves a request in
-    ``RESULTS_DIR/join_requests/`` and waits until ``nodes.json`` lists the robot.
+    The launcher owns every process of an experiment: the request goes to its console node
+    (``console`` in ``nodes.json``) as a platform post, and the launcher's answer comes back
+    the same way.
 
     Raises
     ------
     ExperimentError
-        The robot exists already, or the launcher did not start it within ``timeout_s``.
+        The robot exists already, the launcher refused, or no answer came in ``timeout_s``.
     """
     info = nodes_of(results_dir)
     if any(n["robot"] == robot for n in info["nodes"]):
         raise ExperimentError(f"robot {robot} is already part of the experiment")
+    if not info.get("console"):
+        raise ExperimentError(f"{results_dir}/nodes.json names no console node to ask")
     spec = RobotSpec(robot, arena, algo, seed)
-    req = {"robot": dataclasses.asdict(spec), "iterations": iterations}
-    write_json(Path(results_dir) / JOIN_REQUESTS / f"{robot}.json", req)
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        time.sleep(0.2)
-        for n in nodes_of(results_dir)["nodes"]:
-            if n["robot"] == robot:
-                return n
-    raise ExperimentError(f"the launcher did not start robot {robot} within {timeout_s} s "
-                          "(is the experiment still running?)")
+    with open_console(info["token"]) as console:
+        return console.request_join(tuple(info["console"]), spec, iterations,
+                                    timeout_s=timeout_s)

@@ -10,7 +10,7 @@ from typing import Any, TextIO
 
 from dfrl.experiments.config import ExperimentConfig
 from dfrl.experiments.launcher.children import await_ready
-from dfrl.experiments.launcher.joins import JOIN_REQUESTS
+from dfrl.experiments.launcher.agents import open_console
 from dfrl.experiments.launcher.monitor import monitor, poll_logs
 from dfrl.experiments.launcher.shutdown import kill_all, shutdown
 from dfrl.experiments.launcher.spawn import launch_agents, spawn, write_nodes
@@ -22,7 +22,7 @@ from dfrl.experiments.results.rounds import read_shares, write_rounds_csv
 from dfrl.experiments.results.summary import Results, write_summary
 
 #: Per-robot and per-agent files of a previous run in the same folder, replaced by a new run.
-STALE = ("rounds_*.log", "shares_*.csv", "metrics_*.csv", f"{JOIN_REQUESTS}/*.json")
+STALE = ("rounds_*.log", "shares_*.csv", "metrics_*.csv")
 
 
 class Launcher:
@@ -56,6 +56,7 @@ class Launcher:
         st.t0 = time.monotonic()
         ok = True
         try:
+            st.console = open_console(c.token, st.out / "logs" / "console.err")
             children = [spawn(st, r, c.iterations) for r in c.robots]
             await_ready(children)
             write_nodes(st)
@@ -70,6 +71,8 @@ class Launcher:
             raise
         finally:
             shutdown(st)
+            if st.console is not None:
+                st.console.close()
             results = self._collect(time.monotonic() - st.t0, ok)
         return results
 

@@ -39,12 +39,15 @@ def spawn(state: RunState, robot: RobotSpec, iterations: int) -> RobotChild:
 
 
 def write_nodes(state: RunState) -> None:
-    """``nodes.json``: the token, every node that is up and every agent."""
+    """``nodes.json``: the token, the console node (where ``dfrl join`` asks), every node
+    that is up and every agent."""
     nodes = [{"robot": rid, "algo": ch.robot.algo, "arena": ch.robot.arena,
               "host": ch.address[0], "port": ch.address[1], "pid": ch.proc.pid,
               "joined": rid in state.joined}
              for rid, ch in state.children.items() if ch.address is not None]
-    write_json(state.out / "nodes.json", {"token": state.config.token, "nodes": nodes,
+    console = list(state.console.address) if state.console is not None else None
+    write_json(state.out / "nodes.json", {"token": state.config.token, "console": console,
+                                          "nodes": nodes,
                                           "agents": [a.to_dict() for a in state.agents.values()]})
 
 
@@ -106,7 +109,7 @@ def launch_agents(state: RunState) -> None:
         state.agents[name] = AgentInfo(name, algo, c.method_for(algo), c.rounds, str(log_path),
                                        list(stops))
         write_nodes(state)
-        launch_agent(launch, state.out / f"launch_{name}.json",
-                     state.out / "logs" / f"launch_{name}.out")
+        write_json(state.out / f"launch_{name}.json", launch)
+        launch_agent(state.console, launch)
         state.say(f"agent {name} ({c.method_for(algo)}, {c.rounds} rounds) launched to "
                   f"{' -> '.join(s['robot'] for s in stops)}")

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from dfrl.experiments.config import ExperimentConfig
+from dfrl.experiments.control import ConsoleNode
 from dfrl.experiments.launcher.children import RobotChild
 from dfrl.experiments.results.agent_log import AgentLog
 
@@ -47,6 +48,7 @@ class RunState:
     crashed: dict[str, int] = field(default_factory=dict)
     joined: set[str] = field(default_factory=set)
     killed: set[str] = field(default_factory=set)       # children the launcher itself stopped
+    console: ConsoleNode | None = None                  # the experiment's console node
     interrupted: str | None = None
     printed_rounds: dict[str, int] = field(default_factory=dict)
     last_status: float = 0.0

@@ -1,4 +1,4 @@
-"""Robots joining a running experiment (the config's ``joins``)."""
+"""Robots joining a running experiment: the config's ``joins`` and ``dfrl join``."""
 from __future__ import annotations
 
 import json
@@ -8,10 +8,11 @@ from pathlib import Path
 import pytest
 
 from dfrl.experiments.config import JoinSpec, RobotSpec
-from dfrl.experiments.launcher import run
+from dfrl.experiments.errors import ExperimentError
+from dfrl.experiments.launcher import join_robot, run
 from dfrl.experiments.results.metrics import read_metrics
 
-from .helpers import rounds_csv, small_config
+from .helpers import rounds_csv, run_in_thread, small_config, wait_rounds
 
 pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
 
@@ -34,3 +35,27 @@ def test_robot_joins_running_experiment(tmp_path: Path) -> None:
     assert [n["robot"] for n in nodes["nodes"]] == ["r1", "r2", "r3"]
 
 
+
+
+def test_dfrl_join_asks_the_launcher_through_the_platform(tmp_path: Path) -> None:
+    # Prepare: a running experiment (rtf 20: 100 iterations take 0.32 s)
+    cfg = small_config(iterations=2000, respite=100, rtf=20.0)
+    t, box = run_in_thread(cfg, tmp_path)
+    wait_rounds(tmp_path, "fed_qlearning", 2)
+    # Execute: another process's view (join_robot opens its own console node and posts the
+    # request to the launcher's; no request files)
+    entry = join_robot(tmp_path, "r3", "r5", iterations=600)
+    with pytest.raises(ExperimentError, match="already part"):
+        join_robot(tmp_path, "r3", "r5")
+    t.join(timeout=120)
+    # Assert
+    assert not t.is_alive()
+    res = box.get("res") or pytest.fail(f"run failed: {box.get('exc')!r}")
+    assert res.ok
+    assert entry["robot"] == "r3" and entry["joined"] is True and entry["port"] > 0
+    assert not (tmp_path / "join_requests").exists()
+    visited = [r["visited"] for r in rounds_csv(tmp_path)]
+    assert "r1 r2 r3" in visited and visited[0] == "r1 r2"
+    nodes = json.loads((tmp_path / "nodes.json").read_text())
+    assert [n["robot"] for n in nodes["nodes"]] == ["r1", "r2", "r3"]
+    assert len(nodes["console"]) == 2
