@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from dfrl.arenas.geometry import blocks_overlap
+
 #: Thickness of the boundary walls (m). The walls stand just outside the floor rectangle,
 #: so the free floor is exactly ``size[0]`` by ``size[1]``.
 WALL_THICKNESS: float = 0.02
@@ -224,29 +226,6 @@ def _vector(value: Any, n: int, source: str, where: str, positive: bool = False)
     if not isinstance(value, list) or len(value) != n:
         raise _fail(source, where, f"expected a list of {n} numbers, got {json.dumps(value)}")
     return tuple(_number(v, source, f"{where}[{i}]", positive) for i, v in enumerate(value))
-
-
-def _corners(block: Block) -> np.ndarray:
-    """The footprint's four corners, shape (4, 2)."""
-    c, s = math.cos(block.yaw), math.sin(block.yaw)
-    hx, hy = block.size[0] / 2.0, block.size[1] / 2.0
-    local = np.array([[hx, hy], [-hx, hy], [-hx, -hy], [hx, -hy]])
-    rot = np.array([[c, -s], [s, c]])
-    return local @ rot.T + np.asarray(block.center)
-
-
-def blocks_overlap(a: Block, b: Block, tolerance: float = 1e-9) -> bool:
-    """True when two footprints share area (touching edges do not count).
-
-    Separating-axis test on the two rectangles' edge normals.
-    """
-    ca, cb = _corners(a), _corners(b)
-    for yaw in (a.yaw, b.yaw):
-        for axis in ((math.cos(yaw), math.sin(yaw)), (-math.sin(yaw), math.cos(yaw))):
-            pa, pb = ca @ axis, cb @ axis
-            if pa.max() <= pb.min() + tolerance or pb.max() <= pa.min() + tolerance:
-                return False
-    return True
 
 
 def parse_arena(data: Any, source: str = "<dict>") -> ArenaSpec:

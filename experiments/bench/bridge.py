@@ -11,36 +11,19 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 import dfrl.pybridge as pybridge_package
 
+if TYPE_CHECKING:
+    from dfrl.pybridge import StaticTable
+
 TARGET_MS = 5.0
 
 #: The agent side of the benchmark (shipped with the bridge).
 BRIDGE_BENCH: Path = Path(pybridge_package.__file__).resolve().parent / "bridge_bench.pl"
-
-
-class BenchRobot:
-    """Table provider for the benchmark (what a learner offers the bridge)."""
-
-    def __init__(self, n_states: int, n_actions: int, seed: int) -> None:
-        rng = np.random.default_rng(seed)
-        self._q = rng.standard_normal((n_states, n_actions))
-        self._visits = rng.integers(0, 100, (n_states, n_actions), dtype=np.int64)
-
-    @property
-    def q_table(self) -> np.ndarray:
-        return self._q.copy()
-
-    @property
-    def visits(self) -> np.ndarray:
-        return self._visits.copy()
-
-    def set_q_table(self, table: np.ndarray) -> None:
-        self._q = np.array(table, dtype=np.float64)
 
 
 class BenchSim:
@@ -92,7 +75,7 @@ def _stats(values: list[float]) -> dict[str, float]:
     return {"median_ms": round(float(np.median(arr)), 4), "p90_ms": round(float(np.percentile(arr, 90)), 4)}
 
 
-def run_codec(node: Any, robot: BenchRobot, sim: BenchSim, codec: str, warmup: int,
+def run_codec(node: Any, robot: StaticTable, sim: BenchSim, codec: str, warmup: int,
               repeats: int) -> dict[str, Any]:
     """Time ``repeats`` read+write pairs with ``codec`` while ``sim`` steps."""
     from dfrl.pybridge import Atom, Term, Var
@@ -143,16 +126,16 @@ def bench(entries: int = 20000, actions: int = 4, repeats: int = 50, warmup: int
     RuntimeError
         The benchmark agent failed or did not finish.
     """
-    from dfrl.pybridge import Atom, RobotNode
+    from dfrl.pybridge import Atom, RobotNode, StaticTable
 
     n_actions = max(1, actions)
     n_states = max(1, entries // n_actions)
-    robot = BenchRobot(n_states, n_actions, seed)
+    robot = StaticTable((n_states, n_actions), seed)
     world = BenchSim(sim, bodies, physics_steps, seed)
     node = RobotNode(request_timeout=60.0)
     try:
         node.call("use_module", Atom(str(BRIDGE_BENCH)))
-        node.register_robot("bench_robot", robot)
+        node.register_robot("bench_robot", robot, shape=robot.shape)
         codecs = ["fts", "text"] if codec == "both" else [codec]
         if "fts" in codecs and not node.self_test_report.fts_ok:
             codecs.remove("fts")
