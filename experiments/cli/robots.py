@@ -198,11 +198,12 @@ def cmd_eval(args: argparse.Namespace) -> int:
     src = table or f"{cfg.iterations} training iterations"
     print(f"{cfg.algo} in {cfg.arena}, {src}; {args.steps} evaluation steps per policy")
     print(f"{'seed':>4} {'train s':>8} {'greedy coll/1000':>17} {'random coll/1000':>17} "
-          f"{'greedy m':>9} {'random m':>9}")
+          f"{'greedy m':>9} {'random m':>9} {'greedy progress':>16} {'greedy coverage':>16}")
     for r in summary.runs:
-        print(f"{r['seed']:>4} {r['train_s']:>8.1f} {r['greedy']['collisions_per_1000']:>17.2f} "
-              f"{r['random']['collisions_per_1000']:>17.2f} {r['greedy']['distance']:>9.2f} "
-              f"{r['random']['distance']:>9.2f}")
+        g = r["greedy"]
+        print(f"{r['seed']:>4} {r['train_s']:>8.1f} {g['collisions_per_1000']:>17.2f} "
+              f"{r['random']['collisions_per_1000']:>17.2f} {g['distance']:>9.2f} "
+              f"{r['random']['distance']:>9.2f} {g['progress']:>16.2f} {g['coverage']:>16.2f}")
     print(f"all  {'':>8} {summary.greedy_collisions_per_1000:>17.2f} "
           f"{summary.random_collisions_per_1000:>17.2f}")
     print(f"reduction {100 * summary.reduction:.0f}%")
