@@ -84,10 +84,16 @@ class Launcher:
         shares = {rid: read_shares(st.out / f"shares_{rid}.csv") for rid in robots}
         rows = write_rounds_csv(st.out / "rounds.csv", st.logs.values(), robots, shares)
         plots: list[Path] = []
+        plot_error = None
         try:
             plots = plot_experiment(st.out, title=st.config.default_title())
+        except ImportError as exc:
+            plot_error = f"not drawn: {exc.name or 'matplotlib'} is not installed " \
+                         "(pip install 'dfrl[plot]')"
         except Exception as exc:  # noqa: BLE001 - plots are optional, results are not
-            st.say(f"plots failed: {exc!r}")
+            plot_error = f"failed: {exc!r}"
+        if plot_error:
+            st.say(f"plots {plot_error}")
         finished = {n: lg.finished for n, lg in st.logs.items()}
         problems = {n: [f"round {a.round} aborted: {a.error}" for a in lg.aborted]
                     + [f"unreadable line: {u}" for u in lg.unreadable]
@@ -98,7 +104,7 @@ class Launcher:
         iters = {rid: ch.iteration for rid, ch in st.children.items()}
         ok = ok and not st.crashed and all(v is not None for v in finished.values())
         result = Results(st.out, st.config, wall, rows, dict(st.crashed), finished, iters,
-                         plots, ok, st.interrupted, problems)
+                         plots, ok, st.interrupted, problems, plot_error)
         write_summary(result)
         return result
 

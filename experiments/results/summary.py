@@ -25,6 +25,7 @@ class Results:
     ok: bool
     interrupted: str | None = None
     log_problems: dict[str, list[str]] | None = None
+    plot_error: str | None = None
 
     @property
     def equal_rounds(self) -> int:
@@ -88,7 +89,10 @@ def write_summary(r: Results) -> Path:
     if r.interrupted:
         lines.append(f"- INTERRUPTED ({r.interrupted}): partial results, robots stopped by "
                      "the launcher")
-    lines += ["", "Plots: " + ", ".join(p.name for p in r.plots), ""]
+    plots = ", ".join(p.name for p in r.plots) if r.plots else "none"
+    if r.plot_error:
+        plots += f" ({r.plot_error})"
+    lines += ["", "Plots: " + plots, ""]
     path = r.output_dir / "summary.md"
     path.write_text("\n".join(lines), encoding="utf-8")
     return path
