@@ -7,6 +7,8 @@ from dfrl.arenas.pybullet_quiet import load as _load_pybullet
 _load_pybullet()
 
 from dfrl.arenas.spec import (
+    HELD_OUT_ARENAS,
+    PAPER_ARENAS,
     WALL_THICKNESS,
     ArenaError,
     ArenaSpec,
@@ -18,6 +20,8 @@ from dfrl.arenas.spec import (
 )
 
 __all__ = [
+    "HELD_OUT_ARENAS",
+    "PAPER_ARENAS",
     "WALL_THICKNESS",
     "ArenaError",
     "ArenaSpec",

@@ -332,8 +332,16 @@ def parse_arena(data: Any, source: str = "<dict>") -> ArenaSpec:
     return spec
 
 
+#: The paper's five arenas, in order.
+PAPER_ARENAS: tuple[str, ...] = ("r1", "r2", "r3", "r4", "r5")
+#: Arenas no federation of the paper trains in, for transfer and generalisation tests:
+#: ``h1`` a cluttered floor of thin pillars, ``h2`` a long loop corridor with slanted baffles.
+HELD_OUT_ARENAS: tuple[str, ...] = ("h1", "h2")
+
+
 def builtin_arena_names() -> list[str]:
-    """Names of the arenas shipped with the package (``r1`` ... ``r5``)."""
+    """Names of the arenas shipped with the package: :data:`PAPER_ARENAS` and
+    :data:`HELD_OUT_ARENAS`, sorted."""
     return sorted(p.stem for p in _ARENA_DIR.glob("*.json"))
 
 

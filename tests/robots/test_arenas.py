@@ -8,7 +8,8 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from dfrl.arenas import ArenaError, build_arena, builtin_arena_names, load_arena, parse_arena
+from dfrl.arenas import (HELD_OUT_ARENAS, PAPER_ARENAS, ArenaError, build_arena,
+                         builtin_arena_names, load_arena, parse_arena)
 
 
 def _good() -> dict:
@@ -18,9 +19,11 @@ def _good() -> dict:
 
 
 def test_paper_arenas_ship_with_their_block_counts() -> None:
-    assert builtin_arena_names() == ["r1", "r2", "r3", "r4", "r5"]
+    assert builtin_arena_names() == ["h1", "h2", "r1", "r2", "r3", "r4", "r5"]
+    assert PAPER_ARENAS == ("r1", "r2", "r3", "r4", "r5") and HELD_OUT_ARENAS == ("h1", "h2")
     counts = {n: len(load_arena(n).blocks) for n in builtin_arena_names()}
-    assert counts == {"r1": 1, "r2": 2, "r3": 2, "r4": 4, "r5": 0}
+    assert counts == {"r1": 1, "r2": 2, "r3": 2, "r4": 4, "r5": 0, "h1": 9, "h2": 3}
+    assert load_arena("h2").size == (1.6, 0.8)
     r2, r3 = load_arena("r2"), load_arena("R3")
     assert [b.center for b in r2.blocks] != [b.center for b in r3.blocks]
 
