@@ -191,3 +191,48 @@ def evaluate_policy(
                           coverage=(covered + cover.share()) / episodes, episodes=episodes)
     finally:
         env.close()
+
+
+#: Columns of :func:`evaluate_snapshots` rows (``evaluations.csv``).
+EVAL_FIELDS: tuple[str, ...] = ("iteration", "arena", "steps", "collisions_per_1000",
+                                "progress", "coverage", "mean_reward")
+
+
+def evaluate_snapshots(
+    config: TrainerConfig,
+    snapshots: dict[int, np.ndarray],
+    arenas: list[str] | tuple[str, ...],
+    steps: int,
+    seed: int,
+    episode_steps: int = 250,
+) -> list[dict[str, float | int | str]]:
+    """The greedy policy of every snapshot, measured in each of ``arenas``.
+
+    The same evaluation seed is used for every snapshot and arena (the start poses are the
+    same across snapshots, so the curves compare tables, not luck).
+
+    Parameters
+    ----------
+    config : TrainerConfig
+        Simulation, actions, reward and discretisation of the tables (its arena is replaced).
+    snapshots : dict of int to np.ndarray
+        Iteration -> Q-table, as :func:`dfrl.robots.training.train` keeps them.
+    arenas : sequence of str
+        Where to evaluate (e.g. the own arena plus :data:`dfrl.arenas.HELD_OUT_ARENAS`).
+    steps, seed, episode_steps
+        As in :func:`evaluate_policy`.
+
+    Returns
+    -------
+    list of dict
+        One row per (iteration, arena) with the columns :data:`EVAL_FIELDS`.
+    """
+    rows: list[dict[str, float | int | str]] = []
+    for iteration in sorted(snapshots):
+        for arena in arenas:
+            r = evaluate_policy(config.replace(arena=arena), PolicyKind.GREEDY, steps, seed,
+                                q_table=snapshots[iteration], episode_steps=episode_steps)
+            rows.append({"iteration": iteration, "arena": arena, "steps": r.steps,
+                         "collisions_per_1000": r.collisions_per_1000, "progress": r.progress,
+                         "coverage": r.coverage, "mean_reward": r.mean_reward})
+    return rows

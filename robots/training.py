@@ -302,6 +302,9 @@ class TrainingResult:
     wall_time : float
         Seconds spent stepping.
     output_dir : Path or None
+    snapshots : dict of int to np.ndarray
+        Copies of the Q-table after every ``snapshot_every`` iterations (and the last one),
+        by iteration; empty without ``snapshot_every``.
     """
 
     metrics: np.ndarray
@@ -309,6 +312,7 @@ class TrainingResult:
     visits: np.ndarray
     wall_time: float
     output_dir: Path | None
+    snapshots: dict[int, np.ndarray] = field(default_factory=dict)
 
 
 _METRIC_DTYPE = np.dtype([
@@ -323,11 +327,13 @@ def train(
     config: TrainerConfig,
     output_dir: str | Path | None = None,
     progress: Callable[[int], None] | None = None,
+    snapshot_every: int | None = None,
 ) -> TrainingResult:
     """Run ``config.iterations`` steps; optionally write the results into ``output_dir``.
 
     Writes ``config.json``, ``metrics.csv`` (one row per iteration, columns of
-    :class:`StepMetrics`), ``q_table.npy`` + ``q_table.json`` + ``q_table.visits.npy``.
+    :class:`StepMetrics`), ``q_table.npy`` + ``q_table.json`` + ``q_table.visits.npy``, and
+    with ``snapshot_every`` also ``snapshots.npz`` (one table per snapshot, key ``it<N>``).
 
     Parameters
     ----------
@@ -335,13 +341,20 @@ def train(
     output_dir : str or Path, optional
     progress : callable, optional
         Called with the number of new iterations done (e.g. a tqdm ``update``).
+    snapshot_every : int, optional
+        Keep a copy of the table every so many iterations (for evaluation during learning).
     """
+    if snapshot_every is not None and snapshot_every < 1:
+        raise ValueError("snapshot_every must be >= 1")
+    snapshots: dict[int, np.ndarray] = {}
     rows = np.empty(config.iterations, dtype=_METRIC_DTYPE)
     with Trainer(config) as trainer:
         t0 = time.perf_counter()
         chunk = max(1, config.iterations // 200)
         for i in range(config.iterations):
             rows[i] = trainer.step().as_row()
+            if snapshot_every and ((i + 1) % snapshot_every == 0 or i + 1 == config.iterations):
+                snapshots[i + 1] = trainer.q_table.copy()
             if progress is not None and (i + 1) % chunk == 0:
                 progress(chunk)
         wall = time.perf_counter() - t0
@@ -349,7 +362,8 @@ def train(
             progress(config.iterations % chunk)
         result = TrainingResult(metrics=rows, q_table=trainer.q_table.copy(),
                                 visits=trainer.visits.copy(), wall_time=wall,
-                                output_dir=Path(output_dir) if output_dir is not None else None)
+                                output_dir=Path(output_dir) if output_dir is not None else None,
+                                snapshots=snapshots)
         if output_dir is not None:
             out = Path(output_dir)
             out.mkdir(parents=True, exist_ok=True)
@@ -358,6 +372,8 @@ def train(
             write_metrics_csv(out / "metrics.csv", rows)
             save_table(out / "q_table", trainer.q_table,
                        trainer.table_meta(wall_time_s=round(wall, 3)), visits=trainer.visits)
+            if snapshots:
+                np.savez(out / "snapshots.npz", **{f"it{k}": v for k, v in snapshots.items()})
     return result
 
 

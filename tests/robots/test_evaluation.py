@@ -48,3 +48,22 @@ def test_same_seed_same_measure() -> None:
     b = evaluate_policy(cfg, PolicyKind.RANDOM, 400, seed=11, episode_steps=100)
     c = evaluate_policy(cfg, PolicyKind.RANDOM, 400, seed=12, episode_steps=100)
     assert a == b and a != c
+
+
+def test_snapshots_are_evaluated_in_own_and_held_out_arenas() -> None:
+    from dfrl.robots.evaluation import EVAL_FIELDS, evaluate_snapshots
+    from dfrl.robots.training import train
+
+    cfg = TrainerConfig(arena="r4", iterations=600, seed=2)
+    res = train(cfg, snapshot_every=200)
+    assert sorted(res.snapshots) == [200, 400, 600]
+    assert np.array_equal(res.snapshots[600], res.q_table)
+    assert not np.array_equal(res.snapshots[200], res.snapshots[600])
+    rows = evaluate_snapshots(cfg, res.snapshots, ["r4", "h1"], steps=200, seed=5,
+                              episode_steps=100)
+    assert [(r["iteration"], r["arena"]) for r in rows] == [
+        (200, "r4"), (200, "h1"), (400, "r4"), (400, "h1"), (600, "r4"), (600, "h1")]
+    assert all(set(r) == set(EVAL_FIELDS) for r in rows)
+    again = evaluate_snapshots(cfg, res.snapshots, ["r4", "h1"], steps=200, seed=5,
+                               episode_steps=100)
+    assert again == rows
