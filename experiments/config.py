@@ -149,16 +149,44 @@ class RobotSpec:
         ``qlearning`` or ``sarsa``.
     seed : int or None
         None: the experiment seed plus the robot's position in the list.
+    node : str or None
+        ``"HOST:PORT"`` of an already running ``dfrl robot`` that runs this robot (configured
+        over the platform); None: the launcher spawns a robot process on its own host.
     """
 
     id: str
     arena: str
     algo: str = "qlearning"
     seed: int | None = None
+    node: str | None = None
 
     def __post_init__(self) -> None:
         if not self.id or not (self.id[0].islower() and self.id.replace("_", "").isalnum()):
             raise ValueError(f"robot id {self.id!r}: use a lower-case name like r1")
+        if self.node is not None:
+            parse_node(self.node)
+
+    @property
+    def node_address(self) -> tuple[str, int] | None:
+        """``(host, port)`` of the robot's ``dfrl robot`` service, None when spawned locally."""
+        return parse_node(self.node) if self.node is not None else None
+
+
+def parse_node(text: str) -> tuple[str, int]:
+    """``"HOST:PORT"`` -> ``(host, port)``.
+
+    >>> parse_node("10.0.0.7:7001")
+    ('10.0.0.7', 7001)
+
+    Raises
+    ------
+    ValueError
+        Not a host and a port 1..65535.
+    """
+    host, sep, port = str(text).rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ValueError(f"robot node {text!r}: use HOST:PORT, e.g. 10.0.0.7:7001")
+    return host.strip("[]"), int(port)
 
 
 @dataclass(frozen=True)
@@ -204,6 +232,15 @@ class ExperimentConfig:
         Whole-experiment limit (children are killed after it).
     title : str
         Plot title (default: derived from the config).
+    console : str or None
+        Address the launcher's console node binds and the robots reach it at. None: the
+        address this host uses towards the first remote robot (its route), or 127.0.0.1 when
+        every robot is spawned locally.
+    tolerate_lost_robots : int
+        Robots that may be lost (crashed, failed, unreachable at the end) with the run still
+        counted as complete.
+    tolerate_missing_rounds : int
+        Planned rounds per agent that may be missing (never logged) likewise.
     """
 
     name: str = "experiment"
@@ -221,6 +258,9 @@ class ExperimentConfig:
     joins: tuple[JoinSpec, ...] = ()
     timeout_s: float = 3600.0
     title: str = ""
+    console: str | None = None
+    tolerate_lost_robots: int = 0
+    tolerate_missing_rounds: int = 0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "mode", Mode(self.mode))
@@ -240,12 +280,21 @@ class ExperimentConfig:
             raise ValueError("iterations and respite must be >= 1")
         if self.rtf is not None and self.rtf < 0:
             raise ValueError("rtf must be >= 0")
+        if self.tolerate_lost_robots < 0 or self.tolerate_missing_rounds < 0:
+            raise ValueError("tolerate_lost_robots and tolerate_missing_rounds must be >= 0")
+        nodes = [r.node for r in list(self.robots) + [j.robot for j in self.joins] if r.node]
+        if len(set(nodes)) != len(nodes):
+            raise ValueError(f"two robots on one robot node: {nodes}")
 
     # -- derived -------------------------------------------------------------------------------
     @property
     def rounds(self) -> int:
         """Agent rounds: one per respite boundary (the last iteration included)."""
         return len(boundaries(self.iterations, self.respite))
+
+    def remote_robots(self) -> list[RobotSpec]:
+        """Robots (and joiners) that run on an already running ``dfrl robot``."""
+        return [r for r in list(self.robots) + [j.robot for j in self.joins] if r.node]
 
     def algorithms(self) -> list[str]:
         """Algorithms in order of first appearance (one agent each)."""

@@ -178,7 +178,6 @@ class ConsoleNode:
             self._err_reader.join(timeout=2.0)       # its last words
         return f"exit code {code}: {self.stderr_tail()}"
 
-
     # -- requests --------------------------------------------------------------------------
     def _request(self, op: str, timeout_s: float, **fields: Any) -> dict[str, Any]:
         """Send one request; return the reply's fields (without ``id`` and ``ok``)."""
@@ -265,22 +264,40 @@ class ConsoleNode:
         host, port = node
         return list(self._request("agents", timeout_s, node=[host, int(port)])["agents"])
 
-    def request_join(self, driver: Address, robot_spec: Mapping[str, Any] | Any,
-                     iterations: int | None = None, timeout_s: float = 60.0) -> dict[str, Any]:
-        """Ask the driver whose console node is at ``driver`` to add a robot; wait for its answer.
+    def robot(self, node: Address, request: str | Mapping[str, Any],
+              timeout_s: float = 30.0) -> Any:
+        """Send one request to the robot service (``dfrl robot``) at ``node``; its answer.
 
         Parameters
         ----------
-        driver : (str, int)
-            The driver's console node.
-        robot_spec : mapping or dataclass (e.g. ``RobotSpec``)
-            Passed to the driver as a JSON object.
-        iterations : int or None
+        node : (str, int)
+        request : str or mapping
+            ``"status"``, ``"start"``, ``"stop"``, ``"files"``, ``{"configure": JSON_TEXT}`` or
+            ``{"fetch": {"name": N, "offset": O, "max": M}}`` (contract K5).
+        timeout_s : float
+            Longest wait for the robot's answer (the console's own wait is a little longer).
 
         Returns
         -------
-        dict
-            The driver's result.
+        Any
+            ``status``: the status dict; ``files``: ``[{"name", "size"}, ...]``; ``fetch``:
+            ``{"data": base64 text, "eof": bool}``; the others: ``True``.
+
+        Raises
+        ------
+        ExperimentError
+            The robot could not be reached, refused the request, or did not answer in time.
+        """
+        host, port = node
+        req = request if isinstance(request, str) else dict(request)
+        return self._request("robot", timeout_s + 5.0, node=[host, int(port)], request=req,
+                             wait_s=float(timeout_s))["result"]
+
+    def request_join(self, driver: Address, robot_spec: Mapping[str, Any] | Any,
+                     iterations: int | None = None, timeout_s: float = 60.0) -> dict[str, Any]:
+        """Ask the driver whose console node is at ``driver`` to add a robot (``robot_spec``, a
+        mapping or dataclass such as ``RobotSpec``, is passed on as a JSON object); wait for
+        its answer and return the driver's result.
 
         Raises
         ------

@@ -52,6 +52,11 @@ def print_results(results: Results) -> None:
           f"after the share; wall time {results.wall_time_s:.1f} s", file=sys.stderr)
     if results.crashed:
         print(f"crashed robots: {results.crashed}", file=sys.stderr)
+    if results.faults is not None:
+        for line in results.faults.lines():
+            print(line, file=sys.stderr)
+        if not results.complete:
+            print("the federation did NOT complete (see summary.md)", file=sys.stderr)
     print(results.output_dir)
 
 
@@ -114,11 +119,12 @@ def cmd_join(args: argparse.Namespace) -> int:
 
     try:
         info = join_robot(args.results_dir, args.robot, args.arena, args.algo,
-                          iterations=args.iterations, seed=args.seed)
-    except ExperimentError as exc:
+                          iterations=args.iterations, seed=args.seed, node=args.node)
+    except (ExperimentError, ValueError) as exc:
         print(f"dfrl join: {exc}", file=sys.stderr)
         return 1
-    print(f"robot {args.robot} runs at {info['host']}:{info['port']} (pid {info['pid']}); "
+    where = f"robot node {info['node']}" if info.get("node") else f"pid {info['pid']}"
+    print(f"robot {args.robot} runs at {info['host']}:{info['port']} ({where}); "
           f"the agent includes it from its next round")
     return 0
 
@@ -147,7 +153,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_override_arguments(p)
     p.set_defaults(func=cmd_demo)
 
-    p = subparsers.add_parser("run", help="run a federated experiment (robot processes + agent)")
+    p = subparsers.add_parser("run", help="run a federated experiment (robot processes + agent); "
+                                          "exit 1 unless the federation completed")
     p.add_argument("config", help="experiment config: a JSON file or a name in experiments/configs")
     p.add_argument("--out", type=Path, default=None, help="results folder (default results/NAME)")
     add_override_arguments(p)
@@ -171,6 +178,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--iterations", type=int, default=None,
                    help="iterations (default: the experiment's)")
     p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--node", default=None, metavar="HOST:PORT",
+                   help="a running `dfrl robot` to run the robot on (default: a new robot "
+                        "process on the launcher's host)")
     p.set_defaults(func=cmd_join)
 
     p = subparsers.add_parser("paper", help="reproduce the paper's figures (4 federated runs + "

@@ -33,12 +33,14 @@ def swipl_path() -> str:
     return path
 
 
-def open_console(token: int | str, log_path: Path | None = None) -> ConsoleNode:
-    """Start the console node of an experiment (its token lets it load programs into the
-    robot nodes); its stderr goes to ``log_path``."""
+def open_console(token: int | str, log_path: Path | None = None,
+                 host: str = "127.0.0.1") -> ConsoleNode:
+    """Start the console node of an experiment at ``host`` (an address the robots reach; its
+    token lets it load programs into the robot nodes and drive robot services); its stderr
+    goes to ``log_path``."""
     if log_path is not None:
         log_path.parent.mkdir(parents=True, exist_ok=True)
-    return ConsoleNode(tokens=token, log_path=log_path)
+    return ConsoleNode(tokens=token, host=host, log_path=log_path)
 
 
 def launch_agent(console: ConsoleNode, launch: dict[str, Any], timeout_s: float = 60.0) -> None:

@@ -94,6 +94,14 @@ class RobotChild:
     def running(self) -> bool:
         return self.proc.poll() is None
 
+    @property
+    def pid(self) -> int | None:
+        return self.proc.pid
+
+    def exit_code(self) -> int | None:
+        """The process's exit code, None while it runs."""
+        return self.proc.poll()
+
     def close_stdin(self) -> None:
         """Tell the node to stop (it stops when its stdin closes)."""
         try:

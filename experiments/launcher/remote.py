@@ -7,6 +7,7 @@ from typing import Any
 from dfrl.experiments.config import RobotSpec
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.launcher.agents import open_console, send_control
+from dfrl.experiments.launcher.remote_robots import route_source
 from dfrl.experiments.results.files import read_json
 
 
@@ -41,7 +42,9 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
     targets = [a for a in info["agents"] if agent is None or a["name"] == agent]
     if not targets:
         raise ExperimentError(f"no agent {agent!r} in {results_dir}")
-    with open_console(info["token"]) as console:
+    first = targets[0]["itinerary"][0]
+    with open_console(info["token"], host=route_source(first["host"], int(first["port"]))) \
+            as console:
         for a in targets:
             nodes = [(s["host"], s["port"]) for s in a["itinerary"]]
             send_control(console, nodes[0], a["name"], {"method": method}, program=prog,
@@ -51,9 +54,11 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
 
 def join_robot(results_dir: str | Path, robot: str, arena: str, algo: str = "qlearning",
                iterations: int | None = None, seed: int | None = None,
-               timeout_s: float = 60.0) -> dict[str, Any]:
+               timeout_s: float = 60.0, node: str | None = None) -> dict[str, Any]:
     """Ask the launcher of a running experiment to start a robot and add it to the agent of
     its algorithm (from the agent's next round). Returns the new node's ``nodes.json`` entry.
+    With ``node`` (``"HOST:PORT"`` of a running ``dfrl robot``) the launcher configures that
+    service instead of starting a process.
 
     The launcher owns every process of an experiment: the request goes to its console node
     (``console`` in ``nodes.json``) as a platform post, and the launcher's answer comes back
@@ -69,7 +74,8 @@ def join_robot(results_dir: str | Path, robot: str, arena: str, algo: str = "qle
         raise ExperimentError(f"robot {robot} is already part of the experiment")
     if not info.get("console"):
         raise ExperimentError(f"{results_dir}/nodes.json names no console node to ask")
-    spec = RobotSpec(robot, arena, algo, seed)
-    with open_console(info["token"]) as console:
+    spec = RobotSpec(robot, arena, algo, seed, node)
+    driver = tuple(info["console"])
+    with open_console(info["token"], host=route_source(driver[0], int(driver[1]))) as console:
         return console.request_join(tuple(info["console"]), spec, iterations,
                                     timeout_s=timeout_s)

@@ -1,6 +1,8 @@
-"""Run one federated experiment on loopback: :func:`run` and the :class:`Launcher` behind it."""
+"""Run one federated experiment, its robots spawned here or running on other hosts:
+:func:`run` and the :class:`Launcher` behind it."""
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import threading
@@ -11,10 +13,13 @@ from typing import Any, TextIO
 from dfrl.experiments.config import ExperimentConfig
 from dfrl.experiments.launcher.children import await_ready
 from dfrl.experiments.launcher.agents import open_console
+from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.launcher.monitor import monitor, poll_logs
+from dfrl.experiments.launcher.remote_robots import StatusPoller, console_host
 from dfrl.experiments.launcher.shutdown import kill_all, shutdown
 from dfrl.experiments.launcher.spawn import launch_agents, spawn, write_nodes
 from dfrl.experiments.launcher.state import RunState
+from dfrl.experiments.results.faults import assess
 from dfrl.experiments.report.plots import plot_experiment
 from dfrl.experiments.results.files import write_json
 from dfrl.experiments.results.metrics import merge_metrics
@@ -54,11 +59,15 @@ class Launcher:
                 stale.unlink()
         write_json(st.out / "config.json", c.to_dict())
         st.t0 = time.monotonic()
+        st.experiment_id = f"{c.name}-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
         ok = True
         try:
-            st.console = open_console(c.token, st.out / "logs" / "console.err")
+            st.console_host = console_host(c)
+            st.console = open_console(c.token, st.out / "logs" / "console.err",
+                                      host=st.console_host)
             children = [spawn(st, r, c.iterations) for r in c.robots]
-            await_ready(children)
+            st.poller = StatusPoller(st.remote()).start()
+            await_ready([ch for ch in children if ch.robot.node is None])
             write_nodes(st)
             st.say(f"{len(children)} robot nodes up: " + ", ".join(
                 f"{rid}@{ch.address[1]}" for rid, ch in st.children.items()))
@@ -70,11 +79,27 @@ class Launcher:
             kill_all(st)
             raise
         finally:
+            st.end_stalls()
             shutdown(st)
+            if st.poller is not None:
+                st.poller.close()
+            self._gather()
             if st.console is not None:
                 st.console.close()
             results = self._collect(time.monotonic() - st.t0, ok)
         return results
+
+    def _gather(self) -> None:
+        """Copy every remote robot's result files into the results folder, over the
+        platform (a robot that cannot give them is a fault, said and recorded)."""
+        st = self.state
+        for ch in st.remote():
+            try:
+                st.gathered[ch.robot.id] = ch.gather(st.out)
+            except ExperimentError as exc:
+                st.gather_errors.append(f"files of {ch.robot.id} not gathered: {exc}")
+                st.say(st.gather_errors[-1])
+                st.lost.setdefault(ch.robot.id, f"its result files could not be fetched: {exc}")
 
     def _collect(self, wall: float, ok: bool) -> Results:
         st = self.state
@@ -102,9 +127,12 @@ class Launcher:
             for line in lines:
                 st.say(f"{name}: {line}")
         iters = {rid: ch.iteration for rid, ch in st.children.items()}
-        ok = ok and not st.crashed and all(v is not None for v in finished.values())
+        faults = assess(st.config, [(lg, st.agents[n].rounds) for n, lg in st.logs.items()],
+                        st.lost, st.stalls, st.gather_errors)
+        ok = ok and all(v is not None for v in finished.values()) and faults.complete(st.config)
         result = Results(st.out, st.config, wall, rows, dict(st.crashed), finished, iters,
-                         plots, ok, st.interrupted, problems, plot_error)
+                         plots, ok, st.interrupted, problems, plot_error, faults,
+                         dict(st.gathered))
         write_summary(result)
         return result
 

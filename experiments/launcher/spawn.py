@@ -7,6 +7,7 @@ import time
 from dfrl.experiments.config import Mode, NodeConfig, RobotSpec
 from dfrl.experiments.launcher.agents import agent_name, launch_agent
 from dfrl.experiments.launcher.children import RobotChild
+from dfrl.experiments.launcher.remote_robots import RemoteRobot
 from dfrl.experiments.launcher.state import AgentInfo, RunState
 from dfrl.experiments.results.files import write_json
 
@@ -28,12 +29,27 @@ def node_config(state: RunState, robot: RobotSpec, iterations: int) -> NodeConfi
     return NodeConfig(robot=robot.id, out_dir=str(state.out), arena=robot.arena, algo=robot.algo,
                       seed=robot_seed(state, robot), iterations=iterations, respite=c.respite,
                       mode=c.mode, rtf=c.rtf, token=c.token, trainer=dict(c.trainer),
-                      grace_s=grace, sync_timeout_s=max(60.0, c.timeout_s))
+                      grace_s=grace, sync_timeout_s=max(60.0, c.timeout_s),
+                      host=state.console_host)
 
 
-def spawn(state: RunState, robot: RobotSpec, iterations: int) -> RobotChild:
-    """Start a robot node process (not waiting for it)."""
-    child = RobotChild(robot, node_config(state, robot, iterations), state.out, state.on_event)
+def spawn(state: RunState, robot: RobotSpec, iterations: int) -> RobotChild | RemoteRobot:
+    """Start a robot: a node process on this host (not waiting for it), or, for a robot with
+    a ``node``, configure and start the ``dfrl robot`` service there (waiting for it).
+
+    Raises
+    ------
+    ExperimentError
+        A remote robot could not be configured or started.
+    """
+    cfg = node_config(state, robot, iterations)
+    if robot.node is None:
+        child: RobotChild | RemoteRobot = RobotChild(robot, cfg, state.out, state.on_event)
+    else:
+        assert state.console is not None
+        child = RemoteRobot(robot, cfg, state.console, state.experiment_id)
+        child.configure()
+        child.start()
     state.children[robot.id] = child
     return child
 
@@ -42,11 +58,12 @@ def write_nodes(state: RunState) -> None:
     """``nodes.json``: the token, the console node (where ``dfrl join`` asks), every node
     that is up and every agent."""
     nodes = [{"robot": rid, "algo": ch.robot.algo, "arena": ch.robot.arena,
-              "host": ch.address[0], "port": ch.address[1], "pid": ch.proc.pid,
-              "joined": rid in state.joined}
+              "host": ch.address[0], "port": ch.address[1], "pid": ch.pid,
+              "node": ch.robot.node, "joined": rid in state.joined}
              for rid, ch in state.children.items() if ch.address is not None]
     console = list(state.console.address) if state.console is not None else None
     write_json(state.out / "nodes.json", {"token": state.config.token, "console": console,
+                                          "experiment": state.experiment_id,
                                           "nodes": nodes,
                                           "agents": [a.to_dict() for a in state.agents.values()]})
 
@@ -73,7 +90,7 @@ def rest_s(state: RunState) -> float:
     return round(c.respite * 0.0005 * share, 3)
 
 
-def await_first_respite(state: RunState, children: list[RobotChild]) -> None:
+def await_first_respite(state: RunState, children: list[RobotChild | RemoteRobot]) -> None:
     """Async: wait until the agent's robots reach the first respite boundary, so that rounds
     fall near iterations respite, 2 x respite, ... (the agent rests in between)."""
     target = min(state.config.respite, state.config.iterations)

@@ -14,7 +14,11 @@ from typing import Any, TextIO
 from dfrl.experiments.config import ExperimentConfig
 from dfrl.experiments.control import ConsoleNode
 from dfrl.experiments.launcher.children import RobotChild
+from dfrl.experiments.launcher.remote_robots import RemoteRobot, StatusPoller
 from dfrl.experiments.results.agent_log import AgentLog
+
+#: Seconds without progress after which a running robot counts as stalled.
+STALL_S = 15.0
 
 
 @dataclass
@@ -41,7 +45,7 @@ class RunState:
     config: ExperimentConfig
     out: Path
     progress: TextIO | None
-    children: dict[str, RobotChild] = field(default_factory=dict)
+    children: dict[str, RobotChild | RemoteRobot] = field(default_factory=dict)
     agent_at: dict[str, tuple[str, str, int]] = field(default_factory=dict)  # robot, op, it
     agents: dict[str, AgentInfo] = field(default_factory=dict)
     logs: dict[str, AgentLog] = field(default_factory=dict)
@@ -49,6 +53,15 @@ class RunState:
     joined: set[str] = field(default_factory=set)
     killed: set[str] = field(default_factory=set)       # children the launcher itself stopped
     console: ConsoleNode | None = None                  # the experiment's console node
+    console_host: str = "127.0.0.1"                     # where it binds; local nodes too
+    experiment_id: str = ""                             # remote robots file it under this
+    poller: StatusPoller | None = None                  # polls the remote robots' status
+    lost: dict[str, str] = field(default_factory=dict)  # robot -> why (crashed, failed, gone)
+    stalls: list[str] = field(default_factory=list)
+    progress_at: dict[str, tuple[int, float]] = field(default_factory=dict)  # it, since
+    stalled: dict[str, float] = field(default_factory=dict)    # robot -> stalled since
+    gathered: dict[str, list[str]] = field(default_factory=dict)
+    gather_errors: list[str] = field(default_factory=list)
     interrupted: str | None = None
     printed_rounds: dict[str, int] = field(default_factory=dict)
     last_status: float = 0.0
@@ -70,14 +83,58 @@ class RunState:
                 if info.algo == algo:
                     self.agent_at[name] = (robot, op, iteration)
 
+    def remote(self) -> list[RemoteRobot]:
+        return [ch for ch in self.children.values() if isinstance(ch, RemoteRobot)]
+
     def check_children(self) -> None:
-        """Record (and say) every robot process that died with a non-zero exit code."""
+        """Record (and say) every robot process that died with a non-zero exit code, every
+        remote robot that failed or stopped answering (and came back), and stalls."""
+        now = time.monotonic()
         for rid, ch in self.children.items():
-            rc = ch.proc.poll()
-            if rc is not None and rc != 0 and rid not in self.crashed and rid not in self.killed:
-                self.crashed[rid] = rc
-                self.say(f"ROBOT {rid} CRASHED (exit code {rc}) at iteration {ch.iteration}; "
-                         f"see {ch.err_path}\n{ch.err_tail()}")
+            if isinstance(ch, RemoteRobot):
+                why = ch.lost
+                if why is not None and rid not in self.lost:
+                    self.lost[rid] = why
+                    self.say(f"ROBOT {rid} LOST at iteration {ch.iteration}: {why}")
+                elif why is None and rid in self.lost and ch.state != "failed":
+                    self.say(f"robot {rid} answers again (iteration {ch.iteration})")
+                    del self.lost[rid]
+                for t0, t1, reason in ch.take_outages():
+                    self.stalls.append(f"{rid} unreachable from {t0 - self.t0:.1f} s to "
+                                       f"{t1 - self.t0:.1f} s ({reason[:120]})")
+            else:
+                rc = ch.exit_code()
+                if rc is not None and rc != 0 and rid not in self.crashed \
+                        and rid not in self.killed:
+                    self.crashed[rid] = rc
+                    self.lost[rid] = f"process exited with code {rc}"
+                    self.say(f"ROBOT {rid} CRASHED (exit code {rc}) at iteration "
+                             f"{ch.iteration}; see {ch.err_path}\n{ch.err_tail()}")
+            self._check_progress(rid, ch, now)
+
+    def _check_progress(self, rid: str, ch: RobotChild | RemoteRobot, now: float) -> None:
+        """A running robot whose iteration has not moved for :data:`STALL_S` is stalled; the
+        stall is recorded when it moves again (or at the end, :meth:`end_stalls`)."""
+        it, since = self.progress_at.get(rid, (-1, now))
+        if ch.iteration != it:
+            if rid in self.stalled:
+                self._stall(rid, self.stalled.pop(rid), now, it)
+            self.progress_at[rid] = (ch.iteration, now)
+        elif ch.running and not ch.done and ch.iteration < ch.cfg.iterations \
+                and now - since > STALL_S and rid not in self.stalled:
+            self.stalled[rid] = since
+            self.say(f"robot {rid} stalled at iteration {it} for {now - since:.0f} s")
+
+    def _stall(self, rid: str, since: float, until: float, it: int) -> None:
+        self.stalls.append(f"{rid} made no progress at iteration {it} from "
+                           f"{since - self.t0:.1f} s to {until - self.t0:.1f} s")
+
+    def end_stalls(self) -> None:
+        """Record the stalls still going on (the run is ending)."""
+        now = time.monotonic()
+        for rid, since in list(self.stalled.items()):
+            self._stall(rid, since, now, self.progress_at.get(rid, (-1, now))[0])
+        self.stalled.clear()
 
     def all_finished(self) -> bool:
         """Every agent logged ``finished``."""

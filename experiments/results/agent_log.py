@@ -8,6 +8,11 @@ Events the agent writes (``platform_pl/agents/dfrl_agent.pl``)::
     {"event": "aborted", "agent": A, "round": N, "error": Text}
     {"event": "control", "agent": A, "round": N, "command": Text,
      "status": "applied" | "ignored", "reason": Text}
+    {"event": "resurrected", "agent": A, "round": N, "epoch": E, "from": "host:port",
+     "dead": "host:port"}
+
+A round event may also carry ``retries`` (connection attempts repeated that round) and
+``epoch``; both default to 0.
 
 Times are the agent's ``get_time/1`` floats. A line that is not one of these objects is kept
 in :attr:`AgentLog.unreadable` (reported, never dropped).
@@ -41,6 +46,8 @@ class RoundRecord:
     method: str
     visited: tuple[str, ...]
     skipped: tuple[Skip, ...] = ()
+    retries: int = 0
+    epoch: int = 0
 
     @property
     def duration_ms(self) -> float:
@@ -65,6 +72,17 @@ class ControlEvent:
     reason: str = ""
 
 
+@dataclass(frozen=True)
+class Resurrection:
+    """A ``resurrected`` event: the stop ``source`` brought the agent back in ``round`` with
+    ``epoch`` because the node ``dead`` it had gone to did not answer."""
+
+    round: int
+    epoch: int
+    source: str
+    dead: str
+
+
 @dataclass
 class AgentLog:
     """What an agent's rounds log holds so far."""
@@ -74,6 +92,7 @@ class AgentLog:
     finished: int | None = None
     aborted: list[Aborted] = field(default_factory=list)
     controls: list[ControlEvent] = field(default_factory=list)
+    resurrections: list[Resurrection] = field(default_factory=list)
     unreadable: list[str] = field(default_factory=list)
 
 
@@ -95,7 +114,8 @@ def _round(agent: str, ev: dict[str, Any]) -> RoundRecord:
     skipped = tuple(Skip(str(s["robot"]), str(s["reason"])) for s in ev.get("skipped", []))
     return RoundRecord(agent, int(ev["round"]), float(ev["start"]), float(ev["end"]),
                        int(ev["hops"]), int(ev["bytes"]), str(ev["method"]),
-                       tuple(str(v) for v in ev["visited"]), skipped)
+                       tuple(str(v) for v in ev["visited"]), skipped,
+                       int(ev.get("retries") or 0), int(ev.get("epoch") or 0))
 
 
 def _add(log: AgentLog, ev: dict[str, Any]) -> bool:
@@ -112,6 +132,9 @@ def _add(log: AgentLog, ev: dict[str, Any]) -> bool:
     elif kind == "control":
         log.controls.append(ControlEvent(int(ev["round"]), str(ev["command"]),
                                          str(ev["status"]), str(ev.get("reason", ""))))
+    elif kind == "resurrected":
+        log.resurrections.append(Resurrection(int(ev["round"]), int(ev.get("epoch") or 0),
+                                              str(ev.get("from", "")), str(ev.get("dead", ""))))
     else:
         return False
     return True

@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import Any
 
 from dfrl.experiments.config import ExperimentConfig
+from dfrl.experiments.results.faults import Faults
 from dfrl.experiments.results.metrics import read_metrics
 from dfrl.experiments.results.rounds import count_equal
 
@@ -26,6 +27,14 @@ class Results:
     interrupted: str | None = None
     log_problems: dict[str, list[str]] | None = None
     plot_error: str | None = None
+    faults: Faults | None = None
+    gathered: dict[str, list[str]] | None = None
+
+    @property
+    def complete(self) -> bool:
+        """The federation completed: every planned round logged, no robot lost (up to what
+        the config tolerates); see :meth:`Faults.complete`."""
+        return self.faults is None or self.faults.complete(self.config)
 
     @property
     def equal_rounds(self) -> int:
@@ -84,8 +93,16 @@ def write_summary(r: Results) -> Path:
         if problems:
             lines.append(f"- {agent}: {len(problems)} problem(s) in its log, first ones:")
             lines += [f"  - `{p[:200]}`" for p in problems[:5]]
+    if r.gathered:
+        n = sum(len(v) for v in r.gathered.values())
+        lines.append(f"- result files gathered over the platform from {len(r.gathered)} "
+                     f"remote robot(s): {n}")
     if r.crashed:
         lines.append(f"- CRASHED robots (exit codes): {r.crashed}")
+    if r.faults is not None:
+        fault_lines = r.faults.lines()
+        verdict = "complete" if r.complete else "INCOMPLETE"
+        lines += ["", f"## Faults: federation {verdict}", ""] + (fault_lines or ["- none"])
     if r.interrupted:
         lines.append(f"- INTERRUPTED ({r.interrupted}): partial results, robots stopped by "
                      "the launcher")

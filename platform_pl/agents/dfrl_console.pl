@@ -6,13 +6,14 @@
           ]).
 :- use_module('../tartarus').
 :- use_module(dfrl_agent, [dfrl_create/4]).
+:- use_module('../transport', [transport_request/4]).
 :- use_module(library(http/json),
               [atom_json_dict/3, json_write_dict/3]).
 :- use_module(library(main), [main/0, argv_options/3]).
 :- autoload(library(error), [must_be/2, domain_error/2, type_error/2]).
 :- autoload(library(readutil), [read_line_to_string/2]).
 :- autoload(library(option), [option/2, option/3]).
-:- autoload(library(lists), [member/2]).
+:- autoload(library(lists), [member/2, memberchk/2]).
 
 /** <module> The console node of an experiment, driven in JSON lines
 
@@ -51,6 +52,21 @@ request never stops the node. Requests:
     (Spec is passed on untouched; N may be null).
   - `{"id":5,"op":"reply","to":[H,P],"request":R,"result":Result}`:
     answer the join request R that came from the console H:P.
+  - `{"id":8,"op":"robot","node":[H,P],"request":R}`: send the request
+    dfrl_robot(Term) to the robot service (`dfrl robot`) at H:P with
+    this node's tokens (transport_request/4) and reply
+    `{"result":Answer}`. R and its Term (robot_request/2) and Answer:
+      "status"             status       the service's status object
+      "start" / "stop"     start / stop true
+      "files"              files        [{"name":N,"size":S},...]
+      {"configure":Text}   configure(Text)  true (Text: a JSON object
+                                        as a string, passed untouched)
+      {"fetch":{"name":N,"offset":O,"max":M}}
+                           fetch(N, O, M)   {"data":Base64,"eof":Bool}
+    An optional "wait_s" bounds the wait for the answer (default
+    30 s). Robot requests are served each in a thread of their own, so a
+    slow or unreachable robot does not hold up other requests: their
+    replies may come out of order (match them by id).
   - `{"id":6,"op":"quit"}` (or end of input): stop the node and exit 0.
 
 Joins travel through the platform: this node declares the platform event
@@ -134,6 +150,13 @@ serve_request(_, Id, Request, false) :-
     !,
     reply(Id, ok(_{})).
 serve_request(Node, Id, Request, true) :-
+    get_dict(op, Request, "robot"),
+    !,
+    thread_create(answer(Node, Id, Request), _, [detached(true)]).
+serve_request(Node, Id, Request, true) :-
+    answer(Node, Id, Request).
+
+answer(Node, Id, Request) :-
     (   catch(request(Node, Request, Result), E, true)
     ->  (   var(E)
         ->  reply(Id, ok(Result))
@@ -195,8 +218,72 @@ op(reply, Node, Request, _{posted:true}) :-
     atom_json_dict(ResultText, Result, [as(string), width(0)]),
     node_property(Node, link(Link)),
     agent_post(Address, platform, dfrl_driver, Link, [reply(R, ResultText)]).
+op(robot, Node, Request, _{result:Result}) :-
+    !,
+    key(node, Request, N), address(N, Address),
+    key(request, Request, R),
+    robot_request(R, Term),
+    (   node_property(Node, tokens(Tokens)) -> true ; Tokens = [] ),
+    dict_default(Request, wait_s, 30, Timeout), must_be(number, Timeout),
+    (   Timeout > 0 -> true ; domain_error(positive_timeout, Timeout) ),
+    transport_request(Address, dfrl_robot(Term), Answer,
+                      [tokens(Tokens), reply_timeout(Timeout)]),
+    robot_answer(Term, Answer, Result).
 op(Op, _, _, _) :-
     domain_error(console_op, Op).
+
+%   robot_request(+JSON, -Term): a robot request of the `robot` op as the
+%   term the robot service answers (contract K5); nothing else passes.
+
+robot_request(R, Term) :-
+    string(R),
+    atom_string(A, R),
+    memberchk(A, [status, start, stop, files]),
+    !,
+    Term = A.
+robot_request(D, configure(Text)) :-
+    is_dict(D),
+    get_dict(configure, D, Text),
+    !,
+    must_be(string, Text).
+robot_request(D, fetch(Name, Offset, Max)) :-
+    is_dict(D),
+    get_dict(fetch, D, F),
+    !,
+    must_be(dict, F),
+    key(name, F, Name0), text_atom(Name0, Name),
+    key(offset, F, Offset), must_be(nonneg, Offset),
+    key(max, F, Max), must_be(positive_integer, Max).
+robot_request(R, _) :-
+    domain_error(robot_request, R).
+
+%   robot_answer(+Term, +Answer, -JSON)
+
+robot_answer(files, Files, JSON) :-
+    !,
+    must_be(list, Files),
+    maplist(file_json, Files, JSON).
+robot_answer(fetch(_, _, _), chunk(Data0, Eof), _{data:Data, eof:Eof}) :-
+    !,
+    text_string(Data0, Data),
+    must_be(boolean, Eof).
+robot_answer(status, Dict, Dict) :-
+    !,
+    must_be(dict, Dict).
+robot_answer(_, Answer, Answer).
+
+file_json(file(Name0, Size), _{name:Name, size:Size}) :-
+    !,
+    text_string(Name0, Name),
+    must_be(nonneg, Size).
+file_json(F, _) :-
+    type_error(robot_file, F).
+
+text_string(X, S) :-
+    (   string(X) -> S = X
+    ;   atom(X) -> atom_string(X, S)
+    ;   type_error(text, X)
+    ).
 
 agent_dict(agent(Name, Handler, Kind, Status),
            _{name:Name, handler:H, kind:Kind, status:S}) :-

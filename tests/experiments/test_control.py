@@ -27,12 +27,12 @@ TOKEN = 7
 class Node:
     """A plain platform node (node_main.pl) hosting the in-memory robots r1..r4."""
 
-    def __init__(self) -> None:
+    def __init__(self, consult: Path = ROBOTS) -> None:
         assert SWIPL is not None
         self.proc = subprocess.Popen(
             [SWIPL, "-q", str(PLATFORM_DIR / "node_main.pl"), "--host", "127.0.0.1",
              "--token", str(TOKEN), "--consult", str(AGENTS_DIR / "dfrl_agent.pl"),
-             "--consult", str(ROBOTS)],
+             "--consult", str(consult)],
             stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
             text=True)
         assert self.proc.stdout is not None
@@ -300,3 +300,51 @@ def test_one_shot_scripts_launch_and_control(nodes: Callable[[], Node], tmp_path
         e["event"] == "round" and e["method"] == "median" for e in log_events(log)))
     assert control({"agent": "fed_test", "stop": True}).returncode == 0
     wait_until("finished", lambda: any(e["event"] == "finished" for e in log_events(log)))
+
+
+ROBOT_PEER = Path(__file__).parent / "launcher" / "robot_peer.pl"
+
+
+def test_robot_op_sends_k5_requests_and_converts_the_answers() -> None:
+    import base64
+
+    peer = Node(consult=ROBOT_PEER)
+    try:
+        with ConsoleNode(tokens=TOKEN) as c:
+            status = c.robot(peer.address, "status")
+            assert status["state"] == "idle" and status["robot"] == "r1"
+            assert status["iteration"] == 7 and status["error"] is None
+            assert c.robot(peer.address, {"configure": json.dumps({"experiment": "e"})}) is True
+            assert c.robot(peer.address, "status")["state"] == "configured"
+            assert c.robot(peer.address, "start") is True
+            files = c.robot(peer.address, "files")
+            assert files == [{"name": "metrics_r1.csv", "size": 26}]
+            data, offset = b"", 0
+            for _ in range(20):
+                chunk = c.robot(peer.address, {"fetch": {"name": "metrics_r1.csv",
+                                                         "offset": offset, "max": 10}})
+                part = base64.b64decode(chunk["data"])
+                data += part
+                offset += len(part)
+                if chunk["eof"]:
+                    break
+            assert data == b"robot,iteration\nr1,1\nr1,2\n"
+            with pytest.raises(ExperimentError, match="robot_request"):
+                c.robot(peer.address, {"reboot": True})
+            with pytest.raises(ExperimentError, match="robot_request"):
+                c.robot(peer.address, {"fetch": {"name": "nope", "offset": 0, "max": 1}})
+        with ConsoleNode(tokens=12345) as wrong:        # a token the peer does not know
+            with pytest.raises(ExperimentError):
+                wrong.robot(peer.address, "status")
+    finally:
+        peer.stop()
+
+
+def test_robot_op_to_a_dead_address_fails_without_blocking_the_console(
+        console: ConsoleNode) -> None:
+    with socket.socket() as s:                       # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        dead = ("127.0.0.1", s.getsockname()[1])
+    with pytest.raises(ExperimentError, match="robot failed"):
+        console.robot(dead, "status", timeout_s=5)
+    assert console.agents_at(console.address) == []
