@@ -10,10 +10,11 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from dfrl.experiments.cli import bench, federated, node, robots, transfer
+from dfrl import __version__
+from dfrl.experiments.cli import bench, federated, node, robot, robots, studies, transfer
 
 #: Modules that add subcommands, in the order they appear in ``dfrl --help``.
-COMMAND_MODULES = (node, federated, bench, robots, transfer)
+COMMAND_MODULES = (node, federated, bench, robots, transfer, studies, robot)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -22,6 +23,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="dfrl",
         description="Decentralized federated RL test bed driven by mobile agents.",
     )
+    parser.add_argument("--version", action="version", version=f"dfrl {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     for module in COMMAND_MODULES:
         module.register(subparsers)

@@ -1,0 +1,87 @@
+"""``dfrl sweep``: hyper-parameter sweeps with several seeds (:mod:`dfrl.experiments.studies`)."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+
+def parse_factor(text: str) -> tuple[str, list[Any]]:
+    """``PATH=V1;V2;...`` with JSON values (a bare word is a string)."""
+    path, sep, values = text.partition("=")
+    if not sep or not path or not values:
+        raise argparse.ArgumentTypeError(f"expected PATH=V1;V2;..., got {text!r}")
+    out: list[Any] = []
+    for v in values.split(";"):
+        try:
+            out.append(json.loads(v))
+        except json.JSONDecodeError:
+            out.append(v)
+    return path, out
+
+
+DEFAULT_FACTORS = [
+    "learner.alpha=0.05;0.1;0.4",
+    "learner.gamma=0.8;0.9;0.99",
+    'learner.epsilon={"kind":"linear","start":1.0,"end":0.05,"decay_steps":10000};'
+    '{"kind":"constant","start":0.1,"end":0.1,"decay_steps":1}',
+    "reward.alive_bonus=0.0",
+    "discretisation.grouping=five",
+]
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "sweep", help="hyper-parameter sweep: several seeds per setting, scored by greedy "
+                      "progress and collisions in own and held-out arenas",
+        description="Train standalone robots under several settings (one factor at a time "
+                    "around the defaults, or a grid), several seeds each, and report the "
+                    "greedy policy's performance with 95%% intervals (markdown table).")
+    p.add_argument("--set", dest="factors", action="append", type=parse_factor, default=None,
+                   metavar="PATH=V1;V2", help="a factor: a dotted path into the training "
+                   "config and its levels, JSON values separated by ';' (repeatable; default: "
+                   "learning rate, discount, exploration, reward alive bonus, state grouping)")
+    p.add_argument("--mode", choices=("ofat", "grid"), default="ofat",
+                   help="one factor at a time around the base, or every combination "
+                        "(default: %(default)s)")
+    p.add_argument("--arena", default="r4", help="training arena (default: %(default)s)")
+    p.add_argument("--algo", default="qlearning", help="learner (default: %(default)s)")
+    p.add_argument("--iterations", type=int, default=20000,
+                   help="training iterations per run (default: %(default)s)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3],
+                   help="training seeds (default: %(default)s)")
+    p.add_argument("--eval-steps", type=int, default=2000,
+                   help="evaluation steps per snapshot and arena (default: %(default)s)")
+    p.add_argument("--held-out", nargs="*", default=["h1", "h2"],
+                   help="held-out evaluation arenas (default: %(default)s)")
+    p.add_argument("--jobs", type=int, default=2, help="processes (default: %(default)s)")
+    p.add_argument("--out", type=Path, default=None,
+                   help="also write sweep.md and sweep.json into this folder")
+    p.add_argument("--json", action="store_true", help="print JSON instead of the table")
+    p.set_defaults(func=cmd_sweep)
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from dfrl.experiments.studies.sweep import markdown_table, sweep
+    from dfrl.robots.training import TrainerConfig
+
+    factors = dict(args.factors or [parse_factor(f) for f in DEFAULT_FACTORS])
+    try:
+        base = TrainerConfig(arena=args.arena, algo=args.algo,
+                             iterations=args.iterations).to_dict()
+        results = sweep(base, factors, args.seeds, args.mode, tuple(args.held_out),
+                        args.eval_steps, jobs=args.jobs)
+    except (KeyError, ValueError, TypeError) as exc:
+        print(f"dfrl sweep: {exc}", file=sys.stderr)
+        return 2
+    data = [{"setting": r.setting.name, "changes": [list(c) for c in r.setting.changes],
+             "runs": r.runs} for r in results]
+    table = markdown_table(results)
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "sweep.json").write_text(json.dumps(data, indent=1), encoding="utf-8")
+        (args.out / "sweep.md").write_text(table + "\n", encoding="utf-8")
+    print(json.dumps(data, indent=1) if args.json else table)
+    return 0
