@@ -12,6 +12,7 @@
             node_option/3,              % +Node, +Name, -Value
             node_accepts/2,             % +Node, +Proofs/Nonce
             node_listens_at/2,          % +Node, +Address
+            node_is_self/2,             % +Node, +Address
             node_clear_current/0,
             ctx_node/2,                 % +Ctx, -Node
             ctx_peer/2,                 % +Ctx, -Peer
@@ -21,7 +22,8 @@
           ]).
 :- use_module(wire, [frame_write/3, frame_read/3, wire_version/1]).
 :- use_module(transport,
-              [address_normalize/2, token_proof/3, open_key/1, transport_drop_pool/0]).
+              [ address_normalize/2, token_proof/3, open_key/1,
+                transport_drop_pool/0, transport_identify/3 ]).
 :- use_module(worker_pool, [pool_run/3, pool_signal/3, pool_drain/0]).
 :- autoload(library(socket),
             [ tcp_socket/1, tcp_setopt/2, tcp_bind/2, tcp_listen/2,
@@ -30,7 +32,10 @@
 :- autoload(library(error), [must_be/2, existence_error/2]).
 :- autoload(library(option), [option/2, option/3, select_option/4]).
 :- autoload(library(debug), [debug/3]).
-:- autoload(library(lists), [member/2]).
+:- autoload(library(lists), [member/2, max_list/2]).
+:- autoload(library(crypto), [crypto_n_random_bytes/2]).
+:- autoload(library(readutil), [read_file_to_string/3]).
+:- autoload(library(filesex), [make_directory_path/1, directory_file_path/3]).
 
 :- meta_predicate with_node(+, 0).
 
@@ -43,7 +48,10 @@ closed. A worker greets the peer with hello(Version, Nonce, Info), then
 reads frames with a size limit and an idle timeout, and answers each
 request with ok(Result) or error(Error). A malformed frame gets an error
 reply and the connection is closed; nothing a peer sends can stop the
-node or block other connections. Requests are served by clauses of the
+node or block other connections. A connection on which the peer proved
+a token may stay silent longer (auth_idle_timeout, default 60 s) than one
+that did not (idle_timeout, 10 s): clients keep pooled connections alive
+with pings. Requests are served by clauses of the
 multifile hook node:platform_request/4, which the other platform modules
 define. A clause receives the connection context Ctx, an opaque term
 read with ctx_node/2, ctx_peer/2, ctx_input/2 and ctx_authenticated/1:
@@ -56,10 +64,17 @@ node:platform_request(ping_twice, Ctx, ok(pong(Node, Node)), true) :-
 Several nodes may run in one process. Each thread has a current node: the
 node an agent or worker thread belongs to, otherwise the process's
 default node (the first started, or the one set with node_set_default/1).
+
+Every node has an id, 32 hex digits, random or kept in `Dir/node_id` when
+the node has store(Dir), so that a restarted node keeps it. The hello
+carries it, and "is this address me?" (node_is_self/2) compares ids. A
+node binds one address and advertises another (advertise(Host:Port);
+by default the bind address, or the host name when it binds 0.0.0.0).
 */
 
 :- dynamic
     node_info/3,                % Node, Host:Port, ServerSocket
+    node_ident/4,               % Node, Id, Advertised, StartedAt
     node_acceptor/2,            % Node, ThreadId
     node_tokens/2,              % Node, Tokens
     node_opt/2,                 % Node, Option
@@ -72,6 +87,7 @@ default node (the first started, or the one set with node_set_default/1).
 
 :- multifile
     platform_request/4,         % +Request, +Ctx, -Reply, -After
+    node_started/1,             % +Node
     node_stopping/1.            % +Node
 
 :- predicate_options(node_start/3, 3,
@@ -79,6 +95,11 @@ default node (the first started, or the one set with node_set_default/1).
                        tokens(list),
                        max_connections(positive_integer),
                        idle_timeout(number),
+                       auth_idle_timeout(number),
+                       advertise(any),
+                       store(any),
+                       settle_period(number),
+                       lease_s(number),
                        max_frame_size(positive_integer),
                        max_text_frame_size(positive_integer),
                        reply_timeout(number),
@@ -90,15 +111,28 @@ default node (the first started, or the one set with node_set_default/1).
 %!  node_start(+Address, -Node, +Options) is det.
 %
 %   Start a platform node listening on Address (Host:Port, (Host,Port) or
-%   a port; port 0 lets the OS choose). Node is the atom 'Host:Port' with
-%   the port actually bound. Options:
+%   a port; port 0 lets the OS choose; host 0.0.0.0 binds every
+%   interface). Node is the atom 'Host:Port' with the bind host and the
+%   port actually bound. Options:
 %
 %     - token(+Token) / tokens(+List)
 %       Tokens an arriving agent or privileged request must prove.
 %       Without tokens the node is open: it accepts any agent.
 %     - max_connections(+N)       concurrent connections (default 64)
+%     - advertise(+Host:Port)     the address peers are told and reach
+%                                 this node at (also advertise(Host): the
+%                                 bound port). Default: the bind address,
+%                                 with 0.0.0.0 replaced by the host name
 %     - idle_timeout(+Sec)        idle time before a connection is
 %                                 closed (default 10)
+%     - auth_idle_timeout(+Sec)   the same once the peer proved a token
+%                                 (default 60; pooled connections are
+%                                 pinged well within it)
+%     - store(+Dir)               keep state on disk in Dir (the node id
+%                                 here; custody state by the hook
+%                                 node_started/1). Default: memory only
+%     - settle_period(+Sec), lease_s(+Sec) for the custody protocol
+%                                 (defaults 2 and 10)
 %     - max_frame_size(+Bytes)    largest frame from a peer that proved a
 %                                 token (default 256 MiB)
 %     - max_text_frame_size(+Bytes) largest frame before that (1 MiB)
@@ -109,6 +143,18 @@ default node (the first started, or the one set with node_set_default/1).
 %     - default(+Bool)            make it the process's default node
 %                                 (default: if there is none yet)
 %
+%   Once the node listens, and before it accepts a connection, every
+%   clause of the multifile hook node:node_started(+Node) is called with
+%   Node as the current node (connections wait in the backlog until they
+%   return; a hook that must talk to peers starts a thread). A hook that
+%   raises an error stops the node and node_start/3 raises it:
+%
+%   ```
+%   node:node_started(Node) :-
+%       node_option(Node, store, Dir), Dir \== none,
+%       my_recover(Node, Dir).
+%   ```
+%
 %   @error domain_error(port, Port) for a port outside 0..65535.
 %   @error socket_error(...) if the address cannot be bound.
 
@@ -116,6 +162,11 @@ node_start(Address0, Node, Options) :-
     address_normalize(Address0, Host:Port),
     must_be(list, Options),
     tokens_option(Options, Tokens),
+    check_options(Options),
+    (   option(store(Dir), Options)
+    ->  stored_node_id(Dir, Id)
+    ;   new_node_id(Id)
+    ),
     tcp_socket(Socket),
     catch(( tcp_setopt(Socket, reuseaddr),
             bind_port(Socket, Host, Port, Bound),
@@ -124,7 +175,10 @@ node_start(Address0, Node, Options) :-
           E,
           ( tcp_close_socket(Socket), throw(E) )),
     format(atom(Node), '~w:~w', [Host, Bound]),
+    advertised(Options, Host, Bound, Advertised),
+    get_time(Now),
     assertz(node_info(Node, Host:Bound, Socket)),
+    assertz(node_ident(Node, Id, Advertised, Now)),
     assertz(node_tokens(Node, Tokens)),
     forall(member(O, Options), assertz(node_opt(Node, O))),
     (   option(default(true), Options)
@@ -135,10 +189,80 @@ node_start(Address0, Node, Options) :-
     ->  true
     ;   node_set_default(Node)
     ),
+    catch(with_node(Node, forall(node_started(Node), true)), E2,
+          ( catch(node_stop(Node), _, true), throw(E2) )),
     atom_concat('dfrl_acceptor@', Node, Alias),
     thread_create(accept_loop(Node, Socket), Tid, [alias(Alias)]),
     assertz(node_acceptor(Node, Tid)),
-    debug(dfrl(node), 'Node ~w started', [Node]).
+    debug(dfrl(node), 'Node ~w started (id ~w, advertised as ~w)',
+          [Node, Id, Advertised]).
+
+check_options(Options) :-
+    (   option(advertise(A), Options)
+    ->  (   atomic(A)
+        ->  true
+        ;   address_normalize(A, _)
+        )
+    ;   true
+    ),
+    (   option(store(Dir), Options)
+    ->  must_be(text, Dir)
+    ;   true
+    ),
+    forall(( member(Name, [idle_timeout, auth_idle_timeout, commit_timeout,
+                           settle_period, lease_s, reply_timeout,
+                           connect_timeout]),
+             Opt =.. [Name, V],
+             option(Opt, Options) ),
+           must_be(number, V)).
+
+advertised(Options, Host, Bound, Advertised) :-
+    (   option(advertise(A), Options)
+    ->  (   atomic(A)
+        ->  Advertised = A:Bound
+        ;   address_normalize(A, AH:AP),
+            (   AP =:= 0 -> Advertised = AH:Bound ; Advertised = AH:AP )
+        )
+    ;   wildcard_host(Host)
+    ->  gethostname(Name),
+        Advertised = Name:Bound
+    ;   Advertised = Host:Bound
+    ).
+
+wildcard_host(H) :-
+    atomic(H),
+    atom_string(A, H),
+    memberchk(A, ['0.0.0.0', '::', '']).
+
+%   The node id: 32 hex digits from the crypto random generator, or the
+%   one kept in Dir/node_id (written once: temporary file, then rename).
+new_node_id(Id) :-
+    crypto_n_random_bytes(16, Bytes),
+    bytes_hex(Bytes, Id).
+
+bytes_hex(Bytes, Hex) :-
+    maplist([B, H]>>format(atom(H), '~|~`0t~16r~2+', [B]), Bytes, Hs),
+    atomic_list_concat(Hs, Hex).
+
+stored_node_id(Dir, Id) :-
+    make_directory_path(Dir),
+    directory_file_path(Dir, node_id, File),
+    (   exists_file(File)
+    ->  read_file_to_string(File, Text0, []),
+        split_string(Text0, "", " \t\r\n", [Text]),
+        (   string_length(Text, 32),
+            string_codes(Text, Cs),
+            forall(member(C, Cs), code_type(C, xdigit(_)))
+        ->  atom_string(Id, Text)
+        ;   throw(error(domain_error(node_id, Text), context(_, File)))
+        )
+    ;   new_node_id(Id),
+        atom_concat(File, '.tmp', Tmp),
+        setup_call_cleanup(open(Tmp, write, Out),
+                           format(Out, "~w~n", [Id]),
+                           close(Out)),
+        rename_file(Tmp, File)
+    ).
 
 bind_port(Socket, Host, 0, Bound) :-
     !,
@@ -174,13 +298,17 @@ node_stop(Node) :-
     forall(node_stopping(Node), true),
     forall(connection(Node, T),
            pool_signal(connections, T, node:stop_if_serving(Node))),
-    wake_acceptor(Address),
+    (   node_acceptor(Node, _)
+    ->  wake_acceptor(Address)
+    ;   true
+    ),
     (   retract(node_acceptor(Node, Tid))
     ->  catch(thread_join(Tid, _), _, true)
     ;   true
     ),
     catch(tcp_close_socket(Socket), _, true),
     retractall(node_info(Node, _, _)),
+    retractall(node_ident(Node, _, _, _)),
     retractall(node_tokens(Node, _)),
     retractall(node_opt(Node, _)),
     retractall(stopping(Node)),
@@ -195,7 +323,8 @@ node_stop(Node) :-
     retractall(current_node_tl(Node)),
     debug(dfrl(node), 'Node ~w stopped', [Node]).
 
-wake_acceptor(Host:Port) :-
+wake_acceptor(Host0:Port) :-
+    (   wildcard_host(Host0) -> Host = '127.0.0.1' ; Host = Host0 ),
     catch(setup_call_cleanup(
               tcp_connect(Host:Port, Pair, [bypass_proxy(true)]),
               true,
@@ -204,15 +333,21 @@ wake_acceptor(Host:Port) :-
 
 %!  node_property(?Node, ?Property) is nondet.
 %
-%   Properties: address(Host:Port), link((Host,Port)), tokens(List),
-%   default (if it is the process's default node), option(Option).
+%   Properties: id(Id) (32 hex digits), address(Host:Port) (the
+%   advertised address), link((Host,Port)) (the same as a Tartarus link),
+%   bind(Host:Port) (the bound address), tokens(List), default (if it is
+%   the process's default node), option(Option).
 
 node_property(Node, Property) :-
-    node_info(Node, Address, _),
+    node_ident(Node, _, Address, _),
     node_property_(Property, Node, Address).
 
+node_property_(id(Id), Node, _) :-
+    node_ident(Node, Id, _, _).
 node_property_(address(Address), _, Address).
 node_property_(link((H,P)), _, H:P).
+node_property_(bind(Bound), Node, _) :-
+    node_info(Node, Bound, _).
 node_property_(tokens(Tokens), Node, _) :-
     node_tokens(Node, Tokens).
 node_property_(default, Node, _) :-
@@ -233,6 +368,10 @@ node_option(Node, Name, Value) :-
 
 option_default(max_connections, 64).
 option_default(idle_timeout, 10).
+option_default(auth_idle_timeout, 60).
+option_default(store, none).
+option_default(settle_period, 2).
+option_default(lease_s, 10).
 option_default(max_frame_size, 268435456).
 option_default(max_text_frame_size, 1048576).
 option_default(reply_timeout, 30).
@@ -248,29 +387,89 @@ local_node(Node) :-
 
 %!  node_for_address(+Address, -Node) is semidet.
 %
-%   Node is the platform of this process listening on Address.
+%   Node is the platform of this process that answers at Address, by
+%   identity (see node_is_self/2). With Node unbound, at most one
+%   connection is made to learn the id at Address.
 
 node_for_address(Address, Node) :-
-    node_info(Node, _, _),
-    node_listens_at(Node, Address),
-    !.
+    nonvar(Node),
+    !,
+    node_is_self(Node, Address).
+node_for_address(Address0, Node) :-
+    address_normalize(Address0, Address),
+    (   node_info(N, _, _),
+        literal_self(N, Address)
+    ->  Node = N
+    ;   findall(T, node_ident(_, _, _, T), Starts),
+        Starts \== [],
+        max_list(Starts, Since),
+        identify(Address, Since, Id),
+        node_ident(N, Id, _, _)
+    ->  Node = N
+    ).
 
 %!  node_listens_at(+Node, +Address) is semidet.
 %
+%   The same as node_is_self/2 (the name its callers know).
+
+node_listens_at(Node, Address) :-
+    node_is_self(Node, Address).
+
+%!  node_is_self(+Node, +Address) is semidet.
+%
 %   True if Address (Host:Port, (Host,Port) or a port) reaches the
-%   platform Node of this process: the same port, and the same host
-%   name or two names of the loopback interface (`localhost`,
-%   `127.0.0.1`). This is the one test of "is this address that node";
-%   it compares address text, so it does not know that another name of
-%   this host also reaches it.
+%   platform Node of this process. Decided by identity: the id in the
+%   hello of the platform that answers at Address (from a pooled
+%   connection, a hello seen there since Node started, or a new
+%   connection, which stays pooled for the request that usually follows)
+%   is Node's. Without a connection when Address is literally one Node
+%   binds or advertises: the advertised address, or the bound port with
+%   the bound host, another name of the loopback interface (`localhost`,
+%   `127.0.0.1`), or, for a node bound to 0.0.0.0, a loopback name or the
+%   host name. An address that cannot be reached is not Node.
 
-node_listens_at(Node, Address0) :-
-    address_normalize(Address0, Host:Port),
-    node_info(Node, H:P, _),
-    P =:= Port,
-    same_host(Host, H).
+node_is_self(Node, Address0) :-
+    address_normalize(Address0, Address),
+    node_ident(Node, Id, _, Started),
+    (   literal_self(Node, Address)
+    ->  true
+    ;   identify(Address, Started, Id)
+    ).
 
-same_host(H, H) :- !.
+identify(Address, Since, Id) :-
+    (   catch(current_node(Here), _, fail)
+    ->  node_option(Here, connect_timeout, CT)
+    ;   CT = 5
+    ),
+    catch(transport_identify(Address, Id0,
+                             [since(Since), connect_timeout(CT),
+                              reply_timeout(CT)]),
+          E, ( debug(dfrl(node), 'identify ~w: ~p', [Address, E]), fail )),
+    Id = Id0.
+
+literal_self(Node, Host:Port) :-
+    (   node_ident(Node, _, AH:AP, _),
+        AP =:= Port,
+        same_host(Host, AH)
+    ->  true
+    ;   node_info(Node, BH:BP, _),
+        BP =:= Port,
+        (   same_host(Host, BH)
+        ->  true
+        ;   wildcard_host(BH),
+            (   loopback(Host)
+            ->  true
+            ;   gethostname(Name),
+                same_host(Host, Name)
+            )
+        )
+    ).
+
+same_host(A, B) :-
+    atomic(A), atomic(B),
+    atom_string(A, S),
+    atom_string(B, S),
+    !.
 same_host(A, B) :-
     loopback(A),
     loopback(B).
@@ -468,29 +667,32 @@ serve_pair(Node, Pair, Peer) :-
     node_option(Node, idle_timeout, Idle),
     set_stream(In, timeout(Idle)),
     random_nonce(Nonce),
-    node_info(Node, Host:Port, _),
+    node_ident(Node, Id, Host:Port, _),
+    node_option(Node, auth_idle_timeout, AuthIdle),
     wire_version(V),
-    frame_write(Out, text, hello(V, Nonce, node(Host, Port))),
+    frame_write(Out, text,
+                hello(V, Nonce, node(Host, Port, [id(Id), idle(Idle),
+                                                  auth_idle(AuthIdle)]))),
     Ctx = ctx(Node, Peer, Nonce, In, Out, _Authenticated),
     serve_frames(Ctx).
 
 random_nonce(Nonce) :-
-    length(Bytes, 16),
-    maplist([B]>>random_between(0, 255, B), Bytes),
-    format(atom(Nonce), '~|~`0t~16r~2+~|~`0t~16r~2+~|~`0t~16r~2+~|~`0t~16r~2+\c
-                         ~|~`0t~16r~2+~|~`0t~16r~2+~|~`0t~16r~2+~|~`0t~16r~2+\c
-                         ~|~`0t~16r~2+~|~`0t~16r~2+~|~`0t~16r~2+~|~`0t~16r~2+\c
-                         ~|~`0t~16r~2+~|~`0t~16r~2+~|~`0t~16r~2+~|~`0t~16r~2+',
-           Bytes).
+    new_node_id(Nonce).
 
+%   The idle limit is set before every frame: a request's After goal may
+%   have changed the stream's timeout (a staged migration waits for its
+%   commit with the commit timeout).
 serve_frames(Ctx) :-
     Ctx = ctx(Node, _, _, In, Out, Auth),
     (   Auth == true
     ->  node_option(Node, max_frame_size, Max),
+        node_option(Node, auth_idle_timeout, Idle),
         Binary = true
     ;   node_option(Node, max_text_frame_size, Max),
+        node_option(Node, idle_timeout, Idle),
         Binary = false
     ),
+    set_stream(In, timeout(Idle)),
     catch(frame_read(In, Frame, [max_size(Max), binary(Binary)]),
           error(wire_error(Reason), _),
           ( reply(Out, error(error(wire_error(Reason), _))),
@@ -517,7 +719,7 @@ serve_term(auth(Proofs), Ctx, true) :-
         ->  nb_setarg(6, Ctx, false)
         ;   true
         ),
-        node_info(Node, Here, _),
+        node_ident(Node, _, Here, _),
         reply(Out, error(error(permission_error(authenticate, platform, Here), _)))
     ).
 serve_term(Request, Ctx, Continue) :-

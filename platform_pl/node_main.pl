@@ -1,12 +1,16 @@
 /*  Run one platform node as a program:
 
         swipl platform_pl/node_main.pl [--host H] [--port P] [--token T]...
+                                       [--advertise HOST[:PORT]] [--store DIR]
                                        [--consult FILE]... [--interactive]
 
-    Prints "dfrl node listening on H:P" once it listens, then serves until
-    killed (or, with --interactive, until the toplevel ends). Numeric tokens
-    are read as integers, as Tartarus tokens are. A malformed command line
-    is reported on stderr and exits with status 2.
+    Binds H:P (H may be 0.0.0.0: every interface), prints "dfrl node
+    listening on A:P" with the address it advertises (--advertise, default
+    H, or the host name for 0.0.0.0) once it listens, then serves until
+    killed (or, with --interactive, until the toplevel ends). --store DIR
+    keeps the node's id (and custody state) in DIR. Numeric tokens are read
+    as integers, as Tartarus tokens are. A malformed command line is
+    reported on stderr and exits with status 2.
 
     The arguments are parsed here, not with library(optparse): --token and
     --consult may be repeated, and optparse keeps only the last occurrence
@@ -23,10 +27,15 @@ main(Argv) :-
     option_value(port, Options, 0, Port),
     findall(T, member(token(T), Options), Tokens),
     findall(F, member(consult(F), Options), Files),
+    findall(O, ( member(O0, [advertise(_), store(_)]),
+                 last_option(Options, O0),
+                 O = O0 ),
+            Extra),
     (   Tokens == []
-    ->  node_start(Host:Port, Node, [default(true)])
-    ;   node_start(Host:Port, Node, [tokens(Tokens), default(true)])
+    ->  NodeOptions = [default(true)|Extra]
+    ;   NodeOptions = [tokens(Tokens), default(true)|Extra]
     ),
+    node_start(Host:Port, Node, NodeOptions),
     forall(member(F, Files), load_program(F)),
     node_property(Node, address(H:P)),
     format("dfrl node listening on ~w:~w~n", [H, P]),
@@ -40,6 +49,7 @@ usage(Why) :-
     format(user_error, "~w~n", [Why]),
     format(user_error,
            "usage: swipl node_main.pl [--host H] [--port P] [--token T]... \c
+            [--advertise HOST[:PORT]] [--store DIR] \c
             [--consult FILE]... [--interactive]~n", []),
     halt(2).
 
@@ -63,12 +73,29 @@ flag_arg('--host', host, atom).
 flag_arg('--port', port, integer).
 flag_arg('--token', token, token).
 flag_arg('--consult', consult, atom).
+flag_arg('--advertise', advertise, address).
+flag_arg('--store', store, atom).
 
 typed_value(atom, _, V, V).
 typed_value(integer, Flag, V0, V) :-
     (   atom_number(V0, V), integer(V)
     ->  true
     ;   usage_error("~w needs an integer, not ~w", [Flag, V0])
+    ).
+typed_value(address, Flag, V0, V) :-
+    (   sub_atom(V0, B, 1, A, ':'),
+        sub_atom(V0, _, A, 0, PortText),
+        \+ sub_atom(PortText, _, _, _, ':')
+    ->  sub_atom(V0, 0, B, _, Host),
+        (   atom_number(PortText, Port), integer(Port), between(1, 65535, Port)
+        ->  V = Host:Port
+        ;   usage_error("~w needs HOST or HOST:PORT, not ~w", [Flag, V0])
+        )
+    ;   V = V0
+    ),
+    (   V == '' ; V = '':_
+    ->  usage_error("~w needs a host name", [Flag])
+    ;   true
     ).
 typed_value(token, _, V0, V) :-
     (   atom_number(V0, V) -> true ; V = V0 ).

@@ -11,6 +11,9 @@
             transport_release/1,        % +Conn
             transport_discard/1,        % +Conn
             transport_drop_pool/0,
+            transport_peer_id/2,        % +Conn, -Id
+            transport_identify/3,       % +Address, -Id, +Options
+            transport_pool_statistics/1, % -Stats
             token_proof/3,              % +Token, +Nonce, -Proof
             open_key/1                  % -Token
           ]).
@@ -22,6 +25,8 @@
 :- autoload(library(option), [option/2, option/3]).
 :- autoload(library(sha), [hmac_sha/4]).
 :- autoload(library(time), [call_with_time_limit/2]).
+:- autoload(library(lists), [member/2, min_list/2]).
+:- autoload(library(aggregate), [aggregate_all/3]).
 
 /** <module> Client side of the platform protocol
 
@@ -31,8 +36,16 @@ then sends auth(Proofs): one HMAC-SHA256 of the nonce per token it
 holds; tokens themselves never cross the wire. Requests and replies are
 frames (see wire.pl); a reply is ok(Result) or error(Error).
 
+The hello's Info is node(Host, Port, Props): the address the server
+advertises and a list with its node id, id(Id), and how long it lets a
+connection be silent, idle(Sec) before a token proof and auth_idle(Sec)
+after one. "Is this address that node?" is decided by comparing ids
+(transport_identify/3), never address text.
+
 Connections have a connect timeout and a reply timeout, and TCP_NODELAY
-is set. Nothing a peer replies is ever called.
+is set. Requests and migrations reuse pooled connections, which a
+janitor thread keeps alive with pings (see transport_acquire/4). Nothing
+a peer replies is ever called.
 */
 
 :- predicate_options(transport_open/3, 3,
@@ -102,7 +115,8 @@ transport_open(Address0, Conn, Options) :-
     catch(setup_stream(Pair, RT),
           E, (close(Pair, [force(true)]), throw(E))),
     catch(receive_hello(Conn, Nonce, Info),
-          E2, (close(Pair, [force(true)]), throw(E2))).
+          E2, (close(Pair, [force(true)]), throw(E2))),
+    remember_peer(Conn).
 
 connect(Address, Timeout, Pair) :-
     catch(call_with_time_limit(Timeout,
@@ -143,43 +157,213 @@ receive_hello(Conn, Nonce, Info) :-
     ).
 
 		 /*******************************
+		 *            IDENTITY		*
+		 *******************************/
+
+:- dynamic
+    peer_seen/3,                % Address, Id, Time: the id in its last hello
+    peer_unreachable/2.         % Address, Time: the last failed identify
+
+%!  transport_peer_id(+Conn, -Id) is semidet.
+%
+%   Id is the node id the peer announced in its hello on Conn (an atom
+%   of 32 hex digits). Fails for a peer that announced none.
+
+transport_peer_id(conn(_, _, _, Info, _), Id) :-
+    hello_prop(Info, id(Id)).
+
+hello_prop(node(_, _, Props), Prop) :-
+    is_list(Props),
+    memberchk(Prop, Props).
+
+remember_peer(Conn) :-
+    Conn = conn(Address, _, _, _, _),
+    (   transport_peer_id(Conn, Id)
+    ->  get_time(Now),
+        Old is Now - 60,
+        with_mutex(dfrl_transport_pool,
+                   ( retractall(peer_seen(Address, _, _)),
+                     retractall(peer_unreachable(Address, _)),
+                     forall(( peer_seen(A, I, T), T < Old ),
+                            retract(peer_seen(A, I, T))),
+                     assertz(peer_seen(Address, Id, Now))
+                   ))
+    ;   true
+    ).
+
+%!  transport_identify(+Address, -Id, +Options) is det.
+%
+%   Id is the node id of the platform that answers at Address: from a
+%   healthy pooled connection to Address, else from a hello seen there in
+%   the last 60 seconds (and not before since(Time)), else from the hello
+%   of a new connection, which is then pooled (unauthenticated) for the
+%   request that usually follows. A failed attempt is remembered for 2
+%   seconds, so that "is it me?" followed by a request to an unreachable
+%   address waits for one connect timeout, not two. Options: those of
+%   transport_open/3 and since(+Time).
+%
+%   @error transport_error(Address, Reason) if Address cannot be reached
+%   or announces no id.
+
+transport_identify(Address0, Id, Options) :-
+    address_normalize(Address0, Address),
+    option(since(Since), Options, 0),
+    get_time(Now),
+    (   with_mutex(dfrl_transport_pool, known_id(Address, Since, Now, Id0))
+    ->  Id = Id0
+    ;   with_mutex(dfrl_transport_pool,
+                   ( peer_unreachable(Address, T), T >= Now - 2 ))
+    ->  transport_error(Address, connect(recently_unreachable))
+    ;   catch(transport_open(Address, Conn, Options), E,
+              ( with_mutex(dfrl_transport_pool,
+                           ( retractall(peer_unreachable(Address, _)),
+                             assertz(peer_unreachable(Address, Now)) )),
+                throw(E) )),
+        (   transport_peer_id(Conn, Id0)
+        ->  Id = Id0,
+            release(Conn, none)
+        ;   transport_close(Conn),
+            transport_error(Address, protocol(no_node_id))
+        )
+    ).
+
+known_id(Address, _, _, Id) :-
+    pooled(Address, _, Conn, _, _),
+    healthy(Conn),
+    transport_peer_id(Conn, Id),
+    !.
+known_id(Address, Since, Now, Id) :-
+    peer_seen(Address, Id, T),
+    T >= Since,
+    T >= Now - 60,
+    !.
+
+		 /*******************************
 		 *       CONNECTION REUSE		*
 		 *******************************/
 
-:- dynamic pooled/4.            % Address, Tokens, Conn, LastUsed
+/*  The pool keeps idle connections, each under the key of what was proved
+    on it: `none` (nothing: a connection opened to learn a peer's id) or
+    the sorted list of tokens. An entry is pooled(Address, Key, Conn, Used,
+    Checked): Used is when a request last completed on it, Checked when
+    traffic last crossed it (a request or a keepalive ping).
+
+    The server closes a connection that stays silent for its idle timeout
+    (idle(S) in its hello, before a token proof; auth_idle(S) after). A
+    janitor thread, running while the pool is not empty, closes pooled
+    connections the peer has closed, closes unauthenticated ones before
+    the server would, and pings authenticated ones that have been silent
+    for the keepalive interval, so that they survive rests of any length.
+    At most `dfrl_pool_max` connections are kept; releasing one more
+    closes the least recently used.
+*/
+
+:- create_prolog_flag(dfrl_keepalive, 20, [type(float), keep(true)]).
+:- create_prolog_flag(dfrl_pool_max, 32, [type(integer), keep(true)]).
+
+:- dynamic
+    pooled/5,                   % Address, Key, Conn, Used, Checked
+    pinging/4,                  % Address, Key, Conn, Until: out for a ping
+    conn_key/2,                 % Pair, Key
+    janitor_running/0.
 
 %!  transport_acquire(+Address, +Tokens, -Conn, +Options) is det.
 %
 %   A connection to Address on which Tokens have been proved (option
-%   action(Action) names the permission error if they are refused): a pooled
-%   one if a healthy one is idle, else a new one. Give it back with
-%   transport_release/1 after a complete request/reply exchange, or
-%   transport_discard/1 after any error. Pooled connections idle for
-%   more than 5 seconds are closed (servers close idle ones after 10).
+%   action(Action) names the permission error if they are refused): a
+%   healthy pooled one if there is one (an unauthenticated pooled one is
+%   authenticated first), else a new one. A pooled connection found
+%   broken, or older than its server's idle limit, is closed and replaced
+%   transparently. Give it back with transport_release/1 after a complete
+%   request/reply exchange, or transport_discard/1 after any error.
+%
+%   @error permission_error(Action, platform, Address) if the platform
+%   accepts none of the tokens.
+%   @error transport_error(Address, Reason)
 
 transport_acquire(Address0, Tokens, Conn, Options) :-
-    address_normalize(Address0, Address),
+    must_be(list, Tokens),
     msort(Tokens, Key),
-    get_time(Now),
-    Fresh is Now - 5,
-    (   with_mutex(dfrl_transport_pool,
-                   take_pooled(Address, Key, Fresh, Conn0))
-    ->  Conn = Conn0
+    acquire(Address0, Key, Conn, Options).
+
+acquire(Address0, Key, Conn, Options) :-
+    address_normalize(Address0, Address),
+    (   take_pooled_wait(Address, Key, Conn1, Had)
+    ->  reply_timeout(Conn1, Options, Conn0),
+        (   Had == Key
+        ->  Conn = Conn0
+        ;   Key == none
+        ->  Conn = Conn0
+        ;   authenticate(Conn0, Key, Options),
+            Conn = Conn0
+        )
     ;   transport_open(Address, Conn, Options),
-        option(action(Action), Options, access),
-        catch(transport_auth(Conn, Key, Action), E,
-              ( transport_close(Conn), throw(E) )),
-        remember_key(Conn, Key)
+        (   Key == none
+        ->  remember_key(Conn, none)
+        ;   authenticate(Conn, Key, Options)
+        )
     ).
 
-take_pooled(Address, Key, Fresh, Conn) :-
-    retract(pooled(Address, Key, C, Used)),
-    (   Used >= Fresh,
-        healthy(C)
-    ->  Conn = C
-    ;   transport_close(C),
-        take_pooled(Address, Key, Fresh, Conn)
+%   A pooled connection serves this request with the reply timeout it
+%   asks for.
+reply_timeout(Conn0, Options, Conn) :-
+    Conn0 = conn(Address, Pair, Nonce, Info, RT0),
+    (   option(reply_timeout(RT), Options), RT =\= RT0
+    ->  stream_pair(Pair, In, _),
+        set_stream(In, timeout(RT)),
+        Conn = conn(Address, Pair, Nonce, Info, RT)
+    ;   Conn = Conn0
     ).
+
+authenticate(Conn, Key, Options) :-
+    option(action(Action), Options, access),
+    catch(transport_auth(Conn, Key, Action), E,
+          ( transport_close(Conn), throw(E) )),
+    remember_key(Conn, Key).
+
+%   A connection out for a keepalive ping is back within one round trip
+%   (at most 5 s): wait for it rather than open a new one.
+take_pooled_wait(Address, Key, Conn, Had) :-
+    get_time(Now),
+    with_mutex(dfrl_transport_pool,
+               (   take_pooled(Address, Key, Now, Conn0, Had0)
+               ->  Result = taken(Conn0, Had0)
+               ;   pinging(Address, _, _, Until), Now < Until
+               ->  Result = wait
+               ;   Result = none
+               )),
+    (   Result = taken(Conn, Had)
+    ->  true
+    ;   Result == wait
+    ->  sleep(0.002),
+        take_pooled_wait(Address, Key, Conn, Had)
+    ).
+
+%   Prefer a connection with exactly the tokens asked for; a request that
+%   needs no tokens takes any; one that needs tokens may upgrade an
+%   unauthenticated one.
+take_pooled(Address, Key, Now, Conn, Had) :-
+    sweep_all(Now),
+    (   retract(pooled(Address, Key, Conn, _, _))
+    ->  Had = Key
+    ;   Key == none
+    ->  retract(pooled(Address, Had, Conn, _, _))
+    ;   retract(pooled(Address, none, Conn, _, _))
+    ->  Had = none
+    ).
+
+usable(Key, Conn, Checked, Now) :-
+    healthy(Conn),
+    Conn = conn(_, _, _, Info, _),
+    server_idle(Key, Info, Idle),
+    Now - Checked < Idle * 0.8.
+
+%   How long the server lets this connection be silent (its hello says).
+server_idle(none, Info, Idle) :-
+    !,
+    (   hello_prop(Info, idle(Idle0)) -> Idle = Idle0 ; Idle = 10 ).
+server_idle(_, Info, Idle) :-
+    (   hello_prop(Info, auth_idle(Idle0)) -> Idle = Idle0 ; Idle = 10 ).
 
 %   An idle pooled connection must have nothing to read: readable means
 %   the server closed it (or sent garbage).
@@ -189,21 +373,41 @@ healthy(conn(_, Pair, _, _, _)) :-
     Ready == [].
 
 remember_key(conn(_, Pair, _, _, _), Key) :-
-    retractall(conn_key(Pair, _)),
-    assertz(conn_key(Pair, Key)).
-
-:- dynamic conn_key/2.
+    with_mutex(dfrl_transport_pool,
+               ( retractall(conn_key(Pair, _)),
+                 assertz(conn_key(Pair, Key)) )).
 
 %!  transport_release(+Conn) is det.
 %
 %   Return Conn to the pool for reuse.
 
 transport_release(Conn) :-
-    Conn = conn(Address, Pair, _, _, _),
+    Conn = conn(_, Pair, _, _, _),
     (   conn_key(Pair, Key)
-    ->  get_time(Now),
-        with_mutex(dfrl_transport_pool, assertz(pooled(Address, Key, Conn, Now)))
+    ->  release(Conn, Key)
     ;   transport_close(Conn)
+    ).
+
+release(Conn, Key) :-
+    Conn = conn(Address, Pair, _, _, _),
+    get_time(Now),
+    with_mutex(dfrl_transport_pool,
+               ( retractall(conn_key(Pair, _)),
+                 assertz(conn_key(Pair, Key)),
+                 assertz(pooled(Address, Key, Conn, Now, Now)),
+                 enforce_pool_max,
+                 ensure_janitor
+               )).
+
+enforce_pool_max :-
+    current_prolog_flag(dfrl_pool_max, Max),
+    aggregate_all(count, pooled(_, _, _, _, _), N),
+    (   N > Max,
+        aggregate_all(min(U, C), pooled(_, _, C, U, _), min(_, Oldest))
+    ->  retract(pooled(_, _, Oldest, _, _)),
+        transport_close(Oldest),
+        enforce_pool_max
+    ;   true
     ).
 
 %!  transport_discard(+Conn) is det.
@@ -215,11 +419,111 @@ transport_discard(Conn) :-
 
 %!  transport_drop_pool is det.
 %
-%   Close every pooled connection.
+%   Close every pooled connection and stop the janitor.
 
 transport_drop_pool :-
     with_mutex(dfrl_transport_pool,
-               forall(retract(pooled(_, _, C, _)), transport_close(C))).
+               forall(retract(pooled(_, _, C, _, _)), transport_close(C))),
+    catch(thread_send_message(dfrl_pool_janitor, stop), _, true).
+
+%!  transport_pool_statistics(-Stats) is det.
+%
+%   Stats is pool{connections:N, unauthenticated:U, janitor:Bool}.
+
+transport_pool_statistics(pool{connections:N, unauthenticated:U, janitor:J}) :-
+    with_mutex(dfrl_transport_pool,
+               ( aggregate_all(count, pooled(_, _, _, _, _), N),
+                 aggregate_all(count, pooled(_, none, _, _, _), U),
+                 ( janitor_running -> J = true ; J = false ) )).
+
+ensure_janitor :-
+    (   janitor_running
+    ->  true
+    ;   catch(thread_create(janitor_loop, _,
+                            [alias(dfrl_pool_janitor), detached(true)]),
+              _, fail)
+    ->  assertz(janitor_running)
+    ;   true
+    ).
+
+janitor_loop :-
+    janitor_period(Period),
+    thread_self(Me),
+    (   thread_get_message(Me, Msg, [timeout(Period)])
+    ->  true
+    ;   Msg = tick
+    ),
+    (   Msg == stop
+    ->  janitor_exit
+    ;   catch(janitor_round, E, print_message(warning, E)),
+        (   with_mutex(dfrl_transport_pool, janitor_may_exit)
+        ->  true
+        ;   janitor_loop
+        )
+    ).
+
+janitor_exit :-
+    with_mutex(dfrl_transport_pool, retractall(janitor_running)).
+
+janitor_may_exit :-
+    \+ pooled(_, _, _, _, _),
+    retractall(janitor_running).
+
+janitor_period(Period) :-
+    current_prolog_flag(dfrl_keepalive, K),
+    with_mutex(dfrl_transport_pool,
+               findall(I, ( pooled(_, Key, C, _, _),
+                            C = conn(_, _, _, Info, _),
+                            server_idle(Key, Info, I) ),
+                       Idles)),
+    min_list([K|Idles], Min),
+    Period is max(0.05, min(1.0, Min / 4)).
+
+%   Close what the peer closed or the server is about to close; ping an
+%   authenticated connection silent for the keepalive interval (or half
+%   its server's limit, if that is shorter).
+janitor_round :-
+    get_time(Now),
+    Until is Now + 5,
+    with_mutex(dfrl_transport_pool,
+               ( sweep_all(Now),
+                 findall(Entry, due_keepalive(Now, Entry), Due),
+                 forall(member(pooled(A, K, C, U, Ch), Due),
+                        ( retract(pooled(A, K, C, U, Ch)),
+                          assertz(pinging(A, K, C, Until)) )) )),
+    forall(member(pooled(A, K, C, U, _), Due),
+           (   keepalive_ping(C)
+           ->  get_time(Then),
+               with_mutex(dfrl_transport_pool,
+                          ( retractall(pinging(_, _, C, _)),
+                            assertz(pooled(A, K, C, U, Then)) ))
+           ;   with_mutex(dfrl_transport_pool, retractall(pinging(_, _, C, _))),
+               transport_close(C)
+           )).
+
+sweep_all(Now) :-
+    forall(( pooled(A, K, C, U, Ch), \+ usable(K, C, Ch, Now) ),
+           ( retract(pooled(A, K, C, U, Ch)), transport_close(C) )).
+
+due_keepalive(Now, pooled(A, K, C, U, Ch)) :-
+    current_prolog_flag(dfrl_keepalive, Keep),
+    pooled(A, K, C, U, Ch),
+    K \== none,
+    C = conn(_, _, _, Info, _),
+    server_idle(K, Info, Idle),
+    Now - Ch >= min(Keep, Idle / 2).
+
+keepalive_ping(Conn) :-
+    Conn = conn(_, Pair, _, _, RT),
+    stream_pair(Pair, In, _),
+    Wait is min(RT, 5),
+    catch(setup_call_cleanup(
+              set_stream(In, timeout(Wait)),
+              ( transport_send(Conn, text, ping),
+                receive_frame(Conn, keepalive, Reply) ),
+              set_stream(In, timeout(RT))),
+          _, fail),
+    Reply = ok(pong(_)).
 
 %!  transport_close(+Conn) is det.
 
@@ -333,25 +637,46 @@ receive_failed(_, _, E) :-
 
 %!  transport_request(+Address, +Request, -Result, +Options) is det.
 %
-%   Send Request as a text frame on a fresh connection and wait for the
-%   reply. If the reply is ok(Result), unify Result; if it is
-%   error(error(Formal, _)), throw error(Formal, remote(Address)).
-%   Options are those of transport_open/3 plus tokens(List): prove these
-%   tokens first (for privileged requests).
+%   Send Request as a frame and wait for the reply, on a pooled
+%   connection to Address if there is a healthy one (given back after an
+%   ok reply), else on a new one. If the reply is ok(Result), unify
+%   Result; if it is error(error(Formal, _)), throw error(Formal,
+%   remote(Address)). Options are those of transport_open/3 plus
+%
+%     - tokens(+List)   prove these tokens first (privileged requests)
+%     - action(+Action) the permission error's action if they are refused
+%     - kind(+Kind)     text (default) or binary
+%     - fresh(true)     use a new connection and close it afterwards
 
-transport_request(Address, Request, Result, Options) :-
-    setup_call_cleanup(
-        transport_open(Address, Conn, Options),
-        request_on(Conn, Request, Reply, Options),
-        transport_close(Conn)),
+transport_request(Address0, Request, Result, Options) :-
+    address_normalize(Address0, Address),
+    (   option(tokens(Tokens), Options)
+    ->  must_be(list, Tokens),
+        msort(Tokens, Key)
+    ;   Key = none
+    ),
+    (   option(fresh(true), Options)
+    ->  setup_call_cleanup(
+            transport_open(Address, Conn, Options),
+            ( (   Key == none
+              ->  true
+              ;   option(action(Action), Options, access),
+                  transport_auth(Conn, Key, Action)
+              ),
+              request_on(Conn, Request, Reply, Options)
+            ),
+            transport_close(Conn))
+    ;   acquire(Address, Key, Conn, Options),
+        catch(request_on(Conn, Request, Reply, Options), E,
+              ( transport_discard(Conn), throw(E) )),
+        (   Reply = ok(_)
+        ->  transport_release(Conn)
+        ;   transport_discard(Conn)
+        )
+    ),
     reply_result(Address, Reply, Result).
 
 request_on(Conn, Request, Reply, Options) :-
-    (   option(tokens(Tokens), Options)
-    ->  option(action(Action), Options, access),
-        transport_auth(Conn, Tokens, Action)
-    ;   true
-    ),
     option(kind(Kind), Options, text),
     transport_send(Conn, Kind, Request),
     transport_receive(Conn, Reply, []).

@@ -20,14 +20,16 @@ A frame is a 12-byte header followed by a body:
   | 6-7   | reserved, zero                                 |
   | 8-11  | body length in bytes, unsigned big-endian      |
 
-A text body is the term written canonically (UTF-8) and is read back
-with read_term/3, so any peer may send one; its size is checked against
-a limit before a single body byte is read. A binary body is the term as
-fast_write/2 writes it (SWI-Prolog's fast serialization, self-delimiting;
-the length field is 0): it is quick for large float lists, but the C
-reader trusts its input and crashes the process on garbage, so
-frame_read/3 accepts a binary frame only when the caller says the
-connection is authenticated (the peer proved a token of this node).
+Both kinds carry their real body length, and frame_read/3 checks it
+against a limit before a single body byte is read, so a proxy or a test
+can count and cut frames without decoding them. A text body is the term
+written canonically (UTF-8) and is read back with read_term/3, so any
+peer may send one. A binary body is the term as fast_term_serialized/2
+writes it (SWI-Prolog's fast serialization): it is quick for large float
+lists, but the C reader trusts its input and crashes the process on
+garbage, so frame_read/3 accepts a binary frame only when the caller says
+the connection is authenticated (the peer proved a token of this node).
+A binary body is read whole (exactly its length) before it is decoded.
 */
 
 wire_version(1).
@@ -41,11 +43,6 @@ kind_byte(binary, 0'B).
 %
 %   Write Term as one frame of Kind (`text` or `binary`) and flush.
 
-frame_write(Stream, binary, Term) :-
-    !,
-    write_header(Stream, binary, 0),
-    fast_write(Stream, Term),
-    flush_output(Stream).
 frame_write(Stream, Kind, Term) :-
     body_bytes(Kind, Term, Body),
     string_length(Body, Len),
@@ -71,6 +68,8 @@ write_header(Stream, Kind, Len) :-
 body_bytes(text, Term, Body) :-
     text_term_bytes(Term, Codes),
     string_codes(Body, Codes).
+body_bytes(binary, Term, Body) :-
+    fast_term_serialized(Term, Body).
 
 %!  text_term_bytes(?Term, ?Bytes) is det.
 %
@@ -148,11 +147,8 @@ frame_read(Stream, Frame, Options) :-
         ->  wire_error(binary_not_allowed)
         ;   true
         ),
-        (   Kind == binary
-        ->  fast_read(Stream, Term)
-        ;   read_body(Stream, Len, Body),
-            decode_body(Kind, Body, Term)
-        ),
+        read_body(Stream, Len, Body),
+        decode_body(Kind, Body, Term),
         Frame = frame(Kind, Term)
     ).
 
@@ -192,6 +188,11 @@ read_body(Stream, Len, Body) :-
 decode_body(text, Body, Term) :-
     string_codes(Body, Bytes),
     text_term_bytes(Term, Bytes).
+decode_body(binary, Body, Term) :-
+    (   catch(fast_term_serialized(Term0, Body), _, fail)
+    ->  Term = Term0
+    ;   wire_error(syntax(binary))
+    ).
 
 put_u32(Stream, N) :-
     B0 is (N >> 24) /\ 0xff,

@@ -1,6 +1,8 @@
 """A minimal client of the platform's text frames, for tests from Python."""
 from __future__ import annotations
 
+import hashlib
+import hmac
 import socket
 import struct
 
@@ -15,7 +17,11 @@ def frame(body: bytes, kind: bytes = b"T", length: int | None = None) -> bytes:
 
 
 def read_frame(sock: socket.socket) -> tuple[bytes, str] | None:
-    """Read one text frame; None if the peer closed the connection."""
+    """Read one frame: (kind, body); None if the peer closed the connection.
+
+    Both kinds carry their body length in the header. A text body is decoded as UTF-8; a
+    binary body (SWI-Prolog's fast serialization) is given as latin-1 text, byte for byte.
+    """
     header = _read_exact(sock, 12)
     if header is None:
         return None
@@ -23,7 +29,22 @@ def read_frame(sock: socket.socket) -> tuple[bytes, str] | None:
     (n,) = struct.unpack(">I", header[8:12])
     body = _read_exact(sock, n)
     assert body is not None
-    return header[5:6], body.decode("utf-8")
+    kind = header[5:6]
+    return kind, body.decode("utf-8" if kind == b"T" else "latin-1")
+
+
+OPEN_KEY = "'dfrl-open-platform'"
+"""The open key as the platform writes it (``~q``): the HMAC key an open platform accepts."""
+
+
+def token_proof(key_text: str, nonce: str) -> str:
+    """Hex HMAC-SHA256 of ``nonce`` keyed by a token's canonical text (e.g. ``"55"``)."""
+    return hmac.new(key_text.encode(), nonce.encode(), hashlib.sha256).hexdigest()
+
+
+def open_proof(nonce: str) -> str:
+    """The proof of the open key for ``nonce``."""
+    return token_proof(OPEN_KEY, nonce)
 
 
 def _read_exact(sock: socket.socket, n: int) -> bytes | None:
