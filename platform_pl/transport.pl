@@ -437,7 +437,8 @@ transport_pool_statistics(pool{connections:N, unauthenticated:U, janitor:J}) :-
                  ( janitor_running -> J = true ; J = false ) )).
 
 ensure_janitor :-
-    (   janitor_running
+    (   janitor_running,
+        catch(thread_property(dfrl_pool_janitor, status(running)), _, fail)
     ->  true
     ;   catch(thread_create(janitor_loop, _,
                             [alias(dfrl_pool_janitor), detached(true)]),
@@ -449,8 +450,8 @@ ensure_janitor :-
 janitor_loop :-
     janitor_period(Period),
     thread_self(Me),
-    (   thread_get_message(Me, Msg, [timeout(Period)])
-    ->  true
+    (   catch(thread_get_message(Me, Msg0, [timeout(Period)]), E, janitor_interrupted(E))
+    ->  Msg = Msg0
     ;   Msg = tick
     ),
     (   Msg == stop
@@ -461,6 +462,10 @@ janitor_loop :-
         ;   janitor_loop
         )
     ).
+
+janitor_interrupted('$aborted') :- !, janitor_exit, throw('$aborted').
+janitor_interrupted(unwind(A)) :- !, janitor_exit, throw(unwind(A)).
+janitor_interrupted(E) :- print_message(warning, E), fail.
 
 janitor_exit :-
     with_mutex(dfrl_transport_pool, retractall(janitor_running)).
