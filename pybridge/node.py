@@ -24,11 +24,12 @@ from dfrl.pybridge.errors import BridgeError, NodeStateError, PrologError, Prolo
 from dfrl.pybridge.providers import TableProvider
 from dfrl.pybridge.self_test import SelfTestReport, self_test
 from dfrl.pybridge.serving import MODULE as _MODULE
-from dfrl.pybridge.serving import RegisteredRobot, RequestServer
+from dfrl.pybridge.serving import RegisteredRobot, RequestServer, ServiceHandler
 from dfrl.pybridge.tartarus_commands import TartarusCommands
 from dfrl.pybridge.terms import Atom, Term, Var, atom_or_self
 
-__all__ = ["TableProvider", "RobotNode", "Bridge", "BRIDGE_FILE", "CODEC_FILE", "SelfTestReport"]
+__all__ = ["TableProvider", "RobotNode", "Bridge", "BRIDGE_FILE", "CODEC_FILE", "SERVICE_FILE",
+           "SelfTestReport"]
 
 log = logging.getLogger(__name__)
 
@@ -37,6 +38,9 @@ BRIDGE_FILE: Path = Path(__file__).resolve().parent / "robot_bridge.pl"
 
 CODEC_FILE: Path = Path(__file__).resolve().parent / "table_codec.pl"
 """The Prolog side of the table codecs (module ``table_codec``)."""
+
+SERVICE_FILE: Path = Path(__file__).resolve().parent / "robot_service.pl"
+"""The ``dfrl_robot(...)`` platform requests of a robot service (module ``robot_service``)."""
 
 
 def _robot_term(robot_id: Any) -> Any:
@@ -301,6 +305,30 @@ class RobotNode(TartarusCommands):
         """
         self._check_open()
         return self._server.serve_pending(max_requests, timeout)
+
+    def enable_service(self) -> None:
+        """Load ``robot_service.pl`` (after the platform): this process's nodes then answer
+        authenticated ``dfrl_robot(Request)`` platform requests, which
+        :meth:`serve_service` hands to a Python handler."""
+        self._check_open()
+        if not self._platform_loaded:
+            self.load_platform()
+        self._must("use_module", Atom(str(SERVICE_FILE)))
+
+    def serve_service(self, handler: ServiceHandler, max_requests: int = 4,
+                      timeout: float = 0.0) -> int:
+        """Answer up to ``max_requests`` queued ``dfrl_robot`` service requests with
+        ``handler`` (request term -> reply term); return how many. Main thread only, like
+        :meth:`serve_pending`; a positive ``timeout`` waits that long for the first one."""
+        self._check_open()
+        return self._server.serve_service(handler, max_requests, timeout)
+
+    def node_value(self, node: Any, prop: str) -> Any:
+        """The value of the platform node's property ``prop(Value)`` (e.g. ``id``,
+        ``bind``), or ``None`` if the node has no such property."""
+        self._check_open()
+        sol = self.prolog.call("node_property", node, Term(prop, Var("V")))
+        return sol["V"] if sol else None
 
     # -- shutdown -----------------------------------------------------------------------------
     def close(self, thread_timeout: float = 2.0) -> list[Any]:

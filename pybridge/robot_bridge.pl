@@ -11,6 +11,8 @@
             get_qtable_and_visits/3,    % +Robot, -Table, -Visits
             get_qtable_and_visits/4,    % +Robot, -Table, -Visits, +Options
             bridge_next_request/2,      % -Request, +TimeoutSeconds
+            bridge_service_call/3,      % +Op, -Reply, +Options
+            bridge_next_service_request/2, % -Request, +TimeoutSeconds
             bridge_reply/2,             % +Id, +Reply
             bridge_set_codec/1,         % +Codec
             bridge_codec/1,             % -Codec
@@ -75,16 +77,18 @@ bridge_next_request/2 and bridge_reply/2 for the requests to be answered.
 
 :- dynamic
     robot_/2,                   % Robot, Props
-    pending_/3,                 % Id, ReplyQueue, Robot
+    pending_/3,                 % Id, ReplyQueue, Who (robot(R) or service)
     codec_/1,                   % fts | text
     server_/1,                  % ThreadId of the serving thread
     stopping_threads_/0.        % bridge_stop_threads/2 has aborted threads
 
 :- create_prolog_flag(robot_bridge_timeout, 30.0, [type(float), keep(true)]).
+:- create_prolog_flag(robot_service_timeout, 20.0, [type(float), keep(true)]).
 
 codec_(text).
 
 request_queue(robot_bridge_requests).
+service_queue(robot_bridge_service).
 
 %!  bridge_register_robot(+Robot, +Props) is det.
 %
@@ -208,7 +212,9 @@ check_size(Shape, Values) :-
 %   be the registered shape and Values NStates*NActions finite numbers
 %   (integers are converted to floats); the host checks that where the
 %   table enters Python. If anything is wrong the robot's table is left
-%   unchanged. Options: timeout(Seconds).
+%   unchanged. Options: timeout(Seconds); every other option Name(Value)
+%   with an atomic Value (e.g. round(3), agent(dfrl_q), epoch(1)) is
+%   handed to the host with the write, which records where it came from.
 %
 %   @error existence_error(robot, Robot) if Robot is not registered here.
 %   @error type_error(qtable, Table) if Table is not qtable(Shape, Values).
@@ -254,8 +260,24 @@ set_request_floats(Robot, Shape, Values0, Options, Reply) :-
     set_request(Robot, Shape, Data, Options, Reply).
 
 set_request(Robot, Shape, Data, Options, Reply) :-
-    bridge_call(Robot, set_qtable(Robot, Shape, Data), set_qtable/2,
+    write_origin(Options, Origin),
+    bridge_call(Robot, set_qtable(Robot, Shape, Data, Origin), set_qtable/2,
                 Options, Reply).
+
+%   write_origin(+Options, -Origin): the options of a table write that say
+%   where it comes from (contract K4: round(N), agent(Name), epoch(E), ...):
+%   every Name(Value) option with an atomic Value except timeout/1. The
+%   host records them with the write.
+
+write_origin(Options, Origin) :-
+    include(origin_option, Options, Origin).
+
+origin_option(Option) :-
+    compound(Option),
+    compound_name_arity(Option, Name, 1),
+    Name \== timeout,
+    arg(1, Option, Value),
+    atomic(Value).
 
 check_timeout(Timeout) :-
     must_be(number, Timeout),
@@ -290,10 +312,35 @@ reply_error(Reply, PI) :-
 
 %!  bridge_call(+Robot, +Op, +PI, +Options, -Reply) is det.
 %
-%   Post request(Id, Deadline, Op) on the request queue and wait for
+%   Post request(Id, Deadline, Op) on the table request queue and wait for
 %   reply(Id, Reply) on a private queue that exists only during the call.
 
 bridge_call(Robot, Op, PI, Options, Reply) :-
+    request_queue(RQ),
+    host_call(RQ, robot(Robot), Op, PI, Options, Reply).
+
+%!  bridge_service_call(+Op, -Reply, +Options) is det.
+%
+%   As a table request, but for the host's own service (the robot
+%   process's `dfrl_robot(...)` requests, robot_service.pl): Op is posted
+%   on a queue of its own, which the host serves in every state (also
+%   while a sync robot serves no table request) with
+%   bridge_next_service_request/2. Reply is what the host answered.
+%   Options: timeout(Seconds), default the flag `robot_service_timeout`
+%   (20 s).
+%
+%   @error existence_error(robot_service, host) if no host serves.
+%   @error timeout_error(robot_service, host) if it did not answer in time.
+
+bridge_service_call(Op, Reply, Options) :-
+    must_be(nonvar, Op),
+    must_be(list, Options),
+    current_prolog_flag(robot_service_timeout, Default),
+    option(timeout(Timeout), Options, Default),
+    service_queue(SQ),
+    host_call(SQ, service, Op, bridge_service_call/3, [timeout(Timeout)], Reply).
+
+host_call(Queue, Who, Op, PI, Options, Reply) :-
     current_prolog_flag(robot_bridge_timeout, Default),
     option(timeout(Timeout), Options, Default),
     check_timeout(Timeout),
@@ -307,23 +354,29 @@ bridge_call(Robot, Op, PI, Options, Reply) :-
     Id is Id0 + 1,
     get_time(Now),
     Deadline is Now + Timeout,
-    request_queue(RQ),
     setup_call_cleanup(
         ( message_queue_create(Q),
-          assertz(pending_(Id, Q, Robot))
+          assertz(pending_(Id, Q, Who))
         ),
-        ( catch(thread_send_message(RQ, request(Id, Deadline, Op)),
+        ( catch(thread_send_message(Queue, request(Id, Deadline, Op)),
                 error(existence_error(message_queue, _), _),
-                existence_error(robot, Robot)),
+                ( gone_formal(Who, Gone), throw(error(Gone, context(PI, _))) )),
           (   thread_get_message(Q, reply(Id, Reply0), [timeout(Timeout)])
           ->  Reply = Reply0
           ;   format(atom(Msg), 'no reply within ~w s', [Timeout]),
-              throw(error(timeout_error(bridge, Robot), context(PI, Msg)))
+              timeout_formal(Who, Formal),
+              throw(error(Formal, context(PI, Msg)))
           )
         ),
         ( retractall(pending_(Id, _, _)),
           message_queue_destroy(Q)
         )).
+
+gone_formal(robot(Robot), existence_error(robot, Robot)).
+gone_formal(service, existence_error(robot_service, host)).
+
+timeout_formal(robot(Robot), timeout_error(bridge, Robot)).
+timeout_formal(service, timeout_error(robot_service, host)).
 
 %!  bridge_next_request(-Request, +Timeout) is semidet.
 %
@@ -333,18 +386,33 @@ bridge_call(Robot, Op, PI, Options, Reply) :-
 %     - get_qtable(Robot)
 %     - get_visits(Robot)
 %     - get_qtable_and_visits(Robot)
-%     - set_qtable(Robot, Shape, Data)  where Data is fts(String) or
-%       text(String) (see bridge_set_codec/1)
+%     - set_qtable(Robot, Shape, Data, Origin)  where Data is fts(String)
+%       or text(String) (see bridge_set_codec/1) and Origin the list of
+%       the write's origin options (round(N), agent(A), epoch(E), ...;
+%       see set_qtable/3)
 %
 %   Requests whose caller has already given up are dropped. Fails if no
 %   request arrived in time. Answer every request with bridge_reply/2.
 
 bridge_next_request(Request, Timeout) :-
+    request_queue(RQ),
+    next_from(RQ, Request, Timeout).
+
+%!  bridge_next_service_request(-Request, +Timeout) is semidet.
+%
+%   As bridge_next_request/2 for the host's service queue (see
+%   bridge_service_call/3): Request is request(Id, Op), answered with
+%   bridge_reply/2.
+
+bridge_next_service_request(Request, Timeout) :-
+    service_queue(SQ),
+    next_from(SQ, Request, Timeout).
+
+next_from(Queue, Request, Timeout) :-
     check_timeout(Timeout),
     get_time(Now),
     Until is Now + Timeout,
-    request_queue(RQ),
-    catch(next_request(RQ, Until, Request),
+    catch(next_request(Queue, Until, Request),
           error(existence_error(message_queue, _), _),
           fail).
 
@@ -408,22 +476,20 @@ bridge_detach_server :-
 %!  bridge_shutdown is det.
 %
 %   Forget all robots, answer every waiting caller with
-%   existence_error(robot, Robot) and destroy the request queue. Called by
+%   existence_error(robot, Robot) (existence_error(robot_service, host)
+%   for a service request) and destroy the request queues. Called by
 %   the host before it stops.
 
 bridge_shutdown :-
     with_mutex(robot_bridge,
                ( retractall(robot_(_, _)),
                  retractall(server_(_)),
-                 forall(retract(pending_(Id, Q, Robot)),
-                        catch(thread_send_message(
-                                  Q, reply(Id, error(existence_error(robot, Robot)))),
-                              _, true)),
-                 request_queue(RQ),
-                 (   is_message_queue(RQ)
-                 ->  message_queue_destroy(RQ)
-                 ;   true
-                 ) )).
+                 forall(retract(pending_(Id, Q, Who)),
+                        ( gone_formal(Who, Gone),
+                          catch(thread_send_message(Q, reply(Id, error(Gone))),
+                                _, true) )),
+                 forall(( host_queue(HQ), is_message_queue(HQ) ),
+                        message_queue_destroy(HQ)) )).
 
 %!  bridge_stop_threads(+Timeout, -Remaining) is det.
 %!  bridge_stop_threads(+Timeout, -Remaining, -Aborted) is det.
@@ -479,12 +545,15 @@ wait_stopped(Threads, Deadline) :-
     ).
 
 ensure_request_queue :-
-    request_queue(RQ),
     with_mutex(robot_bridge,
-               (   is_message_queue(RQ)
-               ->  true
-               ;   message_queue_create(_, [alias(RQ)])
-               )).
+               forall(host_queue(Q),
+                      (   is_message_queue(Q)
+                      ->  true
+                      ;   message_queue_create(_, [alias(Q)])
+                      ))).
+
+host_queue(Q) :- request_queue(Q).
+host_queue(Q) :- service_queue(Q).
 
 is_message_queue(Q) :-
     catch(message_queue_property(Q, size(_)), _, fail).
@@ -554,5 +623,9 @@ aborted(unwind(abort)).
 
 prolog:error_message(timeout_error(bridge, Robot)) -->
     [ 'No reply from the robot host for robot ~q (is its control loop serving requests?)'-[Robot] ].
+prolog:error_message(timeout_error(robot_service, host)) -->
+    [ 'No reply from the robot process (is its main thread serving requests?)' ].
+prolog:error_message(existence_error(robot_service, host)) -->
+    [ 'This process serves no robot service requests' ].
 prolog:error_message(python_error(Class, Message)) -->
     [ 'Python ~w: ~w'-[Class, Message] ].

@@ -4,12 +4,18 @@
 (``bridge_next_request/2``), answers each from the robot's provider and replies with
 ``bridge_reply/2``. A table write is validated here, once, where it enters Python
 (:func:`validate_write`): registered shape, number of values, float values, finite values.
-Providers receive only valid tables.
+Providers receive only valid tables. A write's origin (the agent's options ``round``,
+``agent``, ``epoch``, ...; contract K4) goes to a provider that defines
+``set_q_table_from(table, origin)``, otherwise it is dropped and ``set_q_table(table)`` called.
+
+:meth:`RequestServer.serve_service` serves the host's own service queue the same way, with a
+handler the host gives (``dfrl robot``'s ``dfrl_robot(...)`` requests, robot_service.pl).
 """
 from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -21,7 +27,12 @@ from dfrl.pybridge.errors import BridgeError, CodecError
 from dfrl.pybridge.providers import TableProvider
 from dfrl.pybridge.terms import Atom, Term, Var
 
-__all__ = ["RequestError", "RegisteredRobot", "RequestServer", "validate_write"]
+__all__ = ["RequestError", "RegisteredRobot", "RequestServer", "ServiceHandler", "validate_write",
+           "write_origin"]
+
+#: Answers one service request: takes the request term, returns the reply term
+#: (``ok(...)``, ``ok(json(Text))`` or ``error(Formal)``); may raise :class:`RequestError`.
+ServiceHandler = Callable[[Any], Any]
 
 log = logging.getLogger(__name__)
 
@@ -110,16 +121,27 @@ class RequestServer:
     def serve_pending(self, max_requests: int = 16, timeout: float = 0.0) -> int:
         """Answer up to ``max_requests`` queued requests; return how many (see
         :meth:`dfrl.pybridge.node.RobotNode.serve_pending`)."""
+        return self._serve_queue("bridge_next_request", self.serve, max_requests, timeout)
+
+    def serve_service(self, handler: ServiceHandler, max_requests: int = 4,
+                      timeout: float = 0.0) -> int:
+        """Answer up to ``max_requests`` queued service requests with ``handler``; return
+        how many. A handler's :class:`RequestError` becomes ``error(Formal)``, any other
+        exception ``error(python_error(Class, Message))``."""
+        return self._serve_queue("bridge_next_service_request", handler, max_requests, timeout)
+
+    def _serve_queue(self, next_pred: str, handler: ServiceHandler, max_requests: int,
+                     timeout: float) -> int:
         served = 0
         wait = float(timeout)
         while served < max_requests:
-            sol = self.prolog.call("bridge_next_request", Var("R"), wait, module=MODULE)
+            sol = self.prolog.call(next_pred, Var("R"), wait, module=MODULE)
             if sol is None:
                 break
             wait = 0.0
             req_id, op = sol["R"].args
             try:
-                reply = self.serve(op)
+                reply = handler(op)
             except RequestError as exc:
                 reply = Term("error", exc.formal)
             except Exception as exc:  # noqa: BLE001 - every failure becomes a Prolog error
@@ -144,10 +166,15 @@ class RequestServer:
             provider = self._robot(op.args[0]).provider
             return Term("tables", self._table_reply(provider.q_table),
                         self._table_reply(provider.visits))
-        if op.name == "set_qtable" and op.arity == 3:
-            rid, shape, data = op.args
+        if op.name == "set_qtable" and op.arity == 4:
+            rid, shape, data, origin = op.args
             robot = self._robot(rid)
-            robot.provider.set_q_table(validate_write(robot.shape, shape, data))
+            table = validate_write(robot.shape, shape, data)
+            setter = getattr(type(robot.provider), "set_q_table_from", None)
+            if setter is not None:
+                robot.provider.set_q_table_from(table, write_origin(origin))
+            else:
+                robot.provider.set_q_table(table)
             return Atom("ok")
         raise BridgeError(f"unknown request {op!r}")
 
@@ -163,6 +190,17 @@ class RequestServer:
             raise BridgeError(f"the robot's table has shape {arr.shape}, not 2-D")
         data = _codec.encode(self.codec, arr.astype(np.float64, copy=False))
         return Term("table", [int(arr.shape[0]), int(arr.shape[1])], Term(self.codec.value, data))
+
+
+def write_origin(options: Any) -> dict[str, Any]:
+    """The origin options of a table write as a dict: ``[round(3), agent(a)]`` ->
+    ``{"round": 3, "agent": "a"}`` (atoms become ``str``; other entries are ignored)."""
+    origin: dict[str, Any] = {}
+    for item in options if isinstance(options, list) else []:
+        if isinstance(item, Term) and item.arity == 1:
+            value = item.args[0]
+            origin[item.name] = str(value) if isinstance(value, Atom) else value
+    return origin
 
 
 def _python_error(exc: BaseException) -> Term:

@@ -29,12 +29,16 @@ Real-time pacing (``rtf``): one iteration per ``control_dt / rtf`` seconds of wa
 ``control_dt`` being the trainer's own control period (``SimConfig.control_dt``, 64 ms by
 default).
 
-Modules: :mod:`.process` (life cycle, control loop, ``main``), :mod:`.table` (the provider
-registered with the bridge: the trainer's table, or a static one for benchmarks, plus share
-bookkeeping), :mod:`.files` (the CSV files), :mod:`.lines` (stdout protocol, stdin watch).
+Modules: :mod:`.process` (the spawned node's life cycle, ``main``), :mod:`.run` (one
+experiment: trainer, files, the control loop one iteration at a time), :mod:`.service`
+(``dfrl robot``: the same robot as a long-lived service configured over the platform),
+:mod:`.checkpoint` (atomic checkpoints at every share and at the end), :mod:`.table` (the
+provider registered with the bridge: the trainer's table, or a static one for benchmarks, plus
+share bookkeeping with each write's round, agent and epoch), :mod:`.files` (the CSV files),
+:mod:`.lines` (stdout protocol, stdin watch).
 
 The node stops early when stdin reaches end of file or reads a line ``stop`` (the launcher
-closes it when the experiment ends); after the last iteration it keeps its platform up until
+closes it when the experiment ends), unless stdin was at end of file from the start; after the last iteration it keeps its platform up until
 no agent is left on it (sync) or until stdin closes (async), at most ``grace_s`` seconds.
 """
 from __future__ import annotations

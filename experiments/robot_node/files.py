@@ -3,16 +3,21 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import os
 import time
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["METRIC_FIELDS", "SHARE_FIELDS", "table_digest", "CsvLog"]
+__all__ = ["METRIC_FIELDS", "SHARE_FIELDS", "ORIGIN_FIELDS", "table_digest", "CsvLog", "share_row"]
 
 METRIC_FIELDS: tuple[str, ...] = ("robot", "iteration", "q_sum", "cumulative_reward", "collisions")
-SHARE_FIELDS: tuple[str, ...] = ("robot", "share_index", "iteration", "wall_time", "digest")
+SHARE_FIELDS: tuple[str, ...] = ("robot", "share_index", "iteration", "wall_time", "digest",
+                                  "round", "agent", "epoch")
+#: The options of an agent's table write recorded with each share (contract K4).
+ORIGIN_FIELDS: tuple[str, ...] = ("round", "agent", "epoch")
 
 
 def table_digest(table: np.ndarray) -> str:
@@ -29,12 +34,29 @@ class CsvLog:
     path : Path
     fields : tuple of str
         The header.
+    keep : callable, optional
+        Resume an existing file: its rows (as dicts) for which ``keep(row)`` is true are
+        written back first, in order (a torn last row is dropped); without it, or without a
+        file, a new file is started.
     """
 
-    def __init__(self, path: Path, fields: tuple[str, ...]) -> None:
+    def __init__(self, path: Path, fields: tuple[str, ...],
+                 keep: Callable[[dict[str, str]], bool] | None = None) -> None:
+        kept: list[list[str]] = []
+        if keep is not None and path.is_file():
+            with open(path, newline="", encoding="utf-8") as fh:
+                for row in csv.DictReader(fh):
+                    if None in row.values() or None in row:
+                        continue                       # torn (too short or too long)
+                    try:
+                        if keep(row):
+                            kept.append([row.get(f, "") for f in fields])
+                    except (TypeError, ValueError):
+                        continue
         self._fh = open(path, "w", newline="", encoding="utf-8")
         self._writer = csv.writer(self._fh)
         self._writer.writerow(fields)
+        self._writer.writerows(kept)
         self._fh.flush()
 
     def row(self, values: tuple[Any, ...] | list[Any], flush: bool = False) -> None:
@@ -47,12 +69,21 @@ class CsvLog:
         """Flush what was written."""
         self._fh.flush()
 
+    def sync(self) -> None:
+        """Flush and fsync (the rows survive a crash of the process or the machine)."""
+        self._fh.flush()
+        os.fsync(self._fh.fileno())
+
     def close(self) -> None:
         """Close the file (idempotent)."""
         if not self._fh.closed:
             self._fh.close()
 
 
-def share_row(robot: str, share_index: int, iteration: int, table: np.ndarray) -> tuple[Any, ...]:
-    """A ``shares_<robot>.csv`` row for a table just set (wall time: now)."""
-    return (robot, share_index, iteration, repr(time.time()), table_digest(table))
+def share_row(robot: str, share_index: int, iteration: int, table: np.ndarray,
+              origin: Mapping[str, Any] | None = None) -> tuple[Any, ...]:
+    """A ``shares_<robot>.csv`` row for a table just set (wall time: now); ``origin`` holds
+    the write's ``round``, ``agent`` and ``epoch`` (each empty when absent)."""
+    origin = origin or {}
+    extra = tuple("" if origin.get(f) is None else origin[f] for f in ORIGIN_FIELDS)
+    return (robot, share_index, iteration, repr(time.time()), table_digest(table)) + extra

@@ -48,15 +48,31 @@ class ProtocolLines:
 
 
 class StdinWatch:
-    """Non-blocking check whether the launcher closed our stdin (or asked us to stop)."""
+    """Non-blocking check whether the launcher closed our stdin (or asked us to stop).
+
+    A stdin that is already at end of file when the watch starts (``< /dev/null``, a closed
+    pipe, no stdin at all) is no channel: the watch is then *detached* and never says stop
+    (the process runs its iterations; signals stop it).
+    """
 
     def __init__(self, stream: TextIO | None) -> None:
-        self.fd = stream.fileno() if stream is not None and not stream.closed else None
-        self.closed = self.fd is None
+        fd = None
+        if stream is not None and not stream.closed:
+            try:
+                fd = stream.fileno()
+            except (OSError, ValueError):
+                fd = None
+        self.fd = fd
+        self.closed = False
+        self.detached = fd is None
         self._buf = b""
+        if fd is not None and self.poll() and not self._buf:
+            self.closed, self.detached, self.fd = False, True, None
 
     def poll(self) -> bool:
-        """True once stdin reached EOF or a ``stop`` line arrived."""
+        """True once stdin reached EOF or a ``stop`` line arrived (never when detached)."""
+        if self.detached:
+            return False
         if self.closed:
             return True
         try:

@@ -1,4 +1,4 @@
-"""The robot node's life cycle and control loop (:class:`RobotProcess`) and its entry point."""
+"""The spawned robot node's life cycle (:class:`RobotProcess`) and its entry point."""
 from __future__ import annotations
 
 import argparse
@@ -8,16 +8,29 @@ import time
 from pathlib import Path
 from typing import Any, TextIO
 
-from dfrl.experiments.config import Mode, NodeConfig, boundaries
-from dfrl.experiments.robot_node.files import METRIC_FIELDS, SHARE_FIELDS, CsvLog
+from dfrl.experiments.config import Mode, NodeConfig
 from dfrl.experiments.robot_node.lines import ProtocolLines, StdinWatch
-from dfrl.experiments.robot_node.table import NodeTable
+from dfrl.experiments.robot_node.run import Run
 
-__all__ = ["RobotProcess", "main"]
+__all__ = ["RobotProcess", "main", "load_agent_program"]
+
+
+class _StdinHost:
+    """The spawned node's :class:`RunHost`: its stdin says when to stop."""
+
+    def __init__(self, watch: StdinWatch) -> None:
+        self.watch = watch
+
+    def wait(self, seconds: float) -> None:
+        if seconds > 0:
+            time.sleep(seconds)
+
+    def should_stop(self) -> bool:
+        return self.watch.poll()
 
 
 class RobotProcess:
-    """One robot node (see :mod:`dfrl.experiments.robot_node`).
+    """One spawned robot node (see :mod:`dfrl.experiments.robot_node`).
 
     Parameters
     ----------
@@ -25,7 +38,7 @@ class RobotProcess:
     stdout : TextIO
         Where the protocol lines go.
     stdin : TextIO or None
-        Watched for EOF / ``stop``.
+        Watched for EOF / ``stop`` (not when it is at end of file from the start).
     """
 
     def __init__(self, config: NodeConfig, stdout: TextIO = sys.stdout,
@@ -35,118 +48,50 @@ class RobotProcess:
         self.stdin = StdinWatch(stdin)
         self.out_dir = Path(config.out_dir)
         self.out_dir.mkdir(parents=True, exist_ok=True)
-        self.trainer: Any = None
-        self.table: NodeTable | None = None
         self.node: Any = None
-        self.period = 0.0
-        self._metrics: CsvLog | None = None
-        self._shares: CsvLog | None = None
+        self.run_: Run | None = None
 
     @property
     def iteration(self) -> int:
         """Iterations done so far."""
-        return self.table.iteration if self.table is not None else 0
+        return self.run_.iteration if self.run_ is not None else 0
 
     @property
     def shares(self) -> int:
         """Shares applied so far."""
-        return self.table.shares if self.table is not None else 0
+        return self.run_.shares if self.run_ is not None else 0
 
     # -- life cycle ----------------------------------------------------------------------------
     def start(self) -> tuple[str, int]:
-        """Build the robot (or the benchmark's static table), start the platform node,
-        register the table with its shape; return the address."""
-        from dfrl.platform_pl import AGENTS_DIR
-        from dfrl.pybridge import RobotNode, StaticTable
+        """Start the platform node, build the robot (or the benchmark's static table) and
+        register it; return the address."""
+        from dfrl.pybridge import RobotNode
 
         c = self.config
-        if c.bench_table is not None:
-            shape = (int(c.bench_table[0]), int(c.bench_table[1]))
-            base: Any = StaticTable(shape, c.seed)
-        else:
-            from dfrl.robots.training import Trainer
-
-            self.trainer = base = Trainer(c.trainer_config())
-            shape = (self.trainer.n_states, len(self.trainer.action_names))
-            if c.rtf:
-                self.period = self.trainer.config.sim.control_dt / c.rtf
-            self._metrics = CsvLog(self.out_dir / f"metrics_{c.robot}.csv", METRIC_FIELDS)
-        self._shares = CsvLog(self.out_dir / f"shares_{c.robot}.csv", SHARE_FIELDS)
-        self.table = NodeTable(base, c.robot, self._shares, self.lines)
         self.node = RobotNode()
         self.node.load_platform()
-        agent_file = AGENTS_DIR / "dfrl_agent.pl"
-        if agent_file.is_file():
-            self.node.assert_file_to_tartarus(str(agent_file))
-        else:
-            print(f"robot_node {c.robot}: warning: {agent_file} not found", file=sys.stderr)
+        load_agent_program(self.node, f"robot_node {c.robot}")
+        self.run_ = Run(c, self.node, self.lines, host=_StdinHost(self.stdin), poll_every=50)
+        self.run_.open()
         name = self.node.start(c.host, 0, token=int(c.token), idle_timeout=5.0)
         host, port = self.node.address(name)
-        self.node.register_robot(c.robot, self.table, shape=shape, algorithm=c.algo)
         self.lines.node(str(host), int(port))
         return str(host), int(port)
 
     def run(self) -> int:
         """The control loop; returns the exit code."""
-        c = self.config
-        if self.trainer is None:
+        run = self.run_
+        if not run.simulated:
             while not self.stdin.poll():
                 self.node.serve_pending(timeout=0.05)
             return 0
-        stops = set(boundaries(c.iterations, c.respite)) if c.mode is Mode.SYNC else set()
-        next_tick = time.perf_counter()
-        stopped = False
-        robot = c.robot
-        for _ in range(c.iterations):
-            m = self.trainer.step()
-            self.table.iteration = m.iteration
-            self._metrics.row((robot, m.iteration, repr(m.q_sum), repr(m.cumulative_reward),
-                               m.collisions))
-            if c.progress_every and m.iteration % c.progress_every == 0:
-                self.lines.progress(m.iteration)
-            if m.iteration in stops:
-                self._metrics.flush()
-                if not self._wait_for_share():
-                    stopped = True
-                    break
-            elif c.mode is Mode.ASYNC:
-                self.node.serve_pending()
-            if m.iteration % 50 == 0 and self.stdin.poll():
-                stopped = True
-                break
-            if self.period:
-                next_tick += self.period
-                delay = next_tick - time.perf_counter()
-                if delay > 0:
-                    time.sleep(delay)
-                else:
-                    next_tick = time.perf_counter()
-        self._metrics.flush()
-        self.trainer.save_table(self.out_dir / "tables" / robot)
-        self.lines.progress(self.iteration)
-        if not stopped:
+        while run.step():
+            pass
+        run.finish()
+        if not run.stopped:
             self._linger()
         self.lines.done(self.iteration, self.shares)
         return 0
-
-    def _wait_for_share(self) -> bool:
-        """Serve until one set_q_table has been applied; False if told to stop."""
-        before = self.shares
-        deadline = time.monotonic() + self.config.sync_timeout_s
-        while self.shares == before:
-            # one request at a time: the agent's read for the next round may already be
-            # queued right behind this round's write, and must wait for the next boundary
-            self.node.serve_pending(max_requests=1, timeout=0.05)
-            if self.shares != before:
-                break
-            if self.stdin.poll():
-                return False
-            if time.monotonic() > deadline:
-                print(f"robot_node {self.config.robot}: no share within "
-                      f"{self.config.sync_timeout_s} s at iteration {self.iteration}; going on",
-                      file=sys.stderr)
-                break
-        return True
 
     def _agents_here(self) -> bool:
         try:
@@ -168,13 +113,21 @@ class RobotProcess:
 
     def close(self) -> None:
         """Close files, the platform and the simulation."""
-        for log in (self._metrics, self._shares):
-            if log is not None:
-                log.close()
+        if self.run_ is not None:
+            self.run_.close()
         if self.node is not None:
             self.node.close()
-        if self.trainer is not None:
-            self.trainer.close()
+
+
+def load_agent_program(node: Any, who: str) -> None:
+    """Load the dFRL agent program into the node's Tartarus code store (warn if missing)."""
+    from dfrl.platform_pl import AGENTS_DIR
+
+    agent_file = AGENTS_DIR / "dfrl_agent.pl"
+    if agent_file.is_file():
+        node.assert_file_to_tartarus(str(agent_file))
+    else:
+        print(f"{who}: warning: {agent_file} not found", file=sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -7,6 +7,9 @@ into the process that owns it.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
+from typing import Any
+
 import numpy as np
 
 from dfrl.experiments.robot_node.files import CsvLog, share_row
@@ -21,7 +24,8 @@ class NodeTable:
 
     Every read of the Q-table writes a ``DFRL_EVENT get`` line; every applied
     ``set_q_table`` (already validated by the bridge) counts a share, appends a row to the
-    shares file and writes a ``DFRL_EVENT set`` line.
+    shares file (with the write's origin: round, agent, epoch), writes a ``DFRL_EVENT set``
+    line and calls ``on_share`` (the robot's checkpoint).
 
     Parameters
     ----------
@@ -31,6 +35,10 @@ class NodeTable:
     shares_log : CsvLog
         ``shares_<robot>.csv``.
     lines : ProtocolLines
+    on_share : callable, optional
+        Called after every applied share (no arguments).
+    shares : int
+        Shares applied before (a resumed run).
 
     Attributes
     ----------
@@ -41,13 +49,15 @@ class NodeTable:
     """
 
     def __init__(self, base: TableProvider, robot: str, shares_log: CsvLog,
-                 lines: ProtocolLines) -> None:
+                 lines: ProtocolLines, on_share: Callable[[], None] | None = None,
+                 shares: int = 0) -> None:
         self.base = base
         self.robot = robot
         self.shares_log = shares_log
         self.lines = lines
+        self.on_share = on_share
         self.iteration = 0
-        self.shares = 0
+        self.shares = shares
 
     @property
     def q_table(self) -> np.ndarray:
@@ -59,8 +69,15 @@ class NodeTable:
         return self.base.visits
 
     def set_q_table(self, table: np.ndarray) -> None:
+        self.set_q_table_from(table, {})
+
+    def set_q_table_from(self, table: np.ndarray, origin: Mapping[str, Any]) -> None:
+        """Apply a share written by an agent; ``origin`` holds the options of its write
+        (``round``, ``agent``, ``epoch``; see :mod:`dfrl.pybridge.serving`)."""
         self.base.set_q_table(table)
         self.shares += 1
-        self.shares_log.row(share_row(self.robot, self.shares, self.iteration, self.base.q_table),
-                            flush=True)
+        self.shares_log.row(share_row(self.robot, self.shares, self.iteration, self.base.q_table,
+                                      origin), flush=True)
         self.lines.event("set", self.iteration)
+        if self.on_share is not None:
+            self.on_share()

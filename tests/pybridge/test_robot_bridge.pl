@@ -12,7 +12,7 @@
 %   the host would, in this thread.
 serve_one(qtable(Shape, Values), Op) :-
     bridge_next_request(request(Id, Op), 5),
-    (   Op = set_qtable(_, _, _)
+    (   Op = set_qtable(_, _, _, _)
     ->  bridge_reply(Id, ok)
     ;   bridge_codec(Codec),
         encode_values(Codec, Values, Data),
@@ -49,13 +49,13 @@ test(bad_props, [setup(reset), error(domain_error(robot_props, [algorithm(q)]))]
 test(bad_shape, [setup(reset), error(domain_error(_, [2]))]) :-
     bridge_register_robot(r2, [shape([2])]).
 
-test(round_trip_text, [setup(reset), Got-Ops == qtable([2,2], [1.0,-0.0,5.0e-324,0.1])-[get_qtable(r1), set_qtable(r1, [2,2], text("1.0,-0.0,5.0e-324,0.1"))]]) :-
+test(round_trip_text, [setup(reset), Got-Ops == qtable([2,2], [1.0,-0.0,5.0e-324,0.1])-[get_qtable(r1), set_qtable(r1, [2,2], text("1.0,-0.0,5.0e-324,0.1"), [])]]) :-
     T = qtable([2,2], [1.0,-0.0,5.0e-324,0.1]),
     with_host(T, (get_qtable(r1, Got), set_qtable(r1, Got)), Ops).
 test(round_trip_fts, [setup(reset), Got == T]) :-
     bridge_set_codec(fts),
     T = qtable([2,2], [1.0,-0.0,5.0e-324,0.1]),
-    with_host(T, (get_qtable(r1, Got), set_qtable(r1, Got)), [_, set_qtable(r1, [2,2], fts(S))]),
+    with_host(T, (get_qtable(r1, Got), set_qtable(r1, Got)), [_, set_qtable(r1, [2,2], fts(S), [])]),
     fast_term_serialized(Values, S),
     assertion(Values == [1.0,-0.0,5.0e-324,0.1]).
 
@@ -73,7 +73,7 @@ test(unknown_robot, [setup(reset), error(existence_error(robot, nobody))]) :-
 %   The table a set sends is validated by the host (in Python, tests in
 %   test_bridge_node.py); here it is only encoded and sent as it is.
 test(set_sends_shape_and_values_as_given, [setup(reset),
-        Ops == [set_qtable(r1, [4,1], text("1.0,2.0,3.0"))]]) :-
+        Ops == [set_qtable(r1, [4,1], text("1.0,2.0,3.0"), [])]]) :-
     with_host(qtable([2,2], []), set_qtable(r1, qtable([4,1], [1,2.0,3])), Ops, 1).
 test(not_a_number, [setup(reset), error(type_error(number, x))]) :-
     set_qtable(r1, qtable([2,2], [1.0,2.0,3.0,x])).
@@ -90,10 +90,11 @@ test(reply_of_wrong_size, [setup(reset), error(domain_error(qtable_size(4), 3))]
 test(resource_hook_lists_robots, [setup(reset), Props == [algorithm(qlearning), shape([2, 2])]]) :-
     hosted_robot(r1, Props).
 test(resource_hook_reads_and_writes, [setup(reset),
-        Got-Ops == qtable([2,2], [1.0,2.0,3.0,4.0])-[get_qtable(r1), set_qtable(r1, [2,2], text("1.0,2.0,3.0,4.0"))]]) :-
+        Got-Ops == qtable([2,2], [1.0,2.0,3.0,4.0])-[get_qtable(r1), set_qtable(r1, [2,2], text("1.0,2.0,3.0,4.0"), [round(3), agent(dfrl_q), epoch(2)])]]) :-
     T = qtable([2,2], [1.0,2.0,3.0,4.0]),
     with_host(T, ( get_robot_table(r1, Got, [timeout(5)]),
-                   set_robot_table(r1, Got, [timeout(5)]) ), Ops).
+                   set_robot_table(r1, Got, [timeout(5), round(3), agent(dfrl_q), epoch(2),
+                                             note(f(x))]) ), Ops).
 test(resource_hook_tables, [setup(reset), T-V == qtable([2,2],[1.0,2.0,3.0,4.0])-qtable([2,2],[0.0,1.0,0.0,5.0])]) :-
     thread_create(( bridge_next_request(request(Id, get_qtable_and_visits(r1)), 5),
                     bridge_reply(Id, tables(table([2,2], text("1.0,2.0,3.0,4.0")),
@@ -134,6 +135,22 @@ test(shutdown_wakes_waiters, [setup(reset), Formal == existence_error(robot, r1)
     bridge_shutdown,
     thread_get_message(formal(Formal)),
     thread_join(T, _).
+
+%   The host's service queue is separate from the table queue: a service
+%   request is served while a table request waits, and a shutdown answers
+%   a waiting service caller.
+test(service_queue_is_separate, [setup(reset), Reply-Pending == ok(json("{}"))-0]) :-
+    thread_create(( bridge_next_service_request(request(Id, Op), 5),
+                    assertion(Op == status),
+                    bridge_reply(Id, ok(json("{}"))) ), H, []),
+    bridge_service_call(status, Reply, [timeout(5)]),
+    thread_join(H, _),
+    message_queue_property(robot_bridge_requests, size(Pending)).
+test(service_call_times_out, [setup(reset), error(timeout_error(robot_service, host))]) :-
+    bridge_service_call(status, _, [timeout(0.1)]).
+test(service_call_after_shutdown, [setup(reset), error(existence_error(robot_service, host))]) :-
+    bridge_shutdown,
+    bridge_service_call(status, _, [timeout(1)]).
 
 test(messages, [setup(reset)]) :-
     message_to_codes(error(timeout_error(bridge, r1), _), Text1),

@@ -100,3 +100,20 @@ def test_pace_follows_the_trainers_control_dt(tmp_path: Path) -> None:
     slow = _paced_seconds(tmp_path / "b", trainer={"sim": {"control_dt": 0.256}})
     assert 20 * 0.064 / 10 * 0.95 <= default < 0.45, default
     assert slow >= 20 * 0.256 / 10 * 0.95, slow
+
+
+def test_node_with_stdin_at_eof_from_the_start_runs_every_iteration(tmp_path: Path) -> None:
+    """Started with stdin at end of file (< /dev/null), the node is not told to stop at
+    iteration 50: stdin is no channel then."""
+    cfg = NodeConfig(robot="r7", out_dir=str(tmp_path), arena="r2", iterations=160,
+                     progress_every=0, grace_s=0.0)
+    path = tmp_path / "node.json"
+    path.write_text(json.dumps(cfg.to_dict()))
+    p = subprocess.run([sys.executable, "-m", "dfrl.experiments.robot_node", "--config", str(path)],
+                       stdin=subprocess.DEVNULL, capture_output=True, text=True, cwd=REPO,
+                       timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.split()[-4:] == ["DFRL_DONE", "r7", "160", "0"]
+    with open(tmp_path / "metrics_r7.csv", newline="") as fh:
+        assert len(list(csv.DictReader(fh))) == 160
+    assert (tmp_path / "checkpoint" / "r7.npy").is_file()

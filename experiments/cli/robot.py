@@ -1,0 +1,50 @@
+"""``dfrl robot``: a long-lived robot process that experiments configure over the platform."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from dfrl.pybridge.errors import BridgeError
+
+
+def _run(args: argparse.Namespace) -> int:
+    from dfrl.experiments.robot_node.service import RobotService, parse_token
+
+    if not 0 <= args.port <= 65535:
+        print(f"dfrl robot: port {args.port} is outside 0..65535", file=sys.stderr)
+        return 2
+    service = RobotService(args.host, args.port, parse_token(args.token), args.advertise,
+                           Path(args.workdir))
+    service.install_signals()
+    try:
+        service.start()
+    except (BridgeError, OSError) as exc:
+        print(f"dfrl robot: cannot start on {args.host}:{args.port}: {exc}", file=sys.stderr)
+        service.close()
+        return 1
+    try:
+        return service.serve_forever()
+    finally:
+        service.close()
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``robot`` subcommand."""
+    p = subparsers.add_parser(
+        "robot", help="run a robot process that experiments configure over the platform",
+        description="Start a long-lived robot process: an embedded platform node on HOST:PORT "
+                    "that prints 'dfrl robot listening on A:P' and waits for experiments "
+                    "(dfrl_robot requests from peers that prove TOKEN). SIGTERM or Ctrl-C "
+                    "stops it cleanly.")
+    p.add_argument("--host", default="0.0.0.0",
+                   help="address to bind (default 0.0.0.0: every interface)")
+    p.add_argument("--port", type=int, default=7001, help="port to bind (default 7001)")
+    p.add_argument("--token", required=True,
+                   help="platform token peers and agents must prove (the experiment's token)")
+    p.add_argument("--advertise", default=None, metavar="HOST",
+                   help="host name or address others reach this robot at "
+                        "(default: the bound host; 0.0.0.0 becomes this host's name)")
+    p.add_argument("--workdir", default="dfrl-robot", metavar="DIR",
+                   help="experiments' files go to DIR/<experiment>/ (default ./dfrl-robot)")
+    p.set_defaults(func=_run)
