@@ -97,9 +97,12 @@ class Launcher:
             try:
                 st.gathered[ch.robot.id] = ch.gather(st.out)
             except ExperimentError as exc:
-                st.gather_errors.append(f"files of {ch.robot.id} not gathered: {exc}")
-                st.say(st.gather_errors[-1])
-                st.lost.setdefault(ch.robot.id, f"its result files could not be fetched: {exc}")
+                rid = ch.robot.id
+                st.say(f"files of {rid} not gathered: {exc}")
+                if rid in st.lost:          # already counted: say it with the loss
+                    st.lost[rid] += "; its result files could not be fetched"
+                else:                       # answered till the end, then failed to give them
+                    st.gather_errors.append(f"files of {rid} not gathered: {exc}")
 
     def _collect(self, wall: float, ok: bool) -> Results:
         st = self.state
