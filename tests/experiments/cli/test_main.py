@@ -6,7 +6,7 @@ import pytest
 from dfrl.experiments.cli import build_parser, main
 
 COMMANDS = ["node", "demo", "run", "inject", "join", "paper", "bench", "train", "eval",
-            "baselines", "render-arenas", "transfer"]
+            "baselines", "render-arenas", "transfer", "sweep", "robot"]
 
 
 def test_every_command_is_listed_in_order() -> None:
