@@ -23,7 +23,7 @@ def test_agent_moves_to_robot_node_and_updates_table() -> None:
     assert out["port_ok"] and out["sum_ok"] and out["table_plus_one"], out
     assert out["left"] == []
     assert out["joined_none"] and out["joined_home"] and out["tartarus_ok"]
-    assert out["reload_refused"]
+    assert out["reload"] == ("refused" if out["spent"] else "ran"), out
     assert out["moved_ok"] and out["purge_ok"] and out["post_ok"], out
     for bad in ("Warning", "ERROR", "Traceback", "Segmentation"):
         assert bad not in proc.stderr, proc.stderr
