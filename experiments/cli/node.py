@@ -15,6 +15,8 @@ def node_command(
     tokens: list[str] | None = None,
     consult: list[str] | None = None,
     interactive: bool = False,
+    advertise: str | None = None,
+    store: str | None = None,
 ) -> list[str]:
     """The ``swipl`` command line that runs one node.
 
@@ -28,6 +30,11 @@ def node_command(
         Agent programs to load before serving.
     interactive
         Open a Prolog toplevel on the node.
+    advertise
+        ``HOST[:PORT]`` other nodes reach this one at (default: the bound address, or the
+        host name when bound to 0.0.0.0).
+    store
+        Folder where the node keeps its identity and custody records across restarts.
     """
     if not 0 <= port <= 65535:
         raise ValueError(f"port {port} is outside 0..65535")
@@ -39,6 +46,10 @@ def node_command(
         cmd += ["--token", token]
     for path in consult or []:
         cmd += ["--consult", os.path.abspath(path)]
+    if advertise:
+        cmd += ["--advertise", advertise]
+    if store:
+        cmd += ["--store", os.path.abspath(store)]
     if interactive:
         cmd.append("--interactive")
     return cmd
@@ -46,7 +57,8 @@ def node_command(
 
 def _run(args: argparse.Namespace) -> int:
     try:
-        cmd = node_command(args.host, args.port, args.token, args.consult, args.interactive)
+        cmd = node_command(args.host, args.port, args.token, args.consult, args.interactive,
+                           args.advertise, args.store)
     except (ValueError, FileNotFoundError) as exc:
         print(f"dfrl node: {exc}", file=sys.stderr)
         return 2
@@ -62,5 +74,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--token", action="append", default=[], help="platform token (repeatable)")
     p.add_argument("--consult", action="append", default=[], metavar="FILE",
                    help="agent program to load (repeatable)")
+    p.add_argument("--advertise", default=None, metavar="HOST[:PORT]",
+                   help="address other nodes reach this one at (default: the bound one)")
+    p.add_argument("--store", default=None, metavar="DIR",
+                   help="keep the node's identity and custody records in DIR (survive restarts)")
     p.add_argument("--interactive", action="store_true", help="open a Prolog toplevel on the node")
     p.set_defaults(func=_run)
