@@ -1,6 +1,7 @@
 :- module(dfrl_agent,
           [ dfrl_tour/3,                % +Agent, +Link, +Event (the handler)
             dfrl_tour_main/2,           % +Agent, +Link
+            dfrl_tour_event/3,          % +Agent, +Link, +Event
             dfrl_create/4,              % +Node, ?Name, +Plan, +Options
             dfrl_pending/3,             % ?Node, ?Agent, ?Command
             aggregate_tables/3,         % +Method, +Tables, -Table
@@ -9,7 +10,10 @@
 :- use_module('../tartarus').
 :- use_module('../agents',
               [agent_property/3, agent_create/4, agent_add_facts/3]).
-:- use_module('../node', [node_listens_at/2]).
+:- use_module(dfrl_lease,
+              [ lease_depart/6, lease_departed/1, lease_stayed/1,
+                lease_arrived/3, lease_check/3, lease_progress/4,
+                lease_ended/3, lease_custody/3 ]).
 :- use_module('../robot_resources',
               [get_robot_table/3, get_robot_tables/4, set_robot_table/3]).
 :- use_module('../platform_errors', [message_text/2]).
@@ -35,8 +39,31 @@ Everything the agent needs travels as payload facts:
     Itinerary is a list of stop(Host, Port, Robot).
   - dfrl_method_of(Agent, Method)
   - dfrl_state(Agent, State): where it is in the round, a dict
-    `state{round, phase, index, acc, visited, skipped, hops, bytes,
-    start, stop}` (acc packed, see get_state/3).
+    `state{round, phase, index, origin, acc, visited, skipped, retries,
+    hops, bytes, start, stop}` (acc packed, see get_state/3).
+  - dfrl_custody_of(Agent, custody(Epoch, Seq, Holder)): see dfrl_lease.pl.
+  - dfrl_retry_of(Agent, retry(Retries, Backoff)).
+
+## Faults
+
+A move to a stop that fails is tried again Retries times (default 2),
+waiting Backoff seconds (default 0.2), then twice that, ...; then the
+stop is skipped for this pass and listed in the round's `skipped` with
+the error (on the way back a stop that failed this round is tried once
+more, without retries). A round starts at the first stop the agent can
+reach (`origin`; normally the first of the itinerary): when the first
+stop is down the round starts at the next reachable stop, or where the
+agent is, and the backward pass ends there; every round tries the first
+stop again, so a stop that comes back is visited again in the next
+round. The agent never purges itself because a stop is unreachable; it
+aborts only at launch, when no stop at all can be reached.
+
+The agent is not lost with the node it runs on: the stop it came from
+keeps a checkpoint of it under a lease and resurrects it (epoch + 1)
+when that node has died; a late original that meets the higher epoch
+retires. The protocol, and exactly what it guarantees, is in
+dfrl_lease.pl. Table reads and writes carry round(N), agent(Name) and
+epoch(E) in their options (contract K4).
 
 The agent's handler runs in the agent's own module (see agents.pl), so
 the updates of these facts are the agent writing its own state.
@@ -54,16 +81,26 @@ and closed per line):
 ```
 {"event":"round","agent":"fed_q","round":3,"start":1764600000.12,
  "end":1764600000.25,"hops":8,"bytes":4860,"method":"average",
- "visited":["r1","r2","r3"],"skipped":[{"robot":"r4","reason":"..."}]}
+ "visited":["r1","r2","r3"],"skipped":[{"robot":"r4","reason":"..."}],
+ "retries":2,"epoch":1}
 {"event":"control","agent":"fed_q","round":4,"command":"method(median)",
  "status":"applied"}                      (or "ignored" with a "reason")
+{"event":"resurrected","agent":"fed_q","round":5,"epoch":2,
+ "from":"host:port","dead":"host:port"}
+{"event":"superseded","agent":"fed_q","round":5,"epoch":1,"by":2}
 {"event":"finished","agent":"fed_q","round":16}
-{"event":"aborted","agent":"fed_q","round":4,"error":"..."}
+{"event":"aborted","agent":"fed_q","round":1,"error":"..."}
 ```
 
 `visited` lists the robots whose tables went into the aggregate, in the
 order of the forward pass; `skipped` the robots of the itinerary that
-could not be read, reached or written, with the error as text.
+could not be read, reached or written, with the error as text;
+`retries` how many moves of the round were tried again; `epoch` the
+epoch of the copy that logged it. `resurrected` is logged by the copy
+that a stop (`from`) resurrected after the node `dead` was lost with
+the agent on it, `superseded` by a late original as it retires.
+`aborted` is logged only by an agent launched with the event `launch`
+that can reach no stop.
 
 ## Aggregation methods
 
@@ -93,7 +130,9 @@ Every node that loads this module declares the platform event
 dfrl_control/4. Posting [dfrl_control, platform, Link, Agent, Command]
 to the node of the agent's first stop queues Command for Agent (only
 for that agent, on that node). The agent takes its queued commands when
-it starts its next round there, and logs a `control` event for each:
+it starts its next round there (a round that starts elsewhere, because
+the first stop is down, takes those queued where it starts), and logs a
+`control` event for each:
 join(stop(Host, Port, Robot)) adds a robot at the end of the itinerary,
 method(Name) switches the aggregation method (an unknown method is
 ignored and the old one kept), stop ends after the current round (a stop
@@ -108,7 +147,8 @@ that arrives during a round also ends that round's tour).
 
 :- dynamic
     pending/3,                  % Node, Agent, Command (queued control)
-    dfrl_plan/2, dfrl_method_of/2, dfrl_state/2.
+    dfrl_plan/2, dfrl_method_of/2, dfrl_state/2, dfrl_custody_of/2,
+    dfrl_retry_of/2.
 
 :- initialization(platform_event(dfrl_agent:dfrl_control/4)).
 
@@ -189,7 +229,11 @@ dfrl_method(M) :-
 %
 %   Create the agent on Node (not started). Plan is
 %   plan(Itinerary, Rounds, RestSeconds, LogFile, Timeout). Options:
-%   method(M) (default average), tokens(List).
+%   method(M) (default average), tokens(List), retries(N) (default 2:
+%   how often a failed move to a stop is tried again) and backoff(S)
+%   (default 0.2: the first wait before a retry, doubled each time).
+%   Start it by moving it to the first stop, or with the event `launch`
+%   on Node (it then goes to the first stop it can reach).
 %
 %   @error type_error(dfrl_plan, Plan), type_error(stop, Stop)
 %   @error domain_error(non_empty_itinerary, [])
@@ -199,13 +243,19 @@ dfrl_create(Node, Name, Plan, Options) :-
     option(method(Method), Options, average),
     must_be(atom, Method),
     option(tokens(Tokens), Options, []),
+    option(retries(Retries), Options, 2),
+    must_be(nonneg, Retries),
+    option(backoff(Backoff), Options, 0.2),
+    must_be(number, Backoff),
     (   Tokens == [] -> TokOpts = [] ; TokOpts = [tokens(Tokens)] ),
     agent_create(Name, dfrl_agent:dfrl_tour, TokOpts, Node),
-    new_round(1, State),
+    new_round(1, 0, State),
     pack_state(State, Packed),
     agent_add_facts(Node, Name, [ dfrl_plan(Name, Plan),
                                   dfrl_method_of(Name, Method),
-                                  dfrl_state(Name, Packed) ]).
+                                  dfrl_state(Name, Packed),
+                                  dfrl_custody_of(Name, custody(1, 0, none)),
+                                  dfrl_retry_of(Name, retry(Retries, Backoff)) ]).
 
 check_plan(plan(Itinerary, Rounds, Rest, Log, Timeout)) :-
     !,
@@ -223,9 +273,13 @@ check_plan(plan(Itinerary, Rounds, Rest, Log, Timeout)) :-
 check_plan(Plan) :-
     throw(error(type_error(dfrl_plan, Plan), _)).
 
-new_round(Round, state{round:Round, phase:forward, index:0, acc:none,
-                       visited:[], skipped:[], hops:0, bytes:0, start:0,
-                       stop:false}).
+%   A round that starts at stop Origin. Phases: forward, backward, and
+%   home (looking for the stop where the round starts; index is then the
+%   stop the agent is at).
+new_round(Round, Origin,
+          state{round:Round, phase:forward, index:Origin, origin:Origin,
+                acc:none, visited:[], skipped:[], retries:0, hops:0, bytes:0,
+                start:0, stop:false}).
 
 		 /*******************************
 		 *            HANDLER		*
@@ -233,48 +287,116 @@ new_round(Round, state{round:Round, phase:forward, index:0, acc:none,
 
 %!  dfrl_tour(+Agent, +Link, +Event) is det.
 %
-%   The agent's handler: one call per arrival.
+%   The agent's handler. Events: `main` (an arrival), `launch` (started
+%   on a node that is no stop: go to the first reachable stop) and
+%   resurrected(Epoch, From, Dead, Resume) (started by dfrl_lease at
+%   the stop From after the node Dead was lost with the agent on it).
+%   The clause is copied into the agent's own module, so it calls this
+%   module explicitly.
 
-dfrl_tour(Agent, Link, main) :-
-    dfrl_tour_main(Agent, Link).
+dfrl_tour(Agent, Link, Event) :-
+    dfrl_agent:dfrl_tour_event(Agent, Link, Event).
 
 %!  dfrl_tour_main(+Agent, +Link) is det.
 %
-%   What the handler does on arrival (exported, because the handler's
-%   clauses are copied into the agent's own module).
+%   What the handler does on arrival: dfrl_tour_event(Agent, Link, main).
 
-dfrl_tour_main(Agent, _Link) :-
+dfrl_tour_main(Agent, Link) :-
+    dfrl_tour_event(Agent, Link, main).
+
+%!  dfrl_tour_event(+Agent, +Link, +Event) is det.
+%
+%   The body of the handler (exported, because the handler's clauses
+%   run in the agent's own module).
+
+dfrl_tour_event(Agent, _Link, Event) :-
     current_node(Node),
     agent_property(Node, Agent, module(M)),
-    step(M, Agent).
+    event(Event, Node, M, Agent).
+
+event(main, Node, M, Agent) :-
+    lease_arrived(Node, Agent, Verdict),
+    (   Verdict = superseded(E2)
+    ->  retire(Node, M, Agent, E2)
+    ;   step(M, Agent)
+    ).
+event(launch, _, M, Agent) :-
+    get_state(M, Agent, S0),
+    put_dict(_{phase:home, index: -1}, S0, S),
+    put_state(M, Agent, S),
+    try_home(M, Agent, S, 0).
+event(resurrected(Epoch, From, Dead, resume(Packed, Next, Progress)), Node, M,
+      Agent) :-
+    unpack_state(Packed, S0),
+    M:dfrl_plan(Agent, plan(Itinerary, _, _, Log, _)),
+    format(string(Why), "lost with its node ~w; resurrected at ~w with epoch ~w",
+           [Dead, From, Epoch]),
+    nth0(Next, Itinerary, stop(_, _, DeadRobot)),
+    text(From, FromText),
+    text(Dead, DeadText),
+    Event = _{event:resurrected, agent:Agent, epoch:Epoch, from:FromText,
+              dead:DeadText},
+    (   Progress = round_done(Round, true)
+    ->  % the tour had ended there: end it here
+        log_event(Log, Event.put(round, Round)),
+        log_event(Log, _{event:finished, agent:Agent, round:Round}),
+        lease_ended(Node, Agent, finished),
+        purge_agent(Agent)
+    ;   Progress = round_done(Round0, false)
+    ->  Round is Round0 + 1,
+        log_event(Log, Event.put(round, Round)),
+        get_dict(index, S0, At),
+        new_round(Round, At, S1),
+        put_dict(phase, S1, home, S2),
+        skip(DeadRobot, reason(Why), S2, S),
+        put_state(M, Agent, S),
+        try_home(M, Agent, S, 0)
+    ;   get_dict(round, S0, Round),
+        log_event(Log, Event.put(round, Round)),
+        failed_move(M, Agent, S0, Next, reason(Why), 0)
+    ).
 
 step(M, Agent) :-
-    get_state(M, Agent, S0),
+    get_state(M, Agent, S00),
+    (   get_dict(phase, S00, home)
+    ->  get_dict(index, S00, Here),
+        put_dict(_{phase:forward, origin:Here}, S00, S0)
+    ;   S0 = S00
+    ),
     get_dict(phase, S0, Phase),
     get_dict(index, S0, Index),
-    (   Phase == forward, Index =:= 0
+    get_dict(origin, S0, Origin),
+    (   Phase == forward, Index =:= Origin
     ->  start_round(M, Agent, S0, S1)
     ;   S1 = S0
     ),
     M:dfrl_plan(Agent, plan(Itinerary, _, _, _, Timeout)),
     M:dfrl_method_of(Agent, Method),
     nth0(Index, Itinerary, stop(_, _, Robot)),
+    robot_options(Agent, S1, Timeout, Options),
     (   Phase == forward
-    ->  forward(Method, Robot, Timeout, S1, S2),
+    ->  forward(Method, Robot, Options, S1, S2),
         length(Itinerary, N),
         (   Index =:= N - 1
         ->  turn_back(M, Agent, Method, S2)     % writes the last robot here
         ;   go(M, Agent, S2, +1)
         )
-    ;   write_back(Robot, Timeout, S1, S2),
-        (   Index =:= 0
+    ;   write_back(Robot, Options, S1, S2),
+        (   Index =:= Origin
         ->  end_round(M, Agent, S2)
         ;   go(M, Agent, S2, -1)
         )
     ).
 
-%   At the first stop, before the first table is read: take the queued
-%   control commands and note the start time.
+%   Contract K4: where a table read or write comes from.
+robot_options(Agent, S, Timeout, [timeout(Timeout), round(Round), agent(Agent),
+                                  epoch(Epoch)]) :-
+    get_dict(round, S, Round),
+    current_node(Node),
+    lease_custody(Node, Agent, custody(Epoch, _, _)).
+
+%   At the first stop of the round, before the first table is read: take
+%   the queued control commands and note the start time.
 start_round(M, Agent, S0, S) :-
     M:dfrl_plan(Agent, Plan0),
     M:dfrl_method_of(Agent, Method0),
@@ -306,6 +428,9 @@ turn_back(M, Agent, Method, S0) :-
 %   where the agent works on it.
 get_state(M, Agent, S) :-
     M:dfrl_state(Agent, S0),
+    unpack_state(S0, S).
+
+unpack_state(S0, S) :-
     get_dict(acc, S0, Packed),
     unpack(Packed, Acc),
     put_dict(acc, S0, Acc, S).
@@ -320,6 +445,7 @@ pack_state(S0, S) :-
     put_dict(acc, S0, Packed, S).
 
 pack(none, none) :- !.
+pack(packed(S), packed(S)) :- !.
 pack(Acc, packed(String)) :-
     fast_term_serialized(Acc, String).
 
@@ -339,9 +465,9 @@ update(M, Fact) :-
 
 %   Forward: fold this robot's table into the aggregate. A robot that
 %   cannot be read (or whose table does not fit) is skipped.
-forward(Method, Robot, Timeout, S0, S) :-
+forward(Method, Robot, Options, S0, S) :-
     get_dict(acc, S0, Acc0),
-    (   catch(( read_robot(Method, Robot, Timeout, Table),
+    (   catch(( read_robot(Method, Robot, Options, Table),
                 arg(1, Table, Shape),
                 fold(Method, Acc0, Shape, Table, Acc1)
               ),
@@ -357,11 +483,15 @@ forward(Method, Robot, Timeout, S0, S) :-
     ).
 
 %   Record that Robot did not take part (once per robot and round).
+%   Error is an error term or reason(Text).
 skip(Robot, Error, S0, S) :-
     get_dict(skipped, S0, Skipped0),
     (   memberchk(skip(Robot, _), Skipped0)
     ->  S = S0
-    ;   message_text(Error, Text),
+    ;   (   Error = reason(Text0)
+        ->  text(Text0, Text)
+        ;   message_text(Error, Text)
+        ),
         append(Skipped0, [skip(Robot, Text)], Skipped),
         put_dict(skipped, S0, Skipped, S)
     ).
@@ -373,22 +503,22 @@ fold(Method, acc(Shape0, A0), Shape, Table, acc(Shape0, A)) :-
     same_shape(Shape0, Shape),
     aggregate_step(Method, A0, Table, A).
 
-read_robot(Method, Robot, Timeout, Table) :-
+read_robot(Method, Robot, Options, Table) :-
     (   method_uses_visits(Method)
-    ->  get_robot_tables(Robot, qtable(S, V), qtable(S, W), [timeout(Timeout)]),
+    ->  get_robot_tables(Robot, qtable(S, V), qtable(S, W), Options),
         Table = qtable_visits(S, V, W)
-    ;   get_robot_table(Robot, Table, [timeout(Timeout)])
+    ;   get_robot_table(Robot, Table, Options)
     ).
 
 finish(_, none, none) :- !.
 finish(Method, acc(Shape, A), qtable(Shape, Values)) :-
     aggregate_final(Method, A, Values).
 
-write_back(Robot, Timeout, S0, S) :-
+write_back(Robot, Options, S0, S) :-
     get_dict(acc, S0, Table),
     (   Table == none
     ->  S = S0
-    ;   catch(set_robot_table(Robot, Table, [timeout(Timeout)]), E, true),
+    ;   catch(set_robot_table(Robot, Table, Options), E, true),
         (   var(E)
         ->  S = S0
         ;   print_message(warning, E),
@@ -402,35 +532,153 @@ go(M, Agent, S, Dir) :-
     Next is Index + Dir,
     try_stop(M, Agent, S, Next, Dir).
 
-try_stop(M, Agent, S0, Next, Dir) :-
+%   A forward pass goes up to the last stop, a backward pass down to the
+%   stop where the round started (origin).
+try_stop(M, Agent, S0, Next, _Dir) :-
     M:dfrl_plan(Agent, plan(Itinerary, _, _, _, _)),
     length(Itinerary, N),
     get_dict(phase, S0, Phase),
-    (   Next >= 0, Next < N
-    ->  nth0(Next, Itinerary, stop(H, P, Robot)),
-        get_dict(acc, S0, Acc),
-        carried_bytes(Acc, B),
-        get_dict(hops, S0, Hops0),
-        get_dict(bytes, S0, Bytes0),
-        Hops is Hops0 + 1,
-        Bytes is Bytes0 + B,
-        put_dict(_{index:Next, hops:Hops, bytes:Bytes}, S0, S1),
-        put_state(M, Agent, S1),
-        catch(move_agent(Agent, (H, P)), E, true),
-        (   var(E)
-        ->  true
-        ;   print_message(warning, E),
+    get_dict(origin, S0, Origin),
+    (   Next >= Origin, Next < N
+    ->  nth0(Next, Itinerary, Stop),
+        advance(S0, Next, S1),
+        Stop = stop(_, _, Robot),
+        get_dict(skipped, S0, Skipped),
+        (   Phase == backward, memberchk(skip(Robot, _), Skipped)
+        ->  Tries = once                % it failed this round already
+        ;   Tries = policy
+        ),
+        move_to(M, Agent, S0, S1, Stop, Next, Tries, Result),
+        (   Result = failed(E, Retries)
+        ->  print_message(warning, E),
             print_message(warning, format("dfrl: skipping stop ~w", [Next])),
-            skip(Robot, E, S0, S2),
-            put_state(M, Agent, S2),            % still here
-            Next1 is Next + Dir,
-            try_stop(M, Agent, S2, Next1, Dir)
+            failed_move(M, Agent, S0, Next, E, Retries)
+        ;   true
         )
     ;   Phase == forward
     ->  % nothing reachable ahead: finish here and turn back
         M:dfrl_method_of(Agent, Method),
         turn_back(M, Agent, Method, S0)
     ;   end_round(M, Agent, S0)
+    ).
+
+%   The move to stop Next failed (or the agent was lost there and is
+%   resurrected from the state S0 it had before): skip its robot and go
+%   on as the phase says.
+failed_move(M, Agent, S0, Next, Error, Retries) :-
+    M:dfrl_plan(Agent, plan(Itinerary, _, _, _, _)),
+    nth0(Next, Itinerary, stop(_, _, Robot)),
+    skip(Robot, Error, S0, S1),
+    add_retries(Retries, S1, S),
+    put_state(M, Agent, S),
+    get_dict(phase, S, Phase),
+    (   Phase == forward
+    ->  Next1 is Next + 1,
+        try_stop(M, Agent, S, Next1, +1)
+    ;   Phase == backward
+    ->  Next1 is Next - 1,
+        try_stop(M, Agent, S, Next1, -1)
+    ;   Next1 is Next + 1,
+        try_home(M, Agent, S, Next1)
+    ).
+
+add_retries(R, S0, S) :-
+    get_dict(retries, S0, R0),
+    R1 is R0 + R,
+    put_dict(retries, S0, R1, S).
+
+advance(S0, Next, S) :-
+    get_dict(acc, S0, Acc),
+    carried_bytes(Acc, B),
+    get_dict(hops, S0, Hops0),
+    get_dict(bytes, S0, Bytes0),
+    Hops is Hops0 + 1,
+    Bytes is Bytes0 + B,
+    put_dict(_{index:Next, hops:Hops, bytes:Bytes}, S0, S).
+
+%   Find where the round starts (phase home): the first stop before the
+%   one the agent is at (index At; -1 at launch, on a node that is no
+%   stop) that it can reach, else where it is. Robots already skipped in
+%   this round (a stop known to be lost) are not tried again.
+try_home(M, Agent, S0, J) :-
+    M:dfrl_plan(Agent, plan(Itinerary, _, _, Log, _)),
+    length(Itinerary, N),
+    get_dict(index, S0, At),
+    (   At >= 0 -> Limit = At ; Limit = N ),
+    (   J < Limit
+    ->  nth0(J, Itinerary, Stop),
+        Stop = stop(_, _, Robot),
+        get_dict(skipped, S0, Skipped),
+        (   memberchk(skip(Robot, _), Skipped)
+        ->  J1 is J + 1,
+            try_home(M, Agent, S0, J1)
+        ;   advance(S0, J, S1),
+            move_to(M, Agent, S0, S1, Stop, J, policy, Result),
+            (   Result = failed(E, Retries)
+            ->  print_message(warning, E),
+                print_message(warning, format("dfrl: skipping stop ~w", [J])),
+                failed_move(M, Agent, S0, J, E, Retries)
+            ;   true
+            )
+        )
+    ;   At >= 0
+    ->  put_dict(_{phase:forward, origin:At}, S0, S),
+        put_state(M, Agent, S),
+        step(M, Agent)
+    ;   get_dict(round, S0, Round),
+        log_event(Log, _{event:aborted, agent:Agent, round:Round,
+                         error:"no stop of the itinerary can be reached"}),
+        purge_agent(Agent)
+    ).
+
+%   Move to Stop (index Next) with the agent's state S1 (S0 before),
+%   leaving a checkpoint here (dfrl_lease.pl), with bounded retries
+%   (Tries: `policy`, the agent's, or `once`). Result is moved(Retries)
+%   or failed(Error, Retries).
+move_to(M, Agent, S0, S1, stop(H, P, _), Next, Tries, Result) :-
+    current_node(Node),
+    here_address(M, Agent, S0, Here),
+    put_state(M, Agent, S1),
+    pack_state(S0, Packed0),
+    lease_depart(Node, Agent, Here, H:P, resume(Packed0, Next, none), Ticket),
+    retry_policy(M, Agent, Retries0, Backoff),
+    (   Tries == once -> Retries = 0 ; Retries = Retries0 ),
+    attempt_move(Agent, (H, P), Retries, Backoff, 0, Result),
+    (   Result = moved(_)
+    ->  lease_departed(Ticket)
+    ;   lease_stayed(Ticket),
+        put_state(M, Agent, S0)
+    ).
+
+attempt_move(Agent, Link, Retries, Backoff, R, Result) :-
+    catch(move_agent(Agent, Link), E, true),
+    (   var(E)
+    ->  Result = moved(R)
+    ;   R < Retries,
+        \+ E = error(permission_error(enter, _, _), _)
+    ->  Wait is Backoff * 2**R,
+        sleep(Wait),
+        R1 is R + 1,
+        attempt_move(Agent, Link, Retries, Backoff, R1, Result)
+    ;   Result = failed(E, R)
+    ).
+
+retry_policy(M, Agent, Retries, Backoff) :-
+    (   catch(M:dfrl_retry_of(Agent, retry(Retries, Backoff)), _, fail)
+    ->  true
+    ;   Retries = 2,
+        Backoff = 0.2
+    ).
+
+%   The address of the stop the agent is at (as the itinerary names it),
+%   or none on a node that is no stop.
+here_address(M, Agent, S, Here) :-
+    get_dict(index, S, I),
+    M:dfrl_plan(Agent, plan(Itinerary, _, _, _, _)),
+    (   I >= 0,
+        nth0(I, Itinerary, stop(H, P, _))
+    ->  Here = H:P
+    ;   Here = none
     ).
 
 %   Payload size of the aggregate in bytes: 10 per float in the fast
@@ -445,41 +693,97 @@ carried_bytes(Acc, B) :-
     ;   B = 0
     ).
 
+%   The round ends where it started (or where the backward pass stopped).
+%   The holder hears of it first (a resurrection then starts the next
+%   round); an agent that learns there that it was superseded retires
+%   without logging. Then the next round starts at the first reachable
+%   stop, after the rest.
 end_round(M, Agent, S) :-
+    current_node(Node),
     get_time(End),
-    M:dfrl_plan(Agent, plan(Itinerary, Rounds, Rest, Log, _)),
+    M:dfrl_plan(Agent, Plan),
+    Plan = plan(_, Rounds, Rest, Log, _),
     M:dfrl_method_of(Agent, Method),
     get_dict(round, S, Round),
-    log_round(Log, Agent, Method, End, S),
     (   (   Round >= Rounds
-        ->  true
+        ->  Why = none
         ;   get_dict(stop, S, true)
-        ->  true
+        ->  Why = none
         ;   take_stop(Agent)
-        ->  log_control(Log, Agent, Round, stop, applied)
+        ->  Why = stop
         )
-    ->  take_commands(Agent, Left),             % too late for them
-        forall(member(C, Left),
-               log_control(Log, Agent, Round, C,
-                           ignored("the agent has finished its tour"))),
-        log_event(Log, _{event:finished, agent:Agent, round:Round}),
-        purge_agent(Agent)
-    ;   Round1 is Round + 1,
-        new_round(Round1, S1),
-        put_state(M, Agent, S1),
-        (   Rest > 0 -> sleep(Rest) ; true ),
-        nth0(0, Itinerary, stop(H, P, _)),
-        current_node(Node),
-        (   node_listens_at(Node, H:P)
-        ->  step(M, Agent)
-        ;   catch(move_agent(Agent, (H, P)), E,
-                  ( message_text(E, Text),
-                    log_event(Log, _{event:aborted, agent:Agent, round:Round1,
-                                     error:Text}),
-                    print_message(warning, E),
-                    purge_agent(Agent) ))
+    ->  Last = true
+    ;   Last = false
+    ),
+    lease_progress(Node, Agent,
+                   round_done(Round, Last, [dfrl_plan(Agent, Plan),
+                                            dfrl_method_of(Agent, Method)]),
+                   Verdict),
+    (   Verdict = superseded(E2)
+    ->  retire(Node, M, Agent, E2)
+    ;   log_round(Log, Agent, Method, End, S),
+        (   Last == true
+        ->  (   Why == stop -> log_control(Log, Agent, Round, stop, applied) ; true ),
+            take_commands(Agent, Left),             % too late for them
+            forall(member(C, Left),
+                   log_control(Log, Agent, Round, C,
+                               ignored("the agent has finished its tour"))),
+            lease_ended(Node, Agent, finished),
+            log_event(Log, _{event:finished, agent:Agent, round:Round}),
+            purge_agent(Agent)
+        ;   Round1 is Round + 1,
+            get_dict(index, S, At),
+            new_round(Round1, At, S1a),
+            put_dict(phase, S1a, home, S1),
+            put_state(M, Agent, S1),
+            rest(Node, Agent, Rest, Verdict1),
+            (   Verdict1 = superseded(E3)
+            ->  retire(Node, M, Agent, E3)
+            ;   try_home(M, Agent, S1, 0)
+            )
         )
     ).
+
+%   Rest between rounds, in short slices, watching for a higher epoch;
+%   then ask the holder (a long pause may have made it resurrect us).
+rest(Node, Agent, Rest, Verdict) :-
+    (   Rest > 0
+    ->  get_time(T0),
+        Until is T0 + Rest,
+        rest_until(Node, Agent, Until, Verdict0),
+        (   Verdict0 == ok
+        ->  lease_check(Node, Agent, Verdict)
+        ;   Verdict = Verdict0
+        )
+    ;   Verdict = ok
+    ).
+
+rest_until(Node, Agent, Until, Verdict) :-
+    get_time(Now),
+    (   Now >= Until
+    ->  Verdict = ok
+    ;   Slice is min(0.2, Until - Now),
+        sleep(Slice),
+        lease_arrived(Node, Agent, V),
+        (   V == ok
+        ->  rest_until(Node, Agent, Until, Verdict)
+        ;   Verdict = V
+        )
+    ).
+
+%   A copy that met a higher epoch stops, says so and lets its holder go.
+retire(Node, M, Agent, Epoch2) :-
+    lease_custody(Node, Agent, custody(Epoch, _, _)),
+    M:dfrl_plan(Agent, plan(_, _, _, Log, _)),
+    get_state(M, Agent, S),
+    get_dict(round, S, Round),
+    print_message(warning,
+                  format("dfrl: ~w (epoch ~w) superseded by epoch ~w; retires",
+                         [Agent, Epoch, Epoch2])),
+    log_event(Log, _{event:superseded, agent:Agent, round:Round, epoch:Epoch,
+                     by:Epoch2}),
+    lease_ended(Node, Agent, superseded),
+    purge_agent(Agent).
 
 		 /*******************************
 		 *            ROUND LOG		*
@@ -492,11 +796,15 @@ log_round(Log, Agent, Method, End, S) :-
     get_dict(bytes, S, Bytes),
     get_dict(visited, S, Visited0),
     get_dict(skipped, S, Skipped0),
+    get_dict(retries, S, Retries),
     maplist(text, Visited0, Visited),
     maplist(skip_json, Skipped0, Skipped),
+    current_node(Node),
+    lease_custody(Node, Agent, custody(Epoch, _, _)),
     log_event(Log, _{event:round, agent:Agent, round:Round, start:Start,
                      end:End, hops:Hops, bytes:Bytes, method:Method,
-                     visited:Visited, skipped:Skipped}).
+                     visited:Visited, skipped:Skipped, retries:Retries,
+                     epoch:Epoch}).
 
 skip_json(skip(Robot, Reason), _{robot:R, reason:Reason}) :-
     text(Robot, R).

@@ -2,7 +2,9 @@
           [ memory_robots_start/1,      % +Robot-Values pairs
             memory_robots_stop/0,
             memory_robot_table/2,       % ?Robot, ?Values
-            memory_robot_sets/2         % ?Robot, ?Count
+            memory_robot_sets/2,        % ?Robot, ?Count
+            memory_robot_delay/2,       % +Robot, +Seconds
+            memory_robot_options/3      % ?Robot, ?Op, ?Options
           ]).
 /** <module> Robots with in-memory tables, for the platform's tests
 
@@ -10,13 +12,17 @@ A plain-Prolog implementation of the resource hook
 (platform_pl/robot_resources.pl): each robot has a table of 2 actions
 held in this module; reads return it, writes replace it and are counted
 (a write that is not qtable(Shape, List) raises type_error(qtable, T)).
-Visit counts are all 1.0.
+Visit counts are all 1.0. A robot may be made slow (memory_robot_delay/2:
+each read waits that long first, so an agent stays on its node), and the
+options of the last read and write of each robot are kept
+(memory_robot_options/3), so tests can check where a request came from.
 */
 :- use_module('../../platform_pl/robot_resources', []).
 :- autoload(library(apply), [maplist/3]).
 :- autoload(library(lists), [member/2]).
+:- autoload(library(error), [must_be/2]).
 
-:- dynamic table_/2, sets_/2.
+:- dynamic table_/2, sets_/2, delay_/2, options_/3.
 
 :- multifile
     robot_resources:robot/2,
@@ -39,7 +45,30 @@ memory_robots_start(Robots) :-
 
 memory_robots_stop :-
     retractall(table_(_, _)),
-    retractall(sets_(_, _)).
+    retractall(sets_(_, _)),
+    retractall(delay_(_, _)),
+    retractall(options_(_, _, _)).
+
+%!  memory_robot_delay(+Robot, +Seconds) is det.
+%
+%   Every later read of Robot's table first waits Seconds.
+
+memory_robot_delay(R, S) :-
+    must_be(number, S),
+    retractall(delay_(R, _)),
+    assertz(delay_(R, S)).
+
+%!  memory_robot_options(?Robot, ?Op, ?Options) is nondet.
+%
+%   Options came with the last request Op (get or set) for Robot.
+
+memory_robot_options(R, Op, O) :-
+    options_(R, Op, O).
+
+seen(R, Op, O) :-
+    (   delay_(R, S), Op == get -> sleep(S) ; true ),
+    retractall(options_(R, Op, _)),
+    assertz(options_(R, Op, O)).
 
 %!  memory_robot_table(?Robot, ?Values) is nondet.
 
@@ -60,14 +89,17 @@ shape(V, [A, 2]) :-
 robot_resources:robot(R, [algorithm(test), shape(S)]) :-
     table_(R, V),
     shape(V, S).
-robot_resources:table_get(R, qtable(S, V), _) :-
+robot_resources:table_get(R, qtable(S, V), O) :-
+    seen(R, get, O),
     table_(R, V),
     shape(V, S).
-robot_resources:tables_get(R, qtable(S, V), qtable(S, W), _) :-
+robot_resources:tables_get(R, qtable(S, V), qtable(S, W), O) :-
+    seen(R, get, O),
     table_(R, V),
     shape(V, S),
     maplist([_, 1.0]>>true, V, W).
-robot_resources:table_set(R, T, _) :-
+robot_resources:table_set(R, T, O) :-
+    seen(R, set, O),
     (   T = qtable(_, V), is_list(V)
     ->  true
     ;   throw(error(type_error(qtable, T), _))

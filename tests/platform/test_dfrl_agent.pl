@@ -5,6 +5,8 @@
 :- use_module('../../platform_pl/tartarus').
 :- use_module('../../platform_pl/agents/dfrl_agent').
 :- use_module(memory_robots).
+:- use_module('../../platform_pl/agents', [agent_execute/4, agent_exists/2]).
+:- use_module('../../platform_pl/node', [local_node/1]).
 :- use_module(library(plunit)).
 :- use_module(library(http/json)).
 
@@ -38,8 +40,11 @@ events(File, Type, Events) :-
 finished(File) :- events(File, finished, [_]).
 
 nodes(N, Nodes) :-
+    nodes(N, [], Nodes).
+
+nodes(N, Options, Nodes) :-
     length(Nodes, N),
-    maplist([X]>>node_start(localhost:0, X, [token(7), default(false)]), Nodes).
+    maplist([X]>>node_start(localhost:0, X, [token(7), default(false)|Options]), Nodes).
 
 stop_of(Node, R, stop(localhost, P, R)) :- node_property(Node, address(_:P)).
 
@@ -47,6 +52,10 @@ launch(Console, Name, Stops, Method, Rounds, Log) :-
     dfrl_create(Console, Name, plan(Stops, Rounds, 0.0, Log, 30), [method(Method), tokens([7])]),
     Stops = [stop(H, P, _)|_],
     with_node(Console, move_agent(Name, (H, P))).
+
+cleanup_all(Log) :-
+    findall(N, local_node(N), Nodes),
+    cleanup(Nodes, Log).
 
 cleanup(Nodes, Log) :-
     memory_robots_stop,
@@ -163,6 +172,8 @@ test(unreachable_stop_is_skipped, [setup(assertz(user:quiet)),
     R.skipped = [Skip],
     assertion(Skip.robot == r3),
     assertion(sub_atom(Skip.reason, _, _, _, 'cannot connect')),
+    assertion(R.retries == 2),                      % two retries, then skipped
+    assertion(R.epoch == 1),
     assertion(memory_robot_table(r1, [2.0,2.0])),
     assertion(memory_robot_table(r3, [9.0,9.0])).
 
@@ -180,5 +191,105 @@ test(unknown_robot_is_skipped, [setup(assertz(user:quiet)),
     assertion(Skip.robot == nobody),
     assertion(sub_atom(Skip.reason, _, _, _, 'does not exist')),
     assertion(memory_robot_table(r1, [1.0,1.0])).
+
+test(table_requests_say_where_they_come_from,
+     [cleanup(cleanup([C,A,B], Log))]) :-
+    tmp_file(rounds, Log),
+    memory_robots_start([r1-[1.0,1.0], r2-[3.0,3.0]]),
+    nodes(3, [C,A,B]),
+    maplist(stop_of, [A,B], [r1,r2], Stops),
+    launch(C, fo, Stops, average, 2, Log),
+    assertion(wait_for(finished(Log))),
+    once(memory_robot_options(r2, get, Get)),
+    assertion(subsumes_term([timeout(_), round(2), agent(fo), epoch(1)], Get)),
+    once(memory_robot_options(r1, set, Set)),
+    assertion(subsumes_term([timeout(_), round(2), agent(fo), epoch(1)], Set)).
+
+%   The first stop is down at launch and for the first round: the agent
+%   starts its rounds at the next stop it reaches, tries the first stop
+%   again every round, and visits it again once it is back.
+test(unreachable_first_stop_rehomes_and_comes_back,
+     [setup(assertz(user:quiet)),
+      cleanup((retractall(user:quiet), cleanup_all(Log)))]) :-
+    tmp_file(rounds, Log),
+    memory_robots_start([r1-[1.0,1.0], r2-[3.0,3.0], r3-[5.0,5.0]]),
+    nodes(4, [C,A,B,D]),
+    maplist(stop_of, [A,B,D], [r1,r2,r3], Stops),
+    node_property(A, address(_:PortA)),
+    node_stop(A),
+    dfrl_create(C, fh, plan(Stops, 3, 0.4, Log, 30),
+                [tokens([7]), retries(1), backoff(0.05)]),
+    node_property(C, link(Link)),
+    with_node(C, agent_execute(C, fh, Link, launch)),
+    assertion(wait_for(events(Log, round, [_]))),
+    events(Log, round, [R1]),
+    assertion(R1.visited == [r2, r3]),
+    assertion(R1.skipped = [_{robot:r1, reason:_}]),
+    assertion(R1.retries >= 1),
+    % the first stop comes back, on its port, during the rest
+    node_start(localhost:PortA, _, [token(7), default(false)]),
+    assertion(wait_for(finished(Log), 500)),
+    events(Log, round, Rounds),
+    assertion(length(Rounds, 3)),
+    last(Rounds, R3),
+    assertion(R3.visited == [r1, r2, r3]),
+    assertion(R3.skipped == []),
+    assertion(memory_robot_table(r1, [3.0,3.0])),
+    events(Log, aborted, Aborted),
+    assertion(Aborted == []).
+
+%   The agent dwells on a slow robot longer than its holder's lease: the
+%   holder's probe finds it there and renews; nothing is resurrected.
+test(lease_renewed_while_agent_works, [cleanup(cleanup([C,A,B], Log))]) :-
+    tmp_file(rounds, Log),
+    memory_robots_start([r1-[1.0,1.0], r2-[3.0,3.0]]),
+    memory_robot_delay(r2, 1.0),
+    nodes(3, [lease_s(0.2)], [C,A,B]),
+    maplist(stop_of, [A,B], [r1,r2], Stops),
+    launch(C, fl, Stops, average, 1, Log),
+    assertion(wait_for(finished(Log), 400)),
+    events(Log, resurrected, Res),
+    assertion(Res == []),
+    events(Log, round, [R]),
+    assertion(R.visited == [r1, r2]),
+    assertion(R.epoch == 1).
+
+%   The node the agent is on dies mid-round: the stop it came from
+%   resurrects it (epoch 2), it skips the dead stop and finishes its
+%   rounds; later rounds skip the dead stop too.
+test(agent_resurrected_when_its_node_dies,
+     [setup(assertz(user:quiet)),
+      cleanup((retractall(user:quiet), cleanup([C,A,D], Log)))]) :-
+    tmp_file(rounds, Log),
+    memory_robots_start([r1-[1.0,1.0], r2-[3.0,3.0], r3-[5.0,5.0]]),
+    memory_robot_delay(r2, 1.0),
+    nodes(4, [lease_s(0.3), connect_timeout(0.5), reply_timeout(1)], [C,A,B,D]),
+    maplist(stop_of, [A,B,D], [r1,r2,r3], Stops),
+    node_property(A, address(AAddr)),
+    node_property(B, address(BAddr)),
+    launch(C, fr, Stops, average, 2, Log),
+    assertion(wait_for(agent_exists(B, fr), 200)),
+    sleep(0.2),
+    node_stop(B),
+    assertion(wait_for(finished(Log), 500)),
+    events(Log, resurrected, [Res]),
+    assertion(Res.round == 1),
+    assertion(Res.epoch == 2),
+    format(atom(AText), '~w', [AAddr]),
+    format(atom(BText), '~w', [BAddr]),
+    assertion(Res.from == AText),
+    assertion(Res.dead == BText),
+    events(Log, round, [R1, R2]),
+    assertion(R1.visited == [r1, r3]),
+    assertion(R1.skipped = [_{robot:r2, reason:_}]),
+    R1.skipped = [Lost],
+    assertion(sub_atom(Lost.reason, _, _, _, 'lost with its node')),
+    assertion(R1.epoch == 2),
+    assertion(R2.visited == [r1, r3]),
+    assertion(R2.skipped = [_{robot:r2, reason:_}]),
+    assertion(memory_robot_table(r1, [3.0,3.0])),
+    assertion(memory_robot_table(r3, [3.0,3.0])),
+    events(Log, finished, [_]),
+    assertion(\+ dfrl_lease:lease_checkpoint(_, fr, _, _)).
 
 :- end_tests(dfrl_agent).

@@ -1,0 +1,598 @@
+:- module(dfrl_lease,
+          [ lease_depart/6,             % +Node, +Agent, +Here, +Dest, +Resume, -Ticket
+            lease_departed/1,           % +Ticket
+            lease_stayed/1,             % +Ticket
+            lease_arrived/3,            % +Node, +Agent, -Verdict
+            lease_check/3,              % +Node, +Agent, -Verdict
+            lease_progress/4,           % +Node, +Agent, +Progress, -Verdict
+            lease_ended/3,              % +Node, +Agent, +How
+            lease_custody/3,            % +Node, +Agent, -Custody
+            lease_checkpoint/4,         % ?Node, ?Agent, ?Epoch, ?Dest
+            lease_epoch_seen/3,         % ?Node, ?Agent, ?Epoch
+            lease_broadcast_epoch/5     % +Node, +Tokens, +Agent, +Epoch, +Stops
+          ]).
+:- use_module('../node',
+              [ node_option/3, node_property/2, local_node/1, ctx_node/2,
+                ctx_authenticated/1 ]).
+:- use_module('../agents',
+              [ agent_exists/2, agent_property/3, agent_export/3,
+                agent_install/4, agent_execute/4 ]).
+:- use_module('../transport', [transport_request/4, address_normalize/2]).
+:- autoload(library(lists), [member/2, append/3, last/2, min_list/2]).
+:- autoload(library(apply), [exclude/3, foldl/4]).
+:- autoload(library(debug), [debug/3]).
+
+/** <module> Checkpoints, leases and epochs of the dFRL agent (custody)
+
+The dFRL agent (dfrl_agent.pl) must outlive the node it runs on. This
+module keeps, at the stop the agent came from, a checkpoint of the agent
+and resurrects it from there when the node it went to has died.
+
+## The protocol
+
+The agent carries, as payload, custody(Epoch, Seq, Holder): its epoch
+(1 at creation), the number Seq of the hop that brought it here, and the
+address of the stop that holds the checkpoint covering it (`none` at
+its first stop and right after a resurrection).
+
+  1. *Depart.* Before a move from stop A to stop B the agent sets its
+     custody to custody(E, Seq+1, A), and A records a checkpoint: the
+     agent's full record as it leaves (payload, plan, state), the state
+     it had before the move (to resume from) and a lease that expires
+     after the node option `lease_s` (default 10 s). If the move fails
+     the checkpoint is dropped and the old custody restored.
+  2. *Release.* Once the move has succeeded, A's thread tells the old
+     holder (the stop before A) that it may drop its checkpoint for
+     Seq: the agent is now covered by A's. An agent that finishes (or
+     retires) releases its holder the same way.
+  3. *Lease.* When a checkpoint's lease expires without a release, the
+     holder probes B (`probe`, up to 2 tries, each within half the lease):
+     B answers here(E, Seq) if the agent is registered there (running,
+     idle, staged or in doubt), left(E, Seq') if it holds a checkpoint or
+     a record of a later departure, finished(E, Seq) if the tour ended
+     there, superseded(E') if it knows a higher epoch, or unknown.
+     `here` renews the lease; `left`, `finished` and `superseded` drop the
+     checkpoint; `unknown` and no answer at all make the holder ask
+     every other stop of the itinerary the same question. Only if none
+     knows of a later hop (or a higher epoch) is the agent *resurrected*:
+     installed at the holder from the checkpoint with epoch E+1 (one
+     more than any epoch seen), started with the event
+     resurrected(E1, Dead) so that it skips the dead stop B and goes on
+     from the holder exactly as if its move to B had failed. The new
+     epoch is then sent to every reachable stop (`epoch`).
+  4. *Progress.* When the agent ends a round it tells its holder
+     (progress(round_done(N, [Plan and method facts]))), so that a resurrection
+     starts round N+1 instead of repeating the end of round N, and with
+     the plan and method as they are then.
+  5. *Epochs.* Every node records the highest epoch it has seen of each
+     agent (agents arriving, probes, releases, the epoch broadcast). An
+     agent that arrives at a node (lease_arrived/3), ends a round or a
+     rest (lease_check/3 asks its holder) and finds a higher epoch
+     retires: it logs `superseded` and purges itself.
+
+## What is guaranteed, and what is not
+
+  - A kill -9 (or crash, or restart without memory) of the node the
+    agent runs on, while its holder and at least one other stop live:
+    the agent is resurrected within about lease_s + 2 probe timeouts,
+    and the federation goes on without the dead stop (which is tried
+    again, and visited again if it came back, in every later round).
+  - A pause (SIGSTOP) or partition of the agent's node that covers a
+    probe is taken for a death. The late original then meets the higher
+    epoch at its next contact with the holder or with any stop that got
+    the epoch broadcast (its next arrival, round end or rest end) and
+    retires there, *before* logging a round. So the two copies never
+    both log the same round, with two exceptions: the original's node
+    is cut off from every stop that knows the new epoch (a partition
+    that outlasts the lease: it finishes its round alone, on its own
+    stops, and logs it; the round events carry `epoch`, so a reader
+    keeps the highest epoch per round), or it is frozen in the few
+    microseconds between its holder's answer and its log write. Until
+    it retires the original may still read and write the table of the
+    robot it is on.
+  - A pause or partition shorter than a probe's timeout never causes a
+    resurrection.
+  - Two faults at once are not covered: if the holder dies too before
+    the agent has moved on, the agent is lost. An agent right after a
+    resurrection, and at its first stop, has no holder until it moves.
+  - Checkpoints are kept in memory: a holder that restarts has none.
+*/
+
+:- dynamic
+    ckpt/9,                     % Node, Agent, Epoch, Seq, Here, Dest, Record, Resume, Expiry
+    gone/6,                     % Node, Agent, Epoch, Seq, How, Time
+    seen/3,                     % Node, Agent, Epoch
+    watchdog/1,                 % ThreadId
+    watchdog_exited/1.          % ThreadId, to be joined
+
+:- multifile
+    node:platform_request/4,
+    node:node_stopping/1.
+
+:- meta_predicate locked(0).
+
+locked(Goal) :-
+    with_mutex(dfrl_lease, Goal).
+
+		 /*******************************
+		 *     AGENT SIDE (dfrl_agent)	*
+		 *******************************/
+
+%!  lease_custody(+Node, +Agent, -Custody) is det.
+%
+%   Custody is custody(Epoch, Seq, Holder) of Agent on Node (read from
+%   its payload; custody(1, 0, none) for an agent without one).
+
+lease_custody(Node, Agent, Custody) :-
+    (   agent_property(Node, Agent, module(M)),
+        catch(M:dfrl_custody_of(Agent, C), _, fail)
+    ->  Custody = C
+    ;   Custody = custody(1, 0, none)
+    ).
+
+set_custody(Node, Agent, Custody) :-
+    agent_property(Node, Agent, module(M)),
+    retractall(M:dfrl_custody_of(Agent, _)),
+    assertz(M:dfrl_custody_of(Agent, Custody)).
+
+%!  lease_depart(+Node, +Agent, +Here, +Dest, +Resume, -Ticket) is det.
+%
+%   Before moving Agent from Node (reached by others at Here, a
+%   Host:Port or `none` for a node that is no stop) to Dest: advance its
+%   custody and record the checkpoint. Resume is what a resurrection
+%   resumes from (resume(StateBefore, Next, none), see dfrl_agent.pl;
+%   lease_progress/4 replaces `none` by round_done(Round, Last)). Ticket
+%   is passed to lease_departed/1 or lease_stayed/1.
+
+lease_depart(Node, Agent, Here, Dest, Resume, Ticket) :-
+    lease_custody(Node, Agent, Old),
+    Old = custody(E, K, _),
+    K1 is K + 1,
+    agent_tokens(Node, Agent, Tokens),
+    Ticket = ticket(Node, Agent, Old, E, K1, Tokens),
+    (   Here == none
+    ->  set_custody(Node, Agent, custody(E, K1, none))
+    ;   set_custody(Node, Agent, custody(E, K1, Here)),
+        agent_export(Node, Agent, Record),
+        lease_s(Node, L),
+        get_time(Now),
+        Expiry is Now + L,
+        locked(( assertz(ckpt(Node, Agent, E, K1, Here, Dest, Record, Resume,
+                              Expiry)),
+                 ensure_watchdog ))
+    ).
+
+%!  lease_stayed(+Ticket) is det.
+%
+%   The move failed: drop the checkpoint, restore the custody.
+
+lease_stayed(ticket(Node, Agent, Old, E, K1, _)) :-
+    locked(retractall(ckpt(Node, Agent, E, K1, _, _, _, _, _))),
+    set_custody(Node, Agent, Old).
+
+%!  lease_departed(+Ticket) is det.
+%
+%   The move succeeded: release the old holder (best effort; a holder
+%   that misses it finds out with its probe). Called from the thread
+%   that moved the agent, after the move.
+
+lease_departed(ticket(Node, Agent, custody(E, K, Holder), _, _, Tokens)) :-
+    release(Node, Tokens, Agent, Holder, E, K, left, _).
+
+release(_, _, _, none, _, _, _, none) :- !.
+release(Node, Tokens, Agent, Holder, E, K, How, Answer) :-
+    custody_call(Node, Tokens, Holder, release(Agent, E, K, How), Answer0),
+    (   Answer0 = error(Why)
+    ->  debug(dfrl(lease), 'release of ~w at ~w: ~p', [Agent, Holder, Why]),
+        Answer = none
+    ;   Answer = Answer0
+    ).
+
+%!  lease_ended(+Node, +Agent, +How) is det.
+%
+%   Agent ends on Node (How: finished or superseded): remember it and
+%   release its holder. Call before purging the agent.
+
+lease_ended(Node, Agent, How) :-
+    lease_custody(Node, Agent, custody(E, K, Holder)),
+    get_time(Now),
+    assertz(gone(Node, Agent, E, K, How, Now)),
+    prune_gone(Node, Agent),
+    agent_tokens(Node, Agent, Tokens),
+    release(Node, Tokens, Agent, Holder, E, K, How, _).
+
+%!  lease_arrived(+Node, +Agent, -Verdict) is det.
+%
+%   Agent starts on Node: Verdict is superseded(E2) if Node has seen a
+%   higher epoch of it, else ok (and its epoch is noted).
+
+lease_arrived(Node, Agent, Verdict) :-
+    lease_custody(Node, Agent, custody(E, _, _)),
+    (   seen(Node, Agent, E2), E2 > E
+    ->  Verdict = superseded(E2)
+    ;   note_epoch(Node, Agent, E),
+        Verdict = ok
+    ).
+
+%!  lease_check(+Node, +Agent, -Verdict) is det.
+%
+%   As lease_arrived/3, and ask the holder too: Verdict is
+%   superseded(E2) if it knows a higher epoch. An unreachable holder is
+%   no verdict (ok).
+
+lease_check(Node, Agent, Verdict) :-
+    lease_progress(Node, Agent, alive, Verdict).
+
+%!  lease_progress(+Node, +Agent, +Progress, -Verdict) is det.
+%
+%   Tell the holder of Agent about Progress (`alive`, or
+%   round_done(Round, Last, Facts): the round ended, the last one if Last
+%   is true; Facts, payload facts such
+%   as dfrl_plan(Agent, Plan), replace those of the checkpoint) and
+%   renew its lease. Verdict as
+%   lease_check/3.
+
+lease_progress(Node, Agent, Progress, Verdict) :-
+    lease_arrived(Node, Agent, V0),
+    (   V0 \== ok
+    ->  Verdict = V0
+    ;   lease_custody(Node, Agent, custody(E, K, Holder)),
+        Holder \== none
+    ->  agent_tokens(Node, Agent, Tokens),
+        custody_call(Node, Tokens, Holder, progress(Agent, E, K, Progress),
+                     Answer),
+        (   Answer = superseded(E2)
+        ->  note_epoch(Node, Agent, E2),
+            Verdict = Answer
+        ;   Verdict = ok
+        )
+    ;   Verdict = ok
+    ).
+
+%!  lease_checkpoint(?Node, ?Agent, ?Epoch, ?Dest) is nondet.
+%
+%   Node holds a checkpoint of Agent (epoch Epoch) that went to Dest.
+
+lease_checkpoint(Node, Agent, Epoch, Dest) :-
+    ckpt(Node, Agent, Epoch, _, _, Dest, _, _, _).
+
+%!  lease_epoch_seen(?Node, ?Agent, ?Epoch) is nondet.
+%
+%   Epoch is the highest epoch of Agent that Node has seen.
+
+lease_epoch_seen(Node, Agent, Epoch) :-
+    seen(Node, Agent, Epoch).
+
+note_epoch(Node, Agent, E) :-
+    locked(( seen(Node, Agent, E0), E0 >= E
+           ->  true
+           ;   retractall(seen(Node, Agent, _)),
+               assertz(seen(Node, Agent, E))
+           )).
+
+%   Keep the last 64 records of departures and ends per agent and node.
+prune_gone(Node, Agent) :-
+    findall(T, gone(Node, Agent, _, _, _, T), Ts),
+    length(Ts, N),
+    (   N > 64
+    ->  msort(Ts, Sorted),
+        Drop is N - 64,
+        length(Old, Drop),
+        append(Old, _, Sorted),
+        last(Old, Cut),
+        locked(forall(( gone(Node, Agent, E, K, H, T), T =< Cut ),
+                      retract(gone(Node, Agent, E, K, H, T))))
+    ;   true
+    ).
+
+%!  lease_broadcast_epoch(+Node, +Tokens, +Agent, +Epoch, +Stops) is det.
+%
+%   Tell each of Stops (Host:Port addresses) that Agent now has Epoch,
+%   proving Tokens (the agent's). Unreachable stops are skipped.
+
+lease_broadcast_epoch(Node, Tokens, Agent, Epoch, Stops) :-
+    forall(member(S, Stops),
+           custody_call(Node, Tokens, S, epoch(Agent, Epoch), _)).
+
+		 /*******************************
+		 *           REQUESTS		*
+		 *******************************/
+
+%   custody_call(+Node, +Address, +Request, -Answer): one authenticated
+%   request, with timeouts bounded by the lease; Answer is error(E) if
+%   it could not be made.
+custody_call(Node, Tokens, Address, Request, Answer) :-
+    probe_timeouts(Node, CT, RT),
+    catch(transport_request(Address, dfrl_custody(Request), Answer,
+                            [ connect_timeout(CT), reply_timeout(RT),
+                              tokens(Tokens), action(custody) ]),
+          E, Answer = error(E)).
+
+agent_tokens(Node, Agent, Tokens) :-
+    (   agent_property(Node, Agent, tokens(Tokens))
+    ->  true
+    ;   node_property(Node, tokens(Tokens))
+    ->  true
+    ;   Tokens = []
+    ).
+
+node:platform_request(dfrl_custody(Request), Ctx, Reply, true) :-
+    ctx_node(Ctx, Node),
+    (   ctx_authenticated(Ctx)
+    ->  serve(Request, Node, Answer),
+        Reply = ok(Answer)
+    ;   node_property(Node, address(Here)),
+        Reply = error(error(permission_error(custody, platform, Here), _))
+    ).
+
+serve(probe(Agent, E, K), Node, Answer) :-
+    probe_answer(Node, Agent, E, K, Answer).
+serve(release(Agent, E, K, How), Node, Answer) :-
+    (   seen(Node, Agent, E2), E2 > E
+    ->  Answer = superseded(E2)
+    ;   note_epoch(Node, Agent, E),
+        get_time(Now),
+        locked(forall(( ckpt(Node, Agent, E1, K1, _, _, _, _, _),
+                        E1 =< E, K1 =< K ),
+                      ( retractall(ckpt(Node, Agent, E1, K1, _, _, _, _, _)),
+                        assertz(gone(Node, Agent, E1, K1, released(How), Now))
+                      ))),
+        prune_gone(Node, Agent),
+        Answer = released
+    ).
+serve(progress(Agent, E, K, Progress), Node, Answer) :-
+    (   seen(Node, Agent, E2), E2 > E
+    ->  Answer = superseded(E2)
+    ;   note_epoch(Node, Agent, E),
+        lease_s(Node, L),
+        get_time(Now),
+        Expiry is Now + L,
+        locked(( retract(ckpt(Node, Agent, E, K, Here, Dest, Rec0, Res0, _))
+               ->  apply_progress(Progress, Here, Rec0, Res0, Rec, Res),
+                   assertz(ckpt(Node, Agent, E, K, Here, Dest, Rec, Res,
+                                Expiry)),
+                   Answer = renewed
+               ;   Answer = unknown
+               ))
+    ).
+serve(epoch(Agent, E), Node, noted) :-
+    note_epoch(Node, Agent, E).
+
+%   A round ended where the agent is: a resurrection starts the next
+%   round from the holder, with the facts (plan, method) as they are now.
+apply_progress(alive, _, Rec, Res, Rec, Res).
+apply_progress(round_done(Round, Last, Facts), _, Rec0, resume(S0, Next, _),
+               Rec, resume(S0, Next, round_done(Round, Last))) :-
+    Rec0 = agent(Name, H, K, T, P, Preds, Cls0, Hops),
+    foldl(replace_fact, Facts, Cls0, Cls),
+    Rec = agent(Name, H, K, T, P, Preds, Cls, Hops).
+
+replace_fact(Fact, Cls0, Cls) :-
+    functor(Fact, F, A),
+    functor(Old, F, A),
+    arg(1, Fact, Name),
+    arg(1, Old, Name),
+    exclude([C]>>( C = (Old0 :- _), subsumes_term(Old, Old0) ), Cls0, Cls1),
+    Cls = [(Fact :- true)|Cls1].
+
+probe_answer(Node, Agent, E, K, Answer) :-
+    (   seen(Node, Agent, E2), E2 > E
+    ->  Answer = superseded(E2)
+    ;   agent_exists(Node, Agent)
+    ->  lease_custody(Node, Agent, custody(E1, K1, _)),
+        Answer = here(E1, K1)
+    ;   findall(K1-left, ( ckpt(Node, Agent, E, K1, _, _, _, _, _), K1 > K ), L1),
+        findall(K1-How, ( gone(Node, Agent, E, K1, How0, _), K1 >= K,
+                          gone_how(How0, How) ), L2),
+        append(L1, L2, L),
+        L \== []
+    ->  msort(L, Sorted),
+        last(Sorted, K2-How),
+        Answer =.. [How, E, K2]
+    ;   Answer = unknown
+    ).
+
+gone_how(released(_), left).
+gone_how(finished, finished).
+gone_how(superseded, finished).
+
+		 /*******************************
+		 *           WATCHDOG		*
+		 *******************************/
+
+lease_s(Node, L) :-
+    (   catch(node_option(Node, lease_s, L0), _, fail),
+        number(L0), L0 > 0
+    ->  L = L0
+    ;   L = 10
+    ).
+
+probe_timeouts(Node, CT, RT) :-
+    lease_s(Node, L),
+    node_option(Node, connect_timeout, CT0),
+    node_option(Node, reply_timeout, RT0),
+    CT is max(0.25, min(CT0, L/2)),
+    RT is max(0.25, min(RT0, L/2)).
+
+%   One thread per process, while there are checkpoints: every tick it
+%   handles the checkpoints whose lease expired. It ends when there are
+%   none (the next one to start joins it) or when told to stop (at halt).
+%   Called holding the lock.
+ensure_watchdog :-
+    (   watchdog(_)
+    ->  true
+    ;   forall(retract(watchdog_exited(Old)), catch(thread_join(Old, _), _, true)),
+        thread_create(watch, Tid, []),
+        assertz(watchdog(Tid))
+    ).
+
+watch :-
+    catch(watch_loop, E, true),
+    thread_self(Me),
+    locked(( retractall(watchdog(Me)),
+             assertz(watchdog_exited(Me)) )),
+    (   var(E) -> true ; E == stop -> true ; print_message(warning, E) ).
+
+watch_loop :-
+    (   locked(( ckpt(_, _, _, _, _, _, _, _, _)
+               ->  true
+               ;   thread_self(Me), retractall(watchdog(Me)), fail
+               ))
+    ->  tick(T),
+        thread_self(Me),
+        (   thread_get_message(Me, stop, [timeout(T)])
+        ->  throw(stop)
+        ;   true                        % the timeout: a tick
+        ),
+        get_time(Now),
+        findall(ckpt(N, A, E, K), ( ckpt(N, A, E, K, _, _, _, _, X), X < Now ),
+                Due),
+        forall(member(C, Due),
+               catch(expired(C), Err, print_message(warning, Err))),
+        watch_loop
+    ;   true
+    ).
+
+tick(T) :-
+    findall(L, ( ckpt(N, _, _, _, _, _, _, _, _), lease_s(N, L) ), Ls),
+    (   Ls == [] -> T = 0.1 ; min_list(Ls, Min), T is max(0.02, min(0.5, Min/5)) ).
+
+expired(ckpt(Node, Agent, E, K)) :-
+    (   ckpt(Node, Agent, E, K, Here, Dest, Record, Resume, _)
+    ->  (   \+ local_node(Node)
+        ->  drop(Node, Agent, E, K, node_stopped)
+        ;   seen(Node, Agent, E2), E2 > E
+        ->  drop(Node, Agent, E, K, superseded(E2))
+        ;   agent_exists(Node, Agent)
+        ->  drop(Node, Agent, E, K, back_here)
+        ;   probe(Node, Record, Dest, Agent, E, K, 2, Answer),
+            judge(Answer, Dest, Node, Agent, E, K, Here, Record, Resume)
+        )
+    ;   true
+    ).
+
+judge(here(E1, _), _, Node, Agent, E, K, _, _, _) :-
+    E1 =< E,
+    !,
+    renew(Node, Agent, E, K).
+judge(unknown, Dest, Node, Agent, E, K, Here, Record, Resume) :-
+    !,
+    others_know(Node, Dest, Here, Record, Agent, E, K, Known),
+    (   Known = known(Why)
+    ->  drop(Node, Agent, E, K, Why)
+    ;   Known = max_epoch(Max),
+        resurrect(Node, Agent, E, K, Max, Here, Dest, Record, Resume, lost)
+    ).
+judge(error(Why), Dest, Node, Agent, E, K, Here, Record, Resume) :-
+    !,
+    others_know(Node, Dest, Here, Record, Agent, E, K, Known),
+    (   Known = known(Reason)
+    ->  drop(Node, Agent, E, K, Reason)
+    ;   Known = max_epoch(Max),
+        resurrect(Node, Agent, E, K, Max, Here, Dest, Record, Resume,
+                  unreachable(Why))
+    ).
+judge(Answer, _, Node, Agent, E, K, _, _, _) :-
+    (   Answer = superseded(E2) -> note_epoch(Node, Agent, E2) ; true ),
+    drop(Node, Agent, E, K, Answer).
+
+renew(Node, Agent, E, K) :-
+    lease_s(Node, L),
+    get_time(Now),
+    Expiry is Now + L,
+    locked(( retract(ckpt(Node, Agent, E, K, H, D, R, S, _))
+           ->  assertz(ckpt(Node, Agent, E, K, H, D, R, S, Expiry))
+           ;   true
+           )).
+
+drop(Node, Agent, E, K, Why) :-
+    debug(dfrl(lease), 'drop checkpoint ~w/~w/~w on ~w: ~p', [Agent, E, K, Node, Why]),
+    get_time(Now),
+    locked(( retract(ckpt(Node, Agent, E, K, _, _, _, _, _))
+           ->  assertz(gone(Node, Agent, E, K, released(dropped), Now))
+           ;   true
+           )),
+    prune_gone(Node, Agent).
+
+probe(Node, Record, Dest, Agent, E, K, Tries, Answer) :-
+    record_tokens(Record, Tokens),
+    custody_call(Node, Tokens, Dest, probe(Agent, E, K), A0),
+    (   A0 = error(_), Tries > 1
+    ->  sleep(0.1),
+        T1 is Tries - 1,
+        probe(Node, Record, Dest, Agent, E, K, T1, Answer)
+    ;   Answer = A0
+    ).
+
+%   Does any other stop know of a later hop or a higher epoch?
+others_know(Node, Dest, Here, Record, Agent, E, K, Known) :-
+    record_stops(Record, Agent, Stops0),
+    exclude([S]>>( same_address(S, Dest) ; same_address(S, Here) ), Stops0, Stops),
+    record_tokens(Record, Tokens),
+    others_know_(Stops, Node, Tokens, Agent, E, K, E, Known).
+
+others_know_([], _, _, _, _, _, Max, max_epoch(Max)).
+others_know_([S|Ss], Node, Tokens, Agent, E, K, Max0, Known) :-
+    custody_call(Node, Tokens, S, probe(Agent, E, K), Answer),
+    (   Answer = superseded(E2)
+    ->  Known = known(superseded(S, E2))
+    ;   Answer = here(E1, _), E1 >= E
+    ->  Known = known(here(S))
+    ;   ( Answer = left(_, K1) ; Answer = finished(_, K1) ), K1 > K
+    ->  Known = known(Answer)
+    ;   others_know_(Ss, Node, Tokens, Agent, E, K, Max0, Known)
+    ).
+
+record_tokens(Record, Tokens) :-
+    arg(4, Record, Tokens).
+
+record_stops(agent(_, _, _, _, _, _, Clauses, _), Agent, Stops) :-
+    (   member((dfrl_plan(Agent, plan(It, _, _, _, _)) :- _), Clauses)
+    ->  findall(H:P, member(stop(H, P, _), It), Stops0),
+        sort(Stops0, Stops)
+    ;   Stops = []
+    ).
+
+same_address(A, B) :-
+    catch(( address_normalize(A, H1:P1),
+            address_normalize(B, H2:P2) ), _, fail),
+    P1 =:= P2,
+    (   H1 == H2
+    ->  true
+    ;   loopback(H1), loopback(H2)
+    ).
+
+loopback(localhost).
+loopback('127.0.0.1').
+
+%   Install the agent at the holder with a new epoch and start it with
+%   resurrected(OldEpoch, Dead); tell the other stops.
+resurrect(Node, Agent, E, K, MaxSeen, Here, Dest, Record0, Resume, Why) :-
+    locked(retract(ckpt(Node, Agent, E, K, _, _, _, _, _))),
+    (   seen(Node, Agent, Seen) -> true ; Seen = E ),
+    E1 is max(max(E, MaxSeen), Seen) + 1,
+    Record0 = agent(Name, H, Kind, T, P, Preds, Cls0, Hops),
+    replace_fact(dfrl_custody_of(Name, custody(E1, K, none)), Cls0, Cls1),
+    Record = agent(Name, H, Kind, T, P, Preds, Cls1, Hops),
+    note_epoch(Node, Agent, E1),
+    agent_install(Node, Record, idle, Agent),
+    print_message(warning, format("dfrl: ~w lost at ~w (~p); resurrected at ~w with epoch ~w",
+                                  [Agent, Dest, Why, Node, E1])),
+    node_property(Node, link(Link)),
+    agent_execute(Node, Agent, Link, resurrected(E1, Here, Dest, Resume)),
+    record_stops(Record, Agent, Stops0),
+    exclude([S]>>( same_address(S, Dest) ; same_address(S, Here) ), Stops0, Stops),
+    lease_broadcast_epoch(Node, T, Agent, E1, Stops).
+
+:- at_halt(stop_watchdog).
+
+stop_watchdog :-
+    forall(watchdog(T), catch(thread_send_message(T, stop), _, true)),
+    forall(watchdog(T), catch(thread_join(T, _), _, true)),
+    forall(retract(watchdog_exited(T)), catch(thread_join(T, _), _, true)).
+
+%   A node that stops forgets its checkpoints, as a process that dies.
+node:node_stopping(Node) :-
+    locked(( retractall(ckpt(Node, _, _, _, _, _, _, _, _)),
+             retractall(gone(Node, _, _, _, _, _)),
+             retractall(seen(Node, _, _)) )).
