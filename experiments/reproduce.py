@@ -1,102 +1,222 @@
-"""Reproduce the paper's figures: four federated runs, the standalone baselines, ``report.md``.
+"""``dfrl paper``: the paper's experiment K times, greedy evaluations, a report of tests.
 
-Runs the four federated combinations (Q-learning / SARSA x average / max, five robots in
-R1..R5, ``experiments/configs/paper_*.json``) and the standalone baselines (each arena alone,
-same seeds and budget), gathers the eight federated figures (sum of Q-values and cumulative
-reward per robot, per combination) and draws the two baseline figures (R1 vs R4, as in the
-paper), and writes ``report.md`` (:mod:`dfrl.experiments.report.paper`).
+For every seed: the four federated combinations (Q-learning / SARSA x average / max, five
+robots in R1..R5, ``experiments/configs/paper_*.json``, real robot node processes and the
+dFRL agent), the standalone baselines (each arena alone, the seed its federated robot has),
+and the negative control: federated Q-learning/average and standalone Q-learning in R1 and R4
+with a random behaviour policy (epsilon 1 throughout). Each run's tables are evaluated at
+``points`` evenly spaced iterations (federated: the table history the robot nodes write at
+every share; standalone: snapshots) with the greedy policy in the robot's own arena and the
+held-out arenas h1 and h2 (``evaluations.csv`` in the run's folder).
+
+Layout of ``OUT``: ``seed<S>/<config name>/`` (a federated results folder),
+``seed<S>/standalone/<algo>_<arena>/``, ``seed<S>/standalone/control_qlearning_<arena>/``,
+``figures/`` (means over seeds with 95% bands), ``report.md``
+(:mod:`dfrl.experiments.report.paper`). Federated runs go one after another (each uses both
+cores); standalone trainings and evaluations run meanwhile on a pool of ``jobs`` processes.
 """
 from __future__ import annotations
 
-import shutil
 import sys
 import time
-from dataclasses import dataclass
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
+import numpy as np
+
 from dfrl.experiments.config import ExperimentConfig, resolve_config
-from dfrl.experiments.launcher import run
-from dfrl.experiments.report.paper import write_report
-from dfrl.experiments.report.stats import (ALGO_NAMES, COMBOS, CombinationRun, StandaloneRuns,
-                                           stats_of)
+from dfrl.experiments.report.observations import SeedRun
+from dfrl.experiments.report.stats import COMBOS
 from dfrl.experiments.results.metrics import read_metrics
-from dfrl.experiments.results.rounds import count_equal, read_rounds_csv
-from dfrl.experiments.standalone import run_baselines
+from dfrl.experiments.standalone import evaluated_job
+from dfrl.experiments.studies.history import (Evaluator, PendingRows, eval_job, history_tables,
+                                              pick, read_rows)
+from dfrl.robots.state import Discretiser
+from dfrl.robots.training import TrainerConfig, read_metrics_csv
+
+#: Random behaviour: the negative control's exploration schedule.
+RANDOM_BEHAVIOUR = {"kind": "constant", "start": 1.0, "end": 1.0, "decay_steps": 1}
+#: Held-out evaluation arenas.
+HELD_OUT = ("h1", "h2")
+#: Arenas of the control's standalone runs (the ones tests 4 and 5 compare).
+CONTROL_ARENAS = ("r1", "r4")
+#: Evaluation seeds: this plus the training seed (the same for every configuration).
+EVAL_SEED = 50_000
 
 
 @dataclass(frozen=True)
+class PaperOptions:
+    """What ``dfrl paper`` runs (defaults: the 15-minute budget on two cores)."""
+
+    seeds: int = 5
+    first_seed: int = 1
+    iterations: int | None = None       # None: the configs' (20,000)
+    respite: int | None = None
+    points: int = 4                     # greedy evaluations per run
+    eval_steps: int = 1000              # per table and arena
+    episode_steps: int = 200
+    jobs: int = 2
+    control: bool = True
+    skip_existing: bool = False
+
+
+@dataclass
 class Reproduction:
     """What :func:`reproduce_paper` produced; ``ok``: every federated run succeeded."""
 
     report: Path
-    runs: dict[tuple[str, str], CombinationRun]
-    standalone: dict[str, StandaloneRuns]
+    fed: dict[str, list[SeedRun]]
+    standalone: dict[str, list[SeedRun]]
+    control_fed: list[SeedRun]
+    control_sa: list[SeedRun]
     total_s: float
     ok: bool
+    walls: dict[str, float] = field(default_factory=dict)
 
 
-def federated_run(algo: str, method: str, out: Path, changes: dict[str, Any],
-                  skip_existing: bool, progress: TextIO | None) -> CombinationRun:
-    """Run (or reuse) one combination into ``OUT/NAME``; copy its figures to ``OUT/figures``."""
-    cfg = ExperimentConfig.load(resolve_config(f"paper_{algo}_{method}"))
-    cfg = cfg.replace(**changes) if changes else cfg
-    d = out / cfg.name
-    t1 = time.monotonic()
+def control_learner() -> dict[str, Any]:
+    learner = TrainerConfig().to_dict()["learner"]
+    learner["epsilon"] = dict(RANDOM_BEHAVIOUR)
+    return learner
+
+
+def paper_configs(opts: PaperOptions, seed: int) -> list[tuple[str, ExperimentConfig]]:
+    """(key, config) of the federated runs of one seed; the control last."""
+    changes: dict[str, Any] = {"seed": seed}
+    if opts.iterations is not None:
+        changes["iterations"] = opts.iterations
+    if opts.respite is not None:
+        changes["respite"] = opts.respite
+    out = []
+    for algo, method in COMBOS:
+        cfg = ExperimentConfig.load(resolve_config(f"paper_{algo}_{method}")).replace(**changes)
+        out.append((f"{algo}/{method}", cfg))
+    if opts.control:
+        base = ExperimentConfig.load(resolve_config("paper_qlearning_average")).replace(**changes)
+        trainer = dict(base.trainer)
+        trainer["learner"] = control_learner()
+        out.append(("control", base.replace(name="control_qlearning_average", trainer=trainer,
+                                            title="control: random behaviour (epsilon 1)")))
+    return out
+
+
+def _federated(cfg: ExperimentConfig, d: Path, opts: PaperOptions, evaluator: Evaluator,
+               progress: TextIO | None) -> tuple[bool, PendingRows, float]:
+    from dfrl.experiments.launcher import run
+
+    t0 = time.monotonic()
     ok = True
-    if not (skip_existing and (d / "summary.md").is_file() and (d / "metrics.csv").is_file()):
+    if not (opts.skip_existing and (d / "summary.md").is_file()):
         if progress is not None:
-            print(f"== {cfg.name}: {len(cfg.robots)} robots, {cfg.iterations} iterations, "
-                  f"{cfg.rounds} rounds", file=progress)
-        ok = run(cfg, d, progress=progress).ok
-    wall = time.monotonic() - t1
+            print(f"== {d.parent.name}/{cfg.name}: {len(cfg.robots)} robots, {cfg.iterations} "
+                  f"iterations", file=progress, flush=True)
+        ok = run(cfg, d, progress=None).ok
+    wall = time.monotonic() - t0
+    pending = PendingRows()
     arenas = {r.id: r.arena for r in cfg.robots}
-    curves = read_metrics(d / "metrics.csv")
-    rows = read_rounds_csv(d / "rounds.csv")
-    for name in ("q_sum", "cumulative_reward"):
-        if (d / f"{name}.png").is_file():
-            shutil.copy(d / f"{name}.png", out / "figures" / f"{algo}_{method}_{name}.png")
-    return CombinationRun(cfg, curves, arenas, wall, ok, len(rows), count_equal(rows),
-                          stats_of(curves, arenas))
+    for robot, files in history_tables(d).items():
+        for it in pick(files, cfg.iterations, opts.points):
+            pending.add(evaluator, robot, it, np.load(files[it]), arenas[robot], HELD_OUT)
+    return ok, pending, wall
 
 
-def reproduce_paper(out: Path, iterations: int | None = None, respite: int | None = None,
-                    seed: int | None = None, baseline_iterations: int | None = None,
-                    skip_existing: bool = False,
+def reproduce_paper(out: Path, opts: PaperOptions = PaperOptions(),
                     progress: TextIO | None = sys.stderr) -> Reproduction:
-    """Run everything and write ``OUT/report.md`` (progress lines to ``progress``).
+    """Run everything and write ``OUT/report.md`` and ``OUT/figures`` (progress lines to
+    ``progress``).
 
     Raises
     ------
     ExperimentError
         A federated run could not be started.
     """
-    from dfrl.robots.plots import plot_learning_curves
-    from dfrl.robots.training import read_metrics_csv
+    from dfrl.experiments.report.paper import write_report
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    figures = out / "figures"
-    figures.mkdir(exist_ok=True)
     t0 = time.monotonic()
-    changes = {k: v for k, v in (("iterations", iterations), ("respite", respite), ("seed", seed))
-               if v is not None}
-    runs = {(algo, method): federated_run(algo, method, out, changes, skip_existing, progress)
-            for algo, method in COMBOS}
-    cfg0 = runs[COMBOS[0]].cfg
-    arena_seeds = {r.arena: cfg0.robot_seed(r) for r in cfg0.robots}
-    arena_list = [r.arena for r in cfg0.robots]
-    b_iters = baseline_iterations or cfg0.iterations
-    t1 = time.monotonic()
-    dirs = run_baselines(out, arena_list, arena_seeds, b_iters, skip_existing, progress=progress)
-    baseline_wall = time.monotonic() - t1
-    standalone = {}
-    for algo in ("qlearning", "sarsa"):
-        curves = {a: read_metrics_csv(dirs[(algo, a)] / "metrics.csv") for a in arena_list}
-        standalone[algo] = StandaloneRuns(curves, stats_of(curves, {a: a for a in arena_list}))
-        shown = {a.upper(): curves[a] for a in ("r1", "r4") if a in curves}
-        plot_learning_curves(shown, figures / f"baseline_{algo}.png",
-                             f"Standalone {ALGO_NAMES[algo]}, {b_iters} iterations (R1 vs R4)")
+    seeds = list(range(opts.first_seed, opts.first_seed + opts.seeds))
+    base_cfg = TrainerConfig().to_dict()
+    fed_cfgs = {s: paper_configs(opts, s) for s in seeds}
+    arenas = [r.arena for r in fed_cfgs[seeds[0]][0][1].robots]
+    all_arenas = list(dict.fromkeys(arenas + list(HELD_OUT)))
+    walls: dict[str, float] = {}
+    with ProcessPoolExecutor(max_workers=max(1, opts.jobs)) as pool:
+        n_states = Discretiser(TrainerConfig().discretisation).n_states
+        n_actions = len(TrainerConfig().actions.names)
+        zero = {a: pool.submit(eval_job, base_cfg, np.zeros((n_states, n_actions)), a, opts.eval_steps,
+                               opts.episode_steps, EVAL_SEED) for a in all_arenas}
+        sa_jobs: dict[tuple[int, str, str], Future] = {}
+        for s in seeds:
+            cfg0 = fed_cfgs[s][0][1]
+            iters = cfg0.iterations
+            for algo in ("qlearning", "sarsa"):
+                for r in cfg0.robots:
+                    sa_jobs[(s, algo, r.arena)] = _standalone(
+                        pool, out / f"seed{s}" / "standalone" / f"{algo}_{r.arena}",
+                        TrainerConfig(arena=r.arena, algo=algo, seed=cfg0.robot_seed(r),
+                                      iterations=iters), opts, s)
+            if opts.control:
+                for r in cfg0.robots:
+                    if r.arena in CONTROL_ARENAS:
+                        cfg = TrainerConfig.from_dict({**TrainerConfig(
+                            arena=r.arena, seed=cfg0.robot_seed(r), iterations=iters).to_dict(),
+                            "learner": control_learner()})
+                        sa_jobs[(s, "control", r.arena)] = _standalone(
+                            pool, out / f"seed{s}" / "standalone" / f"control_qlearning_{r.arena}",
+                            cfg, opts, s)
+        pendings: dict[tuple[int, str], tuple[Path, PendingRows]] = {}
+        ok = True
+        for s in seeds:
+            evaluator = Evaluator(pool, base_cfg, opts.eval_steps, opts.episode_steps,
+                                  EVAL_SEED + s)
+            for key, cfg in fed_cfgs[s]:
+                d = out / f"seed{s}" / cfg.name
+                run_ok, pending, wall = _federated(cfg, d, opts, evaluator, progress)
+                ok = ok and run_ok
+                walls[f"seed{s}/{key}"] = wall
+                pendings[(s, key)] = (d, pending)
+        for (s, key), (d, pending) in pendings.items():
+            pending.write(d / "evaluations.csv")
+        for fut in sa_jobs.values():
+            fut.result()
+        zero_score = {a: f.result()["score"] for a, f in zero.items()}
+    fed: dict[str, list[SeedRun]] = {}
+    control_fed: list[SeedRun] = []
+    for (s, key), (d, _) in pendings.items():
+        cfg = dict(fed_cfgs[s])[key]
+        run = SeedRun(read_metrics(d / "metrics.csv"), {r.id: r.arena for r in cfg.robots},
+                      read_rows(d / "evaluations.csv"), zero_score)
+        (control_fed.append(run) if key == "control" else fed.setdefault(key, []).append(run))
+    standalone: dict[str, list[SeedRun]] = {}
+    control_sa: list[SeedRun] = []
+    for s in seeds:
+        for algo in ("qlearning", "sarsa", "control"):
+            keys = [k for k in sa_jobs if k[0] == s and k[1] == algo]
+            if not keys:
+                continue
+            run = SeedRun({}, {}, [], zero_score)
+            for k in keys:
+                d = Path(sa_jobs[k].result())
+                run.curves[k[2]] = read_metrics_csv(d / "metrics.csv")
+                run.arenas[k[2]] = k[2]
+                run.evals += read_rows(d / "evaluations.csv")
+            (control_sa.append(run) if algo == "control"
+             else standalone.setdefault(algo, []).append(run))
     total = time.monotonic() - t0
-    report = write_report(out, runs, standalone, total, baseline_wall, b_iters)
-    return Reproduction(report, runs, standalone, total, all(r.ok for r in runs.values()))
+    rep = Reproduction(out / "report.md", fed, standalone, control_fed, control_sa, total, ok,
+                       walls)
+    write_report(out, rep, opts, seeds)
+    return rep
+
+
+def _standalone(pool: ProcessPoolExecutor, d: Path, cfg: TrainerConfig, opts: PaperOptions,
+                seed: int) -> Future:
+    if opts.skip_existing and (d / "evaluations.csv").is_file():
+        fut: Future = Future()
+        fut.set_result(str(d))
+        return fut
+    return pool.submit(evaluated_job, cfg.to_dict(), str(d), opts.points, list(HELD_OUT),
+                       opts.eval_steps, opts.episode_steps, EVAL_SEED + seed)

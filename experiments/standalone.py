@@ -68,6 +68,25 @@ def run_baselines(out: Path, arenas: list[str], seeds: dict[str, int], iteration
     return dirs
 
 
+def evaluated_job(cfg_dict: dict[str, Any], out: str, points: int, held_out: list[str],
+                  steps: int, episode_steps: int, eval_seed: int) -> str:
+    """Train one standalone robot into ``out`` with ``points`` snapshots, then evaluate each
+    snapshot's greedy policy in its own and the held-out arenas (``out/evaluations.csv``,
+    :mod:`dfrl.experiments.studies.history`); a worker process job. Returns ``out``."""
+    from dfrl.experiments.studies.history import eval_job, write_rows
+    from dfrl.robots.training import train
+
+    cfg = TrainerConfig.from_dict(cfg_dict)
+    res = train(cfg, out, snapshot_every=max(1, cfg.iterations // max(1, points)))
+    rows = []
+    for it, q in sorted(res.snapshots.items()):
+        for arena, role in [(cfg.arena, "own")] + [(a, "held_out") for a in held_out]:
+            rows.append({"robot": cfg.arena, "iteration": it, "arena": arena, "role": role,
+                         **eval_job(cfg_dict, q, arena, steps, episode_steps, eval_seed)})
+    write_rows(Path(out) / "evaluations.csv", rows)
+    return out
+
+
 # -- evaluation ------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class EvalSummary:

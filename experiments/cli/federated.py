@@ -129,24 +129,8 @@ def cmd_join(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_paper(args: argparse.Namespace) -> int:
-    """``dfrl paper``: exit 0 when every federated run succeeded."""
-    from dfrl.experiments.reproduce import reproduce_paper
-
-    try:
-        done = reproduce_paper(args.out, iterations=args.iterations, respite=args.respite,
-                               seed=args.seed, baseline_iterations=args.baseline_iterations,
-                               skip_existing=args.skip_existing)
-    except (ExperimentError, FileNotFoundError, ValueError) as exc:
-        print(f"dfrl paper: {exc}", file=sys.stderr)
-        return 1
-    print(f"reproduction done in {done.total_s:.0f} s", file=sys.stderr)
-    print(done.report)
-    return 0 if done.ok else 1
-
-
 def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``demo``, ``run``, ``inject``, ``join`` and ``paper``."""
+    """Add ``demo``, ``run``, ``inject`` and ``join`` (``paper`` is in :mod:`.studies`)."""
     p = subparsers.add_parser("demo", help="the 5-robot dFRL demo on loopback (plots + summary "
                                            "in results/demo)")
     p.add_argument("--out", type=Path, default=Path("results/demo"), help="results folder")
@@ -182,16 +166,3 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="a running `dfrl robot` to run the robot on (default: a new robot "
                         "process on the launcher's host)")
     p.set_defaults(func=cmd_join)
-
-    p = subparsers.add_parser("paper", help="reproduce the paper's figures (4 federated runs + "
-                                            "standalone baselines) and write report.md")
-    p.add_argument("--out", type=Path, default=Path("results/paper"))
-    p.add_argument("--iterations", type=int, default=None,
-                   help="iterations per robot (default: the configs')")
-    p.add_argument("--respite", type=int, default=None)
-    p.add_argument("--seed", type=int, default=None)
-    p.add_argument("--baseline-iterations", type=int, default=None,
-                   help="standalone runs (default: as the federated runs)")
-    p.add_argument("--skip-existing", action="store_true",
-                   help="reuse finished runs found in --out")
-    p.set_defaults(func=cmd_paper)

@@ -61,6 +61,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="also write sweep.md and sweep.json into this folder")
     p.add_argument("--json", action="store_true", help="print JSON instead of the table")
     p.set_defaults(func=cmd_sweep)
+    register_paper(subparsers)
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
@@ -85,3 +86,49 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         (args.out / "sweep.md").write_text(table + "\n", encoding="utf-8")
     print(json.dumps(data, indent=1) if args.json else table)
     return 0
+
+
+def register_paper(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "paper", help="the paper's experiment with K seeds, the negative control, greedy "
+                      "evaluations, figures with 95%% bands and report.md with tests",
+        description="Every federated combination (Q-learning/SARSA x average/max) and the "
+                    "standalone baselines K times, plus the negative control (random "
+                    "behaviour, epsilon 1); report.md states each paper observation as a test "
+                    "with an interval and a verdict. Exit 1 if a federated run failed.")
+    p.add_argument("--out", type=Path, default=Path("results/paper"))
+    p.add_argument("--seeds", type=int, default=5, help="seeds per configuration "
+                   "(default: %(default)s)")
+    p.add_argument("--first-seed", type=int, default=1)
+    p.add_argument("--iterations", type=int, default=None,
+                   help="iterations per robot (default: the configs', 20000)")
+    p.add_argument("--respite", type=int, default=None)
+    p.add_argument("--eval-points", type=int, default=4,
+                   help="greedy evaluations per run (default: %(default)s)")
+    p.add_argument("--eval-steps", type=int, default=1000,
+                   help="evaluation steps per table and arena (default: %(default)s)")
+    p.add_argument("--jobs", type=int, default=2,
+                   help="processes for standalone runs and evaluations (default: %(default)s)")
+    p.add_argument("--no-control", action="store_true", help="skip the negative control")
+    p.add_argument("--skip-existing", action="store_true",
+                   help="reuse finished runs found in --out")
+    p.set_defaults(func=cmd_paper)
+
+
+def cmd_paper(args: argparse.Namespace) -> int:
+    """``dfrl paper``: exit 0 when every federated run succeeded."""
+    from dfrl.experiments.errors import ExperimentError
+    from dfrl.experiments.reproduce import PaperOptions, reproduce_paper
+
+    opts = PaperOptions(seeds=args.seeds, first_seed=args.first_seed,
+                        iterations=args.iterations, respite=args.respite,
+                        points=args.eval_points, eval_steps=args.eval_steps, jobs=args.jobs,
+                        control=not args.no_control, skip_existing=args.skip_existing)
+    try:
+        done = reproduce_paper(args.out, opts)
+    except (ExperimentError, FileNotFoundError, ValueError) as exc:
+        print(f"dfrl paper: {exc}", file=sys.stderr)
+        return 1
+    print(f"dfrl paper done in {done.total_s:.0f} s", file=sys.stderr)
+    print(done.report)
+    return 0 if done.ok else 1

@@ -1,160 +1,106 @@
-"""``report.md`` of the paper reproduction: the figures, the statistics, and the paper's
-observations checked against them (both curves rise and saturate; max shows a dip before
-saturating; R4 differs; standalone saturates faster). The statements are computed from the
-curves, so they say plainly when an observation is not reproduced.
-"""
+"""``report.md`` of ``dfrl paper``: figures with bands, the paper's observations as tests with
+intervals and verdicts (:mod:`dfrl.experiments.report.observations`), the negative control."""
 from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from dfrl.experiments.report.stats import ALGO_NAMES, CombinationRun, StandaloneRuns, dip
+from dfrl.experiments.report.observations import (SeedRun, final_score, mean_q, paper_tests,
+                                                  tests_markdown)
+from dfrl.experiments.report.stats import late_growth
+from dfrl.experiments.studies.intervals import interval
 
-def _fmt(x: float, nd: int = 1) -> str:
-    return "n/a" if x != x else f"{x:.{nd}f}"
+
+def _iv(values: list[float]) -> str:
+    vals = [v for v in values if v == v]
+    return str(interval(vals)) if vals else "n/a"
 
 
-def write_report(out: Path, runs: dict[tuple[str, str], CombinationRun],
-                 standalone: dict[str, StandaloneRuns], total_s: float, baseline_s: float,
-                 b_iters: int) -> Path:
-    """Write ``OUT/report.md`` from the runs' statistics; return its path."""
-    L: list[str] = ["# dFRL: reproduction of the paper's figures", ""]
-    cfg0 = next(iter(runs.values())).cfg
-    L += [f"Five robots in R1..R5, {cfg0.iterations} iterations each, a share every "
-          f"{cfg0.respite} iterations ({cfg0.rounds} agent rounds), {cfg0.mode.value} mode, "
-          f"seed {cfg0.seed} (robot *i* uses seed {cfg0.seed}+i-1; the standalone run in the "
-          f"same arena uses the same seed). Standalone baselines: {b_iters} iterations.", "",
-          f"Wall time of the whole reproduction on this machine ({os.cpu_count()} cores): "
-          f"**{total_s:.0f} s** (federated runs "
-          + ", ".join(f"{a}/{m} {r.wall:.0f} s" for (a, m), r in runs.items())
-          + f"; standalone runs {baseline_s:.0f} s).", ""]
-    L += ["## Figures", "", "| combination | sum of Q-values | cumulative reward |", "|---|---|---|"]
-    for (algo, method) in runs:
-        L.append(f"| {ALGO_NAMES[algo]}, {method} | figures/{algo}_{method}_q_sum.png | "
-                 f"figures/{algo}_{method}_cumulative_reward.png |")
-    L += ["| standalone Q-learning (R1 vs R4) | figures/baseline_qlearning.png | (same figure) |",
-          "| standalone SARSA (R1 vs R4) | figures/baseline_sarsa.png | (same figure) |", ""]
-    for (algo, method), r in runs.items():
-        L += [f"### {ALGO_NAMES[algo]}, {method}", "",
-              f"{r.rounds} rounds; every robot held the same table after "
-              f"{r.equal}/{r.rounds} of them.", "",
-              "| robot | arena | final sum Q | iteration at 90% of final sum Q | growth in last "
-              "quarter | reward/iter first quarter | reward/iter last quarter | cumulative "
-              "reward | collisions | largest dip of sum Q |",
-              "|---|---|---|---|---|---|---|---|---|---|"]
-        for s in r.stats:
-            L.append(f"| {s.robot} | {s.arena} | {s.final_q:.1f} | {s.t90_q} | "
-                     f"{_fmt(100 * s.late_growth_q, 0)}% | {s.rate_first:.2f} | {s.rate_last:.2f} | "
-                     f"{s.final_reward:.0f} | {s.collisions} | {100 * s.dip:.0f}% at {s.dip_at} |")
-        L.append("")
-    L += ["### Standalone", "",
-          "| algorithm | arena | final sum Q | iteration at 90% of final sum Q | growth in last "
-          "quarter | reward/iter first quarter | reward/iter last quarter | cumulative reward "
-          "| collisions |", "|---|---|---|---|---|---|---|---|---|"]
-    for algo, sd in standalone.items():
-        for s in sd.stats:
-            L.append(f"| {ALGO_NAMES[algo]} | {s.arena} | {s.final_q:.1f} | {s.t90_q} | "
-                     f"{_fmt(100 * s.late_growth_q, 0)}% | {s.rate_first:.2f} | "
-                     f"{s.rate_last:.2f} | {s.final_reward:.0f} | {s.collisions} |")
-    L += ["", "## Against the paper's observations", ""]
-    L += _observations(runs, standalone)
+def _collisions(runs: list[SeedRun], role: str) -> list[float]:
+    out = []
+    for r in runs:
+        last = max(int(e["iteration"]) for e in r.evals)
+        sel = [float(e["collisions_per_1000"]) for e in r.evals
+               if int(e["iteration"]) == last and e["role"] == role]
+        out.append(float(np.mean(sel)) if sel else float("nan"))
+    return out
+
+
+def figures(out: Path, rep: Any) -> list[str]:
+    """Draw the band figures; return their names (empty without matplotlib)."""
+    from dfrl.experiments.report.bands import plot_groups
+
+    names = []
+    try:
+        for algo in ("qlearning", "sarsa"):
+            groups = {k: v for k, v in rep.fed.items() if k.startswith(algo)}
+            groups[f"{algo} standalone"] = rep.standalone.get(algo, [])
+            if algo == "qlearning" and rep.control_fed:
+                groups["control federated"] = rep.control_fed
+                groups["control standalone (R1, R4)"] = rep.control_sa
+            p = plot_groups(groups, out / "figures" / f"{algo}_bands.png",
+                            f"{'Q-learning' if algo == 'qlearning' else 'SARSA'}")
+            names.append(p.name)
+    except ImportError:
+        return []
+    return names
+
+
+def write_report(out: Path, rep: Any, opts: Any, seeds: list[int]) -> Path:
+    """Write ``OUT/report.md`` from a :class:`dfrl.experiments.reproduce.Reproduction`."""
+    cfg_runs = next(iter(rep.fed.values()))
+    iters = len(next(iter(cfg_runs[0].curves.values())))
+    L = ["# dFRL: the paper's experiment, several seeds, observations as tests", "",
+         f"Seeds {seeds[0]}..{seeds[-1]} ({len(seeds)}); five robots in R1..R5, {iters} "
+         f"iterations each; standalone baselines with the same seeds and budget; negative "
+         f"control: federated Q-learning/average and standalone Q-learning in R1 and R4 with a "
+         f"random behaviour policy (epsilon 1 throughout). Greedy evaluations at "
+         f"{opts.points} points of every run, {opts.eval_steps} steps per table and arena "
+         f"({opts.eval_steps // opts.episode_steps} episodes of {opts.episode_steps} steps "
+         f"from seeded random poses), in the robot's own arena and the held-out arenas h1 and "
+         f"h2. Intervals: mean ± 95% Student-t half width over seeds.", "",
+         f"Wall time of the whole `dfrl paper` on this machine ({os.cpu_count()} cores): "
+         f"**{rep.total_s:.0f} s**; federated runs {sum(rep.walls.values()):.0f} s of it "
+         f"(standalone trainings and evaluations ran beside them).", ""]
+    names = figures(out, rep)
+    L += ["## Figures", ""]
+    L += [f"* figures/{n}" for n in names] or ["* (no figures: matplotlib is not installed)"]
+    L += ["", "Per run and seed: `seed<S>/<run>/` (q_sum.png, cumulative_reward.png, "
+          "metrics.csv, evaluations.csv).", "",
+          "## Final numbers (mean ± 95% half width over seeds)", "",
+          "| runs | final sum Q (robots' mean) | Q-sum growth in last quarter | greedy score own "
+          "| greedy score held-out | collisions/1000 own | collisions/1000 held-out |",
+          "|---|---|---|---|---|---|---|"]
+    groups = dict(rep.fed)
+    groups.update({f"{k} standalone": v for k, v in rep.standalone.items()})
+    if rep.control_fed:
+        groups["control federated"] = rep.control_fed
+        groups["control standalone"] = rep.control_sa
+    for name, runs in groups.items():
+        L.append(f"| {name} | {_iv([float(mean_q(r)[-1]) for r in runs])} | "
+                 f"{_iv([late_growth(mean_q(r)) for r in runs])} | "
+                 f"{_iv([final_score(r, 'own') for r in runs])} | "
+                 f"{_iv([final_score(r, 'held_out') for r in runs])} | "
+                 f"{_iv(_collisions(runs, 'own'))} | {_iv(_collisions(runs, 'held_out'))} |")
+    zero = next(iter(cfg_runs)).zero_score
+    L += ["", "Zero table (greedy with random ties = a uniform random policy), score per arena: "
+          + ", ".join(f"{a} {v:.2f}" for a, v in zero.items()) + ".", "",
+          "## The paper's observations as tests", ""]
+    tests = paper_tests(rep.fed, rep.standalone, rep.control_fed, rep.control_sa)
+    L += tests_markdown(tests)
+    L += ["## Summary", "", "| test | holds (real runs) | control passes | a test of learning |",
+          "|---|---|---|---|"]
+    for t in tests:
+        L.append(f"| {t.key}. {t.title} | {'yes' if t.holds else 'no'} | "
+                 f"{'n/a' if not t.control else 'yes' if t.control_passes else 'no'} | "
+                 f"{'n/a' if not t.control else 'no' if t.control_passes else 'yes'} |")
+    L += ["", "Caveats: our e-puck, reward and state discretisation are our own reconstruction "
+          "(robots/README.md); absolute values are not comparable with the paper's. The "
+          "saturation tests use the sum of Q-values, which with a constant learning rate keeps "
+          "moving; robots/README.md gives the budgets at which it flattens."]
     path = Path(out) / "report.md"
     path.write_text("\n".join(L) + "\n", encoding="utf-8")
     return path
-
-
-def _observations(runs: dict[tuple[str, str], CombinationRun],
-                  standalone: dict[str, StandaloneRuns]) -> list[str]:
-    L: list[str] = []
-    # 1. both curves rise and saturate
-    rises, sats, rates = [], [], []
-    for key, r in runs.items():
-        for s in r.stats:
-            rises.append(s.final_q > 0 and s.final_reward > 0)
-            sats.append(s.late_growth_q)
-            rates.append(s.rate_last > s.rate_first)
-    lg = np.array(sats)
-    L.append(f"1. **Both curves rise and saturate.** Sum of Q-values and cumulative reward rise "
-             f"for {sum(rises)}/{len(rises)} robot runs. Saturation of the sum of Q-values, "
-             f"measured as the share of its total growth made in the last quarter of the run "
-             f"(25% would be a straight line): median {np.nanmedian(lg) * 100:.0f}%, from "
-             f"{np.nanmin(lg) * 100:.0f}% to {np.nanmax(lg) * 100:.0f}%. "
-             + ("It flattens clearly (median under 15%). " if np.nanmedian(lg) < 0.15 else
-                "It flattens only partly at this budget. " if np.nanmedian(lg) < 0.25 else
-                "It does not saturate at this budget. ")
-             + f"The cumulative reward grows faster at the end than at the start (the robots "
-             f"earn more per iteration as they learn) for {sum(rates)}/{len(rates)} robot runs; "
-             f"it keeps rising linearly, as a cumulative sum of positive rewards does.")
-    # 2. max dips before saturating
-    dips = {}
-    for (algo, method), r in runs.items():
-        curves = list(r.curves.values())
-        n = min(len(c) for c in curves)
-        mean_q = np.mean([c["q_sum"][:n] for c in curves], axis=0)
-        d, k = dip(mean_q)
-        dips[(algo, method)] = (d, int(curves[0]["iteration"][k]))
-    parts = []
-    verdict = []
-    for algo in ("qlearning", "sarsa"):
-        (dm, km), (da, ka) = (dips.get((algo, "max"), (float("nan"), 0)),
-                              dips.get((algo, "average"), (float("nan"), 0)))
-        parts.append(f"{ALGO_NAMES[algo]}: max {dm * 100:.1f}% (deepest at iteration {km}), "
-                     f"average {da * 100:.1f}% (at {ka})")
-        verdict.append(dm > da and dm > 0.02)
-    L.append("2. **Max shows a dip before saturating.** Largest drop of the robots' mean sum of "
-             "Q-values (smoothed over 100 iterations) below its running peak; averaging keeps "
-             "that mean unchanged at a share, taking the element-wise max raises it: "
-             + "; ".join(parts) + ". "
-             + ("Reproduced: the max runs dip more than the average runs for both algorithms."
-                if all(verdict) else
-                "Reproduced for one algorithm only." if any(verdict) else
-                "Not reproduced: the max runs do not dip more than the average runs here.")
-             + " Per-robot curves also drop at shares (a robot above the aggregate comes down "
-             "to it), see the largest-dip column above.")
-    # 3. R4 differs
-    lines3 = []
-    r4_low = 0
-    for (algo, method), r in runs.items():
-        st = {s.arena: s for s in r.stats}
-        if "r4" not in st:
-            continue
-        others = [s for a, s in st.items() if a != "r4"]
-        rank = sorted(st.values(), key=lambda s: s.final_reward).index(st["r4"]) + 1
-        r4_low += rank == 1
-        lines3.append(f"{ALGO_NAMES[algo]}/{method}: R4 cumulative reward {st['r4'].final_reward:.0f} "
-                      f"vs others {np.mean([s.final_reward for s in others]):.0f} (rank {rank} of "
-                      f"{len(st)}, 1 = lowest), collisions {st['r4'].collisions} vs "
-                      f"{np.mean([s.collisions for s in others]):.0f}")
-    L.append("3. **R4 differs.** R4 (four blocks, the most cluttered arena) earns "
-             + ("the lowest cumulative reward in every combination" if r4_low == len(lines3) else
-                f"the lowest cumulative reward in {r4_low}/{len(lines3)} combinations")
-             + ": " + "; ".join(lines3) + ". With a shared table, the sums of Q-values of all "
-             "robots are equal right after each share, so R4 differs in the reward it earns, "
-             "and in its sum of Q-values only between shares.")
-    # 4. standalone saturates faster
-    lines4 = []
-    faster = 0
-    n = 0
-    for algo in ("qlearning", "sarsa"):
-        sa = {s.arena: s for s in standalone[algo].stats}
-        for method in ("average", "max"):
-            if (algo, method) not in runs:
-                continue
-            fed = {s.arena: s for s in runs[(algo, method)].stats}
-            common = [a for a in fed if a in sa]
-            ts = np.median([sa[a].t90_q for a in common])
-            tf = np.median([fed[a].t90_q for a in common])
-            n += 1
-            faster += ts < tf
-            lines4.append(f"{ALGO_NAMES[algo]}/{method}: standalone reaches 90% of its final sum "
-                          f"of Q at iteration {ts:.0f} (median over arenas), federated at {tf:.0f}")
-    L.append("4. **Standalone saturates faster.** " + "; ".join(lines4) + ". "
-             + ("Reproduced in every combination." if faster == n else
-                f"Reproduced in {faster}/{n} combinations." if faster else "Not reproduced."))
-    L.append("")
-    L.append("Caveats: one seed per run (curves of single runs are noisy); our e-puck, reward and "
-             "state discretisation are our own reconstruction (see robots/README.md), so absolute "
-             "values are not comparable with the paper's, only the shapes are.")
-    return L

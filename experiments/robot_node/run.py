@@ -9,11 +9,14 @@ waits.
 """
 from __future__ import annotations
 
+import os
 import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
+
+import numpy as np
 
 from dfrl.experiments.config import Mode, NodeConfig, boundaries
 from dfrl.experiments.robot_node.checkpoint import (
@@ -159,7 +162,7 @@ class Run:
             self._metrics = CsvLog(self.out_dir / f"metrics_{c.robot}.csv", METRIC_FIELDS, keep_m)
             self._shares = CsvLog(self.out_dir / f"shares_{c.robot}.csv", SHARE_FIELDS, keep_s)
             self._stops = set(boundaries(c.iterations, c.respite)) if c.mode is Mode.SYNC else set()
-        on_share = self.checkpoint if self.trainer is not None else None
+        on_share = self.on_share if self.trainer is not None else None
         self.table = NodeTable(base, c.robot, self._shares, self.lines, on_share, shares)
         if self.trainer is not None:
             self.table.iteration = self.trainer.iteration
@@ -235,6 +238,23 @@ class Run:
                           "going on")
                 break
         return True
+
+    def on_share(self) -> None:
+        """After an applied share: the table's history snapshot, then the checkpoint."""
+        self.save_history()
+        self.checkpoint()
+
+    def save_history(self) -> None:
+        """Write the table just shared as ``tables/history/<robot>_it<N>.npy`` (N: the
+        robot's iteration), for the greedy evaluations a study runs afterwards."""
+        if self.trainer is None:
+            return
+        d = self.out_dir / "tables" / "history"
+        d.mkdir(parents=True, exist_ok=True)
+        tmp = d / f".{self.config.robot}_it{self.iteration}.npy.tmp"
+        with open(tmp, "wb") as fh:
+            np.save(fh, self.trainer.q_table)
+        os.replace(tmp, d / f"{self.config.robot}_it{self.iteration}.npy")
 
     def checkpoint(self) -> None:
         """Write the checkpoint now (atomically; see :mod:`.checkpoint`), after syncing the

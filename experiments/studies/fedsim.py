@@ -1,0 +1,174 @@
+"""Federated tabular learning in one process, for studies that need many runs.
+
+The transfer and speed-up studies train hundreds of federations; starting robot node
+processes and a mobile agent for each would cost more than the learning. :func:`federate`
+runs the same thing in one process: ``N`` :class:`~dfrl.robots.training.Trainer` (one per
+arena, seeded as the launcher seeds its robots), stepped in turn, and every ``respite``
+iterations every table is replaced by the aggregate of all of them, which is what one sync
+round of the dFRL agent does (it reads every table, folds them, writes the result back).
+The aggregation maths are pure functions over arrays, registered by name in
+:data:`AGGREGATIONS`; they mirror the agent's built-in methods (``average``, ``max``,
+``visit_average``, platform_pl/agents/dfrl_agent.pl) and the injectable ``max_visited``
+(platform_pl/agents/examples/max_visited.pl); tests check them against hand-computed tables.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from dfrl.robots.training import Trainer, TrainerConfig
+
+Aggregation = Callable[[Sequence[np.ndarray], Sequence[np.ndarray]], np.ndarray]
+
+
+def _check(tables: Sequence[np.ndarray], visits: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    if not tables:
+        raise ValueError("nothing to aggregate")
+    q = np.stack([np.asarray(t, dtype=np.float64) for t in tables])
+    w = np.stack([np.asarray(v, dtype=np.float64) for v in visits])
+    if q.shape != w.shape:
+        raise ValueError(f"tables {q.shape} and visit counts {w.shape} differ in shape")
+    if not np.isfinite(q).all():
+        raise ValueError("a table holds a non-finite value")
+    return q, w
+
+
+def aggregate_average(tables: Sequence[np.ndarray], visits: Sequence[np.ndarray]) -> np.ndarray:
+    """Element-wise mean, shape (n_states, n_actions)."""
+    q, _ = _check(tables, visits)
+    return q.mean(axis=0)
+
+
+def aggregate_max(tables: Sequence[np.ndarray], visits: Sequence[np.ndarray]) -> np.ndarray:
+    """Element-wise maximum."""
+    q, _ = _check(tables, visits)
+    return q.max(axis=0)
+
+
+def aggregate_visit_average(tables: Sequence[np.ndarray],
+                            visits: Sequence[np.ndarray]) -> np.ndarray:
+    """Mean weighted by visit counts; entries nobody visited get the plain mean."""
+    q, w = _check(tables, visits)
+    tot = w.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        weighted = (q * w).sum(axis=0) / tot
+    return np.where(tot > 0, weighted, q.mean(axis=0))
+
+
+def aggregate_max_visited(tables: Sequence[np.ndarray],
+                          visits: Sequence[np.ndarray]) -> np.ndarray:
+    """Element-wise maximum over the robots that visited the entry; plain mean elsewhere."""
+    q, w = _check(tables, visits)
+    seen = w > 0
+    best = np.where(seen, q, -np.inf).max(axis=0)
+    return np.where(seen.any(axis=0), best, q.mean(axis=0))
+
+
+#: Aggregation methods by name (the agent's names).
+AGGREGATIONS: dict[str, Aggregation] = {
+    "average": aggregate_average,
+    "max": aggregate_max,
+    "visit_average": aggregate_visit_average,
+    "max_visited": aggregate_max_visited,
+}
+
+
+@dataclass
+class Federation:
+    """Outcome of :func:`federate`.
+
+    Attributes
+    ----------
+    table : np.ndarray, shape (n_states, n_actions)
+        The aggregate after the last round (every robot holds it).
+    visits : np.ndarray
+        Visit counts summed over robots.
+    snapshots : dict of int to np.ndarray
+        Iteration (per robot) -> aggregate after the round ending there, every
+        ``snapshot_every`` rounds and the last one.
+    q_sum, reward : np.ndarray, shape (robots, iterations)
+        Each robot's sum of Q-values and cumulative reward per iteration.
+    collisions : np.ndarray, shape (robots,)
+    """
+
+    table: np.ndarray
+    visits: np.ndarray
+    snapshots: dict[int, np.ndarray] = field(default_factory=dict)
+    q_sum: np.ndarray | None = None
+    reward: np.ndarray | None = None
+    collisions: np.ndarray | None = None
+
+
+def federate(configs: Sequence[TrainerConfig], iterations: int, respite: int,
+             method: str = "average", snapshot_every: int = 0,
+             initial: np.ndarray | None = None) -> Federation:
+    """Train one robot per config for ``iterations`` steps each, aggregating every
+    ``respite`` (a single config with ``method`` anything is a standalone run).
+
+    Parameters
+    ----------
+    configs : sequence of TrainerConfig
+        One per robot (arena, seed, learner, ...); all must have the same table shape.
+    iterations, respite : int
+    method : str
+        A key of :data:`AGGREGATIONS`.
+    snapshot_every : int
+        Keep the aggregate every so many rounds (0: only the last).
+    initial : np.ndarray, optional
+        Start every robot from this table instead of zeros.
+
+    Raises
+    ------
+    KeyError
+        Unknown method.
+    ValueError
+        Bad budget or tables of different shapes.
+    """
+    agg = AGGREGATIONS[method]
+    if iterations < 1 or respite < 1:
+        raise ValueError("iterations and respite must be >= 1")
+    trainers = [Trainer(c) for c in configs]
+    try:
+        if initial is not None:
+            for t in trainers:
+                t.set_q_table(initial)
+        n = len(trainers)
+        q_sum = np.zeros((n, iterations))
+        reward = np.zeros((n, iterations))
+        snaps: dict[int, np.ndarray] = {}
+        rounds = 0
+        for i in range(iterations):
+            for k, t in enumerate(trainers):
+                m = t.step()
+                q_sum[k, i], reward[k, i] = m.q_sum, m.cumulative_reward
+            if (i + 1) % respite == 0 or i + 1 == iterations:
+                table = agg([t.q_table for t in trainers], [t.visits for t in trainers])
+                for t in trainers:
+                    t.set_q_table(table)
+                rounds += 1
+                if (snapshot_every and rounds % snapshot_every == 0) or i + 1 == iterations:
+                    snaps[i + 1] = table.copy()
+        return Federation(table=trainers[0].q_table.copy(),
+                          visits=np.sum([t.visits for t in trainers], axis=0),
+                          snapshots=snaps, q_sum=q_sum, reward=reward,
+                          collisions=np.array([t.collisions for t in trainers]))
+    finally:
+        for t in trainers:
+            t.close()
+
+
+def in_turn(config: TrainerConfig, arenas: Sequence[str], iterations: int) -> np.ndarray:
+    """One robot trained ``iterations`` steps in each of ``arenas``, one after the other,
+    keeping its table (and its exploration schedule restarting in each arena); the final table."""
+    table: np.ndarray | None = None
+    for k, arena in enumerate(arenas):
+        with Trainer(config.replace(arena=arena, seed=config.seed + 1000 * k)) as t:
+            if table is not None:
+                t.set_q_table(table)
+            for _ in range(iterations):
+                t.step()
+            table = t.q_table.copy()
+    assert table is not None, "no arena given"
+    return table
