@@ -22,13 +22,16 @@ def parse_factor(text: str) -> tuple[str, list[Any]]:
     return path, out
 
 
+#: ``dfrl paper --budget long``: iterations per robot (robots/README.md, "Budget").
+LONG_BUDGET = 150_000
+
 DEFAULT_FACTORS = [
     "learner.alpha=0.05;0.1;0.4",
     "learner.gamma=0.8;0.9;0.99",
     'learner.epsilon={"kind":"linear","start":1.0,"end":0.05,"decay_steps":10000};'
     '{"kind":"constant","start":0.1,"end":0.1,"decay_steps":1}',
     "reward.alive_bonus=0.0",
-    "discretisation.grouping=five",
+    "discretisation.grouping=five;eight",
 ]
 
 
@@ -62,6 +65,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print JSON instead of the table")
     p.set_defaults(func=cmd_sweep)
     register_paper(subparsers)
+    register_speedup(subparsers)
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
@@ -102,6 +106,10 @@ def register_paper(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--first-seed", type=int, default=1)
     p.add_argument("--iterations", type=int, default=None,
                    help="iterations per robot (default: the configs', 20000)")
+    p.add_argument("--budget", choices=("paper", "long"), default="paper",
+                   help="paper: the configs' 20,000 iterations (fits 15 minutes for 5 seeds); "
+                        "long: 150,000, where the sum of Q-values of one robot flattens "
+                        "(robots/README.md, 'Budget'); --iterations overrides both")
     p.add_argument("--respite", type=int, default=None)
     p.add_argument("--eval-points", type=int, default=4,
                    help="greedy evaluations per run (default: %(default)s)")
@@ -121,7 +129,8 @@ def cmd_paper(args: argparse.Namespace) -> int:
     from dfrl.experiments.reproduce import PaperOptions, reproduce_paper
 
     opts = PaperOptions(seeds=args.seeds, first_seed=args.first_seed,
-                        iterations=args.iterations, respite=args.respite,
+                        iterations=args.iterations if args.iterations is not None else
+                        (LONG_BUDGET if args.budget == "long" else None), respite=args.respite,
                         points=args.eval_points, eval_steps=args.eval_steps, jobs=args.jobs,
                         control=not args.no_control, skip_existing=args.skip_existing)
     try:
@@ -132,3 +141,46 @@ def cmd_paper(args: argparse.Namespace) -> int:
     print(f"dfrl paper done in {done.total_s:.0f} s", file=sys.stderr)
     print(done.report)
     return 0 if done.ok else 1
+
+
+def register_speedup(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "speedup", help="iterations to a greedy performance threshold vs the number of robots, "
+                        "against linear speed-up (markdown table with intervals)")
+    p.add_argument("--robots", type=int, nargs="+", default=[1, 2, 5, 10])
+    p.add_argument("--seeds", type=int, default=5)
+    p.add_argument("--iterations", type=int, default=6000, help="budget per robot (6000)")
+    p.add_argument("--respite", type=int, default=500)
+    p.add_argument("--eval-every", type=int, default=1000)
+    p.add_argument("--threshold", type=float, default=0.5,
+                   help="greedy score in the held-out arenas (0.5)")
+    p.add_argument("--eval-steps", type=int, default=1000)
+    p.add_argument("--method", default="average")
+    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--out", type=Path, default=None,
+                   help="also write speedup.md and speedup.json there")
+    p.set_defaults(func=cmd_speedup)
+
+
+def cmd_speedup(args: argparse.Namespace) -> int:
+    from dfrl.experiments.studies.speedup import (EXPLANATION, SpeedupOptions, markdown,
+                                                  speedup)
+
+    opts = SpeedupOptions(robots=tuple(args.robots), seeds=tuple(range(1, args.seeds + 1)),
+                          iterations=args.iterations, respite=args.respite,
+                          eval_every=args.eval_every, threshold=args.threshold,
+                          eval_steps=args.eval_steps, method=args.method, jobs=args.jobs)
+    try:
+        rows, runs = speedup(opts)
+    except (KeyError, ValueError) as exc:
+        print(f"dfrl speedup: {exc}", file=sys.stderr)
+        return 2
+    text = markdown(rows, opts) + "\n\n" + EXPLANATION
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "speedup.md").write_text(text + "\n", encoding="utf-8")
+        (args.out / "speedup.json").write_text(json.dumps(
+            [{**r, "curve": {str(k): v for k, v in r["curve"].items()}} for r in runs],
+            indent=1), encoding="utf-8")
+    print(text)
+    return 0

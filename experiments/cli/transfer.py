@@ -15,7 +15,7 @@ from dfrl.robots.state import SensorGrouping
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``transfer``."""
+    """Add ``transfer`` and ``transfer-study``."""
     p = subparsers.add_parser(
         "transfer",
         help="learn in a new arena from a saved table vs from zeros (collisions, reward)",
@@ -43,6 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="write config.json, runs.csv, curves.csv, summary.json, transfer.png here")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.set_defaults(func=cmd_transfer)
+    register_study(subparsers)
 
 
 #: Rows of the readable report: metric name, label.
@@ -109,4 +110,49 @@ def cmd_transfer(args: argparse.Namespace) -> int:
     print("(before = the initial table, no training; for zero that is a uniformly random policy)")
     if result.output_dir is not None:
         print(f"results in {result.output_dir}")
+    return 0
+
+
+def register_study(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "transfer-study",
+        help="transfer to unseen arenas (h1, h2) against controls: zeros, standalone, same "
+             "experience, in turn, one-shot average, federated average/max/max_visited",
+        description="Source tables from several seeds under each condition, evaluated and "
+                    "fine-tuned in the held-out arenas with several target seeds; intervals "
+                    "over source seeds and a verdict on the paper's transfer claim (markdown).")
+    p.add_argument("--source-seeds", type=int, default=5, help="source seeds (5)")
+    p.add_argument("--target-seeds", type=int, default=2, help="target seeds (2)")
+    p.add_argument("--targets", nargs="+", default=["h1", "h2"], help="target arenas (h1 h2)")
+    p.add_argument("--iterations", type=int, default=4000,
+                   help="source training iterations per robot (4000)")
+    p.add_argument("--respite", type=int, default=500)
+    p.add_argument("--fine-tune", type=int, default=1000,
+                   help="learning steps from the table in each target (1000)")
+    p.add_argument("--eval-steps", type=int, default=1000)
+    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--out", type=Path, default=None,
+                   help="also write transfer_study.md and transfer_study.json there")
+    p.set_defaults(func=cmd_study)
+
+
+def cmd_study(args: argparse.Namespace) -> int:
+    from dfrl.experiments.transfer.study import StudyOptions, markdown, transfer_study
+
+    opts = StudyOptions(source_seeds=tuple(range(1, args.source_seeds + 1)),
+                        target_seeds=tuple(range(1, args.target_seeds + 1)),
+                        targets=tuple(args.targets), iterations=args.iterations,
+                        respite=args.respite, fine_tune=args.fine_tune,
+                        eval_steps=args.eval_steps, jobs=args.jobs)
+    try:
+        rows = transfer_study(opts)
+    except (KeyError, ValueError) as exc:
+        print(f"dfrl transfer-study: {exc}", file=sys.stderr)
+        return 2
+    text = markdown(rows, opts)
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "transfer_study.md").write_text(text + "\n", encoding="utf-8")
+        (args.out / "transfer_study.json").write_text(json.dumps(rows, indent=1), encoding="utf-8")
+    print(text)
     return 0
