@@ -122,7 +122,10 @@ def launch_agents(state: RunState) -> None:
         log_path = state.out / f"rounds_{name}.log"
         launch = {"name": name, "itinerary": stops, "method": c.method_for(algo),
                   "rounds": c.rounds, "rest_s": rest_s(state), "rounds_log": str(log_path),
-                  "token": c.token, "timeout_s": float(c.timeout_s)}
+                  "token": c.token, "timeout_s": float(c.timeout_s),
+                  # the agent posts its round log to the console node, which writes it here:
+                  # no shared disk between the hosts the agent visits and the driver's
+                  "log_to": list(state.console.address)}
         state.agents[name] = AgentInfo(name, algo, c.method_for(algo), c.rounds, str(log_path),
                                        list(stops))
         write_nodes(state)

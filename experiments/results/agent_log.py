@@ -8,6 +8,7 @@ Events the agent writes (``platform_pl/agents/dfrl_agent.pl``)::
     {"event": "aborted", "agent": A, "round": N, "error": Text}
     {"event": "control", "agent": A, "round": N, "command": Text,
      "status": "applied" | "ignored", "reason": Text}
+    {"event": "superseded", "agent": A, "round": N, "epoch": E, "by": E2}
     {"event": "resurrected", "agent": A, "round": N, "epoch": E, "from": "host:port",
      "dead": "host:port"}
 
@@ -83,6 +84,16 @@ class Resurrection:
     dead: str
 
 
+@dataclass(frozen=True)
+class Superseded:
+    """A ``superseded`` event: a late copy of the agent (``epoch``) met the higher epoch
+    ``by`` of its replacement and purged itself."""
+
+    round: int
+    epoch: int
+    by: int
+
+
 @dataclass
 class AgentLog:
     """What an agent's rounds log holds so far."""
@@ -93,6 +104,10 @@ class AgentLog:
     aborted: list[Aborted] = field(default_factory=list)
     controls: list[ControlEvent] = field(default_factory=list)
     resurrections: list[Resurrection] = field(default_factory=list)
+    superseded: list[Superseded] = field(default_factory=list)
+    #: rounds logged twice (a late copy and its replacement); the higher epoch is kept in
+    #: ``rounds``, the other is listed here
+    duplicates: list[RoundRecord] = field(default_factory=list)
     unreadable: list[str] = field(default_factory=list)
 
 
@@ -124,7 +139,15 @@ def _add(log: AgentLog, ev: dict[str, Any]) -> bool:
         return False
     kind = ev["event"]
     if kind == "round":
-        log.rounds.append(_round(log.agent, ev))
+        rec = _round(log.agent, ev)
+        same = next((i for i, r in enumerate(log.rounds) if r.round == rec.round), None)
+        if same is None:
+            log.rounds.append(rec)
+        elif rec.epoch > log.rounds[same].epoch:
+            log.duplicates.append(log.rounds[same])
+            log.rounds[same] = rec
+        else:
+            log.duplicates.append(rec)
     elif kind == "finished":
         log.finished = int(ev["round"])
     elif kind == "aborted":
@@ -135,6 +158,9 @@ def _add(log: AgentLog, ev: dict[str, Any]) -> bool:
     elif kind == "resurrected":
         log.resurrections.append(Resurrection(int(ev["round"]), int(ev.get("epoch") or 0),
                                               str(ev.get("from", "")), str(ev.get("dead", ""))))
+    elif kind == "superseded":
+        log.superseded.append(Superseded(int(ev["round"]), int(ev.get("epoch") or 0),
+                                         int(ev.get("by") or 0)))
     else:
         return False
     return True

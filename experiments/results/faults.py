@@ -76,6 +76,12 @@ def assess(config: ExperimentConfig, logs: Iterable[tuple[AgentLog, int]],
         for r in log.resurrections:
             f.resurrections.append(f"{log.agent} round {r.round}: resurrected at {r.source} "
                                    f"with epoch {r.epoch} ({r.dead} did not answer)")
+        for x in log.superseded:
+            f.resurrections.append(f"{log.agent} round {x.round}: a late copy (epoch {x.epoch}) "
+                                   f"met epoch {x.by} and purged itself")
+        for d in log.duplicates:
+            f.resurrections.append(f"{log.agent} round {d.round}: also logged by the superseded "
+                                   f"copy of epoch {d.epoch} (not counted)")
         done = {rec.round for rec in log.rounds}
         f.missing_rounds[log.agent] = [n for n in range(1, planned_rounds(log, budget) + 1)
                                        if n not in done]

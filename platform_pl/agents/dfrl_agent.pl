@@ -268,7 +268,7 @@ check_plan(plan(Itinerary, Rounds, Rest, Log, Timeout)) :-
            )),
     must_be(positive_integer, Rounds),
     must_be(number, Rest),
-    must_be(atomic, Log),
+    check_log(Log),
     must_be(number, Timeout).
 check_plan(Plan) :-
     throw(error(type_error(dfrl_plan, Plan), _)).
@@ -823,18 +823,46 @@ log_control(Log, Agent, Round, Command, Status) :-
 text(X, S) :-
     format(string(S), '~w', [X]).
 
+%   A log is a file name (the agent appends to it where it runs: one
+%   machine, or a shared disk), or console(Host, Port, File): every line is
+%   posted to the console node at Host:Port, which appends it to its File
+%   (the driver's disk, whichever host the agent is on).
+check_log(console(H, P, F)) :-
+    !,
+    must_be(atomic, H), must_be(integer, P), must_be(atomic, F).
+check_log(Log) :-
+    must_be(atomic, Log).
+
 %!  log_event(+Log, +Dict) is det.
 %
-%   Append Dict as one JSON line to the file Log. The agent name and
-%   method, atoms, are written as strings.
+%   Write Dict as one JSON line to Log (see check_log/1). The agent name
+%   and method, atoms, are written as strings. A console that cannot be
+%   reached gets the line appended to File on this host instead, with a
+%   warning: a line is never dropped silently.
 
 log_event(Log, Dict0) :-
     foldl(stringify, [agent, method], Dict0, Dict),
+    with_output_to(string(Line), json_write_dict(current_output, Dict, [width(0)])),
+    (   Log = console(H, P, File)
+    ->  catch(post_log_line(H, P, File, Line), E, true),
+        (   var(E)
+        ->  true
+        ;   print_message(warning, format("dfrl: round log to console ~w:~w failed (~p); \c
+                                           line kept in ~w on this host", [H, P, E, File])),
+            append_line(File, Line)
+        )
+    ;   append_line(Log, Line)
+    ).
+
+post_log_line(H, P, File, Line) :-
+    current_node(Node),
+    node_property(Node, link(Link)),
+    agent_post(H:P, platform, dfrl_log, Link, [entry(File, Line)]).
+
+append_line(File, Line) :-
     setup_call_cleanup(
-        open(Log, append, Out, [encoding(utf8)]),
-        ( json_write_dict(Out, Dict, [width(0)]),
-          nl(Out)
-        ),
+        open(File, append, Out, [encoding(utf8)]),
+        format(Out, "~s~n", [Line]),
         close(Out)).
 
 stringify(Key, D0, D) :-

@@ -84,6 +84,7 @@ Lines on stdout are written under one mutex, whole, and flushed.
 */
 
 :- initialization(platform_event(dfrl_console:dfrl_driver/3)).
+:- initialization(platform_event(dfrl_console:dfrl_log/3)).
 :- initialization(main, main).
 
 opt_type(host,  host,  atom).
@@ -330,6 +331,8 @@ text_atom(X, A) :-
 %       "rounds": 16,                               round budget (1)
 %       "rest_s": 0.0,                              rest at the first stop
 %       "rounds_log": "/abs/rounds.log",            the agent's JSON-lines log
+%       "log_to": [H, P],                           post its lines to this console,
+%                                                   which appends them to rounds_log
 %       "token": 1111,                              token of the robot nodes
 %       "timeout_s": 3600 }                         table read/write limit
 %
@@ -344,7 +347,12 @@ dfrl_launch_plan(D, Name, plan(Stops, Rounds, Rest, Log, Timeout),
     maplist(stop_term, Stops0, Stops),
     dict_default(D, rounds, 1, Rounds),
     dict_default(D, rest_s, 0.0, Rest0), must_be(number, Rest0), Rest is float(Rest0),
-    dict_default(D, rounds_log, 'rounds.log', Log0), text_atom(Log0, Log),
+    dict_default(D, rounds_log, 'rounds.log', Log0), text_atom(Log0, File),
+    (   get_dict(log_to, D, [LH0, LP]), LH0 \== null
+    ->  text_atom(LH0, LH), must_be(integer, LP),
+        Log = console(LH, LP, File)
+    ;   Log = File
+    ),
     dict_default(D, timeout_s, 3600, Timeout),
     dict_default(D, method, average, Method0), text_atom(Method0, Method),
     dict_default(D, name, dfrl, Name0), text_atom(Name0, Name),
@@ -375,6 +383,8 @@ dict_default(D, K, Default, V) :-
 
 dfrl_launch(Node, Dict, _{agent:Name, host:H, port:P}) :-
     dfrl_launch_plan(Dict, Name, Plan, Options),
+    arg(4, Plan, Log),
+    (   Log = console(_, _, File) -> accept_log(File) ; true ),
     dfrl_create(Node, Name, Plan, Options),
     Plan = plan([stop(H, P, _)|_], _, _, _, _),
     catch(with_node(Node, move_agent(Name, (H, P))), E,
@@ -405,6 +415,37 @@ dfrl_command(D, Command) :-
     ->  Command = stop
     ;   domain_error(dfrl_command, D)
     ).
+
+		 /*******************************
+		 *      ROUND LOGS FROM AGENTS	*
+		 *******************************/
+
+:- dynamic log_file/1.          % File: a launched agent may post lines for it
+
+accept_log(File) :-
+    (   log_file(File) -> true ; assertz(log_file(File)) ).
+
+%!  dfrl_log(+Platform, +Link, +Entry) is det.
+%
+%   Platform event: an agent launched from this console, wherever it is,
+%   posts entry(File, Line), one line of its round log; the line is
+%   appended to File on this host. Only files named by a launch of this
+%   console are written; anything else is reported as an event and
+%   dropped.
+
+dfrl_log(platform, _Link, entry(File, Line)) :-
+    atom(File), log_file(File), string(Line),
+    \+ sub_string(Line, _, _, _, "\n"),
+    !,
+    with_mutex(dfrl_console_log,
+               setup_call_cleanup(open(File, append, Out, [encoding(utf8)]),
+                                  format(Out, "~s~n", [Line]),
+                                  close(Out))).
+dfrl_log(platform, Link, Entry) :-
+    format(string(M), '~q', [Entry]),
+    format(string(From), '~w', [Link]),
+    emit(_{event:bad_message, message:M, error:"not a round-log line of an agent launched here",
+           from:From}).
 
 		 /*******************************
 		 *      JOINS THROUGH THE PLATFORM	*

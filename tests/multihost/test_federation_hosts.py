@@ -120,6 +120,13 @@ def test_the_documented_lan_setup_federates_three_hosts(tmp_path: Path) -> None:
         assert {ln.split(",")[0] for ln in metrics[1:]} == set(robots)
         summary = (out / "summary.md").read_text(encoding="utf-8")
         assert "federation complete" in summary, summary
+        # the agent's round log reached the driver through its console node, not through the
+        # file system the namespaces share: no robot fell back to writing it locally
+        for h in ROBOT_HOSTS:
+            for log in (tmp_path / h).rglob("*.err"):
+                assert "round log to console" not in log.read_text(encoding="utf-8"), log
+        launch = json.loads(next(out.glob("launch_*.json")).read_text(encoding="utf-8"))
+        assert launch["log_to"][0] == lab["driver"].address
         tag = lab.tag
     assert not leftover_namespaces(tag)
     assert time.monotonic() - t0 < 120

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from dfrl.experiments.results.agent_log import (Aborted, ControlEvent, RoundRecord, Skip,
+from dfrl.experiments.results.agent_log import (Aborted, ControlEvent, RoundRecord, Skip, Superseded,
                                                 parse_event, read_rounds_log)
 
 
@@ -68,3 +68,18 @@ def test_parse_event_round_trips_what_json_writes() -> None:
         parse_event('"just a string"')
     with pytest.raises(ValueError):
         parse_event('{"no_event": 1}')
+
+
+def test_a_round_logged_by_a_late_copy_and_its_replacement_counts_once(tmp_path: Path) -> None:
+    r = ('{"event":"round","agent":"fed","round":%d,"start":1.0,"end":2.0,"hops":2,'
+         '"bytes":0,"method":"average","visited":["r1"],"skipped":[],"epoch":%d}')
+    log = _write(tmp_path / "rounds.log", r % (1, 1), r % (2, 1),
+                 '{"event":"resurrected","agent":"fed","round":2,"epoch":2,"from":"a:1",'
+                 '"dead":"b:2"}',
+                 r % (2, 2), '{"event":"superseded","agent":"fed","round":3,"epoch":1,"by":2}',
+                 r % (3, 2))
+    got = read_rounds_log(log, "fed")
+    assert [(x.round, x.epoch) for x in got.rounds] == [(1, 1), (2, 2), (3, 2)]
+    assert [(x.round, x.epoch) for x in got.duplicates] == [(2, 1)]
+    assert got.superseded == [Superseded(3, 1, 2)] and len(got.resurrections) == 1
+    assert got.unreadable == []
