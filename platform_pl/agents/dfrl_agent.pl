@@ -295,7 +295,11 @@ new_round(Round, Origin,
 %   module explicitly.
 
 dfrl_tour(Agent, Link, Event) :-
-    dfrl_agent:dfrl_tour_event(Agent, Link, Event).
+    % a qualified goal written here would lose its qualifier when clause/2 reads
+    % this clause back (same module): build it, so the copy calls this module
+    % from whatever module the agent runs in
+    Module = dfrl_agent,
+    call(Module:dfrl_tour_event(Agent, Link, Event)).
 
 %!  dfrl_tour_main(+Agent, +Link) is det.
 %

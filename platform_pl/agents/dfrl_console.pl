@@ -378,19 +378,31 @@ dict_default(D, K, Default, V) :-
 %!  dfrl_launch(+Node, +Dict, -Result) is det.
 %
 %   Create the agent of launch plan Dict on Node and move it to its first
-%   stop. Result is the dict `_{agent:Name, host:H, port:P}`. If the move
-%   fails the agent is purged from Node and the move's error is thrown.
+%   stop. Result is the dict `_{agent:Name, host:H, port:P}`. If that move
+%   fails, the agent is started with the event `launch` instead: it goes
+%   to the first stop it can reach, and Result gets `first_stop_failed`
+%   (the error's text); an agent that can reach none logs `aborted`.
 
-dfrl_launch(Node, Dict, _{agent:Name, host:H, port:P}) :-
+dfrl_launch(Node, Dict, Result) :-
     dfrl_launch_plan(Dict, Name, Plan, Options),
     arg(4, Plan, Log),
     (   Log = console(_, _, File) -> accept_log(File) ; true ),
     dfrl_create(Node, Name, Plan, Options),
     Plan = plan([stop(H, P, _)|_], _, _, _, _),
-    catch(with_node(Node, move_agent(Name, (H, P))), E,
-          ( catch(with_node(Node, purge_agent(Name)), E2,
-                  print_message(warning, E2)),
-            throw(E) )).
+    catch(with_node(Node, move_agent(Name, (H, P))), E, true),
+    (   var(E)
+    ->  Result = _{agent:Name, host:H, port:P}
+    ;   E \= error(transport_error(_, _), _)
+    ->  % refused (e.g. tokens, a name in use): not a launch to retry elsewhere
+        catch(with_node(Node, purge_agent(Name)), E2, print_message(warning, E2)),
+        throw(E)
+    ;   % the first stop cannot be reached: the agent's `launch` event goes to the first
+        % stop it can reach (with its retries), and logs `aborted` if there is none
+        error_text(E, Why),
+        node_property(Node, link(Link)),
+        agents:agent_execute(Node, Name, Link, launch),
+        Result = _{agent:Name, host:H, port:P, first_stop_failed:Why}
+    ).
 
 %!  dfrl_command(+Dict, -Command) is det.
 %

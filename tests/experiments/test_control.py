@@ -348,3 +348,24 @@ def test_robot_op_to_a_dead_address_fails_without_blocking_the_console(
     with pytest.raises(ExperimentError, match="robot failed"):
         console.robot(dead, "status", timeout_s=5)
     assert console.agents_at(console.address) == []
+
+
+def test_launch_with_its_first_stop_down_starts_at_the_next(
+        console: ConsoleNode, nodes: Callable[[], Node], tmp_path: Path) -> None:
+    # Prepare: the first stop is a node that was started and killed (nothing listens there).
+    dead, b = nodes(), nodes()
+    dead.proc.kill()
+    dead.proc.wait(timeout=10)
+    log = tmp_path / "rounds.log"
+    # Execute
+    got = console.launch_agent(plan("fed_test", [(dead, "r1"), (b, "r2")], log, rounds=3))
+    # Assert: the launch says what happened, the agent re-homes at r2 and runs its rounds,
+    # each reporting the dead stop as skipped.
+    assert got["first_stop_failed"], got
+    done = wait_until("finished", lambda: [e for e in log_events(log)
+                                           if e["event"] == "finished"])
+    assert done[0]["round"] == 3
+    rounds = [e for e in log_events(log) if e["event"] == "round"]
+    assert [r["round"] for r in rounds] == [1, 2, 3]
+    assert all(r["visited"] == ["r2"] for r in rounds)
+    assert all(s["robot"] == "r1" for r in rounds for s in r["skipped"])
