@@ -21,7 +21,8 @@
             agent_fresh_name/3,         % +Node, +Base, -Name
             current_agent/1,            % -Name
             replace_guid/4,             % +Term0, +From, +To, -Term
-            with_agents_locked/1        % :Goal
+            with_agents_locked/1,       % :Goal
+            agent_notify/3              % +Event, +Node, +Name
           ]).
 :- use_module(node,
               [ current_node/1, node_set_current/1, node_clear_current/0,
@@ -68,11 +69,38 @@ program writes its own module, which is where its handler runs.
     current_agent_tl/1.
 
 :- multifile
-    node:node_stopping/1.
+    node:node_stopping/1,
+    agent_changed/3.            % +Event, +Node, +Name
 
+%   A stopping node forgets its agents without telling the custody hook:
+%   stopping a node is not purging its agents, a node restarted with its
+%   store recovers them.
 node:node_stopping(Node) :-
     forall(agent_entry(Node, Name, _, _),
-           catch(agent_purge(Node, Name), _, true)).
+           catch(purge(Node, Name, quiet), _, true)).
+
+%!  agent_changed(+Event, +Node, +Name) is nondet.
+%
+%   Multifile hook, called (through agent_notify/3) after agent Name on
+%   Node changed, outside the registry mutex. Event is `saved` (created,
+%   payload or tokens changed), run(idle) / run(run) (its handler
+%   returned / started) or `removed`. custody.pl implements it to keep
+%   the agents a node holds on disk. Example:
+%
+%   ```
+%   agents:agent_changed(removed, Node, Name) :-
+%       debug(my_topic, '~p left ~w', [Name, Node]).
+%   ```
+%
+%   Errors are not caught: a change that cannot be made durable is
+%   reported to the caller.
+
+%!  agent_notify(+Event, +Node, +Name) is det.
+%
+%   Call every clause of the hook agent_changed/3 for Event.
+
+agent_notify(Event, Node, Name) :-
+    forall(agent_changed(Event, Node, Name), true).
 
 %!  with_agents_locked(:Goal) is semidet.
 %
@@ -130,7 +158,7 @@ agent_create(Name, Handler0, Options, Node) :-
     assertz(agent_status_(Node, Name, idle)),
     (   option(payload(Preds), Options)
     ->  agent_add_payload(Node, Name, Preds)
-    ;   true
+    ;   agent_notify(saved, Node, Name)
     ).
 
 strip_handler(M:H, _, M, H) :-
@@ -305,7 +333,8 @@ agent_add_payload(Node, Name, Preds) :-
              ->  true
              ;   assertz(agent_payload_(Node, Name, F/A))
              )
-           )).
+           )),
+    agent_notify(saved, Node, Name).
 
 pred_indicator(F/A, F/A) :-
     !,
@@ -369,7 +398,8 @@ agent_add_facts(Node, Name, Facts) :-
              ->  true
              ;   assertz(agent_payload_(Node, Name, P/A))
              )
-           )).
+           )),
+    agent_notify(saved, Node, Name).
 
 %!  agent_remove_payload(+Node, +Name, +Preds) is det.
 %
@@ -387,7 +417,8 @@ agent_remove_payload(Node, Name, Preds) :-
              ;   true
              ),
              retractall(agent_payload_(Node, Name, F/A))
-           )).
+           )),
+    agent_notify(saved, Node, Name).
 
 		 /*******************************
 		 *            TOKENS		*
@@ -403,7 +434,8 @@ agent_add_tokens(Node, Name, Tokens) :-
         ( retract(agent_tokens_(Node, Name, Old)),
           union(Old, Tokens, New),
           assertz(agent_tokens_(Node, Name, New))
-        )).
+        )),
+    agent_notify(saved, Node, Name).
 
 %!  agent_remove_tokens(+Node, +Name, +Tokens) is det.
 
@@ -414,7 +446,8 @@ agent_remove_tokens(Node, Name, Tokens) :-
         ( retract(agent_tokens_(Node, Name, Old)),
           subtract(Old, Tokens, New),
           assertz(agent_tokens_(Node, Name, New))
-        )).
+        )),
+    agent_notify(saved, Node, Name).
 
 		 /*******************************
 		 *           EXECUTION		*
@@ -453,15 +486,23 @@ agent_run(Node, Name, Link, Event) :-
         ;   Run = false                 % purged or moved before it started
         )),
     (   Run == true
-    ->  setup_call_cleanup(
+    ->  catch(agent_notify(run(run), Node, Name), E0,
+              print_message(warning, E0)),
+        setup_call_cleanup(
             enter_agent(Node, Name),
             run_agent(Node, Name, Link, Event),
             leave_agent),
         with_agents_locked(
             (   agent_status_(Node, Name, running(Me))
-            ->  agent_set_status(Node, Name, idle)
-            ;   true
-            ))
+            ->  agent_set_status(Node, Name, idle),
+                Rested = true
+            ;   Rested = false
+            )),
+        (   Rested == true
+        ->  catch(agent_notify(run(idle), Node, Name), E,
+                  print_message(warning, E))
+        ;   true
+        )
     ;   true
     ).
 
@@ -516,19 +557,30 @@ current_agent(Name) :-
 %   @error existence_error(agent, Name)
 
 agent_purge(Node, Name) :-
+    purge(Node, Name, notify).
+
+purge(Node, Name, Notify) :-
     must_exist(Node, Name),
     (   agent_status_(Node, Name, running(Tid)),
         \+ thread_self(Tid)
     ->  pool_signal(agents, Tid, agents:purge_if_running(Name))
     ;   true
     ),
-    agent_remove(Node, Name).
+    forget(Node, Name),
+    (   Notify == notify
+    ->  agent_notify(removed, Node, Name)
+    ;   true
+    ).
 
 %!  agent_remove(+Node, +Name) is det.
 %
 %   Forget agent Name and its code on Node (without touching a thread).
 
 agent_remove(Node, Name) :-
+    forget(Node, Name),
+    agent_notify(removed, Node, Name).
+
+forget(Node, Name) :-
     agent_module(Node, Name, M),
     forall(( current_predicate(_, M:H),
              \+ predicate_property(M:H, imported_from(_)),

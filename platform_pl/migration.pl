@@ -2,58 +2,105 @@
           [ agent_move/3,               % +Name, +Address, +Options
             agent_clone/4,              % +Name, +Address, -Clone, +Options
             agent_resolve/2,            % +Name, +Decision
-            migration_decision/3        % ?Node, ?MigrationId, ?Decision
+            migration_decision/3,       % ?Node, ?MigrationId, ?Decision
+            migration_start/1,          % +Node
+            migration_settle/1          % +Node
           ]).
+:- reexport(custody, [custody_agents/2]).
 :- use_module(node,
               [ current_node/1, node_property/2, node_option/3,
-                node_for_address/2, ctx_node/2, ctx_input/2,
-                ctx_authenticated/1 ]).
+                node_for_address/2, ctx_node/2, ctx_authenticated/1 ]).
 :- use_module(agents).
+:- use_module(custody).
 :- use_module(transport).
 :- use_module(platform_errors, [transport_error/2]).
-:- use_module(wire, [frame_read/3]).
 :- autoload(library(error),
             [must_be/2, existence_error/2, permission_error/3]).
 :- autoload(library(option), [option/2, option/3]).
 :- autoload(library(debug), [debug/3]).
+:- autoload(library(lists), [min_list/2, member/2]).
 
-/** <module> Weak migration and cloning of agents between nodes
+/** <module> Migration and cloning of agents between nodes, with custody
 
-Moving an agent is a two-phase hand-over on one connection:
+Moving agent A from source S to destination D is a hand-over in which
+exactly one side owns A at every instant and the owner is decided once,
+by S, and recorded durably (with the node option `store(Dir)`; see
+custody.pl for the files and recovery):
 
-  1. The source sends transfer(Id, Mode, Source, Departed, Record) as a
-     binary frame, after proving the agent's tokens.
-  2. The destination checks the tokens and the record, installs the agent
-     *staged* (not running) and answers ok(staged(Name)), or refuses.
-  3. On that answer the source decides: the migration is committed, the
-     agent is removed at the source and commit(Id) is sent. Without that
-     answer (refusal, timeout, closed connection) the source decides
-     abort and keeps the agent, and move_agent raises the reason.
-  4. The destination starts the agent on commit(Id). If the commit does
-     not come (lost message, closed connection), it asks the source for
-     its decision on Id: committed starts the agent, aborted discards
-     the staged copy. If the source cannot be reached the agent is kept
-     `in_doubt`, listed and resolvable with agent_resolve/2, never
-     silently dropped or started twice.
+  | step | S (source)                              | D (destination)                      |
+  |------|-----------------------------------------|--------------------------------------|
+  | 1    | A becomes departing(M), M is *pending*  |                                      |
+  | 2    | sends transfer(M, Mode, S, T, Record, I)|                                      |
+  | 3    |                                         | installs A staged(M), stores it, answers ok(staged(A)) |
+  | 4    | on that answer: stores committed(M), removes its copy | |
+  | 5    | sends commit(M) (a request)             | stores A active, starts it, answers ok(started(A)) |
+  | 6    | on that answer: forgets committed(M)    |                                      |
 
-Each side decides once and records the decision, so one lost message
-neither loses nor duplicates an agent.
+I is S's incarnation (custody_incarnation/2). Without the staged answer
+(refusal, reply timeout, closed connection, a failure to store the
+decision) S decides aborted, keeps A running and agent_move/3 raises the
+reason. An `aborted` is never stored: S answers aborted for every M it
+has no record of (*presumed abort*), and it never commits an M it does
+not remember, so a restarted S (which forgot every pending M) is right
+to answer so.
+
+A staged A never starts without learning committed(M), and S never runs
+A again after committed(M): at no instant do two live copies exist,
+whatever the timeouts (they only decide how soon a fault is noticed).
+A is never lost: S removes its copy only after D stored A as staged and
+S stored committed(M); D discards A only when S answers aborted.
+
+*Settling.* Each node runs a settle thread (started by the hook
+node:node_started/1 or on first use; period: node option
+`settle_period`, default 2 s). As destination it asks the source of
+every agent staged longer than `commit_timeout` (and every in_doubt
+one) migration_status(M):
+
+  - committed: start A;  aborted: discard the staged copy;
+  - pending: S is still deciding; ask again later;
+  - unknown(I'): no record at S. If I' is the incarnation S sent in the
+    transfer, S never committed (presumed abort): discard. If it differs,
+    S restarted without its store and lost whatever it held: start A
+    (D's copy is the only one left). A transfer without an incarnation
+    (transfer/5, older peers) keeps A in_doubt;
+  - no answer: A is in_doubt(M, S); ask again next period.
+
+As source it sends commit(M) again for every committed decision not yet
+confirmed (D answers started(A) or not_staged), then forgets it. A node
+restarted with its store recovers its agents and decisions first, so a
+kill -9 of either side at any moment, lost or delayed frames, SIGSTOP
+past every timeout and cut links all settle to exactly one running copy
+without an operator. agent_resolve/2 remains for agents of old peers
+and for a staged agent whose source never answers again (only the
+source knows whether it committed).
 */
 
 :- dynamic
-    decision/4.                 % Node, MigrationId, Decision, Time
+    pending_/2,                 % Node, MigId
+    arrival_/3,                 % Node, MigId, Departed
+    settler_/3.                 % Node, Thread, Queue
 
-:- multifile node:platform_request/4.
+:- multifile
+    node:platform_request/4,
+    node:node_started/1,
+    node:node_stopping/1.
+
+node:node_started(Node) :-
+    migration_start(Node).
+
+node:node_stopping(Node) :-
+    migration_stop(Node).
 
 %!  agent_move(+Name, +Address, +Options) is det.
 %
 %   Move agent Name from the current node to the platform at Address
 %   (weak migration: its code and payload travel; at the destination its
-%   handler starts again with Event `main`). Succeeds only once the
-%   destination has installed the agent; otherwise the agent stays here
-%   and the error says why. May be called from the agent's own handler
-%   (the usual Tartarus style) or for an idle agent. Options: those of
-%   transport_open/3.
+%   handler starts again with Event `main`). Succeeds once the
+%   destination holds the agent and this node decided (durably, with a
+%   store) that it has left; otherwise the agent stays here (decided
+%   aborted) and the error says why. May be called from the agent's own
+%   handler (the usual Tartarus style) or for an idle agent. Options:
+%   connect_timeout(S), reply_timeout(S) (default: the node's).
 %
 %   @error existence_error(agent, Name)
 %   @error permission_error(move, static_agent, Name)
@@ -65,24 +112,29 @@ agent_move(Name, Address0, Options) :-
     must_be(atom, Name),
     address_normalize(Address0, Address),
     current_node(Node),
-    (   node_for_address(Address, Node)
+    migration_start(Node),
+    (   is_self(Node, Address)
     ->  move_here(Node, Name)
     ;   with_agents_locked(begin_departure(Node, Name, MigId, Previous)),
-        catch(transfer(Node, Name, Address, move, MigId, _Final, Options,
-                       agent_remove(Node, Name)),
+        catch(transfer(Node, Name, Address, move, MigId, _Final, Options),
               E,
-              restore_unless_gone(Node, Name, Previous, E))
+              ( with_agents_locked(restore(Node, Name, Previous)),
+                throw(E)
+              ))
     ).
 
-%   The move failed. If it failed before the commit the agent is still
-%   here: give it back its status. (After the commit it is gone from here
-%   and the error is only about sending the commit, which the
-%   destination resolves by asking us.)
-restore_unless_gone(Node, Name, Previous, E) :-
-    (   agent_exists(Node, Name)
-    ->  with_agents_locked(agent_set_status(Node, Name, Previous)),
-        throw(E)
-    ;   print_message(warning, E)
+%   node_is_self/2 (node identity) where node.pl offers it, else the
+%   address-text test.
+is_self(Node, Address) :-
+    (   current_predicate(node:node_is_self/2)
+    ->  node:node_is_self(Node, Address)
+    ;   node_for_address(Address, Node)
+    ).
+
+restore(Node, Name, Previous) :-
+    (   agent_status(Node, Name, departing(_))
+    ->  agent_set_status(Node, Name, Previous)
+    ;   true
     ).
 
 begin_departure(Node, Name, MigId, Previous) :-
@@ -96,6 +148,7 @@ begin_departure(Node, Name, MigId, Previous) :-
     ;   permission_error(move, agent, Name)
     ),
     new_migration_id(Node, Name, MigId),
+    assertz(pending_(Node, MigId)),
     agent_set_status(Node, Name, departing(MigId)).
 
 %   Moving to the node it is on: start the handler again with main.
@@ -118,19 +171,28 @@ agent_clone(Name, Address0, Clone, Options) :-
     must_be(atom, Name),
     address_normalize(Address0, Address),
     current_node(Node),
+    migration_start(Node),
     (   agent_exists(Node, Name)
     ->  true
     ;   existence_error(agent, Name)
     ),
     new_migration_id(Node, Name, MigId),
-    transfer(Node, Name, Address, clone, MigId, Clone, Options, true).
+    assertz(pending_(Node, MigId)),
+    transfer(Node, Name, Address, clone, MigId, Clone, Options).
 
-%   OnCommit runs once the destination has staged the agent and before the
-%   commit is sent: the source's copy of a moved agent is gone before the
-%   agent can start at the destination (and, e.g., come straight back).
-transfer(Node, Name, Address, Mode, MigId, Final, Options, OnCommit) :-
+transfer(Node, Name, Address, Mode, MigId, Final, Options) :-
+    catch(prepare(Node, Name, Mode, Address, Options, Record, Conn),
+          E, ( abort(Node, MigId), throw(E) )),
+    catch(hand_over(Node, Conn, Address, Mode, MigId, Name, Record, Final, Reuse),
+          E2,
+          ( transport_discard(Conn), throw(E2) )),
+    (   Reuse == true
+    ->  transport_release(Conn)
+    ;   transport_discard(Conn)
+    ).
+
+prepare(Node, Name, Mode, Address, Options, Record, Conn) :-
     agent_export(Node, Name, Record0),
-    get_time(Departed),
     (   Mode == clone
     ->  setarg(1, Record0, rename(Name, Name)),
         setarg(8, Record0, [])
@@ -138,157 +200,326 @@ transfer(Node, Name, Address, Mode, MigId, Final, Options, OnCommit) :-
     ),
     Record = Record0,
     arg(4, Record, Tokens),
-    node_property(Node, address(Source)),
     node_option(Node, connect_timeout, CT),
     node_option(Node, reply_timeout, RT),
-    merge_timeouts(Options, CT, RT, ConnOptions0),
-    ConnOptions = [action(enter)|ConnOptions0],
-    transport_acquire(Address, Tokens, Conn, ConnOptions),
-    catch(hand_over(Node, Conn, Address, Mode, MigId, Source, Departed,
-                    Record, Final, OnCommit),
-          E,
-          ( transport_discard(Conn), throw(E) )),
-    transport_release(Conn).
-
-merge_timeouts(Options, CT, RT, [connect_timeout(C), reply_timeout(R)]) :-
     option(connect_timeout(C), Options, CT),
-    option(reply_timeout(R), Options, RT).
+    option(reply_timeout(R), Options, RT),
+    transport_acquire(Address, Tokens, Conn,
+                      [action(enter), connect_timeout(C), reply_timeout(R)]).
 
-hand_over(Node, Conn, Address, Mode, MigId, Source, Departed, Record,
-          Final, OnCommit) :-
+hand_over(Node, Conn, Address, Mode, MigId, Name, Record, Final, Reuse) :-
+    node_property(Node, address(Source)),
+    custody_incarnation(Node, Inc),
+    get_time(Departed),
     catch(( transport_send(Conn, binary,
-                           transfer(MigId, Mode, Source, Departed, Record)),
+                           transfer(MigId, Mode, Source, Departed, Record, Inc)),
             transport_receive(Conn, Reply, [phase(transfer)])
           ),
           E,
-          ( decide(Node, MigId, aborted), throw(E) )),
+          ( abort(Node, MigId), throw(E) )),
     (   Reply = ok(staged(Final))
-    ->  decide(Node, MigId, committed),
-        call(OnCommit),
-        transport_send(Conn, binary, commit(MigId))
-    ;   decide(Node, MigId, aborted),
+    ->  arg(4, Record, Tokens),
+        (   Mode == move
+        ->  What = move(Name),
+            OnCommit = agent_remove(Node, Name)
+        ;   What = clone(Final),
+            OnCommit = true
+        ),
+        catch(custody_commit(Node, MigId, What, Address, Tokens, OnCommit),
+              E2, ( abort(Node, MigId), throw(E2) )),
+        retractall(pending_(Node, MigId)),
+        send_commit(Node, Conn, MigId, Reuse)
+    ;   abort(Node, MigId),
         (   Reply = error(error(Formal, _))
         ->  throw(error(Formal, remote(Address)))
         ;   transport_error(Address, protocol(unexpected_reply(Reply)))
         )
     ).
 
-decide(Node, MigId, Decision) :-
-    get_time(Now),
-    flag(dfrl_decisions, N, N+1),
-    (   N mod 512 =:= 0
-    ->  prune_decisions(Now)
-    ;   true
-    ),
-    assertz(decision(Node, MigId, Decision, Now)).
+abort(Node, MigId) :-
+    custody_decide(Node, MigId, aborted),
+    retractall(pending_(Node, MigId)).
 
-prune_decisions(Now) :-
-    Old is Now - 3600,
-    forall(( decision(N, I, D, T), T < Old ), retract(decision(N, I, D, T))).
+%   The agent has left whatever happens here; a commit that does not get
+%   its answer is sent again by the settle thread.
+send_commit(Node, Conn, MigId, Reuse) :-
+    catch(( transport_send(Conn, text, commit(MigId)),
+            transport_receive(Conn, Answer, [phase(commit)])
+          ),
+          E, Answer = failed(E)),
+    (   Answer = ok(_)
+    ->  custody_acked(Node, MigId),
+        Reuse = true
+    ;   debug(dfrl(custody), 'commit of ~q not confirmed (~p); settling later',
+              [MigId, Answer]),
+        Reuse = false
+    ).
 
-%!  migration_decision(?Node, ?MigrationId, ?Decision) is nondet.
+%!  migration_decision(?Node, ?MigId, ?Decision) is nondet.
 %
 %   The decision (committed or aborted) a node took as the source of a
-%   migration in the last hour.
+%   migration (aborted ones for an hour).
 
 migration_decision(Node, MigId, Decision) :-
-    decision(Node, MigId, Decision, _).
+    custody_decision(Node, MigId, Decision).
+
+%   For tests that play a source by hand.
+decide(Node, MigId, Decision) :-
+    custody_decide(Node, MigId, Decision).
 
 		 /*******************************
 		 *          DESTINATION		*
 		 *******************************/
 
+node:platform_request(transfer(MigId, Mode, Source, Departed, Record, SInc),
+                      Ctx, Reply, After) :-
+    receive_transfer(Ctx, MigId, Mode, Source, Departed, Record, SInc,
+                     Reply, After).
 node:platform_request(transfer(MigId, Mode, Source, Departed, Record),
                       Ctx, Reply, After) :-
+    receive_transfer(Ctx, MigId, Mode, Source, Departed, Record, none,
+                     Reply, After).
+node:platform_request(commit(MigId), Ctx, Reply, After) :-
     ctx_node(Ctx, Node),
     (   \+ ctx_authenticated(Ctx)
-    ->  node_property(Node, address(Here)),
-        Reply = error(error(permission_error(enter, platform, Here),
-                            context(_, 'the agent carries no token of this platform'))),
-        After = close
-    ;   stage(Node, MigId, Mode, Record, Name),
-        Reply = ok(staged(Name)),
-        After = continue(migration:await_commit(Ctx, MigId, Name, Source,
-                                                Departed))
+    ->  unauthenticated(Node, Reply, After)
+    ;   migration_start(Node),
+        (   custody_staged(Node, Name, MigId, _, _, _),
+            activate(Node, Name, MigId)
+        ->  Reply = ok(started(Name))
+        ;   Reply = ok(not_staged)
+        ),
+        After = true
     ).
 node:platform_request(migration_status(MigId), Ctx, ok(Decision), true) :-
     ctx_node(Ctx, Node),
-    (   decision(Node, MigId, D, _)
+    migration_start(Node),
+    (   pending_(Node, MigId)
+    ->  Decision = pending
+    ;   custody_decision(Node, MigId, D)
     ->  Decision = D
-    ;   Decision = unknown
+    ;   custody_incarnation(Node, Inc),
+        Decision = unknown(Inc)
     ).
 
-stage(Node, MigId, Mode, Record, Name) :-
-    must_be(oneof([move, clone]), Mode),
-    agent_install(Node, Record, staged(MigId), Name).
+unauthenticated(Node, Reply, close) :-
+    node_property(Node, address(Here)),
+    Reply = error(error(permission_error(enter, platform, Here),
+                        context(_, 'the agent carries no token of this platform'))).
 
-%!  await_commit(+Ctx, +MigId, +Name, +Source, +Departed) is det.
-%
-%   Run by the worker after it answered staged: wait for the commit, or
-%   ask the source, then start or discard the staged agent.
-
-await_commit(Ctx, MigId, Name, Source, Departed) :-
+receive_transfer(Ctx, MigId, Mode, Source, Departed, Record, SInc, Reply, After) :-
     ctx_node(Ctx, Node),
-    ctx_input(Ctx, In),
-    node_option(Node, commit_timeout, Timeout),
-    node_option(Node, idle_timeout, Idle),
-    set_stream(In, timeout(Timeout)),
-    catch(frame_read(In, Frame, [max_size(4096), binary(true)]), _, Frame = lost),
-    set_stream(In, timeout(Idle)),
-    (   Frame = frame(_, commit(MigId))
-    ->  activate(Node, Name, Source, Departed)
-    ;   resolve_with_source(Node, MigId, Name, Source, Departed),
-        throw(connection_lost)
+    (   \+ ctx_authenticated(Ctx)
+    ->  unauthenticated(Node, Reply, After)
+    ;   migration_start(Node),
+        must_be(oneof([move, clone]), Mode),
+        agent_install(Node, Record, staged(MigId), Name),
+        get_time(Now),
+        catch(custody_stage(Node, Name, MigId, Source, SInc, Now), E,
+              ( agent_remove(Node, Name), throw(E) )),
+        assertz(arrival_(Node, MigId, Departed)),
+        wake_settler(Node),
+        Reply = ok(staged(Name)),
+        After = true
     ).
 
-resolve_with_source(Node, MigId, Name, Source, Departed) :-
-    ask_source(Node, Source, MigId, 3, Decision),
-    (   Decision == committed
-    ->  activate(Node, Name, Source, Departed)
-    ;   Decision == aborted
-    ->  agent_remove(Node, Name)
-    ;   with_agents_locked(agent_set_status(Node, Name, in_doubt(MigId, Source))),
-        print_message(warning, dfrl(agent_in_doubt(Node, Name, Source)))
-    ).
-
-ask_source(_, _, _, 0, unreachable) :- !.
-ask_source(Node, Source, MigId, Tries, Decision) :-
-    node_option(Node, connect_timeout, CT),
-    (   catch(transport_request(Source, migration_status(MigId), D,
-                                [connect_timeout(CT), reply_timeout(CT)]),
-              _, fail),
-        D \== unknown
-    ->  Decision = D
-    ;   Tries1 is Tries - 1,
-        sleep(0.2),
-        ask_source(Node, Source, MigId, Tries1, Decision)
-    ).
-
-activate(Node, Name, Source, Departed) :-
-    get_time(Arrived),
+%   Start the staged (or in_doubt) agent Name of migration MigId, once.
+activate(Node, Name, MigId) :-
+    with_custody(Node, activate_(Node, Name, MigId, Source, Departed)),
     node_property(Node, link(Link)),
+    agent_execute(Node, Name, Link, main),
+    debug(dfrl(custody), '~w: ~q from ~w started', [Node, Name, Source-Departed]).
+
+activate_(Node, Name, MigId, Source, Departed) :-
+    agent_status(Node, Name, Status),
+    (   Status = staged(MigId) -> true ; Status = in_doubt(MigId, _) ),
+    (   custody_staged(Node, Name, MigId, Source, _, Since)
+    ->  true
+    ;   Status = in_doubt(_, Source), get_time(Since)
+    ),
+    (   retract(arrival_(Node, MigId, Departed))
+    ->  true
+    ;   Departed = Since
+    ),
+    custody_activated(Node, Name, MigId),
+    get_time(Arrived),
     format(atom(Here), '~w', [Node]),
     with_agents_locked(
         (   agent_record_hop(Node, Name, hop(Source, Here, Departed, Arrived))
         ->  agent_set_status(Node, Name, idle)
         ;   true
-        )),
-    agent_execute(Node, Name, Link, main).
+        )).
+
+%   Discard the staged copy of Name: its source decided aborted.
+discard(Node, Name, MigId) :-
+    with_custody(Node,
+                 (   agent_status(Node, Name, Status),
+                     ( Status = staged(MigId) ; Status = in_doubt(MigId, _) )
+                 ->  agent_remove(Node, Name),
+                     custody_unstage(Node, Name),
+                     retractall(arrival_(Node, MigId, _))
+                 ;   true
+                 )).
 
 %!  agent_resolve(+Name, +Decision) is det.
 %
-%   Settle an agent left in_doubt on the current node: Decision is
+%   Settle by hand an agent left in_doubt on the current node (only
+%   agents sent by peers without an incarnation stay so): Decision is
 %   `start` or `discard`.
 
 agent_resolve(Name, Decision) :-
     must_be(oneof([start, discard]), Decision),
     current_node(Node),
     agent_status(Node, Name, Status),
-    (   Status = in_doubt(_, Source)
+    (   Status = in_doubt(MigId, _)
     ->  (   Decision == start
-        ->  get_time(Now),
-            activate(Node, Name, Source, Now)
-        ;   agent_remove(Node, Name)
+        ->  activate(Node, Name, MigId)
+        ;   discard(Node, Name, MigId)
         )
     ;   permission_error(resolve, agent, Name)
+    ).
+
+		 /*******************************
+		 *            SETTLE		*
+		 *******************************/
+
+%!  migration_start(+Node) is det.
+%
+%   Open Node's custody (recovering its store), start its settle thread
+%   and restart the recovered agents that were running. Called by the
+%   hook node:node_started/1 and on first use; later calls do nothing.
+
+migration_start(Node) :-
+    (   settler_(Node, _, _)
+    ->  true
+    ;   with_mutex(dfrl_migration_start, start_(Node))
+    ).
+
+start_(Node) :-
+    (   settler_(Node, _, _)
+    ->  true
+    ;   custody_open(Node, Restart),
+        message_queue_create(Queue),
+        atom_concat('dfrl_settle@', Node, Alias),
+        thread_create(settle_loop(Node, Queue), Tid, [alias(Alias)]),
+        assertz(settler_(Node, Tid, Queue)),
+        node_property(Node, link(Link)),
+        forall(member(Name, Restart),
+               catch(agent_execute(Node, Name, Link, main), E,
+                     print_message(warning, E)))
+    ).
+
+migration_stop(Node) :-
+    (   retract(settler_(Node, Tid, Queue))
+    ->  thread_send_message(Queue, stop),
+        catch(thread_join(Tid, _), _, true),
+        message_queue_destroy(Queue)
+    ;   true
+    ),
+    retractall(pending_(Node, _)),
+    retractall(arrival_(Node, _, _)),
+    custody_close(Node).
+
+wake_settler(Node) :-
+    (   settler_(Node, _, Queue)
+    ->  thread_send_message(Queue, wake)
+    ;   true
+    ).
+
+%   thread_get_message/3 fails on timeout: that is a tick, not the end.
+settle_loop(Node, Queue) :-
+    custody_option(Node, settle_period, 2, Period),
+    next_wait(Node, Period, Wait),
+    (   thread_get_message(Queue, Msg, [timeout(Wait)])
+    ->  true
+    ;   Msg = tick
+    ),
+    (   Msg == stop
+    ->  true
+    ;   catch(settle_due(Node, Period), E, print_message(warning, E)),
+        settle_loop(Node, Queue)
+    ).
+
+%   Wake when the first staged agent's commit timeout runs out, at the
+%   latest after one period.
+next_wait(Node, Period, Wait) :-
+    custody_option(Node, commit_timeout, 10, CT),
+    get_time(Now),
+    findall(W, ( custody_staged(Node, Name, MigId, _, _, Since),
+                 agent_status(Node, Name, staged(MigId)),
+                 W is max(0.02, Since + CT - Now) ),
+            Ws),
+    min_list([Period|Ws], Wait).
+
+%!  migration_settle(+Node) is det.
+%
+%   One settle pass over every staged, in_doubt and unconfirmed
+%   hand-over of Node, whatever their age (the settle thread does this
+%   for those that are due).
+
+migration_settle(Node) :-
+    settle(Node, 0, 0).
+
+settle_due(Node, Period) :-
+    custody_option(Node, commit_timeout, 10, CT),
+    settle(Node, CT, Period).
+
+settle(Node, StagedAge, CommitAge) :-
+    get_time(Now),
+    forall(( custody_staged(Node, Name, MigId, Source, SInc, Since),
+             agent_status(Node, Name, Status),
+             (   Status = in_doubt(MigId, _)
+             ->  true
+             ;   Status == staged(MigId), Now - Since >= StagedAge
+             )
+           ),
+           settle_staged(Node, Name, MigId, Source, SInc)),
+    forall(( custody_unacked(Node, MigId, Dest, Tokens, Time, _),
+             Now - Time >= CommitAge
+           ),
+           settle_commit(Node, MigId, Dest, Tokens)).
+
+settle_staged(Node, Name, MigId, Source, SInc) :-
+    node_option(Node, connect_timeout, CT),
+    (   catch(transport_request(Source, migration_status(MigId), Answer,
+                                [connect_timeout(CT), reply_timeout(CT)]),
+              E, ( debug(dfrl(custody), 'ask ~w: ~p', [Source, E]), fail ))
+    ->  true
+    ;   Answer = unreachable
+    ),
+    debug(dfrl(custody), '~w: ~q staged by ~q: source says ~p',
+          [Node, Name, MigId, Answer]),
+    verdict(Answer, SInc, Verdict),
+    apply_verdict(Verdict, Node, Name, MigId, Source).
+
+verdict(committed, _, start) :- !.
+verdict(aborted, _, discard) :- !.
+verdict(pending, _, wait) :- !.
+verdict(unknown(_), none, doubt) :- !.
+verdict(unknown(Inc), Inc, discard) :- !.        % presumed abort
+verdict(unknown(_), _, start) :- !.              % the source lost its memory
+verdict(_, _, doubt).
+
+apply_verdict(start, Node, Name, MigId, _) :-
+    ignore(activate(Node, Name, MigId)).
+apply_verdict(discard, Node, Name, MigId, _) :-
+    discard(Node, Name, MigId).
+apply_verdict(wait, _, _, _, _).
+apply_verdict(doubt, Node, Name, MigId, Source) :-
+    with_custody(Node,
+                 (   agent_status(Node, Name, staged(MigId))
+                 ->  with_agents_locked(
+                         agent_set_status(Node, Name, in_doubt(MigId, Source)))
+                 ;   true
+                 )).
+
+settle_commit(Node, MigId, Dest, Tokens) :-
+    node_option(Node, connect_timeout, CT),
+    (   catch(transport_request(Dest, commit(MigId), Answer,
+                                [ tokens(Tokens), action(enter),
+                                  connect_timeout(CT), reply_timeout(CT) ]),
+              E, ( debug(dfrl(custody), 'commit to ~w: ~p', [Dest, E]), fail ))
+    ->  debug(dfrl(custody), '~w: commit ~q again: ~p', [Node, MigId, Answer]),
+        custody_acked(Node, MigId)
+    ;   true
     ).

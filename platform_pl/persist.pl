@@ -52,8 +52,9 @@ node_save_state(Node, File) :-
 
 %!  node_load_state(+Node, +File) is det.
 %
-%   Install the agents saved in File on Node, idle. Agents whose name is
-%   taken on Node are skipped with a warning.
+%   Install the agents saved in File on Node, idle (and in the node's
+%   custody store if it has one). Agents whose name is taken on Node are
+%   skipped with a warning.
 
 node_load_state(Node, File) :-
     must_be(atom, Node),
@@ -67,7 +68,9 @@ load_terms(Node, In) :-
     (   Term == end_of_file
     ->  true
     ;   (   Term = dfrl_agent(_Status, Record)
-        ->  catch(agent_install(Node, Record, idle, _), E,
+        ->  catch(( agent_install(Node, Record, idle, Name),
+                    agent_notify(saved, Node, Name)     % held on disk too
+                  ), E,
                   print_message(warning, E))
         ;   print_message(warning, format('Not a saved agent: ~p', [Term]))
         ),

@@ -8,7 +8,7 @@ import sys
 from dataclasses import asdict
 from pathlib import Path
 
-from dfrl.experiments.bench import bridge, migrate, round as round_bench, sim
+from dfrl.experiments.bench import bridge, chaos, migrate, round as round_bench, sim
 
 
 # -- migrate ---------------------------------------------------------------------------------
@@ -146,12 +146,47 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     return 0 if all(r["bit_exact"] for r in results.values()) else 1
 
 
+# -- chaos -----------------------------------------------------------------------------------
+def add_chaos_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--faults", type=int, default=100, help="faults to inject (default 100)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--agents", type=int, default=4, help="hopping agents (default 4)")
+    parser.add_argument("--settle-timeout", type=float, default=30.0,
+                        help="longest wait for the nodes to settle after a fault (s)")
+    parser.add_argument("--keep", type=Path, default=None,
+                        help="keep the node logs and stores here (default: a temp folder)")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def cmd_chaos(args: argparse.Namespace) -> int:
+    """Exit 0 only if no agent was lost, doubled or left unsettled."""
+    def progress(n: int, kind: str, c: dict) -> None:
+        if not args.json:
+            print(f"{n:4d} {kind:28s} settled in {c['settle_s']:5.2f} s  lost {c['lost']} "
+                  f"doubled {c['doubled']} unsettled {c['unsettled']}", flush=True)
+
+    try:
+        r = chaos.run(args.faults, args.seed, agents=args.agents,
+                      settle_timeout=args.settle_timeout, workdir=args.keep, progress=progress)
+    except (ValueError, RuntimeError, FileNotFoundError) as exc:
+        print(f"dfrl bench chaos: {exc}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(r))
+    else:
+        print(f"{r['faults']} faults, {r['moves']} moves, {r['restarts']} restarts: lost "
+              f"{r['lost']}, doubled {r['doubled']}, unsettled {r['unsettled']} "
+              f"({r['wall_s']} s)")
+    return 0 if r["lost"] == r["doubled"] == r["unsettled"] == 0 else 1
+
+
 #: benchmark name -> (its module, whose doc gives the help line; add arguments; run)
 BENCHMARKS = {
     "migrate": (migrate, add_migrate_arguments, cmd_migrate),
     "sim": (sim, add_sim_arguments, cmd_sim),
     "round": (round_bench, add_round_arguments, cmd_round),
     "bridge": (bridge, add_bridge_arguments, cmd_bridge),
+    "chaos": (chaos, add_chaos_arguments, cmd_chaos),
 }
 
 
