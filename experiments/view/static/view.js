@@ -10,6 +10,8 @@
     "control", "resurrected", "superseded", "finished", "robot_state", "run_end", "join"]);
   const MAX_LIST = 300;
   const RENDER_MS = 200;
+  const HOP_MS = 180;             // a hop stays on screen at least this long (live)
+  const QUEUE = 8;                // hops waiting to be shown at most (older ones dropped)
 
   const all = [];                 // every event received, by seq
   let S = fresh();                // the model at the replay position
@@ -37,7 +39,8 @@
     let a = S.agents.get(name);
     if (!a) {
       a = { name, algo: "", method: "", rounds: 0, round: 0, lastMs: null, at: null,
-            phase: "rest", prev: null, moves: 0, itinerary: [],
+            phase: "rest", prev: null, moves: 0, itinerary: [], queue: [], shown: null,
+            shownAt: 0,
             color: AGENT_COLORS[S.agents.size % AGENT_COLORS.length] };
       S.agents.set(name, a);
     }
@@ -73,6 +76,7 @@
       case "hop": {
         const a = agent(ev.agent);
         a.prev = a.at; a.at = ev.robot; a.phase = ev.phase; a.moves++;
+        a.queue.push({ at: a.at, prev: a.prev, phase: a.phase });
         a.round = Math.max(a.round, ev.round - 1);
         a.current = ev.round;
         break;
@@ -81,6 +85,7 @@
         const a = agent(ev.agent);
         a.round = Math.max(a.round, ev.round); a.lastMs = ev.duration_ms; a.method = ev.method;
         a.phase = "rest"; a.prev = a.at; a.at = ev.visited.length ? ev.visited[0] : a.at;
+        a.queue.push({ at: a.at, prev: a.prev, phase: a.phase });
         note(ev, `${ev.agent} round ${ev.round}: ${ev.method}, ${ev.duration_ms.toFixed(0)} ms, ` +
                  `visited ${ev.visited.join(",") || "-"}` +
                  (ev.skipped.length ? `, skipped ${ev.skipped.map(s => s.robot).join(",")}` : ""));
@@ -141,6 +146,7 @@
     S = fresh(); applied = 0; listed = []; el("events").textContent = "";
     el("network").textContent = ""; el("arenas").textContent = ""; svgNodes = null;
     while (applied < k && applied < all.length) apply(all[applied++]);
+    for (const a of S.agents.values()) { a.queue = []; a.shown = { at: a.at, prev: a.prev, phase: a.phase }; }
     schedule();
   }
 
@@ -155,6 +161,9 @@
   function schedule() {
     dirty = true;
     if (timer === null) timer = setTimeout(() => { timer = null; if (dirty) render(); }, RENDER_MS);
+  }
+  function later(ms) {
+    if (timer === null) timer = setTimeout(() => { timer = null; render(); }, ms);
   }
   function rel(t) { return S.t0 === null ? "" : `+${Math.max(0, t - S.t0).toFixed(1)} s`; }
 
@@ -202,8 +211,15 @@
     const hops = el("hops"), marks = el("agent-marks");
     hops.textContent = "";
     let k = 0;
+    const now = performance.now();
     for (const a of S.agents.values()) {
-      const to = svgNodes.get(a.at);
+      if (a.queue.length && (now - a.shownAt >= HOP_MS || !a.shown)) {
+        while (a.queue.length > QUEUE) a.queue.shift();
+        a.shown = a.queue.shift(); a.shownAt = now; a.shows = (a.shows || 0) + 1;
+      }
+      if (a.queue.length) later(HOP_MS);
+      const v = a.shown || { at: a.at, prev: a.prev, phase: a.phase };
+      const to = svgNodes.get(v.at);
       let g = marks.querySelector(`[data-agent="${CSS.escape(a.name)}"]`);
       if (!g) {
         g = svg("g", { class: "agent", "data-agent": a.name }, marks);
@@ -213,13 +229,13 @@
       const dx = 0, dy = -34 - 14 * k;
       const x = to.x + dx, y = to.y + dy;
       g.setAttribute("visibility", "visible");
-      g.setAttribute("transform", `translate(${x},${y})` + (a.phase === "backward" ? " rotate(180)" : ""));
-      g.setAttribute("data-robot", a.at); g.setAttribute("data-phase", a.phase);
+      g.setAttribute("transform", `translate(${x},${y})` + (v.phase === "backward" ? " rotate(180)" : ""));
+      g.setAttribute("data-robot", v.at); g.setAttribute("data-phase", v.phase);
       g.setAttribute("data-x", x.toFixed(1)); g.setAttribute("data-y", y.toFixed(1));
       g.setAttribute("data-moves", a.moves);
-      const from = svgNodes.get(a.prev);
-      if (from && from !== to && a.phase !== "rest")
-        svg("line", { class: `hop-line ${a.phase}`, x1: from.x, y1: from.y, x2: to.x, y2: to.y,
+      const from = svgNodes.get(v.prev);
+      if (from && from !== to && v.phase !== "rest")
+        svg("line", { class: `hop-line ${v.phase}`, x1: from.x, y1: from.y, x2: to.x, y2: to.y,
                       stroke: a.color }, hops);
       k++;
     }
