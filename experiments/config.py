@@ -1,7 +1,5 @@
-"""Experiment and robot-node configuration: the dataclasses, their JSON form, and where
-configs live.
-
-:class:`ExperimentConfig` (with its :class:`RobotSpec` and :class:`JoinSpec` entries) defines a
+"""Experiment and robot-node configuration: the dataclasses, their JSON form, where configs
+live; every check is in :mod:`dfrl.experiments.config_check`. :class:`ExperimentConfig` (with its :class:`RobotSpec` and :class:`JoinSpec` entries) defines a
 federated experiment and is saved as ``config.json`` beside its results; :class:`NodeConfig` is
 what the launcher hands one robot node process. :func:`resolve_config` finds a config file by
 path or by the name of a shipped one (``experiments/configs``).
@@ -15,8 +13,11 @@ from enum import Enum
 from pathlib import Path
 from typing import Any
 
-#: Aggregation methods built into the agent (others can be injected at runtime).
-BUILTIN_METHODS: tuple[str, ...] = ("average", "max", "visit_average")
+from dfrl.experiments.config_check import (BUILTIN_METHODS, ConfigError, check_experiment,
+                                           check_node)
+
+__all__ = ["BUILTIN_METHODS", "ConfigError", "ExperimentConfig", "JoinSpec", "Mode",
+           "NodeConfig", "RobotSpec", "boundaries", "parse_node", "resolve_config"]
 
 
 class Mode(str, Enum):
@@ -27,20 +28,33 @@ class Mode(str, Enum):
 
 
 def config_to_dict(cfg: Any) -> dict[str, Any]:
-    """A config dataclass with a ``mode`` enum as a JSON-ready dict."""
-    d = dataclasses.asdict(cfg)
+    """A config dataclass with a ``mode`` enum as a JSON-ready dict (lists for tuples)."""
+    d = json.loads(json.dumps(dataclasses.asdict(cfg), default=str))
     d["mode"] = cfg.mode.value
     return d
 
 
-def config_from_dict(cls: type, data: dict[str, Any], what: str,
-                     ignore: frozenset[str] = frozenset()) -> Any:
-    """Build config dataclass ``cls`` from ``data``; unknown keys (but ``ignore``) are an error."""
+def config_from_dict(cls: type, data: dict[str, Any], problems: list[str]) -> Any:
+    """Build config dataclass ``cls`` from ``data`` once ``problems`` (every problem of
+    ``data``, see :mod:`dfrl.experiments.config_check`) is empty.
+
+    Raises
+    ------
+    ConfigError
+        ``problems`` is not empty.
+    """
+    if problems:
+        raise ConfigError(problems)
     names = {f.name for f in dataclasses.fields(cls)}
-    unknown = set(data) - names - ignore
-    if unknown:
-        raise ValueError(f"unknown {what} config keys: {sorted(unknown)}")
     return cls(**{k: v for k, v in data.items() if k in names})
+
+
+def _raw(cfg: Any) -> dict[str, Any]:
+    """The JSON form of a config dataclass as built (entries may still be dicts)."""
+    raw = {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)}
+    if isinstance(raw.get("mode"), Mode):
+        raw["mode"] = raw["mode"].value
+    return raw
 
 
 @dataclass(frozen=True)
@@ -96,13 +110,10 @@ class NodeConfig:
     host: str = "127.0.0.1"
 
     def __post_init__(self) -> None:
+        problems = check_node(_raw(self))
+        if problems:
+            raise ConfigError(problems)
         object.__setattr__(self, "mode", Mode(self.mode))
-        if self.respite < 1:
-            raise ValueError("respite must be >= 1")
-        if self.iterations < 0:
-            raise ValueError("iterations must be >= 0")
-        if self.rtf is not None and self.rtf < 0:
-            raise ValueError("rtf must be >= 0")
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict."""
@@ -111,7 +122,7 @@ class NodeConfig:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "NodeConfig":
         """Inverse of :meth:`to_dict` (unknown keys are an error)."""
-        return config_from_dict(cls, data, "node")
+        return config_from_dict(cls, data, check_node(data))
 
     def trainer_config(self):  # noqa: ANN201 - TrainerConfig (imported lazily)
         """The :class:`dfrl.robots.training.TrainerConfig` of this robot."""
@@ -161,10 +172,10 @@ class RobotSpec:
     node: str | None = None
 
     def __post_init__(self) -> None:
-        if not self.id or not (self.id[0].islower() and self.id.replace("_", "").isalnum()):
-            raise ValueError(f"robot id {self.id!r}: use a lower-case name like r1")
-        if self.node is not None:
-            parse_node(self.node)
+        raw = _raw(self)
+        problems = check_experiment({"robots": [raw]}, resources=False)
+        if problems:
+            raise ConfigError([p.removeprefix("robots[0].") for p in problems])
 
     @property
     def node_address(self) -> tuple[str, int] | None:
@@ -173,10 +184,7 @@ class RobotSpec:
 
 
 def parse_node(text: str) -> tuple[str, int]:
-    """``"HOST:PORT"`` -> ``(host, port)``.
-
-    >>> parse_node("10.0.0.7:7001")
-    ('10.0.0.7', 7001)
+    """``"HOST:PORT"`` -> ``(host, port)``, e.g. ``('10.0.0.7', 7001)``.
 
     Raises
     ------
@@ -241,6 +249,9 @@ class ExperimentConfig:
         counted as complete.
     tolerate_missing_rounds : int
         Planned rounds per agent that may be missing (never logged) likewise.
+    tolerate_method_errors : int
+        Rounds per agent whose aggregation method may fail (the round is aborted: no table is
+        written) with the run still counted as complete.
     """
 
     name: str = "experiment"
@@ -261,8 +272,18 @@ class ExperimentConfig:
     console: str | None = None
     tolerate_lost_robots: int = 0
     tolerate_missing_rounds: int = 0
+    tolerate_method_errors: int = 0
 
     def __post_init__(self) -> None:
+        raw = _raw(self)
+        raw["robots"] = [_raw(r) if isinstance(r, RobotSpec) else r for r in self.robots]
+        raw["joins"] = [{"robot": j.robot, "after_round": j.after_round}
+                        if isinstance(j, JoinSpec) else j for j in self.joins]
+        raw["joins"] = [dict(j, robot=_raw(j["robot"])) if isinstance(j, dict)
+                        and isinstance(j.get("robot"), RobotSpec) else j for j in raw["joins"]]
+        problems = check_experiment(raw, resources=False)
+        if problems:
+            raise ConfigError(problems)
         object.__setattr__(self, "mode", Mode(self.mode))
         object.__setattr__(self, "robots", tuple(
             r if isinstance(r, RobotSpec) else RobotSpec(**r) for r in self.robots))
@@ -271,20 +292,18 @@ class ExperimentConfig:
             JoinSpec(robot=j["robot"] if isinstance(j["robot"], RobotSpec) else RobotSpec(**j["robot"]),
                      after_round=int(j.get("after_round", 1)))
             for j in self.joins))
-        if not self.robots:
-            raise ValueError("an experiment needs at least one robot")
-        ids = [r.id for r in self.robots] + [j.robot.id for j in self.joins]
-        if len(set(ids)) != len(ids):
-            raise ValueError(f"robot ids must be unique: {ids}")
-        if self.iterations < 1 or self.respite < 1:
-            raise ValueError("iterations and respite must be >= 1")
-        if self.rtf is not None and self.rtf < 0:
-            raise ValueError("rtf must be >= 0")
-        if self.tolerate_lost_robots < 0 or self.tolerate_missing_rounds < 0:
-            raise ValueError("tolerate_lost_robots and tolerate_missing_rounds must be >= 0")
-        nodes = [r.node for r in list(self.robots) + [j.robot for j in self.joins] if r.node]
-        if len(set(nodes)) != len(nodes):
-            raise ValueError(f"two robots on one robot node: {nodes}")
+
+    def check(self) -> None:
+        """Check what :meth:`from_dict` leaves to run time: every arena exists and parses.
+
+        Raises
+        ------
+        ConfigError
+            With every problem and its key path.
+        """
+        problems = check_experiment(self.to_dict(), resources=True)
+        if problems:
+            raise ConfigError(problems)
 
     # -- derived -------------------------------------------------------------------------------
     @property
@@ -327,15 +346,38 @@ class ExperimentConfig:
         return config_to_dict(self)
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "ExperimentConfig":
-        return config_from_dict(cls, data, "experiment", ignore=frozenset({"comment"}))
+    def from_dict(cls, data: dict[str, Any], resources: bool = False) -> "ExperimentConfig":
+        """Inverse of :meth:`to_dict`; every problem of ``data`` is reported at once
+        (``resources``: the arenas too).
+
+        Raises
+        ------
+        ConfigError
+        """
+        return config_from_dict(cls, data, check_experiment(data, resources=resources))
 
     @classmethod
-    def load(cls, path: str | Path) -> "ExperimentConfig":
+    def load(cls, path: str | Path, overrides: dict[str, Any] | None = None,
+             resources: bool = True) -> "ExperimentConfig":
+        """Read a config file, apply ``overrides`` (top-level keys) and check it all.
+
+        Raises
+        ------
+        ConfigError
+            Not JSON, or any problem of the config (each with its key path), the file named.
+        """
         try:
-            return cls.from_dict(json.loads(Path(path).read_text(encoding="utf-8")))
-        except (ValueError, TypeError) as exc:
-            raise ValueError(f"{path}: {exc}") from None
+            data = json.loads(Path(path).read_text(encoding="utf-8"))
+        except json.JSONDecodeError as exc:
+            raise ConfigError([f"not valid JSON: {exc}"], str(path)) from None
+        except OSError as exc:
+            raise ConfigError([f"cannot read it: {exc.strerror}"], str(path)) from None
+        if isinstance(data, dict) and overrides:
+            data = {**data, **overrides}
+        try:
+            return cls.from_dict(data, resources=resources)
+        except ConfigError as exc:
+            raise ConfigError(exc.problems, str(path)) from None
 
     def replace(self, **changes: Any) -> "ExperimentConfig":
         return dataclasses.replace(self, **changes)

@@ -21,10 +21,10 @@
             agent_post/3,               % +platform, +(Ip,Port), +Message
             purge_agent/1,              % +Name
             list_agents/0,
-            list_agents/1,              % -Names
+            list_agents/1,              % +(Ip,Port) or -Names
             list_agent/0,
-            list_agent/1,               % -Names
-            isexist_agent/3,            % +Name, +(Ip,Port), ?Handler
+            list_agent/1,               % +(Ip,Port) or -Names
+            isexist_agent/3,            % ?Name, ?(Ip,Port), ?Handler
             save_agent/2,               % +Name, +File
             assert_file_to_tartarus/1,  % +File
             save_tartarus_state/1,      % +File
@@ -46,7 +46,7 @@
 :- use_module(persist).
 :- use_module(transport, [address_normalize/2]).
 :- use_module(node, [node_for_address/2]).
-:- use_module(platform_errors, []).
+:- use_module(platform_errors, [message_text/2]).
 :- autoload(library(error), [must_be/2, existence_error/2, domain_error/2]).
 :- autoload(library(lists), [member/2, sum_list/2, max_list/2, min_list/2,
                              nth0/3]).
@@ -293,32 +293,71 @@ purge_agent(Name) :-
     agent_purge(Node, Name).
 
 %!  list_agents is det.
+%!  list_agents(+Link) is det.
 %!  list_agents(-Names) is det.
 %
-%   Print (or return the names of) the agents on the current platform.
+%   Print the agents on the current platform, or, as Tartarus does, on
+%   the platform at Link = (Ip,Port) (local or remote): one line per
+%   agent with its handler, kind and status. A platform that cannot be
+%   asked prints the error instead (and the call still succeeds, as in
+%   Tartarus). With an unbound argument (or a list), Names are the
+%   names of the agents on the current platform.
+%
+%   @error type_error(link, Link) when Link is neither (Ip,Port), a
+%   variable nor a list
 
 list_agents :-
     current_node(Node),
     agent_list(Node, Agents),
-    format("Agents on ~w:~n", [Node]),
-    forall(member(agent(N, H, K, S), Agents),
-           format("  ~q~t~30| handler ~q~t~50| ~w~t~60| ~w~n", [N, H, K, S])).
+    print_agents(Node, Agents).
 list_agents(Names) :-
+    (   var(Names) ; is_list(Names) ),
+    !,
     current_node(Node),
     agent_list(Node, Agents),
     findall(N, member(agent(N, _, _, _), Agents), Names).
+list_agents((Ip, Port)) :-
+    !,
+    must_be(integer, Port),
+    catch(remote_agents((Ip, Port), Agents, []), E, true),
+    (   var(E)
+    ->  print_agents(Ip:Port, Agents)
+    ;   message_text(E, Text),
+        format("Agents on ~w:~w: cannot list them: ~w~n", [Ip, Port, Text])
+    ).
+list_agents(Link) :-
+    throw(error(type_error(link, Link), context(list_agents/1, _))).
+
+print_agents(Where, Agents) :-
+    length(Agents, N),
+    format("Agents on ~w (~D):~n", [Where, N]),
+    forall(member(agent(A, H, K, S), Agents),
+           format("  ~q~t~30| handler ~q~t~50| ~w~t~60| ~w~n", [A, H, K, S])).
 
 list_agent :- list_agents.
-list_agent(Names) :- list_agents(Names).
+list_agent(X) :- list_agents(X).
 
-%!  isexist_agent(+Name, +Link, ?Handler) is semidet.
+%!  isexist_agent(?Name, ?Link, ?Handler) is nondet.
 %
-%   True if agent Name with Handler is on the platform at Link (local or
-%   remote).
+%   True if agent Name with Handler is on the platform at Link,
+%   (Ip,Port), local or remote. With Link unbound the local platform is
+%   asked, as in Tartarus, and Link is bound to its (Ip,Port); Name and
+%   Handler may be unbound too (then it enumerates).
 
 isexist_agent(Name, Link, Handler) :-
+    var(Link),
+    !,
+    current_node(Node),
+    agent_list(Node, Agents),
+    get_tartarus_details(Ip, Port),
+    Link = (Ip, Port),
+    member(agent(Name, Handler, _, _), Agents).
+isexist_agent(Name, Link, Handler) :-
     remote_agents(Link, Agents, []),
-    memberchk(agent(Name, Handler, _, _), Agents).
+    (   atom(Name)
+    ->  memberchk(agent(Name, Handler, _, _), Agents)
+    ;   member(agent(Name, Handler, _, _), Agents)
+    ).
 
 %!  save_agent(+Name, +File) is det.
 

@@ -2,38 +2,41 @@
 
 One module per command group, each with ``register(subparsers)``: it adds its parsers and
 sets ``func`` (called with the parsed namespace, returning an exit code). Every module is
-imported up front; a module that fails to import is an error, not a missing command.
+imported when the parser is built; a module that fails to import is an error, not a missing
+command. ``dfrl node`` builds only its own parser: it imports neither the simulation nor the
+learners (a platform node needs none of them).
 """
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 from collections.abc import Sequence
 
 from dfrl import __version__
-from dfrl.experiments.cli import bench, federated, node, robot, robots, studies, transfer
 
-#: Modules that add subcommands, in the order they appear in ``dfrl --help``.
-COMMAND_MODULES = (node, federated, bench, robots, transfer, studies, robot)
+#: Modules (of this package) that add subcommands, in the order of ``dfrl --help``.
+COMMAND_MODULES = ("node", "federated", "bench", "robots", "transfer", "studies", "robot")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Build the top-level parser with every subcommand."""
+def build_parser(only: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """Build the top-level parser with every subcommand (or those of the modules ``only``)."""
     parser = argparse.ArgumentParser(
         prog="dfrl",
         description="Decentralized federated RL test bed driven by mobile agents.",
     )
     parser.add_argument("--version", action="version", version=f"dfrl {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for module in COMMAND_MODULES:
-        module.register(subparsers)
+    for name in only or COMMAND_MODULES:
+        importlib.import_module(f"{__name__}.{name}").register(subparsers)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``dfrl`` console script."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    args_in = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(["node"] if args_in[:1] == ["node"] else None)
+    args = parser.parse_args(args_in)
     func = getattr(args, "func", None)
     if func is None:
         parser.print_help()

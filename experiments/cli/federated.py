@@ -11,45 +11,75 @@ import argparse
 import sys
 from pathlib import Path
 
-from dfrl.experiments.config import ExperimentConfig, Mode, resolve_config
+from typing import Any
+
+from dfrl.experiments.config import ConfigError, ExperimentConfig, Mode, resolve_config
 from dfrl.experiments.errors import ExperimentError
+from dfrl.experiments.results.files import claim_output, new_run_folder
 from dfrl.experiments.results.summary import Results
 
 
 def add_override_arguments(p: argparse.ArgumentParser) -> None:
-    """Flags that override fields of an experiment config."""
-    g = p.add_argument_group("overrides")
+    """Flags that override fields of an experiment config (default: the config's value)."""
+    g = p.add_argument_group("overrides (default: the config's value)")
     g.add_argument("--iterations", type=int, default=None, help="iterations per robot")
     g.add_argument("--respite", type=int, default=None, help="iterations between two shares")
-    g.add_argument("--seed", type=int, default=None)
+    g.add_argument("--seed", type=int, default=None, help="experiment seed")
     g.add_argument("--mode", choices=[m.value for m in Mode], default=None,
                    help="async: robots flat out; sync: robots wait for the agent at each respite")
-    g.add_argument("--rtf", type=float, default=None,
-                   help="real-time factor (1.0 = one iteration per 64 ms; 0 = flat out)")
+    g.add_argument("--rtf", type=_rtf, default=None, metavar="RTF|none",
+                   help="real-time factor, > 0 (1.0 = one iteration per 64 ms), or 'none': "
+                        "flat out")
     g.add_argument("--method", default=None, help="aggregation method of every agent")
     g.add_argument("--timeout", type=float, default=None, help="experiment time limit (s)")
 
 
-def apply_overrides(cfg: ExperimentConfig, args: argparse.Namespace) -> ExperimentConfig:
-    """``cfg`` with the override flags that were given."""
-    changes = {}
+def _rtf(text: str) -> float | str:
+    if text.lower() in ("none", "null"):
+        return "none"
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"{text}: a real-time factor is > 0 ('none': flat out)")
+    return value
+
+
+def add_output_arguments(p: argparse.ArgumentParser, name: str) -> None:
+    p.add_argument("--out", type=Path, default=None,
+                   help=f"results folder; must not exist or be empty (default: a new "
+                        f"results/{name}/<timestamp>, with results/{name}/latest linked to it)")
+    p.add_argument("--force", action="store_true",
+                   help="empty a non-empty --out (a results folder) first (default: refuse)")
+
+
+def overrides_of(args: argparse.Namespace) -> dict[str, Any]:
+    """The config keys the override flags that were given set."""
+    changes: dict[str, Any] = {}
     for name, key in (("iterations", "iterations"), ("respite", "respite"), ("seed", "seed"),
                       ("mode", "mode"), ("timeout", "timeout_s")):
         v = getattr(args, name, None)
         if v is not None:
             changes[key] = v
     if getattr(args, "rtf", None) is not None:
-        changes["rtf"] = args.rtf or None
+        changes["rtf"] = None if args.rtf == "none" else args.rtf
     if getattr(args, "method", None) is not None:
         changes["method"] = args.method
         changes["methods"] = {}
-    return cfg.replace(**changes) if changes else cfg
+    return changes
+
+
+def apply_overrides(cfg: ExperimentConfig, args: argparse.Namespace) -> ExperimentConfig:
+    """``cfg`` with the override flags that were given (checked like a config)."""
+    changes = overrides_of(args)
+    return ExperimentConfig.from_dict({**cfg.to_dict(), **changes}) if changes else cfg
 
 
 def print_results(results: Results) -> None:
     """Rounds, crashes on stderr; the results folder on stdout."""
+    failed = [r for r in results.rounds if r.get("error")]
+    partial = [r for r in results.rounds if r.get("skipped") and not r.get("error")]
     print(f"{len(results.rounds)} rounds, {results.equal_rounds} with every robot holding the same table "
-          f"after the share; wall time {results.wall_time_s:.1f} s", file=sys.stderr)
+          f"after the share, {len(partial)} that skipped robots, {len(failed)} whose method "
+          f"FAILED; wall time {results.wall_time_s:.1f} s", file=sys.stderr)
     if results.crashed:
         print(f"crashed robots: {results.crashed}", file=sys.stderr)
     if results.faults is not None:
@@ -60,57 +90,107 @@ def print_results(results: Results) -> None:
     print(results.output_dir)
 
 
-def run_and_report(cfg: ExperimentConfig, out: Path, prog: str, show_summary: bool = False) -> int:
-    """Run experiment ``cfg`` into ``out`` and report it; the command's exit code."""
+def output_folder(args: argparse.Namespace, name: str) -> Path:
+    """``--out`` (claimed: empty, or emptied with ``--force``), or a new timestamped folder.
+
+    Raises
+    ------
+    FileExistsError
+    """
+    if args.out is not None:
+        return claim_output(args.out, args.force)
+    return new_run_folder(Path("results"), name)
+
+
+def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
+                   show_summary: bool = False) -> int:
+    """Check ``cfg``, claim its results folder, run it and report; the command's exit code
+    (2: bad config or folder, before anything started; 130: interrupted)."""
     from dfrl.experiments.launcher import run
 
+    try:
+        cfg.check()
+        out = output_folder(args, cfg.name)
+    except ConfigError as exc:
+        return config_error(prog, exc)
+    except FileExistsError as exc:
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return 2
     try:
         results = run(cfg, out)
     except ExperimentError as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print(f"{prog}: interrupted; partial results in {out}", file=sys.stderr)
-        return 130
     summary = results.output_dir / "summary.md"
     if show_summary and summary.is_file():
         print(summary.read_text(encoding="utf-8"), file=sys.stderr)
     print_results(results)
+    if results.interrupted:
+        kept = sorted(p.name for p in (out / "tables").glob("*.npy")) if \
+            (out / "tables").is_dir() else []
+        print(f"{prog}: interrupted ({results.interrupted}); kept in {out}: summary.md, "
+              f"metrics.csv, rounds.csv and {len(kept)} table file(s) in tables/"
+              + (f" (from checkpoints: {', '.join(results.from_checkpoint)})"
+                 if results.from_checkpoint else ""), file=sys.stderr)
+        return 130
     return 0 if results.ok else 1
+
+
+def config_error(prog: str, exc: ConfigError) -> int:
+    """Print every problem of a config, one per line; exit status 2."""
+    n = len(exc.problems)
+    print(f"{prog}: the config has {n} problem{'s' if n != 1 else ''}; nothing was started",
+          file=sys.stderr)
+    for line in exc.text().splitlines():
+        print(f"  {line}", file=sys.stderr)
+    return 2
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """``dfrl demo``: the shipped ``demo`` config at the demo budget."""
     from dfrl.robots.training import DEMO_ITERATIONS
 
-    cfg = ExperimentConfig.load(resolve_config("demo"))
-    if cfg.iterations != DEMO_ITERATIONS:
-        cfg = cfg.replace(iterations=DEMO_ITERATIONS)
-    cfg = apply_overrides(cfg, args)
+    try:
+        over = {"iterations": DEMO_ITERATIONS, **overrides_of(args)}
+        cfg = ExperimentConfig.load(resolve_config("demo"), over)
+    except ConfigError as exc:
+        return config_error("dfrl demo", exc)
     print(f"dfrl demo: {len(cfg.robots)} robots ({', '.join(r.arena.upper() for r in cfg.robots)}), "
           f"{cfg.method}, {cfg.iterations} iterations, a share every {cfg.respite} "
           f"({cfg.rounds} rounds), {cfg.mode.value} mode, seed {cfg.seed}", file=sys.stderr)
-    return run_and_report(cfg, args.out, "dfrl demo", show_summary=True)
+    return run_and_report(cfg, args, "dfrl demo", show_summary=True)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
     try:
-        cfg = apply_overrides(ExperimentConfig.load(resolve_config(args.config)), args)
-    except (FileNotFoundError, ValueError) as exc:
+        cfg = ExperimentConfig.load(resolve_config(args.config), overrides_of(args))
+    except FileNotFoundError as exc:
         print(f"dfrl run: {exc}", file=sys.stderr)
         return 2
-    return run_and_report(cfg, args.out or Path("results") / cfg.name, "dfrl run")
+    except ConfigError as exc:
+        return config_error("dfrl run", exc)
+    return run_and_report(cfg, args, "dfrl run")
 
 
 def cmd_inject(args: argparse.Namespace) -> int:
     from dfrl.experiments.launcher import inject_method
 
     try:
-        told = inject_method(args.results_dir, args.program, args.method, args.agent)
+        told = inject_method(args.results_dir, args.program, args.method, args.agent,
+                             wait_s=args.wait)
     except ExperimentError as exc:
         print(f"dfrl inject: {exc}", file=sys.stderr)
         return 1
-    print(f"method {args.method} loaded; agents {', '.join(told)} use it from their next round")
+    applied = [a for a, st in told.items() if st == "applied"]
+    pending = [a for a, st in told.items() if st != "applied"]
+    if applied:
+        print(f"method {args.method} applied by {', '.join(applied)} (acknowledged in the "
+              "round log)")
+    if pending:
+        print(f"method {args.method} sent to {', '.join(pending)}, not acknowledged "
+              f"{'yet (--wait 0)' if args.wait <= 0 else f'within {args.wait:g} s'}",
+              file=sys.stderr)
+        return 3
     return 0
 
 
@@ -120,6 +200,8 @@ def cmd_join(args: argparse.Namespace) -> int:
     try:
         info = join_robot(args.results_dir, args.robot, args.arena, args.algo,
                           iterations=args.iterations, seed=args.seed, node=args.node)
+    except ConfigError as exc:
+        return config_error("dfrl join", exc)
     except (ExperimentError, ValueError) as exc:
         print(f"dfrl join: {exc}", file=sys.stderr)
         return 1
@@ -132,36 +214,44 @@ def cmd_join(args: argparse.Namespace) -> int:
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``demo``, ``run``, ``inject`` and ``join`` (``paper`` is in :mod:`.studies`)."""
     p = subparsers.add_parser("demo", help="the 5-robot dFRL demo on loopback (plots + summary "
-                                           "in results/demo)")
-    p.add_argument("--out", type=Path, default=Path("results/demo"), help="results folder")
+                                           "in results/demo/<timestamp>); exit 1 unless the "
+                                           "federation completed, 2 on a bad option")
+    add_output_arguments(p, "demo")
     add_override_arguments(p)
     p.set_defaults(func=cmd_demo)
 
     p = subparsers.add_parser("run", help="run a federated experiment (robot processes + agent); "
-                                          "exit 1 unless the federation completed")
+                                          "exit 1 unless the federation completed, 2 on a bad "
+                                          "config (nothing started), 130 when interrupted")
     p.add_argument("config", help="experiment config: a JSON file or a name in experiments/configs")
-    p.add_argument("--out", type=Path, default=None, help="results folder (default results/NAME)")
+    add_output_arguments(p, "NAME")
     add_override_arguments(p)
     p.set_defaults(func=cmd_run)
 
     p = subparsers.add_parser("inject", help="load an aggregation method into a running "
-                                             "experiment; the agent uses it from its next round")
+                                             "experiment and wait until the agent applied it "
+                                             "(exit 1 if it refused, 3 if it did not answer)")
     p.add_argument("results_dir", type=Path, help="results folder of the running experiment")
     p.add_argument("--program", type=Path, required=True,
-                   help="Prolog file defining dfrl_agent:aggregate_init/step/final for METHOD")
-    p.add_argument("--method", required=True, help="method name")
+                   help="Prolog file defining dfrl_agent:aggregate_init/step/final for METHOD "
+                        "(required)")
+    p.add_argument("--method", required=True, help="method name (required)")
     p.add_argument("--agent", default=None, help="only this agent (default: every agent)")
+    p.add_argument("--wait", type=float, default=120.0, metavar="S",
+                   help="seconds to wait for the agent's acknowledgement (default: %(default)s; "
+                        "0: do not wait)")
     p.set_defaults(func=cmd_inject)
 
     p = subparsers.add_parser("join", help="start a new robot node and add it to a running "
                                            "experiment's agent (next round)")
-    p.add_argument("results_dir", type=Path)
-    p.add_argument("--robot", required=True, help="new robot id, e.g. r6")
-    p.add_argument("--arena", required=True)
-    p.add_argument("--algo", default="qlearning")
+    p.add_argument("results_dir", type=Path, help="results folder of the running experiment")
+    p.add_argument("--robot", required=True, help="new robot id, e.g. r6 (required)")
+    p.add_argument("--arena", required=True, help="arena name or file (required)")
+    p.add_argument("--algo", default="qlearning", help="learner (default: %(default)s)")
     p.add_argument("--iterations", type=int, default=None,
                    help="iterations (default: the experiment's)")
-    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--seed", type=int, default=None,
+                   help="robot seed (default: the experiment seed + its position)")
     p.add_argument("--node", default=None, metavar="HOST:PORT",
                    help="a running `dfrl robot` to run the robot on (default: a new robot "
                         "process on the launcher's host)")

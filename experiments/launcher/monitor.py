@@ -22,9 +22,13 @@ def poll_logs(state: RunState) -> None:
         for rec in log.rounds[shown:]:
             its = " ".join(f"{rid}:{c.iteration}" for rid, c in state.children.items()
                            if c.robot.algo == info.algo)
+            flags = "".join(f" SKIPPED {s.robot} ({' '.join(s.reason.split())[:120]})"
+                            for s in rec.skipped)
+            if rec.error:
+                flags += f" METHOD FAILED, round aborted, no table written: {rec.error[:300]}"
             state.say(f"{name} round {rec.round}/{info.rounds} {rec.method} "
                       f"{rec.duration_ms:.0f} ms, {rec.hops} hops, visited "
-                      f"{','.join(rec.visited)} | {its}")
+                      f"{','.join(rec.visited) or 'none'}{flags} | {its}")
         state.printed_rounds[name] = len(log.rounds)
 
 

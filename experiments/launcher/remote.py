@@ -1,6 +1,7 @@
 """Acting on a running experiment from another process: ``dfrl inject`` and ``dfrl join``."""
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any
 
@@ -8,6 +9,7 @@ from dfrl.experiments.config import RobotSpec
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.launcher.agents import open_console, send_control
 from dfrl.experiments.launcher.remote_robots import route_source
+from dfrl.experiments.results.agent_log import ControlEvent, read_rounds_log
 from dfrl.experiments.results.files import read_json
 
 
@@ -25,15 +27,30 @@ def nodes_of(results_dir: str | Path) -> dict[str, Any]:
     return read_json(path)
 
 
+def _rounds_log(results_dir: str | Path, agent: dict[str, Any]) -> Path:
+    """The agent's round log: the path ``nodes.json`` names, or that file in ``results_dir``."""
+    named = Path(agent.get("rounds_log") or f"rounds_{agent['name']}.log")
+    return named if named.is_file() else Path(results_dir) / named.name
+
+
+def _controls(path: Path, agent: str, command: str) -> list[ControlEvent]:
+    return [c for c in read_rounds_log(path, agent).controls if c.command == command]
+
+
 def inject_method(results_dir: str | Path, program: str | Path, method: str,
-                  agent: str | None = None) -> list[str]:
-    """Load ``program`` into every node of the running experiment and switch the agent(s) to
-    ``method`` from their next round. Returns the agents told.
+                  agent: str | None = None, wait_s: float = 120.0,
+                  poll_s: float = 0.2) -> dict[str, str]:
+    """Load ``program`` into every node of the running experiment, tell the agent(s) to switch
+    to ``method``, and wait until each agent acknowledged it in its round log (the ``control``
+    event it writes when it takes the command at its next round start). Returns agent ->
+    ``"applied"``, or ``"sent"`` for an agent that did not answer within ``wait_s`` (0: do not
+    wait).
 
     Raises
     ------
     ExperimentError
-        No such program or agent, or a control command failed.
+        No such program or agent, a control command failed, or an agent ignored the command
+        (the message says why, e.g. the method is unknown on its node).
     """
     info = nodes_of(results_dir)
     prog = Path(program).resolve()
@@ -41,7 +58,11 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
         raise ExperimentError(f"program {prog} not found")
     targets = [a for a in info["agents"] if agent is None or a["name"] == agent]
     if not targets:
-        raise ExperimentError(f"no agent {agent!r} in {results_dir}")
+        known = ", ".join(a["name"] for a in info["agents"])
+        raise ExperimentError(f"no agent {agent!r} in {results_dir} (agents: {known})")
+    command = f"method({method})" if method.isidentifier() else f"method('{method}')"
+    seen = {a["name"]: len(_controls(_rounds_log(results_dir, a), a["name"], command))
+            for a in targets}
     first = targets[0]["itinerary"][0]
     with open_console(info["token"], host=route_source(first["host"], int(first["port"]))) \
             as console:
@@ -49,7 +70,25 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
             nodes = [(s["host"], s["port"]) for s in a["itinerary"]]
             send_control(console, nodes[0], a["name"], {"method": method}, program=prog,
                          nodes=nodes)
-    return [a["name"] for a in targets]
+    status = {a["name"]: "sent" for a in targets}
+    deadline = time.monotonic() + wait_s
+    while wait_s > 0 and "sent" in status.values() and time.monotonic() < deadline:
+        for a in targets:
+            name = a["name"]
+            if status[name] != "sent":
+                continue
+            path = _rounds_log(results_dir, a)
+            new = _controls(path, name, command)[seen[name]:]
+            if new:
+                if new[0].status != "applied":
+                    raise ExperimentError(f"agent {name} ignored method {method} (round "
+                                          f"{new[0].round}): {new[0].reason}")
+                status[name] = "applied"
+            elif read_rounds_log(path, name).finished is not None:
+                raise ExperimentError(f"agent {name} finished its tour before it took "
+                                      f"method {method}")
+        time.sleep(poll_s)
+    return status
 
 
 def join_robot(results_dir: str | Path, robot: str, arena: str, algo: str = "qlearning",

@@ -21,25 +21,33 @@ from dfrl.experiments.launcher.spawn import launch_agents, spawn, write_nodes
 from dfrl.experiments.launcher.state import RunState
 from dfrl.experiments.results.faults import assess
 from dfrl.experiments.report.plots import plot_experiment
-from dfrl.experiments.results.files import write_json
+from dfrl.experiments.results.files import claim_output, write_json
+from dfrl.experiments.results.tables import keep_checkpoints
 from dfrl.experiments.results.metrics import merge_metrics
 from dfrl.experiments.results.rounds import read_shares, write_rounds_csv
 from dfrl.experiments.results.summary import Results, write_summary
-
-#: Per-robot and per-agent files of a previous run in the same folder, replaced by a new run.
-STALE = ("rounds_*.log", "shares_*.csv", "metrics_*.csv")
-
 
 class Launcher:
     """Runs one experiment; see :func:`run`."""
 
     def __init__(self, config: ExperimentConfig, output_dir: str | Path,
-                 progress: TextIO | None = sys.stderr) -> None:
+                 progress: TextIO | None = sys.stderr, force: bool = False) -> None:
         self.state = RunState(config, Path(output_dir).resolve(), progress)
+        self.force = force
 
     def run(self) -> Results:
-        """Run the experiment (SIGTERM and SIGINT stop it cleanly when called from the main
-        thread: children are killed and the partial results written)."""
+        """Run the experiment. SIGTERM and SIGINT (when called from the main thread) stop it
+        cleanly: the robots are told to stop (they save their tables; a robot that does not
+        exit in time is killed and its last checkpoint kept as its table), the partial results
+        are written, and the :class:`Results` come back with ``interrupted`` set.
+
+        Raises
+        ------
+        ConfigError
+            An arena is missing or does not parse (before anything is started).
+        FileExistsError
+            The results folder is not empty and ``force`` is not set.
+        """
         restore = []
         if threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGTERM, signal.SIGINT):
@@ -53,10 +61,8 @@ class Launcher:
     def _run(self) -> Results:
         st = self.state
         c = st.config
-        st.out.mkdir(parents=True, exist_ok=True)
-        for pattern in STALE:
-            for stale in list(st.out.glob(pattern)):
-                stale.unlink()
+        c.check()
+        claim_output(st.out, self.force)
         write_json(st.out / "config.json", c.to_dict())
         st.t0 = time.monotonic()
         st.experiment_id = f"{c.name}-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
@@ -73,6 +79,10 @@ class Launcher:
                 f"{rid}@{ch.address[1]}" for rid, ch in st.children.items()))
             launch_agents(st)
             monitor(st)
+        except KeyboardInterrupt as exc:
+            ok = False
+            st.interrupted = str(exc) or "KeyboardInterrupt"
+            st.say(f"interrupted ({st.interrupted}): stopping the robots, they save their tables")
         except BaseException as exc:
             ok = False
             st.interrupted = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
@@ -80,7 +90,11 @@ class Launcher:
             raise
         finally:
             st.end_stalls()
-            shutdown(st)
+            try:
+                shutdown(st)
+            except BaseException:
+                kill_all(st)
+                raise
             if st.poller is not None:
                 st.poller.close()
             self._gather()
@@ -108,6 +122,9 @@ class Launcher:
         st = self.state
         poll_logs(st)
         robots = list(st.children)
+        st.from_checkpoint = keep_checkpoints(st.out, robots)
+        for rid in st.from_checkpoint:
+            st.say(f"table of {rid} kept from its last checkpoint (tables/{rid}.npy)")
         merge_metrics(st.out, robots)
         shares = {rid: read_shares(st.out / f"shares_{rid}.csv") for rid in robots}
         rows = write_rounds_csv(st.out / "rounds.csv", st.logs.values(), robots, shares)
@@ -135,7 +152,7 @@ class Launcher:
         ok = ok and all(v is not None for v in finished.values()) and faults.complete(st.config)
         result = Results(st.out, st.config, wall, rows, dict(st.crashed), finished, iters,
                          plots, ok, st.interrupted, problems, plot_error, faults,
-                         dict(st.gathered))
+                         dict(st.gathered), list(st.from_checkpoint))
         write_summary(result)
         return result
 
@@ -145,7 +162,7 @@ def _interrupt(signum: int, frame: Any) -> None:
 
 
 def run(config: ExperimentConfig, output_dir: str | Path,
-        progress: TextIO | None = sys.stderr) -> Results:
+        progress: TextIO | None = sys.stderr, force: bool = False) -> Results:
     """Run a federated experiment on loopback and write its results folder.
 
     Starts one robot node process per robot, waits for their addresses, writes
@@ -159,8 +176,10 @@ def run(config: ExperimentConfig, output_dir: str | Path,
     ----------
     config : ExperimentConfig
     output_dir : str or Path
-        Results folder (created; previous per-robot files in it are replaced).
+        Results folder: created, or empty (a non-empty one is refused unless ``force``, which
+        empties it first: two runs never mix their files).
     progress : TextIO or None
         Where progress lines go (None: quiet).
+    force : bool
     """
-    return Launcher(config, output_dir, progress).run()
+    return Launcher(config, output_dir, progress, force).run()

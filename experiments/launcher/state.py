@@ -63,6 +63,7 @@ class RunState:
     gathered: dict[str, list[str]] = field(default_factory=dict)
     gather_errors: list[str] = field(default_factory=list)
     interrupted: str | None = None
+    from_checkpoint: list[str] = field(default_factory=list)  # tables kept from checkpoints
     printed_rounds: dict[str, int] = field(default_factory=dict)
     last_status: float = 0.0
     t0: float = field(default_factory=time.monotonic)

@@ -13,7 +13,8 @@ Events the agent writes (``platform_pl/agents/dfrl_agent.pl``)::
      "dead": "host:port"}
 
 A round event may also carry ``retries`` (connection attempts repeated that round) and
-``epoch``; both default to 0.
+``epoch`` (both default to 0), and ``error``: the aggregation method failed or threw that
+round, which was aborted without writing any table.
 
 Times are the agent's ``get_time/1`` floats. A line that is not one of these objects is kept
 in :attr:`AgentLog.unreadable` (reported, never dropped).
@@ -49,6 +50,9 @@ class RoundRecord:
     skipped: tuple[Skip, ...] = ()
     retries: int = 0
     epoch: int = 0
+    #: the aggregation method failed or threw this round (the message); the round was aborted
+    #: and no table written
+    error: str = ""
 
     @property
     def duration_ms(self) -> float:
@@ -130,7 +134,8 @@ def _round(agent: str, ev: dict[str, Any]) -> RoundRecord:
     return RoundRecord(agent, int(ev["round"]), float(ev["start"]), float(ev["end"]),
                        int(ev["hops"]), int(ev["bytes"]), str(ev["method"]),
                        tuple(str(v) for v in ev["visited"]), skipped,
-                       int(ev.get("retries") or 0), int(ev.get("epoch") or 0))
+                       int(ev.get("retries") or 0), int(ev.get("epoch") or 0),
+                       str(ev.get("error") or ""))
 
 
 def _add(log: AgentLog, ev: dict[str, Any]) -> bool:

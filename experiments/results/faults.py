@@ -25,14 +25,19 @@ class Faults:
     lost: dict[str, str] = field(default_factory=dict)
     stalls: list[str] = field(default_factory=list)
     other: list[str] = field(default_factory=list)
+    #: agent -> "round N: error" for each round whose aggregation method failed
+    method_errors: dict[str, list[str]] = field(default_factory=dict)
 
     def complete(self, config: ExperimentConfig) -> bool:
         """Every agent logged its planned rounds and no robot was lost, up to what the config
-        tolerates (``tolerate_missing_rounds`` per agent, ``tolerate_lost_robots``), and
+        tolerates (``tolerate_missing_rounds`` per agent, ``tolerate_lost_robots``,
+        ``tolerate_method_errors`` per agent: rounds whose aggregation method failed), and
         nothing else (e.g. result files that could not be gathered) went wrong."""
         worst = max((len(v) for v in self.missing_rounds.values()), default=0)
+        failed = max((len(v) for v in self.method_errors.values()), default=0)
         return (worst <= config.tolerate_missing_rounds
-                and len(self.lost) <= config.tolerate_lost_robots and not self.other)
+                and len(self.lost) <= config.tolerate_lost_robots and not self.other
+                and failed <= config.tolerate_method_errors)
 
     def lines(self) -> list[str]:
         """The summary's fault section (empty when there was none)."""
@@ -41,6 +46,11 @@ class Faults:
             if rounds:
                 shown = ", ".join(map(str, rounds[:20])) + (" ..." if len(rounds) > 20 else "")
                 out.append(f"- MISSING rounds of {agent} ({len(rounds)}): {shown}")
+        for agent, errors in self.method_errors.items():
+            if errors:
+                out.append(f"- METHOD FAILED in {len(errors)} round(s) of {agent} (aborted, "
+                           "no table written):")
+                out += [f"  - {e}" for e in errors[:20]]
         for rid, why in self.lost.items():
             out.append(f"- LOST robot {rid}: {why}")
         for title, items in (("skipped stops", self.skips),
@@ -82,6 +92,9 @@ def assess(config: ExperimentConfig, logs: Iterable[tuple[AgentLog, int]],
         for d in log.duplicates:
             f.resurrections.append(f"{log.agent} round {d.round}: also logged by the superseded "
                                    f"copy of epoch {d.epoch} (not counted)")
+        f.method_errors[log.agent] = [f"round {rec.round} ({rec.method}): "
+                                      f"{' '.join(rec.error.split())}"
+                                      for rec in log.rounds if rec.error]
         done = {rec.round for rec in log.rounds}
         f.missing_rounds[log.agent] = [n for n in range(1, planned_rounds(log, budget) + 1)
                                        if n not in done]

@@ -13,7 +13,14 @@ _CURVE_DTYPE = np.dtype([("iteration", np.int64), ("q_sum", np.float64),
 
 
 def merge_metrics(out_dir: str | Path, robots: list[str]) -> Path:
-    """Concatenate the ``metrics_<robot>.csv`` files into ``metrics.csv`` (robot order kept)."""
+    """Concatenate the ``metrics_<robot>.csv`` files into ``metrics.csv`` (robot order kept).
+
+    A robot's last metrics row is taken before the last share; when its saved table
+    (``tables/<robot>.npy``, written after it) sums to something else, one more row at the
+    same iteration carries that sum, so that curves and summary end with the last share.
+    """
+    from dfrl.experiments.results.tables import table_sum
+
     out = Path(out_dir)
     target = out / "metrics.csv"
     with open(target, "w", newline="", encoding="utf-8") as dst:
@@ -22,11 +29,16 @@ def merge_metrics(out_dir: str | Path, robots: list[str]) -> Path:
             src = out / f"metrics_{robot}.csv"
             if not src.is_file():
                 continue
+            last = None
             with open(src, encoding="utf-8") as fh:
                 next(fh, None)
                 for line in fh:
                     if line.count(",") == 4 and line.endswith("\n"):   # skip a torn last line
                         dst.write(line)
+                        last = line.rstrip("\n").split(",")
+            final = table_sum(out, robot)
+            if last is not None and final is not None and float(last[2]) != final:
+                dst.write(",".join([robot, last[1], repr(final), last[3], last[4]]) + "\n")
     return target
 
 

@@ -9,6 +9,7 @@ from dfrl.experiments.config import ExperimentConfig
 from dfrl.experiments.results.faults import Faults
 from dfrl.experiments.results.metrics import read_metrics
 from dfrl.experiments.results.rounds import count_equal
+from dfrl.experiments.results.tables import table_sum
 
 
 @dataclass
@@ -29,6 +30,7 @@ class Results:
     plot_error: str | None = None
     faults: Faults | None = None
     gathered: dict[str, list[str]] | None = None
+    from_checkpoint: list[str] | None = None
 
     @property
     def complete(self) -> bool:
@@ -65,26 +67,38 @@ def write_summary(r: Results) -> Path:
              f"rounds planned {c.rounds}", ""]
     metrics_path = r.output_dir / "metrics.csv"
     curves = read_metrics(metrics_path) if metrics_path.is_file() else {}
-    lines += ["| robot | arena | algo | iterations | final sum of Q | cumulative reward | collisions |",
-              "|---|---|---|---|---|---|---|"]
+    lines += ["| robot | arena | algo | iterations | final sum of Q (tables/) | cumulative reward "
+              "| collisions |", "|---|---|---|---|---|---|---|"]
     specs = {s.id: s for s in list(c.robots) + [j.robot for j in c.joins]}
+    kept = set(r.from_checkpoint or ())
     for rid, cur in curves.items():
         if len(cur) == 0:
             continue
         s = specs.get(rid)
         last = cur[-1]
+        final = table_sum(r.output_dir, rid)
+        q = "no table saved" if final is None else f"{final:.2f}" + (
+            " (last checkpoint)" if rid in kept else "")
         lines.append(f"| {rid} | {s.arena if s else '?'} | {s.algo if s else '?'} | "
-                     f"{int(last['iteration'])} | {last['q_sum']:.2f} | "
+                     f"{int(last['iteration'])} | {q} | "
                      f"{last['cumulative_reward']:.1f} | {int(last['collisions'])} |")
     lines.append("")
+    failed = [row for row in r.rounds if row.get("error")]
+    partial = [row for row in r.rounds if row.get("skipped") and not row.get("error")]
     n_rounds = len(r.rounds)
     durations = sorted(float(row["duration_ms"]) for row in r.rounds)
     med = durations[len(durations) // 2] if durations else float("nan")
     lines += [f"- agent rounds logged: {n_rounds}; rounds after which every visited robot held "
-              f"the same table: {r.equal_rounds}/{n_rounds}",
+              f"the same table: {r.equal_rounds}/{n_rounds}; rounds that skipped robots: "
+              f"{len(partial)}; rounds whose method FAILED (no table written): {len(failed)}",
               f"- median round time: {med:.1f} ms",
               f"- methods used: {', '.join(sorted({row['method'] for row in r.rounds})) or '-'}",
               f"- agents finished: {r.agents_finished}"]
+    for row in failed[:10]:
+        lines.append(f"  - FAILED: {row['agent']} round {row['round']} ({row['method']}): "
+                     f"{row['error'][:300]}")
+    for row in partial[:10]:
+        lines.append(f"  - skipped robots: {row['agent']} round {row['round']}: {row['skipped']}")
     warnings = node_warnings(r.output_dir)
     if warnings:
         lines.append(f"- {len(warnings)} warning(s) in logs/ (agent and nodes), first ones:")
@@ -105,7 +119,8 @@ def write_summary(r: Results) -> Path:
         lines += ["", f"## Faults: federation {verdict}", ""] + (fault_lines or ["- none"])
     if r.interrupted:
         lines.append(f"- INTERRUPTED ({r.interrupted}): partial results, robots stopped by "
-                     "the launcher")
+                     "the launcher" + (f"; tables of {', '.join(sorted(kept))} kept from their "
+                                       "last checkpoints" if kept else ""))
     plots = ", ".join(p.name for p in r.plots) if r.plots else "none"
     if r.plot_error:
         plots += f" ({r.plot_error})"

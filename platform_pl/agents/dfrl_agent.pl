@@ -82,7 +82,7 @@ and closed per line):
 {"event":"round","agent":"fed_q","round":3,"start":1764600000.12,
  "end":1764600000.25,"hops":8,"bytes":4860,"method":"average",
  "visited":["r1","r2","r3"],"skipped":[{"robot":"r4","reason":"..."}],
- "retries":2,"epoch":1}
+ "retries":2,"epoch":1}                   (and "error":"..." if the method failed)
 {"event":"control","agent":"fed_q","round":4,"command":"method(median)",
  "status":"applied"}                      (or "ignored" with a "reason")
 {"event":"resurrected","agent":"fed_q","round":5,"epoch":2,
@@ -96,7 +96,10 @@ and closed per line):
 order of the forward pass; `skipped` the robots of the itinerary that
 could not be read, reached or written, with the error as text;
 `retries` how many moves of the round were tried again; `epoch` the
-epoch of the copy that logged it. `resurrected` is logged by the copy
+epoch of the copy that logged it. `error` (only then) says that an
+aggregation hook failed or threw that round (which hook, and the error):
+the round was aborted there, no robot read after it and no table
+written, so every robot keeps its own table; the next round tries again. `resurrected` is logged by the copy
 that a stop (`from`) resurrected after the node `dead` was lost with
 the agent on it, `superseded` by a late original as it retires.
 `aborted` is logged only by an agent launched with the event `launch`
@@ -144,6 +147,34 @@ that arrives during a round also ends that round's tour).
     aggregate_step/4,           % +Method, +Acc0, +Table, -Acc
     aggregate_final/3,          % +Method, +Acc, -Values
     method_uses_visits/1.       % ?Method
+
+%!  aggregate_init(+Method, +Table, -Acc) is semidet.
+%
+%   Hook of an aggregation method: start the aggregate Acc of a round
+%   from the first robot's Table, qtable(Shape, Values) (Values a flat
+%   list of floats), or qtable_visits(Shape, Values, Visits) when
+%   method_uses_visits(Method). Defining a clause for a new Method name
+%   defines the method (see dfrl_method/1). A hook that fails or throws
+%   aborts the round: logged with an `error`, no table written.
+
+%!  aggregate_step(+Method, +Acc0, +Table, -Acc) is semidet.
+%
+%   Hook of an aggregation method: fold the Table of the next robot of
+%   the forward pass into the aggregate Acc0 (same shapes are checked
+%   before). Failing or throwing aborts the round, as for
+%   aggregate_init/3.
+
+%!  aggregate_final(+Method, +Acc, -Values) is semidet.
+%
+%   Hook of an aggregation method: the table Values (a flat list, the
+%   shape of the first table) that the agent writes back to every robot
+%   it visited in the round, from the aggregate Acc.
+
+%!  method_uses_visits(?Method) is nondet.
+%
+%   Hook: Method's aggregate_init/3 and aggregate_step/4 receive
+%   qtable_visits(Shape, Values, Visits), the tables with their visit
+%   counts (e.g. visit_average).
 
 :- dynamic
     pending/3,                  % Node, Agent, Command (queued control)
@@ -421,8 +452,14 @@ take_command(Log, Agent, Round, Command, Acc0, Acc) :-
 
 turn_back(M, Agent, Method, S0) :-
     get_dict(acc, S0, Acc),
-    finish(Method, Acc, Final),
-    put_dict(_{phase:backward, acc:Final}, S0, S),
+    method_call(finish(Method, Acc, Final0), aggregate_final(Method), Result),
+    (   Result == ok
+    ->  S1 = S0,
+        Final = Final0
+    ;   method_failed(Result, S0, S1),
+        Final = none
+    ),
+    put_dict(_{phase:backward, acc:Final}, S1, S),
     put_state(M, Agent, S),
     step(M, Agent).
 
@@ -468,23 +505,62 @@ update(M, Fact) :-
     assertz(M:Fact).
 
 %   Forward: fold this robot's table into the aggregate. A robot that
-%   cannot be read (or whose table does not fit) is skipped.
+%   cannot be read (or whose table does not fit) is skipped. A method
+%   whose hook fails or throws aborts the round: the error is kept in the
+%   state (logged with the round), the aggregate is dropped so that no
+%   robot is written, and no further robot is read this round.
+forward(_, _, _, S0, S) :-
+    get_dict(error, S0, _),
+    !,
+    S = S0.
 forward(Method, Robot, Options, S0, S) :-
     get_dict(acc, S0, Acc0),
     (   catch(( read_robot(Method, Robot, Options, Table),
                 arg(1, Table, Shape),
-                fold(Method, Acc0, Shape, Table, Acc1)
+                fits(Acc0, Shape)
               ),
               E, true)
     ->  (   var(E)
-        ->  get_dict(visited, S0, V0),
-            append(V0, [Robot], V),
-            put_dict(_{acc:Acc1, visited:V}, S0, S)
+        ->  aggregate_hook(Acc0, Method, Hook),
+            method_call(fold(Method, Acc0, Shape, Table, Acc1), Hook, Result),
+            (   Result == ok
+            ->  get_dict(visited, S0, V0),
+                append(V0, [Robot], V),
+                put_dict(_{acc:Acc1, visited:V}, S0, S)
+            ;   method_failed(Result, S0, S)
+            )
         ;   print_message(warning, E),
             skip(Robot, E, S0, S)
         )
     ;   skip(Robot, failed(read_robot(Robot)), S0, S)
     ).
+
+fits(none, _) :- !.
+fits(acc(Shape0, _), Shape) :-
+    same_shape(Shape0, Shape).
+
+aggregate_hook(none, Method, aggregate_init(Method)) :- !.
+aggregate_hook(_, Method, aggregate_step(Method)).
+
+%   method_call(:Goal, +Hook, -Result): Result is `ok` when Goal
+%   succeeded, else error(Text) saying how Hook failed or what it threw.
+method_call(Goal, Hook, Result) :-
+    catch(( Goal -> R = true ; R = failed ), E, R = thrown(E)),
+    (   R == true
+    ->  Result = ok
+    ;   R == failed
+    ->  format(string(Error), "~q failed", [Hook]),
+        Result = error(Error)
+    ;   R = thrown(E),
+        message_text(E, Text),
+        format(string(Error), "~q raised: ~w", [Hook, Text]),
+        Result = error(Error)
+    ).
+
+method_failed(error(Error), S0, S) :-
+    print_message(error, format("dfrl: aggregation method: ~w; round aborted, \c
+                                 no table is written", [Error])),
+    put_dict(_{error:Error, acc:none}, S0, S).
 
 %   Record that Robot did not take part (once per robot and round).
 %   Error is an error term or reason(Text).
@@ -503,8 +579,7 @@ skip(Robot, Error, S0, S) :-
 fold(Method, none, Shape, Table, acc(Shape, A)) :-
     !,
     aggregate_init(Method, Table, A).
-fold(Method, acc(Shape0, A0), Shape, Table, acc(Shape0, A)) :-
-    same_shape(Shape0, Shape),
+fold(Method, acc(Shape0, A0), _Shape, Table, acc(Shape0, A)) :-
     aggregate_step(Method, A0, Table, A).
 
 read_robot(Method, Robot, Options, Table) :-
@@ -805,10 +880,14 @@ log_round(Log, Agent, Method, End, S) :-
     maplist(skip_json, Skipped0, Skipped),
     current_node(Node),
     lease_custody(Node, Agent, custody(Epoch, _, _)),
-    log_event(Log, _{event:round, agent:Agent, round:Round, start:Start,
-                     end:End, hops:Hops, bytes:Bytes, method:Method,
-                     visited:Visited, skipped:Skipped, retries:Retries,
-                     epoch:Epoch}).
+    Event = _{event:round, agent:Agent, round:Round, start:Start,
+              end:End, hops:Hops, bytes:Bytes, method:Method,
+              visited:Visited, skipped:Skipped, retries:Retries,
+              epoch:Epoch},
+    (   get_dict(error, S, Error)
+    ->  log_event(Log, Event.put(error, Error))
+    ;   log_event(Log, Event)
+    ).
 
 skip_json(skip(Robot, Reason), _{robot:R, reason:Reason}) :-
     text(Robot, R).

@@ -17,6 +17,18 @@
 :- multifile user:message_hook/3.
 :- dynamic user:message_hook/3.
 :- asserta((user:message_hook(_, warning, _) :- quiet)).
+:- asserta((user:message_hook(_, error, _) :- quiet)).
+
+% methods that go wrong at run time: a step that fails, a final that throws
+:- multifile dfrl_agent:aggregate_init/3, dfrl_agent:aggregate_step/4,
+             dfrl_agent:aggregate_final/3.
+dfrl_agent:aggregate_init(failing_step, qtable(_, V), V).
+dfrl_agent:aggregate_step(failing_step, _, _, _) :- fail.
+dfrl_agent:aggregate_final(failing_step, A, A).
+dfrl_agent:aggregate_init(throwing_final, qtable(_, V), V).
+dfrl_agent:aggregate_step(throwing_final, A, _, A).
+dfrl_agent:aggregate_final(throwing_final, _, _) :-
+    type_error(integer, not_a_number).
 
 wait_for(G) :- wait_for(G, 250).
 wait_for(G, N) :- ( call(G) -> true ; N > 0 -> sleep(0.02), N1 is N-1, wait_for(G, N1) ; fail ).
@@ -157,6 +169,41 @@ test(unknown_method_ignored_and_stop, [cleanup(cleanup([C,A,B], Log))]) :-
     assertion(Stop.command == stop), assertion(Stop.status == applied),
     assertion(Round.method == max),
     assertion(Finished.round == 1).
+
+test(failing_method_aborts_round_loudly, [setup(assertz(user:quiet)),
+                                          cleanup((retractall(user:quiet),
+                                                   cleanup([C,A,B,D], Log)))]) :-
+    tmp_file(rounds, Log),
+    memory_robots_start([r1-[1.0,2.0], r2-[3.0,4.0], r3-[5.0,6.0]]),
+    nodes(4, [C,A,B,D]),
+    maplist(stop_of, [A,B,D], [r1,r2,r3], Stops),
+    launch(C, ff, Stops, failing_step, 2, Log),
+    assertion(wait_for(finished(Log))),
+    events(Log, round, [R1, R2]),
+    assertion(R1.error == 'aggregate_step(failing_step) failed'),
+    assertion(R2.error == R1.error),
+    assertion(R1.visited == [r1]),          % r2's step failed: nothing after it
+    assertion(R1.skipped == []),
+    % every robot keeps its own table: nothing was written
+    assertion(memory_robot_table(r1, [1.0,2.0])),
+    assertion(memory_robot_table(r3, [5.0,6.0])),
+    forall(member(R, [r1,r2,r3]), assertion(memory_robot_sets(R, 0))).
+
+test(throwing_method_aborts_round_loudly, [setup(assertz(user:quiet)),
+                                           cleanup((retractall(user:quiet),
+                                                    cleanup([C,A,B], Log)))]) :-
+    tmp_file(rounds, Log),
+    memory_robots_start([r1-[1.0,2.0], r2-[3.0,4.0]]),
+    nodes(3, [C,A,B]),
+    maplist(stop_of, [A,B], [r1,r2], Stops),
+    launch(C, ft, Stops, throwing_final, 1, Log),
+    assertion(wait_for(finished(Log))),
+    events(Log, round, [R]),
+    assertion(sub_atom(R.error, 0, _, _, 'aggregate_final(throwing_final) raised: ')),
+    assertion(sub_atom(R.error, _, _, _, not_a_number)),
+    assertion(R.visited == [r1, r2]),
+    forall(member(Rb, [r1,r2]), assertion(memory_robot_sets(Rb, 0))),
+    assertion(memory_robot_table(r2, [3.0,4.0])).
 
 test(unreachable_stop_is_skipped, [setup(assertz(user:quiet)),
                                    cleanup((retractall(user:quiet), cleanup([C,A,B], Log)))]) :-

@@ -30,7 +30,7 @@ def test_robot_joins_running_experiment(tmp_path: Path) -> None:
     assert 2 <= first < len(rows)
     assert all(r["all_equal"] == "true" for r in rows)
     curves = read_metrics(tmp_path / "metrics.csv")
-    assert "r3" in curves and 0 < len(curves["r3"]) <= 800
+    assert "r3" in curves and 0 < len(set(curves["r3"]["iteration"].tolist())) <= 800
     nodes = json.loads((tmp_path / "nodes.json").read_text())
     assert [n["robot"] for n in nodes["nodes"]] == ["r1", "r2", "r3"]
 
