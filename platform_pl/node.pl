@@ -18,6 +18,7 @@
             ctx_peer/2,                 % +Ctx, -Peer
             ctx_input/2,                % +Ctx, -InputStream
             ctx_authenticated/1,        % +Ctx
+            ctx_authorized/1,           % +Ctx
             platform_shutdown/0
           ]).
 :- use_module(wire, [frame_write/3, frame_read/3, wire_version/1]).
@@ -33,6 +34,7 @@
 :- autoload(library(option), [option/2, option/3, select_option/4]).
 :- autoload(library(debug), [debug/3]).
 :- autoload(library(lists), [member/2, max_list/2]).
+:- autoload(library(aggregate), [aggregate_all/3]).
 :- autoload(library(crypto), [crypto_n_random_bytes/2]).
 :- autoload(library(readutil), [read_file_to_string/3]).
 :- autoload(library(filesex), [make_directory_path/1, directory_file_path/3]).
@@ -80,13 +82,18 @@ by default the bind address, or the host name when it binds 0.0.0.0).
     node_opt/2,                 % Node, Option
     default_node/1,             % Node
     stopping/1,                 % Node
-    connection/2.               % Node, ThreadId
+    connection/2,               % Node, ThreadId
+    conn_entry/5.               % Node, ConnId, PeerKey, Class, Since
+
+:- thread_local
+    serving/2.                  % Node, ConnId: this worker's connection
 
 :- thread_local
     current_node_tl/1.
 
 :- multifile
     platform_request/4,         % +Request, +Ctx, -Reply, -After
+    requires_authentication/1,  % +Request
     node_started/1,             % +Node
     node_stopping/1.            % +Node
 
@@ -102,6 +109,10 @@ by default the bind address, or the host name when it binds 0.0.0.0).
                        lease_s(number),
                        max_frame_size(positive_integer),
                        max_text_frame_size(positive_integer),
+                       frame_deadline(number),
+                       max_term_depth(positive_integer),
+                       max_unauth_connections(positive_integer),
+                       max_unauth_per_peer(positive_integer),
                        reply_timeout(number),
                        connect_timeout(number),
                        commit_timeout(number),
@@ -135,7 +146,17 @@ by default the bind address, or the host name when it binds 0.0.0.0).
 %                                 (defaults 2 and 10)
 %     - max_frame_size(+Bytes)    largest frame from a peer that proved a
 %                                 token (default 256 MiB)
-%     - max_text_frame_size(+Bytes) largest frame before that (1 MiB)
+%     - max_text_frame_size(+Bytes) largest frame before that (64 KiB)
+%     - frame_deadline(+Sec)      before a token proof, a whole frame must
+%                                 arrive within Sec of its first byte
+%                                 (default 5)
+%     - max_term_depth(+D)        before a token proof, the deepest term
+%                                 a frame may hold (default 64)
+%     - max_unauth_connections(+N) connections that have not proved a
+%                                 token, in total (default: half of
+%                                 max_connections); the rest is kept for
+%                                 authenticated peers
+%     - max_unauth_per_peer(+N)   the same per peer address (default 16)
 %     - reply_timeout(+Sec), connect_timeout(+Sec) for outgoing requests
 %       (defaults 30 and 5)
 %     - commit_timeout(+Sec)      how long a staged arriving agent waits
@@ -313,6 +334,7 @@ node_stop(Node) :-
     retractall(node_opt(Node, _)),
     retractall(stopping(Node)),
     retractall(connection(Node, _)),
+    with_mutex(dfrl_conns, retractall(conn_entry(Node, _, _, _, _))),
     (   retract(default_node(Node))
     ->  (   node_info(Other, _, _)
         ->  assertz(default_node(Other))
@@ -363,6 +385,9 @@ node_option(Node, Name, Value) :-
     Opt =.. [Name, V0],
     (   node_opt(Node, Opt)
     ->  Value = V0
+    ;   Name == max_unauth_connections
+    ->  node_option(Node, max_connections, Max),
+        Value is max(1, Max // 2)
     ;   option_default(Name, Value)
     ).
 
@@ -373,7 +398,10 @@ option_default(store, none).
 option_default(settle_period, 2).
 option_default(lease_s, 10).
 option_default(max_frame_size, 268435456).
-option_default(max_text_frame_size, 1048576).
+option_default(max_text_frame_size, 65536).
+option_default(frame_deadline, 5).
+option_default(max_term_depth, 64).
+option_default(max_unauth_per_peer, 16).
 option_default(reply_timeout, 30).
 option_default(connect_timeout, 5).
 option_default(commit_timeout, 10).
@@ -593,15 +621,118 @@ accept_loop(Node, Socket) :-
         accept_loop(Node, Socket)
     ).
 
+%   Admission. Every connection starts unauthenticated and becomes
+%   authenticated when its peer proves a token (conn_entry/5 keeps its
+%   class). Unauthenticated connections are capped per peer address and
+%   in total, below max_connections, so the remaining slots are kept for
+%   authenticated ones, which an unauthenticated flood never displaces.
+%   At a cap, the new connection is not refused: the oldest
+%   unauthenticated connection of the same peer (per-peer cap) or of the
+%   peer holding the most (total cap) is evicted, so a trickling or
+%   idle peer cannot keep a newcomer out, and a newcomer that proves its
+%   token at once becomes authenticated before its turn comes. Only when
+%   every slot is authenticated is a connection refused.
 dispatch(Node, Client, Peer) :-
-    node_option(Node, max_connections, Max),
-    aggregate_all(count, connection(Node, _), Open),
-    (   Open >= Max
+    peer_key(Peer, Key),
+    flag(dfrl_conn_ids, CId, CId+1),
+    get_time(Now),
+    with_mutex(dfrl_conns, admit(Node, CId, Key, Now, Verdict)),
+    (   Verdict = refuse
     ->  refuse_busy(Client)
-    ;   catch(pool_run(connections, serve_connection(Node, Client, Peer),
-                       [max(10000)]),
-              E, (print_message(warning, E), refuse_busy(Client)))
+    ;   Verdict = evict(Victim)
+    ->  evict(Node, Victim)
+    ;   true
+    ),
+    (   Verdict == refuse
     ->  true
+    ;   catch(pool_run(connections, serve_connection(Node, CId, Client, Peer),
+                       [max(10000)]),
+              E, ( print_message(warning, E),
+                   with_mutex(dfrl_conns, retractall(conn_entry(Node, CId, _, _, _))),
+                   refuse_busy(Client) ))
+    ->  true
+    ;   true
+    ).
+
+peer_key(ip(A,B,C,D), ip(A,B,C,D)) :- !.
+peer_key(Peer, Peer).
+
+admit(Node, CId, Key, Now, Verdict) :-
+    node_option(Node, max_connections, Max),
+    node_option(Node, max_unauth_connections, MaxU),
+    node_option(Node, max_unauth_per_peer, MaxP),
+    aggregate_all(count, conn_entry(Node, _, _, _, _), Total),
+    aggregate_all(count, conn_entry(Node, _, _, unauth, _), Unauth),
+    aggregate_all(count, conn_entry(Node, _, Key, unauth, _), Mine),
+    (   Mine >= MaxP
+    ->  oldest_unauth(Node, Key, Victim),
+        Verdict = evict(Victim)
+    ;   Unauth >= MaxU
+    ->  busiest_peer(Node, Busiest),
+        oldest_unauth(Node, Busiest, Victim),
+        Verdict = evict(Victim)
+    ;   Total >= Max
+    ->  (   busiest_peer(Node, Busiest)
+        ->  oldest_unauth(Node, Busiest, Victim),
+            Verdict = evict(Victim)
+        ;   Verdict = refuse
+        )
+    ;   Verdict = admit
+    ),
+    (   Verdict = evict(V)
+    ->  retractall(conn_entry(Node, V, _, _, _))
+    ;   true
+    ),
+    (   Verdict == refuse
+    ->  true
+    ;   assertz(conn_entry(Node, CId, Key, unauth, Now))
+    ).
+
+oldest_unauth(Node, Key, Victim) :-
+    aggregate_all(min(Since, C), conn_entry(Node, C, Key, unauth, Since),
+                  min(_, Victim)).
+
+busiest_peer(Node, Key) :-
+    findall(K, conn_entry(Node, _, K, unauth, _), Ks),
+    Ks \== [],
+    msort(Ks, Sorted),
+    clumped_pairs(Sorted, Counts),
+    aggregate_all(max(N, K), member(K-N, Counts), max(_, Key)).
+
+clumped_pairs([], []).
+clumped_pairs([K|Ks], [K-N|Rest]) :-
+    take_same(K, Ks, 1, N, Ks1),
+    clumped_pairs(Ks1, Rest).
+
+take_same(K, [K1|Ks], N0, N, Rest) :-
+    K1 == K,
+    !,
+    N1 is N0 + 1,
+    take_same(K, Ks, N1, N, Rest).
+take_same(_, Ks, N, N, Ks).
+
+%   The victim's entry is gone already (it no longer counts); its worker,
+%   if it runs, is told to close the connection.
+evict(Node, Victim) :-
+    debug(dfrl(node), '~w: evicting unauthenticated connection ~w', [Node, Victim]),
+    forall(connection(Node, T),
+           pool_signal(connections, T, node:evict_if_serving(Node, Victim))).
+
+evict_if_serving(Node, CId) :-
+    (   serving(Node, CId)
+    ->  throw(dfrl_evicted)
+    ;   true
+    ).
+
+%   A connection's class becomes authenticated (it no longer counts
+%   against the unauthenticated caps).
+mark_authenticated(Node) :-
+    (   serving(Node, CId)
+    ->  with_mutex(dfrl_conns,
+                   (   retract(conn_entry(Node, CId, Key, _, Since))
+                   ->  assertz(conn_entry(Node, CId, Key, auth, Since))
+                   ;   true
+                   ))
     ;   true
     ).
 
@@ -629,11 +760,16 @@ refuse_busy(Client) :-
 		 *          CONNECTIONS		*
 		 *******************************/
 
-serve_connection(Node, Client, Peer) :-
+serve_connection(Node, CId, Client, Peer) :-
     thread_self(Me),
     assertz(connection(Node, Me)),
+    assertz(serving(Node, CId)),
     catch(setup_call_cleanup(
               ( node_set_current_if_alive(Node),
+                (   conn_entry(Node, CId, _, _, _)
+                ->  true
+                ;   throw(dfrl_evicted)          % evicted before it began
+                ),
                 catch(tcp_setopt(Client, nodelay), _, true),
                 tcp_open_socket(Client, Pair)
               ),
@@ -641,8 +777,23 @@ serve_connection(Node, Client, Peer) :-
               close(Pair, [force(true)])),
           E,
           connection_ended(Node, Peer, E)),
+    (   var(Pair)
+    ->  catch(tcp_close_socket(Client), _, true)
+    ;   true
+    ),
+    with_mutex(dfrl_conns, retractall(conn_entry(Node, CId, _, _, _))),
+    retractall(serving(_, _)),
     retractall(connection(Node, Me)),
     retractall(current_node_tl(_)).
+
+%   Give back what a large or rejected frame made the worker's stacks grow
+%   to (a worker thread is reused, and a hostile frame must not leave its
+%   memory behind): collect, shrink the stacks, and hand freed memory back
+%   to the OS (trim_heap/0; tcmalloc otherwise keeps it).
+release_memory :-
+    garbage_collect,
+    trim_stacks,
+    catch(trim_heap, _, true).
 
 node_set_current_if_alive(Node) :-
     (   node_info(Node, _, _)
@@ -651,6 +802,7 @@ node_set_current_if_alive(Node) :-
     ).
 
 connection_ended(_, _, node_stopping) :- !.
+connection_ended(_, _, dfrl_evicted) :- !.
 connection_ended(_, _, '$aborted') :- !.
 connection_ended(_, _, unwind(_)) :- !.
 connection_ended(_, _, error(existence_error(platform, _), _)) :- !.
@@ -687,21 +839,31 @@ serve_frames(Ctx) :-
     (   Auth == true
     ->  node_option(Node, max_frame_size, Max),
         node_option(Node, auth_idle_timeout, Idle),
-        Binary = true
+        ReadOptions = [max_size(Max), binary(true)]
     ;   node_option(Node, max_text_frame_size, Max),
         node_option(Node, idle_timeout, Idle),
-        Binary = false
+        node_option(Node, frame_deadline, Deadline),
+        node_option(Node, max_term_depth, Depth),
+        ReadOptions = [ max_size(Max), binary(false), deadline(Deadline),
+                        max_depth(Depth) ]
     ),
     set_stream(In, timeout(Idle)),
-    catch(frame_read(In, Frame, [max_size(Max), binary(Binary)]),
+    byte_count(In, Before),
+    catch(frame_read(In, Frame, ReadOptions),
           error(wire_error(Reason), _),
           ( reply(Out, error(error(wire_error(Reason), _))),
-            Frame = end_of_file
+            Frame = end_of_file,
+            release_memory
           )),
     (   Frame == end_of_file
     ->  true
     ;   Frame = frame(_, Term),
         serve_term(Term, Ctx, Continue),
+        byte_count(In, After),
+        (   After - Before > 4194304
+        ->  release_memory
+        ;   true
+        ),
         (   Continue == true
         ->  serve_frames(Ctx)
         ;   true
@@ -714,6 +876,7 @@ serve_term(auth(Proofs), Ctx, true) :-
     (   is_list(Proofs),
         node_accepts(Node, Proofs/Nonce)
     ->  nb_setarg(6, Ctx, true),
+        mark_authenticated(Node),
         reply(Out, ok(authenticated))
     ;   (   var(Auth)
         ->  nb_setarg(6, Ctx, false)
@@ -748,12 +911,54 @@ after_failed(E, false) :-
     print_message(warning, E).
 
 handle(Request, Ctx, Reply, After) :-
-    (   platform_request(Request, Ctx, Reply0, After0)
+    (   \+ callable(Request)
+    ->  unknown_request(Request, Reply),
+        After = true
+    ;   requires_authentication(Request),
+        \+ ctx_authorized(Ctx)
+    ->  ctx_node(Ctx, Node),
+        node_ident(Node, _, Here, _),
+        functor(Request, Name, Arity),
+        Reply = error(error(permission_error(request, platform, Here),
+                            context(Name/Arity,
+                                    'this request needs a proved token'))),
+        After = true
+    ;   platform_request(Request, Ctx, Reply0, After0)
     ->  Reply = Reply0,
         After = After0
-    ;   Reply = error(error(domain_error(platform_request, Request), _)),
+    ;   unknown_request(Request, Reply),
         After = true
     ).
+
+%   An unknown request is answered with its name and arity only: the
+%   request itself may be large (and echoing it back is the peer's
+%   work, not ours).
+unknown_request(Request, error(error(domain_error(platform_request, What), _))) :-
+    (   callable(Request)
+    ->  functor(Request, Name, Arity),
+        What = Name/Arity
+    ;   What = not_callable
+    ).
+
+%!  requires_authentication(+Request) is semidet.
+%
+%   Multifile hook: true if Request is served only to a peer that proved
+%   one of the node's tokens (or to anyone by an open node). The
+%   platform's own: listing and posting to agents, migration and custody
+%   status, code loading, execution and transfers. A module serving its
+%   own requests adds a clause, e.g.
+%
+%   ```
+%   node:requires_authentication(my_status(_)).
+%   ```
+
+requires_authentication(migration_status(_)).
+requires_authentication(custody_agents).
+requires_authentication(load_code(_, _)).
+requires_authentication(execute(_, _)).
+requires_authentication(commit(_)).
+requires_authentication(dfrl_robot(_)).
+requires_authentication(dfrl_custody(_)).
 
 reply(Out, Reply) :-
     sanitize_reply(Reply, Safe),
@@ -774,8 +979,25 @@ sanitize_reply(error(E), error(error(Safe, _))) :-
     ).
 sanitize_reply(Reply, Reply).
 
+%   Linear in the size of T (sub_term/2 is quadratic on deep terms: a
+%   reply echoing a 200 KB operator chain took a minute of CPU).
 writable_term(T) :-
-    \+ ( sub_term(S, T), blob(S, Type), \+ memberchk(Type, [text, reserved_symbol]) ).
+    (   compound(T)
+    ->  compound_name_arity(T, _, A),
+        writable_args(1, A, T)
+    ;   blob(T, Type)
+    ->  memberchk(Type, [text, reserved_symbol])
+    ;   true
+    ).
+
+writable_args(I, A, _) :-
+    I > A,
+    !.
+writable_args(I, A, T) :-
+    arg(I, T, X),
+    writable_term(X),
+    I1 is I + 1,
+    writable_args(I1, A, T).
 
 		 /*******************************
 		 *       CONNECTION CONTEXT	*
@@ -811,6 +1033,19 @@ ctx_input(ctx(_, _, _, In, _, _), In).
 
 ctx_authenticated(ctx(_, _, _, _, _, Auth)) :-
     Auth == true.
+
+%!  ctx_authorized(+Ctx) is semidet.
+%
+%   True if the peer may make requests that need authentication: it
+%   proved a token, or the node is open (has no tokens: it accepts
+%   anyone, see node_start/3).
+
+ctx_authorized(Ctx) :-
+    (   ctx_authenticated(Ctx)
+    ->  true
+    ;   ctx_node(Ctx, Node),
+        node_tokens(Node, [])
+    ).
 
 		 /*******************************
 		 *          BUILT-IN		*

@@ -648,7 +648,10 @@ receive_failed(_, _, E) :-
 %   Result; if it is error(error(Formal, _)), throw error(Formal,
 %   remote(Address)). Options are those of transport_open/3 plus
 %
-%     - tokens(+List)   prove these tokens first (privileged requests)
+%     - tokens(+List)   prove these tokens first (privileged requests);
+%                       default, for a request that needs them
+%                       (node:requires_authentication/1): the current
+%                       node's tokens
 %     - action(+Action) the permission error's action if they are refused
 %     - kind(+Kind)     text (default) or binary
 %     - fresh(true)     use a new connection and close it afterwards
@@ -658,6 +661,10 @@ transport_request(Address0, Request, Result, Options) :-
     (   option(tokens(Tokens), Options)
     ->  must_be(list, Tokens),
         msort(Tokens, Key)
+    ;   catch(node:requires_authentication(Request), _, fail),
+        own_tokens(Tokens),
+        Tokens \== []
+    ->  msort(Tokens, Key)
     ;   Key = none
     ),
     (   option(fresh(true), Options)
@@ -680,6 +687,21 @@ transport_request(Address0, Request, Result, Options) :-
         )
     ),
     reply_result(Address, Reply, Result).
+
+%   The tokens of the calling thread's node: a node proves its own
+%   tokens to its peers for the requests that need a proof.
+%   A thread of no node (e.g. a node's settle thread in a process whose
+%   nodes are not the default) proves the tokens of all nodes of the
+%   process.
+own_tokens(Tokens) :-
+    catch(node:current_node(Node), _, fail),
+    !,
+    node:node_property(Node, tokens(Tokens)).
+own_tokens(Tokens) :-
+    findall(T, ( node:local_node(N),
+                 node:node_property(N, tokens(Ts)),
+                 member(T, Ts) ), Tokens0),
+    sort(Tokens0, Tokens).
 
 request_on(Conn, Request, Reply, Options) :-
     option(kind(Kind), Options, text),

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+import re
 import socket
 import struct
 
@@ -57,17 +58,52 @@ def _read_exact(sock: socket.socket, n: int) -> bytes | None:
     return buf
 
 
-def connect(port: int, timeout: float = 5.0) -> socket.socket:
-    """Connect and consume the hello frame."""
-    s = socket.create_connection(("127.0.0.1", port), timeout=timeout)
-    hello = read_frame(s)
-    assert hello is not None and hello[1].startswith("hello("), hello
+def connect(port: int, timeout: float = 5.0, source: str | None = None) -> socket.socket:
+    """Connect (from the loopback address ``source`` if given) and consume the hello frame."""
+    s, _ = connect_nonce(port, timeout, source)
     return s
 
 
-def request(port: int, text: str) -> str:
-    """Send one text request (a Prolog term, no final dot) and return the reply text."""
-    with connect(port) as s:
+def connect_nonce(port: int, timeout: float = 5.0,
+                  source: str | None = None) -> tuple[socket.socket, str]:
+    """Connect, read the hello; give the socket and the hello's nonce."""
+    src = (source, 0) if source else None
+    s = socket.create_connection(("127.0.0.1", port), timeout=timeout, source_address=src)
+    hello = read_frame(s)
+    assert hello is not None and hello[1].startswith("hello("), hello
+    return s, hello_nonce(hello[1])
+
+
+def hello_nonce(hello: str) -> str:
+    """The nonce of a hello frame's text: ``hello(1,'0a..',node(...))``."""
+    m = re.match(r"hello\(\d+,'?([0-9a-f]+)'?,", hello)
+    assert m, hello
+    return m.group(1)
+
+
+def authenticate(s: socket.socket, nonce: str, key_text: str) -> str:
+    """Send auth with the proof of one token (its canonical text, e.g. ``"9"``); give the verdict."""
+    s.sendall(frame(f"auth(['{token_proof(key_text, nonce)}']) .\n".encode()))
+    verdict = read_frame(s)
+    assert verdict is not None
+    return verdict[1]
+
+
+def connect_auth(port: int, key_text: str, timeout: float = 5.0,
+                 source: str | None = None) -> socket.socket:
+    """A connection on which the token ``key_text`` was proved."""
+    s, nonce = connect_nonce(port, timeout, source)
+    verdict = authenticate(s, nonce, key_text)
+    assert verdict.startswith("ok(authenticated)"), verdict
+    return s
+
+
+def request(port: int, text: str, token: str | None = None) -> str:
+    """Send one text request (a Prolog term, no final dot) and return the reply text.
+
+    With ``token`` (a token's canonical text) the request is sent after a proof of it.
+    """
+    with (connect_auth(port, token) if token is not None else connect(port)) as s:
         s.sendall(frame(f"{text} .\n".encode()))
         reply = read_frame(s)
         assert reply is not None
