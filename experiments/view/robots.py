@@ -58,6 +58,7 @@ class RobotTrack:
     stride: int = 1
     pid: int | None = None
     local: bool = False
+    born: float = 0.0                        # when the view learnt of it (nodes.json)
     metrics: CsvTail = field(init=False)
     shares: CsvTail = field(init=False)
     iteration: int = 0
@@ -139,7 +140,7 @@ class RobotTrack:
         for seg in sorted(batches):
             pts = batches[seg]
             t = self.time_of(int(pts[-1][0]))
-            out.append({"t": t if t is not None else mtime, "kind": "metrics",
+            out.append({"t": max(self.born, t if t is not None else mtime), "kind": "metrics",
                         "robot": self.robot, "points": pts})
         return out
 

@@ -188,7 +188,7 @@ class EventSource:
         except (OSError, ValueError):
             pass
         local = n.get("node") is None and str(n.get("host", "")).startswith("127.")
-        track = RobotTrack(rid, self.dir, target, self.run["stride"], n.get("pid"), local)
+        track = RobotTrack(rid, self.dir, target, self.run["stride"], n.get("pid"), local, t)
         track.set_start(self.run["t"])
         self.robots[rid] = track
         out.append({"t": t, "kind": "robot", "robot": rid, "host": n.get("host"),

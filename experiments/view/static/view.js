@@ -9,7 +9,8 @@
   const LISTED = new Set(["robot", "agent", "round", "skip", "method", "error", "aborted",
     "control", "resurrected", "superseded", "finished", "robot_state", "run_end", "join"]);
   const MAX_LIST = 300;
-  const RENDER_MS = 200;
+  const RENDER_MS = 250;           // redraw of the network, counters and list at most this often
+  const CHART_MS = 1000;          // curves and arenas at most this often (live)
   const HOP_MS = 180;             // a hop stays on screen at least this long (live)
   const QUEUE = 8;                // hops waiting to be shown at most (older ones dropped)
 
@@ -17,7 +18,7 @@
   let S = fresh();                // the model at the replay position
   let applied = 0;                // events applied to S
   let follow = true;              // apply new events as they come
-  let dirty = true, timer = null, listed = [];
+  let dirty = true, timer = null, listed = [], chartsAt = -1e9;
   const stats = { received: 0, applyMs: 0, renderMs: 0, renders: 0, firstPaintMs: null,
                   connected: false };
   window.dfrlView = { stats, model: () => S };
@@ -46,6 +47,9 @@
     }
     return a;
   }
+  function names(list) {
+    return list.length <= 8 ? list.join(",") : `${list.slice(0, 3).join(",")},…,${list[list.length - 1]} (${list.length})`;
+  }
   function note(ev, text, fault) {
     S.list.push({ seq: ev.seq, kind: ev.kind, t: ev.t, text, fault: !!fault });
   }
@@ -70,7 +74,7 @@
                            itinerary: ev.itinerary || [] });
         if (!a.at && a.itinerary.length) a.at = a.itinerary[0];
         note(ev, `agent ${ev.agent} (${ev.method}, ${ev.rounds} rounds): ` +
-                 (ev.itinerary || []).join(" → "));
+                 ((ev.itinerary || []).length <= 8 ? ev.itinerary.join(" → ") : names(ev.itinerary)));
         break;
       }
       case "hop": {
@@ -87,8 +91,8 @@
         a.phase = "rest"; a.prev = a.at; a.at = ev.visited.length ? ev.visited[0] : a.at;
         a.queue.push({ at: a.at, prev: a.prev, phase: a.phase });
         note(ev, `${ev.agent} round ${ev.round}: ${ev.method}, ${ev.duration_ms.toFixed(0)} ms, ` +
-                 `visited ${ev.visited.join(",") || "-"}` +
-                 (ev.skipped.length ? `, skipped ${ev.skipped.map(s => s.robot).join(",")}` : ""));
+                 `visited ${names(ev.visited) || "-"}` +
+                 (ev.skipped.length ? `, skipped ${names(ev.skipped.map(s => s.robot))}` : ""));
         break;
       }
       case "method":
@@ -169,11 +173,11 @@
 
   let svgNodes = null;     // robot id -> {g, x, y}, rebuilt when robots are added
   function positions() {
-    const n = S.order.length, cx = 320, cy = 205;
-    const rad = n <= 1 ? 0 : Math.min(170, 60 + n * 12);
+    const n = S.order.length, cx = 320, cy = 222;
+    const rx = n <= 1 ? 0 : Math.min(270, 60 + n * 14), ry = n <= 1 ? 0 : Math.min(165, 60 + n * 12);
     return S.order.map((id, i) => {
       const a = -Math.PI / 2 + (2 * Math.PI * i) / Math.max(1, n);
-      return [id, cx + rad * Math.cos(a), cy + rad * Math.sin(a) * 0.95];
+      return [id, cx + rx * Math.cos(a), cy + ry * Math.sin(a)];
     });
   }
   function drawNetwork() {
@@ -196,8 +200,7 @@
           const st = svg("text", { "text-anchor": "middle", y: 49, class: "state" }, g);
           svgNodes.set(id, { g, x, y, info, st });
         } else {
-          const st = svg("text", { "text-anchor": "middle", y: 24, class: "state" }, g);
-          svgNodes.set(id, { g, x, y, info: null, st });
+          svgNodes.set(id, { g, x, y, info: null, st: svg("title", {}, g) });
         }
       }
       svg("g", { id: "agent-marks" }, root);
@@ -205,8 +208,10 @@
     for (const [id, n] of svgNodes) {
       const r = S.robots.get(id);
       n.g.setAttribute("data-state", r.state);
-      if (n.info) n.info.textContent = `${r.host}:${r.port} · ${r.arena} · ${r.algo}`;
-      n.st.textContent = `${r.state} · it ${r.iteration}`;
+      if (n.info) {
+        n.info.textContent = `${r.host}:${r.port} · ${r.arena} · ${r.algo}`;
+        n.st.textContent = `${r.state} · it ${r.iteration}`;
+      } else n.st.textContent = `${id} ${r.host}:${r.port} · ${r.arena} · ${r.algo} · ${r.state} · it ${r.iteration}`;
     }
     const hops = el("hops"), marks = el("agent-marks");
     hops.textContent = "";
@@ -226,7 +231,7 @@
         svg("path", { d: "M -9 -8 L 11 0 L -9 8 Z", fill: a.color, stroke: a.color, "stroke-width": 2 }, g);
       }
       if (!to) { g.setAttribute("visibility", "hidden"); k++; continue; }
-      const dx = 0, dy = -34 - 14 * k;
+      const small = svgNodes.size > 12, dx = 0, dy = (small ? -20 : -34) - 14 * k;
       const x = to.x + dx, y = to.y + dy;
       g.setAttribute("visibility", "visible");
       g.setAttribute("transform", `translate(${x},${y})` + (v.phase === "backward" ? " rotate(180)" : ""));
@@ -290,8 +295,12 @@
   }
   function drawLegend() {
     const box = el("legend");
-    if (box.childElementCount === S.order.length) return;
+    if (box.childElementCount === S.order.length + 1) return;
     box.textContent = "";
+    const states = document.createElement("div"); states.className = "states";
+    for (const st of ["learning", "waiting", "stalled", "skipped", "dead", "done"])
+      states.insertAdjacentHTML("beforeend", `<span class="st" data-state="${st}">● ${st}</span> `);
+    box.appendChild(states);
     for (const id of S.order) {
       const s = document.createElement("span");
       s.style.color = S.robots.get(id).color; s.textContent = `■ ${id} `; box.appendChild(s);
@@ -357,8 +366,10 @@
   function render() {
     const t0 = performance.now();
     dirty = false;
-    drawHeader(); drawAgents(); drawNetwork(); drawLegend();
-    drawChart("chart-q", "q"); drawChart("chart-cr", "cr"); drawArenas(); drawList();
+    drawHeader(); drawAgents(); drawNetwork(); drawLegend(); drawList();
+    if (!follow || S.ended || t0 - chartsAt >= CHART_MS) {
+      chartsAt = t0; drawChart("chart-q", "q"); drawChart("chart-cr", "cr"); drawArenas();
+    } else later(CHART_MS - (t0 - chartsAt));
     stats.renders++; stats.renderMs += performance.now() - t0;
     if (stats.firstPaintMs === null && S.order.length && S.run && S.robots.size >= S.run.robots)
       stats.firstPaintMs = performance.now();

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import pytest
@@ -74,15 +75,16 @@ def test_metrics_are_decimated_and_timed_by_shares(tmp_path: Path) -> None:
     write_run(tmp_path, ("r1",), iterations=2000, respite=1000)
     rows = "".join(f"r1,{i},{i * 0.5},{i * 0.1},0\n" for i in range(1, 2001))
     append(tmp_path / "metrics_r1.csv", rows)
-    append(tmp_path / "shares_r1.csv", "r1,1,1000,500.0,d,1,fed_qlearning,1\n"
-                                       "r1,2,2000,600.0,d,2,fed_qlearning,1\n")
+    t = time.time() + 10.0                       # after the run's start (nodes.json)
+    append(tmp_path / "shares_r1.csv", f"r1,1,1000,{t},d,1,fed_qlearning,1\n"
+                                       f"r1,2,2000,{t + 100},d,2,fed_qlearning,1\n")
     src = EventSource(tmp_path)
     ev = src.drain()
     pts = [p for e in ev if e["kind"] == "metrics" for p in e["points"]]
     assert pts[0][0] == 4 and pts[-1] == [2000, 1000.0, 200.0, 0.0]    # stride 2000 // 500
     assert len(pts) == 500 and all(b[0] > a[0] for a, b in zip(pts, pts[1:]))
     times = [e["t"] for e in ev if e["kind"] == "metrics"]
-    assert times == sorted(times) and times[-1] == 600.0
+    assert times == sorted(times) and times[-1] == t + 100
 
 
 def test_events_file_hops_states_poses_and_bad_lines(tmp_path: Path) -> None:

@@ -1,0 +1,171 @@
+"""Measurements of the live view (not a test): ``python -m tests.experiments.view.measure_view``.
+
+* ``page``: a synthetic 32-robot results folder (8,000 iterations, respite 500, 16 rounds),
+  finished and then written live; time to first paint in headless Chromium and the page's
+  handling time per event and per redraw.
+* ``overhead``: the demo config (5 robots, sync, same seed) run with the launcher directly,
+  alternately without and with ``start_view`` on its folder and a browser attached.
+"""
+from __future__ import annotations
+
+import json
+import math
+import random
+import statistics
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from dfrl.experiments.view import start_view
+
+from .helpers import append, browser_paths, chrome, round_line, write_run
+
+STATS = "return window.dfrlView.stats"
+
+
+def synthetic(out: Path, robots: int = 32, iterations: int = 8000, respite: int = 500,
+              upto: int | None = None, t0: float | None = None) -> None:
+    """Metrics, shares and the round log of a fake sync run up to iteration ``upto``."""
+    ids = tuple(f"r{i + 1}" for i in range(robots))
+    if not (out / "config.json").exists():
+        write_run(out, ids, iterations, respite)
+    upto = iterations if upto is None else upto
+    rng = random.Random(1)
+    t0 = time.time() if t0 is None else t0
+    done = _done.get(out, 0)
+    for i, rid in enumerate(ids):
+        q = [f"{rid},{k},{k * 0.01 + rng.random():.6f},{k * 0.02:.6f},0\n"
+             for k in range(done + 1, upto + 1)]
+        append(out / f"metrics_{rid}.csv", "".join(q))
+    for k in range(done // respite + 1, upto // respite + 1):
+        t = t0 + k
+        for i, rid in enumerate(ids):
+            append(out / f"shares_{rid}.csv",
+                   f"{rid},{k},{k * respite},{t + 0.5 - i * 0.01},d,{k},fed_qlearning,1\n")
+        append(out / "rounds_fed_qlearning.log", round_line(k, list(ids), t))
+    _done[out] = upto
+
+
+_done: dict[Path, int] = {}
+
+
+def page(browser: tuple[str, str]) -> dict[str, Any]:
+    res: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "done"
+        synthetic(out)
+        (out / "summary.md").write_text("done\n")
+        t = time.perf_counter()
+        view = start_view(out)
+        while not view.source.events or view.source.events[-1]["kind"] != "robot_state":
+            time.sleep(0.01)
+        res["finished_drain_s"] = round(time.perf_counter() - t, 3)
+        res["finished_events"] = len(view.source.events)
+        drv = chrome(*browser)
+        try:
+            t = time.perf_counter()
+            drv.get(view.url)
+            for _ in range(300):
+                s = drv.execute_script(STATS)
+                if s["firstPaintMs"] is not None and s["received"] >= res["finished_events"]:
+                    break
+                time.sleep(0.05)
+            res["finished_first_paint_ms"] = round(s["firstPaintMs"], 1)
+            res["finished_all_events_ms"] = round((time.perf_counter() - t) * 1000, 1)
+            res["finished_apply_us_per_event"] = round(1000 * s["applyMs"] / s["received"], 2)
+            res["finished_render_ms"] = round(s["renderMs"] / max(1, s["renders"]), 2)
+            res["points_drawn"] = drv.execute_script(
+                "return Number(document.getElementById('chart-q').dataset.points)")
+        finally:
+            drv.quit()
+            view.close()
+        # live: the same run written 100 iterations at a time, 10 times a second
+        out = Path(tmp) / "live"
+        synthetic(out, upto=0)
+        view = start_view(out)
+        drv = chrome(*browser)
+        try:
+            drv.get(view.url)
+            time.sleep(1.0)
+            t = time.perf_counter()
+            for k in range(100, 8001, 100):
+                synthetic(out, upto=k)
+                time.sleep(0.1)
+            time.sleep(1.0)
+            s = drv.execute_script(STATS)
+            res["live_s"] = round(time.perf_counter() - t, 2)
+            res["live_events"] = s["received"]
+            res["live_apply_us_per_event"] = round(1000 * s["applyMs"] / s["received"], 2)
+            res["live_render_ms"] = round(s["renderMs"] / max(1, s["renders"]), 2)
+            res["live_renders"] = s["renders"]
+            res["live_first_paint_ms"] = round(s["firstPaintMs"], 1)
+            t = time.perf_counter()
+            drv.execute_script("return 1")
+            res["live_script_roundtrip_ms"] = round((time.perf_counter() - t) * 1000, 1)
+        finally:
+            drv.quit()
+            view.close()
+    return res
+
+
+def demo_once(with_view: bool, browser: tuple[str, str] | None, out: Path) -> float:
+    from dfrl.experiments.config import ExperimentConfig, resolve_config
+    from dfrl.experiments.launcher.run import run
+
+    cfg = ExperimentConfig.load(resolve_config("demo"))
+    view = drv = None
+    if with_view:
+        view = start_view(out, fresh=True)
+        assert browser is not None
+        drv = chrome(*browser)
+        drv.get(view.url)
+    try:
+        t = time.perf_counter()
+        res = run(cfg, out, progress=None)
+        wall = time.perf_counter() - t
+        assert res.ok
+        if drv is not None:
+            s = drv.execute_script(STATS)
+            assert s["received"] > 100, s
+    finally:
+        if drv is not None:
+            drv.quit()
+        if view is not None:
+            view.close()
+    return wall
+
+
+def overhead(browser: tuple[str, str], pairs: int = 3) -> dict[str, Any]:
+    off, on = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in range(pairs):
+            off.append(demo_once(False, None, Path(tmp) / f"off{k}"))
+            on.append(demo_once(True, browser, Path(tmp) / f"on{k}"))
+        same = all((Path(tmp) / f"off{k}/metrics.csv").read_bytes()
+                   == (Path(tmp) / f"on{k}/metrics.csv").read_bytes() for k in range(pairs))
+    m_off, m_on = statistics.median(off), statistics.median(on)
+    return {"without_view_s": [round(x, 2) for x in off], "with_view_s": [round(x, 2) for x in on],
+            "median_without_s": round(m_off, 2), "median_with_s": round(m_on, 2),
+            "overhead_pct": round(100 * (m_on - m_off) / m_off, 1), "same_metrics": same}
+
+
+def main(argv: list[str]) -> int:
+    paths = browser_paths()
+    if isinstance(paths, str):
+        print(paths, file=sys.stderr)
+        return 1
+    what = argv[1:] or ["page", "overhead"]
+    out = {}
+    if "page" in what:
+        out["page"] = page(paths)
+    if "overhead" in what:
+        out["overhead"] = overhead(paths)
+    print(json.dumps(out, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv))
