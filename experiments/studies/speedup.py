@@ -101,17 +101,19 @@ def markdown(rows: Sequence[SpeedupRow], opts: SpeedupOptions) -> str:
 
 EXPLANATION = """Why the speed-up is far from linear here. The theory of federated Q-learning
 (Khodadadian, Sharma, Joshi and Maguluri, ICML 2022; Woo, Joshi and Chi, ICML 2023) predicts
-a near-linear speed-up in N for the *sample complexity of estimating Q* under assumptions that
-our set-up breaks: (1) every agent samples the *same* MDP, while our robots live in five
-different arenas, so averaging mixes different Q-functions and the aggregate converges to none
-of them exactly (heterogeneity bias, which Woo et al. bound separately); (2) the step size is
-tuned to N (it grows with N, or the averaging period shrinks), while ours is a fixed alpha 0.2
-and a fixed respite of 500 iterations, so extra robots reduce variance but do not make the
-update bigger; (3) coverage: with 81 states most of the learning is in a few dozen states that
-every robot visits within the first thousand iterations, so the time to threshold is bounded
-below by one robot's own exploration schedule (epsilon decays over 4,000 updates whatever N
-is) and by the first respite; (4) our threshold is on the greedy policy's behaviour, which
-changes in jumps when the argmax of a few states flips, not on the Q error that the bounds
-control. Woo et al.'s importance averaging (weights by visit counts, our `visit_average`)
-addresses uneven coverage, not the arena heterogeneity."""
-
+a near-linear speed-up in N of the *sample complexity of estimating Q*, under assumptions our
+set-up breaks. (1) Averaging N local updates gives an aggregate that moves like one robot's
+update with 1/N of its variance, not N times as far: the speed-up of the theory comes from
+using that variance reduction, with a step size (or a number of local steps) that grows with
+N; ours is a fixed alpha 0.2 and a fixed respite of 500 iterations, so extra robots only
+steady the table. (2) Every agent of the theory samples the *same* MDP; our robots live in
+five different arenas, so the average is a compromise between different Q-functions
+(heterogeneity bias, bounded separately by Woo et al.) that no amount of robots removes.
+(3) Coverage: with 81 states the learning sits in a few dozen states every robot visits
+within its first thousand iterations, and exploration decays over 4,000 updates whatever N
+is; so the time to the threshold is bounded below by one robot's own schedule and by the
+first respite. (4) Our threshold is on the greedy policy's behaviour, which changes in jumps
+when the argmax of a few states flips, not on the Q error that the bounds control; with many
+robots the averaged table also changes less per round, and the greedy policy often freezes
+for several evaluations. Woo et al.'s importance averaging (weights by visit counts, our
+`visit_average`) addresses uneven coverage, not the heterogeneity of the arenas."""

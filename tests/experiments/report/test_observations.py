@@ -30,7 +30,7 @@ def flat(seed: int) -> np.ndarray:
 
 
 def evals(score: float) -> list[dict]:
-    return [{"iteration": it, "arena": a, "role": role, "score": s, "collisions_per_1000": 0.0}
+    return [{"robot": "r1", "iteration": it, "arena": a, "role": role, "score": s, "collisions_per_1000": 0.0}
             for it, s in ((N // 2, score - 0.05), (N, score))
             for a, role in (("r1", "own"), ("h1", "held_out"))]
 
@@ -64,6 +64,8 @@ def test_control_fails_the_tests_that_real_runs_pass():
                                            [run("control", s + 10) for s in seeds])}
     # the Q-sum rises in every run, control included: not a test of learning
     assert tests["1a"].holds and tests["1a"].control_passes and not tests["1a"].is_test
+    # 1e has the control as its reference: the control row fails by construction
+    assert tests["1e"].holds and not tests["1e"].control_passes
     for key in ("1b", "1c", "4", "6"):
         assert tests[key].holds, (key, tests[key].real)
         assert not tests[key].control_passes, (key, tests[key].control)

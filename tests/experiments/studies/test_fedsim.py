@@ -47,3 +47,27 @@ def test_federate_same_seeds_same_tables():
     assert np.array_equal(a.table, b.table) and np.array_equal(a.q_sum, b.q_sum)
     assert sorted(a.snapshots) == [100, 200]
     assert a.q_sum.shape == (2, 200)
+
+
+def test_prolog_max_visited_matches_python():
+    """platform_pl/agents/examples/max_visited.pl, loaded into the agent module, folds the
+    same tables as aggregate_max_visited (the study's mirror of the injected method)."""
+    import json
+    import shutil
+    import subprocess
+    from pathlib import Path
+
+    swipl = shutil.which("swipl")
+    if swipl is None:
+        pytest.skip("swipl not installed")
+    root = Path(__file__).resolve().parents[3] / "platform_pl" / "agents"
+    tables = ",".join(f"qtable_visits([2,2],{json.dumps(q.ravel().tolist())},"
+                      f"{json.dumps(w.ravel().tolist())})" for q, w in zip(Q, W))
+    goal = (f"dfrl_agent:aggregate_tables(max_visited,[{tables}],qtable(_,V)),"
+            "format('~w~n',[V])")
+    out = subprocess.run([swipl, "-q", "-g", f"use_module('{root / 'dfrl_agent'}')",
+                          "-g", f"consult('{root / 'examples' / 'max_visited'}')",
+                          "-g", goal, "-t", "halt"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    assert np.allclose(np.reshape(got, (2, 2)), AGGREGATIONS["max_visited"](Q, W))
