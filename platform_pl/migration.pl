@@ -18,7 +18,7 @@
             [must_be/2, existence_error/2, permission_error/3]).
 :- autoload(library(option), [option/2, option/3]).
 :- autoload(library(debug), [debug/3]).
-:- autoload(library(lists), [min_list/2, member/2]).
+:- autoload(library(lists), [min_list/2, member/2, append/3]).
 
 /** <module> Migration and cloning of agents between nodes, with custody
 
@@ -479,10 +479,17 @@ settle(Node, StagedAge, CommitAge) :-
            ),
            settle_commit(Node, MigId, Dest, Tokens)).
 
+%   The question needs a token proof (node:requires_authentication/1):
+%   this node's tokens and the agent's, which its source accepted.
 settle_staged(Node, Name, MigId, Source, SInc) :-
     node_option(Node, connect_timeout, CT),
+    node_property(Node, tokens(Own)),
+    (   agent_property(Node, Name, tokens(Carried)) -> true ; Carried = [] ),
+    append(Own, Carried, Tokens0),
+    sort(Tokens0, Tokens),
     (   catch(transport_request(Source, migration_status(MigId), Answer,
-                                [connect_timeout(CT), reply_timeout(CT)]),
+                                [ tokens(Tokens), connect_timeout(CT),
+                                  reply_timeout(CT) ]),
               E, ( debug(dfrl(custody), 'ask ~w: ~p', [Source, E]), fail ))
     ->  true
     ;   Answer = unreachable
