@@ -1,5 +1,6 @@
 :- module(messages,
           [ agent_post/5,               % +Address, +Agent, +Handler, +Link, +Args
+            agent_post/6,               % +Address, +Agent, +Handler, +Link, +Args, +Options
             platform_event/1,           % +[Module:]Name/Arity
             remote_agents/3,            % +Address, -Agents, +Options
             remote_execute/4            % +Address, +Agent, +Event, +Options
@@ -12,6 +13,7 @@
 :- use_module(transport).
 :- autoload(library(error), [must_be/2, existence_error/2]).
 :- autoload(library(option), [option/2]).
+:- autoload(library(lists), [append/3]).
 
 /** <module> Messages to agents and to declared platform events
 
@@ -21,7 +23,9 @@ thread, and only if Agent is registered there with that handler. A node
 may also declare platform events (platform_event/1): posting to the
 pseudo-agent `platform` calls Module:Handler(platform, Link, Args...) if
 Module:Handler/N was declared (Module `user` unless the declaration
-names one). Nothing else can be called by a peer.
+names one). Nothing else can be called by a peer, and a remote peer may
+post only if it proved one of the node's tokens (or the node is open):
+`post` is one of the requests node:requires_authentication/1 names.
 */
 
 :- dynamic declared_event/1.
@@ -63,14 +67,29 @@ platform_event(Spec) :-
 %   @error existence_error(agent, Agent) if the platform does not host
 %   Agent with Handler (nor declares Handler as a platform event).
 
-agent_post(Address0, Agent, Handler, Link, Args) :-
+agent_post(Address, Agent, Handler, Link, Args) :-
+    agent_post(Address, Agent, Handler, Link, Args, []).
+
+%!  agent_post(+Address, +Agent, +Handler, +Link, +Args, +Options) is det.
+%
+%   As agent_post/5. Options: tokens(List), the tokens to prove to a
+%   remote platform (default: the current node's), connect_timeout(S),
+%   reply_timeout(S). For a process without a node of its own (a shell
+%   command sending a control event).
+%
+%   @error permission_error(access, platform, Address) if the remote
+%   platform accepts none of the tokens.
+
+agent_post(Address0, Agent, Handler, Link, Args, Options) :-
     must_be(atom, Handler),
     must_be(list, Args),
+    must_be(list, Options),
     address_normalize(Address0, Address),
     (   node_for_address(Address, Node)
     ->  deliver(Node, Agent, Handler, Link, Args)
-    ;   request_options(Options),
-        transport_request(Address, post(Agent, Handler, Link, Args), _, Options)
+    ;   request_options(Defaults),
+        append(Options, Defaults, Options1),
+        transport_request(Address, post(Agent, Handler, Link, Args), _, Options1)
     ).
 
 request_options([connect_timeout(CT), reply_timeout(RT)]) :-

@@ -952,6 +952,8 @@ unknown_request(Request, error(error(domain_error(platform_request, What), _))) 
 %   node:requires_authentication(my_status(_)).
 %   ```
 
+requires_authentication(post(_, _, _, _)).
+requires_authentication(agents).
 requires_authentication(migration_status(_)).
 requires_authentication(custody_agents).
 requires_authentication(load_code(_, _)).

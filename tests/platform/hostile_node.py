@@ -13,6 +13,7 @@ from .conftest import SWIPL, Proc
 
 SCRIPT = """
 :- use_module({tartarus!r}).
+{consults}
 :- initialization(main, main).
 main :-
     node_start('127.0.0.1':0, N, {options}),
@@ -23,11 +24,17 @@ main :-
 """
 
 
-def start(procs: list[Proc], tmp_path: Path, options: str, name: str = "node") -> tuple[Proc, int]:
-    """Start a node with ``options`` (Prolog list text, e.g. ``"[token(9)]"``); give it and its port."""
+def start(procs: list[Proc], tmp_path: Path, options: str, name: str = "node",
+          consult: tuple[Path, ...] = ()) -> tuple[Proc, int]:
+    """Start a node with ``options`` (Prolog list text, e.g. ``"[token(9)]"``); give it and its port.
+
+    ``consult``: files loaded (as ``use_module``) before the node starts.
+    """
     assert SWIPL, "swipl missing"
     script = tmp_path / f"{name}.pl"
-    script.write_text(SCRIPT.format(tartarus=str(PLATFORM_DIR / "tartarus.pl"), options=options))
+    consults = "\n".join(f":- use_module({str(f)!r})." for f in consult)
+    script.write_text(SCRIPT.format(tartarus=str(PLATFORM_DIR / "tartarus.pl"),
+                                    options=options, consults=consults))
     p = Proc([SWIPL, "-q", str(script)])
     procs.append(p)
     line = p.wait_for("LISTENING")
