@@ -62,6 +62,8 @@ class ViewServer:
         self.source = EventSource(self.results_dir)
         self.poll_s = poll_s
         self.errors: list[str] = []
+        #: CPU seconds the poller thread spent reading the folder so far
+        self.poll_cpu_s = 0.0
         self._cond = threading.Condition()
         self._closed = threading.Event()
         self._since = time.time() if fresh else None
@@ -103,7 +105,12 @@ class ViewServer:
             try:
                 if self._fresh():
                     # read outside the lock (the list only grows; readers slice it)
-                    new = self.source.drain() if first else self.source.poll()
+                    c0 = time.thread_time()
+                    # a finished run is read whole first (curves merged by time); a live
+                    # one is followed poll by poll (a drain would never end)
+                    finished = (self.results_dir / "summary.md").is_file()
+                    new = self.source.drain() if first and finished else self.source.poll()
+                    self.poll_cpu_s += time.thread_time() - c0
                     first = False
                     if new:
                         with self._cond:

@@ -155,8 +155,9 @@ class EventSource:
     def _read_nodes(self, out: list[dict[str, Any]]) -> None:
         path = self.dir / "nodes.json"
         mtime = file_mtime(path)
-        if mtime is None or mtime == self._nodes_mtime:
-            return
+        if mtime is None or mtime == self._nodes_mtime or \
+                (self.run is not None and mtime < self.run["t"]):
+            return                                  # unchanged, or an older run's
         try:
             nodes = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, ValueError):

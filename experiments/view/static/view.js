@@ -174,7 +174,7 @@
   let svgNodes = null;     // robot id -> {g, x, y}, rebuilt when robots are added
   function positions() {
     const n = S.order.length, cx = 320, cy = 222;
-    const rx = n <= 1 ? 0 : Math.min(270, 60 + n * 14), ry = n <= 1 ? 0 : Math.min(165, 60 + n * 12);
+    const rx = n <= 1 ? 0 : Math.min(270, 70 + n * 24), ry = n <= 1 ? 0 : Math.min(165, 60 + n * 18);
     return S.order.map((id, i) => {
       const a = -Math.PI / 2 + (2 * Math.PI * i) / Math.max(1, n);
       return [id, cx + rx * Math.cos(a), cy + ry * Math.sin(a)];

@@ -9,7 +9,8 @@
 from __future__ import annotations
 
 import json
-import math
+import os
+import resource
 import random
 import statistics
 import sys
@@ -111,7 +112,35 @@ def page(browser: tuple[str, str]) -> dict[str, Any]:
     return res
 
 
-def demo_once(with_view: bool, browser: tuple[str, str] | None, out: Path) -> float:
+def _tree_cpu(root: int) -> float:
+    """CPU seconds (user + system) of process ``root`` and its descendants, from /proc."""
+    parent: dict[int, int] = {}
+    cpu: dict[int, float] = {}
+    tick = os.sysconf("SC_CLK_TCK")
+    for d in os.listdir("/proc"):
+        if not d.isdigit():
+            continue
+        try:
+            fields = open(f"/proc/{d}/stat").read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        parent[int(d)] = int(fields[1])
+        cpu[int(d)] = (int(fields[11]) + int(fields[12]) + int(fields[13]) + int(fields[14])) / tick
+    total, todo = 0.0, [root]
+    while todo:
+        p = todo.pop()
+        total += cpu.get(p, 0.0)
+        todo += [c for c, pp in parent.items() if pp == p]
+    return total
+
+
+def _cpu_self_children() -> float:
+    s, c = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return s.ru_utime + s.ru_stime + c.ru_utime + c.ru_stime
+
+
+def demo_once(with_view: bool, browser: tuple[str, str] | None, out: Path,
+              cpu: dict[str, float] | None = None) -> float:
     from dfrl.experiments.config import ExperimentConfig, resolve_config
     from dfrl.experiments.launcher.run import run
 
@@ -123,13 +152,20 @@ def demo_once(with_view: bool, browser: tuple[str, str] | None, out: Path) -> fl
         drv = chrome(*browser)
         drv.get(view.url)
     try:
+        b0 = _tree_cpu(drv.service.process.pid) if drv is not None else 0.0
+        c0 = _cpu_self_children()
         t = time.perf_counter()
         res = run(cfg, out, progress=None)
         wall = time.perf_counter() - t
         assert res.ok
+        if cpu is not None:
+            cpu["run"] = _cpu_self_children() - c0     # launcher, robots, console (+ view)
         if drv is not None:
             s = drv.execute_script(STATS)
             assert s["received"] > 100, s
+            if cpu is not None:
+                cpu["browser"] = _tree_cpu(drv.service.process.pid) - b0
+                cpu["view_poll"] = view.poll_cpu_s
     finally:
         if drv is not None:
             drv.quit()
@@ -138,18 +174,30 @@ def demo_once(with_view: bool, browser: tuple[str, str] | None, out: Path) -> fl
     return wall
 
 
-def overhead(browser: tuple[str, str], pairs: int = 3) -> dict[str, Any]:
-    off, on = [], []
+def overhead(browser: tuple[str, str], pairs: int = 4) -> dict[str, Any]:
+    off, on, cpu_off, cpu_on = [], [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         for k in range(pairs):
-            off.append(demo_once(False, None, Path(tmp) / f"off{k}"))
-            on.append(demo_once(True, browser, Path(tmp) / f"on{k}"))
+            c1: dict[str, float] = {}
+            c2: dict[str, float] = {}
+            off.append(demo_once(False, None, Path(tmp) / f"off{k}", c1))
+            on.append(demo_once(True, browser, Path(tmp) / f"on{k}", c2))
+            cpu_off.append(c1)
+            cpu_on.append(c2)
         same = all((Path(tmp) / f"off{k}/metrics.csv").read_bytes()
                    == (Path(tmp) / f"on{k}/metrics.csv").read_bytes() for k in range(pairs))
     m_off, m_on = statistics.median(off), statistics.median(on)
     return {"without_view_s": [round(x, 2) for x in off], "with_view_s": [round(x, 2) for x in on],
             "median_without_s": round(m_off, 2), "median_with_s": round(m_on, 2),
-            "overhead_pct": round(100 * (m_on - m_off) / m_off, 1), "same_metrics": same}
+            "overhead_pct": round(100 * (m_on - m_off) / m_off, 1), "same_metrics": same,
+            "cpu_run_without_s": [round(c["run"], 2) for c in cpu_off],
+            "cpu_run_with_view_s": [round(c["run"], 2) for c in cpu_on],
+            "cpu_browser_s": [round(c["browser"], 2) for c in cpu_on],
+            "cpu_view_poll_s": [round(c["view_poll"], 3) for c in cpu_on],
+            "cpu_overhead_pct": round(100 * statistics.median(
+                (c2["browser"] + c2["run"] - c1["run"]) / c1["run"]
+                for c1, c2 in zip(cpu_off, cpu_on)), 1),
+            "load_before": os.getloadavg()}
 
 
 def main(argv: list[str]) -> int:
