@@ -19,7 +19,7 @@ import pytest
 from dfrl.platform_pl import PLATFORM_DIR
 
 from .conftest import SWIPL, Proc
-from .wire_client import connect, frame, read_frame
+from .wire_client import connect, connect_auth, frame, read_frame
 
 pytestmark = pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
 
@@ -51,9 +51,9 @@ def _quiet_node(procs: list[Proc], tmp_path: Path) -> tuple[Proc, int]:
 
 
 def _agents_request(port: int, timeout: float = 5.0) -> bool:
-    """One connection, one request; True when the node answered it."""
+    """One authenticated connection, one request; True when the node answered it."""
     try:
-        with connect(port, timeout=timeout) as s:
+        with connect_auth(port, "55", timeout=timeout) as s:
             s.sendall(frame(b"agents .\n"))
             reply = read_frame(s)
             return reply is not None and reply[1].startswith("ok(")
