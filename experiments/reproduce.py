@@ -42,8 +42,9 @@ RANDOM_BEHAVIOUR = {"kind": "constant", "start": 1.0, "end": 1.0, "decay_steps":
 HELD_OUT = ("h1", "h2")
 #: Arenas of the control's standalone runs (the ones tests 4 and 5 compare).
 CONTROL_ARENAS = ("r1", "r4")
-#: Default iterations per robot: 5 seeds of everything at 20,000 took 1,060 s (17.7 min) on
-#: this 2-core machine, over the 15-minute budget; 15,000 fits (see report.md's wall time).
+#: Default iterations per robot. 5 seeds of everything at 20,000 took 1,060 s (17.7 min) on
+#: this 2-core machine shared with other test suites; at 15,000 the same wall time under a
+#: heavier load, with 1,406 s of CPU (703 s if both cores were ours). See robots/README.md.
 PAPER_ITERATIONS = 15_000
 #: Evaluation seeds: this plus the training seed (the same for every configuration).
 EVAL_SEED = 50_000
