@@ -17,6 +17,7 @@ def node_command(
     interactive: bool = False,
     advertise: str | None = None,
     store: str | None = None,
+    insecure: bool = False,
 ) -> list[str]:
     """The ``swipl`` command line that runs one node.
 
@@ -35,6 +36,8 @@ def node_command(
         host name when bound to 0.0.0.0).
     store
         Folder where the node keeps its identity and custody records across restarts.
+    insecure
+        Accept a weak token (or none) on an address other than loopback.
     """
     if not 0 <= port <= 65535:
         raise ValueError(f"port {port} is outside 0..65535")
@@ -50,6 +53,8 @@ def node_command(
         cmd += ["--advertise", advertise]
     if store:
         cmd += ["--store", os.path.abspath(store)]
+    if insecure:
+        cmd.append("--insecure")
     if interactive:
         cmd.append("--interactive")
     return cmd
@@ -58,7 +63,7 @@ def node_command(
 def _run(args: argparse.Namespace) -> int:
     try:
         cmd = node_command(args.host, args.port, args.token, args.consult, args.interactive,
-                           args.advertise, args.store)
+                           args.advertise, args.store, args.insecure)
     except (ValueError, FileNotFoundError) as exc:
         print(f"dfrl node: {exc}", file=sys.stderr)
         return 2
@@ -78,5 +83,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="address other nodes reach this one at (default: the bound one)")
     p.add_argument("--store", default=None, metavar="DIR",
                    help="keep the node's identity and custody records in DIR (survive restarts)")
+    p.add_argument("--insecure", action="store_true",
+                   help="accept a weak token (or none) on an address other than loopback "
+                        "(default: refused)")
     p.add_argument("--interactive", action="store_true", help="open a Prolog toplevel on the node")
     p.set_defaults(func=_run)

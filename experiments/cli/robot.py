@@ -15,7 +15,7 @@ def _run(args: argparse.Namespace) -> int:
         print(f"dfrl robot: port {args.port} is outside 0..65535", file=sys.stderr)
         return 2
     service = RobotService(args.host, args.port, parse_token(args.token), args.advertise,
-                           Path(args.workdir))
+                           Path(args.workdir), insecure=args.insecure)
     service.install_signals()
     try:
         service.start()
@@ -47,4 +47,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "(default: the bound host; 0.0.0.0 becomes this host's name)")
     p.add_argument("--workdir", default="dfrl-robot", metavar="DIR",
                    help="experiments' files go to DIR/<experiment>/ (default ./dfrl-robot)")
+    p.add_argument("--insecure", action="store_true",
+                   help="accept a token under 128 bits on an address other than loopback "
+                        "(default: refused; see dfrl secret)")
     p.set_defaults(func=_run)

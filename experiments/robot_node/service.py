@@ -84,8 +84,10 @@ class RobotService:
     """
 
     def __init__(self, host: str, port: int, token: int | str, advertise: str | None = None,
-                 workdir: Path = Path("dfrl-robot"), out: TextIO = sys.stdout) -> None:
+                 workdir: Path = Path("dfrl-robot"), out: TextIO = sys.stdout,
+                 insecure: bool = False) -> None:
         self.bind = (host, int(port))
+        self.insecure = insecure
         self.token = token
         self.advertise = advertise
         self.workdir = Path(workdir).resolve()
@@ -113,6 +115,8 @@ class RobotService:
         host, port = self.bind
         adv = self.advertise
         options: dict[str, Any] = {"token": self.token, "idle_timeout": 30.0}
+        if self.insecure:
+            options["insecure"] = True
         if adv and port:
             options["advertise"] = Term(":", Atom(adv), port)
         self.node_name = self.node.start(host, port, **options)

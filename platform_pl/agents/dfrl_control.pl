@@ -16,6 +16,7 @@
     `control` and `load_program` requests, without a process per command.
 */
 :- use_module('../tartarus').
+:- use_module('../messages', []).
 :- use_module(dfrl_console, [dfrl_command/2]).
 :- use_module(library(http/json), [json_read_dict/3]).
 :- use_module(library(main)).
@@ -42,7 +43,8 @@ control(Host, Port, Token, File) :-
     ),
     dfrl_command(C, Command),
     load_first(C, Host, Port, Token),
-    agent_post(Host:Port, platform, dfrl_control, (Host, Port), [Agent, Command]),
+    messages:agent_post(Host:Port, platform, dfrl_control, (Host, Port), [Agent, Command],
+                        [tokens([Token])]),
     format("DFRL_CONTROL sent ~q to ~q~n", [Command, Agent]).
 
 load_first(C, Host, Port, Token) :-

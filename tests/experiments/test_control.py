@@ -38,6 +38,9 @@ class Node:
         assert self.proc.stdout is not None
         self.lines: list[str] = []
         first = self.proc.stdout.readline()        # bounded: the node prints it or exits
+        while first.startswith("Warning:"):         # e.g. a Tartarus-style token on loopback
+            self.lines.append(first)
+            first = self.proc.stdout.readline()
         self.lines.append(first)
         if "listening on" not in first:
             self.proc.kill()

@@ -31,7 +31,7 @@ def test_a_killed_robot_host_is_skipped_and_reported(tmp_path: Path) -> None:
                                     stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
             wait_line(procs[h], "dfrl robot listening on", 60)
         cfg = {"name": "fail", "iterations": 600, "respite": 100, "mode": "sync", "rtf": 4.0,
-               "token": 4242, "timeout_s": 120,
+               "token": 463709187335281729054263357812893156702, "timeout_s": 120,
                "robots": [{"id": f"r{i}", "arena": a, "node": f"{lab[h].address}:7001"}
                           for i, (h, a) in enumerate(zip(("h1", "h2", "h3"),
                                                          ("r1", "r4", "r2")), 1)]}

@@ -100,7 +100,7 @@ class Federation:
     def has_agent(self, i: int, status: str = "") -> bool:
         """Node i lists agent fx (with ``status``, e.g. ``running``, if given)."""
         try:
-            return f"agent(fx,dfrl_tour,mobile,{status}" in request(self.ports[i], "agents")
+            return f"agent(fx,dfrl_tour,mobile,{status}" in request(self.ports[i], "agents", token=str(TOKEN))
         except (OSError, AssertionError):
             return False
 

@@ -32,7 +32,7 @@ test(id_is_32_hex_digits, [cleanup(stop_all([N]))]) :-
     forall(member(C, Cs), code_type(C, xdigit(_))).
 
 test(wildcard_bind_is_self_by_every_name, [cleanup(stop_all([N]))]) :-
-    node_start('0.0.0.0':0, N, [default(false)]),
+    node_start('0.0.0.0':0, N, [default(false), insecure(true)]),
     bound_port(N, P),
     gethostname(Host),
     assertion(node_property(N, address(Host:P))),

@@ -36,7 +36,7 @@ def _node(procs: list[Proc], tmp_path: Path, name: str, host: str, port: int = 0
     :- dynamic hop/3.
     hop(guid, (_, P), main) :- format("ARRIVED ~w ~w~n", [guid, P]), flush_output.
     main :-
-        node_start('{host}':{port}, N, [token(7), default(true)]),
+        node_start('{host}':{port}, N, [token(7), default(true), insecure(true)]),
         node_property(N, bind(_:P)), format("LISTENING ~w~n", [P]), flush_output,
         repeat,
         read_term(user_input, Cmd, []),
@@ -110,7 +110,7 @@ def test_wildcard_node_knows_itself_by_any_address(tmp_path: Path, procs: list[P
 
 
 def test_hello_carries_id_and_idle_limits(procs: list[Proc]) -> None:
-    _, port = start_node(procs, "--host", "0.0.0.0", "--advertise", "127.0.0.1")
+    _, port = start_node(procs, "--host", "0.0.0.0", "--advertise", "127.0.0.1", "--insecure")
     with connect(port) as s:
         s.sendall(frame(b"ping .\n"))
         assert read_frame(s) is not None
@@ -127,7 +127,8 @@ def _hello(port: int) -> str:
 
 
 def test_node_command_advertises(procs: list[Proc]) -> None:
-    proc, port = start_node(procs, "--host", "0.0.0.0", "--advertise", "robot-3.lab:7300")
+    proc, port = start_node(procs, "--host", "0.0.0.0", "--advertise", "robot-3.lab:7300",
+                             "--insecure")
     assert "listening on robot-3.lab:7300" in proc.output()
     assert "node('robot-3.lab',7300," in _hello(_bound_port(proc))
 

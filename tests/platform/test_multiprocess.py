@@ -135,7 +135,9 @@ def test_bad_inputs_leave_node_serving(procs: list[Proc]) -> None:
     # a syntax error and an attempt to run a goal
     assert "syntax" in request(port, "foo((((")
     assert "domain_error(platform_request" in request(port, "shell('touch /tmp/dfrl_pwned')")
-    assert "existence_error(agent" in request(port, "post(nobody, shell, x, ['touch /tmp/dfrl_pwned'])")
+    post = "post(nobody, shell, x, ['touch /tmp/dfrl_pwned'])"
+    assert "permission_error(request" in request(port, post)      # posts need a token proof
+    assert "existence_error(agent" in request(port, post, token="9")
     # a half-sent frame, connection left open
     half = socket.create_connection(("127.0.0.1", port))
     read_frame(half)
