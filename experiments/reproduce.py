@@ -116,7 +116,7 @@ def _federated(cfg: ExperimentConfig, d: Path, opts: PaperOptions, evaluator: Ev
         if progress is not None:
             print(f"== {d.parent.name}/{cfg.name}: {len(cfg.robots)} robots, {cfg.iterations} "
                   f"iterations", file=progress, flush=True)
-        ok = run(cfg, d, progress=None).ok
+        ok = run(cfg, d, progress=None, force=True).ok   # the paper owns its run folders
     wall = time.monotonic() - t0
     pending = PendingRows()
     arenas = {r.id: r.arena for r in cfg.robots}

@@ -148,6 +148,12 @@ def cmd_train(args: argparse.Namespace) -> int:
         cfg = config_from_args(args)
     except (ValueError, KeyError) as exc:
         return _fail(str(exc))
+    from dfrl.arenas.spec import ArenaError, load_arena
+
+    try:                     # a bad arena is said before a progress bar is drawn
+        load_arena(cfg.arena)
+    except (ArenaError, OSError) as exc:
+        return _fail(f"--arena: {exc}")
     out = args.out or Path("results/train") / f"{Path(cfg.arena).stem}_{cfg.algo}_s{cfg.seed}"
     with tqdm(total=cfg.iterations, desc=f"{cfg.algo} {cfg.arena} seed {cfg.seed}", unit="it",
               disable=args.no_progress, file=sys.stderr) as bar:

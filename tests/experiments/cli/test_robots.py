@@ -59,3 +59,14 @@ def test_eval_command_on_a_saved_table(tmp_path: Path, capsys: pytest.CaptureFix
     g, r = summary["greedy_collisions_per_1000"], summary["random_collisions_per_1000"]
     assert summary["reduction"] == pytest.approx(1 - g / r) if r > 0 else True
     assert "passed" not in summary      # the verdict is a test's job (tests/experiments/test_standalone.py)
+
+
+def test_train_with_an_unknown_arena_fails_before_any_progress_bar() -> None:
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-m", "dfrl", "train", "--arena", "r9",
+                          "--iterations", "10"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2
+    assert "--arena: unknown arena 'r9'" in out.stderr
+    assert "it/s" not in out.stderr and "%|" not in out.stderr
