@@ -61,7 +61,9 @@ def page(browser: tuple[str, str]) -> dict[str, Any]:
         (out / "summary.md").write_text("done\n")
         t = time.perf_counter()
         view = start_view(out)
-        while not view.source.events or view.source.events[-1]["kind"] != "robot_state":
+        for _ in range(3000):                        # until the first read is done (30 s)
+            if any(e["kind"] == "run_end" for e in view.source.events):
+                break
             time.sleep(0.01)
         res["finished_drain_s"] = round(time.perf_counter() - t, 3)
         res["finished_events"] = len(view.source.events)
