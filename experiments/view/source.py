@@ -237,9 +237,12 @@ class EventSource:
                 out.append({"t": ev["t"], "kind": "error", "text": f"bad hop event {ev!r}"})
         else:
             if ev["kind"] == "robot_state" and str(ev.get("robot")) in self.robots:
-                self.robots[str(ev["robot"])].told = str(ev.get("state"))
+                # a told state holds until another is told; "learning" hands the state
+                # back to the inference (waiting, skipped, ... follow from the files again)
+                told = str(ev.get("state"))
+                self.robots[str(ev["robot"])].told = None if told == "learning" else told
                 ev["inferred"] = False
-                self.robots[str(ev["robot"])].state = str(ev.get("state"))
+                self.robots[str(ev["robot"])].state = told
             out.append(ev)
 
     def _hop(self, out: list[dict[str, Any]], agent: str, rnd: int, robot: str, phase: str,
