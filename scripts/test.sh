@@ -5,4 +5,7 @@
 set -euo pipefail
 . "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
 cd "$DFRL_ROOT"
+# the live view's browser test: Chromium and its driver from Debian's packages (if missing)
+bash scripts/browser-setup.sh >/dev/null \
+    || echo "[test] could not install chromium; the browser test will say why it skips" >&2
 exec python -m pytest -q "$@"

@@ -1,4 +1,4 @@
-"""``dfrl bench migrate|sim|round|bridge``: run a benchmark and print its figures (JSON with
+"""``dfrl bench migrate|sim|round|bridge|chaos|scale``: run a benchmark and print its figures (JSON with
 ``--json``). The benchmarks themselves are :mod:`dfrl.experiments.bench`."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import sys
 from dataclasses import asdict
 from pathlib import Path
 
-from dfrl.experiments.bench import bridge, chaos, migrate, round as round_bench, sim
+from dfrl.experiments.bench import bridge, chaos, migrate, round as round_bench, scale, sim
 
 
 # -- migrate ---------------------------------------------------------------------------------
@@ -180,6 +180,36 @@ def cmd_chaos(args: argparse.Namespace) -> int:
     return 0 if r["lost"] == r["doubled"] == r["unsettled"] == 0 else 1
 
 
+# -- scale -----------------------------------------------------------------------------------
+def add_scale_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--robots", type=int, nargs="+", default=[2, 8, 32],
+                        help="robot counts to run (default: 2 8 32)")
+    parser.add_argument("--iterations", type=int, default=2000,
+                        help="iterations per robot (default: 2000)")
+    parser.add_argument("--respite", type=int, default=500,
+                        help="iterations between shares (default: 500)")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def cmd_scale(args: argparse.Namespace) -> int:
+    """Exit 0 only if every point ran all its rounds with identical tables."""
+    try:
+        r = scale.bench(args.robots, args.iterations, args.respite)
+    except (ValueError, RuntimeError) as exc:
+        print(f"dfrl bench scale: {exc}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(r))
+    else:
+        for p in r["points"]:
+            print(f"{p['robots']:3d} robots: wall {p['wall_s']:7.1f} s, round median "
+                  f"{p['round_median_ms']:8.1f} ms, RSS per robot median {p['rss_median_mb']:6.1f} "
+                  f"MB (max {p['rss_max_mb']:.1f}), rounds with identical tables "
+                  f"{p['rounds_all_equal']}/{p['rounds_planned']}")
+    ok = all(p["ok"] and p["rounds_all_equal"] == p["rounds_planned"] for p in r["points"])
+    return 0 if ok else 1
+
+
 #: benchmark name -> (its module, whose doc gives the help line; add arguments; run)
 BENCHMARKS = {
     "migrate": (migrate, add_migrate_arguments, cmd_migrate),
@@ -187,6 +217,7 @@ BENCHMARKS = {
     "round": (round_bench, add_round_arguments, cmd_round),
     "bridge": (bridge, add_bridge_arguments, cmd_bridge),
     "chaos": (chaos, add_chaos_arguments, cmd_chaos),
+    "scale": (scale, add_scale_arguments, cmd_scale),
 }
 
 

@@ -49,6 +49,13 @@ def add_output_arguments(p: argparse.ArgumentParser, name: str) -> None:
                         f"results/{name}/<timestamp>, with results/{name}/latest linked to it)")
     p.add_argument("--force", action="store_true",
                    help="empty a non-empty --out (a results folder) first (default: refuse)")
+    p.add_argument("--view", action="store_true",
+                   help="serve a live web view of the run and print its URL (default: off)")
+    p.add_argument("--view-port", type=int, default=0,
+                   help="port of the view (default: 0, the OS chooses)")
+    p.add_argument("--view-host", default="127.0.0.1",
+                   help="address the view binds; another than loopback exposes it "
+                        "(default: 127.0.0.1)")
 
 
 def overrides_of(args: argparse.Namespace) -> dict[str, Any]:
@@ -116,11 +123,20 @@ def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
     except FileExistsError as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
         return 2
+    view = None
+    if getattr(args, "view", False):
+        from dfrl.experiments.view import start_view
+
+        view = start_view(out, args.view_host, args.view_port, fresh=True)
+        print(f"{prog}: live view at {view.url}", file=sys.stderr, flush=True)
     try:
         results = run(cfg, out)
     except ExperimentError as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
         return 1
+    finally:
+        if view is not None:
+            view.close()
     summary = results.output_dir / "summary.md"
     if show_summary and summary.is_file():
         print(summary.read_text(encoding="utf-8"), file=sys.stderr)

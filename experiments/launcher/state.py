@@ -16,6 +16,7 @@ from dfrl.experiments.control import ConsoleNode
 from dfrl.experiments.launcher.children import RobotChild
 from dfrl.experiments.launcher.remote_robots import RemoteRobot, StatusPoller
 from dfrl.experiments.results.agent_log import AgentLog
+from dfrl.experiments.view.events import append_event
 
 #: Seconds without progress after which a running robot counts as stalled.
 STALL_S = 15.0
@@ -83,6 +84,19 @@ class RunState:
             for name, info in self.agents.items():
                 if info.algo == algo:
                     self.agent_at[name] = (robot, op, iteration)
+                    log = self.logs.get(name)
+                    self._view_event({"kind": "hop", "agent": name, "robot": robot,
+                                      "phase": "forward" if op == "get" else "backward",
+                                      "round": (len(log.rounds) if log else 0) + 1,
+                                      "iteration": iteration})
+
+    def _view_event(self, event: dict) -> None:
+        """A line of ``events.jsonl`` for the live view (:mod:`dfrl.experiments.view`); a
+        failed write is said, never fatal to the run."""
+        try:
+            append_event(self.out, event)
+        except (OSError, ValueError) as exc:
+            self.say(f"could not write events.jsonl: {exc}")
 
     def remote(self) -> list[RemoteRobot]:
         return [ch for ch in self.children.values() if isinstance(ch, RemoteRobot)]
@@ -97,9 +111,12 @@ class RunState:
                 if why is not None and rid not in self.lost:
                     self.lost[rid] = why
                     self.say(f"ROBOT {rid} LOST at iteration {ch.iteration}: {why}")
+                    self._view_event({"kind": "robot_state", "robot": rid, "state": "dead",
+                                      "reason": why})
                 elif why is None and rid in self.lost and ch.state != "failed":
                     self.say(f"robot {rid} answers again (iteration {ch.iteration})")
                     del self.lost[rid]
+                    self._view_event({"kind": "robot_state", "robot": rid, "state": "learning"})
                 for t0, t1, reason in ch.take_outages():
                     self.stalls.append(f"{rid} unreachable from {t0 - self.t0:.1f} s to "
                                        f"{t1 - self.t0:.1f} s ({reason[:120]})")
@@ -109,6 +126,8 @@ class RunState:
                         and rid not in self.killed:
                     self.crashed[rid] = rc
                     self.lost[rid] = f"process exited with code {rc}"
+                    self._view_event({"kind": "robot_state", "robot": rid, "state": "dead",
+                                      "reason": f"exit code {rc}"})
                     self.say(f"ROBOT {rid} CRASHED (exit code {rc}) at iteration "
                              f"{ch.iteration}; see {ch.err_path}\n{ch.err_tail()}")
             self._check_progress(rid, ch, now)
