@@ -45,10 +45,12 @@ def add_sim_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--steps", type=int, default=5000, help="timed control steps per robot")
     parser.add_argument("--robots", type=int, nargs="+", default=[1, 2, 4],
                         help="robots per process to measure (the first is the headline figure)")
-    parser.add_argument("--arena", default="r4")
-    parser.add_argument("--algo", choices=sorted(LEARNERS), default="qlearning")
-    parser.add_argument("--physics-dt", type=float, default=SimConfig().physics_dt)
-    parser.add_argument("--control-dt", type=float, default=SimConfig().control_dt)
+    parser.add_argument("--arena", default="r4", help="arena of every robot")
+    parser.add_argument("--algo", choices=sorted(LEARNERS), default="qlearning", help="learner")
+    parser.add_argument("--physics-dt", type=float, default=SimConfig().physics_dt,
+                        help="physics step (s)")
+    parser.add_argument("--control-dt", type=float, default=SimConfig().control_dt,
+                        help="control step (s)")
     parser.add_argument("--warmup", type=int, default=200, help="untimed steps per robot first")
     parser.add_argument("--json", action="store_true", help="print JSON")
 
@@ -112,7 +114,8 @@ def add_bridge_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--actions", type=int, default=4, help="actions per state (default 4)")
     parser.add_argument("--repeats", type=int, default=50, help="timed read+write pairs per codec")
     parser.add_argument("--warmup", type=int, default=5, help="untimed pairs first")
-    parser.add_argument("--codec", choices=["fts", "text", "both"], default="both")
+    parser.add_argument("--codec", choices=["fts", "text", "both"], default="both",
+                        help="table codec(s) to time")
     parser.add_argument("--sim", choices=["pybullet", "epuck", "none"], default="pybullet",
                         help="what the main loop steps between two serve_pending calls: a pybullet "
                              "world of falling boxes, a training e-puck (robots.training.Trainer: "
@@ -120,7 +123,7 @@ def add_bridge_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bodies", type=int, default=30, help="falling boxes in the pybullet world")
     parser.add_argument("--physics-steps", type=int, default=1,
                         help="pybullet steps per control step (serve_pending once per control step)")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0, help="seed of the tables and the world")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -149,7 +152,7 @@ def cmd_bridge(args: argparse.Namespace) -> int:
 # -- chaos -----------------------------------------------------------------------------------
 def add_chaos_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--faults", type=int, default=100, help="faults to inject (default 100)")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0, help="seed of the fault schedule")
     parser.add_argument("--agents", type=int, default=4, help="hopping agents (default 4)")
     parser.add_argument("--settle-timeout", type=float, default=30.0,
                         help="longest wait for the nodes to settle after a fault (s)")
@@ -228,4 +231,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     for name, (module, add_arguments, func) in BENCHMARKS.items():
         sub = inner.add_parser(name, help=(module.__doc__ or "").strip().splitlines()[0])
         add_arguments(sub)
+        _state_defaults(sub)
         sub.set_defaults(func=func)
+
+
+def _state_defaults(parser: argparse.ArgumentParser) -> None:
+    """Every option's help says its default (the CLI convention of every command)."""
+    for action in parser._actions:
+        shown = action.default not in (None, False, argparse.SUPPRESS)
+        if shown and action.help and "default" not in action.help:
+            action.help += " (default: %(default)s)"

@@ -41,7 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                       "progress and collisions in own and held-out arenas",
         description="Train standalone robots under several settings (one factor at a time "
                     "around the defaults, or a grid), several seeds each, and report the "
-                    "greedy policy's performance with 95%% intervals (markdown table).")
+                    "greedy policy's performance with 95% intervals (markdown table).")
     p.add_argument("--set", dest="factors", action="append", type=parse_factor, default=None,
                    metavar="PATH=V1;V2", help="a factor: a dotted path into the training "
                    "config and its levels, JSON values separated by ';' (repeatable; default: "
