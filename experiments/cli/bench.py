@@ -75,10 +75,15 @@ def cmd_sim(args: argparse.Namespace) -> int:
     return 0
 
 
-# -- round -----------------------------------------------------------------------------------
-def add_round_arguments(parser: argparse.ArgumentParser) -> None:
+def add_table_shape_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--entries`` and ``--actions``: the shape of the benchmark's Q-tables."""
     parser.add_argument("--entries", type=int, default=20000, help="Q-table entries (default 20000)")
     parser.add_argument("--actions", type=int, default=4, help="actions per state (default 4)")
+
+
+# -- round -----------------------------------------------------------------------------------
+def add_round_arguments(parser: argparse.ArgumentParser) -> None:
+    add_table_shape_arguments(parser)
     parser.add_argument("--robots", type=int, default=5, help="robot nodes (default 5)")
     parser.add_argument("--rounds", type=int, default=30, help="timed rounds (default 30)")
     parser.add_argument("--warmup", type=int, default=3, help="untimed rounds first")
@@ -110,8 +115,7 @@ def cmd_round(args: argparse.Namespace) -> int:
 
 # -- bridge ----------------------------------------------------------------------------------
 def add_bridge_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--entries", type=int, default=20000, help="Q-table entries (default 20000)")
-    parser.add_argument("--actions", type=int, default=4, help="actions per state (default 4)")
+    add_table_shape_arguments(parser)
     parser.add_argument("--repeats", type=int, default=50, help="timed read+write pairs per codec")
     parser.add_argument("--warmup", type=int, default=5, help="untimed pairs first")
     parser.add_argument("--codec", choices=["fts", "text", "both"], default="both",
