@@ -20,6 +20,7 @@
             ctx_input/2,                % +Ctx, -InputStream
             ctx_authenticated/1,        % +Ctx
             ctx_authorized/1,           % +Ctx
+            ctx_peer_name/2,            % +Ctx, -Name
             platform_shutdown/0
           ]).
 :- use_module(wire, [frame_write/3, frame_read/3, wire_version/1]).
@@ -911,7 +912,8 @@ serve_pair(Node, Pair, Peer) :-
     frame_write(Out, text,
                 hello(V, Nonce, node(Host, Port, [id(Id), idle(Idle),
                                                   auth_idle(AuthIdle)]))),
-    Ctx = ctx(Node, Peer, Nonce, In, Out, _Authenticated),
+    PeerName = none,
+    Ctx = ctx(Node, Peer, Nonce, In, Out, _Authenticated, PeerName),
     serve_frames(Ctx).
 
 random_nonce(Nonce) :-
@@ -921,7 +923,7 @@ random_nonce(Nonce) :-
 %   have changed the stream's timeout (a staged migration waits for its
 %   commit with the commit timeout).
 serve_frames(Ctx) :-
-    Ctx = ctx(Node, _, _, In, Out, Auth),
+    Ctx = ctx(Node, _, _, In, Out, Auth, _),
     (   Auth == true
     ->  node_option(Node, max_frame_size, Max),
         node_option(Node, auth_idle_timeout, Idle),
@@ -958,7 +960,7 @@ serve_frames(Ctx) :-
 
 serve_term(auth(Proofs), Ctx, true) :-
     !,
-    Ctx = ctx(Node, _, Nonce, _, Out, Auth),
+    Ctx = ctx(Node, _, Nonce, _, Out, Auth, _),
     (   is_list(Proofs),
         node_accepts(Node, Proofs/Nonce)
     ->  nb_setarg(6, Ctx, true),
@@ -972,7 +974,7 @@ serve_term(auth(Proofs), Ctx, true) :-
         reply(Out, error(error(permission_error(authenticate, platform, Here), _)))
     ).
 serve_term(Request, Ctx, Continue) :-
-    Ctx = ctx(Node, Peer, _, _, Out, _),
+    Ctx = ctx(Node, Peer, _, _, Out, _, _),
     debug(dfrl(request), '~w: ~p from ~p', [Node, Request, Peer]),
     catch(handle(Request, Ctx, Reply, After), E,
           ( Reply = error(E), After = true )),
@@ -1090,7 +1092,8 @@ writable_args(I, A, T) :-
 		 *******************************/
 
 %   The context of a served connection: ctx(Node, Peer, Nonce, In, Out,
-%   Authenticated), where Authenticated is unbound until the peer sent
+%   Authenticated, PeerName), where PeerName is the CN of the peer's
+%   verified certificate or `none`, and Authenticated is unbound until the peer sent
 %   auth(Proofs), then true or false (set destructively by serve_term/3).
 %   Other modules read it through the accessors below only.
 
@@ -1098,27 +1101,38 @@ writable_args(I, A, T) :-
 %
 %   Node is the platform that serves the connection.
 
-ctx_node(ctx(Node, _, _, _, _, _), Node).
+ctx_node(ctx(Node, _, _, _, _, _, _), Node).
 
 %!  ctx_peer(+Ctx, -Peer) is det.
 %
 %   Peer is the peer's address as tcp_accept/3 gave it.
 
-ctx_peer(ctx(_, Peer, _, _, _, _), Peer).
+ctx_peer(ctx(_, Peer, _, _, _, _, _), Peer).
 
 %!  ctx_input(+Ctx, -In) is det.
 %
 %   In is the binary input stream of the connection (for a request that
 %   reads further frames after its reply, as a staged migration does).
 
-ctx_input(ctx(_, _, _, In, _, _), In).
+ctx_input(ctx(_, _, _, In, _, _, _), In).
 
 %!  ctx_authenticated(+Ctx) is semidet.
 %
 %   True if the peer proved one of the node's tokens on this connection.
 
-ctx_authenticated(ctx(_, _, _, _, _, Auth)) :-
+ctx_authenticated(ctx(_, _, _, _, _, Auth, _)) :-
     Auth == true.
+
+%!  ctx_peer_name(+Ctx, -Name) is semidet.
+%
+%   Name (an atom) is the common name of the certificate the peer
+%   presented on this connection, verified against the node's CA (see
+%   the tls(Dir) option of node_start/3). Fails on a plaintext
+%   connection.
+
+ctx_peer_name(ctx(_, _, _, _, _, _, Name), Name) :-
+    atom(Name),
+    Name \== none.
 
 %!  ctx_authorized(+Ctx) is semidet.
 %
