@@ -221,8 +221,9 @@ class ExperimentConfig:
         ``ceil(iterations / respite)``.
     seed : int
     mode : Mode
-        ``async`` (robots flat out, default) or ``sync`` (robots wait for the agent at each
-        respite boundary: same seed, same curves).
+        ``sync`` (default: robots wait for the agent at each respite boundary, so the same
+        config and seed give the same curves, the reproducible setting) or ``async`` (robots
+        run flat out and serve the agent between steps; wall-clock timing shapes the rounds).
     rtf : float or None
         Real-time factor (1.0: one iteration per 64 ms of wall time); None: flat out.
     method : str
@@ -237,7 +238,10 @@ class ExperimentConfig:
         Extra :class:`dfrl.robots.training.TrainerConfig` fields shared by all robots.
     joins : tuple of JoinSpec
     timeout_s : float
-        Whole-experiment limit (children are killed after it).
+        Whole-experiment limit (children are killed after it). The default, 3600 s, is a safety
+        ceiling for the default 8000 iterations on a loaded machine; the shipped configs set
+        their own (``demo``: 900 s, the budget of a 5-robot demo; the ``paper_*`` configs keep
+        3600 s).
     title : str
         Plot title (default: derived from the config).
     console : str or None
@@ -259,7 +263,7 @@ class ExperimentConfig:
     iterations: int = 8000
     respite: int = 500
     seed: int = 1
-    mode: Mode = Mode.ASYNC
+    mode: Mode = Mode.SYNC
     rtf: float | None = None
     method: str = "average"
     methods: dict[str, str] = field(default_factory=dict)
