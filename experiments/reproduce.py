@@ -54,7 +54,7 @@ EVAL_SEED = 50_000
 class PaperOptions:
     """What ``dfrl paper`` runs (defaults: the 15-minute budget on two cores)."""
 
-    seeds: int = 5
+    seeds: int | tuple[int, ...] = 5    # a count (first_seed, first_seed + 1, ...) or the seeds
     first_seed: int = 1
     iterations: int | None = PAPER_ITERATIONS   # None: the configs' (20,000)
     respite: int | None = None
@@ -141,7 +141,8 @@ def reproduce_paper(out: Path, opts: PaperOptions = PaperOptions(),
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.monotonic()
-    seeds = list(range(opts.first_seed, opts.first_seed + opts.seeds))
+    seeds = (list(opts.seeds) if isinstance(opts.seeds, tuple)
+             else list(range(opts.first_seed, opts.first_seed + opts.seeds)))
     base_cfg = TrainerConfig().to_dict()
     fed_cfgs = {s: paper_configs(opts, s) for s in seeds}
     arenas = [r.arena for r in fed_cfgs[seeds[0]][0][1].robots]

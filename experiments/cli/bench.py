@@ -84,32 +84,37 @@ def add_table_shape_arguments(parser: argparse.ArgumentParser) -> None:
 # -- round -----------------------------------------------------------------------------------
 def add_round_arguments(parser: argparse.ArgumentParser) -> None:
     add_table_shape_arguments(parser)
-    parser.add_argument("--robots", type=int, default=5, help="robot nodes (default 5)")
+    parser.add_argument("--robots", type=int, nargs="+", default=[5],
+                        help="robot nodes, one benchmark per count (default 5)")
     parser.add_argument("--rounds", type=int, default=30, help="timed rounds (default 30)")
     parser.add_argument("--warmup", type=int, default=3, help="untimed rounds first")
     parser.add_argument("--method", default="average", help="aggregation method")
     parser.add_argument("--out", type=Path, default=None,
-                        help="keep the node logs and rounds.csv here (default: a temp folder)")
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
+                        help="keep the node logs and rounds.csv here, in a subfolder per robot "
+                             "count when there are several (default: a temp folder)")
+    parser.add_argument("--json", action="store_true",
+                        help="print one JSON object per robot count, one a line")
 
 
 def cmd_round(args: argparse.Namespace) -> int:
-    try:
-        r = round_bench.bench(args.entries, args.actions, args.robots, args.rounds, args.warmup,
-                              args.method, args.out)
-    except (RuntimeError, ValueError) as exc:
-        print(f"dfrl bench round: {exc}", file=sys.stderr)
-        return 1
-    if args.json:
-        print(json.dumps(r))
-    else:
-        print(f"{r['robots']} nodes, {r['entries']} entries, {r['method']}: one round "
-              f"(forward + backward, {r['hops']} hops, {r['bytes_carried']} bytes carried) "
-              f"median {r['median_ms']} ms, p90 {r['p90_ms']} ms over {r['rounds']} rounds "
-              f"(target < {round_bench.TARGET_MS:g} ms); identical tables after "
-              f"{r['all_equal_rounds']}/{r['total_rounds']} rounds")
-    for problem in r["log_problems"]:
-        print(f"dfrl bench round: agent log: {problem}", file=sys.stderr)
+    for n in args.robots:
+        out = args.out / f"robots{n}" if args.out is not None and len(args.robots) > 1 else args.out
+        try:
+            r = round_bench.bench(args.entries, args.actions, n, args.rounds, args.warmup,
+                                  args.method, out)
+        except (RuntimeError, ValueError) as exc:
+            print(f"dfrl bench round: {n} robots: {exc}", file=sys.stderr)
+            return 1
+        if args.json:
+            print(json.dumps(r), flush=True)
+        else:
+            print(f"{r['robots']} nodes, {r['entries']} entries, {r['method']}: one round "
+                  f"(forward + backward, {r['hops']} hops, {r['bytes_carried']} bytes carried) "
+                  f"median {r['median_ms']} ms, p90 {r['p90_ms']} ms over {r['rounds']} rounds "
+                  f"(target < {round_bench.TARGET_MS:g} ms); identical tables after "
+                  f"{r['all_equal_rounds']}/{r['total_rounds']} rounds", flush=True)
+        for problem in r["log_problems"]:
+            print(f"dfrl bench round: agent log: {problem}", file=sys.stderr)
     return 0
 
 

@@ -30,31 +30,39 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "eval", help="greedy learned policy vs random policy: collisions per 1,000 steps")
     _add_config_arguments(p, seed=False)
-    p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="training seeds")
-    p.add_argument("--steps", type=int, default=2000, help="evaluation steps per policy and seed")
+    p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3],
+                   help="training seeds (default: 1 2 3)")
+    p.add_argument("--steps", type=int, default=2000,
+                   help="evaluation steps per policy and seed (default: %(default)s)")
     p.add_argument("--table", type=Path, default=None,
                    help="evaluate this saved table (q_table.npy) instead of training one per seed")
-    p.add_argument("--jobs", type=int, default=2, help="worker processes")
+    p.add_argument("--jobs", type=int, default=2, help="worker processes (default: %(default)s)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=cmd_eval)
 
     p = subparsers.add_parser(
         "baselines", help="standalone Q-learning and SARSA in R1 and R4 (the paper's baseline figures)")
-    p.add_argument("--out", type=Path, default=Path("results/baselines"))
-    p.add_argument("--iterations", type=int, default=20_000)
-    p.add_argument("--seed", type=int, default=1, help="first seed")
-    p.add_argument("--seeds", type=int, default=1,
-                   help="runs per curve (seeds SEED, SEED+1, ...): mean line and min-max band")
-    p.add_argument("--arenas", nargs="+", default=["r1", "r4"])
-    p.add_argument("--algos", nargs="+", choices=sorted(LEARNERS), default=["qlearning", "sarsa"])
-    p.add_argument("--jobs", type=int, default=2, help="worker processes")
+    p.add_argument("--out", type=Path, default=Path("results/baselines"),
+                   help="output folder (default: %(default)s)")
+    p.add_argument("--iterations", type=int, default=20_000,
+                   help="control steps per run (default: %(default)s)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[1],
+                   help="training seeds, one run per curve and seed; several: mean line and "
+                        "min-max band (default: 1)")
+    p.add_argument("--arenas", nargs="+", default=["r1", "r4"],
+                   help="arena names or files (default: r1 r4)")
+    p.add_argument("--algos", nargs="+", choices=sorted(LEARNERS), default=["qlearning", "sarsa"],
+                   help="learners, one figure each (default: qlearning sarsa)")
+    p.add_argument("--jobs", type=int, default=2, help="worker processes (default: %(default)s)")
     p.set_defaults(func=cmd_baselines)
 
     p = subparsers.add_parser("render-arenas", help="draw a top view of each arena to PNG")
-    p.add_argument("--out", type=Path, default=Path("results/arenas"))
+    p.add_argument("--out", type=Path, default=Path("results/arenas"),
+                   help="output folder (default: %(default)s)")
     p.add_argument("--arena", nargs="+", default=None,
                    help="arena names or files (default: every built-in arena)")
-    p.add_argument("--size", type=int, default=480, help="image size in pixels")
+    p.add_argument("--size", type=int, default=480,
+                   help="image size in pixels (default: %(default)s)")
     p.set_defaults(func=cmd_render_arenas)
 
 
@@ -75,7 +83,8 @@ def _add_config_arguments(p: argparse.ArgumentParser, seed: bool = True) -> None
     g = p.add_argument_group("learner")
     g.add_argument("--alpha", type=float, default=None, help=f"learning rate ({d.learner.alpha})")
     g.add_argument("--gamma", type=float, default=None, help=f"discount ({d.learner.gamma})")
-    g.add_argument("--epsilon-schedule", choices=[k.value for k in ScheduleKind], default=None)
+    g.add_argument("--epsilon-schedule", choices=[k.value for k in ScheduleKind], default=None,
+                   help=f"exploration schedule (default {d.learner.epsilon.kind.value})")
     g.add_argument("--epsilon-start", type=float, default=None, help=f"({d.learner.epsilon.start})")
     g.add_argument("--epsilon-end", type=float, default=None, help=f"({d.learner.epsilon.end})")
     g.add_argument("--epsilon-decay", type=int, default=None,
@@ -85,12 +94,19 @@ def _add_config_arguments(p: argparse.ArgumentParser, seed: bool = True) -> None
                    help=f"sensor groups ({d.discretisation.grouping.value})")
     g.add_argument("--levels", type=int, default=None,
                    help=f"levels per group ({d.discretisation.levels})")
-    g.add_argument("--actions", choices=[a.value for a in ActionSet], default=None)
-    g.add_argument("--collision-response", choices=[c.value for c in CollisionResponse], default=None)
+    g.add_argument("--actions", choices=[a.value for a in ActionSet], default=None,
+                   help=f"action set (default {_value(d.actions)})")
+    g.add_argument("--collision-response", choices=[c.value for c in CollisionResponse],
+                   default=None, help=f"what a collision does (default {_value(d.collision_response)})")
     g.add_argument("--control-dt", type=float, default=None, help=f"s ({d.sim.control_dt})")
     g.add_argument("--physics-dt", type=float, default=None, help=f"s ({d.sim.physics_dt})")
     g.add_argument("--sensor-noise", type=float, default=None,
                    help=f"IR noise std in m ({d.sim.robot.sensor_noise_std})")
+
+
+def _value(x: Any) -> str:
+    """An enum's value, or the thing itself, for a help text."""
+    return str(getattr(x, "value", x))
 
 
 def config_from_args(args: argparse.Namespace) -> TrainerConfig:
@@ -227,7 +243,7 @@ def cmd_baselines(args: argparse.Namespace) -> int:
     from dfrl.robots.training import read_metrics_csv
 
     args.out.mkdir(parents=True, exist_ok=True)
-    seeds = [args.seed + k for k in range(max(1, args.seeds))]
+    seeds = list(dict.fromkeys(args.seeds))
 
     def run_dir(algo: str, arena: str, seed: int) -> Path:
         return args.out / (f"{algo}_{arena}" if len(seeds) == 1 else f"{algo}_{arena}_s{seed}")
@@ -244,7 +260,9 @@ def cmd_baselines(args: argparse.Namespace) -> int:
         curves = {a.upper(): [read_metrics_csv(run_dir(algo, a, s) / "metrics.csv") for s in seeds]
                   for a in args.arenas}
         name = ALGO_NAMES.get(algo, algo)
-        which = f"seed {seeds[0]}" if len(seeds) == 1 else f"seeds {seeds[0]}-{seeds[-1]}"
+        which = (f"seed {seeds[0]}" if len(seeds) == 1 else
+                 f"seeds {seeds[0]}-{seeds[-1]}" if seeds == list(range(seeds[0], seeds[-1] + 1))
+                 else "seeds " + ", ".join(map(str, seeds)))
         path = plot_learning_curves(curves, args.out / f"baseline_{algo}.png",
                                     f"Standalone {name}, {args.iterations} iterations ({which})")
         print(path)

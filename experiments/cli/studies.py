@@ -100,18 +100,20 @@ def register_paper(subparsers: argparse._SubParsersAction) -> None:
                     "standalone baselines K times, plus the negative control (random "
                     "behaviour, epsilon 1); report.md states each paper observation as a test "
                     "with an interval and a verdict. Exit 1 if a federated run failed.")
-    p.add_argument("--out", type=Path, default=Path("results/paper"))
-    p.add_argument("--seeds", type=int, default=5, help="seeds per configuration "
-                   "(default: %(default)s)")
-    p.add_argument("--first-seed", type=int, default=1)
+    p.add_argument("--out", type=Path, default=Path("results/paper"),
+                   help="output folder (default: %(default)s)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5],
+                   help="seeds, every configuration runs once per seed (default: 1 2 3 4 5)")
     p.add_argument("--iterations", type=int, default=None,
                    help="iterations per robot (default: 15000, see --budget)")
     p.add_argument("--budget", choices=("paper", "long"), default="paper",
                    help="paper: 15,000 iterations (5 seeds fit 15 minutes; the configs' "
                         "20,000 took 17.7); "
                         "long: 150,000, where the sum of Q-values of one robot flattens "
-                        "(robots/README.md, 'Budget'); --iterations overrides both")
-    p.add_argument("--respite", type=int, default=None)
+                        "(robots/README.md, 'Budget'); --iterations overrides both "
+                        "(default: %(default)s)")
+    p.add_argument("--respite", type=int, default=None,
+                   help="iterations between two shares (default: the configs', 500)")
     p.add_argument("--eval-points", type=int, default=4,
                    help="greedy evaluations per run (default: %(default)s)")
     p.add_argument("--eval-steps", type=int, default=1000,
@@ -129,7 +131,7 @@ def cmd_paper(args: argparse.Namespace) -> int:
     from dfrl.experiments.errors import ExperimentError
     from dfrl.experiments.reproduce import PAPER_ITERATIONS, PaperOptions, reproduce_paper
 
-    opts = PaperOptions(seeds=args.seeds, first_seed=args.first_seed,
+    opts = PaperOptions(seeds=tuple(dict.fromkeys(args.seeds)),
                         iterations=args.iterations if args.iterations is not None else
                         (LONG_BUDGET if args.budget == "long" else PAPER_ITERATIONS),
                         respite=args.respite,
@@ -149,16 +151,23 @@ def register_speedup(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "speedup", help="iterations to a greedy performance threshold vs the number of robots, "
                         "against linear speed-up (markdown table with intervals)")
-    p.add_argument("--robots", type=int, nargs="+", default=[1, 2, 5, 10])
-    p.add_argument("--seeds", type=int, default=5)
-    p.add_argument("--iterations", type=int, default=6000, help="budget per robot (6000)")
-    p.add_argument("--respite", type=int, default=500)
-    p.add_argument("--eval-every", type=int, default=1000)
+    p.add_argument("--robots", type=int, nargs="+", default=[1, 2, 5, 10],
+                   help="robot counts, one federation each (default: 1 2 5 10)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5],
+                   help="seeds per robot count (default: 1 2 3 4 5)")
+    p.add_argument("--iterations", type=int, default=6000,
+                   help="budget per robot (default: %(default)s)")
+    p.add_argument("--respite", type=int, default=500,
+                   help="iterations between two shares (default: %(default)s)")
+    p.add_argument("--eval-every", type=int, default=1000,
+                   help="iterations between two greedy evaluations (default: %(default)s)")
     p.add_argument("--threshold", type=float, default=0.5,
-                   help="greedy score in the held-out arenas (0.5)")
-    p.add_argument("--eval-steps", type=int, default=1000)
-    p.add_argument("--method", default="average")
-    p.add_argument("--jobs", type=int, default=2)
+                   help="greedy score in the held-out arenas (default: %(default)s)")
+    p.add_argument("--eval-steps", type=int, default=1000,
+                   help="evaluation steps per table and arena (default: %(default)s)")
+    p.add_argument("--method", default="average",
+                   help="aggregation method (default: %(default)s)")
+    p.add_argument("--jobs", type=int, default=2, help="processes (default: %(default)s)")
     p.add_argument("--out", type=Path, default=None,
                    help="also write speedup.md and speedup.json there")
     p.set_defaults(func=cmd_speedup)
@@ -168,7 +177,7 @@ def cmd_speedup(args: argparse.Namespace) -> int:
     from dfrl.experiments.studies.speedup import (EXPLANATION, SpeedupOptions, markdown,
                                                   speedup)
 
-    opts = SpeedupOptions(robots=tuple(args.robots), seeds=tuple(range(1, args.seeds + 1)),
+    opts = SpeedupOptions(robots=tuple(args.robots), seeds=tuple(dict.fromkeys(args.seeds)),
                           iterations=args.iterations, respite=args.respite,
                           eval_every=args.eval_every, threshold=args.threshold,
                           eval_steps=args.eval_steps, method=args.method, jobs=args.jobs)

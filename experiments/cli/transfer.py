@@ -22,23 +22,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="For each seed, train one robot whose Q-table starts as a copy of --init "
                     "and one that starts from zeros, in the same arena, with the same seed and "
                     "budget; report collisions per 1,000 steps (whole run, first 1,000 steps, "
-                    "first 10%%), cumulative reward and a greedy evaluation after training.")
+                    "first 10%), cumulative reward and a greedy evaluation after training.")
     p.add_argument("--init", type=Path, required=True,
                    help="saved table (NAME.npy with its NAME.json sidecar)")
     p.add_argument("--arena", required=True,
                    help="arena name or JSON file, preferably one the table was not trained in")
-    p.add_argument("--iterations", type=int, default=3000, help="training steps per run (3000)")
-    p.add_argument("--seeds", type=int, default=5, help="number of seeds (5)")
-    p.add_argument("--first-seed", type=int, default=1,
-                   help="seeds are FIRST_SEED .. FIRST_SEED+SEEDS-1 (1)")
+    p.add_argument("--iterations", type=int, default=3000,
+                   help="training steps per run (default: %(default)s)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5],
+                   help="seeds, one run per condition and seed (default: 1 2 3 4 5)")
     p.add_argument("--algo", choices=sorted(LEARNERS), default=None,
                    help="learner (default: the table's algorithm)")
     p.add_argument("--grouping", choices=[s.value for s in SensorGrouping], default=None,
                    help="sensor groups (default: the table's)")
     p.add_argument("--levels", type=int, default=None, help="levels per group (default: the table's)")
     p.add_argument("--eval-steps", type=int, default=2000,
-                   help="greedy evaluation steps per table, 0 to skip (2000)")
-    p.add_argument("--jobs", type=int, default=2, help="worker processes (2)")
+                   help="greedy evaluation steps per table, 0 to skip (default: %(default)s)")
+    p.add_argument("--jobs", type=int, default=2, help="worker processes (default: %(default)s)")
     p.add_argument("--out", type=Path, default=None,
                    help="write config.json, runs.csv, curves.csv, summary.json, transfer.png here")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
@@ -68,13 +68,10 @@ def cmd_transfer(args: argparse.Namespace) -> int:
     """``dfrl transfer``: exit 0 on success, 2 on a bad table, arena or argument."""
     from dfrl.experiments.transfer import TransferConfig, run
 
-    if args.seeds < 1:
-        print("dfrl: error: --seeds must be >= 1", file=sys.stderr)
-        return 2
     try:
         cfg = TransferConfig(
             init=str(args.init), arena=args.arena, iterations=args.iterations,
-            seeds=tuple(range(args.first_seed, args.first_seed + args.seeds)), algo=args.algo,
+            seeds=tuple(dict.fromkeys(args.seeds)), algo=args.algo,
             grouping=args.grouping, levels=args.levels, eval_steps=args.eval_steps,
             jobs=args.jobs)
         result = run(cfg, args.out)
@@ -121,16 +118,22 @@ def register_study(subparsers: argparse._SubParsersAction) -> None:
         description="Source tables from several seeds under each condition, evaluated and "
                     "fine-tuned in the held-out arenas with several target seeds; intervals "
                     "over source seeds and a verdict on the paper's transfer claim (markdown).")
-    p.add_argument("--source-seeds", type=int, default=5, help="source seeds (5)")
-    p.add_argument("--target-seeds", type=int, default=2, help="target seeds (2)")
-    p.add_argument("--targets", nargs="+", default=["h1", "h2"], help="target arenas (h1 h2)")
+    p.add_argument("--source-seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5],
+                   help="seeds of the source tables (default: 1 2 3 4 5)")
+    p.add_argument("--target-seeds", type=int, nargs="+", default=[1, 2],
+                   help="seeds of the fine-tuning in each target (default: 1 2)")
+    p.add_argument("--targets", nargs="+", default=["h1", "h2"],
+                   help="target arenas (default: h1 h2)")
     p.add_argument("--iterations", type=int, default=4000,
-                   help="source training iterations per robot (4000)")
-    p.add_argument("--respite", type=int, default=500)
+                   help="source training iterations per robot (default: %(default)s)")
+    p.add_argument("--respite", type=int, default=500,
+                   help="iterations between two shares of the federated sources "
+                        "(default: %(default)s)")
     p.add_argument("--fine-tune", type=int, default=1000,
-                   help="learning steps from the table in each target (1000)")
-    p.add_argument("--eval-steps", type=int, default=1000)
-    p.add_argument("--jobs", type=int, default=2)
+                   help="learning steps from the table in each target (default: %(default)s)")
+    p.add_argument("--eval-steps", type=int, default=1000,
+                   help="evaluation steps per table and arena (default: %(default)s)")
+    p.add_argument("--jobs", type=int, default=2, help="processes (default: %(default)s)")
     p.add_argument("--out", type=Path, default=None,
                    help="also write transfer_study.md and transfer_study.json there")
     p.set_defaults(func=cmd_study)
@@ -139,8 +142,8 @@ def register_study(subparsers: argparse._SubParsersAction) -> None:
 def cmd_study(args: argparse.Namespace) -> int:
     from dfrl.experiments.transfer.study import StudyOptions, markdown, transfer_study
 
-    opts = StudyOptions(source_seeds=tuple(range(1, args.source_seeds + 1)),
-                        target_seeds=tuple(range(1, args.target_seeds + 1)),
+    opts = StudyOptions(source_seeds=tuple(dict.fromkeys(args.source_seeds)),
+                        target_seeds=tuple(dict.fromkeys(args.target_seeds)),
                         targets=tuple(args.targets), iterations=args.iterations,
                         respite=args.respite, fine_tune=args.fine_tune,
                         eval_steps=args.eval_steps, jobs=args.jobs)

@@ -15,3 +15,14 @@ def test_bench_round_smoke() -> None:
     assert r["rounds"] == 3 and r["hops"] == 4, r
     assert r["all_equal_rounds"] == r["total_rounds"] == 4, r
     assert 0 < r["median_ms"] < 5000
+
+
+def test_bench_round_command_takes_a_list_of_robot_counts(capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    from dfrl.experiments.cli import main
+
+    assert main(["bench", "round", "--entries", "200", "--robots", "2", "3", "--rounds", "2",
+                 "--warmup", "0", "--json"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.strip()]
+    assert [r["robots"] for r in rows] == [2, 3]

@@ -56,7 +56,8 @@ def test_command_json_output_and_files(setup: tuple[Path, Path], tmp_path: Path,
     out = tmp_path / "out"
     # Execute
     rc = main(["transfer", "--init", str(table), "--arena", str(arena), "--iterations", "150",
-               "--seeds", "2", "--eval-steps", "100", "--jobs", "1", "--out", str(out), "--json"])
+               "--seeds", "1", "2", "--eval-steps", "100", "--jobs", "1", "--out", str(out),
+               "--json"])
     # Assert
     assert rc == 0
     doc = json.loads(capsys.readouterr().out)
