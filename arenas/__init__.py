@@ -1,11 +1,11 @@
 """Arenas as data files: the paper's R1..R5 (``r1.json`` ... ``r5.json``) and user files.
 
 See ``arenas/README.md`` for the JSON format.
+
+The package imports no pybullet (a platform node loads arena specs, never a simulation):
+:mod:`dfrl.arenas.builder` and the robots' simulation import it through
+:mod:`dfrl.arenas.pybullet_quiet`, without its build-time banner.
 """
-from dfrl.arenas.pybullet_quiet import load as _load_pybullet
-
-_load_pybullet()
-
 from dfrl.arenas.spec import (
     HELD_OUT_ARENAS,
     PAPER_ARENAS,

@@ -4,9 +4,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import pybullet as p
-
+from dfrl.arenas.pybullet_quiet import load as _load_pybullet
 from dfrl.arenas.spec import WALL_THICKNESS, ArenaSpec
+
+p = _load_pybullet()  # pybullet, without its build-time banner
 
 #: RGBA colours used for rendering.
 FLOOR_RGBA: tuple[float, float, float, float] = (0.93, 0.93, 0.90, 1.0)

@@ -9,10 +9,9 @@ Public API for other layers: :class:`dfrl.robots.training.Trainer` / :class:`Tra
 """
 from __future__ import annotations
 
-from dfrl.arenas.pybullet_quiet import load as _load_pybullet
 from dfrl.robots.registration import ENV_ID, register_envs
 
-_load_pybullet()
-register_envs()
+register_envs()   # imports neither pybullet nor the environment (modules that use pybullet
+                  # import it through dfrl.arenas.pybullet_quiet, without its banner)
 
 __all__ = ["ENV_ID"]

@@ -15,7 +15,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import pybullet as p
+
+from dfrl.arenas.pybullet_quiet import load as _load_pybullet
+
+p = _load_pybullet()  # pybullet, without its build-time banner
 
 #: Sensor directions of the e-puck's ``ps0`` ... ``ps7`` (rad, counter-clockwise from forward):
 #: ps0/ps7 front right/left, ps1/ps6 diagonals, ps2/ps5 sides, ps3/ps4 rear.

@@ -6,11 +6,13 @@ from dataclasses import dataclass, field
 from enum import Enum
 
 import numpy as np
-import pybullet as p
 
 from dfrl.arenas.builder import ArenaBodies, build_arena
+from dfrl.arenas.pybullet_quiet import load as _load_pybullet
 from dfrl.arenas.spec import ArenaSpec
 from dfrl.robots.epuck import EPuck, EPuckConfig
+
+p = _load_pybullet()  # pybullet, without its build-time banner
 
 
 class ConnectionMode(str, Enum):

@@ -39,8 +39,11 @@ class BenchSim:
 
             self.trainer = Trainer(TrainerConfig(seed=seed))
         if kind == "pybullet":
-            import pybullet
             import pybullet_data
+
+            from dfrl.arenas.pybullet_quiet import load
+
+            pybullet = load()
 
             self.p = pybullet
             self.client = pybullet.connect(pybullet.DIRECT)

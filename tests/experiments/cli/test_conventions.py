@@ -19,12 +19,9 @@ MEANING: dict[str, tuple[object, object]] = {
     "--iterations": (None, int),
 }
 
-#: Commands whose options do not follow the conventions yet (owned elsewhere; see the
-#: issue-12 report): strict, so fixing one makes its entry here fail until it is removed.
-PENDING: set[str] = {
-    "dfrl baselines", "dfrl eval", "dfrl paper", "dfrl render-arenas",
-    "dfrl speedup", "dfrl train", "dfrl transfer", "dfrl transfer-study",
-}
+#: Commands whose options do not follow the conventions yet: strict, so fixing one makes its
+#: entry here fail until it is removed (none left).
+PENDING: set[str] = set()
 
 
 def all_parsers() -> dict[str, argparse.ArgumentParser]:
@@ -81,8 +78,7 @@ def test_parser_follows_conventions(name: str, request: pytest.FixtureRequest) -
 def test_robots_means_one_thing() -> None:
     kinds = {(a.nargs, a.type) for p in PARSERS.values() for a in options(p)
              if "--robots" in a.option_strings}
-    if len(kinds) > 1:
-        pytest.xfail(f"--robots differs between commands: {kinds} (bench, owned elsewhere)")
+    assert kinds == {("+", int)}, f"--robots differs between commands: {kinds}"
 
 
 def test_version_and_no_banner() -> None:
@@ -95,8 +91,6 @@ def test_version_and_no_banner() -> None:
     assert "pybullet" not in done.stdout + done.stderr
 
 
-@pytest.mark.xfail(strict=True, reason="import dfrl loads dfrl.robots, whose __init__ imports "
-                   "pybullet (lead: see the issue-12 report)")
 def test_node_command_does_not_import_pybullet() -> None:
     code = ("import sys\nfrom dfrl.experiments.cli import build_parser\n"
             "build_parser(['node']).parse_args(['node', '--help'])\n")
