@@ -9,6 +9,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from dfrl.experiments.bench import bridge, chaos, migrate, round as round_bench, scale, sim
+from dfrl.experiments.bench import hostile, hostile_cli
 
 
 # -- migrate ---------------------------------------------------------------------------------
@@ -230,6 +231,7 @@ BENCHMARKS = {
     "bridge": (bridge, add_bridge_arguments, cmd_bridge),
     "chaos": (chaos, add_chaos_arguments, cmd_chaos),
     "scale": (scale, add_scale_arguments, cmd_scale),
+    "hostile": (hostile, hostile_cli.add_arguments, hostile_cli.cmd),
 }
 
 

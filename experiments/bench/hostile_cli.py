@@ -1,0 +1,84 @@
+"""``dfrl bench hostile``: its options and its output (registered in ``experiments/cli/bench.py``).
+
+The command layer of :mod:`dfrl.experiments.bench.hostile`: it alone prints and chooses the
+exit status (0 every phase met its targets, 1 one did not or the benchmark failed).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from dfrl.experiments.bench import hostile
+
+D = hostile.HostileConfig()
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``dfrl bench hostile``, each help stating its default."""
+    parser.add_argument("--slowloris", type=int, default=D.slowloris,
+                        help=f"slowloris connections, one byte a second each (default {D.slowloris})")
+    parser.add_argument("--flood", type=int, default=D.flood,
+                        help=f"flood connections opened and held (default {D.flood})")
+    parser.add_argument("--frames", type=int, default=D.frames,
+                        help=f"concurrent senders of large hostile frames (default {D.frames})")
+    parser.add_argument("--frame-size", type=int, default=D.frame_size,
+                        help=f"bytes of the oversized frames (default {D.frame_size})")
+    parser.add_argument("--duration", type=float, default=D.duration_s,
+                        help=f"seconds of each phase, quiet included (default {D.duration_s:g})")
+    parser.add_argument("--settle", type=float, default=D.settle_s,
+                        help=f"seconds after each attack before RSS is read (default {D.settle_s:g})")
+    parser.add_argument("--sources", type=int, default=D.sources,
+                        help=f"loopback source addresses of the attackers, from 127.0.0.2 "
+                             f"(default {D.sources})")
+    parser.add_argument("--pause-ms", type=int, default=D.pause_ms,
+                        help=f"pause of the agent between two hops (default {D.pause_ms})")
+    parser.add_argument("--floats", type=int, default=D.floats,
+                        help=f"floats in the agent's payload (default {D.floats})")
+    parser.add_argument("--pooled", action="store_true",
+                        help="reuse pooled connections to the target (default: a new "
+                             "connection for every hop into the target)")
+    parser.add_argument("--attacks", nargs="+", choices=hostile.ATTACKS,
+                        default=list(hostile.ATTACKS),
+                        help=f"attacks to run, in order (default: {' '.join(hostile.ATTACKS)})")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def cmd(args: argparse.Namespace) -> int:
+    """Run the benchmark; exit 1 if any phase missed a target."""
+    cfg = hostile.HostileConfig(
+        slowloris=args.slowloris, flood=args.flood, frames=args.frames,
+        frame_size=args.frame_size, duration_s=args.duration, settle_s=args.settle,
+        sources=args.sources, pause_ms=args.pause_ms, floats=args.floats,
+        fresh=not args.pooled)
+    try:
+        r = hostile.run(cfg, tuple(args.attacks))
+    except (ValueError, RuntimeError, FileNotFoundError) as exc:
+        print(f"dfrl bench hostile: {exc}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(r))
+    else:
+        print(f"{'phase':10s} {'hops ok/fail/unf':>17s} {'median':>8s} {'p90':>8s} "
+              f"{'x quiet':>8s} {'RSS before':>10s} {'after':>7s} {'peak':>7s}  "
+              f"attack connections")
+        for p in r["phases"]:
+            h, m, a = p["hops"], p["rss_mb"], p["attack"]
+            conns = "-" if a is None else (
+                f"opened {a['opened']}, closed by node {a['closed_by_node']} "
+                f"(deadline {a['deadline']}, refused {a['refused']}, rejected {a['rejected']}, "
+                f"closed {a['closed']}, reset {a['reset']}), held at end {a['held_at_end']}")
+            print(f"{p['phase']:10s} {h['succeeded']:>7d}/{h['failed']}/{h['unfinished']:<7d} "
+                  f"{_ms(h['hop_median_ms'])} {_ms(h['hop_p90_ms'])} "
+                  f"{'-' if p['p90_ratio'] is None else p['p90_ratio']:>8} "
+                  f"{m['before']:>10.1f} {m['after']:>7.1f} {m['peak']:>7.1f}  {conns}")
+            for why in p["why"]:
+                print(f"{'':10s} missed: {why}")
+        print(f"overall: {'pass' if r['pass'] else 'FAIL'} (p90 < {hostile.P90_RATIO_MAX:g}x "
+              f"quiet, RSS within {hostile.RSS_DELTA_MAX_MB:g} MB, every hop succeeding; "
+              f"{r['wall_s']} s)")
+    return 0 if r["pass"] else 1
+
+
+def _ms(v: float | None) -> str:
+    return f"{'-':>8s}" if v is None else f"{v:8.2f}"
