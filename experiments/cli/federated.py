@@ -56,6 +56,9 @@ def add_output_arguments(p: argparse.ArgumentParser, name: str) -> None:
     p.add_argument("--view-host", default="127.0.0.1",
                    help="address the view binds; another than loopback exposes it "
                         "(default: 127.0.0.1)")
+    from dfrl.experiments.cli.figures import add_figure_arguments
+
+    add_figure_arguments(p)
 
 
 def overrides_of(args: argparse.Namespace) -> dict[str, Any]:
@@ -137,6 +140,9 @@ def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
     finally:
         if view is not None:
             view.close()
+    from dfrl.experiments.cli.figures import redraw_experiment
+
+    redraw_experiment(results.output_dir, args, cfg.default_title(), prog)
     summary = results.output_dir / "summary.md"
     if show_summary and summary.is_file():
         print(summary.read_text(encoding="utf-8"), file=sys.stderr)

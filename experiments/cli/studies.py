@@ -7,6 +7,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from dfrl.experiments.cli.figures import add_figure_arguments, redraw_paper
+
 
 def parse_factor(text: str) -> tuple[str, list[Any]]:
     """``PATH=V1;V2;...`` with JSON values (a bare word is a string)."""
@@ -123,6 +125,7 @@ def register_paper(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-control", action="store_true", help="skip the negative control")
     p.add_argument("--skip-existing", action="store_true",
                    help="reuse finished runs found in --out")
+    add_figure_arguments(p)
     p.set_defaults(func=cmd_paper)
 
 
@@ -142,6 +145,7 @@ def cmd_paper(args: argparse.Namespace) -> int:
     except (ExperimentError, FileNotFoundError, ValueError) as exc:
         print(f"dfrl paper: {exc}", file=sys.stderr)
         return 1
+    redraw_paper(args.out, done, args)
     print(f"dfrl paper done in {done.total_s:.0f} s", file=sys.stderr)
     print(done.report)
     return 0 if done.ok else 1

@@ -10,6 +10,7 @@ import math
 import sys
 from pathlib import Path
 
+from dfrl.experiments.cli.figures import add_figure_arguments, wants_redraw
 from dfrl.robots.learners import LEARNERS
 from dfrl.robots.state import SensorGrouping
 
@@ -42,6 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=None,
                    help="write config.json, runs.csv, curves.csv, summary.json, transfer.png here")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    add_figure_arguments(p)
     p.set_defaults(func=cmd_transfer)
     register_study(subparsers)
 
@@ -78,6 +80,13 @@ def cmd_transfer(args: argparse.Namespace) -> int:
     except (ValueError, OSError) as exc:
         print(f"dfrl: error: {exc}", file=sys.stderr)
         return 2
+    if result.output_dir is not None and wants_redraw(args):
+        from dfrl.experiments.transfer import plot_transfer
+
+        try:
+            plot_transfer(result, result.output_dir / "transfer.png", args.figure_format, args.dpi)
+        except ImportError:
+            print("dfrl transfer: figure not drawn: matplotlib is not installed", file=sys.stderr)
     if result.same_arena:
         print(f"dfrl: warning: the table was trained in '{result.table.arena}', the arena of "
               f"this transfer", file=sys.stderr)

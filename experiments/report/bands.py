@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from dfrl.experiments.report.observations import SeedRun, mean_q, scores
-from dfrl.experiments.report.plots import COLOURS, new_figure
+from dfrl.experiments.report.plots import COLOURS, new_figure, save_figure
 from dfrl.experiments.studies.intervals import t975
 
 
@@ -32,10 +32,12 @@ def _score_curve(runs: Sequence[SeedRun], role: str) -> tuple[np.ndarray, np.nda
     return np.array(its), m, h
 
 
-def plot_groups(groups: Mapping[str, Sequence[SeedRun]], path: Path, title: str) -> Path:
+def plot_groups(groups: Mapping[str, Sequence[SeedRun]], path: Path, title: str,
+                formats: Sequence[str] = ("png",), dpi: float | None = None) -> list[Path]:
     """Three panels: robots' mean sum of Q-values, mean cumulative reward, and the greedy
     score (own arena solid, held-out dashed), one colour per group, mean over seeds with a
-    95% band."""
+    95% band; written in each of ``formats`` (see
+    :func:`dfrl.experiments.report.plots.save_figure`, screen default 100 dpi)."""
     fig = new_figure(figsize=(15, 4.4))
     axes = fig.subplots(1, 3)
     for (name, runs), colour in zip(groups.items(), COLOURS * 2):
@@ -61,6 +63,4 @@ def plot_groups(groups: Mapping[str, Sequence[SeedRun]], path: Path, title: str)
         ax.grid(True, alpha=0.3)
         ax.legend(loc="best", fontsize=7)
     fig.suptitle(title + " (mean over seeds, 95% band)", fontsize=10)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    return path
+    return save_figure(fig, path, formats, dpi, default_dpi=100)

@@ -3,6 +3,7 @@ intervals and verdicts (:mod:`dfrl.experiments.report.observations`), the negati
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -29,8 +30,10 @@ def _collisions(runs: list[SeedRun], role: str) -> list[float]:
     return out
 
 
-def figures(out: Path, rep: Any) -> list[str]:
-    """Draw the band figures; return their names (empty without matplotlib)."""
+def figures(out: Path, rep: Any, formats: Sequence[str] = ("png",),
+            dpi: float | None = None) -> list[str]:
+    """Draw the band figures in each of ``formats`` at ``dpi``; return the names of the first
+    format's files (empty without matplotlib)."""
     from dfrl.experiments.report.bands import plot_groups
 
     names = []
@@ -41,9 +44,10 @@ def figures(out: Path, rep: Any) -> list[str]:
             if algo == "qlearning" and rep.control_fed:
                 groups["control federated"] = rep.control_fed
                 groups["control standalone (R1, R4)"] = rep.control_sa
-            p = plot_groups(groups, out / "figures" / f"{algo}_bands.png",
-                            f"{'Q-learning' if algo == 'qlearning' else 'SARSA'}")
-            names.append(p.name)
+            paths = plot_groups(groups, out / "figures" / f"{algo}_bands.png",
+                                f"{'Q-learning' if algo == 'qlearning' else 'SARSA'}",
+                                formats, dpi)
+            names.append(paths[0].name)
     except ImportError:
         return []
     return names

@@ -1,5 +1,9 @@
-"""Figures of a federated experiment (matplotlib, PNG), in the paper's style: one line per
-robot against iterations, for the sum of Q-values and for the cumulative reward.
+"""Figures of a federated experiment (matplotlib), in the paper's style: one line per robot
+against iterations, for the sum of Q-values and for the cumulative reward. Each figure is
+written in the formats asked for (PNG by default; PDF and SVG are vector formats for print) at
+the resolution asked for (``dpi``: a figure's own screen default, 110, unless given; 300 for
+print). The curves end with the last share: ``metrics.csv`` closes each robot's curve with the
+sum of its saved table (:mod:`dfrl.experiments.results.metrics`), and every row is drawn.
 
 matplotlib is an optional extra (``pip install dfrl[plot]``); it is imported when a figure is
 drawn, through its object-oriented API (no pyplot state, no backend switch).
@@ -9,6 +13,7 @@ from __future__ import annotations
 import csv
 import json
 import textwrap
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -20,6 +25,53 @@ COLOURS = ("tab:blue", "tab:red", "tab:green", "tab:orange", "tab:purple", "tab:
            "tab:pink", "tab:gray", "tab:olive", "tab:cyan")
 
 LABELS = {"q_sum": "sum of Q-values", "cumulative_reward": "cumulative reward"}
+
+#: Formats a figure can be written in (matplotlib's names, which are the file suffixes).
+FORMATS = ("png", "pdf", "svg")
+
+#: Resolution of a PNG when none is asked for (screen).
+SCREEN_DPI = 110
+
+
+def parse_formats(text: str) -> tuple[str, ...]:
+    """``"png,pdf"`` -> ``("png", "pdf")`` (order kept, repeats dropped).
+
+    Raises
+    ------
+    ValueError
+        Empty, or a format not in :data:`FORMATS`.
+    """
+    names = tuple(dict.fromkeys(f.strip().lower() for f in text.split(",") if f.strip()))
+    bad = [f for f in names if f not in FORMATS]
+    if not names or bad:
+        raise ValueError(f"figure format {', '.join(bad) or repr(text)}: "
+                         f"use a comma-separated list of {', '.join(FORMATS)}")
+    return names
+
+
+def save_figure(fig: Any, path: str | Path, formats: Sequence[str] = ("png",),
+                dpi: float | None = None, default_dpi: float = SCREEN_DPI) -> list[Path]:
+    """Write ``fig`` as ``path`` with each suffix of ``formats`` (``q_sum.png``,
+    ``q_sum.pdf``, ...) at ``dpi`` (``default_dpi`` when None); return the files written.
+
+    Raises
+    ------
+    ValueError
+        A format not in :data:`FORMATS`, or a dpi that is not positive.
+    """
+    bad = [f for f in formats if f not in FORMATS]
+    if bad or not formats:
+        raise ValueError(f"figure formats {list(formats)}: use some of {', '.join(FORMATS)}")
+    if dpi is not None and not dpi > 0:
+        raise ValueError(f"figure dpi {dpi}: must be > 0")
+    base = Path(path)
+    base.parent.mkdir(parents=True, exist_ok=True)
+    out = []
+    for fmt in formats:
+        target = base.with_suffix(f".{fmt}")
+        fig.savefig(target, format=fmt, dpi=dpi or default_dpi)
+        out.append(target)
+    return out
 
 
 def new_figure(**kwargs: Any) -> Any:
@@ -42,8 +94,21 @@ def robot_label(robot: str, arenas: Mapping[str, str]) -> str:
     return f"{name} ({arena.upper()})" if arena and arena.lower() != robot.lower() else name
 
 
+def draw_lines(ax: Any, curves: Mapping[str, np.ndarray], field: str,
+               arenas: Mapping[str, str] | None = None) -> list[Any]:
+    """One line per robot of ``field`` against iterations on ``ax``, every row of the curve
+    (so the last point is the last share's); return the lines."""
+    lines = []
+    for (robot, cur), colour in zip(curves.items(), COLOURS * 3):
+        if len(cur):
+            lines += ax.plot(cur["iteration"], cur[field], color=colour, lw=1.3,
+                             label=robot_label(robot, arenas or {}))
+    return lines
+
+
 def plot_metric(curves: Mapping[str, np.ndarray], field: str, path: str | Path, title: str,
-                arenas: Mapping[str, str] | None = None, shares: list[int] | None = None) -> Path:
+                arenas: Mapping[str, str] | None = None, shares: list[int] | None = None,
+                formats: Sequence[str] = ("png",), dpi: float | None = None) -> list[Path]:
     """One figure: ``field`` against iterations, one line per robot.
 
     Parameters
@@ -56,14 +121,12 @@ def plot_metric(curves: Mapping[str, np.ndarray], field: str, path: str | Path, 
     arenas : mapping robot -> arena name, optional (legend)
     shares : list of int, optional
         Iterations at which tables were shared (drawn as faint vertical lines).
+    formats, dpi
+        See :func:`save_figure`; the files written are returned.
     """
     fig = new_figure(figsize=(6.4, 4.4))
     ax = fig.subplots()
-    for (robot, cur), colour in zip(curves.items(), COLOURS * 3):
-        if len(cur) == 0:
-            continue
-        ax.plot(cur["iteration"], cur[field], color=colour, lw=1.3,
-                label=robot_label(robot, arenas or {}))
+    draw_lines(ax, curves, field, arenas)
     for x in shares or []:
         ax.axvline(x, color="0.85", lw=0.6, zorder=0)
     ax.set_xlabel("iterations")
@@ -71,31 +134,24 @@ def plot_metric(curves: Mapping[str, np.ndarray], field: str, path: str | Path, 
     ax.set_title(textwrap.fill(title, 70), fontsize=9)
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize=8)
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    return out
+    return save_figure(fig, path, formats, dpi)
 
 
 def plot_both(curves: Mapping[str, np.ndarray], path: str | Path, title: str,
-              arenas: Mapping[str, str] | None = None) -> Path:
-    """Sum of Q-values and cumulative reward side by side."""
+              arenas: Mapping[str, str] | None = None, formats: Sequence[str] = ("png",),
+              dpi: float | None = None) -> list[Path]:
+    """Sum of Q-values and cumulative reward side by side (files as :func:`save_figure`)."""
     fig = new_figure(figsize=(11, 4.2))
     axes = fig.subplots(1, 2)
     for ax, field in zip(axes, ("q_sum", "cumulative_reward")):
-        for (robot, cur), colour in zip(curves.items(), COLOURS * 3):
-            if len(cur):
-                ax.plot(cur["iteration"], cur[field], color=colour, lw=1.3,
-                        label=robot_label(robot, arenas or {}))
+        draw_lines(ax, curves, field, arenas)
         ax.set_xlabel("iterations")
         ax.set_ylabel(LABELS[field])
         ax.set_title(LABELS[field][0].upper() + LABELS[field][1:])
         ax.grid(True, alpha=0.3)
         ax.legend(loc="best", fontsize=8)
     fig.suptitle(title, fontsize=10)
-    out = Path(path)
-    fig.savefig(out, dpi=110)
-    return out
+    return save_figure(fig, path, formats, dpi)
 
 
 def share_iterations(out_dir: Path) -> list[int]:
@@ -107,8 +163,11 @@ def share_iterations(out_dir: Path) -> list[int]:
         return [int(r["iteration"]) for r in csv.DictReader(fh)]
 
 
-def plot_experiment(out_dir: str | Path, title: str = "") -> list[Path]:
-    """Draw ``q_sum.png``, ``cumulative_reward.png`` and ``curves.png`` from ``metrics.csv``."""
+def plot_experiment(out_dir: str | Path, title: str = "", formats: Sequence[str] = ("png",),
+                    dpi: float | None = None) -> list[Path]:
+    """Draw ``q_sum``, ``cumulative_reward`` and ``curves`` from ``metrics.csv``, each in every
+    format of ``formats`` (``.png``, ``.pdf``, ``.svg``) at ``dpi`` (see :func:`save_figure`);
+    return the files written, figure by figure."""
     out = Path(out_dir)
     curves = read_metrics(out / "metrics.csv")
     if not curves:
@@ -121,8 +180,9 @@ def plot_experiment(out_dir: str | Path, title: str = "") -> list[Path]:
             arenas[r["id"]] = r["arena"]
     shares = share_iterations(out)
     return [
-        plot_metric(curves, "q_sum", out / "q_sum.png", f"Sum of Q-values: {title}", arenas, shares),
-        plot_metric(curves, "cumulative_reward", out / "cumulative_reward.png",
-                    f"Cumulative reward: {title}", arenas, shares),
-        plot_both(curves, out / "curves.png", title, arenas),
+        *plot_metric(curves, "q_sum", out / "q_sum.png", f"Sum of Q-values: {title}", arenas,
+                     shares, formats, dpi),
+        *plot_metric(curves, "cumulative_reward", out / "cumulative_reward.png",
+                     f"Cumulative reward: {title}", arenas, shares, formats, dpi),
+        *plot_both(curves, out / "curves.png", title, arenas, formats, dpi),
     ]

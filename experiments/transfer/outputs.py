@@ -4,6 +4,7 @@ from __future__ import annotations
 import csv
 import json
 from dataclasses import asdict
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -37,15 +38,18 @@ def write_outputs(result: TransferResult, out: Path) -> None:
         pass
 
 
-def plot_transfer(result: TransferResult, path: Path) -> Path:
-    """Cumulative collisions and reward against iterations, mean over seeds, min-max band.
+def plot_transfer(result: TransferResult, path: Path, formats: Sequence[str] = ("png",),
+                  dpi: float | None = None) -> list[Path]:
+    """Cumulative collisions and reward against iterations, mean over seeds, min-max band,
+    in each of ``formats`` at ``dpi`` (:func:`dfrl.experiments.report.plots.save_figure`,
+    screen default 100 dpi); return the files written.
 
     Raises
     ------
     ImportError
         matplotlib is not installed (``pip install dfrl[plot]``).
     """
-    from dfrl.experiments.report.plots import new_figure
+    from dfrl.experiments.report.plots import new_figure, save_figure
 
     fig = new_figure(figsize=(10, 3.8))
     ax_c, ax_r = fig.subplots(1, 2)
@@ -67,6 +71,4 @@ def plot_transfer(result: TransferResult, path: Path) -> Path:
         ax.grid(True, alpha=0.3)
         ax.legend(loc="best", fontsize=8)
     fig.suptitle(f"Transfer into {result.arena_name} ({result.trainer_config.algo})")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    return path
+    return save_figure(fig, path, formats, dpi, default_dpi=100)
