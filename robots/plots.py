@@ -85,29 +85,39 @@ def plot_arena(image: np.ndarray, spec, path: str | Path,  # noqa: ANN001 - Aren
         Sensor rays to draw (:meth:`dfrl.robots.epuck.EPuck.sensor_rays`).
     """
     plt = _pyplot()
-    w, d = spec.size
-    half = (max(w, d) + 0.1) / 2
     fig, ax = plt.subplots(figsize=(5.2, 5.2), constrained_layout=True)
-    ax.imshow(image, extent=(-half, half, -half, half), origin="upper")
-    if spec.start.pose is not None:
-        x, y, yaw = spec.start.pose
-        ax.annotate("", xy=(x + 0.09 * math.cos(yaw), y + 0.09 * math.sin(yaw)), xytext=(x, y),
-                    arrowprops={"arrowstyle": "->", "color": "black", "lw": 1.5})
-        ax.text(x, y - 0.07, "start", ha="center", va="top", fontsize=8)
-    else:
-        ax.text(0, -half + 0.01, "start: random free pose", ha="center", va="bottom", fontsize=8)
-    if rays is not None:
-        for (x0, y0), (x1, y1) in np.asarray(rays):
-            ax.plot([x0, x1], [y0, y1], color="tab:red", lw=0.8, alpha=0.8)
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    n = len(spec.blocks)
-    ax.set_title(f"{spec.name.upper()}: {w:g} m x {d:g} m, {n} block{'s' if n != 1 else ''}")
+    draw_arena(ax, image, spec, rays)
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=100)
     plt.close(fig)
     return out
+
+
+def draw_arena(ax, image: np.ndarray, spec, rays: np.ndarray | None = None) -> dict:  # noqa: ANN001
+    """Draw a top view on matplotlib axes ``ax`` (see :func:`plot_arena`); return the artists:
+    ``heading`` (the start pose's arrow, None for a random start) and ``rays`` (lines)."""
+    w, d = spec.size
+    half = (max(w, d) + 0.1) / 2
+    ax.imshow(image, extent=(-half, half, -half, half), origin="upper")
+    heading = None
+    if spec.start.pose is not None:
+        x, y, yaw = spec.start.pose
+        heading = ax.annotate("", xy=(x + 0.09 * math.cos(yaw), y + 0.09 * math.sin(yaw)),
+                              xytext=(x, y),
+                              arrowprops={"arrowstyle": "->", "color": "black", "lw": 1.5})
+        ax.text(x, y - 0.07, "start", ha="center", va="top", fontsize=8)
+    else:
+        ax.text(0, -half + 0.01, "start: random free pose", ha="center", va="bottom", fontsize=8)
+    lines = []
+    if rays is not None:
+        for (x0, y0), (x1, y1) in np.asarray(rays):
+            lines += ax.plot([x0, x1], [y0, y1], color="tab:red", lw=0.8, alpha=0.8)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    n = len(spec.blocks)
+    ax.set_title(f"{spec.name.upper()}: {w:g} m x {d:g} m, {n} block{'s' if n != 1 else ''}")
+    return {"heading": heading, "rays": lines}
 
 
 def plot_arena_overview(images: Mapping[str, np.ndarray], path: str | Path) -> Path:

@@ -63,6 +63,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="arena names or files (default: every built-in arena)")
     p.add_argument("--size", type=int, default=480,
                    help="image size in pixels (default: %(default)s)")
+    p.add_argument("--rays", action="store_true",
+                   help="draw the e-puck's sensor rays at the start pose (default: off)")
     p.set_defaults(func=cmd_render_arenas)
 
 
@@ -284,15 +286,20 @@ def cmd_render_arenas(args: argparse.Namespace) -> int:
         except ArenaError as exc:
             return _fail(str(exc))
         world = World(spec)
+        rays = None
         try:
             if spec.start.pose is not None:
                 world.place_robot(*spec.start.pose)
+                if args.rays:   # what the sensors see at the start pose (seeded noise)
+                    import numpy as np
+
+                    rays = world.robot.sensor_rays(world.robot.sense(np.random.default_rng(0)))
             else:  # a random start: keep the robot out of the picture
                 world.place_robot(10.0 * max(spec.size), 0.0, 0.0)
             img = world.render_top(args.size, args.size)
         finally:
             world.close()
         images[spec.name] = img
-        print(plot_arena(img, spec, args.out / f"arena_{spec.name}.png"))
+        print(plot_arena(img, spec, args.out / f"arena_{spec.name}.png", rays))
     print(plot_arena_overview(images, args.out / "arenas.png"))
     return 0
