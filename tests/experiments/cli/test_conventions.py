@@ -99,3 +99,13 @@ def test_node_command_does_not_import_pybullet() -> None:
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
+
+
+def test_seeds_lists_parse_where_counts_used_to() -> None:
+    # `dfrl baselines --seeds 1 2` printed the top-level usage; transfer had --first-seed
+    parser = build_parser()
+    assert parser.parse_args(["baselines", "--seeds", "1", "2"]).seeds == [1, 2]
+    args = parser.parse_args(["transfer", "--init", "t.npy", "--arena", "r1", "--seeds", "3", "4"])
+    assert args.seeds == [3, 4]
+    assert parser.parse_args(["paper", "--seeds", "7"]).seeds == [7]
+    assert "10%" in PARSERS["dfrl transfer"].format_help()

@@ -183,3 +183,24 @@ def test_default_out_is_a_new_timestamped_folder(tmp_path: Path) -> None:
     latest = tmp_path / "results" / "demo" / "latest"
     assert latest.is_symlink() and os.readlink(latest) == b.name
     assert latest.resolve() == b.resolve()
+
+
+@pytest.mark.parametrize("arena, located", [
+    ({"name": "mine", "size": [1.0, 0.8], "wall_height": 0.1,
+      "blocks": [{"center": [0.2, 0.1], "size": [0.1, 0.2, 0.1]}],
+      "start": {"pose": [0.2, -0.02, 0.0]}}, "only 0.020 m from a block or wall"),
+    ({"name": "mine", "size": [1.0, 0.8], "wall_height": 0.1,
+      "blocks": [{"center": [0.2, 0.1], "size": [0.1, 0.2, 0.1]},
+                                     {"center": [0.25, 0.1], "size": [0.1, 0.2, 0.1]}],
+      "start": {"pose": [-0.3, -0.2, 0.0]}},
+     "blocks[1]: overlaps blocks[0]"),
+])
+def test_arena_with_a_start_pose_too_close_or_overlapping_blocks(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], arena: dict[str, Any],
+        located: str) -> None:
+    path = tmp_path / "mine.json"
+    path.write_text(json.dumps(arena))
+    cfg = smoke()
+    cfg["robots"][0]["arena"] = str(path)
+    code, err = run_cli(tmp_path, cfg, capsys)
+    assert_refused(tmp_path, code, err, "robots[0].arena: ", located)
