@@ -16,7 +16,9 @@
                 ctx_authenticated/1 ]).
 :- use_module('../agents',
               [ agent_exists/2, agent_property/3, agent_export/3,
-                agent_install/4, agent_execute/4 ]).
+                agent_install/4, agent_execute/4, agent_status/3,
+                agent_remove/2 ]).
+:- use_module('../custody', [with_custody/2, custody_unstage/2]).
 :- use_module('../transport', [transport_request/4, address_normalize/2]).
 :- autoload(library(lists), [member/2, append/3, last/2, min_list/2]).
 :- autoload(library(apply), [exclude/3, foldl/4]).
@@ -47,19 +49,25 @@ its first stop and right after a resurrection).
      retires) releases its holder the same way.
   3. *Lease.* When a checkpoint's lease expires without a release, the
      holder probes B (`probe`, up to 2 tries, each within half the lease):
-     B answers here(E, Seq) if the agent is registered there (running,
-     idle, staged or in doubt), left(E, Seq') if it holds a checkpoint or
+     B answers here(E, Seq) if the agent is registered there (running or
+     idle), staged(E, Seq) if it arrived there and waits for its source's
+     decision (staged or in doubt), left(E, Seq') if it holds a checkpoint or
      a record of a later departure, finished(E, Seq) if the tour ended
      there, superseded(E') if it knows a higher epoch, or unknown.
-     `here` renews the lease; `left`, `finished` and `superseded` drop the
-     checkpoint; `unknown` and no answer at all make the holder ask
-     every other stop of the itinerary the same question. Only if none
-     knows of a later hop (or a higher epoch) is the agent *resurrected*:
+     `here` and `staged` renew the lease; `left`, `finished` and
+     `superseded` drop the checkpoint; `unknown` and no answer at all
+     make the holder ask every other stop of the itinerary the same
+     question. Only if none knows of a later hop (or a higher epoch) is
+     the agent *resurrected*; a copy *staged* at another stop does not
+     count (its source died between transfer and commit, so it never
+     ran, and only that source could decide to start it):
      installed at the holder from the checkpoint with epoch E+1 (one
      more than any epoch seen), started with the event
      resurrected(E1, Dead) so that it skips the dead stop B and goes on
      from the holder exactly as if its move to B had failed. The new
-     epoch is then sent to every reachable stop (`epoch`).
+     epoch is first sent to every reachable stop (`epoch`); a stop that
+     holds a staged copy with a lower epoch discards it, so that the
+     resurrected agent can enter it.
   4. *Progress.* When the agent ends a round it tells its holder
      (progress(round_done(N, [Plan and method facts]))), so that a resurrection
      starts round N+1 instead of repeating the end of round N, and with
@@ -356,7 +364,28 @@ serve(progress(Agent, E, K, Progress), Node, Answer) :-
                ))
     ).
 serve(epoch(Agent, E), Node, noted) :-
-    note_epoch(Node, Agent, E).
+    note_epoch(Node, Agent, E),
+    discard_superseded_arrival(Node, Agent, E).
+
+%   A copy of Agent that arrived here from a source that died before
+%   deciding (staged or in_doubt) is superseded by a resurrection with
+%   the higher epoch E: it must never start, and its name must be free
+%   for the resurrected agent's next visit. Discarded as migration.pl
+%   discards an aborted arrival; a source that committed after all is
+%   then told not_staged.
+discard_superseded_arrival(Node, Agent, E) :-
+    with_custody(Node,
+                 (   agent_exists(Node, Agent),
+                     arrived_only(Node, Agent),
+                     lease_custody(Node, Agent, custody(E0, _, _)),
+                     E0 < E
+                 ->  agent_remove(Node, Agent),
+                     custody_unstage(Node, Agent),
+                     print_message(informational,
+                                   format("dfrl: arrival of ~w (epoch ~w) discarded: superseded by epoch ~w",
+                                          [Agent, E0, E]))
+                 ;   true
+                 )).
 
 %   A round ended where the agent is: a resurrection starts the next
 %   round from the holder, with the facts (plan, method) as they are now.
@@ -380,7 +409,10 @@ probe_answer(Node, Agent, E, K, Answer) :-
     ->  Answer = superseded(E2)
     ;   agent_exists(Node, Agent)
     ->  lease_custody(Node, Agent, custody(E1, K1, _)),
-        Answer = here(E1, K1)
+        (   arrived_only(Node, Agent)
+        ->  Answer = staged(E1, K1)
+        ;   Answer = here(E1, K1)
+        )
     ;   findall(K1-left, ( ckpt(Node, Agent, E, K1, _, _, _, _, _), K1 > K ), L1),
         findall(K1-How, ( gone(Node, Agent, E, K1, How0, _), K1 >= K,
                           gone_how(How0, How) ), L2),
@@ -391,6 +423,14 @@ probe_answer(Node, Agent, E, K, Answer) :-
         Answer =.. [How, E, K2]
     ;   Answer = unknown
     ).
+
+%   The agent arrived at Node and waits for its source's decision
+%   (migration.pl): it has not run here, and it will not unless its
+%   source committed.
+arrived_only(Node, Agent) :-
+    agent_status(Node, Agent, Status),
+    ( Status = staged(_) ; Status = in_doubt(_, _) ),
+    !.
 
 gone_how(released(_), left).
 gone_how(finished, finished).
@@ -475,6 +515,10 @@ judge(here(E1, _), _, Node, Agent, E, K, _, _, _) :-
     E1 =< E,
     !,
     renew(Node, Agent, E, K).
+judge(staged(E1, _), _, Node, Agent, E, K, _, _, _) :-
+    E1 =< E,
+    !,
+    renew(Node, Agent, E, K).
 judge(unknown, Dest, Node, Agent, E, K, Here, Record, Resume) :-
     !,
     others_know(Node, Dest, Here, Record, Agent, E, K, Known),
@@ -515,7 +559,7 @@ drop(Node, Agent, E, K, Why) :-
     prune_gone(Node, Agent).
 
 probe(Node, Record, Dest, Agent, E, K, Tries, Answer) :-
-    record_tokens(Record, Tokens),
+    record_tokens(Record, Node, Tokens),
     custody_call(Node, Tokens, Dest, probe(Agent, E, K), A0),
     (   A0 = error(_), Tries > 1
     ->  sleep(0.1),
@@ -528,7 +572,7 @@ probe(Node, Record, Dest, Agent, E, K, Tries, Answer) :-
 others_know(Node, Dest, Here, Record, Agent, E, K, Known) :-
     record_stops(Record, Agent, Stops0),
     exclude([S]>>( same_address(S, Dest) ; same_address(S, Here) ), Stops0, Stops),
-    record_tokens(Record, Tokens),
+    record_tokens(Record, Node, Tokens),
     others_know_(Stops, Node, Tokens, Agent, E, K, E, Known).
 
 others_know_([], _, _, _, _, _, Max, max_epoch(Max)).
@@ -537,14 +581,20 @@ others_know_([S|Ss], Node, Tokens, Agent, E, K, Max0, Known) :-
     (   Answer = superseded(E2)
     ->  Known = known(superseded(S, E2))
     ;   Answer = here(E1, _), E1 >= E
-    ->  Known = known(here(S))
+    ->  Known = known(here(S))          % staged(_, _): arrived, never ran: not known
     ;   ( Answer = left(_, K1) ; Answer = finished(_, K1) ), K1 > K
     ->  Known = known(Answer)
     ;   others_know_(Ss, Node, Tokens, Agent, E, K, Max0, Known)
     ).
 
-record_tokens(Record, Tokens) :-
-    arg(4, Record, Tokens).
+%   The tokens to prove for the agent: those in its checkpoint, or the
+%   node's (a record may carry none).
+record_tokens(Record, Node, Tokens) :-
+    arg(4, Record, Tokens0),
+    (   Tokens0 \== []
+    ->  Tokens = Tokens0
+    ;   agent_tokens(Node, none, Tokens)
+    ).
 
 record_stops(agent(_, _, _, _, _, _, Clauses, _), Agent, Stops) :-
     (   member((dfrl_plan(Agent, plan(It, _, _, _, _)) :- _), Clauses)
@@ -578,11 +628,14 @@ resurrect(Node, Agent, E, K, MaxSeen, Here, Dest, Record0, Resume, Why) :-
     agent_install(Node, Record, idle, Agent),
     print_message(warning, format("dfrl: ~w lost at ~w (~p); resurrected at ~w with epoch ~w",
                                   [Agent, Dest, Why, Node, E1])),
-    node_property(Node, link(Link)),
-    agent_execute(Node, Agent, Link, resurrected(E1, Here, Dest, Resume)),
+    % The other stops hear of the new epoch before the agent can move to
+    % one of them (a copy staged there by the dead stop is discarded).
     record_stops(Record, Agent, Stops0),
     exclude([S]>>( same_address(S, Dest) ; same_address(S, Here) ), Stops0, Stops),
-    lease_broadcast_epoch(Node, T, Agent, E1, Stops).
+    record_tokens(Record, Node, Tokens),
+    lease_broadcast_epoch(Node, Tokens, Agent, E1, Stops),
+    node_property(Node, link(Link)),
+    agent_execute(Node, Agent, Link, resurrected(E1, Here, Dest, Resume)).
 
 :- at_halt(stop_watchdog).
 

@@ -11,12 +11,14 @@ from __future__ import annotations
 import json
 import os
 import signal
+import threading
 import time
 from collections import Counter
 from pathlib import Path
 
 import pytest
 
+from dfrl.experiments.bench.fault_proxy import PASS, STALL, FaultProxy
 from dfrl.platform_pl import PLATFORM_DIR
 
 from .conftest import SWIPL, Proc, free_port
@@ -78,8 +80,10 @@ class Federation:
         p.wait_for("LISTENING")
         return p
 
-    def launch(self, rounds: int, rest: float) -> None:
-        stops = ",".join(f"stop(localhost,{p},r{i})" for i, p in enumerate(self.ports))
+    def launch(self, rounds: int, rest: float, via: dict[int, int] | None = None) -> None:
+        """Start agent ``fx``; ``via`` maps a stop to another port (a proxy) in the plan."""
+        ports = [(via or {}).get(i, p) for i, p in enumerate(self.ports)]
+        stops = ",".join(f"stop(localhost,{p},r{i})" for i, p in enumerate(ports))
         plan = self.tmp / "plan.txt"
         plan.write_text(f"plan([{stops}], {rounds}, {rest}, {str(self.log)!r}).\n")
         c = Proc([SWIPL, "-q", "-g", "main", "-t", "halt", str(self.tmp / "console.pl"), str(plan)])
@@ -192,3 +196,42 @@ def test_sigstop_past_lease_leaves_one_agent(tmp_path: Path, procs: list[Proc]) 
     assert rounds[-1]["visited"] == ["r0", "r1", "r2"], rounds[-1]
     time.sleep(0.3)
     assert not any(fed.has_agent(i) for i in range(3))
+
+
+def test_source_killed_with_agent_staged_at_next_stop(tmp_path: Path, procs: list[Proc]) -> None:
+    # Prepare: three stops; r2 is reached through a proxy that lets the first agent transfer
+    # into r2 through and then holds back the next frame on that connection (r1's commit).
+    fed = Federation(tmp_path, procs, [0.0, 0.0, 0.0])
+    held = threading.Event()
+    transfer_on: set[int] = set()
+
+    def hold_commit(direction: str, conn: int, frame: int, kind: str, length: int):
+        if direction != "up" or held.is_set():
+            return PASS
+        if conn in transfer_on:
+            held.set()
+            return STALL
+        if kind == "B" and length > 500:
+            transfer_on.add(conn)
+        return PASS
+
+    with FaultProxy(("127.0.0.1", fed.ports[2])) as proxy:
+        proxy.rule(hold_commit)
+        fed.launch(rounds=3, rest=0.2, via={2: proxy.address[1]})
+        # Execute: once r1's commit is held, kill -9 r1 (the agent's node): the agent exists
+        # only as a copy staged at r2, whose source will never decide.
+        fed.wait(held.is_set, 15, "r1's commit to r2")
+        fed.nodes[1].popen.send_signal(signal.SIGKILL)
+        fed.wait(lambda: fed.events("finished"), 40, "the end of the tour")
+    # Assert: the holder (r0) found no stop that knows of a later hop (r2's copy never ran),
+    # resurrected the agent, and r2 discarded its staged copy, so the agent could visit r2
+    # again; every round logged once, r1 skipped.
+    [res] = fed.events("resurrected")
+    assert (res["round"], res["epoch"]) == (1, 2)
+    assert res["from"] == fed.address(0)
+    rounds = assert_each_round_once(fed, 3)
+    for r in rounds:
+        assert r["visited"] == ["r0", "r2"], r
+        assert [s["robot"] for s in r["skipped"]] == ["r1"], r
+    time.sleep(0.3)
+    assert not any(fed.has_agent(i) for i in (0, 2))
