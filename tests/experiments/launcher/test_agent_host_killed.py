@@ -74,3 +74,6 @@ def test_run_completes_when_the_agents_host_is_killed(tmp_path: Path) -> None:
     assert all(list(r.visited) == ["r1", "r3"] for r in log.rounds[-2:]), log.rounds[-2:]
     assert res.ok, (res.crashed, res.agents_finished)
     assert "r2" in res.crashed or "r2" in (res.faults.lost if res.faults else {})
+    summary = (tmp_path / "summary.md").read_text()
+    assert "## Faults: federation complete" in summary, summary
+    assert "resurrected at" in summary and "LOST robot r2" in summary, summary
