@@ -32,7 +32,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from dfrl.experiments.bench.hostile_attacks import FrameSenders, Swarm, sources
+from dfrl.experiments.bench.hostile_attacks import FRAME_KINDS, FrameSenders, Swarm, sources
 from dfrl.experiments.bench.migrate import percentile
 
 SCRIPT = Path(__file__).resolve().parent / "hostile_node.pl"
@@ -58,6 +58,7 @@ class HostileConfig:
     fresh: bool = True
     reconnect_s: float = 1.0
     frame_pause_s: float = 0.25
+    frame_kinds: tuple[str, ...] = FRAME_KINDS
 
     def check(self) -> None:
         if min(self.slowloris, self.flood, self.frames, self.frame_size, self.sources) < 1:
@@ -65,6 +66,9 @@ class HostileConfig:
         if self.duration_s <= 0 or self.settle_s < 0 or self.pause_ms < 0 or self.floats < 0:
             raise ValueError("duration > 0, settle >= 0, pause >= 0 and floats >= 0 are required")
         sources(self.sources)
+        unknown = set(self.frame_kinds) - set(FRAME_KINDS)
+        if unknown or not self.frame_kinds:
+            raise ValueError(f"unknown frame kinds {sorted(unknown)}; choose from {FRAME_KINDS}")
 
 
 class _Node:
@@ -181,7 +185,8 @@ def _attacker(name: str, cfg: HostileConfig, port: int) -> Swarm | FrameSenders:
     if name == "flood":
         return Swarm(port, cfg.flood, srcs, trickle=False, reconnect_s=cfg.reconnect_s,
                      max_s=limit)
-    return FrameSenders(port, cfg.frames, cfg.frame_size, srcs, cfg.frame_pause_s, max_s=limit)
+    return FrameSenders(port, cfg.frames, cfg.frame_size, srcs, cfg.frame_pause_s, max_s=limit,
+                        kinds=cfg.frame_kinds)
 
 
 def run(cfg: HostileConfig = HostileConfig(),

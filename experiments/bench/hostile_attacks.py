@@ -257,17 +257,19 @@ def hostile_frame(kind: str, size: int) -> bytes:
 
 
 class FrameSenders:
-    """``n`` threads, each sending hostile frames one connection at a time (kinds in turn by
+    """``n`` threads, each sending hostile frames one connection at a time (``kinds`` in turn by
     thread), waiting for the node's answer or close, pausing ``pause_s``, and again."""
 
     def __init__(self, port: int, n: int, size: int, srcs: list[str],
-                 pause_s: float = 0.25, max_s: float = 600.0) -> None:
-        if n < 1 or size < 1:
+                 pause_s: float = 0.25, max_s: float = 600.0,
+                 kinds: tuple[str, ...] = FRAME_KINDS) -> None:
+        if n < 1 or size < 1 or not kinds:
             raise ValueError("frames >= 1 and frame size >= 1 are required")
         self.port, self.srcs, self.pause_s, self.max_s = port, srcs, pause_s, max_s
-        self.frames = {k: hostile_frame(k, size) for k in FRAME_KINDS}
+        self.kinds = kinds
+        self.frames = {k: hostile_frame(k, size) for k in kinds}
         self.counts = Counts()
-        self.by_kind = {k: 0 for k in FRAME_KINDS}
+        self.by_kind = {k: 0 for k in kinds}
         self.lock = threading.Lock()
         self.stopping = threading.Event()
         self.errors: list[str] = []
@@ -289,7 +291,7 @@ class FrameSenders:
         return {**self.counts.as_dict(), "frames_by_kind": self.by_kind}
 
     def _loop(self, i: int) -> None:
-        kind = FRAME_KINDS[i % len(FRAME_KINDS)]
+        kind = self.kinds[i % len(self.kinds)]
         end = time.monotonic() + self.max_s
         try:
             while not self.stopping.is_set() and time.monotonic() < end:

@@ -10,6 +10,7 @@ import json
 import sys
 
 from dfrl.experiments.bench import hostile
+from dfrl.experiments.bench.hostile_attacks import FRAME_KINDS
 
 D = hostile.HostileConfig()
 
@@ -41,6 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--attacks", nargs="+", choices=hostile.ATTACKS,
                         default=list(hostile.ATTACKS),
                         help=f"attacks to run, in order (default: {' '.join(hostile.ATTACKS)})")
+    parser.add_argument("--frame-kinds", nargs="+", choices=FRAME_KINDS, default=list(FRAME_KINDS),
+                        help=f"hostile frames sent, in turn by sender (default: "
+                             f"{' '.join(FRAME_KINDS)})")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -50,7 +54,7 @@ def cmd(args: argparse.Namespace) -> int:
         slowloris=args.slowloris, flood=args.flood, frames=args.frames,
         frame_size=args.frame_size, duration_s=args.duration, settle_s=args.settle,
         sources=args.sources, pause_ms=args.pause_ms, floats=args.floats,
-        fresh=not args.pooled)
+        fresh=not args.pooled, frame_kinds=tuple(args.frame_kinds))
     try:
         r = hostile.run(cfg, tuple(args.attacks))
     except (ValueError, RuntimeError, FileNotFoundError) as exc:
