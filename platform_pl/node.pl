@@ -28,6 +28,7 @@
               [ address_normalize/2, token_proof/3, open_key/1,
                 transport_drop_pool/0, transport_identify/3 ]).
 :- use_module(worker_pool, [pool_run/3, pool_signal/3, pool_drain/0]).
+:- use_module(tls, [tls_check_dir/1, tls_accept/5]).
 :- autoload(library(socket),
             [ tcp_socket/1, tcp_setopt/2, tcp_bind/2, tcp_listen/2,
               tcp_accept/3, tcp_open_socket/2, tcp_close_socket/1,
@@ -116,6 +117,8 @@ by default the bind address, or the host name when it binds 0.0.0.0).
                        max_unauth_connections(positive_integer),
                        max_unauth_per_peer(positive_integer),
                        insecure(boolean),
+                       tls(any),
+                       tls_peers(list),
                        reply_timeout(number),
                        connect_timeout(number),
                        commit_timeout(number),
@@ -168,12 +171,25 @@ by default the bind address, or the host name when it binds 0.0.0.0).
 %                                 (default: if there is none yet)
 %     - insecure(+Bool)           start on a non-loopback address with a
 %                                 weak token or none (default false)
+%     - tls(+Dir)                 mutual TLS on every connection, in and
+%                                 out, with the CA and certificate in Dir
+%                                 (ca.crt, node.crt, node.key; see tls.pl):
+%                                 peers without a certificate the CA
+%                                 signed are refused
+%     - tls_peers(+Names)         with tls(Dir): only peers whose
+%                                 certificate's common name is in Names
+%                                 may send agents or code (transfer,
+%                                 commit, load_code, execute); others get
+%                                 a permission error (default: any name
+%                                 the CA signed)
 %
 %   Secrets. A node bound to an address other than loopback (0.0.0.0
 %   included) refuses to start if it is open or one of its tokens has
 %   less than 128 bits of entropy (token_entropy_bits/2), unless told
 %   insecure(true): its peers' proofs cross the network, and a weak
-%   token falls to an offline search of one captured handshake. On
+%   token falls to an offline search of one captured handshake. With
+%   tls(Dir) they cross it encrypted, to a peer the CA vouches for, and
+%   a weak token (or none) is accepted anywhere. On
 %   loopback a weak token (a Tartarus-style integer) is accepted, with
 %   an informational message.
 %
@@ -244,6 +260,19 @@ check_options(Options) :-
     ->  must_be(text, Dir)
     ;   true
     ),
+    (   option(tls(TlsDir), Options)
+    ->  tls_check_dir(TlsDir)
+    ;   true
+    ),
+    (   option(tls_peers(Names), Options)
+    ->  must_be(list(atom), Names),
+        (   option(tls(_), Options)
+        ->  true
+        ;   throw(error(domain_error(tls_option, tls_peers(Names)),
+                        context(node_start/3, 'tls_peers(Names) needs tls(Dir)')))
+        )
+    ;   true
+    ),
     forall(( member(Name, [idle_timeout, auth_idle_timeout, commit_timeout,
                            settle_period, lease_s, reply_timeout,
                            connect_timeout]),
@@ -258,6 +287,8 @@ check_secrets(Host:Port, Tokens, Options) :-
     ;   aggregate_all(min(B), ( member(T, Tokens), token_entropy_bits(T, B) ), Bits)
     ),
     (   Bits >= 128
+    ->  true
+    ;   option(tls(_), Options)
     ->  true
     ;   loopback_host(Host)
     ->  (   Tokens == []
@@ -492,6 +523,8 @@ option_default(max_unauth_per_peer, 16).
 option_default(reply_timeout, 30).
 option_default(connect_timeout, 5).
 option_default(commit_timeout, 10).
+option_default(tls, none).
+option_default(tls_peers, any).
 
 %!  local_node(?Node) is nondet.
 %
@@ -725,7 +758,7 @@ dispatch(Node, Client, Peer) :-
     get_time(Now),
     with_mutex(dfrl_conns, admit(Node, CId, Key, Now, Verdict)),
     (   Verdict = refuse
-    ->  refuse_busy(Client)
+    ->  refuse_busy(Node, Client)
     ;   Verdict = evict(Victim)
     ->  evict(Node, Victim)
     ;   true
@@ -736,7 +769,7 @@ dispatch(Node, Client, Peer) :-
                        [max(10000)]),
               E, ( print_message(warning, E),
                    with_mutex(dfrl_conns, retractall(conn_entry(Node, CId, _, _, _))),
-                   refuse_busy(Client) ))
+                   refuse_busy(Node, Client) ))
     ->  true
     ;   true
     ).
@@ -832,7 +865,13 @@ stop_if_serving(Node) :-
     ;   true
     ).
 
-refuse_busy(Client) :-
+%   A TLS node cannot say it in plaintext: it closes the connection.
+refuse_busy(Node, Client) :-
+    node_option(Node, tls, Dir),
+    Dir \== none,
+    !,
+    catch(tcp_close_socket(Client), _, true).
+refuse_busy(_, Client) :-
     catch(setup_call_cleanup(
               tcp_open_socket(Client, Pair),
               ( stream_pair(Pair, _, Out),
@@ -896,10 +935,27 @@ connection_ended(_, _, error(existence_error(platform, _), _)) :- !.
 connection_ended(_, _, error(timeout_error(_, _), _)) :- !.
 connection_ended(_, _, error(io_error(_, _), _)) :- !.
 connection_ended(_, _, error(socket_error(_, _), _)) :- !.
+connection_ended(Node, Peer, error(tls_error(_, Reason), _)) :-
+    !,
+    debug(dfrl(node), '~w: TLS refused ~p: ~w', [Node, Peer, Reason]).
 connection_ended(Node, Peer, E) :-
     print_message(warning, dfrl(connection_error(Node, Peer, E))).
 
+%   A TLS node first runs the handshake, under the pre-authentication
+%   frame deadline; the encrypted pair is closed before the plain one.
+serve_pair(Node, Plain, Peer) :-
+    node_option(Node, tls, Dir),
+    Dir \== none,
+    !,
+    node_option(Node, frame_deadline, Deadline),
+    tls_accept(Dir, Plain, Pair, PeerName, [deadline(Deadline)]),
+    setup_call_cleanup(true,
+                       serve_stream(Node, Pair, Peer, PeerName),
+                       close(Pair, [force(true)])).
 serve_pair(Node, Pair, Peer) :-
+    serve_stream(Node, Pair, Peer, none).
+
+serve_stream(Node, Pair, Peer, PeerName) :-
     stream_pair(Pair, In, Out),
     set_stream(In, type(binary)),
     set_stream(Out, type(binary)),
@@ -912,7 +968,6 @@ serve_pair(Node, Pair, Peer) :-
     frame_write(Out, text,
                 hello(V, Nonce, node(Host, Port, [id(Id), idle(Idle),
                                                   auth_idle(AuthIdle)]))),
-    PeerName = none,
     Ctx = ctx(Node, Peer, Nonce, In, Out, _Authenticated, PeerName),
     serve_frames(Ctx).
 
@@ -1011,6 +1066,15 @@ handle(Request, Ctx, Reply, After) :-
                             context(Name/Arity,
                                     'this request needs a proved token'))),
         After = true
+    ;   restricted_to_tls_peers(Request),
+        \+ tls_peer_allowed(Ctx)
+    ->  ctx_node(Ctx, Node),
+        node_ident(Node, _, Here, _),
+        functor(Request, Name, Arity),
+        (   ctx_peer_name(Ctx, Peer) -> true ; Peer = none ),
+        Reply = error(error(permission_error(request, platform, Here),
+                            context(Name/Arity, not_in_tls_peers(Peer)))),
+        After = true
     ;   platform_request(Request, Ctx, Reply0, After0)
     ->  Reply = Reply0,
         After = After0
@@ -1047,6 +1111,23 @@ requires_authentication(custody_agents).
 requires_authentication(load_code(_, _)).
 requires_authentication(execute(_, _)).
 requires_authentication(commit(_)).
+
+%   Requests that send an agent or code: with tls_peers(Names), only
+%   from a peer whose certificate names one of Names.
+restricted_to_tls_peers(transfer(_, _, _, _, _)).
+restricted_to_tls_peers(transfer(_, _, _, _, _, _)).
+restricted_to_tls_peers(commit(_)).
+restricted_to_tls_peers(load_code(_, _)).
+restricted_to_tls_peers(execute(_, _)).
+
+tls_peer_allowed(Ctx) :-
+    ctx_node(Ctx, Node),
+    node_option(Node, tls_peers, Names),
+    (   Names == any
+    ->  true
+    ;   ctx_peer_name(Ctx, Name),
+        memberchk(Name, Names)
+    ).
 
 reply(Out, Reply) :-
     sanitize_reply(Reply, Safe),

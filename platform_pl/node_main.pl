@@ -2,7 +2,8 @@
 
         swipl platform_pl/node_main.pl [--host H] [--port P] [--token T]...
                                        [--advertise HOST[:PORT]] [--store DIR]
-                                       [--insecure]
+                                       [--insecure] [--tls DIR]
+                                       [--tls-peer NAME]...
                                        [--consult FILE]... [--interactive]
 
     Binds H:P (H may be 0.0.0.0: every interface), prints "dfrl node
@@ -13,7 +14,11 @@
     as integers, as Tartarus tokens are. Off loopback, a node with a token
     under 128 bits of entropy (or none) does not start unless --insecure
     is given (`dfrl secret` prints a strong token); on loopback such a
-    token is accepted with a warning. A malformed command line is
+    token is accepted with a warning. --tls DIR (a node's ca.crt,
+    node.crt, node.key from `dfrl certs node`) makes every connection
+    mutual TLS, and then any token is accepted anywhere; --tls-peer NAME
+    (repeatable) lets only peers whose certificate names NAME send agents
+    or code. A malformed command line is
     reported on stderr and exits with status 2; a node that cannot start
     (address taken, weak token) prints why and exits with status 1.
 
@@ -32,13 +37,18 @@ main(Argv) :-
     option_value(port, Options, 0, Port),
     findall(T, member(token(T), Options), Tokens),
     findall(F, member(consult(F), Options), Files),
-    findall(O, ( member(O0, [advertise(_), store(_)]),
+    findall(N, member(tls_peer(N), Options), Peers),
+    findall(O, ( member(O0, [advertise(_), store(_), tls(_)]),
                  last_option(Options, O0),
                  O = O0 ),
             Extra),
     (   memberchk(insecure, Options)
-    ->  Extra1 = [insecure(true)|Extra]
-    ;   Extra1 = Extra
+    ->  Extra0 = [insecure(true)|Extra]
+    ;   Extra0 = Extra
+    ),
+    (   Peers == []
+    ->  Extra1 = Extra0
+    ;   Extra1 = [tls_peers(Peers)|Extra0]
     ),
     (   Tokens == []
     ->  NodeOptions = [default(true)|Extra1]
@@ -46,7 +56,10 @@ main(Argv) :-
     ),
     catch(node_start(Host:Port, Node, NodeOptions), E,
           ( print_message(error, E), halt(1) )),
-    (   node:loopback_host(Host) -> warn_weak_tokens(Tokens) ; true ),
+    (   node:loopback_host(Host), \+ memberchk(tls(_), Options)
+    ->  warn_weak_tokens(Tokens)
+    ;   true
+    ),
     forall(member(F, Files), load_program(F)),
     node_property(Node, address(H:P)),
     format("dfrl node listening on ~w:~w~n", [H, P]),
@@ -69,6 +82,7 @@ usage(Why) :-
     format(user_error,
            "usage: swipl node_main.pl [--host H] [--port P] [--token T]... \c
             [--advertise HOST[:PORT]] [--store DIR] [--insecure] \c
+            [--tls DIR] [--tls-peer NAME]... \c
             [--consult FILE]... [--interactive]~n", []),
     halt(2).
 
@@ -97,6 +111,8 @@ flag_arg('--token', token, token).
 flag_arg('--consult', consult, atom).
 flag_arg('--advertise', advertise, address).
 flag_arg('--store', store, atom).
+flag_arg('--tls', tls, atom).
+flag_arg('--tls-peer', tls_peer, atom).
 
 typed_value(atom, _, V, V).
 typed_value(integer, Flag, V0, V) :-

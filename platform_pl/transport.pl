@@ -19,6 +19,7 @@
           ]).
 :- use_module(wire, [frame_write/3, frame_read/3, wire_version/1]).
 :- use_module(platform_errors, [transport_error/2]).
+:- use_module(tls, [tls_connect/5]).
 :- autoload(library(socket),
             [tcp_socket/1, tcp_setopt/2, tcp_connect/3, tcp_close_socket/1]).
 :- autoload(library(error), [must_be/2, domain_error/2]).
@@ -50,7 +51,8 @@ a peer replies is ever called.
 
 :- predicate_options(transport_open/3, 3,
                      [ connect_timeout(number),
-                       reply_timeout(number)
+                       reply_timeout(number),
+                       tls(any)
                      ]).
 
 %!  address_normalize(+Address, -HostPort) is det.
@@ -101,8 +103,13 @@ address_link(Host:Port, (Host,Port)).
 %
 %   Connect to the platform at Address and read its hello. Options:
 %
-%     - connect_timeout(+Seconds)   default 5
+%     - connect_timeout(+Seconds)   default 5 (the TLS handshake
+%                                   has as long again)
 %     - reply_timeout(+Seconds)     default 30
+%     - tls(+Dir)                   speak TLS with the certificate in
+%                                   Dir (see tls.pl), or tls(none) for
+%                                   plaintext. Default: as the calling
+%                                   thread's node (its tls(Dir) option)
 %
 %   @error transport_error(Address, Reason)
 
@@ -110,13 +117,31 @@ transport_open(Address0, Conn, Options) :-
     address_normalize(Address0, Address),
     option(connect_timeout(CT), Options, 5),
     option(reply_timeout(RT), Options, 30),
-    connect(Address, CT, Pair),
+    own_tls(Options, Tls),
+    connect(Address, CT, Plain),
+    (   Tls == none
+    ->  Pair = Plain
+    ;   catch(tls_connect(Tls, Address, Plain, Pair, [timeout(CT)]),
+              E0, (close(Plain, [force(true)]), throw(E0))),
+        with_mutex(dfrl_transport_pool, assertz(conn_tls(Pair, Tls)))
+    ),
     Conn = conn(Address, Pair, Nonce, Info, RT),
     catch(setup_stream(Pair, RT),
           E, (close(Pair, [force(true)]), throw(E))),
     catch(receive_hello(Conn, Nonce, Info),
           E2, (close(Pair, [force(true)]), throw(E2))),
     remember_peer(Conn).
+
+%   The TLS directory of a connection: the option, else the one of the
+%   calling thread's node, else none.
+own_tls(Options, Tls) :-
+    (   option(tls(T), Options)
+    ->  Tls = T
+    ;   catch(node:current_node(Node), _, fail),
+        node:node_property(Node, option(tls(T)))
+    ->  Tls = T
+    ;   Tls = none
+    ).
 
 connect(Address, Timeout, Pair) :-
     catch(call_with_time_limit(Timeout,
@@ -265,6 +290,7 @@ known_id(Address, Since, Now, Id) :-
     pooled/5,                   % Address, Key, Conn, Used, Checked
     pinging/4,                  % Address, Key, Conn, Until: out for a ping
     conn_key/2,                 % Pair, Key
+    conn_tls/2,                 % Pair, Dir: a TLS connection
     janitor_running/0.
 
 %!  transport_acquire(+Address, +Tokens, -Conn, +Options) is det.
@@ -288,7 +314,8 @@ transport_acquire(Address0, Tokens, Conn, Options) :-
 
 acquire(Address0, Key, Conn, Options) :-
     address_normalize(Address0, Address),
-    (   take_pooled_wait(Address, Key, Conn1, Had)
+    own_tls(Options, Tls),
+    (   take_pooled_wait(Address, Key, Tls, Conn1, Had)
     ->  reply_timeout(Conn1, Options, Conn0),
         (   Had == Key
         ->  Conn = Conn0
@@ -323,10 +350,10 @@ authenticate(Conn, Key, Options) :-
 
 %   A connection out for a keepalive ping is back within one round trip
 %   (at most 5 s): wait for it rather than open a new one.
-take_pooled_wait(Address, Key, Conn, Had) :-
+take_pooled_wait(Address, Key, Tls, Conn, Had) :-
     get_time(Now),
     with_mutex(dfrl_transport_pool,
-               (   take_pooled(Address, Key, Now, Conn0, Had0)
+               (   take_pooled(Address, Key, Tls, Now, Conn0, Had0)
                ->  Result = taken(Conn0, Had0)
                ;   pinging(Address, _, _, Until), Now < Until
                ->  Result = wait
@@ -336,20 +363,33 @@ take_pooled_wait(Address, Key, Conn, Had) :-
     ->  true
     ;   Result == wait
     ->  sleep(0.002),
-        take_pooled_wait(Address, Key, Conn, Had)
+        take_pooled_wait(Address, Key, Tls, Conn, Had)
     ).
 
 %   Prefer a connection with exactly the tokens asked for; a request that
 %   needs no tokens takes any; one that needs tokens may upgrade an
-%   unauthenticated one.
-take_pooled(Address, Key, Now, Conn, Had) :-
+%   unauthenticated one. Only a connection of the same TLS identity
+%   (or plaintext like the caller) is taken.
+take_pooled(Address, Key, Tls, Now, Conn, Had) :-
     sweep_all(Now),
-    (   retract(pooled(Address, Key, Conn, _, _))
+    (   take_entry(Address, Key, Tls, Conn)
     ->  Had = Key
     ;   Key == none
-    ->  retract(pooled(Address, Had, Conn, _, _))
-    ;   retract(pooled(Address, none, Conn, _, _))
+    ->  take_entry(Address, Had, Tls, Conn)
+    ;   take_entry(Address, none, Tls, Conn)
     ->  Had = none
+    ).
+
+take_entry(Address, Key, Tls, Conn) :-
+    pooled(Address, Key, Conn, U, C),
+    conn_tls_is(Conn, Tls),
+    !,
+    retract(pooled(Address, Key, Conn, U, C)).
+
+conn_tls_is(conn(_, Pair, _, _, _), Tls) :-
+    (   conn_tls(Pair, T)
+    ->  T == Tls
+    ;   Tls == none
     ).
 
 usable(Key, Conn, Checked, Now) :-
@@ -534,6 +574,7 @@ keepalive_ping(Conn) :-
 
 transport_close(conn(_, Pair, _, _, _)) :-
     retractall(conn_key(Pair, _)),
+    retractall(conn_tls(Pair, _)),
     close(Pair, [force(true)]).
 
 %!  transport_auth(+Conn, +Tokens, +Action) is det.

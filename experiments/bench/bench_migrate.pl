@@ -1,13 +1,15 @@
 /*  Migration benchmark agent: run by experiments/bench/migrate.py.
 
-    swipl bench_migrate.pl peer TOKEN
+    swipl bench_migrate.pl peer TOKEN [TLS_DIR]
         start a platform on an OS-chosen port, print "PORT <p>", serve until
         standard input closes.
-    swipl bench_migrate.pl home TOKEN PEER_PORT FLOATS HOPS
+    swipl bench_migrate.pl home TOKEN PEER_PORT FLOATS HOPS [TLS_DIR]
         start a platform, create an agent whose payload is a list of FLOATS
         floats, bounce it HOPS times between home and peer, print one line
         "LATENCIES_MS [..]" (one figure per hop, from the call of move_agent
         at the source to the start of the handler at the destination).
+    With TLS_DIR (a node's ca.crt, node.crt, node.key), both platforms
+    speak mutual TLS (node option tls(Dir)).
 */
 :- use_module('../../platform_pl/tartarus').
 :- use_module(library(main)).
@@ -16,18 +18,20 @@
 
 :- initialization(main, main).
 
-main(['peer', Token0]) :-
+main(['peer', Token0|Tls]) :-
     atom_number(Token0, Token),
-    node_start(localhost:0, Node, [token(Token)]),
+    tls_options(Tls, TlsOptions),
+    node_start(localhost:0, Node, [token(Token)|TlsOptions]),
     node_property(Node, address(_:Port)),
     format("PORT ~w~n", [Port]),
     flush_output,
     read_term(user_input, _, []),   % until stdin closes
     node_stop(Node).
-main(['home', Token0, Peer0, Floats0, Hops0]) :-
+main(['home', Token0, Peer0, Floats0, Hops0|Tls]) :-
     maplist(atom_number, [Token0, Peer0, Floats0, Hops0],
             [Token, Peer, Floats, Hops]),
-    node_start(localhost:0, Node, [token(Token)]),
+    tls_options(Tls, TlsOptions),
+    node_start(localhost:0, Node, [token(Token)|TlsOptions]),
     node_property(Node, address(_:Home)),
     findall(F, ( between(1, Floats, I), F is I * 0.001 + 0.5 ), Data),
     assertz(data(guid, Data)),
@@ -39,6 +43,9 @@ main(['home', Token0, Peer0, Floats0, Hops0]) :-
     thread_get_message(user:bench_result(Lat)),
     format("LATENCIES_MS ~w~n", [Lat]),
     node_stop(Node).
+
+tls_options([], []).
+tls_options([Dir], [tls(Dir)]).
 
 bench(guid, (_, Port), main) :-
     get_time(Now),

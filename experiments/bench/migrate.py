@@ -45,8 +45,11 @@ def percentile(values: list[float], q: float) -> float:
 
 
 def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
-        timeout: float = 600) -> MigrationResult:
+        timeout: float = 600, tls: str | Path | None = None) -> MigrationResult:
     """Measure ``hops`` hops (after ``warmup`` uncounted ones) with a payload of ``floats`` floats.
+
+    With ``tls`` (a node's TLS folder: ``ca.crt``, ``node.crt``, ``node.key``, from ``dfrl certs
+    node``), both platforms speak mutual TLS with that certificate.
 
     Raises
     ------
@@ -59,10 +62,17 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
     """
     if floats < 0 or hops < 1 or warmup < 0:
         raise ValueError("floats >= 0, hops >= 1 and warmup >= 0 are required")
+    tls_args: list[str] = []
+    if tls is not None:
+        from dfrl.experiments.certs import CertError, check_node_dir
+        try:
+            tls_args = [str(check_node_dir(tls).resolve())]
+        except CertError as exc:
+            raise ValueError(str(exc)) from exc
     swipl = shutil.which("swipl")
     if swipl is None:
         raise FileNotFoundError("swipl is not installed (run scripts/setup.sh)")
-    peer = subprocess.Popen([swipl, "-q", str(SCRIPT), "peer", str(token)],
+    peer = subprocess.Popen([swipl, "-q", str(SCRIPT), "peer", str(token), *tls_args],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
         assert peer.stdout is not None
@@ -71,7 +81,8 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
             raise RuntimeError(f"peer did not start: {line!r}")
         port = int(line.split()[1])
         home = subprocess.run(
-            [swipl, "-q", str(SCRIPT), "home", str(token), str(port), str(floats), str(hops + warmup)],
+            [swipl, "-q", str(SCRIPT), "home", str(token), str(port), str(floats),
+             str(hops + warmup), *tls_args],
             capture_output=True, text=True, timeout=timeout,
         )
     finally:
@@ -92,3 +103,43 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         min_ms=min(ms), max_ms=max(ms), mean_ms=statistics.fmean(ms),
         payload_bytes=10 * floats + 1,
     )
+
+
+@dataclass
+class TlsComparison:
+    """Plaintext and TLS hops with the same payload, measured alternately (medians in ms)."""
+
+    floats: int
+    plain: MigrationResult
+    tls: MigrationResult
+    tls_cost: float
+    """``tls.median_ms / plain.median_ms - 1`` (0.2 means TLS costs 20% more per hop)."""
+
+
+def compare_tls(floats: int, hops: int, tls: str | Path, warmup: int = 2,
+                rounds: int = 1) -> TlsComparison:
+    """Measure plaintext and TLS hops beside each other, ``rounds`` times each, alternating
+    (so a load change on the machine hits both); the figures pool every round's hops."""
+    if rounds < 1:
+        raise ValueError("rounds >= 1 is required")
+    plain: list[MigrationResult] = []
+    secure: list[MigrationResult] = []
+    for _ in range(rounds):
+        plain.append(run(floats, hops, warmup))
+        secure.append(run(floats, hops, warmup, tls=tls))
+    p, t = _pool(plain), _pool(secure)
+    return TlsComparison(floats=floats, plain=p, tls=t, tls_cost=t.median_ms / p.median_ms - 1)
+
+
+def _pool(results: list[MigrationResult]) -> MigrationResult:
+    if len(results) == 1:
+        return results[0]
+    # medians of medians: each round's hops are one sample of the same distribution
+    meds = [r.median_ms for r in results]
+    r0 = results[0]
+    return MigrationResult(
+        floats=r0.floats, hops=sum(r.hops for r in results), warmup=r0.warmup,
+        median_ms=statistics.median(meds), p10_ms=statistics.median(r.p10_ms for r in results),
+        p90_ms=statistics.median(r.p90_ms for r in results),
+        min_ms=min(r.min_ms for r in results), max_ms=max(r.max_ms for r in results),
+        mean_ms=statistics.fmean(r.mean_ms for r in results), payload_bytes=r0.payload_bytes)

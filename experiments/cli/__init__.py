@@ -17,7 +17,7 @@ from dfrl import __version__
 
 #: Modules (of this package) that add subcommands, in the order of ``dfrl --help``.
 COMMAND_MODULES = ("node", "federated", "bench", "robots", "transfer", "studies", "robot", "view",
-                   "secret")
+                   "secret", "certs")
 
 
 def build_parser(only: Sequence[str] | None = None) -> argparse.ArgumentParser:

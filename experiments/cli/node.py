@@ -18,6 +18,8 @@ def node_command(
     advertise: str | None = None,
     store: str | None = None,
     insecure: bool = False,
+    tls: str | None = None,
+    tls_peers: list[str] | None = None,
 ) -> list[str]:
     """The ``swipl`` command line that runs one node.
 
@@ -38,6 +40,12 @@ def node_command(
         Folder where the node keeps its identity and custody records across restarts.
     insecure
         Accept a weak token (or none) on an address other than loopback.
+    tls
+        A node's TLS folder (``ca.crt``, ``node.crt``, ``node.key``; ``dfrl certs node``):
+        every connection is mutual TLS; any token is then accepted off loopback.
+    tls_peers
+        With ``tls``: the certificate names that may send agents or code (default: any the
+        CA signed).
     """
     if not 0 <= port <= 65535:
         raise ValueError(f"port {port} is outside 0..65535")
@@ -55,6 +63,16 @@ def node_command(
         cmd += ["--store", os.path.abspath(store)]
     if insecure:
         cmd.append("--insecure")
+    if tls_peers and not tls:
+        raise ValueError("--tls-peer needs --tls")
+    if tls:
+        from dfrl.experiments.certs import CertError, check_node_dir
+        try:
+            cmd += ["--tls", str(check_node_dir(tls).resolve())]
+        except CertError as exc:
+            raise ValueError(str(exc)) from exc
+    for name in tls_peers or []:
+        cmd += ["--tls-peer", name]
     if interactive:
         cmd.append("--interactive")
     return cmd
@@ -63,7 +81,8 @@ def node_command(
 def _run(args: argparse.Namespace) -> int:
     try:
         cmd = node_command(args.host, args.port, args.token, args.consult, args.interactive,
-                           args.advertise, args.store, args.insecure)
+                           args.advertise, args.store, args.insecure, args.tls,
+                           args.tls_peer)
     except (ValueError, FileNotFoundError) as exc:
         print(f"dfrl node: {exc}", file=sys.stderr)
         return 2
@@ -86,5 +105,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--insecure", action="store_true",
                    help="accept a weak token (or none) on an address other than loopback "
                         "(default: refused)")
+    p.add_argument("--tls", default=None, metavar="DIR",
+                   help="mutual TLS with the node certificate in DIR (ca.crt, node.crt, "
+                        "node.key from 'dfrl certs node'); default: plaintext")
+    p.add_argument("--tls-peer", action="append", default=[], metavar="NAME",
+                   help="with --tls: a certificate name that may send agents or code "
+                        "(repeatable; default: any name the CA signed)")
     p.add_argument("--interactive", action="store_true", help="open a Prolog toplevel on the node")
     p.set_defaults(func=_run)

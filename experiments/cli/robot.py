@@ -9,13 +9,19 @@ from dfrl.pybridge.errors import BridgeError
 
 
 def _run(args: argparse.Namespace) -> int:
+    from dfrl.experiments.certs import CertError, check_node_dir
     from dfrl.experiments.robot_node.service import RobotService, parse_token
 
     if not 0 <= args.port <= 65535:
         print(f"dfrl robot: port {args.port} is outside 0..65535", file=sys.stderr)
         return 2
+    try:
+        tls = check_node_dir(args.tls) if args.tls else None
+    except CertError as exc:
+        print(f"dfrl robot: --tls: {exc}", file=sys.stderr)
+        return 2
     service = RobotService(args.host, args.port, parse_token(args.token), args.advertise,
-                           Path(args.workdir), insecure=args.insecure)
+                           Path(args.workdir), insecure=args.insecure, tls=tls)
     service.install_signals()
     try:
         service.start()
@@ -50,4 +56,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--insecure", action="store_true",
                    help="accept a token under 128 bits on an address other than loopback "
                         "(default: refused; see dfrl secret)")
+    p.add_argument("--tls", default=None, metavar="DIR",
+                   help="mutual TLS with the node certificate in DIR (ca.crt, node.crt, "
+                        "node.key from 'dfrl certs node'); any token is then accepted off "
+                        "loopback (default: plaintext)")
     p.set_defaults(func=_run)

@@ -81,13 +81,18 @@ class RobotService:
         Experiments' files go to ``workdir/<experiment id>/``.
     out : TextIO
         Where the listening line and state notices are printed.
+    insecure : bool
+        Accept a weak token off loopback without TLS.
+    tls : Path, optional
+        A node TLS folder (``dfrl certs node``): every connection is mutual TLS.
     """
 
     def __init__(self, host: str, port: int, token: int | str, advertise: str | None = None,
                  workdir: Path = Path("dfrl-robot"), out: TextIO = sys.stdout,
-                 insecure: bool = False) -> None:
+                 insecure: bool = False, tls: Path | None = None) -> None:
         self.bind = (host, int(port))
         self.insecure = insecure
+        self.tls = Path(tls).resolve() if tls is not None else None
         self.token = token
         self.advertise = advertise
         self.workdir = Path(workdir).resolve()
@@ -117,6 +122,8 @@ class RobotService:
         options: dict[str, Any] = {"token": self.token, "idle_timeout": 30.0}
         if self.insecure:
             options["insecure"] = True
+        if self.tls is not None:
+            options["tls"] = str(self.tls)
         if adv and port:
             options["advertise"] = Term(":", Atom(adv), port)
         self.node_name = self.node.start(host, port, **options)
