@@ -1,6 +1,7 @@
 :- module(tartarus,
           [ start_tartarus/2,           % +Ip, +Port
             start_tartarus/3,           % +Ip, +Port, +Token
+            start_tartarus/4,           % +Ip, +Port, +Token, +Options
             close_tartarus/0,
             reset_tartarus/0,
             set_token/1,                % +Token
@@ -101,6 +102,23 @@ start_tartarus(Ip, Port) :-
 start_tartarus(Ip, Port, Token) :-
     must_be(ground, Token),
     node_start(Ip:Port, _, [token(Token), default(true)]).
+
+%!  start_tartarus(+Ip, +Port, +Token, +Options) is det.
+%
+%   As start_tartarus/3, with further options of node_start/3. For a
+%   platform that speaks mutual TLS with its peers: tls(Dir), where Dir
+%   holds ca.crt, node.crt and node.key (`dfrl certs node NAME CA_DIR
+%   --out Dir`), and optionally tls_peers(Names), the certificate names
+%   that may send it agents or code:
+%
+%   ```
+%   ?- start_tartarus(localhost, 5000, 1111, [tls('certs/alpha')]).
+%   ```
+
+start_tartarus(Ip, Port, Token, Options) :-
+    must_be(ground, Token),
+    must_be(list, Options),
+    node_start(Ip:Port, _, [token(Token), default(true)|Options]).
 
 %!  close_tartarus is det.
 %

@@ -19,9 +19,17 @@ def add_migrate_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--hops", type=int, default=50, help="timed hops per size")
     parser.add_argument("--warmup", type=int, default=2, help="untimed hops first")
     parser.add_argument("--json", action="store_true", help="print one JSON object per size")
+    parser.add_argument("--tls", default=None, metavar="DIR",
+                        help="also measure over mutual TLS with the node certificate in DIR "
+                             "(ca.crt, node.crt, node.key), beside plaintext (default: "
+                             "plaintext only)")
+    parser.add_argument("--rounds", type=int, default=3,
+                        help="with --tls: alternating plaintext/TLS runs per size (default 3)")
 
 
 def cmd_migrate(args: argparse.Namespace) -> int:
+    if args.tls:
+        return _migrate_tls(args)
     for n in args.floats:
         try:
             result = migrate.run(n, args.hops, args.warmup)
@@ -34,6 +42,23 @@ def cmd_migrate(args: argparse.Namespace) -> int:
             print(f"floats={n:>7}  median {result.median_ms:8.3f} ms  p10 {result.p10_ms:8.3f}  "
                   f"p90 {result.p90_ms:8.3f}  min {result.min_ms:8.3f}  max {result.max_ms:8.3f}  "
                   f"(hops={result.hops})")
+        sys.stdout.flush()
+    return 0
+
+
+def _migrate_tls(args: argparse.Namespace) -> int:
+    for n in args.floats:
+        try:
+            cmp = migrate.compare_tls(n, args.hops, args.tls, args.warmup, args.rounds)
+        except (ValueError, RuntimeError, FileNotFoundError) as exc:
+            print(f"dfrl bench migrate: {exc}", file=sys.stderr)
+            return 2 if isinstance(exc, ValueError) else 1
+        if args.json:
+            print(json.dumps(asdict(cmp)))
+        else:
+            print(f"floats={n:>7}  plaintext median {cmp.plain.median_ms:8.3f} ms  "
+                  f"TLS median {cmp.tls.median_ms:8.3f} ms  TLS cost {cmp.tls_cost:+.1%}  "
+                  f"(hops={cmp.tls.hops} each)")
         sys.stdout.flush()
     return 0
 
