@@ -184,6 +184,11 @@ class EPuckEnv(gym.Env):
         self._distances = np.full(self.robot.n_sensors, rc.sensor_range)
         self.sim_steps = 0
 
+    @property
+    def pose(self) -> tuple[float, float, float]:
+        """The robot's pose after the last ``reset``/``step``: x, y (m) and yaw (rad)."""
+        return self._pose
+
     # -- Gymnasium API ---------------------------------------------------------------------
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None

@@ -236,6 +236,11 @@ class Trainer:
         return self.config.actions.names
 
     @property
+    def pose(self) -> tuple[float, float, float]:
+        """The robot's current pose: x, y (m), yaw (rad) (what the live view draws)."""
+        return self.env.pose
+
+    @property
     def sim_time(self) -> float:
         """Simulated seconds so far."""
         return self.iteration * self.config.sim.control_dt

@@ -20,6 +20,7 @@ import dfrl
 from dfrl.experiments.config import NodeConfig, RobotSpec
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.results.files import write_json
+from dfrl.experiments.robot_node.lines import Sample, parse_sample
 
 #: Called with (robot id, op ``get``/``set``, iteration) for every ``DFRL_EVENT`` line.
 EventHandler = Callable[[str, str, int], None]
@@ -64,6 +65,7 @@ class RobotChild:
         self.iteration = 0
         self.done = False
         self.shares = 0
+        self.sample: Sample | None = None
         self.ready = threading.Event()
         self._on_event = on_event
         self._reader = threading.Thread(target=self._read, name=f"read-{robot.id}", daemon=True)
@@ -84,6 +86,8 @@ class RobotChild:
             elif tag == "DFRL_EVENT" and len(parts) == 4:
                 if self._on_event is not None:
                     self._on_event(self.robot.id, parts[2], int(parts[3]))
+            elif tag == "DFRL_SAMPLE":
+                self.sample = parse_sample(line)       # for the live view (state.py)
             elif tag == "DFRL_DONE" and len(parts) == 4:
                 self.iteration = int(parts[2])
                 self.shares = int(parts[3])

@@ -57,6 +57,7 @@ def monitor(state: RunState) -> None:
         time.sleep(0.1)
         poll_logs(state)
         state.check_children()
+        state.view_samples()
         handle_joins(state)
         now = time.monotonic()
         if state.progress is not None and now - state.last_status > STATUS_PERIOD_S:

@@ -27,6 +27,7 @@ from typing import Any
 from dfrl.experiments.config import ExperimentConfig, NodeConfig, RobotSpec
 from dfrl.experiments.control import ConsoleNode
 from dfrl.experiments.errors import ExperimentError
+from dfrl.experiments.robot_node.lines import Sample, parse_sample
 
 #: Seconds without a status answer after which a remote robot counts as lost.
 LOST_AFTER_S = 10.0
@@ -141,6 +142,10 @@ class RemoteRobot:
         self.stopped = False
         self._down_since = 0.0
         self.err_path: Path | None = None
+        self.sample: Sample | None = None            # the newest DFRL_SAMPLE it wrote
+        self.sample_error: str | None = None         # why the last read of them failed
+        self._lines_at = 0                           # bytes of its lines file read
+        self._lines_rest = b""
 
     # -- the members a RobotChild has -------------------------------------------------------
     @property
@@ -258,6 +263,29 @@ class RemoteRobot:
         if isinstance(status, dict) and status.get("experiment") in (self.experiment, None):
             self._update(status)
 
+    def poll_samples(self) -> None:
+        """Read what the service's copy of our protocol lines (``logs/<robot>.out``, one of
+        the result files) gained since the last read, and keep the newest ``DFRL_SAMPLE``
+        (the live view's pose and curves). A failure is remembered in ``sample_error``."""
+        try:
+            chunk = self._ask({"fetch": {"name": f"logs/{self.robot.id}.out",
+                                         "offset": self._lines_at, "max": FETCH_CHUNK}},
+                              timeout_s=5.0)
+            data = base64.b64decode(chunk["data"])
+        except (ExperimentError, KeyError, TypeError, ValueError) as exc:
+            self.sample_error = f"{type(exc).__name__}: {exc}"
+            return
+        self.sample_error = None
+        self._lines_at += len(data)
+        data = self._lines_rest + data
+        cut = data.rfind(b"\n") + 1
+        self._lines_rest = data[cut:]
+        for line in reversed(data[:cut].decode("utf-8", errors="replace").splitlines()):
+            sample = parse_sample(line)
+            if sample is not None:
+                self.sample = sample
+                break
+
     def take_outages(self) -> list[tuple[float, float, str]]:
         """The outages (from, to, why) that ended since the last call."""
         with self._lock:
@@ -303,7 +331,8 @@ class RemoteRobot:
 
 
 class StatusPoller:
-    """One thread polling every remote robot's status every :data:`POLL_S` until stopped."""
+    """One thread polling every remote robot's status (and its newest samples, see
+    :meth:`RemoteRobot.poll_samples`) every :data:`POLL_S` until stopped."""
 
     def __init__(self, robots: list[RemoteRobot]) -> None:
         self._robots = robots
@@ -319,6 +348,8 @@ class StatusPoller:
             for robot in list(self._robots):
                 if not robot.stopped and not self._stop.is_set():
                     robot.poll()
+                    if robot.state in ("running", "finished") and robot.unreachable is None:
+                        robot.poll_samples()
 
     def close(self) -> None:
         self._stop.set()

@@ -66,6 +66,7 @@ class RunState:
     interrupted: str | None = None
     from_checkpoint: list[str] = field(default_factory=list)  # tables kept from checkpoints
     printed_rounds: dict[str, int] = field(default_factory=dict)
+    sampled: dict[str, Any] = field(default_factory=dict)   # robot -> last sample in the view
     last_status: float = 0.0
     t0: float = field(default_factory=time.monotonic)
     lock: threading.Lock = field(default_factory=threading.Lock)
@@ -97,6 +98,29 @@ class RunState:
             append_event(self.out, event)
         except (OSError, ValueError) as exc:
             self.say(f"could not write events.jsonl: {exc}")
+
+    def view_samples(self) -> None:
+        """Each robot's newest ``DFRL_SAMPLE`` not written yet, as a ``pose`` event; for a
+        remote robot (its files arrive at the end) also as a ``progress`` event (iteration,
+        sum of Q-values, cumulative reward, shares), so that the view's curves follow it."""
+        for rid, ch in self.children.items():
+            sample = ch.sample
+            if sample is None or self.sampled.get(rid) == sample:
+                continue
+            self.sampled[rid] = sample
+            self._view_event({"kind": "pose", "robot": rid, "iteration": sample.iteration,
+                              "x": sample.x, "y": sample.y, "yaw": sample.yaw})
+            if isinstance(ch, RemoteRobot):
+                self._view_event({"kind": "progress", "robot": rid,
+                                  "iteration": sample.iteration, "q_sum": sample.q_sum,
+                                  "cumulative_reward": sample.cumulative_reward,
+                                  "shares": ch.shares})
+        for rid, ch in self.children.items():
+            why = ch.sample_error if isinstance(ch, RemoteRobot) else None
+            if why is not None and self.sampled.get(f"{rid}!") != why:
+                self.sampled[f"{rid}!"] = why
+                self._view_event({"kind": "error",
+                                  "text": f"no live samples from {rid}: {why[:200]}"})
 
     def remote(self) -> list[RemoteRobot]:
         return [ch for ch in self.children.values() if isinstance(ch, RemoteRobot)]

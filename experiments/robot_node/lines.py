@@ -1,11 +1,37 @@
 """The robot node's stdout protocol lines and its stdin watch (the launcher's two channels)."""
 from __future__ import annotations
 
+import math
 import os
 import select
-from typing import TextIO
+from typing import NamedTuple, TextIO
 
-__all__ = ["ProtocolLines", "StdinWatch"]
+__all__ = ["ProtocolLines", "Sample", "StdinWatch", "parse_sample"]
+
+
+class Sample(NamedTuple):
+    """A ``DFRL_SAMPLE`` line, parsed."""
+
+    robot: str
+    iteration: int
+    x: float
+    y: float
+    yaw: float
+    q_sum: float
+    cumulative_reward: float
+
+
+def parse_sample(line: str) -> Sample | None:
+    """The sample a ``DFRL_SAMPLE`` line carries (None: not such a line, or malformed)."""
+    parts = line.split()
+    if len(parts) != 8 or parts[0] != "DFRL_SAMPLE":
+        return None
+    try:
+        values = [float(v) for v in parts[3:]]
+        sample = Sample(parts[1], int(parts[2]), *values)
+    except ValueError:
+        return None
+    return sample if all(math.isfinite(v) for v in values) else None
 
 
 class ProtocolLines:
@@ -41,6 +67,16 @@ class ProtocolLines:
         """``DFRL_EVENT <robot> get|set <iteration>`` (if events are on)."""
         if self.events:
             self.say(f"DFRL_EVENT {self.robot} {what} {iteration}")
+
+    def sample(self, iteration: int, pose: tuple[float, float, float], q_sum: float,
+               cumulative_reward: float) -> None:
+        """``DFRL_SAMPLE <robot> <iteration> <x> <y> <yaw> <q_sum> <cumulative_reward>``:
+        where the robot is and how its curves stand, for the live view (if events are on;
+        the run writes one now and then, see :data:`~.run.SAMPLE_S`)."""
+        if self.events:
+            x, y, yaw = (float(v) for v in pose)
+            self.say(f"DFRL_SAMPLE {self.robot} {iteration} {x:.4f} {y:.4f} {yaw:.4f} "
+                     f"{float(q_sum)!r} {float(cumulative_reward)!r}")
 
     def done(self, iterations: int, shares: int) -> None:
         """``DFRL_DONE <robot> <iterations> <shares>``."""

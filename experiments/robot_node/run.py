@@ -29,7 +29,10 @@ from dfrl.experiments.robot_node.files import METRIC_FIELDS, SHARE_FIELDS, CsvLo
 from dfrl.experiments.robot_node.lines import ProtocolLines
 from dfrl.experiments.robot_node.table import NodeTable
 
-__all__ = ["Run", "RunHost", "SleepHost"]
+__all__ = ["Run", "RunHost", "SleepHost", "SAMPLE_S"]
+
+#: Wall seconds between two ``DFRL_SAMPLE`` lines at least (written with progress lines).
+SAMPLE_S = 0.5
 
 
 class RunHost(Protocol):
@@ -102,6 +105,7 @@ class Run:
         self._metrics: CsvLog | None = None
         self._shares: CsvLog | None = None
         self._registered = False
+        self._sampled_at = -SAMPLE_S
 
     # -- state ---------------------------------------------------------------------------------
     @property
@@ -193,6 +197,8 @@ class Run:
         self._metrics.row((c.robot, it, repr(m.q_sum), repr(m.cumulative_reward), m.collisions))
         if c.progress_every and it % c.progress_every == 0:
             self.lines.progress(it)
+            if time.monotonic() - self._sampled_at >= SAMPLE_S:
+                self.sample(m.q_sum, m.cumulative_reward)
         if it in self._stops:
             self._metrics.flush()
             if not self._wait_for_share():
@@ -213,6 +219,16 @@ class Run:
             else:
                 self._next_tick = time.perf_counter()
         return True
+
+    def sample(self, q_sum: float | None = None, cumulative_reward: float | None = None) -> None:
+        """Write a ``DFRL_SAMPLE`` line now: the pose, the sum of Q-values and the
+        cumulative reward at this iteration."""
+        if self.trainer is None:
+            return
+        self._sampled_at = time.monotonic()
+        q = float(self.trainer.q_table.sum()) if q_sum is None else q_sum
+        cr = self.trainer.cumulative_reward if cumulative_reward is None else cumulative_reward
+        self.lines.sample(self.iteration, self.trainer.pose, q, cr)
 
     def _pause(self, seconds: float) -> None:
         until = time.perf_counter() + seconds
@@ -279,6 +295,7 @@ class Run:
         self.save_tables()
         self.table.on_share = self.save_tables     # a late share updates the saved tables
         self.lines.progress(self.iteration)
+        self.sample()
 
     def save_tables(self) -> None:
         """Save the table files and the checkpoint (also after a share that came late)."""

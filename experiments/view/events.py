@@ -6,7 +6,16 @@ view (:mod:`dfrl.experiments.view.source`)::
     {"t": 1796149725.77, "kind": "hop", "agent": "fed_qlearning", "robot": "r2",
      "phase": "forward" | "backward", "round": 3}
     {"t": ..., "kind": "robot_state", "robot": "r3", "state": "dead", "reason": "exit code -9"}
-    {"t": ..., "kind": "pose", "robot": "r1", "x": 0.12, "y": -0.3, "yaw": 1.57}
+    {"t": ..., "kind": "pose", "robot": "r1", "iteration": 500, "x": 0.12, "y": -0.3,
+     "yaw": 1.57}
+    {"t": ..., "kind": "progress", "robot": "r4", "iteration": 500, "q_sum": 61.2,
+     "cumulative_reward": 180.5, "shares": 1}
+
+Poses come from the robots' ``DFRL_SAMPLE`` lines (at most one every
+:data:`~dfrl.experiments.robot_node.run.SAMPLE_S`, with a progress line); a robot on a
+``dfrl robot`` service sends the same lines into its ``logs/<robot>.out``, which the launcher
+fetches as it grows, and its samples also become ``progress`` events (its metrics file comes
+only at the end).
 
 ``t`` is the writer's wall clock (:func:`time.time`), filled in when the event has none. Any
 other ``kind`` is shown in the view's event list as it is.

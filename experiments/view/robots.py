@@ -57,6 +57,7 @@ class RobotTrack:
     target: int
     stride: int = 1
     pid: int | None = None
+    respite: int = 0
     local: bool = False
     born: float = 0.0                        # when the view learnt of it (nodes.json)
     metrics: CsvTail = field(init=False)
@@ -143,6 +144,14 @@ class RobotTrack:
             out.append({"t": max(self.born, t if t is not None else mtime), "kind": "metrics",
                         "robot": self.robot, "points": pts})
         return out
+
+    def progressed(self, ev: dict[str, Any], now: float) -> None:
+        """A ``progress`` event (a remote robot's status): its iteration and shares."""
+        it, shares = _num(str(ev.get("iteration"))), _num(str(ev.get("shares")))
+        if it is not None and int(it) > self.iteration:
+            self.iteration, self.grew_at = int(it), now
+        if shares is not None and self.respite > 0 and shares > 0:
+            self.shared_at = max(self.shared_at, min(int(shares) * self.respite, self.target))
 
     def alive(self) -> bool | None:
         """Whether its local process exists (None: not known)."""

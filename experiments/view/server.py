@@ -6,8 +6,9 @@ Routes (``GET`` only):
 ``/``                        the page (``static/index.html``)
 ``/static/<name>``           its script and style sheet (package data, nothing from outside)
 ``/events``                  server-sent events: every event from the first (or from
-                             ``Last-Event-ID`` + 1, or ``?from=N``), then each new one;
-                             ``data:`` is a JSON array of events, ``id:`` the last ``seq``
+                             ``Last-Event-ID`` + 1, or ``?from=N``), then the new ones in
+                             messages :data:`SEND_S` apart at least; ``data:`` is a JSON
+                             array of events, ``id:`` the last ``seq``
 ``/events.json?from=N``      the same events as one JSON array (tests, scripts)
 ============================ ===========================================================
 
@@ -36,6 +37,9 @@ _TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=
 BATCH = 2000
 #: Seconds between two keep-alive comments on an idle event stream.
 HEARTBEAT_S = 10.0
+#: Seconds between two messages of one event stream at least: what comes in between goes
+#: in the next message (a page redraws once per message at most, so fewer is cheaper).
+SEND_S = 0.25
 
 
 def _asset(name: str) -> bytes | None:
@@ -90,6 +94,10 @@ class ViewServer:
             self._cond.wait_for(lambda: len(self.source.events) > first or
                                 self._closed.is_set(), timeout)
             return self.source.events[first:first + BATCH]
+
+    def pause(self, seconds: float) -> None:
+        """Wait ``seconds`` (less if the view closes)."""
+        self._closed.wait(seconds)
 
     def _fresh(self) -> bool:
         if self._since is None:
@@ -235,6 +243,8 @@ def _handler(view: ViewServer) -> type[BaseHTTPRequestHandler]:
                     else:
                         self.wfile.write(b": ping\n\n")
                     self.wfile.flush()
+                    if batch and len(batch) < BATCH:
+                        view.pause(SEND_S)          # gather what comes next
             except (BrokenPipeError, ConnectionResetError, OSError):
                 return                              # the browser went away
 

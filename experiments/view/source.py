@@ -17,7 +17,12 @@ new events, each a dict with ``seq`` (0, 1, ...), ``t`` (wall clock) and ``kind`
 ``share``       robot, iteration, round, agent: the agent wrote the robot's table
 ``metrics``     robot, points ``[[iteration, q_sum, cumulative_reward, collisions], ...]``
 ``robot_state`` robot, state, inferred
-``pose``        robot, x, y, yaw (only from ``events.jsonl``)
+``pose``        robot, iteration, x, y, yaw (only from ``events.jsonl``)
+``progress``    robot, iteration, q_sum, cumulative_reward, shares: a remote robot's status
+                (only from ``events.jsonl``; its files arrive at the end of the run)
+``eval``        robot, iteration, progress (and any other greedy-evaluation measures): drawn
+                as a third curve when present (only from ``events.jsonl``; nothing in the
+                launcher writes it yet)
 ``finished`` ``aborted`` ``control`` ``resurrected`` ``superseded``: the agent's log events
 ``error``       text: something the view could not read
 ``run_end``     the run wrote ``summary.md``
@@ -38,10 +43,13 @@ from typing import Any
 
 from dfrl.experiments.view.events import EVENTS_FILE
 from dfrl.experiments.view.robots import RobotTrack
-from dfrl.experiments.view.tail import FileTail, file_mtime
+from dfrl.experiments.view.tail import MAX_BYTES, FileTail, file_mtime
 
 #: Points kept per robot curve, about (the stride is ``iterations // POINTS``).
 POINTS = 500
+#: Bytes read from one file in one poll at most while draining a finished run (read whole,
+#: so that its rounds, hops and poses are ordered by time across the files).
+DRAIN_BYTES = 64 * 1024 * 1024
 _AGENT_EVENTS = ("finished", "aborted", "control", "resurrected", "superseded")
 
 
@@ -78,6 +86,7 @@ class EventSource:
         self._last_end: dict[str, float] = {}          # agent -> end of its last round
         self._extra = FileTail(self.dir / EVENTS_FILE)
         self._ended = False
+        self._bulk = False
 
     # -- public ------------------------------------------------------------------------
     @property
@@ -90,14 +99,20 @@ class EventSource:
         return self._number(self._collect())
 
     def drain(self, max_polls: int = 100_000) -> list[dict[str, Any]]:
-        """Poll until no file has unread bytes (a finished run); metrics events are merged
-        into the others by time, the others keep their order."""
+        """Poll until no file has unread bytes (a finished run); each file is read whole
+        (up to :data:`DRAIN_BYTES`) in the first poll, so the events come in time order across
+        the files; metrics events are merged into the others by time."""
         got: list[dict[str, Any]] = []
-        for _ in range(max_polls):
+        self._bulk = True          # each file read whole: one poll orders everything by time
+        try:
+            for _ in range(max_polls):
+                got += self._collect()
+                if not self._pending():
+                    break
             got += self._collect()
-            if not self._pending():
-                break
-        got += self._collect()
+        finally:
+            self._bulk = False
+            self._widen(MAX_BYTES)
         curves = sorted((e for e in got if e["kind"] == "metrics"), key=lambda e: e["t"])
         rest = [e for e in got if e["kind"] != "metrics"]
         return self._number(list(heapq.merge(rest, curves, key=lambda e: e["t"])))
@@ -109,10 +124,16 @@ class EventSource:
             self.events.append(ev)
         return new
 
-    def _pending(self) -> bool:
+    def _tails(self) -> list[FileTail]:
         tails = [self._extra, *self._logs.values()]
-        tails += [t for r in self.robots.values() for t in (r.metrics.tail, r.shares.tail)]
-        return any(t.pending() for t in tails)
+        return tails + [t for r in self.robots.values() for t in (r.metrics.tail, r.shares.tail)]
+
+    def _pending(self) -> bool:
+        return any(t.pending() for t in self._tails())
+
+    def _widen(self, max_bytes: int) -> None:
+        for tail in self._tails():
+            tail.max_bytes = max_bytes
 
     def _collect(self) -> list[dict[str, Any]]:
         out: list[dict[str, Any]] = []
@@ -121,6 +142,8 @@ class EventSource:
             self._read_config(out)
         if self.run is not None:
             self._read_nodes(out)
+            if self._bulk:
+                self._widen(DRAIN_BYTES)
             timed = self._read_extra(out)
             for track in self.robots.values():
                 timed += [(e["t"], "share", e) for e in track.read_shares()]
@@ -189,7 +212,8 @@ class EventSource:
         except (OSError, ValueError):
             pass
         local = n.get("node") is None and str(n.get("host", "")).startswith("127.")
-        track = RobotTrack(rid, self.dir, target, self.run["stride"], n.get("pid"), local, t)
+        track = RobotTrack(rid, self.dir, target, self.run["stride"], n.get("pid"),
+                           self.run["respite"], local, t)
         track.set_start(self.run["t"])
         self.robots[rid] = track
         out.append({"t": t, "kind": "robot", "robot": rid, "host": n.get("host"),
@@ -236,6 +260,8 @@ class EventSource:
             except (KeyError, TypeError, ValueError):
                 out.append({"t": ev["t"], "kind": "error", "text": f"bad hop event {ev!r}"})
         else:
+            if ev["kind"] == "progress" and str(ev.get("robot")) in self.robots:
+                self.robots[str(ev["robot"])].progressed(ev, self.clock())
             if ev["kind"] == "robot_state" and str(ev.get("robot")) in self.robots:
                 # a told state holds until another is told; "learning" hands the state
                 # back to the inference (waiting, skipped, ... follow from the files again)

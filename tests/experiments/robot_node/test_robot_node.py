@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from dfrl.experiments.config import NodeConfig
+from dfrl.experiments.robot_node.lines import parse_sample
 
 REPO = Path(__file__).resolve().parents[3]
 
@@ -24,17 +25,45 @@ def _start(tmp_path: Path, **kw) -> subprocess.Popen:
                             text=True, cwd=REPO)
 
 
+def _line(p: subprocess.Popen, samples: list | None = None) -> list[str]:
+    """The next protocol line that is not a DFRL_SAMPLE (those go to ``samples``)."""
+    for _ in range(100):
+        line = p.stdout.readline()
+        sample = parse_sample(line)
+        if sample is None:
+            return line.split()
+        if samples is not None:
+            samples.append(sample)
+    raise AssertionError("only DFRL_SAMPLE lines")
+
+
+def _rest(out: str, samples: list | None = None) -> list[str]:
+    """Words of the lines of ``out`` that are not DFRL_SAMPLE lines."""
+    kept = []
+    for line in out.splitlines():
+        sample = parse_sample(line)
+        if sample is None:
+            kept += line.split()
+        elif samples is not None:
+            samples.append(sample)
+    return kept
+
+
 def test_async_node_trains_then_waits_for_stdin(tmp_path: Path) -> None:
     p = _start(tmp_path, iterations=120, progress_every=50, grace_s=30.0)
     first = p.stdout.readline().split()
     assert first[:3] == ["DFRL_NODE", "r7", "127.0.0.1"] and int(first[3]) > 0
-    assert p.stdout.readline().split() == ["DFRL_PROGRESS", "r7", "50"]
-    assert p.stdout.readline().split() == ["DFRL_PROGRESS", "r7", "100"]
-    assert p.stdout.readline().split() == ["DFRL_PROGRESS", "r7", "120"]
+    samples: list = []
+    assert _line(p, samples) == ["DFRL_PROGRESS", "r7", "50"]
+    assert _line(p, samples) == ["DFRL_PROGRESS", "r7", "100"]
+    assert _line(p, samples) == ["DFRL_PROGRESS", "r7", "120"]
     time.sleep(0.3)
     assert p.poll() is None                       # lingers, serving, until stdin closes
     out, _ = p.communicate("", timeout=30)
-    assert out.split() == ["DFRL_DONE", "r7", "120", "0"]
+    assert _rest(out, samples) == ["DFRL_DONE", "r7", "120", "0"]
+    # the pose and the curves now and then (here: the first progress line and the end)
+    assert samples[0].iteration == 50 and samples[-1].iteration == 120
+    assert all(s.robot == "r7" and -1.0 < s.x < 1.0 and -1.0 < s.y < 1.0 for s in samples)
     assert p.returncode == 0
     with open(tmp_path / "metrics_r7.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
@@ -50,7 +79,7 @@ def test_sync_node_stops_at_a_boundary_when_told(tmp_path: Path) -> None:
     time.sleep(1.0)                                # waits at iteration 40 for a share
     assert p.poll() is None
     out, _ = p.communicate("stop\n", timeout=30)
-    assert out.split()[-4:] == ["DFRL_DONE", "r7", "40", "0"]
+    assert _rest(out)[-4:] == ["DFRL_DONE", "r7", "40", "0"]
     with open(tmp_path / "metrics_r7.csv", newline="") as fh:
         assert len(list(csv.DictReader(fh))) == 40
 
@@ -79,10 +108,10 @@ def _paced_seconds(tmp_path: Path, **kw) -> float:
     p = _start(tmp_path, iterations=25, rtf=10.0, progress_every=5, grace_s=0.0, **kw)
     try:
         assert p.stdout.readline().startswith("DFRL_NODE")
-        assert p.stdout.readline().split() == ["DFRL_PROGRESS", "r7", "5"]
+        assert _line(p) == ["DFRL_PROGRESS", "r7", "5"]
         t0 = time.monotonic()
         for i in (10, 15, 20, 25):
-            assert p.stdout.readline().split() == ["DFRL_PROGRESS", "r7", str(i)]
+            assert _line(p) == ["DFRL_PROGRESS", "r7", str(i)]
         elapsed = time.monotonic() - t0
         out, _ = p.communicate(timeout=30)
         assert "DFRL_DONE r7 25" in out
@@ -113,7 +142,7 @@ def test_node_with_stdin_at_eof_from_the_start_runs_every_iteration(tmp_path: Pa
                        stdin=subprocess.DEVNULL, capture_output=True, text=True, cwd=REPO,
                        timeout=120)
     assert p.returncode == 0, p.stderr
-    assert p.stdout.split()[-4:] == ["DFRL_DONE", "r7", "160", "0"]
+    assert _rest(p.stdout)[-4:] == ["DFRL_DONE", "r7", "160", "0"]
     with open(tmp_path / "metrics_r7.csv", newline="") as fh:
         assert len(list(csv.DictReader(fh))) == 160
     assert (tmp_path / "checkpoint" / "r7.npy").is_file()

@@ -127,3 +127,48 @@ def chrome(browser: str, driver: str, width: int = 1400, height: int = 1000) -> 
         opts.add_argument(arg)
     opts.binary_location = browser
     return webdriver.Chrome(service=Service(driver), options=opts)
+
+
+def finished_run(out: Path, robots: int = 32, iterations: int = 8000, respite: int = 500,
+                 seconds: float = 80.0) -> None:
+    """A finished sync run of ``robots`` robots, as large as a real one: every metrics row,
+    the shares, the round log, and an ``events.jsonl`` with every hop and two poses a second
+    per robot (what the launcher writes), over ``seconds`` of run time."""
+    import random
+
+    ids = [f"r{i + 1}" for i in range(robots)]
+    write_run(out, tuple(ids), iterations, respite)
+    rng = random.Random(1)
+    rounds = iterations // respite
+    t0 = time.time() - seconds - 10.0
+    per_round = seconds / rounds
+    for i, rid in enumerate(ids):
+        append(out / f"metrics_{rid}.csv", "".join(
+            f"{rid},{k},{k * 0.01 + rng.random():.6f},{k * 0.02:.6f},{k // 400}\n"
+            for k in range(1, iterations + 1)))
+        append(out / f"shares_{rid}.csv", "".join(
+            f"{rid},{k},{k * respite},{t0 + k * per_round + 0.5 - i * 0.01:.3f},d,{k},"
+            f"fed_qlearning,1\n" for k in range(1, rounds + 1)))
+    lines = []
+    for k in range(1, rounds + 1):
+        t = t0 + k * per_round
+        for j, rid in enumerate(ids + ids[::-1]):
+            phase = "forward" if j < robots else "backward"
+            lines.append({"t": t + 0.01 * j, "kind": "hop", "agent": "fed_qlearning",
+                          "robot": rid, "phase": phase, "round": k})
+        append(out / "rounds_fed_qlearning.log", round_line(k, ids, t))
+    for s in range(int(2 * seconds)):
+        for rid in ids:
+            lines.append({"t": t0 + 0.5 * s, "kind": "pose", "robot": rid,
+                          "iteration": int(s * iterations / (2 * seconds)),
+                          "x": rng.uniform(-0.4, 0.4), "y": rng.uniform(-0.4, 0.4),
+                          "yaw": rng.uniform(-3.1, 3.1)})
+    lines.sort(key=lambda e: e["t"])
+    append(out / "events.jsonl", "".join(json.dumps(e) + "\n" for e in lines))
+    append(out / "rounds_fed_qlearning.log",
+           json.dumps({"event": "finished", "agent": "fed_qlearning", "round": rounds}) + "\n")
+    (out / "summary.md").write_text("# finished\n")
+    # the files' times as the run left them: config first, the summary last
+    for name, t in (("config.json", t0 - 2.0), ("nodes.json", t0 - 1.0),
+                    ("summary.md", t0 + seconds + 1.0)):
+        os.utime(out / name, (t, t))
