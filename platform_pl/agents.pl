@@ -129,6 +129,10 @@ agent_module(Node, Name, Module) :-
 %     - payload(+Preds)    payload predicates, as for agent_add_payload/3
 %     - module(+Module)    where Handler and payload are defined
 %                          (default `user`)
+%     - events(+List)      the Handler/Arity events peers may post to it
+%                          (default: every arity of Handler it carries;
+%                          kept as the fact '$agent_events'(List) in its
+%                          module, so it travels with it)
 %
 %   @error permission_error(create, agent, Name) if the name is taken.
 %   @error existence_error(handler, Handler/3) if Handler has no clauses.
@@ -153,6 +157,11 @@ agent_create(Name, Handler0, Options, Node) :-
     agent_module(Node, Name, M),
     replace_guid(Templates, guid, Name, Clauses),
     install_clauses(M, Clauses),
+    (   option(events(Events), Options)
+    ->  must_be(list, Events),
+        install_clause(M, '$agent_events'(Events))
+    ;   true
+    ),
     assertz(agent_tokens_(Node, Name, Tokens)),
     assertz(agent_hops_(Node, Name, [])),
     assertz(agent_status_(Node, Name, idle)),
@@ -604,6 +613,9 @@ forget(Node, Name) :-
 %   Record is a self-contained copy of the agent: everything needed to
 %   install it on another node, save it to a file or clone it:
 %   agent(Name, Handler, Kind, Tokens, Payload, Preds, Clauses, Hops).
+%   Tokens are the agent's own, for uses inside this process (custody,
+%   checkpoints): a record that leaves it carries none (migration.pl
+%   sends [], persist.pl saves []).
 
 agent_export(Node, Name, agent(Name, Handler, Kind, Tokens, Payload,
                                Preds, Clauses, Hops)) :-
@@ -682,11 +694,18 @@ check_record(Record) :-
 
 valid_clause((H:-_)) :-
     !,
-    callable(H),
-    \+ H = (_:_).
+    valid_head(H).
 valid_clause(H) :-
+    valid_head(H).
+
+%   Not qualified, and no control construct: a head (a:-b) would be
+%   asserted as a rule.
+valid_head(H) :-
     callable(H),
-    \+ H = (_:_).
+    \+ H = (_:_),
+    functor(H, F, A),
+    \+ memberchk(F/A, [ (:-)/2, (:-)/1, (?-)/1, (-->)/2, (',')/2, (;)/2,
+                        (->)/2, (*->)/2, (\+)/1, (@)/2 ]).
 
 %!  agent_hop_times(+Node, +Name, -Millis) is det.
 %

@@ -6,6 +6,7 @@
 :- use_module(node, [current_node/1, node_property/2, ctx_node/2,
                      ctx_authenticated/1]).
 :- use_module(platform_errors, [message_text/2]).
+:- use_module(code_safety, [check_program_text/2, code_trusted/1]).
 :- use_module(transport).
 :- autoload(library(error), [must_be/2]).
 :- autoload(library(option), [option/2, option/3]).
@@ -18,6 +19,12 @@ methods) while it runs: from a local file, or sent by a peer that proves
 one of the node's tokens. The program is loaded into `user`, where new
 agents find their handlers. Errors and warnings raised while loading are
 collected and returned to the sender.
+
+A program sent by a peer is checked as a whole before any of it is
+loaded (code_safety:check_program_text/2: every clause and directive),
+unless the peer is trusted by name (node option trusted_peers(Names));
+a refused program loads nothing and the sender gets the error. Locally
+loaded programs (load_program/1, consult/1) are trusted.
 */
 
 :- multifile node:platform_request/4.
@@ -43,6 +50,8 @@ load_program(File) :-
 %   transport_open/3.
 %
 %   @error permission_error(load, platform, Address) if no token fits.
+%   @error permission_error(install, code, Culprit) if the sandbox there
+%   refused the program (nothing of it was loaded).
 %   @error load_errors(Messages) if the program had errors there.
 
 load_program_at(Address, File, Options) :-
@@ -92,7 +101,13 @@ user:message_hook(Term, error, _Lines) :-
 node:platform_request(load_code(Id, Text), Ctx, Reply, true) :-
     ctx_node(Ctx, Node),
     (   ctx_authenticated(Ctx)
-    ->  load_text(Id, Text),
+    ->  must_be(atomic, Id),
+        must_be(string, Text),
+        (   code_trusted(Ctx)
+        ->  true
+        ;   check_program_text(Id, Text)
+        ),
+        load_text(Id, Text),
         Reply = ok(loaded(Id))
     ;   node_property(Node, address(Here)),
         Reply = error(error(permission_error(load, platform, Here), _))

@@ -11,6 +11,7 @@
 :- use_module(agents).
 :- use_module(worker_pool, [pool_run/3]).
 :- use_module(transport).
+:- use_module(code_safety, [check_post/3]).
 :- autoload(library(error), [must_be/2, existence_error/2]).
 :- autoload(library(option), [option/2]).
 :- autoload(library(lists), [append/3]).
@@ -19,7 +20,10 @@
 
 A posted message names an agent and its handler: the receiving platform
 calls Handler(Agent, Link, Args...) in the agent's module, in a fresh
-thread, and only if Agent is registered there with that handler. A node
+thread, and only if Agent is registered there with that handler and
+declares that event (code_safety:check_post/3): it is in the agent's
+events(List) (agent_create/4), or, for an agent that declares none, the
+agent's own module defines Handler with that arity. A node
 may also declare platform events (platform_event/1): posting to the
 pseudo-agent `platform` calls Module:Handler(platform, Link, Args...) if
 Module:Handler/N was declared (Module `user` unless the declaration
@@ -66,6 +70,8 @@ platform_event(Spec) :-
 %
 %   @error existence_error(agent, Agent) if the platform does not host
 %   Agent with Handler (nor declares Handler as a platform event).
+%   @error permission_error(post, event, Handler/Arity) if Agent does
+%   not declare that event.
 
 agent_post(Address, Agent, Handler, Link, Args) :-
     agent_post(Address, Agent, Handler, Link, Args, []).
@@ -103,7 +109,8 @@ request_options([connect_timeout(CT), reply_timeout(RT)]) :-
 deliver(Node, Agent, Handler, Link, Args) :-
     Goal0 =.. [Handler, Agent, Link | Args],
     (   agent_property(Node, Agent, handler(Handler))
-    ->  agent_module(Node, Agent, M),
+    ->  check_post(Node, Agent, Goal0),
+        agent_module(Node, Agent, M),
         Goal = M:Goal0
     ;   Agent == platform,
         length(Args, N),

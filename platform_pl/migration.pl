@@ -14,6 +14,9 @@
 :- use_module(custody).
 :- use_module(transport).
 :- use_module(platform_errors, [transport_error/2]).
+:- use_module(code_safety,
+              [ check_agent_record/1, code_trusted/1, record_seal/3,
+                record_sealed/3 ]).
 :- autoload(library(error),
             [must_be/2, existence_error/2, permission_error/3]).
 :- autoload(library(option), [option/2, option/3]).
@@ -105,7 +108,9 @@ node:node_stopping(Node) :-
 %   @error existence_error(agent, Name)
 %   @error permission_error(move, static_agent, Name)
 %   @error permission_error(enter, platform, Address) if the destination
-%   refused the agent's tokens.
+%   refused the tokens (this node's and the agent's) proved for it.
+%   @error permission_error(install, code, Culprit) if the destination's
+%   sandbox refused the agent's code (code_safety.pl); the agent stays.
 %   @error transport_error(Address, Reason)
 
 agent_move(Name, Address0, Options) :-
@@ -181,9 +186,11 @@ agent_clone(Name, Address0, Clone, Options) :-
     transfer(Node, Name, Address, clone, MigId, Clone, Options).
 
 transfer(Node, Name, Address, Mode, MigId, Final, Options) :-
-    catch(prepare(Node, Name, Mode, Address, Options, Record, Conn),
+    catch(prepare(Node, Name, Mode, MigId, Address, Options, Record, Tokens,
+                  Conn),
           E, ( abort(Node, MigId), throw(E) )),
-    catch(hand_over(Node, Conn, Address, Mode, MigId, Name, Record, Final, Reuse),
+    catch(hand_over(Node, Conn, Address, Mode, MigId, Name, Record, Tokens,
+                    Final, Reuse),
           E2,
           ( transport_discard(Conn), throw(E2) )),
     (   Reuse == true
@@ -191,15 +198,30 @@ transfer(Node, Name, Address, Mode, MigId, Final, Options) :-
     ;   transport_discard(Conn)
     ).
 
-prepare(Node, Name, Mode, Address, Options, Record, Conn) :-
+%   The record that crosses the wire carries no token: the source proves
+%   its right to send the agent in the hello (its own tokens and the
+%   agent's), and the agent takes the destination's tokens there. A
+%   record sent to a node of this process carries, in place of the
+%   tokens, same_process(Seal) (code_safety:record_seal/3): its code was
+%   trusted here, so it is installed unchecked there.
+prepare(Node, Name, Mode, MigId, Address, Options, Record, Tokens, Conn) :-
     agent_export(Node, Name, Record0),
     (   Mode == clone
     ->  setarg(1, Record0, rename(Name, Name)),
         setarg(8, Record0, [])
     ;   true
     ),
+    arg(4, Record0, AgentTokens),
+    setarg(4, Record0, []),
+    (   node_for_address(Address, _)
+    ->  record_seal(MigId, Record0, Seal),
+        setarg(4, Record0, same_process(Seal))
+    ;   true
+    ),
     Record = Record0,
-    arg(4, Record, Tokens),
+    node_property(Node, tokens(Own)),
+    append(Own, AgentTokens, Tokens0),
+    sort(Tokens0, Tokens),
     node_option(Node, connect_timeout, CT),
     node_option(Node, reply_timeout, RT),
     option(connect_timeout(C), Options, CT),
@@ -207,7 +229,8 @@ prepare(Node, Name, Mode, Address, Options, Record, Conn) :-
     transport_acquire(Address, Tokens, Conn,
                       [action(enter), connect_timeout(C), reply_timeout(R)]).
 
-hand_over(Node, Conn, Address, Mode, MigId, Name, Record, Final, Reuse) :-
+hand_over(Node, Conn, Address, Mode, MigId, Name, Record, Tokens, Final,
+          Reuse) :-
     node_property(Node, address(Source)),
     custody_incarnation(Node, Inc),
     get_time(Departed),
@@ -218,8 +241,7 @@ hand_over(Node, Conn, Address, Mode, MigId, Name, Record, Final, Reuse) :-
           E,
           ( abort(Node, MigId), throw(E) )),
     (   Reply = ok(staged(Final))
-    ->  arg(4, Record, Tokens),
-        (   Mode == move
+    ->  (   Mode == move
         ->  What = move(Name),
             OnCommit = agent_remove(Node, Name)
         ;   What = clone(Final),
@@ -307,12 +329,17 @@ unauthenticated(Node, Reply, close) :-
     Reply = error(error(permission_error(enter, platform, Here),
                         context(_, 'the agent carries no token of this platform'))).
 
-receive_transfer(Ctx, MigId, Mode, Source, Departed, Record, SInc, Reply, After) :-
+%   An arriving agent's code is checked (code_safety.pl) before anything
+%   of it is installed, unless it comes from a node of this process or
+%   a peer trusted by name; a refusal is the reply, so the source keeps
+%   the agent. It gets this node's tokens, never the ones of a record.
+receive_transfer(Ctx, MigId, Mode, Source, Departed, Record0, SInc, Reply, After) :-
     ctx_node(Ctx, Node),
     (   \+ ctx_authenticated(Ctx)
     ->  unauthenticated(Node, Reply, After)
     ;   migration_start(Node),
         must_be(oneof([move, clone]), Mode),
+        arriving_record(Ctx, Node, MigId, Record0, Record),
         agent_install(Node, Record, staged(MigId), Name),
         get_time(Now),
         catch(custody_stage(Node, Name, MigId, Source, SInc, Now), E,
@@ -322,6 +349,24 @@ receive_transfer(Ctx, MigId, Mode, Source, Departed, Record, SInc, Reply, After)
         Reply = ok(staged(Name)),
         After = true
     ).
+
+arriving_record(Ctx, Node, MigId, Record0, Record) :-
+    (   compound(Record0), compound_name_arity(Record0, agent, 8)
+    ->  true
+    ;   throw(error(type_error(agent_record, Record0), _))
+    ),
+    arg(4, Record0, Seal),
+    (   Seal = same_process(S),
+        setarg(4, Record0, []),
+        record_sealed(MigId, Record0, S)
+    ->  true
+    ;   code_trusted(Ctx)
+    ->  true
+    ;   check_agent_record(Record0)
+    ),
+    node_property(Node, tokens(Tokens)),
+    Record0 = agent(Name, Handler, Kind, _, Payload, Preds, Clauses, Hops),
+    Record = agent(Name, Handler, Kind, Tokens, Payload, Preds, Clauses, Hops).
 
 %   Start the staged (or in_doubt) agent Name of migration MigId, once.
 activate(Node, Name, MigId) :-

@@ -16,6 +16,16 @@ domain_error/2) and adds:
     A frame could not be read: bad_magic, bad_version(V),
     too_large(Size, Max), binary_not_allowed, syntax(Detail) or truncated.
 
+and two permission errors with messages of their own:
+
+  - permission_error(install, code, Culprit)
+    Code from a peer was refused by the sandbox (code_safety.pl).
+    Culprit is the offending goal, undefined(PI, Goal),
+    unknown_call(Goal), clause_head(Head), directive(D), handler(H),
+    data or M:Name/Arity (a platform predicate outside the agent API).
+  - permission_error(post, event, Handler/Arity)
+    A post named no event the agent declares.
+
 Each has a prolog:error_message//1 clause, so the toplevel prints a
 readable message.
 
@@ -127,3 +137,32 @@ dfrl_message(agent_in_doubt(Node, Agent, Source)) -->
     [ 'Platform ~w: migration of agent ~p from ~p was not confirmed; '-[Node, Agent, Source],
       'the agent is kept as in_doubt (see agent_resolve/2)'
     ].
+
+%   Refused mobile code (code_safety.pl): the culprit says what.
+prolog:error_message(permission_error(install, code, Culprit)) -->
+    [ 'Refused mobile code: ' ],
+    code_culprit(Culprit),
+    [ ' (code from a peer runs in the sandbox: platform_pl/README.md, "Mobile code")' ].
+prolog:error_message(permission_error(post, event, Handler/Arity)) -->
+    [ 'No such event: ~q is not an event the agent declares '-[Handler/Arity],
+      '(its events(List), or its own handler clauses)' ].
+
+code_culprit(undefined(PI, G)) -->
+    !, [ '~q calls ~q, which this node does not define'-[G, PI] ].
+code_culprit(unknown_call(G)) -->
+    !, [ 'cannot tell which predicate ~q calls'-[G] ].
+code_culprit(clause_head(H)) -->
+    !, [ 'it may not define ~q'-[H] ].
+code_culprit(directive(D)) -->
+    !, [ 'directive ~q is not allowed'-[D] ].
+code_culprit(handler(H)) -->
+    !, [ 'its handler ~q is not defined by its own clauses'-[H] ].
+code_culprit(data) -->
+    !, [ 'it holds cyclic terms or attributed variables' ].
+code_culprit(clause(E)) -->
+    !, [ 'a clause cannot be defined (~p)'-[E] ].
+code_culprit(M:F/A) -->
+    { atom(M), atom(F), integer(A) },
+    !, [ 'it calls ~q, which is not part of the agent API'-[M:F/A] ].
+code_culprit(G) -->
+    [ 'it calls ~q, which is not allowed in the sandbox'-[G] ].

@@ -40,6 +40,9 @@ census(Node, L) :- custody_agents(Node, L).
 %   staged answer, close without a commit.
 transfer_by_hand(Src, Dst, Name, MigId, Inc) :-
     agents:agent_export(Src, Name, Record),
+    setarg(4, Record, []),                      % sealed as a node of this process does
+    code_safety:record_seal(MigId, Record, Seal),
+    setarg(4, Record, same_process(Seal)),
     node_property(Src, address(SrcAddr)),
     node_property(Dst, address(DstAddr)),
     get_time(T),

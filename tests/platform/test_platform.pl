@@ -306,6 +306,9 @@ test(remote_load_needs_token, [cleanup(stop_all([N]))]) :-
 %   staged answer, then drop the connection without the commit.
 transfer_without_commit(Src, Dst, Name, MigId) :-
     agents:agent_export(Src, Name, Record),
+    setarg(4, Record, []),                      % sealed as a node of this process does
+    code_safety:record_seal(MigId, Record, Seal),
+    setarg(4, Record, same_process(Seal)),
     node_property(Src, address(SrcAddr)),
     node_property(Dst, address(DstAddr)),
     get_time(T),

@@ -1,0 +1,590 @@
+:- module(code_safety,
+          [ check_agent_record/1,       % +Record
+            check_program_text/2,       % +Id, +Text
+            check_post/3,               % +Node, +Agent, +Goal
+            code_trusted/1,             % +Ctx
+            peer_trusted/2,             % +Node, +PeerName
+            record_seal/3,              % +MigId, +Record, -Seal
+            record_sealed/3             % +MigId, +Record, +Seal
+          ]).
+:- dynamic apply_macros_was_loaded/0.
+:- (   current_module(apply_macros)
+   ->  assertz(apply_macros_was_loaded)
+   ;   true
+   ).
+:- use_module(library(sandbox), [safe_goal/1]).
+%   library(sandbox) loads library(apply_macros), whose goal expansion of
+%   maplist/N then applies to all code compiled later in the process and
+%   changes what it means (a yall lambda's free variables are copied
+%   instead of shared). The sandbox needs none of it: unless the process
+%   loaded apply_macros itself, its expansion clauses are taken out again.
+:- (   apply_macros_was_loaded
+   ->  true
+   ;   forall(( member(H, [goal_expansion(_, _), goal_expansion(_, _, _, _)]),
+                clause(system:H, Body, Ref),
+                Body = apply_macros:_ ),
+              erase(Ref))
+   ).
+:- use_module(node, [ctx_node/2, node_property/2]).
+:- use_module(agents, [agent_property/3]).
+:- autoload(library(error), [permission_error/3]).
+:- autoload(library(lists), [member/2, append/2, append/3]).
+:- autoload(library(apply), [maplist/2, include/3, exclude/3]).
+:- autoload(library(crypto), [crypto_n_random_bytes/2, crypto_data_hash/3]).
+
+/** <module> Mobile code: what arrives over the network runs in a sandbox
+
+Code that a peer sends (an arriving agent's clauses, a program sent
+with load_program_at/3 or load_program_text/4) is checked here before
+anything of it is installed, with SWI-Prolog's library(sandbox) extended
+with the platform's agent API. Locally consulted programs, agents made
+on this node and agents sent by a node of this process are trusted.
+
+Rules (a refusal is error(permission_error(install, code, Culprit), _),
+Culprit the offending goal, clause head or directive):
+
+  - Every clause body may call only what library(sandbox) deems safe
+    (pure computation, lists, arithmetic, strings, format/2 to an atom
+    or to current output, assert/retract of *facts* in the agent's own
+    module), output to the agent's output (nl/0, print/1, write/1,
+    flush_output/0, format/3 to user_output/user_error) and the agent
+    API (agent_api/2). Shell, files, halt, foreign calls, op/3, flags,
+    qualified asserts (another module), asserted rules and any other
+    predicate of a platform module (node, transport, tokens, handlers
+    of platform_request) are refused.
+  - API calls that name an agent (move, clone, payload, purge) must name
+    the agent itself: `guid` in a program, the agent's own name (or the
+    first argument of its handler) in an agent's clauses.
+  - A goal whose predicate cannot be told (call/1 of a variable) or an
+    undefined predicate is refused.
+  - An agent's handler must be defined by its own clauses.
+  - A program may define clauses in `user` of predicates that are not
+    hooks (not multifile), not imported, not built in and not defined by
+    another file; elsewhere only the hooks declared with mobile_hook/1
+    (the dFRL aggregation hooks). Its directives may only declare
+    predicates (dynamic, discontiguous, multifile of those same
+    predicates), load libraries, and run a safe initialization goal.
+
+A node trusts peers by name with the node option trusted_peers(Names):
+code from a peer whose TLS certificate names one of them is installed
+unchecked (node:ctx_peer_name/2; a plaintext peer is never trusted by
+name).
+*/
+
+:- multifile
+    mobile_hook/1,              % ?Module:Name/Arity
+    agent_api/2.                % +Module:Goal, -Condition
+
+:- dynamic process_key/1.
+
+%!  mobile_hook(?PI) is nondet.
+%
+%   Multifile: Module:Name/Arity is a hook that programs sent by peers
+%   may add clauses to (their bodies are checked as any other). E.g.
+%
+%   ```
+%   code_safety:mobile_hook(my_module:my_hook/2).
+%   ```
+
+mobile_hook(dfrl_agent:aggregate_init/3).
+mobile_hook(dfrl_agent:aggregate_step/4).
+mobile_hook(dfrl_agent:aggregate_final/3).
+mobile_hook(dfrl_agent:method_uses_visits/1).
+
+		 /*******************************
+		 *            TRUST		*
+		 *******************************/
+
+%!  code_trusted(+Ctx) is semidet.
+%
+%   True if the peer of connection Ctx is trusted by name: the node has
+%   the option trusted_peers(Names) and the peer's TLS certificate names
+%   one of them.
+
+code_trusted(Ctx) :-
+    ctx_node(Ctx, Node),
+    catch(node:ctx_peer_name(Ctx, Name), error(existence_error(_, _), _), fail),
+    peer_trusted(Node, Name).
+
+%!  peer_trusted(+Node, +PeerName) is semidet.
+%
+%   True if Node's option trusted_peers(Names) names PeerName.
+
+peer_trusted(Node, Name) :-
+    node_property(Node, option(trusted_peers(Names))),
+    is_list(Names),
+    atom_string(Name, S),
+    member(N, Names),
+    atom_string(N, S),
+    !.
+
+%   A record sent by a node of this process is sealed with a key that
+%   never leaves the process: its code was trusted (or checked) here.
+key(Key) :-
+    (   process_key(Key)
+    ->  true
+    ;   with_mutex(code_safety_key,
+                   (   process_key(Key)
+                   ->  true
+                   ;   crypto_n_random_bytes(32, Bytes),
+                       atom_codes(Key, Bytes),
+                       assertz(process_key(Key))
+                   ))
+    ).
+
+%!  record_seal(+MigId, +Record, -Seal) is det.
+%
+%   Seal is an HMAC, with this process's key, of migration MigId and
+%   Record (as sent): record_sealed/3 accepts it in this process only.
+
+record_seal(MigId, Record, Seal) :-
+    key(Key),
+    variant_sha1(MigId-Record, Sha),
+    crypto_data_hash(Sha, Seal, [algorithm(sha256), hmac(Key)]).
+
+%!  record_sealed(+MigId, +Record, +Seal) is semidet.
+
+record_sealed(MigId, Record, Seal) :-
+    atom(Seal),
+    catch(record_seal(MigId, Record, Seal0), _, fail),
+    Seal0 == Seal.
+
+		 /*******************************
+		 *        AGENT RECORDS		*
+		 *******************************/
+
+%!  check_agent_record(+Record) is det.
+%
+%   Check the code of an agent record that arrived from a peer (see the
+%   module comment).
+%
+%   @error permission_error(install, code, Culprit)
+
+check_agent_record(Record) :-
+    (   Record = agent(Name0, Handler, _, _, _, Preds, Clauses, _),
+        is_list(Preds), is_list(Clauses)
+    ->  true
+    ;   throw(error(type_error(agent_record, Record), _))
+    ),
+    (   Name0 = rename(Self, _) -> true ; Self = Name0 ),
+    plain_data(Clauses),
+    maplist(clause_parts, Clauses, Parts),
+    maplist(check_head, Parts),
+    (   member(H-_, Parts), callable(H), functor(H, Handler, A), A >= 3
+    ->  true
+    ;   refuse(handler(Handler), 'the handler is not defined by the agent''s own clauses')
+    ),
+    include(is_rule, Parts, Rules),
+    (   Rules == []
+    ->  true
+    ;   with_scratch(Preds, Rules,
+                     [S]>>forall(member(R, Rules),
+                                 check_rule(S, Self, Handler, R)))
+    ).
+
+%   Data with no attributed variables and no cycles: nothing runs when
+%   it is unified, copied or asserted.
+plain_data(T) :-
+    (   acyclic_term(T), term_attvars(T, [])
+    ->  true
+    ;   refuse(data, 'cyclic terms or attributed variables')
+    ).
+
+clause_parts((H:-B), H-B) :- !.
+clause_parts(H, H-true).
+
+is_rule(_-B) :- B \== true.
+
+check_head(H-_) :-
+    (   var(H)
+    ->  refuse(clause_head(H), 'a variable as clause head')
+    ;   \+ callable(H)
+    ->  refuse(clause_head(H), 'not callable')
+    ;   H = _:_
+    ->  refuse(clause_head(H), 'a clause for another module')
+    ;   functor(H, F, A), control(F/A)
+    ->  refuse(clause_head(H), 'a control construct as clause head')
+    ;   true
+    ).
+
+control((:-)/2). control((:-)/1). control((?-)/1). control((-->)/2).
+control((',')/2). control((;)/2). control((->)/2). control((*->)/2).
+control((\+)/1). control((@)/2).
+
+%   A handler clause is called by the platform with the agent's own name
+%   first (agent_execute/4, a post): its first argument is the agent.
+check_rule(S, Self, Handler, H0-B0) :-
+    copy_term(H0-B0, H-B),
+    (   functor(H, Handler, A), A >= 3, arg(1, H, Me), var(Me)
+    ->  Me = Self
+    ;   true
+    ),
+    check_body(S, Self, B).
+
+		 /*******************************
+		 *      THE SANDBOX CHECK	*
+		 *******************************/
+
+%   check_body(+Module, +Self, +Body): conjunct by conjunct, left to
+%   right, applying the unifications of the top-level conjunction to the
+%   goals after them (so that Mod = m, call(Mod:G) is understood).
+check_body(S, Self, (A, B)) :-
+    !,
+    check_body(S, Self, A),
+    check_body(S, Self, B).
+check_body(_, _, X = Y) :-
+    !,
+    ( X = Y -> true ; true ).
+check_body(S, Self, G) :-
+    copy_term(G, G1),
+    b_setval(code_safety_self, Self),
+    catch(safe_goal(S:G1), E, sandbox_refusal(S, G, E)),
+    b_setval(code_safety_self, '$none').
+
+sandbox_refusal(_, _, error(permission_error(install, code, C), Ctx)) :-
+    !,
+    throw(error(permission_error(install, code, C), Ctx)).
+sandbox_refusal(S, _, error(permission_error(call, sandboxed, G), _)) :-
+    !,
+    unscratch(S, G, C),
+    refuse(C, 'not allowed in the sandbox').
+sandbox_refusal(S, G0, error(existence_error(procedure, PI), _)) :-
+    !,
+    unscratch(S, PI, C),
+    unscratch(S, G0, G),
+    refuse(undefined(C, G), 'calls a predicate this node does not define').
+sandbox_refusal(S, G0, error(instantiation_error, _)) :-
+    !,
+    unscratch(S, G0, G),
+    refuse(unknown_call(G), 'cannot tell which predicate it calls').
+sandbox_refusal(S, G0, error(Formal, _)) :-
+    unscratch(S, G0, G),
+    refuse(G, Formal).
+
+unscratch(S, T0, T) :-
+    (   T0 = M:T1, M == S
+    ->  T = T1
+    ;   T = T0
+    ).
+
+refuse(Culprit, Why) :-
+    throw(error(permission_error(install, code, Culprit),
+                context(code_safety, Why))).
+
+%   with_scratch(+Preds, +Rules, :Goal): the code under check, in a
+%   module that inherits from `user` as agents' modules do, so that the
+%   sandbox sees the calls between its predicates.
+:- meta_predicate with_scratch(+, +, 1).
+
+with_scratch(Preds, Rules, Goal) :-
+    with_mutex(code_safety_scratch,
+               setup_call_cleanup(
+                   scratch_fill(Preds, Rules, S),
+                   call(Goal, S),
+                   scratch_clear(S))).
+
+scratch_module(code_safety_scratch).
+
+scratch_fill(Preds, Rules, S) :-
+    scratch_module(S),
+    scratch_clear(S),
+    catch(( forall(( member(P, Preds), P = F/A, atom(F), integer(A) ),
+                   dynamic(S:F/A)),
+            forall(member(H-B, Rules),
+                   ( functor(H, F, A), dynamic(S:F/A), assertz(S:(H:-B)) ))
+          ),
+          error(E, _),
+          refuse(clause(E), 'cannot define it')).
+
+scratch_clear(S) :-
+    forall(( current_predicate(S:F/A),
+             functor(H, F, A),
+             predicate_property(S:H, dynamic),
+             \+ predicate_property(S:H, imported_from(_)) ),
+           abolish(S:F/A)).
+
+		 /*******************************
+		 *            POSTS		*
+		 *******************************/
+
+%!  check_post(+Node, +Agent, +Goal) is det.
+%
+%   Goal, Handler(Agent, Link, Args...), is an event that Agent on Node
+%   declares: one of the list of its fact '$agent_events'(List) (the
+%   agent_create/4 option events(List)), or without it, an arity of its
+%   handler that the agent's own module defines (Tartarus programs post
+%   to their handler's clauses).
+%
+%   @error permission_error(post, event, Handler/Arity)
+
+check_post(Node, Agent, Goal) :-
+    functor(Goal, Handler, Arity),
+    agent_property(Node, Agent, module(M)),
+    (   catch(M:'$agent_events'(Events), _, fail)
+    ->  memberchk(Handler/Arity, Events)
+    ;   Arity >= 3,
+        functor(H, Handler, Arity),
+        current_predicate(M:Handler/Arity),
+        \+ predicate_property(M:H, imported_from(_))
+    ),
+    !.
+check_post(_, _, Goal) :-
+    functor(Goal, Handler, Arity),
+    throw(error(permission_error(post, event, Handler/Arity),
+                context(check_post/3, 'not an event this agent declares'))).
+
+		 /*******************************
+		 *           PROGRAMS		*
+		 *******************************/
+
+%!  check_program_text(+Id, +Text) is det.
+%
+%   Check a program a peer sent (see the module comment) before it is
+%   loaded into `user` as dfrl_program://Id.
+%
+%   @error permission_error(install, code, Culprit)
+%   @error syntax_error(...) if Text does not read.
+
+check_program_text(Id, Text) :-
+    format(atom(SourceId), 'dfrl_program://~w', [Id]),
+    setup_call_cleanup(open_string(Text, In),
+                       read_program(In, Terms0),
+                       close(In)),
+    plain_data(Terms0),
+    maplist(expand, Terms0, Expanded),
+    append(Expanded, Terms),
+    partition_terms(Terms, Directives, Clauses),
+    maplist(check_directive(SourceId), Directives),
+    maplist(program_clause(SourceId), Clauses, Parts),
+    findall(P, ( member(D, Directives), declared(D, P) ), Declared),
+    include(user_part, Parts, UserParts),
+    findall(H-B, ( member(user-H-B, UserParts), B \== true ), LocalRules),
+    findall(F/A, ( member(user-H-_, UserParts), functor(H, F, A) ), Local0),
+    append(Declared, Local0, Local),
+    findall(B, ( member(_-_-B, Parts), B \== true ), Bodies),
+    findall(G, ( member(D, Directives), init_goal(D, G) ), Inits),
+    append(Bodies, Inits, ToCheck),
+    (   ToCheck == []
+    ->  true
+    ;   with_scratch(Local, LocalRules,
+                     [S]>>forall(member(B, ToCheck), check_body(S, guid, B)))
+    ).
+
+read_program(In, Terms) :-
+    read_term(In, T, [module(user), syntax_errors(error)]),
+    (   T == end_of_file
+    ->  Terms = []
+    ;   Terms = [T|Rest],
+        read_program(In, Rest)
+    ).
+
+expand(T, Ts) :-
+    expand_term(T, X),
+    (   is_list(X) -> Ts = X ; Ts = [X] ).
+
+partition_terms([], [], []).
+partition_terms([(:- D)|Ts], [D|Ds], Cs) :- !, partition_terms(Ts, Ds, Cs).
+partition_terms([(?- D)|Ts], [D|Ds], Cs) :- !, partition_terms(Ts, Ds, Cs).
+partition_terms([C|Ts], Ds, [C|Cs]) :- partition_terms(Ts, Ds, Cs).
+
+user_part(user-_-_).
+
+%   program_clause(+SourceId, +Clause, -Module-Head-Body)
+program_clause(SourceId, Clause, M-H-B) :-
+    clause_parts(Clause, QH-B),
+    (   var(QH) -> refuse(clause_head(QH), 'a variable as clause head') ; true ),
+    strip_module(user:QH, M, H),
+    check_head(H-B),
+    (   M == user
+    ->  user_head(SourceId, H)
+    ;   functor(H, F, A),
+        mobile_hook(M:F/A)
+    ->  true
+    ;   refuse(clause_head(M:H), 'a clause for another module')
+    ).
+
+%   A program may not redefine what the node has: hooks, imports,
+%   built-ins and predicates of other files.
+user_head(SourceId, H) :-
+    (   predicate_property(user:H, built_in)
+    ->  refuse(clause_head(H), 'a built-in predicate')
+    ;   predicate_property(user:H, multifile)
+    ->  refuse(clause_head(H), 'a hook of this node')
+    ;   predicate_property(user:H, imported_from(M))
+    ->  functor(H, F, A),
+        refuse(clause_head(M:F/A), 'a predicate this node imports')
+    ;   predicate_property(user:H, file(F)), F \== SourceId
+    ->  refuse(clause_head(H), 'a predicate defined by another file')
+    ;   true
+    ).
+
+%   Directives: declarations of the program's own predicates, libraries
+%   and an initialization goal (checked as a body).
+check_directive(SourceId, D) :-
+    (   var(D)
+    ->  refuse(directive(D), 'a variable')
+    ;   D = (A, B)
+    ->  check_directive(SourceId, A),
+        check_directive(SourceId, B)
+    ;   declaration(D, Specs)
+    ->  forall(pi_member(PI, Specs), check_declared(SourceId, D, PI))
+    ;   library_directive(D)
+    ->  true
+    ;   init_goal(D, _)
+    ->  true
+    ;   refuse(directive(D), 'not allowed in a program sent by a peer')
+    ).
+
+declaration(dynamic(S), S).
+declaration(discontiguous(S), S).
+declaration(multifile(S), S).
+
+pi_member(_, V) :- var(V), !, fail.
+pi_member(PI, (A, B)) :- !, ( pi_member(PI, A) ; pi_member(PI, B) ).
+pi_member(PI, [H|T]) :- !, ( pi_member(PI, H) ; pi_member(PI, T) ).
+pi_member(_, []) :- !, fail.
+pi_member(PI, PI).
+
+check_declared(SourceId, D, PI) :-
+    (   PI = M0:F/A, atom(M0), atom(F), integer(A) -> M = M0
+    ;   PI = F/A, atom(F), integer(A) -> M = user
+    ;   refuse(directive(D), 'not a predicate indicator')
+    ),
+    (   M == user
+    ->  functor(H, F, A),
+        (   D = multifile(_)
+        ->  refuse(directive(D), 'declares a hook')
+        ;   user_head(SourceId, H)
+        )
+    ;   mobile_hook(M:F/A)
+    ->  true
+    ;   refuse(directive(D), 'declares a predicate of another module')
+    ).
+
+declared(D, F/A) :-
+    declaration(D, Specs),
+    pi_member(PI, Specs),
+    (   PI = F/A ; PI = user:F/A ),
+    atom(F), integer(A).
+declared((A, B), PI) :-
+    (   declared(A, PI) ; declared(B, PI) ).
+
+library_directive(use_module(library(X))) :- library_name(X).
+library_directive(use_module(library(X), _)) :- library_name(X).
+library_directive(ensure_loaded(library(X))) :- library_name(X).
+
+library_name(X) :-
+    (   atom(X)
+    ->  \+ sub_atom(X, _, _, _, '..'),
+        \+ sub_atom(X, 0, _, _, '/')
+    ;   X = A/B,
+        library_name(A),
+        library_name(B)
+    ).
+
+init_goal(initialization(G), G).
+init_goal(initialization(G, _), G).
+
+		 /*******************************
+		 *    THE AGENT API AS SAFE	*
+		 *******************************/
+
+%   Output to the agent's output.
+:- multifile sandbox:safe_primitive/1, sandbox:safe_meta/2.
+
+sandbox:safe_primitive(system:nl).
+sandbox:safe_primitive(system:flush_output).
+sandbox:safe_primitive(system:print(_)).
+sandbox:safe_primitive(system:write(_)).
+sandbox:safe_primitive(system:writeq(_)).
+sandbox:safe_primitive(system:write_canonical(_)).
+sandbox:safe_primitive(system:tab(_)).
+
+sandbox:safe_meta(system:format(Out, Format, Args), Calls) :-
+    memberchk(Out, [user_output, user_error]),
+    sandbox:format_calls(Format, Args, Calls).
+sandbox:safe_meta(M:G, Calls) :-
+    platform_module(M),
+    (   agent_api(M:G, Condition),
+        call(Condition)
+    ->  Calls = []
+    ;   functor(G, F, A),
+        refuse(M:F/A, 'not part of the agent API')
+    ).
+
+%   The platform's own modules: platform_pl/ and pybridge/. Nothing in
+%   them is safe to a sandboxed caller unless agent_api/2 says so (the
+%   sandbox's own analysis would, e.g., accept a predicate that asserts
+%   into its own module, such as the one that sets the node's tokens).
+:- dynamic platform_root/1.
+
+:- prolog_load_context(directory, Dir),
+   file_directory_name(Dir, Root),
+   retractall(platform_root(_)),
+   assertz(platform_root(Dir)),
+   atom_concat(Root, '/pybridge', Py),
+   assertz(platform_root(Py)).
+
+platform_module(M) :-
+    atom(M),
+    module_property(M, file(File)),
+    platform_root(Root),
+    atom_concat(Root, '/', Prefix),
+    sub_atom(File, 0, _, _, Prefix),
+    !.
+
+%!  agent_api(?Module:Goal, -Condition) is nondet.
+%
+%   Multifile: Module:Goal, a predicate of a platform module, may be
+%   called by sandboxed code if Condition (called at check time)
+%   succeeds. self(A) means: A is the agent itself.
+
+agent_api(tartarus:move_agent(A, _), self(A)).
+agent_api(tartarus:clone_agent(A, _, _), self(A)).
+agent_api(tartarus:post_agent(_, _, _), true).
+agent_api(tartarus:agent_post(_, _, _), true).
+agent_api(tartarus:add_payload(A, _), self(A)).
+agent_api(tartarus:remove_payload(A, _), self(A)).
+agent_api(tartarus:purge_agent(A), self(A)).
+agent_api(tartarus:execute_agent(A, _, _), self(A)).
+agent_api(tartarus:execute_agent(A, _, _, _), self(A)).
+agent_api(tartarus:get_tartarus_details(_, _), true).
+agent_api(tartarus:isexist_agent(_, _, _), true).
+agent_api(tartarus:list_agents, true).
+agent_api(tartarus:list_agents(_), true).
+agent_api(tartarus:list_agent, true).
+agent_api(tartarus:list_agent(_), true).
+agent_api(tartarus:agent_hop_times(_, _), true).
+agent_api(tartarus:agent_hop_statistics(_, _), true).
+agent_api(migration:agent_move(A, _, _), self(A)).
+agent_api(migration:agent_clone(A, _, _, _), self(A)).
+agent_api(messages:agent_post(_, _, _, _, _), true).
+agent_api(messages:agent_post(_, _, _, _, _, _), true).
+agent_api(messages:remote_agents(_, _, _), true).
+agent_api(agents:current_agent(_), true).
+agent_api(agents:agent_property(_, _, P), ( nonvar(P), P \= tokens(_) )).
+agent_api(agents:agent_add_payload(_, A, _), self(A)).
+agent_api(agents:agent_remove_payload(_, A, _), self(A)).
+agent_api(agents:agent_add_facts(_, A, _), self(A)).
+agent_api(agents:agent_exists(_, _), true).
+agent_api(agents:agent_list(_, _), true).
+agent_api(agents:agent_hop_times(_, _, _), true).
+agent_api(node:current_node(_), true).
+agent_api(node:node_property(_, P), ( nonvar(P), public_node_property(P) )).
+agent_api(robot_resources:get_robot_table(_, _, _), true).
+agent_api(robot_resources:get_robot_tables(_, _, _, _), true).
+agent_api(robot_resources:set_robot_table(_, _, _), true).
+agent_api(robot_resources:hosted_robot(_, _), true).
+agent_api(dfrl_agent:dfrl_tour_event(A, _, _), self(A)).
+agent_api(dfrl_agent:dfrl_tour_main(A, _), self(A)).
+agent_api(dfrl_agent:dfrl_method(_), true).
+
+public_node_property(address(_)).
+public_node_property(link(_)).
+public_node_property(id(_)).
+public_node_property(bind(_)).
+
+self(A) :-
+    nonvar(A),
+    catch(b_getval(code_safety_self, Self), _, fail),
+    A == Self.
