@@ -935,6 +935,7 @@ connection_ended(_, _, error(existence_error(platform, _), _)) :- !.
 connection_ended(_, _, error(timeout_error(_, _), _)) :- !.
 connection_ended(_, _, error(io_error(_, _), _)) :- !.
 connection_ended(_, _, error(socket_error(_, _), _)) :- !.
+connection_ended(_, _, error(ssl_error(_, _, _, _), _)) :- !.  % TLS peer gone
 connection_ended(Node, Peer, error(tls_error(_, Reason), _)) :-
     !,
     debug(dfrl(node), '~w: TLS refused ~p: ~w', [Node, Peer, Reason]).

@@ -7,7 +7,10 @@
         start a platform, create an agent whose payload is a list of FLOATS
         floats, bounce it HOPS times between home and peer, print one line
         "LATENCIES_MS [..]" (one figure per hop, from the call of move_agent
-        at the source to the start of the handler at the destination).
+        at the source to the start of the handler at the destination), then
+        serve until standard input closes. (The agent prints the line itself:
+        its code runs in the sandbox at the peer, which allows output, not
+        messages to other threads.)
     With TLS_DIR (a node's ca.crt, node.crt, node.key), both platforms
     speak mutual TLS (node option tls(Dir)).
 */
@@ -40,8 +43,7 @@ main(['home', Token0, Peer0, Floats0, Hops0|Tls]) :-
     create_mobile_agent(bencher, (localhost, Home), bench, [Token]),
     add_payload(bencher, [(data,2), (lat,2), (plan,2), (departed,2)]),
     execute_agent(bencher, (localhost, Home), bench),
-    thread_get_message(user:bench_result(Lat)),
-    format("LATENCIES_MS ~w~n", [Lat]),
+    read_term(user_input, _, []),   % the agent prints its figures; then stdin closes
     node_stop(Node).
 
 tls_options([], []).
@@ -62,7 +64,8 @@ bench(guid, (_, Port), main) :-
     (   Done >= Hops
     ->  (   Port =:= Home
         ->  reverse(L, InOrder),
-            thread_send_message(main, user:bench_result(InOrder))
+            format(user_output, "LATENCIES_MS ~w~n", [InOrder]),
+            flush_output
         ;   move_agent(guid, (localhost, Home))
         )
     ;   get_time(T1),

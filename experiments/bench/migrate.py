@@ -80,11 +80,15 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         if not line.startswith("PORT "):
             raise RuntimeError(f"peer did not start: {line!r}")
         port = int(line.split()[1])
-        home = subprocess.run(
+        home = subprocess.Popen(
             [swipl, "-q", str(SCRIPT), "home", str(token), str(port), str(floats),
              str(hops + warmup), *tls_args],
-            capture_output=True, text=True, timeout=timeout,
-        )
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            out, err = _read_latencies(home, timeout)
+        finally:
+            home.kill()
+            home.wait(timeout=10)
     finally:
         if peer.stdin:
             peer.stdin.close()
@@ -92,9 +96,9 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
             peer.wait(timeout=10)
         except subprocess.TimeoutExpired:
             peer.kill()
-    lat_line = next((l for l in home.stdout.splitlines() if l.startswith("LATENCIES_MS")), None)
+    lat_line = next((l for l in out.splitlines() if l.startswith("LATENCIES_MS")), None)
     if lat_line is None:
-        raise RuntimeError(f"benchmark failed:\n{home.stdout}\n{home.stderr}")
+        raise RuntimeError(f"benchmark failed:\n{out}\n{err}")
     all_ms = json.loads(lat_line.split(" ", 1)[1])
     ms = all_ms[warmup:]
     return MigrationResult(
@@ -103,6 +107,31 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         min_ms=min(ms), max_ms=max(ms), mean_ms=statistics.fmean(ms),
         payload_bytes=10 * floats + 1,
     )
+
+
+def _read_latencies(home: subprocess.Popen, timeout: float) -> tuple[str, str]:
+    """Home's output up to its LATENCIES_MS line (or its end, or the timeout); its stderr
+    when it gave none."""
+    import threading
+
+    lines: list[str] = []
+    done = threading.Event()
+
+    def read() -> None:
+        assert home.stdout is not None
+        for line in home.stdout:
+            lines.append(line)
+            if line.startswith("LATENCIES_MS"):
+                break
+        done.set()
+
+    threading.Thread(target=read, daemon=True).start()
+    done.wait(timeout)
+    if any(l.startswith("LATENCIES_MS") for l in lines):
+        return "".join(lines), ""
+    home.kill()
+    err = home.stderr.read() if home.stderr is not None else ""
+    return "".join(lines), err
 
 
 @dataclass
