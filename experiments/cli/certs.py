@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from dfrl.experiments.certs import CertError, init_ca, make_node
 
@@ -49,7 +50,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     n.add_argument("name", metavar="NAME",
                    help="the node's name: the certificate's CN and subjectAltName DNS entry")
     n.add_argument("dir", metavar="DIR", help="folder of the CA (from 'dfrl certs init')")
-    n.add_argument("--out", metavar="NODE_DIR", default=None,
+    n.add_argument("--out", metavar="NODE_DIR", type=Path, default=None,
                    help="where to write ca.crt, node.crt, node.key (default: DIR/NAME)")
     n.add_argument("--force", action="store_true",
                    help="replace a certificate already in NODE_DIR (default: refuse)")

@@ -7,7 +7,7 @@ from dfrl.experiments.cli import build_parser, main
 
 COMMANDS = ["node", "demo", "run", "inject", "join", "bench", "train", "eval", "baselines",
             "render-arenas", "transfer", "transfer-study", "sweep", "paper", "speedup", "robot", "view",
-            "secret"]
+            "secret", "certs"]
 
 
 def test_every_command_is_listed_in_order() -> None:
