@@ -321,7 +321,8 @@
       setText(line.of, String(a.rounds || "?"));
       setText(line.method, a.method);
       setText(line.last, a.lastMs === null ? "" : `last round ${a.lastMs.toFixed(0)} ms`);
-      setText(line.where, a.at ? `at ${a.at} (${a.phase})` : "");
+      const v = a.shown || a;          // where the mark is drawn (hops shown one a frame)
+      setText(line.where, v.at ? `at ${v.at} (${v.phase})` : "");
     }
   }
   function drawChart(id, key) {
@@ -439,7 +440,7 @@
   }
   function render() {
     const t0 = performance.now();
-    drawHeader(); drawAgents(); const more = drawNetwork(); drawLegend(); drawList();
+    drawHeader(); const more = drawNetwork(); drawAgents(); drawLegend(); drawList();
     let later = more;
     const chartsDue = !follow || S.ended || t0 - chartsAt >= CHART_MS;
     const changed = drawn.get("curves") !== S.curves || drawn.get("arenas") !== S.arenas;

@@ -3,6 +3,7 @@
 * ``page``: a synthetic 32-robot results folder (8,000 iterations, respite 500, 16 rounds),
   finished and then written live; time to first paint in headless Chromium and the page's
   handling time per event and per redraw.
+* ``screenshot PATH``: the README's picture (``docs/view.png``), a live demo in Chromium;
 * ``overhead [PAIRS]``: the demo config (5 robots, sync, same seed) run with the launcher
   directly, alternately without and with ``start_view`` on its folder and a browser attached
   (started, and settled after its start-up, before the run begins); medians of PAIRS pairs
@@ -221,6 +222,39 @@ def overhead(browser: tuple[str, str], pairs: int = 4) -> dict[str, Any]:
             "load_before": os.getloadavg()}
 
 
+def screenshot(browser: tuple[str, str], path: Path, at_round: int = 10) -> dict[str, Any]:
+    """The README's picture: the page during a live demo run (5 robots), taken by the test
+    set-up's Chromium once the agent has done ``at_round`` rounds."""
+    from dfrl.experiments.config import ExperimentConfig, resolve_config
+    from dfrl.experiments.launcher.run import run
+
+    cfg = ExperimentConfig.load(resolve_config("demo"))
+    box: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "demo"
+        with start_view(out, fresh=True) as view:
+            drv = chrome(*browser, height=900)
+            try:
+                drv.get(view.url)
+                thread = threading.Thread(target=lambda: box.update(res=run(cfg, out, progress=None)),
+                                          daemon=True)
+                thread.start()
+                for _ in range(1200):                       # 120 s at most
+                    rnd = drv.execute_script(
+                        "const r = document.querySelector('.agent-line .round');"
+                        "return r ? Number(r.dataset.round) : 0")
+                    if rnd >= at_round or not thread.is_alive():
+                        break
+                    time.sleep(0.1)
+                time.sleep(0.6)                              # the frame after that one
+                drv.save_screenshot(str(path))
+            finally:
+                drv.quit()
+            thread.join(120)
+    return {"screenshot": str(path), "round": rnd, "ok": bool(box.get("res") and
+                                                             box["res"].ok)}
+
+
 def main(argv: list[str]) -> int:
     paths = browser_paths()
     if isinstance(paths, str):
@@ -230,6 +264,8 @@ def main(argv: list[str]) -> int:
     out = {}
     if "page" in what:
         out["page"] = page(paths)
+    if "screenshot" in what:
+        out["screenshot"] = screenshot(paths, Path(what[what.index("screenshot") + 1]))
     if "overhead" in what:
         pairs = [int(a) for a in what if a.isdigit()]
         out["overhead"] = overhead(paths, *pairs[:1])
