@@ -88,7 +88,8 @@ class NodeConfig:
         Print ``DFRL_EVENT`` lines.
     bench_table : list of int or None
         ``[S, A]``: no simulation; serve a random table of that shape until stdin closes.
-    host : str
+    host, tls : str, str or None
+        Address to bind; a node's TLS folder (``dfrl certs node``; None: plaintext).
     """
 
     robot: str
@@ -108,6 +109,7 @@ class NodeConfig:
     events: bool = True
     bench_table: list[int] | None = None
     host: str = "127.0.0.1"
+    tls: str | None = None
 
     def __post_init__(self) -> None:
         problems = check_node(_raw(self))

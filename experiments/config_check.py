@@ -172,6 +172,7 @@ NODE_RULES: dict[str, Rule] = {
     "token": Rule(int, low=0), "trainer": Rule(dict), "grace_s": Rule(float, low=0),
     "sync_timeout_s": Rule(float, above=0), "progress_every": Rule(int, low=0),
     "events": Rule(bool), "bench_table": Rule(list, nullable=True), "host": Rule(str),
+    "tls": Rule(str, nullable=True),
 }
 
 

@@ -26,8 +26,8 @@ import collections
 import dataclasses
 import itertools
 import json
+import os
 import queue
-import shutil
 import subprocess
 import threading
 import time
@@ -37,14 +37,13 @@ from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
 
+from dfrl.experiments.console_command import CONSOLE_SCRIPT, console_command
 from dfrl.experiments.errors import ExperimentError
-from dfrl.platform_pl import AGENTS_DIR
+
+__all__ = ["Address", "CONSOLE_SCRIPT", "ConsoleNode"]
 
 Address = tuple[str, int]
 """A node's (host, port)."""
-
-CONSOLE_SCRIPT: Path = AGENTS_DIR / "dfrl_console.pl"
-"""The Prolog program a :class:`ConsoleNode` runs."""
 
 _STDERR_LINES = 200
 
@@ -66,26 +65,26 @@ class ConsoleNode:
         File that receives the node's stderr (warnings, errors) as well.
     swipl : str or None
         The ``swipl`` executable (default: found on ``PATH``).
+    tls : path or None
+        A node's TLS folder (``dfrl certs node``): mutual TLS on every connection, in and out
+        (None: plaintext).
 
     Raises
     ------
     ExperimentError
-        ``swipl`` is missing, or the node did not report its address in time.
+        ``swipl`` is missing, ``tls`` lacks a file (a ``CertError``), or the node did not
+        report its address in time (e.g. its TLS files do not make a context).
     """
 
     def __init__(self, tokens: int | str | Sequence[int | str] | None = None,
                  host: str = "127.0.0.1", port: int = 0, ready_timeout_s: float = 30.0,
-                 log_path: Path | None = None, swipl: str | None = None) -> None:
-        exe = swipl or shutil.which("swipl")
-        if exe is None:
-            raise ExperimentError("swipl is not installed (run scripts/setup.sh)")
+                 log_path: Path | None = None, swipl: str | None = None,
+                 tls: str | os.PathLike[str] | None = None) -> None:
         if tokens is None:
             tokens = []
         elif isinstance(tokens, (int, str)):
             tokens = [tokens]
-        cmd = [exe, "-q", str(CONSOLE_SCRIPT), "--host", host, "--port", str(int(port))]
-        for tok in tokens:
-            cmd += ["--token", str(tok)]
+        cmd = console_command(host, port, tokens, tls, swipl)
         self._ids = itertools.count(1)
         self._cond = threading.Condition()
         self._replies: dict[Any, dict[str, Any]] = {}

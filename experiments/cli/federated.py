@@ -61,6 +61,17 @@ def add_output_arguments(p: argparse.ArgumentParser, name: str) -> None:
     add_figure_arguments(p)
 
 
+def add_tls_argument(p: argparse.ArgumentParser) -> None:
+    """``--tls DIR``: mutual TLS for the driver's console node and its local robots."""
+    p.add_argument("--tls", type=Path, default=None, metavar="DIR",
+                   help="mutual TLS with the node certificate in DIR (ca.crt, node.crt, "
+                        "node.key from 'dfrl certs node'): the console node and every robot "
+                        "process spawned on this host use it (one credential for all local "
+                        "processes); remote robots (\"node\": \"HOST:PORT\") must run "
+                        "'dfrl robot --tls' with a certificate of the same CA "
+                        "(default: none, plaintext)")
+
+
 def overrides_of(args: argparse.Namespace) -> dict[str, Any]:
     """The config keys the override flags that were given set."""
     changes: dict[str, Any] = {}
@@ -114,15 +125,23 @@ def output_folder(args: argparse.Namespace, name: str) -> Path:
 
 def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
                    show_summary: bool = False) -> int:
-    """Check ``cfg``, claim its results folder, run it and report; the command's exit code
-    (2: bad config or folder, before anything started; 130: interrupted)."""
+    """Check ``cfg`` and the TLS folder, claim the results folder, run it and report; the
+    command's exit code (2: bad config, TLS folder or results folder, before anything
+    started; 130: interrupted)."""
+    from dfrl.experiments.certs import CertError, check_node_dir
     from dfrl.experiments.launcher import run
 
+    tls = getattr(args, "tls", None)
     try:
         cfg.check()
+        if tls is not None:
+            tls = check_node_dir(tls).resolve()
         out = output_folder(args, cfg.name)
     except ConfigError as exc:
         return config_error(prog, exc)
+    except CertError as exc:
+        print(f"{prog}: --tls: {exc}; nothing was started", file=sys.stderr)
+        return 2
     except FileExistsError as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
         return 2
@@ -133,7 +152,7 @@ def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
         view = start_view(out, args.view_host, args.view_port, fresh=True)
         print(f"{prog}: live view at {view.url}", file=sys.stderr, flush=True)
     try:
-        results = run(cfg, out)
+        results = run(cfg, out, tls=tls)
     except ExperimentError as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
         return 1
@@ -239,6 +258,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                            "in results/demo/<timestamp>); exit 1 unless the "
                                            "federation completed, 2 on a bad option")
     add_output_arguments(p, "demo")
+    add_tls_argument(p)
     add_override_arguments(p)
     p.set_defaults(func=cmd_demo)
 
@@ -247,6 +267,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                           "config (nothing started), 130 when interrupted")
     p.add_argument("config", help="experiment config: a JSON file or a name in experiments/configs")
     add_output_arguments(p, "NAME")
+    add_tls_argument(p)
     add_override_arguments(p)
     p.set_defaults(func=cmd_run)
 

@@ -34,13 +34,14 @@ def swipl_path() -> str:
 
 
 def open_console(token: int | str, log_path: Path | None = None,
-                 host: str = "127.0.0.1") -> ConsoleNode:
+                 host: str = "127.0.0.1", tls: str | Path | None = None) -> ConsoleNode:
     """Start the console node of an experiment at ``host`` (an address the robots reach; its
     token lets it load programs into the robot nodes and drive robot services); its stderr
-    goes to ``log_path``."""
+    goes to ``log_path``. With ``tls`` (a node's TLS folder, ``dfrl certs node``) it speaks
+    mutual TLS to every node (default: plaintext)."""
     if log_path is not None:
         log_path.parent.mkdir(parents=True, exist_ok=True)
-    return ConsoleNode(tokens=token, host=host, log_path=log_path)
+    return ConsoleNode(tokens=token, host=host, log_path=log_path, tls=tls)
 
 
 def launch_agent(console: ConsoleNode, launch: dict[str, Any], timeout_s: float = 60.0) -> None:

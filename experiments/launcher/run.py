@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 from typing import Any, TextIO
 
+from dfrl.experiments.certs import check_node_dir
 from dfrl.experiments.config import ExperimentConfig
 from dfrl.experiments.launcher.children import await_ready
 from dfrl.experiments.launcher.agents import open_console
@@ -31,8 +32,10 @@ class Launcher:
     """Runs one experiment; see :func:`run`."""
 
     def __init__(self, config: ExperimentConfig, output_dir: str | Path,
-                 progress: TextIO | None = sys.stderr, force: bool = False) -> None:
+                 progress: TextIO | None = sys.stderr, force: bool = False,
+                 tls: str | Path | None = None) -> None:
         self.state = RunState(config, Path(output_dir).resolve(), progress)
+        self.state.tls = Path(tls).resolve() if tls is not None else None
         self.force = force
 
     def run(self) -> Results:
@@ -45,6 +48,8 @@ class Launcher:
         ------
         ConfigError
             An arena is missing or does not parse (before anything is started).
+        CertError
+            The TLS folder lacks one of its files (before anything is started).
         FileExistsError
             The results folder is not empty and ``force`` is not set.
         """
@@ -62,6 +67,8 @@ class Launcher:
         st = self.state
         c = st.config
         c.check()
+        if st.tls is not None:
+            check_node_dir(st.tls)
         claim_output(st.out, self.force)
         write_json(st.out / "config.json", c.to_dict())
         st.t0 = time.monotonic()
@@ -70,7 +77,7 @@ class Launcher:
         try:
             st.console_host = console_host(c)
             st.console = open_console(c.token, st.out / "logs" / "console.err",
-                                      host=st.console_host)
+                                      host=st.console_host, tls=st.tls)
             children = [spawn(st, r, c.iterations) for r in c.robots]
             st.poller = StatusPoller(st.remote()).start()
             await_ready([ch for ch in children if ch.robot.node is None])
@@ -162,7 +169,8 @@ def _interrupt(signum: int, frame: Any) -> None:
 
 
 def run(config: ExperimentConfig, output_dir: str | Path,
-        progress: TextIO | None = sys.stderr, force: bool = False) -> Results:
+        progress: TextIO | None = sys.stderr, force: bool = False,
+        tls: str | Path | None = None) -> Results:
     """Run a federated experiment on loopback and write its results folder.
 
     Starts one robot node process per robot, waits for their addresses, writes
@@ -181,5 +189,10 @@ def run(config: ExperimentConfig, output_dir: str | Path,
     progress : TextIO or None
         Where progress lines go (None: quiet).
     force : bool
+    tls : str, Path or None
+        A node's TLS folder (``ca.crt``, ``node.crt``, ``node.key``; ``dfrl certs node``): the
+        console node and every robot node spawned here speak mutual TLS with it (one
+        credential for all local processes); remote robots must run ``dfrl robot --tls``
+        with a certificate of the same CA. None (default): plaintext.
     """
-    return Launcher(config, output_dir, progress, force).run()
+    return Launcher(config, output_dir, progress, force, tls).run()

@@ -30,7 +30,10 @@ def node_config(state: RunState, robot: RobotSpec, iterations: int) -> NodeConfi
                       seed=robot_seed(state, robot), iterations=iterations, respite=c.respite,
                       mode=c.mode, rtf=c.rtf, token=c.token, trainer=dict(c.trainer),
                       grace_s=grace, sync_timeout_s=max(60.0, c.timeout_s),
-                      host=state.console_host)
+                      host=state.console_host,
+                      # a remote robot has its own TLS folder (dfrl robot --tls): not ours
+                      tls=str(state.tls) if state.tls is not None and robot.node is None
+                      else None)
 
 
 def spawn(state: RunState, robot: RobotSpec, iterations: int) -> RobotChild | RemoteRobot:
@@ -55,14 +58,15 @@ def spawn(state: RunState, robot: RobotSpec, iterations: int) -> RobotChild | Re
 
 
 def write_nodes(state: RunState) -> None:
-    """``nodes.json``: the token, the console node (where ``dfrl join`` asks), every node
-    that is up and every agent."""
+    """``nodes.json``: the token, the console node (where ``dfrl join`` asks), its TLS folder
+    (null: plaintext), every node that is up and every agent."""
     nodes = [{"robot": rid, "algo": ch.robot.algo, "arena": ch.robot.arena,
               "host": ch.address[0], "port": ch.address[1], "pid": ch.pid,
               "node": ch.robot.node, "joined": rid in state.joined}
              for rid, ch in state.children.items() if ch.address is not None]
     console = list(state.console.address) if state.console is not None else None
     write_json(state.out / "nodes.json", {"token": state.config.token, "console": console,
+                                          "tls": str(state.tls) if state.tls else None,
                                           "experiment": state.experiment_id,
                                           "nodes": nodes,
                                           "agents": [a.to_dict() for a in state.agents.values()]})

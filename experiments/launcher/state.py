@@ -55,6 +55,7 @@ class RunState:
     killed: set[str] = field(default_factory=set)       # children the launcher itself stopped
     console: ConsoleNode | None = None                  # the experiment's console node
     console_host: str = "127.0.0.1"                     # where it binds; local nodes too
+    tls: Path | None = None                             # TLS folder of the console + local nodes
     experiment_id: str = ""                             # remote robots file it under this
     poller: StatusPoller | None = None                  # polls the remote robots' status
     lost: dict[str, str] = field(default_factory=dict)  # robot -> why (crashed, failed, gone)

@@ -73,7 +73,10 @@ class RobotProcess:
         load_agent_program(self.node, f"robot_node {c.robot}")
         self.run_ = Run(c, self.node, self.lines, host=_StdinHost(self.stdin), poll_every=50)
         self.run_.open()
-        name = self.node.start(c.host, 0, token=int(c.token), idle_timeout=5.0)
+        options: dict[str, Any] = {"token": int(c.token), "idle_timeout": 5.0}
+        if c.tls is not None:
+            options["tls"] = str(Path(c.tls).resolve())
+        name = self.node.start(c.host, 0, **options)
         host, port = self.node.address(name)
         self.lines.node(str(host), int(port))
         return str(host), int(port)

@@ -13,7 +13,7 @@
 :- autoload(library(error), [must_be/2, domain_error/2, type_error/2]).
 :- autoload(library(readutil), [read_line_to_string/2]).
 :- autoload(library(option), [option/2, option/3]).
-:- autoload(library(lists), [member/2, memberchk/2]).
+:- autoload(library(lists), [append/3, member/2, memberchk/2]).
 
 /** <module> The console node of an experiment, driven in JSON lines
 
@@ -21,12 +21,14 @@ A long-lived platform node that an experiment driver (a Python process)
 starts once and talks to over stdin and stdout, one JSON object per line:
 
     swipl -q platform_pl/agents/dfrl_console.pl [--host H] [--port P]
-                                                [--token T]...
+                                                [--token T]... [--tls DIR]
 
 --host is the address to bind (default 127.0.0.1), --port the port (0,
 the default, lets the OS choose), --token a token of the node (repeat for
-several; numeric tokens are integers, as Tartarus tokens are). The node
-prints
+several; numeric tokens are integers, as Tartarus tokens are), --tls the
+folder of a node certificate (ca.crt, node.crt, node.key; `dfrl certs
+node`): the node then speaks mutual TLS on every connection, in and out
+(node_start/3 option tls(Dir)). The node prints
 
     {"event":"ready","host":H,"port":P}
 
@@ -90,11 +92,14 @@ Lines on stdout are written under one mutex, whole, and flushed.
 opt_type(host,  host,  atom).
 opt_type(port,  port,  between(0, 65535)).
 opt_type(token, token, atom).
+opt_type(tls,   tls,   atom).
 
 opt_help(host,  "Address to bind (default 127.0.0.1)").
 opt_help(port,  "Port to bind (default 0: chosen by the OS)").
 opt_help(token, "A token of this node (repeat for several)").
-opt_help(help(usage), " [--host H] [--port P] [--token T]...").
+opt_help(tls,   "Folder of the node's TLS files (ca.crt, node.crt, node.key): \c
+                 mutual TLS on every connection (default: plaintext)").
+opt_help(help(usage), " [--host H] [--port P] [--token T]... [--tls DIR]").
 
 main(Argv) :-
     catch(console(Argv), E, ( print_message(error, E), halt(1) )).
@@ -107,7 +112,9 @@ console(Argv) :-
     set_stream(user_input, encoding(utf8)),
     set_stream(user_output, encoding(utf8)),
     (   Tokens == [] -> TokOpts = [] ; TokOpts = [tokens(Tokens)] ),
-    node_start(Host:Port, Node, [default(true)|TokOpts]),
+    (   option(tls(Dir), Options) -> TlsOpts = [tls(Dir)] ; TlsOpts = [] ),
+    append(TokOpts, TlsOpts, NodeOpts),
+    node_start(Host:Port, Node, [default(true)|NodeOpts]),
     node_property(Node, address(H:P)),
     emit(_{event:ready, host:H, port:P}),
     call_cleanup(dfrl_console_serve(Node), node_stop(Node)).
