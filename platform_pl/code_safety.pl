@@ -288,6 +288,7 @@ scratch_module(code_safety_scratch).
 scratch_fill(Preds, Rules, S) :-
     scratch_module(S),
     scratch_clear(S),
+    dynamic(S:'$scratch'/0),            % the module exists, even for no rules
     catch(( forall(( member(P, Preds), P = F/A, atom(F), integer(A) ),
                    dynamic(S:F/A)),
             forall(member(H-B, Rules),
@@ -578,6 +579,14 @@ agent_api(robot_resources:hosted_robot(_, _), true).
 agent_api(dfrl_agent:dfrl_tour_event(A, _, _), self(A)).
 agent_api(dfrl_agent:dfrl_tour_main(A, _), self(A)).
 agent_api(dfrl_agent:dfrl_method(_), true).
+%   The aggregation hooks: their clauses are the node's own or were
+%   checked when a peer sent them (mobile_hook/1), so a method may build
+%   on another (e.g. call the average's hooks).
+agent_api(dfrl_agent:aggregate_init(_, _, _), true).
+agent_api(dfrl_agent:aggregate_step(_, _, _, _), true).
+agent_api(dfrl_agent:aggregate_final(_, _, _), true).
+agent_api(dfrl_agent:method_uses_visits(_), true).
+agent_api(dfrl_agent:aggregate_tables(_, _, _), true).
 
 public_node_property(address(_)).
 public_node_property(link(_)).

@@ -148,10 +148,15 @@ test(refused_program_loads_nothing, [cleanup(stop_all([N]))]) :-
     load_program_text(localhost:P, good, "sandbox_marker(1).\n", [tokens([k])]),
     assertion(user:sandbox_marker(1)).
 
+test(hook_clause_alone) :-                  % no user predicate in the program
+    check_program_text(hook_only,
+                       "dfrl_agent:aggregate_step(s, A, T, B) :- sleep(0.01), A = T, B = T.").
+
 test(aggregation_methods_pass) :-
     forall(member(F0, ['../../platform_pl/agents/examples/max_visited.pl',
                        '../../platform_pl/agents/examples/median_method.pl',
-                       '../../platform_pl/examples/tartarus_tour/tour.pl']),
+                       '../../platform_pl/examples/tartarus_tour/tour.pl',
+                       '../experiments/launcher/slow_method.pl']),
            ( here(F0, F),
              read_file_to_string(F, Text, []),
              file_base_name(F, Id),
