@@ -64,8 +64,8 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
     seen = {a["name"]: len(_controls(_rounds_log(results_dir, a), a["name"], command))
             for a in targets}
     first = targets[0]["itinerary"][0]
-    with open_console(info["token"], host=route_source(first["host"], int(first["port"]))) \
-            as console:
+    with open_console(info["token"], host=route_source(first["host"], int(first["port"])),
+                      tls=info.get("tls")) as console:
         for a in targets:
             nodes = [(s["host"], s["port"]) for s in a["itinerary"]]
             send_control(console, nodes[0], a["name"], {"method": method}, program=prog,
@@ -115,6 +115,7 @@ def join_robot(results_dir: str | Path, robot: str, arena: str, algo: str = "qle
         raise ExperimentError(f"{results_dir}/nodes.json names no console node to ask")
     spec = RobotSpec(robot, arena, algo, seed, node)
     driver = tuple(info["console"])
-    with open_console(info["token"], host=route_source(driver[0], int(driver[1]))) as console:
+    with open_console(info["token"], host=route_source(driver[0], int(driver[1])),
+                      tls=info.get("tls")) as console:
         return console.request_join(tuple(info["console"]), spec, iterations,
                                     timeout_s=timeout_s)

@@ -18,9 +18,9 @@ from typing import Any
 import pytest
 
 from dfrl.experiments.certs import CertError, init_ca, make_node
-from dfrl.experiments.launcher import run
+from dfrl.experiments.launcher import join_robot, run
 
-from .helpers import diagnose, rounds_csv, small_config
+from .helpers import diagnose, rounds_csv, small_config, wait_rounds
 
 pytestmark = [pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl"),
               pytest.mark.skipif(shutil.which("openssl") is None, reason="needs openssl")]
@@ -159,3 +159,30 @@ def test_help_names_the_default(tmp_path: Path) -> None:
         text = " ".join(done.stdout.split())
         assert "--tls DIR" in text and "default: none, plaintext" in text, text
         assert "one credential for all local processes" in text, text
+
+
+def test_join_reaches_a_tls_run_with_its_folder(tmp_path: Path, node_dir: Path) -> None:
+    """``dfrl join`` (join_robot) opens its own console node with the run's TLS folder
+    (``nodes.json``); the launcher spawns the new robot with it too."""
+    cfg = small_config(iterations=2000, respite=100, rtf=20.0)
+    box: dict[str, Any] = {}
+
+    def target() -> None:
+        try:
+            box["res"] = run(cfg, tmp_path, progress=None, tls=node_dir)
+        except BaseException as exc:  # noqa: BLE001 - reported below
+            box["exc"] = exc
+
+    t = threading.Thread(target=target, daemon=True)
+    t.start()
+    wait_rounds(tmp_path, "fed_qlearning", 2)
+    entry = join_robot(tmp_path, "r3", "r5", iterations=600)
+    t.join(timeout=120)
+    assert not t.is_alive()
+    res = box.get("res") or pytest.fail(f"run failed: {box.get('exc')!r}")
+    assert res.ok, diagnose(tmp_path)
+    assert entry["robot"] == "r3" and entry["joined"] is True
+    assert json.loads((tmp_path / "nodes" / "r3.json").read_text())["tls"] == \
+        str(node_dir.resolve())
+    visited = [r["visited"] for r in rounds_csv(tmp_path)]
+    assert "r1 r2 r3" in visited and visited[0] == "r1 r2"
