@@ -27,8 +27,9 @@
 :- use_module(transport,
               [ address_normalize/2, token_proof/3, open_key/1,
                 transport_drop_pool/0, transport_identify/3 ]).
-:- use_module(worker_pool, [pool_run/3, pool_signal/3, pool_drain/0]).
+:- use_module(worker_pool, [pool_run/3, pool_signal/3, pool_drain/0, pool_retire/0]).
 :- use_module(tls, [tls_check_dir/1, tls_accept/5]).
+:- use_module(secrets, [check_secrets/3, loopback_host/1, token_entropy_bits/2]).
 :- autoload(library(socket),
             [ tcp_socket/1, tcp_setopt/2, tcp_bind/2, tcp_listen/2,
               tcp_accept/3, tcp_open_socket/2, tcp_close_socket/1,
@@ -85,7 +86,7 @@ by default the bind address, or the host name when it binds 0.0.0.0).
     node_opt/2,                 % Node, Option
     default_node/1,             % Node
     stopping/1,                 % Node
-    connection/2,               % Node, ThreadId
+    connection/3,               % Node, ConnId, ThreadId: a served connection
     conn_entry/5.               % Node, ConnId, PeerKey, Class, Since
 
 :- thread_local
@@ -152,12 +153,23 @@ by default the bind address, or the host name when it binds 0.0.0.0).
 %                                 (defaults 2 and 10)
 %     - max_frame_size(+Bytes)    largest frame from a peer that proved a
 %                                 token (default 256 MiB)
-%     - max_text_frame_size(+Bytes) largest frame before that (64 KiB)
+%     - max_text_frame_size(+Bytes) largest frame before that (4096:
+%                                 a hello is answered by auth(Proofs),
+%                                 about 70 bytes a proof, and pings)
 %     - frame_deadline(+Sec)      before a token proof, a whole frame must
 %                                 arrive within Sec of its first byte
 %                                 (default 5)
 %     - max_term_depth(+D)        before a token proof, the deepest term
-%                                 a frame may hold (default 64)
+%                                 a frame may hold, and the deepest its
+%                                 text may nest brackets (checked before
+%                                 it is parsed; default 64). At most two
+%                                 such frames over 512 bytes are parsed
+%                                 at once in a process (flag
+%                                 dfrl_preauth_parsers), so
+%                                 unauthenticated peers cannot take every
+%                                 core; an auth(Proofs) or a ping is
+%                                 parsed at once, and authenticated
+%                                 connections never wait for a slot
 %     - max_unauth_connections(+N) connections that have not proved a
 %                                 token, in total (default: half of
 %                                 max_connections); the rest is kept for
@@ -280,81 +292,6 @@ check_options(Options) :-
              option(Opt, Options) ),
            must_be(number, V)).
 
-%   Refuse weak secrets off loopback (see node_start/3).
-check_secrets(Host:Port, Tokens, Options) :-
-    (   Tokens == []
-    ->  Bits = 0
-    ;   aggregate_all(min(B), ( member(T, Tokens), token_entropy_bits(T, B) ), Bits)
-    ),
-    (   Bits >= 128
-    ->  true
-    ;   option(tls(_), Options)
-    ->  true
-    ;   loopback_host(Host)
-    ->  (   Tokens == []
-        ->  true
-        ;   print_message(informational, dfrl(weak_token(Host:Port, Bits)))
-        )
-    ;   option(insecure(true), Options)
-    ->  print_message(warning, dfrl(insecure_node(Host:Port, Bits)))
-    ;   throw(error(permission_error(listen, address, Host:Port),
-                    context(node_start/3, weak_secret(Bits, 128))))
-    ).
-
-%!  token_entropy_bits(+Token, -Bits) is det.
-%
-%   An estimate of the entropy of Token: for an integer, its magnitude
-%   in bits; for text (atoms, strings, the canonical text of other
-%   terms), its length times log2 of the alphabet its characters are
-%   drawn from (digits 10, lower case 26, upper case 26, other 33, or
-%   hex digits 16), the alphabet being at most the square of the number
-%   of distinct characters (so `aaaa...` scores 0). A 64-digit hex
-%   string or `dfrl secret`'s output scores over 128.
-
-token_entropy_bits(T, Bits) :-
-    integer(T),
-    !,
-    (   T =:= 0 -> Bits = 0 ; Bits is msb(abs(T)) + 1 ).
-token_entropy_bits(T, Bits) :-
-    (   ( atom(T) ; string(T) )
-    ->  atom_codes(T, Cs)
-    ;   format(codes(Cs), '~q', [T])
-    ),
-    length(Cs, Len),
-    sort(Cs, Distinct),
-    length(Distinct, D),
-    (   forall(member(C, Cs), code_type(C, xdigit(_)))
-    ->  Pool0 = 16
-    ;   aggregate_all(sum(P), ( char_class(Class, P),
-                                once(( member(C, Cs), in_class(Class, C) )) ),
-                      Pool0)
-    ),
-    Pool is min(Pool0, D*D),
-    (   Pool =< 1
-    ->  Bits = 0
-    ;   Bits is floor(Len * log(Pool) / log(2))
-    ).
-
-char_class(digit, 10).
-char_class(lower, 26).
-char_class(upper, 26).
-char_class(other, 33).
-
-in_class(digit, C) :- code_type(C, digit).
-in_class(lower, C) :- code_type(C, lower), C < 128.
-in_class(upper, C) :- code_type(C, upper), C < 128.
-in_class(other, C) :- \+ code_type(C, alnum) ; C >= 128.
-
-loopback_host(H) :-
-    atomic(H),
-    atom_string(A, H),
-    (   A == localhost
-    ->  true
-    ;   A == '::1'
-    ->  true
-    ;   sub_atom(A, 0, _, _, '127.')
-    ).
-
 advertised(Options, Host, Bound, Advertised) :-
     (   option(advertise(A), Options)
     ->  (   atomic(A)
@@ -435,7 +372,7 @@ node_stop(Node) :-
     ),
     assertz(stopping(Node)),
     forall(node_stopping(Node), true),
-    forall(connection(Node, T),
+    forall(connection(Node, _, T),
            pool_signal(connections, T, node:stop_if_serving(Node))),
     (   node_acceptor(Node, _)
     ->  wake_acceptor(Address)
@@ -451,7 +388,7 @@ node_stop(Node) :-
     retractall(node_tokens(Node, _)),
     retractall(node_opt(Node, _)),
     retractall(stopping(Node)),
-    retractall(connection(Node, _)),
+    retractall(connection(Node, _, _)),
     with_mutex(dfrl_conns, retractall(conn_entry(Node, _, _, _, _))),
     (   retract(default_node(Node))
     ->  (   node_info(Other, _, _)
@@ -516,7 +453,7 @@ option_default(store, none).
 option_default(settle_period, 2).
 option_default(lease_s, 10).
 option_default(max_frame_size, 268435456).
-option_default(max_text_frame_size, 65536).
+option_default(max_text_frame_size, 4096).
 option_default(frame_deadline, 5).
 option_default(max_term_depth, 64).
 option_default(max_unauth_per_peer, 16).
@@ -765,14 +702,23 @@ dispatch(Node, Client, Peer) :-
     ),
     (   Verdict == refuse
     ->  true
-    ;   catch(pool_run(connections, serve_connection(Node, CId, Client, Peer),
-                       [max(10000)]),
+    ;   connection_workers_max(MaxWorkers),
+        catch(pool_run(connections, serve_connection(Node, CId, Client, Peer),
+                       [max(MaxWorkers)]),
               E, ( print_message(warning, E),
                    with_mutex(dfrl_conns, retractall(conn_entry(Node, CId, _, _, _))),
                    refuse_busy(Node, Client) ))
     ->  true
     ;   true
     ).
+
+%   The connection pool (shared by the nodes of the process) holds twice
+%   their connections: room for evicted workers that are still ending,
+%   but not for a flood to grow it without bound.
+connection_workers_max(Max) :-
+    aggregate_all(sum(M), ( node_info(N, _, _), node_option(N, max_connections, M) ),
+                  Sum),
+    Max is max(16, 2 * Sum).
 
 peer_key(ip(A,B,C,D), ip(A,B,C,D)) :- !.
 peer_key(Peer, Peer).
@@ -832,11 +778,15 @@ take_same(K, [K1|Ks], N0, N, Rest) :-
 take_same(_, Ks, N, N, Ks).
 
 %   The victim's entry is gone already (it no longer counts); its worker,
-%   if it runs, is told to close the connection.
+%   if it runs, is told to close the connection. A worker that has not
+%   recorded itself yet finds its entry gone when it starts (see
+%   serve_connection/4: it records itself, then looks).
 evict(Node, Victim) :-
     debug(dfrl(node), '~w: evicting unauthenticated connection ~w', [Node, Victim]),
-    forall(connection(Node, T),
-           pool_signal(connections, T, node:evict_if_serving(Node, Victim))).
+    (   connection(Node, Victim, T)
+    ->  pool_signal(connections, T, node:evict_if_serving(Node, Victim))
+    ;   true
+    ).
 
 evict_if_serving(Node, CId) :-
     (   serving(Node, CId)
@@ -860,7 +810,7 @@ mark_authenticated(Node) :-
 %   has moved on to another job.
 stop_if_serving(Node) :-
     thread_self(Me),
-    (   connection(Node, Me)
+    (   connection(Node, _, Me)
     ->  throw(node_stopping)
     ;   true
     ).
@@ -888,7 +838,7 @@ refuse_busy(_, Client) :-
 
 serve_connection(Node, CId, Client, Peer) :-
     thread_self(Me),
-    assertz(connection(Node, Me)),
+    assertz(connection(Node, CId, Me)),
     assertz(serving(Node, CId)),
     catch(setup_call_cleanup(
               ( node_set_current_if_alive(Node),
@@ -909,8 +859,36 @@ serve_connection(Node, CId, Client, Peer) :-
     ),
     with_mutex(dfrl_conns, retractall(conn_entry(Node, CId, _, _, _))),
     retractall(serving(_, _)),
-    retractall(connection(Node, Me)),
+    retractall(connection(Node, CId, Me)),
     retractall(current_node_tl(_)).
+
+%   After a rejected frame: give its memory back. A reader that ran out of
+%   C stack leaves the pages it touched resident in this thread (no trim
+%   returns them), so its worker exits when the connection ends.
+rejected_frame(Reason) :-
+    (   Reason = syntax(resource_error(_))
+    ->  pool_retire
+    ;   true
+    ),
+    release_memory.
+
+%   The parse slots of unauthenticated frames (see frame_read/3): a
+%   message queue holding as many `slot` messages as the flag
+%   dfrl_preauth_parsers (2) says, one queue per process, made once.
+:- create_prolog_flag(dfrl_preauth_parsers, 2, [type(integer), keep(true)]).
+
+preauth_parse_slots(Q) :-
+    Q = dfrl_preauth_parse,
+    (   catch(message_queue_property(Q, size(_)), _, fail)
+    ->  true
+    ;   with_mutex(dfrl_conns,
+                   (   catch(message_queue_property(Q, size(_)), _, fail)
+                   ->  true
+                   ;   current_prolog_flag(dfrl_preauth_parsers, N),
+                       message_queue_create(Q, [alias(Q)]),
+                       forall(between(1, N, _), thread_send_message(Q, slot))
+                   ))
+    ).
 
 %   Give back what a large or rejected frame made the worker's stacks grow
 %   to (a worker thread is reused, and a hostile frame must not leave its
@@ -988,8 +966,9 @@ serve_frames(Ctx) :-
         node_option(Node, idle_timeout, Idle),
         node_option(Node, frame_deadline, Deadline),
         node_option(Node, max_term_depth, Depth),
+        preauth_parse_slots(Slots),
         ReadOptions = [ max_size(Max), binary(false), deadline(Deadline),
-                        max_depth(Depth) ]
+                        max_depth(Depth), parse_slots(Slots, 512) ]
     ),
     set_stream(In, timeout(Idle)),
     byte_count(In, Before),
@@ -997,7 +976,7 @@ serve_frames(Ctx) :-
           error(wire_error(Reason), _),
           ( reply(Out, error(error(wire_error(Reason), _))),
             Frame = end_of_file,
-            release_memory
+            rejected_frame(Reason)
           )),
     (   Frame == end_of_file
     ->  true

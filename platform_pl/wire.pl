@@ -3,11 +3,12 @@
             frame_read/3,               % +Stream, -Frame, +Options
             wire_version/1,             % -Version
             text_term_bytes/2,          % ?Term, ?Bytes
-            term_depth_within/2         % @Term, +MaxDepth
+            term_depth_within/2,        % @Term, +MaxDepth
+            text_nesting_within/2       % +Text, +MaxDepth
           ]).
 :- use_module(platform_errors, [wire_error/1]).
 :- autoload(library(utf8), [utf8_codes//1]).
-:- autoload(library(lists), [append/3]).
+:- autoload(library(lists), [append/3, member/2]).
 :- autoload(library(error), [must_be/2]).
 :- autoload(library(option), [option/3]).
 :- autoload(library(memfile),
@@ -42,11 +43,20 @@ last, must arrive within a deadline (deadline(Sec)); the peer sends one
 frame and waits for its answer (no pipelining before authentication);
 and the parsed term may be at most max_depth(D) deep (a list counts as
 one level, whatever its length; an operator chain such as `a+a+...+a`
-is as deep as it is long). read_term/3 parses in time linear in the
-text for every shape tried (chains of infix, prefix and mixed
-operators, nested brackets; deeply nested brackets raise a resource
-error, reported as a syntax error), and every check after it is linear
-too, so a frame's cost is bounded by its size.
+is as deep as it is long). Before read_term/3 sees the text, its
+brackets ( `(`, `[`, `{` outside quoted text, `0'c` codes and comments)
+are counted in one pass (text_nesting_within/2): a text nested deeper
+than D is refused unread, since read_term/3 recurses on the C stack for
+every bracket level (16,000 levels overflow a thread's C stack, and the
+pages it touched stay resident in a pooled worker). read_term/3 parses
+in time linear in the text for every shape tried (chains of infix,
+prefix and mixed operators, nested brackets), and every check after it
+is linear too, so a frame's cost is bounded by its size. The deadline
+reader keeps its chunks in one open list, so reading a frame is linear
+in its size however it is split. Option parse_slots(Queue, Over) makes
+the decoding of a text body over Over bytes wait for a slot (a message
+of Queue, a counting semaphore), so that a server bounds how many
+unauthenticated frames are parsed at once.
 */
 
 wire_version(1).
@@ -152,26 +162,43 @@ open_codes_stream(Codes, In) :-
 %       beyond the frame are an error (pipelined), as the caller has not
 %       answered yet. For unauthenticated peers.
 %     - max_depth(+Depth)
-%       The text term may be at most Depth deep (term_depth_within/2).
+%       The text may nest brackets at most Depth deep
+%       (text_nesting_within/2, checked before it is parsed) and the
+%       term read may be at most Depth deep (term_depth_within/2).
+%     - parse_slots(+Queue, +Over)
+%       A text body longer than Over bytes is decoded holding a slot: a
+%       `slot` message taken from the message queue Queue and given back
+%       afterwards (the caller fills Queue with as many as may decode at
+%       once). Shorter ones (an auth(Proofs), a ping) are decoded at
+%       once. With deadline(Sec) the wait for a slot counts against it.
 %
 %   @error wire_error(Reason) for a malformed, oversized, late or
-%   refused frame.
+%   refused frame: too_large(Len, Max), binary_not_allowed,
+%   deadline(Sec), truncated, pipelined, too_deep(Depth), syntax(What)
+%   (syntax(resource_error(c_stack)) if the reader ran out of C stack).
 
 frame_read(Stream, Frame, Options) :-
     option(max_size(Max), Options, 1048576),
     option(binary(AllowBinary), Options, false),
+    option(max_depth(Depth), Options, none),
+    (   option(parse_slots(Q, Over), Options)
+    ->  Slots = slots(Q, Over)
+    ;   Slots = none
+    ),
     (   option(deadline(Secs), Options, none), Secs \== none
-    ->  read_frame_deadline(Stream, Max, AllowBinary, Secs, Frame0)
-    ;   read_frame_plain(Stream, Max, AllowBinary, Frame0)
+    ->  read_frame_deadline(Stream, Max, AllowBinary, Secs,
+                            decode(Depth, Slots), Frame0)
+    ;   read_frame_plain(Stream, Max, AllowBinary,
+                         decode(Depth, Slots, none), Frame0)
     ),
     (   Frame0 = frame(text, Term),
-        option(max_depth(Depth), Options, none), Depth \== none,
+        Depth \== none,
         \+ term_depth_within(Term, Depth)
     ->  wire_error(too_deep(Depth))
     ;   Frame = Frame0
     ).
 
-read_frame_plain(Stream, Max, AllowBinary, Frame) :-
+read_frame_plain(Stream, Max, AllowBinary, Decode, Frame) :-
     get_byte(Stream, B0),
     (   B0 == -1
     ->  Frame = end_of_file
@@ -179,7 +206,7 @@ read_frame_plain(Stream, Max, AllowBinary, Frame) :-
         Header = [B0|Rest],
         check_header(Header, Max, AllowBinary, Kind, Len),
         read_body(Stream, Len, Body),
-        decode_body(Kind, Body, Term),
+        decode_body(Kind, Body, Decode, Term),
         Frame = frame(Kind, Term)
     ).
 
@@ -194,37 +221,45 @@ check_header(Header, Max, AllowBinary, Kind, Len) :-
     ;   true
     ).
 
-%   The deadline reader: chunks of what the stream has (read_chunk/2),
-%   each wait bounded by the time left.
-read_frame_deadline(Stream, Max, AllowBinary, Secs, Frame) :-
-    read_chunk(Stream, First),
-    (   First == []
+%   The deadline reader: chunks of what the stream has, each wait bounded
+%   by the time left. The chunks go onto one open list (All, Tail0 its
+%   unbound end), so a frame split in many chunks is still read in time
+%   linear in its size.
+read_frame_deadline(Stream, Max, AllowBinary, Secs, decode(Depth, Slots), Frame) :-
+    fill_buffer(Stream),
+    read_pending_codes(Stream, All, Tail0),
+    (   All == []
     ->  Frame = end_of_file
     ;   get_time(T0),
         Deadline is T0 + Secs,
-        length(First, N0),
-        fill_to(Stream, 12, First, N0, Deadline, Secs, Got, NGot),
-        length(Header, 12),
-        append(Header, _, Got),
-        check_header(Header, Max, AllowBinary, Kind, Len),
+        segment_length(All, Tail0, N0),
+        Limit = limit(Deadline, Secs),
+        fill_to(Stream, 12, Tail0, N0, Limit, Tail1, N1),
+        All = [H0,H1,H2,H3,H4,H5,H6,H7,H8,H9,H10,H11|BodyCodes],
+        check_header([H0,H1,H2,H3,H4,H5,H6,H7,H8,H9,H10,H11], Max, AllowBinary,
+                     Kind, Len),
         Need is 12 + Len,
-        fill_to(Stream, Need, Got, NGot, Deadline, Secs, All, NAll),
+        fill_to(Stream, Need, Tail1, N1, Limit, [], NAll),
         (   NAll > Need
         ->  wire_error(pipelined)
         ;   true
         ),
-        append(Header, BodyCodes, All),
         string_codes(Body, BodyCodes),
-        decode_body(Kind, Body, Term),
+        decode_body(Kind, Body, decode(Depth, Slots, Limit), Term),
         Frame = frame(Kind, Term)
     ).
 
-%   fill_to(+Stream, +Need, +Have, +NHave, +Deadline, +Secs, -All, -NAll):
-%   read until at least Need bytes are there.
-fill_to(_, Need, Have, N, _, _, Have, N) :-
+%   fill_to(+Stream, +Need, +Tail, +N, +Limit, -TailOut, -NOut): the open
+%   list ending in Tail holds N bytes; read chunks onto it until it holds
+%   at least Need (NOut), then unify its end with TailOut. A chunk is
+%   what the stream's buffer has, or one read(2) waiting at most the time
+%   left.
+fill_to(_, Need, Tail, N, _, TailOut, N) :-
     N >= Need,
-    !.
-fill_to(Stream, Need, Have, N, Deadline, Secs, All, NAll) :-
+    !,
+    Tail = TailOut.
+fill_to(Stream, Need, Tail, N, Limit, TailOut, NOut) :-
+    Limit = limit(Deadline, Secs),
     get_time(Now),
     Left is Deadline - Now,
     (   Left =< 0
@@ -232,23 +267,174 @@ fill_to(Stream, Need, Have, N, Deadline, Secs, All, NAll) :-
     ;   true
     ),
     set_stream(Stream, timeout(Left)),
-    catch(read_chunk(Stream, More),
+    catch(fill_buffer(Stream),
           error(timeout_error(_, _), _),
           wire_error(deadline(Secs))),
-    (   More == []
+    read_pending_codes(Stream, Tail, Tail1),
+    (   Tail == []
     ->  wire_error(truncated)
     ;   true
     ),
-    length(More, M),
-    append(Have, More, Have1),
+    segment_length(Tail, Tail1, M),
     N1 is N + M,
-    fill_to(Stream, Need, Have1, N1, Deadline, Secs, All, NAll).
+    fill_to(Stream, Need, Tail1, N1, Limit, TailOut, NOut).
 
-%   What the stream has: its buffer, or one read(2) (waiting at most the
-%   stream's timeout) if the buffer is empty; [] at end of file.
-read_chunk(Stream, Codes) :-
-    fill_buffer(Stream),
-    read_pending_codes(Stream, Codes, []).
+%   The number of elements from List to its (unbound) tail Tail.
+segment_length(List, Tail, N) :-
+    segment_length(List, Tail, 0, N).
+
+segment_length(L, Tail, N0, N) :-
+    (   L == Tail
+    ->  N = N0
+    ;   L = [_|L1],
+        N1 is N0 + 1,
+        segment_length(L1, Tail, N1, N)
+    ).
+
+%!  text_nesting_within(+Text, +MaxDepth) is semidet.
+%
+%   True if the brackets of Text, a Prolog term's text (a string of
+%   characters or of UTF-8 bytes), nest at most MaxDepth deep. Brackets
+%   are `(`, `[` and `{` and their closing partners; those inside quoted
+%   text ('...', "...", `...`, with their escapes and doubled quotes),
+%   character codes (0'c, 0'\n, 0''') and comments (`%` to the end of
+%   the line, `/* ... */` unless `/*` continues a symbol atom such as
+%   `+/*`) do not count. One pass over the codes; it stops at the first
+%   bracket too deep. A quote right after a number other than a lone 0
+%   (radix notation such as 16'ff, or 1'a', which the reader tokenizes
+%   differently by context) makes it fail: quoted text must never be
+%   mistaken for code, and the platform never writes that.
+
+text_nesting_within(Text, Max) :-
+    must_be(nonneg, Max),
+    string_codes(Text, Codes),
+    nest(Codes, other, 0, Max).
+
+%   nest(+Codes, +Mode, +Depth, +Max): Mode is what the previous code
+%   ended: word (a name, or digits inside one), zero (a number token so
+%   far just "0"), number (other digits starting a token), symbol
+%   (symbol characters) or other.
+nest([], _, _, _).
+nest([C|Cs], Mode, D, Max) :-
+    octet_class(C, Class),
+    nest(Class, C, Cs, Mode, D, Max).
+
+nest(open, _, Cs, _, D, Max) :-
+    D1 is D + 1,
+    D1 =< Max,
+    nest(Cs, other, D1, Max).
+nest(close, _, Cs, _, D, Max) :-
+    D1 is max(0, D - 1),
+    nest(Cs, other, D1, Max).
+nest(quote, Q, Cs, Mode, D, Max) :-
+    (   Mode == zero                        % 0'c
+    ->  char_code_rest(Cs, Rest),
+        nest(Rest, other, D, Max)
+    ;   Mode == number                      % 16'ff, 1'a': refused
+    ->  fail
+    ;   quoted(Cs, Q, Rest),
+        nest(Rest, other, D, Max)
+    ).
+nest(dquote, Q, Cs, _, D, Max) :-
+    quoted(Cs, Q, Rest),
+    nest(Rest, other, D, Max).
+nest(percent, _, Cs, _, D, Max) :-
+    line_comment(Cs, Rest),
+    nest(Rest, other, D, Max).
+nest(slash, _, Cs, Mode, D, Max) :-
+    (   Cs = [0'*|Cs1],
+        Mode \== symbol
+    ->  block_comment(Cs1, Rest),
+        nest(Rest, other, D, Max)
+    ;   nest(Cs, symbol, D, Max)
+    ).
+nest(digit, C, Cs, Mode, D, Max) :-
+    (   Mode == word
+    ->  Mode1 = word
+    ;   ( Mode == zero ; Mode == number )
+    ->  Mode1 = number
+    ;   C =:= 0'0
+    ->  Mode1 = zero
+    ;   Mode1 = number
+    ),
+    nest(Cs, Mode1, D, Max).
+nest(word, _, Cs, _, D, Max) :-
+    nest(Cs, word, D, Max).
+nest(symbol, _, Cs, _, D, Max) :-
+    nest(Cs, symbol, D, Max).
+nest(other, _, Cs, _, D, Max) :-
+    nest(Cs, other, D, Max).
+
+%   After 0': the code of one character: two quotes or one (0''' and
+%   0''), an escape sequence, or any one character.
+char_code_rest([0'', 0''|Rest], Rest) :- !.
+char_code_rest([0'\\|Cs], Rest) :- !, escape_rest(Cs, Rest).
+char_code_rest([_|Rest], Rest) :- !.
+char_code_rest([], []).
+
+%   Quoted text up to its closing quote Q (a doubled Q is one character).
+quoted([], _, []).
+quoted([C|Cs], Q, Rest) :-
+    (   C =:= Q
+    ->  (   Cs = [Q|Cs1]
+        ->  quoted(Cs1, Q, Rest)
+        ;   Rest = Cs
+        )
+    ;   C =:= 0'\\
+    ->  escape_rest(Cs, Cs1),
+        quoted(Cs1, Q, Rest)
+    ;   quoted(Cs, Q, Rest)
+    ).
+
+%   After a backslash: \xHH..\ and \OOO..\ (the closing backslash is
+%   optional), or one character.
+escape_rest([0'x|Cs], Rest) :- !, digits_then_backslash(Cs, 16, Rest).
+escape_rest([C|Cs], Rest) :- C >= 0'0, C =< 0'7, !, digits_then_backslash(Cs, 8, Rest).
+escape_rest([_|Rest], Rest) :- !.
+escape_rest([], []).
+
+digits_then_backslash([C|Cs], Radix, Rest) :-
+    code_type(C, xdigit(W)),
+    W < Radix,
+    !,
+    digits_then_backslash(Cs, Radix, Rest).
+digits_then_backslash([0'\\|Rest], _, Rest) :- !.
+digits_then_backslash(Rest, _, Rest).
+
+line_comment([], []).
+line_comment([C|Cs], Rest) :-
+    (   C =:= 0'\n
+    ->  Rest = Cs
+    ;   line_comment(Cs, Rest)
+    ).
+
+block_comment([], []).
+block_comment([C|Cs], Rest) :-
+    (   C =:= 0'*, Cs = [0'/|Rest0]
+    ->  Rest = Rest0
+    ;   block_comment(Cs, Rest)
+    ).
+
+%   octet_class(?Code, ?Class): the class of every code 0..255 (bytes of
+%   UTF-8 text: those above 127 are parts of letters here), as clauses
+%   indexed on Code; codes above 255 (text given as characters) are
+%   letters too.
+term_expansion(octet_classes, Clauses) :-
+    findall(octet_class(C, K), ( between(0, 255, C), classify(C, K) ), Clauses0),
+    append(Clauses0, [(octet_class(C, word) :- C > 255)], Clauses).
+
+classify(C, open)    :- memberchk(C, `([{`), !.
+classify(C, close)   :- memberchk(C, `)]}`), !.
+classify(0'', quote) :- !.
+classify(C, dquote)  :- memberchk(C, `"\``), !.
+classify(0'%, percent) :- !.
+classify(0'/, slash) :- !.
+classify(C, digit)   :- between(0'0, 0'9, C), !.
+classify(C, word)    :- ( between(0'a, 0'z, C) ; between(0'A, 0'Z, C) ; C =:= 0'_ ; C > 127 ), !.
+classify(C, symbol)  :- memberchk(C, `+-*\\^<>=~:.?@#&$`), !.
+classify(_, other).
+
+octet_classes.
 
 %!  term_depth_within(@Term, +MaxDepth) is semidet.
 %
@@ -325,8 +511,20 @@ read_body(Stream, Len, Body) :-
 
 %   A text body (a string of bytes) is decoded as UTF-8 through a memory
 %   file: no list of codes is built, so a large frame costs about its own
-%   size in memory, not twenty times that.
-decode_body(text, Body, Term) :-
+%   size in memory, not twenty times that. With a depth limit its
+%   nesting is checked first; with parse slots both hold one.
+decode_body(text, Body, decode(Depth, Slots, Limit), Term) :-
+    with_parse_slot(Slots, Body, Limit, decode_text(Body, Depth, Term)).
+decode_body(binary, Body, _, Term) :-
+    decode_binary(Body, Term).
+
+decode_text(Body, Depth, Term) :-
+    (   Depth == none
+    ->  true
+    ;   text_nesting_within(Body, Depth)
+    ->  true
+    ;   wire_error(too_deep(Depth))
+    ),
     setup_call_cleanup(
         new_memory_file(MF),
         ( setup_call_cleanup(open_memory_file(MF, write, W, [encoding(octet)]),
@@ -337,7 +535,39 @@ decode_body(text, Body, Term) :-
                              close(In))
         ),
         free_memory_file(MF)).
-decode_body(binary, Body, Term) :-
+
+with_parse_slot(Slots, Body, _, Goal) :-
+    (   Slots == none
+    ->  true
+    ;   Slots = slots(_, Over),
+        string_length(Body, Len),
+        Len =< Over
+    ),
+    !,
+    call(Goal).
+with_parse_slot(slots(Queue, _), _, Limit, Goal) :-
+    (   Limit = limit(Deadline, Secs)
+    ->  get_time(Now),
+        Wait is max(0, Deadline - Now),
+        WaitOptions = [timeout(Wait)]
+    ;   Secs = none,
+        WaitOptions = []
+    ),
+    setup_call_cleanup(
+        (   thread_get_message(Queue, slot, WaitOptions)
+        ->  Got = true
+        ;   Got = false
+        ),
+        (   Got == true
+        ->  call(Goal)
+        ;   wire_error(deadline(Secs))
+        ),
+        (   Got == true
+        ->  thread_send_message(Queue, slot)
+        ;   true
+        )).
+
+decode_binary(Body, Term) :-
     (   catch(fast_term_serialized(Term0, Body), _, fail)
     ->  Term = Term0
     ;   wire_error(syntax(binary))

@@ -3,6 +3,7 @@
             pool_run/3,                 % +Pool, :Goal, +Options
             pool_signal/3,              % +Pool, +Thread, :Goal
             pool_statistics/2,          % +Pool, -Stats
+            pool_retire/0,
             pool_drain/0
           ]).
 :- autoload(library(error), [must_be/2, resource_error/1]).
@@ -35,6 +36,10 @@ pool whose workers all timed out still takes jobs.
 :- dynamic
     pool_idle/2,                % Pool, Count
     pool_size/2.                % Pool, Count
+
+:- thread_local
+    pool_worker/1,              % Pool: this thread is one of its workers
+    retiring/0.                 % this worker exits after its job
 
 %!  pool_run(+Pool, :Goal) is det.
 %!  pool_run(+Pool, :Goal, +Options) is det.
@@ -106,9 +111,17 @@ pool_queue(Pool, Q) :-
     ).
 
 worker_start(Pool, Goal, Keep, Idle) :-
+    assertz(pool_worker(Pool)),
     pool_queue(Pool, Q),
     run_goal(Goal),
-    worker_loop(Pool, Q, Keep, Idle).
+    after_job(Pool, Q, Keep, Idle).
+
+%   A worker that was told to retire during its job leaves the pool.
+after_job(Pool, Q, Keep, Idle) :-
+    (   retract(retiring)
+    ->  with_mutex(dfrl_worker_pool, change(pool_size, Pool, -1))
+    ;   worker_loop(Pool, Q, Keep, Idle)
+    ).
 
 worker_loop(Pool, Q, Keep, Idle) :-
     with_mutex(dfrl_worker_pool, change(pool_idle, Pool, 1)),
@@ -124,13 +137,13 @@ worker_wait(Pool, Q, Keep, Idle) :-
     ),
     (   Msg = run(Goal)
     ->  run_goal(Goal),
-        worker_loop(Pool, Q, Keep, Idle)
+        after_job(Pool, Q, Keep, Idle)
     ;   Msg == exit
     ->  true
     ;   with_mutex(dfrl_worker_pool, may_exit(Pool, Q, Keep, Exit)),
         (   Exit = run(Goal)
         ->  run_goal(Goal),
-            worker_loop(Pool, Q, Keep, Idle)
+            after_job(Pool, Q, Keep, Idle)
         ;   Exit == stay
         ->  worker_wait(Pool, Q, Keep, Idle)
         ;   true
@@ -179,6 +192,22 @@ pool_drain :-
              with_mutex(dfrl_worker_pool, change(pool_size, Pool, -I))
            )),
     sleep(0.05).
+
+%!  pool_retire is det.
+%
+%   Called in a job: the worker running it exits when the job ends
+%   instead of waiting for the next one (a thread whose C stack grew
+%   deep keeps those pages resident; only its exit gives them back). No
+%   effect in a thread that is not a pool worker.
+
+pool_retire :-
+    (   pool_worker(_)
+    ->  (   retiring
+        ->  true
+        ;   assertz(retiring)
+        )
+    ;   true
+    ).
 
 %!  pool_signal(+Pool, +Thread, :Goal) is det.
 %

@@ -10,7 +10,8 @@ with a settling time after it:
 ``slowloris``  connections trickling one byte a second each (reconnecting when cut);
 ``flood``      connections opened and held (reopened when closed);
 ``frames``     concurrent senders of large hostile frames: ``a+a+...`` chains and ``[[[...]]]``
-               nesting over the pre-auth limit and just under it, and oversized binary frames.
+               nesting over the pre-auth limit, the same and ``f(f(...))`` just under it,
+               and oversized binary frames.
 
 Per phase: hops attempted (departures in the phase), succeeded, failed (the move raised) and
 unfinished (neither by the end of the settling time); hop time median and p90 (call of the

@@ -28,8 +28,9 @@ MAGIC = b"DFRL"
 VERSION = 1
 HEADER = 12
 OUTCOMES = ("deadline", "refused", "rejected", "closed", "reset")
-FRAME_KINDS = ("chain_big", "nested_big", "binary_big", "chain_limit", "nested_limit")
-PRE_AUTH_LIMIT = 65536          # the node's max_text_frame_size default
+FRAME_KINDS = ("chain_big", "nested_big", "binary_big", "chain_limit", "nested_limit",
+               "call_limit")
+PRE_AUTH_LIMIT = 4096           # the node's max_text_frame_size default (node.pl), tested
 
 
 def frame_header(length: int, kind: bytes = b"T") -> bytes:
@@ -239,8 +240,8 @@ def hostile_frame(kind: str, size: int) -> bytes:
     """One hostile frame (header and body) of kind ``kind`` (see :data:`FRAME_KINDS`).
 
     ``*_big``: ``size`` bytes (``a+a+...``, ``[[[...]]]``, or a binary body of zeros) far over
-    the pre-authentication limit; ``*_limit``: the same shapes just under that limit, so
-    that the node must read and parse them.
+    the pre-authentication limit; ``*_limit``: ``a+a+...``, ``[[[...]]]`` and ``f(f(...))``
+    just under that limit (:data:`PRE_AUTH_LIMIT`), so that the node must read them.
     """
     big = kind.endswith("_big")
     n = size if big else PRE_AUTH_LIMIT - 64
@@ -249,6 +250,9 @@ def hostile_frame(kind: str, size: int) -> bytes:
     elif kind.startswith("nested"):
         depth = (n - 3) // 2
         body = b"[" * depth + b"]" * depth + b" .\n"
+    elif kind == "call_limit":
+        depth = (n - 4) // 3
+        body = b"f(" * depth + b"a" + b")" * depth + b" .\n"
     elif kind == "binary_big":
         return frame_header(n, b"B") + b"\0" * n
     else:

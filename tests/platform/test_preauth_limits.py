@@ -2,8 +2,11 @@
 
 A whole-frame deadline (a peer trickling bytes is cut off however slowly it sends), caps on
 unauthenticated connections per peer and in total that never displace authenticated ones,
-a term depth limit with a parse cost linear in the frame, memory given back after large
-rejected frames, binary frames bounded by the frame size limit.
+a 4096-byte frame limit that the largest legitimate pre-auth frame fits well under, a term
+depth limit with a parse cost linear in the frame, bracket nesting refused before it is
+parsed (quoted text aside), memory given back after large rejected frames and by a worker
+that ran out of C stack, at most two large pre-auth frames parsed at once (auth and ping
+never wait), binary frames bounded by the frame size limit.
 """
 from __future__ import annotations
 
@@ -14,13 +17,15 @@ from pathlib import Path
 
 from . import hostile_node
 from .conftest import Proc
-from .wire_client import connect, connect_auth, frame, read_frame
+from .wire_client import (connect, connect_auth, connect_nonce, frame, open_proof, read_frame,
+                          token_proof)
 
 TOKEN = "9"
 
 
-def _node(procs: list[Proc], tmp_path: Path, extra: str = "") -> tuple[Proc, int]:
-    return hostile_node.start(procs, tmp_path, f"[token({TOKEN}){extra}]")
+def _node(procs: list[Proc], tmp_path: Path, extra: str = "",
+          name: str = "node") -> tuple[Proc, int]:
+    return hostile_node.start(procs, tmp_path, f"[token({TOKEN}){extra}]", name=name)
 
 
 def _ping(s: socket.socket) -> str:
@@ -95,28 +100,158 @@ def test_unauthenticated_flood_never_displaces_authenticated(tmp_path: Path,
 
 
 def test_operator_chain_costs_linear_time(tmp_path: Path, procs: list[Proc]) -> None:
-    # Prepare: a 60 KB operator chain (under the 64 KiB pre-authentication limit) and a
-    # 2 MB one after authentication (an unknown request: the node answers its name only).
+    # Prepare: a 4 KB operator chain (under the 4096-byte pre-authentication limit), a 60 KB
+    # one for a node whose limit is 64 KiB, and a 2 MB one after authentication (an unknown
+    # request: the node answers its name only).
     node, port = _node(procs, tmp_path)
-    chain = b"a+" * 30000 + b"a .\n"
+    wide, wide_port = _node(procs, tmp_path, ", max_text_frame_size(65536)", name="wide")
+    chain = b"a+" * 2000 + b"a .\n"
+    wide_chain = b"a+" * 30000 + b"a .\n"
     big = b"a+" * 1000000 + b"a .\n"
-    cpu0 = hostile_node.cpu_s(node.popen.pid)
+    cpu0 = hostile_node.cpu_s(node.popen.pid) + hostile_node.cpu_s(wide.popen.pid)
     # Execute
     with connect(port) as s:
         s.sendall(frame(chain))
         before_auth = read_frame(s)
+    with connect(wide_port) as s:
+        s.sendall(frame(wide_chain))
+        wide_before_auth = read_frame(s)
     with connect_auth(port, TOKEN, timeout=30) as s:
         s.sendall(frame(big))
         after_auth = read_frame(s)
     with connect(port) as s:
         s.sendall(frame(b"a+" * 100000 + b"a .\n"))
         oversized = read_frame(s)
-    cpu = hostile_node.cpu_s(node.popen.pid) - cpu0
+    cpu = hostile_node.cpu_s(node.popen.pid) + hostile_node.cpu_s(wide.popen.pid) - cpu0
     # Assert: refused for its depth, answered by name, refused for its size; seconds, not hours
     assert before_auth is not None and "too_deep(64)" in before_auth[1], before_auth
+    assert wide_before_auth is not None and "too_deep(64)" in wide_before_auth[1]
     assert after_auth is not None and "domain_error(platform_request,/(+,2))" in after_auth[1], after_auth
-    assert oversized is not None and "too_large(200004,65536)" in oversized[1], oversized
+    assert oversized is not None and "too_large(200004,4096)" in oversized[1], oversized
     assert cpu < 5.0, cpu
+
+
+def _nested(shape: str, depth: int) -> bytes:
+    opening, closing = {"list": (b"[", b"]"), "call": (b"f(", b")"),
+                        "brace": (b"{", b"}")}[shape]
+    return opening * depth + b"a" + closing * depth + b" .\n"
+
+
+def _send_all(port: int, bodies: list[bytes], timeout: float = 30.0) -> list[str]:
+    """Send each body on its own connection, all at once (one thread each, from 127.0.0.2-5,
+    under the per-peer cap); give the replies."""
+    replies: list[str] = []
+    lock = threading.Lock()
+
+    def one(i: int, body: bytes) -> None:
+        with connect(port, timeout=timeout, source=f"127.0.0.{2 + i % 4}") as s:
+            s.sendall(frame(body))
+            r = read_frame(s)
+            with lock:
+                replies.append(r[1] if r else "closed")
+
+    threads = [threading.Thread(target=one, args=(i, b)) for i, b in enumerate(bodies)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=2 * timeout)
+    return replies
+
+
+def test_deep_nesting_is_refused_before_it_is_parsed(tmp_path: Path, procs: list[Proc]) -> None:
+    # Prepare: a node with a 64 KiB pre-auth limit, where read_term/3 would run out of C stack
+    # on 16,000 levels of brackets; 32 concurrent senders of such frames just under the limit.
+    node, port = _node(procs, tmp_path, ", max_text_frame_size(65536)")
+    pid = node.popen.pid
+    time.sleep(0.3)
+    rss0 = hostile_node.rss_mb(pid)
+    shapes = [_nested("list", 32000), _nested("call", 21000), _nested("brace", 32000)]
+    # Execute: three rounds of 32
+    replies: list[str] = []
+    for _ in range(3):
+        replies += _send_all(port, [shapes[i % 3] for i in range(32)])
+    time.sleep(1.0)
+    rss1 = hostile_node.rss_mb(pid)
+    # Assert: every frame refused for its depth (not a C-stack overflow), no memory kept
+    assert len(replies) == 96 and all("too_deep(64)" in r for r in replies), replies[:3]
+    assert rss1 - rss0 < 30, (rss0, rss1)
+
+
+def test_quoted_brackets_and_codes_do_not_count_as_nesting(tmp_path: Path,
+                                                          procs: list[Proc]) -> None:
+    _, port = _node(procs, tmp_path)
+    # a request f(Atom, Codes, String): 1000 brackets quoted, 0'( 0'[ 0''' codes, a comment
+    text = (b"f('" + b"[" * 1000 + b"', [0'(, 0'[, 0'''], \"" + b"{" * 500
+            + b"\") /* ((( */ .\n")
+    with connect(port) as s:
+        s.sendall(frame(text))
+        reply = read_frame(s)
+    assert reply is not None and "domain_error(platform_request,/(f,3))" in reply[1], reply
+    # ... while 65 real levels are refused, and so is a quote after a radix number
+    for body in (_nested("list", 65), b"f(16'ff', [a]) .\n"):
+        with connect(port) as s:
+            s.sendall(frame(body))
+            reply = read_frame(s)
+        assert reply is not None and "too_deep(64)" in reply[1], (body[:20], reply)
+
+
+def test_worker_that_ran_out_of_c_stack_gives_its_memory_back(tmp_path: Path,
+                                                             procs: list[Proc]) -> None:
+    # Prepare: limits that let 40,000 levels reach read_term/3, which runs out of C stack;
+    # the C stack pages a thread touched stay resident until the thread exits.
+    node, port = _node(procs, tmp_path,
+                       ", max_text_frame_size(200000), max_term_depth(1000000)")
+    pid = node.popen.pid
+    time.sleep(0.3)
+    rss0 = hostile_node.rss_mb(pid)
+    # Execute: 16 at once
+    replies = _send_all(port, [_nested("list", 40000)] * 16)
+    time.sleep(1.5)
+    rss1 = hostile_node.rss_mb(pid)
+    # Assert: each one a C-stack syntax error; its worker exited, so the memory is back
+    assert len(replies) == 16 and all("c_stack" in r for r in replies), replies[:3]
+    assert rss1 - rss0 < 40, (rss0, rss1)
+
+
+def test_preauth_parsing_waits_for_a_slot_auth_and_ping_do_not(tmp_path: Path,
+                                                               procs: list[Proc]) -> None:
+    # Prepare: both parse slots of the process taken (as by two frames being parsed)
+    held = tmp_path / "hold_slots.pl"
+    held.write_text(":- module(hold_slots, []).\n"
+                    ":- initialization(( node:preauth_parse_slots(Q),\n"
+                    "     thread_get_message(Q, slot), thread_get_message(Q, slot) )).\n")
+    _, port = hostile_node.start(procs, tmp_path, f"[token({TOKEN}), frame_deadline(1)]",
+                                 consult=(held,))
+    # Execute / Assert: a 2 KB unauthenticated frame waits for a slot until its deadline ...
+    t0 = time.monotonic()
+    with connect(port) as s:
+        s.sendall(frame(b"f('" + b"x" * 2000 + b"') .\n"))
+        reply = read_frame(s)
+    assert reply is not None and "deadline(1)" in reply[1], reply
+    assert 0.8 < time.monotonic() - t0 < 3.0
+    # ... while a ping, a proof of a token and authenticated requests are served at once
+    with connect(port) as s:
+        assert _ping(s).startswith("ok(pong(")
+    t0 = time.monotonic()
+    with connect_auth(port, TOKEN) as s:
+        s.sendall(frame(b"f('" + b"x" * 2000 + b"') .\n"))
+        reply = read_frame(s)
+        assert reply is not None and "domain_error(platform_request,/(f,1))" in reply[1], reply
+    assert time.monotonic() - t0 < 0.5
+
+
+def test_largest_legitimate_preauth_frame_fits(tmp_path: Path, procs: list[Proc]) -> None:
+    # auth(Proofs) with the open key and 32 tokens (69 bytes a proof) is well under 4096
+    _, port = _node(procs, tmp_path)
+    s, nonce = connect_nonce(port)
+    with s:
+        proofs = [token_proof(str(1000 + i), nonce) for i in range(31)]
+        proofs += [open_proof(nonce), token_proof(TOKEN, nonce)]
+        text = ("auth([" + ",".join(f"'{p}'" for p in proofs) + "]) .\n").encode()
+        assert 2200 < len(text) < 4096
+        s.sendall(frame(text))
+        verdict = read_frame(s)
+        assert verdict is not None and verdict[1].startswith("ok(authenticated)"), verdict
 
 
 def test_memory_given_back_after_large_rejected_frames(tmp_path: Path, procs: list[Proc]) -> None:

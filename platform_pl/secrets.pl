@@ -1,0 +1,108 @@
+:- module(secrets,
+          [ check_secrets/3,            % +Host:Port, +Tokens, +Options
+            token_entropy_bits/2,       % +Token, -Bits
+            loopback_host/1             % +Host
+          ]).
+:- autoload(library(option), [option/2]).
+:- autoload(library(lists), [member/2]).
+:- autoload(library(aggregate), [aggregate_all/3]).
+
+/** <module> Secrets strong enough for the network a node listens on
+
+A node's tokens prove a peer's right to send it agents and code; without
+TLS its peers' proofs (HMACs of a nonce) cross the network in the clear,
+and a weak token falls to an offline search of one captured handshake.
+check_secrets/3 is the rule node_start/3 applies; token_entropy_bits/2
+its estimate of a token's strength.
+*/
+
+%!  check_secrets(+Address, +Tokens, +Options) is det.
+%
+%   Refuse to listen at Address (Host:Port) with Tokens (the node's, []
+%   for an open node) if the address is not loopback, the weakest token
+%   has under 128 bits of entropy (token_entropy_bits/2; an open node
+%   has 0) and Options (those of node_start/3) hold neither tls(Dir) nor
+%   insecure(true). On loopback a weak token is accepted with an
+%   informational message, with insecure(true) with a warning.
+%
+%   @error permission_error(listen, address, Address), with context
+%   weak_secret(Bits, 128).
+
+check_secrets(Host:Port, Tokens, Options) :-
+    (   Tokens == []
+    ->  Bits = 0
+    ;   aggregate_all(min(B), ( member(T, Tokens), token_entropy_bits(T, B) ), Bits)
+    ),
+    (   Bits >= 128
+    ->  true
+    ;   option(tls(_), Options)
+    ->  true
+    ;   loopback_host(Host)
+    ->  (   Tokens == []
+        ->  true
+        ;   print_message(informational, dfrl(weak_token(Host:Port, Bits)))
+        )
+    ;   option(insecure(true), Options)
+    ->  print_message(warning, dfrl(insecure_node(Host:Port, Bits)))
+    ;   throw(error(permission_error(listen, address, Host:Port),
+                    context(node_start/3, weak_secret(Bits, 128))))
+    ).
+
+%!  token_entropy_bits(+Token, -Bits) is det.
+%
+%   An estimate of the entropy of Token: for an integer, its magnitude
+%   in bits; for text (atoms, strings, the canonical text of other
+%   terms), its length times log2 of the alphabet its characters are
+%   drawn from (digits 10, lower case 26, upper case 26, other 33, or
+%   hex digits 16), the alphabet being at most the square of the number
+%   of distinct characters (so `aaaa...` scores 0). A 64-digit hex
+%   string or `dfrl secret`'s output scores over 128.
+
+token_entropy_bits(T, Bits) :-
+    integer(T),
+    !,
+    (   T =:= 0 -> Bits = 0 ; Bits is msb(abs(T)) + 1 ).
+token_entropy_bits(T, Bits) :-
+    (   ( atom(T) ; string(T) )
+    ->  atom_codes(T, Cs)
+    ;   format(codes(Cs), '~q', [T])
+    ),
+    length(Cs, Len),
+    sort(Cs, Distinct),
+    length(Distinct, D),
+    (   forall(member(C, Cs), code_type(C, xdigit(_)))
+    ->  Pool0 = 16
+    ;   aggregate_all(sum(P), ( char_class(Class, P),
+                                once(( member(C, Cs), in_class(Class, C) )) ),
+                      Pool0)
+    ),
+    Pool is min(Pool0, D*D),
+    (   Pool =< 1
+    ->  Bits = 0
+    ;   Bits is floor(Len * log(Pool) / log(2))
+    ).
+
+char_class(digit, 10).
+char_class(lower, 26).
+char_class(upper, 26).
+char_class(other, 33).
+
+in_class(digit, C) :- code_type(C, digit).
+in_class(lower, C) :- code_type(C, lower), C < 128.
+in_class(upper, C) :- code_type(C, upper), C < 128.
+in_class(other, C) :- \+ code_type(C, alnum) ; C >= 128.
+
+%!  loopback_host(+Host) is semidet.
+%
+%   Host (atom or string) names the loopback interface: localhost, ::1
+%   or 127.*.
+
+loopback_host(H) :-
+    atomic(H),
+    atom_string(A, H),
+    (   A == localhost
+    ->  true
+    ;   A == '::1'
+    ->  true
+    ;   sub_atom(A, 0, _, _, '127.')
+    ).
