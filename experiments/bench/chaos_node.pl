@@ -34,6 +34,12 @@
 :- initialization(main, main).
 
 :- dynamic user:chaos_route/2, user:chaos_paused/0.
+
+%   Arriving hoppers run in the sandbox (platform_pl/code_safety.pl): this
+%   node extends the agent API with reading its route table and pause flag.
+:- multifile sandbox:safe_primitive/1.
+sandbox:safe_primitive(user:chaos_route(_, _)).
+sandbox:safe_primitive(user:chaos_paused).
 :- dynamic chaos_hops/2.
 
 main([node, Port0, Store, Token, Routes | Rest]) :-

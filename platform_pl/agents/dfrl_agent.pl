@@ -279,7 +279,9 @@ dfrl_create(Node, Name, Plan, Options) :-
     option(backoff(Backoff), Options, 0.2),
     must_be(number, Backoff),
     (   Tokens == [] -> TokOpts = [] ; TokOpts = [tokens(Tokens)] ),
-    agent_create(Name, dfrl_agent:dfrl_tour, TokOpts, Node),
+    % events([]): no peer may post to the tour handler (control comes
+    % through the platform event dfrl_control/4, from authenticated peers)
+    agent_create(Name, dfrl_agent:dfrl_tour, [events([])|TokOpts], Node),
     new_round(1, 0, State),
     pack_state(State, Packed),
     agent_add_facts(Node, Name, [ dfrl_plan(Name, Plan),
@@ -932,21 +934,43 @@ log_event(Log, Dict0) :-
         ->  true
         ;   print_message(warning, format("dfrl: round log to console ~w:~w failed (~p); \c
                                            line kept in ~w on this host", [H, P, E, File])),
-            append_line(File, Line)
+            append_line_or_warn(File, Line)
         )
-    ;   append_line(Log, Line)
+    ;   append_line_or_warn(Log, Line)
     ).
+
+append_line_or_warn(File, Line) :-
+    catch(append_line(File, Line), E,
+          print_message(warning, format("dfrl: round log line not written: ~p", [E]))).
+
 
 post_log_line(H, P, File, Line) :-
     current_node(Node),
     node_property(Node, link(Link)),
     agent_post(H:P, platform, dfrl_log, Link, [entry(File, Line)]).
 
+%   The log path comes with the agent, from whichever node sent it: it
+%   may only name a round log (`.log` or `.jsonl`) in a directory that
+%   exists; the agent never creates directories or writes other files.
 append_line(File, Line) :-
+    (   log_path_ok(File)
+    ->  true
+    ;   throw(error(permission_error(append, round_log, File),
+                    context(dfrl_agent:append_line/2,
+                            'a round log must be a .log or .jsonl file in an existing directory')))
+    ),
     setup_call_cleanup(
         open(File, append, Out, [encoding(utf8)]),
         format(Out, "~s~n", [Line]),
         close(Out)).
+
+log_path_ok(File) :-
+    atomic(File),
+    file_name_extension(_, Ext, File),
+    memberchk(Ext, [log, jsonl]),
+    file_directory_name(File, Dir),
+    exists_directory(Dir),
+    \+ exists_directory(File).
 
 stringify(Key, D0, D) :-
     (   get_dict(Key, D0, V)

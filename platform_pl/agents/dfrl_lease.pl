@@ -349,7 +349,9 @@ serve(release(Agent, E, K, How), Node, Answer) :-
         Answer = released
     ).
 serve(progress(Agent, E, K, Progress), Node, Answer) :-
-    (   seen(Node, Agent, E2), E2 > E
+    (   \+ progress_ok(Agent, Progress)
+    ->  Answer = refused(progress)
+    ;   seen(Node, Agent, E2), E2 > E
     ->  Answer = superseded(E2)
     ;   note_epoch(Node, Agent, E),
         lease_s(Node, L),
@@ -386,6 +388,27 @@ discard_superseded_arrival(Node, Agent, E) :-
                                           [Agent, E0, E]))
                  ;   true
                  )).
+
+%   What a peer may write into a checkpoint (installed unchecked if it
+%   is resurrected): `alive`, or the end of a round with the agent's
+%   plan and method as plain ground facts of the shapes the agent sends.
+progress_ok(_, alive).
+progress_ok(Agent, round_done(Round, Last, Facts)) :-
+    integer(Round),
+    memberchk(Last, [true, false]),
+    ground(Facts),
+    is_list(Facts),
+    forall(member(F, Facts), progress_fact(Agent, F)).
+
+progress_fact(Agent, dfrl_plan(Agent, plan(It, Rounds, Rest, Log, Timeout))) :-
+    is_list(It),
+    forall(member(S, It), ( S = stop(H, P, R), atomic(H), integer(P), atom(R) )),
+    integer(Rounds), number(Rest), atomic(Log), number(Timeout).
+progress_fact(Agent, dfrl_plan(Agent, plan(It, Rounds, Rest, console(H, P, File), Timeout))) :-
+    progress_fact(Agent, dfrl_plan(Agent, plan(It, Rounds, Rest, File, Timeout))),
+    atomic(H), integer(P).
+progress_fact(Agent, dfrl_method_of(Agent, Method)) :-
+    atom(Method).
 
 %   A round ended where the agent is: a resurrection starts the next
 %   round from the holder, with the facts (plan, method) as they are now.

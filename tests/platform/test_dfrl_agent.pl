@@ -69,6 +69,11 @@ cleanup_all(Log) :-
     findall(N, local_node(N), Nodes),
     cleanup(Nodes, Log).
 
+%   A fresh round-log name: the agent appends only to .log/.jsonl files.
+tmp_log(Log) :-
+    tmp_file(rounds, F),
+    atom_concat(F, '.jsonl', Log).
+
 cleanup(Nodes, Log) :-
     memory_robots_stop,
     forall(member(N, Nodes), catch(node_stop(N), _, true)),
@@ -77,7 +82,7 @@ cleanup(Nodes, Log) :-
 :- begin_tests(dfrl_agent).
 
 test(average_two_rounds, [cleanup(cleanup([C,A,B,D], Log))]) :-
-    tmp_file(rounds, Log),
+    tmp_log(Log),
     memory_robots_start([r1-[1.0,2.0,0.0,0.0], r2-[3.0,4.0,0.0,0.0], r3-[5.0,12.0,3.0,0.0]]),
     nodes(4, [C,A,B,D]),
     maplist(stop_of, [A,B,D], [r1,r2,r3], Stops),
@@ -97,7 +102,7 @@ test(average_two_rounds, [cleanup(cleanup([C,A,B,D], Log))]) :-
     assertion(F = _{event:finished, agent:fa, round:2}).
 
 test(max_and_visit_average, [cleanup(cleanup([C,A,B], Log))]) :-
-    tmp_file(rounds, Log),
+    tmp_log(Log),
     memory_robots_start([r1-[1.0,7.0], r2-[3.0,4.0]]),
     nodes(3, [C,A,B]),
     maplist(stop_of, [A,B], [r1,r2], Stops),
@@ -107,7 +112,7 @@ test(max_and_visit_average, [cleanup(cleanup([C,A,B], Log))]) :-
     assertion(memory_robot_table(r2, [3.0,7.0])).
 
 test(visit_average_uses_visits, [cleanup(cleanup([C,A,B], Log))]) :-
-    tmp_file(rounds, Log),
+    tmp_log(Log),
     memory_robots_start([r1-[1.0,7.0], r2-[3.0,5.0]]),
     nodes(3, [C,A,B]),
     maplist(stop_of, [A,B], [r1,r2], Stops),
@@ -118,7 +123,7 @@ test(visit_average_uses_visits, [cleanup(cleanup([C,A,B], Log))]) :-
     assertion(R.method == visit_average).
 
 test(join_and_injected_method, [cleanup(cleanup([C,A,B,D], Log))]) :-
-    tmp_file(rounds, Log),
+    tmp_log(Log),
     memory_robots_start([r1-[1.0,9.0], r2-[3.0,5.0], r3-[2.0,7.0]]),
     nodes(4, [C,A,B,D]),
     maplist(stop_of, [A,B,D], [r1,r2,r3], [S1,S2,S3]),
@@ -151,7 +156,7 @@ test(join_and_injected_method, [cleanup(cleanup([C,A,B,D], Log))]) :-
     retractall(dfrl_agent:pending(_, other, _)).
 
 test(unknown_method_ignored_and_stop, [cleanup(cleanup([C,A,B], Log))]) :-
-    tmp_file(rounds, Log),
+    tmp_log(Log),
     memory_robots_start([r1-[1.0,1.0], r2-[3.0,3.0]]),
     nodes(3, [C,A,B]),
     maplist(stop_of, [A,B], [r1,r2], Stops),
@@ -173,7 +178,7 @@ test(unknown_method_ignored_and_stop, [cleanup(cleanup([C,A,B], Log))]) :-
 test(failing_method_aborts_round_loudly, [setup(assertz(user:quiet)),
                                           cleanup((retractall(user:quiet),
                                                    cleanup([C,A,B,D], Log)))]) :-
-    tmp_file(rounds, Log),
+    tmp_log(Log),
     memory_robots_start([r1-[1.0,2.0], r2-[3.0,4.0], r3-[5.0,6.0]]),
     nodes(4, [C,A,B,D]),
     maplist(stop_of, [A,B,D], [r1,r2,r3], Stops),
@@ -192,7 +197,7 @@ test(failing_method_aborts_round_loudly, [setup(assertz(user:quiet)),
 test(throwing_method_aborts_round_loudly, [setup(assertz(user:quiet)),
                                            cleanup((retractall(user:quiet),
                                                     cleanup([C,A,B], Log)))]) :-
-    tmp_file(rounds, Log),
+    tmp_log(Log),
     memory_robots_start([r1-[1.0,2.0], r2-[3.0,4.0]]),
     nodes(3, [C,A,B]),
     maplist(stop_of, [A,B], [r1,r2], Stops),
@@ -207,7 +212,7 @@ test(throwing_method_aborts_round_loudly, [setup(assertz(user:quiet)),
 
 test(unreachable_stop_is_skipped, [setup(assertz(user:quiet)),
                                    cleanup((retractall(user:quiet), cleanup([C,A,B], Log)))]) :-
-    tmp_file(rounds, Log),
+    tmp_log(Log),
     memory_robots_start([r1-[1.0,1.0], r2-[3.0,3.0], r3-[9.0,9.0]]),
     nodes(4, [C,A,Gone,B]),
     maplist(stop_of, [A,Gone,B], [r1,r3,r2], Stops),
@@ -226,7 +231,7 @@ test(unreachable_stop_is_skipped, [setup(assertz(user:quiet)),
 
 test(unknown_robot_is_skipped, [setup(assertz(user:quiet)),
                                 cleanup((retractall(user:quiet), cleanup([C,A,B], Log)))]) :-
-    tmp_file(rounds, Log),
+    tmp_log(Log),
     memory_robots_start([r1-[1.0,1.0]]),
     nodes(3, [C,A,B]),
     maplist(stop_of, [A,B], [r1,nobody], Stops),
@@ -241,7 +246,7 @@ test(unknown_robot_is_skipped, [setup(assertz(user:quiet)),
 
 test(table_requests_say_where_they_come_from,
      [cleanup(cleanup([C,A,B], Log))]) :-
-    tmp_file(rounds, Log),
+    tmp_log(Log),
     memory_robots_start([r1-[1.0,1.0], r2-[3.0,3.0]]),
     nodes(3, [C,A,B]),
     maplist(stop_of, [A,B], [r1,r2], Stops),
@@ -258,7 +263,7 @@ test(table_requests_say_where_they_come_from,
 test(unreachable_first_stop_rehomes_and_comes_back,
      [setup(assertz(user:quiet)),
       cleanup((retractall(user:quiet), cleanup_all(Log)))]) :-
-    tmp_file(rounds, Log),
+    tmp_log(Log),
     memory_robots_start([r1-[1.0,1.0], r2-[3.0,3.0], r3-[5.0,5.0]]),
     nodes(4, [C,A,B,D]),
     maplist(stop_of, [A,B,D], [r1,r2,r3], Stops),
@@ -288,7 +293,7 @@ test(unreachable_first_stop_rehomes_and_comes_back,
 %   The agent dwells on a slow robot longer than its holder's lease: the
 %   holder's probe finds it there and renews; nothing is resurrected.
 test(lease_renewed_while_agent_works, [cleanup(cleanup([C,A,B], Log))]) :-
-    tmp_file(rounds, Log),
+    tmp_log(Log),
     memory_robots_start([r1-[1.0,1.0], r2-[3.0,3.0]]),
     memory_robot_delay(r2, 1.0),
     nodes(3, [lease_s(0.2)], [C,A,B]),
@@ -307,7 +312,7 @@ test(lease_renewed_while_agent_works, [cleanup(cleanup([C,A,B], Log))]) :-
 test(agent_resurrected_when_its_node_dies,
      [setup(assertz(user:quiet)),
       cleanup((retractall(user:quiet), cleanup([C,A,D], Log)))]) :-
-    tmp_file(rounds, Log),
+    tmp_log(Log),
     memory_robots_start([r1-[1.0,1.0], r2-[3.0,3.0], r3-[5.0,5.0]]),
     memory_robot_delay(r2, 1.0),
     nodes(4, [lease_s(0.3), connect_timeout(0.5), reply_timeout(1)], [C,A,B,D]),
@@ -340,3 +345,16 @@ test(agent_resurrected_when_its_node_dies,
     assertion(\+ dfrl_lease:lease_checkpoint(_, fr, _, _)).
 
 :- end_tests(dfrl_agent).
+
+:- begin_tests(round_log_path).
+
+test(only_round_logs_in_existing_directories) :-
+    tmp_log(Ok),
+    assertion(dfrl_agent:log_path_ok(Ok)),
+    tmp_file(rounds, NoExt),
+    assertion(\+ dfrl_agent:log_path_ok(NoExt)),
+    assertion(\+ dfrl_agent:log_path_ok('/nonexistent_dir_dfrl/rounds.log')),
+    expand_file_name('~/.bashrc', [Rc]),
+    assertion(\+ dfrl_agent:log_path_ok(Rc)).
+
+:- end_tests(round_log_path).
