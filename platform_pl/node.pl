@@ -703,7 +703,7 @@ dispatch(Node, Client, Peer) :-
     (   Verdict == refuse
     ->  true
     ;   connection_workers_max(MaxWorkers),
-        catch(pool_run(connections, serve_connection(Node, CId, Client, Peer),
+        catch(pool_run(connections, serve_connection_job(Node, CId, Client, Peer),
                        [max(MaxWorkers)]),
               E, ( print_message(warning, E),
                    with_mutex(dfrl_conns, retractall(conn_entry(Node, CId, _, _, _))),
@@ -835,6 +835,20 @@ refuse_busy(_, Client) :-
 		 /*******************************
 		 *          CONNECTIONS		*
 		 *******************************/
+
+%   An eviction signal (evict/2) that lands after serve_connection/4 left
+%   its catch but before it retracted serving/2 ends up here: finish the
+%   clean-up it interrupted, quietly.
+serve_connection_job(Node, CId, Client, Peer) :-
+    catch(serve_connection(Node, CId, Client, Peer), dfrl_evicted,
+          connection_cleanup(Node, CId, Client)).
+
+connection_cleanup(Node, CId, Client) :-
+    catch(tcp_close_socket(Client), _, true),
+    with_mutex(dfrl_conns, retractall(conn_entry(Node, CId, _, _, _))),
+    retractall(serving(_, _)),
+    retractall(connection(Node, CId, _)),
+    retractall(current_node_tl(_)).
 
 serve_connection(Node, CId, Client, Peer) :-
     thread_self(Me),
