@@ -45,6 +45,38 @@ def argv_of(line: str) -> list[str]:
     return [sys.executable, "-m", "dfrl", *words[1:]]
 
 
+def drive_and_check(lab: Lab, drv: Path, config_name: str, cfg: str,
+                    driver_cmd: str) -> tuple[Path, list[str]]:
+    """Write the config, run the README's driver command in the driver's namespace and check
+    what every recipe promises: exit 0, every planned round visiting every robot with no skip
+    and identical tables, every robot's files back over the platform. Returns the results
+    folder and the robot ids."""
+    (drv / config_name).write_text(cfg, encoding="utf-8")
+    done = lab["driver"].run(argv_of(driver_cmd), cwd=drv, timeout=180,
+                             capture_output=True, text=True)
+    out = drv / driver_cmd.split("--out", 1)[1].split()[0]
+    detail = f"exit {done.returncode}\n{done.stderr[-3000:]}"
+    assert done.returncode == 0, detail
+    assert done.stdout.strip().endswith(str(out.name)), detail
+    with open(out / "rounds.csv", newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    planned = json.loads(cfg)
+    n_rounds = -(-planned["iterations"] // planned["respite"])
+    robots = [r["id"] for r in planned["robots"]]
+    assert len(rows) == n_rounds, detail
+    for row in rows:
+        assert row["visited"].split() == robots, row
+        assert row["skipped"] == "", row
+        assert row["all_equal"] == "true", row
+        assert len({row[f"digest_{r}"] for r in robots}) == 1, row
+    # the robots wrote their files under their own workdirs, never into the driver's folder
+    for r in robots:
+        assert (out / f"metrics_{r}.csv").stat().st_size > 0
+        assert (out / f"shares_{r}.csv").is_file()
+        assert (out / "tables" / f"{r}.npy").is_file()
+    return out, robots
+
+
 def wait_line(proc: subprocess.Popen, pattern: str, timeout_s: float) -> str:
     """The first stdout line of ``proc`` containing ``pattern``, read in a thread (bounded)."""
     found: list[str] = []
@@ -91,31 +123,7 @@ def test_the_documented_lan_setup_federates_three_hosts(tmp_path: Path) -> None:
         cfg = config_text
         for key, addr in addresses.items():
             cfg = cfg.replace(key, addr)
-        (drv / config_name).write_text(cfg, encoding="utf-8")
-        done = lab["driver"].run(argv_of(driver_cmd), cwd=drv, timeout=180,
-                                 capture_output=True, text=True)
-        out = drv / driver_cmd.split("--out", 1)[1].split()[0]
-        detail = f"exit {done.returncode}\n{done.stderr[-3000:]}"
-        assert done.returncode == 0, detail
-        assert done.stdout.strip().endswith(str(out.name)), detail
-
-        with open(out / "rounds.csv", newline="", encoding="utf-8") as fh:
-            rows = list(csv.DictReader(fh))
-        planned = json.loads(cfg)
-        n_rounds = -(-planned["iterations"] // planned["respite"])
-        robots = [r["id"] for r in planned["robots"]]
-        assert len(rows) == n_rounds, detail
-        for row in rows:
-            assert row["visited"].split() == robots, row
-            assert row["skipped"] == "", row
-            assert row["all_equal"] == "true", row
-            assert len({row[f"digest_{r}"] for r in robots}) == 1, row
-        # every robot's files came back over the platform (the robots wrote them under
-        # their own workdirs, never into the driver's folder)
-        for r in robots:
-            assert (out / f"metrics_{r}.csv").stat().st_size > 0
-            assert (out / f"shares_{r}.csv").is_file()
-            assert (out / "tables" / f"{r}.npy").is_file()
+        out, robots = drive_and_check(lab, drv, config_name, cfg, driver_cmd)
         metrics = (out / "metrics.csv").read_text(encoding="utf-8").splitlines()
         assert {ln.split(",")[0] for ln in metrics[1:]} == set(robots)
         summary = (out / "summary.md").read_text(encoding="utf-8")

@@ -10,7 +10,6 @@ Runs in CI (as root); skipped with the reason where namespaces cannot be made.
 """
 from __future__ import annotations
 
-import csv
 import json
 import re
 import shutil
@@ -23,7 +22,7 @@ from pathlib import Path
 import pytest
 
 from .netns import REPO_ROOT, Lab, leftover_namespaces, unavailable
-from .test_federation_hosts import argv_of, wait_line
+from .test_federation_hosts import argv_of, drive_and_check, wait_line
 
 WHY = unavailable() or (None if shutil.which("openssl") else "the openssl command is missing")
 pytestmark = pytest.mark.skipif(WHY is not None, reason=WHY or "")
@@ -110,29 +109,7 @@ def test_the_documented_tls_lan_setup_federates_three_hosts(tmp_path: Path) -> N
         cfg = config_text
         for i, h in enumerate(ROBOT_HOSTS):
             cfg = cfg.replace(f"HOST{i + 1}", lab[h].address)
-        (drv / config_name).write_text(cfg, encoding="utf-8")
-        done = lab["driver"].run(argv_of(driver_cmd), cwd=drv, timeout=180,
-                                 capture_output=True, text=True)
-        out = drv / driver_cmd.split("--out", 1)[1].split()[0]
-        detail = f"exit {done.returncode}\n{done.stderr[-3000:]}"
-        assert done.returncode == 0, detail
-        assert done.stdout.strip().endswith(str(out.name)), detail
-
-        with open(out / "rounds.csv", newline="", encoding="utf-8") as fh:
-            rows = list(csv.DictReader(fh))
-        planned = json.loads(cfg)
-        n_rounds = -(-planned["iterations"] // planned["respite"])
-        robots = [r["id"] for r in planned["robots"]]
-        assert len(rows) == n_rounds, detail
-        for row in rows:
-            assert row["visited"].split() == robots, row
-            assert row["skipped"] == "", row
-            assert row["all_equal"] == "true", row
-            assert len({row[f"digest_{r}"] for r in robots}) == 1, row
-        for r in robots:
-            assert (out / f"metrics_{r}.csv").stat().st_size > 0
-            assert (out / f"shares_{r}.csv").is_file()
-            assert (out / "tables" / f"{r}.npy").is_file()
+        out, robots = drive_and_check(lab, drv, config_name, cfg, driver_cmd)
         summary = (out / "summary.md").read_text(encoding="utf-8")
         assert "federation complete" in summary, summary
         nodes = json.loads((out / "nodes.json").read_text(encoding="utf-8"))
