@@ -5,6 +5,7 @@ import csv
 import json
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -49,6 +50,23 @@ def _rest(out: str, samples: list | None = None) -> list[str]:
     return kept
 
 
+def _finish(p: subprocess.Popen, text: str = "") -> str:
+    """Send ``text``, close stdin and read the rest of stdout through ``p.stdout`` itself:
+    ``communicate`` reads the pipe beneath it and would lose lines ``readline`` had already
+    buffered (a sample written right after a progress line, say). A node that does not
+    end within 30 s is killed, so the read is bounded."""
+    timer = threading.Timer(30.0, p.kill)
+    timer.start()
+    try:
+        p.stdin.write(text)
+        p.stdin.close()
+        out = p.stdout.read()
+        p.wait(timeout=30)
+    finally:
+        timer.cancel()
+    return out
+
+
 def test_async_node_trains_then_waits_for_stdin(tmp_path: Path) -> None:
     p = _start(tmp_path, iterations=120, progress_every=50, grace_s=30.0)
     first = p.stdout.readline().split()
@@ -59,7 +77,7 @@ def test_async_node_trains_then_waits_for_stdin(tmp_path: Path) -> None:
     assert _line(p, samples) == ["DFRL_PROGRESS", "r7", "120"]
     time.sleep(0.3)
     assert p.poll() is None                       # lingers, serving, until stdin closes
-    out, _ = p.communicate("", timeout=30)
+    out = _finish(p)
     assert _rest(out, samples) == ["DFRL_DONE", "r7", "120", "0"]
     # the pose and the curves now and then (here: the first progress line and the end)
     assert samples[0].iteration == 50 and samples[-1].iteration == 120
@@ -78,7 +96,7 @@ def test_sync_node_stops_at_a_boundary_when_told(tmp_path: Path) -> None:
     assert p.stdout.readline().startswith("DFRL_NODE r7")
     time.sleep(1.0)                                # waits at iteration 40 for a share
     assert p.poll() is None
-    out, _ = p.communicate("stop\n", timeout=30)
+    out = _finish(p, "stop\n")
     assert _rest(out)[-4:] == ["DFRL_DONE", "r7", "40", "0"]
     with open(tmp_path / "metrics_r7.csv", newline="") as fh:
         assert len(list(csv.DictReader(fh))) == 40
@@ -97,7 +115,7 @@ def test_real_time_factor_paces_the_loop(tmp_path: Path, rtf: float) -> None:
     p = _start(tmp_path, iterations=50, rtf=rtf, progress_every=0, grace_s=0.0)
     assert p.stdout.readline().startswith("DFRL_NODE")
     t0 = time.monotonic()
-    out, _ = p.communicate(timeout=30)
+    out = _finish(p)
     assert "DFRL_DONE r7 50" in out
     assert time.monotonic() - t0 >= 50 * 0.064 / rtf * 0.95
 
@@ -113,7 +131,7 @@ def _paced_seconds(tmp_path: Path, **kw) -> float:
         for i in (10, 15, 20, 25):
             assert _line(p) == ["DFRL_PROGRESS", "r7", str(i)]
         elapsed = time.monotonic() - t0
-        out, _ = p.communicate(timeout=30)
+        out = _finish(p)
         assert "DFRL_DONE r7 25" in out
         return elapsed
     finally:
