@@ -3,7 +3,7 @@
         swipl platform_pl/node_main.pl [--host H] [--port P] [--token T]...
                                        [--advertise HOST[:PORT]] [--store DIR]
                                        [--insecure] [--tls DIR]
-                                       [--tls-peer NAME]...
+                                       [--tls-peer NAME]... [--trust NAME]...
                                        [--consult FILE]... [--interactive]
 
     Binds H:P (H may be 0.0.0.0: every interface), prints "dfrl node
@@ -18,7 +18,9 @@
     node.crt, node.key from `dfrl certs node`) makes every connection
     mutual TLS, and then any token is accepted anywhere; --tls-peer NAME
     (repeatable) lets only peers whose certificate names NAME send agents
-    or code. A malformed command line is
+    or code; --trust NAME (repeatable, with --tls) installs the code of a
+    peer whose certificate names NAME without the sandbox check (node
+    option trusted_peers(Names)). A malformed command line is
     reported on stderr and exits with status 2; a node that cannot start
     (address taken, weak token) prints why and exits with status 1.
 
@@ -38,6 +40,7 @@ main(Argv) :-
     findall(T, member(token(T), Options), Tokens),
     findall(F, member(consult(F), Options), Files),
     findall(N, member(tls_peer(N), Options), Peers),
+    findall(N, member(trust(N), Options), Trusted),
     findall(O, ( member(O0, [advertise(_), store(_), tls(_)]),
                  last_option(Options, O0),
                  O = O0 ),
@@ -50,9 +53,13 @@ main(Argv) :-
     ->  Extra1 = Extra0
     ;   Extra1 = [tls_peers(Peers)|Extra0]
     ),
+    (   Trusted == []
+    ->  Extra2 = Extra1
+    ;   Extra2 = [trusted_peers(Trusted)|Extra1]
+    ),
     (   Tokens == []
-    ->  NodeOptions = [default(true)|Extra1]
-    ;   NodeOptions = [tokens(Tokens), default(true)|Extra1]
+    ->  NodeOptions = [default(true)|Extra2]
+    ;   NodeOptions = [tokens(Tokens), default(true)|Extra2]
     ),
     catch(node_start(Host:Port, Node, NodeOptions), E,
           ( print_message(error, E), halt(1) )),
@@ -82,7 +89,7 @@ usage(Why) :-
     format(user_error,
            "usage: swipl node_main.pl [--host H] [--port P] [--token T]... \c
             [--advertise HOST[:PORT]] [--store DIR] [--insecure] \c
-            [--tls DIR] [--tls-peer NAME]... \c
+            [--tls DIR] [--tls-peer NAME]... [--trust NAME]... \c
             [--consult FILE]... [--interactive]~n", []),
     halt(2).
 
@@ -113,6 +120,7 @@ flag_arg('--advertise', advertise, address).
 flag_arg('--store', store, atom).
 flag_arg('--tls', tls, atom).
 flag_arg('--tls-peer', tls_peer, atom).
+flag_arg('--trust', trust, atom).
 
 typed_value(atom, _, V, V).
 typed_value(integer, Flag, V0, V) :-

@@ -20,6 +20,7 @@ def node_command(
     insecure: bool = False,
     tls: str | None = None,
     tls_peers: list[str] | None = None,
+    trust: list[str] | None = None,
 ) -> list[str]:
     """The ``swipl`` command line that runs one node.
 
@@ -46,6 +47,17 @@ def node_command(
     tls_peers
         With ``tls``: the certificate names that may send agents or code (default: any the
         CA signed).
+    trust
+        With ``tls``: certificate names whose code (agents, programs) is installed without
+        the sandbox check (node option ``trusted_peers``; default: none, all code checked).
+
+    Raises
+    ------
+    ValueError
+        A port out of range, ``tls_peers`` or ``trust`` without ``tls``, a name no
+        certificate can have, or ``tls`` not a node TLS folder.
+    FileNotFoundError
+        ``swipl`` is missing.
     """
     if not 0 <= port <= 65535:
         raise ValueError(f"port {port} is outside 0..65535")
@@ -65,6 +77,9 @@ def node_command(
         cmd.append("--insecure")
     if tls_peers and not tls:
         raise ValueError("--tls-peer needs --tls")
+    if trust and not tls:
+        raise ValueError("--trust needs --tls (trust is by TLS certificate name)")
+    check_trust_names(trust or [])
     if tls:
         from dfrl.experiments.certs import CertError, check_node_dir
         try:
@@ -73,16 +88,29 @@ def node_command(
             raise ValueError(str(exc)) from exc
     for name in tls_peers or []:
         cmd += ["--tls-peer", name]
+    for name in trust or []:
+        cmd += ["--trust", name]
     if interactive:
         cmd.append("--interactive")
     return cmd
+
+
+def check_trust_names(names: list[str]) -> None:
+    """Raise ValueError for a ``--trust`` name no node certificate can have (``dfrl certs``
+    names: letters, digits, ``-`` and ``.``, at most 64 characters)."""
+    from dfrl.experiments.certs import NAME_RE
+
+    for name in names:
+        if not NAME_RE.match(name) or ".." in name:
+            raise ValueError(f"--trust {name!r}: not a certificate name (letters, digits, "
+                             "'-' and '.', at most 64 characters, as 'dfrl certs node' makes)")
 
 
 def _run(args: argparse.Namespace) -> int:
     try:
         cmd = node_command(args.host, args.port, args.token, args.consult, args.interactive,
                            args.advertise, args.store, args.insecure, args.tls,
-                           args.tls_peer)
+                           args.tls_peer, args.trust)
     except (ValueError, FileNotFoundError) as exc:
         print(f"dfrl node: {exc}", file=sys.stderr)
         return 2
@@ -111,5 +139,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--tls-peer", action="append", default=[], metavar="NAME",
                    help="with --tls: a certificate name that may send agents or code "
                         "(repeatable; default: any name the CA signed)")
+    add_trust_argument(p)
     p.add_argument("--interactive", action="store_true", help="open a Prolog toplevel on the node")
     p.set_defaults(func=_run)
+
+
+def add_trust_argument(p: argparse.ArgumentParser) -> None:
+    """``--trust NAME`` (repeatable): code from that certificate name skips the sandbox."""
+    p.add_argument("--trust", action="append", default=[], metavar="NAME",
+                   help="with --tls: install agents and programs from the peer whose "
+                        "certificate names NAME without the sandbox check (repeatable; "
+                        "default: none, all code from peers is checked)")

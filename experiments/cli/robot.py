@@ -5,23 +5,34 @@ import argparse
 import sys
 from pathlib import Path
 
+from dfrl.experiments.cli.node import add_trust_argument
 from dfrl.pybridge.errors import BridgeError
 
 
 def _run(args: argparse.Namespace) -> int:
     from dfrl.experiments.certs import CertError, check_node_dir
+    from dfrl.experiments.cli.node import check_trust_names
     from dfrl.experiments.robot_node.service import RobotService, parse_token
 
     if not 0 <= args.port <= 65535:
         print(f"dfrl robot: port {args.port} is outside 0..65535", file=sys.stderr)
         return 2
+    if args.trust and not args.tls:
+        print("dfrl robot: --trust needs --tls (trust is by TLS certificate name)",
+              file=sys.stderr)
+        return 2
     try:
+        check_trust_names(args.trust)
         tls = check_node_dir(args.tls) if args.tls else None
+    except ValueError as exc:
+        print(f"dfrl robot: {exc}", file=sys.stderr)
+        return 2
     except CertError as exc:
         print(f"dfrl robot: --tls: {exc}", file=sys.stderr)
         return 2
     service = RobotService(args.host, args.port, parse_token(args.token), args.advertise,
-                           Path(args.workdir), insecure=args.insecure, tls=tls)
+                           Path(args.workdir), insecure=args.insecure, tls=tls,
+                           trust=tuple(args.trust))
     service.install_signals()
     try:
         service.start()
@@ -60,4 +71,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="mutual TLS with the node certificate in DIR (ca.crt, node.crt, "
                         "node.key from 'dfrl certs node'); any token is then accepted off "
                         "loopback (default: plaintext)")
+    add_trust_argument(p)
     p.set_defaults(func=_run)

@@ -21,6 +21,7 @@ import re
 import signal
 import socket
 import sys
+from collections.abc import Sequence
 from enum import Enum
 from pathlib import Path
 from typing import Any, TextIO
@@ -85,12 +86,24 @@ class RobotService:
         Accept a weak token off loopback without TLS.
     tls : Path, optional
         A node TLS folder (``dfrl certs node``): every connection is mutual TLS.
+    trust : sequence of str
+        With ``tls``: certificate names whose code is installed without the sandbox check
+        (node option ``trusted_peers``).
+
+    Raises
+    ------
+    ValueError
+        ``trust`` without ``tls``.
     """
 
     def __init__(self, host: str, port: int, token: int | str, advertise: str | None = None,
                  workdir: Path = Path("dfrl-robot"), out: TextIO = sys.stdout,
-                 insecure: bool = False, tls: Path | None = None) -> None:
+                 insecure: bool = False, tls: Path | None = None,
+                 trust: Sequence[str] = ()) -> None:
+        if trust and tls is None:
+            raise ValueError("trusting peers by name needs tls (a TLS certificate name)")
         self.bind = (host, int(port))
+        self.trust = tuple(trust)
         self.insecure = insecure
         self.tls = Path(tls).resolve() if tls is not None else None
         self.token = token
@@ -124,6 +137,8 @@ class RobotService:
             options["insecure"] = True
         if self.tls is not None:
             options["tls"] = str(self.tls)
+        if self.trust:
+            options["trusted_peers"] = [Atom(name) for name in self.trust]
         if adv and port:
             options["advertise"] = Term(":", Atom(adv), port)
         self.node_name = self.node.start(host, port, **options)
