@@ -23,12 +23,19 @@
             ctx_peer_name/2,            % +Ctx, -Name
             platform_shutdown/0
           ]).
-:- use_module(wire, [frame_write/3, frame_read/3, wire_version/1]).
+:- use_module(wire, [frame_write/3]).
 :- use_module(transport,
               [ address_normalize/2, token_proof/3, open_key/1,
                 transport_drop_pool/0, transport_identify/3 ]).
-:- use_module(worker_pool, [pool_run/3, pool_signal/3, pool_drain/0, pool_retire/0]).
-:- use_module(tls, [tls_check_dir/1, tls_accept/5]).
+:- use_module(worker_pool, [pool_run/3, pool_drain/0]).
+:- use_module(tls, [tls_check_dir/1]).
+:- use_module(node_id, [node_id_new/1, node_id_stored/2]).
+:- use_module(node_admission, [admission_admit/5, admission_forget/2, admission_forget_node/1]).
+:- use_module(node_connection,
+              [ connection_serve/4, connection_evict/2, connection_stop_all/1,
+                connection_forget_node/1 ]).
+:- reexport(node_ctx,
+            [ ctx_node/2, ctx_peer/2, ctx_input/2, ctx_authenticated/1, ctx_peer_name/2 ]).
 :- use_module(secrets, [check_secrets/3, loopback_host/1, token_entropy_bits/2]).
 :- autoload(library(socket),
             [ tcp_socket/1, tcp_setopt/2, tcp_bind/2, tcp_listen/2,
@@ -39,13 +46,17 @@
 :- autoload(library(debug), [debug/3]).
 :- autoload(library(lists), [member/2, max_list/2]).
 :- autoload(library(aggregate), [aggregate_all/3]).
-:- autoload(library(crypto), [crypto_n_random_bytes/2]).
-:- autoload(library(readutil), [read_file_to_string/3]).
-:- autoload(library(filesex), [make_directory_path/1, directory_file_path/3]).
 
 :- meta_predicate with_node(+, 0).
 
 /** <module> A platform node: listening socket, acceptor, connection workers
+
+This module starts and stops nodes, keeps their identity and options,
+and runs the acceptor. The rest of a node lives beside it: admission
+and eviction of connections in node_admission.pl, the connection worker
+(hello, frames, authentication) in node_connection.pl, request policy
+and replies in node_request.pl, the connection context in node_ctx.pl
+(its accessors re-exported here) and ids in node_id.pl.
 
 A node listens on the address it is given (and only there). An acceptor
 thread takes connections and gives each to a worker thread, at most
@@ -85,12 +96,7 @@ by default the bind address, or the host name when it binds 0.0.0.0).
     node_tokens/2,              % Node, Tokens
     node_opt/2,                 % Node, Option
     default_node/1,             % Node
-    stopping/1,                 % Node
-    connection/3,               % Node, ConnId, ThreadId: a served connection
-    conn_entry/5.               % Node, ConnId, PeerKey, Class, Since
-
-:- thread_local
-    serving/2.                  % Node, ConnId: this worker's connection
+    stopping/1.                 % Node
 
 :- thread_local
     current_node_tl/1.
@@ -227,8 +233,8 @@ node_start(Address0, Node, Options) :-
     check_options(Options),
     check_secrets(Host:Port, Tokens, Options),
     (   option(store(Dir), Options)
-    ->  stored_node_id(Dir, Id)
-    ;   new_node_id(Id)
+    ->  node_id_stored(Dir, Id)
+    ;   node_id_new(Id)
     ),
     tcp_socket(Socket),
     catch(( tcp_setopt(Socket, reuseaddr),
@@ -310,36 +316,6 @@ wildcard_host(H) :-
     atom_string(A, H),
     memberchk(A, ['0.0.0.0', '::', '']).
 
-%   The node id: 32 hex digits from the crypto random generator, or the
-%   one kept in Dir/node_id (written once: temporary file, then rename).
-new_node_id(Id) :-
-    crypto_n_random_bytes(16, Bytes),
-    bytes_hex(Bytes, Id).
-
-bytes_hex(Bytes, Hex) :-
-    maplist([B, H]>>format(atom(H), '~|~`0t~16r~2+', [B]), Bytes, Hs),
-    atomic_list_concat(Hs, Hex).
-
-stored_node_id(Dir, Id) :-
-    make_directory_path(Dir),
-    directory_file_path(Dir, node_id, File),
-    (   exists_file(File)
-    ->  read_file_to_string(File, Text0, []),
-        split_string(Text0, "", " \t\r\n", [Text]),
-        (   string_length(Text, 32),
-            string_codes(Text, Cs),
-            forall(member(C, Cs), code_type(C, xdigit(_)))
-        ->  atom_string(Id, Text)
-        ;   throw(error(domain_error(node_id, Text), context(_, File)))
-        )
-    ;   new_node_id(Id),
-        atom_concat(File, '.tmp', Tmp),
-        setup_call_cleanup(open(Tmp, write, Out),
-                           format(Out, "~w~n", [Id]),
-                           close(Out)),
-        rename_file(Tmp, File)
-    ).
-
 bind_port(Socket, Host, 0, Bound) :-
     !,
     tcp_bind(Socket, Host:Bound).
@@ -372,8 +348,7 @@ node_stop(Node) :-
     ),
     assertz(stopping(Node)),
     forall(node_stopping(Node), true),
-    forall(connection(Node, _, T),
-           pool_signal(connections, T, node:stop_if_serving(Node))),
+    connection_stop_all(Node),
     (   node_acceptor(Node, _)
     ->  wake_acceptor(Address)
     ;   true
@@ -388,8 +363,8 @@ node_stop(Node) :-
     retractall(node_tokens(Node, _)),
     retractall(node_opt(Node, _)),
     retractall(stopping(Node)),
-    retractall(connection(Node, _, _)),
-    with_mutex(dfrl_conns, retractall(conn_entry(Node, _, _, _, _))),
+    connection_forget_node(Node),
+    admission_forget_node(Node),
     (   retract(default_node(Node))
     ->  (   node_info(Other, _, _)
         ->  assertz(default_node(Other))
@@ -678,35 +653,30 @@ accept_loop(Node, Socket) :-
         accept_loop(Node, Socket)
     ).
 
-%   Admission. Every connection starts unauthenticated and becomes
-%   authenticated when its peer proves a token (conn_entry/5 keeps its
-%   class). Unauthenticated connections are capped per peer address and
-%   in total, below max_connections, so the remaining slots are kept for
-%   authenticated ones, which an unauthenticated flood never displaces.
-%   At a cap, the new connection is not refused: the oldest
-%   unauthenticated connection of the same peer (per-peer cap) or of the
-%   peer holding the most (total cap) is evicted, so a trickling or
-%   idle peer cannot keep a newcomer out, and a newcomer that proves its
-%   token at once becomes authenticated before its turn comes. Only when
+%   Admission (node_admission.pl) keeps slots for authenticated peers:
+%   an unauthenticated newcomer at a cap evicts the oldest
+%   unauthenticated connection of the peer holding the most; only when
 %   every slot is authenticated is a connection refused.
 dispatch(Node, Client, Peer) :-
     peer_key(Peer, Key),
     flag(dfrl_conn_ids, CId, CId+1),
-    get_time(Now),
-    with_mutex(dfrl_conns, admit(Node, CId, Key, Now, Verdict)),
+    node_option(Node, max_connections, Max),
+    node_option(Node, max_unauth_connections, MaxU),
+    node_option(Node, max_unauth_per_peer, MaxP),
+    admission_admit(Node, CId, Key, limits(Max, MaxU, MaxP), Verdict),
     (   Verdict = refuse
     ->  refuse_busy(Node, Client)
     ;   Verdict = evict(Victim)
-    ->  evict(Node, Victim)
+    ->  connection_evict(Node, Victim)
     ;   true
     ),
     (   Verdict == refuse
     ->  true
     ;   connection_workers_max(MaxWorkers),
-        catch(pool_run(connections, serve_connection_job(Node, CId, Client, Peer),
+        catch(pool_run(connections, connection_serve(Node, CId, Client, Peer),
                        [max(MaxWorkers)]),
               E, ( print_message(warning, E),
-                   with_mutex(dfrl_conns, retractall(conn_entry(Node, CId, _, _, _))),
+                   admission_forget(Node, CId),
                    refuse_busy(Node, Client) ))
     ->  true
     ;   true
@@ -722,98 +692,6 @@ connection_workers_max(Max) :-
 
 peer_key(ip(A,B,C,D), ip(A,B,C,D)) :- !.
 peer_key(Peer, Peer).
-
-admit(Node, CId, Key, Now, Verdict) :-
-    node_option(Node, max_connections, Max),
-    node_option(Node, max_unauth_connections, MaxU),
-    node_option(Node, max_unauth_per_peer, MaxP),
-    aggregate_all(count, conn_entry(Node, _, _, _, _), Total),
-    aggregate_all(count, conn_entry(Node, _, _, unauth, _), Unauth),
-    aggregate_all(count, conn_entry(Node, _, Key, unauth, _), Mine),
-    (   Mine >= MaxP
-    ->  oldest_unauth(Node, Key, Victim),
-        Verdict = evict(Victim)
-    ;   Unauth >= MaxU
-    ->  busiest_peer(Node, Busiest),
-        oldest_unauth(Node, Busiest, Victim),
-        Verdict = evict(Victim)
-    ;   Total >= Max
-    ->  (   busiest_peer(Node, Busiest)
-        ->  oldest_unauth(Node, Busiest, Victim),
-            Verdict = evict(Victim)
-        ;   Verdict = refuse
-        )
-    ;   Verdict = admit
-    ),
-    (   Verdict = evict(V)
-    ->  retractall(conn_entry(Node, V, _, _, _))
-    ;   true
-    ),
-    (   Verdict == refuse
-    ->  true
-    ;   assertz(conn_entry(Node, CId, Key, unauth, Now))
-    ).
-
-oldest_unauth(Node, Key, Victim) :-
-    aggregate_all(min(Since, C), conn_entry(Node, C, Key, unauth, Since),
-                  min(_, Victim)).
-
-busiest_peer(Node, Key) :-
-    findall(K, conn_entry(Node, _, K, unauth, _), Ks),
-    Ks \== [],
-    msort(Ks, Sorted),
-    clumped_pairs(Sorted, Counts),
-    aggregate_all(max(N, K), member(K-N, Counts), max(_, Key)).
-
-clumped_pairs([], []).
-clumped_pairs([K|Ks], [K-N|Rest]) :-
-    take_same(K, Ks, 1, N, Ks1),
-    clumped_pairs(Ks1, Rest).
-
-take_same(K, [K1|Ks], N0, N, Rest) :-
-    K1 == K,
-    !,
-    N1 is N0 + 1,
-    take_same(K, Ks, N1, N, Rest).
-take_same(_, Ks, N, N, Ks).
-
-%   The victim's entry is gone already (it no longer counts); its worker,
-%   if it runs, is told to close the connection. A worker that has not
-%   recorded itself yet finds its entry gone when it starts (see
-%   serve_connection/4: it records itself, then looks).
-evict(Node, Victim) :-
-    debug(dfrl(node), '~w: evicting unauthenticated connection ~w', [Node, Victim]),
-    (   connection(Node, Victim, T)
-    ->  pool_signal(connections, T, node:evict_if_serving(Node, Victim))
-    ;   true
-    ).
-
-evict_if_serving(Node, CId) :-
-    (   serving(Node, CId)
-    ->  throw(dfrl_evicted)
-    ;   true
-    ).
-
-%   A connection's class becomes authenticated (it no longer counts
-%   against the unauthenticated caps).
-mark_authenticated(Node) :-
-    (   serving(Node, CId)
-    ->  with_mutex(dfrl_conns,
-                   (   retract(conn_entry(Node, CId, Key, _, Since))
-                   ->  assertz(conn_entry(Node, CId, Key, auth, Since))
-                   ;   true
-                   ))
-    ;   true
-    ).
-
-%   Signalled to a pooled worker when Node stops; harmless if the worker
-%   has moved on to another job.
-stop_if_serving(Node) :-
-    thread_self(Me),
-    (   connection(Node, _, Me)
-    ->  throw(node_stopping)
-    ;   true
-    ).
 
 %   A TLS node cannot say it in plaintext: it closes the connection.
 refuse_busy(Node, Client) :-
@@ -833,381 +711,12 @@ refuse_busy(_, Client) :-
           _, true).
 
 		 /*******************************
-		 *          CONNECTIONS		*
-		 *******************************/
-
-%   An eviction signal (evict/2) that lands after serve_connection/4 left
-%   its catch but before it retracted serving/2 ends up here: finish the
-%   clean-up it interrupted, quietly.
-serve_connection_job(Node, CId, Client, Peer) :-
-    catch(serve_connection(Node, CId, Client, Peer), dfrl_evicted,
-          connection_cleanup(Node, CId, Client)).
-
-connection_cleanup(Node, CId, Client) :-
-    catch(tcp_close_socket(Client), _, true),
-    with_mutex(dfrl_conns, retractall(conn_entry(Node, CId, _, _, _))),
-    retractall(serving(_, _)),
-    retractall(connection(Node, CId, _)),
-    retractall(current_node_tl(_)).
-
-serve_connection(Node, CId, Client, Peer) :-
-    thread_self(Me),
-    assertz(connection(Node, CId, Me)),
-    assertz(serving(Node, CId)),
-    catch(setup_call_cleanup(
-              ( node_set_current_if_alive(Node),
-                (   conn_entry(Node, CId, _, _, _)
-                ->  true
-                ;   throw(dfrl_evicted)          % evicted before it began
-                ),
-                catch(tcp_setopt(Client, nodelay), _, true),
-                tcp_open_socket(Client, Pair)
-              ),
-              serve_pair(Node, Pair, Peer),
-              close(Pair, [force(true)])),
-          E,
-          connection_ended(Node, Peer, E)),
-    (   var(Pair)
-    ->  catch(tcp_close_socket(Client), _, true)
-    ;   true
-    ),
-    with_mutex(dfrl_conns, retractall(conn_entry(Node, CId, _, _, _))),
-    retractall(serving(_, _)),
-    retractall(connection(Node, CId, Me)),
-    retractall(current_node_tl(_)).
-
-%   After a rejected frame: give its memory back. A reader that ran out of
-%   C stack leaves the pages it touched resident in this thread (no trim
-%   returns them), so its worker exits when the connection ends.
-rejected_frame(Reason) :-
-    (   Reason = syntax(resource_error(_))
-    ->  pool_retire
-    ;   true
-    ),
-    release_memory.
-
-%   The parse slots of unauthenticated frames (see frame_read/3): a
-%   message queue holding as many `slot` messages as the flag
-%   dfrl_preauth_parsers (2) says, one queue per process, made once.
-:- create_prolog_flag(dfrl_preauth_parsers, 2, [type(integer), keep(true)]).
-
-preauth_parse_slots(Q) :-
-    Q = dfrl_preauth_parse,
-    (   catch(message_queue_property(Q, size(_)), _, fail)
-    ->  true
-    ;   with_mutex(dfrl_conns,
-                   (   catch(message_queue_property(Q, size(_)), _, fail)
-                   ->  true
-                   ;   current_prolog_flag(dfrl_preauth_parsers, N),
-                       message_queue_create(Q, [alias(Q)]),
-                       forall(between(1, N, _), thread_send_message(Q, slot))
-                   ))
-    ).
-
-%   Give back what a large or rejected frame made the worker's stacks grow
-%   to (a worker thread is reused, and a hostile frame must not leave its
-%   memory behind): collect, shrink the stacks, and hand freed memory back
-%   to the OS (trim_heap/0; tcmalloc otherwise keeps it).
-release_memory :-
-    garbage_collect,
-    trim_stacks,
-    catch(trim_heap, _, true).
-
-node_set_current_if_alive(Node) :-
-    (   node_info(Node, _, _)
-    ->  node_set_current(Node)
-    ;   throw(node_stopping)
-    ).
-
-connection_ended(_, _, node_stopping) :- !.
-connection_ended(_, _, dfrl_evicted) :- !.
-connection_ended(_, _, '$aborted') :- !.
-connection_ended(_, _, unwind(_)) :- !.
-connection_ended(_, _, error(existence_error(platform, _), _)) :- !.
-connection_ended(_, _, error(timeout_error(_, _), _)) :- !.
-connection_ended(_, _, error(io_error(_, _), _)) :- !.
-connection_ended(_, _, error(socket_error(_, _), _)) :- !.
-connection_ended(_, _, error(ssl_error(_, _, _, _), _)) :- !.  % TLS peer gone
-connection_ended(Node, Peer, error(tls_error(_, Reason), _)) :-
-    !,
-    debug(dfrl(node), '~w: TLS refused ~p: ~w', [Node, Peer, Reason]).
-connection_ended(Node, Peer, E) :-
-    print_message(warning, dfrl(connection_error(Node, Peer, E))).
-
-%   A TLS node first runs the handshake, under the pre-authentication
-%   frame deadline; the encrypted pair is closed before the plain one.
-serve_pair(Node, Plain, Peer) :-
-    node_option(Node, tls, Dir),
-    Dir \== none,
-    !,
-    node_option(Node, frame_deadline, Deadline),
-    tls_accept(Dir, Plain, Pair, PeerName, [deadline(Deadline)]),
-    setup_call_cleanup(true,
-                       serve_stream(Node, Pair, Peer, PeerName),
-                       close(Pair, [force(true)])).
-serve_pair(Node, Pair, Peer) :-
-    serve_stream(Node, Pair, Peer, none).
-
-serve_stream(Node, Pair, Peer, PeerName) :-
-    stream_pair(Pair, In, Out),
-    set_stream(In, type(binary)),
-    set_stream(Out, type(binary)),
-    node_option(Node, idle_timeout, Idle),
-    set_stream(In, timeout(Idle)),
-    random_nonce(Nonce),
-    node_ident(Node, Id, Host:Port, _),
-    node_option(Node, auth_idle_timeout, AuthIdle),
-    wire_version(V),
-    frame_write(Out, text,
-                hello(V, Nonce, node(Host, Port, [id(Id), idle(Idle),
-                                                  auth_idle(AuthIdle)]))),
-    Ctx = ctx(Node, Peer, Nonce, In, Out, _Authenticated, PeerName),
-    serve_frames(Ctx).
-
-random_nonce(Nonce) :-
-    new_node_id(Nonce).
-
-%   The idle limit is set before every frame: a request's After goal may
-%   have changed the stream's timeout (a staged migration waits for its
-%   commit with the commit timeout).
-serve_frames(Ctx) :-
-    Ctx = ctx(Node, _, _, In, Out, Auth, _),
-    (   Auth == true
-    ->  node_option(Node, max_frame_size, Max),
-        node_option(Node, auth_idle_timeout, Idle),
-        ReadOptions = [max_size(Max), binary(true)]
-    ;   node_option(Node, max_text_frame_size, Max),
-        node_option(Node, idle_timeout, Idle),
-        node_option(Node, frame_deadline, Deadline),
-        node_option(Node, max_term_depth, Depth),
-        preauth_parse_slots(Slots),
-        ReadOptions = [ max_size(Max), binary(false), deadline(Deadline),
-                        max_depth(Depth), parse_slots(Slots, 512) ]
-    ),
-    set_stream(In, timeout(Idle)),
-    byte_count(In, Before),
-    catch(frame_read(In, Frame, ReadOptions),
-          error(wire_error(Reason), _),
-          ( reply(Out, error(error(wire_error(Reason), _))),
-            Frame = end_of_file,
-            rejected_frame(Reason)
-          )),
-    (   Frame == end_of_file
-    ->  true
-    ;   Frame = frame(_, Term),
-        serve_term(Term, Ctx, Continue),
-        byte_count(In, After),
-        (   After - Before > 4194304
-        ->  release_memory
-        ;   true
-        ),
-        (   Continue == true
-        ->  serve_frames(Ctx)
-        ;   true
-        )
-    ).
-
-serve_term(auth(Proofs), Ctx, true) :-
-    !,
-    Ctx = ctx(Node, _, Nonce, _, Out, Auth, _),
-    (   is_list(Proofs),
-        node_accepts(Node, Proofs/Nonce)
-    ->  nb_setarg(6, Ctx, true),
-        mark_authenticated(Node),
-        reply(Out, ok(authenticated))
-    ;   (   var(Auth)
-        ->  nb_setarg(6, Ctx, false)
-        ;   true
-        ),
-        node_ident(Node, _, Here, _),
-        reply(Out, error(error(permission_error(authenticate, platform, Here), _)))
-    ).
-serve_term(Request, Ctx, Continue) :-
-    Ctx = ctx(Node, Peer, _, _, Out, _, _),
-    debug(dfrl(request), '~w: ~p from ~p', [Node, Request, Peer]),
-    catch(handle(Request, Ctx, Reply, After), E,
-          ( Reply = error(E), After = true )),
-    (   Reply == none
-    ->  true
-    ;   reply(Out, Reply)
-    ),
-    (   After == close
-    ->  Continue = false
-    ;   After == true
-    ->  Continue = true
-    ;   After = continue(Goal)
-    ->  catch(( Goal -> Continue = true ; Continue = false ), E2,
-              after_failed(E2, Continue))
-    ;   catch(After, E2, print_message(warning, E2)),
-        Continue = false
-    ).
-
-after_failed(connection_lost, false) :- !.
-after_failed('$aborted', _) :- !, throw('$aborted').
-after_failed(E, false) :-
-    print_message(warning, E).
-
-handle(Request, Ctx, Reply, After) :-
-    (   \+ callable(Request)
-    ->  unknown_request(Request, Reply),
-        After = true
-    ;   requires_authentication(Request),
-        \+ ctx_authorized(Ctx)
-    ->  ctx_node(Ctx, Node),
-        node_ident(Node, _, Here, _),
-        functor(Request, Name, Arity),
-        Reply = error(error(permission_error(request, platform, Here),
-                            context(Name/Arity,
-                                    'this request needs a proved token'))),
-        After = true
-    ;   restricted_to_tls_peers(Request),
-        \+ tls_peer_allowed(Ctx)
-    ->  ctx_node(Ctx, Node),
-        node_ident(Node, _, Here, _),
-        functor(Request, Name, Arity),
-        (   ctx_peer_name(Ctx, Peer) -> true ; Peer = none ),
-        Reply = error(error(permission_error(request, platform, Here),
-                            context(Name/Arity, not_in_tls_peers(Peer)))),
-        After = true
-    ;   platform_request(Request, Ctx, Reply0, After0)
-    ->  Reply = Reply0,
-        After = After0
-    ;   unknown_request(Request, Reply),
-        After = true
-    ).
-
-%   An unknown request is answered with its name and arity only: the
-%   request itself may be large (and echoing it back is the peer's
-%   work, not ours).
-unknown_request(Request, error(error(domain_error(platform_request, What), _))) :-
-    (   callable(Request)
-    ->  functor(Request, Name, Arity),
-        What = Name/Arity
-    ;   What = not_callable
-    ).
-
-%!  requires_authentication(+Request) is semidet.
-%
-%   Multifile hook: true if Request is served only to a peer that proved
-%   one of the node's tokens (or to anyone by an open node). The
-%   platform's own: listing and posting to agents, migration and custody
-%   status, code loading, execution and transfers. A module serving its
-%   own requests adds a clause, e.g.
-%
-%   ```
-%   node:requires_authentication(my_status(_)).
-%   ```
-
-requires_authentication(post(_, _, _, _)).
-requires_authentication(agents).
-requires_authentication(migration_status(_)).
-requires_authentication(custody_agents).
-requires_authentication(load_code(_, _)).
-requires_authentication(execute(_, _)).
-requires_authentication(commit(_)).
-
-%   Requests that send an agent or code: with tls_peers(Names), only
-%   from a peer whose certificate names one of Names.
-restricted_to_tls_peers(transfer(_, _, _, _, _)).
-restricted_to_tls_peers(transfer(_, _, _, _, _, _)).
-restricted_to_tls_peers(commit(_)).
-restricted_to_tls_peers(load_code(_, _)).
-restricted_to_tls_peers(execute(_, _)).
-
-tls_peer_allowed(Ctx) :-
-    ctx_node(Ctx, Node),
-    node_option(Node, tls_peers, Names),
-    (   Names == any
-    ->  true
-    ;   ctx_peer_name(Ctx, Name),
-        memberchk(Name, Names)
-    ).
-
-reply(Out, Reply) :-
-    sanitize_reply(Reply, Safe),
-    frame_write(Out, text, Safe).
-
-%   Error contexts may hold streams, clause references or other blobs
-%   that cannot be written and read back: send the formal only.
-sanitize_reply(error(E), error(error(Safe, _))) :-
-    !,
-    (   E = error(Formal, _)
-    ->  true
-    ;   Formal = E
-    ),
-    (   writable_term(Formal)
-    ->  Safe = Formal
-    ;   format(string(Text), '~p', [Formal]),
-        Safe = remote_failure(Text)
-    ).
-sanitize_reply(Reply, Reply).
-
-%   Linear in the size of T (sub_term/2 is quadratic on deep terms: a
-%   reply echoing a 200 KB operator chain took a minute of CPU).
-writable_term(T) :-
-    (   compound(T)
-    ->  compound_name_arity(T, _, A),
-        writable_args(1, A, T)
-    ;   blob(T, Type)
-    ->  memberchk(Type, [text, reserved_symbol])
-    ;   true
-    ).
-
-writable_args(I, A, _) :-
-    I > A,
-    !.
-writable_args(I, A, T) :-
-    arg(I, T, X),
-    writable_term(X),
-    I1 is I + 1,
-    writable_args(I1, A, T).
-
-		 /*******************************
 		 *       CONNECTION CONTEXT	*
 		 *******************************/
 
-%   The context of a served connection: ctx(Node, Peer, Nonce, In, Out,
-%   Authenticated, PeerName), where PeerName is the CN of the peer's
-%   verified certificate or `none`, and Authenticated is unbound until the peer sent
-%   auth(Proofs), then true or false (set destructively by serve_term/3).
-%   Other modules read it through the accessors below only.
-
-%!  ctx_node(+Ctx, -Node) is det.
-%
-%   Node is the platform that serves the connection.
-
-ctx_node(ctx(Node, _, _, _, _, _, _), Node).
-
-%!  ctx_peer(+Ctx, -Peer) is det.
-%
-%   Peer is the peer's address as tcp_accept/3 gave it.
-
-ctx_peer(ctx(_, Peer, _, _, _, _, _), Peer).
-
-%!  ctx_input(+Ctx, -In) is det.
-%
-%   In is the binary input stream of the connection (for a request that
-%   reads further frames after its reply, as a staged migration does).
-
-ctx_input(ctx(_, _, _, In, _, _, _), In).
-
-%!  ctx_authenticated(+Ctx) is semidet.
-%
-%   True if the peer proved one of the node's tokens on this connection.
-
-ctx_authenticated(ctx(_, _, _, _, _, Auth, _)) :-
-    Auth == true.
-
-%!  ctx_peer_name(+Ctx, -Name) is semidet.
-%
-%   Name (an atom) is the common name of the certificate the peer
-%   presented on this connection, verified against the node's CA (see
-%   the tls(Dir) option of node_start/3). Fails on a plaintext
-%   connection.
-
-ctx_peer_name(ctx(_, _, _, _, _, _, Name), Name) :-
-    atom(Name),
-    Name \== none.
+%   The context of a served connection is node_ctx.pl's (made by the
+%   connection worker, node_connection.pl); its accessors are
+%   re-exported from here.
 
 %!  ctx_authorized(+Ctx) is semidet.
 %
@@ -1228,6 +737,26 @@ ctx_authorized(Ctx) :-
 
 platform_request(ping, Ctx, ok(pong(Node)), true) :-
     ctx_node(Ctx, Node).
+
+%!  requires_authentication(+Request) is semidet.
+%
+%   Multifile hook: true if Request is served only to a peer that proved
+%   one of the node's tokens (or to anyone by an open node). The
+%   platform's own: listing and posting to agents, migration and custody
+%   status, code loading, execution and transfers. A module serving its
+%   own requests adds a clause, e.g.
+%
+%   ```
+%   node:requires_authentication(my_status(_)).
+%   ```
+
+requires_authentication(post(_, _, _, _)).
+requires_authentication(agents).
+requires_authentication(migration_status(_)).
+requires_authentication(custody_agents).
+requires_authentication(load_code(_, _)).
+requires_authentication(execute(_, _)).
+requires_authentication(commit(_)).
 
 %!  platform_shutdown is det.
 %

@@ -218,7 +218,7 @@ def test_preauth_parsing_waits_for_a_slot_auth_and_ping_do_not(tmp_path: Path,
     # Prepare: both parse slots of the process taken (as by two frames being parsed)
     held = tmp_path / "hold_slots.pl"
     held.write_text(":- module(hold_slots, []).\n"
-                    ":- initialization(( node:preauth_parse_slots(Q),\n"
+                    ":- initialization(( node_connection:preauth_parse_slots(Q),\n"
                     "     thread_get_message(Q, slot), thread_get_message(Q, slot) )).\n")
     _, port = hostile_node.start(procs, tmp_path, f"[token({TOKEN}), frame_deadline(1)]",
                                  consult=(held,))
