@@ -213,12 +213,37 @@ def cmd_run(args: argparse.Namespace) -> int:
     return run_and_report(cfg, args, "dfrl run")
 
 
+def driver_tls_arg(args: argparse.Namespace, prog: str) -> tuple[Path | None, int]:
+    """``--tls DIR`` of ``dfrl inject``/``join`` checked: (the folder or None, 0), or
+    (None, 2) after saying what is wrong with it."""
+    from dfrl.experiments.certs import CertError, check_node_dir
+
+    if args.tls is None:
+        return None, 0
+    try:
+        return check_node_dir(args.tls).resolve(), 0
+    except CertError as exc:
+        print(f"{prog}: --tls: {exc}; nothing was sent", file=sys.stderr)
+        return None, 2
+
+
+def add_driver_tls_argument(p: argparse.ArgumentParser) -> None:
+    """``--tls DIR`` of ``dfrl inject``/``join``: the driver's certificate folder here."""
+    p.add_argument("--tls", type=Path, default=None, metavar="DIR",
+                   help="the driver's node TLS folder on this host (ca.crt, node.crt, "
+                        "node.key), instead of the one nodes.json records (default: that "
+                        "one; none for a plaintext run)")
+
+
 def cmd_inject(args: argparse.Namespace) -> int:
     from dfrl.experiments.launcher import inject_method
 
+    tls, rc = driver_tls_arg(args, "dfrl inject")
+    if rc:
+        return rc
     try:
         told = inject_method(args.results_dir, args.program, args.method, args.agent,
-                             wait_s=args.wait)
+                             wait_s=args.wait, tls=tls)
     except ExperimentError as exc:
         print(f"dfrl inject: {exc}", file=sys.stderr)
         return 1
@@ -238,9 +263,12 @@ def cmd_inject(args: argparse.Namespace) -> int:
 def cmd_join(args: argparse.Namespace) -> int:
     from dfrl.experiments.launcher import join_robot
 
+    tls, rc = driver_tls_arg(args, "dfrl join")
+    if rc:
+        return rc
     try:
         info = join_robot(args.results_dir, args.robot, args.arena, args.algo,
-                          iterations=args.iterations, seed=args.seed, node=args.node)
+                          iterations=args.iterations, seed=args.seed, node=args.node, tls=tls)
     except ConfigError as exc:
         return config_error("dfrl join", exc)
     except (ExperimentError, ValueError) as exc:
@@ -283,6 +311,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--wait", type=float, default=120.0, metavar="S",
                    help="seconds to wait for the agent's acknowledgement (default: %(default)s; "
                         "0: do not wait)")
+    add_driver_tls_argument(p)
     p.set_defaults(func=cmd_inject)
 
     p = subparsers.add_parser("join", help="start a new robot node and add it to a running "
@@ -298,4 +327,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--node", default=None, metavar="HOST:PORT",
                    help="a running `dfrl robot` to run the robot on (default: a new robot "
                         "process on the launcher's host)")
+    add_driver_tls_argument(p)
     p.set_defaults(func=cmd_join)

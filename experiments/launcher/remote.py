@@ -27,6 +27,33 @@ def nodes_of(results_dir: str | Path) -> dict[str, Any]:
     return read_json(path)
 
 
+def driver_tls(results_dir: str | Path, info: dict[str, Any],
+               tls: str | Path | None = None) -> Path | None:
+    """The TLS folder the driver's console node uses: ``tls`` when given (checked by the
+    caller or here), else the one ``nodes.json`` records (None: a plaintext run).
+
+    Raises
+    ------
+    CertError
+        ``tls`` is not a node TLS folder.
+    ExperimentError
+        The recorded folder is not one on this host (e.g. the results folder was copied).
+    """
+    from dfrl.experiments.certs import CertError, check_node_dir
+
+    if tls is not None:
+        return check_node_dir(tls).resolve()
+    recorded = info.get("tls")
+    if recorded is None:
+        return None
+    try:
+        return check_node_dir(recorded).resolve()
+    except CertError as exc:
+        raise ExperimentError(f"{Path(results_dir) / 'nodes.json'} names the TLS folder "
+                              f"{recorded}, not usable here ({exc}); give this host's copy "
+                              "of the driver's certificate folder with --tls DIR") from exc
+
+
 def _rounds_log(results_dir: str | Path, agent: dict[str, Any]) -> Path:
     """The agent's round log: the path ``nodes.json`` names, or that file in ``results_dir``."""
     named = Path(agent.get("rounds_log") or f"rounds_{agent['name']}.log")
@@ -39,20 +66,22 @@ def _controls(path: Path, agent: str, command: str) -> list[ControlEvent]:
 
 def inject_method(results_dir: str | Path, program: str | Path, method: str,
                   agent: str | None = None, wait_s: float = 120.0,
-                  poll_s: float = 0.2) -> dict[str, str]:
+                  poll_s: float = 0.2, tls: str | Path | None = None) -> dict[str, str]:
     """Load ``program`` into every node of the running experiment, tell the agent(s) to switch
     to ``method``, and wait until each agent acknowledged it in its round log (the ``control``
     event it writes when it takes the command at its next round start). Returns agent ->
     ``"applied"``, or ``"sent"`` for an agent that did not answer within ``wait_s`` (0: do not
-    wait).
+    wait). ``tls``: the driver's TLS folder, instead of the one ``nodes.json`` records.
 
     Raises
     ------
     ExperimentError
-        No such program or agent, a control command failed, or an agent ignored the command
-        (the message says why, e.g. the method is unknown on its node).
+        No such program or agent, no usable TLS folder (:func:`driver_tls`), a control
+        command failed, or an agent ignored the command (the message says why, e.g. the
+        method is unknown on its node).
     """
     info = nodes_of(results_dir)
+    tls_dir = driver_tls(results_dir, info, tls)
     prog = Path(program).resolve()
     if not prog.is_file():
         raise ExperimentError(f"program {prog} not found")
@@ -65,7 +94,7 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
             for a in targets}
     first = targets[0]["itinerary"][0]
     with open_console(info["token"], host=route_source(first["host"], int(first["port"])),
-                      tls=info.get("tls")) as console:
+                      tls=tls_dir) as console:
         for a in targets:
             nodes = [(s["host"], s["port"]) for s in a["itinerary"]]
             send_control(console, nodes[0], a["name"], {"method": method}, program=prog,
@@ -93,11 +122,13 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
 
 def join_robot(results_dir: str | Path, robot: str, arena: str, algo: str = "qlearning",
                iterations: int | None = None, seed: int | None = None,
-               timeout_s: float = 60.0, node: str | None = None) -> dict[str, Any]:
+               timeout_s: float = 60.0, node: str | None = None,
+               tls: str | Path | None = None) -> dict[str, Any]:
     """Ask the launcher of a running experiment to start a robot and add it to the agent of
     its algorithm (from the agent's next round). Returns the new node's ``nodes.json`` entry.
     With ``node`` (``"HOST:PORT"`` of a running ``dfrl robot``) the launcher configures that
-    service instead of starting a process.
+    service instead of starting a process. ``tls``: the driver's TLS folder, instead of the
+    one ``nodes.json`` records.
 
     The launcher owns every process of an experiment: the request goes to its console node
     (``console`` in ``nodes.json``) as a platform post, and the launcher's answer comes back
@@ -106,7 +137,8 @@ def join_robot(results_dir: str | Path, robot: str, arena: str, algo: str = "qle
     Raises
     ------
     ExperimentError
-        The robot exists already, the launcher refused, or no answer came in ``timeout_s``.
+        The robot exists already, no usable TLS folder (:func:`driver_tls`), the launcher
+        refused, or no answer came in ``timeout_s``.
     """
     info = nodes_of(results_dir)
     if any(n["robot"] == robot for n in info["nodes"]):
@@ -114,8 +146,9 @@ def join_robot(results_dir: str | Path, robot: str, arena: str, algo: str = "qle
     if not info.get("console"):
         raise ExperimentError(f"{results_dir}/nodes.json names no console node to ask")
     spec = RobotSpec(robot, arena, algo, seed, node)
+    tls_dir = driver_tls(results_dir, info, tls)
     driver = tuple(info["console"])
     with open_console(info["token"], host=route_source(driver[0], int(driver[1])),
-                      tls=info.get("tls")) as console:
+                      tls=tls_dir) as console:
         return console.request_join(tuple(info["console"]), spec, iterations,
                                     timeout_s=timeout_s)
