@@ -1,5 +1,6 @@
 """Experiment and robot-node configuration: the dataclasses, their JSON form, where configs
-live; every check is in :mod:`dfrl.experiments.config_check`. :class:`ExperimentConfig` (with its :class:`RobotSpec` and :class:`JoinSpec` entries) defines a
+live; every check is in :mod:`dfrl.experiments.config_check`, the generic dataclass <-> dict
+helpers in :mod:`dfrl.experiments.config_dicts`. :class:`ExperimentConfig` (with its :class:`RobotSpec` and :class:`JoinSpec` entries) defines a
 federated experiment and is saved as ``config.json`` beside its results; :class:`NodeConfig` is
 what the launcher hands one robot node process. :func:`resolve_config` finds a config file by
 path or by the name of a shipped one (``experiments/configs``).
@@ -15,6 +16,7 @@ from typing import Any
 
 from dfrl.experiments.config_check import (BUILTIN_METHODS, ConfigError, check_experiment,
                                            check_node)
+from dfrl.experiments.config_dicts import config_from_dict, config_to_dict, raw_fields
 
 __all__ = ["BUILTIN_METHODS", "ConfigError", "ExperimentConfig", "JoinSpec", "Mode",
            "NodeConfig", "RobotSpec", "boundaries", "parse_node", "resolve_config"]
@@ -25,36 +27,6 @@ class Mode(str, Enum):
 
     ASYNC = "async"
     SYNC = "sync"
-
-
-def config_to_dict(cfg: Any) -> dict[str, Any]:
-    """A config dataclass with a ``mode`` enum as a JSON-ready dict (lists for tuples)."""
-    d = json.loads(json.dumps(dataclasses.asdict(cfg), default=str))
-    d["mode"] = cfg.mode.value
-    return d
-
-
-def config_from_dict(cls: type, data: dict[str, Any], problems: list[str]) -> Any:
-    """Build config dataclass ``cls`` from ``data`` once ``problems`` (every problem of
-    ``data``, see :mod:`dfrl.experiments.config_check`) is empty.
-
-    Raises
-    ------
-    ConfigError
-        ``problems`` is not empty.
-    """
-    if problems:
-        raise ConfigError(problems)
-    names = {f.name for f in dataclasses.fields(cls)}
-    return cls(**{k: v for k, v in data.items() if k in names})
-
-
-def _raw(cfg: Any) -> dict[str, Any]:
-    """The JSON form of a config dataclass as built (entries may still be dicts)."""
-    raw = {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)}
-    if isinstance(raw.get("mode"), Mode):
-        raw["mode"] = raw["mode"].value
-    return raw
 
 
 @dataclass(frozen=True)
@@ -112,7 +84,7 @@ class NodeConfig:
     tls: str | None = None
 
     def __post_init__(self) -> None:
-        problems = check_node(_raw(self))
+        problems = check_node(raw_fields(self))
         if problems:
             raise ConfigError(problems)
         object.__setattr__(self, "mode", Mode(self.mode))
@@ -174,7 +146,7 @@ class RobotSpec:
     node: str | None = None
 
     def __post_init__(self) -> None:
-        raw = _raw(self)
+        raw = raw_fields(self)
         problems = check_experiment({"robots": [raw]}, resources=False)
         if problems:
             raise ConfigError([p.removeprefix("robots[0].") for p in problems])
@@ -281,11 +253,11 @@ class ExperimentConfig:
     tolerate_method_errors: int = 0
 
     def __post_init__(self) -> None:
-        raw = _raw(self)
-        raw["robots"] = [_raw(r) if isinstance(r, RobotSpec) else r for r in self.robots]
+        raw = raw_fields(self)
+        raw["robots"] = [raw_fields(r) if isinstance(r, RobotSpec) else r for r in self.robots]
         raw["joins"] = [{"robot": j.robot, "after_round": j.after_round}
                         if isinstance(j, JoinSpec) else j for j in self.joins]
-        raw["joins"] = [dict(j, robot=_raw(j["robot"])) if isinstance(j, dict)
+        raw["joins"] = [dict(j, robot=raw_fields(j["robot"])) if isinstance(j, dict)
                         and isinstance(j.get("robot"), RobotSpec) else j for j in raw["joins"]]
         problems = check_experiment(raw, resources=False)
         if problems:
