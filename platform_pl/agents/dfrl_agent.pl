@@ -11,17 +11,26 @@
 :- use_module('../agents',
               [agent_property/3, agent_create/4, agent_add_facts/3]).
 :- use_module(dfrl_lease,
-              [ lease_depart/6, lease_departed/1, lease_stayed/1,
-                lease_arrived/3, lease_check/3, lease_progress/4,
+              [ lease_arrived/3, lease_check/3, lease_progress/4,
                 lease_ended/3, lease_custody/3 ]).
+:- use_module(dfrl_round_state,
+              [ new_round/3, get_state/3, put_state/3, pack_state/2,
+                unpack_state/2, replace_fact/2, skip_robot/4, add_retries/3,
+                advance_to/3 ]).
+:- use_module(dfrl_round_log,                   % log_path_ok/1: also as
+              [ log_round/6, log_control/5, log_event/2, check_log/1,
+                log_path_ok/1, log_text/2 ]).   % dfrl_agent:log_path_ok/1
+:- use_module(dfrl_move, [move_to_stop/8]).
+:- use_module(dfrl_aggregation,
+              [ aggregate_fold/5, aggregate_finish/3, aggregate_fits/2,
+                fold_hook/3, method_call/3, add_lists/3, mul_lists/3,
+                max_lists/3, scale_list/3, weighted_mean/5 ]).
 :- use_module('../robot_resources',
               [get_robot_table/3, get_robot_tables/4, set_robot_table/3]).
-:- use_module('../platform_errors', [message_text/2]).
 :- autoload(library(error), [must_be/2, domain_error/2]).
-:- autoload(library(lists), [nth0/3, append/3, sum_list/2]).
-:- autoload(library(apply), [maplist/3, foldl/4]).
+:- autoload(library(lists), [nth0/3, append/3, member/2, memberchk/2]).
+:- autoload(library(apply), [foldl/4]).
 :- autoload(library(option), [option/2, option/3]).
-:- autoload(library(http/json), [json_write_dict/3]).
 
 /** <module> The dFRL itinerary agent (Algorithm 1 as a mobile agent)
 
@@ -40,7 +49,7 @@ Everything the agent needs travels as payload facts:
   - dfrl_method_of(Agent, Method)
   - dfrl_state(Agent, State): where it is in the round, a dict
     `state{round, phase, index, origin, acc, visited, skipped, retries,
-    hops, bytes, start, stop}` (acc packed, see get_state/3).
+    hops, bytes, start, stop}` (acc packed; see dfrl_round_state.pl).
   - dfrl_custody_of(Agent, custody(Epoch, Seq, Holder)): see dfrl_lease.pl.
   - dfrl_retry_of(Agent, retry(Retries, Backoff)).
 
@@ -73,37 +82,19 @@ Robots are reached through the resource hook of the host process
 set_robot_table/3), which a robot node implements. Tables are
 qtable(Shape, Values) with Values a flat row-major list of floats.
 
+The agent's parts, each loaded with this module wherever it is loaded:
+dfrl_round_state.pl (the round state and its packing), dfrl_move.pl
+(one move with retries and a checkpoint), dfrl_lease.pl (the custody
+protocol), dfrl_round_log.pl (the JSON-lines log) and
+dfrl_aggregation.pl (running the aggregation hooks, the list maths).
+
 ## Round log
 
-The agent appends one JSON object per line to LogFile (opened, written
-and closed per line):
-
-```
-{"event":"round","agent":"fed_q","round":3,"start":1764600000.12,
- "end":1764600000.25,"hops":8,"bytes":4860,"method":"average",
- "visited":["r1","r2","r3"],"skipped":[{"robot":"r4","reason":"..."}],
- "retries":2,"epoch":1}                   (and "error":"..." if the method failed)
-{"event":"control","agent":"fed_q","round":4,"command":"method(median)",
- "status":"applied"}                      (or "ignored" with a "reason")
-{"event":"resurrected","agent":"fed_q","round":5,"epoch":2,
- "from":"host:port","dead":"host:port"}
-{"event":"superseded","agent":"fed_q","round":5,"epoch":1,"by":2}
-{"event":"finished","agent":"fed_q","round":16}
-{"event":"aborted","agent":"fed_q","round":1,"error":"..."}
-```
-
-`visited` lists the robots whose tables went into the aggregate, in the
-order of the forward pass; `skipped` the robots of the itinerary that
-could not be read, reached or written, with the error as text;
-`retries` how many moves of the round were tried again; `epoch` the
-epoch of the copy that logged it. `error` (only then) says that an
-aggregation hook failed or threw that round (which hook, and the error):
-the round was aborted there, no robot read after it and no table
-written, so every robot keeps its own table; the next round tries again. `resurrected` is logged by the copy
-that a stop (`from`) resurrected after the node `dead` was lost with
-the agent on it, `superseded` by a late original as it retires.
-`aborted` is logged only by an agent launched with the event `launch`
-that can reach no stop.
+The agent appends one JSON object per line to LogFile (a file, or
+console(Host, Port, File): posted to a console node): an event per
+round, control command, resurrection, retirement and the end of the
+tour. The events and their fields are listed in dfrl_round_log.pl,
+which writes them.
 
 ## Aggregation methods
 
@@ -306,14 +297,6 @@ check_plan(plan(Itinerary, Rounds, Rest, Log, Timeout)) :-
 check_plan(Plan) :-
     throw(error(type_error(dfrl_plan, Plan), _)).
 
-%   A round that starts at stop Origin. Phases: forward, backward, and
-%   home (looking for the stop where the round starts; index is then the
-%   stop the agent is at).
-new_round(Round, Origin,
-          state{round:Round, phase:forward, index:Origin, origin:Origin,
-                acc:none, visited:[], skipped:[], retries:0, hops:0, bytes:0,
-                start:0, stop:false}).
-
 		 /*******************************
 		 *            HANDLER		*
 		 *******************************/
@@ -369,8 +352,8 @@ event(resurrected(Epoch, From, Dead, resume(Packed, Next, Progress)), Node, M,
     format(string(Why), "lost with its node ~w; resurrected at ~w with epoch ~w",
            [Dead, From, Epoch]),
     nth0(Next, Itinerary, stop(_, _, DeadRobot)),
-    text(From, FromText),
-    text(Dead, DeadText),
+    log_text(From, FromText),
+    log_text(Dead, DeadText),
     Event = _{event:resurrected, agent:Agent, epoch:Epoch, from:FromText,
               dead:DeadText},
     (   Progress = round_done(Round, true)
@@ -385,7 +368,7 @@ event(resurrected(Epoch, From, Dead, resume(Packed, Next, Progress)), Node, M,
         get_dict(index, S0, At),
         new_round(Round, At, S1),
         put_dict(phase, S1, home, S2),
-        skip(DeadRobot, reason(Why), S2, S),
+        skip_robot(DeadRobot, reason(Why), S2, S),
         put_state(M, Agent, S),
         try_home(M, Agent, S, 0)
     ;   get_dict(round, S0, Round),
@@ -443,8 +426,8 @@ start_round(M, Agent, S0, S) :-
     take_commands(Agent, Commands),
     foldl(take_command(Log, Agent, Round), Commands,
           Plan0-Method0-Stop0, Plan-Method-Stop),
-    update(M, dfrl_plan(Agent, Plan)),
-    update(M, dfrl_method_of(Agent, Method)),
+    replace_fact(M, dfrl_plan(Agent, Plan)),
+    replace_fact(M, dfrl_method_of(Agent, Method)),
     get_time(Start),
     put_dict(_{start:Start, stop:Stop}, S0, S).
 
@@ -454,7 +437,7 @@ take_command(Log, Agent, Round, Command, Acc0, Acc) :-
 
 turn_back(M, Agent, Method, S0) :-
     get_dict(acc, S0, Acc),
-    method_call(finish(Method, Acc, Final0), aggregate_final(Method), Result),
+    method_call(aggregate_finish(Method, Acc, Final0), aggregate_final(Method), Result),
     (   Result == ok
     ->  S1 = S0,
         Final = Final0
@@ -464,47 +447,6 @@ turn_back(M, Agent, Method, S0) :-
     put_dict(_{phase:backward, acc:Final}, S1, S),
     put_state(M, Agent, S),
     step(M, Agent).
-
-%   The aggregate travels packed (fast_term_serialized/2 string): a string
-%   is copied, asserted and sent as one block, where a list of 20,000
-%   floats costs milliseconds at each of those steps. It is unpacked only
-%   where the agent works on it.
-get_state(M, Agent, S) :-
-    M:dfrl_state(Agent, S0),
-    unpack_state(S0, S).
-
-unpack_state(S0, S) :-
-    get_dict(acc, S0, Packed),
-    unpack(Packed, Acc),
-    put_dict(acc, S0, Acc, S).
-
-put_state(M, Agent, S) :-
-    pack_state(S, Packed),
-    update(M, dfrl_state(Agent, Packed)).
-
-pack_state(S0, S) :-
-    get_dict(acc, S0, Acc),
-    pack(Acc, Packed),
-    put_dict(acc, S0, Packed, S).
-
-pack(none, none) :- !.
-pack(packed(S), packed(S)) :- !.
-pack(Acc, packed(String)) :-
-    fast_term_serialized(Acc, String).
-
-unpack(none, none) :- !.
-unpack(packed(String), Acc) :-
-    !,
-    fast_term_serialized(Acc, String).
-unpack(Acc, Acc).
-
-update(M, Fact) :-
-    functor(Fact, F, 2),
-    arg(1, Fact, Agent),
-    functor(Old, F, 2),
-    arg(1, Old, Agent),
-    retractall(M:Old),
-    assertz(M:Fact).
 
 %   Forward: fold this robot's table into the aggregate. A robot that
 %   cannot be read (or whose table does not fit) is skipped. A method
@@ -519,12 +461,12 @@ forward(Method, Robot, Options, S0, S) :-
     get_dict(acc, S0, Acc0),
     (   catch(( read_robot(Method, Robot, Options, Table),
                 arg(1, Table, Shape),
-                fits(Acc0, Shape)
+                aggregate_fits(Acc0, Shape)
               ),
               E, true)
     ->  (   var(E)
-        ->  aggregate_hook(Acc0, Method, Hook),
-            method_call(fold(Method, Acc0, Shape, Table, Acc1), Hook, Result),
+        ->  fold_hook(Acc0, Method, Hook),
+            method_call(aggregate_fold(Method, Acc0, Shape, Table, Acc1), Hook, Result),
             (   Result == ok
             ->  get_dict(visited, S0, V0),
                 append(V0, [Robot], V),
@@ -532,31 +474,9 @@ forward(Method, Robot, Options, S0, S) :-
             ;   method_failed(Result, S0, S)
             )
         ;   print_message(warning, E),
-            skip(Robot, E, S0, S)
+            skip_robot(Robot, E, S0, S)
         )
-    ;   skip(Robot, failed(read_robot(Robot)), S0, S)
-    ).
-
-fits(none, _) :- !.
-fits(acc(Shape0, _), Shape) :-
-    same_shape(Shape0, Shape).
-
-aggregate_hook(none, Method, aggregate_init(Method)) :- !.
-aggregate_hook(_, Method, aggregate_step(Method)).
-
-%   method_call(:Goal, +Hook, -Result): Result is `ok` when Goal
-%   succeeded, else error(Text) saying how Hook failed or what it threw.
-method_call(Goal, Hook, Result) :-
-    catch(( Goal -> R = true ; R = failed ), E, R = thrown(E)),
-    (   R == true
-    ->  Result = ok
-    ;   R == failed
-    ->  format(string(Error), "~q failed", [Hook]),
-        Result = error(Error)
-    ;   R = thrown(E),
-        message_text(E, Text),
-        format(string(Error), "~q raised: ~w", [Hook, Text]),
-        Result = error(Error)
+    ;   skip_robot(Robot, failed(read_robot(Robot)), S0, S)
     ).
 
 method_failed(error(Error), S0, S) :-
@@ -564,36 +484,12 @@ method_failed(error(Error), S0, S) :-
                                  no table is written", [Error])),
     put_dict(_{error:Error, acc:none}, S0, S).
 
-%   Record that Robot did not take part (once per robot and round).
-%   Error is an error term or reason(Text).
-skip(Robot, Error, S0, S) :-
-    get_dict(skipped, S0, Skipped0),
-    (   memberchk(skip(Robot, _), Skipped0)
-    ->  S = S0
-    ;   (   Error = reason(Text0)
-        ->  text(Text0, Text)
-        ;   message_text(Error, Text)
-        ),
-        append(Skipped0, [skip(Robot, Text)], Skipped),
-        put_dict(skipped, S0, Skipped, S)
-    ).
-
-fold(Method, none, Shape, Table, acc(Shape, A)) :-
-    !,
-    aggregate_init(Method, Table, A).
-fold(Method, acc(Shape0, A0), _Shape, Table, acc(Shape0, A)) :-
-    aggregate_step(Method, A0, Table, A).
-
 read_robot(Method, Robot, Options, Table) :-
     (   method_uses_visits(Method)
     ->  get_robot_tables(Robot, qtable(S, V), qtable(S, W), Options),
         Table = qtable_visits(S, V, W)
     ;   get_robot_table(Robot, Table, Options)
     ).
-
-finish(_, none, none) :- !.
-finish(Method, acc(Shape, A), qtable(Shape, Values)) :-
-    aggregate_final(Method, A, Values).
 
 write_back(Robot, Options, S0, S) :-
     get_dict(acc, S0, Table),
@@ -603,7 +499,7 @@ write_back(Robot, Options, S0, S) :-
         (   var(E)
         ->  S = S0
         ;   print_message(warning, E),
-            skip(Robot, E, S0, S)
+            skip_robot(Robot, E, S0, S)
         )
     ).
 
@@ -622,14 +518,14 @@ try_stop(M, Agent, S0, Next, _Dir) :-
     get_dict(origin, S0, Origin),
     (   Next >= Origin, Next < N
     ->  nth0(Next, Itinerary, Stop),
-        advance(S0, Next, S1),
+        advance_to(Next, S0, S1),
         Stop = stop(_, _, Robot),
         get_dict(skipped, S0, Skipped),
         (   Phase == backward, memberchk(skip(Robot, _), Skipped)
         ->  Tries = once                % it failed this round already
         ;   Tries = policy
         ),
-        move_to(M, Agent, S0, S1, Stop, Next, Tries, Result),
+        move_to_stop(M, Agent, S0, S1, Stop, Next, Tries, Result),
         (   Result = failed(E, Retries)
         ->  print_message(warning, E),
             print_message(warning, format("dfrl: skipping stop ~w", [Next])),
@@ -649,7 +545,7 @@ try_stop(M, Agent, S0, Next, _Dir) :-
 failed_move(M, Agent, S0, Next, Error, Retries) :-
     M:dfrl_plan(Agent, plan(Itinerary, _, _, _, _)),
     nth0(Next, Itinerary, stop(_, _, Robot)),
-    skip(Robot, Error, S0, S1),
+    skip_robot(Robot, Error, S0, S1),
     add_retries(Retries, S1, S),
     put_state(M, Agent, S),
     get_dict(phase, S, Phase),
@@ -662,20 +558,6 @@ failed_move(M, Agent, S0, Next, Error, Retries) :-
     ;   Next1 is Next + 1,
         try_home(M, Agent, S, Next1)
     ).
-
-add_retries(R, S0, S) :-
-    get_dict(retries, S0, R0),
-    R1 is R0 + R,
-    put_dict(retries, S0, R1, S).
-
-advance(S0, Next, S) :-
-    get_dict(acc, S0, Acc),
-    carried_bytes(Acc, B),
-    get_dict(hops, S0, Hops0),
-    get_dict(bytes, S0, Bytes0),
-    Hops is Hops0 + 1,
-    Bytes is Bytes0 + B,
-    put_dict(_{index:Next, hops:Hops, bytes:Bytes}, S0, S).
 
 %   Find where the round starts (phase home): the first stop before the
 %   one the agent is at (index At; -1 at launch, on a node that is no
@@ -693,8 +575,8 @@ try_home(M, Agent, S0, J) :-
         (   memberchk(skip(Robot, _), Skipped)
         ->  J1 is J + 1,
             try_home(M, Agent, S0, J1)
-        ;   advance(S0, J, S1),
-            move_to(M, Agent, S0, S1, Stop, J, policy, Result),
+        ;   advance_to(J, S0, S1),
+            move_to_stop(M, Agent, S0, S1, Stop, J, policy, Result),
             (   Result = failed(E, Retries)
             ->  print_message(warning, E),
                 print_message(warning, format("dfrl: skipping stop ~w", [J])),
@@ -710,68 +592,6 @@ try_home(M, Agent, S0, J) :-
         log_event(Log, _{event:aborted, agent:Agent, round:Round,
                          error:"no stop of the itinerary can be reached"}),
         purge_agent(Agent)
-    ).
-
-%   Move to Stop (index Next) with the agent's state S1 (S0 before),
-%   leaving a checkpoint here (dfrl_lease.pl), with bounded retries
-%   (Tries: `policy`, the agent's, or `once`). Result is moved(Retries)
-%   or failed(Error, Retries).
-move_to(M, Agent, S0, S1, stop(H, P, _), Next, Tries, Result) :-
-    current_node(Node),
-    here_address(M, Agent, S0, Here),
-    put_state(M, Agent, S1),
-    pack_state(S0, Packed0),
-    lease_depart(Node, Agent, Here, H:P, resume(Packed0, Next, none), Ticket),
-    retry_policy(M, Agent, Retries0, Backoff),
-    (   Tries == once -> Retries = 0 ; Retries = Retries0 ),
-    attempt_move(Agent, (H, P), Retries, Backoff, 0, Result),
-    (   Result = moved(_)
-    ->  lease_departed(Ticket)
-    ;   lease_stayed(Ticket),
-        put_state(M, Agent, S0)
-    ).
-
-attempt_move(Agent, Link, Retries, Backoff, R, Result) :-
-    catch(move_agent(Agent, Link), E, true),
-    (   var(E)
-    ->  Result = moved(R)
-    ;   R < Retries,
-        \+ E = error(permission_error(enter, _, _), _)
-    ->  Wait is Backoff * 2**R,
-        sleep(Wait),
-        R1 is R + 1,
-        attempt_move(Agent, Link, Retries, Backoff, R1, Result)
-    ;   Result = failed(E, R)
-    ).
-
-retry_policy(M, Agent, Retries, Backoff) :-
-    (   catch(M:dfrl_retry_of(Agent, retry(Retries, Backoff)), _, fail)
-    ->  true
-    ;   Retries = 2,
-        Backoff = 0.2
-    ).
-
-%   The address of the stop the agent is at (as the itinerary names it),
-%   or none on a node that is no stop.
-here_address(M, Agent, S, Here) :-
-    get_dict(index, S, I),
-    M:dfrl_plan(Agent, plan(Itinerary, _, _, _, _)),
-    (   I >= 0,
-        nth0(I, Itinerary, stop(H, P, _))
-    ->  Here = H:P
-    ;   Here = none
-    ).
-
-%   Payload size of the aggregate in bytes: 10 per float in the fast
-%   serialisation used on the wire (an estimate, without the clauses).
-carried_bytes(qtable(_, V), B) :- !, length(V, N), B is 10 * N.
-carried_bytes(acc(_, A), B) :- !, carried_bytes(A, B).
-carried_bytes(Acc, B) :-
-    (   compound(Acc)
-    ->  findall(N, ( arg(_, Acc, L), is_list(L), length(L, N) ), Ns),
-        sum_list(Ns, Total),
-        B is 10 * Total
-    ;   B = 0
     ).
 
 %   The round ends where it started (or where the backward pass stopped).
@@ -802,7 +622,8 @@ end_round(M, Agent, S) :-
                    Verdict),
     (   Verdict = superseded(E2)
     ->  retire(Node, M, Agent, E2)
-    ;   log_round(Log, Agent, Method, End, S),
+    ;   lease_custody(Node, Agent, custody(Epoch, _, _)),
+        log_round(Log, Agent, Method, Epoch, End, S),
         (   Last == true
         ->  (   Why == stop -> log_control(Log, Agent, Round, stop, applied) ; true ),
             take_commands(Agent, Left),             % too late for them
@@ -867,121 +688,29 @@ retire(Node, M, Agent, Epoch2) :-
     purge_agent(Agent).
 
 		 /*******************************
-		 *            ROUND LOG		*
+		 *       AGGREGATE TABLES	*
 		 *******************************/
 
-log_round(Log, Agent, Method, End, S) :-
-    get_dict(round, S, Round),
-    get_dict(start, S, Start),
-    get_dict(hops, S, Hops),
-    get_dict(bytes, S, Bytes),
-    get_dict(visited, S, Visited0),
-    get_dict(skipped, S, Skipped0),
-    get_dict(retries, S, Retries),
-    maplist(text, Visited0, Visited),
-    maplist(skip_json, Skipped0, Skipped),
-    current_node(Node),
-    lease_custody(Node, Agent, custody(Epoch, _, _)),
-    Event = _{event:round, agent:Agent, round:Round, start:Start,
-              end:End, hops:Hops, bytes:Bytes, method:Method,
-              visited:Visited, skipped:Skipped, retries:Retries,
-              epoch:Epoch},
-    (   get_dict(error, S, Error)
-    ->  log_event(Log, Event.put(error, Error))
-    ;   log_event(Log, Event)
-    ).
-
-skip_json(skip(Robot, Reason), _{robot:R, reason:Reason}) :-
-    text(Robot, R).
-
-log_control(Log, Agent, Round, Command, Status) :-
-    format(string(C), '~q', [Command]),
-    (   Status = ignored(Why)
-    ->  log_event(Log, _{event:control, agent:Agent, round:Round, command:C,
-                         status:ignored, reason:Why})
-    ;   log_event(Log, _{event:control, agent:Agent, round:Round, command:C,
-                         status:applied})
-    ).
-
-%   Names become JSON strings (an atom `true` or `null` would otherwise
-%   be written as a JSON constant).
-text(X, S) :-
-    format(string(S), '~w', [X]).
-
-%   A log is a file name (the agent appends to it where it runs: one
-%   machine, or a shared disk), or console(Host, Port, File): every line is
-%   posted to the console node at Host:Port, which appends it to its File
-%   (the driver's disk, whichever host the agent is on).
-check_log(console(H, P, F)) :-
-    !,
-    must_be(atomic, H), must_be(integer, P), must_be(atomic, F).
-check_log(Log) :-
-    must_be(atomic, Log).
-
-%!  log_event(+Log, +Dict) is det.
+%!  aggregate_tables(+Method, +Tables, -Table) is det.
 %
-%   Write Dict as one JSON line to Log (see check_log/1). The agent name
-%   and method, atoms, are written as strings. A console that cannot be
-%   reached gets the line appended to File on this host instead, with a
-%   warning: a line is never dropped silently.
+%   Aggregate a list of qtable(Shape, Values) (or qtable_visits/3 for
+%   methods that use visits) in one go, as the agent does over a round.
+%   (Defined here, not in dfrl_methods.pl: the sandbox lets mobile code
+%   call dfrl_agent:aggregate_tables/3, see code_safety.pl.)
 
-log_event(Log, Dict0) :-
-    foldl(stringify, [agent, method], Dict0, Dict),
-    with_output_to(string(Line), json_write_dict(current_output, Dict, [width(0)])),
-    (   Log = console(H, P, File)
-    ->  catch(post_log_line(H, P, File, Line), E, true),
-        (   var(E)
-        ->  true
-        ;   print_message(warning, format("dfrl: round log to console ~w:~w failed (~p); \c
-                                           line kept in ~w on this host", [H, P, E, File])),
-            append_line_or_warn(File, Line)
-        )
-    ;   append_line_or_warn(Log, Line)
-    ).
-
-append_line_or_warn(File, Line) :-
-    catch(append_line(File, Line), E,
-          print_message(warning, format("dfrl: round log line not written: ~p", [E]))).
-
-
-post_log_line(H, P, File, Line) :-
-    current_node(Node),
-    node_property(Node, link(Link)),
-    agent_post(H:P, platform, dfrl_log, Link, [entry(File, Line)]).
-
-%   The log path comes with the agent, from whichever node sent it: it
-%   may only name a round log (`.log` or `.jsonl`) in a directory that
-%   exists; the agent never creates directories or writes other files.
-append_line(File, Line) :-
-    (   log_path_ok(File)
-    ->  true
-    ;   throw(error(permission_error(append, round_log, File),
-                    context(dfrl_agent:append_line/2,
-                            'a round log must be a .log or .jsonl file in an existing directory')))
-    ),
-    setup_call_cleanup(
-        open(File, append, Out, [encoding(utf8)]),
-        format(Out, "~s~n", [Line]),
-        close(Out)).
-
-log_path_ok(File) :-
-    atomic(File),
-    file_name_extension(_, Ext, File),
-    memberchk(Ext, [log, jsonl]),
-    file_directory_name(File, Dir),
-    exists_directory(Dir),
-    \+ exists_directory(File).
-
-stringify(Key, D0, D) :-
-    (   get_dict(Key, D0, V)
-    ->  text(V, S),
-        put_dict(Key, D0, S, D)
-    ;   D = D0
-    ).
+aggregate_tables(Method, [T|Ts], Table) :-
+    arg(1, T, Shape),
+    aggregate_fold(Method, none, Shape, T, A0),
+    foldl([X, A1, A2]>>(arg(1, X, S), aggregate_fold(Method, A1, S, X, A2)), Ts, A0, A),
+    aggregate_finish(Method, A, Table).
 
 		 /*******************************
-		 *      BUILT-IN METHODS		*
+		 *      BUILT-IN METHODS	*
 		 *******************************/
+
+%   Defined in this file, which declares the hooks, so that help/1 finds
+%   the hooks' documentation (it reads the file of a predicate's first
+%   clause). Their list maths is in dfrl_aggregation.pl.
 
 aggregate_init(average, qtable(_, V), sum(V, 1)).
 aggregate_step(average, sum(A0, N0), qtable(_, V), sum(A, N)) :-
@@ -1007,46 +736,3 @@ aggregate_step(visit_average, wsum(QW0, W0, Q0, N0), qtable_visits(_, Q, W),
     N is N0 + 1.
 aggregate_final(visit_average, wsum(QW, W, Q, N), Values) :-
     weighted_mean(QW, W, Q, N, Values).
-
-same_shape(S, S) :- !.
-same_shape(S, S1) :-
-    throw(error(domain_error(table_shape(S), S1), _)).
-
-%!  aggregate_tables(+Method, +Tables, -Table) is det.
-%
-%   Aggregate a list of qtable(Shape, Values) (or qtable_visits/3 for
-%   methods that use visits) in one go, as the agent does over a round.
-
-aggregate_tables(Method, [T|Ts], Table) :-
-    arg(1, T, Shape),
-    fold(Method, none, Shape, T, A0),
-    foldl([X, A1, A2]>>(arg(1, X, S), fold(Method, A1, S, X, A2)), Ts, A0, A),
-    finish(Method, A, Table).
-
-%   The element-wise helpers are compiled with the optimise flag, which
-%   turns is/2 into virtual-machine arithmetic: 2.5 times faster on
-%   20,000-element lists. The flag is restored after them.
-:- dynamic saved_optimise/1.
-:- current_prolog_flag(optimise, O),
-   assertz(saved_optimise(O)),
-   set_prolog_flag(optimise, true).
-
-add_lists([], [], []).
-add_lists([A|As], [B|Bs], [C|Cs]) :- C is A + B, add_lists(As, Bs, Cs).
-
-mul_lists([], [], []).
-mul_lists([A|As], [B|Bs], [C|Cs]) :- C is A * B, mul_lists(As, Bs, Cs).
-
-max_lists([], [], []).
-max_lists([A|As], [B|Bs], [C|Cs]) :- C is max(A, B), max_lists(As, Bs, Cs).
-
-scale_list([], _, []).
-scale_list([A|As], N, [C|Cs]) :- C is A / N, scale_list(As, N, Cs).
-
-weighted_mean([], [], [], _, []).
-weighted_mean([QW|QWs], [W|Ws], [Q|Qs], N, [V|Vs]) :-
-    (   W > 0 -> V is QW / W ; V is Q / N ),
-    weighted_mean(QWs, Ws, Qs, N, Vs).
-
-:- retract(saved_optimise(O)),
-   set_prolog_flag(optimise, O).
