@@ -80,7 +80,7 @@ serve_connection(Node, CId, Client, Peer) :-
               serve_pair(Node, Pair, Peer),
               close(Pair, [force(true)])),
           E,
-          connection_ended(Node, Peer, E)),
+          true),
     (   var(Pair)
     ->  catch(tcp_close_socket(Client), _, true)
     ;   true
@@ -88,7 +88,11 @@ serve_connection(Node, CId, Client, Peer) :-
     admission_forget(Node, CId),
     retractall(serving(_, _)),
     retractall(connection(Node, CId, Me)),
-    node_clear_current.
+    node_clear_current,
+    (   var(E)
+    ->  true
+    ;   connection_ended(Node, Peer, E)
+    ).
 
 node_set_current_if_alive(Node) :-
     (   local_node(Node)
@@ -96,10 +100,13 @@ node_set_current_if_alive(Node) :-
     ;   throw(node_stopping)
     ).
 
+%   Called after the clean-up. An abort (the host stopping every thread,
+%   as pybridge's close does) goes on up, so that the pool worker exits
+%   instead of waiting for the next connection.
 connection_ended(_, _, node_stopping) :- !.
 connection_ended(_, _, dfrl_evicted) :- !.
-connection_ended(_, _, '$aborted') :- !.
-connection_ended(_, _, unwind(_)) :- !.
+connection_ended(_, _, '$aborted') :- !, throw('$aborted').
+connection_ended(_, _, unwind(A)) :- !, throw(unwind(A)).
 connection_ended(_, _, error(existence_error(platform, _), _)) :- !.
 connection_ended(_, _, error(timeout_error(_, _), _)) :- !.
 connection_ended(_, _, error(io_error(_, _), _)) :- !.
@@ -210,6 +217,7 @@ serve_frames(Ctx) :-
         ReadOptions = [ max_size(Max), binary(false), deadline(Deadline),
                         max_depth(Depth), parse_slots(Slots, 512) ]
     ),
+    await_frame(In, Idle),
     set_stream(In, timeout(Idle)),
     byte_count(In, Before),
     catch(frame_read(In, Frame, ReadOptions),
@@ -229,6 +237,31 @@ serve_frames(Ctx) :-
         ),
         (   Continue == true
         ->  serve_frames(Ctx)
+        ;   true
+        )
+    ).
+
+%   Wait at most Idle seconds for the first byte of the next frame (or
+%   the end of the stream), in slices of a second: between two slices
+%   the worker runs Prolog again, so that a signal (the node stopping,
+%   an eviction, the host aborting its threads) is taken even by a
+%   process that embeds Prolog without OS signal handling, where a
+%   blocked read is never interrupted.
+await_frame(In, Idle) :-
+    get_time(Now),
+    Deadline is Now + Idle,
+    await_frame_(In, Deadline, Idle).
+
+await_frame_(In, Deadline, Idle) :-
+    get_time(Now),
+    Left is Deadline - Now,
+    (   Left =< 0
+    ->  throw(error(timeout_error(read, In), context(_, idle(Idle))))
+    ;   Slice is min(1.0, Left),
+        set_stream(In, timeout(Slice)),
+        catch(peek_byte(In, _), error(timeout_error(_, _), _), Timeout = true),
+        (   Timeout == true
+        ->  await_frame_(In, Deadline, Idle)
         ;   true
         )
     ).

@@ -225,12 +225,14 @@ check_header(Header, Max, AllowBinary, Kind, Len) :-
 %   by the time left. The chunks go onto one open list (All, Tail0 its
 %   unbound end), so a frame split in many chunks is still read in time
 %   linear in its size.
+%   The wait for the first byte is a peek (fill_buffer/1 would wait for
+%   more even when the caller's own wait left bytes in the buffer).
 read_frame_deadline(Stream, Max, AllowBinary, Secs, decode(Depth, Slots), Frame) :-
-    fill_buffer(Stream),
-    read_pending_codes(Stream, All, Tail0),
-    (   All == []
+    peek_byte(Stream, B0),
+    (   B0 == -1
     ->  Frame = end_of_file
-    ;   get_time(T0),
+    ;   read_pending_codes(Stream, All, Tail0),
+        get_time(T0),
         Deadline is T0 + Secs,
         segment_length(All, Tail0, N0),
         Limit = limit(Deadline, Secs),
