@@ -34,8 +34,9 @@ def test_inject_method_into_running_experiment(tmp_path: Path) -> None:
     assert 2 <= first < 19
     assert set(methods[:first]) == {"average"} and set(methods[first:]) == {"median"}
     assert all(r["all_equal"] == "true" for r in rounds_csv(tmp_path))
-
-
+    # the connection the injection pooled at r1 did not keep a Prolog thread alive at exit
+    for err in (tmp_path / "logs").glob("r*.err"):
+        assert "still running after close" not in err.read_text(), err
 
 
 FAILING = Path(__file__).parent / "failing_method.pl"
