@@ -511,18 +511,26 @@ settle_due(Node, Period) :-
 
 settle(Node, StagedAge, CommitAge) :-
     get_time(Now),
-    forall(( custody_staged(Node, Name, MigId, Source, SInc, Since),
-             agent_status(Node, Name, Status),
-             (   Status = in_doubt(MigId, _)
-             ->  true
-             ;   Status == staged(MigId), Now - Since >= StagedAge
-             )
-           ),
-           settle_staged(Node, Name, MigId, Source, SInc)),
+    forall(custody_staged(Node, Name, MigId, Source, SInc, Since),
+           catch(settle_if_due(Node, Name, MigId, Source, SInc, Now - Since, StagedAge),
+                 error(existence_error(agent, Name), _),
+                 debug(dfrl(custody), '~w: ~q is gone, nothing to settle', [Node, Name]))),
     forall(( custody_unacked(Node, MigId, Dest, Tokens, Time, _),
              Now - Time >= CommitAge
            ),
            settle_commit(Node, MigId, Dest, Tokens)).
+
+%   An agent that goes away meanwhile (its node stopping, a discard or a
+%   start by another path) raises an existence error, which settle/3
+%   takes as "nothing to settle".
+settle_if_due(Node, Name, MigId, Source, SInc, Age, StagedAge) :-
+    agent_status(Node, Name, Status),
+    (   Status = in_doubt(MigId, _)
+    ->  settle_staged(Node, Name, MigId, Source, SInc)
+    ;   Status == staged(MigId), Age >= StagedAge
+    ->  settle_staged(Node, Name, MigId, Source, SInc)
+    ;   true
+    ).
 
 %   The question needs a token proof (node:requires_authentication/1):
 %   this node's tokens and the agent's, which its source accepted.
