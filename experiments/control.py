@@ -8,21 +8,18 @@ into running nodes, and exchanges join requests with other console nodes through
 (platform event ``dfrl_driver/3``) instead of files on a shared disk.
 
 Requests are answered one at a time, in order. Events the node reports (join requests, replies,
-messages it could not read, and any stdout line that is not a JSON object, as
+injected programs, messages it could not read, and any stdout line that is not a JSON object, as
 ``{"event": "unreadable", "line": ...}``) are queued for :meth:`ConsoleNode.next_event`.
 Every wait is bounded; every failure raises :class:`~dfrl.experiments.errors.ExperimentError`
 with the node's own error text.
 
-Example
--------
->>> with ConsoleNode(tokens=[1111]) as console:                    # doctest: +SKIP
-...     console.launch_agent({"name": "fed_qlearning", "itinerary": stops, "rounds": 4,
-...                           "rounds_log": "/abs/rounds.log", "token": 1111})
-...     console.control(("127.0.0.1", 7001), "fed_qlearning", {"method": "max"})
+Example: ``with ConsoleNode(tokens=[1111]) as console: console.control(("127.0.0.1", 7001),
+"fed_qlearning", {"method": "max"})`` (after ``console.launch_agent(plan)``).
 """
 from __future__ import annotations
 
 import collections
+import contextlib
 import dataclasses
 import itertools
 import json
@@ -335,6 +332,14 @@ class ConsoleNode:
         (a ``join_request`` event's ``from``)."""
         self._request("reply", timeout_s, to=list(to), request=request, result=dict(result))
 
+    def announce_program(self, driver: Address, program: str | Path,
+                         timeout_s: float = 30.0) -> None:
+        """Tell the driver whose console node is at ``driver`` that ``program`` was injected,
+        so that it loads it into the robots that join later (a ``program`` event there)."""
+        path = Path(program)
+        self._request("program", timeout_s, to=list(driver), name=path.name,
+                      text=path.read_text(encoding="utf-8"))
+
     # -- events ----------------------------------------------------------------------------
     def next_event(self, timeout_s: float) -> dict[str, Any] | None:
         """The next event the node reported, waiting at most ``timeout_s``; None if none came."""
@@ -366,17 +371,13 @@ class ConsoleNode:
         """Stop the node (``quit``, then end of input, then kill); return its exit code."""
         stdin = self._proc.stdin
         if self._proc.poll() is None and stdin is not None and not stdin.closed:
-            try:
-                with self._write_lock:
-                    stdin.write(json.dumps({"id": "quit", "op": "quit"}) + "\n")
-                    stdin.flush()
-            except (BrokenPipeError, OSError, ValueError):
-                pass          # already gone: the exit code below tells
+            # already gone: the exit code below tells
+            with contextlib.suppress(BrokenPipeError, OSError, ValueError), self._write_lock:
+                stdin.write(json.dumps({"id": "quit", "op": "quit"}) + "\n")
+                stdin.flush()
         if stdin is not None and not stdin.closed:
-            try:
+            with contextlib.suppress(BrokenPipeError, OSError):
                 stdin.close()
-            except (BrokenPipeError, OSError):
-                pass
         try:
             code = self._proc.wait(timeout=timeout_s)
         except subprocess.TimeoutExpired:

@@ -3,6 +3,7 @@
 answered with the new node's entry or an error)."""
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from dfrl.experiments.config import JoinSpec, RobotSpec
@@ -27,6 +28,9 @@ def join(state: RunState, spec: JoinSpec, agent: str, remaining: int, done: int)
     child = spawn(state, spec.robot, remaining)
     await_ready([child])
     host, port = child.address
+    if state.programs and state.console is not None:   # methods injected before it joined
+        for program in state.programs.values():
+            state.console.load_program(program, [(host, port)])
     stop = {"host": host, "port": port, "robot": rid}
     info = state.agents[agent]
     info.itinerary.append(stop)
@@ -84,8 +88,25 @@ def handle_joins(state: RunState) -> None:
     for event in state.console.events():
         if event.get("event") == "join_request":
             _answer(state, event)
+        elif event.get("event") == "program":
+            _keep_program(state, event)
         else:
             state.say(f"console node: {event}")
+
+
+def _keep_program(state: RunState, event: dict[str, Any]) -> None:
+    """A ``program`` event (``dfrl inject`` told us): keep the program in ``programs/`` of the
+    results, to load it into every robot that joins from now on."""
+    name, text = event.get("name"), event.get("text")
+    if not (isinstance(name, str) and isinstance(text, str) and name.endswith(".pl")
+            and name == Path(name).name and not name.startswith(".")):
+        state.say(f"console node: unreadable program event {event.get('name')!r}")
+        return
+    path = state.out / "programs" / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text, encoding="utf-8")
+    state.programs[name] = path
+    state.say(f"program {name} injected; robots that join from now on load it too")
 
 
 def _answer(state: RunState, event: dict[str, Any]) -> None:

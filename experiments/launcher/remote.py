@@ -69,7 +69,8 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
                   poll_s: float = 0.2, tls: str | Path | None = None) -> dict[str, str]:
     """Load ``program`` into every node of the running experiment, tell the agent(s) to switch
     to ``method``, and wait until each agent acknowledged it in its round log (the ``control``
-    event it writes when it takes the command at its next round start). Returns agent ->
+    event it writes when it takes the command at its next round start). The driver is told
+    first (it keeps the program in ``programs/`` and loads it into robots that join later). Returns agent ->
     ``"applied"``, or ``"sent"`` for an agent that did not answer within ``wait_s`` (0: do not
     wait). ``tls``: the driver's TLS folder, instead of the one ``nodes.json`` records.
 
@@ -95,6 +96,8 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
     first = targets[0]["itinerary"][0]
     with open_console(info["token"], host=route_source(first["host"], int(first["port"])),
                       tls=tls_dir) as console:
+        if info.get("console"):      # the driver gives the program to robots that join later
+            console.announce_program(tuple(info["console"]), prog)
         for a in targets:
             nodes = [(s["host"], s["port"]) for s in a["itinerary"]]
             send_control(console, nodes[0], a["name"], {"method": method}, program=prog,

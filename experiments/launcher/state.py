@@ -52,6 +52,7 @@ class RunState:
     logs: dict[str, AgentLog] = field(default_factory=dict)
     crashed: dict[str, int] = field(default_factory=dict)
     joined: set[str] = field(default_factory=set)
+    programs: dict[str, Path] = field(default_factory=dict)  # injected, for robots that join
     killed: set[str] = field(default_factory=set)       # children the launcher itself stopped
     console: ConsoleNode | None = None                  # the experiment's console node
     console_host: str = "127.0.0.1"                     # where it binds; local nodes too

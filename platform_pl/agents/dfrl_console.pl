@@ -54,6 +54,9 @@ request never stops the node. Requests:
     (Spec is passed on untouched; N may be null).
   - `{"id":5,"op":"reply","to":[H,P],"request":R,"result":Result}`:
     answer the join request R that came from the console H:P.
+  - `{"id":9,"op":"program","to":[H,P],"name":N,"text":T}`: tell the
+    driver whose console is H:P that the program T (file name N) was
+    injected, so that it loads it into robots that join later.
   - `{"id":8,"op":"robot","node":[H,P],"request":R}`: send the request
     dfrl_robot(Term) to the robot service (`dfrl robot`) at H:P with
     this node's tokens (transport_request/4) and reply
@@ -74,12 +77,13 @@ request never stops the node. Requests:
 Joins travel through the platform: this node declares the platform event
 dfrl_console:dfrl_driver/3. A peer posts `[dfrl_driver, platform, (H,P), Message]`,
 (H,P) being the peer's own console node, with Message one of
-`join(Request, SpecJSON, Iterations)` or `reply(Request, ResultJSON)`
-(the JSON objects as strings). The node prints them as event lines for
-its driver:
+`join(Request, SpecJSON, Iterations)`, `reply(Request, ResultJSON)`
+(the JSON objects as strings) or `program(Name, Text)` (both strings).
+The node prints them as event lines for its driver:
 
     {"event":"join_request","request":R,"robot":Spec,"iterations":N,"from":[H,P]}
     {"event":"reply","request":R,"result":Result,"from":[H,P]}
+    {"event":"program","name":N,"text":T,"from":[H,P]}
 
 and a message it cannot read as `{"event":"bad_message","error":...}`.
 Lines on stdout are written under one mutex, whole, and flushed.
@@ -226,6 +230,13 @@ op(reply, Node, Request, _{posted:true}) :-
     atom_json_dict(ResultText, Result, [as(string), width(0)]),
     node_property(Node, link(Link)),
     agent_post(Address, platform, dfrl_driver, Link, [reply(R, ResultText)]).
+op(program, Node, Request, _{posted:true}) :-
+    !,
+    key(to, Request, To), address(To, Address),
+    key(name, Request, Name), must_be(string, Name),
+    key(text, Request, Text), must_be(string, Text),
+    node_property(Node, link(Link)),
+    agent_post(Address, platform, dfrl_driver, Link, [program(Name, Text)]).
 op(robot, Node, Request, _{result:Result}) :-
     !,
     key(node, Request, N), address(N, Address),
@@ -497,6 +508,12 @@ driver_event(Link, reply(R, ResultText), Event) :-
     request_ref(R),
     json_object(ResultText, Result),
     Event = _{event:reply, request:R, result:Result, from:From}.
+driver_event(Link, program(Name, Text), Event) :-
+    !,
+    link_pair(Link, From),
+    must_be(string, Name),
+    must_be(string, Text),
+    Event = _{event:program, name:Name, text:Text, from:From}.
 driver_event(_, Message, _) :-
     domain_error(dfrl_driver_message, Message).
 

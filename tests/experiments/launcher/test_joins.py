@@ -59,3 +59,27 @@ def test_dfrl_join_asks_the_launcher_through_the_platform(tmp_path: Path) -> Non
     nodes = json.loads((tmp_path / "nodes.json").read_text())
     assert [n["robot"] for n in nodes["nodes"]] == ["r1", "r2", "r3"]
     assert len(nodes["console"]) == 2
+
+
+def test_a_robot_that_joins_after_an_injection_gets_the_injected_method(tmp_path: Path) -> None:
+    # Prepare: a running experiment whose agent switched to an injected method
+    from dfrl.experiments.launcher import inject_method
+    from dfrl.platform_pl import AGENTS_DIR
+
+    median = AGENTS_DIR / "examples" / "median_method.pl"
+    cfg = small_config(iterations=2000, respite=100, rtf=20.0)
+    t, box = run_in_thread(cfg, tmp_path)
+    wait_rounds(tmp_path, "fed_qlearning", 2)
+    assert inject_method(tmp_path, median, "median") == {"fed_qlearning": "applied"}
+    # Execute: a robot joins afterwards (its node never had the program loaded by inject)
+    join_robot(tmp_path, "r3", "r5", iterations=600)
+    t.join(timeout=120)
+    # Assert: the driver kept the program and loaded it into r3, so rounds with r3 use median
+    assert not t.is_alive()
+    res = box.get("res") or pytest.fail(f"run failed: {box.get('exc')!r}")
+    assert res.ok
+    assert (tmp_path / "programs" / "median_method.pl").read_text() == median.read_text()
+    rows = rounds_csv(tmp_path)
+    with_r3 = [r for r in rows if r["visited"] == "r1 r2 r3"]
+    assert with_r3 and all(r["method"] == "median" for r in with_r3)
+    assert all(r["all_equal"] == "true" and not r.get("error") for r in with_r3), with_r3
