@@ -17,8 +17,14 @@
 :- use_module(node,
               [ node_option/3, node_property/2, node_accepts/2, local_node/1,
                 node_set_current/1, node_clear_current/0 ]).
-:- autoload(library(socket), [tcp_setopt/2, tcp_open_socket/2, tcp_close_socket/1]).
-:- autoload(library(debug), [debug/3]).
+%   Libraries are imported eagerly here (use_module/2, not autoload/2),
+%   as in every module that runs in connection workers (tls, wire,
+%   transport, worker_pool): a worker is signalled (evicted, stopped)
+%   at any moment, and a signal that lands while it autoloads a library
+%   left the predicate undefined for the other workers too ("Unknown
+%   procedure tls:option/3" under a burst of stalled handshakes).
+:- use_module(library(socket), [tcp_setopt/2, tcp_open_socket/2, tcp_close_socket/1]).
+:- use_module(library(debug), [debug/3]).
 
 /** <module> A node's connection worker: hello, frames, authentication
 

@@ -6,12 +6,13 @@
 :- use_module(library(ssl),
               [ ssl_context/3, ssl_negotiate/5, certificate_field/2 ]).
 :- use_module(platform_errors, [transport_error/2]).
-:- autoload(library(error), [must_be/2]).
-:- autoload(library(option), [option/2, option/3]).
-:- autoload(library(time), [call_with_time_limit/2]).
-:- autoload(library(lists), [member/2]).
-:- autoload(library(filesex), [directory_file_path/3]).
-:- autoload(library(debug), [debug/3]).
+%   Eager imports (not autoload/2): see node_connection.pl.
+:- use_module(library(error), [must_be/2]).
+:- use_module(library(option), [option/2, option/3]).
+:- use_module(library(time), [call_with_time_limit/2]).
+:- use_module(library(lists), [member/2]).
+:- use_module(library(filesex), [directory_file_path/3]).
+:- use_module(library(debug), [debug/3]).
 
 /** <module> Mutual TLS between platform nodes
 

@@ -20,14 +20,15 @@
 :- use_module(wire, [frame_write/3, frame_read/3, wire_version/1]).
 :- use_module(platform_errors, [transport_error/2]).
 :- use_module(tls, [tls_connect/5]).
-:- autoload(library(socket),
+%   Eager imports (not autoload/2): see node_connection.pl.
+:- use_module(library(socket),
             [tcp_socket/1, tcp_setopt/2, tcp_connect/3, tcp_close_socket/1]).
-:- autoload(library(error), [must_be/2, domain_error/2]).
-:- autoload(library(option), [option/2, option/3]).
-:- autoload(library(sha), [hmac_sha/4]).
-:- autoload(library(time), [call_with_time_limit/2]).
-:- autoload(library(lists), [member/2, min_list/2]).
-:- autoload(library(aggregate), [aggregate_all/3]).
+:- use_module(library(error), [must_be/2, domain_error/2]).
+:- use_module(library(option), [option/2, option/3]).
+:- use_module(library(sha), [hmac_sha/4]).
+:- use_module(library(time), [call_with_time_limit/2]).
+:- use_module(library(lists), [member/2, min_list/2]).
+:- use_module(library(aggregate), [aggregate_all/3]).
 
 /** <module> Client side of the platform protocol
 

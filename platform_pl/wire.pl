@@ -7,11 +7,12 @@
             text_nesting_within/2       % +Text, +MaxDepth
           ]).
 :- use_module(platform_errors, [wire_error/1]).
-:- autoload(library(utf8), [utf8_codes//1]).
-:- autoload(library(lists), [append/3, member/2]).
-:- autoload(library(error), [must_be/2]).
-:- autoload(library(option), [option/3]).
-:- autoload(library(memfile),
+%   Eager imports (not autoload/2): see node_connection.pl.
+:- use_module(library(utf8), [utf8_codes//1]).
+:- use_module(library(lists), [append/3, member/2]).
+:- use_module(library(error), [must_be/2]).
+:- use_module(library(option), [option/3]).
+:- use_module(library(memfile),
             [ new_memory_file/1, open_memory_file/4, free_memory_file/1 ]).
 
 /** <module> Length-prefixed frames on a binary stream

@@ -6,8 +6,9 @@
             pool_retire/0,
             pool_drain/0
           ]).
-:- autoload(library(error), [must_be/2, resource_error/1]).
-:- autoload(library(option), [option/3]).
+%   Eager imports (not autoload/2): see node_connection.pl.
+:- use_module(library(error), [must_be/2, resource_error/1]).
+:- use_module(library(option), [option/3]).
 
 :- meta_predicate
     pool_run(+, 0),
