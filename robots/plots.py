@@ -1,4 +1,5 @@
-"""Figures (matplotlib, Agg backend, PNG): learning curves and arena top views.
+"""Figures (matplotlib, Agg backend): learning curves and arena top views, written as PNG
+(default) or PDF/SVG at the resolution asked for (:func:`dfrl.robots.figure_files.save_figure`).
 
 matplotlib is an optional dependency (``pip install dfrl[plot]``); it is imported here only.
 """
@@ -9,6 +10,8 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
+
+from dfrl.robots.figure_files import save_figure
 
 _COLOURS = ("tab:blue", "tab:red", "tab:green", "tab:orange", "tab:purple", "tab:brown")
 
@@ -23,7 +26,8 @@ def _pyplot():  # noqa: ANN202 - matplotlib module
 
 
 def plot_learning_curves(
-    curves: Mapping[str, np.ndarray | Sequence[np.ndarray]], path: str | Path, title: str
+    curves: Mapping[str, np.ndarray | Sequence[np.ndarray]], path: str | Path, title: str,
+    formats: Sequence[str] = ("png",), dpi: float | None = None,
 ) -> Path:
     """Sum of Q-values and cumulative reward against iterations, one line per label.
 
@@ -35,13 +39,16 @@ def plot_learning_curves(
         such arrays of equal length (runs with different seeds): then the line is their mean
         and a band shows their minimum and maximum.
     path : str or Path
-        PNG file to write.
+        File to write; its suffix is replaced by each of ``formats``.
     title : str
         Figure title.
+    formats, dpi
+        File formats (``png``, ``pdf``, ``svg``) and resolution (default 110 dpi).
 
     Returns
     -------
     Path
+        The first file written (the others beside it).
     """
     plt = _pyplot()
     fig, (ax_q, ax_r) = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
@@ -64,15 +71,21 @@ def plot_learning_curves(
         ax.grid(True, alpha=0.3)
         ax.legend(loc="best")
     fig.suptitle(title)
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return _save(plt, fig, path, formats, dpi, 110)
+
+
+def _save(plt, fig, path: str | Path, formats: Sequence[str], dpi: float | None,  # noqa: ANN001
+          default_dpi: float) -> Path:
+    """Write ``fig`` in each of ``formats`` and close it; the first file written."""
+    try:
+        return save_figure(fig, path, formats, dpi, default_dpi)[0]
+    finally:
+        plt.close(fig)
 
 
 def plot_arena(image: np.ndarray, spec, path: str | Path,  # noqa: ANN001 - ArenaSpec
-               rays: np.ndarray | None = None) -> Path:
+               rays: np.ndarray | None = None, formats: Sequence[str] = ("png",),
+               dpi: float | None = None) -> Path:
     """Save a rendered top view with metric axes, the start pose and its heading.
 
     Parameters
@@ -81,17 +94,21 @@ def plot_arena(image: np.ndarray, spec, path: str | Path,  # noqa: ANN001 - Aren
         Top view from :meth:`dfrl.robots.world.World.render_top` (covers the floor plus 5 cm).
     spec : ArenaSpec
     path : str or Path
+        File to write; its suffix is replaced by each of ``formats``.
     rays : np.ndarray, shape (n_sensors, 2, 2), optional
         Sensor rays to draw (:meth:`dfrl.robots.epuck.EPuck.sensor_rays`).
+    formats, dpi
+        File formats (``png``, ``pdf``, ``svg``) and resolution (default 100 dpi).
+
+    Returns
+    -------
+    Path
+        The first file written.
     """
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(5.2, 5.2), constrained_layout=True)
     draw_arena(ax, image, spec, rays)
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=100)
-    plt.close(fig)
-    return out
+    return _save(plt, fig, path, formats, dpi, 100)
 
 
 def draw_arena(ax, image: np.ndarray, spec, rays: np.ndarray | None = None) -> dict:  # noqa: ANN001
@@ -120,8 +137,10 @@ def draw_arena(ax, image: np.ndarray, spec, rays: np.ndarray | None = None) -> d
     return {"heading": heading, "rays": lines}
 
 
-def plot_arena_overview(images: Mapping[str, np.ndarray], path: str | Path) -> Path:
-    """All arenas side by side (one row)."""
+def plot_arena_overview(images: Mapping[str, np.ndarray], path: str | Path,
+                        formats: Sequence[str] = ("png",), dpi: float | None = None) -> Path:
+    """All arenas side by side (one row), in ``formats`` at ``dpi`` (default 100); the first
+    file written."""
     plt = _pyplot()
     n = len(images)
     fig, axes = plt.subplots(1, n, figsize=(2.6 * n, 2.9), constrained_layout=True)
@@ -129,8 +148,4 @@ def plot_arena_overview(images: Mapping[str, np.ndarray], path: str | Path) -> P
         ax.imshow(img)
         ax.set_title(name.upper())
         ax.axis("off")
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=100)
-    plt.close(fig)
-    return out
+    return _save(plt, fig, path, formats, dpi, 100)

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from dfrl.experiments.cli.figures import add_figure_arguments
 from dfrl.robots.learners import LEARNERS, EpsilonSchedule, LearnerParams, ScheduleKind
 from dfrl.robots.training import DEMO_ITERATIONS, TrainerConfig
 
@@ -22,9 +23,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=None,
                    help="output folder (default results/train/ARENA_ALGO_sSEED)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--no-plot", action="store_true", help="do not draw learning_curves.png")
+    p.add_argument("--no-plot", action="store_true", help="do not draw the learning curves")
     p.add_argument("--gui", action="store_true",
                    help="watch in a pybullet window (needs a display; not paced to real time)")
+    add_figure_arguments(p)
     p.set_defaults(func=cmd_train)
 
     p = subparsers.add_parser(
@@ -54,9 +56,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--algos", nargs="+", choices=sorted(LEARNERS), default=["qlearning", "sarsa"],
                    help="learners, one figure each (default: qlearning sarsa)")
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default: %(default)s)")
+    add_figure_arguments(p)
     p.set_defaults(func=cmd_baselines)
 
-    p = subparsers.add_parser("render-arenas", help="draw a top view of each arena to PNG")
+    p = subparsers.add_parser("render-arenas", help="draw a top view of each arena (PNG, or "
+                                                    "PDF/SVG with --figure-format)")
     p.add_argument("--out", type=Path, default=Path("results/arenas"),
                    help="output folder (default: %(default)s)")
     p.add_argument("--arena", nargs="+", default=None,
@@ -65,6 +69,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="image size in pixels (default: %(default)s)")
     p.add_argument("--rays", action="store_true",
                    help="draw the e-puck's sensor rays at the start pose (default: off)")
+    add_figure_arguments(p)
     p.set_defaults(func=cmd_render_arenas)
 
 
@@ -184,7 +189,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         from dfrl.robots.plots import plot_learning_curves
 
         plot_learning_curves({f"{cfg.arena} {cfg.algo}": m}, out / "learning_curves.png",
-                             f"{cfg.algo} in {cfg.arena}, seed {cfg.seed}")
+                             f"{cfg.algo} in {cfg.arena}, seed {cfg.seed}",
+                             args.figure_format, args.dpi)
     rate = cfg.iterations / result.wall_time if result.wall_time > 0 else float("nan")
     last = m[-1] if len(m) else None
     print(f"trained {cfg.algo} in {cfg.arena} for {cfg.iterations} iterations in "
@@ -266,8 +272,9 @@ def cmd_baselines(args: argparse.Namespace) -> int:
                  f"seeds {seeds[0]}-{seeds[-1]}" if seeds == list(range(seeds[0], seeds[-1] + 1))
                  else "seeds " + ", ".join(map(str, seeds)))
         path = plot_learning_curves(curves, args.out / f"baseline_{algo}.png",
-                                    f"Standalone {name}, {args.iterations} iterations ({which})")
-        print(path)
+                                    f"Standalone {name}, {args.iterations} iterations ({which})",
+                                    args.figure_format, args.dpi)
+        _print_files(path, args.figure_format)
     return 0
 
 
@@ -300,6 +307,14 @@ def cmd_render_arenas(args: argparse.Namespace) -> int:
         finally:
             world.close()
         images[spec.name] = img
-        print(plot_arena(img, spec, args.out / f"arena_{spec.name}.png", rays))
-    print(plot_arena_overview(images, args.out / "arenas.png"))
+        _print_files(plot_arena(img, spec, args.out / f"arena_{spec.name}.png", rays,
+                                args.figure_format, args.dpi), args.figure_format)
+    _print_files(plot_arena_overview(images, args.out / "arenas.png", args.figure_format,
+                                     args.dpi), args.figure_format)
     return 0
+
+
+def _print_files(first: Path, formats: tuple[str, ...]) -> None:
+    """Print every file of a figure written in ``formats`` (``first`` is one of them)."""
+    for fmt in formats:
+        print(first.with_suffix(f".{fmt}"))

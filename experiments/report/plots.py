@@ -20,59 +20,13 @@ from typing import Any, Mapping
 import numpy as np
 
 from dfrl.experiments.results.metrics import read_metrics
+# the file formats and resolution of every figure of dfrl (re-exported: callers import them here)
+from dfrl.robots.figure_files import FORMATS, SCREEN_DPI, parse_formats, save_figure  # noqa: F401
 
 COLOURS = ("tab:blue", "tab:red", "tab:green", "tab:orange", "tab:purple", "tab:brown",
            "tab:pink", "tab:gray", "tab:olive", "tab:cyan")
 
 LABELS = {"q_sum": "sum of Q-values", "cumulative_reward": "cumulative reward"}
-
-#: Formats a figure can be written in (matplotlib's names, which are the file suffixes).
-FORMATS = ("png", "pdf", "svg")
-
-#: Resolution of a PNG when none is asked for (screen).
-SCREEN_DPI = 110
-
-
-def parse_formats(text: str) -> tuple[str, ...]:
-    """``"png,pdf"`` -> ``("png", "pdf")`` (order kept, repeats dropped).
-
-    Raises
-    ------
-    ValueError
-        Empty, or a format not in :data:`FORMATS`.
-    """
-    names = tuple(dict.fromkeys(f.strip().lower() for f in text.split(",") if f.strip()))
-    bad = [f for f in names if f not in FORMATS]
-    if not names or bad:
-        raise ValueError(f"figure format {', '.join(bad) or repr(text)}: "
-                         f"use a comma-separated list of {', '.join(FORMATS)}")
-    return names
-
-
-def save_figure(fig: Any, path: str | Path, formats: Sequence[str] = ("png",),
-                dpi: float | None = None, default_dpi: float = SCREEN_DPI) -> list[Path]:
-    """Write ``fig`` as ``path`` with each suffix of ``formats`` (``q_sum.png``,
-    ``q_sum.pdf``, ...) at ``dpi`` (``default_dpi`` when None); return the files written.
-
-    Raises
-    ------
-    ValueError
-        A format not in :data:`FORMATS`, or a dpi that is not positive.
-    """
-    bad = [f for f in formats if f not in FORMATS]
-    if bad or not formats:
-        raise ValueError(f"figure formats {list(formats)}: use some of {', '.join(FORMATS)}")
-    if dpi is not None and not dpi > 0:
-        raise ValueError(f"figure dpi {dpi}: must be > 0")
-    base = Path(path)
-    base.parent.mkdir(parents=True, exist_ok=True)
-    out = []
-    for fmt in formats:
-        target = base.with_suffix(f".{fmt}")
-        fig.savefig(target, format=fmt, dpi=dpi or default_dpi)
-        out.append(target)
-    return out
-
 
 def new_figure(**kwargs: Any) -> Any:
     """A matplotlib ``Figure`` with constrained layout (saved with ``savefig``).

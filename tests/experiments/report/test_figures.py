@@ -87,7 +87,8 @@ def test_run_and_demo_redraw_as_asked(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("command", [["run", "smoke2"], ["demo"], ["paper"],
-                                     ["transfer", "--init", "t.npy", "--arena", "r1"]])
+                                     ["transfer", "--init", "t.npy", "--arena", "r1"],
+                                     ["train"], ["baselines"], ["render-arenas"]])
 @pytest.mark.parametrize("bad", [["--figure-format", "png,gif"], ["--dpi", "0"]])
 def test_figure_options_are_checked_before_anything_starts(command: list[str],
                                                            bad: list[str]) -> None:
