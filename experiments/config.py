@@ -62,6 +62,9 @@ class NodeConfig:
         ``[S, A]``: no simulation; serve a random table of that shape until stdin closes.
     host, tls : str, str or None
         Address to bind; a node's TLS folder (``dfrl certs node``; None: plaintext).
+    eval_every, eval_steps : int
+        Greedy evaluation of the table every ``eval_every`` iterations (0: none) for
+        ``eval_steps`` control steps, in an environment of its own (:mod:`.robot_node.evaluate`).
     """
 
     robot: str
@@ -82,6 +85,8 @@ class NodeConfig:
     bench_table: list[int] | None = None
     host: str = "127.0.0.1"
     tls: str | None = None
+    eval_every: int = 0
+    eval_steps: int = 500
 
     def __post_init__(self) -> None:
         problems = check_node(raw_fields(self))
@@ -230,6 +235,9 @@ class ExperimentConfig:
     tolerate_method_errors : int
         Rounds per agent whose aggregation method may fail (the round is aborted: no table is
         written) with the run still counted as complete.
+    eval_every, eval_steps : int
+        Every robot measures its greedy policy every ``eval_every`` iterations (0: never) for
+        ``eval_steps`` control steps (``eval_<robot>.csv``, ``evaluations.csv``).
     """
 
     name: str = "experiment"
@@ -251,6 +259,8 @@ class ExperimentConfig:
     tolerate_lost_robots: int = 0
     tolerate_missing_rounds: int = 0
     tolerate_method_errors: int = 0
+    eval_every: int = 0
+    eval_steps: int = 500
 
     def __post_init__(self) -> None:
         raw = raw_fields(self)

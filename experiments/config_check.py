@@ -161,6 +161,7 @@ EXPERIMENT_RULES: dict[str, Rule] = {
     "timeout_s": Rule(float, above=0), "title": Rule(str), "console": Rule(str, nullable=True),
     "tolerate_lost_robots": Rule(int, low=0), "tolerate_missing_rounds": Rule(int, low=0),
     "tolerate_method_errors": Rule(int, low=0),
+    "eval_every": Rule(int, low=0, hint="0 means no evaluation"), "eval_steps": Rule(int, low=1),
 }
 
 NODE_RULES: dict[str, Rule] = {
@@ -173,6 +174,7 @@ NODE_RULES: dict[str, Rule] = {
     "sync_timeout_s": Rule(float, above=0), "progress_every": Rule(int, low=0),
     "events": Rule(bool), "bench_table": Rule(list, nullable=True), "host": Rule(str),
     "tls": Rule(str, nullable=True),
+    "eval_every": Rule(int, low=0, hint="0 means no evaluation"), "eval_steps": Rule(int, low=1),
 }
 
 

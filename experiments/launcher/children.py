@@ -13,6 +13,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections import deque
 from pathlib import Path
 from typing import Callable
 
@@ -20,7 +21,7 @@ import dfrl
 from dfrl.experiments.config import NodeConfig, RobotSpec
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.results.files import write_json
-from dfrl.experiments.robot_node.lines import Sample, parse_sample
+from dfrl.experiments.robot_node.lines import Evaluation, Sample, parse_eval, parse_sample
 
 #: Called with (robot id, op ``get``/``set``, iteration) for every ``DFRL_EVENT`` line.
 EventHandler = Callable[[str, str, int], None]
@@ -66,6 +67,7 @@ class RobotChild:
         self.done = False
         self.shares = 0
         self.sample: Sample | None = None
+        self.evals: deque[Evaluation] = deque()      # DFRL_EVAL lines not in the view yet
         self.ready = threading.Event()
         self._on_event = on_event
         self._reader = threading.Thread(target=self._read, name=f"read-{robot.id}", daemon=True)
@@ -88,6 +90,10 @@ class RobotChild:
                     self._on_event(self.robot.id, parts[2], int(parts[3]))
             elif tag == "DFRL_SAMPLE":
                 self.sample = parse_sample(line)       # for the live view (state.py)
+            elif tag == "DFRL_EVAL":
+                evaluation = parse_eval(line)
+                if evaluation is not None:
+                    self.evals.append(evaluation)
             elif tag == "DFRL_DONE" and len(parts) == 4:
                 self.iteration = int(parts[2])
                 self.shares = int(parts[3])

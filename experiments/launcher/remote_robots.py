@@ -21,13 +21,14 @@ import json
 import socket
 import threading
 import time
+from collections import deque
 from pathlib import Path, PurePosixPath
 from typing import Any
 
 from dfrl.experiments.config import ExperimentConfig, NodeConfig, RobotSpec
 from dfrl.experiments.control import ConsoleNode
 from dfrl.experiments.errors import ExperimentError
-from dfrl.experiments.robot_node.lines import Sample, parse_sample
+from dfrl.experiments.robot_node.lines import Evaluation, Sample, parse_eval, parse_sample
 
 #: Seconds without a status answer after which a remote robot counts as lost.
 LOST_AFTER_S = 10.0
@@ -144,6 +145,7 @@ class RemoteRobot:
         self.err_path: Path | None = None
         self.sample: Sample | None = None            # the newest DFRL_SAMPLE it wrote
         self.sample_error: str | None = None         # why the last read of them failed
+        self.evals: deque[Evaluation] = deque()      # DFRL_EVAL lines not in the view yet
         self._lines_at = 0                           # bytes of its lines file read
         self._lines_rest = b""
 
@@ -266,7 +268,8 @@ class RemoteRobot:
     def poll_samples(self) -> None:
         """Read what the service's copy of our protocol lines (``logs/<robot>.out``, one of
         the result files) gained since the last read, and keep the newest ``DFRL_SAMPLE``
-        (the live view's pose and curves). A failure is remembered in ``sample_error``."""
+        (the live view's pose and curves) and every ``DFRL_EVAL`` (in ``evals``). A failure
+        is remembered in ``sample_error``."""
         try:
             chunk = self._ask({"fetch": {"name": f"logs/{self.robot.id}.out",
                                          "offset": self._lines_at, "max": FETCH_CHUNK}},
@@ -280,11 +283,13 @@ class RemoteRobot:
         data = self._lines_rest + data
         cut = data.rfind(b"\n") + 1
         self._lines_rest = data[cut:]
-        for line in reversed(data[:cut].decode("utf-8", errors="replace").splitlines()):
+        lines = data[:cut].decode("utf-8", errors="replace").splitlines()
+        for line in reversed(lines):
             sample = parse_sample(line)
             if sample is not None:
                 self.sample = sample
                 break
+        self.evals.extend(e for e in map(parse_eval, lines) if e is not None)
 
     def take_outages(self) -> list[tuple[float, float, str]]:
         """The outages (from, to, why) that ended since the last call."""

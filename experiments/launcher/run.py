@@ -24,6 +24,7 @@ from dfrl.experiments.results.faults import assess
 from dfrl.experiments.report.plots import plot_experiment
 from dfrl.experiments.results.files import claim_output, write_json
 from dfrl.experiments.results.tables import keep_checkpoints
+from dfrl.experiments.results.evaluations import merge_evaluations
 from dfrl.experiments.results.metrics import merge_metrics
 from dfrl.experiments.results.rounds import read_shares, write_rounds_csv
 from dfrl.experiments.results.summary import Results, write_summary
@@ -115,6 +116,8 @@ class Launcher:
         platform (a robot that cannot give them is a fault, said and recorded)."""
         st = self.state
         for ch in st.remote():
+            if ch.robot.id not in st.lost:
+                ch.poll_samples()           # its last lines, for the view's last events
             try:
                 st.gathered[ch.robot.id] = ch.gather(st.out)
             except ExperimentError as exc:
@@ -128,11 +131,13 @@ class Launcher:
     def _collect(self, wall: float, ok: bool) -> Results:
         st = self.state
         poll_logs(st)
+        st.view_samples()                   # lines the robots wrote after the last look
         robots = list(st.children)
         st.from_checkpoint = keep_checkpoints(st.out, robots)
         for rid in st.from_checkpoint:
             st.say(f"table of {rid} kept from its last checkpoint (tables/{rid}.npy)")
         merge_metrics(st.out, robots)
+        merge_evaluations(st.out, robots)
         shares = {rid: read_shares(st.out / f"shares_{rid}.csv") for rid in robots}
         rows = write_rounds_csv(st.out / "rounds.csv", st.logs.values(), robots, shares)
         plots: list[Path] = []

@@ -31,6 +31,7 @@ def node_config(state: RunState, robot: RobotSpec, iterations: int) -> NodeConfi
                       mode=c.mode, rtf=c.rtf, token=c.token, trainer=dict(c.trainer),
                       grace_s=grace, sync_timeout_s=max(60.0, c.timeout_s),
                       host=state.console_host,
+                      eval_every=c.eval_every, eval_steps=c.eval_steps,
                       # a remote robot has its own TLS folder (dfrl robot --tls): not ours
                       tls=str(state.tls) if state.tls is not None and robot.node is None
                       else None)

@@ -104,8 +104,16 @@ class RunState:
     def view_samples(self) -> None:
         """Each robot's newest ``DFRL_SAMPLE`` not written yet, as a ``pose`` event; for a
         remote robot (its files arrive at the end) also as a ``progress`` event (iteration,
-        sum of Q-values, cumulative reward, shares), so that the view's curves follow it."""
+        sum of Q-values, cumulative reward, shares), so that the view's curves follow it.
+        Every ``DFRL_EVAL`` a robot wrote since, in order, as an ``eval`` event (robot,
+        iteration, progress, collisions_per_1000, coverage)."""
         for rid, ch in self.children.items():
+            while ch.evals:
+                e = ch.evals.popleft()
+                self._view_event({"kind": "eval", "robot": rid, "iteration": e.iteration,
+                                  "progress": e.progress,
+                                  "collisions_per_1000": e.collisions_per_1000,
+                                  "coverage": e.coverage})
             sample = ch.sample
             if sample is None or self.sampled.get(rid) == sample:
                 continue

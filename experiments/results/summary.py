@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import Any
 
 from dfrl.experiments.config import ExperimentConfig
+from dfrl.experiments.results.evaluations import last_evaluations
 from dfrl.experiments.results.faults import Faults
 from dfrl.experiments.results.metrics import read_metrics
 from dfrl.experiments.results.rounds import count_equal
@@ -83,6 +84,13 @@ def write_summary(r: Results) -> Path:
                      f"{int(last['iteration'])} | {q} | "
                      f"{last['cumulative_reward']:.1f} | {int(last['collisions'])} |")
     lines.append("")
+    evals = last_evaluations(r.output_dir)
+    for rid, e in evals.items():
+        lines.append(f"- {rid}: last greedy evaluation (iteration {e['iteration']}, "
+                     f"{e['steps']} steps): {e['collisions_per_1000']:.1f} collisions per 1,000 "
+                     f"steps, progress {e['progress']:.3f}, coverage {e['coverage']:.3f}")
+    if evals:
+        lines.append("")
     failed = [row for row in r.rounds if row.get("error")]
     partial = [row for row in r.rounds if row.get("skipped") and not row.get("error")]
     n_rounds = len(r.rounds)

@@ -23,11 +23,16 @@ Other lines on stdout, for the launcher's progress display::
 
     DFRL_PROGRESS <robot> <iteration>
     DFRL_EVENT <robot> get|set <iteration>
+    DFRL_SAMPLE <robot> <iteration> <x> <y> <yaw> <q_sum> <cumulative_reward>
+    DFRL_EVAL <robot> <iteration> <collisions_per_1000> <progress> <coverage>
     DFRL_DONE <robot> <iterations> <shares>
 
 Real-time pacing (``rtf``): one iteration per ``control_dt / rtf`` seconds of wall time,
 ``control_dt`` being the trainer's own control period (``SimConfig.control_dt``, 64 ms by
 default).
+
+With ``eval_every`` > 0 the node measures its greedy policy every so many iterations in an
+environment of its own (``eval_<robot>.csv``, a ``DFRL_EVAL`` line; :mod:`.evaluate`).
 
 Modules: :mod:`.process` (the spawned node's life cycle, ``main``), :mod:`.run` (one
 experiment: trainer, files, the control loop one iteration at a time), :mod:`.service`
@@ -35,7 +40,8 @@ experiment: trainer, files, the control loop one iteration at a time), :mod:`.se
 :mod:`.checkpoint` (atomic checkpoints at every share and at the end), :mod:`.table` (the
 provider registered with the bridge: the trainer's table, or a static one for benchmarks, plus
 share bookkeeping with each write's round, agent and epoch), :mod:`.files` (the CSV files),
-:mod:`.lines` (stdout protocol, stdin watch).
+:mod:`.lines` (stdout protocol, stdin watch), :mod:`.evaluate` (greedy evaluations while
+learning).
 
 The node stops early when stdin reaches end of file or reads a line ``stop`` (the launcher
 closes it when the experiment ends), unless stdin was at end of file from the start; after the last iteration it keeps its platform up until

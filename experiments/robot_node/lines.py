@@ -6,7 +6,7 @@ import os
 import select
 from typing import NamedTuple, TextIO
 
-__all__ = ["ProtocolLines", "Sample", "StdinWatch", "parse_sample"]
+__all__ = ["Evaluation", "ProtocolLines", "Sample", "StdinWatch", "parse_eval", "parse_sample"]
 
 
 class Sample(NamedTuple):
@@ -32,6 +32,29 @@ def parse_sample(line: str) -> Sample | None:
     except ValueError:
         return None
     return sample if all(math.isfinite(v) for v in values) else None
+
+
+class Evaluation(NamedTuple):
+    """A ``DFRL_EVAL`` line, parsed: a greedy evaluation's measures."""
+
+    robot: str
+    iteration: int
+    collisions_per_1000: float
+    progress: float
+    coverage: float
+
+
+def parse_eval(line: str) -> Evaluation | None:
+    """The evaluation a ``DFRL_EVAL`` line carries (None: not such a line, or malformed)."""
+    parts = line.split()
+    if len(parts) != 6 or parts[0] != "DFRL_EVAL":
+        return None
+    try:
+        values = [float(v) for v in parts[3:]]
+        evaluation = Evaluation(parts[1], int(parts[2]), *values)
+    except ValueError:
+        return None
+    return evaluation if all(math.isfinite(v) for v in values) else None
 
 
 class ProtocolLines:
@@ -77,6 +100,15 @@ class ProtocolLines:
             x, y, yaw = (float(v) for v in pose)
             self.say(f"DFRL_SAMPLE {self.robot} {iteration} {x:.4f} {y:.4f} {yaw:.4f} "
                      f"{float(q_sum)!r} {float(cumulative_reward)!r}")
+
+    def evaluation(self, iteration: int, collisions_per_1000: float, progress: float,
+                   coverage: float) -> None:
+        """``DFRL_EVAL <robot> <iteration> <collisions_per_1000> <progress> <coverage>``: a
+        greedy evaluation of the table at this iteration (if events are on; see
+        :mod:`.evaluate`)."""
+        if self.events:
+            self.say(f"DFRL_EVAL {self.robot} {iteration} {float(collisions_per_1000)!r} "
+                     f"{float(progress)!r} {float(coverage)!r}")
 
     def done(self, iterations: int, shares: int) -> None:
         """``DFRL_DONE <robot> <iterations> <shares>``."""

@@ -25,6 +25,7 @@ from dfrl.experiments.robot_node.checkpoint import (
     restore_trainer,
     save_checkpoint,
 )
+from dfrl.experiments.robot_node.evaluate import LiveEvaluator
 from dfrl.experiments.robot_node.files import METRIC_FIELDS, SHARE_FIELDS, CsvLog
 from dfrl.experiments.robot_node.lines import ProtocolLines
 from dfrl.experiments.robot_node.table import NodeTable
@@ -104,6 +105,7 @@ class Run:
         self._next_tick = 0.0
         self._metrics: CsvLog | None = None
         self._shares: CsvLog | None = None
+        self._evals: LiveEvaluator | None = None
         self._registered = False
         self._sampled_at = -SAMPLE_S
 
@@ -166,6 +168,10 @@ class Run:
             self._metrics = CsvLog(self.out_dir / f"metrics_{c.robot}.csv", METRIC_FIELDS, keep_m)
             self._shares = CsvLog(self.out_dir / f"shares_{c.robot}.csv", SHARE_FIELDS, keep_s)
             self._stops = set(boundaries(c.iterations, c.respite)) if c.mode is Mode.SYNC else set()
+            if c.eval_every:
+                self._evals = LiveEvaluator(self.trainer.config, c.robot, c.seed, c.eval_every,
+                                            c.eval_steps, self.out_dir, self.lines,
+                                            upto if cp is not None else None)
         on_share = self.on_share if self.trainer is not None else None
         self.table = NodeTable(base, c.robot, self._shares, self.lines, on_share, shares)
         if self.trainer is not None:
@@ -187,7 +193,7 @@ class Run:
 
     def step(self) -> bool:
         """One iteration: step, record, serve (async) or wait for a share (sync boundary),
-        pace; True while iterations are left."""
+        evaluate the greedy policy when due, pace; True while iterations are left."""
         if self.done:
             return False
         c = self.config
@@ -205,6 +211,8 @@ class Run:
                 self.stopped = True
         elif c.mode is Mode.ASYNC:
             self.node.serve_pending()
+        if self._evals is not None and not self.stopped and self._evals.due(it):
+            self._evals.evaluate(it, self.trainer.q_table)      # after this boundary's share
         if not self.stopped and it % self.poll_every == 0:
             self.host.wait(0.0)
             if self.host.should_stop():
@@ -277,7 +285,7 @@ class Run:
         CSV files, so that they hold at least every row up to it."""
         if self.trainer is None:
             return
-        for log in (self._metrics, self._shares):
+        for log in (self._metrics, self._shares, self._evals):
             if log is not None:
                 log.sync()
         save_checkpoint(self.checkpoint_dir, self.config.robot,
@@ -311,7 +319,7 @@ class Run:
                 self.node.unregister_robot(self.config.robot)
             except Exception as exc:  # noqa: BLE001 - a closing node must still close files
                 self.warn(f"robot_node {self.config.robot}: unregistering failed: {exc}")
-        for log in (self._metrics, self._shares):
+        for log in (self._metrics, self._shares, self._evals):
             if log is not None:
                 log.close()
         if self.trainer is not None:

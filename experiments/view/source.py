@@ -20,9 +20,9 @@ new events, each a dict with ``seq`` (0, 1, ...), ``t`` (wall clock) and ``kind`
 ``pose``        robot, iteration, x, y, yaw (only from ``events.jsonl``)
 ``progress``    robot, iteration, q_sum, cumulative_reward, shares: a remote robot's status
                 (only from ``events.jsonl``; its files arrive at the end of the run)
-``eval``        robot, iteration, progress (and any other greedy-evaluation measures): drawn
-                as a third curve when present (only from ``events.jsonl``; nothing in the
-                launcher writes it yet)
+``eval``        robot, iteration, progress, collisions_per_1000, coverage: a greedy evaluation
+                (``eval_every``; the launcher writes one per ``DFRL_EVAL`` line), progress
+                drawn as a third curve (only from ``events.jsonl``)
 ``finished`` ``aborted`` ``control`` ``resurrected`` ``superseded``: the agent's log events
 ``error``       text: something the view could not read
 ``run_end``     the run wrote ``summary.md``
