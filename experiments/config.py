@@ -1,7 +1,8 @@
 """Experiment and robot-node configuration: the dataclasses, their JSON form, where configs
 live; every check is in :mod:`dfrl.experiments.config_check`, the generic dataclass <-> dict
-helpers in :mod:`dfrl.experiments.config_dicts`. :class:`ExperimentConfig` (with its :class:`RobotSpec` and :class:`JoinSpec` entries) defines a
-federated experiment and is saved as ``config.json`` beside its results; :class:`NodeConfig` is
+helpers in :mod:`dfrl.experiments.config_dicts`. :class:`ExperimentConfig` (with its
+:class:`RobotSpec` and :class:`JoinSpec` entries) defines a federated experiment and is saved
+as ``config.json`` beside its results; :class:`NodeConfig` is
 what the launcher hands one robot node process. :func:`resolve_config` finds a config file by
 path or by the name of a shipped one (``experiments/configs``).
 """
@@ -49,7 +50,8 @@ class NodeConfig:
     token : int
         Platform token agents must carry.
     trainer : dict
-        Extra :class:`dfrl.robots.training.TrainerConfig` fields (``learner``, ``discretisation``, ...).
+        Extra :class:`dfrl.robots.training.TrainerConfig` fields (``learner``,
+        ``discretisation``, ...).
     grace_s : float
         Seconds the node stays up after its last iteration (see module doc).
     sync_timeout_s : float
@@ -237,7 +239,7 @@ class ExperimentConfig:
         written) with the run still counted as complete.
     eval_every, eval_steps : int
         Every robot measures its greedy policy every ``eval_every`` iterations (0: never) for
-        ``eval_steps`` control steps (``eval_<robot>.csv``, ``evaluations.csv``).
+        ``eval_steps`` control steps (``eval_<robot>.csv``, ``live_evaluations.csv``).
     """
 
     name: str = "experiment"
@@ -277,7 +279,8 @@ class ExperimentConfig:
             r if isinstance(r, RobotSpec) else RobotSpec(**r) for r in self.robots))
         object.__setattr__(self, "joins", tuple(
             j if isinstance(j, JoinSpec) else
-            JoinSpec(robot=j["robot"] if isinstance(j["robot"], RobotSpec) else RobotSpec(**j["robot"]),
+            JoinSpec(robot=j["robot"] if isinstance(j["robot"], RobotSpec)
+                     else RobotSpec(**j["robot"]),
                      after_round=int(j.get("after_round", 1)))
             for j in self.joins))
 

@@ -12,7 +12,7 @@ Layout (see ``experiments/README.md``)::
     metrics_<robot>.csv    per-robot metrics, written by the node while it runs
     shares_<robot>.csv     per-robot applied shares (index, iteration, time, sha256)
     eval_<robot>.csv       greedy evaluations while learning (``eval_every``), and
-    evaluations.csv        all robots' in one file (:mod:`.evaluations`)
+    live_evaluations.csv   all robots' in one file (:mod:`.evaluations`)
     rounds_<agent>.log     the agent's log: one JSON object per line (round, finished,
                            aborted and control events)
     nodes/<robot>.json     node configs; logs/<robot>.err, logs/launch_<agent>.out
@@ -20,7 +20,7 @@ Layout (see ``experiments/README.md``)::
 
 Modules: :mod:`.agent_log` (the agent's JSON-lines log), :mod:`.rounds` (shares, their
 matching to rounds, ``rounds.csv``), :mod:`.metrics` (``metrics.csv``), :mod:`.evaluations`
-(``evaluations.csv``), :mod:`.files` (JSON files), :mod:`.summary` (:class:`Results` and
+(``live_evaluations.csv``), :mod:`.files` (JSON files), :mod:`.summary` (:class:`Results` and
 ``summary.md``).
 """
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""``evaluations.csv``: the greedy evaluations the robots ran while they learned (one row per
+"""``live_evaluations.csv``: the greedy evaluations the robots ran while they learned (one row per
 robot and evaluation), joined from their ``eval_<robot>.csv`` files
 (:mod:`dfrl.experiments.robot_node.evaluate`, option ``eval_every``).
 
@@ -17,11 +17,11 @@ from dfrl.experiments.robot_node.evaluate import EVAL_FIELDS
 __all__ = ["EVALUATIONS_FILE", "last_evaluations", "merge_evaluations", "read_evaluations"]
 
 #: Name of the file in a results folder.
-EVALUATIONS_FILE = "evaluations.csv"
+EVALUATIONS_FILE = "live_evaluations.csv"
 
 
 def merge_evaluations(out_dir: str | Path, robots: list[str]) -> Path | None:
-    """Concatenate the ``eval_<robot>.csv`` files into ``evaluations.csv`` (robot order
+    """Concatenate the ``eval_<robot>.csv`` files into ``live_evaluations.csv`` (robot order
     kept, a torn last line skipped); None, and no file, when no robot evaluated."""
     out = Path(out_dir)
     rows: list[str] = []
@@ -43,7 +43,7 @@ def merge_evaluations(out_dir: str | Path, robots: list[str]) -> Path | None:
 
 
 def read_evaluations(path: str | Path) -> list[dict[str, Any]]:
-    """``evaluations.csv`` (or one ``eval_<robot>.csv``) back, numbers as numbers."""
+    """``live_evaluations.csv`` (or one ``eval_<robot>.csv``) back, numbers as numbers."""
     with open(path, newline="", encoding="utf-8") as fh:
         rows: list[dict[str, Any]] = list(csv.DictReader(fh))
     for r in rows:
@@ -55,7 +55,7 @@ def read_evaluations(path: str | Path) -> list[dict[str, Any]]:
 
 def last_evaluations(out_dir: str | Path) -> dict[str, dict[str, Any]]:
     """Robot -> its last evaluation (the row with the highest iteration) in the folder's
-    ``evaluations.csv``; empty when there is none, or it is not this module's file."""
+    ``live_evaluations.csv``; empty when there is none, or it is not this module's file."""
     path = Path(out_dir) / EVALUATIONS_FILE
     if not path.is_file():
         return {}

@@ -22,7 +22,7 @@ from dfrl.experiments.robot_node.lines import ProtocolLines
 
 __all__ = ["EVAL_FIELDS", "LiveEvaluator", "eval_seed"]
 
-#: Columns of ``eval_<robot>.csv`` (and of the results folder's ``evaluations.csv``).
+#: Columns of ``eval_<robot>.csv`` (and of the results folder's ``live_evaluations.csv``).
 EVAL_FIELDS: tuple[str, ...] = ("robot", "iteration", "arena", "steps", "collisions_per_1000",
                                 "distance", "progress", "coverage", "mean_reward")
 

@@ -10,12 +10,15 @@ view (:mod:`dfrl.experiments.view.source`)::
      "yaw": 1.57}
     {"t": ..., "kind": "progress", "robot": "r4", "iteration": 500, "q_sum": 61.2,
      "cumulative_reward": 180.5, "shares": 1}
+    {"t": ..., "kind": "eval", "robot": "r1", "iteration": 1000, "progress": 0.42,
+     "collisions_per_1000": 3.0, "coverage": 0.31}
 
 Poses come from the robots' ``DFRL_SAMPLE`` lines (at most one every
 :data:`~dfrl.experiments.robot_node.run.SAMPLE_S`, with a progress line); a robot on a
 ``dfrl robot`` service sends the same lines into its ``logs/<robot>.out``, which the launcher
 fetches as it grows, and its samples also become ``progress`` events (its metrics file comes
-only at the end).
+only at the end). Greedy evaluations (``eval_every``) come from ``DFRL_EVAL`` lines, the
+same way.
 
 ``t`` is the writer's wall clock (:func:`time.time`), filled in when the event has none. Any
 other ``kind`` is shown in the view's event list as it is.

@@ -1,5 +1,5 @@
 """Greedy evaluations while the robots learn (``eval_every``, ``eval_steps``): rows in
-``eval_<robot>.csv`` and ``evaluations.csv``, ``eval`` events for the live view, a line per
+``eval_<robot>.csv`` and ``live_evaluations.csv``, ``eval`` events for the live view, a line per
 robot in the summary, from local robots and from a robot on a ``dfrl robot`` service; and the
 control: the same run without evaluations learns byte for byte the same."""
 from __future__ import annotations
@@ -66,7 +66,7 @@ def test_evaluations_do_not_disturb_training(tmp_path: Path) -> None:
     for rid in ("r1", "r2"):
         digests = [[s["digest"] for s in _rows(d / f"shares_{rid}.csv")] for d in (ev, plain)]
         assert digests[0] == digests[1] and len(digests[0]) == 3
-    rows = _rows(ev / "evaluations.csv")
+    rows = _rows(ev / "live_evaluations.csv")
     assert [(r["robot"], int(r["iteration"])) for r in rows] == \
         [(rid, it) for rid in ("r1", "r2") for it in (100, 200, 300)]
     assert [r["arena"] for r in rows] == ["r1"] * 3 + ["r4"] * 3
@@ -88,7 +88,7 @@ def test_evaluations_do_not_disturb_training(tmp_path: Path) -> None:
         assert (f"- {rid}: last greedy evaluation (iteration 300, 100 steps): "
                 f"{float(last['collisions_per_1000']):.1f} collisions per 1,000 steps") in summary
     # without eval_every: no file, no event, no summary line
-    assert not (plain / "evaluations.csv").exists() and not list(plain.glob("eval_*.csv"))
+    assert not (plain / "live_evaluations.csv").exists() and not list(plain.glob("eval_*.csv"))
     assert not _events(plain, "eval") and "greedy evaluation" not in \
         (plain / "summary.md").read_text()
     # the view passes them on (its third curve)
@@ -122,7 +122,7 @@ def test_remote_robot_evaluates_and_its_file_is_gathered(tmp_path: Path) -> None
         svc.communicate(timeout=30)
     out = tmp_path / "out"
     assert "eval_r2.csv" in res.gathered["r2"]
-    rows = _rows(out / "evaluations.csv")
+    rows = _rows(out / "live_evaluations.csv")
     assert [(r["robot"], int(r["iteration"])) for r in rows] == \
         [("r1", 150), ("r1", 300), ("r2", 150), ("r2", 300)]
     for r in rows:
