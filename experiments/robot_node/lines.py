@@ -23,15 +23,22 @@ class Sample(NamedTuple):
 
 def parse_sample(line: str) -> Sample | None:
     """The sample a ``DFRL_SAMPLE`` line carries (None: not such a line, or malformed)."""
+    return _parse_measures(line, "DFRL_SAMPLE", Sample)
+
+
+def _parse_measures(line: str, tag: str, kind: type) -> tuple | None:
+    """``<tag> <robot> <iteration> <float> ...`` as ``kind(robot, iteration, *floats)``, with
+    as many floats as ``kind`` has fields after the first two; None if the line is another
+    one, malformed, or carries a value that is not finite."""
     parts = line.split()
-    if len(parts) != 8 or parts[0] != "DFRL_SAMPLE":
+    if len(parts) != len(kind._fields) + 1 or parts[0] != tag:
         return None
     try:
         values = [float(v) for v in parts[3:]]
-        sample = Sample(parts[1], int(parts[2]), *values)
+        parsed = kind(parts[1], int(parts[2]), *values)
     except ValueError:
         return None
-    return sample if all(math.isfinite(v) for v in values) else None
+    return parsed if all(math.isfinite(v) for v in values) else None
 
 
 class Evaluation(NamedTuple):
@@ -46,15 +53,7 @@ class Evaluation(NamedTuple):
 
 def parse_eval(line: str) -> Evaluation | None:
     """The evaluation a ``DFRL_EVAL`` line carries (None: not such a line, or malformed)."""
-    parts = line.split()
-    if len(parts) != 6 or parts[0] != "DFRL_EVAL":
-        return None
-    try:
-        values = [float(v) for v in parts[3:]]
-        evaluation = Evaluation(parts[1], int(parts[2]), *values)
-    except ValueError:
-        return None
-    return evaluation if all(math.isfinite(v) for v in values) else None
+    return _parse_measures(line, "DFRL_EVAL", Evaluation)
 
 
 class ProtocolLines:
