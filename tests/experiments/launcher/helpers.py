@@ -42,13 +42,15 @@ def small_config(n: int = 2, **kw: Any) -> ExperimentConfig:
     return ExperimentConfig(**base)
 
 
-def run_in_thread(cfg: ExperimentConfig, out: Path) -> tuple[threading.Thread, dict[str, Any]]:
-    """Start ``run(cfg, out)`` in a thread; its result or exception lands in the dict."""
+def run_in_thread(cfg: ExperimentConfig, out: Path,
+                  **run_options: Any) -> tuple[threading.Thread, dict[str, Any]]:
+    """Start ``run(cfg, out, **run_options)`` in a thread (``tls=DIR``, say); its result or
+    exception lands in the dict."""
     box: dict[str, Any] = {}
 
     def target() -> None:
         try:
-            box["res"] = run(cfg, out, progress=None)
+            box["res"] = run(cfg, out, progress=None, **run_options)
         except BaseException as exc:  # noqa: BLE001
             box["exc"] = exc
 

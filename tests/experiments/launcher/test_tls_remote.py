@@ -13,18 +13,15 @@ import json
 import shutil
 import subprocess
 import sys
-import threading
 from pathlib import Path
-from typing import Any
 
 import pytest
 
 from dfrl.experiments.certs import init_ca, make_node
-from dfrl.experiments.launcher import run
 from dfrl.experiments.results.agent_log import read_rounds_log
 from dfrl.platform_pl import AGENTS_DIR
 
-from .helpers import diagnose, rounds_csv, small_config, wait_rounds
+from .helpers import diagnose, rounds_csv, run_in_thread, small_config, wait_rounds
 
 pytestmark = [pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl"),
               pytest.mark.skipif(shutil.which("openssl") is None, reason="needs openssl")]
@@ -50,16 +47,7 @@ def test_inject_and_join_with_tls_from_a_copied_results_folder(tmp_path: Path) -
     node_dir = make_node("local", tmp_path / "ca", tmp_path / "tls-local").directory
     out = tmp_path / "run"
     cfg = small_config(iterations=3000, respite=100, rtf=20.0)
-    box: dict[str, Any] = {}
-
-    def target() -> None:
-        try:
-            box["res"] = run(cfg, out, progress=None, tls=node_dir)
-        except BaseException as exc:  # noqa: BLE001 - reported below
-            box["exc"] = exc
-
-    t = threading.Thread(target=target, daemon=True)
-    t.start()
+    t, box = run_in_thread(cfg, out, tls=node_dir)
     wait_rounds(out, AGENT, 2)
     copied = tmp_path / "copied"
     copied.mkdir()

@@ -10,7 +10,6 @@ import shutil
 import socket
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -20,7 +19,7 @@ import pytest
 from dfrl.experiments.certs import CertError, init_ca, make_node
 from dfrl.experiments.launcher import join_robot, run
 
-from .helpers import diagnose, rounds_csv, small_config, wait_rounds
+from .helpers import diagnose, rounds_csv, run_in_thread, small_config, wait_rounds
 
 pytestmark = [pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl"),
               pytest.mark.skipif(shutil.which("openssl") is None, reason="needs openssl")]
@@ -72,16 +71,7 @@ def _first_bytes(out: Path, box: dict[str, Any], timeout_s: float = 60.0) -> dic
 
 def _run_probed(cfg: Any, out: Path, tls: Path | None) -> tuple[Any, dict[str, bytes]]:
     """``run(cfg, out, tls=tls)`` in a thread, probed by :func:`_first_bytes` while it runs."""
-    box: dict[str, Any] = {}
-
-    def target() -> None:
-        try:
-            box["res"] = run(cfg, out, progress=None, tls=tls)
-        except BaseException as exc:  # noqa: BLE001 - reported by the assert below
-            box["exc"] = exc
-
-    t = threading.Thread(target=target, daemon=True)
-    t.start()
+    t, box = run_in_thread(cfg, out, tls=tls)
     try:
         seen = _first_bytes(out, box)
     finally:
@@ -165,16 +155,7 @@ def test_join_reaches_a_tls_run_with_its_folder(tmp_path: Path, node_dir: Path) 
     """``dfrl join`` (join_robot) opens its own console node with the run's TLS folder
     (``nodes.json``); the launcher spawns the new robot with it too."""
     cfg = small_config(iterations=2000, respite=100, rtf=20.0)
-    box: dict[str, Any] = {}
-
-    def target() -> None:
-        try:
-            box["res"] = run(cfg, tmp_path, progress=None, tls=node_dir)
-        except BaseException as exc:  # noqa: BLE001 - reported below
-            box["exc"] = exc
-
-    t = threading.Thread(target=target, daemon=True)
-    t.start()
+    t, box = run_in_thread(cfg, tmp_path, tls=node_dir)
     wait_rounds(tmp_path, "fed_qlearning", 2)
     entry = join_robot(tmp_path, "r3", "r5", iterations=600)
     t.join(timeout=120)
