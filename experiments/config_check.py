@@ -301,7 +301,23 @@ def check_experiment(data: Any, resources: bool = True) -> list[str]:
                                Rule(str, choices=_methods, what="method", hint=_METHOD_HINT))
     if "trainer" in data:
         out += check_trainer("trainer", data["trainer"])
+    out += check_eval_every(data)
     return out
+
+
+def check_eval_every(data: dict[str, Any]) -> list[str]:
+    """An ``eval_every`` larger than the run's iterations would evaluate nothing, silently:
+    it is a problem (0 is the way to say "no evaluation")."""
+    every, iterations = data.get("eval_every"), data.get("iterations")
+    if iterations is None:
+        from dfrl.experiments.config import ExperimentConfig
+
+        iterations = ExperimentConfig.__dataclass_fields__["iterations"].default
+    if (isinstance(every, int) and isinstance(iterations, int) and not isinstance(every, bool)
+            and 0 < iterations < every):
+        return [f"eval_every: {every} is more than the {iterations} iterations, so no "
+                "evaluation would run (0 means no evaluation)"]
+    return []
 
 
 def check_node(data: Any) -> list[str]:

@@ -170,7 +170,10 @@ def test_bad_eval_options_are_located(tmp_path: Path, capsys: pytest.CaptureFixt
                              ({"eval_steps": 0}, "eval_steps: must be >= 1, got 0"),
                              ({"eval_every": "100"},
                               "eval_every: expected an integer, got '100' (a string)"),
-                             ({"eval_steps": 2.5}, "eval_steps: expected an integer, got 2.5")):
+                             ({"eval_steps": 2.5}, "eval_steps: expected an integer, got 2.5"),
+                             # a run that would evaluate nothing must not pass for one that did
+                             ({"eval_every": 500},
+                              "eval_every: 500 is more than the 200 iterations")):
         path = tmp_path / "cfg.json"
         path.write_text(json.dumps({**cfg, **changes}))
         code = main(["run", str(path)])
@@ -184,5 +187,6 @@ def test_bad_eval_options_are_located(tmp_path: Path, capsys: pytest.CaptureFixt
     assert "eval_steps: must be >= 1, got -5" in problems, problems
     ok = ExperimentConfig.from_dict({**cfg, "eval_every": 100, "eval_steps": 50})
     assert (ok.eval_every, ok.eval_steps) == (100, 50)
+    assert ExperimentConfig.from_dict({**cfg, "eval_every": 200}).eval_every == 200
     default = ExperimentConfig.from_dict(cfg)
     assert (default.eval_every, default.eval_steps) == (0, 500)
