@@ -3,7 +3,9 @@
 Each accepted connection gets its own connection to the target. Every chunk read from one
 side is forwarded to the other ``delay`` seconds after it was read, in order, so a request
 and its reply cost one round trip of ``2 * delay``. The proxy counts the connections it
-accepted (a pooled platform connection is one connection however many hops use it).
+accepted (a pooled platform connection is one connection however many hops use it). With
+``record=True`` it also keeps every byte it forwards, both ways (:meth:`captured_bytes`), for
+the tests that look at what crosses the wire.
 """
 from __future__ import annotations
 
@@ -17,10 +19,12 @@ class DelayProxy:
     """Forward ``listen`` to ``target`` with ``delay`` seconds each way."""
 
     def __init__(self, target: tuple[str, int], delay: float,
-                 listen: tuple[str, int] = ("127.0.0.1", 0)) -> None:
+                 listen: tuple[str, int] = ("127.0.0.1", 0), record: bool = False) -> None:
         self.target = target
         self.delay = delay
         self.accepted = 0
+        self._record = record
+        self._captured = bytearray()
         self._server = socket.create_server(listen)
         self._server.settimeout(0.2)
         self._closing = threading.Event()
@@ -28,6 +32,11 @@ class DelayProxy:
         self._lock = threading.Lock()
         self._thread = threading.Thread(target=self._accept_loop, daemon=True)
         self._thread.start()
+
+    def captured_bytes(self) -> bytes:
+        """Every byte forwarded so far, both directions interleaved (``record=True``)."""
+        with self._lock:
+            return bytes(self._captured)
 
     @property
     def address(self) -> tuple[str, int]:
@@ -81,6 +90,9 @@ class DelayProxy:
                 data = src.recv(65536)
             except OSError:
                 data = b""
+            if self._record and data:
+                with self._lock:
+                    self._captured += data
             chunks.put((time.monotonic() + self.delay, data))
             if not data:
                 return

@@ -6,9 +6,7 @@ token. The control: the same run without TLS, whose capture must show the Q-valu
 from __future__ import annotations
 
 import shutil
-import socket
 import struct
-import threading
 from pathlib import Path
 
 import pytest
@@ -17,6 +15,7 @@ from dfrl.experiments.certs import init_ca, make_node
 from dfrl.platform_pl import PLATFORM_DIR
 
 from .conftest import SWIPL, Proc
+from .delay_proxy import DelayProxy
 
 pytestmark = pytest.mark.skipif(shutil.which("openssl") is None or SWIPL is None,
                                 reason="openssl or swipl missing")
@@ -49,63 +48,6 @@ main :-
 """
 
 
-class RecordingProxy:
-    """Forward a loopback port to ``target`` and keep every byte in both directions."""
-
-    def __init__(self, target: tuple[str, int]) -> None:
-        self.target = target
-        self.captured = bytearray()
-        self._lock = threading.Lock()
-        self._server = socket.create_server(("127.0.0.1", 0))
-        self._server.settimeout(0.2)
-        self._stop = threading.Event()
-        self._threads: list[threading.Thread] = []
-        t = threading.Thread(target=self._accept, daemon=True)
-        t.start()
-        self._threads.append(t)
-
-    @property
-    def port(self) -> int:
-        return int(self._server.getsockname()[1])
-
-    def close(self) -> None:
-        self._stop.set()
-        self._server.close()
-
-    def _accept(self) -> None:
-        while not self._stop.is_set():
-            try:
-                down, _ = self._server.accept()
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            up = socket.create_connection(self.target, timeout=10)
-            for a, b in ((down, up), (up, down)):
-                threading.Thread(target=self._pump, args=(a, b), daemon=True).start()
-
-    def _pump(self, src: socket.socket, dst: socket.socket) -> None:
-        src.settimeout(30)
-        for _ in range(100000):          # bounded: one chunk per turn
-            try:
-                data = src.recv(65536)
-            except OSError:
-                data = b""
-            if not data:
-                break
-            with self._lock:
-                self.captured += data
-            try:
-                dst.sendall(data)
-            except OSError:
-                break
-        for s in (src, dst):
-            try:
-                s.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
-
-
 def _capture(tmp_path: Path, tls: tuple[Path, Path] | None) -> bytes:
     tls_a = f", tls({str(tls[0])!r})" if tls else ""
     tls_b = f", tls({str(tls[1])!r})" if tls else ""
@@ -117,14 +59,14 @@ def _capture(tmp_path: Path, tls: tuple[Path, Path] | None) -> bytes:
     proc = Proc([SWIPL, "-q", str(script)])
     try:
         port = int(proc.wait_for("PORT").split()[1])
-        proxy = RecordingProxy(("127.0.0.1", port))
+        proxy = DelayProxy(("127.0.0.1", port), 0.0, record=True)
         try:
             assert proc.popen.stdin is not None
-            proc.popen.stdin.write(f"proxy({proxy.port}).\n")
+            proc.popen.stdin.write(f"proxy({proxy.address[1]}).\n")
             proc.popen.stdin.flush()
             arrived = proc.wait_for("ARRIVED", timeout=30)
             assert float(arrived.split()[1]) == pytest.approx(sum(Q_VALUES))
-            return bytes(proxy.captured)
+            return proxy.captured_bytes()
         finally:
             proxy.close()
     finally:

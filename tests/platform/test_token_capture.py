@@ -7,9 +7,6 @@ capture did see the record).
 """
 from __future__ import annotations
 
-import queue
-import socket
-import threading
 from pathlib import Path
 
 import pytest
@@ -24,31 +21,10 @@ pytestmark = pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
 TOKEN = "dfrl_" + "5e" * 32          # a strong token: no loopback warning, easy to find
 
 
-class RecordingProxy(DelayProxy):
-    """A DelayProxy without delay that keeps every byte it forwards."""
-
-    def __init__(self, target: tuple[str, int]) -> None:
-        self.captured = bytearray()
-        self._cap_lock = threading.Lock()
-        super().__init__(target, 0.0)
-
-    def _read(self, src: socket.socket, chunks: queue.Queue[tuple[float, bytes]]) -> None:
-        while True:
-            try:
-                data = src.recv(65536)
-            except OSError:
-                data = b""
-            with self._cap_lock:
-                self.captured += data
-            chunks.put((0.0, data))
-            if not data:
-                return
-
-
 def test_migration_sends_no_token(tmp_path: Path, procs: list[Proc]) -> None:
     # Prepare: a node with the token, a recording proxy in front of it.
     node, port = start_node(procs, "--token", TOKEN)
-    with RecordingProxy(("127.0.0.1", port)) as proxy:
+    with DelayProxy(("127.0.0.1", port), 0.0, record=True) as proxy:
         pport = proxy.address[1]
         prog = f"""
         :- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
@@ -69,8 +45,7 @@ def test_migration_sends_no_token(tmp_path: Path, procs: list[Proc]) -> None:
         # Execute
         console.wait_for("MOVED")
         node.wait_for("COURIER payload_marker_0451")
-        with proxy._cap_lock:
-            captured = bytes(proxy.captured)
+        captured = proxy.captured_bytes()
     # Assert: the record crossed, the token did not.
     assert b"payload_marker_0451" in captured
     assert TOKEN.encode() not in captured
