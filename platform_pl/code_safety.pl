@@ -12,7 +12,8 @@
    ->  assertz(apply_macros_was_loaded)
    ;   true
    ).
-:- use_module(library(sandbox), [safe_goal/1]).
+:- use_module(library(sandbox), []).
+:- use_module(sandbox_policy, [policy_safe_goal/1, safe_library/1]).
 %   library(sandbox) loads library(apply_macros), whose goal expansion of
 %   maplist/N then applies to all code compiled later in the process and
 %   changes what it means (a yall lambda's free variables are copied
@@ -238,16 +239,19 @@ check_body(_, _, X = Y) :-
 check_body(S, Self, G) :-
     copy_term(G, G1),
     b_setval(code_safety_self, Self),
-    catch(safe_goal(S:G1), E, sandbox_refusal(S, G, E)),
+    catch(policy_safe_goal(S:G1), E, sandbox_refusal(S, G, E)),
     b_setval(code_safety_self, '$none').
 
 sandbox_refusal(_, _, error(permission_error(install, code, C), Ctx)) :-
     !,
     throw(error(permission_error(install, code, C), Ctx)).
-sandbox_refusal(S, _, error(permission_error(call, sandboxed, G), _)) :-
+sandbox_refusal(S, _, error(permission_error(call, sandboxed, G), Ctx)) :-
     !,
     unscratch(S, G, C),
-    refuse(C, 'not allowed in the sandbox').
+    (   nonvar(Ctx), Ctx = sandbox(_, [policy(Why)|_])
+    ->  refuse(C, Why)
+    ;   refuse(C, 'not allowed in the sandbox')
+    ).
 sandbox_refusal(S, G0, error(existence_error(procedure, PI), _)) :-
     !,
     unscratch(S, PI, C),
@@ -371,9 +375,13 @@ check_program_text(Id, Text) :-
                      [S]>>forall(member(B, ToCheck), check_body(S, guid, B)))
     ).
 
+%   Quasi quotations are parsed by hooks when the text is read (the
+%   checker's read and the loader's): a program may not use them.
 read_program(In, Terms) :-
-    read_term(In, T, [module(user), syntax_errors(error)]),
-    (   T == end_of_file
+    read_term(In, T, [module(user), syntax_errors(error), quasi_quotations(QQ)]),
+    (   QQ \== []
+    ->  refuse(quasi_quotation(T), 'quasi quotations run parsers when read')
+    ;   T == end_of_file
     ->  Terms = []
     ;   Terms = [T|Rest],
         read_program(In, Rest)
@@ -470,21 +478,15 @@ declared(D, F/A) :-
 declared((A, B), PI) :-
     (   declared(A, PI) ; declared(B, PI) ).
 
-library_directive(use_module(library(X))) :- library_name(X).
-library_directive(use_module(library(X), _)) :- library_name(X).
-library_directive(ensure_loaded(library(X))) :- library_name(X).
+library_directive(use_module(library(X))) :- safe_library(X).
+library_directive(use_module(library(X), _)) :- safe_library(X).
+library_directive(ensure_loaded(library(X))) :- safe_library(X).
 
-library_name(X) :-
-    (   atom(X)
-    ->  \+ sub_atom(X, _, _, _, '..'),
-        \+ sub_atom(X, 0, _, _, '/')
-    ;   X = A/B,
-        library_name(A),
-        library_name(B)
-    ).
-
+%   initialization(G, main) would halt the node after G, the other
+%   moments (restore, program, after_load) run G when the program
+%   cannot be checked again: only now and after loading are allowed.
 init_goal(initialization(G), G).
-init_goal(initialization(G, _), G).
+init_goal(initialization(G, now), G).
 
 		 /*******************************
 		 *    THE AGENT API AS SAFE	*
@@ -563,7 +565,7 @@ agent_api(messages:agent_post(_, _, _, _, _), true).
 agent_api(messages:agent_post(_, _, _, _, _, _), true).
 agent_api(messages:remote_agents(_, _, _), true).
 agent_api(agents:current_agent(_), true).
-agent_api(agents:agent_property(_, _, P), ( nonvar(P), P \= tokens(_) )).
+agent_api(agents:agent_property(_, A, P), ( nonvar(P), agent_may_see(A, P) )).
 agent_api(agents:agent_add_payload(_, A, _), self(A)).
 agent_api(agents:agent_remove_payload(_, A, _), self(A)).
 agent_api(agents:agent_add_facts(_, A, _), self(A)).
@@ -587,6 +589,20 @@ agent_api(dfrl_agent:aggregate_step(_, _, _, _), true).
 agent_api(dfrl_agent:aggregate_final(_, _, _), true).
 agent_api(dfrl_agent:method_uses_visits(_), true).
 agent_api(dfrl_agent:aggregate_tables(_, _, _), true).
+
+%   An agent sees its own properties but its tokens; of other agents,
+%   what list_agents/0 shows (never their module, payload or tokens).
+agent_may_see(A, P) :-
+    P \= tokens(_),
+    (   self(A)
+    ->  true
+    ;   public_agent_property(P)
+    ).
+
+public_agent_property(handler(_)).
+public_agent_property(kind(_)).
+public_agent_property(status(_)).
+public_agent_property(hops(_)).
 
 public_node_property(address(_)).
 public_node_property(link(_)).

@@ -1,7 +1,8 @@
 :- module(platform_errors,
           [ transport_error/2,          % +Address, +Reason
             wire_error/1,               % +Reason
-            message_text/2              % +Message, -String
+            message_text/2,             % +Message, -String
+            inert_error/2               % +Error0, -Error
           ]).
 /** <module> Error terms of the agent platform and their messages
 
@@ -29,6 +30,13 @@ and two permission errors with messages of their own:
 Each has a prolog:error_message//1 clause, so the toplevel prints a
 readable message.
 
+An error term that a peer or mobile code made is printed only if it is
+inert (inert_error/2): message translation takes a formal
+format(Format, Args), and some messages take parts of their term as a
+format, so a `~@` in it would call a goal of the sender's choosing
+where the message is printed. A term with a `~` in any of its text is
+shown as foreign_error(Text) instead, Text its quoted form.
+
 An error that a remote platform answered with is rethrown here as
 error(Formal, remote(Address)): the formal as the peer raised it (its
 own context stays there) and, as context, the address of the platform
@@ -40,6 +48,8 @@ after the message, e.g.
 ERROR: agent `nobody' does not exist (at 127.0.0.1:7002)
 ```
 */
+
+:- autoload(library(apply), [maplist/2]).
 
 :- multifile prolog:error_message//1, prolog:message//1,
              prolog:message_context//1.
@@ -65,7 +75,8 @@ wire_error(Reason) :-
 %   `ERROR:`/`Warning:` prefix; a term without a translation is written
 %   with ~p. For logs and replies that carry an error as text.
 
-message_text(Message, Text) :-
+message_text(Message0, Text) :-
+    inert_error(Message0, Message),
     (   catch('$messages':translate_message(Message, Lines, []), _, fail)
     ->  with_output_to(string(Text0),
                        print_message_lines(current_output, '', Lines)),
@@ -73,6 +84,46 @@ message_text(Message, Text) :-
     ;   format(string(Text), '~p', [Message])
     ),
     !.
+
+%!  inert_error(+Error0, -Error) is det.
+%
+%   Error is Error0 if no atom, string or code list in it holds a `~`
+%   and it is acyclic; else error(foreign_error(Text), Context), Text a
+%   string that writes Error0 quoted (to depth 10), Context the context
+%   of Error0 if it is error(_, Context) with an inert Context.
+
+inert_error(E0, E) :-
+    (   inert(E0)
+    ->  E = E0
+    ;   format(string(Text), '~W', [E0, [quoted(true), max_depth(10)]]),
+        (   nonvar(E0), E0 = error(_, Ctx0), inert(Ctx0)
+        ->  Ctx = Ctx0
+        ;   true
+        ),
+        E = error(foreign_error(Text), Ctx)
+    ).
+
+inert(T) :-
+    acyclic_term(T),
+    inert_(T).
+
+inert_(T) :-
+    (   var(T)
+    ->  true
+    ;   atom(T)
+    ->  \+ sub_atom(T, _, _, _, '~')
+    ;   string(T)
+    ->  \+ sub_string(T, _, _, _, "~")
+    ;   is_list(T), T = [_|_], maplist(integer, T)
+    ->  \+ memberchk(0'~, T)
+    ;   compound(T)
+    ->  compound_name_arguments(T, _, Args),
+        maplist(inert_, Args)
+    ;   true
+    ).
+
+prolog:error_message(foreign_error(Text)) -->
+    [ 'error from a peer or from mobile code: ~w'-[Text] ].
 
 prolog:error_message(transport_error(Address, Reason)) -->
     [ 'Platform at ~p: '-[Address] ],
@@ -120,6 +171,13 @@ prolog:message(dfrl(Message)) -->
 dfrl_message(weak_token(Address, Bits)) -->
     [ 'dfrl platform ~w: a token of ~d bits is fine on loopback only; '-[Address, Bits],
       'other addresses need 128 (dfrl secret prints one) or TLS' ].
+dfrl_message(open_node(Address)) -->
+    [ 'dfrl platform ~w has no token: it is OPEN, any local user may '-[Address],
+      'send it agents and code (give it a token: DFRL_TOKEN or --token-file)' ].
+dfrl_message(token_on_command_line) -->
+    [ '--token puts the token on the command line, where other users of ',
+      'this host see it (ps); use --token-file FILE (mode 600) or the ',
+      'environment variable DFRL_TOKEN' ].
 dfrl_message(insecure_node(Address, Bits)) -->
     [ 'dfrl platform ~w is INSECURE: reachable from the network '-[Address],
       'with a token of ~d bits (128 needed) and no TLS'-[Bits] ].
@@ -127,10 +185,12 @@ dfrl_message(node_started(Node)) -->
     [ 'dfrl platform listening on ~w'-[Node] ].
 dfrl_message(node_stopped(Node)) -->
     [ 'dfrl platform ~w stopped'-[Node] ].
-dfrl_message(agent_crashed(Node, Agent, Error)) -->
+dfrl_message(agent_crashed(Node, Agent, Error0)) -->
+    { inert_error(Error0, Error) },
     [ 'Agent ~p on ~w stopped with an error: '-[Agent, Node] ],
     '$messages':translate_message(Error).
-dfrl_message(connection_error(Node, Peer, Error)) -->
+dfrl_message(connection_error(Node, Peer, Error0)) -->
+    { inert_error(Error0, Error) },
     [ 'Platform ~w: request from ~p failed: '-[Node, Peer] ],
     '$messages':translate_message(Error).
 dfrl_message(agent_in_doubt(Node, Agent, Source)) -->

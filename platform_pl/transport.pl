@@ -18,7 +18,7 @@
             open_key/1                  % -Token
           ]).
 :- use_module(wire, [frame_write/3, frame_read/3, wire_version/1]).
-:- use_module(platform_errors, [transport_error/2]).
+:- use_module(platform_errors, [transport_error/2, inert_error/2]).
 :- use_module(tls, [tls_connect/5]).
 %   Eager imports (not autoload/2): see node_connection.pl.
 :- use_module(library(socket),
@@ -177,8 +177,9 @@ receive_hello(Conn, Nonce, Info) :-
         ->  true
         ;   transport_error(Address, protocol(version(Version)))
         )
-    ;   Term = error(E)
-    ->  throw(E)
+    ;   Term = error(E0)
+    ->  inert_error(E0, E),
+        throw(E)
     ;   transport_error(Address, protocol(expected_hello))
     ).
 
@@ -753,8 +754,9 @@ request_on(Conn, Request, Reply, Options) :-
 reply_result(_, ok(Result0), Result) :-
     !,
     Result = Result0.
-reply_result(Address, error(error(Formal, _)), _) :-
+reply_result(Address, error(error(Formal0, _)), _) :-
     !,
-    throw(error(Formal, remote(Address))).
+    inert_error(error(Formal0, remote(Address)), Error),
+    throw(Error).
 reply_result(Address, Other, _) :-
     transport_error(Address, protocol(unexpected_reply(Other))).

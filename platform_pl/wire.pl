@@ -570,9 +570,18 @@ with_parse_slot(slots(Queue, _), _, Limit, Goal) :-
         ;   true
         )).
 
+%   fast_term_serialized/2 keeps attributes and cycles: a variable with
+%   a freeze/2 attribute would run its goal at the first unification of
+%   the decoded term (a pattern match of the request), and a cyclic term
+%   loops whatever walks it. Both are refused before anyone sees them.
 decode_binary(Body, Term) :-
     (   catch(fast_term_serialized(Term0, Body), _, fail)
-    ->  Term = Term0
+    ->  (   \+ acyclic_term(Term0)
+        ->  wire_error(syntax(cyclic))
+        ;   term_attvars(Term0, [_|_])
+        ->  wire_error(syntax(attributed_variable))
+        ;   Term = Term0
+        )
     ;   wire_error(syntax(binary))
     ).
 

@@ -9,6 +9,7 @@
 %   Eager imports (not autoload/2): see node_connection.pl.
 :- use_module(library(error), [must_be/2, resource_error/1]).
 :- use_module(library(option), [option/3]).
+:- use_module(platform_errors, [inert_error/2]).
 
 :- meta_predicate
     pool_run(+, 0),
@@ -175,7 +176,8 @@ job_error('$dfrl_cancelled') :- !.
 job_error(node_stopping) :- !.
 job_error('$aborted') :- !, throw('$aborted').
 job_error(unwind(A)) :- !, throw(unwind(A)).
-job_error(E) :-
+job_error(E0) :-                       % a job may run mobile code
+    inert_error(E0, E),
     print_message(warning, E).
 
 %!  pool_drain is det.
