@@ -66,6 +66,36 @@ Culprit the offending goal, clause head or directive):
     predicates (dynamic, discontiguous, multifile of those same
     predicates), load libraries, and run a safe initialization goal.
 
+Side doors. library(sandbox) judges a goal by the predicates it calls;
+some goals run without being a visible call in the checked code. Each
+family, and what is done about it (sandbox_policy.pl holds the table of
+refusals, applied at any depth of the sandbox's walk):
+
+  | family                                | here                        |
+  |---------------------------------------|-----------------------------|
+  | attribute hooks: put_attr/3, put_attrs/2 (attr_unify_hook, attribute_goals, portray_attvar of the attribute's module run with the value), freeze/when/dif | refused: put_attr(V, freeze, user:shell(C)), V = 1 ran C |
+  | attributed variables or cycles in data (records, binary frames) | refused before anyone unifies them (plain_data/1, wire.pl) |
+  | directives of programs                | only declarations of the program's own predicates, libraries of an allow-list (sandbox_policy:safe_library/1), initialization/1 and initialization(G, now) with G checked; if/elif, op, flags, include, module, table, encoding refused |
+  | quasi quotations                      | refused: their parsers run when the text is read |
+  | print_message/2, message_to_string/2, message translation | refused: a format(F, A) message with ~@ calls a goal, and message hooks are the node's |
+  | format/1,2,3                          | ~@ arguments checked by the sandbox; ~W refused (its options may hold portray_goal(G)); output only to atoms/strings, current output, user_output, user_error |
+  | portray, print                        | print/1 and ~p call the node's portray/1 hook, which a peer cannot define (multifile hooks are refused as clause heads) |
+  | exception, signal, halt hooks (exception/3, prolog_exception_hook/4, on_signal/3, at_halt/1) | refused: hooks are multifile or not in the sandbox |
+  | goal and term expansion               | a program may not define expansion hooks (multifile); the node's own expand the checked terms |
+  | flags: set_prolog_flag/2, create_prolog_flag/3, set_prolog_stack/2 | refused: flags are the process's (double_quotes broke every later program load) |
+  | reading flags                         | only arithmetic and syntax flags (argv, os_argv, executable, home are refused: argv held tokens) |
+  | environment: getenv/2, setenv/2       | refused (the sandbox has neither) |
+  | global variables (b_/nb_getval, b_/nb_setval, nb_current) | refused: agents run in the platform's pooled threads |
+  | flag/3, recorded database, char_conversion/2, op/3, style_check/1 | refused: tables of the whole process |
+  | tabling                               | refused: tables outlive the call |
+  | loading code at run time (use_module, load_files, consult) | refused |
+  | setup_call_cleanup/3, call_cleanup/2,3, setup_call_catcher_cleanup/4 | refused: a cleanup runs after the platform stopped the agent |
+  | catch/3 with a catcher that could be the platform's stop ('$aborted', '$dfrl_purged', '$dfrl_bound'(_), time_limit_exceeded, a variable) | refused, and throwing one of them too: an agent over a bound must stop |
+  | abort/0                               | refused: it unwinds the platform's worker |
+  | clause/2 of a variable                | refused                     |
+  | other agents                          | agent_property/3 of another agent gives only handler, kind, status, hops; modules of other agents cannot be called (not exported) |
+  | error terms (thrown by an agent, sent by a peer in a reply) | printed only if inert (platform_errors:inert_error/2); a `~` in any text makes them foreign_error(Text) |
+
 A node trusts peers by name with the node option trusted_peers(Names):
 code from a peer whose TLS certificate names one of them is installed
 unchecked (node:ctx_peer_name/2; a plaintext peer is never trusted by

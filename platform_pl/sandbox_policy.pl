@@ -94,6 +94,14 @@ refused(system:throw/1, throw(Ball), 'throw: the ball could be one of the platfo
     could_be_reserved(Ball).
 refused(system:clause/2, clause(H, _), 'clause/2: only of a known predicate') :-
     var(H).
+refused(system:'$'/1, _, '$/1: the sandbox takes its own definition, $(G) :- $(G), as proof that G is safe').
+refused(system:at_halt/1, _, 'at_halt/1: the goal runs when the node halts, unchecked').
+refused(system:cancel_halt/1, _, 'cancel_halt/1: halting is the node''s').
+refused(arithmetic:arithmetic_function/1, _, 'arithmetic_function/1: a table of the whole process').
+refused(predicate_options:predicate_options/3, _, 'predicate_options/3: a table of the whole process').
+refused(settings:F/A, _, 'settings: the node''s configuration') :-
+    memberchk(F/A, [setting/2, setting/4, current_setting/1, set_setting/2]).
+refused(prolog:translate_bindings/5, _, 'toplevel internals').
 
 tabling(abolish_all_tables/0).
 tabling('$wrap_tabled'/2).

@@ -9,6 +9,14 @@
 :- use_module('../../platform_pl/sandbox_policy').
 :- use_module('../../platform_pl/platform_errors').
 :- use_module(library(plunit)).
+:- use_module('../../platform_pl/agents/dfrl_agent').
+:- use_module('../../platform_pl/robot_resources').
+:- use_module(library(time)).
+:- use_module(library(thread)).
+:- use_module(library(aggregate)).
+:- use_module(library(solution_sequences)).
+:- use_module(library(settings)).
+:- use_module(library(arithmetic)).
 
 record(Clauses, agent(a1, h, mobile, [], [], [], Clauses, [])).
 
@@ -108,12 +116,67 @@ test(global_tables_and_records) :-
     refused(flag(dfrl_agent_names, _, 0), _),
     refused(recorda(k, v), _),
     refused(char_conversion(a, b), _).
+test(hooks_and_process_tables) :-
+    refused(at_halt(true), at_halt(_)),
+    refused('$'(true), '$'(_)),
+    refused(consult(foo), _),
+    refused(op(700, xfx, ===>), _),
+    refused(style_check(-singleton), _),
+    refused(thread_create(true, _, []), _).
+test(hook_clause_heads) :-
+    record([ (h(a1, _, main) :- true), (user:exception(_, _, _) :- true) ], R1),
+    catch(check_agent_record(R1), error(permission_error(install, code, C1), _), true),
+    assertion(C1 = clause_head(_)).
 test(ordinary_code_passes) :-
     accepted(( numlist(1, 10, L), maplist([X, Y]>>(Y is X * 2), L, L2),
                sum_list(L2, _), msort(L2, _), nth0(1, L2, _), max_list(L2, _),
                aggregate_all(count, member(_, L2), _),
                split_string("a,b", ",", "", P), atomic_list_concat(P, '-', _),
                term_to_atom(f(_), _), forall(between(1, 3, I), I > 0) )).
+
+%   Every meta-predicate of every module loaded here (the platform, the
+%   dFRL agent, the libraries a node loads), with shell(ls) in each of
+%   its goal arguments, is refused: a predicate that runs or keeps a
+%   goal without the sandbox seeing the call (as $/1 and at_halt/1 did)
+%   shows up here. The exceptions take a clause of the agent's own
+%   module, not a goal.
+test(every_meta_predicate_checks_its_goals) :-
+    findall(M:G, meta_goal_with_shell(M, G), Goals),
+    length(Goals, N),
+    assertion(N > 100),
+    include(accepted_goal, Goals, Accepted),
+    assertion(Accepted == []).
+
+meta_goal_with_shell(M, G) :-
+    current_module(M),
+    M \== code_safety_scratch,
+    current_predicate(M:Name/A), A > 0, A < 8,
+    functor(G, Name, A),
+    \+ predicate_property(M:G, imported_from(_)),
+    predicate_property(M:G, meta_predicate(Spec)),
+    \+ clause_not_goal(Name/A),
+    Spec =.. [_|Args],
+    G =.. [_|Vs],
+    shell_args(Args, Vs, Filled),
+    Filled == true.
+
+clause_not_goal(PI) :-
+    memberchk(PI, [assert/1, asserta/1, assertz/1, retract/1, retractall/1,
+                   clause/2, current_op/3]).
+
+shell_args([], [], _).
+shell_args([S|Ss], [V|Vs], Filled) :-
+    (   integer(S)
+    ->  length(Extra, S), V =.. [shell, ls|Extra], Filled = true
+    ;   memberchk(S, [^, //])
+    ->  V = shell(ls), Filled = true
+    ;   true
+    ),
+    shell_args(Ss, Vs, Filled).
+
+accepted_goal(M:G) :-
+    record([(h(a1, _, main) :- M:G)], R),
+    catch(( check_agent_record(R), true ), _, fail).
 
 :- end_tests(side_doors).
 
@@ -138,6 +201,11 @@ test(libraries) :-
     check_program_text(t, ":- use_module(library(lists)).\n:- use_module(library(apply)).\n").
 test(quasi_quotation) :-
     program_refused("x({|string(X)||abc|}).\n", quasi_quotation(_)).
+test(table_and_hooks) :-
+    program_refused(":- table fib/2.\nfib(0, 0).\n", directive(_)),
+    program_refused("user:exception(_, _, _) :- true.\n", clause_head(_)),
+    program_refused("term_expansion(_, _) :- true.\n", clause_head(_)),
+    program_refused(":- if(true).\nx.\n:- endif.\n", directive(_)).
 test(flag_directive) :-
     program_refused(":- set_prolog_flag(double_quotes, atom).\n", directive(_)).
 
