@@ -43,6 +43,9 @@ ESCAPES = {
     "other_payload": ("agent_property(_, sitter, payload(P)), assertz(loot(guid, P)), "
                       "shell('touch {m}')", "agent_property"),
     "catch_the_stop": ("catch(shell('touch {m}'), _, true)", "catch("),
+    "dollar_call": ("'$'(shell('touch {m}'))", "$shell("),
+    "at_halt": ("at_halt(shell('touch {m}'))", "at_halt("),
+    "throw_stop": ("X = '$dfrl_purged', throw(X)", "throw("),
 }
 
 
@@ -134,7 +137,8 @@ def test_control_escapes_run_when_trusted(tmp_path: Path, procs: list[Proc]) -> 
     """The same handlers executed at the attacker's own node (trusted local code) create their
     markers: the escapes are live, and the refusals above are what kept them from running."""
     markers = {n: tmp_path / f"marker_{n}" for n in ESCAPES if n in
-               ("attr_hook", "attr_hook_findall", "message_goal", "format_portray_goal")}
+               ("attr_hook", "attr_hook_findall", "message_goal", "format_portray_goal",
+                        "dollar_call")}
     clauses = "\n".join(f"{n}(guid, _, main) :- {ESCAPES[n][0].format(m=markers[n])}."
                         for n in markers)
     prog = f"""
