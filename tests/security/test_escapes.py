@@ -47,6 +47,24 @@ ESCAPES = {
     "at_halt": ("at_halt(shell('touch {m}'))", "at_halt("),
     "throw_stop": ("X = '$dfrl_purged', throw(X)", "throw("),
 }
+# one more of every family the sandbox refuses (code_safety.pl's table); each also runs the marker
+FAMILIES = {
+    "coroutine": ("freeze(V, shell('touch {m}')), V = 1", "freeze("),
+    "message_text": ("message_to_string(format(\"~@\", [shell('touch {m}')]), _)",
+                     "message_to_string("),
+    "occurs_check": ("set_prolog_flag(occurs_check, error), shell('touch {m}')", "set_prolog_flag("),
+    "environment": ("getenv('DFRL_TOKEN', T), assertz(loot(guid, T)), shell('touch {m}')",
+                    "getenv("),
+    "global_variable": ("nb_getval(k, _), shell('touch {m}')", "nb_getval("),
+    "process_table": ("flag(dfrl_agent_names, _, 0), shell('touch {m}')", "flag("),
+    "operator": ("op(700, xfx, ===>), shell('touch {m}')", "op("),
+    "tabling": ("abolish_all_tables, shell('touch {m}')", "abolish_all_tables"),
+    "loading": ("use_module(library(apply_macros)), shell('touch {m}')", "use_module("),
+    "cleanup": ("setup_call_cleanup(true, true, shell('touch {m}'))", "setup_call_cleanup("),
+    "abort": ("abort, shell('touch {m}')", "abort"),
+    "clause_scan": ("clause(H, _), assertz(loot(guid, H)), shell('touch {m}')", "clause("),
+}
+ESCAPES.update(FAMILIES)
 
 
 def _prolog_atom(text: str) -> str:
