@@ -47,8 +47,10 @@ class NodeConfig:
     mode : Mode
     rtf : float or None
         Real-time factor: 1.0 = one iteration per 64 ms of wall time; None or 0 = flat out.
-    token : int
-        Platform token agents must carry.
+    token : int, str or None
+        Platform token agents must carry. None (the default, and always in the file the
+        launcher writes: :meth:`public_dict`): the process reads it from its environment
+        (``DFRL_TOKEN``, :mod:`dfrl.experiments.tokens`).
     trainer : dict
         Extra :class:`dfrl.robots.training.TrainerConfig` fields (``learner``,
         ``discretisation``, ...).
@@ -78,7 +80,7 @@ class NodeConfig:
     respite: int = 500
     mode: Mode = Mode.ASYNC
     rtf: float | None = None
-    token: int = 1111
+    token: int | str | None = None
     trainer: dict[str, Any] = field(default_factory=dict)
     grace_s: float = 10.0
     sync_timeout_s: float = 300.0
@@ -97,8 +99,12 @@ class NodeConfig:
         object.__setattr__(self, "mode", Mode(self.mode))
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict."""
+        """JSON-ready dict (the token included: :meth:`public_dict` for files)."""
         return config_to_dict(self)
+
+    def public_dict(self) -> dict[str, Any]:
+        """:meth:`to_dict` without the token: what a results file or a peer may see."""
+        return _without_token(config_to_dict(self))
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "NodeConfig":
@@ -113,6 +119,11 @@ class NodeConfig:
         base.update(self.trainer)
         base.update(arena=self.arena, algo=self.algo, seed=self.seed, iterations=self.iterations)
         return TrainerConfig.from_dict(base)
+
+
+def _without_token(data: dict[str, Any]) -> dict[str, Any]:
+    data.pop("token", None)
+    return data
 
 
 def boundaries(iterations: int, respite: int) -> list[int]:
@@ -214,7 +225,13 @@ class ExperimentConfig:
     rest_s : float or None
         Async only: seconds the agent rests at its first stop between rounds. None: the
         expected wall time of one respite.
-    token : int
+    token : int, str or None
+        The platform token of the run's nodes: an integer >= 0 or a string without white
+        space. None (the default): ``dfrl run`` makes a strong random one for each run
+        (``dfrl_`` and 64 hex digits, :func:`dfrl.experiments.cli.secret.new_secret`). It is
+        never written to ``config.json`` (:meth:`public_dict`); the run keeps it in
+        ``secret.token`` (mode 0600). A weak token (``1111``) serves on loopback only; robots
+        on other hosts need the strong token their ``dfrl robot`` was started with.
     trainer : dict
         Extra :class:`dfrl.robots.training.TrainerConfig` fields shared by all robots.
     joins : tuple of JoinSpec
@@ -252,7 +269,7 @@ class ExperimentConfig:
     method: str = "average"
     methods: dict[str, str] = field(default_factory=dict)
     rest_s: float | None = None
-    token: int = 1111
+    token: int | str | None = None
     trainer: dict[str, Any] = field(default_factory=dict)
     joins: tuple[JoinSpec, ...] = ()
     timeout_s: float = 3600.0
@@ -334,7 +351,12 @@ class ExperimentConfig:
 
     # -- (de)serialisation ---------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (the token included: :meth:`public_dict` for files)."""
         return config_to_dict(self)
+
+    def public_dict(self) -> dict[str, Any]:
+        """:meth:`to_dict` without the token: what ``config.json`` of a results folder holds."""
+        return _without_token(config_to_dict(self))
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], resources: bool = False) -> "ExperimentConfig":

@@ -45,7 +45,9 @@ class ConfigError(ValueError):
 class Rule:
     """What one key may hold: ``kind`` (``int``, ``float``, ``str``, ``bool``, ``dict``,
     ``list``), ``None`` allowed when ``nullable``, inclusive bounds ``low``/``high`` (``above``:
-    strictly greater), ``choices`` (a function returning the known values) named ``what``."""
+    strictly greater), ``choices`` (a function returning the known values) named ``what``;
+    ``check`` (a function returning a problem or None) replaces the kind and bounds (a value of
+    more than one kind, such as a token)."""
 
     kind: type
     nullable: bool = False
@@ -55,6 +57,7 @@ class Rule:
     choices: Callable[[], Sequence[str]] | None = None
     what: str = "value"
     hint: str = ""
+    check: Callable[[Any], str | None] | None = None
 
 
 def _type_name(value: Any) -> str:
@@ -71,6 +74,9 @@ def check_value(path: str, value: Any, rule: Rule) -> list[str]:
     """Problems of ``value`` at ``path`` against ``rule`` (empty: fine)."""
     if value is None:
         return [] if rule.nullable else [f"{path}: must not be null"]
+    if rule.check is not None:
+        why = rule.check(value)
+        return [] if why is None else [f"{path}: {why}"]
     ok = (isinstance(value, bool) if rule.kind is bool else
           isinstance(value, (int, float)) and not isinstance(value, bool) if rule.kind is float
           else isinstance(value, int) and not isinstance(value, bool) if rule.kind is int
@@ -139,6 +145,14 @@ def _methods() -> list[str]:
     return list(BUILTIN_METHODS)
 
 
+def _token_problem(value: Any) -> str | None:
+    from dfrl.experiments.tokens import token_problem
+
+    why = token_problem(value)
+    return None if why is None else f"not a token: {why} (an integer >= 0 or a string " \
+        "without white space; dfrl secret prints a strong one)"
+
+
 ROBOT_RULES: dict[str, Rule] = {
     "id": Rule(str), "arena": Rule(str),
     "algo": Rule(str, choices=known_algorithms, what="algorithm"),
@@ -157,7 +171,8 @@ EXPERIMENT_RULES: dict[str, Rule] = {
     "rtf": Rule(float, nullable=True, above=0, hint=_FLAT_OUT),
     "method": Rule(str, choices=_methods, what="method", hint=_METHOD_HINT),
     "methods": Rule(dict), "rest_s": Rule(float, nullable=True, low=0),
-    "token": Rule(int, low=0), "trainer": Rule(dict), "joins": Rule(list),
+    "token": Rule(object, nullable=True, check=_token_problem), "trainer": Rule(dict),
+    "joins": Rule(list),
     "timeout_s": Rule(float, above=0), "title": Rule(str), "console": Rule(str, nullable=True),
     "tolerate_lost_robots": Rule(int, low=0), "tolerate_missing_rounds": Rule(int, low=0),
     "tolerate_method_errors": Rule(int, low=0),
@@ -170,7 +185,8 @@ NODE_RULES: dict[str, Rule] = {
     "seed": Rule(int, low=0), "iterations": Rule(int, low=0), "respite": Rule(int, low=1),
     "mode": Rule(str, choices=_modes, what="mode"),
     "rtf": Rule(float, nullable=True, low=0, hint="null or 0 means flat out"),
-    "token": Rule(int, low=0), "trainer": Rule(dict), "grace_s": Rule(float, low=0),
+    "token": Rule(object, nullable=True, check=_token_problem), "trainer": Rule(dict),
+    "grace_s": Rule(float, low=0),
     "sync_timeout_s": Rule(float, above=0), "progress_every": Rule(int, low=0),
     "events": Rule(bool), "bench_table": Rule(list, nullable=True), "host": Rule(str),
     "tls": Rule(str, nullable=True),

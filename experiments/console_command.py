@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import shutil
-from collections.abc import Sequence
 from pathlib import Path
 
 from dfrl.experiments.errors import ExperimentError
@@ -15,10 +14,12 @@ CONSOLE_SCRIPT: Path = AGENTS_DIR / "dfrl_console.pl"
 """The Prolog program a console node runs."""
 
 
-def console_command(host: str, port: int, tokens: Sequence[int | str],
-                    tls: str | os.PathLike[str] | None = None,
+def console_command(host: str, port: int, tls: str | os.PathLike[str] | None = None,
                     swipl: str | None = None) -> list[str]:
-    """The argv of a console node bound to ``host:port`` (0: the OS chooses) with ``tokens``.
+    """The argv of a console node bound to ``host:port`` (0: the OS chooses). It holds no
+    token: the node reads its tokens from ``DFRL_TOKEN`` in its environment
+    (:func:`dfrl.experiments.tokens.env_with_tokens`), as ``ps`` shows every argv to every
+    user.
 
     Parameters
     ----------
@@ -40,8 +41,6 @@ def console_command(host: str, port: int, tokens: Sequence[int | str],
     if exe is None:
         raise ExperimentError("swipl is not installed (run scripts/setup.sh)")
     cmd = [exe, "-q", str(CONSOLE_SCRIPT), "--host", host, "--port", str(int(port))]
-    for tok in tokens:
-        cmd += ["--token", str(tok)]
     if tls is not None:
         from dfrl.experiments.certs import check_node_dir
 

@@ -36,6 +36,7 @@ from typing import IO, Any
 
 from dfrl.experiments.console_command import CONSOLE_SCRIPT, console_command
 from dfrl.experiments.errors import ExperimentError
+from dfrl.experiments.tokens import env_with_tokens
 
 __all__ = ["Address", "CONSOLE_SCRIPT", "ConsoleNode"]
 
@@ -51,7 +52,9 @@ class ConsoleNode:
     Parameters
     ----------
     tokens : int, str, sequence of them, or None
-        The node's tokens (it proves them when loading programs into other nodes).
+        The node's tokens (it proves them when loading programs into other nodes), handed to
+        the process in its environment (``DFRL_TOKEN``), never on its command line. None: an
+        open node (it warns on loopback and refuses to start elsewhere).
     host : str
         Address to bind; also the host others reach it at.
     port : int
@@ -81,7 +84,8 @@ class ConsoleNode:
             tokens = []
         elif isinstance(tokens, (int, str)):
             tokens = [tokens]
-        cmd = console_command(host, port, tokens, tls, swipl)
+        cmd = console_command(host, port, tls, swipl)
+        env = env_with_tokens(tokens)   # never on the command line, which ps shows to all
         self._ids = itertools.count(1)
         self._cond = threading.Condition()
         self._replies: dict[Any, dict[str, Any]] = {}
@@ -94,7 +98,7 @@ class ConsoleNode:
         self._log: IO[str] | None = open(log_path, "a", encoding="utf-8") if log_path else None
         self._proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                       stderr=subprocess.PIPE, text=True, encoding="utf-8",
-                                      bufsize=1)
+                                      bufsize=1, env=env)
         self._reader = threading.Thread(target=self._read_stdout, daemon=True,
                                         name="console-stdout")
         self._err_reader = threading.Thread(target=self._read_stderr, daemon=True,

@@ -1,6 +1,7 @@
 /*  Run one platform node as a program:
 
-        swipl platform_pl/node_main.pl [--host H] [--port P] [--token T]...
+        DFRL_TOKEN=T swipl platform_pl/node_main.pl [--host H] [--port P]
+                                       [--token-file FILE]... [--token T]...
                                        [--advertise HOST[:PORT]] [--store DIR]
                                        [--insecure] [--tls DIR]
                                        [--tls-peer NAME]... [--trust NAME]...
@@ -10,11 +11,19 @@
     listening on A:P" with the address it advertises (--advertise, default
     H, or the host name for 0.0.0.0) once it listens, then serves until
     killed (or, with --interactive, until the toplevel ends). --store DIR
-    keeps the node's id (and custody state) in DIR. Numeric tokens are read
-    as integers, as Tartarus tokens are. Off loopback, a node with a token
-    under 128 bits of entropy (or none) does not start unless --insecure
-    is given (`dfrl secret` prints a strong token); on loopback such a
-    token is accepted with a warning. --tls DIR (a node's ca.crt,
+    keeps the node's id (and custody state) in DIR.
+
+    The node's tokens come from the environment variable DFRL_TOKEN, which
+    is deleted from the environment once read (so that processes the node
+    starts do not inherit it), and from each --token-file FILE (keep it
+    mode 600); both hold one token per line (secrets.pl, take_env_tokens/1).
+    --token T still works but puts T where every user of the host sees it
+    (ps), so it prints a warning. Digit-only tokens are integers, as
+    Tartarus tokens are. Off loopback, a node with a token under 128 bits
+    of entropy (or none) does not start unless --insecure is given (`dfrl
+    secret` prints a strong token); on loopback such a token is accepted
+    with a warning, and a node without a token (open: any local user may
+    send it agents and code) starts with a warning. --tls DIR (a node's ca.crt,
     node.crt, node.key from `dfrl certs node`) makes every connection
     mutual TLS, and then any token is accepted anywhere; --tls-peer NAME
     (repeatable) lets only peers whose certificate names NAME send agents
@@ -24,20 +33,32 @@
     reported on stderr and exits with status 2; a node that cannot start
     (address taken, weak token) prints why and exits with status 1.
 
-    The arguments are parsed here, not with library(optparse): --token and
-    --consult may be repeated, and optparse keeps only the last occurrence
-    of a flag.
+    The arguments are parsed here, not with library(optparse): --token,
+    --token-file and --consult may be repeated, and optparse keeps only
+    the last occurrence of a flag.
 */
 :- use_module(tartarus).
+:- use_module(secrets, [take_env_tokens/1, read_token_file/2, token_text_term/2]).
 :- use_module(library(main)).
 
 :- initialization(main, main).
 
 main(Argv) :-
+    take_env_tokens(EnvTokens),         % first: no child inherits DFRL_TOKEN
     catch(parse_args(Argv, Options), error(usage(Why), _), usage(Why)),
     option_value(host, Options, localhost, Host),
     option_value(port, Options, 0, Port),
-    findall(T, member(token(T), Options), Tokens),
+    findall(T, member(token(T), Options), ArgTokens),
+    (   ArgTokens == []
+    ->  true
+    ;   print_message(warning, dfrl(token_on_command_line))
+    ),
+    findall(F, member(token_file(F), Options), TokenFiles),
+    catch(maplist(read_token_file, TokenFiles, FileTokens), E0,
+          ( print_message(error, E0), halt(1) )),
+    append([ArgTokens|FileTokens], Tokens0),
+    append(Tokens0, EnvTokens, Tokens1),
+    list_to_set(Tokens1, Tokens),
     findall(F, member(consult(F), Options), Files),
     findall(N, member(tls_peer(N), Options), Peers),
     findall(N, member(trust(N), Options), Trusted),
@@ -87,7 +108,8 @@ warn_weak_tokens(Tokens) :-
 usage(Why) :-
     format(user_error, "~w~n", [Why]),
     format(user_error,
-           "usage: swipl node_main.pl [--host H] [--port P] [--token T]... \c
+           "usage: swipl node_main.pl [--host H] [--port P] \c
+            [--token-file FILE]... [--token T]... \c
             [--advertise HOST[:PORT]] [--store DIR] [--insecure] \c
             [--tls DIR] [--tls-peer NAME]... [--trust NAME]... \c
             [--consult FILE]... [--interactive]~n", []),
@@ -115,6 +137,7 @@ parse_args([Flag|Argv0], [Option|Options]) :-
 flag_arg('--host', host, atom).
 flag_arg('--port', port, integer).
 flag_arg('--token', token, token).
+flag_arg('--token-file', token_file, atom).
 flag_arg('--consult', consult, atom).
 flag_arg('--advertise', advertise, address).
 flag_arg('--store', store, atom).
@@ -144,7 +167,7 @@ typed_value(address, Flag, V0, V) :-
     ;   true
     ).
 typed_value(token, _, V0, V) :-
-    (   atom_number(V0, V) -> true ; V = V0 ).
+    token_text_term(V0, V).
 
 usage_error(Format, Args) :-
     format(string(Why), Format, Args),

@@ -1,11 +1,18 @@
 :- module(secrets,
           [ check_secrets/3,            % +Host:Port, +Tokens, +Options
             token_entropy_bits/2,       % +Token, -Bits
-            loopback_host/1             % +Host
+            loopback_host/1,            % +Host
+            take_env_tokens/1,          % -Tokens
+            read_token_file/2,          % +File, -Tokens
+            text_tokens/2,              % +Text, -Tokens
+            token_text_term/2           % +Text, -Token
           ]).
 :- autoload(library(option), [option/2]).
 :- autoload(library(lists), [member/2]).
 :- autoload(library(aggregate), [aggregate_all/3]).
+:- autoload(library(error), [must_be/2, domain_error/2]).
+:- autoload(library(readutil), [read_file_to_string/3]).
+:- autoload(library(apply), [convlist/3]).
 
 /** <module> Secrets strong enough for the network a node listens on
 
@@ -14,6 +21,17 @@ TLS its peers' proofs (HMACs of a nonce) cross the network in the clear,
 and a weak token falls to an offline search of one captured handshake.
 check_secrets/3 is the rule node_start/3 applies; token_entropy_bits/2
 its estimate of a token's strength.
+
+Tokens never travel on a command line, which `ps` shows to every user
+of the host. A program such as node_main.pl or dfrl_console.pl gets
+them in the environment variable `DFRL_TOKEN` (take_env_tokens/1 reads
+it and deletes it, so that the program's own children do not inherit
+it) or in a file readable by its owner only (`--token-file FILE`,
+read_token_file/2). Both hold the token format: one token per line,
+surrounding white space and blank lines ignored, a line of ASCII digits
+an integer token (as Tartarus tokens are), any other line an atom
+(text_tokens/2). The Python side writes and reads the same format
+(`experiments/tokens.py`).
 */
 
 %!  check_secrets(+Address, +Tokens, +Options) is det.
@@ -23,7 +41,9 @@ its estimate of a token's strength.
 %   has under 128 bits of entropy (token_entropy_bits/2; an open node
 %   has 0) and Options (those of node_start/3) hold neither tls(Dir) nor
 %   insecure(true). On loopback a weak token is accepted with an
-%   informational message, with insecure(true) with a warning.
+%   informational message, no token at all (an open node, which accepts
+%   any agent and any code from any local user) with a warning; off
+%   loopback, with insecure(true), either with a warning.
 %
 %   @error permission_error(listen, address, Address), with context
 %   weak_secret(Bits, 128).
@@ -39,7 +59,7 @@ check_secrets(Host:Port, Tokens, Options) :-
     ->  true
     ;   loopback_host(Host)
     ->  (   Tokens == []
-        ->  true
+        ->  print_message(warning, dfrl(open_node(Host:Port)))
         ;   print_message(informational, dfrl(weak_token(Host:Port, Bits)))
         )
     ;   option(insecure(true), Options)
@@ -105,4 +125,62 @@ loopback_host(H) :-
     ;   A == '::1'
     ->  true
     ;   sub_atom(A, 0, _, _, '127.')
+    ).
+
+
+%!  take_env_tokens(-Tokens) is det.
+%
+%   Tokens are those of the environment variable `DFRL_TOKEN` (text_tokens/2;
+%   [] if it is not set), which is then deleted from the environment of
+%   this process, so that the processes it starts do not inherit it.
+
+take_env_tokens(Tokens) :-
+    (   getenv('DFRL_TOKEN', Text)
+    ->  unsetenv('DFRL_TOKEN'),
+        text_tokens(Text, Tokens)
+    ;   Tokens = []
+    ).
+
+%!  read_token_file(+File, -Tokens) is det.
+%
+%   Tokens are those of File, in the token format (text_tokens/2). Keep
+%   the file readable by its owner only (`chmod 600`): `dfrl node` and
+%   `dfrl robot` refuse one that other users may read.
+%
+%   @error existence_error(source_sink, File) if it cannot be read.
+%   @error domain_error(token_file, File) if it holds no token.
+
+read_token_file(File, Tokens) :-
+    must_be(atomic, File),
+    read_file_to_string(File, Text, [encoding(utf8)]),
+    text_tokens(Text, Tokens),
+    (   Tokens == []
+    ->  domain_error(token_file, File)
+    ;   true
+    ).
+
+%!  text_tokens(+Text, -Tokens) is det.
+%
+%   Tokens of Text, one per line (token_text_term/2), blank lines
+%   skipped.
+
+text_tokens(Text, Tokens) :-
+    split_string(Text, "\n", " \t\r", Lines),
+    convlist(line_token, Lines, Tokens).
+
+line_token(Line, Token) :-
+    Line \== "",
+    token_text_term(Line, Token).
+
+%!  token_text_term(+Text, -Token) is det.
+%
+%   Token is the token Text stands for: an integer if Text is ASCII
+%   digits only, else the atom Text.
+
+token_text_term(Text, Token) :-
+    atom_codes(Text, Codes),
+    (   Codes \== [],
+        forall(member(C, Codes), between(0'0, 0'9, C))
+    ->  number_codes(Token, Codes)
+    ;   atom_codes(Token, Codes)
     ).

@@ -15,6 +15,7 @@ from typing import Any
 
 from dfrl.experiments.config import ConfigError, ExperimentConfig, Mode, resolve_config
 from dfrl.experiments.errors import ExperimentError
+from dfrl.experiments.tokens import TokenError, pop_env_tokens, read_token_file
 from dfrl.experiments.results.files import claim_output, new_run_folder
 from dfrl.experiments.results.summary import Results
 
@@ -70,6 +71,30 @@ def add_tls_argument(p: argparse.ArgumentParser) -> None:
                         "processes); remote robots (\"node\": \"HOST:PORT\") must run "
                         "'dfrl robot --tls' with a certificate of the same CA "
                         "(default: none, plaintext)")
+
+
+def add_token_file_argument(p: argparse.ArgumentParser) -> None:
+    """``--token-file FILE``: the run's token, instead of the config's or a random one."""
+    p.add_argument("--token-file", type=Path, default=None, metavar="FILE",
+                   help="the run's platform token, from FILE (mode 600; 'dfrl secret --out "
+                        "FILE' makes one), e.g. the token the remote robots were started with; "
+                        "or set DFRL_TOKEN (default: the config's token, else a random token "
+                        "of 256 bits). The run keeps it in secret.token (mode 600) of its "
+                        "results folder, for dfrl join and dfrl inject")
+
+
+def run_token(cfg: ExperimentConfig, args: argparse.Namespace) -> ExperimentConfig:
+    """``cfg`` with the token of ``--token-file``, else of ``DFRL_TOKEN`` (taken out of this
+    process's environment), else its own.
+
+    Raises
+    ------
+    TokenError
+        The file cannot be read, other users may read it, or it holds no token.
+    """
+    path = getattr(args, "token_file", None)
+    tokens = read_token_file(path) if path is not None else pop_env_tokens()
+    return cfg.replace(token=tokens[0]) if tokens else cfg
 
 
 def overrides_of(args: argparse.Namespace) -> dict[str, Any]:
@@ -132,6 +157,11 @@ def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
     from dfrl.experiments.launcher import run
 
     tls = getattr(args, "tls", None)
+    try:
+        cfg = run_token(cfg, args)
+    except TokenError as exc:
+        print(f"{prog}: --token-file: {exc}; nothing was started", file=sys.stderr)
+        return 2
     try:
         cfg.check()
         if tls is not None:
@@ -287,6 +317,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                            "federation completed, 2 on a bad option")
     add_output_arguments(p, "demo")
     add_tls_argument(p)
+    add_token_file_argument(p)
     add_override_arguments(p)
     p.set_defaults(func=cmd_demo)
 
@@ -296,6 +327,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("config", help="experiment config: a JSON file or a name in experiments/configs")
     add_output_arguments(p, "NAME")
     add_tls_argument(p)
+    add_token_file_argument(p)
     add_override_arguments(p)
     p.set_defaults(func=cmd_run)
 

@@ -6,13 +6,14 @@ import os
 import shutil
 import sys
 
+from dfrl.experiments.tokens import (TOKEN_ENV, Token, env_with_tokens, parse_tokens,
+                                     pop_env_tokens, read_token_file)
 from dfrl.platform_pl import PLATFORM_DIR
 
 
 def node_command(
     host: str = "localhost",
     port: int = 0,
-    tokens: list[str] | None = None,
     consult: list[str] | None = None,
     interactive: bool = False,
     advertise: str | None = None,
@@ -22,14 +23,14 @@ def node_command(
     tls_peers: list[str] | None = None,
     trust: list[str] | None = None,
 ) -> list[str]:
-    """The ``swipl`` command line that runs one node.
+    """The ``swipl`` command line that runs one node. It holds no token: run it with the
+    node's tokens in the environment (:func:`dfrl.experiments.tokens.env_with_tokens`; none:
+    an open node, which warns on loopback and does not start elsewhere).
 
     Parameters
     ----------
     host, port
         Address to listen on (port 0: the OS chooses; the node prints it).
-    tokens
-        Tokens an arriving agent must carry (none: an open node).
     consult
         Agent programs to load before serving.
     interactive
@@ -65,8 +66,6 @@ def node_command(
     if swipl is None:
         raise FileNotFoundError("swipl is not installed (run scripts/setup.sh)")
     cmd = [swipl, "-q", str(PLATFORM_DIR / "node_main.pl"), "--host", host, "--port", str(port)]
-    for token in tokens or []:
-        cmd += ["--token", token]
     for path in consult or []:
         cmd += ["--consult", os.path.abspath(path)]
     if advertise:
@@ -106,15 +105,49 @@ def check_trust_names(names: list[str]) -> None:
                              "'-' and '.', at most 64 characters, as 'dfrl certs node' makes)")
 
 
+def tokens_of_args(args: argparse.Namespace, prog: str) -> list[Token]:
+    """The tokens a ``dfrl node``/``dfrl robot`` command line names: those of ``DFRL_TOKEN``
+    (taken out of this process's environment), of each ``--token-file`` and of each
+    ``--token`` (with a warning on stderr: ``ps`` shows it to every user).
+
+    Raises
+    ------
+    TokenError
+        A token file cannot be read, other users may read it, or holds no token.
+    """
+    tokens: list[Token] = []
+    if args.token:
+        print(f"{prog}: warning: --token puts the token on the command line, where other "
+              "users of this host see it (ps); use --token-file FILE (mode 600) or the "
+              f"environment variable {TOKEN_ENV}", file=sys.stderr)
+        tokens += parse_tokens("\n".join(args.token))
+    for path in args.token_file:
+        tokens += read_token_file(path)
+    tokens += pop_env_tokens()
+    return list(dict.fromkeys(tokens))
+
+
+def add_token_arguments(p: argparse.ArgumentParser, what: str) -> None:
+    """``--token-file FILE`` and ``--token T`` (both repeatable)."""
+    p.add_argument("--token-file", action="append", default=[], metavar="FILE",
+                   help=f"file of {what}, one per line, readable by you only (chmod 600; "
+                        f"'dfrl secret' prints a strong token); or set {TOKEN_ENV} (repeatable)")
+    p.add_argument("--token", action="append", default=[], metavar="T",
+                   help="a token on the command line (repeatable): other users of the host "
+                        "see it (ps), so this warns; prefer --token-file or " + TOKEN_ENV)
+
+
 def _run(args: argparse.Namespace) -> int:
     try:
-        cmd = node_command(args.host, args.port, args.token, args.consult, args.interactive,
+        tokens = tokens_of_args(args, "dfrl node")
+        cmd = node_command(args.host, args.port, args.consult, args.interactive,
                            args.advertise, args.store, args.insecure, args.tls,
                            args.tls_peer, args.trust)
-    except (ValueError, FileNotFoundError) as exc:
+    except (ValueError, FileNotFoundError) as exc:      # TokenError is a ValueError
         print(f"dfrl node: {exc}", file=sys.stderr)
         return 2
-    os.execv(cmd[0], cmd)
+    # the node reads DFRL_TOKEN and deletes it from its environment
+    os.execve(cmd[0], cmd, env_with_tokens(tokens))
     return 0  # not reached
 
 
@@ -123,7 +156,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("node", help="run one platform node (prints its address)")
     p.add_argument("--host", default="localhost", help="address to bind (default localhost)")
     p.add_argument("--port", type=int, default=0, help="port (default 0: the OS chooses)")
-    p.add_argument("--token", action="append", default=[], help="platform token (repeatable)")
+    add_token_arguments(p, "platform tokens an arriving agent or peer must prove (none: an "
+                           "open node, refused off loopback)")
     p.add_argument("--consult", action="append", default=[], metavar="FILE",
                    help="agent program to load (repeatable)")
     p.add_argument("--advertise", default=None, metavar="HOST[:PORT]",

@@ -5,14 +5,16 @@ import argparse
 import sys
 from pathlib import Path
 
-from dfrl.experiments.cli.node import add_trust_argument
+from dfrl.experiments.cli.node import add_token_arguments, add_trust_argument
 from dfrl.pybridge.errors import BridgeError
 
 
 def _run(args: argparse.Namespace) -> int:
     from dfrl.experiments.certs import CertError, check_node_dir
     from dfrl.experiments.cli.node import check_trust_names
-    from dfrl.experiments.robot_node.service import RobotService, parse_token
+    from dfrl.experiments.cli.node import tokens_of_args
+    from dfrl.experiments.robot_node.service import RobotService
+    from dfrl.experiments.tokens import TOKEN_ENV, TokenError
 
     if not 0 <= args.port <= 65535:
         print(f"dfrl robot: port {args.port} is outside 0..65535", file=sys.stderr)
@@ -30,7 +32,16 @@ def _run(args: argparse.Namespace) -> int:
     except CertError as exc:
         print(f"dfrl robot: --tls: {exc}", file=sys.stderr)
         return 2
-    service = RobotService(args.host, args.port, parse_token(args.token), args.advertise,
+    try:
+        tokens = tokens_of_args(args, "dfrl robot")
+    except TokenError as exc:
+        print(f"dfrl robot: {exc}", file=sys.stderr)
+        return 2
+    if not tokens:
+        print(f"dfrl robot: no token: give the experiment's token in {TOKEN_ENV} or "
+              "--token-file FILE ('dfrl secret' prints a strong one)", file=sys.stderr)
+        return 2
+    service = RobotService(args.host, args.port, tokens, args.advertise,
                            Path(args.workdir), insecure=args.insecure, tls=tls,
                            trust=tuple(args.trust))
     service.install_signals()
@@ -52,13 +63,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "robot", help="run a robot process that experiments configure over the platform",
         description="Start a long-lived robot process: an embedded platform node on HOST:PORT "
                     "that prints 'dfrl robot listening on A:P' and waits for experiments "
-                    "(dfrl_robot requests from peers that prove TOKEN). SIGTERM or Ctrl-C "
+                    "(dfrl_robot requests from peers that prove its token, read from "
+                    "DFRL_TOKEN or --token-file). SIGTERM or Ctrl-C "
                     "stops it cleanly.")
     p.add_argument("--host", default="0.0.0.0",
                    help="address to bind (default 0.0.0.0: every interface)")
     p.add_argument("--port", type=int, default=7001, help="port to bind (default 7001)")
-    p.add_argument("--token", required=True,
-                   help="platform token peers and agents must prove (the experiment's token)")
+    add_token_arguments(p, "the platform tokens peers and agents must prove (the "
+                           "experiment's token; one is required)")
     p.add_argument("--advertise", default=None, metavar="HOST",
                    help="host name or address others reach this robot at "
                         "(default: the bound host; 0.0.0.0 becomes this host's name)")

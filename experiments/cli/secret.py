@@ -1,20 +1,16 @@
-"""``dfrl secret``: print a strong platform token (256 random bits)."""
+"""``dfrl secret``: print a strong platform token (256 random bits), or write it to a new
+token file of mode 0600 (``--out FILE``, for ``--token-file``)."""
 from __future__ import annotations
 
 import argparse
 import secrets
+import sys
+from pathlib import Path
 
-PREFIX = "dfrl_"
+from dfrl.experiments.tokens import SECRET_PREFIX, new_secret, write_secret_file
 
-
-def new_secret() -> str:
-    """A token of 256 random bits: ``dfrl_`` and 64 hex digits (an atom Prolog writes unquoted,
-    so its canonical text, the key of the token proof, is the token itself).
-
-    The prefix keeps ``dfrl node``/``dfrl robot`` from reading it as a number (they read
-    digit-only tokens as integers, as Tartarus does).
-    """
-    return PREFIX + secrets.token_hex(32)
+PREFIX = SECRET_PREFIX
+__all__ = ["new_integer_secret", "new_secret", "register"]
 
 
 def new_integer_secret() -> int:
@@ -24,17 +20,30 @@ def new_integer_secret() -> int:
 
 
 def secret_main(args: argparse.Namespace) -> int:
-    print(new_integer_secret() if args.integer else new_secret())
+    token = new_integer_secret() if args.integer else new_secret()
+    if args.out is None:
+        print(token)
+        return 0
+    if args.out.exists():
+        print(f"dfrl secret: {args.out} exists; not replacing it", file=sys.stderr)
+        return 2
+    write_secret_file(args.out, [token])
+    print(f"dfrl secret: a new token in {args.out} (mode 600): give it to dfrl robot, dfrl "
+          "node and dfrl run with --token-file", file=sys.stderr)
     return 0
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "secret", help="print a strong platform token",
-        description="Print a token with 256 bits of entropy, for --token on nodes reachable "
+        description="Print a token with 256 bits of entropy, for the token file (--token-file) "
+                    "or DFRL_TOKEN of nodes reachable "
                     "from the network (nodes off loopback refuse tokens under 128 bits "
                     "without TLS unless told --insecure).")
     p.add_argument("--integer", action="store_true",
                    help="print an integer of 129 random bits instead (experiment configs take "
                         "integer tokens)")
+    p.add_argument("--out", type=Path, default=None, metavar="FILE",
+                   help="write it to FILE, created with mode 600, instead of printing it "
+                        "(the token file of --token-file; FILE must not exist)")
     p.set_defaults(func=secret_main)

@@ -10,6 +10,7 @@ from typing import Any
 
 from dfrl.experiments.control import ConsoleNode
 from dfrl.experiments.errors import ExperimentError
+from dfrl.experiments.tokens import Token
 
 Address = tuple[str, int]
 
@@ -33,10 +34,11 @@ def swipl_path() -> str:
     return path
 
 
-def open_console(token: int | str, log_path: Path | None = None,
+def open_console(token: Token | Sequence[Token], log_path: Path | None = None,
                  host: str = "127.0.0.1", tls: str | Path | None = None) -> ConsoleNode:
     """Start the console node of an experiment at ``host`` (an address the robots reach; its
-    token lets it load programs into the robot nodes and drive robot services); its stderr
+    token, handed over in its environment, lets it load programs into the robot nodes, drive
+    robot services, and its agents carry it); its stderr
     goes to ``log_path``. With ``tls`` (a node's TLS folder, ``dfrl certs node``) it speaks
     mutual TLS to every node (default: plaintext)."""
     if log_path is not None:
@@ -51,7 +53,7 @@ def launch_agent(console: ConsoleNode, launch: dict[str, Any], timeout_s: float 
     ----------
     launch : dict
         The launch plan (``name``, ``itinerary``, ``method``, ``rounds``, ``rest_s``,
-        ``rounds_log``, ``token``, ``timeout_s``).
+        ``rounds_log``, ``timeout_s``; no ``token``: the agent carries the console's).
 
     Raises
     ------

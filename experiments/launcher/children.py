@@ -14,6 +14,7 @@ import sys
 import threading
 import time
 from collections import deque
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Callable
 
@@ -22,17 +23,20 @@ from dfrl.experiments.config import NodeConfig, RobotSpec
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.results.files import write_json
 from dfrl.experiments.robot_node.lines import Evaluation, Sample, parse_eval, parse_sample
+from dfrl.experiments.tokens import Token, env_with_tokens
 
 #: Called with (robot id, op ``get``/``set``, iteration) for every ``DFRL_EVENT`` line.
 EventHandler = Callable[[str, str, int], None]
 
 
-def child_env() -> dict[str, str]:
-    """Environment of a Python child: unbuffered, importing this process's ``dfrl``."""
+def child_env(tokens: Sequence[Token] = ()) -> dict[str, str]:
+    """Environment of a Python child: unbuffered, importing this process's ``dfrl``, with
+    ``tokens`` in ``DFRL_TOKEN`` (none: no such variable, not even one this process got)."""
     root = str(Path(dfrl.__file__).resolve().parent.parent)
     path = os.environ.get("PYTHONPATH")
-    return dict(os.environ, PYTHONUNBUFFERED="1",
-                PYTHONPATH=root if not path else os.pathsep.join([root, path]))
+    return env_with_tokens(tokens, dict(
+        os.environ, PYTHONUNBUFFERED="1",
+        PYTHONPATH=root if not path else os.pathsep.join([root, path])))
 
 
 class RobotChild:
@@ -42,7 +46,8 @@ class RobotChild:
     ----------
     robot : RobotSpec
     cfg : NodeConfig
-        Written to ``OUT/nodes/<robot>.json`` and handed to the process.
+        Written to ``OUT/nodes/<robot>.json`` without its token, which the process gets in
+        its environment (``DFRL_TOKEN``, :mod:`dfrl.experiments.tokens`), and handed to it.
     out_dir : Path
         Results folder (absolute); stderr goes to ``OUT/logs/<robot>.err``.
     on_event : EventHandler, optional
@@ -53,7 +58,7 @@ class RobotChild:
         self.robot = robot
         self.cfg = cfg
         cfg_path = out_dir / "nodes" / f"{robot.id}.json"
-        write_json(cfg_path, cfg.to_dict())
+        write_json(cfg_path, cfg.public_dict())
         logs = out_dir / "logs"
         logs.mkdir(exist_ok=True)
         self.err_path = logs / f"{robot.id}.err"
@@ -61,7 +66,8 @@ class RobotChild:
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "dfrl.experiments.robot_node", "--config", str(cfg_path)],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._err, cwd=out_dir,
-            env=child_env(), text=True, bufsize=1, start_new_session=True)
+            env=child_env(() if cfg.token is None else [cfg.token]), text=True, bufsize=1,
+            start_new_session=True)
         self.address: tuple[str, int] | None = None
         self.iteration = 0
         self.done = False

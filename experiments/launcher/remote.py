@@ -11,6 +11,7 @@ from dfrl.experiments.launcher.agents import open_console, send_control
 from dfrl.experiments.launcher.remote_robots import route_source
 from dfrl.experiments.results.agent_log import ControlEvent, read_rounds_log
 from dfrl.experiments.results.files import read_json
+from dfrl.experiments.tokens import Token, TokenError, run_tokens
 
 
 def nodes_of(results_dir: str | Path) -> dict[str, Any]:
@@ -25,6 +26,21 @@ def nodes_of(results_dir: str | Path) -> dict[str, Any]:
     if not path.is_file():
         raise ExperimentError(f"{path} not found: is an experiment running there?")
     return read_json(path)
+
+
+def tokens_of(results_dir: str | Path) -> list[Token]:
+    """The tokens of a (running) experiment: its ``secret.token`` (mode 0600; ``nodes.json``
+    holds none), read each time, never copied.
+
+    Raises
+    ------
+    ExperimentError
+        No such file, or one other users may read.
+    """
+    try:
+        return run_tokens(results_dir)
+    except TokenError as exc:
+        raise ExperimentError(str(exc)) from None
 
 
 def driver_tls(results_dir: str | Path, info: dict[str, Any],
@@ -77,7 +93,8 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
     Raises
     ------
     ExperimentError
-        No such program or agent, no usable TLS folder (:func:`driver_tls`), a control
+        No such program or agent, no usable TLS folder (:func:`driver_tls`) or token file
+        (:func:`tokens_of`), a control
         command failed, or an agent ignored the command (the message says why, e.g. the
         method is unknown on its node).
     """
@@ -94,7 +111,7 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
     seen = {a["name"]: len(_controls(_rounds_log(results_dir, a), a["name"], command))
             for a in targets}
     first = targets[0]["itinerary"][0]
-    with open_console(info["token"], host=route_source(first["host"], int(first["port"])),
+    with open_console(tokens_of(results_dir), host=route_source(first["host"], int(first["port"])),
                       tls=tls_dir) as console:
         if info.get("console"):      # the driver gives the program to robots that join later
             console.announce_program(tuple(info["console"]), prog)
@@ -140,7 +157,8 @@ def join_robot(results_dir: str | Path, robot: str, arena: str, algo: str = "qle
     Raises
     ------
     ExperimentError
-        The robot exists already, no usable TLS folder (:func:`driver_tls`), the launcher
+        The robot exists already, no usable TLS folder (:func:`driver_tls`) or token file
+        (:func:`tokens_of`), the launcher
         refused, or no answer came in ``timeout_s``.
     """
     info = nodes_of(results_dir)
@@ -151,7 +169,7 @@ def join_robot(results_dir: str | Path, robot: str, arena: str, algo: str = "qle
     spec = RobotSpec(robot, arena, algo, seed, node)
     tls_dir = driver_tls(results_dir, info, tls)
     driver = tuple(info["console"])
-    with open_console(info["token"], host=route_source(driver[0], int(driver[1])),
+    with open_console(tokens_of(results_dir), host=route_source(driver[0], int(driver[1])),
                       tls=tls_dir) as console:
         return console.request_join(tuple(info["console"]), spec, iterations,
                                     timeout_s=timeout_s)

@@ -214,7 +214,7 @@ class RemoteRobot:
             raise ExperimentError(f"robot node {where} is busy with experiment "
                                   f"{status.get('experiment')!r} (state {status.get('state')})")
         name, arena = arena_payload(self.robot.arena)
-        node = {**self.cfg.to_dict(), "arena": name}
+        node = {**self.cfg.public_dict(), "arena": name}   # the robot has its own token
         self._ask({"configure": json.dumps({"experiment": self.experiment, "node": node,
                                             "arena": arena})})
         self._update(self._ask("status"))

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from dfrl.experiments.certs import check_node_dir
-from dfrl.experiments.config import ExperimentConfig
+from dfrl.experiments.config import ConfigError, ExperimentConfig
 from dfrl.experiments.launcher.children import await_ready
 from dfrl.experiments.launcher.agents import open_console
 from dfrl.experiments.errors import ExperimentError
@@ -28,6 +28,7 @@ from dfrl.experiments.results.evaluations import merge_evaluations
 from dfrl.experiments.results.metrics import merge_metrics
 from dfrl.experiments.results.rounds import read_shares, write_rounds_csv
 from dfrl.experiments.results.summary import Results, write_summary
+from dfrl.experiments.tokens import SECRET_FILE, new_secret, write_secret_file
 
 class Launcher:
     """Runs one experiment; see :func:`run`."""
@@ -48,7 +49,8 @@ class Launcher:
         Raises
         ------
         ConfigError
-            An arena is missing or does not parse (before anything is started).
+            An arena is missing or does not parse, or robots on other hosts but no token
+            (before anything is started).
         CertError
             The TLS folder lacks one of its files (before anything is started).
         FileExistsError
@@ -68,10 +70,18 @@ class Launcher:
         st = self.state
         c = st.config
         c.check()
+        if c.token is None and c.remote_robots():
+            raise ConfigError([f"token: robots on other hosts ({c.remote_robots()[0].node}) "
+                               "prove the token their dfrl robot was started with: name it "
+                               "in the config (without one a run makes a random token)"])
         if st.tls is not None:
             check_node_dir(st.tls)
         claim_output(st.out, self.force)
-        write_json(st.out / "config.json", c.to_dict())
+        if c.token is None:                 # a strong token of this run only
+            c = st.config = c.replace(token=new_secret())
+        # the one file of the folder that holds the token (mode 0600): for dfrl join/inject
+        write_secret_file(st.out / SECRET_FILE, [c.token])
+        write_json(st.out / "config.json", c.public_dict())
         st.t0 = time.monotonic()
         st.experiment_id = f"{c.name}-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
         ok = True
@@ -178,7 +188,10 @@ def run(config: ExperimentConfig, output_dir: str | Path,
         tls: str | Path | None = None) -> Results:
     """Run a federated experiment on loopback and write its results folder.
 
-    Starts one robot node process per robot, waits for their addresses, writes
+    Keeps the run's token (the config's, or a new random one) in ``secret.token`` (mode
+    0600, the only file of the folder that holds it; ``dfrl join`` and ``dfrl inject`` read
+    it) and hands it to every process it starts through its environment, never its command
+    line. Starts one robot node process per robot, waits for their addresses, writes
     ``nodes.json``, launches one dFRL itinerary agent per learning algorithm (the agent of an
     algorithm visits only the robots using it), follows the agents' round logs and the nodes'
     progress lines, starts robots that join during the run, and at the end writes

@@ -59,14 +59,14 @@ def spawn(state: RunState, robot: RobotSpec, iterations: int) -> RobotChild | Re
 
 
 def write_nodes(state: RunState) -> None:
-    """``nodes.json``: the token, the console node (where ``dfrl join`` asks), its TLS folder
-    (null: plaintext), every node that is up and every agent."""
+    """``nodes.json``: the console node (where ``dfrl join`` asks), its TLS folder (null:
+    plaintext), every node that is up and every agent; never the token (``secret.token``)."""
     nodes = [{"robot": rid, "algo": ch.robot.algo, "arena": ch.robot.arena,
               "host": ch.address[0], "port": ch.address[1], "pid": ch.pid,
               "node": ch.robot.node, "joined": rid in state.joined}
              for rid, ch in state.children.items() if ch.address is not None]
     console = list(state.console.address) if state.console is not None else None
-    write_json(state.out / "nodes.json", {"token": state.config.token, "console": console,
+    write_json(state.out / "nodes.json", {"console": console,
                                           "tls": str(state.tls) if state.tls else None,
                                           "experiment": state.experiment_id,
                                           "nodes": nodes,
@@ -127,7 +127,8 @@ def launch_agents(state: RunState) -> None:
         log_path = state.out / f"rounds_{name}.log"
         launch = {"name": name, "itinerary": stops, "method": c.method_for(algo),
                   "rounds": c.rounds, "rest_s": rest_s(state), "rounds_log": str(log_path),
-                  "token": c.token, "timeout_s": float(c.timeout_s),
+                  # no token: the agent carries the console node's (the run's) tokens
+                  "timeout_s": float(c.timeout_s),
                   # the agent posts its round log to the console node, which writes it here:
                   # no shared disk between the hosts the agent visits and the driver's
                   "log_to": list(state.console.address)}

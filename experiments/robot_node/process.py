@@ -11,6 +11,7 @@ from typing import Any, TextIO
 from dfrl.experiments.config import Mode, NodeConfig
 from dfrl.experiments.robot_node.lines import ProtocolLines, StdinWatch
 from dfrl.experiments.robot_node.run import Run
+from dfrl.experiments.tokens import TOKEN_ENV, pop_env_tokens
 
 __all__ = ["RobotProcess", "main", "load_agent_program"]
 
@@ -65,7 +66,7 @@ class RobotProcess:
     def start(self) -> tuple[str, int]:
         """Start the platform node, build the robot (or the benchmark's static table) and
         register it; return the address."""
-        from dfrl.pybridge import RobotNode
+        from dfrl.pybridge import Atom, RobotNode
 
         c = self.config
         self.node = RobotNode()
@@ -73,7 +74,9 @@ class RobotProcess:
         load_agent_program(self.node, f"robot_node {c.robot}")
         self.run_ = Run(c, self.node, self.lines, host=_StdinHost(self.stdin), poll_every=50)
         self.run_.open()
-        options: dict[str, Any] = {"token": int(c.token), "idle_timeout": 5.0}
+        options: dict[str, Any] = {"idle_timeout": 5.0}
+        if c.token is not None:         # none: an open node (node_start/3 warns on loopback)
+            options["tokens"] = [Atom(c.token) if isinstance(c.token, str) else c.token]
         if c.tls is not None:
             options["tls"] = str(Path(c.tls).resolve())
         name = self.node.start(c.host, 0, **options)
@@ -134,13 +137,23 @@ def load_agent_program(node: Any, who: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point: ``python -m dfrl.experiments.robot_node --config NODE.json``."""
+    """Entry point: ``python -m dfrl.experiments.robot_node --config NODE.json``.
+
+    The node's token comes from the environment (``DFRL_TOKEN``, deleted from it once read so
+    that no child inherits it; :mod:`dfrl.experiments.tokens`), or else from the config file;
+    never from the command line.
+    """
     parser = argparse.ArgumentParser(prog="python -m dfrl.experiments.robot_node",
-                                     description="one robot node of a federated experiment")
+                                     description="one robot node of a federated experiment "
+                                                 f"(its token in ${TOKEN_ENV})")
     parser.add_argument("--config", type=Path, required=True, help="node config (JSON)")
     args = parser.parse_args(argv)
+    tokens = pop_env_tokens()
     try:
-        config = NodeConfig.from_dict(json.loads(args.config.read_text(encoding="utf-8")))
+        data = json.loads(args.config.read_text(encoding="utf-8"))
+        if tokens and isinstance(data, dict):
+            data["token"] = tokens[0]
+        config = NodeConfig.from_dict(data)
     except (OSError, ValueError, TypeError) as exc:
         print(f"robot_node: bad config {args.config}: {exc}", file=sys.stderr)
         return 2

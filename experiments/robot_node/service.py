@@ -1,6 +1,7 @@
 """The robot process as a long-lived service: ``dfrl robot`` (contract K5).
 
-``dfrl robot --host H --port P --token T [--advertise A] [--workdir DIR]`` starts one process
+``DFRL_TOKEN=T dfrl robot --host H --port P [--advertise A] [--workdir DIR]`` (or
+``--token-file FILE``) starts one process
 that embeds a platform node bound to H:P, prints ``dfrl robot listening on A:P`` and then
 waits to be configured over the platform. It serves experiments one after another; its
 lifetime does not depend on stdin; SIGTERM and SIGINT stop it cleanly (the current iteration
@@ -30,10 +31,11 @@ from dfrl.experiments.config import Mode, NodeConfig
 from dfrl.experiments.robot_node.lines import ProtocolLines
 from dfrl.experiments.robot_node.process import load_agent_program
 from dfrl.experiments.robot_node.run import Run
+from dfrl.experiments.tokens import Token
 from dfrl.pybridge.serving import RequestError
 from dfrl.pybridge.terms import Atom, Term
 
-__all__ = ["State", "RobotService", "parse_token", "MAX_CHUNK"]
+__all__ = ["State", "RobotService", "MAX_CHUNK"]
 
 #: Largest ``fetch`` chunk (bytes).
 MAX_CHUNK = 1 << 20
@@ -52,12 +54,6 @@ class State(str, Enum):
     FAILED = "failed"
 
 
-def parse_token(text: str) -> int | str:
-    """A command-line token as the platform compares it: digits are an integer (as Tartarus
-    tokens are and as ``dfrl node`` reads them), anything else an atom."""
-    return int(text) if text.isdigit() else text
-
-
 def _config_error(message: str) -> RequestError:
     return RequestError(Term("robot_config_error", message))
 
@@ -73,8 +69,8 @@ class RobotService:
     ----------
     host, port
         Address to bind (``0.0.0.0`` and host names allowed; port 0: the OS chooses).
-    token : int or str
-        The token peers (and arriving agents) must prove.
+    token : int, str or a sequence of them
+        The token(s) peers (and arriving agents) must prove (one at least).
     advertise : str, optional
         Host others reach this node at (default: the bound host; ``0.0.0.0`` becomes the host
         name).
@@ -96,7 +92,8 @@ class RobotService:
         ``trust`` without ``tls``.
     """
 
-    def __init__(self, host: str, port: int, token: int | str, advertise: str | None = None,
+    def __init__(self, host: str, port: int, token: Token | Sequence[Token],
+                 advertise: str | None = None,
                  workdir: Path = Path("dfrl-robot"), out: TextIO = sys.stdout,
                  insecure: bool = False, tls: Path | None = None,
                  trust: Sequence[str] = ()) -> None:
@@ -106,7 +103,9 @@ class RobotService:
         self.trust = tuple(trust)
         self.insecure = insecure
         self.tls = Path(tls).resolve() if tls is not None else None
-        self.token = token
+        self.tokens: list[Token] = [token] if isinstance(token, (int, str)) else list(token)
+        if not self.tokens:
+            raise ValueError("a robot service needs a token")
         self.advertise = advertise
         self.workdir = Path(workdir).resolve()
         self.out = out
@@ -132,7 +131,9 @@ class RobotService:
         self.node.enable_service()
         host, port = self.bind
         adv = self.advertise
-        options: dict[str, Any] = {"token": self.token, "idle_timeout": 30.0}
+        options: dict[str, Any] = {
+            "tokens": [Atom(t) if isinstance(t, str) else t for t in self.tokens],
+            "idle_timeout": 30.0}
         if self.insecure:
             options["insecure"] = True
         if self.tls is not None:
@@ -328,8 +329,9 @@ class RobotService:
         node = dict(node)
         resume = bool(node.pop("resume", data.get("resume", False)))
         node.pop("out_dir", None)
-        if "token" in node and str(node["token"]) != str(self.token):
-            raise _config_error("the experiment's token differs from this robot's --token")
+        # a driver sends no token (the peer proved one); an older one did: it must match
+        if "token" in node and str(node["token"]) not in {str(t) for t in self.tokens}:
+            raise _config_error("the experiment's token differs from this robot's token")
         node.pop("token", None)
         out = self.workdir / experiment
         arena = data.get("arena")
@@ -341,7 +343,7 @@ class RobotService:
             path.write_text(json.dumps(arena), encoding="utf-8")
             node["arena"] = str(path)
         try:
-            config = NodeConfig.from_dict(dict(node, out_dir=str(out), token=self.token))
+            config = NodeConfig.from_dict(dict(node, out_dir=str(out)))
         except (TypeError, ValueError) as exc:
             raise _config_error(str(exc)) from None
         (out / "service").mkdir(parents=True, exist_ok=True)

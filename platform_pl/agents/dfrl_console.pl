@@ -7,25 +7,34 @@
 :- use_module('../tartarus').
 :- use_module(dfrl_agent, [dfrl_create/4]).
 :- use_module('../transport', [transport_request/4]).
+:- use_module('../secrets', [take_env_tokens/1, read_token_file/2,
+                              token_text_term/2]).
 :- use_module(library(http/json),
               [atom_json_dict/3, json_write_dict/3]).
 :- use_module(library(main), [main/0, argv_options/3]).
 :- autoload(library(error), [must_be/2, domain_error/2, type_error/2]).
 :- autoload(library(readutil), [read_line_to_string/2]).
 :- autoload(library(option), [option/2, option/3]).
-:- autoload(library(lists), [append/3, member/2, memberchk/2]).
+:- autoload(library(lists), [append/2, append/3, member/2, memberchk/2,
+                             list_to_set/2]).
 
 /** <module> The console node of an experiment, driven in JSON lines
 
 A long-lived platform node that an experiment driver (a Python process)
 starts once and talks to over stdin and stdout, one JSON object per line:
 
-    swipl -q platform_pl/agents/dfrl_console.pl [--host H] [--port P]
-                                                [--token T]... [--tls DIR]
+    DFRL_TOKEN=T swipl -q platform_pl/agents/dfrl_console.pl
+            [--host H] [--port P] [--token-file FILE]... [--token T]...
+            [--tls DIR]
 
 --host is the address to bind (default 127.0.0.1), --port the port (0,
-the default, lets the OS choose), --token a token of the node (repeat for
-several; numeric tokens are integers, as Tartarus tokens are), --tls the
+the default, lets the OS choose). The node's tokens come from the
+environment variable DFRL_TOKEN (deleted once read, so that no process
+the node starts inherits it) and from --token-file FILE (repeatable),
+both one token per line (secrets:take_env_tokens/1; digit-only tokens
+are integers, as Tartarus tokens are); --token T still works, with a
+warning, as it shows T to every user of the host (ps); the experiment
+driver never uses it. --tls the
 folder of a node certificate (ca.crt, node.crt, node.key; `dfrl certs
 node`): the node then speaks mutual TLS on every connection, in and out
 (node_start/3 option tls(Dir)). The node prints
@@ -96,23 +105,36 @@ Lines on stdout are written under one mutex, whole, and flushed.
 opt_type(host,  host,  atom).
 opt_type(port,  port,  between(0, 65535)).
 opt_type(token, token, atom).
+opt_type(token_file, token_file, file).
 opt_type(tls,   tls,   atom).
 
 opt_help(host,  "Address to bind (default 127.0.0.1)").
 opt_help(port,  "Port to bind (default 0: chosen by the OS)").
-opt_help(token, "A token of this node (repeat for several)").
+opt_help(token, "A token of this node (repeat for several); visible to \c
+                 other users (ps): prefer --token-file or DFRL_TOKEN").
+opt_help(token_file, "File of this node's tokens, one per line (mode 600)").
 opt_help(tls,   "Folder of the node's TLS files (ca.crt, node.crt, node.key): \c
                  mutual TLS on every connection (default: plaintext)").
-opt_help(help(usage), " [--host H] [--port P] [--token T]... [--tls DIR]").
+opt_help(help(usage), " [--host H] [--port P] [--token-file FILE]... \c
+                       [--token T]... [--tls DIR]").
 
 main(Argv) :-
     catch(console(Argv), E, ( print_message(error, E), halt(1) )).
 
 console(Argv) :-
+    take_env_tokens(EnvTokens),         % first: no child inherits DFRL_TOKEN
     argv_options(Argv, _Positional, Options),
     option(host(Host), Options, '127.0.0.1'),
     option(port(Port), Options, 0),
-    findall(T, ( member(token(A), Options), token_term(A, T) ), Tokens),
+    findall(T, ( member(token(A), Options), token_term(A, T) ), ArgTokens),
+    (   ArgTokens == []
+    ->  true
+    ;   print_message(warning, dfrl(token_on_command_line))
+    ),
+    findall(Ts, ( member(token_file(F), Options), read_token_file(F, Ts) ), FileTokens),
+    append([ArgTokens|FileTokens], Tokens0),
+    append(Tokens0, EnvTokens, Tokens1),
+    list_to_set(Tokens1, Tokens),
     set_stream(user_input, encoding(utf8)),
     set_stream(user_output, encoding(utf8)),
     (   Tokens == [] -> TokOpts = [] ; TokOpts = [tokens(Tokens)] ),
@@ -351,7 +373,8 @@ text_atom(X, A) :-
 %       "rounds_log": "/abs/rounds.log",            the agent's JSON-lines log
 %       "log_to": [H, P],                           post its lines to this console,
 %                                                   which appends them to rounds_log
-%       "token": 1111,                              token of the robot nodes
+%       "token": 1111,                              optional: the agent's token
+%                                                   (default: this node's tokens)
 %       "timeout_s": 3600 }                         table read/write limit
 %
 %   Plan is plan(Stops, Rounds, Rest, Log, Timeout) with Stops a list of
@@ -385,10 +408,9 @@ stop_term(D, stop(H, P, R)) :-
     key(port, D, P), must_be(integer, P),
     key(robot, D, R0), text_atom(R0, R).
 
-%   A numeric token is an integer, as Tartarus tokens are.
+%   A digit-only token is an integer, as Tartarus tokens are.
 token_term(T, T) :- number(T), !.
-token_term(T, N) :- atom(T), atom_number(T, N), integer(N), !.
-token_term(T, A) :- text_atom(T, A).
+token_term(T, Token) :- text_atom(T, A), token_text_term(A, Token).
 
 dict_default(D, K, Default, V) :-
     (   get_dict(K, D, V0), V0 \== null -> V = V0 ; V = Default ).

@@ -11,6 +11,8 @@ from __future__ import annotations
 import csv
 import json
 import re
+import shutil
+import stat
 import subprocess
 import sys
 import threading
@@ -77,6 +79,17 @@ def drive_and_check(lab: Lab, drv: Path, config_name: str, cfg: str,
     return out, robots
 
 
+def make_token_file(lab: Lab, drv: Path, blocks: dict[str, tuple[str, str]]) -> Path:
+    """Run the section's token command on the driver's host, in ``drv``; its token file
+    (mode 0600, as every host gets a copy of it)."""
+    cmd = blocks["token"][1].strip()
+    made = lab["driver"].run(argv_of(cmd), cwd=drv, timeout=60, capture_output=True, text=True)
+    assert made.returncode == 0, f"{cmd}: {made.stderr}"
+    path = drv / cmd.split("--out", 1)[1].split()[0]
+    assert stat.S_IMODE(path.stat().st_mode) == 0o600
+    return path
+
+
 def wait_line(proc: subprocess.Popen, pattern: str, timeout_s: float) -> str:
     """The first stdout line of ``proc`` containing ``pattern``, read in a thread (bounded)."""
     found: list[str] = []
@@ -101,7 +114,7 @@ def wait_line(proc: subprocess.Popen, pattern: str, timeout_s: float) -> str:
 
 def test_the_documented_lan_setup_federates_three_hosts(tmp_path: Path) -> None:
     blocks = section_blocks(README.read_text(encoding="utf-8"))
-    assert set(blocks) >= {"robot", "config", "driver"}, "README section markers missing"
+    assert set(blocks) >= {"token", "robot", "config", "driver"}, "README section markers missing"
     robot_cmd = blocks["robot"][1].strip()
     config_name, config_text = blocks["config"]
     driver_cmd = blocks["driver"][1].strip()
@@ -109,17 +122,19 @@ def test_the_documented_lan_setup_federates_three_hosts(tmp_path: Path) -> None:
     t0 = time.monotonic()
     with Lab(ROBOT_HOSTS + ["driver"]) as lab:
         addresses = {f"HOST{i + 1}": lab[h].address for i, h in enumerate(ROBOT_HOSTS)}
+        drv = tmp_path / "driver"
+        drv.mkdir()
+        token_file = make_token_file(lab, drv, blocks)
         for i, h in enumerate(ROBOT_HOSTS):
             cwd = tmp_path / h
             cwd.mkdir()
+            shutil.copy2(token_file, cwd)           # scp -p: mode 0600 kept
             line = robot_cmd.replace("HOSTn", lab[h].address)
             proc = lab[h].popen(argv_of(line), cwd=cwd, stdin=subprocess.DEVNULL,
                                 stdout=subprocess.PIPE, stderr=open(cwd / "robot.err", "w"),
                                 text=True)
             said = wait_line(proc, "dfrl robot listening on", 60)
             assert f"{lab[h].address}:7001" in said, said
-        drv = tmp_path / "driver"
-        drv.mkdir()
         cfg = config_text
         for key, addr in addresses.items():
             cfg = cfg.replace(key, addr)

@@ -22,7 +22,8 @@ from pathlib import Path
 import pytest
 
 from .netns import REPO_ROOT, Lab, leftover_namespaces, unavailable
-from .test_federation_hosts import argv_of, drive_and_check, wait_line
+from .test_federation_hosts import (argv_of, drive_and_check, make_token_file, section_blocks,
+                                    wait_line)
 
 WHY = unavailable() or (None if shutil.which("openssl") else "the openssl command is missing")
 pytestmark = pytest.mark.skipif(WHY is not None, reason=WHY or "")
@@ -74,6 +75,7 @@ def test_the_documented_tls_lan_setup_federates_three_hosts(tmp_path: Path) -> N
     with Lab(ROBOT_HOSTS + ["driver"]) as lab:
         drv = tmp_path / "driver"
         drv.mkdir()
+        token_file = make_token_file(lab, drv, section_blocks(README.read_text(encoding="utf-8")))
         # 1. certificates, made on the driver's host; the HOSTn line once per robot host
         for line in cert_lines:
             targets = [lab[h].address for h in ROBOT_HOSTS] if "HOSTn" in line else [None]
@@ -87,6 +89,7 @@ def test_the_documented_tls_lan_setup_federates_three_hosts(tmp_path: Path) -> N
             (tmp_path / h).mkdir()
             folder = f"tls-{lab[h].address}"
             shutil.copytree(drv / folder, tmp_path / h / folder)
+            shutil.copy2(token_file, tmp_path / h)
         # 2. the robot services
         for h in ROBOT_HOSTS:
             cwd = tmp_path / h

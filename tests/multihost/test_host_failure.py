@@ -12,11 +12,13 @@ from pathlib import Path
 import pytest
 
 from dfrl.experiments.results.agent_log import read_rounds_log
+from dfrl.experiments.tokens import write_secret_file
 
 from .netns import Lab, unavailable
 from .test_federation_hosts import README, argv_of, section_blocks, wait_line
 
 WHY = unavailable()
+TOKEN = 463709187335281729054263357812893156702
 pytestmark = pytest.mark.skipif(WHY is not None, reason=WHY or "")
 
 
@@ -26,12 +28,13 @@ def test_a_killed_robot_host_is_skipped_and_reported(tmp_path: Path) -> None:
         procs = {}
         for h in ("h1", "h2", "h3"):
             (tmp_path / h).mkdir()
+            write_secret_file(tmp_path / h / "dfrl.token", [TOKEN])   # the README's token file
             procs[h] = lab[h].popen(argv_of(robot_cmd.replace("HOSTn", lab[h].address)),
                                     cwd=tmp_path / h, stdin=subprocess.DEVNULL,
                                     stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
             wait_line(procs[h], "dfrl robot listening on", 60)
         cfg = {"name": "fail", "iterations": 600, "respite": 100, "mode": "sync", "rtf": 4.0,
-               "token": 463709187335281729054263357812893156702, "timeout_s": 120,
+               "token": TOKEN, "timeout_s": 120,
                "robots": [{"id": f"r{i}", "arena": a, "node": f"{lab[h].address}:7001"}
                           for i, (h, a) in enumerate(zip(("h1", "h2", "h3"),
                                                          ("r1", "r4", "r2")), 1)]}

@@ -27,10 +27,11 @@ def free_port() -> int:
 class Proc:
     """A subprocess whose output lines are collected by a reader thread."""
 
-    def __init__(self, cmd: list[str], cwd: Path | None = None) -> None:
+    def __init__(self, cmd: list[str], cwd: Path | None = None,
+                 env: dict[str, str] | None = None) -> None:
         self.popen = subprocess.Popen(
             cmd, cwd=cwd, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT, text=True, bufsize=1,
+            stderr=subprocess.STDOUT, text=True, bufsize=1, env=env,
         )
         self.lines: list[str] = []
         self._q: queue.Queue[str] = queue.Queue()
@@ -76,10 +77,12 @@ def procs() -> Iterator[list[Proc]]:
         p.stop()
 
 
-def start_node(procs: list[Proc], *args: str) -> tuple[Proc, int]:
-    """Start ``node_main.pl`` with ``args``; return it and its port."""
+def start_node(procs: list[Proc], *args: str,
+               env: dict[str, str] | None = None) -> tuple[Proc, int]:
+    """Start ``node_main.pl`` with ``args`` (and environment ``env``, e.g. the node's tokens in
+    ``DFRL_TOKEN``: ``dfrl.experiments.tokens.env_with_tokens``); return it and its port."""
     assert SWIPL, "swipl missing"
-    p = Proc([SWIPL, "-q", str(PLATFORM_DIR / "node_main.pl"), *args])
+    p = Proc([SWIPL, "-q", str(PLATFORM_DIR / "node_main.pl"), *args], env=env)
     procs.append(p)
     line = p.wait_for("listening on")
     return p, int(line.rsplit(":", 1)[1])

@@ -25,14 +25,14 @@ bound_port(Node, P) :- node_property(Node, bind(_:P)).
 :- begin_tests(identity).
 
 test(id_is_32_hex_digits, [cleanup(stop_all([N]))]) :-
-    node_start('127.0.0.1':0, N, [default(false)]),
+    node_start('127.0.0.1':0, N, [default(false), token(test)]),
     node_property(N, id(Id)),
     atom_length(Id, 32),
     atom_codes(Id, Cs),
     forall(member(C, Cs), code_type(C, xdigit(_))).
 
 test(wildcard_bind_is_self_by_every_name, [cleanup(stop_all([N]))]) :-
-    node_start('0.0.0.0':0, N, [default(false), insecure(true)]),
+    node_start('0.0.0.0':0, N, [default(false), token(test), insecure(true)]),
     bound_port(N, P),
     gethostname(Host),
     assertion(node_property(N, address(Host:P))),
@@ -44,9 +44,9 @@ test(wildcard_bind_is_self_by_every_name, [cleanup(stop_all([N]))]) :-
     assertion(\+ node_is_self(N, '127.0.0.1':P1)).
 
 test(same_port_on_two_hosts_not_confused, [cleanup(stop_all([A, B]))]) :-
-    node_start('127.0.0.1':0, A, [default(false)]),
+    node_start('127.0.0.1':0, A, [default(false), token(test)]),
     bound_port(A, P),
-    node_start('127.0.0.2':P, B, [default(false)]),
+    node_start('127.0.0.2':P, B, [default(false), token(test)]),
     assertion(node_is_self(A, localhost:P)),
     assertion(\+ node_is_self(A, '127.0.0.2':P)),
     assertion(\+ node_is_self(B, '127.0.0.1':P)),
@@ -56,7 +56,7 @@ test(same_port_on_two_hosts_not_confused, [cleanup(stop_all([A, B]))]) :-
     assertion(node_for_address(localhost:P, A)).
 
 test(advertised_address_in_hello, [cleanup(stop_all([N]))]) :-
-    node_start('127.0.0.1':0, N, [default(false), advertise('robot-7.lab':7100)]),
+    node_start('127.0.0.1':0, N, [default(false), token(test), advertise('robot-7.lab':7100)]),
     bound_port(N, P),
     node_property(N, id(Id)),
     assertion(node_property(N, address('robot-7.lab':7100))),
@@ -71,13 +71,13 @@ test(advertised_address_in_hello, [cleanup(stop_all([N]))]) :-
         transport_close(Conn)).
 
 test(advertise_host_only_takes_bound_port, [cleanup(stop_all([N]))]) :-
-    node_start('127.0.0.1':0, N, [default(false), advertise('10.0.0.9')]),
+    node_start('127.0.0.1':0, N, [default(false), token(test), advertise('10.0.0.9')]),
     bound_port(N, P),
     assertion(node_property(N, address('10.0.0.9':P))).
 
 test(identify_learns_id_once, [cleanup(stop_all([A, B]))]) :-
-    node_start('127.0.0.1':0, A, [default(false)]),
-    node_start('127.0.0.1':0, B, [default(false)]),
+    node_start('127.0.0.1':0, A, [default(false), token(test)]),
+    node_start('127.0.0.1':0, B, [default(false), token(test)]),
     bound_port(B, PB),
     node_property(B, id(IdB)),
     transport_identify('127.0.0.1':PB, Id1, []),
@@ -86,10 +86,10 @@ test(identify_learns_id_once, [cleanup(stop_all([A, B]))]) :-
     assertion(Id2 == IdB).
 
 test(stored_id_survives_restart, [setup(tmp_dir(Dir)), cleanup(delete_directory_and_contents(Dir))]) :-
-    node_start('127.0.0.1':0, N1, [default(false), store(Dir)]),
+    node_start('127.0.0.1':0, N1, [default(false), token(test), store(Dir)]),
     node_property(N1, id(Id1)),
     node_stop(N1),
-    node_start('127.0.0.1':0, N2, [default(false), store(Dir)]),
+    node_start('127.0.0.1':0, N2, [default(false), token(test), store(Dir)]),
     node_property(N2, id(Id2)),
     node_stop(N2),
     assertion(Id1 == Id2),
@@ -98,7 +98,7 @@ test(stored_id_survives_restart, [setup(tmp_dir(Dir)), cleanup(delete_directory_
     assertion(sub_string(Text, 0, 32, _, Id1)).
 
 test(new_options_have_defaults, [cleanup(stop_all([N]))]) :-
-    node_start('127.0.0.1':0, N, [default(false), lease_s(3)]),
+    node_start('127.0.0.1':0, N, [default(false), token(test), lease_s(3)]),
     assertion(node_option(N, lease_s, 3)),
     assertion(node_option(N, settle_period, 2)),
     assertion(node_option(N, store, none)),
@@ -107,12 +107,12 @@ test(new_options_have_defaults, [cleanup(stop_all([N]))]) :-
 
 test(started_hook_once_with_current_node, [cleanup(stop_all([N]))]) :-
     retractall(user:started_seen(_)),
-    node_start('127.0.0.1':0, N, [default(false), hook_test(record)]),
+    node_start('127.0.0.1':0, N, [default(false), token(test), hook_test(record)]),
     findall(S, user:started_seen(S), Seen),
     assertion(Seen == [N-N]).
 
 test(failing_hook_stops_node) :-
-    catch(node_start('127.0.0.1':0, _, [default(false), hook_test(fail_hard)]), E, true),
+    catch(node_start('127.0.0.1':0, _, [default(false), token(test), hook_test(fail_hard)]), E, true),
     assertion(E = error(domain_error(hook_test, fail_hard), _)),
     assertion(\+ ( local_node(N), node_property(N, option(hook_test(fail_hard))) )).
 

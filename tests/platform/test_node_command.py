@@ -7,6 +7,7 @@ import sys
 import pytest
 
 from dfrl.experiments.cli.node import node_command
+from dfrl.experiments.tokens import env_with_tokens
 
 from .conftest import SWIPL, Proc
 from .wire_client import request
@@ -15,7 +16,8 @@ pytestmark = pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
 
 
 def test_node_prints_address_and_serves(procs: list[Proc]) -> None:
-    p = Proc([sys.executable, "-m", "experiments", "node", "--port", "0", "--token", "3"])
+    p = Proc([sys.executable, "-m", "experiments", "node", "--port", "0"],
+             env=env_with_tokens(["3"]))
     procs.append(p)
     line = p.wait_for("dfrl node listening on")
     port = int(line.rsplit(":", 1)[1])
@@ -23,10 +25,10 @@ def test_node_prints_address_and_serves(procs: list[Proc]) -> None:
 
 
 def test_interactive_toplevel_runs_on_the_node() -> None:
-    cmd = node_command(port=0, tokens=["3"], interactive=True)
+    cmd = node_command(port=0, interactive=True)
     run = subprocess.run(
         cmd, input="get_tartarus_details(H, P), format('DETAILS ~w ~w~n', [H, P]).\nhalt.\n",
-        capture_output=True, text=True, timeout=60,
+        capture_output=True, text=True, timeout=60, env=env_with_tokens(["3"]),
     )
     out = run.stdout
     assert "dfrl node listening on localhost:" in out

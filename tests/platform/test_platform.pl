@@ -65,14 +65,14 @@ test(negative_port, error(domain_error(port, -1))) :-
 test(bad_address, error(type_error(address, foo(bar)))) :-
     node_start(foo(bar), _, []).
 test(port_zero_chooses, [true(P > 0), cleanup(node_stop(N))]) :-
-    node_start(localhost:0, N, [default(false)]),
+    node_start(localhost:0, N, [default(false), token(test)]),
     port(N, P).
-test(port_in_use, [ setup(node_start(localhost:0, N, [default(false)])),
+test(port_in_use, [ setup(node_start(localhost:0, N, [default(false), token(test)])),
                     cleanup(node_stop(N)),
                     error(socket_error(_, _))
                   ]) :-
     port(N, P),
-    node_start(localhost:P, _, [default(false)]).
+    node_start(localhost:P, _, [default(false), token(test)]).
 
 :- end_tests(addresses).
 
@@ -117,8 +117,8 @@ test(refused_token_keeps_agent, [cleanup(stop_all([A,B]))]) :-
     assertion(NB == []).
 
 test(unreachable_node_keeps_agent, [cleanup(stop_all([A]))]) :-
-    node_start(localhost:0, A, [default(false)]),
-    node_start(localhost:0, Gone, [default(false)]),
+    node_start(localhost:0, A, [default(false), token(test)]),
+    node_start(localhost:0, Gone, [default(false), token(test)]),
     port(Gone, PG),
     node_stop(Gone),
     with_node(A, create_mobile_agent(u1, walker, [])),
@@ -127,8 +127,8 @@ test(unreachable_node_keeps_agent, [cleanup(stop_all([A]))]) :-
     with_node(A, list_agents([u1])).
 
 test(static_agent_does_not_move, [cleanup(stop_all([A,B]))]) :-
-    node_start(localhost:0, A, [default(false)]),
-    node_start(localhost:0, B, [default(false)]),
+    node_start(localhost:0, A, [default(false), token(test)]),
+    node_start(localhost:0, B, [default(false), token(test)]),
     port(B, PB),
     with_node(A, create_static_agent(s1, walker, [])),
     catch(with_node(A, move_agent(s1, (localhost,PB))), E, true),
@@ -153,8 +153,8 @@ bouncer(guid, (_, Port), main) :-
 % registered at the node it left (regression: the source removed its copy
 % only after sending the commit).
 test(straight_back_forty_times, [cleanup(stop_all([A,B]))]) :-
-    node_start(localhost:0, A, [default(false)]),
-    node_start(localhost:0, B, [default(false)]),
+    node_start(localhost:0, A, [default(false), token(test)]),
+    node_start(localhost:0, B, [default(false), token(test)]),
     port(A, PA), port(B, PB),
     retractall(user:pair(_, _)), assertz(user:pair(PA, PB)),
     with_node(A, ( create_mobile_agent(b1, bouncer, []),
@@ -181,22 +181,22 @@ test(clone_runs_with_own_name, [cleanup(stop_all([A,B]))]) :-
     assertion(LB == [Clone]).
 
 test(post_reaches_handler, [cleanup(stop_all([A,B]))]) :-
-    node_start(localhost:0, A, [default(false)]),
-    node_start(localhost:0, B, [default(false)]),
+    node_start(localhost:0, A, [default(false), token(test)]),
+    node_start(localhost:0, B, [default(false), token(test)]),
     port(B, PB),
     with_node(B, create_mobile_agent(e1, echo, [])),
     with_node(A, post_agent(platform, (localhost,PB), [echo, e1, (localhost,PB), hi, there])),
     assertion(wait_for(user:msg(e1, hi-there))).
 
 test(post_to_unknown_agent, [cleanup(stop_all([A,B]))]) :-
-    node_start(localhost:0, A, [default(false)]),
-    node_start(localhost:0, B, [default(false)]),
+    node_start(localhost:0, A, [default(false), token(test)]),
+    node_start(localhost:0, B, [default(false), token(test)]),
     port(B, PB),
     catch(with_node(A, post_agent(platform, (localhost,PB), [echo, nobody, x, y, z])), E, true),
     assertion(subsumes_term(error(existence_error(agent, nobody), _), E)).
 
 test(post_cannot_call_arbitrary_goal, [cleanup(stop_all([B]))]) :-
-    node_start(localhost:0, B, [default(false)]),
+    node_start(localhost:0, B, [default(false), token(test)]),
     port(B, PB),
     catch(transport_request(localhost:PB, post(platform, assertz, x, [user:pwned]), _, []),
           E, true),
@@ -207,7 +207,7 @@ test(post_cannot_call_arbitrary_goal, [cleanup(stop_all([B]))]) :-
     assertion(\+ catch(user:pwned, _, fail)).
 
 test(declared_platform_event, [cleanup(stop_all([B]))]) :-
-    node_start(localhost:0, B, [default(false)]),
+    node_start(localhost:0, B, [default(false), token(test)]),
     port(B, PB),
     platform_event(platform_hello/3),
     post_agent(platform, (localhost,PB), [platform_hello, platform, (localhost,PB), 42]),
@@ -234,14 +234,14 @@ alive(Port) :-
     transport_request(localhost:Port, ping, pong(_), []).
 
 test(bad_magic_gets_error_and_node_serves, [cleanup(stop_all([N]))]) :-
-    node_start(localhost:0, N, [default(false)]),
+    node_start(localhost:0, N, [default(false), token(test)]),
     port(N, P),
     raw_send(P, `GET / HTTP/1.0\r\n\r\n`, R),
     assertion(R = frame(text, error(error(wire_error(bad_magic), _)))),
     assertion(alive(P)).
 
 test(oversized_frame_refused, [cleanup(stop_all([N]))]) :-
-    node_start(localhost:0, N, [default(false), max_text_frame_size(1000)]),
+    node_start(localhost:0, N, [default(false), token(test), max_text_frame_size(1000)]),
     port(N, P),
     raw_send(P, [0'D,0'F,0'R,0'L,1,0'T,0,0, 0x7f,0xff,0xff,0xff], R),
     assertion(R = frame(text, error(error(wire_error(too_large(_, 1000)), _)))),
@@ -255,7 +255,7 @@ test(binary_without_token_refused, [cleanup(stop_all([N]))]) :-
     assertion(alive(P)).
 
 test(syntax_error_in_text_frame, [cleanup(stop_all([N]))]) :-
-    node_start(localhost:0, N, [default(false)]),
+    node_start(localhost:0, N, [default(false), token(test)]),
     port(N, P),
     Body = `foo(((( .`,
     length(Body, L),
@@ -264,7 +264,7 @@ test(syntax_error_in_text_frame, [cleanup(stop_all([N]))]) :-
     assertion(alive(P)).
 
 test(port_scan_and_idle_connections, [cleanup(stop_all([N]))]) :-
-    node_start(localhost:0, N, [default(false), idle_timeout(1)]),
+    node_start(localhost:0, N, [default(false), token(test), idle_timeout(1)]),
     port(N, P),
     forall(between(1, 20, _),
            ( tcp_connect(localhost:P, S, []), close(S, [force(true)]) )),
@@ -273,7 +273,7 @@ test(port_scan_and_idle_connections, [cleanup(stop_all([N]))]) :-
     forall(member(S3, Idle), close(S3, [force(true)])).
 
 test(truncated_frame, [cleanup(stop_all([N]))]) :-
-    node_start(localhost:0, N, [default(false)]),
+    node_start(localhost:0, N, [default(false), token(test)]),
     port(N, P),
     setup_call_cleanup(
         tcp_connect(localhost:P, Pair, []),
@@ -284,7 +284,7 @@ test(truncated_frame, [cleanup(stop_all([N]))]) :-
     assertion(alive(P)).
 
 test(unknown_request, [cleanup(stop_all([N]))]) :-
-    node_start(localhost:0, N, [default(false)]),
+    node_start(localhost:0, N, [default(false), token(test)]),
     port(N, P),
     catch(transport_request(localhost:P, shell('rm -rf /'), _, []), E, true),
     assertion(subsumes_term(error(domain_error(platform_request, _), _), E)).
@@ -355,8 +355,8 @@ test(lost_commit_source_silent, [cleanup(stop_all([A,B]))]) :-
 
 test(save_and_load_state, [cleanup((stop_all([A,B]), delete_file(F)))]) :-
     tmp_file(state, F),
-    node_start(localhost:0, A, [default(false)]),
-    node_start(localhost:0, B, [default(false)]),
+    node_start(localhost:0, A, [default(false), token(test)]),
+    node_start(localhost:0, B, [default(false), token(test)]),
     with_node(A, ( create_mobile_agent(p1, cloner, []),
                    add_payload(p1, [(counter,2)]),
                    save_tartarus_state(F) )),
@@ -381,7 +381,7 @@ node:platform_request(test_ctx, Ctx, ok(ctx(Node, Auth)), true) :-
 :- begin_tests(seams).
 
 test(node_listens_at, [cleanup(stop_all([N]))]) :-
-    node_start(localhost:0, N, [default(false)]),
+    node_start(localhost:0, N, [default(false), token(test)]),
     port(N, P),
     assertion(node:node_listens_at(N, localhost:P)),
     assertion(node:node_listens_at(N, '127.0.0.1':P)),
@@ -401,14 +401,14 @@ test(ctx_accessors, [cleanup(stop_all([N]))]) :-
     assertion(R2 == ctx(N, true)).
 
 test(module_platform_event, [cleanup(stop_all([B]))]) :-
-    node_start(localhost:0, B, [default(false)]),
+    node_start(localhost:0, B, [default(false), token(test)]),
     port(B, PB),
     platform_event(plunit_seams:seam_event/3),
     agent_post(localhost:PB, platform, seam_event, x, [7]),
     assertion(wait_for(user:module_event_seen(7))).
 
 test(remote_error_prints_address, [cleanup(stop_all([N]))]) :-
-    node_start(localhost:0, N, [default(false)]),
+    node_start(localhost:0, N, [default(false), token(test)]),
     port(N, P),
     catch(transport_request(localhost:P, post(nobody, hello, x, []), _, []), E, true),
     assertion(E = error(existence_error(agent, nobody), remote(localhost:P))),
@@ -417,7 +417,7 @@ test(remote_error_prints_address, [cleanup(stop_all([N]))]) :-
     assertion(sub_string(Text, _, _, 0, Expected)).
 
 test(record_hop, [cleanup(stop_all([N]))]) :-
-    node_start(localhost:0, N, [default(false)]),
+    node_start(localhost:0, N, [default(false), token(test)]),
     with_node(N, create_mobile_agent(h1, walker, [])),
     assertion(agents:agent_record_hop(N, h1, hop(a, b, 1.0, 1.5))),
     agents:agent_hop_times(N, h1, Ms),
@@ -425,7 +425,7 @@ test(record_hop, [cleanup(stop_all([N]))]) :-
     assertion(\+ agents:agent_record_hop(N, nobody, hop(a, b, 1.0, 1.5))).
 
 test(add_facts_travel_as_payload, [cleanup(stop_all([N]))]) :-
-    node_start(localhost:0, N, [default(false)]),
+    node_start(localhost:0, N, [default(false), token(test)]),
     with_node(N, create_mobile_agent(f1, walker, [])),
     agents:agent_add_facts(N, f1, [state_of(f1, s{a:1}), other(f1)]),
     agent_property(N, f1, payload(Payload)),

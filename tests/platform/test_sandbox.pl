@@ -209,13 +209,13 @@ test(undeclared_events_are_refused, [cleanup(stop_all([A,B]))]) :-
 :- begin_tests(trust).
 
 test(trusted_by_name, [cleanup(stop_all([N]))]) :-
-    node_start(localhost:0, N, [default(false), trusted_peers([alice, "bob"])]),
+    node_start(localhost:0, N, [default(false), token(test), trusted_peers([alice, "bob"])]),
     assertion(peer_trusted(N, alice)),
     assertion(peer_trusted(N, bob)),
     assertion(\+ peer_trusted(N, mallory)).
 
 test(nobody_trusted_by_default, [cleanup(stop_all([N]))]) :-
-    node_start(localhost:0, N, [default(false)]),
+    node_start(localhost:0, N, [default(false), token(test)]),
     assertion(\+ peer_trusted(N, alice)).
 
 test(seal_is_bound_to_migration_and_record) :-

@@ -37,8 +37,9 @@ def main() -> int:
     out["joined_none"] = node.join() is None
     # Embedded Prolog runs without signal handling, so node_stop/1 cannot interrupt a
     # connection worker blocked in a read: it ends at its idle timeout (default 10 s).
-    home = node.start("127.0.0.1", 0, idle_timeout=1)
-    robot_node = node.start("127.0.0.1", 0, idle_timeout=1)
+    # a token: a node without one is open and warns (the test fails on any warning)
+    home = node.start("127.0.0.1", 0, idle_timeout=1, token="test")
+    robot_node = node.start("127.0.0.1", 0, idle_timeout=1, token="test")
     home_host, home_port = node.address(home)
     robot_host, robot_port = node.address(robot_node)
     out["joined_home"] = node.join() == home   # the first node started is the default
@@ -98,7 +99,7 @@ def main() -> int:
     again = RobotNode()
     try:
         again.load_platform()
-        out["reload"] = "ran" if again.address(again.start("127.0.0.1", 0))[1] > 0 else "broken"
+        out["reload"] = "ran" if again.address(again.start("127.0.0.1", 0, token="test"))[1] > 0 else "broken"
     except NodeStateError:
         out["reload"] = "refused"
     finally:

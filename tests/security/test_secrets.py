@@ -8,6 +8,7 @@ import shutil
 import subprocess
 
 from dfrl.experiments.cli.secret import new_secret
+from dfrl.experiments.tokens import env_with_tokens
 from dfrl.platform_pl import PLATFORM_DIR
 from tests.platform.conftest import Proc, start_node
 from tests.platform.wire_client import connect_auth, connect_nonce, frame, read_frame
@@ -33,7 +34,8 @@ def test_weak_token_refused_off_loopback() -> None:
 def test_insecure_or_strong_token_starts_off_loopback(procs: list[Proc]) -> None:
     p, _ = start_node(procs, "--host", "0.0.0.0", "--port", "0", "--token", "1111", "--insecure")
     assert "INSECURE" in p.output()
-    p2, port = start_node(procs, "--host", "0.0.0.0", "--port", "0", "--token", new_secret())
+    p2, port = start_node(procs, "--host", "0.0.0.0", "--port", "0",
+                          env=env_with_tokens([new_secret()]))
     assert "Warning" not in p2.output() and "INSECURE" not in p2.output()
 
 

@@ -20,6 +20,7 @@ from dfrl.experiments.config import ExperimentConfig, RobotSpec
 from dfrl.experiments.launcher import run
 from dfrl.experiments.robot_node.evaluate import EVAL_FIELDS, eval_seed
 from dfrl.experiments.robot_node.lines import Evaluation, ProtocolLines, parse_eval
+from dfrl.experiments.tokens import env_with_tokens
 from dfrl.experiments.view import EVENTS_FILE, EventSource
 
 from .helpers import diagnose, small_config
@@ -107,12 +108,14 @@ def test_remote_robot_evaluates_and_its_file_is_gathered(tmp_path: Path) -> None
     (tmp_path / "svc").mkdir()
     svc = subprocess.Popen(
         [sys.executable, "-m", "dfrl.experiments", "robot", "--host", "127.0.0.1",
-         "--port", str(port), "--token", "1111", "--workdir", str(tmp_path / "svc")],
-        stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+         "--port", str(port), "--workdir", str(tmp_path / "svc")],
+        stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env=env_with_tokens([1111]))
     try:
         line = svc.stdout.readline()
         assert "listening on" in line, line + svc.stderr.read()
-        cfg = small_config(2, iterations=300, respite=100, eval_every=150, eval_steps=100)
+        cfg = small_config(2, iterations=300, respite=100, eval_every=150, eval_steps=100,
+                           token=1111)      # the remote robot's token
         cfg = cfg.replace(robots=(cfg.robots[0], RobotSpec("r2", "r4",
                                                            node=f"127.0.0.1:{port}")))
         res = run(cfg, tmp_path / "out", progress=None)

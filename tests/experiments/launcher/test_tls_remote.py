@@ -58,6 +58,7 @@ def test_inject_and_join_with_tls_from_a_copied_results_folder(tmp_path: Path) -
         assert info["tls"] == str(node_dir.resolve())
         (copied / "nodes.json").write_text(json.dumps({**info, "tls": str(gone)}),
                                            encoding="utf-8")
+        shutil.copy2(out / "secret.token", copied)  # the run's token (mode 0600) goes along
 
     copy_results()
     driver = shutil.copytree(node_dir, tmp_path / "driver-tls")
