@@ -1,7 +1,12 @@
 /*  Send one control command to a running dFRL agent, through the node of
     its first stop:
 
-        swipl -q platform_pl/agents/dfrl_control.pl HOST PORT TOKEN COMMAND.json
+        DFRL_TOKEN=T swipl -q platform_pl/agents/dfrl_control.pl HOST PORT COMMAND.json
+
+    The token comes from the environment variable DFRL_TOKEN (its first
+    line; deleted once read). The older form with the token as an
+    argument, HOST PORT TOKEN COMMAND.json, still works with a warning:
+    an argument is visible to every user of the host (ps).
 
     COMMAND.json names the agent and holds one command
     (dfrl_console:dfrl_command/2):
@@ -18,20 +23,30 @@
 :- use_module('../tartarus').
 :- use_module('../messages', []).
 :- use_module(dfrl_console, [dfrl_command/2]).
+:- use_module('../secrets', [take_env_tokens/1, token_text_term/2]).
 :- use_module(library(http/json), [json_read_dict/3]).
 :- use_module(library(main)).
 
 :- initialization(main, main).
 
+main([Host, Port0, File]) :-
+    take_env_tokens([Token|_]),
+    !,
+    main_([Host, Port0, Token, File]).
 main([Host, Port0, Token0, File]) :-
     !,
+    take_env_tokens(_),
+    print_message(warning, dfrl(token_on_command_line)),
+    token_text_term(Token0, Token),
+    main_([Host, Port0, Token, File]).
+main(_) :-
+    format(user_error, "usage: DFRL_TOKEN=T swipl dfrl_control.pl HOST PORT COMMAND.json~n", []),
+    halt(2).
+
+main_([Host, Port0, Token, File]) :-
     atom_number(Port0, Port),
-    (   atom_number(Token0, Token) -> true ; Token = Token0 ),
     catch(control(Host, Port, Token, File), E,
           ( print_message(error, E), halt(1) )).
-main(_) :-
-    format(user_error, "usage: swipl dfrl_control.pl HOST PORT TOKEN COMMAND.json~n", []),
-    halt(2).
 
 control(Host, Port, Token, File) :-
     setup_call_cleanup(open(File, read, In, [encoding(utf8)]),

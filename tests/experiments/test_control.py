@@ -15,6 +15,7 @@ import pytest
 
 from dfrl.experiments.control import CONSOLE_SCRIPT, ConsoleNode
 from dfrl.experiments.errors import ExperimentError
+from dfrl.experiments.tokens import env_with_tokens
 from dfrl.platform_pl import AGENTS_DIR, PLATFORM_DIR
 
 SWIPL = shutil.which("swipl")
@@ -291,7 +292,7 @@ def test_one_shot_scripts_launch_and_control(nodes: Callable[[], Node], tmp_path
     def control(doc: dict[str, Any]) -> subprocess.CompletedProcess[str]:
         command.write_text(json.dumps(doc), encoding="utf-8")
         return subprocess.run([SWIPL, "-q", str(AGENTS_DIR / "dfrl_control.pl"), "127.0.0.1",
-                               str(a.port), str(TOKEN), str(command)],
+                               str(a.port), str(command)], env=env_with_tokens([TOKEN]),
                               capture_output=True, text=True, timeout=60)
     refused = control({"stop": True})                        # no agent named: refused
     assert refused.returncode == 1 and "agent" in refused.stderr
