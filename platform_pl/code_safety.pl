@@ -3,6 +3,7 @@
             check_program_text/2,       % +Id, +Text
             check_post/3,               % +Node, +Agent, +Goal
             code_trusted/1,             % +Ctx
+            forget_checked_code/0,
             peer_trusted/2,             % +Node, +PeerName
             record_seal/3,              % +MigId, +Record, -Seal
             record_sealed/3             % +MigId, +Record, +Seal
@@ -74,7 +75,7 @@ refusals, applied at any depth of the sandbox's walk):
   | family                                | here                        |
   |---------------------------------------|-----------------------------|
   | attribute hooks: put_attr/3, put_attrs/2 (attr_unify_hook, attribute_goals, portray_attvar of the attribute's module run with the value), freeze/when/dif | refused: put_attr(V, freeze, user:shell(C)), V = 1 ran C |
-  | attributed variables or cycles in data (records, binary frames) | refused before anyone unifies them (plain_data/1, wire.pl) |
+  | attributed variables or cycles in data (records, binary frames) | refused before anyone unifies them (wire.pl for frames, plain_data/1 for programs) |
   | directives of programs                | only declarations of the program's own predicates, libraries of an allow-list (sandbox_policy:safe_library/1), initialization/1 and initialization(G, now) with G checked; if/elif, op, flags, include, module, table, encoding refused |
   | quasi quotations                      | refused: their parsers run when the text is read |
   | print_message/2, message_to_string/2, message translation | refused: a format(F, A) message with ~@ calls a goal, and message hooks are the node's |
@@ -107,6 +108,7 @@ name).
     agent_api/2.                % +Module:Goal, -Condition
 
 :- dynamic process_key/1.
+:- dynamic checked_code/1.              % Sha: code accepted since the last load
 
 %!  mobile_hook(?PI) is nondet.
 %
@@ -198,7 +200,6 @@ check_agent_record(Record) :-
     ;   throw(error(type_error(agent_record, Record), _))
     ),
     (   Name0 = rename(Self, _) -> true ; Self = Name0 ),
-    plain_data(Clauses),
     maplist(clause_parts, Clauses, Parts),
     maplist(check_head, Parts),
     (   member(H-_, Parts), callable(H), functor(H, Handler, A), A >= 3
@@ -206,13 +207,42 @@ check_agent_record(Record) :-
     ;   refuse(handler(Handler), 'the handler is not defined by the agent''s own clauses')
     ),
     include(is_rule, Parts, Rules),
+    variant_sha1(Self-Handler-Preds-Rules, Key),
     (   Rules == []
+    ->  true
+    ;   checked_code(Key)
     ->  true
     ;   with_scratch(Preds, Rules,
                      [S]>>forall(member(R, Rules),
-                                 check_rule(S, Self, Handler, R)))
+                                 check_rule(S, Self, Handler, R))),
+        remember_checked(Key)
     ).
 
+%   The code of a record (its rules: the facts are data and are not
+%   walked, nor is a payload of 100,000 floats) is checked once; its
+%   hash is kept until a program is loaded (which may define what a
+%   refused agent lacked, or redefine nothing: programs may not redefine
+%   the node's predicates) and at most 512 of them.
+remember_checked(Key) :-
+    with_mutex(code_safety_cache,
+               (   predicate_property(checked_code(_), number_of_clauses(N)),
+                   N >= 512
+               ->  retractall(checked_code(_)),
+                   assertz(checked_code(Key))
+               ;   assertz(checked_code(Key))
+               )).
+
+%!  forget_checked_code is det.
+%
+%   Forget which agent code was accepted: called after code is loaded
+%   into the node (codeload.pl), which changes what the sandbox sees.
+
+forget_checked_code :-
+    retractall(checked_code(_)).
+
+%   Records reach the check from frames only: a text frame cannot hold
+%   attributed variables or cycles and wire.pl refuses a binary frame
+%   with them, so the data is not walked again here.
 %   Data with no attributed variables and no cycles: nothing runs when
 %   it is unified, copied or asserted.
 plain_data(T) :-

@@ -6,7 +6,7 @@
 :- use_module(node, [current_node/1, node_property/2, ctx_node/2,
                      ctx_authenticated/1]).
 :- use_module(platform_errors, [message_text/2]).
-:- use_module(code_safety, [check_program_text/2, code_trusted/1]).
+:- use_module(code_safety, [check_program_text/2, code_trusted/1, forget_checked_code/0]).
 :- use_module(transport).
 :- autoload(library(error), [must_be/2]).
 :- autoload(library(option), [option/2, option/3]).
@@ -40,7 +40,8 @@ loaded programs (load_program/1, consult/1) are trusted.
 
 load_program(File) :-
     must_be(atomic, File),
-    load_files(user:File, [if(true)]).
+    load_files(user:File, [if(true)]),
+    forget_checked_code.
 
 %!  load_program_at(+Address, +File, +Options) is det.
 %
@@ -86,6 +87,7 @@ load_text(Id, Text) :-
         ( open_string(Text, In), assertz(collecting) ),
         load_files(user:SourceId, [stream(In), if(true)]),
         ( close(In), retractall(collecting) )),
+    forget_checked_code,
     findall(M, retract(collected(M)), Errors),
     (   Errors == []
     ->  true

@@ -178,6 +178,25 @@ accepted_goal(M:G) :-
     record([(h(a1, _, main) :- M:G)], R),
     catch(( check_agent_record(R), true ), _, fail).
 
+
+%   The code of a record is checked once (its hash is kept); a refusal
+%   is not kept, and loading a program forgets what was accepted.
+test(accepted_code_is_remembered_until_a_load) :-
+    Rules = [(h(c1, _, main) :- X = 1, Y is X + 1, writeln(Y))],
+    R = agent(c1, h, mobile, [], [], [big/1], [big([1.0, 2.0])|Rules], []),
+    forget_checked_code,
+    check_agent_record(R),
+    aggregate_all(count, code_safety:checked_code(_), 1),
+    numlist(1, 1000, Big),                    % other data, same code: no new entry
+    check_agent_record(agent(c1, h, mobile, [], [], [big/1], [big(Big)|Rules], [])),
+    aggregate_all(count, code_safety:checked_code(_), 1),
+    catch(check_agent_record(agent(c1, h, mobile, [], [], [],
+                                   [(h(c1, _, main) :- shell(ls))], [])), _, true),
+    aggregate_all(count, code_safety:checked_code(_), 1),
+    tmp_file_stream(text, F, S), format(S, "cached_marker(1).~n", []), close(S),
+    load_program(F),
+    aggregate_all(count, code_safety:checked_code(_), 0).
+
 :- end_tests(side_doors).
 
 :- begin_tests(programs).
