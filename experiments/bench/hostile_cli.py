@@ -45,6 +45,38 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frame-kinds", nargs="+", choices=FRAME_KINDS, default=list(FRAME_KINDS),
                         help=f"hostile frames sent, in turn by sender (default: "
                              f"{' '.join(FRAME_KINDS)})")
+    parser.add_argument("--per-wave", type=int, default=D.per_wave,
+                        help=f"agents per wave of loop/memory/clone/assert/log/post "
+                             f"(default {D.per_wave})")
+    parser.add_argument("--wave-s", type=float, default=D.wave_s,
+                        help=f"seconds between two waves (default {D.wave_s:g})")
+    parser.add_argument("--escape-wait", type=float, default=D.escape_wait_s,
+                        help=f"seconds an accepted escape agent has to come home "
+                             f"(default {D.escape_wait_s:g})")
+    parser.add_argument("--clone-depth", type=int, default=D.clone_depth,
+                        help=f"generations of the clone bomb (2^depth agents; default "
+                             f"{D.clone_depth})")
+    parser.add_argument("--assert-facts", type=int, default=D.assert_facts,
+                        help=f"facts each assert bomb asserts (default {D.assert_facts})")
+    parser.add_argument("--auth-big", type=int, default=D.auth_big,
+                        help=f"authenticated senders of big frames (default {D.auth_big})")
+    parser.add_argument("--auth-big-mb", type=float, default=D.auth_big_mb,
+                        help="MiB of their frames (default 0: the target's max_frame_size "
+                             "less 64 KiB)")
+    parser.add_argument("--auth-flood", type=int, default=D.auth_flood,
+                        help=f"authenticated senders of small requests, as fast as replies "
+                             f"come (default {D.auth_flood})")
+    parser.add_argument("--trust-attacker", action="store_true",
+                        help="control run: mutual TLS, and the target trusts the attacker's "
+                             "code by name (trusted_peers), so escapes run and the escapes "
+                             "phase must fail")
+    parser.add_argument("--threads-wait", type=float, default=D.threads_wait_s,
+                        help=f"seconds after settling the target's threads have to come back "
+                             f"near the quiet count (default {D.threads_wait_s:g}; idle pool "
+                             f"workers exit after the flag dfrl_pool_idle, 30 s)")
+    parser.add_argument("--pool-idle", type=float, default=D.pool_idle_s,
+                        help="the target's dfrl_pool_idle flag in seconds (default 0: the "
+                             "node's own, 30)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -54,7 +86,11 @@ def cmd(args: argparse.Namespace) -> int:
         slowloris=args.slowloris, flood=args.flood, frames=args.frames,
         frame_size=args.frame_size, duration_s=args.duration, settle_s=args.settle,
         sources=args.sources, pause_ms=args.pause_ms, floats=args.floats,
-        fresh=not args.pooled, frame_kinds=tuple(args.frame_kinds))
+        fresh=not args.pooled, frame_kinds=tuple(args.frame_kinds), per_wave=args.per_wave,
+        wave_s=args.wave_s, escape_wait_s=args.escape_wait, clone_depth=args.clone_depth,
+        assert_facts=args.assert_facts, auth_big=args.auth_big, auth_big_mb=args.auth_big_mb,
+        auth_flood=args.auth_flood, trust_attacker=args.trust_attacker,
+        threads_wait_s=args.threads_wait, pool_idle_s=args.pool_idle)
     try:
         r = hostile.run(cfg, tuple(args.attacks))
     except (ValueError, RuntimeError, FileNotFoundError) as exc:
@@ -71,16 +107,26 @@ def cmd(args: argparse.Namespace) -> int:
             conns = "-" if a is None else (
                 f"opened {a['opened']}, closed by node {a['closed_by_node']} "
                 f"(deadline {a['deadline']}, refused {a['refused']}, rejected {a['rejected']}, "
-                f"closed {a['closed']}, reset {a['reset']}), held at end {a['held_at_end']}")
+                f"closed {a['closed']}, reset {a['reset']}), held at end {a['held_at_end']}"
+                if "opened" in a else json.dumps(a.get("counts", a))[:200])
             print(f"{p['phase']:10s} {h['succeeded']:>7d}/{h['failed']}/{h['unfinished']:<7d} "
                   f"{_ms(h['hop_median_ms'])} {_ms(h['hop_p90_ms'])} "
                   f"{'-' if p['p90_ratio'] is None else p['p90_ratio']:>8} "
                   f"{m['before']:>10.1f} {m['after']:>7.1f} {m['peak']:>7.1f}  {conns}")
+            t, c = p["threads"], p["cpu_cores"]
+            print(f"{'':10s} threads {t['before']} -> {t['after']} (peak {t['peak']}, "
+                  f"{t['back']} after {t['waited_s']} s more), CPU {c['phase']} cores, "
+                  f"settled {c['settled']}; agents at end {p['agents_at_end']}")
+            if p["escapes"] is not None:
+                e = p["escapes"]
+                print(f"{'':10s} escapes: {e['tried']} tried, {e['refused']} refused, "
+                      f"{e['accepted']} accepted, {e['ran']} ran {e['ran_names']}")
             for why in p["why"]:
                 print(f"{'':10s} missed: {why}")
         print(f"overall: {'pass' if r['pass'] else 'FAIL'} (p90 < {hostile.P90_RATIO_MAX:g}x "
-              f"quiet, RSS within {hostile.RSS_DELTA_MAX_MB:g} MB, every hop succeeding; "
-              f"{r['wall_s']} s)")
+              f"quiet, RSS within {hostile.RSS_DELTA_MAX_MB:g} MB, threads within "
+              f"{hostile.THREADS_DELTA_MAX} and CPU within {hostile.CPU_MARGIN:g} cores of "
+              f"quiet, every hop succeeding, no escape; {r['wall_s']} s)")
     return 0 if r["pass"] else 1
 
 

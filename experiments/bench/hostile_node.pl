@@ -1,11 +1,20 @@
 /*  The processes of the hostile benchmark (experiments/bench/hostile.py).
 
-    swipl hostile_node.pl target TOKEN
+    swipl hostile_node.pl target TOKEN [TLS_DIR TRUSTED]
         A platform node on 127.0.0.1 (OS-chosen port) with the platform's
-        default limits: the node under attack. Prints "PORT <p>" and serves
-        until standard input closes.
+        default limits: the node under attack. It hosts a static agent
+        `victim` whose payload (secret/2) no other agent may read. Prints
+        "PORT <p>", then serves and answers commands on standard input,
+        until it closes: `probe.` prints a JSON line with the agents it
+        hosts, its double_quotes flag in `user` and its max_frame_size;
+        `purge.` purges every agent but the benchmark's own (the operator
+        cleaning up between two attacks) and prints how many. With TLS_DIR
+        (a control run only) it serves mutual TLS and trusts the peer
+        named TRUSTED (trusted_peers/1): that peer's code is not checked.
+        The environment variable DFRL_HOSTILE_POOL_IDLE, if set, is its flag
+        dfrl_pool_idle (seconds before an idle pool worker exits).
 
-    swipl hostile_node.pl peer TOKEN TARGET_PORT FLOATS PAUSE_MS BUDGET_S FRESH
+    swipl hostile_node.pl peer TOKEN TARGET_PORT FLOATS PAUSE_MS BUDGET_S FRESH [TLS_DIR]
         An authenticated peer: a node on 127.0.0.1 and an agent whose payload
         holds FLOATS floats, moved to the target and back, PAUSE_MS between
         two hops, until BUDGET_S seconds have passed. With FRESH = true the
@@ -27,20 +36,34 @@
 */
 :- use_module('../../platform_pl/tartarus').
 :- use_module(library(main)).
+:- use_module(library(http/json), [json_write_dict/3]).
+:- use_module('../../platform_pl/agents', [agent_list/2, agent_exists/2, agent_purge/2]).
 
 :- initialization(main, main).
 
-:- dynamic data/2, departed/3, plan/2.
+:- dynamic data/2, departed/3, plan/2, secret/2.
 
-main([target, Token0]) :-
+main([target, Token0|Trust]) :-
     set_stream(user_output, buffer(line)),
     atom_number(Token0, Token),
-    node_start('127.0.0.1':0, Node, [token(Token)]),
+    (   Trust = [Dir, Name]
+    ->  Extra = [tls(Dir), trusted_peers([Name])]
+    ;   Extra = []
+    ),
+    (   getenv('DFRL_HOSTILE_POOL_IDLE', Idle0)      % tests: pool workers expire sooner
+    ->  atom_number(Idle0, Idle),
+        set_prolog_flag(dfrl_pool_idle, Idle)
+    ;   true
+    ),
+    node_start('127.0.0.1':0, Node, [token(Token)|Extra]),
     node_property(Node, bind(_:Port)),
+    assertz(secret(guid, 'the victim''s secret')),
+    create_static_agent(victim, ('127.0.0.1', Port), victim, [Token]),
+    add_payload(victim, [(secret, 2)]),
     emit('PORT ~w', [Port]),
-    read_term(user_input, _, []),       % until stdin closes
+    commands(Node),
     node_stop(Node).
-main([peer, Token0, Target0, Floats0, Pause0, Budget0, Fresh]) :-
+main([peer, Token0, Target0, Floats0, Pause0, Budget0, Fresh|Tls]) :-
     set_stream(user_output, buffer(line)),
     maplist(atom_number, [Token0, Target0, Floats0, Pause0, Budget0],
             [Token, Target, Floats, PauseMs, Budget]),
@@ -49,7 +72,9 @@ main([peer, Token0, Target0, Floats0, Pause0, Budget0, Fresh]) :-
     ->  set_prolog_flag(dfrl_pool_max, 0)
     ;   true
     ),
-    node_start('127.0.0.1':0, Node, [token(Token), reply_timeout(10), connect_timeout(5)]),
+    (   Tls = [Dir] -> Extra = [tls(Dir)] ; Extra = [] ),
+    node_start('127.0.0.1':0, Node,
+               [token(Token), reply_timeout(10), connect_timeout(5)|Extra]),
     node_property(Node, bind(_:Port)),
     emit('PORT ~w', [Port]),
     findall(F, ( between(1, Floats, I), F is I * 0.001 + 0.5 ), Data),
@@ -64,6 +89,37 @@ main([peer, Token0, Target0, Floats0, Pause0, Budget0, Fresh]) :-
     read_term(user_input, _, []),
     node_stop(Node).
 
+%   The target's commands (see the header), until standard input closes.
+commands(Node) :-
+    catch(read_term(user_input, C, []), _, C = end_of_file),
+    (   C == end_of_file
+    ->  true
+    ;   command(C, Node),
+        commands(Node)
+    ).
+
+command(probe, Node) :-
+    !,
+    agent_list(Node, Agents),
+    length(Agents, N),
+    current_prolog_flag(double_quotes, DQ),
+    node:node_option(Node, max_frame_size, Max),
+    json_line(_{event: probe, agents: N, double_quotes: DQ, max_frame_size: Max}).
+command(purge, Node) :-
+    !,
+    findall(A, ( agent_exists(Node, A), A \== victim, A \== hostile_bencher ), As),
+    forall(member(A, As), catch(agent_purge(Node, A), _, true)),
+    length(As, N),
+    json_line(_{event: purged, agents: N}).
+command(C, _) :-
+    print_message(error, format('unknown command ~q', [C])).
+
+json_line(Dict) :-
+    with_output_to(string(S), json_write_dict(current_output, Dict, [width(0)])),
+    emit('~s', [S]).
+
+victim(guid, _, _).
+
 emit(Format, Args) :-
     format(user_output, Format, Args),
     nl(user_output),
@@ -71,6 +127,8 @@ emit(Format, Args) :-
 
 %   The agent: log the arrival, then (until the budget is spent) pause and
 %   move on; a move that fails is logged and tried again after the pause.
+%   It catches error(_, _) only: a sandbox may refuse a catcher that could
+%   take the platform's stop of an agent.
 %   Its lines go to user_output, line-buffered by both processes' main/1.
 hostile_hop(guid, (_, Here), main) :-
     get_time(Now),
@@ -88,12 +146,12 @@ hostile_hop(guid, (_, Here), main) :-
         get_time(T1),
         assertz(departed(guid, T1, Here)),
         format(user_output, 'DEPART ~6f ~w ~w~n', [T1, Here, Next]),
-        catch(move_agent(guid, ('127.0.0.1', Next)), E, true),
-        (   var(E)
+        catch(move_agent(guid, ('127.0.0.1', Next)), error(F, C), true),
+        (   var(F)
         ->  true
         ;   retractall(departed(guid, _, _)),
             get_time(T2),
-            format(string(Why), '~q', [E]),
+            format(string(Why), '~q', [error(F, C)]),
             split_string(Why, "\n", " ", Parts),
             atomic_list_concat(Parts, ' ', Flat),
             format(user_output, 'FAIL ~6f ~6f ~w ~w ~w~n', [T1, T2, Here, Next, Flat]),
