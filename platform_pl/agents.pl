@@ -28,6 +28,7 @@
               [ current_node/1, node_set_current/1, node_clear_current/0,
                 node_property/2 ]).
 :- use_module(worker_pool, [pool_run/3, pool_signal/3]).
+:- use_module(agent_bounds, [bounds_call/4, bounds_stopped/3, bounds_warning/2]).
 :- autoload(library(error),
             [must_be/2, existence_error/2, permission_error/3, domain_error/2]).
 :- autoload(library(option), [option/2, option/3]).
@@ -529,7 +530,8 @@ run_agent(Node, Name, Link, Event) :-
     (   agent_entry(Node, Name, Handler, _)
     ->  agent_module(Node, Name, M),
         Goal =.. [Handler, Name, Link, Event],
-        catch(run_handler(Node, Name, M:Goal), E, handler_error(Node, Name, E))
+        catch(bounds_call(Node, Name, M, run_handler(Node, Name, M:Goal)), E,
+              handler_error(Node, Name, E))
     ;   true
     ).
 
@@ -547,9 +549,19 @@ purge_if_running(Name) :-
     ;   true
     ).
 
+%   An agent over one of its bounds (agent_bounds.pl) is removed, not
+%   left idle; its sender is told why.
 handler_error(_, _, '$dfrl_purged') :- !.
+handler_error(Node, Name, '$dfrl_bound'(Kind)) :-
+    !,
+    bounds_stopped(Node, Name, Kind),
+    (   agent_entry(Node, Name, _, _)
+    ->  catch(purge(Node, Name, notify), E,
+              print_message(warning, E))
+    ;   true
+    ).
 handler_error(Node, Name, E) :-
-    print_message(warning, dfrl(agent_crashed(Node, Name, E))).
+    bounds_warning(Node, dfrl(agent_crashed(Node, Name, E))).
 
 %!  current_agent(-Name) is semidet.
 %

@@ -10,6 +10,8 @@
                      ctx_authenticated/1]).
 :- use_module(agents).
 :- use_module(worker_pool, [pool_run/3]).
+:- use_module(agent_bounds, [bounds_call/4, bounds_post/0, bounds_stopped/3,
+                             bounds_warning/2]).
 :- use_module(transport).
 :- use_module(code_safety, [check_post/3]).
 :- autoload(library(error), [must_be/2, existence_error/2]).
@@ -90,6 +92,7 @@ agent_post(Address0, Agent, Handler, Link, Args, Options) :-
     must_be(atom, Handler),
     must_be(list, Args),
     must_be(list, Options),
+    bounds_post,
     address_normalize(Address0, Address),
     (   node_for_address(Address, Node)
     ->  deliver(Node, Agent, Handler, Link, Args)
@@ -121,9 +124,24 @@ deliver(Node, Agent, Handler, Link, Args) :-
     ),
     pool_run(messages, run_message(Node, Agent, Goal), []).
 
+%   An agent's event runs within its bounds (agent_bounds.pl), a platform
+%   event (the node's own code) without.
 run_message(Node, Agent, Goal) :-
-    catch(with_node(Node, ( call(Goal) -> true ; true )), E,
-          print_message(warning, dfrl(agent_crashed(Node, Agent, E)))).
+    catch(with_node(Node, bounded_event(Node, Agent, Goal)), E,
+          message_error(Node, Agent, E)).
+
+bounded_event(Node, Agent, M:Goal) :-
+    (   Agent == platform
+    ->  ( call(M:Goal) -> true ; true )
+    ;   bounds_call(Node, Agent, M, ( call(M:Goal) -> true ; true ))
+    ).
+
+message_error(Node, Agent, '$dfrl_bound'(Kind)) :-
+    !,
+    bounds_stopped(Node, Agent, Kind),
+    catch(agent_purge(Node, Agent), _, true).
+message_error(Node, Agent, E) :-
+    bounds_warning(Node, dfrl(agent_crashed(Node, Agent, E))).
 
 %!  remote_agents(+Address, -Agents, +Options) is det.
 %

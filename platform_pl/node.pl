@@ -129,6 +129,13 @@ by default the bind address, or the host name when it binds 0.0.0.0).
                        reply_timeout(number),
                        connect_timeout(number),
                        commit_timeout(number),
+                       agent_cpu_limit(any),
+                       agent_stack_limit(any),
+                       agent_module_limit(any),
+                       agent_post_limit(any),
+                       agent_log_limit(any),
+                       max_agents(any),
+                       clone_limit(any),
                        default(boolean)
                      ]).
 
@@ -200,6 +207,26 @@ by default the bind address, or the host name when it binds 0.0.0.0).
 %                                 commit, load_code, execute); others get
 %                                 a permission error (default: any name
 %                                 the CA signed)
+%
+%   Bounds on agents (agent_bounds.pl; each also takes `infinite`). An
+%   agent over a per-call bound is stopped, removed and its sender told:
+%
+%     - agent_cpu_limit(+Sec)     CPU time of one handler call (default 2)
+%     - agent_stack_limit(+Bytes) stacks of the thread running a handler
+%                                 call (default 256 MiB)
+%     - agent_module_limit(+Bytes) clauses in the agent's own module: its
+%                                 code, payload and asserted facts
+%                                 (default 64 MiB; also checked on arrival)
+%     - agent_post_limit(+N)      posts an agent sends per minute
+%                                 (default 600)
+%     - agent_log_limit(+N)       lines of output per agent and minute
+%                                 (default 200)
+%     - max_agents(+N)            agents on the node; an arriving agent
+%                                 over it is refused with
+%                                 resource_error(agents) (default 100)
+%     - clone_limit(+N)           clones arriving per minute; more are
+%                                 refused with resource_error(clones)
+%                                 (default 60)
 %
 %   Secrets. A node bound to an address other than loopback (0.0.0.0
 %   included) refuses to start if it is open or one of its tokens has
@@ -296,7 +323,18 @@ check_options(Options) :-
                            connect_timeout]),
              Opt =.. [Name, V],
              option(Opt, Options) ),
-           must_be(number, V)).
+           must_be(number, V)),
+    forall(( member(Name, [agent_cpu_limit, agent_stack_limit,
+                           agent_module_limit, agent_post_limit,
+                           agent_log_limit, max_agents, clone_limit]),
+             Opt =.. [Name, V],
+             option(Opt, Options),
+             V \== infinite ),
+           (   Name == agent_cpu_limit
+           ->  must_be(number, V),
+               (   V > 0 -> true ; must_be(positive_integer, V) )
+           ;   must_be(positive_integer, V)
+           )).
 
 advertised(Options, Host, Bound, Advertised) :-
     (   option(advertise(A), Options)
@@ -437,6 +475,13 @@ option_default(connect_timeout, 5).
 option_default(commit_timeout, 10).
 option_default(tls, none).
 option_default(tls_peers, any).
+option_default(agent_cpu_limit, 2).
+option_default(agent_stack_limit, 268435456).
+option_default(agent_module_limit, 67108864).
+option_default(agent_post_limit, 600).
+option_default(agent_log_limit, 200).
+option_default(max_agents, 100).
+option_default(clone_limit, 60).
 
 %!  local_node(?Node) is nondet.
 %

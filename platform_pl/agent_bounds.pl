@@ -1,0 +1,779 @@
+:- module(agent_bounds,
+          [ bounds_call/4,              % +Node, +Agent, +Module, :Goal
+            bounds_stopped/3,           % +Node, +Agent, +Kind
+            bounds_admit/3,             % +Node, +Mode, +Agents
+            bounds_arrived/3,           % +Node, +Agent, +Source
+            bounds_check_module/2,      % +Node, +Module
+            bounds_post/0,
+            bounds_warning/2,           % +Node, +Message
+            agent_bound_report/3,       % ?Node, ?Agent, ?Report
+            bounds_statistics/1         % -Stats
+          ]).
+%   Eager imports (not autoload/2): see node_connection.pl.
+:- use_module(library(prolog_stream), [open_prolog_stream/4]).
+:- use_module(library(aggregate), [aggregate_all/3]).
+:- use_module(library(debug), [debug/3]).
+:- use_module(node,
+              [ node_option/3, node_property/2, node_for_address/2,
+                with_node/2, ctx_node/2, ctx_peer/2 ]).
+:- use_module(transport, [transport_request/4]).
+:- use_module(worker_pool, [pool_run/3, pool_signal/3, pool_retire/0]).
+
+:- meta_predicate bounds_call(+, +, +, 0).
+
+/** <module> Bounds on what an agent may take from a node
+
+A node runs code that peers send it (checked by the sandbox, which says
+*what* it may call, not *how much*). This module bounds how much, per
+handler call of an agent (its main handler or a posted event, in a pool
+worker):
+
+  | bound            | node option                     | default   | measured by |
+  |------------------|---------------------------------|-----------|-------------|
+  | CPU time         | agent_cpu_limit(Sec)            | 2 s       | the thread's CPU time since the call started (monitor) |
+  | stacks           | agent_stack_limit(Bytes)        | 256 MiB   | SWI-Prolog's own per-thread stack_limit flag |
+  | its own module   | agent_module_limit(Bytes)       | 64 MiB    | predicate_property(size(B)) summed (monitor, end of call, arrival) |
+  | posts it sends   | agent_post_limit(PerMinute)     | 600       | counted in agent_post/6 |
+  | output lines     | agent_log_limit(PerMinute)      | 200       | user_output / user_error of the call go through a counting stream |
+
+and per node: agents present (`max_agents(N)`, default 100) and agents
+arriving as clones (`clone_limit(PerMinute)`, default 60). An arrival
+over either is refused at the transfer with resource_error(agents) or
+resource_error(clones), which the sender's agent_move/3 or
+agent_clone/4 raises. Every bound takes `infinite`.
+
+An agent over a per-call bound is stopped: the term '$dfrl_bound'(Kind)
+is thrown in its thread (thread_signal/2), Kind one of cpu(Limit),
+memory(Limit), module_memory(Limit), posts(Limit) or log(Limit); a stack
+overflow of the call is memory(Limit). The caller (agents.pl,
+messages.pl) removes the agent from the node and calls bounds_stopped/3,
+which prints one warning and tells the node the agent came from (the
+source of its last transfer) with the request
+bound_notice(Agent, Kind, Here): that node records it (agent_bound_report/3)
+and prints it. A notice is checked for shape and size and can only ever
+become such a record and a warning line. A thread that keeps running
+after the signal (it was in foreign code, or a catch/3 of trusted code
+took the signal) is signalled again every `dfrl_bounds_grace` seconds
+(flag, 0.5), ten times at most; then the agent is purged and a warning
+says the thread did not stop.
+
+The monitor is one thread per process (`dfrl_bounds_monitor`, started on
+the first bounded call). It wakes every `dfrl_bounds_period` seconds
+(flag, 0.2) while calls run and blocks on its queue when none does; a
+tick reads each running call's thread CPU time (about 0.6 us) and the
+size of its agent's module.
+
+The node's warnings about agents it stopped, refused or saw crash go
+through bounds_warning/2: at most 20 per node and minute, then one line
+says how many were suppressed.
+*/
+
+:- create_prolog_flag(dfrl_bounds_period, 0.2, [type(float), keep(true)]).
+:- create_prolog_flag(dfrl_bounds_grace, 0.5, [type(float), keep(true)]).
+
+:- dynamic
+    call_/7,                    % Id, Node, Agent, Module, Thread, CPU0, Limits
+    signalled_/4,               % Id, Kind, Time, Tries
+    counters_/2,                % OutStream, ErrStream
+    stream_role_/2,             % Stream, out|err
+    default_target_/2,          % out|err, Stream
+    window_/3,                  % Key, Start, Count
+    arrived_/3,                 % Node, Agent, Source
+    report_/4,                  % Node, Agent, Time, Report
+    stat_/2,                    % Name, Value
+    monitor_/2,                 % Thread, Queue
+    monitor_idle_/0.            % the monitor waits for a call to start
+
+:- thread_local
+    current_call_/4,            % Id, Node, Agent, Limits
+    budget_/5,                  % Node, Agent, Limits, OutTarget, ErrTarget
+    swallowed_/1.               % Kind: the call ended after its signal
+
+:- multifile
+    node:platform_request/4,
+    node:requires_authentication/1,
+    node:node_stopping/1,
+    agents:agent_changed/3,
+    prolog:message//1.
+
+max_warnings_per_minute(20).
+max_notices_per_minute(60).
+max_reports_kept(100).
+max_signals(10).
+
+		 /*******************************
+		 *            A CALL		*
+		 *******************************/
+
+%!  bounds_call(+Node, +Agent, +Module, :Goal) is semidet.
+%
+%   Call Goal, a handler call of Agent (whose code and state live in
+%   Module) on Node, within Node's per-call bounds: CPU time, stacks,
+%   the size of Module, posts and output lines (see the module doc).
+%   Succeeds or fails as Goal does. In a thread that already runs a
+%   bounded call, Goal runs under that call's bounds.
+%
+%   @error '$dfrl_bound'(Kind) if the call went over a bound (then the
+%   agent is to be removed and bounds_stopped/3 called), also if the
+%   call caught the signal and ended normally.
+
+bounds_call(_Node, _Agent, _Module, Goal) :-
+    current_call_(_, _, _, _),
+    !,
+    call(Goal).
+bounds_call(Node, Agent, Module, Goal) :-
+    node_limits(Node, Limits),
+    flag(dfrl_bounds_calls, Id, Id+1),
+    setup_call_cleanup(
+        enter(Id, Node, Agent, Module, Limits, Saved),
+        (   catch(Goal, E, call_error(E, Limits))
+        ->  Result = true
+        ;   Result = false
+        ),
+        leave(Id, Saved)),
+    (   retract(swallowed_(Kind))
+    ->  throw('$dfrl_bound'(Kind))
+    ;   true
+    ),
+    limit(Limits, module, MaxModule),
+    module_size(Module, Size),
+    (   over(Size, MaxModule)
+    ->  throw('$dfrl_bound'(module_memory(MaxModule)))
+    ;   true
+    ),
+    Result == true.
+
+%   SWI-Prolog's own stack limit is the memory bound.
+call_error(error(resource_error(Stack), _), Limits) :-
+    stack_resource(Stack),
+    !,
+    limit(Limits, stack, Max),
+    throw('$dfrl_bound'(memory(Max))).
+call_error(E, _) :-
+    throw(E).
+
+stack_resource(stack).
+stack_resource(stack_overflow).
+stack_resource(global_stack).
+stack_resource(local_stack).
+stack_resource(trail_stack).
+
+node_limits(Node, limits(CPU, Stack, Module, Posts, Log)) :-
+    node_option(Node, agent_cpu_limit, CPU),
+    node_option(Node, agent_stack_limit, Stack),
+    node_option(Node, agent_module_limit, Module),
+    node_option(Node, agent_post_limit, Posts),
+    node_option(Node, agent_log_limit, Log).
+
+limit(limits(L, _, _, _, _), cpu, L).
+limit(limits(_, L, _, _, _), stack, L).
+limit(limits(_, _, L, _, _), module, L).
+limit(limits(_, _, _, L, _), posts, L).
+limit(limits(_, _, _, _, L), log, L).
+
+over(Value, Limit) :-
+    Limit \== infinite,
+    Value > Limit.
+
+enter(Id, Node, Agent, Module, Limits, saved(Stack0, Out0, Err0, Cur0)) :-
+    thread_self(Me),
+    thread_statistics(Me, cputime, CPU0),
+    current_prolog_flag(stack_limit, Stack0),
+    limit(Limits, stack, Stack),
+    (   Stack == infinite
+    ->  true
+    ;   catch(set_prolog_flag(stack_limit, Stack), E,
+              print_message(warning, E))
+    ),
+    once(stream_property(Out0, alias(user_output))),
+    once(stream_property(Err0, alias(user_error))),
+    current_output(Cur0),
+    counters(Out, Err),
+    target(out, Out0, OutTarget),
+    target(err, Err0, ErrTarget),
+    assertz(budget_(Node, Agent, Limits, OutTarget, ErrTarget)),
+    set_stream(Out, alias(user_output)),
+    set_stream(Err, alias(user_error)),
+    set_output(Out),
+    assertz(current_call_(Id, Node, Agent, Limits)),
+    assertz(call_(Id, Node, Agent, Module, Me, CPU0, Limits)),
+    monitor_wake.
+
+%   The call's records go first, so that a signal arriving during the
+%   clean-up finds no call to stop; its last output is counted still.
+leave(Id, saved(Stack0, Out0, Err0, Cur0)) :-
+    retractall(current_call_(Id, _, _, _)),
+    (   retract(call_(Id, Node, _, _, Me, CPU0, _))
+    ->  catch(( thread_statistics(Me, cputime, CPU1),
+                Used is CPU1 - CPU0,
+                stat_max(peak_cpu(Node), Used)
+              ), _, true)
+    ;   true
+    ),
+    (   retract(signalled_(Id, Kind, _, _))
+    ->  retractall(swallowed_(_)),
+        assertz(swallowed_(Kind))           % a handler that took the signal
+    ;   true
+    ),
+    counters(Out, Err),
+    catch(flush_output(Out), _, true),
+    catch(flush_output(Err), _, true),
+    retractall(budget_(_, _, _, _, _)),
+    set_stream(Out0, alias(user_output)),
+    set_stream(Err0, alias(user_error)),
+    set_output(Cur0),
+    stat_add(calls, 1),
+    catch(set_prolog_flag(stack_limit, Stack0), _, true).
+
+%   The signal: stop the call Id if this thread still runs it.
+stop_if_running(Id, Kind) :-
+    (   current_call_(Id, _, _, _)
+    ->  throw('$dfrl_bound'(Kind))
+    ;   true
+    ).
+
+stop_call(Id, Thread, Kind) :-
+    get_time(Now),
+    with_mutex(dfrl_bounds,
+               (   signalled_(Id, _, _, _)
+               ->  New = false
+               ;   assertz(signalled_(Id, Kind, Now, 1)),
+                   New = true
+               )),
+    (   New == true
+    ->  pool_signal(agents, Thread, agent_bounds:stop_if_running(Id, Kind))
+    ;   true
+    ).
+
+%!  bounds_post is det.
+%
+%   Count one post sent by the agent whose bounded call runs in this
+%   thread (no effect in other threads).
+%
+%   @error '$dfrl_bound'(posts(Limit)) if it sent more than its limit
+%   in the current minute.
+
+bounds_post :-
+    (   current_call_(_, Node, Agent, Limits)
+    ->  limit(Limits, posts, Max),
+        window_take(posts(Node, Agent), Max, 1, Granted),
+        (   Granted < 1
+        ->  throw('$dfrl_bound'(posts(Max)))
+        ;   true
+        )
+    ;   true
+    ).
+
+		 /*******************************
+		 *            OUTPUT		*
+		 *******************************/
+
+%   The counting streams: one pair per process, never closed, because a
+%   thread created during a bounded call (a pool worker, a connection)
+%   inherits its creator's streams and keeps them. Output written through
+%   them in a bounded call goes to the call's own user_output or
+%   user_error until the agent's lines this minute reach its limit; then
+%   it is dropped and the call stopped. Output of a thread that runs no
+%   bounded call goes, uncounted, to the streams the process had when
+%   the pair was made. A line is a newline, or 4096 characters without
+%   one, or one flush of a partial line.
+counters(Out, Err) :-
+    (   counters_(Out0, Err0)
+    ->  Out = Out0,
+        Err = Err0
+    ;   with_mutex(dfrl_bounds_monitor, make_counters),
+        counters_(Out, Err)
+    ).
+
+make_counters :-
+    (   counters_(_, _)
+    ->  true
+    ;   once(stream_property(Out0, alias(user_output))),
+        once(stream_property(Err0, alias(user_error))),
+        assertz(default_target_(out, Out0)),
+        assertz(default_target_(err, Err0)),
+        open_prolog_stream(agent_bounds, write, Out, []),
+        open_prolog_stream(agent_bounds, write, Err, []),
+        set_stream(Out, buffer(line)),
+        set_stream(Err, buffer(line)),
+        assertz(stream_role_(Out, out)),
+        assertz(stream_role_(Err, err)),
+        assertz(counters_(Out, Err))
+    ).
+
+%   Where a call's output goes: the thread's stream, unless that is a
+%   counting stream it inherited.
+target(Role, Stream, Target) :-
+    (   stream_role_(Stream, _)
+    ->  default_target_(Role, Target)
+    ;   Target = Stream
+    ).
+
+%   Called by the stream layer in the writing thread.
+stream_write(S, String) :-
+    stream_role_(S, Role),
+    (   budget_(Node, Agent, Limits, OutTarget, ErrTarget)
+    ->  ( Role == out -> Target = OutTarget ; Target = ErrTarget ),
+        limit(Limits, log, Limit),
+        line_count(String, N),
+        window_take(log(Node, Agent), Limit, N, Granted),
+        (   Granted >= N
+        ->  forward(Target, String)
+        ;   Granted > 0
+        ->  first_lines(String, Granted, Part),
+            forward(Target, Part),
+            log_over(Limit)
+        ;   log_over(Limit)
+        )
+    ;   default_target_(Role, Target)
+    ->  forward(Target, String)
+    ;   true
+    ).
+
+stream_close(_).
+
+forward(Target, String) :-
+    catch(( write(Target, String), flush_output(Target) ), _, true).
+
+log_over(Limit) :-
+    (   current_call_(Id, _, _, _)
+    ->  thread_self(Me),
+        stop_call(Id, Me, log(Limit))
+    ;   true
+    ).
+
+line_count(String, N) :-
+    aggregate_all(count, sub_string(String, _, 1, _, "\n"), NL),
+    string_length(String, Len),
+    N is max(1, NL) + Len // 4096.
+
+first_lines(String, N, Part) :-
+    split_string(String, "\n", "", Lines),
+    length(Keep, N),
+    (   append(Keep, _, Lines)
+    ->  atomic_list_concat(Keep, '\n', Part0),
+        atom_concat(Part0, '\n', Part)
+    ;   Part = String
+    ).
+
+		 /*******************************
+		 *            MONITOR		*
+		 *******************************/
+
+%   Called after the call is registered: the monitor marks itself idle
+%   before it looks for calls, so one of the two sees the other.
+monitor_wake :-
+    (   monitor_(_, Queue)
+    ->  true
+    ;   with_mutex(dfrl_bounds_monitor, monitor_start(Queue))
+    ),
+    (   monitor_idle_
+    ->  thread_send_message(Queue, wake)
+    ;   true
+    ).
+
+monitor_start(Queue) :-
+    (   monitor_(_, Queue)
+    ->  true
+    ;   message_queue_create(Queue),
+        thread_create(monitor_loop(Queue), Tid,
+                      [alias(dfrl_bounds_monitor), detached(true)]),
+        assertz(monitor_(Tid, Queue))
+    ).
+
+%   Block while no call runs; tick every period while some do.
+monitor_loop(Queue) :-
+    assertz(monitor_idle_),
+    (   call_(_, _, _, _, _, _, _)
+    ->  retractall(monitor_idle_),
+        current_prolog_flag(dfrl_bounds_period, Period),
+        (   thread_get_message(Queue, _, [timeout(Period)])
+        ->  drain(Queue)
+        ;   true
+        )
+    ;   thread_get_message(Queue, _),
+        retractall(monitor_idle_),
+        drain(Queue)
+    ),
+    catch(monitor_tick, E, print_message(warning, E)),
+    monitor_loop(Queue).
+
+drain(Queue) :-
+    (   thread_get_message(Queue, _, [timeout(0)])
+    ->  drain(Queue)
+    ;   true
+    ).
+
+monitor_tick :-
+    get_time(Now),
+    forall(call_(Id, Node, Agent, Module, Thread, CPU0, Limits),
+           catch(check_call(Id, Node, Agent, Module, Thread, CPU0, Limits, Now),
+                 E, debug(dfrl(bounds), 'check ~w: ~p', [Id, E]))),
+    thread_self(Me),
+    thread_statistics(Me, cputime, Own),
+    stat_set(monitor_cpu, Own),
+    stat_add(ticks, 1).
+
+check_call(Id, Node, Agent, _Module, Thread, _, _, Now) :-
+    signalled_(Id, Kind, Since, Tries),
+    !,
+    current_prolog_flag(dfrl_bounds_grace, Grace),
+    max_signals(Max),
+    (   Now - Since < Grace
+    ->  true
+    ;   integer(Tries),
+        Tries < Max
+    ->  T1 is Tries + 1,
+        with_mutex(dfrl_bounds,
+                   ( retract(signalled_(Id, Kind, Since, Tries)),
+                     assertz(signalled_(Id, Kind, Now, T1)) )),
+        stat_add(resignals, 1),
+        pool_signal(agents, Thread, agent_bounds:stop_if_running(Id, Kind))
+    ;   Tries == Max
+    ->  with_mutex(dfrl_bounds,
+                   ( retract(signalled_(Id, Kind, Since, Tries)),
+                     assertz(signalled_(Id, Kind, Now, gave_up)) )),
+        bounds_warning(Node, dfrl_bounds(unstoppable(Node, Agent, Kind, Max))),
+        catch(agents:agent_purge(Node, Agent), _, true)
+    ;   true
+    ).
+check_call(Id, Node, _Agent, Module, Thread, CPU0, Limits, _) :-
+    thread_statistics(Thread, cputime, CPU),
+    Used is CPU - CPU0,
+    catch(( thread_statistics(Thread, globalused, G),
+            thread_statistics(Thread, localused, L),
+            thread_statistics(Thread, trailused, T),
+            Stack is G + L + T,
+            stat_max(peak_stack(Node), Stack) ), _, true),
+    limit(Limits, cpu, MaxCPU),
+    limit(Limits, module, MaxModule),
+    (   over(Used, MaxCPU)
+    ->  stop_call(Id, Thread, cpu(MaxCPU))
+    ;   MaxModule \== infinite,
+        module_size(Module, Size),
+        over(Size, MaxModule)
+    ->  stop_call(Id, Thread, module_memory(MaxModule))
+    ;   true
+    ).
+
+%   Bytes held by the clauses of Module's own predicates.
+module_size(Module, Size) :-
+    aggregate_all(sum(B),
+                  ( current_predicate(_, Module:H),
+                    \+ predicate_property(Module:H, imported_from(_)),
+                    predicate_property(Module:H, size(B))
+                  ),
+                  Size).
+
+%!  bounds_check_module(+Node, +Module) is det.
+%
+%   Check the size of an arriving agent's Module against Node's
+%   agent_module_limit.
+%
+%   @error resource_error(agent_memory) if it is over.
+
+bounds_check_module(Node, Module) :-
+    node_option(Node, agent_module_limit, Max),
+    (   Max \== infinite,
+        module_size(Module, Size),
+        over(Size, Max)
+    ->  throw(error(resource_error(agent_memory),
+                    context(_, too_large(Size, Max))))
+    ;   true
+    ).
+
+		 /*******************************
+		 *          ARRIVALS		*
+		 *******************************/
+
+%!  bounds_admit(+Node, +Mode, +Agents) is det.
+%
+%   Admit an arriving agent (Mode `move` or `clone`) on Node, which holds
+%   Agents agents: at most max_agents(N), and at most clone_limit(N)
+%   clones a minute. A refusal is printed (rate-limited) and raised, for
+%   the transfer's reply.
+%
+%   @error resource_error(agents)
+%   @error resource_error(clones)
+
+bounds_admit(Node, Mode, Agents) :-
+    node_option(Node, max_agents, Max),
+    (   over(Agents + 1, Max)
+    ->  refuse(Node, agents, Max)
+    ;   Mode == clone
+    ->  node_option(Node, clone_limit, Clones),
+        window_take(clones(Node), Clones, 1, Granted),
+        (   Granted < 1
+        ->  refuse(Node, clones, Clones)
+        ;   true
+        )
+    ;   true
+    ).
+
+refuse(Node, What, Max) :-
+    bounds_warning(Node, dfrl_bounds(refused(Node, What, Max))),
+    throw(error(resource_error(What), context(_, limit(Max)))).
+
+%!  bounds_arrived(+Node, +Agent, +Source) is det.
+%
+%   Agent arrived on Node from the node at address Source: that node is
+%   told if Agent is stopped here.
+
+bounds_arrived(Node, Agent, Source) :-
+    retractall(arrived_(Node, Agent, _)),
+    assertz(arrived_(Node, Agent, Source)).
+
+agents:agent_changed(removed, Node, Agent) :-
+    retractall(arrived_(Node, Agent, _)),
+    with_mutex(dfrl_bounds,
+               ( retractall(window_(log(Node, Agent), _, _)),
+                 retractall(window_(posts(Node, Agent), _, _)) )).
+
+node:node_stopping(Node) :-
+    retractall(arrived_(Node, _, _)),
+    retractall(report_(Node, _, _, _)),
+    with_mutex(dfrl_bounds,
+               forall(( window_(Key, _, _), arg(1, Key, Node) ),
+                      retractall(window_(Key, _, _)))).
+
+		 /*******************************
+		 *      STOPPED: WARN, TELL	*
+		 *******************************/
+
+%!  bounds_stopped(+Node, +Agent, +Kind) is det.
+%
+%   Agent was stopped on Node for going over bound Kind (its handler
+%   thread calls this, after '$dfrl_bound'(Kind), before removing the
+%   agent): print one warning, tell the node it came from, and let the
+%   worker thread exit after its job (a thread that held large stacks
+%   gives them back only when it ends).
+
+bounds_stopped(Node, Agent, Kind) :-
+    stat_add(stopped, 1),
+    bounds_warning(Node, dfrl_bounds(stopped(Node, Agent, Kind))),
+    (   arrived_(Node, Agent, Source)
+    ->  notify(Node, Agent, Kind, Source)
+    ;   true
+    ),
+    pool_retire.
+
+notify(Node, Agent, Kind, Source) :-
+    max_notices_per_minute(Max),
+    window_take(notices(Node), Max, 1, Granted),
+    (   Granted =:= 1
+    ->  catch(pool_run(dfrl_bound_notices,
+                       send_notice(Node, Agent, Kind, Source), [max(2)]),
+              E, debug(dfrl(bounds), 'notice dropped: ~p', [E]))
+    ;   true
+    ).
+
+send_notice(Node, Agent, Kind, Source) :-
+    node_property(Node, address(Here)),
+    (   node_for_address(Source, Local)
+    ->  record_report(Local, Agent, Kind, Here, local)
+    ;   node_property(Node, tokens(Tokens)),
+        node_option(Node, connect_timeout, CT),
+        catch(with_node(Node,
+                        transport_request(Source, bound_notice(Agent, Kind, Here), _,
+                                          [ tokens(Tokens), connect_timeout(CT),
+                                            reply_timeout(CT) ])),
+              E, debug(dfrl(bounds), 'notice to ~p: ~p', [Source, E]))
+    ).
+
+node:requires_authentication(bound_notice(_, _, _)).
+
+node:platform_request(bound_notice(Agent, Kind, From), Ctx, ok(noted), true) :-
+    ctx_node(Ctx, Node),
+    (   valid_notice(Agent, Kind, From)
+    ->  true
+    ;   throw(error(domain_error(bound_notice, bound_notice/3), _))
+    ),
+    (   ctx_peer(Ctx, Peer) -> true ; Peer = unknown ),
+    record_report(Node, Agent, Kind, From, Peer).
+
+%   A notice holds an agent name, a bound and an address, of bounded
+%   size; nothing else is accepted.
+valid_notice(Agent, Kind, Host:Port) :-
+    atom(Agent), atom_length(Agent, AL), AL =< 256,
+    compound(Kind), compound_name_arity(Kind, K, 1),
+    memberchk(K, [cpu, memory, module_memory, posts, log]),
+    arg(1, Kind, Limit),
+    ( number(Limit) ; Limit == infinite ),
+    atomic(Host), \+ number(Host), atom_length(Host, HL), HL =< 256,
+    integer(Port), between(0, 65535, Port).
+
+record_report(Node, Agent, Kind, From, Peer) :-
+    get_time(Now),
+    Report = bound(Kind, From, Peer),
+    with_mutex(dfrl_bounds,
+               ( assertz(report_(Node, Agent, Now, Report)),
+                 prune_reports(Node) )),
+    bounds_warning(Node, dfrl_bounds(report(Node, Agent, Kind, From))).
+
+prune_reports(Node) :-
+    max_reports_kept(Max),
+    aggregate_all(count, report_(Node, _, _, _), N),
+    (   N > Max,
+        retract(report_(Node, _, _, _))
+    ->  prune_reports(Node)
+    ;   true
+    ).
+
+%!  agent_bound_report(?Node, ?Agent, ?Report) is nondet.
+%
+%   Node was told that its Agent was stopped elsewhere for going over a
+%   bound. Report is bound(Kind, From, Peer, Time): Kind as in
+%   '$dfrl_bound'(Kind), From the address the stopping node gave, Peer
+%   the connection's peer (`local` for a node of this process), Time
+%   when it was told. The last 100 per node are kept.
+
+agent_bound_report(Node, Agent, bound(Kind, From, Peer, Time)) :-
+    report_(Node, Agent, Time, bound(Kind, From, Peer)).
+
+		 /*******************************
+		 *     RATE-LIMITED WARNINGS	*
+		 *******************************/
+
+%!  bounds_warning(+Node, +Message) is det.
+%
+%   print_message(warning, Message), at most 20 times per node and
+%   minute; the first warning of the next minute is preceded by the
+%   number suppressed.
+
+bounds_warning(Node, Message) :-
+    max_warnings_per_minute(Max),
+    get_time(Now),
+    with_mutex(dfrl_bounds, warn_take(Node, Max, Now, Verdict)),
+    (   Verdict = print(Suppressed)
+    ->  (   Suppressed > 0
+        ->  print_message(warning, dfrl_bounds(suppressed(Node, Suppressed)))
+        ;   true
+        ),
+        print_message(warning, Message)
+    ;   true
+    ).
+
+warn_take(Node, Max, Now, Verdict) :-
+    Key = warnings(Node),
+    (   window_(Key, Start, Count),
+        Now - Start < 60
+    ->  (   Count < Max
+        ->  Verdict = print(0)
+        ;   Verdict = quiet
+        ),
+        C is Count + 1,
+        retractall(window_(Key, _, _)),
+        assertz(window_(Key, Start, C))
+    ;   (   window_(Key, _, Old)
+        ->  Suppressed is max(0, Old - Max)
+        ;   Suppressed = 0
+        ),
+        retractall(window_(Key, _, _)),
+        assertz(window_(Key, Now, 1)),
+        Verdict = print(Suppressed)
+    ).
+
+%   Take N units from the budget of Key this minute; Granted of them are
+%   within Limit. Every unit asked for counts.
+window_take(_, infinite, N, N) :-
+    !.
+window_take(Key, Limit, N, Granted) :-
+    get_time(Now),
+    with_mutex(dfrl_bounds,
+               (   (   window_(Key, Start, C0),
+                       Now - Start < 60
+                   ->  true
+                   ;   Start = Now,
+                       C0 = 0
+                   ),
+                   Granted is max(0, min(N, Limit - C0)),
+                   C is C0 + N,
+                   retractall(window_(Key, _, _)),
+                   assertz(window_(Key, Start, C))
+               )).
+
+		 /*******************************
+		 *          STATISTICS		*
+		 *******************************/
+
+%!  bounds_statistics(-Stats) is det.
+%
+%   Stats is a dict: `calls` (bounded calls ended), `stopped`,
+%   `resignals`, `ticks` and `monitor_cpu` (seconds of CPU the monitor
+%   thread used so far), and per node `peak_cpu` (the most CPU one call
+%   used) and `peak_stack` (the largest stack use the monitor saw in a
+%   running call), as Node-Value pairs.
+
+bounds_statistics(bounds{calls:Calls, stopped:Stopped, resignals:Re,
+                         ticks:Ticks, monitor_cpu:CPU,
+                         peak_cpu:PeakCPU, peak_stack:PeakStack}) :-
+    stat_value(calls, Calls),
+    stat_value(stopped, Stopped),
+    stat_value(resignals, Re),
+    stat_value(ticks, Ticks),
+    stat_value(monitor_cpu, CPU),
+    findall(N-V, stat_(peak_cpu(N), V), PeakCPU),
+    findall(N-V, stat_(peak_stack(N), V), PeakStack).
+
+stat_value(Name, V) :-
+    (   stat_(Name, V0) -> V = V0 ; V = 0 ).
+
+stat_add(Name, D) :-
+    with_mutex(dfrl_bounds_stats,
+               (   retract(stat_(Name, V0))
+               ->  V is V0 + D,
+                   assertz(stat_(Name, V))
+               ;   assertz(stat_(Name, D))
+               )).
+
+stat_set(Name, V) :-
+    with_mutex(dfrl_bounds_stats,
+               ( retractall(stat_(Name, _)),
+                 assertz(stat_(Name, V)) )).
+
+stat_max(Name, V) :-
+    with_mutex(dfrl_bounds_stats,
+               (   stat_(Name, V0), V0 >= V
+               ->  true
+               ;   retractall(stat_(Name, _)),
+                   assertz(stat_(Name, V))
+               )).
+
+		 /*******************************
+		 *           MESSAGES		*
+		 *******************************/
+
+prolog:message(dfrl_bounds(Message)) -->
+    bounds_message(Message).
+
+bounds_message(stopped(Node, Agent, Kind)) -->
+    [ 'Platform ~w: agent ~q stopped and removed: '-[Node, Agent] ],
+    bound_text(Kind).
+bounds_message(report(Node, Agent, Kind, From)) -->
+    [ 'Platform ~w: agent ~q was stopped at ~w: '-[Node, Agent, From] ],
+    bound_text(Kind).
+bounds_message(refused(Node, What, Max)) -->
+    [ 'Platform ~w: refused an arriving agent: '-[Node] ],
+    refusal_text(What, Max).
+bounds_message(unstoppable(Node, Agent, Kind, Tries)) -->
+    [ 'Platform ~w: the thread of agent ~q did not stop after ~d signals '-[Node, Agent, Tries],
+      '(bound ~q); the agent is purged'-[Kind] ].
+bounds_message(suppressed(Node, N)) -->
+    [ 'Platform ~w: ~D warnings about agents suppressed in the last minute'-[Node, N] ].
+
+bound_text(cpu(L)) -->
+    [ 'it used more than ~w s of CPU in one handler call (agent_cpu_limit)'-[L] ].
+bound_text(memory(L)) -->
+    [ 'its stacks outgrew ~w bytes (agent_stack_limit)'-[L] ].
+bound_text(module_memory(L)) -->
+    [ 'its own facts outgrew ~w bytes (agent_module_limit)'-[L] ].
+bound_text(posts(L)) -->
+    [ 'it sent more than ~w posts in a minute (agent_post_limit)'-[L] ].
+bound_text(log(L)) -->
+    [ 'it wrote more than ~w lines in a minute (agent_log_limit); '-[L],
+      'the rest of its output was dropped' ].
+
+refusal_text(agents, Max) -->
+    [ 'it holds ~w agents (max_agents)'-[Max] ].
+refusal_text(clones, Max) -->
+    [ 'more than ~w clones arrived in a minute (clone_limit)'-[Max] ].
