@@ -36,9 +36,11 @@ from collections.abc import Callable
 from pathlib import Path
 
 from dfrl.experiments.bench.fault_proxy import DROP, PASS, STALL, Action, FaultProxy
+from dfrl.experiments.tokens import env_with_tokens, new_secret
 
 SCRIPT = Path(__file__).resolve().parent / "chaos_node.pl"
-TOKEN = "chaos"
+TOKEN = new_secret()
+"""The nodes' token, this process's own, handed to them in the environment (never argv)."""
 REPLY_TIMEOUT_S = 1.5        # the nodes' reply_timeout (chaos_node.pl)
 PAST_TIMEOUTS_S = 2.5        # SIGSTOP, stall and delay last this long
 FAULT_KINDS = (
@@ -64,12 +66,12 @@ class NodeProcess:
         swipl = shutil.which("swipl")
         if swipl is None:
             raise FileNotFoundError("swipl is not installed")
-        args = [swipl, "-q", str(SCRIPT), "node", str(self.port), str(self.store), TOKEN,
+        args = [swipl, "-q", str(SCRIPT), "node", str(self.port), str(self.store),
                 self.routes] + ([",".join(agents)] if agents else [])
         offset = self.log.stat().st_size if self.log.exists() else 0
         with open(self.log, "ab") as log:
             self.proc = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=log,
-                                         stderr=subprocess.STDOUT)
+                                         stderr=subprocess.STDOUT, env=env_with_tokens([TOKEN]))
         self.starts += 1
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
@@ -98,9 +100,9 @@ class ChaosConsole:
     def __init__(self) -> None:
         swipl = shutil.which("swipl")
         assert swipl is not None
-        self.proc = subprocess.Popen([swipl, "-q", str(SCRIPT), "console", TOKEN],
+        self.proc = subprocess.Popen([swipl, "-q", str(SCRIPT), "console"],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-                                     bufsize=1)
+                                     bufsize=1, env=env_with_tokens([TOKEN]))
         self.sel = selectors.DefaultSelector()
         assert self.proc.stdout is not None
         self.sel.register(self.proc.stdout, selectors.EVENT_READ)

@@ -28,6 +28,7 @@
 */
 :- use_module('../../platform_pl/tartarus').
 :- use_module('../../platform_pl/transport', [transport_request/4]).
+:- use_module('../../platform_pl/secrets', [take_env_tokens/1]).
 :- use_module(library(http/json)).
 :- use_module(library(main)).
 
@@ -42,7 +43,10 @@ sandbox:safe_primitive(user:chaos_route(_, _)).
 sandbox:safe_primitive(user:chaos_paused).
 :- dynamic chaos_hops/2.
 
-main([node, Port0, Store, Token, Routes | Rest]) :-
+%   The token comes in the environment (DFRL_TOKEN), never on the
+%   command line.
+main([node, Port0, Store, Routes | Rest]) :-
+    env_token(Token),
     (   getenv('DFRL_CHAOS_DEBUG', _)
     ->  debug(dfrl(custody))
     ;   true
@@ -63,9 +67,17 @@ main([node, Port0, Store, Token, Routes | Rest]) :-
     format("CHAOS listening on 127.0.0.1:~w~n", [Port]),
     flush_output,
     thread_get_message(_).
-main([console, Token]) :-
+main([console]) :-
+    env_token(Token),
     set_stream(user_output, buffer(line)),
     console_loop(Token).
+
+env_token(Token) :-
+    (   take_env_tokens([Token|_])
+    ->  true
+    ;   format(user_error, "chaos_node: DFRL_TOKEN is not set~n", []),
+        halt(2)
+    ).
 
 parse_routes(Text) :-
     atomic_list_concat(Parts, ',', Text),
@@ -109,7 +121,7 @@ chaos_hopper(guid, _Link, main) :-
     sleep(Pause),
     findall(P, user:chaos_route(_, P), Ports),
     random_member(Port, Ports),
-    catch(move_agent(guid, ('127.0.0.1', Port)), _, ( sleep(0.05), fail )),
+    catch(move_agent(guid, ('127.0.0.1', Port)), error(_, _), ( sleep(0.05), fail )),
     !.
 
 wait_unpaused(0) :- !.
