@@ -12,7 +12,7 @@
                 node_for_address/2, ctx_node/2, ctx_authenticated/1 ]).
 :- use_module(agents).
 :- use_module(custody).
-:- use_module(agent_bounds, [bounds_admit/3, bounds_arrived/3, bounds_check_module/2]).
+:- use_module(agent_bounds, [bounds_admit/3, bounds_arrived/3, bounds_install/4]).
 :- autoload(library(aggregate), [aggregate_all/3]).
 :- use_module(transport).
 :- use_module(platform_errors, [transport_error/2]).
@@ -344,10 +344,7 @@ receive_transfer(Ctx, MigId, Mode, Source, Departed, Record0, SInc, Reply, After
         aggregate_all(count, agent_exists(Node, _), Present),
         bounds_admit(Node, Mode, Present),
         arriving_record(Ctx, Node, MigId, Record0, Record),
-        agent_install(Node, Record, staged(MigId), Name),
-        agent_module(Node, Name, Module),
-        catch(bounds_check_module(Node, Module), E0,
-              ( agent_remove(Node, Name), throw(E0) )),
+        bounds_install(Node, Record, staged(MigId), Name),
         bounds_arrived(Node, Name, Source),
         get_time(Now),
         catch(custody_stage(Node, Name, MigId, Source, SInc, Now), E,
