@@ -4,6 +4,8 @@
             bounds_admit/3,             % +Node, +Mode, +Agents
             bounds_arrived/3,           % +Node, +Agent, +Source
             bounds_check_module/2,      % +Node, +Module
+            bounds_install/4,           % +Node, +Record, +Status, -Name
+            bounds_node_memory/2,       % +Node, -Bytes
             bounds_post/0,
             bounds_warning/2,           % +Node, +Message
             agent_bound_report/3,       % ?Node, ?Agent, ?Report
@@ -12,6 +14,8 @@
 %   Eager imports (not autoload/2): see node_connection.pl.
 :- use_module(library(prolog_stream), [open_prolog_stream/4]).
 :- use_module(library(aggregate), [aggregate_all/3]).
+:- use_module(library(apply), [foldl/4]).
+:- use_module(library(lists), [sum_list/2, member/2]).
 :- use_module(library(debug), [debug/3]).
 :- use_module(node,
               [ node_option/3, node_property/2, node_for_address/2,
@@ -82,7 +86,12 @@ says how many were suppressed.
     report_/4,                  % Node, Agent, Time, Report
     stat_/2,                    % Name, Value
     monitor_/2,                 % Thread, Queue
-    monitor_idle_/0.            % the monitor waits for a call to start
+    monitor_idle_/0,            % the monitor waits for a call to start
+    monitor_hot_/0,             % a node's agents hold over half its budget
+    module_size_/3,             % Node, Agent, Bytes (last measured)
+    slot_queue_/2,              % Node, Queue (max_running_agents tokens)
+    reclaim_due_/1,             % Time: give freed memory back then
+    reclaim_pass_/1.            % passes of the current reclaim so far
 
 :- thread_local
     current_call_/4,            % Id, Node, Agent, Limits
@@ -125,12 +134,15 @@ bounds_call(Node, Agent, Module, Goal) :-
     node_limits(Node, Limits),
     flag(dfrl_bounds_calls, Id, Id+1),
     setup_call_cleanup(
-        enter(Id, Node, Agent, Module, Limits, Saved),
-        (   catch(Goal, E, call_error(E, Limits))
-        ->  Result = true
-        ;   Result = false
-        ),
-        leave(Id, Saved)),
+        take_slot(Node, Agent, Slot),
+        setup_call_cleanup(
+            enter(Id, Node, Agent, Module, Limits, Saved),
+            (   catch(Goal, E, call_error(E, Limits))
+            ->  Result = true
+            ;   Result = false
+            ),
+            leave(Id, Saved)),
+        give_slot(Slot)),
     (   retract(swallowed_(Kind))
     ->  throw('$dfrl_bound'(Kind))
     ;   true
@@ -141,7 +153,54 @@ bounds_call(Node, Agent, Module, Goal) :-
     ->  throw('$dfrl_bound'(module_memory(MaxModule)))
     ;   true
     ),
+    note_module_size(Node, Agent, Size),
     Result == true.
+
+%   max_running_agents(N): a call takes one of N slots of its node (a
+%   message queue holding N tokens) before it starts, and waits for one
+%   when all are taken, at most agent_slot_wait(Sec) (node option, 60).
+%   Waiting costs no CPU and is not counted in the call's bounds.
+take_slot(Node, Agent, Slot) :-
+    node_option(Node, max_running_agents, Max),
+    (   Max == infinite
+    ->  Slot = none
+    ;   slot_queue(Node, Max, Queue),
+        node_option(Node, agent_slot_wait, Wait),
+        (   thread_get_message(Queue, slot, [timeout(0)])
+        ->  true
+        ;   stat_add(slot_waits, 1),
+            thread_get_message(Queue, slot, [timeout(Wait)])
+        ->  true
+        ;   bounds_warning(Node, dfrl_bounds(no_slot(Node, Agent, Max, Wait))),
+            throw(error(resource_error(running_agents), context(_, limit(Max))))
+        ),
+        Slot = slot(Queue)
+    ).
+
+give_slot(none).
+give_slot(slot(Queue)) :-
+    catch(thread_send_message(Queue, slot), _, true).
+
+slot_queue(Node, Max, Queue) :-
+    (   slot_queue_(Node, Q0)
+    ->  Queue = Q0
+    ;   with_mutex(dfrl_bounds_monitor,
+                   (   slot_queue_(Node, Q0)
+                   ->  Queue = Q0
+                   ;   message_queue_create(Queue),
+                       forall(between(1, Max, _), thread_send_message(Queue, slot)),
+                       assertz(slot_queue_(Node, Queue))
+                   ))
+    ).
+
+%   The last measured size of an agent still on its node.
+note_module_size(Node, Agent, Size) :-
+    with_mutex(dfrl_bounds,
+               (   agents:agent_exists(Node, Agent)
+               ->  retractall(module_size_(Node, Agent, _)),
+                   assertz(module_size_(Node, Agent, Size))
+               ;   true
+               )).
 
 %   SWI-Prolog's own stack limit is the memory bound.
 call_error(error(resource_error(Stack), _), Limits) :-
@@ -381,21 +440,36 @@ monitor_start(Queue) :-
         assertz(monitor_(Tid, Queue))
     ).
 
-%   Block while no call runs; tick every period while some do.
+%   Block while no call runs and no reclaim is due; tick every period
+%   while calls run, five times as often while a node's agents hold over
+%   half its agent_memory_budget.
 monitor_loop(Queue) :-
     assertz(monitor_idle_),
+    get_time(Now),
     (   call_(_, _, _, _, _, _, _)
     ->  retractall(monitor_idle_),
-        current_prolog_flag(dfrl_bounds_period, Period),
-        (   thread_get_message(Queue, _, [timeout(Period)])
-        ->  drain(Queue)
-        ;   true
+        current_prolog_flag(dfrl_bounds_period, Period0),
+        (   monitor_hot_
+        ->  Period1 is Period0 / 5
+        ;   Period1 = Period0
         )
-    ;   thread_get_message(Queue, _),
-        retractall(monitor_idle_),
-        drain(Queue)
+    ;   Period1 = infinite
     ),
+    (   aggregate_all(min(T), reclaim_due_(T), Due)
+    ->  Wait is max(0, Due - Now),
+        (   Period1 == infinite -> Period = Wait ; Period is min(Period1, Wait) )
+    ;   Period = Period1
+    ),
+    (   Period == infinite
+    ->  thread_get_message(Queue, _)
+    ;   thread_get_message(Queue, _, [timeout(Period)])
+    ->  true
+    ;   true
+    ),
+    retractall(monitor_idle_),
+    drain(Queue),
     catch(monitor_tick, E, print_message(warning, E)),
+    catch(reclaim_if_due, E2, print_message(warning, E2)),
     monitor_loop(Queue).
 
 drain(Queue) :-
@@ -409,6 +483,11 @@ monitor_tick :-
     forall(call_(Id, Node, Agent, Module, Thread, CPU0, Limits),
            catch(check_call(Id, Node, Agent, Module, Thread, CPU0, Limits, Now),
                  E, debug(dfrl(bounds), 'check ~w: ~p', [Id, E]))),
+    findall(Node, call_(_, Node, _, _, _, _, _), Nodes0),
+    sort(Nodes0, Nodes),
+    foldl(check_budget, Nodes, false, Hot),
+    retractall(monitor_hot_),
+    (   Hot == true -> assertz(monitor_hot_) ; true ),
     thread_self(Me),
     thread_statistics(Me, cputime, Own),
     stat_set(monitor_cpu, Own),
@@ -456,6 +535,124 @@ check_call(Id, Node, _Agent, Module, Thread, CPU0, Limits, _) :-
     ;   true
     ).
 
+%   agent_memory_budget(B): the node's agents may hold B bytes, counted
+%   as the sizes of their modules plus the stacks of the threads running
+%   their calls. Over it, the running call that holds most (stack plus
+%   module) is stopped with memory_budget(B); calls already signalled
+%   count as freed.
+check_budget(Node, Hot0, Hot) :-
+    node_option(Node, agent_memory_budget, Budget),
+    (   Budget == infinite
+    ->  Hot = Hot0
+    ;   findall(c(Id, Thread, Mem, Sig),
+                ( call_(Id, Node, _, Module, Thread, _, _),
+                  catch(call_memory(Module, Thread, Mem), _, fail),
+                  ( signalled_(Id, _, _, _) -> Sig = true ; Sig = false )
+                ),
+                Calls),
+        findall(A, call_(_, Node, A, _, _, _, _), Running),
+        idle_memory(Node, Running, Idle),
+        aggregate_all(sum(M), member(c(_, _, M, _), Calls), Run),
+        aggregate_all(sum(M), member(c(_, _, M, true), Calls), Going),
+        Used is Idle + Run,
+        stat_max(peak_memory(Node), Used),
+        (   Used - Going > Budget,
+            aggregate_all(max(M, Id-T), member(c(Id, T, M, false), Calls),
+                          max(_, BigId-BigThread))
+        ->  stat_add(budget_stops, 1),
+            stop_call(BigId, BigThread, memory_budget(Budget))
+        ;   true
+        ),
+        (   Used * 2 > Budget -> Hot = true ; Hot = Hot0 )
+    ).
+
+call_memory(Module, Thread, Mem) :-
+    thread_statistics(Thread, stack, Stack),
+    module_size(Module, Size),
+    Mem is Stack + Size.
+
+%   Modules of the agents of Node that run no call, as last measured.
+idle_memory(Node, Running, Idle) :-
+    aggregate_all(sum(S),
+                  ( module_size_(Node, A, S),
+                    \+ memberchk(A, Running)
+                  ),
+                  Idle).
+
+%!  bounds_node_memory(+Node, -Bytes) is det.
+%
+%   Bytes the agents of Node hold as agent_memory_budget counts them:
+%   their modules (as last measured: on arrival, at the end of each
+%   call, running calls now) plus the stacks of the threads running
+%   their calls.
+
+bounds_node_memory(Node, Bytes) :-
+    findall(Mem,
+            ( call_(_, Node, _, Module, Thread, _, _),
+              catch(call_memory(Module, Thread, Mem), _, fail)
+            ),
+            Mems),
+    sum_list(Mems, Run),
+    findall(A, call_(_, Node, A, _, _, _, _), Running),
+    idle_memory(Node, Running, Idle),
+    Bytes is Idle + Run.
+
+		 /*******************************
+		 *      GIVING MEMORY BACK	*
+		 *******************************/
+
+%   After an agent that held much memory left (stopped, or a module of
+%   16 MiB or more), its retracted clauses are reclaimed and the freed
+%   heap given back to the OS (garbage_collect_clauses/0, trim_heap/0),
+%   in the monitor thread, 0.3 s later (the stopped call's worker has
+%   exited by then) and again 2 s later. SWI-Prolog 9.0.4 frees erased
+%   clauses over several passes (measured: 8 modules of 700,000 facts,
+%   retractall/1, then garbage_collect_clauses/0 every 0.1 s: the
+%   clause count fell over 3 to 4 passes; one pass and trim_heap gave
+%   back 85 of 707 MB, passes until no progress and then trim_heap all
+%   but 5 MB). So a reclaim repeats a pass every 0.1 s while the number
+%   of clauses falls (at most 50 passes), then trims the heap.
+reclaim_threshold(16777216).
+max_reclaim_passes(50).
+
+schedule_reclaim :-
+    get_time(Now),
+    T1 is Now + 0.3,
+    T2 is Now + 2.0,
+    with_mutex(dfrl_bounds,
+               forall(member(T, [T1, T2]),
+                      (   reclaim_due_(T0), abs(T0 - T) < 0.25
+                      ->  true
+                      ;   assertz(reclaim_due_(T))
+                      ))),
+    (   monitor_(_, Queue)
+    ->  thread_send_message(Queue, wake)
+    ;   with_mutex(dfrl_bounds_monitor, monitor_start(Queue)),
+        thread_send_message(Queue, wake)
+    ).
+
+reclaim_if_due :-
+    get_time(Now),
+    with_mutex(dfrl_bounds,
+               findall(T, ( reclaim_due_(T), T =< Now, retract(reclaim_due_(T)) ), Due)),
+    (   Due == []
+    ->  true
+    ;   statistics(clauses, C0),
+        garbage_collect_clauses,
+        statistics(clauses, C1),
+        (   retract(reclaim_pass_(P0)) -> true ; P0 = 0 ),
+        P is P0 + 1,
+        max_reclaim_passes(MaxP),
+        (   C1 < C0,
+            P < MaxP
+        ->  assertz(reclaim_pass_(P)),
+            Next is Now + 0.1,
+            with_mutex(dfrl_bounds, assertz(reclaim_due_(Next)))
+        ;   trim_heap,
+            stat_add(reclaims, 1)
+        )
+    ).
+
 %   Bytes held by the clauses of Module's own predicates.
 module_size(Module, Size) :-
     aggregate_all(sum(B),
@@ -485,6 +682,51 @@ bounds_check_module(Node, Module) :-
 		 /*******************************
 		 *          ARRIVALS		*
 		 *******************************/
+
+%!  bounds_install(+Node, +Record, +Status, -Name) is det.
+%
+%   Install an arriving agent from Record (agent_install/5) within
+%   Node's bounds: max_agents(N) is counted and the agent registered
+%   under the registry mutex (simultaneous arrivals never make more than
+%   N); then its module must be within agent_module_limit and fit in
+%   what is left of agent_memory_budget (counted and noted under one
+%   mutex). A refused agent is removed again and the refusal printed
+%   (rate-limited) and raised, for the transfer's reply.
+%
+%   @error resource_error(agents)
+%   @error resource_error(agent_memory)
+
+bounds_install(Node, Record, Status, Name) :-
+    node_option(Node, max_agents, Max),
+    catch(agents:agent_install(Node, Record, Status, Name, [max_agents(Max)]),
+          error(resource_error(agents), C),
+          ( bounds_warning(Node, dfrl_bounds(refused(Node, agents, Max))),
+            throw(error(resource_error(agents), C)) )),
+    agents:agent_module(Node, Name, Module),
+    catch(admit_memory(Node, Name, Module), E,
+          ( agents:agent_remove(Node, Name), throw(E) )).
+
+admit_memory(Node, Name, Module) :-
+    bounds_check_module(Node, Module),
+    module_size(Module, Size),
+    node_option(Node, agent_memory_budget, Budget),
+    with_mutex(dfrl_bounds, admit_memory(Node, Name, Size, Budget, Verdict)),
+    (   Verdict = over(Used)
+    ->  bounds_warning(Node, dfrl_bounds(refused(Node, agent_memory, Budget))),
+        throw(error(resource_error(agent_memory),
+                    context(_, budget(Used, Size, Budget))))
+    ;   true
+    ).
+
+admit_memory(Node, Name, Size, Budget, Verdict) :-
+    (   Budget \== infinite,
+        bounds_node_memory(Node, Used),
+        Used + Size > Budget
+    ->  Verdict = over(Used)
+    ;   retractall(module_size_(Node, Name, _)),
+        assertz(module_size_(Node, Name, Size)),
+        Verdict = ok
+    ).
 
 %!  bounds_admit(+Node, +Mode, +Agents) is det.
 %
@@ -525,6 +767,12 @@ bounds_arrived(Node, Agent, Source) :-
 
 agents:agent_changed(removed, Node, Agent) :-
     retractall(arrived_(Node, Agent, _)),
+    (   with_mutex(dfrl_bounds, retract(module_size_(Node, Agent, Size))),
+        reclaim_threshold(Big),
+        Size >= Big
+    ->  schedule_reclaim
+    ;   true
+    ),
     with_mutex(dfrl_bounds,
                ( retractall(window_(log(Node, Agent), _, _)),
                  retractall(window_(posts(Node, Agent), _, _)) )).
@@ -532,6 +780,11 @@ agents:agent_changed(removed, Node, Agent) :-
 node:node_stopping(Node) :-
     retractall(arrived_(Node, _, _)),
     retractall(report_(Node, _, _, _)),
+    with_mutex(dfrl_bounds, retractall(module_size_(Node, _, _))),
+    (   with_mutex(dfrl_bounds_monitor, retract(slot_queue_(Node, Queue)))
+    ->  catch(message_queue_destroy(Queue), _, true)
+    ;   true
+    ),
     with_mutex(dfrl_bounds,
                forall(( window_(Key, _, _), arg(1, Key, Node) ),
                       retractall(window_(Key, _, _)))).
@@ -555,6 +808,7 @@ bounds_stopped(Node, Agent, Kind) :-
     ->  notify(Node, Agent, Kind, Source)
     ;   true
     ),
+    schedule_reclaim,
     pool_retire.
 
 notify(Node, Agent, Kind, Source) :-
@@ -596,7 +850,7 @@ node:platform_request(bound_notice(Agent, Kind, From), Ctx, ok(noted), true) :-
 valid_notice(Agent, Kind, Host:Port) :-
     atom(Agent), atom_length(Agent, AL), AL =< 256,
     compound(Kind), compound_name_arity(Kind, K, 1),
-    memberchk(K, [cpu, memory, module_memory, posts, log]),
+    memberchk(K, [cpu, memory, module_memory, memory_budget, posts, log]),
     arg(1, Kind, Limit),
     ( number(Limit) ; Limit == infinite ),
     atomic(Host), \+ number(Host), atom_length(Host, HL), HL =< 256,
@@ -702,11 +956,22 @@ window_take(Key, Limit, N, Granted) :-
 %   `resignals`, `ticks` and `monitor_cpu` (seconds of CPU the monitor
 %   thread used so far), and per node `peak_cpu` (the most CPU one call
 %   used) and `peak_stack` (the largest stack use the monitor saw in a
-%   running call), as Node-Value pairs.
+%   running call), as Node-Value pairs; `slot_waits` (calls that waited
+%   for a max_running_agents slot), `budget_stops` (calls stopped over
+%   agent_memory_budget), `reclaims` (times freed memory was given
+%   back), `peak_memory` (per node, the most its agents held as
+%   agent_memory_budget counts it, seen while a budget was set).
 
 bounds_statistics(bounds{calls:Calls, stopped:Stopped, resignals:Re,
                          ticks:Ticks, monitor_cpu:CPU,
-                         peak_cpu:PeakCPU, peak_stack:PeakStack}) :-
+                         slot_waits:Waits, budget_stops:BStops,
+                         reclaims:Reclaims,
+                         peak_cpu:PeakCPU, peak_stack:PeakStack,
+                         peak_memory:PeakMem}) :-
+    stat_value(slot_waits, Waits),
+    stat_value(budget_stops, BStops),
+    stat_value(reclaims, Reclaims),
+    findall(N-V, stat_(peak_memory(N), V), PeakMem),
     stat_value(calls, Calls),
     stat_value(stopped, Stopped),
     stat_value(resignals, Re),
@@ -758,6 +1023,9 @@ bounds_message(refused(Node, What, Max)) -->
 bounds_message(unstoppable(Node, Agent, Kind, Tries)) -->
     [ 'Platform ~w: the thread of agent ~q did not stop after ~d signals '-[Node, Agent, Tries],
       '(bound ~q); the agent is purged'-[Kind] ].
+bounds_message(no_slot(Node, Agent, Max, Wait)) -->
+    [ 'Platform ~w: a call of agent ~q waited ~w s for one of ~w slots '-[Node, Agent, Wait, Max],
+      '(max_running_agents) and was not run' ].
 bounds_message(suppressed(Node, N)) -->
     [ 'Platform ~w: ~D warnings about agents suppressed in the last minute'-[Node, N] ].
 
@@ -767,6 +1035,9 @@ bound_text(memory(L)) -->
     [ 'its stacks outgrew ~w bytes (agent_stack_limit)'-[L] ].
 bound_text(module_memory(L)) -->
     [ 'its own facts outgrew ~w bytes (agent_module_limit)'-[L] ].
+bound_text(memory_budget(L)) -->
+    [ 'the node\'s agents held more than ~w bytes and it held most '-[L],
+      '(agent_memory_budget)' ].
 bound_text(posts(L)) -->
     [ 'it sent more than ~w posts in a minute (agent_post_limit)'-[L] ].
 bound_text(log(L)) -->
@@ -777,3 +1048,5 @@ refusal_text(agents, Max) -->
     [ 'it holds ~w agents (max_agents)'-[Max] ].
 refusal_text(clones, Max) -->
     [ 'more than ~w clones arrived in a minute (clone_limit)'-[Max] ].
+refusal_text(agent_memory, Max) -->
+    [ 'its agents would hold more than ~w bytes (agent_memory_budget)'-[Max] ].

@@ -13,6 +13,7 @@
             agent_module/3,             % +Node, +Name, -Module
             agent_export/3,             % +Node, +Name, -Record
             agent_install/4,            % +Node, +Record, +Status, -Name
+            agent_install/5,            % +Node, +Record, +Status, -Name, +Options
             agent_remove/2,             % +Node, +Name
             agent_set_status/3,         % +Node, +Name, +Status
             agent_status/3,             % +Node, +Name, -Status
@@ -34,6 +35,7 @@
 :- autoload(library(option), [option/2, option/3]).
 :- autoload(library(lists), [member/2, subtract/3, union/3, max_member/2, append/3]).
 :- autoload(library(apply), [maplist/2, maplist/3, include/3]).
+:- autoload(library(aggregate), [aggregate_all/3]).
 
 :- meta_predicate with_agents_locked(0).
 
@@ -663,9 +665,26 @@ agent_export(Node, Name, agent(Name, Handler, Kind, Tokens, Payload,
 %   @error type_error(agent_record, Record) for a malformed record.
 
 agent_install(Node, Record, Status, Name) :-
+    agent_install(Node, Record, Status, Name, []).
+
+%!  agent_install(+Node, +Record, +Status, -Name, +Options) is det.
+%
+%   As agent_install/4. Options:
+%
+%     - max_agents(+Max)  refuse the agent if Node holds Max agents
+%                         already (an integer or `infinite`, the
+%                         default). Counted and registered under the
+%                         registry mutex, so simultaneous arrivals never
+%                         make more than Max.
+%
+%   @error resource_error(agents) if Node holds Max agents.
+
+agent_install(Node, Record, Status, Name, Options) :-
     check_record(Record),
+    option(max_agents(Max), Options, infinite),
     Record = agent(Name0, Handler, Kind, Tokens, Payload, Preds, Clauses0, Hops),
-    with_agents_locked(install_entry(Node, Name0, Handler, Kind, Name)),
+    with_agents_locked(( room_for_one(Node, Max),
+                         install_entry(Node, Name0, Handler, Kind, Name) )),
     (   Name0 = rename(Old, _)
     ->  replace_guid(Clauses0, Old, Name, Clauses)
     ;   Clauses = Clauses0
@@ -677,6 +696,15 @@ agent_install(Node, Record, Status, Name) :-
     forall(member(P, Payload), assertz(agent_payload_(Node, Name, P))),
     assertz(agent_hops_(Node, Name, Hops)),
     assertz(agent_status_(Node, Name, Status)).
+
+room_for_one(_, infinite) :-
+    !.
+room_for_one(Node, Max) :-
+    aggregate_all(count, agent_entry(Node, _, _, _), N),
+    (   N < Max
+    ->  true
+    ;   throw(error(resource_error(agents), context(_, limit(Max))))
+    ).
 
 install_entry(Node, rename(_, Base), Handler, Kind, Name) :-
     !,

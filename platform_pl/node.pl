@@ -136,6 +136,9 @@ by default the bind address, or the host name when it binds 0.0.0.0).
                        agent_log_limit(any),
                        max_agents(any),
                        clone_limit(any),
+                       agent_memory_budget(any),
+                       max_running_agents(any),
+                       agent_slot_wait(number),
                        default(boolean)
                      ]).
 
@@ -165,7 +168,13 @@ by default the bind address, or the host name when it binds 0.0.0.0).
 %     - settle_period(+Sec), lease_s(+Sec) for the custody protocol
 %                                 (defaults 2 and 10)
 %     - max_frame_size(+Bytes)    largest frame from a peer that proved a
-%                                 token (default 256 MiB)
+%                                 token (default 32 MiB: about 3 million
+%                                 floats in a binary frame, 1.5 million as
+%                                 text). Parsing a text frame takes 8 to 19
+%                                 times its size (a string, a list of
+%                                 small integers): two 32 MiB frames at
+%                                 once raised a node's RSS by 481 and
+%                                 1256 MiB (256 MiB frames: 2.8 GB)
 %     - max_text_frame_size(+Bytes) largest frame before that (4096:
 %                                 a hello is answered by auth(Proofs),
 %                                 about 70 bytes a proof, and pings)
@@ -227,6 +236,22 @@ by default the bind address, or the host name when it binds 0.0.0.0).
 %     - clone_limit(+N)           clones arriving per minute; more are
 %                                 refused with resource_error(clones)
 %                                 (default 60)
+%     - agent_memory_budget(+Bytes) what the node's agents may hold
+%                                 together: their modules plus the stacks
+%                                 of their running calls (default 1 GiB).
+%                                 Over it the running call holding most
+%                                 is stopped (memory_budget(Bytes)); an
+%                                 arriving agent that does not fit is
+%                                 refused with resource_error(agent_memory)
+%     - max_running_agents(+N)    handler calls (main or posted event)
+%                                 running at once; more wait for a slot,
+%                                 then fail with
+%                                 resource_error(running_agents) (the
+%                                 agent stays, idle; default 8). With it,
+%                                 the stacks of agents never exceed
+%                                 N x agent_stack_limit
+%     - agent_slot_wait(+Sec)     how long a call waits for one of those
+%                                 slots (default 60)
 %
 %   Secrets. A node bound to an address other than loopback (0.0.0.0
 %   included) refuses to start if it is open or one of its tokens has
@@ -320,13 +345,14 @@ check_options(Options) :-
     ),
     forall(( member(Name, [idle_timeout, auth_idle_timeout, commit_timeout,
                            settle_period, lease_s, reply_timeout,
-                           connect_timeout]),
+                           connect_timeout, agent_slot_wait]),
              Opt =.. [Name, V],
              option(Opt, Options) ),
            must_be(number, V)),
     forall(( member(Name, [agent_cpu_limit, agent_stack_limit,
                            agent_module_limit, agent_post_limit,
-                           agent_log_limit, max_agents, clone_limit]),
+                           agent_log_limit, max_agents, clone_limit,
+                           agent_memory_budget, max_running_agents]),
              Opt =.. [Name, V],
              option(Opt, Options),
              V \== infinite ),
@@ -465,7 +491,7 @@ option_default(auth_idle_timeout, 60).
 option_default(store, none).
 option_default(settle_period, 2).
 option_default(lease_s, 10).
-option_default(max_frame_size, 268435456).
+option_default(max_frame_size, 33554432).
 option_default(max_text_frame_size, 4096).
 option_default(frame_deadline, 5).
 option_default(max_term_depth, 64).
@@ -482,6 +508,9 @@ option_default(agent_post_limit, 600).
 option_default(agent_log_limit, 200).
 option_default(max_agents, 100).
 option_default(clone_limit, 60).
+option_default(agent_memory_budget, 1073741824).
+option_default(max_running_agents, 8).
+option_default(agent_slot_wait, 60).
 
 %!  local_node(?Node) is nondet.
 %

@@ -6,6 +6,7 @@
                                        [--insecure] [--tls DIR]
                                        [--tls-peer NAME]... [--trust NAME]...
                                        [--consult FILE]... [--interactive]
+                                       [BOUND VALUE]...
 
     Binds H:P (H may be 0.0.0.0: every interface), prints "dfrl node
     listening on A:P" with the address it advertises (--advertise, default
@@ -32,6 +33,13 @@
     option trusted_peers(Names)). A malformed command line is
     reported on stderr and exits with status 2; a node that cannot start
     (address taken, weak token) prints why and exits with status 1.
+
+    Bounds on agents (node options of node_start/3, agent_bounds.pl),
+    each taking a value or `infinite`: --agent-cpu-limit SEC,
+    --agent-stack-limit BYTES, --agent-module-limit BYTES,
+    --agent-post-limit N, --agent-log-limit N, --max-agents N,
+    --clone-limit N, --agent-memory-budget BYTES, --max-running-agents N;
+    and --agent-slot-wait SEC, --max-frame-size BYTES (values only).
 
     The arguments are parsed here, not with library(optparse): --token,
     --token-file and --consult may be repeated, and optparse keeps only
@@ -62,7 +70,10 @@ main(Argv) :-
     findall(F, member(consult(F), Options), Files),
     findall(N, member(tls_peer(N), Options), Peers),
     findall(N, member(trust(N), Options), Trusted),
-    findall(O, ( member(O0, [advertise(_), store(_), tls(_)]),
+    findall(O, ( ( member(O0, [advertise(_), store(_), tls(_)])
+                 ; bound_flag(_, Name, _),
+                   O0 =.. [Name, _]
+                 ),
                  last_option(Options, O0),
                  O = O0 ),
             Extra),
@@ -112,7 +123,13 @@ usage(Why) :-
             [--token-file FILE]... [--token T]... \c
             [--advertise HOST[:PORT]] [--store DIR] [--insecure] \c
             [--tls DIR] [--tls-peer NAME]... [--trust NAME]... \c
-            [--consult FILE]... [--interactive]~n", []),
+            [--consult FILE]... [--interactive] \c
+            [--agent-cpu-limit SEC] [--agent-stack-limit BYTES] \c
+            [--agent-module-limit BYTES] [--agent-post-limit N] \c
+            [--agent-log-limit N] [--max-agents N] [--clone-limit N] \c
+            [--agent-memory-budget BYTES] [--max-running-agents N] \c
+            [--agent-slot-wait SEC] [--max-frame-size BYTES] \c
+            (a bound's value may be infinite)~n", []),
     halt(2).
 
 %   parse_args(+Argv, -Options): Options in command-line order.
@@ -144,6 +161,21 @@ flag_arg('--store', store, atom).
 flag_arg('--tls', tls, atom).
 flag_arg('--tls-peer', tls_peer, atom).
 flag_arg('--trust', trust, atom).
+flag_arg(Flag, Name, Type) :-
+    bound_flag(Flag, Name, Type).
+
+%   Bounds on agents and frames: flag, node option, type.
+bound_flag('--agent-cpu-limit', agent_cpu_limit, limit(number)).
+bound_flag('--agent-stack-limit', agent_stack_limit, limit(integer)).
+bound_flag('--agent-module-limit', agent_module_limit, limit(integer)).
+bound_flag('--agent-post-limit', agent_post_limit, limit(integer)).
+bound_flag('--agent-log-limit', agent_log_limit, limit(integer)).
+bound_flag('--max-agents', max_agents, limit(integer)).
+bound_flag('--clone-limit', clone_limit, limit(integer)).
+bound_flag('--agent-memory-budget', agent_memory_budget, limit(integer)).
+bound_flag('--max-running-agents', max_running_agents, limit(integer)).
+bound_flag('--agent-slot-wait', agent_slot_wait, positive(number)).
+bound_flag('--max-frame-size', max_frame_size, positive(integer)).
 
 typed_value(atom, _, V, V).
 typed_value(integer, Flag, V0, V) :-
@@ -168,6 +200,23 @@ typed_value(address, Flag, V0, V) :-
     ).
 typed_value(token, _, V0, V) :-
     token_text_term(V0, V).
+typed_value(limit(_), _, infinite, infinite) :-
+    !.
+typed_value(limit(Type), Flag, V0, V) :-
+    (   positive_value(Type, V0, V)
+    ->  true
+    ;   usage_error("~w needs a positive ~w or infinite, not ~w", [Flag, Type, V0])
+    ).
+typed_value(positive(Type), Flag, V0, V) :-
+    (   positive_value(Type, V0, V)
+    ->  true
+    ;   usage_error("~w needs a positive ~w, not ~w", [Flag, Type, V0])
+    ).
+
+positive_value(Type, V0, V) :-
+    catch(atom_number(V0, V), _, fail),
+    V > 0,
+    (   Type == integer -> integer(V) ; true ).
 
 usage_error(Format, Args) :-
     format(string(Why), Format, Args),

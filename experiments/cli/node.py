@@ -5,10 +5,86 @@ import argparse
 import os
 import shutil
 import sys
+from dataclasses import dataclass
+from typing import Callable, Union
 
 from dfrl.experiments.tokens import (TOKEN_ENV, Token, env_with_tokens, parse_tokens,
                                      pop_env_tokens, read_token_file)
 from dfrl.platform_pl import PLATFORM_DIR
+
+
+Bound = Union[int, float, str]
+"""A bound's value: a positive number, or ``"infinite"`` where the bound allows it."""
+
+
+@dataclass(frozen=True)
+class BoundFlag:
+    """A command-line flag for a node option bounding agents or frames."""
+
+    flag: str
+    option: str
+    integer: bool
+    infinite: bool
+    metavar: str
+    help: str
+
+    def parse(self, text: str) -> Bound:
+        """The value of ``text``; raise argparse.ArgumentTypeError if it is not one."""
+        if self.infinite and text == "infinite":
+            return "infinite"
+        try:
+            value: Bound = int(text) if self.integer else float(text)
+        except ValueError:
+            value = -1
+        if value <= 0:
+            kind = "integer" if self.integer else "number"
+            also = " or infinite" if self.infinite else ""
+            raise argparse.ArgumentTypeError(f"needs a positive {kind}{also}, not {text!r}")
+        return value
+
+
+#: Every node option that bounds what agents (or frames) may take, as flags of ``dfrl node``
+#: and ``dfrl robot`` (node_start/3 documents them; platform_pl/README.md "Bounds on agents").
+BOUND_FLAGS: tuple[BoundFlag, ...] = (
+    BoundFlag("--agent-cpu-limit", "agent_cpu_limit", False, True, "SEC",
+              "CPU seconds of one handler call of an agent (default 2)"),
+    BoundFlag("--agent-stack-limit", "agent_stack_limit", True, True, "BYTES",
+              "stacks of one handler call (default 268435456, 256 MiB)"),
+    BoundFlag("--agent-module-limit", "agent_module_limit", True, True, "BYTES",
+              "an agent's own code and facts (default 67108864, 64 MiB)"),
+    BoundFlag("--agent-post-limit", "agent_post_limit", True, True, "N",
+              "posts an agent sends per minute (default 600)"),
+    BoundFlag("--agent-log-limit", "agent_log_limit", True, True, "N",
+              "output lines per agent and minute (default 200)"),
+    BoundFlag("--max-agents", "max_agents", True, True, "N",
+              "agents on the node (default 100)"),
+    BoundFlag("--clone-limit", "clone_limit", True, True, "N",
+              "clones arriving per minute (default 60)"),
+    BoundFlag("--agent-memory-budget", "agent_memory_budget", True, True, "BYTES",
+              "what the node's agents hold together: modules plus stacks of running calls "
+              "(default 1073741824, 1 GiB)"),
+    BoundFlag("--max-running-agents", "max_running_agents", True, True, "N",
+              "agent handler calls running at once; more wait (default 8)"),
+    BoundFlag("--agent-slot-wait", "agent_slot_wait", False, False, "SEC",
+              "how long a call waits for a running slot (default 60)"),
+    BoundFlag("--max-frame-size", "max_frame_size", True, False, "BYTES",
+              "largest frame from a peer that proved a token (default 33554432, 32 MiB)"),
+)
+
+
+def add_bound_arguments(p: argparse.ArgumentParser) -> None:
+    """One flag per entry of :data:`BOUND_FLAGS` (values may be ``infinite`` where noted)."""
+    g = p.add_argument_group("bounds on agents (each may be 'infinite' unless noted)")
+    for b in BOUND_FLAGS:
+        parse: Callable[[str], Bound] = b.parse
+        g.add_argument(b.flag, dest=b.option, type=parse, default=None, metavar=b.metavar,
+                       help=b.help + ("" if b.infinite else "; not infinite"))
+
+
+def bounds_of_args(args: argparse.Namespace) -> dict[str, Bound]:
+    """The bound options a command line gave, by node option name."""
+    return {b.option: getattr(args, b.option) for b in BOUND_FLAGS
+            if getattr(args, b.option, None) is not None}
 
 
 def node_command(
@@ -22,6 +98,7 @@ def node_command(
     tls: str | None = None,
     tls_peers: list[str] | None = None,
     trust: list[str] | None = None,
+    bounds: dict[str, Bound] | None = None,
 ) -> list[str]:
     """The ``swipl`` command line that runs one node. It holds no token: run it with the
     node's tokens in the environment (:func:`dfrl.experiments.tokens.env_with_tokens`; none:
@@ -51,12 +128,15 @@ def node_command(
     trust
         With ``tls``: certificate names whose code (agents, programs) is installed without
         the sandbox check (node option ``trusted_peers``; default: none, all code checked).
+    bounds
+        Node options bounding agents and frames, by name (:data:`BOUND_FLAGS`).
 
     Raises
     ------
     ValueError
         A port out of range, ``tls_peers`` or ``trust`` without ``tls``, a name no
-        certificate can have, or ``tls`` not a node TLS folder.
+        certificate can have, ``tls`` not a node TLS folder, or an unknown bound or bad
+        value.
     FileNotFoundError
         ``swipl`` is missing.
     """
@@ -89,6 +169,15 @@ def node_command(
         cmd += ["--tls-peer", name]
     for name in trust or []:
         cmd += ["--trust", name]
+    flags = {b.option: b for b in BOUND_FLAGS}
+    for option, value in (bounds or {}).items():
+        if option not in flags:
+            raise ValueError(f"unknown bound {option!r}")
+        try:
+            flags[option].parse(str(value))
+        except argparse.ArgumentTypeError as exc:
+            raise ValueError(f"{flags[option].flag}: {exc}") from exc
+        cmd += [flags[option].flag, str(value)]
     if interactive:
         cmd.append("--interactive")
     return cmd
@@ -142,7 +231,7 @@ def _run(args: argparse.Namespace) -> int:
         tokens = tokens_of_args(args, "dfrl node")
         cmd = node_command(args.host, args.port, args.consult, args.interactive,
                            args.advertise, args.store, args.insecure, args.tls,
-                           args.tls_peer, args.trust)
+                           args.tls_peer, args.trust, bounds_of_args(args))
     except (ValueError, FileNotFoundError) as exc:      # TokenError is a ValueError
         print(f"dfrl node: {exc}", file=sys.stderr)
         return 2
@@ -174,6 +263,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="with --tls: a certificate name that may send agents or code "
                         "(repeatable; default: any name the CA signed)")
     add_trust_argument(p)
+    add_bound_arguments(p)
     p.add_argument("--interactive", action="store_true", help="open a Prolog toplevel on the node")
     p.set_defaults(func=_run)
 

@@ -5,7 +5,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from dfrl.experiments.cli.node import add_token_arguments, add_trust_argument
+from dfrl.experiments.cli.node import (add_bound_arguments, add_token_arguments,
+                                       add_trust_argument, bounds_of_args)
 from dfrl.pybridge.errors import BridgeError
 
 
@@ -43,7 +44,7 @@ def _run(args: argparse.Namespace) -> int:
         return 2
     service = RobotService(args.host, args.port, tokens, args.advertise,
                            Path(args.workdir), insecure=args.insecure, tls=tls,
-                           trust=tuple(args.trust))
+                           trust=tuple(args.trust), bounds=bounds_of_args(args))
     service.install_signals()
     try:
         service.start()
@@ -84,4 +85,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "node.key from 'dfrl certs node'); any token is then accepted off "
                         "loopback (default: plaintext)")
     add_trust_argument(p)
+    add_bound_arguments(p)
     p.set_defaults(func=_run)

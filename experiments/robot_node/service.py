@@ -85,6 +85,9 @@ class RobotService:
     trust : sequence of str
         With ``tls``: certificate names whose code is installed without the sandbox check
         (node option ``trusted_peers``).
+    bounds : dict, optional
+        Node options bounding agents and frames (``agent_cpu_limit``, ``max_agents``, ...;
+        :data:`dfrl.experiments.cli.node.BOUND_FLAGS`), a positive number or ``"infinite"``.
 
     Raises
     ------
@@ -96,12 +99,14 @@ class RobotService:
                  advertise: str | None = None,
                  workdir: Path = Path("dfrl-robot"), out: TextIO = sys.stdout,
                  insecure: bool = False, tls: Path | None = None,
-                 trust: Sequence[str] = ()) -> None:
+                 trust: Sequence[str] = (),
+                 bounds: dict[str, int | float | str] | None = None) -> None:
         if trust and tls is None:
             raise ValueError("trusting peers by name needs tls (a TLS certificate name)")
         self.bind = (host, int(port))
         self.trust = tuple(trust)
         self.insecure = insecure
+        self.bounds = dict(bounds or {})
         self.tls = Path(tls).resolve() if tls is not None else None
         self.tokens: list[Token] = [token] if isinstance(token, (int, str)) else list(token)
         if not self.tokens:
@@ -140,6 +145,8 @@ class RobotService:
             options["tls"] = str(self.tls)
         if self.trust:
             options["trusted_peers"] = [Atom(name) for name in self.trust]
+        for name, value in self.bounds.items():
+            options[name] = Atom(value) if isinstance(value, str) else value
         if adv and port:
             options["advertise"] = Term(":", Atom(adv), port)
         self.node_name = self.node.start(host, port, **options)

@@ -19,7 +19,8 @@
 :- asserta((user:message_hook(dfrl_bounds(M), warning, _) :- assertz(seen(M)))).
 :- asserta((user:message_hook(dfrl(agent_crashed(_, _, _)), warning, _))).
 
-:- dynamic looper/3, burner/3, bomb/3, poster/3, stubborn/3, good/3, ran/1.
+:- dynamic looper/3, burner/3, bomb/3, poster/3, stubborn/3, good/3, ran/1,
+    sleeper/3.
 looper(guid, _, main) :- repeat, fail.
 burner(guid, _, main) :-
     statistics(cputime, T0),
@@ -37,6 +38,7 @@ stubborn(guid, _, main) :-
     ;   true
     ).
 good(guid, _, main) :- assertz(user:ran(guid)).
+sleeper(guid, _, main) :- sleep(1.0), assertz(user:ran(slept(guid))).
 
 wait_for(G) :- wait_for(G, 300).
 wait_for(G, N) :- ( call(G) -> true ; N > 0 -> sleep(0.02), N1 is N-1, wait_for(G, N1) ; fail ).
@@ -151,5 +153,74 @@ test(warnings_rate_limited, [cleanup(cleanup([]))]) :-
     forall(between(1, 30, I), bounds_warning(rate_test, dfrl_bounds(stopped(rate_test, I, cpu(1))))),
     aggregate_all(count, seen(stopped(rate_test, _, _)), N),
     assertion(N == 20).
+
+test(max_agents_atomic_under_concurrent_arrivals, [cleanup(cleanup([A, B]))]) :-
+    node([max_agents(3)], A),
+    node([], B),
+    link(A, Link),
+    numlist(1, 12, Is),
+    forall(member(I, Is),
+           ( atom_concat(r, I, Name),
+             with_node(B, create_mobile_agent(Name, good, [5])) )),
+    findall(T, ( member(I, Is),
+                 atom_concat(r, I, Name),
+                 thread_create(with_node(B, catch(move_agent(Name, Link), _, true)), T, []) ),
+            Ts),
+    maplist(thread_join, Ts),
+    aggregate_all(count, agent_exists(A, _), OnA),
+    aggregate_all(count, ( member(I, Is), atom_concat(r, I, Name),
+                           agent_exists(B, Name) ), Kept),
+    assertion(OnA == 3),
+    assertion(Kept == 9).
+
+test(running_calls_wait_for_a_slot, [cleanup(cleanup([A, B]))]) :-
+    node([max_running_agents(1)], A),
+    node([], B),
+    bounds_statistics(S0),
+    send(B, A, s1, sleeper),
+    sleep(0.2),
+    send(B, A, g1, good),
+    assertion(wait_for(ran(g1), 200)),
+    assertion(ran(slept(s1))),                  % g1 waited for s1's slot
+    bounds_statistics(S1),
+    assertion(S1.slot_waits > S0.slot_waits).
+
+test(slot_wait_bounded, [cleanup(cleanup([A, B]))]) :-
+    node([max_running_agents(1), agent_slot_wait(0.3)], A),
+    node([], B),
+    send(B, A, s1, sleeper),
+    sleep(0.2),
+    send(B, A, g1, good),
+    assertion(wait_for(seen(no_slot(A, g1, 1, _)), 100)),
+    assertion(\+ ran(g1)),
+    assertion(agent_exists(A, g1)),             % not run, not lost
+    assertion(wait_for(ran(slept(s1)), 100)).
+
+test(memory_budget_refuses_arrival, [cleanup(cleanup([A, B]))]) :-
+    node([agent_memory_budget(700000)], A),
+    node([], B),
+    numlist(1, 20000, Big),                     % about 480 KB as a fact
+    forall(member(F, [f1, f2]),
+           with_node(B, ( create_mobile_agent(F, good, [5]),
+                          current_node(NB),
+                          agent_add_facts(NB, F, [big(Big)]) ))),
+    link(A, Link),
+    with_node(B, move_agent(f1, Link)),
+    assertion(wait_for(ran(f1))),
+    catch(with_node(B, move_agent(f2, Link)), E, true),
+    assertion(E = error(resource_error(agent_memory), remote(_))),
+    assertion(\+ agent_exists(A, f2)),
+    assertion(seen(refused(A, agent_memory, 700000))),
+    bounds_node_memory(A, Used),
+    assertion(Used > 400000).
+
+test(memory_budget_stops_biggest_call, [cleanup(cleanup([A, B]))]) :-
+    node([agent_memory_budget(40000000), agent_cpu_limit(20)], A),
+    node([], B),
+    send(B, A, m1, bomb),
+    assertion(wait_for(agent_bound_report(B, m1, bound(memory_budget(40000000), _, _, _)))),
+    assertion(stopped(A, m1)),
+    send(B, A, g1, good),
+    assertion(wait_for(ran(g1))).
 
 :- end_tests(agent_bounds).

@@ -142,7 +142,7 @@ def _bound_port(proc: Proc) -> int:
 
 
 def test_oversized_binary_frame_refused_before_its_body(procs: list[Proc]) -> None:
-    # Prepare: an open node (no token) takes frames up to 256 MiB once the open key is proved.
+    # Prepare: an open node (no token) takes frames up to 32 MiB once the open key is proved.
     _, port = start_node(procs)
     with connect_with_nonce(port) as (s, nonce):
         s.sendall(frame(f"auth(['{open_proof(nonce)}']) .\n".encode()))
@@ -152,7 +152,7 @@ def test_oversized_binary_frame_refused_before_its_body(procs: list[Proc]) -> No
         s.sendall(frame(b"", kind=b"B", length=300 * 2**20))
         reply = read_frame(s)
     # Assert: refused at once, by size.
-    assert reply is not None and "too_large(314572800,268435456)" in reply[1], reply
+    assert reply is not None and "too_large(314572800,33554432)" in reply[1], reply
 
 
 class connect_with_nonce:  # noqa: N801 (a context manager used like a function)

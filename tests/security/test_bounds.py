@@ -304,3 +304,76 @@ def test_post_flood_cut(tmp_path: Path, procs: list[Proc]) -> None:
     assert "NO REPORT q1" in a.output()
     victim.wait_for("GOOD at", 10)
     assert status(victim.popen.pid, "Threads") < 80
+
+
+def wait_rss_settled(pid: int, base_kb: int, within_kb: int, limit_s: float = 10.0) -> int:
+    """VmRSS of ``pid`` (kB) once it is within ``within_kb`` of ``base_kb``, or after
+    ``limit_s`` seconds."""
+    end = time.monotonic() + limit_s
+    rss = status(pid, "VmRSS")
+    while rss - base_kb > within_kb and time.monotonic() < end:
+        time.sleep(0.2)
+        rss = status(pid, "VmRSS")
+    return rss
+
+
+def concurrent_bombs(procs: list[Proc], tmp_path: Path, port: int, handler: str,
+                     clauses: str, n: int = 8) -> Proc:
+    """An attacker that sends ``n`` agents with ``handler`` at once (b1..bn), waits for the
+    victim's report on each, then sends an ordinary agent g1."""
+    names = [f"b{i}" for i in range(1, n + 1)]
+    sends = "".join(f"send({b}, {handler}, {port}), " for b in names)
+    awaits = "".join(f"await_report({b}, 40), " for b in names)
+    return attacker(procs, tmp_path, clauses, f"""
+        get_time(T0), {sends}
+        {awaits}
+        get_time(T1), D is T1 - T0, format("ALL STOPPED after ~3f s~n", [D]),
+        send(g1, good, {port}),
+    """)
+
+
+def test_eight_memory_bombs_within_node_budget(tmp_path: Path, procs: list[Proc]) -> None:
+    # defaults: agent_stack_limit 256 MiB, agent_memory_budget 1 GiB, max_running_agents 8
+    victim, port = start_victim(procs, tmp_path)
+    pid = victim.popen.pid
+    time.sleep(0.3)
+    base = status(pid, "VmRSS")
+    a = concurrent_bombs(procs, tmp_path, port, "bomb", """
+    :- dynamic bomb/3.
+    bomb(guid, _, main) :- numlist(1, 200000000, L), length(L, N), N > 0.
+    """)
+    a.wait_for("DONE", 120)
+    out = a.output()
+    kinds = re.findall(r"REPORT b\d+ (\w+)\(", out)
+    assert len(kinds) == 8 and set(kinds) <= {"memory", "memory_budget"}, out
+    hwm = status(pid, "VmHWM")
+    victim.wait_for("GOOD at", 20)
+    after = wait_rss_settled(pid, base, 50 * 1024)
+    print(f"8 memory bombs: {a.wait_for('ALL STOPPED')}, stopped by {sorted(kinds)}; RSS before "
+          f"{base // 1024} MiB, peak +{(hwm - base) // 1024} MiB, after +{(after - base) // 1024} MiB")
+    # the stated bound (README "Bounds on agents"): agent_memory_budget plus what calls can
+    # grow in one fast monitor period, plus the node's own transfer and GC slack
+    assert (hwm - base) * 1024 < 1024 * MIB + 512 * MIB, (base, hwm)
+    assert (after - base) < 50 * 1024, (base, after)
+
+
+def test_eight_assert_bombs_within_node_budget(tmp_path: Path, procs: list[Proc]) -> None:
+    victim, port = start_victim(procs, tmp_path, "agent_cpu_limit(30)")
+    pid = victim.popen.pid
+    time.sleep(0.3)
+    base = status(pid, "VmRSS")
+    a = concurrent_bombs(procs, tmp_path, port, "asserter", """
+    :- dynamic asserter/3.
+    asserter(guid, _, main) :- between(1, inf, I), assertz(fact(I)), fail.
+    """)
+    a.wait_for("DONE", 180)
+    out = a.output()
+    kinds = re.findall(r"REPORT b\d+ (\w+)\(", out)
+    assert len(kinds) == 8 and set(kinds) <= {"module_memory", "memory_budget"}, out
+    hwm = status(pid, "VmHWM")
+    victim.wait_for("GOOD at", 20)
+    after = wait_rss_settled(pid, base, 50 * 1024)
+    print(f"8 assert bombs: {a.wait_for('ALL STOPPED')}, stopped by {sorted(kinds)}; RSS before "
+          f"{base // 1024} MiB, peak +{(hwm - base) // 1024} MiB, after +{(after - base) // 1024} MiB")
+    assert (hwm - base) * 1024 < 1024 * MIB + 512 * MIB, (base, hwm)
+    assert (after - base) < 50 * 1024, (base, after)
