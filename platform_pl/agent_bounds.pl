@@ -40,15 +40,26 @@ worker):
   | posts it sends   | agent_post_limit(PerMinute)     | 600       | counted in agent_post/6 |
   | output lines     | agent_log_limit(PerMinute)      | 200       | user_output / user_error of the call go through a counting stream |
 
-and per node: agents present (`max_agents(N)`, default 100) and agents
-arriving as clones (`clone_limit(PerMinute)`, default 60). An arrival
-over either is refused at the transfer with resource_error(agents) or
+and per node: agents present (`max_agents(N)`, default 100, counted
+under the registry mutex with the install) and agents arriving as
+clones (`clone_limit(PerMinute)`, default 60). An arrival over either is
+refused at the transfer with resource_error(agents) or
 resource_error(clones), which the sender's agent_move/3 or
-agent_clone/4 raises. Every bound takes `infinite`.
+agent_clone/4 raises. Memory of the node as a whole:
+
+  | bound            | node option                     | default   | measured by |
+  |------------------|---------------------------------|-----------|-------------|
+  | agents together  | agent_memory_budget(Bytes)      | 1 GiB     | module sizes (last measured) + allocated stacks of running calls (monitor, arrival) |
+  | calls at once    | max_running_agents(N)           | 8         | N slots; a call waits agent_slot_wait(Sec) (60) for one |
+
+so the stacks of agents never exceed N x agent_stack_limit, and what
+they hold is kept near the budget (README "Bounds on agents" has the
+measurements). Every bound takes `infinite`.
 
 An agent over a per-call bound is stopped: the term '$dfrl_bound'(Kind)
 is thrown in its thread (thread_signal/2), Kind one of cpu(Limit),
-memory(Limit), module_memory(Limit), posts(Limit) or log(Limit); a stack
+memory(Limit), module_memory(Limit), memory_budget(Limit), posts(Limit)
+or log(Limit); a stack
 overflow of the call is memory(Limit). The caller (agents.pl,
 messages.pl) removes the agent from the node and calls bounds_stopped/3,
 which prints one warning and tells the node the agent came from (the
@@ -91,7 +102,8 @@ says how many were suppressed.
     module_size_/3,             % Node, Agent, Bytes (last measured)
     slot_queue_/2,              % Node, Queue (max_running_agents tokens)
     reclaim_due_/1,             % Time: give freed memory back then
-    reclaim_pass_/1.            % passes of the current reclaim so far
+    reclaim_pass_/1,            % passes of the current reclaim so far
+    tick_size_/2.               % Id, Bytes: module size this tick
 
 :- thread_local
     current_call_/4,            % Id, Node, Agent, Limits
@@ -479,6 +491,7 @@ drain(Queue) :-
     ).
 
 monitor_tick :-
+    retractall(tick_size_(_, _)),
     get_time(Now),
     forall(call_(Id, Node, Agent, Module, Thread, CPU0, Limits),
            catch(check_call(Id, Node, Agent, Module, Thread, CPU0, Limits, Now),
@@ -529,10 +542,19 @@ check_call(Id, Node, _Agent, Module, Thread, CPU0, Limits, _) :-
     (   over(Used, MaxCPU)
     ->  stop_call(Id, Thread, cpu(MaxCPU))
     ;   MaxModule \== infinite,
-        module_size(Module, Size),
+        tick_module_size(Id, Module, Size),
         over(Size, MaxModule)
     ->  stop_call(Id, Thread, module_memory(MaxModule))
     ;   true
+    ).
+
+%   A module's size, measured once per tick: predicate_property(size(B))
+%   walks the clauses (about 10 ms for 700,000 facts).
+tick_module_size(Id, Module, Size) :-
+    (   tick_size_(Id, S0)
+    ->  Size = S0
+    ;   module_size(Module, Size),
+        assertz(tick_size_(Id, Size))
     ).
 
 %   agent_memory_budget(B): the node's agents may hold B bytes, counted
@@ -546,7 +568,9 @@ check_budget(Node, Hot0, Hot) :-
     ->  Hot = Hot0
     ;   findall(c(Id, Thread, Mem, Sig),
                 ( call_(Id, Node, _, Module, Thread, _, _),
-                  catch(call_memory(Module, Thread, Mem), _, fail),
+                  catch(( thread_statistics(Thread, stack, Stack),
+                          tick_module_size(Id, Module, Size),
+                          Mem is Stack + Size ), _, fail),
                   ( signalled_(Id, _, _, _) -> Sig = true ; Sig = false )
                 ),
                 Calls),
