@@ -350,7 +350,7 @@ receive_transfer(Ctx, MigId, Mode, Source, Departed, Record0, SInc, Reply, After
         catch(custody_stage(Node, Name, MigId, Source, SInc, Now), E,
               ( agent_remove(Node, Name), throw(E) )),
         assertz(arrival_(Node, MigId, Departed)),
-        wake_settler(Node),
+        wake_settler_if_due(Node),
         Reply = ok(staged(Name)),
         After = true
     ).
@@ -473,6 +473,18 @@ migration_stop(Node) :-
 wake_settler(Node) :-
     (   settler_(Node, _, Queue)
     ->  thread_send_message(Queue, wake)
+    ;   true
+    ).
+
+%   A newly staged agent is due after the commit timeout; the settle
+%   thread looks again within one period anyway, so it is woken (to wait
+%   less) only if the timeout is shorter than the period. A hop then
+%   wakes no third thread.
+wake_settler_if_due(Node) :-
+    custody_option(Node, commit_timeout, 10, CT),
+    custody_option(Node, settle_period, 2, Period),
+    (   CT < Period
+    ->  wake_settler(Node)
     ;   true
     ).
 

@@ -191,6 +191,7 @@ serve_stream(Node, Pair, Peer, PeerName) :-
     stream_pair(Pair, In, Out),
     set_stream(In, type(binary)),
     set_stream(Out, type(binary)),
+    set_stream(Out, record_position(false)),    % frames move in bulk (wire.pl)
     node_option(Node, idle_timeout, Idle),
     set_stream(In, timeout(Idle)),
     node_id_new(Nonce),
@@ -206,13 +207,18 @@ serve_stream(Node, Pair, Peer, PeerName) :-
 
 %   The idle limit is set before every frame: a request's After goal may
 %   have changed the stream's timeout (a staged migration waits for its
-%   commit with the commit timeout).
+%   commit with the commit timeout). Once the peer is authenticated, the
+%   input records no position, so that a binary frame's body is moved in
+%   bulk (wire.pl); before, it does: the deadline reader's
+%   read_pending_codes/3 fails on a TLS stream without one (SWI-Prolog
+%   9.0.4: "I/O error in read ... Invalid argument").
 serve_frames(Ctx) :-
     ctx_node(Ctx, Node),
     ctx_input(Ctx, In),
     ctx_output(Ctx, Out),
     (   ctx_authenticated(Ctx)
-    ->  node_option(Node, max_frame_size, Max),
+    ->  set_stream(In, record_position(false)),  % see below
+        node_option(Node, max_frame_size, Max),
         node_option(Node, auth_idle_timeout, Idle),
         ReadOptions = [max_size(Max), binary(true)]
     ;   node_option(Node, max_text_frame_size, Max),
@@ -225,8 +231,7 @@ serve_frames(Ctx) :-
     ),
     await_frame(In, Idle),
     set_stream(In, timeout(Idle)),
-    byte_count(In, Before),
-    catch(frame_read(In, Frame, ReadOptions),
+    catch(frame_read(In, Frame, [body_size(Size)|ReadOptions]),
           error(wire_error(Reason), _),
           ( request_reply(Out, error(error(wire_error(Reason), _))),
             Frame = end_of_file,
@@ -236,8 +241,7 @@ serve_frames(Ctx) :-
     ->  true
     ;   Frame = frame(_, Term),
         serve_term(Term, Ctx, Continue),
-        byte_count(In, After),
-        (   After - Before > 4194304
+        (   Size > 4194304
         ->  release_memory
         ;   true
         ),

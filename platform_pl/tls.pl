@@ -142,6 +142,7 @@ tls_accept(Dir, Plain, Pair, Name, Options) :-
     nb_setval(dfrl_tls_peer, none),
     catch(call_with_time_limit(Secs, ssl_negotiate(SSL, In0, Out0, In, Out)),
           E, handshake_failed(server, E)),
+    tune_streams(In0, Out0, Out),
     stream_pair(Pair, In, Out),
     nb_getval(dfrl_tls_peer, Name0),
     nb_setval(dfrl_tls_peer, none),
@@ -176,8 +177,20 @@ tls_connect(Dir, Address, Plain, Pair, Options) :-
     stream_pair(Plain, In0, Out0),
     catch(call_with_time_limit(Secs, ssl_negotiate(SSL, In0, Out0, In, Out)),
           E, connect_failed(Address, E)),
+    tune_streams(In0, Out0, Out),
     stream_pair(Pair, In, Out),
     debug(dfrl(tls), 'TLS to ~w established', [Address]).
+
+%   Large frames in few records: what is written to the encrypted stream
+%   Out goes to SSL_write/3 one buffer at a time, each a TLS record, so
+%   its buffer is one full record (16 KiB, TLS's largest) instead of the
+%   default 4 KiB; the socket's stream below takes several records per
+%   send(2). Neither stream below counts lines and columns (see wire.pl).
+tune_streams(In0, Out0, Out) :-
+    set_stream(In0, record_position(false)),
+    set_stream(Out0, record_position(false)),
+    set_stream(Out0, buffer_size(65536)),
+    set_stream(Out, buffer_size(16384)).
 
 connect_failed(Address, time_limit_exceeded) :-
     !,

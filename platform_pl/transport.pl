@@ -163,10 +163,14 @@ connect_failed(Address, error(Formal, _)) :-
 connect_failed(_, E) :-
     throw(E).
 
+%   No position is recorded on a connection's streams: SWI-Prolog then
+%   moves a binary frame's body in bulk (see wire.pl).
 setup_stream(Pair, Timeout) :-
     stream_pair(Pair, In, Out),
     set_stream(In, type(binary)),
     set_stream(Out, type(binary)),
+    set_stream(In, record_position(false)),
+    set_stream(Out, record_position(false)),
     set_stream(In, timeout(Timeout)).
 
 receive_hello(Conn, Nonce, Info) :-

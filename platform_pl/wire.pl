@@ -36,7 +36,15 @@ writes it (SWI-Prolog's fast serialization): it is quick for large float
 lists, but the C reader trusts its input and crashes the process on
 garbage, so frame_read/3 accepts a binary frame only when the caller says
 the connection is authenticated (the peer proved a token of this node).
-A binary body is read whole (exactly its length) before it is decoded.
+A binary body is decoded straight from the stream with fast_read/2 (its
+length is checked against the header where the stream counts bytes).
+
+Streams that carry frames should record no position
+(`set_stream(S, record_position(false))`, as transport.pl and the node's
+connection workers do): SWI-Prolog then moves a binary body in bulk
+instead of counting lines and columns byte by byte, which is most of
+what reading a 1 MB frame costs. frame_read/3's option body_size(-Bytes)
+tells the caller how large the frame was.
 
 Before a peer has authenticated, a server reads with three more limits
 (options of frame_read/3): the whole frame, from its first byte to its
@@ -166,6 +174,9 @@ open_codes_stream(Codes, In) :-
 %       The text may nest brackets at most Depth deep
 %       (text_nesting_within/2, checked before it is parsed) and the
 %       term read may be at most Depth deep (term_depth_within/2).
+%     - body_size(-Bytes)
+%       Unified with the length of the frame's body (0 at the end of
+%       the stream), e.g. to give memory back after a large frame.
 %     - parse_slots(+Queue, +Over)
 %       A text body longer than Over bytes is decoded holding a slot: a
 %       `slot` message taken from the message queue Queue and given back
@@ -188,9 +199,13 @@ frame_read(Stream, Frame, Options) :-
     ),
     (   option(deadline(Secs), Options, none), Secs \== none
     ->  read_frame_deadline(Stream, Max, AllowBinary, Secs,
-                            decode(Depth, Slots), Frame0)
+                            decode(Depth, Slots), Frame0, Len)
     ;   read_frame_plain(Stream, Max, AllowBinary,
-                         decode(Depth, Slots, none), Frame0)
+                         decode(Depth, Slots, none), Frame0, Len)
+    ),
+    (   option(body_size(Size), Options)
+    ->  Size = Len
+    ;   true
     ),
     (   Frame0 = frame(text, Term),
         Depth \== none,
@@ -199,17 +214,60 @@ frame_read(Stream, Frame, Options) :-
     ;   Frame = Frame0
     ).
 
-read_frame_plain(Stream, Max, AllowBinary, Decode, Frame) :-
+read_frame_plain(Stream, Max, AllowBinary, Decode, Frame, Len) :-
     get_byte(Stream, B0),
     (   B0 == -1
-    ->  Frame = end_of_file
+    ->  Frame = end_of_file,
+        Len = 0
     ;   read_bytes(Stream, 11, Rest),
         Header = [B0|Rest],
         check_header(Header, Max, AllowBinary, Kind, Len),
-        read_body(Stream, Len, Body),
-        decode_body(Kind, Body, Decode, Term),
+        (   Kind == binary
+        ->  read_binary_body(Stream, Len, Term)
+        ;   read_body(Stream, Len, Body),
+            decode_body(Kind, Body, Decode, Term)
+        ),
         Frame = frame(Kind, Term)
     ).
+
+%   A binary body is decoded straight from the stream (fast_read/2): no
+%   copy of it is made as a string first, and on a stream that records
+%   no position (see the module comment) the decoder copies its bytes in
+%   bulk. Where the stream counts bytes, the body must be exactly Len of
+%   them; where it does not, a body that lies about its length leaves
+%   the stream out of step, and the next frame's header is refused.
+read_binary_body(Stream, Len, Term) :-
+    (   stream_property(Stream, position(_))
+    ->  byte_count(Stream, B0),
+        decode_binary_stream(Stream, Term),
+        byte_count(Stream, B1),
+        (   B1 - B0 =:= Len
+        ->  true
+        ;   wire_error(protocol(binary_length(Len)))
+        )
+    ;   decode_binary_stream(Stream, Term)
+    ).
+
+decode_binary_stream(Stream, Term) :-
+    catch(fast_read(Stream, Term0), E, binary_failed(Stream, E)),
+    (   Term0 == end_of_file
+    ->  wire_error(truncated)
+    ;   plain_term(Term0)
+    ->  Term = Term0
+    ).
+
+%   A body the decoder cannot read is truncated if the stream ended in it
+%   (seen without waiting for more: end_of_stream/1 is a property of what
+%   the stream has read so far), else malformed.
+binary_failed(Stream, error(syntax_error(_), _)) :-
+    !,
+    (   stream_property(Stream, end_of_stream(At)),
+        At \== not
+    ->  wire_error(truncated)
+    ;   wire_error(syntax(binary))
+    ).
+binary_failed(_, E) :-
+    throw(E).
 
 check_header(Header, Max, AllowBinary, Kind, Len) :-
     parse_header(Header, Kind, Len),
@@ -228,10 +286,11 @@ check_header(Header, Max, AllowBinary, Kind, Len) :-
 %   linear in its size.
 %   The wait for the first byte is a peek (fill_buffer/1 would wait for
 %   more even when the caller's own wait left bytes in the buffer).
-read_frame_deadline(Stream, Max, AllowBinary, Secs, decode(Depth, Slots), Frame) :-
+read_frame_deadline(Stream, Max, AllowBinary, Secs, decode(Depth, Slots), Frame, Len) :-
     peek_byte(Stream, B0),
     (   B0 == -1
-    ->  Frame = end_of_file
+    ->  Frame = end_of_file,
+        Len = 0
     ;   read_pending_codes(Stream, All, Tail0),
         get_time(T0),
         Deadline is T0 + Secs,
@@ -576,13 +635,17 @@ with_parse_slot(slots(Queue, _), _, Limit, Goal) :-
 %   loops whatever walks it. Both are refused before anyone sees them.
 decode_binary(Body, Term) :-
     (   catch(fast_term_serialized(Term0, Body), _, fail)
-    ->  (   \+ acyclic_term(Term0)
-        ->  wire_error(syntax(cyclic))
-        ;   term_attvars(Term0, [_|_])
-        ->  wire_error(syntax(attributed_variable))
-        ;   Term = Term0
-        )
+    ->  plain_term(Term0),
+        Term = Term0
     ;   wire_error(syntax(binary))
+    ).
+
+plain_term(Term) :-
+    (   \+ acyclic_term(Term)
+    ->  wire_error(syntax(cyclic))
+    ;   term_attvars(Term, [_|_])
+    ->  wire_error(syntax(attributed_variable))
+    ;   true
     ).
 
 put_u32(Stream, N) :-

@@ -152,12 +152,58 @@ test(oversized_binary_refused_before_body) :-
     assertion(E = error(wire_error(too_large(1073741824, 1000)), _)).
 
 test(truncated_binary_body) :-
-    Header = [0'D, 0'F, 0'R, 0'L, 1, 0'B, 0, 0, 0, 0, 0, 9, 1, 2, 3],
+    % the first 8 bytes of a real body, then the end of the stream
+    fast_term_serialized(f([1.5, 2.5, 3.5], abc), S),
+    string_codes(S, Body),
+    length(Body, Len),
+    length(Prefix, 8),
+    append(Prefix, _, Body),
+    Header = [0'D, 0'F, 0'R, 0'L, 1, 0'B, 0, 0, 0, 0, 0, Len],
+    append(Header, Prefix, Codes),
+    setup_call_cleanup(
+        open_codes_binary(Codes, In),
+        catch(frame_read(In, _, [binary(true)]), E, true),
+        close(In)),
+    assertion(E = error(wire_error(truncated), _)).
+
+test(malformed_binary_body) :-
+    % as long as its header says, but not a serialized term
+    Header = [0'D, 0'F, 0'R, 0'L, 1, 0'B, 0, 0, 0, 0, 0, 9, 1, 2, 3, 4, 5, 6, 7, 8, 9],
     setup_call_cleanup(
         open_codes_binary(Header, In),
         catch(frame_read(In, _, [binary(true)]), E, true),
         close(In)),
-    assertion(E = error(wire_error(truncated), _)).
+    assertion(E = error(wire_error(syntax(binary)), _)).
+
+test(binary_body_longer_than_its_term) :-
+    % where the stream counts bytes, a body must be exactly its length
+    fast_term_serialized(f(1), S),
+    string_codes(S, Body),
+    length(Body, Len0),
+    Len is Len0 + 2,
+    Header = [0'D, 0'F, 0'R, 0'L, 1, 0'B, 0, 0, 0, 0, 0, Len],
+    append([Header, Body, [0, 0]], Codes),
+    setup_call_cleanup(
+        open_codes_binary(Codes, In),
+        catch(frame_read(In, _, [binary(true)]), E, true),
+        close(In)),
+    assertion(E = error(wire_error(protocol(binary_length(Len))), _)).
+
+test(body_size_option) :-
+    fast_term_serialized(hello, S),
+    string_codes(S, Body),
+    length(Body, Len),
+    Header = [0'D, 0'F, 0'R, 0'L, 1, 0'B, 0, 0, 0, 0, 0, Len],
+    append(Header, Body, Codes),
+    setup_call_cleanup(
+        open_codes_binary(Codes, In),
+        ( frame_read(In, F, [binary(true), body_size(N)]),
+          frame_read(In, F2, [binary(true), body_size(N2)]) ),
+        close(In)),
+    assertion(F == frame(binary, hello)),
+    assertion(N == Len),
+    assertion(F2 == end_of_file),
+    assertion(N2 == 0).
 
 :- end_tests(binary_frames).
 
