@@ -7,6 +7,12 @@ they arrive, no simulation), launches the real itinerary agent
 reads the round times from its log (the agent stamps a round's start when it reads the first
 robot and its end after writing the first robot back). Checks that every robot holds the
 same table after each round. Target: median under 50 ms for 5 nodes and 20,000 entries.
+
+Beside the round, in the same run, it times the hops a round is made of: ``dfrl bench migrate``'s
+hop with a payload of as many floats as the table has entries (``hop_median_ms``), so that
+``round_over_hops`` (the round's median over ``hops`` such hops) tells whether a slower round
+is slower hops or the rest of the round (reading, aggregating and writing tables, the agent's
+checkpoints).
 """
 from __future__ import annotations
 
@@ -25,8 +31,10 @@ TARGET_MS = 50.0
 
 
 def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int = 30,
-          warmup: int = 3, method: str = "average", out: Path | None = None) -> dict:
-    """Run the benchmark; return its figures.
+          warmup: int = 3, method: str = "average", out: Path | None = None,
+          hop_hops: int = 20) -> dict:
+    """Run the benchmark; return its figures. ``hop_hops``: how many migrate hops to time
+    beside the round (0: none; the hop fields are then None).
 
     Raises
     ------
@@ -83,13 +91,18 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
     rows = write_rounds_csv(out / "rounds.csv", [agent_log], ids, shares)
     timed = [r for r in agent_log.rounds if r.round > warmup]
     ms = sorted(r.duration_ms for r in timed)
+    hop_ms = _hop_median(entries, hop_hops)
+    hops = timed[0].hops
     result = {
         "benchmark": "round", "robots": robots, "entries": entries, "shape": [states, actions],
         "method": method, "rounds": len(timed), "warmup": warmup,
         "median_ms": round(statistics.median(ms), 2),
         "p90_ms": round(ms[min(len(ms) - 1, int(0.9 * len(ms)))], 2),
         "min_ms": round(ms[0], 2), "max_ms": round(ms[-1], 2),
-        "hops": timed[0].hops, "bytes_carried": timed[0].bytes,
+        "hops": hops, "bytes_carried": timed[0].bytes,
+        "hop_floats": entries, "hop_median_ms": None if hop_ms is None else round(hop_ms, 3),
+        "round_over_hops": (None if not hop_ms or not hops
+                            else round(statistics.median(ms) / (hops * hop_ms), 3)),
         "all_equal_rounds": count_equal(rows), "total_rounds": len(rows),
         "wall_s": round(wall, 2), "target_ms": TARGET_MS,
         "log_problems": agent_log.unreadable + [f"round {a.round} aborted: {a.error}"
@@ -99,3 +112,11 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
     if tmp is not None:
         tmp.cleanup()
     return result
+
+
+def _hop_median(floats: int, hops: int) -> float | None:
+    """The median of ``hops`` migrate hops with ``floats`` floats (ms), or None for 0 hops."""
+    if hops <= 0:
+        return None
+    from dfrl.experiments.bench import migrate
+    return migrate.run(floats, hops, warmup=2, naive=False).median_ms

@@ -39,9 +39,12 @@ def cmd_migrate(args: argparse.Namespace) -> int:
         if args.json:
             print(json.dumps(asdict(result)))
         else:
+            naive = ("" if result.naive_median_ms is None else
+                     f"  naive text hop {result.naive_median_ms:8.3f} ms  "
+                     f"ratio {result.naive_ratio:.3f}")
             print(f"floats={n:>7}  median {result.median_ms:8.3f} ms  p10 {result.p10_ms:8.3f}  "
                   f"p90 {result.p90_ms:8.3f}  min {result.min_ms:8.3f}  max {result.max_ms:8.3f}  "
-                  f"(hops={result.hops})")
+                  f"(hops={result.hops}){naive}")
         sys.stdout.flush()
     return 0
 
@@ -115,6 +118,9 @@ def add_round_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rounds", type=int, default=30, help="timed rounds (default 30)")
     parser.add_argument("--warmup", type=int, default=3, help="untimed rounds first")
     parser.add_argument("--method", default="average", help="aggregation method")
+    parser.add_argument("--hop-hops", type=int, default=20,
+                        help="migrate hops timed beside the round, with a payload of --entries "
+                             "floats (0: none)")
     parser.add_argument("--out", type=Path, default=None,
                         help="keep the node logs and rounds.csv here, in a subfolder per robot "
                              "count when there are several (default: a temp folder)")
@@ -127,7 +133,7 @@ def cmd_round(args: argparse.Namespace) -> int:
         out = args.out / f"robots{n}" if args.out is not None and len(args.robots) > 1 else args.out
         try:
             r = round_bench.bench(args.entries, args.actions, n, args.rounds, args.warmup,
-                                  args.method, out)
+                                  args.method, out, args.hop_hops)
         except (RuntimeError, ValueError) as exc:
             print(f"dfrl bench round: {n} robots: {exc}", file=sys.stderr)
             return 1
@@ -139,6 +145,10 @@ def cmd_round(args: argparse.Namespace) -> int:
                   f"median {r['median_ms']} ms, p90 {r['p90_ms']} ms over {r['rounds']} rounds "
                   f"(target < {round_bench.TARGET_MS:g} ms); identical tables after "
                   f"{r['all_equal_rounds']}/{r['total_rounds']} rounds", flush=True)
+            if r["hop_median_ms"] is not None:
+                print(f"  its hops: {r['hops']} x {r['hop_median_ms']} ms (bench migrate, "
+                      f"{r['hop_floats']} floats, same run): the round takes "
+                      f"{r['round_over_hops']} x its hops", flush=True)
         for problem in r["log_problems"]:
             print(f"dfrl bench round: agent log: {problem}", file=sys.stderr)
     return 0
