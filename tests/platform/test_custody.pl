@@ -160,4 +160,28 @@ test(restart_recovers_agents, [cleanup((stop_all([B2]), delete_directory_and_con
     agent_property(B2, r1, module(M)),
     assertion(M:arrivals(r1, 1)).
 
+test(store_write_reads_back, [setup(tmp_file(store, Dir)), cleanup(delete_directory_and_contents(Dir))]) :-
+    make_directory(Dir),
+    directory_file_path(Dir, 'a.term', File),
+    custody_store:store_write(File, t([1.5, 'x y'], "s")),
+    custody_store:store_write(File, t(2)),
+    assertion(custody_store:store_read(File, t(2))),
+    atom_concat(File, '.tmp', Tmp),
+    assertion(\+ exists_file(Tmp)).
+
+test(fsync_of_a_missing_file_is_an_io_error) :-
+    catch(custody_store:fsync('/nonexistent/dfrl/x'), E, true),
+    assertion(nonvar(E)).
+
+%   Where the helper cannot run, coreutils sync does the fsync.
+test(fsync_without_the_helper, [setup(tmp_file(store, Dir)), cleanup(delete_directory_and_contents(Dir))]) :-
+    make_directory(Dir),
+    directory_file_path(Dir, 'b.term', File),
+    setup_call_cleanup(
+        assertz(custody_store:fsync_helper_failed_),
+        ( with_mutex(dfrl_fsync, custody_store:helper_died),
+          custody_store:store_write(File, t(3)) ),
+        retractall(custody_store:fsync_helper_failed_)),
+    assertion(custody_store:store_read(File, t(3))).
+
 :- end_tests(store).
