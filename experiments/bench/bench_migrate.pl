@@ -7,7 +7,7 @@
     swipl bench_migrate.pl naive TOKEN NAIVE_PORT FLOATS HOPS
         the naive hop, for comparison: make the same agent as `home`,
         and HOPS times write its record as text (write_canonical/2 on a
-        plain socket stream) to the naive server, which reads it back
+        plain socket stream, TCP_NODELAY) to the naive server, which reads it back
         with read_term/3 and answers `ok.`; print "NAIVE_MS [..]" (one
         figure per hop: from the first byte written to the answer).
     swipl bench_migrate.pl home TOKEN PEER_PORT FLOATS HOPS [TLS_DIR]
@@ -71,7 +71,7 @@ main(['naive', Token0, Naive0, Floats0, Hops0]) :-
     agents:agent_export(Node, bencher, Record0),
     setarg(4, Record0, []),                 % as migration.pl sends it
     setup_call_cleanup(
-        tcp_connect(localhost:NaivePort, Pair, []),
+        tcp_connect(localhost:NaivePort, Pair, [nodelay(true)]),
         findall(Ms, ( between(1, Hops, _), naive_hop(Pair, Record0, Ms) ), L),
         close(Pair)),
     format("NAIVE_MS ~w~n", [L]),
@@ -111,7 +111,11 @@ naive_accept(S) :-
     thread_create(naive_serve(Client), _, [detached(true)]),
     naive_accept(S).
 
+%   TCP_NODELAY on both ends, as the platform's connections: otherwise
+%   Nagle's algorithm and delayed acknowledgements add some 40 ms to a
+%   hop, which is not what the naive hop is there to measure.
 naive_serve(Client) :-
+    tcp_setopt(Client, nodelay),
     setup_call_cleanup(
         tcp_open_socket(Client, Pair),
         ( stream_pair(Pair, In, Out), naive_loop(In, Out) ),
