@@ -71,12 +71,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "code by name (trusted_peers), so escapes run and the escapes "
                              "phase must fail")
     parser.add_argument("--threads-wait", type=float, default=D.threads_wait_s,
-                        help=f"seconds after settling the target's threads have to come back "
-                             f"near the quiet count (default {D.threads_wait_s:g}; idle pool "
-                             f"workers exit after the flag dfrl_pool_idle, 30 s)")
+                        help=f"seconds the target's threads have to come down to the settled "
+                             f"bound once its pools' idle time has passed after an attack "
+                             f"(default {D.threads_wait_s:g})")
     parser.add_argument("--pool-idle", type=float, default=D.pool_idle_s,
-                        help="the target's dfrl_pool_idle flag in seconds (default 0: the "
-                             "node's own, 30)")
+                        help=f"the target's dfrl_pool_idle flag: seconds before a surplus idle "
+                             f"pool worker exits (default {D.pool_idle_s:g}, to keep the "
+                             f"benchmark short; 0: the node's own, 30)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -114,19 +115,22 @@ def cmd(args: argparse.Namespace) -> int:
                   f"{'-' if p['p90_ratio'] is None else p['p90_ratio']:>8} "
                   f"{m['before']:>10.1f} {m['after']:>7.1f} {m['peak']:>7.1f}  {conns}")
             t, c = p["threads"], p["cpu_cores"]
-            print(f"{'':10s} threads {t['before']} -> {t['after']} (peak {t['peak']}, "
-                  f"{t['back']} after {t['waited_s']} s more), CPU {c['phase']} cores, "
-                  f"settled {c['settled']}; agents at end {p['agents_at_end']}")
+            print(f"{'':10s} threads {t['before']} -> peak {t['peak']} (ceiling "
+                  f"{t['peak_ceiling']}) -> {t['settled']} {t['settled_after_s']} s after the "
+                  f"attack (bound {t['settled_bound']}); ordinary agent accepted "
+                  f"{p['accepted_after_s']} s after; CPU {c['phase']} cores, settled "
+                  f"{c['settled']}; agents at end {p['agents_at_end']}")
             if p["escapes"] is not None:
                 e = p["escapes"]
                 print(f"{'':10s} escapes: {e['tried']} tried, {e['refused']} refused, "
                       f"{e['accepted']} accepted, {e['ran']} ran {e['ran_names']}")
             for why in p["why"]:
                 print(f"{'':10s} missed: {why}")
-        print(f"overall: {'pass' if r['pass'] else 'FAIL'} (p90 < {hostile.P90_RATIO_MAX:g}x "
-              f"quiet, RSS within {hostile.RSS_DELTA_MAX_MB:g} MB, threads within "
-              f"{hostile.THREADS_DELTA_MAX} and CPU within {hostile.CPU_MARGIN:g} cores of "
-              f"quiet, every hop succeeding, no escape; {r['wall_s']} s)")
+        print(f"overall: {'pass' if r['pass'] else 'FAIL'} (every hop succeeding, p90 < "
+              f"{hostile.P90_RATIO_MAX:g}x quiet, RSS within {hostile.RSS_DELTA_MAX_MB:g} MB, "
+              f"an ordinary agent accepted within {hostile.ACCEPT_MAX_S:g} s, threads under "
+              f"the ceiling and back to the settled bound, CPU within "
+              f"{hostile.CPU_MARGIN:g} cores of quiet, no escape; {r['wall_s']} s)")
     return 0 if r["pass"] else 1
 
 

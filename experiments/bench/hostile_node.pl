@@ -6,7 +6,10 @@
         `victim` whose payload (secret/2) no other agent may read. Prints
         "PORT <p>", then serves and answers commands on standard input,
         until it closes: `probe.` prints a JSON line with the agents it
-        hosts, its double_quotes flag in `user` and its max_frame_size;
+        hosts, its double_quotes flag in `user`, its max_frame_size,
+        max_connections, max_agents, the most workers of its connection
+        pool, its dfrl_pool_idle flag and the size and idle workers of
+        each of its worker pools (pool/1);
         `purge.` purges every agent but the benchmark's own (the operator
         cleaning up between two attacks) and prints how many. With TLS_DIR
         (a control run only) it serves mutual TLS and trusts the peer
@@ -21,6 +24,9 @@
         peer keeps no pooled connection (flag dfrl_pool_max 0), so every move
         to the target opens a new connection and passes the target's
         acceptor and admission; with false, pooled connections are reused.
+        Reads commands on standard input until it closes: `relaunch.`
+        starts a new agent if none is at the peer (after the target
+        stopped it) and prints a JSON line saying whether it did.
         The agent uses only what the target's sandbox allows (its code
         arrives over the network): output to user_output, get_time/1,
         sleep/1, its own facts, move_agent/2. Prints "PORT <p>",
@@ -38,6 +44,8 @@
 :- use_module(library(main)).
 :- use_module(library(http/json), [json_write_dict/3]).
 :- use_module('../../platform_pl/agents', [agent_list/2, agent_exists/2, agent_purge/2]).
+:- use_module('../../platform_pl/node', [node_option/3]).
+:- use_module('../../platform_pl/worker_pool', [pool_statistics/2]).
 
 :- initialization(main, main).
 
@@ -83,11 +91,35 @@ main([peer, Token0, Target0, Floats0, Pause0, Budget0, Fresh|Tls]) :-
     Pause is PauseMs / 1000,
     assertz(data(guid, Data)),
     assertz(plan(guid, plan(Port, Target, Pause, End))),
+    launch(Token, Port),
+    peer_commands(Node, Token, Port),
+    node_stop(Node).
+
+%   The bencher agent, created here and started.
+launch(Token, Port) :-
+    retractall(departed(guid, _, _)),
     create_mobile_agent(hostile_bencher, ('127.0.0.1', Port), hostile_hop, [Token]),
     add_payload(hostile_bencher, [(data,2), (plan,2), (departed,3)]),
-    execute_agent(hostile_bencher, ('127.0.0.1', Port), hostile_hop),
-    read_term(user_input, _, []),
-    node_stop(Node).
+    execute_agent(hostile_bencher, ('127.0.0.1', Port), hostile_hop).
+
+%   The peer's commands, until standard input closes: `relaunch.` starts
+%   a new bencher agent if none is here (the benchmark sends it after the
+%   target stopped the old one) and prints whether it did.
+peer_commands(Node, Token, Port) :-
+    catch(read_term(user_input, C, []), _, C = end_of_file),
+    (   C == end_of_file
+    ->  true
+    ;   C == relaunch
+    ->  (   agent_exists(Node, hostile_bencher)
+        ->  Done = false
+        ;   launch(Token, Port),
+            Done = true
+        ),
+        json_line(_{event: relaunch, launched: Done}),
+        peer_commands(Node, Token, Port)
+    ;   print_message(error, format('unknown command ~q', [C])),
+        peer_commands(Node, Token, Port)
+    ).
 
 %   The target's commands (see the header), until standard input closes.
 commands(Node) :-
@@ -103,8 +135,20 @@ command(probe, Node) :-
     agent_list(Node, Agents),
     length(Agents, N),
     current_prolog_flag(double_quotes, DQ),
-    node:node_option(Node, max_frame_size, Max),
-    json_line(_{event: probe, agents: N, double_quotes: DQ, max_frame_size: Max}).
+    maplist(node_option(Node), [max_frame_size, max_connections, max_agents],
+            [Max, MaxConn, MaxAgents]),
+    (   catch(node:connection_workers_max(ConnWorkers), _, fail)
+    ->  true
+    ;   ConnWorkers is max(16, 2 * MaxConn)     % node.pl's formula when this was written
+    ),
+    current_prolog_flag(dfrl_pool_idle, Idle),
+    findall(P-_{size: S, idle: I},
+            ( pool(P), pool_statistics(P, pool{size: S, idle: I}) ),
+            PoolPairs),
+    dict_pairs(Pools, pools, PoolPairs),
+    json_line(_{event: probe, agents: N, double_quotes: DQ, max_frame_size: Max,
+                max_connections: MaxConn, max_agents: MaxAgents,
+                connection_workers_max: ConnWorkers, pool_idle_s: Idle, pools: Pools}).
 command(purge, Node) :-
     !,
     findall(A, ( agent_exists(Node, A), A \== victim, A \== hostile_bencher ), As),
@@ -113,6 +157,14 @@ command(purge, Node) :-
     json_line(_{event: purged, agents: N}).
 command(C, _) :-
     print_message(error, format('unknown command ~q', [C])).
+
+%   The node's worker pools (worker_pool.pl): connections (node.pl; at
+%   most connection_workers_max), agents (agents.pl), messages
+%   (messages.pl), dfrl_bound_notices (agent_bounds.pl; at most 2).
+pool(connections).
+pool(agents).
+pool(messages).
+pool(dfrl_bound_notices).
 
 json_line(Dict) :-
     with_output_to(string(S), json_write_dict(current_output, Dict, [width(0)])),

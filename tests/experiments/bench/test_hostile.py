@@ -8,6 +8,7 @@ import sys
 
 import pytest
 
+from dfrl.experiments.bench import hostile
 from dfrl.experiments.bench.hostile_attacks import (FRAME_KINDS, PRE_AUTH_LIMIT, frame_header,
                                                    hostile_frame, outcome_of)
 from dfrl.experiments.bench.hostile_auth_attacks import escape_results
@@ -48,6 +49,7 @@ def test_small_hostile_benchmark_keeps_hops_succeeding() -> None:
     out = subprocess.run([sys.executable, "-m", "dfrl", "bench", "hostile", "--slowloris", "10",
                           "--flood", "50", "--frames", "6", "--frame-size", "200000",
                           "--duration", "4", "--settle", "1", "--threads-wait", "3",
+                          "--pool-idle", "1",
                           "--attacks", "slowloris", "flood", "frames", "--json"],
                          capture_output=True, text=True, timeout=60)
     r = json.loads(out.stdout)
@@ -106,11 +108,21 @@ def test_authenticated_phases_have_their_figures_and_no_escape_runs() -> None:
     r, out = _hostile("--attacks", "escapes", "loop", "authframes", "--auth-big-mb", "1",
                       "--auth-flood", "2", *AUTH_SHORT)
     assert [p["phase"] for p in r["phases"]] == ["quiet", "escapes", "loop", "authframes"]
+    limits = r["targets"]["target_limits"]
+    assert r["targets"]["target_pool_idle_s"] == 1.0
     for p in r["phases"]:
         assert p["hops"]["succeeded"] > 5, p
-        assert set(p["threads"]) == {"before", "peak", "after", "back", "waited_s"}
+        t = p["threads"]
+        assert t["peak_ceiling"] == hostile.thread_ceiling(t["quiet_outside_pools"], limits)
+        assert t["settled_bound"] == hostile.settled_bound(t["quiet_outside_pools"], limits)
+        assert 0 < t["quiet_outside_pools"] <= t["before"] <= t["peak"]
+        assert t["settled_after_s"] >= 1.0 + hostile.IDLE_MARGIN_S   # after the pools' idle
+        assert set(t["pools_settled"]) == {"connections", "agents", "messages",
+                                           "dfrl_bound_notices"}
+        assert p["accepted_after_s"] is not None and p["accepted_after_s"] >= 0
         assert set(p["cpu_cores"]) == {"phase", "settled"}
         assert p["agents_at_end"] >= 1 and isinstance(p["pass"], bool)
+        assert p["pass"] == (p["why"] == [])
     quiet, escapes, loop, frames = r["phases"]
     e = escapes["escapes"]
     assert e["tried"] == 11 and e["tried"] == len(e["attempts"])
@@ -144,3 +156,60 @@ def test_escapes_phase_fails_when_the_target_trusts_the_attacker() -> None:
     assert argv["reported"] and argv["leaked_token"]       # the target's argv holds its token
     assert any("escapes ran" in w for w in escapes["why"])
     assert escapes["pass"] is False and r["pass"] is False and out.returncode == 1
+
+
+def _phase(**over) -> dict:
+    """A phase that meets every target (quiet p90 10 ms); ``over`` replaces parts of it."""
+    p = {"hops": {"succeeded": 50, "failed": 0, "unfinished": 0, "hop_p90_ms": 20.0},
+         "p90_ratio": 2.0, "rss_mb": {"delta": 10.0}, "accepted_after_s": 0.1,
+         "threads": {"peak": 60, "peak_ceiling": 345, "settled": 30, "settled_bound": 37,
+                     "settled_after_s": 6.0, "pools_settled": {}},
+         "cpu_cores": {"settled": 0.05}, "escapes": None, "peer_agent_stopped": []}
+    for k, v in over.items():
+        p[k] = p[k] | v if isinstance(v, dict) else v
+    return p
+
+
+QUIET = {"cpu_cores": {"phase": 0.05}}
+
+
+def test_thread_bounds_follow_the_nodes_limits_by_hand() -> None:
+    limits = {"max_connections": 64, "max_agents": 100, "connection_workers_max": 128}
+    # 7 outside the pools + 128 connection workers + 100 agents + 100 messages + 2 notices + 8
+    assert hostile.thread_ceiling(7, limits) == 345
+    # 7 + 8 (connections) + 8 (agents) + 8 (messages) + 2 (notices, at most 2) + 4
+    assert hostile.settled_bound(7, limits) == 37
+    small = {"max_connections": 2, "max_agents": 3, "connection_workers_max": 16}
+    assert hostile.settled_bound(5, small) == 5 + 8 + 3 + 3 + 2 + 4
+
+
+def test_each_criterion_can_fail() -> None:
+    assert hostile._misses(_phase(), QUIET) == []
+    cases = {
+        "threads 6.0 s after": _phase(threads={"settled": 38}),
+        "peak of 345 threads": _phase(threads={"peak": 345}),
+        "no ordinary agent accepted": _phase(accepted_after_s=None),
+        "within 20 s": _phase(accepted_after_s=20.5),
+        "stopped the peer's ordinary agent": _phase(peer_agent_stopped=["agent ... stopped"]),
+        "RSS grew by 50.1 MB": _phase(rss_mb={"delta": 50.1}),
+        "p90 10.0x": _phase(p90_ratio=10.0),
+        "CPU 0.31 cores": _phase(cpu_cores={"settled": 0.31}),
+        "1 hops failed": _phase(hops={"failed": 1}),
+    }
+    for needle, p in cases.items():
+        why = hostile._misses(p, QUIET)
+        assert len(why) == 1 and needle in why[0], (needle, why)
+
+
+def test_settled_threads_fail_when_warm_pools_are_not_allowed(monkeypatch) -> None:
+    # Control on real processes: with no idle worker allowed to stay warm and no slack, the
+    # pool workers that the clone bomb's agents needed stay in the settled count, and the
+    # phase fails on threads, naming the pools.
+    monkeypatch.setattr(hostile, "KEEP_WARM", 0)
+    monkeypatch.setattr(hostile, "SETTLED_SLACK", 0)
+    r = hostile.run(hostile.HostileConfig(duration_s=3, settle_s=0.5, pool_idle_s=1,
+                                          threads_wait_s=1, wave_s=2), ("clone",))
+    quiet, clone = r["phases"]
+    assert clone["threads"]["settled_bound"] == clone["threads"]["quiet_outside_pools"]
+    assert any("threads" in w and "pools" in w for w in clone["why"]), clone["why"]
+    assert clone["pass"] is False and r["pass"] is False
