@@ -646,13 +646,23 @@ agent_export(Node, Name, agent(Name, Handler, Kind, Tokens, Payload,
               functor(H, F, A)
             ),
             Preds),
-    findall(Cl,
+    findall(Ref,
             ( member(F/A, Preds),
               functor(H, F, A),
-              clause(M:H, B),
-              Cl = (H:-B)
+              nth_clause(M:H, _, Ref)
             ),
-            Clauses).
+            Refs),
+    ref_clauses(Refs, M, Clauses).
+
+%   Each clause decompiled once, straight into the list (findall/3 of
+%   the clauses themselves would copy a large payload twice more).
+ref_clauses([], _, []).
+ref_clauses([Ref|Refs], M, Clauses) :-
+    (   catch(clause(M:H, B, Ref), _, fail)
+    ->  Clauses = [(H:-B)|Rest]
+    ;   Clauses = Rest                  % retracted meanwhile
+    ),
+    ref_clauses(Refs, M, Rest).
 
 %!  agent_install(+Node, +Record, +Status, -Name) is det.
 %
