@@ -28,6 +28,7 @@
     phase_breakdown/2 reads them).
 */
 :- use_module('../../platform_pl/tartarus').
+:- use_module('../../platform_pl/secrets', [take_env_tokens/1]).
 :- use_module(library(main)).
 :- use_module(library(socket)).
 :- use_module(library(prolog_wrap), [wrap_predicate/4]).
@@ -37,9 +38,17 @@
 
 :- initialization(main, main).
 
-main(['peer', Token0|Tls]) :-
+env_token(Token) :-
+    (   take_env_tokens([Token|_])
+    ->  true
+    ;   format(user_error, "bench_migrate: DFRL_TOKEN is not set~n", []),
+        halt(2)
+    ).
+
+%   The token comes in the environment (DFRL_TOKEN), never in argv.
+main(['peer'|Tls]) :-
     trace_start,
-    atom_number(Token0, Token),
+    env_token(Token),
     tls_options(Tls, TlsOptions),
     node_start(localhost:0, Node, [token(Token)|TlsOptions]),
     node_property(Node, address(_:Port)),
@@ -49,10 +58,10 @@ main(['peer', Token0|Tls]) :-
     read_term(user_input, _, []),   % until stdin closes
     trace_write(peer),
     node_stop(Node).
-main(['home', Token0, Peer0, Floats0, Hops0|Tls]) :-
+main(['home', Peer0, Floats0, Hops0|Tls]) :-
     trace_start,
-    maplist(atom_number, [Token0, Peer0, Floats0, Hops0],
-            [Token, Peer, Floats, Hops]),
+    env_token(Token),
+    maplist(atom_number, [Peer0, Floats0, Hops0], [Peer, Floats, Hops]),
     tls_options(Tls, TlsOptions),
     node_start(localhost:0, Node, [token(Token)|TlsOptions]),
     node_property(Node, address(_:Home)),
@@ -62,9 +71,9 @@ main(['home', Token0, Peer0, Floats0, Hops0|Tls]) :-
     trace_write(home),
     node_stop(Node).
 
-main(['naive', Token0, Naive0, Floats0, Hops0]) :-
-    maplist(atom_number, [Token0, Naive0, Floats0, Hops0],
-            [Token, NaivePort, Floats, Hops]),
+main(['naive', Naive0, Floats0, Hops0]) :-
+    env_token(Token),
+    maplist(atom_number, [Naive0, Floats0, Hops0], [NaivePort, Floats, Hops]),
     node_start(localhost:0, Node, [token(Token)]),
     node_property(Node, address(_:Home)),
     bench_agent(Home, Home, Floats, 0, Token),

@@ -18,12 +18,13 @@ With ``trace_dir``, both processes time the steps of every hand-over (see
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import statistics
 import subprocess
 from dataclasses import dataclass
 from pathlib import Path
+
+from dfrl.experiments.tokens import env_with_tokens
 
 SCRIPT = Path(__file__).resolve().parent / "bench_migrate.pl"
 
@@ -91,13 +92,13 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
     swipl = shutil.which("swipl")
     if swipl is None:
         raise FileNotFoundError("swipl is not installed (run scripts/setup.sh)")
-    env = dict(os.environ)
+    env = env_with_tokens([token])            # the token in the environment, never in argv
     if trace_dir is not None:
         env["DFRL_HOP_TRACE"] = str(Path(trace_dir).resolve())
     else:
         env.pop("DFRL_HOP_TRACE", None)
     naive_ms: list[float] | None = None
-    peer = subprocess.Popen([swipl, "-q", str(SCRIPT), "peer", str(token), *tls_args],
+    peer = subprocess.Popen([swipl, "-q", str(SCRIPT), "peer", *tls_args],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
     try:
         assert peer.stdout is not None
@@ -107,7 +108,7 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         words = line.split()
         port, naive_port = int(words[1]), int(words[3])
         home = subprocess.Popen(
-            [swipl, "-q", str(SCRIPT), "home", str(token), str(port), str(floats),
+            [swipl, "-q", str(SCRIPT), "home", str(port), str(floats),
              str(hops + warmup), *tls_args],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
             env=env)
@@ -116,7 +117,7 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         finally:
             _finish(home)
         if naive:
-            naive_ms = _naive_hops(swipl, token, naive_port, floats, hops + warmup, timeout)
+            naive_ms = _naive_hops(swipl, env, naive_port, floats, hops + warmup, timeout)
             naive_ms = naive_ms[warmup:]
     finally:
         if peer.stdin:
@@ -154,12 +155,13 @@ def _finish(proc: subprocess.Popen) -> None:
         proc.wait(timeout=10)
 
 
-def _naive_hops(swipl: str, token: int, naive_port: int, floats: int, hops: int,
+def _naive_hops(swipl: str, env: dict[str, str], naive_port: int, floats: int, hops: int,
                 timeout: float) -> list[float]:
-    """The naive text hop's figures (ms), ``hops`` of them, from the ``naive`` mode."""
+    """The naive text hop's figures (ms), ``hops`` of them, from the ``naive`` mode (``env``
+    carries the token)."""
     done = subprocess.run(
-        [swipl, "-q", str(SCRIPT), "naive", str(token), str(naive_port), str(floats), str(hops)],
-        stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=timeout)
+        [swipl, "-q", str(SCRIPT), "naive", str(naive_port), str(floats), str(hops)],
+        stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=timeout, env=env)
     line = next((l for l in done.stdout.splitlines() if l.startswith("NAIVE_MS")), None)
     if line is None:
         raise RuntimeError(f"naive hop failed:\n{done.stdout}\n{done.stderr}")
