@@ -9,7 +9,7 @@
 :- autoload(library(process),
             [process_create/3, process_wait/2, process_wait/3, process_kill/1]).
 :- autoload(library(readutil), [read_line_to_string/2]).
-:- autoload(library(filesex), [directory_file_path/3, make_directory_path/1]).
+:- autoload(library(filesex), [directory_file_path/3, make_directory_path/1, chmod/2]).
 :- autoload(library(error), [must_be/2]).
 :- autoload(library(lists), [member/2]).
 :- autoload(library(apply), [include/3]).
@@ -41,11 +41,13 @@ term is reported (print_message/2) and skipped, never called.
 
 %!  store_make_dirs(+Dir) is det.
 %
-%   Create Dir and its parents if needed.
+%   Create Dir and its parents if needed; Dir itself is made readable by
+%   its owner only (mode 700): the records in it hold agents' tokens.
 
 store_make_dirs(Dir) :-
     must_be(atom, Dir),
-    make_directory_path(Dir).
+    make_directory_path(Dir),
+    chmod(Dir, 0o700).
 
 %!  store_key_file(+Dir, +Key, +Ext, -File) is det.
 %
@@ -68,7 +70,8 @@ store_write(File, Term) :-
     atom_concat(File, '.tmp', Tmp),
     setup_call_cleanup(
         open(Tmp, write, Out, [encoding(utf8)]),
-        format(Out, '~k.~n', [Term]),
+        ( chmod(Tmp, 0o600),            % before the term (tokens) is in it
+          format(Out, '~k.~n', [Term]) ),
         close(Out)),
     fsync(Tmp),
     rename_file(Tmp, File),

@@ -285,3 +285,31 @@ def test_token_formats(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
 def tokens_of_missing(folder: Path) -> None:
     from dfrl.experiments.tokens import run_tokens
     run_tokens(folder)
+
+
+def test_a_node_store_keeps_tokens_from_other_users(tmp_path: Path) -> None:
+    """A node started with store(Dir) keeps its agents' records (tokens included) in Dir: every
+    record file is 0600 and its folder 0700, so no other user reads a token there. The scan
+    finds the token in the records (control: the token really is on disk)."""
+    token = new_secret()
+    store = tmp_path / "store"
+    script = tmp_path / "stored.pl"
+    script.write_text(f"""
+    :- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
+    :- dynamic keeper/3, notes/2.
+    keeper(guid, _, _).
+    main :- node_start(localhost:0, _, [token({token!r}), store({str(store)!r})]),
+            assertz(notes(guid, 1)),
+            create_mobile_agent(k1, keeper, [{token!r}]),
+            add_payload(k1, [(notes, 2)]),
+            sleep(0.5), format("STORED~n"), flush_output.
+    """)
+    done = subprocess.run([shutil.which("swipl") or "swipl", "-q", "-g", "main", "-t", "halt",
+                           str(script)], capture_output=True, text=True, timeout=60)
+    assert "STORED" in done.stdout, done
+    holding = files_with(store, token)
+    assert holding, sorted(p.name for p in store.rglob("*"))          # control
+    for path in holding:
+        assert stat.S_IMODE(path.stat().st_mode) & 0o077 == 0, (path, oct(path.stat().st_mode))
+        d = path.parent                                   # and the folder the records are in
+        assert stat.S_IMODE(d.stat().st_mode) & 0o077 == 0, (d, oct(d.stat().st_mode))
