@@ -568,7 +568,7 @@ check_budget(Node, Hot0, Hot) :-
     ->  Hot = Hot0
     ;   findall(c(Id, Thread, Mem, Sig),
                 ( call_(Id, Node, _, Module, Thread, _, _),
-                  catch(( thread_statistics(Thread, stack, Stack),
+                  catch(( thread_stacks(Thread, Stack),
                           tick_module_size(Id, Module, Size),
                           Mem is Stack + Size ), _, fail),
                   ( signalled_(Id, _, _, _) -> Sig = true ; Sig = false )
@@ -591,9 +591,20 @@ check_budget(Node, Hot0, Hot) :-
     ).
 
 call_memory(Module, Thread, Mem) :-
-    thread_statistics(Thread, stack, Stack),
+    thread_stacks(Thread, Stack),
     module_size(Module, Size),
     Mem is Stack + Size.
+
+%   The stacks a thread has allocated. In SWI-Prolog 9.0.4 the key
+%   `stack` of thread_statistics/3 gives the stacks of the whole process,
+%   the same for every thread (a memory bomb's stacks were charged to
+%   every call running beside it, and the budget stopped an innocent
+%   one); global, local and trail are the thread's own.
+thread_stacks(Thread, Bytes) :-
+    thread_statistics(Thread, global, G),
+    thread_statistics(Thread, local, L),
+    thread_statistics(Thread, trail, T),
+    Bytes is G + L + T.
 
 %   Modules of the agents of Node that run no call, as last measured.
 idle_memory(Node, Running, Idle) :-

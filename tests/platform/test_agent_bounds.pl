@@ -223,4 +223,22 @@ test(memory_budget_stops_biggest_call, [cleanup(cleanup([A, B]))]) :-
     send(B, A, g1, good),
     assertion(wait_for(ran(g1))).
 
+%   A bomb beside an ordinary call: the budget charges each call its own
+%   thread's stacks, so the bomb is stopped and the sleeper finishes (with
+%   the process's stacks charged to every call, the sleeper could be the
+%   one stopped: the hostile bench saw it).
+test(memory_budget_charges_each_call_its_own_stacks, [cleanup(cleanup([A, B]))]) :-
+    node([agent_memory_budget(120000000), agent_cpu_limit(20)], A),
+    node([], B),
+    numlist(1, 20000, Big),                 % the sleeper's module outweighs the bomb's
+    with_node(B, ( create_mobile_agent(s1, sleeper, [5]),
+                   current_node(NB),
+                   agent_add_facts(NB, s1, [big(Big)]) )),
+    link(A, Link),
+    with_node(B, move_agent(s1, Link)),
+    send(B, A, m2, bomb),
+    assertion(wait_for(agent_bound_report(B, m2, bound(memory_budget(120000000), _, _, _)))),
+    assertion(wait_for(ran(slept(s1)))),
+    assertion(\+ agent_bound_report(B, s1, _)).
+
 :- end_tests(agent_bounds).
