@@ -25,30 +25,7 @@
 
 :- initialization(main, main).
 
-%   The handler of bench_migrate.pl (same code, so the same check).
-bench(guid, (_, Port), main) :-
-    get_time(Now),
-    (   retract(departed(guid, T0))
-    ->  Ms is (Now - T0) * 1000,
-        retract(lat(guid, L0)),
-        assertz(lat(guid, [Ms|L0]))
-    ;   true
-    ),
-    lat(guid, L),
-    length(L, Done),
-    plan(guid, plan(Home, Peer, Hops)),
-    (   Port =:= Home -> Next = Peer ; Next = Home ),
-    (   Done >= Hops
-    ->  (   Port =:= Home
-        ->  reverse(L, InOrder),
-            format(user_output, "LATENCIES_MS ~w~n", [InOrder]),
-            flush_output
-        ;   move_agent(guid, (localhost, Home))
-        )
-    ;   get_time(T1),
-        assertz(departed(guid, T1)),
-        move_agent(guid, (localhost, Next))
-    ).
+:- include(bench_hop_handler).
 
 main(Argv) :-
     Argv = [Floats0, Reps0|Flags],
