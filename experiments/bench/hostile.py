@@ -24,8 +24,9 @@ benchmark (as the target's operator) purges the agents they left there.
 Per phase: hops attempted (departures in the phase), succeeded, failed (the move raised) and
 unfinished (neither by the end of the phase's measurements); hop time median and p90 (call of
 the move at the source to the start of the handler at the destination), the p90 against the
-quiet p90; the target's RSS (``/proc/PID/status`` VmRSS) before the attack and after its
-settling time, its CPU seconds, its CPU use over ``CPU_WINDOW_S`` after settling; its threads
+quiet p90; the target's RSS (``/proc/PID/status`` VmRSS) before the attack, after its
+settling time and once its threads have settled (the attack's workers gone idle: the RSS the
+criterion reads), its CPU seconds, its CPU use over ``CPU_WINDOW_S`` after settling; its threads
 (``/proc/PID/status`` Threads) sampled every 0.2 s from the attack's start to the end of the
 phase (the peak), and its worker pools (``worker_pool:pool_statistics/2``, read through the
 target's ``probe.``); what became of the attack's connections or agents; the agents the
@@ -33,7 +34,9 @@ target hosts at the end. A phase passes if
 
 * no hop failed or went unfinished and at least one succeeded;
 * the p90 is under ``P90_RATIO_MAX`` times the quiet p90;
-* RSS after settling is within ``RSS_DELTA_MAX_MB`` of before;
+* RSS once the threads have settled is within ``RSS_DELTA_MAX_MB`` of before (read at the
+  settling time instead, a flood's idle connection workers, still alive then, once counted
+  50.6 MB);
 * an ordinary agent is accepted (the peer's agent starts its handler at the target) within
   ``ACCEPT_MAX_S`` of the attack's end (the attacker stopped and gone);
 * the peak of threads stays under the ceiling that the node's limits allow
@@ -376,6 +379,7 @@ def _phase(name: str, b: _Bench) -> dict[str, Any]:
     time.sleep(CPU_WINDOW_S)
     cpu_settled = (proc_status(pid)["cpu_s"] - after["cpu_s"]) / CPU_WINDOW_S
     threads = _threads_settled(pid, b, t_end)
+    settled_rss = proc_status(pid)["rss_mb"]   # RSS once the attack's workers have gone idle
     accept_s = _accepted_after(b, t_end)
     sampler.stop()
     probe = b.target.command("probe")
@@ -398,9 +402,10 @@ def _phase(name: str, b: _Bench) -> dict[str, Any]:
     phase = {
         "phase": name, "seconds": round(t1 - t0, 2), "hops": hops,
         "p90_ratio": _ratio(hops, b.quiet), "accepted_after_s": accept_s,
-        "rss_mb": {"before": round(before["rss_mb"], 1), "after": round(after["rss_mb"], 1),
-                   "peak": round(max(sampler.peak_rss, after["rss_mb"]), 1),
-                   "delta": round(after["rss_mb"] - before["rss_mb"], 1)},
+        "rss_mb": {"before": round(before["rss_mb"], 1), "after": round(settled_rss, 1),
+                   "after_settle_s": round(after["rss_mb"], 1),
+                   "peak": round(max(sampler.peak_rss, after["rss_mb"], settled_rss), 1),
+                   "delta": round(settled_rss - before["rss_mb"], 1)},
         "threads": threads,
         "target_cpu_s": round(after["cpu_s"] - before["cpu_s"], 2),
         "cpu_cores": {"phase": round(cpu_rate, 3), "settled": round(cpu_settled, 3)},
