@@ -110,6 +110,7 @@ request_options([connect_timeout(CT), reply_timeout(RT)]) :-
     ).
 
 deliver(Node, Agent, Handler, Link, Args) :-
+    max_running_posts(Max),
     Goal0 =.. [Handler, Agent, Link | Args],
     (   agent_property(Node, Agent, handler(Handler))
     ->  check_post(Node, Agent, Goal0),
@@ -122,7 +123,13 @@ deliver(Node, Agent, Handler, Link, Args) :-
     ->  Goal = Module:Goal0
     ;   existence_error(agent, Agent)
     ),
-    pool_run(messages, run_message(Node, Agent, Goal), []).
+    pool_run(messages, run_message(Node, Agent, Goal), [max(Max)]).
+
+%   At most this many posted events run (or wait for a running slot of
+%   agent_bounds.pl) at once in a process: a flood of posts from agents
+%   made a thread per post (536 in a hostile-bench run). A post over it
+%   is refused with resource_error(workers(messages)).
+max_running_posts(64).
 
 %   An agent's event runs within its bounds (agent_bounds.pl), a platform
 %   event (the node's own code) without.
