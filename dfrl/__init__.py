@@ -41,9 +41,9 @@ _API: dict[str, str] = {
     "Trainer": "dfrl.robots.training",
     "train": "dfrl.robots.training",
     "load_arena": "dfrl.arenas.spec",
-    "ExperimentConfig": "dfrl.experiments.config",
-    "RobotSpec": "dfrl.experiments.config",
-    "run_experiment": "dfrl.experiments.launcher",
+    "ExperimentConfig": "dfrl.experiments.driver.config",
+    "RobotSpec": "dfrl.experiments.driver.config",
+    "run_experiment": "dfrl.experiments.driver.launcher",
 }
 
 __all__ = ["ENV_ID", "__version__", *_API]

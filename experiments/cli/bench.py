@@ -1,5 +1,5 @@
 """``dfrl bench migrate|sim|round|bridge|chaos|scale``: run a benchmark and print its figures (JSON with
-``--json``). The benchmarks themselves are :mod:`dfrl.experiments.bench`."""
+``--json``). The benchmarks themselves are :mod:`dfrl.experiments.tools.bench`."""
 from __future__ import annotations
 
 import argparse
@@ -8,8 +8,8 @@ import sys
 from dataclasses import asdict
 from pathlib import Path
 
-from dfrl.experiments.bench import bridge, chaos, migrate, round as round_bench, scale, sim
-from dfrl.experiments.bench import hostile, hostile_cli
+from dfrl.experiments.tools.bench import bridge, chaos, migrate, round as round_bench, scale, sim
+from dfrl.experiments.tools.bench import hostile, hostile_cli
 
 
 # -- migrate ---------------------------------------------------------------------------------

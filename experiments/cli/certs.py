@@ -5,7 +5,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from dfrl.experiments.certs import CertError, init_ca, make_node
+from dfrl.experiments.tools.certs import CertError, init_ca, make_node
 
 
 def _init(args: argparse.Namespace) -> int:

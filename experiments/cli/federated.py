@@ -13,11 +13,11 @@ from pathlib import Path
 
 from typing import Any
 
-from dfrl.experiments.config import ConfigError, ExperimentConfig, Mode, resolve_config
+from dfrl.experiments.driver.config import ConfigError, ExperimentConfig, Mode, resolve_config
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.tokens import TokenError, pop_env_tokens, read_token_file
-from dfrl.experiments.results.files import claim_output, new_run_folder
-from dfrl.experiments.results.summary import Results
+from dfrl.experiments.driver.results.files import claim_output, new_run_folder
+from dfrl.experiments.driver.results.summary import Results
 
 
 def add_override_arguments(p: argparse.ArgumentParser) -> None:
@@ -153,8 +153,8 @@ def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
     """Check ``cfg`` and the TLS folder, claim the results folder, run it and report; the
     command's exit code (2: bad config, TLS folder or results folder, before anything
     started; 130: interrupted)."""
-    from dfrl.experiments.certs import CertError, check_node_dir
-    from dfrl.experiments.launcher import run
+    from dfrl.experiments.tools.certs import CertError, check_node_dir
+    from dfrl.experiments.driver.launcher import run
 
     tls = getattr(args, "tls", None)
     try:
@@ -177,7 +177,7 @@ def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
         return 2
     view = None
     if getattr(args, "view", False):
-        from dfrl.experiments.view import start_view
+        from dfrl.experiments.tools.view import start_view
 
         view = start_view(out, args.view_host, args.view_port, fresh=True)
         print(f"{prog}: live view at {view.url}", file=sys.stderr, flush=True)
@@ -246,7 +246,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 def driver_tls_arg(args: argparse.Namespace, prog: str) -> tuple[Path | None, int]:
     """``--tls DIR`` of ``dfrl inject``/``join`` checked: (the folder or None, 0), or
     (None, 2) after saying what is wrong with it."""
-    from dfrl.experiments.certs import CertError, check_node_dir
+    from dfrl.experiments.tools.certs import CertError, check_node_dir
 
     if args.tls is None:
         return None, 0
@@ -266,7 +266,7 @@ def add_driver_tls_argument(p: argparse.ArgumentParser) -> None:
 
 
 def cmd_inject(args: argparse.Namespace) -> int:
-    from dfrl.experiments.launcher import inject_method
+    from dfrl.experiments.driver.launcher import inject_method
 
     tls, rc = driver_tls_arg(args, "dfrl inject")
     if rc:
@@ -291,7 +291,7 @@ def cmd_inject(args: argparse.Namespace) -> int:
 
 
 def cmd_join(args: argparse.Namespace) -> int:
-    from dfrl.experiments.launcher import join_robot
+    from dfrl.experiments.driver.launcher import join_robot
 
     tls, rc = driver_tls_arg(args, "dfrl join")
     if rc:

@@ -160,7 +160,7 @@ def node_command(
         raise ValueError("--trust needs --tls (trust is by TLS certificate name)")
     check_trust_names(trust or [])
     if tls:
-        from dfrl.experiments.certs import CertError, check_node_dir
+        from dfrl.experiments.tools.certs import CertError, check_node_dir
         try:
             cmd += ["--tls", str(check_node_dir(tls).resolve())]
         except CertError as exc:
@@ -186,7 +186,7 @@ def node_command(
 def check_trust_names(names: list[str]) -> None:
     """Raise ValueError for a ``--trust`` name no node certificate can have (``dfrl certs``
     names: letters, digits, ``-`` and ``.``, at most 64 characters)."""
-    from dfrl.experiments.certs import NAME_RE
+    from dfrl.experiments.tools.certs import NAME_RE
 
     for name in names:
         if not NAME_RE.match(name) or ".." in name:

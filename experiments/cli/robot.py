@@ -11,10 +11,10 @@ from dfrl.pybridge.errors import BridgeError
 
 
 def _run(args: argparse.Namespace) -> int:
-    from dfrl.experiments.certs import CertError, check_node_dir
+    from dfrl.experiments.tools.certs import CertError, check_node_dir
     from dfrl.experiments.cli.node import check_trust_names
     from dfrl.experiments.cli.node import tokens_of_args
-    from dfrl.experiments.robot_node.service import RobotService
+    from dfrl.experiments.robot_host.service import RobotService
     from dfrl.experiments.tokens import TOKEN_ENV, TokenError
 
     if not 0 <= args.port <= 65535:

@@ -1,6 +1,6 @@
 """Standalone robot commands: ``dfrl train``, ``dfrl eval``, ``dfrl baselines``, ``dfrl render-arenas``.
 
-Thin CLI over :mod:`dfrl.robots.training`, :mod:`dfrl.experiments.standalone` and
+Thin CLI over :mod:`dfrl.robots.training`, :mod:`dfrl.experiments.science.standalone` and
 :mod:`dfrl.robots.plots`.
 """
 from __future__ import annotations
@@ -206,7 +206,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 # -- eval ------------------------------------------------------------------------------------
 def cmd_eval(args: argparse.Namespace) -> int:
     """``dfrl eval``: greedy vs random collisions per 1,000 steps, per seed and over all."""
-    from dfrl.experiments.standalone import evaluate, with_table_discretisation
+    from dfrl.experiments.science.standalone import evaluate, with_table_discretisation
 
     try:
         cfg = config_from_args(args)
@@ -245,8 +245,8 @@ def cmd_baselines(args: argparse.Namespace) -> int:
     """``dfrl baselines``: train every (algo, arena) pair and draw one figure per algorithm."""
     from tqdm import tqdm
 
-    from dfrl.experiments.report.stats import ALGO_NAMES
-    from dfrl.experiments.standalone import run_jobs
+    from dfrl.experiments.science.report.stats import ALGO_NAMES
+    from dfrl.experiments.science.standalone import run_jobs
     from dfrl.robots.plots import plot_learning_curves
     from dfrl.robots.training import read_metrics_csv
 

@@ -1,4 +1,4 @@
-"""``dfrl sweep``: hyper-parameter sweeps with several seeds (:mod:`dfrl.experiments.studies`)."""
+"""``dfrl sweep``: hyper-parameter sweeps with several seeds (:mod:`dfrl.experiments.science.studies`)."""
 from __future__ import annotations
 
 import argparse
@@ -71,7 +71,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from dfrl.experiments.studies.sweep import markdown_table, sweep
+    from dfrl.experiments.science.studies.sweep import markdown_table, sweep
     from dfrl.robots.training import TrainerConfig
 
     factors = dict(args.factors or [parse_factor(f) for f in DEFAULT_FACTORS])
@@ -132,7 +132,7 @@ def register_paper(subparsers: argparse._SubParsersAction) -> None:
 def cmd_paper(args: argparse.Namespace) -> int:
     """``dfrl paper``: exit 0 when every federated run succeeded."""
     from dfrl.experiments.errors import ExperimentError
-    from dfrl.experiments.reproduce import PAPER_ITERATIONS, PaperOptions, reproduce_paper
+    from dfrl.experiments.science.reproduce import PAPER_ITERATIONS, PaperOptions, reproduce_paper
 
     opts = PaperOptions(seeds=tuple(dict.fromkeys(args.seeds)),
                         iterations=args.iterations if args.iterations is not None else
@@ -178,7 +178,7 @@ def register_speedup(subparsers: argparse._SubParsersAction) -> None:
 
 
 def cmd_speedup(args: argparse.Namespace) -> int:
-    from dfrl.experiments.studies.speedup import (EXPLANATION, SpeedupOptions, markdown,
+    from dfrl.experiments.science.studies.speedup import (EXPLANATION, SpeedupOptions, markdown,
                                                   speedup)
 
     opts = SpeedupOptions(robots=tuple(args.robots), seeds=tuple(dict.fromkeys(args.seeds)),

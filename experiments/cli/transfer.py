@@ -1,6 +1,6 @@
 """``dfrl transfer``: train in a new arena from a saved table and from zeros, compare.
 
-Thin CLI over :func:`dfrl.experiments.transfer.run`.
+Thin CLI over :func:`dfrl.experiments.science.transfer.run`.
 """
 from __future__ import annotations
 
@@ -68,7 +68,7 @@ def _fmt(x: float, width: int = 8) -> str:
 
 def cmd_transfer(args: argparse.Namespace) -> int:
     """``dfrl transfer``: exit 0 on success, 2 on a bad table, arena or argument."""
-    from dfrl.experiments.transfer import TransferConfig, run
+    from dfrl.experiments.science.transfer import TransferConfig, run
 
     try:
         cfg = TransferConfig(
@@ -81,7 +81,7 @@ def cmd_transfer(args: argparse.Namespace) -> int:
         print(f"dfrl: error: {exc}", file=sys.stderr)
         return 2
     if result.output_dir is not None and wants_redraw(args):
-        from dfrl.experiments.transfer import plot_transfer
+        from dfrl.experiments.science.transfer import plot_transfer
 
         try:
             plot_transfer(result, result.output_dir / "transfer.png", args.figure_format, args.dpi)
@@ -149,7 +149,7 @@ def register_study(subparsers: argparse._SubParsersAction) -> None:
 
 
 def cmd_study(args: argparse.Namespace) -> int:
-    from dfrl.experiments.transfer.study import StudyOptions, markdown, transfer_study
+    from dfrl.experiments.science.transfer.study import StudyOptions, markdown, transfer_study
 
     opts = StudyOptions(source_seeds=tuple(dict.fromkeys(args.source_seeds)),
                         target_seeds=tuple(dict.fromkeys(args.target_seeds)),

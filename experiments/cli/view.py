@@ -21,7 +21,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def cmd_view(args: argparse.Namespace) -> int:
-    from dfrl.experiments.view import start_view
+    from dfrl.experiments.tools.view import start_view
 
     out = Path(args.results_dir)
     if not (out / "config.json").is_file():

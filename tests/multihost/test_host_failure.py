@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from dfrl.experiments.results.agent_log import read_rounds_log
+from dfrl.experiments.driver.results.agent_log import read_rounds_log
 from dfrl.experiments.tokens import write_secret_file
 
 from .netns import Lab, unavailable

@@ -1,6 +1,6 @@
 """Custody of a migrating agent, case by case, with real processes (contract K2).
 
-Two store-backed nodes A and B (``experiments/bench/chaos_node.pl``: reply timeout 1.5 s,
+Two store-backed nodes A and B (``experiments/tools/bench/chaos_node.pl``: reply timeout 1.5 s,
 commit timeout 1 s, settle period 0.5 s); A reaches B through a fault proxy. A *parcel* agent
 (it counts its arrivals and rests) is moved from A to B once while a fault hits the hand-over;
 then the nodes settle by themselves and a census (``custody_agents/2`` on both) must show
@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from dfrl.experiments.bench.chaos import ChaosConsole, NodeProcess, Trigger
-from dfrl.experiments.bench.fault_proxy import DROP, PASS, FaultProxy
+from dfrl.experiments.tools.bench.chaos import ChaosConsole, NodeProcess, Trigger
+from dfrl.experiments.tools.bench.fault_proxy import DROP, PASS, FaultProxy
 
 from .conftest import SWIPL, free_port
 

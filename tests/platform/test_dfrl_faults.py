@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from dfrl.experiments.bench.fault_proxy import PASS, STALL, FaultProxy
+from dfrl.experiments.tools.bench.fault_proxy import PASS, STALL, FaultProxy
 from dfrl.platform_pl import PLATFORM_DIR
 
 from .conftest import SWIPL, Proc, free_port

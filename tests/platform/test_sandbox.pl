@@ -156,7 +156,7 @@ test(aggregation_methods_pass) :-
     forall(member(F0, ['../../platform_pl/agents/examples/max_visited.pl',
                        '../../platform_pl/agents/examples/median_method.pl',
                        '../../platform_pl/examples/tartarus_tour/tour.pl',
-                       '../experiments/launcher/slow_method.pl']),
+                       '../experiments/driver/launcher/slow_method.pl']),
            ( here(F0, F),
              read_file_to_string(F, Text, []),
              file_base_name(F, Id),

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from dfrl.experiments.certs import init_ca, make_node
+from dfrl.experiments.tools.certs import init_ca, make_node
 from dfrl.platform_pl import PLATFORM_DIR
 
 from . import hostile_node

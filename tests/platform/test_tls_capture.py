@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from dfrl.experiments.certs import init_ca, make_node
+from dfrl.experiments.tools.certs import init_ca, make_node
 from dfrl.platform_pl import PLATFORM_DIR
 
 from .conftest import SWIPL, Proc

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from dfrl.experiments.certs import init_ca, make_node
+from dfrl.experiments.tools.certs import init_ca, make_node
 
 from . import hostile_node
 from .conftest import Proc

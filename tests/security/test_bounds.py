@@ -428,7 +428,7 @@ def test_running_slots_bound_stacks(tmp_path: Path, procs: list[Proc]) -> None:
 
 
 def test_two_max_size_frames_bounded(tmp_path: Path, procs: list[Proc]) -> None:
-    from dfrl.experiments.bench.hostile_auth_attacks import _Conn, _frame
+    from dfrl.experiments.tools.bench.hostile_auth_attacks import _Conn, _frame
 
     victim, port = start_victim(procs, tmp_path)               # max_frame_size: 32 MiB
     pid = victim.popen.pid

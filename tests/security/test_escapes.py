@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from dfrl.experiments.certs import init_ca, make_node
+from dfrl.experiments.tools.certs import init_ca, make_node
 from dfrl.platform_pl import PLATFORM_DIR
 from tests.platform import hostile_node
 from tests.platform.conftest import SWIPL, Proc

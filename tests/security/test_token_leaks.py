@@ -16,11 +16,11 @@ from pathlib import Path
 
 import pytest
 
-from dfrl.experiments.launcher.remote import tokens_of
+from dfrl.experiments.driver.launcher.remote import tokens_of
 from dfrl.experiments.tokens import (SECRET_FILE, TOKEN_ENV, env_with_tokens, new_secret,
                                      pop_env_tokens, read_token_file, TokenError)
 from dfrl.platform_pl import PLATFORM_DIR
-from tests.experiments.launcher.helpers import run_in_thread, small_config
+from tests.experiments.driver.launcher.helpers import run_in_thread, small_config
 from tests.platform.conftest import Proc, start_node
 from tests.platform.wire_client import authenticate, connect_nonce
 

@@ -17,7 +17,7 @@ PROBE = """
 import sys
 from dfrl.experiments.cli import build_parser
 from dfrl.experiments.cli.node import bounds_of_args
-from dfrl.experiments.robot_node.service import RobotService
+from dfrl.experiments.robot_host.service import RobotService
 from dfrl.pybridge.terms import Atom, Var
 args = build_parser().parse_args(sys.argv[1:])
 svc = RobotService(args.host, args.port, ["1111"], None, args.workdir, bounds=bounds_of_args(args))

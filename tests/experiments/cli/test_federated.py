@@ -10,9 +10,9 @@ from typing import Any
 import pytest
 
 from dfrl.experiments.cli import main
-from dfrl.experiments.config import ConfigError, ExperimentConfig, NodeConfig
-from dfrl.experiments.config_check import check_node
-from dfrl.experiments.results.files import claim_output, new_run_folder
+from dfrl.experiments.driver.config import ConfigError, ExperimentConfig, NodeConfig
+from dfrl.experiments.driver.config_check import check_node
+from dfrl.experiments.driver.results.files import claim_output, new_run_folder
 
 
 def smoke(**changes: Any) -> dict[str, Any]:

@@ -10,7 +10,7 @@ import pytest
 
 from dfrl.experiments.cli import main
 
-from ..report.test_figures import png_dpi
+from ..science.report.test_figures import png_dpi
 
 
 def _check(first: Path, formats: tuple[str, ...], dpi: float) -> None:

@@ -1,0 +1,39 @@
+"""The results folder of a federated experiment: reading the pieces, writing the tables.
+
+Layout (see ``experiments/README.md``)::
+
+    config.json            the experiment config (ExperimentConfig.to_dict)
+    nodes.json             robots' addresses, the agents and their itineraries
+    metrics.csv            robot, iteration, q_sum, cumulative_reward, collisions (all robots)
+    rounds.csv             one row per agent round: times, hops, bytes, method, a digest per
+                           robot right after the share, all_equal
+    q_sum.png, cumulative_reward.png, curves.png
+    summary.md
+    metrics_<robot>.csv    per-robot metrics, written by the node while it runs
+    shares_<robot>.csv     per-robot applied shares (index, iteration, time, sha256)
+    eval_<robot>.csv       greedy evaluations while learning (``eval_every``), and
+    live_evaluations.csv   all robots' in one file (:mod:`.evaluations`)
+    rounds_<agent>.log     the agent's log: one JSON object per line (round, finished,
+                           aborted and control events)
+    nodes/<robot>.json     node configs; logs/<robot>.err, logs/launch_<agent>.out
+    tables/<robot>.npy     final tables (robots.tables format)
+
+Modules: :mod:`.agent_log` (the agent's JSON-lines log), :mod:`.rounds` (shares, their
+matching to rounds, ``rounds.csv``), :mod:`.metrics` (``metrics.csv``), :mod:`.evaluations`
+(``live_evaluations.csv``), :mod:`.files` (JSON files), :mod:`.summary` (:class:`Results` and
+``summary.md``).
+"""
+from __future__ import annotations
+
+from dfrl.experiments.driver.results.agent_log import (Aborted, AgentLog, ControlEvent, RoundRecord,
+                                                Skip, parse_event, read_rounds_log)
+from dfrl.experiments.driver.results.files import read_json, write_json
+from dfrl.experiments.driver.results.metrics import METRICS_FIELDS, merge_metrics, read_metrics
+from dfrl.experiments.driver.results.rounds import (ROUNDS_FIELDS, Share, count_equal, match_shares,
+                                             read_rounds_csv, read_shares, write_rounds_csv)
+from dfrl.experiments.driver.results.summary import Results, node_warnings, write_summary
+
+__all__ = ["Aborted", "AgentLog", "ControlEvent", "METRICS_FIELDS", "ROUNDS_FIELDS", "Results",
+           "RoundRecord", "Share", "Skip", "count_equal", "match_shares", "merge_metrics",
+           "node_warnings", "parse_event", "read_json", "read_metrics", "read_rounds_csv",
+           "read_rounds_log", "read_shares", "write_json", "write_rounds_csv", "write_summary"]

@@ -1,0 +1,138 @@
+"""What a run produced (:class:`Results`) and its ``summary.md``."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from dfrl.experiments.driver.config import ExperimentConfig
+from dfrl.experiments.driver.results.evaluations import last_evaluations
+from dfrl.experiments.driver.results.faults import Faults
+from dfrl.experiments.driver.results.metrics import read_metrics
+from dfrl.experiments.driver.results.rounds import count_equal
+from dfrl.experiments.driver.results.tables import table_sum
+
+
+@dataclass
+class Results:
+    """What :func:`dfrl.experiments.driver.launcher.run` produced."""
+
+    output_dir: Path
+    config: ExperimentConfig
+    wall_time_s: float
+    rounds: list[dict[str, Any]]
+    crashed: dict[str, int]
+    agents_finished: dict[str, int | None]
+    iterations: dict[str, int]
+    plots: list[Path]
+    ok: bool
+    interrupted: str | None = None
+    log_problems: dict[str, list[str]] | None = None
+    plot_error: str | None = None
+    faults: Faults | None = None
+    gathered: dict[str, list[str]] | None = None
+    from_checkpoint: list[str] | None = None
+
+    @property
+    def complete(self) -> bool:
+        """The federation completed: every planned round logged, no robot lost (up to what
+        the config tolerates); see :meth:`Faults.complete`."""
+        return self.faults is None or self.faults.complete(self.config)
+
+    @property
+    def equal_rounds(self) -> int:
+        """Rounds after which every visited robot held the same table."""
+        return count_equal(self.rounds)
+
+
+def node_warnings(out_dir: Path) -> list[str]:
+    """``Warning:`` / ``ERROR:`` lines the nodes and agent launchers printed (logs/)."""
+    found = []
+    for f in sorted((Path(out_dir) / "logs").glob("*")):
+        try:
+            text = f.read_text(encoding="utf-8", errors="replace")
+        except OSError:
+            continue
+        found += [f"{f.stem}: {ln.strip()}" for ln in text.splitlines()
+                  if ln.lstrip().startswith(("Warning:", "ERROR:"))]
+    return found
+
+
+def write_summary(r: Results) -> Path:
+    """``summary.md``: what ran, what came out."""
+    c = r.config
+    lines = [f"# {c.name}", "", c.default_title(), "",
+             f"- wall time: {r.wall_time_s:.1f} s",
+             f"- mode: {c.mode.value}, real-time factor: {c.rtf or 'none (flat out)'}",
+             f"- seed: {c.seed}; iterations {c.iterations}, respite {c.respite}, "
+             f"rounds planned {c.rounds}", ""]
+    metrics_path = r.output_dir / "metrics.csv"
+    curves = read_metrics(metrics_path) if metrics_path.is_file() else {}
+    lines += ["| robot | arena | algo | iterations | final sum of Q (tables/) | cumulative reward "
+              "| collisions |", "|---|---|---|---|---|---|---|"]
+    specs = {s.id: s for s in list(c.robots) + [j.robot for j in c.joins]}
+    kept = set(r.from_checkpoint or ())
+    for rid, cur in curves.items():
+        if len(cur) == 0:
+            continue
+        s = specs.get(rid)
+        last = cur[-1]
+        final = table_sum(r.output_dir, rid)
+        q = "no table saved" if final is None else f"{final:.2f}" + (
+            " (last checkpoint)" if rid in kept else "")
+        lines.append(f"| {rid} | {s.arena if s else '?'} | {s.algo if s else '?'} | "
+                     f"{int(last['iteration'])} | {q} | "
+                     f"{last['cumulative_reward']:.1f} | {int(last['collisions'])} |")
+    lines.append("")
+    evals = last_evaluations(r.output_dir)
+    for rid, e in evals.items():
+        lines.append(f"- {rid}: last greedy evaluation (iteration {e['iteration']}, "
+                     f"{e['steps']} steps): {e['collisions_per_1000']:.1f} collisions per 1,000 "
+                     f"steps, progress {e['progress']:.3f}, coverage {e['coverage']:.3f}")
+    if evals:
+        lines.append("")
+    failed = [row for row in r.rounds if row.get("error")]
+    partial = [row for row in r.rounds if row.get("skipped") and not row.get("error")]
+    n_rounds = len(r.rounds)
+    durations = sorted(float(row["duration_ms"]) for row in r.rounds)
+    med = durations[len(durations) // 2] if durations else float("nan")
+    lines += [f"- agent rounds logged: {n_rounds}; rounds after which every visited robot held "
+              f"the same table: {r.equal_rounds}/{n_rounds}; rounds that skipped robots: "
+              f"{len(partial)}; rounds whose method FAILED (no table written): {len(failed)}",
+              f"- median round time: {med:.1f} ms",
+              f"- methods used: {', '.join(sorted({row['method'] for row in r.rounds})) or '-'}",
+              f"- agents finished: {r.agents_finished}"]
+    for row in failed[:10]:
+        lines.append(f"  - FAILED: {row['agent']} round {row['round']} ({row['method']}): "
+                     f"{row['error'][:300]}")
+    for row in partial[:10]:
+        lines.append(f"  - skipped robots: {row['agent']} round {row['round']}: {row['skipped']}")
+    warnings = node_warnings(r.output_dir)
+    if warnings:
+        lines.append(f"- {len(warnings)} warning(s) in logs/ (agent and nodes), first ones:")
+        lines += [f"  - `{w[:200]}`" for w in warnings[:5]]
+    for agent, problems in (r.log_problems or {}).items():
+        if problems:
+            lines.append(f"- {agent}: {len(problems)} problem(s) in its log, first ones:")
+            lines += [f"  - `{p[:200]}`" for p in problems[:5]]
+    if r.gathered:
+        n = sum(len(v) for v in r.gathered.values())
+        lines.append(f"- result files gathered over the platform from {len(r.gathered)} "
+                     f"remote robot(s): {n}")
+    if r.crashed:
+        lines.append(f"- CRASHED robots (exit codes): {r.crashed}")
+    if r.faults is not None:
+        fault_lines = r.faults.lines()
+        verdict = "complete" if r.complete else "INCOMPLETE"
+        lines += ["", f"## Faults: federation {verdict}", ""] + (fault_lines or ["- none"])
+    if r.interrupted:
+        lines.append(f"- INTERRUPTED ({r.interrupted}): partial results, robots stopped by "
+                     "the launcher" + (f"; tables of {', '.join(sorted(kept))} kept from their "
+                                       "last checkpoints" if kept else ""))
+    plots = ", ".join(p.name for p in r.plots) if r.plots else "none"
+    if r.plot_error:
+        plots += f" ({r.plot_error})"
+    lines += ["", "Plots: " + plots, ""]
+    path = r.output_dir / "summary.md"
+    path.write_text("\n".join(lines), encoding="utf-8")
+    return path

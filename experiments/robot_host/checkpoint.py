@@ -1,0 +1,162 @@
+"""A robot's checkpoint: its learning state, written atomically at every share and at the end.
+
+``checkpoint/<robot>.npy`` is the checkpoint itself, one file so that it is replaced as a
+whole: a NumPy structured scalar with fields
+
+=====================  ===================  ==============================================
+field                  dtype, shape         meaning
+=====================  ===================  ==============================================
+``q``                  float64, (S, A)      the Q-table
+``visits``             int64, (S, A)        update counts per state-action pair
+``iteration``          int64                iterations done
+``shares``             int64                shares applied
+``learner_t``          int64                the learner's update count (its epsilon clock)
+``cumulative_reward``  float64
+``collisions``         int64
+``respawns``           int64
+=====================  ===================  ==============================================
+
+(``np.load(path)["q"]`` is the table). ``checkpoint/<robot>.json`` beside it describes it for
+people and tools (robot, experiment, iteration, shares, the sha256 of the table, the time);
+it is written after the ``.npy`` and is not read back. Each file is written to a temporary
+name, flushed, fsynced and renamed over the old one, then the directory is fsynced: a crash
+leaves either the old or the new checkpoint, never a torn one.
+"""
+from __future__ import annotations
+
+import io
+import json
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dfrl.experiments.robot_host.files import table_digest
+
+__all__ = ["Checkpoint", "atomic_write", "save_checkpoint", "load_checkpoint",
+           "checkpoint_of", "restore_trainer"]
+
+
+@dataclass
+class Checkpoint:
+    """A robot's learning state (see the module doc for the fields)."""
+
+    q: np.ndarray
+    visits: np.ndarray
+    iteration: int
+    shares: int
+    learner_t: int = 0
+    cumulative_reward: float = 0.0
+    collisions: int = 0
+    respawns: int = 0
+
+
+_SCALARS: tuple[tuple[str, str], ...] = (
+    ("iteration", "<i8"), ("shares", "<i8"), ("learner_t", "<i8"),
+    ("cumulative_reward", "<f8"), ("collisions", "<i8"), ("respawns", "<i8"))
+
+
+def atomic_write(path: Path, data: bytes) -> None:
+    """Replace ``path`` by ``data`` atomically: temporary name, fsync, rename, fsync dir."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    try:
+        view = memoryview(data)
+        while view:
+            view = view[os.write(fd, view):]
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+    os.replace(tmp, path)
+    dfd = os.open(path.parent, os.O_RDONLY)
+    try:
+        os.fsync(dfd)
+    finally:
+        os.close(dfd)
+
+
+def paths(directory: Path, robot: str) -> tuple[Path, Path]:
+    """(``<robot>.npy``, ``<robot>.json``) in ``directory``."""
+    return directory / f"{robot}.npy", directory / f"{robot}.json"
+
+
+def save_checkpoint(directory: Path, robot: str, cp: Checkpoint,
+                    meta: dict[str, Any] | None = None) -> Path:
+    """Write ``cp`` as ``directory/<robot>.npy`` (+ ``.json``) atomically; return the .npy."""
+    q = np.ascontiguousarray(cp.q, dtype=np.float64)
+    visits = np.ascontiguousarray(cp.visits, dtype=np.int64)
+    if q.ndim != 2 or visits.shape != q.shape:
+        raise ValueError(f"checkpoint tables: q {q.shape}, visits {visits.shape}")
+    dtype = np.dtype([("q", "<f8", q.shape), ("visits", "<i8", q.shape), *_SCALARS])
+    rec = np.zeros((), dtype=dtype)
+    rec["q"], rec["visits"] = q, visits
+    for name, _ in _SCALARS:
+        rec[name] = getattr(cp, name)
+    buf = io.BytesIO()
+    np.save(buf, rec, allow_pickle=False)
+    npy, side = paths(directory, robot)
+    atomic_write(npy, buf.getvalue())
+    info = dict(meta or {}, robot=robot, iteration=int(cp.iteration), shares=int(cp.shares),
+                shape=list(q.shape), q_sha256=table_digest(q), wall_time=time.time(),
+                format="numpy structured scalar: q, visits, " + ", ".join(n for n, _ in _SCALARS))
+    atomic_write(side, (json.dumps(info, indent=2) + "\n").encode("utf-8"))
+    return npy
+
+
+def load_checkpoint(directory: Path, robot: str) -> Checkpoint:
+    """Read ``directory/<robot>.npy``.
+
+    Raises
+    ------
+    FileNotFoundError
+        No checkpoint.
+    ValueError
+        Not a checkpoint file.
+    """
+    npy, _ = paths(directory, robot)
+    rec = np.load(npy, allow_pickle=False)
+    names = rec.dtype.names or ()
+    missing = {"q", "visits", *(n for n, _ in _SCALARS)} - set(names)
+    if rec.shape != () or missing:
+        raise ValueError(f"{npy} is not a robot checkpoint (missing {sorted(missing)})")
+    return Checkpoint(q=np.array(rec["q"], dtype=np.float64),
+                      visits=np.array(rec["visits"], dtype=np.int64),
+                      iteration=int(rec["iteration"]), shares=int(rec["shares"]),
+                      learner_t=int(rec["learner_t"]),
+                      cumulative_reward=float(rec["cumulative_reward"]),
+                      collisions=int(rec["collisions"]), respawns=int(rec["respawns"]))
+
+
+def checkpoint_of(trainer: Any, shares: int) -> Checkpoint:
+    """The learning state of a :class:`dfrl.robots.training.Trainer` now."""
+    return Checkpoint(q=np.array(trainer.q_table), visits=np.array(trainer.visits),
+                      iteration=int(trainer.iteration), shares=int(shares),
+                      learner_t=int(trainer.learner.t),
+                      cumulative_reward=float(trainer.cumulative_reward),
+                      collisions=int(trainer.collisions), respawns=int(trainer.respawns))
+
+
+def restore_trainer(trainer: Any, cp: Checkpoint) -> None:
+    """Put a fresh trainer in the state of ``cp`` (table, visits, counters, epsilon clock).
+
+    The simulation itself starts a new episode: the robot's pose is not checkpointed.
+
+    Raises
+    ------
+    ValueError
+        The checkpoint's table does not have the trainer's shape.
+    """
+    if cp.q.shape != trainer.q_table.shape:
+        raise ValueError(f"the checkpoint's table has shape {cp.q.shape}, this robot's "
+                         f"{trainer.q_table.shape}")
+    trainer.set_q_table(cp.q)
+    trainer.visits[...] = cp.visits
+    trainer.learner.t = cp.learner_t
+    trainer.iteration = cp.iteration
+    trainer.cumulative_reward = cp.cumulative_reward
+    trainer.collisions = cp.collisions
+    trainer.respawns = cp.respawns

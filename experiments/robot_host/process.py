@@ -1,0 +1,167 @@
+"""The spawned robot node's life cycle (:class:`RobotProcess`) and its entry point."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any, TextIO
+
+from dfrl.experiments.driver.config import Mode, NodeConfig
+from dfrl.experiments.robot_host.lines import ProtocolLines, StdinWatch
+from dfrl.experiments.robot_host.run import Run
+from dfrl.experiments.tokens import TOKEN_ENV, pop_env_tokens
+
+__all__ = ["RobotProcess", "main", "load_agent_program"]
+
+
+class _StdinHost:
+    """The spawned node's :class:`RunHost`: its stdin says when to stop."""
+
+    def __init__(self, watch: StdinWatch) -> None:
+        self.watch = watch
+
+    def wait(self, seconds: float) -> None:
+        if seconds > 0:
+            time.sleep(seconds)
+
+    def should_stop(self) -> bool:
+        return self.watch.poll()
+
+
+class RobotProcess:
+    """One spawned robot node (see :mod:`dfrl.experiments.robot_host`).
+
+    Parameters
+    ----------
+    config : NodeConfig
+    stdout : TextIO
+        Where the protocol lines go.
+    stdin : TextIO or None
+        Watched for EOF / ``stop`` (not when it is at end of file from the start).
+    """
+
+    def __init__(self, config: NodeConfig, stdout: TextIO = sys.stdout,
+                 stdin: TextIO | None = sys.stdin) -> None:
+        self.config = config
+        self.lines = ProtocolLines(stdout, config.robot, config.events)
+        self.stdin = StdinWatch(stdin)
+        self.out_dir = Path(config.out_dir)
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.node: Any = None
+        self.run_: Run | None = None
+
+    @property
+    def iteration(self) -> int:
+        """Iterations done so far."""
+        return self.run_.iteration if self.run_ is not None else 0
+
+    @property
+    def shares(self) -> int:
+        """Shares applied so far."""
+        return self.run_.shares if self.run_ is not None else 0
+
+    # -- life cycle ----------------------------------------------------------------------------
+    def start(self) -> tuple[str, int]:
+        """Start the platform node, build the robot (or the benchmark's static table) and
+        register it; return the address."""
+        from dfrl.pybridge import Atom, RobotNode
+
+        c = self.config
+        self.node = RobotNode()
+        self.node.load_platform()
+        load_agent_program(self.node, f"robot_node {c.robot}")
+        self.run_ = Run(c, self.node, self.lines, host=_StdinHost(self.stdin), poll_every=50)
+        self.run_.open()
+        options: dict[str, Any] = {"idle_timeout": 5.0}
+        if c.token is not None:         # none: an open node (node_start/3 warns on loopback)
+            options["tokens"] = [Atom(c.token) if isinstance(c.token, str) else c.token]
+        if c.tls is not None:
+            options["tls"] = str(Path(c.tls).resolve())
+        name = self.node.start(c.host, 0, **options)
+        host, port = self.node.address(name)
+        self.lines.node(str(host), int(port))
+        return str(host), int(port)
+
+    def run(self) -> int:
+        """The control loop; returns the exit code."""
+        run = self.run_
+        if not run.simulated:
+            while not self.stdin.poll():
+                self.node.serve_pending(timeout=0.05)
+            return 0
+        while run.step():
+            pass
+        run.finish()
+        if not run.stopped:
+            self._linger()
+        self.lines.done(self.iteration, self.shares)
+        return 0
+
+    def _agents_here(self) -> bool:
+        try:
+            return bool(self.node.list_agents())
+        except Exception as exc:  # noqa: BLE001 - a failing listing must not keep us alive
+            print(f"robot_node {self.config.robot}: listing agents failed: {exc}", file=sys.stderr)
+            return False
+
+    def _linger(self) -> None:
+        """After the last iteration: serve until the agent left (sync) or stdin closes."""
+        deadline = time.monotonic() + self.config.grace_s
+        sync = self.config.mode is Mode.SYNC
+        while time.monotonic() < deadline:
+            self.node.serve_pending(timeout=0.05)
+            if self.stdin.poll():
+                break
+            if sync and not self._agents_here():
+                break
+
+    def close(self) -> None:
+        """Close files, the platform and the simulation."""
+        if self.run_ is not None:
+            self.run_.close()
+        if self.node is not None:
+            self.node.close()
+
+
+def load_agent_program(node: Any, who: str) -> None:
+    """Load the dFRL agent program into the node's Tartarus code store (warn if missing)."""
+    from dfrl.platform_pl import AGENTS_DIR
+
+    agent_file = AGENTS_DIR / "dfrl_agent.pl"
+    if agent_file.is_file():
+        node.assert_file_to_tartarus(str(agent_file))
+    else:
+        print(f"{who}: warning: {agent_file} not found", file=sys.stderr)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point: ``python -m dfrl.experiments.robot_host --config NODE.json``.
+
+    The node's token comes from the environment (``DFRL_TOKEN``, deleted from it once read so
+    that no child inherits it; :mod:`dfrl.experiments.tokens`), or else from the config file;
+    never from the command line.
+    """
+    parser = argparse.ArgumentParser(prog="python -m dfrl.experiments.robot_host",
+                                     description="one robot node of a federated experiment "
+                                                 f"(its token in ${TOKEN_ENV})")
+    parser.add_argument("--config", type=Path, required=True, help="node config (JSON)")
+    args = parser.parse_args(argv)
+    tokens = pop_env_tokens()
+    try:
+        data = json.loads(args.config.read_text(encoding="utf-8"))
+        if tokens and isinstance(data, dict):
+            data["token"] = tokens[0]
+        config = NodeConfig.from_dict(data)
+    except (OSError, ValueError, TypeError) as exc:
+        print(f"robot_node: bad config {args.config}: {exc}", file=sys.stderr)
+        return 2
+    proc = RobotProcess(config)
+    try:
+        proc.start()
+        return proc.run()
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        proc.close()

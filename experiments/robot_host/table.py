@@ -1,0 +1,83 @@
+"""The provider the robot node registers with the bridge: its table, with share bookkeeping.
+
+The table itself (a :class:`dfrl.robots.training.Trainer`, or a
+:class:`dfrl.pybridge.StaticTable` in benchmark mode) is chosen once, when the node starts;
+:class:`NodeTable` adds what the node records about agents' visits, and never calls back
+into the process that owns it.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+
+from dfrl.experiments.robot_host.files import CsvLog, share_row
+from dfrl.experiments.robot_host.lines import ProtocolLines
+from dfrl.pybridge.providers import TableProvider
+
+__all__ = ["NodeTable"]
+
+
+class NodeTable:
+    """A :class:`dfrl.pybridge.TableProvider` over ``base`` that records shares.
+
+    Every read of the Q-table writes a ``DFRL_EVENT get`` line; every applied
+    ``set_q_table`` (already validated by the bridge) counts a share, appends a row to the
+    shares file (with the write's origin: round, agent, epoch), writes a ``DFRL_EVENT set``
+    line and calls ``on_share`` (the robot's checkpoint).
+
+    Parameters
+    ----------
+    base : TableProvider
+        Where the table lives.
+    robot : str
+    shares_log : CsvLog
+        ``shares_<robot>.csv``.
+    lines : ProtocolLines
+    on_share : callable, optional
+        Called after every applied share (no arguments).
+    shares : int
+        Shares applied before (a resumed run).
+
+    Attributes
+    ----------
+    iteration : int
+        The robot's iteration, set by the control loop (recorded with each event).
+    shares : int
+        Shares applied so far.
+    """
+
+    def __init__(self, base: TableProvider, robot: str, shares_log: CsvLog,
+                 lines: ProtocolLines, on_share: Callable[[], None] | None = None,
+                 shares: int = 0) -> None:
+        self.base = base
+        self.robot = robot
+        self.shares_log = shares_log
+        self.lines = lines
+        self.on_share = on_share
+        self.iteration = 0
+        self.shares = shares
+
+    @property
+    def q_table(self) -> np.ndarray:
+        self.lines.event("get", self.iteration)
+        return self.base.q_table
+
+    @property
+    def visits(self) -> np.ndarray:
+        return self.base.visits
+
+    def set_q_table(self, table: np.ndarray) -> None:
+        self.set_q_table_from(table, {})
+
+    def set_q_table_from(self, table: np.ndarray, origin: Mapping[str, Any]) -> None:
+        """Apply a share written by an agent; ``origin`` holds the options of its write
+        (``round``, ``agent``, ``epoch``; see :mod:`dfrl.pybridge.serving`)."""
+        self.base.set_q_table(table)
+        self.shares += 1
+        self.shares_log.row(share_row(self.robot, self.shares, self.iteration, self.base.q_table,
+                                      origin), flush=True)
+        self.lines.event("set", self.iteration)
+        if self.on_share is not None:
+            self.on_share()

@@ -1,0 +1,110 @@
+"""``report.md`` of ``dfrl paper``: figures with bands, the paper's observations as tests with
+intervals and verdicts (:mod:`dfrl.experiments.science.report.observations`), the negative control."""
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dfrl.experiments.science.report.observations import (SeedRun, final_score, mean_q, paper_tests,
+                                                  tests_markdown)
+from dfrl.experiments.science.report.stats import late_growth
+from dfrl.experiments.science.studies.intervals import interval
+
+
+def _iv(values: list[float]) -> str:
+    vals = [v for v in values if v == v]
+    return str(interval(vals)) if vals else "n/a"
+
+
+def _collisions(runs: list[SeedRun], role: str) -> list[float]:
+    out = []
+    for r in runs:
+        last = max(int(e["iteration"]) for e in r.evals)
+        sel = [float(e["collisions_per_1000"]) for e in r.evals
+               if int(e["iteration"]) == last and e["role"] == role]
+        out.append(float(np.mean(sel)) if sel else float("nan"))
+    return out
+
+
+def figures(out: Path, rep: Any, formats: Sequence[str] = ("png",),
+            dpi: float | None = None) -> list[str]:
+    """Draw the band figures in each of ``formats`` at ``dpi``; return the names of the first
+    format's files (empty without matplotlib)."""
+    from dfrl.experiments.science.report.bands import plot_groups
+
+    names = []
+    try:
+        for algo in ("qlearning", "sarsa"):
+            groups = {k: v for k, v in rep.fed.items() if k.startswith(algo)}
+            groups[f"{algo} standalone"] = rep.standalone.get(algo, [])
+            if algo == "qlearning" and rep.control_fed:
+                groups["control federated"] = rep.control_fed
+                groups["control standalone (R1, R4)"] = rep.control_sa
+            paths = plot_groups(groups, out / "figures" / f"{algo}_bands.png",
+                                f"{'Q-learning' if algo == 'qlearning' else 'SARSA'}",
+                                formats, dpi)
+            names.append(paths[0].name)
+    except ImportError:
+        return []
+    return names
+
+
+def write_report(out: Path, rep: Any, opts: Any, seeds: list[int]) -> Path:
+    """Write ``OUT/report.md`` from a :class:`dfrl.experiments.science.reproduce.Reproduction`."""
+    cfg_runs = next(iter(rep.fed.values()))
+    iters = len(next(iter(cfg_runs[0].curves.values())))
+    L = ["# dFRL: the paper's experiment, several seeds, observations as tests", "",
+         f"Seeds {seeds[0]}..{seeds[-1]} ({len(seeds)}); five robots in R1..R5, {iters} "
+         f"iterations each; standalone baselines with the same seeds and budget; negative "
+         f"control: federated Q-learning/average and standalone Q-learning in R1 and R4 with a "
+         f"random behaviour policy (epsilon 1 throughout). Greedy evaluations at "
+         f"{opts.points} points of every run, {opts.eval_steps} steps per table and arena "
+         f"({opts.eval_steps // opts.episode_steps} episodes of {opts.episode_steps} steps "
+         f"from seeded random poses), in the robot's own arena and the held-out arenas h1 and "
+         f"h2. Intervals: mean ± 95% Student-t half width over seeds.", "",
+         f"Wall time of the whole `dfrl paper` on this machine ({os.cpu_count()} cores): "
+         f"**{rep.total_s:.0f} s**; federated runs {sum(rep.walls.values()):.0f} s of it "
+         f"(standalone trainings and evaluations ran beside them).", ""]
+    names = figures(out, rep)
+    L += ["## Figures", ""]
+    L += [f"* figures/{n}" for n in names] or ["* (no figures: matplotlib is not installed)"]
+    L += ["", "Per run and seed: `seed<S>/<run>/` (q_sum.png, cumulative_reward.png, "
+          "metrics.csv, evaluations.csv).", "",
+          "## Final numbers (mean ± 95% half width over seeds)", "",
+          "| runs | final sum Q (robots' mean) | Q-sum growth in last quarter | greedy score own "
+          "| greedy score held-out | collisions/1000 own | collisions/1000 held-out |",
+          "|---|---|---|---|---|---|---|"]
+    groups = dict(rep.fed)
+    groups.update({f"{k} standalone": v for k, v in rep.standalone.items()})
+    if rep.control_fed:
+        groups["control federated"] = rep.control_fed
+        groups["control standalone"] = rep.control_sa
+    for name, runs in groups.items():
+        L.append(f"| {name} | {_iv([float(mean_q(r)[-1]) for r in runs])} | "
+                 f"{_iv([late_growth(mean_q(r)) for r in runs])} | "
+                 f"{_iv([final_score(r, 'own') for r in runs])} | "
+                 f"{_iv([final_score(r, 'held_out') for r in runs])} | "
+                 f"{_iv(_collisions(runs, 'own'))} | {_iv(_collisions(runs, 'held_out'))} |")
+    zero = next(iter(cfg_runs)).zero_score
+    L += ["", "Zero table (greedy with random ties = a uniform random policy), score per arena: "
+          + ", ".join(f"{a} {v:.2f}" for a, v in zero.items()) + ".", "",
+          "## The paper's observations as tests", ""]
+    tests = paper_tests(rep.fed, rep.standalone, rep.control_fed, rep.control_sa)
+    L += tests_markdown(tests)
+    L += ["## Summary", "", "| test | holds (real runs) | control passes | a test of learning |",
+          "|---|---|---|---|"]
+    for t in tests:
+        L.append(f"| {t.key}. {t.title} | {'yes' if t.holds else 'no'} | "
+                 f"{'n/a' if not t.control else 'yes' if t.control_passes else 'no'} | "
+                 f"{'n/a' if not t.control else 'no' if t.control_passes else 'yes'} |")
+    L += ["", "Caveats: our e-puck, reward and state discretisation are our own reconstruction "
+          "(robots/README.md); absolute values are not comparable with the paper's. The "
+          "saturation tests use the sum of Q-values, which with a constant learning rate keeps "
+          "moving; robots/README.md gives the budgets at which it flattens."]
+    path = Path(out) / "report.md"
+    path.write_text("\n".join(L) + "\n", encoding="utf-8")
+    return path

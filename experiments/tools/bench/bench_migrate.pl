@@ -1,0 +1,213 @@
+/*  Migration benchmark agent: run by experiments/tools/bench/migrate.py.
+
+    swipl bench_migrate.pl peer TOKEN [TLS_DIR]
+        start a platform on an OS-chosen port and a naive text server on
+        another, print "PORT <p> NAIVE <q>", serve until standard input
+        closes.
+    swipl bench_migrate.pl naive TOKEN NAIVE_PORT FLOATS HOPS
+        the naive hop, for comparison: make the same agent as `home`,
+        and HOPS times write its record as text (write_canonical/2 on a
+        plain socket stream, TCP_NODELAY) to the naive server, which reads it back
+        with read_term/3 and answers `ok.`; print "NAIVE_MS [..]" (one
+        figure per hop: from the first byte written to the answer).
+    swipl bench_migrate.pl home TOKEN PEER_PORT FLOATS HOPS [TLS_DIR]
+        start a platform, create an agent whose payload is a list of FLOATS
+        floats, bounce it HOPS times between home and peer, print one line
+        "LATENCIES_MS [..]" (one figure per hop, from the call of move_agent
+        at the source to the start of the handler at the destination), then
+        serve until standard input closes. (The agent prints the line itself:
+        its code runs in the sandbox at the peer, which allows output, not
+        messages to other threads.)
+    With TLS_DIR (a node's ca.crt, node.crt, node.key), both platforms
+    speak mutual TLS (node option tls(Dir)).
+    With the environment variable DFRL_HOP_TRACE=DIR, each process times
+    the steps of every hand-over (wrap_predicate/4 around the platform's
+    predicates, nothing changed in them) and writes them, one JSON object
+    a line {"step", "t0", "t1", "thread"} (get_time/1 stamps), to
+    DIR/peer.jsonl or DIR/home.jsonl when it ends (migrate.py's
+    phase_breakdown/2 reads them).
+*/
+:- use_module('../../platform_pl/tartarus').
+:- use_module('../../platform_pl/secrets', [take_env_tokens/1]).
+:- use_module(library(main)).
+:- use_module(library(socket)).
+:- use_module(library(prolog_wrap), [wrap_predicate/4]).
+:- use_module(library(http/json), [json_write_dict/3]).
+
+:- dynamic bench/3, data/2, departed/2, lat/2, plan/2, user:bench_done/1.
+
+:- initialization(main, main).
+
+env_token(Token) :-
+    (   take_env_tokens([Token|_])
+    ->  true
+    ;   format(user_error, "bench_migrate: DFRL_TOKEN is not set~n", []),
+        halt(2)
+    ).
+
+%   The token comes in the environment (DFRL_TOKEN), never in argv.
+main(['peer'|Tls]) :-
+    trace_start,
+    env_token(Token),
+    tls_options(Tls, TlsOptions),
+    node_start(localhost:0, Node, [token(Token)|TlsOptions]),
+    node_property(Node, address(_:Port)),
+    naive_server(NaivePort),
+    format("PORT ~w NAIVE ~w~n", [Port, NaivePort]),
+    flush_output,
+    read_term(user_input, _, []),   % until stdin closes
+    trace_write(peer),
+    node_stop(Node).
+main(['home', Peer0, Floats0, Hops0|Tls]) :-
+    trace_start,
+    env_token(Token),
+    maplist(atom_number, [Peer0, Floats0, Hops0], [Peer, Floats, Hops]),
+    tls_options(Tls, TlsOptions),
+    node_start(localhost:0, Node, [token(Token)|TlsOptions]),
+    node_property(Node, address(_:Home)),
+    bench_agent(Home, Peer, Floats, Hops, Token),
+    execute_agent(bencher, (localhost, Home), bench),
+    read_term(user_input, _, []),   % the agent prints its figures; then stdin closes
+    trace_write(home),
+    node_stop(Node).
+
+main(['naive', Naive0, Floats0, Hops0]) :-
+    env_token(Token),
+    maplist(atom_number, [Naive0, Floats0, Hops0], [NaivePort, Floats, Hops]),
+    node_start(localhost:0, Node, [token(Token)]),
+    node_property(Node, address(_:Home)),
+    bench_agent(Home, Home, Floats, 0, Token),
+    agents:agent_export(Node, bencher, Record0),
+    setarg(4, Record0, []),                 % as migration.pl sends it
+    setup_call_cleanup(
+        tcp_connect(localhost:NaivePort, Pair, [nodelay(true)]),
+        findall(Ms, ( between(1, Hops, _), naive_hop(Pair, Record0, Ms) ), L),
+        close(Pair)),
+    format("NAIVE_MS ~w~n", [L]),
+    flush_output,
+    node_stop(Node).
+
+%   The benchmark agent, with a payload of Floats floats.
+bench_agent(Home, Peer, Floats, Hops, Token) :-
+    findall(F, ( between(1, Floats, I), F is I * 0.001 + 0.5 ), Data),
+    assertz(data(guid, Data)),
+    assertz(lat(guid, [])),
+    assertz(plan(guid, plan(Home, Peer, Hops))),
+    create_mobile_agent(bencher, (localhost, Home), bench, [Token]),
+    add_payload(bencher, [(data,2), (lat,2), (plan,2), (departed,2)]).
+
+naive_hop(Pair, Term, Ms) :-
+    stream_pair(Pair, In, Out),
+    get_time(T0),
+    write_canonical(Out, Term),
+    write(Out, ' .\n'),
+    flush_output(Out),
+    read_term(In, ok, []),
+    get_time(T1),
+    Ms is (T1 - T0) * 1000.
+
+%   The naive server: a thread that reads terms from each connection and
+%   answers ok to each.
+naive_server(Port) :-
+    tcp_socket(S),
+    tcp_setopt(S, reuseaddr),
+    tcp_bind(S, localhost:Port),
+    tcp_listen(S, 5),
+    thread_create(naive_accept(S), _, [detached(true)]).
+
+naive_accept(S) :-
+    tcp_accept(S, Client, _),
+    thread_create(naive_serve(Client), _, [detached(true)]),
+    naive_accept(S).
+
+%   TCP_NODELAY on both ends, as the platform's connections: otherwise
+%   Nagle's algorithm and delayed acknowledgements add some 40 ms to a
+%   hop, which is not what the naive hop is there to measure.
+naive_serve(Client) :-
+    tcp_setopt(Client, nodelay),
+    setup_call_cleanup(
+        tcp_open_socket(Client, Pair),
+        ( stream_pair(Pair, In, Out), naive_loop(In, Out) ),
+        close(Pair, [force(true)])).
+
+naive_loop(In, Out) :-
+    read_term(In, T, []),
+    (   T == end_of_file
+    ->  true
+    ;   format(Out, "ok.~n", []),
+        flush_output(Out),
+        naive_loop(In, Out)
+    ).
+
+tls_options([], []).
+tls_options([Dir], [tls(Dir)]).
+
+:- include(bench_hop_handler).
+
+		 /*******************************
+		 *        STEP TRACING		*
+		 *******************************/
+
+:- dynamic step_/4.                     % Step, T0, T1, Thread
+
+%   traced(Module:Head, Step): the steps timed, Step a term of Head's
+%   arguments (bound after the call).
+traced(agents:agent_export(_, _, _), export).
+traced(transport:transport_acquire(_, _, _, _), acquire).
+traced(wire:frame_write(_, _, T), write(F)) :- term_functor(T, F).
+traced(wire:frame_read(_, Fr, _), read(F)) :- ( Fr = frame(_, T) -> term_functor(T, F) ; F = eof ).
+traced(code_safety:check_agent_record(_), check).
+traced(code_safety:record_sealed(_, _, _), sealed).
+traced(agents:agent_install(_, _, _, _), install).
+traced(agents:agent_install(_, _, _, _, _), install).
+traced(agent_bounds:bounds_install(_, _, _, _), bounds_install).
+traced(agent_bounds:module_size(_, _), module_size).
+traced(custody:custody_stage(_, _, _, _, _, _), custody_stage).
+traced(custody:commit_(_, _, _, _, _, _), custody_commit).    % not the meta-predicate: a wrapper would lose its module argument
+traced(agents:agent_remove(_, _), remove).
+traced(migration:receive_transfer(_, _, _, _, _, _, _, _, _), receive_transfer).
+traced(migration:activate(_, _, _), activate).
+traced(agents:agent_run(_, _, _, _), agent_run).
+
+term_functor(T, F) :-
+    (   var(T)
+    ->  F = var
+    ;   T = ok(R)
+    ->  term_functor(R, F0),
+        format(atom(F), 'ok(~w)', [F0])
+    ;   compound(T)
+    ->  compound_name_arity(T, F, _)
+    ;   F = T
+    ).
+
+trace_start :-
+    (   getenv('DFRL_HOP_TRACE', _)
+    ->  forall(( traced(M:H, _),
+                 functor(H, N, A),
+                 current_predicate(M:N/A) ),     % steps of this version of the platform
+               ( functor(G, N, A),
+                 wrap_predicate(M:G, dfrl_trace, W, traced_call(M:G, W)) ))
+    ;   true
+    ).
+
+traced_call(MG, W) :-
+    get_time(T0),
+    call(W),
+    get_time(T1),
+    (   traced(MG, Step) -> true ; Step = unknown ),
+    thread_self(Me),
+    ( atom(Me) -> Th = Me ; thread_property(Me, id(Th)) ),
+    assertz(step_(Step, T0, T1, Th)).
+
+trace_write(Role) :-
+    (   getenv('DFRL_HOP_TRACE', Dir)
+    ->  format(atom(File), '~w/~w.jsonl', [Dir, Role]),
+        setup_call_cleanup(
+            open(File, write, Out),
+            forall(step_(Step, T0, T1, Th),
+                   ( format(atom(S), '~w', [Step]),
+                     json_write_dict(Out, _{step:S, t0:T0, t1:T1, thread:Th}, [width(0)]),
+                     nl(Out) )),
+            close(Out))
+    ;   true
+    ).

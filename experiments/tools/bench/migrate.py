@@ -1,0 +1,286 @@
+"""Agent migration between two platform processes on loopback: ms per hop.
+
+Runs ``bench_migrate.pl`` (beside this module) as two ``swipl`` processes (a peer and a home
+node); an agent whose payload is a list of N floats bounces between them H times.
+Each hop is timed from the call of ``move_agent`` at the source to the start of
+the handler at the destination (same host, same clock).
+
+In the same run, against the same peer process, a *naive text hop* is timed: the agent's
+record written as text (``write_canonical``) on a plain socket and read back with
+``read_term`` by the peer, which answers ``ok``. The hop's median over the naive hop's median
+(``naive_ratio``) is the figure to watch: it does not move with the machine's load the way
+milliseconds do, so a regression in the hop shows in every run (target at 100,000 floats:
+at most 0.20).
+
+With ``trace_dir``, both processes time the steps of every hand-over (see
+``bench_migrate.pl``) and :func:`phase_breakdown` sums them up per step.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import statistics
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+
+from dfrl.experiments.tokens import env_with_tokens
+
+SCRIPT = Path(__file__).resolve().parent / "bench_migrate.pl"
+
+
+@dataclass
+class MigrationResult:
+    """Per-hop latency figures of one run (milliseconds)."""
+
+    floats: int
+    hops: int
+    warmup: int
+    median_ms: float
+    p10_ms: float
+    p90_ms: float
+    min_ms: float
+    max_ms: float
+    mean_ms: float
+    payload_bytes: int
+    naive_median_ms: float | None = None
+    """Median of the naive text hop with the same payload, same run (None: not measured)."""
+    naive_ratio: float | None = None
+    """``median_ms / naive_median_ms``."""
+
+
+def percentile(values: list[float], q: float) -> float:
+    """The q-quantile (0..1) by linear interpolation between order statistics."""
+    xs = sorted(values)
+    if not xs:
+        raise ValueError("no values")
+    pos = q * (len(xs) - 1)
+    lo = int(pos)
+    hi = min(lo + 1, len(xs) - 1)
+    return xs[lo] + (xs[hi] - xs[lo]) * (pos - lo)
+
+
+def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
+        timeout: float = 600, tls: str | Path | None = None, naive: bool = True,
+        trace_dir: str | Path | None = None) -> MigrationResult:
+    """Measure ``hops`` hops (after ``warmup`` uncounted ones) with a payload of ``floats`` floats.
+
+    With ``tls`` (a node's TLS folder: ``ca.crt``, ``node.crt``, ``node.key``, from ``dfrl certs
+    node``), both platforms speak mutual TLS with that certificate. With ``naive`` (default),
+    the naive text hop is timed too (as many hops, after as many warm-up ones), against the
+    same peer process. With ``trace_dir`` (an existing folder), the processes write their step
+    timings there (``home.jsonl``, ``peer.jsonl``; see :func:`phase_breakdown`).
+
+    Raises
+    ------
+    ValueError
+        Bad arguments.
+    FileNotFoundError
+        swipl is not installed.
+    RuntimeError
+        The benchmark scripts failed.
+    """
+    if floats < 0 or hops < 1 or warmup < 0:
+        raise ValueError("floats >= 0, hops >= 1 and warmup >= 0 are required")
+    tls_args: list[str] = []
+    if tls is not None:
+        from dfrl.experiments.tools.certs import CertError, check_node_dir
+        try:
+            tls_args = [str(check_node_dir(tls).resolve())]
+        except CertError as exc:
+            raise ValueError(str(exc)) from exc
+    swipl = shutil.which("swipl")
+    if swipl is None:
+        raise FileNotFoundError("swipl is not installed (run scripts/setup.sh)")
+    env = env_with_tokens([token])            # the token in the environment, never in argv
+    if trace_dir is not None:
+        env["DFRL_HOP_TRACE"] = str(Path(trace_dir).resolve())
+    else:
+        env.pop("DFRL_HOP_TRACE", None)
+    naive_ms: list[float] | None = None
+    peer = subprocess.Popen([swipl, "-q", str(SCRIPT), "peer", *tls_args],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        assert peer.stdout is not None
+        line = peer.stdout.readline()
+        if not line.startswith("PORT "):
+            raise RuntimeError(f"peer did not start: {line!r}")
+        words = line.split()
+        port, naive_port = int(words[1]), int(words[3])
+        home = subprocess.Popen(
+            [swipl, "-q", str(SCRIPT), "home", str(port), str(floats),
+             str(hops + warmup), *tls_args],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            env=env)
+        try:
+            out, err = _read_latencies(home, timeout)
+        finally:
+            _finish(home)
+        if naive:
+            naive_ms = _naive_hops(swipl, env, naive_port, floats, hops + warmup, timeout)
+            naive_ms = naive_ms[warmup:]
+    finally:
+        if peer.stdin:
+            peer.stdin.close()
+        try:
+            peer.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            peer.kill()
+    lat_line = next((l for l in out.splitlines() if l.startswith("LATENCIES_MS")), None)
+    if lat_line is None:
+        raise RuntimeError(f"benchmark failed:\n{out}\n{err}")
+    all_ms = json.loads(lat_line.split(" ", 1)[1])
+    ms = all_ms[warmup:]
+    median = statistics.median(ms)
+    naive_median = statistics.median(naive_ms) if naive_ms else None
+    return MigrationResult(
+        floats=floats, hops=len(ms), warmup=warmup,
+        median_ms=median, p10_ms=percentile(ms, 0.1), p90_ms=percentile(ms, 0.9),
+        min_ms=min(ms), max_ms=max(ms), mean_ms=statistics.fmean(ms),
+        payload_bytes=10 * floats + 1,
+        naive_median_ms=naive_median,
+        naive_ratio=median / naive_median if naive_median else None,
+    )
+
+
+def _finish(proc: subprocess.Popen) -> None:
+    """Close a benchmark process's standard input (it then stops its node and, when tracing,
+    writes its steps) and wait for it; kill it if it does not end within 10 s."""
+    try:
+        if proc.stdin:
+            proc.stdin.close()
+        proc.wait(timeout=10)
+    except (subprocess.TimeoutExpired, OSError):
+        proc.kill()
+        proc.wait(timeout=10)
+
+
+def _naive_hops(swipl: str, env: dict[str, str], naive_port: int, floats: int, hops: int,
+                timeout: float) -> list[float]:
+    """The naive text hop's figures (ms), ``hops`` of them, from the ``naive`` mode (``env``
+    carries the token)."""
+    done = subprocess.run(
+        [swipl, "-q", str(SCRIPT), "naive", str(naive_port), str(floats), str(hops)],
+        stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=timeout, env=env)
+    line = next((l for l in done.stdout.splitlines() if l.startswith("NAIVE_MS")), None)
+    if line is None:
+        raise RuntimeError(f"naive hop failed:\n{done.stdout}\n{done.stderr}")
+    return [float(x) for x in json.loads(line.split(" ", 1)[1])]
+
+
+@dataclass
+class Phase:
+    """One step of the hand-over, over the timed hops: its median duration, and the median
+    time from the hop's start (the source's export of the agent) to its start."""
+
+    step: str
+    side: str
+    """``source`` (the process the agent leaves) or ``destination``."""
+    calls: int
+    median_ms: float
+    median_start_ms: float
+
+
+def phase_breakdown(trace_dir: str | Path, warmup: int = 2) -> list[Phase]:
+    """The steps of the hops traced into ``trace_dir`` (by :func:`run` with ``trace_dir``),
+    in the order they happen within a hop.
+
+    A hop starts with an ``export`` (in the process the agent leaves) and ends with the
+    ``agent_run`` that starts its handler at the other end; the first ``warmup`` hops are left
+    out.
+    """
+    steps: list[tuple[float, float, str, str]] = []
+    for process in ("home", "peer"):
+        path = Path(trace_dir) / f"{process}.jsonl"
+        if path.exists():
+            for line in path.read_text().splitlines():
+                d = json.loads(line)
+                steps.append((d["t0"], d["t1"], d["step"], process))
+    steps.sort()
+    exports = [s for s in steps if s[2] == "export"]
+    if len(exports) <= warmup:
+        return []
+    per: dict[tuple[str, str], list[tuple[float, float]]] = {}
+    for i, start in enumerate(exports[warmup:], start=warmup):
+        end = exports[i + 1][0] if i + 1 < len(exports) else float("inf")
+        for t0, t1, step, process in steps:
+            if start[0] <= t0 < end:
+                side = "source" if process == start[3] else "destination"
+                per.setdefault((step, side), []).append(((t1 - t0) * 1000,
+                                                         (t0 - start[0]) * 1000))
+                if step == "agent_run" and process != start[3]:
+                    break
+    hops = len(exports) - warmup
+    phases = [Phase(step, side, len(v), statistics.median(d for d, _ in v),
+                    statistics.median(s for _, s in v))
+              for (step, side), v in per.items() if len(v) >= hops // 2]
+    return sorted(phases, key=lambda p: p.median_start_ms)
+
+
+def _read_latencies(home: subprocess.Popen, timeout: float) -> tuple[str, str]:
+    """Home's output up to its LATENCIES_MS line (or its end, or the timeout); its stderr
+    when it gave none."""
+    import threading
+
+    lines: list[str] = []
+    done = threading.Event()
+
+    def read() -> None:
+        assert home.stdout is not None
+        for line in home.stdout:
+            lines.append(line)
+            if line.startswith("LATENCIES_MS"):
+                break
+        done.set()
+
+    threading.Thread(target=read, daemon=True).start()
+    done.wait(timeout)
+    if any(l.startswith("LATENCIES_MS") for l in lines):
+        return "".join(lines), ""
+    home.kill()
+    err = home.stderr.read() if home.stderr is not None else ""
+    return "".join(lines), err
+
+
+@dataclass
+class TlsComparison:
+    """Plaintext and TLS hops with the same payload, measured alternately (medians in ms)."""
+
+    floats: int
+    plain: MigrationResult
+    tls: MigrationResult
+    tls_cost: float
+    """``tls.median_ms / plain.median_ms - 1`` (0.2 means TLS costs 20% more per hop)."""
+
+
+def compare_tls(floats: int, hops: int, tls: str | Path, warmup: int = 2,
+                rounds: int = 1) -> TlsComparison:
+    """Measure plaintext and TLS hops beside each other, ``rounds`` times each, alternating
+    (so a load change on the machine hits both); the figures pool every round's hops."""
+    if rounds < 1:
+        raise ValueError("rounds >= 1 is required")
+    plain: list[MigrationResult] = []
+    secure: list[MigrationResult] = []
+    for _ in range(rounds):
+        plain.append(run(floats, hops, warmup))
+        secure.append(run(floats, hops, warmup, tls=tls, naive=False))
+    p, t = _pool(plain), _pool(secure)
+    return TlsComparison(floats=floats, plain=p, tls=t, tls_cost=t.median_ms / p.median_ms - 1)
+
+
+def _pool(results: list[MigrationResult]) -> MigrationResult:
+    if len(results) == 1:
+        return results[0]
+    # medians of medians: each round's hops are one sample of the same distribution
+    meds = [r.median_ms for r in results]
+    r0 = results[0]
+    naive = [r.naive_median_ms for r in results if r.naive_median_ms is not None]
+    naive_median = statistics.median(naive) if naive else None
+    return MigrationResult(
+        floats=r0.floats, hops=sum(r.hops for r in results), warmup=r0.warmup,
+        median_ms=statistics.median(meds), p10_ms=statistics.median(r.p10_ms for r in results),
+        p90_ms=statistics.median(r.p90_ms for r in results),
+        min_ms=min(r.min_ms for r in results), max_ms=max(r.max_ms for r in results),
+        mean_ms=statistics.fmean(r.mean_ms for r in results), payload_bytes=r0.payload_bytes,
+        naive_median_ms=naive_median,
+        naive_ratio=statistics.median(meds) / naive_median if naive_median else None)

@@ -1,0 +1,122 @@
+"""One full dFRL round (forward and backward over N robot nodes), ms per round.
+
+Starts N robot node processes on loopback (:mod:`dfrl.experiments.robot_host` in benchmark mode:
+each holds a random table of ``--entries`` values and serves the agent's requests as soon as
+they arrive, no simulation), launches the real itinerary agent
+(through a console node, :mod:`dfrl.experiments.driver.console_node`) for ``--warmup + --rounds`` rounds without rest and
+reads the round times from its log (the agent stamps a round's start when it reads the first
+robot and its end after writing the first robot back). Checks that every robot holds the
+same table after each round. Target: median under 50 ms for 5 nodes and 20,000 entries.
+
+Beside the round, in the same run, it times the hops a round is made of: ``dfrl bench migrate``'s
+hop with a payload of as many floats as the table has entries (``hop_median_ms``), so that
+``round_over_hops`` (the round's median over ``hops`` such hops) tells whether a slower round
+is slower hops or the rest of the round (reading, aggregating and writing tables, the agent's
+checkpoints).
+"""
+from __future__ import annotations
+
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+from dfrl.experiments.driver.config import NodeConfig, RobotSpec
+from dfrl.experiments.driver.launcher.agents import launch_agent, open_console
+from dfrl.experiments.driver.launcher.children import RobotChild, await_ready
+from dfrl.experiments.driver.results.agent_log import read_rounds_log
+from dfrl.experiments.driver.results.rounds import count_equal, read_shares, write_rounds_csv
+
+TARGET_MS = 50.0
+
+
+def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int = 30,
+          warmup: int = 3, method: str = "average", out: Path | None = None,
+          hop_hops: int = 20) -> dict:
+    """Run the benchmark; return its figures. ``hop_hops``: how many migrate hops to time
+    beside the round (0: none; the hop fields are then None).
+
+    Raises
+    ------
+    ValueError
+        ``entries`` is not a multiple of ``actions``.
+    RuntimeError
+        A node did not start, the agent could not be launched or did not finish in time.
+    """
+    if entries % actions:
+        raise ValueError(f"--entries {entries} is not a multiple of --actions {actions}")
+    states = entries // actions
+    tmp = None
+    if out is None:
+        tmp = tempfile.TemporaryDirectory(prefix="dfrl_bench_round_")
+        out = Path(tmp.name)
+    out = out.resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    children: list[RobotChild] = []
+    try:
+        for i in range(robots):
+            spec = RobotSpec(f"r{i + 1}", "r1")
+            cfg = NodeConfig(robot=spec.id, out_dir=str(out), seed=i, bench_table=[states, actions],
+                             events=False, progress_every=0)
+            children.append(RobotChild(spec, cfg, out))
+        await_ready(children, 120.0)
+        log = out / "rounds_bench.log"
+        if log.exists():
+            log.unlink()
+        total = warmup + rounds
+        launch = {"name": "bench", "method": method, "rounds": total, "rest_s": 0.0,
+                  "rounds_log": str(log), "token": 1111, "timeout_s": 60.0,
+                  "itinerary": [{"host": ch.address[0], "port": ch.address[1], "robot": ch.robot.id}
+                                for ch in children]}
+        t0 = time.monotonic()
+        with open_console(1111, out / "logs" / "console.err") as console:
+            launch_agent(console, launch)
+        deadline = time.monotonic() + max(120.0, total * 2.0)
+        agent_log = read_rounds_log(log, "bench")
+        while agent_log.finished is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+            agent_log = read_rounds_log(log, "bench")
+        wall = time.monotonic() - t0
+        if agent_log.finished is None:
+            raise RuntimeError(f"the agent did not finish {total} rounds in time "
+                               f"({len(agent_log.rounds)} done)")
+    finally:
+        for ch in children:
+            ch.close_stdin()
+        for ch in children:
+            ch.stop(10.0)
+            ch.finish()
+    ids = [ch.robot.id for ch in children]
+    shares = {rid: read_shares(out / f"shares_{rid}.csv") for rid in ids}
+    rows = write_rounds_csv(out / "rounds.csv", [agent_log], ids, shares)
+    timed = [r for r in agent_log.rounds if r.round > warmup]
+    ms = sorted(r.duration_ms for r in timed)
+    hop_ms = _hop_median(entries, hop_hops)
+    hops = timed[0].hops
+    result = {
+        "benchmark": "round", "robots": robots, "entries": entries, "shape": [states, actions],
+        "method": method, "rounds": len(timed), "warmup": warmup,
+        "median_ms": round(statistics.median(ms), 2),
+        "p90_ms": round(ms[min(len(ms) - 1, int(0.9 * len(ms)))], 2),
+        "min_ms": round(ms[0], 2), "max_ms": round(ms[-1], 2),
+        "hops": hops, "bytes_carried": timed[0].bytes,
+        "hop_floats": entries, "hop_median_ms": None if hop_ms is None else round(hop_ms, 3),
+        "round_over_hops": (None if not hop_ms or not hops
+                            else round(statistics.median(ms) / (hops * hop_ms), 3)),
+        "all_equal_rounds": count_equal(rows), "total_rounds": len(rows),
+        "wall_s": round(wall, 2), "target_ms": TARGET_MS,
+        "log_problems": agent_log.unreadable + [f"round {a.round} aborted: {a.error}"
+                                                  for a in agent_log.aborted],
+        "meets_target": statistics.median(ms) < TARGET_MS,
+    }
+    if tmp is not None:
+        tmp.cleanup()
+    return result
+
+
+def _hop_median(floats: int, hops: int) -> float | None:
+    """The median of ``hops`` migrate hops with ``floats`` floats (ms), or None for 0 hops."""
+    if hops <= 0:
+        return None
+    from dfrl.experiments.tools.bench import migrate
+    return migrate.run(floats, hops, warmup=2, naive=False).median_ms

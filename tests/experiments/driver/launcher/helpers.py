@@ -1,0 +1,70 @@
+"""Helpers of the launcher tests: configs, reading a results folder, a run in a thread."""
+from __future__ import annotations
+
+import csv
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec
+from dfrl.experiments.driver.launcher import run
+from dfrl.experiments.driver.results.agent_log import read_rounds_log
+
+
+def rounds_csv(out: Path) -> list[dict[str, str]]:
+    """The rows of ``OUT/rounds.csv`` as written (strings)."""
+    with open(out / "rounds.csv", newline="", encoding="utf-8") as fh:
+        return list(csv.DictReader(fh))
+
+
+def diagnose(*outs: Path) -> str:
+    """Rounds and node warnings of runs, for a failure message."""
+    text = []
+    for out in outs:
+        text.append(f"--- {out}")
+        text += [f"{r['round']} {r['method']} [{r['visited']}] {r['all_equal']}"
+                 for r in rounds_csv(out)]
+        for err in sorted((out / "logs").glob("*")):
+            lines = [ln for ln in err.read_text(errors="replace").splitlines()
+                     if ln and not ln.startswith("pybullet build time")]
+            text += [f"{err.name}: {ln}" for ln in lines[:10]]
+    return "\n".join(text)
+
+
+def small_config(n: int = 2, **kw: Any) -> ExperimentConfig:
+    """``n`` robots in r1, r4, r2, r3, r5; 200 iterations, respite 50, sync."""
+    arenas = ["r1", "r4", "r2", "r3", "r5"]
+    base: dict[str, Any] = dict(name="t", robots=tuple(RobotSpec(f"r{i + 1}", arenas[i])
+                                                       for i in range(n)),
+                                iterations=200, respite=50, seed=1, mode="sync", timeout_s=120)
+    base.update(kw)
+    return ExperimentConfig(**base)
+
+
+def run_in_thread(cfg: ExperimentConfig, out: Path,
+                  **run_options: Any) -> tuple[threading.Thread, dict[str, Any]]:
+    """Start ``run(cfg, out, **run_options)`` in a thread (``tls=DIR``, say); its result or
+    exception lands in the dict."""
+    box: dict[str, Any] = {}
+
+    def target() -> None:
+        try:
+            box["res"] = run(cfg, out, progress=None, **run_options)
+        except BaseException as exc:  # noqa: BLE001
+            box["exc"] = exc
+
+    t = threading.Thread(target=target, daemon=True)
+    t.start()
+    return t, box
+
+
+def wait_rounds(out: Path, agent: str, n: int, timeout: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if len(read_rounds_log(out / f"rounds_{agent}.log", agent).rounds) >= n:
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"fewer than {n} rounds after {timeout} s")
+
+

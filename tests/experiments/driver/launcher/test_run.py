@@ -1,0 +1,147 @@
+"""run(config, out) on real processes: robot nodes on loopback and the Prolog agent."""
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec
+from dfrl.experiments.driver.launcher import Results, run
+from dfrl.experiments.driver.results.metrics import read_metrics
+
+from .helpers import diagnose, rounds_csv, run_in_thread, small_config, wait_rounds
+
+pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
+
+
+def test_two_robot_smoke_run(tmp_path: Path) -> None:
+    cfg = small_config()
+    res = run(cfg, tmp_path, progress=None)
+    assert res.ok, (res.crashed, res.agents_finished)
+    for name in ("config.json", "nodes.json", "metrics.csv", "rounds.csv", "summary.md",
+                 "q_sum.png", "cumulative_reward.png", "curves.png"):
+        assert (tmp_path / name).is_file(), name
+    assert (tmp_path / "q_sum.png").stat().st_size > 10_000
+    assert ExperimentConfig.from_dict(json.loads((tmp_path / "config.json").read_text())) == cfg
+    nodes = json.loads((tmp_path / "nodes.json").read_text())
+    assert [n["robot"] for n in nodes["nodes"]] == ["r1", "r2"]
+    assert all(n["host"] == "127.0.0.1" and n["port"] > 0 for n in nodes["nodes"])
+    curves = read_metrics(tmp_path / "metrics.csv")
+    assert list(curves) == ["r1", "r2"]
+    summary = (tmp_path / "summary.md").read_text()
+    for rid, cur in curves.items():
+        its = cur["iteration"].tolist()     # one row per iteration, then the last share's
+        assert its[:200] == list(range(1, 201)) and its[200:] in ([], [200])
+        assert cur["q_sum"][-1] > 0 and cur["cumulative_reward"][-1] > 0
+        # numbers agree: the curve and the summary end with the saved table's sum
+        table = np.load(tmp_path / "tables" / f"{rid}.npy")
+        assert cur["q_sum"][-1] == pytest.approx(float(table.sum()), rel=1e-12)
+        assert f"| {rid} | " in summary and f"| {float(table.sum()):.2f} |" in summary
+    rows = rounds_csv(tmp_path)
+    assert [int(r["round"]) for r in rows] == [1, 2, 3, 4]
+    for r in rows:
+        # right after each backward pass every robot holds the same table
+        assert r["all_equal"] == "true"
+        assert r["digest_r1"] == r["digest_r2"] and len(r["digest_r1"]) == 64
+        assert r["visited"] == "r1 r2" and r["method"] == "average" and int(r["hops"]) == 2
+        assert int(r["bytes"]) > 0 and float(r["end"]) > float(r["start"])
+    assert len({r["digest_r1"] for r in rows}) == 4       # the tables moved on between rounds
+    summary = (tmp_path / "summary.md").read_text()
+    assert "4/4" in summary
+
+
+def test_sync_mode_same_seed_same_curves(tmp_path: Path) -> None:
+    cfg = small_config()
+    run(cfg, tmp_path / "a", progress=None)
+    run(cfg, tmp_path / "b", progress=None)
+    same = (tmp_path / "a/metrics.csv").read_bytes() == (tmp_path / "b/metrics.csv").read_bytes()
+    assert same, diagnose(tmp_path / "a", tmp_path / "b")
+    da = [r["digest_r1"] for r in rounds_csv(tmp_path / "a")]
+    db = [r["digest_r1"] for r in rounds_csv(tmp_path / "b")]
+    assert da == db and len(da) == 4
+
+
+def test_visit_weighted_average(tmp_path: Path) -> None:
+    res = run(small_config(iterations=100, method="visit_average"), tmp_path, progress=None)
+    assert res.ok
+    rows = rounds_csv(tmp_path)
+    assert [r["method"] for r in rows] == ["visit_average", "visit_average"]
+    assert all(r["all_equal"] == "true" for r in rows)
+
+
+def test_itinerary_forward_then_backward_on_three_processes(tmp_path: Path) -> None:
+    res = run(small_config(3, iterations=100), tmp_path, progress=None)
+    assert res.ok
+    rows = rounds_csv(tmp_path)
+    assert len(rows) == 2
+    shares = {}
+    for robot in ("r1", "r2", "r3"):
+        with open(tmp_path / f"shares_{robot}.csv", newline="") as fh:
+            shares[robot] = [float(r["wall_time"]) for r in csv.DictReader(fh)]
+        assert len(shares[robot]) == 2
+    for k, row in enumerate(rows):
+        assert row["visited"] == "r1 r2 r3" and int(row["hops"]) == 4   # 2 forward, 2 back
+        assert row["all_equal"] == "true"
+        # the aggregate is written into r3 first, then r2, then r1 on the way back
+        assert shares["r3"][k] < shares["r2"][k] < shares["r1"][k]
+
+
+def test_heterogeneous_one_agent_per_algorithm(tmp_path: Path) -> None:
+    robots = (RobotSpec("r1", "r1", "qlearning"), RobotSpec("r2", "r4", "sarsa"),
+              RobotSpec("r3", "r2", "qlearning"))
+    res = run(small_config(robots=robots, methods={"sarsa": "max"}), tmp_path, progress=None)
+    assert res.ok
+    assert res.agents_finished == {"fed_qlearning": 4, "fed_sarsa": 4}
+    rows = rounds_csv(tmp_path)
+    q = [r for r in rows if r["agent"] == "fed_qlearning"]
+    s = [r for r in rows if r["agent"] == "fed_sarsa"]
+    assert all(r["visited"] == "r1 r3" and r["method"] == "average" for r in q)
+    assert all(r["visited"] == "r2" and r["method"] == "max" for r in s)
+    assert all(r["all_equal"] == "true" for r in rows)
+    assert all(r["digest_r2"] == "" for r in q)
+
+
+def test_async_mode_with_real_time_factor(tmp_path: Path) -> None:
+    # rtf 10: 100 iterations take at least 0.64 s of wall time; robots never wait
+    cfg = small_config(mode="async", iterations=100, respite=25, rtf=10.0, rest_s=0.05)
+    t0 = time.monotonic()
+    res = run(cfg, tmp_path, progress=None)
+    assert res.ok, (res.crashed, res.agents_finished)
+    assert time.monotonic() - t0 >= 100 * 0.064 / 10
+    rows = rounds_csv(tmp_path)
+    assert len(rows) == 4
+    assert all(r["all_equal"] == "true" for r in rows)
+    curves = read_metrics(tmp_path / "metrics.csv")
+    # one row per iteration (plus one at the last iteration when the last share changed it)
+    assert all(sorted(set(c["iteration"].tolist())) == list(range(1, 101))
+               for c in curves.values())
+
+
+def test_crashed_robot_is_reported_and_results_still_written(tmp_path: Path) -> None:
+    import os
+    import signal
+
+    cfg = small_config(3, iterations=1500, respite=100, rtf=20.0, timeout_s=90)
+    t, box = run_in_thread(cfg, tmp_path)
+    wait_rounds(tmp_path, "fed_qlearning", 2)
+    nodes = json.loads((tmp_path / "nodes.json").read_text())
+    pid = next(n["pid"] for n in nodes["nodes"] if n["robot"] == "r2")
+    os.kill(pid, signal.SIGKILL)
+    t.join(timeout=120)
+    assert not t.is_alive()
+    res: Results = box.get("res") or pytest.fail(f"run failed: {box.get('exc')!r}")
+    assert not res.ok
+    assert res.crashed == {"r2": -signal.SIGKILL}
+    assert "CRASHED" in (tmp_path / "summary.md").read_text()
+    rows = rounds_csv(tmp_path)
+    assert rows[0]["visited"] == "r1 r2 r3"
+    assert rows[-1]["visited"] == "r1 r3"          # the agent skips the dead stop
+    assert rows[-1]["all_equal"] == "true"
+    curves = read_metrics(tmp_path / "metrics.csv")
+    assert len(set(curves["r1"]["iteration"].tolist())) == 1500
+    assert 0 < len(curves["r2"]) < 1500

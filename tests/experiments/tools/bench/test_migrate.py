@@ -1,0 +1,66 @@
+"""``dfrl bench migrate`` on real processes, tiny budget: the hop, the naive text hop beside it,
+and the step trace."""
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from dfrl.experiments.tools.bench import migrate
+
+pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
+
+
+def test_migrate_json_has_the_naive_hop_and_its_ratio(capsys: pytest.CaptureFixture[str]) -> None:
+    from dfrl.experiments.cli import main
+
+    assert main(["bench", "migrate", "--floats", "0", "2000", "--hops", "3", "--warmup", "1",
+                 "--json"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.strip()]
+    assert [r["floats"] for r in rows] == [0, 2000]
+    for r in rows:
+        assert r["hops"] == 3
+        assert 0 < r["median_ms"] < 5000
+        assert 0 < r["naive_median_ms"] < 5000
+        assert r["naive_ratio"] == pytest.approx(r["median_ms"] / r["naive_median_ms"])
+    # writing 2,000 floats as text and parsing them back costs more than an empty record
+    assert rows[1]["naive_median_ms"] > rows[0]["naive_median_ms"]
+
+
+def test_migrate_text_output_shows_the_ratio(capsys: pytest.CaptureFixture[str]) -> None:
+    from dfrl.experiments.cli import main
+
+    assert main(["bench", "migrate", "--floats", "100", "--hops", "2", "--warmup", "0"]) == 0
+    out = capsys.readouterr().out
+    assert "naive text hop" in out and "ratio" in out
+
+
+def test_run_without_naive_leaves_the_fields_empty() -> None:
+    r = migrate.run(0, 2, warmup=0, naive=False)
+    assert r.naive_median_ms is None and r.naive_ratio is None
+
+
+def test_phase_breakdown_orders_the_steps_of_a_hand_over(tmp_path: Path) -> None:
+    r = migrate.run(500, 4, warmup=1, naive=False, trace_dir=tmp_path)
+    assert (tmp_path / "home.jsonl").exists() and (tmp_path / "peer.jsonl").exists()
+    phases = migrate.phase_breakdown(tmp_path, warmup=1)
+    by = {(p.step, p.side): p for p in phases}
+    for key in [("export", "source"), ("write(transfer)", "source"),
+                ("read(transfer)", "destination"), ("check", "destination"),
+                ("install", "destination"), ("custody_commit", "source"),
+                ("write(commit)", "source"), ("activate", "destination"),
+                ("agent_run", "destination")]:
+        assert key in by, (key, sorted(by))
+    order = [by[k].median_start_ms for k in [("export", "source"), ("install", "destination"),
+                                              ("custody_commit", "source"),
+                                              ("activate", "destination")]]
+    assert order == sorted(order)
+    # the handler starts within the hop the agent measured (same clock, one process each side)
+    assert by[("agent_run", "destination")].median_start_ms <= r.max_ms + 1.0
+    assert all(p.median_ms >= 0 for p in phases)
+
+
+def test_phase_breakdown_of_an_empty_folder_is_empty(tmp_path: Path) -> None:
+    assert migrate.phase_breakdown(tmp_path) == []

@@ -1,0 +1,38 @@
+"""``dfrl bench round`` on real processes, tiny budget."""
+from __future__ import annotations
+
+import shutil
+
+import pytest
+
+from dfrl.experiments.tools.bench.round import bench
+
+pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
+
+
+def test_bench_round_smoke() -> None:
+    r = bench(entries=400, actions=4, robots=3, rounds=3, warmup=1, hop_hops=3)
+    assert r["rounds"] == 3 and r["hops"] == 4, r
+    assert r["all_equal_rounds"] == r["total_rounds"] == 4, r
+    assert 0 < r["median_ms"] < 5000
+    # the hops it is made of, timed in the same run
+    assert r["hop_floats"] == 400
+    assert 0 < r["hop_median_ms"] < 5000
+    assert r["round_over_hops"] == pytest.approx(
+        r["median_ms"] / (r["hops"] * r["hop_median_ms"]), rel=0.01)
+
+
+def test_bench_round_without_hops_leaves_the_hop_fields_empty() -> None:
+    r = bench(entries=200, actions=4, robots=2, rounds=1, warmup=0, hop_hops=0)
+    assert r["hop_median_ms"] is None and r["round_over_hops"] is None
+
+
+def test_bench_round_command_takes_a_list_of_robot_counts(capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    from dfrl.experiments.cli import main
+
+    assert main(["bench", "round", "--entries", "200", "--robots", "2", "3", "--rounds", "2",
+                 "--warmup", "0", "--hop-hops", "2", "--json"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.strip()]
+    assert [r["robots"] for r in rows] == [2, 3]
