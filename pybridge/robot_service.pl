@@ -9,7 +9,7 @@
 
 /** <module> The robot process as a service: `dfrl_robot(Request)` platform requests
 
-A long-lived robot process (`dfrl robot`, dfrl.experiments.robot_node.service)
+A long-lived robot process (`dfrl robot`, dfrl.experiments.robot_host.service)
 answers the platform request dfrl_robot(Request) of peers that proved one
 of its node's tokens; anyone else gets permission_error(access,
 robot_service, Node). A peer sends it with transport_request/4:
