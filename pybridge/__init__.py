@@ -1,6 +1,6 @@
 """The bridge that makes a Python robot process a node of the agent platform.
 
-``dfrl.pybridge.errors`` and ``dfrl.pybridge.terms`` are plain Python. :class:`RobotNode` (and
+``dfrl.pybridge.errors`` and ``dfrl.pybridge.terms`` are plain Python. :class:`Bridge` (and
 everything that needs the embedded SWI-Prolog) is imported on first use, so importing
 ``pybridge`` alone does not start Prolog.
 """
@@ -20,7 +20,7 @@ from dfrl.pybridge.terms import Atom, Blob, Term, Var
 
 if TYPE_CHECKING:
     from dfrl.pybridge.codec import Codec
-    from dfrl.pybridge.node import RobotNode
+    from dfrl.pybridge.node import Bridge
     from dfrl.pybridge.providers import StaticTable, TableProvider
 
 __all__ = [
@@ -35,14 +35,12 @@ __all__ = [
     "Term",
     "Var",
     "Codec",
-    "RobotNode",
     "Bridge",
     "TableProvider",
     "StaticTable",
 ]
 
 _LAZY = {
-    "RobotNode": "dfrl.pybridge.node",
     "Bridge": "dfrl.pybridge.node",
     "TableProvider": "dfrl.pybridge.providers",
     "StaticTable": "dfrl.pybridge.providers",
@@ -56,6 +54,6 @@ def __getattr__(name: str) -> Any:
         raise AttributeError(f"module 'pybridge' has no attribute {name!r}")
     import importlib
 
-    value = getattr(importlib.import_module(module), "RobotNode" if name == "Bridge" else name)
+    value = getattr(importlib.import_module(module), name)
     globals()[name] = value
     return value

@@ -4,7 +4,7 @@ Two encodings of a flat list of N floats, both pure numpy (no Prolog here):
 
 ``fts``
     The bytes SWI-Prolog's ``fast_term_serialized/2`` produces for a list of floats
-    (verified for 9.0.4 at start-up by :meth:`dfrl.pybridge.node.RobotNode.self_test`)::
+    (verified for 9.0.4 at start-up by :meth:`dfrl.pybridge.node.Bridge.self_test`)::
 
         114, varint(10*N + 1), varint(6*N), N x [8, 14, <float64 little-endian>], 9
 

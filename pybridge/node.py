@@ -2,7 +2,7 @@
 
 Threading model (see README.md): Prolog threads (agents, platform workers) never call
 Python. ``get_qtable/2`` and friends post a request on a Prolog message queue; the robot's
-control loop calls :meth:`RobotNode.serve_pending` once per control step, in the Python main
+control loop calls :meth:`Bridge.serve_pending` once per control step, in the Python main
 thread, which answers the queued requests from the robot's numpy tables. So an agent sees a
 consistent snapshot between two learning steps and no thread fights for the GIL.
 """
@@ -28,7 +28,7 @@ from dfrl.pybridge.serving import RegisteredRobot, RequestServer, ServiceHandler
 from dfrl.pybridge.tartarus_commands import TartarusCommands
 from dfrl.pybridge.terms import Atom, Term, Var, atom_or_self
 
-__all__ = ["TableProvider", "RobotNode", "Bridge", "BRIDGE_FILE", "CODEC_FILE", "SERVICE_FILE",
+__all__ = ["TableProvider", "Bridge", "BRIDGE_FILE", "CODEC_FILE", "SERVICE_FILE",
            "SelfTestReport"]
 
 log = logging.getLogger(__name__)
@@ -49,7 +49,7 @@ def _robot_term(robot_id: Any) -> Any:
     return atom_or_self(robot_id) if isinstance(robot_id, str) else int(robot_id)
 
 
-class RobotNode(TartarusCommands):
+class Bridge(TartarusCommands):
     """One robot node: embedded Prolog, the bridge, optionally the platform, and robots.
 
     Only one node may be open in a process at a time (the bridge's request queue is
@@ -67,7 +67,7 @@ class RobotNode(TartarusCommands):
         Load the platform (``platform_pl/tartarus.pl``) right away.
     """
 
-    _active: ClassVar[RobotNode | None] = None
+    _active: ClassVar[Bridge | None] = None
     _class_lock: ClassVar[threading.Lock] = threading.Lock()
     #: set when close() had to abort platform threads: the platform's own bookkeeping (its
     #: worker pools) no longer matches its threads, so it cannot run again in this process
@@ -75,10 +75,10 @@ class RobotNode(TartarusCommands):
 
     def __init__(self, *, request_timeout: float = 30.0, codec: Codec | str | None = None,
                  load_platform: bool = False) -> None:
-        with RobotNode._class_lock:
-            if RobotNode._active is not None:
-                raise NodeStateError("another RobotNode is open in this process; close it first")
-            RobotNode._active = self
+        with Bridge._class_lock:
+            if Bridge._active is not None:
+                raise NodeStateError("another Bridge is open in this process; close it first")
+            Bridge._active = self
         self._closed = False
         self._nodes: list[Any] = []
         self._platform_loaded = False
@@ -104,7 +104,7 @@ class RobotNode(TartarusCommands):
             if load_platform:
                 self.load_platform()
         except BaseException:
-            RobotNode._active = None
+            Bridge._active = None
             raise
         atexit.register(self.close)
 
@@ -142,7 +142,7 @@ class RobotNode(TartarusCommands):
     # -- low level ----------------------------------------------------------------------------
     def _check_open(self) -> None:
         if self._closed:
-            raise NodeStateError("this RobotNode is closed")
+            raise NodeStateError("this Bridge is closed")
 
     def _must(self, name: str, *args: Any, module: str | None = None) -> dict[str, Any]:
         sol = self.prolog.call(name, *args, module=module)
@@ -181,7 +181,7 @@ class RobotNode(TartarusCommands):
             :meth:`close` (its worker pools cannot be revived): use a new process.
         """
         self._check_open()
-        if RobotNode._platform_spent:
+        if Bridge._platform_spent:
             raise NodeStateError("the platform's threads were stopped by an earlier close() in "
                                  "this process; it cannot run again here (use a new process)")
         if entry is None:
@@ -365,18 +365,18 @@ class RobotNode(TartarusCommands):
                 remaining = list(sol["Left"]) if sol else []
                 aborted = sol["Aborted"] if sol else 0
                 if self._platform_loaded and aborted:
-                    RobotNode._platform_spent = True
+                    Bridge._platform_spent = True
             except BridgeError:
                 log.warning("closing the bridge failed", exc_info=True)
             if remaining:
                 log.warning("Prolog threads still running after close(): %r", remaining)
         finally:
-            with RobotNode._class_lock:
-                if RobotNode._active is self:
-                    RobotNode._active = None
+            with Bridge._class_lock:
+                if Bridge._active is self:
+                    Bridge._active = None
         return remaining
 
-    def __enter__(self) -> RobotNode:
+    def __enter__(self) -> Bridge:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -384,6 +384,4 @@ class RobotNode(TartarusCommands):
 
     def __repr__(self) -> str:
         state = "closed" if self._closed else "open"
-        return f"<RobotNode {state} codec={self._codec.value} robots={list(self._robots)}>"
-Bridge = RobotNode
-"""Alias of :class:`RobotNode`."""
+        return f"<Bridge {state} codec={self._codec.value} robots={list(self._robots)}>"

@@ -47,6 +47,14 @@ class RequestError(Exception):
         self.formal = formal
 
 
+def _note_read(provider: Any) -> None:
+    """Tell a provider that has ``table_read()`` that an agent read its Q-table (its
+    ``q_table`` property is a plain getter)."""
+    note = getattr(type(provider), "table_read", None)
+    if note is not None:
+        provider.table_read()
+
+
 @dataclass
 class RegisteredRobot:
     """A robot this process serves: its provider and the shape given at registration."""
@@ -120,7 +128,7 @@ class RequestServer:
 
     def serve_pending(self, max_requests: int = 16, timeout: float = 0.0) -> int:
         """Answer up to ``max_requests`` queued requests; return how many (see
-        :meth:`dfrl.pybridge.node.RobotNode.serve_pending`)."""
+        :meth:`dfrl.pybridge.node.Bridge.serve_pending`)."""
         return self._serve_queue("bridge_next_request", self.serve, max_requests, timeout)
 
     def serve_service(self, handler: ServiceHandler, max_requests: int = 4,
@@ -159,13 +167,18 @@ class RequestServer:
         if not isinstance(op, Term):
             raise BridgeError(f"unknown request {op!r}")
         if op.name == "get_qtable" and op.arity == 1:
-            return self._table_reply(self._robot(op.args[0]).provider.q_table)
+            provider = self._robot(op.args[0]).provider
+            reply = self._table_reply(provider.q_table)
+            _note_read(provider)
+            return reply
         if op.name == "get_visits" and op.arity == 1:
             return self._table_reply(self._robot(op.args[0]).provider.visits)
         if op.name == "get_qtable_and_visits" and op.arity == 1:
             provider = self._robot(op.args[0]).provider
-            return Term("tables", self._table_reply(provider.q_table),
-                        self._table_reply(provider.visits))
+            reply = Term("tables", self._table_reply(provider.q_table),
+                         self._table_reply(provider.visits))
+            _note_read(provider)
+            return reply
         if op.name == "set_qtable" and op.arity == 4:
             rid, shape, data, origin = op.args
             robot = self._robot(rid)

@@ -1,4 +1,4 @@
-"""Tartarus-style agent commands of a :class:`dfrl.pybridge.RobotNode`, with bound arguments.
+"""Tartarus-style agent commands of a :class:`dfrl.pybridge.Bridge`, with bound arguments.
 
 Links are ``(Ip, Port)`` tuples; names and handlers given as ``str`` are atoms. The class is
 a mixin: it needs the node's ``_must`` (call once, raise on failure) and ``_check_open``.

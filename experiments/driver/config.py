@@ -2,7 +2,7 @@
 live; every check is in :mod:`dfrl.experiments.driver.config_check`, the generic dataclass <-> dict
 helpers in :mod:`dfrl.experiments.driver.config_dicts`. :class:`ExperimentConfig` (with its
 :class:`RobotSpec` and :class:`JoinSpec` entries) defines a federated experiment and is saved
-as ``config.json`` beside its results; :class:`NodeConfig` is
+as ``config.json`` beside its results; :class:`RobotConfig` is
 what the launcher hands one robot node process. :func:`resolve_config` finds a config file by
 path or by the name of a shipped one (``experiments/configs``).
 """
@@ -20,7 +20,7 @@ from dfrl.experiments.driver.config_check import (BUILTIN_METHODS, ConfigError, 
 from dfrl.experiments.driver.config_dicts import config_from_dict, config_to_dict, raw_fields
 
 __all__ = ["BUILTIN_METHODS", "ConfigError", "ExperimentConfig", "JoinSpec", "Mode",
-           "NodeConfig", "RobotSpec", "boundaries", "parse_node", "resolve_config"]
+           "RobotConfig", "RobotSpec", "boundaries", "parse_node", "resolve_config"]
 
 
 class Mode(str, Enum):
@@ -31,7 +31,7 @@ class Mode(str, Enum):
 
 
 @dataclass(frozen=True)
-class NodeConfig:
+class RobotConfig:
     """Everything one robot node process needs (written as JSON by the launcher).
 
     Attributes
@@ -107,7 +107,7 @@ class NodeConfig:
         return _without_token(config_to_dict(self))
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "NodeConfig":
+    def from_dict(cls, data: dict[str, Any]) -> "RobotConfig":
         """Inverse of :meth:`to_dict` (unknown keys are an error)."""
         return config_from_dict(cls, data, check_node(data))
 

@@ -337,7 +337,7 @@ def check_eval_every(data: dict[str, Any]) -> list[str]:
 
 
 def check_node(data: Any) -> list[str]:
-    """Every problem of a robot node config (:class:`dfrl.experiments.driver.config.NodeConfig`)."""
+    """Every problem of a robot node config (:class:`dfrl.experiments.driver.config.RobotConfig`)."""
     out = check_keys("", data, NODE_RULES, required=("robot", "out_dir"))
     if not isinstance(data, dict):
         return out

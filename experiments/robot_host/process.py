@@ -8,16 +8,16 @@ import time
 from pathlib import Path
 from typing import Any, TextIO
 
-from dfrl.experiments.driver.config import Mode, NodeConfig
+from dfrl.experiments.driver.config import Mode, RobotConfig
 from dfrl.experiments.robot_host.lines import ProtocolLines, StdinWatch
-from dfrl.experiments.robot_host.run import Run
+from dfrl.experiments.robot_host.training import Training
 from dfrl.experiments.tokens import TOKEN_ENV, pop_env_tokens
 
 __all__ = ["RobotProcess", "main", "load_agent_program"]
 
 
 class _StdinHost:
-    """The spawned node's :class:`RunHost`: its stdin says when to stop."""
+    """The spawned node's :class:`TrainingHost`: its stdin says when to stop."""
 
     def __init__(self, watch: StdinWatch) -> None:
         self.watch = watch
@@ -35,14 +35,14 @@ class RobotProcess:
 
     Parameters
     ----------
-    config : NodeConfig
+    config : RobotConfig
     stdout : TextIO
         Where the protocol lines go.
     stdin : TextIO or None
         Watched for EOF / ``stop`` (not when it is at end of file from the start).
     """
 
-    def __init__(self, config: NodeConfig, stdout: TextIO = sys.stdout,
+    def __init__(self, config: RobotConfig, stdout: TextIO = sys.stdout,
                  stdin: TextIO | None = sys.stdin) -> None:
         self.config = config
         self.lines = ProtocolLines(stdout, config.robot, config.events)
@@ -50,7 +50,7 @@ class RobotProcess:
         self.out_dir = Path(config.out_dir)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.node: Any = None
-        self.run_: Run | None = None
+        self.run_: Training | None = None
 
     @property
     def iteration(self) -> int:
@@ -66,13 +66,13 @@ class RobotProcess:
     def start(self) -> tuple[str, int]:
         """Start the platform node, build the robot (or the benchmark's static table) and
         register it; return the address."""
-        from dfrl.pybridge import Atom, RobotNode
+        from dfrl.pybridge import Atom, Bridge
 
         c = self.config
-        self.node = RobotNode()
+        self.node = Bridge()
         self.node.load_platform()
         load_agent_program(self.node, f"robot_node {c.robot}")
-        self.run_ = Run(c, self.node, self.lines, host=_StdinHost(self.stdin), poll_every=50)
+        self.run_ = Training(c, self.node, self.lines, host=_StdinHost(self.stdin), poll_every=50)
         self.run_.open()
         options: dict[str, Any] = {"idle_timeout": 5.0}
         if c.token is not None:         # none: an open node (node_start/3 warns on loopback)
@@ -153,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
         data = json.loads(args.config.read_text(encoding="utf-8"))
         if tokens and isinstance(data, dict):
             data["token"] = tokens[0]
-        config = NodeConfig.from_dict(data)
+        config = RobotConfig.from_dict(data)
     except (OSError, ValueError, TypeError) as exc:
         print(f"robot_node: bad config {args.config}: {exc}", file=sys.stderr)
         return 2

@@ -27,10 +27,10 @@ from enum import Enum
 from pathlib import Path
 from typing import Any, TextIO
 
-from dfrl.experiments.driver.config import Mode, NodeConfig
+from dfrl.experiments.driver.config import Mode, RobotConfig
 from dfrl.experiments.robot_host.lines import ProtocolLines
 from dfrl.experiments.robot_host.process import load_agent_program
-from dfrl.experiments.robot_host.run import Run
+from dfrl.experiments.robot_host.training import Training
 from dfrl.experiments.tokens import Token
 from dfrl.pybridge.serving import RequestError
 from dfrl.pybridge.terms import Atom, Term
@@ -118,7 +118,7 @@ class RobotService:
         self.node_name: Any = None
         self.address: tuple[str, int] = (host, int(port))
         self.state = State.IDLE
-        self.run: Run | None = None
+        self.run: Training | None = None
         self.experiment: str | None = None
         self.error: str | None = None
         self._signalled = False
@@ -127,10 +127,10 @@ class RobotService:
     # -- life cycle ----------------------------------------------------------------------------
     def start(self) -> tuple[str, int]:
         """Start the platform node; print ``dfrl robot listening on A:P``; return (A, P)."""
-        from dfrl.pybridge import RobotNode
+        from dfrl.pybridge import Bridge
 
         self.workdir.mkdir(parents=True, exist_ok=True)
-        self.node = RobotNode()
+        self.node = Bridge()
         self.node.load_platform()
         load_agent_program(self.node, "dfrl robot")
         self.node.enable_service()
@@ -204,7 +204,7 @@ class RobotService:
         self.out.write(line + "\n")
         self.out.flush()
 
-    # -- RunHost -------------------------------------------------------------------------------
+    # -- TrainingHost -------------------------------------------------------------------------------
     def wait(self, seconds: float) -> None:
         """While a run waits: answer service requests (at most ``seconds``)."""
         self.node.serve_service(self.handle, timeout=max(0.0, seconds))
@@ -302,7 +302,7 @@ class RobotService:
             err_fh.flush()
             print(message, file=sys.stderr, flush=True)
 
-        run = Run(config, self.node, ProtocolLines(lines_fh, config.robot, config.events),
+        run = Training(config, self.node, ProtocolLines(lines_fh, config.robot, config.events),
                   host=self, resume=resume, poll_every=1, warn=warn)
         try:
             run.open()
@@ -318,7 +318,7 @@ class RobotService:
                  f"{config.iterations} iterations{', resumed at ' + str(run.iteration) if resume else ''})")
         return Term("ok", Atom("true"))
 
-    def _parse_configure(self, text: str) -> tuple[str, NodeConfig, bool]:
+    def _parse_configure(self, text: str) -> tuple[str, RobotConfig, bool]:
         try:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
@@ -350,7 +350,7 @@ class RobotService:
             path.write_text(json.dumps(arena), encoding="utf-8")
             node["arena"] = str(path)
         try:
-            config = NodeConfig.from_dict(dict(node, out_dir=str(out)))
+            config = RobotConfig.from_dict(dict(node, out_dir=str(out)))
         except (TypeError, ValueError) as exc:
             raise _config_error(str(exc)) from None
         (out / "service").mkdir(parents=True, exist_ok=True)

@@ -2,7 +2,7 @@
 
 The table itself (a :class:`dfrl.robots.training.Trainer`, or a
 :class:`dfrl.pybridge.StaticTable` in benchmark mode) is chosen once, when the node starts;
-:class:`NodeTable` adds what the node records about agents' visits, and never calls back
+:class:`SharedTable` adds what the node records about agents' visits, and never calls back
 into the process that owns it.
 """
 from __future__ import annotations
@@ -16,13 +16,14 @@ from dfrl.experiments.robot_host.files import CsvLog, share_row
 from dfrl.experiments.robot_host.lines import ProtocolLines
 from dfrl.pybridge.providers import TableProvider
 
-__all__ = ["NodeTable"]
+__all__ = ["SharedTable"]
 
 
-class NodeTable:
+class SharedTable:
     """A :class:`dfrl.pybridge.TableProvider` over ``base`` that records shares.
 
-    Every read of the Q-table writes a ``DFRL_EVENT get`` line; every applied
+    Every read of the Q-table by an agent (the bridge calls :meth:`table_read`) writes a
+    ``DFRL_EVENT get`` line; every applied
     ``set_q_table`` (already validated by the bridge) counts a share, appends a row to the
     shares file (with the write's origin: round, agent, epoch), writes a ``DFRL_EVENT set``
     line and calls ``on_share`` (the robot's checkpoint).
@@ -61,8 +62,11 @@ class NodeTable:
 
     @property
     def q_table(self) -> np.ndarray:
-        self.lines.event("get", self.iteration)
         return self.base.q_table
+
+    def table_read(self) -> None:
+        """An agent read the Q-table (the bridge calls it after serving the read)."""
+        self.lines.event("get", self.iteration)
 
     @property
     def visits(self) -> np.ndarray:

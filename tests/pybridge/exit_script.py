@@ -10,11 +10,11 @@ import time
 
 from bridge_helpers import HELPER, ArrayRobot
 
-from dfrl.pybridge import Atom, RobotNode, Term, Var
+from dfrl.pybridge import Atom, Bridge, Term, Var
 
 
 def main(mode: str) -> int:
-    node = RobotNode(request_timeout=60.0)
+    node = Bridge(request_timeout=60.0)
     node.call("use_module", Atom(str(HELPER)))
     robot = ArrayRobot(2000, 10)
     node.register_robot("r1", robot)

@@ -13,12 +13,12 @@ from pathlib import Path
 import numpy as np
 from bridge_helpers import ArrayRobot
 
-from dfrl.pybridge import Atom, NodeStateError, RobotNode, Term, Var
+from dfrl.pybridge import Atom, NodeStateError, Bridge, Term, Var
 
 AGENT = Path(__file__).with_name("hop_agent.pl")
 
 
-def wait_for(node: RobotNode, goal: Term, timeout: float = 10.0):
+def wait_for(node: Bridge, goal: Term, timeout: float = 10.0):
     """Serve bridge requests like a control loop until goal succeeds (bindings) or timeout."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -32,7 +32,7 @@ def wait_for(node: RobotNode, goal: Term, timeout: float = 10.0):
 
 def main() -> int:
     out: dict = {}
-    node = RobotNode(request_timeout=10.0)
+    node = Bridge(request_timeout=10.0)
     node.load_platform()
     out["joined_none"] = node.join() is None
     # Embedded Prolog runs without signal handling, so node_stop/1 cannot interrupt a
@@ -95,8 +95,8 @@ def main() -> int:
     out["left"] = [str(t) for t in node.close(thread_timeout=5.0)]
     # if close() had to abort platform threads, the platform refuses to run again in this
     # process; after a clean close it runs again (and must really work)
-    out["spent"] = RobotNode._platform_spent
-    again = RobotNode()
+    out["spent"] = Bridge._platform_spent
+    again = Bridge()
     try:
         again.load_platform()
         out["reload"] = "ran" if again.address(again.start("127.0.0.1", 0, token="test"))[1] > 0 else "broken"

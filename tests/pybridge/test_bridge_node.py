@@ -1,4 +1,4 @@
-"""RobotNode and robot_bridge.pl together: agents in Prolog threads, the test's main thread
+"""Bridge and robot_bridge.pl together: agents in Prolog threads, the test's main thread
 serving their requests like a control loop."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from bridge_helpers import HELPER, ArrayRobot, agent_result, run_agent, spawn
 
-from dfrl.pybridge import Atom, BridgeError, Codec, NodeStateError, PrologError, RobotNode, Term, Var
+from dfrl.pybridge import Atom, BridgeError, Codec, NodeStateError, PrologError, Bridge, Term, Var
 
 
 def _bits(a: np.ndarray) -> np.ndarray:
@@ -287,14 +287,14 @@ def test_serve_pending_respects_max(node) -> None:
 
 def test_one_node_at_a_time_and_close(node) -> None:
     with pytest.raises(NodeStateError):
-        RobotNode()
+        Bridge()
     node.register_robot("r1", ArrayRobot(2, 2))
     spawn(node, "stuck_agent", Term("get_qtable", Atom("r1"), Var()))
     assert node.close() == []
     assert node.closed
     with pytest.raises(NodeStateError):
         node.serve_pending()
-    again = RobotNode()
+    again = Bridge()
     again.close()
 
 
@@ -339,7 +339,7 @@ def test_fts_self_test_failure_falls_back_to_text(monkeypatch) -> None:
         return data
 
     monkeypatch.setattr(codec_module, "encode_fts", skewed)
-    n = RobotNode()
+    n = Bridge()
     try:
         assert not n.self_test_report.fts_ok and n.self_test_report.text_ok
         assert n.codec is Codec.TEXT

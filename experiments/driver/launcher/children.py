@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Callable
 
 import dfrl
-from dfrl.experiments.driver.config import NodeConfig, RobotSpec
+from dfrl.experiments.driver.config import RobotConfig, RobotSpec
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.driver.results.files import write_json
 from dfrl.experiments.robot_host.lines import Evaluation, Sample, parse_eval, parse_sample
@@ -45,7 +45,7 @@ class RobotChild:
     Parameters
     ----------
     robot : RobotSpec
-    cfg : NodeConfig
+    cfg : RobotConfig
         Written to ``OUT/nodes/<robot>.json`` without its token, which the process gets in
         its environment (``DFRL_TOKEN``, :mod:`dfrl.experiments.tokens`), and handed to it.
     out_dir : Path
@@ -53,7 +53,7 @@ class RobotChild:
     on_event : EventHandler, optional
     """
 
-    def __init__(self, robot: RobotSpec, cfg: NodeConfig, out_dir: Path,
+    def __init__(self, robot: RobotSpec, cfg: RobotConfig, out_dir: Path,
                  on_event: EventHandler | None = None) -> None:
         self.robot = robot
         self.cfg = cfg

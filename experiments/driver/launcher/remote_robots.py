@@ -25,7 +25,7 @@ from collections import deque
 from pathlib import Path, PurePosixPath
 from typing import Any
 
-from dfrl.experiments.driver.config import ExperimentConfig, NodeConfig, RobotSpec
+from dfrl.experiments.driver.config import ExperimentConfig, RobotConfig, RobotSpec
 from dfrl.experiments.driver.console_node import ConsoleNode
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.robot_host.lines import Evaluation, Sample, parse_eval, parse_sample
@@ -113,14 +113,14 @@ class RemoteRobot:
     ----------
     robot : RobotSpec
         With ``node`` set.
-    cfg : NodeConfig
+    cfg : RobotConfig
         Sent as the configuration's ``node`` (its ``out_dir`` is ignored by the service).
     console : ConsoleNode
     experiment : str
         Experiment id: the service keeps the files under ``WORKDIR/<experiment>/``.
     """
 
-    def __init__(self, robot: RobotSpec, cfg: NodeConfig, console: ConsoleNode,
+    def __init__(self, robot: RobotSpec, cfg: RobotConfig, console: ConsoleNode,
                  experiment: str) -> None:
         assert robot.node_address is not None
         self.robot = robot

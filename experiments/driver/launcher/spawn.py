@@ -4,7 +4,7 @@ from __future__ import annotations
 import os
 import time
 
-from dfrl.experiments.driver.config import Mode, NodeConfig, RobotSpec
+from dfrl.experiments.driver.config import Mode, RobotConfig, RobotSpec
 from dfrl.experiments.driver.launcher.agents import agent_name, launch_agent
 from dfrl.experiments.driver.launcher.children import RobotChild
 from dfrl.experiments.driver.launcher.remote_robots import RemoteRobot
@@ -22,11 +22,11 @@ def robot_seed(state: RunState, robot: RobotSpec) -> int:
     return c.seed + len(known) + len(state.joined)
 
 
-def node_config(state: RunState, robot: RobotSpec, iterations: int) -> NodeConfig:
+def node_config(state: RunState, robot: RobotSpec, iterations: int) -> RobotConfig:
     """The configuration handed to a robot node process."""
     c = state.config
     grace = 10.0 if c.mode is Mode.SYNC else c.timeout_s
-    return NodeConfig(robot=robot.id, out_dir=str(state.out), arena=robot.arena, algo=robot.algo,
+    return RobotConfig(robot=robot.id, out_dir=str(state.out), arena=robot.arena, algo=robot.algo,
                       seed=robot_seed(state, robot), iterations=iterations, respite=c.respite,
                       mode=c.mode, rtf=c.rtf, token=c.token, trainer=dict(c.trainer),
                       grace_s=grace, sync_timeout_s=max(60.0, c.timeout_s),

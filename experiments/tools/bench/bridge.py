@@ -2,7 +2,7 @@
 
 An agent-like Prolog thread repeatedly reads a robot's Q-table with ``get_qtable/3`` and
 writes it back with ``set_qtable/3``; the Python main thread steps a pybullet world flat out
-and calls :meth:`pybridge.RobotNode.serve_pending` after every control step, as a robot
+and calls :meth:`pybridge.Bridge.serve_pending` after every control step, as a robot
 node does. Each codec (``fts``: fast_term_serialized bytes, ``text``: float text) is timed
 in turn. The table must come back bit for bit. Target: read+write under 5 ms for 20,000
 entries (fts).
@@ -129,13 +129,13 @@ def bench(entries: int = 20000, actions: int = 4, repeats: int = 50, warmup: int
     RuntimeError
         The benchmark agent failed or did not finish.
     """
-    from dfrl.pybridge import Atom, RobotNode, StaticTable
+    from dfrl.pybridge import Atom, Bridge, StaticTable
 
     n_actions = max(1, actions)
     n_states = max(1, entries // n_actions)
     robot = StaticTable((n_states, n_actions), seed)
     world = BenchSim(sim, bodies, physics_steps, seed)
-    node = RobotNode(request_timeout=60.0)
+    node = Bridge(request_timeout=60.0)
     try:
         node.call("use_module", Atom(str(BRIDGE_BENCH)))
         node.register_robot("bench_robot", robot, shape=robot.shape)

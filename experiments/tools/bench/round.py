@@ -21,7 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from dfrl.experiments.driver.config import NodeConfig, RobotSpec
+from dfrl.experiments.driver.config import RobotConfig, RobotSpec
 from dfrl.experiments.driver.launcher.agents import launch_agent, open_console
 from dfrl.experiments.driver.launcher.children import RobotChild, await_ready
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
@@ -56,7 +56,7 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
     try:
         for i in range(robots):
             spec = RobotSpec(f"r{i + 1}", "r1")
-            cfg = NodeConfig(robot=spec.id, out_dir=str(out), seed=i, bench_table=[states, actions],
+            cfg = RobotConfig(robot=spec.id, out_dir=str(out), seed=i, bench_table=[states, actions],
                              events=False, progress_every=0)
             children.append(RobotChild(spec, cfg, out))
         await_ready(children, 120.0)

@@ -14,7 +14,7 @@ view (:mod:`dfrl.experiments.tools.view.source`)::
      "collisions_per_1000": 3.0, "coverage": 0.31}
 
 Poses come from the robots' ``DFRL_SAMPLE`` lines (at most one every
-:data:`~dfrl.experiments.robot_host.run.SAMPLE_S`, with a progress line); a robot on a
+:data:`~dfrl.experiments.robot_host.training.SAMPLE_S`, with a progress line); a robot on a
 ``dfrl robot`` service sends the same lines into its ``logs/<robot>.out``, which the launcher
 fetches as it grows, and its samples also become ``progress`` events (its metrics file comes
 only at the end). Greedy evaluations (``eval_every``) come from ``DFRL_EVAL`` lines, the

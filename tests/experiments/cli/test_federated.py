@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 
 from dfrl.experiments.cli import main
-from dfrl.experiments.driver.config import ConfigError, ExperimentConfig, NodeConfig
+from dfrl.experiments.driver.config import ConfigError, ExperimentConfig, RobotConfig
 from dfrl.experiments.driver.config_check import check_node
 from dfrl.experiments.driver.results.files import claim_output, new_run_folder
 
@@ -155,7 +155,7 @@ def test_node_config_checked() -> None:
                     "events: expected true or false", "mode: unknown mode 'fast'"):
         assert located in text, text
     with pytest.raises(ConfigError, match="colour: unknown key"):
-        NodeConfig.from_dict({"robot": "r1", "out_dir": "x", "colour": 1})
+        RobotConfig.from_dict({"robot": "r1", "out_dir": "x", "colour": 1})
 
 
 def test_out_refused_unless_force(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

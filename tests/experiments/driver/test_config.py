@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dfrl.experiments.driver.config import ExperimentConfig, NodeConfig, RobotSpec, boundaries
+from dfrl.experiments.driver.config import ExperimentConfig, RobotConfig, RobotSpec, boundaries
 from dfrl.experiments.robot_host import table_digest
 
 
@@ -18,10 +18,10 @@ def test_boundaries_and_digest() -> None:
 
 
 def test_configs_round_trip_and_validate() -> None:
-    n = NodeConfig(robot="r1", out_dir="/tmp/x", mode="sync", rtf=1.0)
-    assert NodeConfig.from_dict(n.to_dict()) == n
+    n = RobotConfig(robot="r1", out_dir="/tmp/x", mode="sync", rtf=1.0)
+    assert RobotConfig.from_dict(n.to_dict()) == n
     with pytest.raises(ValueError):
-        NodeConfig.from_dict({"robot": "r1", "out_dir": "x", "colour": 1})
+        RobotConfig.from_dict({"robot": "r1", "out_dir": "x", "colour": 1})
     cfg = ExperimentConfig(robots=(RobotSpec("r1", "r1"), RobotSpec("r2", "r4", "sarsa")),
                            iterations=1200, respite=500, methods={"sarsa": "max"})
     assert cfg.rounds == 3

@@ -11,14 +11,14 @@ from pathlib import Path
 
 import pytest
 
-from dfrl.experiments.driver.config import NodeConfig
+from dfrl.experiments.driver.config import RobotConfig
 from dfrl.experiments.robot_host.lines import parse_sample
 
 REPO = Path(__file__).resolve().parents[3]
 
 
 def _start(tmp_path: Path, **kw) -> subprocess.Popen:
-    cfg = NodeConfig(robot="r7", out_dir=str(tmp_path), arena="r2", **kw)
+    cfg = RobotConfig(robot="r7", out_dir=str(tmp_path), arena="r2", **kw)
     path = tmp_path / "node.json"
     path.write_text(json.dumps(cfg.to_dict()))
     return subprocess.Popen([sys.executable, "-m", "dfrl.experiments.robot_host", "--config", str(path)],
@@ -152,7 +152,7 @@ def test_pace_follows_the_trainers_control_dt(tmp_path: Path) -> None:
 def test_node_with_stdin_at_eof_from_the_start_runs_every_iteration(tmp_path: Path) -> None:
     """Started with stdin at end of file (< /dev/null), the node is not told to stop at
     iteration 50: stdin is no channel then."""
-    cfg = NodeConfig(robot="r7", out_dir=str(tmp_path), arena="r2", iterations=160,
+    cfg = RobotConfig(robot="r7", out_dir=str(tmp_path), arena="r2", iterations=160,
                      progress_every=0, grace_s=0.0)
     path = tmp_path / "node.json"
     path.write_text(json.dumps(cfg.to_dict()))

@@ -1,9 +1,9 @@
-"""One experiment of one robot (:class:`Run`): trainer, result files, checkpoints, the control
+"""One experiment of one robot (:class:`Training`): trainer, result files, checkpoints, the control
 loop advanced one iteration at a time.
 
 Both robot processes use it: the spawned node (:mod:`.process`, one run per process) and the
 robot service (:mod:`.service`, runs one after another). What a process does besides running
-(watching its stdin, answering ``dfrl_robot`` requests) comes in through a :class:`RunHost`,
+(watching its stdin, answering ``dfrl_robot`` requests) comes in through a :class:`TrainingHost`,
 called between iterations, while a sync robot waits for a share and while real-time pacing
 waits.
 """
@@ -18,7 +18,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from dfrl.experiments.driver.config import Mode, NodeConfig, boundaries
+from dfrl.experiments.driver.config import Mode, RobotConfig, boundaries
 from dfrl.experiments.robot_host.checkpoint import (
     checkpoint_of,
     load_checkpoint,
@@ -28,15 +28,15 @@ from dfrl.experiments.robot_host.checkpoint import (
 from dfrl.experiments.robot_host.evaluate import LiveEvaluator
 from dfrl.experiments.robot_host.files import METRIC_FIELDS, SHARE_FIELDS, CsvLog
 from dfrl.experiments.robot_host.lines import ProtocolLines
-from dfrl.experiments.robot_host.table import NodeTable
+from dfrl.experiments.robot_host.table import SharedTable
 
-__all__ = ["Run", "RunHost", "SleepHost", "SAMPLE_S"]
+__all__ = ["Training", "TrainingHost", "SleepHost", "SAMPLE_S"]
 
 #: Wall seconds between two ``DFRL_SAMPLE`` lines at least (written with progress lines).
 SAMPLE_S = 0.5
 
 
-class RunHost(Protocol):
+class TrainingHost(Protocol):
     """What the process does while its run waits."""
 
     def wait(self, seconds: float) -> None:
@@ -57,17 +57,17 @@ class SleepHost:
         return False
 
 
-class Run:
-    """One robot's experiment in a robot process with an open :class:`dfrl.pybridge.RobotNode`.
+class Training:
+    """One robot's experiment in a robot process with an open :class:`dfrl.pybridge.Bridge`.
 
     Parameters
     ----------
-    config : NodeConfig
+    config : RobotConfig
         Its ``out_dir`` is the experiment's folder.
-    node : RobotNode
+    node : Bridge
         The process's bridge; :meth:`open` registers the robot with it.
     lines : ProtocolLines
-    host : RunHost
+    host : TrainingHost
     resume : bool
         Start from ``out_dir/checkpoint/<robot>.npy`` (metrics rows after its iteration and
         shares rows after its share count are dropped from the files).
@@ -84,20 +84,20 @@ class Run:
         :meth:`finish` ran.
     """
 
-    def __init__(self, config: NodeConfig, node: Any, lines: ProtocolLines, *,
-                 host: RunHost | None = None, resume: bool = False, poll_every: int = 1,
+    def __init__(self, config: RobotConfig, node: Any, lines: ProtocolLines, *,
+                 host: TrainingHost | None = None, resume: bool = False, poll_every: int = 1,
                  warn: Callable[[str], None] | None = None) -> None:
         self.config = config
         self.node = node
         self.lines = lines
-        self.host: RunHost = host or SleepHost()
+        self.host: TrainingHost = host or SleepHost()
         self.resume = resume
         self.poll_every = max(1, int(poll_every))
         self.warn = warn or (lambda text: print(text, file=sys.stderr, flush=True))
         self.out_dir = Path(config.out_dir)
         self.checkpoint_dir = self.out_dir / "checkpoint"
         self.trainer: Any = None
-        self.table: NodeTable | None = None
+        self.table: SharedTable | None = None
         self.period = 0.0
         self.stopped = False
         self.finished = False
@@ -173,7 +173,7 @@ class Run:
                                             c.eval_steps, self.out_dir, self.lines,
                                             upto if cp is not None else None)
         on_share = self.on_share if self.trainer is not None else None
-        self.table = NodeTable(base, c.robot, self._shares, self.lines, on_share, shares)
+        self.table = SharedTable(base, c.robot, self._shares, self.lines, on_share, shares)
         if self.trainer is not None:
             self.table.iteration = self.trainer.iteration
         self.node.register_robot(c.robot, self.table, shape=shape, algorithm=c.algo)
