@@ -13,5 +13,6 @@ PLATFORM_DIR: Path = Path(__file__).resolve().parent
 ENTRY_POINT: Path = PLATFORM_DIR / "tartarus.pl"
 """The file that loads the whole platform with its Tartarus-style API."""
 
-AGENTS_DIR: Path = PLATFORM_DIR / "agents"
-"""Folder of the agent programs shipped with the platform (e.g. the dFRL itinerary agent)."""
+DFRL_AGENT_DIR: Path = PLATFORM_DIR / "dfrl_agent"
+"""Folder of the dFRL itinerary agent (its modules, console, launch and control scripts, and
+example aggregation methods); ``agents.pl`` beside it is the agent runtime."""

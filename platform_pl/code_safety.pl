@@ -119,10 +119,10 @@ name).
 %   code_safety:mobile_hook(my_module:my_hook/2).
 %   ```
 
-mobile_hook(dfrl_agent:aggregate_init/3).
-mobile_hook(dfrl_agent:aggregate_step/4).
-mobile_hook(dfrl_agent:aggregate_final/3).
-mobile_hook(dfrl_agent:method_uses_visits/1).
+mobile_hook(dfrl_aggregation:aggregate_init/3).
+mobile_hook(dfrl_aggregation:aggregate_step/4).
+mobile_hook(dfrl_aggregation:aggregate_final/3).
+mobile_hook(dfrl_aggregation:method_uses_visits/1).
 
 		 /*******************************
 		 *            TRUST		*
@@ -640,15 +640,15 @@ agent_api(robot_resources:set_robot_table(_, _, _), true).
 agent_api(robot_resources:hosted_robot(_, _), true).
 agent_api(dfrl_agent:dfrl_tour_event(A, _, _), self(A)).
 agent_api(dfrl_agent:dfrl_tour_main(A, _), self(A)).
-agent_api(dfrl_agent:dfrl_method(_), true).
+agent_api(dfrl_aggregation:dfrl_method(_), true).
 %   The aggregation hooks: their clauses are the node's own or were
 %   checked when a peer sent them (mobile_hook/1), so a method may build
 %   on another (e.g. call the average's hooks).
-agent_api(dfrl_agent:aggregate_init(_, _, _), true).
-agent_api(dfrl_agent:aggregate_step(_, _, _, _), true).
-agent_api(dfrl_agent:aggregate_final(_, _, _), true).
-agent_api(dfrl_agent:method_uses_visits(_), true).
-agent_api(dfrl_agent:aggregate_tables(_, _, _), true).
+agent_api(dfrl_aggregation:aggregate_init(_, _, _), true).
+agent_api(dfrl_aggregation:aggregate_step(_, _, _, _), true).
+agent_api(dfrl_aggregation:aggregate_final(_, _, _), true).
+agent_api(dfrl_aggregation:method_uses_visits(_), true).
+agent_api(dfrl_aggregation:aggregate_tables(_, _, _), true).
 
 %   An agent sees its own properties but its tokens; of other agents,
 %   what list_agents/0 shows (never their module, payload or tokens).

@@ -12,7 +12,7 @@ The platform knows nothing about robots. A process that hosts robots (a
 robot node: the Python bridge, pybridge/robot_bridge.pl) says which
 robots it hosts and how their tables are read and written by defining
 clauses of the multifile hooks below; agents (e.g. the dFRL agent,
-agents/dfrl_agent.pl) use only the exported predicates of this module.
+dfrl_agent/dfrl_agent.pl) use only the exported predicates of this module.
 
 Hooks, defined as clauses in this module:
 

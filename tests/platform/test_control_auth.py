@@ -20,7 +20,7 @@ TOKEN = "9"
 
 def _node(procs: list[Proc], tmp_path: Path) -> int:
     _, port = hostile_node.start(procs, tmp_path, f"[token({TOKEN})]",
-                                 consult=(PLATFORM_DIR / "agents" / "dfrl_agent.pl",))
+                                 consult=(PLATFORM_DIR / "dfrl_agent" / "dfrl_agent.pl",))
     return port
 
 

@@ -3,7 +3,7 @@
     round log is read back as JSON lines.
 */
 :- use_module('../../platform_pl/tartarus').
-:- use_module('../../platform_pl/agents/dfrl_agent').
+:- use_module('../../platform_pl/dfrl_agent/dfrl_agent').
 :- use_module(memory_robots).
 :- use_module('../../platform_pl/agents', [agent_execute/4, agent_exists/2]).
 :- use_module('../../platform_pl/node', [local_node/1]).
@@ -20,14 +20,14 @@
 :- asserta((user:message_hook(_, error, _) :- quiet)).
 
 % methods that go wrong at run time: a step that fails, a final that throws
-:- multifile dfrl_agent:aggregate_init/3, dfrl_agent:aggregate_step/4,
-             dfrl_agent:aggregate_final/3.
-dfrl_agent:aggregate_init(failing_step, qtable(_, V), V).
-dfrl_agent:aggregate_step(failing_step, _, _, _) :- fail.
-dfrl_agent:aggregate_final(failing_step, A, A).
-dfrl_agent:aggregate_init(throwing_final, qtable(_, V), V).
-dfrl_agent:aggregate_step(throwing_final, A, _, A).
-dfrl_agent:aggregate_final(throwing_final, _, _) :-
+:- multifile dfrl_aggregation:aggregate_init/3, dfrl_aggregation:aggregate_step/4,
+             dfrl_aggregation:aggregate_final/3.
+dfrl_aggregation:aggregate_init(failing_step, qtable(_, V), V).
+dfrl_aggregation:aggregate_step(failing_step, _, _, _) :- fail.
+dfrl_aggregation:aggregate_final(failing_step, A, A).
+dfrl_aggregation:aggregate_init(throwing_final, qtable(_, V), V).
+dfrl_aggregation:aggregate_step(throwing_final, A, _, A).
+dfrl_aggregation:aggregate_final(throwing_final, _, _) :-
     type_error(integer, not_a_number).
 
 wait_for(G) :- wait_for(G, 250).

@@ -32,7 +32,7 @@ LEASE_S = 1.0
 
 NODE = f"""
 :- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
-:- use_module({str(PLATFORM_DIR / 'agents' / 'dfrl_agent.pl')!r}).
+:- use_module({str(PLATFORM_DIR / 'dfrl_agent' / 'dfrl_agent.pl')!r}).
 :- use_module({str(HERE / 'memory_robots.pl')!r}).
 main :-
     current_prolog_flag(argv, Argv),
@@ -48,7 +48,7 @@ main :-
 
 CONSOLE = f"""
 :- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
-:- use_module({str(PLATFORM_DIR / 'agents' / 'dfrl_agent.pl')!r}).
+:- use_module({str(PLATFORM_DIR / 'dfrl_agent' / 'dfrl_agent.pl')!r}).
 main :-
     current_prolog_flag(argv, Argv),
     append(_, [PlanFile], Argv), !,

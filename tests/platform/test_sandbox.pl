@@ -6,7 +6,7 @@
 :- use_module('../../platform_pl/tartarus').
 :- use_module('../../platform_pl/transport').
 :- use_module('../../platform_pl/code_safety').
-:- use_module('../../platform_pl/agents/dfrl_agent').
+:- use_module('../../platform_pl/dfrl_agent/dfrl_agent').
 :- use_module(library(plunit)).
 :- use_module(library(readutil)).
 :- use_module('../../platform_pl/agents', [agent_create/4]).
@@ -150,11 +150,11 @@ test(refused_program_loads_nothing, [cleanup(stop_all([N]))]) :-
 
 test(hook_clause_alone) :-                  % no user predicate in the program
     check_program_text(hook_only,
-                       "dfrl_agent:aggregate_step(s, A, T, B) :- sleep(0.01), A = T, B = T.").
+                       "dfrl_aggregation:aggregate_step(s, A, T, B) :- sleep(0.01), A = T, B = T.").
 
 test(aggregation_methods_pass) :-
-    forall(member(F0, ['../../platform_pl/agents/examples/max_visited.pl',
-                       '../../platform_pl/agents/examples/median_method.pl',
+    forall(member(F0, ['../../platform_pl/dfrl_agent/examples/max_visited.pl',
+                       '../../platform_pl/dfrl_agent/examples/median_method.pl',
                        '../../platform_pl/examples/tartarus_tour/tour.pl',
                        '../experiments/driver/launcher/slow_method.pl']),
            ( here(F0, F),
@@ -165,7 +165,7 @@ test(aggregation_methods_pass) :-
 test(injected_method_loads_over_the_network, [cleanup(stop_all([N]))]) :-
     node_start(localhost:0, N, [token(k), default(false)]),
     port(N, P),
-    here('../../platform_pl/agents/examples/max_visited.pl', F),
+    here('../../platform_pl/dfrl_agent/examples/max_visited.pl', F),
     load_program_at(localhost:P, F, [tokens([k])]),
     assertion(dfrl_method(max_visited)).
 

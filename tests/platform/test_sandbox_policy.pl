@@ -9,7 +9,7 @@
 :- use_module('../../platform_pl/sandbox_policy').
 :- use_module('../../platform_pl/platform_errors').
 :- use_module(library(plunit)).
-:- use_module('../../platform_pl/agents/dfrl_agent').
+:- use_module('../../platform_pl/dfrl_agent/dfrl_agent').
 :- use_module('../../platform_pl/robot_resources').
 :- use_module(library(time)).
 :- use_module(library(thread)).

@@ -4,7 +4,7 @@
     aggregation hooks.
 */
 :- use_module('../../platform_pl/tartarus').
-:- use_module('../../platform_pl/agents/dfrl_agent').
+:- use_module('../../platform_pl/dfrl_agent/dfrl_agent').
 :- use_module(library(plunit)).
 
 :- dynamic tt_handler/3.

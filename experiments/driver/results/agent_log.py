@@ -1,6 +1,6 @@
 """The dFRL agent's round log: one JSON object per line (contract C2), read with :mod:`json`.
 
-Events the agent writes (``platform_pl/agents/dfrl_agent.pl``)::
+Events the agent writes (``platform_pl/dfrl_agent/dfrl_agent.pl``)::
 
     {"event": "round", "agent": A, "round": N, "start": T0, "end": T1, "hops": H,
      "bytes": B, "method": M, "visited": [R, ...], "skipped": [{"robot": R, "reason": Text}]}

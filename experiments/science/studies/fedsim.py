@@ -8,8 +8,8 @@ iterations every table is replaced by the aggregate of all of them, which is wha
 round of the dFRL agent does (it reads every table, folds them, writes the result back).
 The aggregation maths are pure functions over arrays, registered by name in
 :data:`AGGREGATIONS`; they mirror the agent's built-in methods (``average``, ``max``,
-``visit_average``, platform_pl/agents/dfrl_agent.pl) and the injectable ``max_visited``
-(platform_pl/agents/examples/max_visited.pl); tests check them against hand-computed tables.
+``visit_average``, platform_pl/dfrl_agent/dfrl_aggregation.pl) and the injectable ``max_visited``
+(platform_pl/dfrl_agent/examples/max_visited.pl); tests check them against hand-computed tables.
 """
 from __future__ import annotations
 

@@ -16,7 +16,7 @@ import pytest
 from dfrl.experiments.driver.console_node import CONSOLE_SCRIPT, ConsoleNode
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.tokens import env_with_tokens
-from dfrl.platform_pl import AGENTS_DIR, PLATFORM_DIR
+from dfrl.platform_pl import DFRL_AGENT_DIR, PLATFORM_DIR
 
 SWIPL = shutil.which("swipl")
 pytestmark = pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
@@ -32,7 +32,7 @@ class Node:
         assert SWIPL is not None
         self.proc = subprocess.Popen(
             [SWIPL, "-q", str(PLATFORM_DIR / "node_main.pl"), "--host", "127.0.0.1",
-             "--token", str(TOKEN), "--consult", str(AGENTS_DIR / "dfrl_agent.pl"),
+             "--token", str(TOKEN), "--consult", str(DFRL_AGENT_DIR / "dfrl_agent.pl"),
              "--consult", str(consult)],
             stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
             text=True)
@@ -225,7 +225,7 @@ def test_program_loaded_then_selected(console: ConsoleNode, nodes: Callable[[], 
     a, b = nodes(), nodes()
     log = tmp_path / "rounds.log"
     console.launch_agent(plan("fed_test", [(a, "r1"), (b, "r2")], log))
-    got = console.load_program(AGENTS_DIR / "examples" / "median_method.pl",
+    got = console.load_program(DFRL_AGENT_DIR / "examples" / "median_method.pl",
                                [a.address, b.address])
     assert got["loaded"] == [list(a.address), list(b.address)]
     console.control(a.address, "fed_test", {"method": "median"})
@@ -282,7 +282,7 @@ def test_one_shot_scripts_launch_and_control(nodes: Callable[[], Node], tmp_path
     log = tmp_path / "rounds.log"
     launch = tmp_path / "launch.json"
     launch.write_text(json.dumps(plan("fed_test", [(a, "r1")], log)), encoding="utf-8")
-    out = subprocess.run([SWIPL, "-q", str(AGENTS_DIR / "dfrl_launch.pl"), str(launch)],
+    out = subprocess.run([SWIPL, "-q", str(DFRL_AGENT_DIR / "dfrl_launch.pl"), str(launch)],
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert f"DFRL_AGENT fed_test launched to 127.0.0.1:{a.port}" in out.stdout
@@ -291,12 +291,12 @@ def test_one_shot_scripts_launch_and_control(nodes: Callable[[], Node], tmp_path
 
     def control(doc: dict[str, Any]) -> subprocess.CompletedProcess[str]:
         command.write_text(json.dumps(doc), encoding="utf-8")
-        return subprocess.run([SWIPL, "-q", str(AGENTS_DIR / "dfrl_control.pl"), "127.0.0.1",
+        return subprocess.run([SWIPL, "-q", str(DFRL_AGENT_DIR / "dfrl_control.pl"), "127.0.0.1",
                                str(a.port), str(command)], env=env_with_tokens([TOKEN]),
                               capture_output=True, text=True, timeout=60)
     refused = control({"stop": True})                        # no agent named: refused
     assert refused.returncode == 1 and "agent" in refused.stderr
-    program = str(AGENTS_DIR / "examples" / "median_method.pl")
+    program = str(DFRL_AGENT_DIR / "examples" / "median_method.pl")
     sent = control({"agent": "fed_test", "method": "median", "program": program,
                     "nodes": [["127.0.0.1", a.port]]})
     assert sent.returncode == 0, sent.stderr

@@ -64,9 +64,9 @@ def test_dfrl_join_asks_the_launcher_through_the_platform(tmp_path: Path) -> Non
 def test_a_robot_that_joins_after_an_injection_gets_the_injected_method(tmp_path: Path) -> None:
     # Prepare: a running experiment whose agent switched to an injected method
     from dfrl.experiments.driver.launcher import inject_method
-    from dfrl.platform_pl import AGENTS_DIR
+    from dfrl.platform_pl import DFRL_AGENT_DIR
 
-    median = AGENTS_DIR / "examples" / "median_method.pl"
+    median = DFRL_AGENT_DIR / "examples" / "median_method.pl"
     cfg = small_config(iterations=2000, respite=100, rtf=20.0)
     t, box = run_in_thread(cfg, tmp_path)
     wait_rounds(tmp_path, "fed_qlearning", 2)

@@ -8,14 +8,14 @@ import pytest
 
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.driver.launcher import Results, inject_method
-from dfrl.platform_pl import AGENTS_DIR
+from dfrl.platform_pl import DFRL_AGENT_DIR
 
 from .helpers import rounds_csv, run_in_thread, small_config, wait_rounds
 
 pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
 
 
-MEDIAN = AGENTS_DIR / "examples" / "median_method.pl"
+MEDIAN = DFRL_AGENT_DIR / "examples" / "median_method.pl"
 
 
 def test_inject_method_into_running_experiment(tmp_path: Path) -> None:

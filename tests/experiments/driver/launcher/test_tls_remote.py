@@ -19,14 +19,14 @@ import pytest
 
 from dfrl.experiments.tools.certs import init_ca, make_node
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
-from dfrl.platform_pl import AGENTS_DIR
+from dfrl.platform_pl import DFRL_AGENT_DIR
 
 from .helpers import diagnose, rounds_csv, run_in_thread, small_config, wait_rounds
 
 pytestmark = [pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl"),
               pytest.mark.skipif(shutil.which("openssl") is None, reason="needs openssl")]
 
-MEDIAN = AGENTS_DIR / "examples" / "median_method.pl"
+MEDIAN = DFRL_AGENT_DIR / "examples" / "median_method.pl"
 AGENT = "fed_qlearning"
 
 

@@ -5,7 +5,7 @@ import pytest
 from dfrl.experiments.science.studies.fedsim import AGGREGATIONS, federate
 from dfrl.robots.training import TrainerConfig
 
-# the same three tables as the Prolog check of platform_pl/agents/examples/max_visited.pl
+# the same three tables as the Prolog check of platform_pl/dfrl_agent/examples/max_visited.pl
 Q = [np.array([[1.0, -2.0], [0.0, 5.0]]), np.array([[0.0, -1.0], [2.0, 7.0]]),
      np.array([[0.5, -3.0], [4.0, 0.0]])]
 W = [np.array([[3, 4], [0, 1]]), np.array([[0, 2], [0, 1]]), np.array([[1, 5], [0, 0]])]
@@ -50,7 +50,7 @@ def test_federate_same_seeds_same_tables():
 
 
 def test_prolog_max_visited_matches_python():
-    """platform_pl/agents/examples/max_visited.pl, loaded into the agent module, folds the
+    """platform_pl/dfrl_agent/examples/max_visited.pl, loaded into the agent module, folds the
     same tables as aggregate_max_visited (the study's mirror of the injected method)."""
     import json
     import shutil
@@ -60,7 +60,7 @@ def test_prolog_max_visited_matches_python():
     swipl = shutil.which("swipl")
     if swipl is None:
         pytest.skip("swipl not installed")
-    root = Path(__file__).resolve().parents[4] / "platform_pl" / "agents"
+    root = Path(__file__).resolve().parents[4] / "platform_pl" / "dfrl_agent"
     tables = ",".join(f"qtable_visits([2,2],{json.dumps(q.ravel().tolist())},"
                       f"{json.dumps(w.ravel().tolist())})" for q, w in zip(Q, W))
     goal = (f"dfrl_agent:aggregate_tables(max_visited,[{tables}],qtable(_,V)),"

@@ -23,7 +23,7 @@
 A long-lived platform node that an experiment driver (a Python process)
 starts once and talks to over stdin and stdout, one JSON object per line:
 
-    DFRL_TOKEN=T swipl -q platform_pl/agents/dfrl_console.pl
+    DFRL_TOKEN=T swipl -q platform_pl/dfrl_agent/dfrl_console.pl
             [--host H] [--port P] [--token-file FILE]... [--token T]...
             [--tls DIR]
 

@@ -3,9 +3,7 @@
             dfrl_tour_main/2,           % +Agent, +Link
             dfrl_tour_event/3,          % +Agent, +Link, +Event
             dfrl_create/4,              % +Node, ?Name, +Plan, +Options
-            dfrl_pending/3,             % ?Node, ?Agent, ?Command
-            aggregate_tables/3,         % +Method, +Tables, -Table
-            dfrl_method/1               % ?Method
+            dfrl_pending/3              % ?Node, ?Agent, ?Command
           ]).
 :- use_module('../tartarus').
 :- use_module('../agents',
@@ -23,8 +21,11 @@
 :- use_module(dfrl_move, [move_to_stop/8]).
 :- use_module(dfrl_aggregation,
               [ aggregate_fold/5, aggregate_finish/3, aggregate_fits/2,
-                fold_hook/3, method_call/3, add_lists/3, mul_lists/3,
-                max_lists/3, scale_list/3, weighted_mean/5 ]).
+                fold_hook/3, method_call/3 ]).
+:- reexport(dfrl_aggregation,                   % for the agent's users
+            [ dfrl_method/1,            % ?Method
+              aggregate_tables/3        % +Method, +Tables, -Table
+            ]).
 :- use_module('../robot_resources',
               [get_robot_table/3, get_robot_tables/4, set_robot_table/3]).
 :- autoload(library(error), [must_be/2, domain_error/2]).
@@ -86,7 +87,8 @@ The agent's parts, each loaded with this module wherever it is loaded:
 dfrl_round_state.pl (the round state and its packing), dfrl_move.pl
 (one move with retries and a checkpoint), dfrl_lease.pl (the custody
 protocol), dfrl_round_log.pl (the JSON-lines log) and
-dfrl_aggregation.pl (running the aggregation hooks, the list maths).
+dfrl_aggregation.pl (the aggregation methods: their hooks, the built-in
+methods and running them over a pass). None of them loads this module.
 
 ## Round log
 
@@ -98,25 +100,14 @@ which writes them.
 
 ## Aggregation methods
 
-Built in: `average` (element-wise mean), `max` (element-wise maximum)
-and `visit_average` (mean weighted by how often each state-action pair
-was visited; pairs nobody visited get the plain mean). A new method is
-plain Prolog: clauses of the multifile hooks below, loaded into running
+An aggregation method is a set of clauses of the multifile hooks of
+dfrl_aggregation.pl (aggregate_init/3, aggregate_step/4,
+aggregate_final/3, method_uses_visits/1), where the hooks, the built-in
+methods (`average`, `max`, `visit_average`) and an example of a new
+method are documented. This module re-exports dfrl_method/1 and
+aggregate_tables/3 from there. A new method is loaded into running
 nodes with load_program_at/3 and selected with the control command
-method(Name). Example (platform_pl/agents/examples/median_method.pl):
-
-```
-:- multifile dfrl_agent:aggregate_init/3, dfrl_agent:aggregate_step/4,
-             dfrl_agent:aggregate_final/3.
-dfrl_agent:aggregate_init(min, qtable(_, V), V).
-dfrl_agent:aggregate_step(min, Acc0, qtable(_, V), Acc) :-
-    maplist([A,B,C]>>(C is min(A,B)), Acc0, V, Acc).
-dfrl_agent:aggregate_final(min, Acc, Acc).
-```
-
-A method that needs visit counts also declares
-dfrl_agent:method_uses_visits(Name); its hooks then receive
-qtable_visits(Shape, Values, Visits).
+method(Name) (example: platform_pl/dfrl_agent/examples/median_method.pl).
 
 ## Control
 
@@ -132,40 +123,6 @@ method(Name) switches the aggregation method (an unknown method is
 ignored and the old one kept), stop ends after the current round (a stop
 that arrives during a round also ends that round's tour).
 */
-
-:- multifile
-    aggregate_init/3,           % +Method, +Table, -Acc
-    aggregate_step/4,           % +Method, +Acc0, +Table, -Acc
-    aggregate_final/3,          % +Method, +Acc, -Values
-    method_uses_visits/1.       % ?Method
-
-%!  aggregate_init(+Method, +Table, -Acc) is semidet.
-%
-%   Hook of an aggregation method: start the aggregate Acc of a round
-%   from the first robot's Table, qtable(Shape, Values) (Values a flat
-%   list of floats), or qtable_visits(Shape, Values, Visits) when
-%   method_uses_visits(Method). Defining a clause for a new Method name
-%   defines the method (see dfrl_method/1). A hook that fails or throws
-%   aborts the round: logged with an `error`, no table written.
-
-%!  aggregate_step(+Method, +Acc0, +Table, -Acc) is semidet.
-%
-%   Hook of an aggregation method: fold the Table of the next robot of
-%   the forward pass into the aggregate Acc0 (same shapes are checked
-%   before). Failing or throwing aborts the round, as for
-%   aggregate_init/3.
-
-%!  aggregate_final(+Method, +Acc, -Values) is semidet.
-%
-%   Hook of an aggregation method: the table Values (a flat list, the
-%   shape of the first table) that the agent writes back to every robot
-%   it visited in the round, from the aggregate Acc.
-
-%!  method_uses_visits(?Method) is nondet.
-%
-%   Hook: Method's aggregate_init/3 and aggregate_step/4 receive
-%   qtable_visits(Shape, Values, Visits), the tables with their visit
-%   counts (e.g. visit_average).
 
 :- dynamic
     pending/3,                  % Node, Agent, Command (queued control)
@@ -235,17 +192,6 @@ apply_command(_, X, X, ignored("not a control command")).
 		 /*******************************
 		 *            CREATE		*
 		 *******************************/
-
-%!  dfrl_method(?Method) is nondet.
-%
-%   Method is an aggregation method known on this node.
-
-dfrl_method(M) :-
-    (   nonvar(M)
-    ->  clause(aggregate_init(M, _, _), _), !
-    ;   setof(X, B^Y^Z^clause(aggregate_init(X, Y, Z), B), Ms),
-        member(M, Ms)
-    ).
 
 %!  dfrl_create(+Node, ?Name, +Plan, +Options) is det.
 %
@@ -485,7 +431,7 @@ method_failed(error(Error), S0, S) :-
     put_dict(_{error:Error, acc:none}, S0, S).
 
 read_robot(Method, Robot, Options, Table) :-
-    (   method_uses_visits(Method)
+    (   dfrl_aggregation:method_uses_visits(Method)
     ->  get_robot_tables(Robot, qtable(S, V), qtable(S, W), Options),
         Table = qtable_visits(S, V, W)
     ;   get_robot_table(Robot, Table, Options)
@@ -686,53 +632,3 @@ retire(Node, M, Agent, Epoch2) :-
                      by:Epoch2}),
     lease_ended(Node, Agent, superseded),
     purge_agent(Agent).
-
-		 /*******************************
-		 *       AGGREGATE TABLES	*
-		 *******************************/
-
-%!  aggregate_tables(+Method, +Tables, -Table) is det.
-%
-%   Aggregate a list of qtable(Shape, Values) (or qtable_visits/3 for
-%   methods that use visits) in one go, as the agent does over a round.
-%   (Defined here, not in dfrl_methods.pl: the sandbox lets mobile code
-%   call dfrl_agent:aggregate_tables/3, see code_safety.pl.)
-
-aggregate_tables(Method, [T|Ts], Table) :-
-    arg(1, T, Shape),
-    aggregate_fold(Method, none, Shape, T, A0),
-    foldl([X, A1, A2]>>(arg(1, X, S), aggregate_fold(Method, A1, S, X, A2)), Ts, A0, A),
-    aggregate_finish(Method, A, Table).
-
-		 /*******************************
-		 *      BUILT-IN METHODS	*
-		 *******************************/
-
-%   Defined in this file, which declares the hooks, so that help/1 finds
-%   the hooks' documentation (it reads the file of a predicate's first
-%   clause). Their list maths is in dfrl_aggregation.pl.
-
-aggregate_init(average, qtable(_, V), sum(V, 1)).
-aggregate_step(average, sum(A0, N0), qtable(_, V), sum(A, N)) :-
-    add_lists(A0, V, A),
-    N is N0 + 1.
-aggregate_final(average, sum(A, N), Mean) :-
-    scale_list(A, N, Mean).
-
-aggregate_init(max, qtable(_, V), max(V)).
-aggregate_step(max, max(A0), qtable(_, V), max(A)) :-
-    max_lists(A0, V, A).
-aggregate_final(max, max(A), A).
-
-method_uses_visits(visit_average).
-aggregate_init(visit_average, qtable_visits(_, Q, W), wsum(QW, W, Q, 1)) :-
-    mul_lists(Q, W, QW).
-aggregate_step(visit_average, wsum(QW0, W0, Q0, N0), qtable_visits(_, Q, W),
-               wsum(QW, W1, Q1, N)) :-
-    mul_lists(Q, W, QWi),
-    add_lists(QW0, QWi, QW),
-    add_lists(W0, W, W1),
-    add_lists(Q0, Q, Q1),
-    N is N0 + 1.
-aggregate_final(visit_average, wsum(QW, W, Q, N), Values) :-
-    weighted_mean(QW, W, Q, N, Values).

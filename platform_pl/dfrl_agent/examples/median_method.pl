@@ -1,14 +1,14 @@
 % An aggregation method injected at runtime: element-wise median of the
 % robots' tables. Load it into every node of a running experiment with
 % `dfrl inject RESULTS --program THIS_FILE --method median`.
-:- multifile dfrl_agent:aggregate_init/3,
-             dfrl_agent:aggregate_step/4,
-             dfrl_agent:aggregate_final/3.
+:- multifile dfrl_aggregation:aggregate_init/3,
+             dfrl_aggregation:aggregate_step/4,
+             dfrl_aggregation:aggregate_final/3.
 
 % The accumulator is the list of tables seen so far (as value lists).
-dfrl_agent:aggregate_init(median, qtable(_, V), [V]).
-dfrl_agent:aggregate_step(median, Vs, qtable(_, V), [V|Vs]).
-dfrl_agent:aggregate_final(median, Vs, Median) :-
+dfrl_aggregation:aggregate_init(median, qtable(_, V), [V]).
+dfrl_aggregation:aggregate_step(median, Vs, qtable(_, V), [V|Vs]).
+dfrl_aggregation:aggregate_final(median, Vs, Median) :-
     transpose_rows(Vs, Columns),
     maplist(median_of, Columns, Median).
 

@@ -1,6 +1,6 @@
 /*  Launch a dFRL itinerary agent from a one-off console platform:
 
-        swipl -q platform_pl/agents/dfrl_launch.pl LAUNCH.json
+        swipl -q platform_pl/dfrl_agent/dfrl_launch.pl LAUNCH.json
 
     LAUNCH.json is a launch plan as dfrl_console:dfrl_launch_plan/4
     describes it (name, itinerary, method, rounds, rest_s, rounds_log,

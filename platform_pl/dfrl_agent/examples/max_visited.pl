@@ -9,24 +9,24 @@
 %
 % Load it into every node of a running experiment and switch to it with
 % `dfrl inject RESULTS --program THIS_FILE --method max_visited`.
-:- multifile dfrl_agent:aggregate_init/3,
-             dfrl_agent:aggregate_step/4,
-             dfrl_agent:aggregate_final/3,
-             dfrl_agent:method_uses_visits/1.
+:- multifile dfrl_aggregation:aggregate_init/3,
+             dfrl_aggregation:aggregate_step/4,
+             dfrl_aggregation:aggregate_final/3,
+             dfrl_aggregation:method_uses_visits/1.
 
-dfrl_agent:method_uses_visits(max_visited).
+dfrl_aggregation:method_uses_visits(max_visited).
 
 % Accumulator: mv(Best, Seen, Sum, N): Best the largest value among visitors so
 % far (0.0 where none), Seen 1 where some robot visited, Sum the plain sum of
 % all values and N the number of tables (for the unvisited entries' mean).
-dfrl_agent:aggregate_init(max_visited, qtable_visits(_, Q, W), mv(B, S, Q, 1)) :-
+dfrl_aggregation:aggregate_init(max_visited, qtable_visits(_, Q, W), mv(B, S, Q, 1)) :-
     maplist(mv_first, Q, W, B, S).
-dfrl_agent:aggregate_step(max_visited, mv(B0, S0, Sum0, N0), qtable_visits(_, Q, W),
+dfrl_aggregation:aggregate_step(max_visited, mv(B0, S0, Sum0, N0), qtable_visits(_, Q, W),
                           mv(B, S, Sum, N)) :-
     mv_next(B0, S0, Q, W, B, S),
     maplist([X, Y, Z]>>(Z is X + Y), Sum0, Q, Sum),
     N is N0 + 1.
-dfrl_agent:aggregate_final(max_visited, mv(B, S, Sum, N), Values) :-
+dfrl_aggregation:aggregate_final(max_visited, mv(B, S, Sum, N), Values) :-
     maplist([Bi, Si, Xi, V]>>( Si =:= 1 -> V = Bi ; V is Xi / N ), B, S, Sum, Values).
 
 mv_first(Q, W, B, S) :-

@@ -1,7 +1,7 @@
 /*  Send one control command to a running dFRL agent, through the node of
     its first stop:
 
-        DFRL_TOKEN=T swipl -q platform_pl/agents/dfrl_control.pl HOST PORT COMMAND.json
+        DFRL_TOKEN=T swipl -q platform_pl/dfrl_agent/dfrl_control.pl HOST PORT COMMAND.json
 
     The token comes from the environment variable DFRL_TOKEN (its first
     line; deleted once read). The older form with the token as an
