@@ -5,7 +5,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from dfrl.experiments.tools.certs import CertError, init_ca, make_node
+from dfrl.experiments.tls_folder import CertError
+from dfrl.experiments.tools.certs import init_ca, make_node
 
 
 def _init(args: argparse.Namespace) -> int:

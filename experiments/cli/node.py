@@ -3,11 +3,13 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import sys
 from dataclasses import dataclass
 from typing import Callable, Union
 
+from dfrl.experiments import processes
+from dfrl.experiments.errors import ExperimentError
+from dfrl.experiments.tls_folder import CertError, check_node_dir, is_node_name
 from dfrl.experiments.tokens import (TOKEN_ENV, Token, env_with_tokens, parse_tokens,
                                      pop_env_tokens, read_token_file)
 from dfrl.platform_pl import PLATFORM_DIR
@@ -137,15 +139,12 @@ def node_command(
         A port out of range, ``tls_peers`` or ``trust`` without ``tls``, a name no
         certificate can have, ``tls`` not a node TLS folder, or an unknown bound or bad
         value.
-    FileNotFoundError
+    ExperimentError
         ``swipl`` is missing.
     """
     if not 0 <= port <= 65535:
         raise ValueError(f"port {port} is outside 0..65535")
-    swipl = shutil.which("swipl")
-    if swipl is None:
-        raise FileNotFoundError("swipl is not installed (run scripts/setup.sh)")
-    cmd = [swipl, "-q", str(PLATFORM_DIR / "node_main.pl"), "--host", host, "--port", str(port)]
+    cmd = [processes.swipl(), "-q", str(PLATFORM_DIR / "node_main.pl"), "--host", host, "--port", str(port)]
     for path in consult or []:
         cmd += ["--consult", os.path.abspath(path)]
     if advertise:
@@ -160,7 +159,6 @@ def node_command(
         raise ValueError("--trust needs --tls (trust is by TLS certificate name)")
     check_trust_names(trust or [])
     if tls:
-        from dfrl.experiments.tools.certs import CertError, check_node_dir
         try:
             cmd += ["--tls", str(check_node_dir(tls).resolve())]
         except CertError as exc:
@@ -186,10 +184,8 @@ def node_command(
 def check_trust_names(names: list[str]) -> None:
     """Raise ValueError for a ``--trust`` name no node certificate can have (``dfrl certs``
     names: letters, digits, ``-`` and ``.``, at most 64 characters)."""
-    from dfrl.experiments.tools.certs import NAME_RE
-
     for name in names:
-        if not NAME_RE.match(name) or ".." in name:
+        if not is_node_name(name):
             raise ValueError(f"--trust {name!r}: not a certificate name (letters, digits, "
                              "'-' and '.', at most 64 characters, as 'dfrl certs node' makes)")
 
@@ -232,7 +228,7 @@ def _run(args: argparse.Namespace) -> int:
         cmd = node_command(args.host, args.port, args.consult, args.interactive,
                            args.advertise, args.store, args.insecure, args.tls,
                            args.tls_peer, args.trust, bounds_of_args(args))
-    except (ValueError, FileNotFoundError) as exc:      # TokenError is a ValueError
+    except (ValueError, ExperimentError) as exc:      # TokenError is a ValueError
         print(f"dfrl node: {exc}", file=sys.stderr)
         return 2
     # the node reads DFRL_TOKEN and deletes it from its environment

@@ -6,17 +6,15 @@ import sys
 from pathlib import Path
 
 from dfrl.experiments.cli.node import (add_bound_arguments, add_token_arguments,
-                                       add_trust_argument, bounds_of_args)
+                                       add_trust_argument, bounds_of_args, check_trust_names,
+                                       tokens_of_args)
+from dfrl.experiments.robot_host.service import RobotService
+from dfrl.experiments.tls_folder import CertError, check_node_dir
+from dfrl.experiments.tokens import TOKEN_ENV, TokenError
 from dfrl.pybridge.errors import BridgeError
 
 
 def _run(args: argparse.Namespace) -> int:
-    from dfrl.experiments.tools.certs import CertError, check_node_dir
-    from dfrl.experiments.cli.node import check_trust_names
-    from dfrl.experiments.cli.node import tokens_of_args
-    from dfrl.experiments.robot_host.service import RobotService
-    from dfrl.experiments.tokens import TOKEN_ENV, TokenError
-
     if not 0 <= args.port <= 65535:
         print(f"dfrl robot: port {args.port} is outside 0..65535", file=sys.stderr)
         return 2

@@ -1,6 +1,7 @@
 """A project certificate authority and node certificates for mutual TLS, made with ``openssl``.
 
-Layout (what ``dfrl certs`` writes and the platform's ``tls(Dir)`` option reads)::
+Layout (what ``dfrl certs`` writes and the platform's ``tls(Dir)`` option reads; the node
+folder's names and its check are :mod:`dfrl.experiments.tls_folder`)::
 
     CA_DIR/ca.crt                      the project CA's certificate (self-signed)
     CA_DIR/ca.key                      its private key (mode 0600)
@@ -17,31 +18,18 @@ host names are not part of the check, so a node's name need not be its address.
 from __future__ import annotations
 
 import os
-import re
 import shutil
 import subprocess
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from dfrl.experiments.errors import ExperimentError
+from dfrl.experiments.tls_folder import (CA_CERT, NODE_CERT, NODE_FILES, NODE_KEY, CertError,
+                                         is_node_name)
 
-CA_CERT = "ca.crt"
 CA_KEY = "ca.key"
-NODE_CERT = "node.crt"
-NODE_KEY = "node.key"
-NODE_FILES = (CA_CERT, NODE_CERT, NODE_KEY)
-
-#: A node name: what a DNS label sequence allows (letters, digits, ``-``, ``.``), at most 64
-#: characters (the X.509 limit for a common name), starting and ending with a letter or digit.
-NAME_RE = re.compile(r"^[A-Za-z0-9](?:[A-Za-z0-9.-]{0,62}[A-Za-z0-9])?$")
-
 CA_DAYS = 3650
 NODE_DAYS = 825
-
-
-class CertError(ExperimentError):
-    """A certificate could not be made: bad input, files in the way, or openssl failed."""
 
 
 @dataclass(frozen=True)
@@ -72,7 +60,7 @@ def openssl() -> str:
 
 def check_name(name: str) -> str:
     """Return ``name`` if it can name a node in a certificate, else raise :class:`CertError`."""
-    if not isinstance(name, str) or not NAME_RE.match(name) or ".." in name:
+    if not is_node_name(name):
         raise CertError(f"bad node name {name!r}: use 1-64 letters, digits, '-' or '.', "
                         "starting and ending with a letter or digit")
     return name
@@ -188,12 +176,3 @@ def certificate_subject(path: str | os.PathLike[str]) -> str:
         raise CertError(f"cannot read certificate {path}: {run.stderr.strip()}")
     return run.stdout.strip().removeprefix("subject=")
 
-
-def check_node_dir(directory: str | os.PathLike[str]) -> Path:
-    """Return ``directory`` as a path if it holds a node's TLS files, else raise."""
-    d = Path(directory)
-    missing = [f for f in NODE_FILES if not (d / f).is_file()]
-    if missing:
-        raise CertError(f"{d} is not a node TLS directory: missing {', '.join(missing)} "
-                        "(make one with 'dfrl certs node NAME CA_DIR --out DIR')")
-    return d

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from dfrl.experiments.tools.certs import CertError, certificate_subject, init_ca, make_node
+from dfrl.experiments.tls_folder import CertError
+from dfrl.experiments.tools.certs import certificate_subject, init_ca, make_node
 from dfrl.experiments.cli import main
 
 pytestmark = pytest.mark.skipif(shutil.which("openssl") is None, reason="openssl missing")

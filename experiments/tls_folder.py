@@ -1,0 +1,53 @@
+"""A platform node's TLS folder: its file names, the names a certificate may carry, its check.
+
+A node's TLS folder (the platform's ``tls(Dir)`` option, ``--tls DIR`` on the command line)::
+
+    NODE_DIR/ca.crt     the project CA's certificate (what peers are checked against)
+    NODE_DIR/node.crt   the node's certificate: CN and subjectAltName DNS = its name
+    NODE_DIR/node.key   its private key (mode 0600)
+
+``dfrl certs`` makes such folders (:mod:`dfrl.experiments.tools.certs`); the driver, the robot
+host and ``dfrl node`` only check them here (:func:`check_node_dir`) before a node starts.
+"""
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+from dfrl.experiments.errors import ExperimentError
+
+CA_CERT = "ca.crt"
+NODE_CERT = "node.crt"
+NODE_KEY = "node.key"
+NODE_FILES = (CA_CERT, NODE_CERT, NODE_KEY)
+
+#: A node name: what a DNS label sequence allows (letters, digits, ``-``, ``.``), at most 64
+#: characters (the X.509 limit for a common name), starting and ending with a letter or digit.
+NAME_RE = re.compile(r"^[A-Za-z0-9](?:[A-Za-z0-9.-]{0,62}[A-Za-z0-9])?$")
+
+
+class CertError(ExperimentError):
+    """A node's TLS folder or certificate is not usable: a bad name, files missing or in the
+    way, or ``openssl`` failed."""
+
+
+def is_node_name(name: object) -> bool:
+    """True if ``name`` can name a node in a certificate (:data:`NAME_RE`, no ``..``)."""
+    return isinstance(name, str) and bool(NAME_RE.match(name)) and ".." not in name
+
+
+def check_node_dir(directory: str | os.PathLike[str]) -> Path:
+    """Return ``directory`` as a path if it holds a node's TLS files.
+
+    Raises
+    ------
+    CertError
+        A file of :data:`NODE_FILES` is missing.
+    """
+    d = Path(directory)
+    missing = [f for f in NODE_FILES if not (d / f).is_file()]
+    if missing:
+        raise CertError(f"{d} is not a node TLS directory: missing {', '.join(missing)} "
+                        "(make one with 'dfrl certs node NAME CA_DIR --out DIR')")
+    return d
