@@ -153,7 +153,7 @@ def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
     """Check ``cfg`` and the TLS folder, claim the results folder, run it and report; the
     command's exit code (2: bad config, TLS folder or results folder, before anything
     started; 130: interrupted)."""
-    from dfrl.experiments.tools.certs import CertError, check_node_dir
+    from dfrl.experiments.tls_folder import CertError, check_node_dir
     from dfrl.experiments.driver.launcher import run
 
     tls = getattr(args, "tls", None)
@@ -246,7 +246,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 def driver_tls_arg(args: argparse.Namespace, prog: str) -> tuple[Path | None, int]:
     """``--tls DIR`` of ``dfrl inject``/``join`` checked: (the folder or None, 0), or
     (None, 2) after saying what is wrong with it."""
-    from dfrl.experiments.tools.certs import CertError, check_node_dir
+    from dfrl.experiments.tls_folder import CertError, check_node_dir
 
     if args.tls is None:
         return None, 0

@@ -42,7 +42,7 @@ def console_command(host: str, port: int, tls: str | os.PathLike[str] | None = N
         raise ExperimentError("swipl is not installed (run scripts/setup.sh)")
     cmd = [exe, "-q", str(CONSOLE_SCRIPT), "--host", host, "--port", str(int(port))]
     if tls is not None:
-        from dfrl.experiments.tools.certs import check_node_dir
+        from dfrl.experiments.tls_folder import check_node_dir
 
         cmd += ["--tls", str(check_node_dir(tls).resolve())]
     return cmd

@@ -55,7 +55,7 @@ def driver_tls(results_dir: str | Path, info: dict[str, Any],
     ExperimentError
         The recorded folder is not one on this host (e.g. the results folder was copied).
     """
-    from dfrl.experiments.tools.certs import CertError, check_node_dir
+    from dfrl.experiments.tls_folder import CertError, check_node_dir
 
     if tls is not None:
         return check_node_dir(tls).resolve()

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 from typing import Any, TextIO
 
-from dfrl.experiments.tools.certs import check_node_dir
+from dfrl.experiments.tls_folder import check_node_dir
 from dfrl.experiments.driver.config import ConfigError, ExperimentConfig
 from dfrl.experiments.driver.launcher.children import await_ready
 from dfrl.experiments.driver.launcher.agents import open_console
@@ -71,14 +71,14 @@ class Launcher:
         c = st.config
         c.check()
         if c.token is None and c.remote_robots():
-            raise ConfigError([f"token: robots on other hosts ({c.remote_robots()[0].node}) "
+            raise ConfigError([f"token: robots on other hosts ({c.remote_robots()[0].robot_host}) "
                                "prove the token their dfrl robot was started with: name it "
                                "in the config (without one a run makes a random token)"])
         if st.tls is not None:
             check_node_dir(st.tls)
         claim_output(st.out, self.force)
         if c.token is None:                 # a strong token of this run only
-            c = st.config = c.replace(token=new_secret())
+            c = st.config = c.with_token(new_secret())
         # the one file of the folder that holds the token (mode 0600): for dfrl join/inject
         write_secret_file(st.out / SECRET_FILE, [c.token])
         write_json(st.out / "config.json", c.public_dict())
@@ -91,7 +91,7 @@ class Launcher:
                                       host=st.console_host, tls=st.tls)
             children = [spawn(st, r, c.iterations) for r in c.robots]
             st.poller = StatusPoller(st.remote()).start()
-            await_ready([ch for ch in children if ch.robot.node is None])
+            await_ready([ch for ch in children if ch.robot.robot_host is None])
             write_nodes(st)
             st.say(f"{len(children)} robot nodes up: " + ", ".join(
                 f"{rid}@{ch.address[1]}" for rid, ch in st.children.items()))

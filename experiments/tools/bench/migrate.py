@@ -84,7 +84,7 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         raise ValueError("floats >= 0, hops >= 1 and warmup >= 0 are required")
     tls_args: list[str] = []
     if tls is not None:
-        from dfrl.experiments.tools.certs import CertError, check_node_dir
+        from dfrl.experiments.tls_folder import CertError, check_node_dir
         try:
             tls_args = [str(check_node_dir(tls).resolve())]
         except CertError as exc:

@@ -16,7 +16,8 @@ from typing import Any
 
 import pytest
 
-from dfrl.experiments.tools.certs import CertError, init_ca, make_node
+from dfrl.experiments.tls_folder import CertError
+from dfrl.experiments.tools.certs import init_ca, make_node
 from dfrl.experiments.driver.launcher import join_robot, run
 
 from .helpers import diagnose, rounds_csv, run_in_thread, small_config, wait_rounds
