@@ -336,8 +336,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                              "(exit 1 if it refused, 3 if it did not answer)")
     p.add_argument("results_dir", type=Path, help="results folder of the running experiment")
     p.add_argument("--program", type=Path, required=True,
-                   help="Prolog file defining dfrl_agent:aggregate_init/step/final for METHOD "
-                        "(required)")
+                   help="Prolog file defining dfrl_aggregation:aggregate_init/step/final for "
+                        "METHOD (required)")
     p.add_argument("--method", required=True, help="method name (required)")
     p.add_argument("--agent", default=None, help="only this agent (default: every agent)")
     p.add_argument("--wait", type=float, default=120.0, metavar="S",

@@ -1,5 +1,5 @@
 """The command line that starts an experiment's console node (a ``swipl`` process running
-``platform_pl/agents/dfrl_console.pl``; :class:`dfrl.experiments.driver.console_node.ConsoleNode` drives
+``platform_pl/dfrl_agent/dfrl_console.pl``; :class:`dfrl.experiments.driver.console_node.ConsoleNode` drives
 it)."""
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import shutil
 from pathlib import Path
 
 from dfrl.experiments.errors import ExperimentError
-from dfrl.platform_pl import AGENTS_DIR
+from dfrl.platform_pl import DFRL_AGENT_DIR
 
-CONSOLE_SCRIPT: Path = AGENTS_DIR / "dfrl_console.pl"
+CONSOLE_SCRIPT: Path = DFRL_AGENT_DIR / "dfrl_console.pl"
 """The Prolog program a console node runs."""
 
 

@@ -1,6 +1,6 @@
 """A long-lived channel to running agents: the experiment's console node.
 
-:class:`ConsoleNode` starts one ``swipl platform_pl/agents/dfrl_console.pl`` process, a platform
+:class:`ConsoleNode` starts one ``swipl platform_pl/dfrl_agent/dfrl_console.pl`` process, a platform
 node of its own, and talks to it in JSON lines over its stdin and stdout (the protocol is
 documented in ``dfrl_console.pl``). Through it a driver launches dFRL agents, posts control
 commands to a running agent's first stop (platform event ``dfrl_control/4``), loads programs

@@ -127,9 +127,9 @@ class RobotProcess:
 
 def load_agent_program(node: Any, who: str) -> None:
     """Load the dFRL agent program into the node's Tartarus code store (warn if missing)."""
-    from dfrl.platform_pl import AGENTS_DIR
+    from dfrl.platform_pl import DFRL_AGENT_DIR
 
-    agent_file = AGENTS_DIR / "dfrl_agent.pl"
+    agent_file = DFRL_AGENT_DIR / "dfrl_agent.pl"
     if agent_file.is_file():
         node.assert_file_to_tartarus(str(agent_file))
     else:
