@@ -1,5 +1,6 @@
-"""``dfrl bench migrate|sim|round|bridge|chaos|scale``: run a benchmark and print its figures (JSON with
-``--json``). The benchmarks themselves are :mod:`dfrl.experiments.tools.bench`."""
+"""``dfrl bench migrate|sim|round|bridge|chaos|scale|hostile``: run a benchmark and print its
+figures (JSON with ``--json``). The benchmarks themselves are :mod:`dfrl.experiments.tools.bench`;
+``hostile``'s options and output are :mod:`.bench_hostile`."""
 from __future__ import annotations
 
 import argparse
@@ -8,8 +9,9 @@ import sys
 from dataclasses import asdict
 from pathlib import Path
 
-from dfrl.experiments.tools.bench import bridge, chaos, migrate, round as round_bench, scale, sim
-from dfrl.experiments.tools.bench import hostile, hostile_cli
+from dfrl.experiments.cli import bench_hostile
+from dfrl.experiments.tools.bench import bridge, chaos, hostile, migrate, round as round_bench
+from dfrl.experiments.tools.bench import scale, sim
 
 
 # -- migrate ---------------------------------------------------------------------------------
@@ -216,7 +218,7 @@ def cmd_chaos(args: argparse.Namespace) -> int:
     try:
         r = chaos.run(args.faults, args.seed, agents=args.agents,
                       settle_timeout=args.settle_timeout, workdir=args.keep, progress=progress)
-    except (ValueError, RuntimeError, FileNotFoundError) as exc:
+    except (ValueError, RuntimeError) as exc:         # ExperimentError is a RuntimeError
         print(f"dfrl bench chaos: {exc}", file=sys.stderr)
         return 1
     if args.json:
@@ -266,7 +268,7 @@ BENCHMARKS = {
     "bridge": (bridge, add_bridge_arguments, cmd_bridge),
     "chaos": (chaos, add_chaos_arguments, cmd_chaos),
     "scale": (scale, add_scale_arguments, cmd_scale),
-    "hostile": (hostile, hostile_cli.add_arguments, hostile_cli.cmd),
+    "hostile": (hostile, bench_hostile.add_arguments, bench_hostile.cmd),
 }
 
 

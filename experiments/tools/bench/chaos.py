@@ -25,8 +25,8 @@ import json
 import os
 import random
 import selectors
-import shutil
 import signal
+import socket
 import statistics
 import subprocess
 import tempfile
@@ -35,8 +35,9 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from dfrl.experiments.tools.bench.fault_proxy import DROP, PASS, STALL, Action, FaultProxy
+from dfrl.experiments import processes
 from dfrl.experiments.tokens import env_with_tokens, new_secret
+from dfrl.experiments.tools.bench.fault_proxy import DROP, PASS, STALL, Action, FaultProxy
 
 SCRIPT = Path(__file__).resolve().parent / "chaos_node.pl"
 TOKEN = new_secret()
@@ -63,15 +64,12 @@ class NodeProcess:
         self.starts = 0
 
     def start(self, agents: list[str], timeout: float = 20.0) -> None:
-        swipl = shutil.which("swipl")
-        if swipl is None:
-            raise FileNotFoundError("swipl is not installed")
-        args = [swipl, "-q", str(SCRIPT), "node", str(self.port), str(self.store),
+        args = [processes.swipl(), "-q", str(SCRIPT), "node", str(self.port), str(self.store),
                 self.routes] + ([",".join(agents)] if agents else [])
         offset = self.log.stat().st_size if self.log.exists() else 0
         with open(self.log, "ab") as log:
-            self.proc = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=log,
-                                         stderr=subprocess.STDOUT, env=env_with_tokens([TOKEN]))
+            self.proc = processes.start(args, stdout=log, stderr=subprocess.STDOUT,
+                                        env=env_with_tokens([TOKEN]))
         self.starts += 1
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
@@ -85,9 +83,16 @@ class NodeProcess:
         raise RuntimeError(f"node {self.index} did not start; see {self.log}")
 
     def kill(self) -> None:
+        """The fault ``kill -9``: no grace, the node's store as it was."""
         if self.proc is not None and self.proc.poll() is None:
             os.kill(self.proc.pid, signal.SIGKILL)
             self.proc.wait(10)
+
+    def stop(self) -> None:
+        """The end of the benchmark: let a stopped node go on, then stop it."""
+        if self.proc is not None:
+            self.signal(signal.SIGCONT)
+            processes.stop(self.proc)
 
     def signal(self, sig: int) -> None:
         if self.proc is not None and self.proc.poll() is None:
@@ -98,11 +103,9 @@ class ChaosConsole:
     """``chaos_node.pl console``: JSON lines, each answer awaited with a deadline."""
 
     def __init__(self) -> None:
-        swipl = shutil.which("swipl")
-        assert swipl is not None
-        self.proc = subprocess.Popen([swipl, "-q", str(SCRIPT), "console"],
-                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-                                     bufsize=1, env=env_with_tokens([TOKEN]))
+        self.proc = processes.start([processes.swipl(), "-q", str(SCRIPT), "console"],
+                                    stdin=subprocess.PIPE, stdout=subprocess.PIPE, bufsize=1,
+                                    env=env_with_tokens([TOKEN]))
         self.sel = selectors.DefaultSelector()
         assert self.proc.stdout is not None
         self.sel.register(self.proc.stdout, selectors.EVENT_READ)
@@ -121,11 +124,7 @@ class ChaosConsole:
     def close(self) -> None:
         if self.proc.stdin:
             self.proc.stdin.close()
-        try:
-            self.proc.wait(5)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait(5)
+        processes.wait_or_stop(self.proc, 5.0)
 
 
 class Trigger:
@@ -182,8 +181,7 @@ class _Chaos:
         if self.console is not None:
             self.console.close()
         for node in self.nodes:
-            node.signal(signal.SIGCONT)
-            node.kill()
+            node.stop()
         for proxy in self.proxies.values():
             proxy.close()
 
@@ -281,7 +279,6 @@ class _Chaos:
 
 
 def _free_port() -> int:
-    import socket
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
@@ -298,7 +295,7 @@ def run(faults: int = 100, seed: int = 0, nodes: int = 3, agents: int = 4,
     ------
     ValueError
         Bad arguments.
-    FileNotFoundError
+    ExperimentError
         swipl is not installed.
     RuntimeError
         A node or the console did not start or answer.

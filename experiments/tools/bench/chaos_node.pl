@@ -26,9 +26,9 @@
     random other node; a move that fails is tried again (at most 100000
     times) after 50 ms.
 */
-:- use_module('../../platform_pl/tartarus').
-:- use_module('../../platform_pl/transport', [transport_request/4]).
-:- use_module('../../platform_pl/secrets', [take_env_tokens/1]).
+:- use_module('../../../platform_pl/tartarus').
+:- use_module('../../../platform_pl/transport', [transport_request/4]).
+:- use_module('../../../platform_pl/secrets', [take_env_tokens/1]).
 :- use_module(library(http/json)).
 :- use_module(library(main)).
 

@@ -30,41 +30,11 @@ criterion reads), its CPU seconds, its CPU use over ``CPU_WINDOW_S`` after settl
 (``/proc/PID/status`` Threads) sampled every 0.2 s from the attack's start to the end of the
 phase (the peak), and its worker pools (``worker_pool:pool_statistics/2``, read through the
 target's ``probe.``); what became of the attack's connections or agents; the agents the
-target hosts at the end. A phase passes if
-
-* no hop failed or went unfinished and at least one succeeded;
-* the p90 is under ``P90_RATIO_MAX`` times the quiet p90;
-* RSS once the threads have settled is within ``RSS_DELTA_MAX_MB`` of before (read at the
-  settling time instead, a flood's idle connection workers, still alive then, once counted
-  50.6 MB);
-* an ordinary agent is accepted (the peer's agent starts its handler at the target) within
-  ``ACCEPT_MAX_S`` of the attack's end (the attacker stopped and gone);
-* the peak of threads stays under the ceiling that the node's limits allow
-  (:func:`thread_ceiling`: the threads of the quiet target outside its pools, plus the most
-  workers of the connection pool (twice ``max_connections``), ``max_agents`` for the agents
-  pool, ``max_agents`` again for the messages pool, 2 for the bound notices pool, plus
-  ``PEAK_SLACK``). The messages pool is the one the node does not bound by a limit of its own
-  (only by the pool's maximum, 1000): the ceiling assumes one running message per agent, so a
-  phase that needs more fails and shows it;
-* once the pools' idle time has passed after the attack's end (the target runs with
-  ``dfrl_pool_idle`` = ``pool_idle_s``, 5 s by default, instead of the node's 30 s, to keep
-  the benchmark short), threads come down, within ``threads_wait_s``, to at most the quiet
-  target's threads outside its pools plus the workers its pools keep warm (``KEEP_WARM`` each,
-  at most the pool's maximum) plus ``SETTLED_SLACK`` (the peer's hop in flight):
-  :func:`settled_bound`;
-* the target did not stop the peer's agent (its home, the peer, was not told so; if it was,
-  the benchmark starts a new one after the phase, so that the next phases measure again);
-* the settled CPU use is within ``CPU_MARGIN`` (cores) of the quiet phase's;
-* no escape ran.
+target hosts at the end. When a phase passes: :mod:`hostile_verdict`.
 """
 from __future__ import annotations
 
-import json
-import os
-import queue
-import shutil
 import statistics
-import subprocess
 import tempfile
 import threading
 import time
@@ -72,22 +42,17 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from dfrl.experiments.tools.bench import hostile_verdict as verdict
 from dfrl.experiments.tools.bench.hostile_attacks import FRAME_KINDS, sources
-from dfrl.experiments.tools.bench.hostile_auth_attacks import (AGENT_ATTACKS, AUTH_ATTACKS,
-                                                        AuthAttacker, escape_results)
+from dfrl.experiments.tools.bench.hostile_auth_attacks import (AUTH_ATTACKS, AuthAttacker,
+                                                               escape_results)
 from dfrl.experiments.tools.bench.hostile_child import ChildAttacker
 from dfrl.experiments.tools.bench.hostile_measure import Sampler, hop_figures, proc_status
+from dfrl.experiments.tools.bench.hostile_nodes import HostileNode
+from dfrl.experiments.tools.certs import init_ca, make_node
 
-SCRIPT = Path(__file__).resolve().parent / "hostile_node.pl"
 TOKEN = 4243
-P90_RATIO_MAX = 10.0
-RSS_DELTA_MAX_MB = 50.0
-KEEP_WARM = 8            # worker_pool.pl's keep(8): the node's pools pass no keep option
-SETTLED_SLACK = 4        # the peer's hop in flight: a connection worker, its handler, a transient
-PEAK_SLACK = 8           # threads that exit while their replacement starts, between two samples
-ACCEPT_MAX_S = 20.0      # issue 16: an ordinary agent is accepted within 20 s
 IDLE_MARGIN_S = 1.0      # after the pools' idle time, before threads are counted
-CPU_MARGIN = 0.25
 CPU_WINDOW_S = 1.0
 ATTACKS = ("slowloris", "flood", "frames", *AUTH_ATTACKS)
 
@@ -138,82 +103,6 @@ class HostileConfig:
             raise ValueError(f"unknown frame kinds {sorted(unknown)}; choose from {FRAME_KINDS}")
 
 
-class _Node:
-    """A ``hostile_node.pl`` process; its event lines are parsed by a reader thread."""
-
-    def __init__(self, args: list[str], events: list[tuple], lock: threading.Lock,
-                 env: dict[str, str] | None = None) -> None:
-        swipl = shutil.which("swipl")
-        if swipl is None:
-            raise FileNotFoundError("swipl is not installed (run scripts/setup.sh)")
-        self.proc = subprocess.Popen([swipl, "-q", str(SCRIPT), *args],
-                                     env={**os.environ, **(env or {})}, stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        self.events, self.lock = events, lock
-        self.replies: queue.Queue[dict[str, Any]] = queue.Queue()
-        self.other_lines = 0
-        self.port: int | None = None
-        self.ready = threading.Event()
-        self.stderr: list[str] = []
-        threading.Thread(target=self._read, daemon=True).start()
-        threading.Thread(target=self._read_err, daemon=True).start()
-        if not self.ready.wait(20) or self.port is None:
-            self.close()
-            raise RuntimeError(f"node {args[0]} did not start: {''.join(self.stderr)[-2000:]}")
-
-    def _read(self) -> None:
-        assert self.proc.stdout is not None
-        for line in self.proc.stdout:
-            f = line.split()
-            if not f:
-                continue
-            if f[0] == "PORT":
-                self.port = int(f[1])
-                self.ready.set()
-            elif f[0] in ("DEPART", "HOP", "FAIL", "DONE"):
-                with self.lock:
-                    self.events.append((f[0], *f[1:]))
-            elif f[0].startswith("{"):
-                try:
-                    self.replies.put(json.loads(line))
-                except json.JSONDecodeError:
-                    self.other_lines += 1
-            else:
-                self.other_lines += 1           # e.g. a log flood's lines
-        self.ready.set()
-
-    def command(self, name: str, timeout_s: float = 20.0) -> dict[str, Any]:
-        """Send the node a command (the target: ``probe``, ``purge``; the peer: ``relaunch``);
-        its JSON reply."""
-        while not self.replies.empty():
-            self.replies.get_nowait()
-        assert self.proc.stdin is not None
-        self.proc.stdin.write(f"{name}.\n")
-        self.proc.stdin.flush()
-        try:
-            return self.replies.get(timeout=timeout_s)
-        except queue.Empty:
-            raise RuntimeError(f"the target did not answer {name} in {timeout_s:g} s") from None
-
-    def _read_err(self) -> None:
-        assert self.proc.stderr is not None
-        for line in self.proc.stderr:
-            if len(self.stderr) < 200:
-                self.stderr.append(line)
-
-    def close(self) -> None:
-        if self.proc.stdin:
-            try:
-                self.proc.stdin.close()
-            except OSError:
-                pass
-        try:
-            self.proc.wait(10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait(10)
-
-
 Attacker = ChildAttacker | AuthAttacker
 
 
@@ -222,11 +111,11 @@ class _Bench:
     """What every phase needs: the target, the events, the quiet phase's figures."""
 
     cfg: HostileConfig
-    target: _Node
+    target: HostileNode
     events: list[tuple]
     lock: threading.Lock
     marker_dir: Path
-    peer: _Node
+    peer: HostileNode
     quiet: dict[str, Any] | None = None
     nonpool: int = 0                     # threads of the quiet target outside its pools
     limits: dict[str, int] = field(default_factory=dict)
@@ -278,8 +167,6 @@ def _attacker(name: str, b: _Bench) -> Attacker:
 def _trust_args(tmp: Path) -> tuple[list[str], list[str]]:
     """The control run: a CA, certificates for the target, the peer and the attacker; the
     target trusts the attacker by name. The extra arguments of the target and of the peer."""
-    from dfrl.experiments.tools.certs import init_ca, make_node
-
     init_ca(tmp / "pki")
     dirs = {n: make_node(n, tmp / "pki").directory for n in ("target", "peer", "attacker")}
     return [str(dirs["target"]), "attacker"], [str(dirs["peer"])]
@@ -293,7 +180,7 @@ def run(cfg: HostileConfig = HostileConfig(),
     ------
     ValueError
         Bad configuration.
-    FileNotFoundError
+    ExperimentError
         swipl is not installed.
     RuntimeError
         A node did not start, an attacker failed or the target process died.
@@ -308,17 +195,17 @@ def run(cfg: HostileConfig = HostileConfig(),
     idle = cfg.pool_idle_s or 30.0
     budget = (len(attacks) + 1) * (cfg.duration_s + 10 + max(
         cfg.settle_s + CPU_WINDOW_S, idle + IDLE_MARGIN_S + cfg.threads_wait_s,
-        ACCEPT_MAX_S + 1)) + 30
+        verdict.ACCEPT_MAX_S + 1)) + 30
     with tempfile.TemporaryDirectory(prefix="dfrl-hostile-") as tmp_name:
         tmp = Path(tmp_name)
         (tmp / "markers").mkdir()
         target_extra, peer_extra = _trust_args(tmp) if cfg.trust_attacker else ([], [])
         env = {"DFRL_HOSTILE_POOL_IDLE": f"{cfg.pool_idle_s:g}"} if cfg.pool_idle_s > 0 else {}
-        target = _Node(["target", str(TOKEN), *target_extra], events, lock, env)
+        target = HostileNode(["target", str(TOKEN), *target_extra], events, lock, env)
         peer = None
         try:
             assert target.port is not None
-            peer = _Node(["peer", str(TOKEN), str(target.port), str(cfg.floats),
+            peer = HostileNode(["peer", str(TOKEN), str(target.port), str(cfg.floats),
                           str(cfg.pause_ms), str(int(budget)), "true" if cfg.fresh else "false",
                           *peer_extra], events, lock)
             time.sleep(1.0)                                   # warm-up hops, not counted
@@ -341,10 +228,12 @@ def run(cfg: HostileConfig = HostileConfig(),
             target.close()
     pool_idle, limits = b.pool_idle_s, b.limits
     return {"benchmark": "hostile", "config": asdict(cfg),
-            "targets": {"p90_ratio_max": P90_RATIO_MAX, "rss_delta_max_mb": RSS_DELTA_MAX_MB,
-                        "accept_max_s": ACCEPT_MAX_S, "keep_warm": KEEP_WARM,
-                        "settled_slack": SETTLED_SLACK, "peak_slack": PEAK_SLACK,
-                        "cpu_margin_cores": CPU_MARGIN,
+            "targets": {"p90_ratio_max": verdict.P90_RATIO_MAX,
+                        "rss_delta_max_mb": verdict.RSS_DELTA_MAX_MB,
+                        "accept_max_s": verdict.ACCEPT_MAX_S, "keep_warm": verdict.KEEP_WARM,
+                        "settled_slack": verdict.SETTLED_SLACK,
+                        "peak_slack": verdict.PEAK_SLACK,
+                        "cpu_margin_cores": verdict.CPU_MARGIN,
                         "target_pool_idle_s": pool_idle, "target_limits": limits,
                         "threads": "peak < thread_ceiling; after the pools' idle time, "
                                    "threads <= settled_bound (see the module doc)"},
@@ -397,11 +286,11 @@ def _phase(name: str, b: _Bench) -> dict[str, Any]:
     cpu_rate = (after["cpu_s"] - before["cpu_s"]) / max(1e-9, t_end - t0 + cfg.settle_s)
     threads |= {"before": int(before["threads"]), "after_settle": int(after["threads"]),
                 "peak": sampler.peak_threads,
-                "peak_ceiling": thread_ceiling(b.nonpool, b.limits),
+                "peak_ceiling": verdict.thread_ceiling(b.nonpool, b.limits),
                 "quiet_outside_pools": b.nonpool}
     phase = {
         "phase": name, "seconds": round(t1 - t0, 2), "hops": hops,
-        "p90_ratio": _ratio(hops, b.quiet), "accepted_after_s": accept_s,
+        "p90_ratio": verdict.p90_ratio(hops, b.quiet), "accepted_after_s": accept_s,
         "rss_mb": {"before": round(before["rss_mb"], 1), "after": round(settled_rss, 1),
                    "after_settle_s": round(after["rss_mb"], 1),
                    "peak": round(max(sampler.peak_rss, after["rss_mb"], settled_rss), 1),
@@ -414,24 +303,8 @@ def _phase(name: str, b: _Bench) -> dict[str, Any]:
         "attack": attack, "escapes": escapes,
         "peer_agent_stopped": lost, "peer_agent_relaunched": relaunched,
     }
-    why = _misses(phase, b.quiet)
+    why = verdict.misses(phase, b.quiet)
     return phase | {"pass": not why, "why": why}
-
-
-def thread_ceiling(nonpool: int, limits: dict[str, int]) -> int:
-    """The most threads the node's limits allow (see the module doc): ``nonpool`` threads
-    outside the pools, every pool at the most workers its limits let it need, ``PEAK_SLACK``."""
-    return (nonpool + limits["connection_workers_max"] + 2 * limits["max_agents"] + 2
-            + PEAK_SLACK)
-
-
-def settled_bound(nonpool: int, limits: dict[str, int]) -> int:
-    """The most threads of a settled node (see the module doc): ``nonpool`` threads outside the
-    pools, ``KEEP_WARM`` idle workers in each pool (at most its maximum), ``SETTLED_SLACK``."""
-    pool_max = {"connections": limits["connection_workers_max"],
-                "agents": limits["max_agents"], "messages": limits["max_agents"],
-                "dfrl_bound_notices": 2}
-    return nonpool + sum(min(KEEP_WARM, m) for m in pool_max.values()) + SETTLED_SLACK
 
 
 def _threads_settled(pid: int, b: _Bench, t_end: float) -> dict[str, Any]:
@@ -441,7 +314,7 @@ def _threads_settled(pid: int, b: _Bench, t_end: float) -> dict[str, Any]:
     start = t_end + b.pool_idle_s + IDLE_MARGIN_S
     until = start + b.cfg.threads_wait_s
     time.sleep(max(0.0, start - time.time()))
-    bound = settled_bound(b.nonpool, b.limits) if b.limits else None
+    bound = verdict.settled_bound(b.nonpool, b.limits) if b.limits else None
     while True:
         n = int(proc_status(pid)["threads"])
         if bound is None or n <= bound or time.time() >= until:
@@ -462,47 +335,6 @@ def _accepted_after(b: _Bench, t_end: float) -> float | None:
                         if e[0] == "HOP" and e[4] == port and float(e[2]) >= t_end]
         if arrivals:
             return round(min(arrivals) - t_end, 2)
-        if time.time() >= t_end + ACCEPT_MAX_S + 1:
+        if time.time() >= t_end + verdict.ACCEPT_MAX_S + 1:
             return None
         time.sleep(0.2)
-
-
-def _ratio(hops: dict[str, Any], quiet: dict[str, Any] | None) -> float | None:
-    q = quiet["hops"]["hop_p90_ms"] if quiet else None
-    if not q or hops["hop_p90_ms"] is None:
-        return None
-    return round(hops["hop_p90_ms"] / q, 2)
-
-
-def _misses(p: dict[str, Any], quiet: dict[str, Any] | None) -> list[str]:
-    """The targets phase ``p`` missed (see the module doc); none for a pass."""
-    why: list[str] = []
-    hops, rss, th, cpu = p["hops"], p["rss_mb"], p["threads"], p["cpu_cores"]
-    if hops["succeeded"] == 0:
-        why.append("no hop succeeded")
-    if hops["failed"] or hops["unfinished"]:
-        why.append(f"{hops['failed']} hops failed, {hops['unfinished']} unfinished")
-    ratio = p["p90_ratio"]
-    if ratio is not None and ratio >= P90_RATIO_MAX:
-        why.append(f"p90 {ratio}x the quiet p90 (limit {P90_RATIO_MAX:g}x)")
-    if rss["delta"] > RSS_DELTA_MAX_MB:
-        why.append(f"RSS grew by {rss['delta']} MB (limit {RSS_DELTA_MAX_MB:g})")
-    if p["peer_agent_stopped"]:
-        why.append(f"the target stopped the peer's ordinary agent: {p['peer_agent_stopped'][0]}")
-    if p["accepted_after_s"] is None or p["accepted_after_s"] > ACCEPT_MAX_S:
-        why.append(f"no ordinary agent accepted within {ACCEPT_MAX_S:g} s of the attack's end")
-    if th["peak"] >= th["peak_ceiling"]:
-        why.append(f"peak of {th['peak']} threads, ceiling {th['peak_ceiling']}")
-    if th["settled_bound"] is not None and th["settled"] > th["settled_bound"]:
-        why.append(f"{th['settled']} threads {th['settled_after_s']} s after the attack, "
-                   f"bound {th['settled_bound']} (pools {_pool_sizes(th['pools_settled'])})")
-    if quiet is not None and cpu["settled"] > quiet["cpu_cores"]["phase"] + CPU_MARGIN:
-        why.append(f"CPU {cpu['settled']:.2f} cores after settling, quiet "
-                   f"{quiet['cpu_cores']['phase']:.2f} (limit +{CPU_MARGIN:g})")
-    if p["escapes"] is not None and p["escapes"]["ran"]:
-        why.append(f"{p['escapes']['ran']} escapes ran: {', '.join(p['escapes']['ran_names'])}")
-    return why
-
-
-def _pool_sizes(pools: dict[str, dict[str, int]]) -> str:
-    return ", ".join(f"{k} {v['size']}" for k, v in sorted(pools.items()))

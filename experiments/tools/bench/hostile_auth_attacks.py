@@ -22,7 +22,6 @@ import hashlib
 import hmac
 import json
 import re
-import shutil
 import socket
 import struct
 import subprocess
@@ -31,6 +30,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from dfrl.experiments import processes
 from dfrl.experiments.tools.bench.hostile_attacks import MAGIC, HEADER, frame_header
 
 AUTH_SCRIPT = Path(__file__).resolve().parent / "hostile_auth_node.pl"
@@ -48,11 +48,8 @@ class AuthAttacker:
     def __init__(self, attack: str, token: int, port: int, options: dict[str, Any]) -> None:
         if attack not in ("escapes", *AGENT_ATTACKS):
             raise ValueError(f"unknown authenticated attack {attack!r}")
-        swipl = shutil.which("swipl")
-        if swipl is None:
-            raise FileNotFoundError("swipl is not installed (run scripts/setup.sh)")
         self.attack = attack
-        self.argv = ["nice", "-n", "19", swipl, "-q", str(AUTH_SCRIPT), attack, str(token),
+        self.argv = ["nice", "-n", "19", processes.swipl(), "-q", str(AUTH_SCRIPT), attack, str(token),
                      str(port)] + [f"--{k.replace('_', '-')}={v}" for k, v in options.items()]
         self.records: list[dict[str, Any]] = []
         self.stderr: list[str] = []
@@ -60,8 +57,8 @@ class AuthAttacker:
         self.reader: threading.Thread | None = None
 
     def start(self) -> None:
-        self.proc = subprocess.Popen(self.argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     stderr=subprocess.PIPE, text=True)
+        self.proc = processes.start(self.argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                    stderr=subprocess.PIPE)
         self.reader = threading.Thread(target=self._read, daemon=True)
         self.reader.start()
         threading.Thread(target=self._read_err, daemon=True).start()
@@ -89,11 +86,7 @@ class AuthAttacker:
                 self.proc.stdin.close()
         except OSError:
             pass
-        try:
-            self.proc.wait(timeout_s)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait(10)
+        processes.wait_or_stop(self.proc, timeout_s)
         self.reader.join(10)
         summary = next((r for r in self.records if r.get("event") == "summary"), None)
         if summary is None:

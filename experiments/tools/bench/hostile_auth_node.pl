@@ -29,7 +29,7 @@
     {"event":"summary",...} with the counts and the first messages the
     node printed here (what the target told the agents' home).
 */
-:- use_module('../../platform_pl/tartarus').
+:- use_module('../../../platform_pl/tartarus').
 :- use_module(library(main)).
 :- use_module(library(http/json), [json_write_dict/3]).
 

@@ -18,6 +18,7 @@ import sys
 import threading
 from typing import Any
 
+from dfrl.experiments import processes
 from dfrl.experiments.tools.bench.hostile_attacks import FrameSenders, Swarm, sources
 from dfrl.experiments.tools.bench.hostile_auth_attacks import AuthFrames
 
@@ -64,9 +65,10 @@ class ChildAttacker:
         self.lines: list[str] = []
 
     def start(self) -> None:
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "dfrl.experiments.tools.bench.hostile_child", json.dumps(self.spec)],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.proc = processes.start(
+            [sys.executable, "-m", "dfrl.experiments.tools.bench.hostile_child",
+             json.dumps(self.spec)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         assert self.proc.stdout is not None
         first = self.proc.stdout.readline()
         if '"started"' not in first:
@@ -84,7 +86,7 @@ class ChildAttacker:
         t.start()
         t.join(timeout_s)
         if t.is_alive():
-            self.proc.kill()
+            processes.stop(self.proc)
             t.join(10)
             raise RuntimeError(f"attacker {self.spec['kind']} did not stop in {timeout_s:g} s")
         lines = [json.loads(x) for x in box["out"].splitlines() if x.startswith("{")]

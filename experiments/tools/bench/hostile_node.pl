@@ -40,12 +40,12 @@
                                     it is tried again after the pause
         DONE T                      the budget is spent (at the peer)
 */
-:- use_module('../../platform_pl/tartarus').
+:- use_module('../../../platform_pl/tartarus').
 :- use_module(library(main)).
 :- use_module(library(http/json), [json_write_dict/3]).
-:- use_module('../../platform_pl/agents', [agent_list/2, agent_exists/2, agent_purge/2]).
-:- use_module('../../platform_pl/node', [node_option/3]).
-:- use_module('../../platform_pl/worker_pool', [pool_statistics/2]).
+:- use_module('../../../platform_pl/agents', [agent_list/2, agent_exists/2, agent_purge/2]).
+:- use_module('../../../platform_pl/node', [node_option/3]).
+:- use_module('../../../platform_pl/worker_pool', [pool_statistics/2]).
 
 :- initialization(main, main).
 

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from dfrl.experiments.tools.bench import hostile
+from dfrl.experiments.tools.bench import hostile, hostile_verdict as verdict
 from dfrl.experiments.tools.bench.hostile_attacks import (FRAME_KINDS, PRE_AUTH_LIMIT, frame_header,
                                                    hostile_frame, outcome_of)
 from dfrl.experiments.tools.bench.hostile_auth_attacks import escape_results
@@ -114,8 +114,8 @@ def test_authenticated_phases_have_their_figures_and_no_escape_runs() -> None:
     for p in r["phases"]:
         assert p["hops"]["succeeded"] > 5, p
         t = p["threads"]
-        assert t["peak_ceiling"] == hostile.thread_ceiling(t["quiet_outside_pools"], limits)
-        assert t["settled_bound"] == hostile.settled_bound(t["quiet_outside_pools"], limits)
+        assert t["peak_ceiling"] == verdict.thread_ceiling(t["quiet_outside_pools"], limits)
+        assert t["settled_bound"] == verdict.settled_bound(t["quiet_outside_pools"], limits)
         assert 0 < t["quiet_outside_pools"] <= t["before"] <= t["peak"]
         assert t["settled_after_s"] >= 1.0 + hostile.IDLE_MARGIN_S   # after the pools' idle
         assert set(t["pools_settled"]) == {"connections", "agents", "messages",
@@ -177,15 +177,15 @@ QUIET = {"cpu_cores": {"phase": 0.05}}
 def test_thread_bounds_follow_the_nodes_limits_by_hand() -> None:
     limits = {"max_connections": 64, "max_agents": 100, "connection_workers_max": 128}
     # 7 outside the pools + 128 connection workers + 100 agents + 100 messages + 2 notices + 8
-    assert hostile.thread_ceiling(7, limits) == 345
+    assert verdict.thread_ceiling(7, limits) == 345
     # 7 + 8 (connections) + 8 (agents) + 8 (messages) + 2 (notices, at most 2) + 4
-    assert hostile.settled_bound(7, limits) == 37
+    assert verdict.settled_bound(7, limits) == 37
     small = {"max_connections": 2, "max_agents": 3, "connection_workers_max": 16}
-    assert hostile.settled_bound(5, small) == 5 + 8 + 3 + 3 + 2 + 4
+    assert verdict.settled_bound(5, small) == 5 + 8 + 3 + 3 + 2 + 4
 
 
 def test_each_criterion_can_fail() -> None:
-    assert hostile._misses(_phase(), QUIET) == []
+    assert verdict.misses(_phase(), QUIET) == []
     cases = {
         "threads 6.0 s after": _phase(threads={"settled": 38}),
         "peak of 345 threads": _phase(threads={"peak": 345}),
@@ -198,7 +198,7 @@ def test_each_criterion_can_fail() -> None:
         "1 hops failed": _phase(hops={"failed": 1}),
     }
     for needle, p in cases.items():
-        why = hostile._misses(p, QUIET)
+        why = verdict.misses(p, QUIET)
         assert len(why) == 1 and needle in why[0], (needle, why)
 
 
@@ -206,8 +206,8 @@ def test_settled_threads_fail_when_warm_pools_are_not_allowed(monkeypatch) -> No
     # Control on real processes: with no idle worker allowed to stay warm and no slack, the
     # pool workers that the clone bomb's agents needed stay in the settled count, and the
     # phase fails on threads, naming the pools.
-    monkeypatch.setattr(hostile, "KEEP_WARM", 0)
-    monkeypatch.setattr(hostile, "SETTLED_SLACK", 0)
+    monkeypatch.setattr(verdict, "KEEP_WARM", 0)
+    monkeypatch.setattr(verdict, "SETTLED_SLACK", 0)
     r = hostile.run(hostile.HostileConfig(duration_s=3, settle_s=0.5, pool_idle_s=1,
                                           threads_wait_s=1, wave_s=2), ("clone",))
     quiet, clone = r["phases"]

@@ -1,7 +1,7 @@
-"""``dfrl bench hostile``: its options and its output (registered in ``experiments/cli/bench.py``).
+"""``dfrl bench hostile``: its options and its output (registered in :mod:`.bench`).
 
-The command layer of :mod:`dfrl.experiments.tools.bench.hostile`: it alone prints and chooses the
-exit status (0 every phase met its targets, 1 one did not or the benchmark failed).
+The command layer of :mod:`dfrl.experiments.tools.bench.hostile`: it alone prints and chooses
+the exit status (0 every phase met its targets, 1 one did not or the benchmark failed).
 """
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import argparse
 import json
 import sys
 
-from dfrl.experiments.tools.bench import hostile
+from dfrl.experiments.tools.bench import hostile, hostile_verdict as verdict
 from dfrl.experiments.tools.bench.hostile_attacks import FRAME_KINDS
 
 D = hostile.HostileConfig()
@@ -94,7 +94,7 @@ def cmd(args: argparse.Namespace) -> int:
         threads_wait_s=args.threads_wait, pool_idle_s=args.pool_idle)
     try:
         r = hostile.run(cfg, tuple(args.attacks))
-    except (ValueError, RuntimeError, FileNotFoundError) as exc:
+    except (ValueError, RuntimeError) as exc:         # ExperimentError is a RuntimeError
         print(f"dfrl bench hostile: {exc}", file=sys.stderr)
         return 1
     if args.json:
@@ -127,10 +127,10 @@ def cmd(args: argparse.Namespace) -> int:
             for why in p["why"]:
                 print(f"{'':10s} missed: {why}")
         print(f"overall: {'pass' if r['pass'] else 'FAIL'} (every hop succeeding, p90 < "
-              f"{hostile.P90_RATIO_MAX:g}x quiet, RSS within {hostile.RSS_DELTA_MAX_MB:g} MB, "
-              f"an ordinary agent accepted within {hostile.ACCEPT_MAX_S:g} s, threads under "
+              f"{verdict.P90_RATIO_MAX:g}x quiet, RSS within {verdict.RSS_DELTA_MAX_MB:g} MB, "
+              f"an ordinary agent accepted within {verdict.ACCEPT_MAX_S:g} s, threads under "
               f"the ceiling and back to the settled bound, CPU within "
-              f"{hostile.CPU_MARGIN:g} cores of quiet, no escape; {r['wall_s']} s)")
+              f"{verdict.CPU_MARGIN:g} cores of quiet, no escape; {r['wall_s']} s)")
     return 0 if r["pass"] else 1
 
 
