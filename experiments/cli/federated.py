@@ -13,7 +13,8 @@ from pathlib import Path
 
 from typing import Any
 
-from dfrl.experiments.driver.config import ConfigError, ExperimentConfig, Mode, resolve_config
+from dfrl.experiments.driver.config import ConfigError, ExperimentConfig, resolve_config
+from dfrl.experiments.robot_host.config import Mode
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.tokens import TokenError, pop_env_tokens, read_token_file
 from dfrl.experiments.driver.results.files import claim_output, new_run_folder
@@ -68,7 +69,7 @@ def add_tls_argument(p: argparse.ArgumentParser) -> None:
                    help="mutual TLS with the node certificate in DIR (ca.crt, node.crt, "
                         "node.key from 'dfrl certs node'): the console node and every robot "
                         "process spawned on this host use it (one credential for all local "
-                        "processes); remote robots (\"node\": \"HOST:PORT\") must run "
+                        "processes); remote robots (\"robot_host\": \"HOST:PORT\") must run "
                         "'dfrl robot --tls' with a certificate of the same CA "
                         "(default: none, plaintext)")
 
@@ -94,7 +95,7 @@ def run_token(cfg: ExperimentConfig, args: argparse.Namespace) -> ExperimentConf
     """
     path = getattr(args, "token_file", None)
     tokens = read_token_file(path) if path is not None else pop_env_tokens()
-    return cfg.replace(token=tokens[0]) if tokens else cfg
+    return cfg.with_token(tokens[0]) if tokens else cfg
 
 
 def overrides_of(args: argparse.Namespace) -> dict[str, Any]:
@@ -111,12 +112,6 @@ def overrides_of(args: argparse.Namespace) -> dict[str, Any]:
         changes["method"] = args.method
         changes["methods"] = {}
     return changes
-
-
-def apply_overrides(cfg: ExperimentConfig, args: argparse.Namespace) -> ExperimentConfig:
-    """``cfg`` with the override flags that were given (checked like a config)."""
-    changes = overrides_of(args)
-    return ExperimentConfig.from_dict({**cfg.to_dict(), **changes}) if changes else cfg
 
 
 def print_results(results: Results) -> None:
@@ -298,13 +293,14 @@ def cmd_join(args: argparse.Namespace) -> int:
         return rc
     try:
         info = join_robot(args.results_dir, args.robot, args.arena, args.algo,
-                          iterations=args.iterations, seed=args.seed, node=args.node, tls=tls)
+                          iterations=args.iterations, seed=args.seed, node=args.robot_host,
+                          tls=tls)
     except ConfigError as exc:
         return config_error("dfrl join", exc)
     except (ExperimentError, ValueError) as exc:
         print(f"dfrl join: {exc}", file=sys.stderr)
         return 1
-    where = f"robot node {info['node']}" if info.get("node") else f"pid {info['pid']}"
+    where = f"robot host {info['node']}" if info.get("node") else f"pid {info['pid']}"
     print(f"robot {args.robot} runs at {info['host']}:{info['port']} ({where}); "
           f"the agent includes it from its next round")
     return 0
@@ -356,8 +352,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="iterations (default: the experiment's)")
     p.add_argument("--seed", type=int, default=None,
                    help="robot seed (default: the experiment seed + its position)")
-    p.add_argument("--node", default=None, metavar="HOST:PORT",
-                   help="a running `dfrl robot` to run the robot on (default: a new robot "
-                        "process on the launcher's host)")
+    p.add_argument("--robot-host", "--node", dest="robot_host", default=None,
+                   metavar="HOST:PORT",
+                   help="a running `dfrl robot` service to run the robot on (--node: its old "
+                        "name; default: a new robot process on the launcher's host)")
     add_driver_tls_argument(p)
     p.set_defaults(func=cmd_join)

@@ -1,141 +1,30 @@
-"""Experiment and robot-node configuration: the dataclasses, their JSON form, where configs
-live; every check is in :mod:`dfrl.experiments.driver.config_check`, the generic dataclass <-> dict
-helpers in :mod:`dfrl.experiments.driver.config_dicts`. :class:`ExperimentConfig` (with its
-:class:`RobotSpec` and :class:`JoinSpec` entries) defines a federated experiment and is saved
-as ``config.json`` beside its results; :class:`RobotConfig` is
-what the launcher hands one robot node process. :func:`resolve_config` finds a config file by
-path or by the name of a shipped one (``experiments/configs``).
+"""Experiment configuration: :class:`ExperimentConfig` (with its :class:`RobotSpec` and
+:class:`JoinSpec` entries) defines a federated experiment and is saved as ``config.json`` beside
+its results; :func:`resolve_config` finds a config file by path or by the name of a shipped one
+(``experiments/configs``). Every check is in :mod:`dfrl.experiments.driver.config_check`; the
+config of one robot process is :class:`dfrl.experiments.robot_host.config.RobotConfig`.
+
+A config is checked once: :meth:`ExperimentConfig.from_dict` (and :meth:`~ExperimentConfig.load`)
+check its JSON form as a whole and build it without checking again; a config built in Python
+checks itself in ``__post_init__``; :meth:`~ExperimentConfig.check` loads the arenas unless that
+was done already; :meth:`~ExperimentConfig.with_token` checks the token alone.
 """
 from __future__ import annotations
 
 import dataclasses
 import json
 from dataclasses import dataclass, field
-from enum import Enum
 from pathlib import Path
 from typing import Any
 
-from dfrl.experiments.driver.config_check import (BUILTIN_METHODS, ConfigError, check_experiment,
-                                           check_node)
-from dfrl.experiments.driver.config_dicts import config_from_dict, config_to_dict, raw_fields
+from dfrl.experiments.config_rules import (ConfigError, check_value, checked, is_checked,
+                                           json_form, raise_problems, to_json_dict, token_rule)
+from dfrl.experiments.driver.config_check import (BUILTIN_METHODS, COMMENT_KEYS,
+                                                  check_experiment, host_port_problem)
+from dfrl.experiments.robot_host.config import DEFAULT_ITERATIONS, Mode, boundaries
 
-__all__ = ["BUILTIN_METHODS", "ConfigError", "ExperimentConfig", "JoinSpec", "Mode",
-           "RobotConfig", "RobotSpec", "boundaries", "parse_node", "resolve_config"]
-
-
-class Mode(str, Enum):
-    """How robots pace themselves against the agent."""
-
-    ASYNC = "async"
-    SYNC = "sync"
-
-
-@dataclass(frozen=True)
-class RobotConfig:
-    """Everything one robot node process needs (written as JSON by the launcher).
-
-    Attributes
-    ----------
-    robot : str
-        Robot id, an atom in Prolog (``r1``).
-    out_dir : str
-        Results folder (metrics and shares CSVs are written there).
-    arena, algo, seed, iterations
-        Training run (see :class:`dfrl.robots.training.TrainerConfig`).
-    respite : int
-        Iterations between two shares (sync boundaries).
-    mode : Mode
-    rtf : float or None
-        Real-time factor: 1.0 = one iteration per 64 ms of wall time; None or 0 = flat out.
-    token : int, str or None
-        Platform token agents must carry. None (the default, and always in the file the
-        launcher writes: :meth:`public_dict`): the process reads it from its environment
-        (``DFRL_TOKEN``, :mod:`dfrl.experiments.tokens`).
-    trainer : dict
-        Extra :class:`dfrl.robots.training.TrainerConfig` fields (``learner``,
-        ``discretisation``, ...).
-    grace_s : float
-        Seconds the node stays up after its last iteration (see module doc).
-    sync_timeout_s : float
-        Longest wait for a share at a sync boundary before training goes on without it.
-    progress_every : int
-        Iterations between two ``DFRL_PROGRESS`` lines (0: none).
-    events : bool
-        Print ``DFRL_EVENT`` lines.
-    bench_table : list of int or None
-        ``[S, A]``: no simulation; serve a random table of that shape until stdin closes.
-    host, tls : str, str or None
-        Address to bind; a node's TLS folder (``dfrl certs node``; None: plaintext).
-    eval_every, eval_steps : int
-        Greedy evaluation of the table every ``eval_every`` iterations (0: none) for
-        ``eval_steps`` control steps, in an environment of its own (:mod:`.robot_node.evaluate`).
-    """
-
-    robot: str
-    out_dir: str
-    arena: str = "r4"
-    algo: str = "qlearning"
-    seed: int = 0
-    iterations: int = 8000
-    respite: int = 500
-    mode: Mode = Mode.ASYNC
-    rtf: float | None = None
-    token: int | str | None = None
-    trainer: dict[str, Any] = field(default_factory=dict)
-    grace_s: float = 10.0
-    sync_timeout_s: float = 300.0
-    progress_every: int = 100
-    events: bool = True
-    bench_table: list[int] | None = None
-    host: str = "127.0.0.1"
-    tls: str | None = None
-    eval_every: int = 0
-    eval_steps: int = 500
-
-    def __post_init__(self) -> None:
-        problems = check_node(raw_fields(self))
-        if problems:
-            raise ConfigError(problems)
-        object.__setattr__(self, "mode", Mode(self.mode))
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (the token included: :meth:`public_dict` for files)."""
-        return config_to_dict(self)
-
-    def public_dict(self) -> dict[str, Any]:
-        """:meth:`to_dict` without the token: what a results file or a peer may see."""
-        return _without_token(config_to_dict(self))
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "RobotConfig":
-        """Inverse of :meth:`to_dict` (unknown keys are an error)."""
-        return config_from_dict(cls, data, check_node(data))
-
-    def trainer_config(self):  # noqa: ANN201 - TrainerConfig (imported lazily)
-        """The :class:`dfrl.robots.training.TrainerConfig` of this robot."""
-        from dfrl.robots.training import TrainerConfig
-
-        base = TrainerConfig().to_dict()
-        base.update(self.trainer)
-        base.update(arena=self.arena, algo=self.algo, seed=self.seed, iterations=self.iterations)
-        return TrainerConfig.from_dict(base)
-
-
-def _without_token(data: dict[str, Any]) -> dict[str, Any]:
-    data.pop("token", None)
-    return data
-
-
-def boundaries(iterations: int, respite: int) -> list[int]:
-    """Iterations at which a sync robot waits for a share: ``k * respite`` and the last one.
-
-    >>> boundaries(1200, 500)
-    [500, 1000, 1200]
-    """
-    points = list(range(respite, iterations + 1, respite))
-    if iterations > 0 and (not points or points[-1] != iterations):
-        points.append(iterations)
-    return points
+__all__ = ["BUILTIN_METHODS", "CONFIGS_DIR", "ConfigError", "ExperimentConfig", "JoinSpec",
+           "RobotSpec", "parse_host_port", "resolve_config"]
 
 
 @dataclass(frozen=True)
@@ -152,40 +41,41 @@ class RobotSpec:
         ``qlearning`` or ``sarsa``.
     seed : int or None
         None: the experiment seed plus the robot's position in the list.
-    node : str or None
-        ``"HOST:PORT"`` of an already running ``dfrl robot`` that runs this robot (configured
-        over the platform); None: the launcher spawns a robot process on its own host.
+    robot_host : str or None
+        ``"HOST:PORT"`` of an already running ``dfrl robot`` service that runs this robot
+        (configured over the platform); None: the launcher spawns a robot process on its own
+        host.
     """
 
     id: str
     arena: str
     algo: str = "qlearning"
     seed: int | None = None
-    node: str | None = None
+    robot_host: str | None = None
 
     def __post_init__(self) -> None:
-        raw = raw_fields(self)
-        problems = check_experiment({"robots": [raw]}, resources=False)
-        if problems:
-            raise ConfigError([p.removeprefix("robots[0].") for p in problems])
+        if not is_checked():
+            problems = check_experiment({"robots": [json_form(self)]}, resources=False)
+            raise_problems([p.removeprefix("robots[0].") for p in problems])
 
     @property
-    def node_address(self) -> tuple[str, int] | None:
+    def robot_host_address(self) -> tuple[str, int] | None:
         """``(host, port)`` of the robot's ``dfrl robot`` service, None when spawned locally."""
-        return parse_node(self.node) if self.node is not None else None
+        return parse_host_port(self.robot_host) if self.robot_host is not None else None
 
 
-def parse_node(text: str) -> tuple[str, int]:
-    """``"HOST:PORT"`` -> ``(host, port)``, e.g. ``('10.0.0.7', 7001)``.
+def parse_host_port(text: str) -> tuple[str, int]:
+    """``"HOST:PORT"`` (of a robot host) -> ``(host, port)``, e.g. ``('10.0.0.7', 7001)``.
 
     Raises
     ------
     ValueError
         Not a host and a port 1..65535.
     """
-    host, sep, port = str(text).rpartition(":")
-    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
-        raise ValueError(f"robot node {text!r}: use HOST:PORT, e.g. 10.0.0.7:7001")
+    why = host_port_problem(str(text))
+    if why is not None:
+        raise ValueError(why)
+    host, _, port = str(text).rpartition(":")
     return host.strip("[]"), int(port)
 
 
@@ -261,7 +151,7 @@ class ExperimentConfig:
 
     name: str = "experiment"
     robots: tuple[RobotSpec, ...] = ()
-    iterations: int = 8000
+    iterations: int = DEFAULT_ITERATIONS
     respite: int = 500
     seed: int = 1
     mode: Mode = Mode.SYNC
@@ -282,36 +172,28 @@ class ExperimentConfig:
     eval_steps: int = 500
 
     def __post_init__(self) -> None:
-        raw = raw_fields(self)
-        raw["robots"] = [raw_fields(r) if isinstance(r, RobotSpec) else r for r in self.robots]
-        raw["joins"] = [{"robot": j.robot, "after_round": j.after_round}
-                        if isinstance(j, JoinSpec) else j for j in self.joins]
-        raw["joins"] = [dict(j, robot=raw_fields(j["robot"])) if isinstance(j, dict)
-                        and isinstance(j.get("robot"), RobotSpec) else j for j in raw["joins"]]
-        problems = check_experiment(raw, resources=False)
-        if problems:
-            raise ConfigError(problems)
-        object.__setattr__(self, "mode", Mode(self.mode))
-        object.__setattr__(self, "robots", tuple(
-            r if isinstance(r, RobotSpec) else RobotSpec(**r) for r in self.robots))
-        object.__setattr__(self, "joins", tuple(
-            j if isinstance(j, JoinSpec) else
-            JoinSpec(robot=j["robot"] if isinstance(j["robot"], RobotSpec)
-                     else RobotSpec(**j["robot"]),
-                     after_round=int(j.get("after_round", 1)))
-            for j in self.joins))
+        if not is_checked():
+            raise_problems(check_experiment(json_form(self), resources=False))
+        with checked():                 # the entries were part of the whole
+            object.__setattr__(self, "mode", Mode(self.mode))
+            object.__setattr__(self, "robots", tuple(_robot(r) for r in self.robots))
+            object.__setattr__(self, "joins", tuple(
+                j if isinstance(j, JoinSpec) else
+                JoinSpec(robot=_robot(j["robot"]), after_round=int(j.get("after_round", 1)))
+                for j in self.joins))
 
     def check(self) -> None:
-        """Check what :meth:`from_dict` leaves to run time: every arena exists and parses.
+        """Check what :meth:`from_dict` may leave to run time: every arena exists and parses
+        (nothing when that was checked already, by :meth:`load` or an earlier call).
 
         Raises
         ------
         ConfigError
             With every problem and its key path.
         """
-        problems = check_experiment(self.to_dict(), resources=True)
-        if problems:
-            raise ConfigError(problems)
+        if not getattr(self, "_arenas_checked", False):
+            raise_problems(check_experiment(self.to_dict(), resources=True))
+            object.__setattr__(self, "_arenas_checked", True)
 
     # -- derived -------------------------------------------------------------------------------
     @property
@@ -321,7 +203,7 @@ class ExperimentConfig:
 
     def remote_robots(self) -> list[RobotSpec]:
         """Robots (and joiners) that run on an already running ``dfrl robot``."""
-        return [r for r in list(self.robots) + [j.robot for j in self.joins] if r.node]
+        return [r for r in list(self.robots) + [j.robot for j in self.joins] if r.robot_host]
 
     def algorithms(self) -> list[str]:
         """Algorithms in order of first appearance (one agent each)."""
@@ -352,11 +234,13 @@ class ExperimentConfig:
     # -- (de)serialisation ---------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (the token included: :meth:`public_dict` for files)."""
-        return config_to_dict(self)
+        return to_json_dict(self)
 
     def public_dict(self) -> dict[str, Any]:
         """:meth:`to_dict` without the token: what ``config.json`` of a results folder holds."""
-        return _without_token(config_to_dict(self))
+        data = to_json_dict(self)
+        data.pop("token", None)
+        return data
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], resources: bool = False) -> "ExperimentConfig":
@@ -367,7 +251,11 @@ class ExperimentConfig:
         ------
         ConfigError
         """
-        return config_from_dict(cls, data, check_experiment(data, resources=resources))
+        raise_problems(check_experiment(data, resources=resources))
+        with checked():
+            cfg = cls(**{k: v for k, v in data.items() if k not in COMMENT_KEYS})
+        object.__setattr__(cfg, "_arenas_checked", resources)
+        return cfg
 
     @classmethod
     def load(cls, path: str | Path, overrides: dict[str, Any] | None = None,
@@ -393,7 +281,26 @@ class ExperimentConfig:
             raise ConfigError(exc.problems, str(path)) from None
 
     def replace(self, **changes: Any) -> "ExperimentConfig":
+        """A copy with ``changes``, checked as a whole (as a config built in Python)."""
         return dataclasses.replace(self, **changes)
+
+    def with_token(self, token: int | str | None) -> "ExperimentConfig":
+        """A copy with ``token``, only the token checked (the rest was, and has not changed).
+
+        Raises
+        ------
+        ConfigError
+            ``token: not a token: ...``.
+        """
+        raise_problems(check_value("token", token, token_rule()))
+        with checked():
+            cfg = dataclasses.replace(self, token=token)
+        object.__setattr__(cfg, "_arenas_checked", getattr(self, "_arenas_checked", False))
+        return cfg
+
+
+def _robot(entry: RobotSpec | dict[str, Any]) -> RobotSpec:
+    return entry if isinstance(entry, RobotSpec) else RobotSpec(**entry)
 
 
 CONFIGS_DIR: Path = Path(__file__).resolve().parent.parent / "configs"

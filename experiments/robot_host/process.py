@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 from typing import Any, TextIO
 
-from dfrl.experiments.driver.config import Mode, RobotConfig
+from dfrl.experiments.robot_host.config import Mode, RobotConfig
 from dfrl.experiments.robot_host.lines import ProtocolLines, StdinWatch
 from dfrl.experiments.robot_host.training import Training
 from dfrl.experiments.tokens import TOKEN_ENV, pop_env_tokens

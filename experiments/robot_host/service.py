@@ -27,7 +27,7 @@ from enum import Enum
 from pathlib import Path
 from typing import Any, TextIO
 
-from dfrl.experiments.driver.config import Mode, RobotConfig
+from dfrl.experiments.robot_host.config import Mode, RobotConfig
 from dfrl.experiments.robot_host.lines import ProtocolLines
 from dfrl.experiments.robot_host.process import load_agent_program
 from dfrl.experiments.robot_host.training import Training

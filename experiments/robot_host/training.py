@@ -18,7 +18,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from dfrl.experiments.driver.config import Mode, RobotConfig, boundaries
+from dfrl.experiments.robot_host.config import Mode, RobotConfig, boundaries
 from dfrl.experiments.robot_host.checkpoint import (
     checkpoint_of,
     load_checkpoint,

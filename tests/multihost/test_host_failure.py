@@ -35,7 +35,7 @@ def test_a_killed_robot_host_is_skipped_and_reported(tmp_path: Path) -> None:
             wait_line(procs[h], "dfrl robot listening on", 60)
         cfg = {"name": "fail", "iterations": 600, "respite": 100, "mode": "sync", "rtf": 4.0,
                "token": TOKEN, "timeout_s": 120,
-               "robots": [{"id": f"r{i}", "arena": a, "node": f"{lab[h].address}:7001"}
+               "robots": [{"id": f"r{i}", "arena": a, "robot_host": f"{lab[h].address}:7001"}
                           for i, (h, a) in enumerate(zip(("h1", "h2", "h3"),
                                                          ("r1", "r4", "r2")), 1)]}
         drv = tmp_path / "driver"

@@ -19,7 +19,8 @@ from pathlib import Path
 from typing import Callable
 
 import dfrl
-from dfrl.experiments.driver.config import RobotConfig, RobotSpec
+from dfrl.experiments.driver.config import RobotSpec
+from dfrl.experiments.robot_host.config import RobotConfig
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.driver.results.files import write_json
 from dfrl.experiments.robot_host.lines import Evaluation, Sample, parse_eval, parse_sample

@@ -40,7 +40,7 @@ def join(state: RunState, spec: JoinSpec, agent: str, remaining: int, done: int)
     state.say(f"robot {rid} ({spec.robot.arena}, {remaining} iterations) joins {agent} "
               f"after round {done}")
     return {"robot": rid, "algo": spec.robot.algo, "arena": spec.robot.arena, "host": host,
-            "port": port, "pid": child.pid, "node": spec.robot.node, "joined": True}
+            "port": port, "pid": child.pid, "node": spec.robot.robot_host, "joined": True}
 
 
 def _due(state: RunState, spec: JoinSpec) -> tuple[str | None, str | None]:

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import time
 
-from dfrl.experiments.driver.config import Mode
+from dfrl.experiments.robot_host.config import Mode
 from dfrl.experiments.driver.launcher.joins import handle_joins
 from dfrl.experiments.driver.launcher.spawn import rest_s
 from dfrl.experiments.driver.launcher.state import RunState

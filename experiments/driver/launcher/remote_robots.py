@@ -25,7 +25,8 @@ from collections import deque
 from pathlib import Path, PurePosixPath
 from typing import Any
 
-from dfrl.experiments.driver.config import ExperimentConfig, RobotConfig, RobotSpec
+from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec
+from dfrl.experiments.robot_host.config import RobotConfig
 from dfrl.experiments.driver.console_node import ConsoleNode
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.robot_host.lines import Evaluation, Sample, parse_eval, parse_sample
@@ -66,7 +67,7 @@ def console_host(config: ExperimentConfig) -> str:
         return config.console
     remote = config.remote_robots()
     if remote:
-        host, port = remote[0].node_address or ("127.0.0.1", 9)
+        host, port = remote[0].robot_host_address or ("127.0.0.1", 9)
         return route_source(host, port)
     return "127.0.0.1"
 
@@ -122,10 +123,10 @@ class RemoteRobot:
 
     def __init__(self, robot: RobotSpec, cfg: RobotConfig, console: ConsoleNode,
                  experiment: str) -> None:
-        assert robot.node_address is not None
+        assert robot.robot_host_address is not None
         self.robot = robot
         self.cfg = cfg
-        self.node = robot.node_address
+        self.node = robot.robot_host_address
         self.console = console
         self.experiment = experiment
         self.address: tuple[str, int] | None = None

@@ -4,7 +4,8 @@ from __future__ import annotations
 import os
 import time
 
-from dfrl.experiments.driver.config import Mode, RobotConfig, RobotSpec
+from dfrl.experiments.driver.config import RobotSpec
+from dfrl.experiments.robot_host.config import Mode, RobotConfig
 from dfrl.experiments.driver.launcher.agents import agent_name, launch_agent
 from dfrl.experiments.driver.launcher.children import RobotChild
 from dfrl.experiments.driver.launcher.remote_robots import RemoteRobot
@@ -33,7 +34,7 @@ def node_config(state: RunState, robot: RobotSpec, iterations: int) -> RobotConf
                       host=state.console_host,
                       eval_every=c.eval_every, eval_steps=c.eval_steps,
                       # a remote robot has its own TLS folder (dfrl robot --tls): not ours
-                      tls=str(state.tls) if state.tls is not None and robot.node is None
+                      tls=str(state.tls) if state.tls is not None and robot.robot_host is None
                       else None)
 
 
@@ -47,7 +48,7 @@ def spawn(state: RunState, robot: RobotSpec, iterations: int) -> RobotChild | Re
         A remote robot could not be configured or started.
     """
     cfg = node_config(state, robot, iterations)
-    if robot.node is None:
+    if robot.robot_host is None:
         child: RobotChild | RemoteRobot = RobotChild(robot, cfg, state.out, state.on_event)
     else:
         assert state.console is not None
@@ -63,7 +64,7 @@ def write_nodes(state: RunState) -> None:
     plaintext), every node that is up and every agent; never the token (``secret.token``)."""
     nodes = [{"robot": rid, "algo": ch.robot.algo, "arena": ch.robot.arena,
               "host": ch.address[0], "port": ch.address[1], "pid": ch.pid,
-              "node": ch.robot.node, "joined": rid in state.joined}
+              "node": ch.robot.robot_host, "joined": rid in state.joined}
              for rid, ch in state.children.items() if ch.address is not None]
     console = list(state.console.address) if state.console is not None else None
     write_json(state.out / "nodes.json", {"console": console,

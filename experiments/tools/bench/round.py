@@ -21,7 +21,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from dfrl.experiments.driver.config import RobotConfig, RobotSpec
+from dfrl.experiments.driver.config import RobotSpec
+from dfrl.experiments.robot_host.config import RobotConfig
 from dfrl.experiments.driver.launcher.agents import launch_agent, open_console
 from dfrl.experiments.driver.launcher.children import RobotChild, await_ready
 from dfrl.experiments.driver.results.agent_log import read_rounds_log

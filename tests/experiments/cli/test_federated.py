@@ -10,8 +10,8 @@ from typing import Any
 import pytest
 
 from dfrl.experiments.cli import main
-from dfrl.experiments.driver.config import ConfigError, ExperimentConfig, RobotConfig
-from dfrl.experiments.driver.config_check import check_node
+from dfrl.experiments.driver.config import ConfigError, ExperimentConfig
+from dfrl.experiments.robot_host.config import RobotConfig, check_robot_config
 from dfrl.experiments.driver.results.files import claim_output, new_run_folder
 
 
@@ -93,12 +93,12 @@ def test_unknown_method_config_and_flag(tmp_path: Path,
 def test_ranges_unique_ids_and_nodes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     cfg = smoke(respite=0, rtf=0, timeout_s=-1, tolerate_lost_robots=-1)
     cfg["robots"][1]["id"] = "r1"
-    cfg["robots"].append({"id": "R3", "arena": "r2", "node": "nohost"})
+    cfg["robots"].append({"id": "R3", "arena": "r2", "robot_host": "nohost"})
     assert_refused(tmp_path, *run_cli(tmp_path, cfg, capsys),
                    "respite: must be >= 1, got 0", "rtf: must be > 0, got 0 (null means flat out)",
                    "timeout_s: must be > 0", "tolerate_lost_robots: must be >= 0",
                    "robots[1].id: robot id 'r1' is already used by robots[0]",
-                   "robots[2].id: robot id 'R3'", "robots[2].node: robot node 'nohost'")
+                   "robots[2].id: robot id 'R3'", "robots[2].robot_host: robot host 'nohost'")
 
 
 def test_every_problem_at_once(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -148,7 +148,7 @@ def test_join_bad_robot_id_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[
 
 
 def test_node_config_checked() -> None:
-    problems = check_node({"robot": "r1", "out_dir": "x", "iterations": -1, "rtf": -2,
+    problems = check_robot_config({"robot": "r1", "out_dir": "x", "iterations": -1, "rtf": -2,
                            "bench_table": [5], "events": "yes", "mode": "fast"})
     text = "\n".join(problems)
     for located in ("iterations: must be >= 0", "rtf: must be >= 0", "bench_table: expected",

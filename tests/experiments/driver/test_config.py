@@ -1,10 +1,20 @@
-"""Experiment and node configurations: round trips, validation, shipped configs, boundaries."""
+"""Experiment and robot process configurations: round trips, validation, shipped configs,
+boundaries, the renamed robot_host key, one check per run."""
 from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
-from dfrl.experiments.driver.config import ExperimentConfig, RobotConfig, RobotSpec, boundaries
+from dfrl.experiments.driver import config as config_module
+from dfrl.experiments.driver.config import (ConfigError, ExperimentConfig, RobotSpec,
+                                            parse_host_port)
+from dfrl.experiments.robot_host.config import RobotConfig, boundaries
 from dfrl.experiments.robot_host import table_digest
 
 
@@ -43,3 +53,85 @@ def test_shipped_configs_load() -> None:
             "paper_sarsa_max", "hetero", "join"} <= set(names)
     for p in CONFIGS_DIR.glob("*.json"):
         ExperimentConfig.load(p)
+
+
+def test_renamed_node_key_is_located_and_named() -> None:
+    data = {"robots": [{"id": "r1", "arena": "r1"}, {"id": "r2", "arena": "r4"},
+                       {"id": "r3", "arena": "r2", "node": "10.0.0.7:7001"}],
+            "joins": [{"robot": {"id": "r4", "arena": "r1", "node": "10.0.0.8:7001"}}]}
+    with pytest.raises(ConfigError) as info:
+        ExperimentConfig.from_dict(data)
+    assert info.value.problems == [
+        "robots[2].node: renamed robot_host (HOST:PORT of a dfrl robot service)",
+        "joins[0].robot.node: renamed robot_host (HOST:PORT of a dfrl robot service)"]
+    data["robots"][2] = {"id": "r3", "arena": "r2", "robot_host": "10.0.0.7:7001"}
+    data["joins"][0]["robot"] = {"id": "r4", "arena": "r1", "robot_host": "[::1]:7002"}
+    cfg = ExperimentConfig.from_dict(data)
+    assert cfg.robots[2].robot_host_address == ("10.0.0.7", 7001)
+    assert cfg.joins[0].robot.robot_host_address == ("::1", 7002)
+    assert [r.id for r in cfg.remote_robots()] == ["r3", "r4"]
+    assert parse_host_port("h:1") == ("h", 1)
+    with pytest.raises(ValueError, match="robot host 'h:0': use HOST:PORT"):
+        parse_host_port("h:0")
+
+
+def counting(monkeypatch: pytest.MonkeyPatch) -> list[bool]:
+    """Count the checks of an experiment config's JSON form (one entry each: ``resources``)."""
+    calls: list[bool] = []
+    real = config_module.check_experiment
+
+    def check(data: Any, resources: bool = True) -> list[str]:
+        calls.append(resources)
+        return real(data, resources=resources)
+
+    monkeypatch.setattr(config_module, "check_experiment", check)
+    return calls
+
+
+def test_a_loaded_config_is_checked_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    path = tmp_path / "cfg.json"
+    path.write_text(json.dumps({"comment": "two robots", "iterations": 300, "respite": 100,
+                                "robots": [{"id": "r1", "arena": "r1"},
+                                           {"id": "r2", "arena": "r4", "algo": "sarsa"}],
+                                "joins": [{"robot": {"id": "r3", "arena": "r2"}}]}))
+    calls = counting(monkeypatch)
+    cfg = ExperimentConfig.load(path, {"seed": 4})
+    cfg.check()                                     # the arenas were loaded by load()
+    cfg = cfg.with_token("dfrl_" + "a" * 64)        # the token alone is checked
+    cfg.check()
+    assert calls == [True]
+    assert cfg.seed == 4 and cfg.joins[0].robot.arena == "r2"
+    with pytest.raises(ConfigError, match="token: not a token"):
+        cfg.with_token("two words")
+    cfg.replace(seed=5).check()                     # a change: checked as a whole again
+    assert calls == [True, False, True]
+
+
+def test_dfrl_run_checks_the_config_once(tmp_path: Path,
+                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    from dfrl.experiments import cli
+    from dfrl.experiments.driver import launcher
+    from dfrl.experiments.errors import ExperimentError
+
+    seen: list[ExperimentConfig] = []
+
+    def fake_run(cfg: ExperimentConfig, out: Path, **_: Any) -> None:
+        cfg.check()                                  # what the launcher does first
+        seen.append(cfg.with_token(cfg.token if cfg.token is not None else 7))
+        raise ExperimentError("stopped before anything started")
+
+    path = tmp_path / "cfg.json"
+    path.write_text(json.dumps({"robots": [{"id": "r1", "arena": "r1"}], "iterations": 100}))
+    monkeypatch.setattr(launcher, "run", fake_run)
+    monkeypatch.chdir(tmp_path)
+    calls = counting(monkeypatch)
+    assert cli.main(["run", str(path), "--seed", "3"]) == 1
+    assert calls == [True] and seen[0].seed == 3
+
+
+def test_robot_host_needs_nothing_of_the_driver() -> None:
+    code = ("import sys, dfrl.experiments.robot_host.config, dfrl.experiments.robot_host.service;"
+            "print(sorted(m for m in sys.modules if '.driver' in m))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.strip() == "[]"

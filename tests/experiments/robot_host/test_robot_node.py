@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from dfrl.experiments.driver.config import RobotConfig
+from dfrl.experiments.robot_host.config import RobotConfig
 from dfrl.experiments.robot_host.lines import parse_sample
 
 REPO = Path(__file__).resolve().parents[3]

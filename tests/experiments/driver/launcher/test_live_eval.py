@@ -117,7 +117,7 @@ def test_remote_robot_evaluates_and_its_file_is_gathered(tmp_path: Path) -> None
         cfg = small_config(2, iterations=300, respite=100, eval_every=150, eval_steps=100,
                            token=1111)      # the remote robot's token
         cfg = cfg.replace(robots=(cfg.robots[0], RobotSpec("r2", "r4",
-                                                           node=f"127.0.0.1:{port}")))
+                                                           robot_host=f"127.0.0.1:{port}")))
         res = run(cfg, tmp_path / "out", progress=None)
         assert res.ok, diagnose(tmp_path / "out")
     finally:
@@ -164,7 +164,7 @@ def test_eval_line_round_trip_and_seed() -> None:
 def test_bad_eval_options_are_located(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                       monkeypatch: pytest.MonkeyPatch) -> None:
     from dfrl.experiments.cli import main
-    from dfrl.experiments.driver.config_check import check_node
+    from dfrl.experiments.robot_host.config import check_robot_config
 
     monkeypatch.chdir(tmp_path)
     cfg = {"name": "bad", "robots": [{"id": "r1", "arena": "r1"}], "iterations": 200,
@@ -184,7 +184,7 @@ def test_bad_eval_options_are_located(tmp_path: Path, capsys: pytest.CaptureFixt
         assert code == 2, err
         assert located in err and "nothing was started" in err, err
         assert not (tmp_path / "results").exists()
-    problems = "\n".join(check_node({"robot": "r1", "out_dir": "x", "eval_every": True,
+    problems = "\n".join(check_robot_config({"robot": "r1", "out_dir": "x", "eval_every": True,
                                      "eval_steps": -5}))
     assert "eval_every: expected an integer, got True (a boolean)" in problems, problems
     assert "eval_steps: must be >= 1, got -5" in problems, problems

@@ -39,7 +39,7 @@ def test_local_and_remote_robots_report_poses_and_progress(tmp_path: Path) -> No
         cfg = ExperimentConfig(name="samples", iterations=600, respite=200, seed=1,
                                mode="sync", rtf=6.0, token=TOKEN, timeout_s=120,
                                robots=(RobotSpec("r1", "r1"),
-                                       RobotSpec("r2", "r4", node=f"127.0.0.1:{port}")))
+                                       RobotSpec("r2", "r4", robot_host=f"127.0.0.1:{port}")))
         res = run(cfg, tmp_path / "out", progress=None)
         assert res.ok, res
     finally:

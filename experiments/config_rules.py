@@ -1,0 +1,255 @@
+"""What a config key may hold, and the checks every config shares (experiment and robot
+process): one problem per line with its key path, every problem of a config at once.
+
+A config is a frozen dataclass and its JSON form (:func:`json_form`); a checker takes the JSON
+form (a dict, as read from a file) and returns its problems, each a line such as
+``robots[1].algo: unknown algorithm 'dqn'; known: qlearning, sarsa``; :class:`ConfigError`
+carries such a list. :func:`check_keys` checks an object against a table of :class:`Rule`:
+unknown keys (with a "did you mean"), renamed keys, missing keys, types (``"2000"`` is not an
+integer, a bool is not a number), ranges and known values.
+
+A config is checked once: ``from_dict`` checks the JSON form, then builds the dataclass inside
+:func:`checked` so that ``__post_init__`` (the check of a config built in Python) is skipped
+for it and for the entries it builds.
+"""
+from __future__ import annotations
+
+import contextlib
+import contextvars
+import dataclasses
+import json
+import math
+import re
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from enum import Enum
+from typing import Any
+
+__all__ = ["ConfigError", "Rule", "check_keys", "check_robot_id", "check_trainer",
+           "check_value", "checked", "is_checked", "json_form", "known_algorithms",
+           "raise_problems", "to_json_dict", "token_rule"]
+
+_ROBOT_ID = re.compile(r"[a-z][a-z0-9_]*\Z")
+
+
+class ConfigError(ValueError):
+    """A configuration that cannot run; :attr:`problems` lists every problem, each with its key
+    path (``robots[1].algo: ...``), :attr:`source` the file (or None)."""
+
+    def __init__(self, problems: Sequence[str], source: str | None = None) -> None:
+        self.problems = list(problems)
+        self.source = source
+        super().__init__(self.text())
+
+    def text(self) -> str:
+        prefix = f"{self.source}: " if self.source else ""
+        return "\n".join(prefix + p for p in self.problems)
+
+
+def raise_problems(problems: Sequence[str]) -> None:
+    """Raise :class:`ConfigError` with ``problems`` unless there are none."""
+    if problems:
+        raise ConfigError(problems)
+
+
+# -- checked once ------------------------------------------------------------------------------
+_CHECKED: contextvars.ContextVar[bool] = contextvars.ContextVar("dfrl_config_checked",
+                                                                default=False)
+
+
+@contextlib.contextmanager
+def checked() -> Iterator[None]:
+    """Build configs whose JSON form was just checked as a whole: their ``__post_init__`` does
+    not check again (:func:`is_checked`; per thread)."""
+    token = _CHECKED.set(True)
+    try:
+        yield
+    finally:
+        _CHECKED.reset(token)
+
+
+def is_checked() -> bool:
+    """True inside :func:`checked` (in this thread)."""
+    return _CHECKED.get()
+
+
+def json_form(value: Any) -> Any:
+    """A config (or any value inside one) in its JSON form: dataclasses as dicts, enums as
+    their values, tuples as lists; other values as they are."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: json_form(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, Enum):
+        return value.value
+    if isinstance(value, (list, tuple)):
+        return [json_form(v) for v in value]
+    if isinstance(value, dict):
+        return {k: json_form(v) for k, v in value.items()}
+    return value
+
+
+def to_json_dict(cfg: Any) -> dict[str, Any]:
+    """:func:`json_form` of ``cfg``, whatever JSON cannot hold written as text."""
+    return json.loads(json.dumps(json_form(cfg), default=str))
+
+
+# -- rules -------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Rule:
+    """What one key may hold: ``kind`` (``int``, ``float``, ``str``, ``bool``, ``dict``,
+    ``list``), ``None`` allowed when ``nullable``, inclusive bounds ``low``/``high`` (``above``:
+    strictly greater), ``choices`` (a function returning the known values) named ``what``;
+    ``check`` (a function returning a problem or None) replaces the kind and bounds (a value of
+    more than one kind, such as a token)."""
+
+    kind: type
+    nullable: bool = False
+    low: float | None = None
+    above: float | None = None
+    high: float | None = None
+    choices: Callable[[], Sequence[str]] | None = None
+    what: str = "value"
+    hint: str = ""
+    check: Callable[[Any], str | None] | None = None
+
+
+_TYPE_NAMES = {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
+               list: "a list", dict: "an object", type(None): "null"}
+_EXPECT = {int: "an integer", float: "a number", str: "a string", bool: "true or false",
+           dict: "an object", list: "a list"}
+
+
+def _type_name(value: Any) -> str:
+    return _TYPE_NAMES.get(type(value), type(value).__name__)
+
+
+def _is_kind(value: Any, kind: type) -> bool:
+    if kind is bool:
+        return isinstance(value, bool)
+    if isinstance(value, bool):
+        return False
+    return isinstance(value, (int, float)) if kind is float else isinstance(value, kind)
+
+
+def check_value(path: str, value: Any, rule: Rule) -> list[str]:
+    """Problems of ``value`` at ``path`` against ``rule`` (empty: fine)."""
+    if value is None:
+        return [] if rule.nullable else [f"{path}: must not be null"]
+    if rule.check is not None:
+        why = rule.check(value)
+        return [] if why is None else [f"{path}: {why}"]
+    if not _is_kind(value, rule.kind):
+        return [f"{path}: expected {_EXPECT[rule.kind]}{' or null' if rule.nullable else ''}, "
+                f"got {value!r} ({_type_name(value)})"]
+    if rule.kind is float and not math.isfinite(value):
+        return [f"{path}: must be a finite number, got {value!r}"]
+    hint = f" ({rule.hint})" if rule.hint else ""
+    if rule.low is not None and value < rule.low:
+        return [f"{path}: must be >= {rule.low:g}, got {value!r}{hint}"]
+    if rule.above is not None and value <= rule.above:
+        return [f"{path}: must be > {rule.above:g}, got {value!r}{hint}"]
+    if rule.high is not None and value > rule.high:
+        return [f"{path}: must be <= {rule.high:g}, got {value!r}{hint}"]
+    if rule.choices is not None:
+        known = list(rule.choices())
+        if value not in known:
+            return [f"{path}: unknown {rule.what} {value!r}; known: {', '.join(known)}{hint}"]
+    return []
+
+
+def check_keys(path: str, data: Any, rules: Mapping[str, Rule], required: Sequence[str] = (),
+               extra: frozenset[str] = frozenset(),
+               renamed: Mapping[str, str] = {}) -> list[str]:
+    """Problems of object ``data``: not an object, unknown, renamed (``renamed`` maps an old
+    key to its note, e.g. ``"renamed robot_host (...)"``) or missing keys, bad values; keys in
+    ``extra`` are allowed and not checked."""
+    if not isinstance(data, dict):
+        return [f"{path or 'config'}: expected an object, got {data!r} ({_type_name(data)})"]
+    out = []
+    dot = f"{path}." if path else ""
+    for key in data:
+        if key in renamed:
+            out.append(f"{dot}{key}: {renamed[key]}")
+        elif key not in rules and key not in extra:
+            near = [k for k in rules if _close(str(key), k)]
+            also = f"; did you mean {near[0]!r}?" if near else ""
+            out.append(f"{dot}{key}: unknown key{also} (known: {', '.join(sorted(rules))})")
+    out += [f"{dot}{key}: missing (required)" for key in required if key not in data]
+    for key, rule in rules.items():
+        if key in data:
+            out += check_value(f"{dot}{key}", data[key], rule)
+    return out
+
+
+def _close(a: str, b: str) -> bool:
+    """``a`` looks like a misspelling of ``b`` (prefix of one another, or one edit apart)."""
+    a, b = a.lower(), b.lower()
+    if a == b or (len(a) > 2 and (a.startswith(b) or b.startswith(a))):
+        return True
+    if abs(len(a) - len(b)) > 1:
+        return False
+    return sum(x != y for x, y in zip(a, b)) + abs(len(a) - len(b)) <= 1
+
+
+# -- rules both configs share ------------------------------------------------------------------
+def known_algorithms() -> list[str]:
+    from dfrl.robots.learners import LEARNERS
+
+    return sorted(LEARNERS)
+
+
+def _token_problem(value: Any) -> str | None:
+    from dfrl.experiments.tokens import token_problem
+
+    why = token_problem(value)
+    return None if why is None else f"not a token: {why} (an integer >= 0 or a string " \
+        "without white space; dfrl secret prints a strong one)"
+
+
+def token_rule() -> Rule:
+    """A platform token or null."""
+    return Rule(object, nullable=True, check=_token_problem)
+
+
+def check_robot_id(path: str, rid: Any) -> list[str]:
+    if isinstance(rid, str) and not _ROBOT_ID.match(rid):
+        return [f"{path}: robot id {rid!r}: use a lower-case name like r1 "
+                "(letters, digits, _)"]
+    return []
+
+
+def check_trainer(path: str, trainer: Any) -> list[str]:
+    """``trainer`` holds known :class:`dfrl.robots.training.TrainerConfig` fields of the right
+    types, and the result builds."""
+    if not isinstance(trainer, dict) or not trainer:
+        return []
+    from dfrl.robots.training import TrainerConfig
+
+    defaults = TrainerConfig().to_dict()
+    problems = _check_like(path, trainer, defaults)
+    owned = {"arena", "algo", "seed", "iterations"} & set(trainer)
+    problems += [f"{path}.{k}: set by the experiment (robots[..].{k} or {k}), not in trainer"
+                 for k in sorted(owned)]
+    if not problems:
+        try:
+            TrainerConfig.from_dict({**defaults, **trainer})
+        except (TypeError, ValueError) as exc:
+            problems.append(f"{path}: {exc}")
+    return problems
+
+
+def _check_like(path: str, data: dict[str, Any], model: dict[str, Any]) -> list[str]:
+    """Keys and value kinds of ``data`` against the defaults ``model`` (nested)."""
+    out = []
+    for key, value in data.items():
+        here = f"{path}.{key}"
+        if key not in model:
+            out.append(f"{here}: unknown key (known: {', '.join(sorted(model))})")
+            continue
+        ref = model[key]
+        if isinstance(ref, dict):
+            out += (_check_like(here, value, ref) if isinstance(value, dict)
+                    else [f"{here}: expected an object, got {value!r}"])
+        elif ref is not None:
+            kind = float if isinstance(ref, float) else type(ref)
+            out += check_value(here, value, Rule(kind))
+    return out
