@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 
+from dfrl.experiments.tools.bench.fault_proxy import FaultProxy
 from dfrl.platform_pl import PLATFORM_DIR
 
 from .conftest import SWIPL, Proc, start_node
-from .delay_proxy import DelayProxy
 from .wire_client import connect, frame, open_proof, read_frame
 
 pytestmark = pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
@@ -89,7 +89,7 @@ def test_same_port_on_two_hosts_is_not_confused(tmp_path: Path, procs: list[Proc
 def test_wildcard_node_knows_itself_by_any_address(tmp_path: Path, procs: list[Proc]) -> None:
     # Prepare: a node bound to 0.0.0.0, and a proxy in front of it.
     node, port = _node(procs, tmp_path, "w", "0.0.0.0")
-    with DelayProxy(("127.0.0.1", port), 0.0) as proxy:
+    with FaultProxy(("127.0.0.1", port)) as proxy:
         # Execute / Assert: itself through 127.0.0.1, its host name, 127.0.0.2 and the proxy
         # (the last two by the id in the hello); not any other node.
         for host, p in [("127.0.0.1", port), (socket.gethostname(), port),

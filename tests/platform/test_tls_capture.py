@@ -11,11 +11,11 @@ from pathlib import Path
 
 import pytest
 
+from dfrl.experiments.tools.bench.fault_proxy import FaultProxy
 from dfrl.experiments.tools.certs import init_ca, make_node
 from dfrl.platform_pl import PLATFORM_DIR
 
 from .conftest import SWIPL, Proc
-from .delay_proxy import DelayProxy
 
 pytestmark = pytest.mark.skipif(shutil.which("openssl") is None or SWIPL is None,
                                 reason="openssl or swipl missing")
@@ -59,7 +59,7 @@ def _capture(tmp_path: Path, tls: tuple[Path, Path] | None) -> bytes:
     proc = Proc([SWIPL, "-q", str(script)])
     try:
         port = int(proc.wait_for("PORT").split()[1])
-        proxy = DelayProxy(("127.0.0.1", port), 0.0, record=True)
+        proxy = FaultProxy(("127.0.0.1", port), record=True)
         try:
             assert proc.popen.stdin is not None
             proc.popen.stdin.write(f"proxy({proxy.address[1]}).\n")

@@ -11,10 +11,10 @@ from pathlib import Path
 
 import pytest
 
+from dfrl.experiments.tools.bench.fault_proxy import FaultProxy
 from dfrl.platform_pl import PLATFORM_DIR
 
 from .conftest import SWIPL, Proc, start_node
-from .delay_proxy import DelayProxy
 
 pytestmark = pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
 
@@ -24,7 +24,7 @@ TOKEN = "dfrl_" + "5e" * 32          # a strong token: no loopback warning, easy
 def test_migration_sends_no_token(tmp_path: Path, procs: list[Proc]) -> None:
     # Prepare: a node with the token, a recording proxy in front of it.
     node, port = start_node(procs, "--token", TOKEN)
-    with DelayProxy(("127.0.0.1", port), 0.0, record=True) as proxy:
+    with FaultProxy(("127.0.0.1", port), record=True) as proxy:
         pport = proxy.address[1]
         prog = f"""
         :- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).

@@ -16,10 +16,10 @@ from pathlib import Path
 
 import pytest
 
+from dfrl.experiments.tools.bench.fault_proxy import FaultProxy
 from dfrl.platform_pl import PLATFORM_DIR
 
 from .conftest import SWIPL, Proc
-from .delay_proxy import DelayProxy
 
 pytestmark = pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
 
@@ -113,7 +113,7 @@ def test_pooled_hop_after_long_rest_costs_one_and_a_half_rtt(tmp_path: Path,
                                                             procs: list[Proc]) -> None:
     # Prepare: source -> proxy (50 ms each way) -> destination, default timeouts.
     dest, [port] = _destination(procs, tmp_path)
-    with DelayProxy(("127.0.0.1", port), ONE_WAY_S) as proxy:
+    with FaultProxy(("127.0.0.1", port), delay_s=ONE_WAY_S) as proxy:
         source = _source(procs, tmp_path)
         # Execute: a first move (new connection), a 12 s rest (longer than the old pool
         # window of 5 s and the old server idle timeout of 10 s), a second move.
@@ -123,7 +123,7 @@ def test_pooled_hop_after_long_rest_costs_one_and_a_half_rtt(tmp_path: Path,
         print(f"\nhop over 50 ms one-way: new connection {first * 1000:.0f} ms, "
               f"pooled after 12 s rest {pooled * 1000:.0f} ms (RTT {RTT_S * 1000:.0f} ms)")
         # Assert: one connection served both moves; the pooled one costs 1.5 RTT.
-        assert proxy.accepted == 1
+        assert proxy.connections == 1
         assert pooled < 1.5 * RTT_S + 0.030
         assert first >= 2.5 * RTT_S
 
@@ -133,14 +133,14 @@ def test_keepalive_outlives_the_servers_idle_timeout(tmp_path: Path, procs: list
     # source pings its pooled connections after 0.3 s of silence. (A hop that meets its
     # connection out for a ping waits for the pong: at most one RTT more.)
     dest, [port] = _destination(procs, tmp_path, ", auth_idle_timeout(1.5)")
-    with DelayProxy(("127.0.0.1", port), ONE_WAY_S) as proxy:
+    with FaultProxy(("127.0.0.1", port), delay_s=ONE_WAY_S) as proxy:
         source = _source(procs, tmp_path, "set_prolog_flag(dfrl_keepalive, 0.3),")
         _move(source, dest, "k1", proxy.address[1])
         # Execute: rest for more than twice the server's limit.
         time.sleep(4.0)
         pooled = _move(source, dest, "k2", proxy.address[1])
         # Assert
-        assert proxy.accepted == 1
+        assert proxy.connections == 1
         assert pooled < 2.5 * RTT_S + 0.030
 
 

@@ -1,12 +1,15 @@
-"""A fault-injecting TCP proxy for the platform's frames: delay, drop, stall, cut.
+"""A fault-injecting TCP proxy for the platform's frames: delay, drop, stall, cut, capture.
 
 ``FaultProxy(target=(host, port))`` listens on a loopback port (``.address``) and forwards every
 connection to ``target``, byte for byte, while it reads the platform's frames in both
 directions (12-byte header: ``b"DFRL"``, version, kind ``b"T"``/``b"B"``, 2 reserved bytes, u32
-big-endian body length). Faults:
+big-endian body length). It counts the connections it forwarded (``.connections``: a pooled
+platform connection is one, however many hops use it). The chaos benchmark (:mod:`.chaos`) and
+the platform's tests (custody, faults, WAN costs, what crosses the wire) use it. Faults:
 
-- ``delay(seconds)``: every chunk, in both directions, is forwarded ``seconds`` after it arrived
-  (order kept; a delay set later applies to chunks read later);
+- ``delay(seconds)`` (or ``delay_s=`` at the start): every chunk, in both directions, is
+  forwarded ``seconds`` after it arrived (order kept; a delay set later applies to chunks read
+  later), so a request and its reply cost ``2 * seconds`` more;
 - ``rule(fn)``: ``fn(direction, conn, frame, kind, length) -> Action`` is called at the header of
   every frame (``direction`` ``"up"`` client to target or ``"down"``; ``conn`` and ``frame``
   count from 0 per proxy and per direction of a connection). ``PASS`` forwards it, ``DROP``
@@ -16,8 +19,12 @@ big-endian body length). Faults:
 - ``cut()``: close every connection abruptly and refuse new ones (accepted and reset) until
   ``mend()``.
 
+With ``record=True`` it also keeps every byte it reads, both directions interleaved
+(:meth:`FaultProxy.captured_bytes`), for tests that look at what crosses the wire.
+
 A stream that stops looking like frames (bad magic, e.g. a binary frame of an older peer whose
-length field is 0) is forwarded raw from there on, without further rule calls. Every wait is
+length field is 0, or TLS records) is forwarded raw from there on, without further rule calls
+(where a header is due, bytes are held until its 12 have come). Every wait is
 bounded (socket timeouts and queue polls of at most 0.2 s); ``close()`` joins all threads.
 """
 from __future__ import annotations
@@ -144,6 +151,7 @@ class _Link:
                 return
             if not data:
                 break
+            self.proxy._record(data)
             out, action = reader.feed(data)
             if out:
                 q.put((time.monotonic() + self.proxy.delay_s, out))
@@ -168,7 +176,7 @@ class _Link:
                 return
             try:
                 if data:
-                    dst.sendall(data)
+                    self._send_all(dst, data)
                 else:
                     dst.shutdown(socket.SHUT_WR)
                     self._one_end()
@@ -176,6 +184,16 @@ class _Link:
             except OSError:
                 self.abort()
                 return
+
+    def _send_all(self, dst: socket.socket, data: bytes) -> None:
+        """Send ``data`` whole, however long the peer takes to read it (the socket's timeout
+        is the readers' poll), unless the link closes meanwhile."""
+        view = memoryview(data)
+        while view and not self.closed.is_set():
+            try:
+                view = view[dst.send(view):]
+            except socket.timeout:
+                continue
 
     def _one_end(self) -> None:
         """A direction ended cleanly; after both, close the sockets."""
@@ -219,14 +237,22 @@ class FaultProxy:
     connect_timeout
         Seconds to wait for the target when a client connects; a client whose target cannot be
         reached is reset.
+    delay_s
+        The delay of every chunk from the start (:meth:`delay`).
+    record
+        Keep every byte read (:meth:`captured_bytes`).
     """
 
     def __init__(self, target: tuple[str, int], listen: tuple[str, int] = ("127.0.0.1", 0),
-                 connect_timeout: float = 2.0) -> None:
+                 connect_timeout: float = 2.0, *, delay_s: float = 0.0,
+                 record: bool = False) -> None:
         self.target = target
         self.connect_timeout = connect_timeout
         self.delay_s = 0.0
+        self.delay(delay_s)
         self.connections = 0
+        self._recording = record
+        self._captured = bytearray()
         self._rule: Rule | None = None
         self._cut = False
         self._lock = threading.Lock()
@@ -245,6 +271,12 @@ class FaultProxy:
         if seconds < 0:
             raise ValueError("delay must be >= 0")
         self.delay_s = float(seconds)
+
+    def captured_bytes(self) -> bytes:
+        """Every byte read so far, both directions interleaved (with ``record=True``; else
+        none)."""
+        with self._lock:
+            return bytes(self._captured)
 
     def rule(self, fn: Rule | None) -> None:
         """Ask ``fn`` about every frame from now on (None: pass everything)."""
@@ -282,6 +314,11 @@ class FaultProxy:
         self.close()
 
     # -- machinery ---------------------------------------------------------------------------
+    def _record(self, data: bytes) -> None:
+        if self._recording:
+            with self._lock:
+                self._captured += data
+
     def _decide(self, direction: str, conn: int, frame: int, kind: str, length: int) -> Action:
         fn = self._rule
         if fn is None:

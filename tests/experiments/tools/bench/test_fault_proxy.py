@@ -112,6 +112,35 @@ def test_delay_applies_to_both_directions(echo: tuple[str, int]) -> None:
     assert 0.3 <= slow < 1.0, slow          # 0.15 s each way
 
 
+def test_delay_from_the_start_records_and_counts_connections(echo: tuple[str, int]) -> None:
+    with FaultProxy(echo, delay_s=0.1, record=True) as proxy:
+        for _ in range(2):
+            with client(proxy) as s:
+                t0 = time.monotonic()
+                s.sendall(b"not a frame at all")    # raw bytes pass (and are recorded) too
+                assert read_exact(s, 18) == b"not a frame at all"
+                assert 0.2 <= time.monotonic() - t0 < 1.0
+        assert proxy.captured_bytes() == b"not a frame at all" * 4     # up and down, twice
+        assert proxy.connections == 2
+    with FaultProxy(echo) as quiet, client(quiet) as s:
+        s.sendall(frame(b"a"))
+        read_frame(s)
+        assert quiet.captured_bytes() == b""
+    with pytest.raises(ValueError):
+        FaultProxy(echo, delay_s=-1)
+
+
+def test_a_slow_reader_gets_every_byte(echo: tuple[str, int]) -> None:
+    # more than the socket buffers hold, read only after a pause longer than the proxy's polls
+    body = bytes(range(256)) * 40_000
+    with FaultProxy(echo) as proxy, client(proxy) as s:
+        sender = threading.Thread(target=s.sendall, args=(frame(body, b"B"),), daemon=True)
+        sender.start()
+        time.sleep(1.0)
+        assert read_frame(s) == (b"B", body)
+        sender.join(5)
+
+
 def test_drop_at_frame_n_resets_the_connection(echo: tuple[str, int]) -> None:
     with FaultProxy(echo) as proxy:
         proxy.rule(lambda d, c, f, k, n: DROP if (d, f) == ("up", 2) else PASS)
