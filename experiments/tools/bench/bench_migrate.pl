@@ -27,8 +27,8 @@
     DIR/peer.jsonl or DIR/home.jsonl when it ends (migrate.py's
     phase_breakdown/2 reads them).
 */
-:- use_module('../../platform_pl/tartarus').
-:- use_module('../../platform_pl/secrets', [take_env_tokens/1]).
+:- use_module('../../../platform_pl/tartarus').
+:- use_module('../../../platform_pl/secrets', [take_env_tokens/1]).
 :- use_module(library(main)).
 :- use_module(library(socket)).
 :- use_module(library(prolog_wrap), [wrap_predicate/4]).

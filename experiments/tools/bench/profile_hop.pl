@@ -12,11 +12,11 @@
     hop minus their sum is what the wire, the handshake frames and the
     thread hand-offs cost.
 */
-:- use_module('../../platform_pl/tartarus').
-:- use_module('../../platform_pl/agents').
-:- use_module('../../platform_pl/wire').
-:- use_module('../../platform_pl/custody').
-:- use_module('../../platform_pl/code_safety').
+:- use_module('../../../platform_pl/tartarus').
+:- use_module('../../../platform_pl/agents').
+:- use_module('../../../platform_pl/wire').
+:- use_module('../../../platform_pl/custody').
+:- use_module('../../../platform_pl/code_safety').
 :- use_module(library(main)).
 :- use_module(library(statistics)).
 :- use_module(library(memfile)).
