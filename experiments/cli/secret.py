@@ -7,10 +7,9 @@ import secrets
 import sys
 from pathlib import Path
 
-from dfrl.experiments.tokens import SECRET_PREFIX, new_secret, write_secret_file
+from dfrl.experiments.tokens import new_secret, write_secret_file
 
-PREFIX = SECRET_PREFIX
-__all__ = ["new_integer_secret", "new_secret", "register"]
+__all__ = ["new_integer_secret", "register"]
 
 
 def new_integer_secret() -> int:

@@ -27,12 +27,14 @@ from typing import Any, TextIO
 import numpy as np
 
 from dfrl.experiments.driver.config import ExperimentConfig, resolve_config
-from dfrl.experiments.science.report.observations import SeedRun
-from dfrl.experiments.science.report.stats import COMBOS
+from dfrl.experiments.driver.launcher import run
 from dfrl.experiments.driver.results.metrics import read_metrics
+from dfrl.experiments.science.report.observations import SeedRun
+from dfrl.experiments.science.report.paper import write_report
+from dfrl.experiments.science.report.stats import COMBOS
 from dfrl.experiments.science.standalone import evaluated_job
-from dfrl.experiments.science.studies.history import (Evaluator, PendingRows, eval_job, history_tables,
-                                              pick, read_rows)
+from dfrl.experiments.science.studies.history import (Evaluator, PendingRows, eval_job,
+                                                      history_tables, pick, read_rows)
 from dfrl.robots.state import Discretiser
 from dfrl.robots.training import TrainerConfig, read_metrics_csv
 
@@ -108,8 +110,6 @@ def paper_configs(opts: PaperOptions, seed: int) -> list[tuple[str, ExperimentCo
 
 def _federated(cfg: ExperimentConfig, d: Path, opts: PaperOptions, evaluator: Evaluator,
                progress: TextIO | None) -> tuple[bool, PendingRows, float]:
-    from dfrl.experiments.driver.launcher import run
-
     t0 = time.monotonic()
     ok = True
     if not (opts.skip_existing and (d / "summary.md").is_file()):
@@ -136,8 +136,6 @@ def reproduce_paper(out: Path, opts: PaperOptions = PaperOptions(),
     ExperimentError
         A federated run could not be started.
     """
-    from dfrl.experiments.science.report.paper import write_report
-
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.monotonic()

@@ -9,9 +9,13 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, TextIO
+from typing import Any, Callable
 
-from dfrl.robots.training import TrainerConfig
+from dfrl.experiments.science.studies import history
+from dfrl.robots.evaluation import PolicyKind, evaluate_policy
+from dfrl.robots.state import DiscretisationConfig
+from dfrl.robots.tables import load_table
+from dfrl.robots.training import TrainerConfig, train
 
 #: Offset between a training seed and the seed of its evaluation episodes (so that the
 #: evaluation does not replay the training's starts).
@@ -23,8 +27,6 @@ RunDone = Callable[[str, str, float], None]
 
 def baseline_job(cfg_dict: dict[str, Any], out: str) -> tuple[str, str, float]:
     """Train one standalone robot into ``out`` (a worker process job)."""
-    from dfrl.robots.training import train
-
     cfg = TrainerConfig.from_dict(cfg_dict)
     result = train(cfg, out)
     return cfg.algo, cfg.arena, result.wall_time
@@ -43,47 +45,19 @@ def run_jobs(jobs: list[tuple[TrainerConfig, Path]], workers: int,
                 on_done(algo, arena, wall)
 
 
-def run_baselines(out: Path, arenas: list[str], seeds: dict[str, int], iterations: int,
-                  skip_existing: bool, jobs: int = 2,
-                  progress: TextIO | None = None) -> dict[tuple[str, str], Path]:
-    """Standalone runs of the paper reproduction: every (algo, arena) with the seed its
-    federated robot has, in ``OUT/standalone/ALGO_ARENA``. Returns the folders."""
-    dirs = {}
-    todo = []
-    for algo in ("qlearning", "sarsa"):
-        for arena in arenas:
-            d = out / "standalone" / f"{algo}_{arena}"
-            dirs[(algo, arena)] = d
-            if skip_existing and (d / "metrics.csv").is_file():
-                continue
-            todo.append((TrainerConfig(arena=arena, algo=algo, seed=seeds[arena],
-                                       iterations=iterations), d))
-
-    def said(algo: str, arena: str, wall: float) -> None:
-        if progress is not None:
-            print(f"standalone {algo} {arena}: {iterations} iterations in {wall:.1f} s",
-                  file=progress)
-
-    run_jobs(todo, jobs, said)
-    return dirs
-
-
 def evaluated_job(cfg_dict: dict[str, Any], out: str, points: int, held_out: list[str],
                   steps: int, episode_steps: int, eval_seed: int) -> str:
     """Train one standalone robot into ``out`` with ``points`` snapshots, then evaluate each
     snapshot's greedy policy in its own and the held-out arenas (``out/evaluations.csv``,
     :mod:`dfrl.experiments.science.studies.history`); a worker process job. Returns ``out``."""
-    from dfrl.experiments.science.studies.history import eval_job, write_rows
-    from dfrl.robots.training import train
-
     cfg = TrainerConfig.from_dict(cfg_dict)
     res = train(cfg, out, snapshot_every=max(1, cfg.iterations // max(1, points)))
     rows = []
     for it, q in sorted(res.snapshots.items()):
         for arena, role in [(cfg.arena, "own")] + [(a, "held_out") for a in held_out]:
             rows.append({"robot": cfg.arena, "iteration": it, "arena": arena, "role": role,
-                         **eval_job(cfg_dict, q, arena, steps, episode_steps, eval_seed)})
-    write_rows(Path(out) / "evaluations.csv", rows)
+                         **history.eval_job(cfg_dict, q, arena, steps, episode_steps, eval_seed)})
+    history.write_rows(Path(out) / "evaluations.csv", rows)
     return out
 
 
@@ -110,10 +84,6 @@ class EvalSummary:
 def eval_job(cfg_dict: dict[str, Any], seed: int, steps: int,
              table_path: str | None) -> dict[str, Any]:
     """Train with ``seed`` (or load ``table_path``), then evaluate greedy and random."""
-    from dfrl.robots.evaluation import PolicyKind, evaluate_policy
-    from dfrl.robots.tables import load_table
-    from dfrl.robots.training import train
-
     cfg = TrainerConfig.from_dict(cfg_dict).replace(seed=seed)
     t0 = time.perf_counter()
     q = train(cfg).q_table if table_path is None else load_table(table_path).q
@@ -133,9 +103,6 @@ def with_table_discretisation(cfg: TrainerConfig, table: str) -> TrainerConfig:
     ValueError, OSError, KeyError
         The table or its sidecar cannot be read.
     """
-    from dfrl.robots.state import DiscretisationConfig
-    from dfrl.robots.tables import load_table
-
     state = load_table(table).meta.state
     return cfg.replace(discretisation=DiscretisationConfig(state["grouping"], state["levels"]))
 

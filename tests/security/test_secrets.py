@@ -7,8 +7,7 @@ import re
 import shutil
 import subprocess
 
-from dfrl.experiments.cli.secret import new_secret
-from dfrl.experiments.tokens import env_with_tokens
+from dfrl.experiments.tokens import env_with_tokens, new_secret
 from dfrl.platform_pl import PLATFORM_DIR
 from tests.platform.conftest import Proc, start_node
 from tests.platform.wire_client import connect_auth, connect_nonce, frame, read_frame

@@ -8,8 +8,9 @@ from __future__ import annotations
 from dfrl.experiments.science.report.paper import write_report
 from dfrl.experiments.science.report.plots import plot_both, plot_experiment, plot_metric
 from dfrl.experiments.science.report.stats import (ALGO_NAMES, COMBOS, CombinationRun, RunStats,
-                                           StandaloneRuns, dip, late_growth, reward_rate, smooth,
-                                           stats_of, t_fraction)
+                                                   StandaloneRuns, stats_of)
+from dfrl.experiments.science.statistics import (dip, late_growth, reward_rate, smooth,
+                                                 t_fraction)
 
 __all__ = ["ALGO_NAMES", "COMBOS", "CombinationRun", "RunStats", "StandaloneRuns", "dip",
            "late_growth", "plot_both", "plot_experiment", "plot_metric", "reward_rate", "smooth",

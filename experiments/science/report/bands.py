@@ -8,7 +8,7 @@ import numpy as np
 
 from dfrl.experiments.science.report.observations import SeedRun, mean_q, scores
 from dfrl.experiments.science.report.plots import COLOURS, new_figure, save_figure
-from dfrl.experiments.science.studies.intervals import t975
+from dfrl.experiments.science.statistics import t975
 
 
 def band(curves: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:

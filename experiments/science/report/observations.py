@@ -2,8 +2,7 @@
 
 Every test turns one observation into a number per seed (a :class:`SeedRun` is one
 configuration run with one seed) and asks whether its 95% t interval lies on the claimed side
-of a bound (:func:`dfrl.experiments.science.studies.intervals.interval`). The same test is applied
-to the negative control (the same configuration with a random behaviour policy, epsilon 1
+of a bound (:func:`dfrl.experiments.science.statistics.interval`). The same test is applied to the negative control (the same configuration with a random behaviour policy, epsilon 1
 throughout): a test the control passes does not detect learning, and the report says so.
 
 Learning is read from behaviour, not from the sum of Q-values (which rises whatever the
@@ -20,8 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from dfrl.experiments.science.report.stats import dip, late_growth, smooth
-from dfrl.experiments.science.studies.intervals import Interval, interval
+from dfrl.experiments.science.statistics import Interval, dip, interval, late_growth, smooth
 
 #: A reward gain per step below this is "no learning" (the saturation time is then the budget).
 MIN_GAIN: float = 0.05

@@ -9,10 +9,10 @@ from typing import Any
 
 import numpy as np
 
-from dfrl.experiments.science.report.observations import (SeedRun, final_score, mean_q, paper_tests,
-                                                  tests_markdown)
-from dfrl.experiments.science.report.stats import late_growth
-from dfrl.experiments.science.studies.intervals import interval
+from dfrl.experiments.science.report.bands import plot_groups
+from dfrl.experiments.science.report.observations import (SeedRun, final_score, mean_q,
+                                                          paper_tests, tests_markdown)
+from dfrl.experiments.science.statistics import interval, late_growth
 
 
 def _iv(values: list[float]) -> str:
@@ -34,8 +34,6 @@ def figures(out: Path, rep: Any, formats: Sequence[str] = ("png",),
             dpi: float | None = None) -> list[str]:
     """Draw the band figures in each of ``formats`` at ``dpi``; return the names of the first
     format's files (empty without matplotlib)."""
-    from dfrl.experiments.science.report.bands import plot_groups
-
     names = []
     try:
         for algo in ("qlearning", "sarsa"):

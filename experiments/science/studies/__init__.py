@@ -1,2 +1,4 @@
-"""Studies that answer a question with several seeds and intervals: the hyper-parameter
-sweep (:mod:`.sweep`); statistics shared by them in :mod:`.intervals`."""
+"""Studies that answer a question with several seeds and intervals: the hyper-parameter sweep
+(:mod:`.sweep`), the speed-up against the number of robots (:mod:`.speedup`, on the
+in-process federation of :mod:`.fedsim`) and greedy evaluations of a run's table history
+(:mod:`.history`). Their intervals are :mod:`dfrl.experiments.science.statistics`."""

@@ -24,6 +24,8 @@ from typing import Any
 import numpy as np
 
 from dfrl.experiments.science.studies.sweep import COLLISION_COST
+from dfrl.robots.evaluation import PolicyKind, evaluate_policy
+from dfrl.robots.training import TrainerConfig
 
 #: Columns of ``evaluations.csv``.
 FIELDS: tuple[str, ...] = ("robot", "iteration", "arena", "role", "steps", "collisions_per_1000",
@@ -62,9 +64,6 @@ def digest(q: np.ndarray) -> str:
 def eval_job(cfg_dict: dict[str, Any], q: np.ndarray, arena: str, steps: int,
              episode_steps: int, seed: int) -> dict[str, float]:
     """One greedy evaluation (a process-pool job)."""
-    from dfrl.robots.evaluation import PolicyKind, evaluate_policy
-    from dfrl.robots.training import TrainerConfig
-
     cfg = TrainerConfig.from_dict(cfg_dict).replace(arena=arena)
     r = evaluate_policy(cfg, PolicyKind.GREEDY, steps, seed, q_table=q,
                         episode_steps=episode_steps)
@@ -137,21 +136,3 @@ def read_rows(path: Path) -> list[dict[str, Any]]:
             r[k] = float(r[k])
     return rows
 
-
-def score_curve(rows: list[dict[str, Any]], role: str | None = None) -> dict[int, float]:
-    """Mean score per iteration (over robots and arenas of ``role``, or all)."""
-    by: dict[int, list[float]] = {}
-    for r in rows:
-        if role is None or r["role"] == role:
-            by.setdefault(r["iteration"], []).append(r["score"])
-    return {it: float(np.mean(v)) for it, v in sorted(by.items())}
-
-
-def mean_of(rows: list[dict[str, Any]], key: str, iteration: int | None = None,
-            role: str | None = None) -> float:
-    """Mean of ``key`` over the rows of ``iteration`` (default: the last) and ``role``."""
-    if not rows:
-        return float("nan")
-    it = max(r["iteration"] for r in rows) if iteration is None else iteration
-    sel = [r[key] for r in rows if r["iteration"] == it and (role is None or r["role"] == role)]
-    return float(np.mean(sel)) if sel else float("nan")

@@ -16,7 +16,10 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
-from dfrl.experiments.science.studies.intervals import Interval, interval
+from dfrl.experiments.science.statistics import Interval, interval
+from dfrl.experiments.science.studies.fedsim import federate
+from dfrl.experiments.science.studies.history import eval_job
+from dfrl.robots.training import TrainerConfig
 
 PAPER_ARENAS = ("r1", "r2", "r3", "r4", "r5")
 
@@ -38,10 +41,6 @@ class SpeedupOptions:
 
 def run_one(n: int, seed: int, opts: SpeedupOptions) -> dict[str, Any]:
     """One federation of ``n`` robots; its greedy score curve and time to threshold."""
-    from dfrl.experiments.science.studies.fedsim import federate
-    from dfrl.experiments.science.studies.history import eval_job
-    from dfrl.robots.training import TrainerConfig
-
     cfgs = [TrainerConfig(arena=PAPER_ARENAS[k % 5], seed=1000 * seed + k, iterations=opts.iterations)
             for k in range(n)]
     fed = federate(cfgs, opts.iterations, opts.respite, opts.method,

@@ -29,7 +29,9 @@ from typing import Any
 
 import numpy as np
 
-from dfrl.experiments.science.studies.intervals import Interval, interval
+from dfrl.experiments.science.statistics import Interval, interval, late_growth
+from dfrl.robots.evaluation import evaluate_snapshots
+from dfrl.robots.training import TrainerConfig, train
 
 #: Collisions per 1,000 steps that cost as much as full-speed progress (see module doc).
 COLLISION_COST = 0.05
@@ -91,10 +93,6 @@ def _label(v: Any) -> str:
 def run_one(base: dict[str, Any], changes: tuple[tuple[str, Any], ...], seed: int,
             arenas: tuple[str, ...], eval_steps: int, stable_last: int) -> dict[str, Any]:
     """Train one setting with one seed and evaluate it (a process-pool job)."""
-    from dfrl.experiments.science.report.stats import late_growth
-    from dfrl.robots.evaluation import evaluate_snapshots
-    from dfrl.robots.training import TrainerConfig, train
-
     d = copy.deepcopy(base)
     for path, value in changes:
         set_path(d, path, value)

@@ -9,12 +9,14 @@ from typing import Any
 
 import numpy as np
 
+from dfrl.arenas import load_arena
 from dfrl.experiments.science.standalone import EVAL_SEED_OFFSET
-from dfrl.experiments.science.transfer.model import (HEAD_STEPS, METRICS, Condition, RunResult, Stat,
-                                             TransferConfig, TransferResult)
+from dfrl.experiments.science.transfer.model import (HEAD_STEPS, METRICS, Condition, RunResult,
+                                                     Stat, TransferConfig, TransferResult)
 from dfrl.experiments.science.transfer.outputs import write_outputs
 from dfrl.experiments.science.transfer.table import load_initial_table, trainer_config_for
-from dfrl.robots.training import TrainerConfig
+from dfrl.robots.evaluation import PolicyKind, evaluate_policy
+from dfrl.robots.training import Trainer, TrainerConfig
 
 
 def run_one(trainer_config: TrainerConfig, condition: Condition | str, q0: np.ndarray | None,
@@ -35,9 +37,6 @@ def run_one(trainer_config: TrainerConfig, condition: Condition | str, q0: np.nd
     every : int
         Curve sampling interval.
     """
-    from dfrl.robots.evaluation import PolicyKind, evaluate_policy
-    from dfrl.robots.training import Trainer
-
     condition = Condition(condition)
     cfg = trainer_config.replace(seed=int(seed))
     n = cfg.iterations
@@ -128,8 +127,6 @@ def run(config: TransferConfig, output_dir: Path | None = None) -> TransferResul
         A missing or bad table, an unknown arena or learner, or a table whose shape does not
         fit the trainer.
     """
-    from dfrl.arenas import load_arena
-
     t0 = time.perf_counter()
     q, info, state = load_initial_table(config.init)
     tcfg = trainer_config_for(config, q, info, state)

@@ -28,7 +28,10 @@ from typing import Any
 
 import numpy as np
 
-from dfrl.experiments.science.studies.intervals import Interval, difference, interval
+from dfrl.experiments.science.statistics import Interval, difference, interval
+from dfrl.experiments.science.studies.fedsim import federate, in_turn
+from dfrl.experiments.science.studies.history import eval_job
+from dfrl.robots.training import Trainer, TrainerConfig
 
 ARENAS = ("r1", "r2", "r3", "r4", "r5")
 CONDITIONS = ("zeros", "standalone", "standalone_same_experience", "in_turn",
@@ -50,9 +53,6 @@ class StudyOptions:
 
 def source_job(condition: str, seed: int, opts: StudyOptions) -> tuple[str, int, np.ndarray]:
     """The source table of one condition and source seed (a worker job)."""
-    from dfrl.experiments.science.studies.fedsim import federate, in_turn
-    from dfrl.robots.training import Trainer, TrainerConfig
-
     n = opts.iterations
     cfg = lambda arena, k=0, it=n: TrainerConfig(arena=arena, seed=1000 * seed + k,  # noqa: E731
                                                  iterations=it)
@@ -85,9 +85,6 @@ def source_job(condition: str, seed: int, opts: StudyOptions) -> tuple[str, int,
 def target_job(condition: str, seed: int, q: np.ndarray, arena: str, tseed: int,
                opts: StudyOptions) -> dict[str, Any]:
     """Zero-shot greedy evaluation and a fine-tuning run of one table in one target."""
-    from dfrl.experiments.science.studies.history import eval_job
-    from dfrl.robots.training import Trainer, TrainerConfig
-
     ev = eval_job(TrainerConfig().to_dict(), q, arena, opts.eval_steps, opts.episode_steps,
                   80_000 + tseed)
     with Trainer(TrainerConfig(arena=arena, seed=90_000 + tseed)) as t:

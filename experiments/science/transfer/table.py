@@ -8,7 +8,9 @@ import numpy as np
 
 from dfrl.experiments.science.transfer.model import TableInfo, TransferConfig
 from dfrl.robots.env import ActionSet
+from dfrl.robots.learners import LEARNERS, validate_table
 from dfrl.robots.state import DiscretisationConfig
+from dfrl.robots.tables import load_table
 from dfrl.robots.training import TrainerConfig
 
 
@@ -27,9 +29,6 @@ def load_initial_table(path: str | Path) -> tuple[np.ndarray, TableInfo, dict[st
     ValueError
         Missing file, unreadable or inconsistent table, non-finite entries.
     """
-    from dfrl.robots.learners import validate_table
-    from dfrl.robots.tables import load_table
-
     p = Path(path)
     npy = p if p.suffix == ".npy" else p.with_name(p.name + ".npy")
     if not npy.exists():
@@ -69,8 +68,6 @@ def trainer_config_for(config: TransferConfig, q: np.ndarray, info: TableInfo,
         The table's shape does not fit the resulting discretisation and action set, or its
         action names match no :class:`dfrl.robots.env.ActionSet`.
     """
-    from dfrl.robots.learners import LEARNERS
-
     base = TrainerConfig()
     algo = config.algo or info.algorithm or base.algo
     if algo not in LEARNERS:

@@ -4,7 +4,7 @@ flagged as not a test."""
 import numpy as np
 
 from dfrl.experiments.science.report.observations import (SeedRun, gain, paper_tests, rate, t_reward90)
-from dfrl.experiments.science.studies.intervals import interval
+from dfrl.experiments.science.statistics import interval
 
 N = 4000
 DTYPE = [("iteration", "i8"), ("q_sum", "f8"), ("cumulative_reward", "f8"), ("collisions", "i8")]

@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from dfrl.experiments.science.studies.intervals import difference, interval, t975
+from dfrl.experiments.science.statistics import difference, interval, t975
 
 
 def test_interval_by_hand() -> None:

@@ -1,10 +1,71 @@
-"""Means with 95% Student-t confidence intervals, for results over a few seeds."""
+"""The statistics that the reports and the studies share: learning-curve measures and means
+with 95% Student-t confidence intervals (for results over a few seeds).
+
+Pure functions of numbers and arrays; :mod:`.report` (the paper's observations and figures)
+and :mod:`.studies` (sweep, speed-up, transfer) both use them, neither imports the other.
+"""
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
+
+# -- learning curves -------------------------------------------------------------------------
+def smooth(y: np.ndarray, window: int = 200) -> np.ndarray:
+    """Moving average (same length; the window shrinks at the start)."""
+    y = np.asarray(y, dtype=np.float64)
+    if len(y) == 0 or window <= 1:
+        return y
+    c = np.cumsum(np.insert(y, 0, 0.0))
+    idx = np.arange(1, len(y) + 1)
+    lo = np.maximum(0, idx - window)
+    return (c[idx] - c[lo]) / (idx - lo)
+
+
+def t_fraction(it: np.ndarray, y: np.ndarray, frac: float = 0.9) -> int:
+    """First iteration at which the (smoothed) curve reaches ``frac`` of its final value."""
+    ys = smooth(y)
+    final = ys[-1]
+    if final <= 0:
+        return int(it[-1])
+    hit = np.nonzero(ys >= frac * final)[0]
+    return int(it[hit[0]]) if len(hit) else int(it[-1])
+
+
+def late_growth(y: np.ndarray) -> float:
+    """Growth over the last quarter as a fraction of the total growth (small: saturated)."""
+    ys = smooth(y)
+    n = len(ys)
+    total = ys[-1] - ys[0]
+    if n < 4 or total == 0:
+        return float("nan")
+    return float((ys[-1] - ys[int(0.75 * n)]) / total)
+
+
+def reward_rate(y: np.ndarray, part: str) -> float:
+    """Mean reward per iteration over the first or last quarter of a cumulative curve."""
+    n = len(y)
+    q = max(1, n // 4)
+    if part == "first":
+        return float(y[q - 1] / q)
+    return float((y[-1] - y[n - q - 1]) / q)
+
+
+def dip(y: np.ndarray) -> tuple[float, int]:
+    """Largest drop of the smoothed curve below its running peak, as a fraction of that peak,
+    and the iteration index where it bottoms."""
+    ys = smooth(y, 100)
+    peak = np.maximum.accumulate(ys)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        drop = np.where(peak > 0, (peak - ys) / peak, 0.0)
+    k = int(np.argmax(drop))
+    return float(drop[k]), k
+
+
+# -- means and intervals over seeds ----------------------------------------------------------
 #: Two-sided 95% quantiles of Student's t, by degrees of freedom 1..30.
 _T975 = (12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,
          2.201, 2.179, 2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086,
