@@ -1,6 +1,6 @@
 """Greedy evaluations while a robot learns: ``eval_<robot>.csv`` and ``DFRL_EVAL`` lines.
 
-Every ``eval_every`` iterations (:class:`dfrl.experiments.driver.config.RobotConfig`; never at
+Every ``eval_every`` iterations (:class:`dfrl.experiments.robot_host.config.RobotConfig`; never at
 iteration 0) :class:`LiveEvaluator` measures the greedy policy of a copy of the robot's
 current Q-table for ``eval_steps`` control steps with
 :func:`dfrl.robots.evaluation.evaluate_policy`. The evaluation builds an environment of its
