@@ -1,6 +1,6 @@
 """Writing a figure to files: the formats (PNG, or PDF and SVG for print) and the resolution
 asked for. Shared by every figure of dfrl (the robots' learning curves and arenas, and the
-experiments' figures in :mod:`dfrl.experiments.science.report.plots`)."""
+experiments' figures in :mod:`dfrl.experiments.driver.results.plots`)."""
 from __future__ import annotations
 
 from collections.abc import Sequence

@@ -17,7 +17,7 @@ from dfrl.experiments.driver.config import ConfigError, ExperimentConfig, resolv
 from dfrl.experiments.robot_host.config import Mode
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.tokens import TokenError, pop_env_tokens, read_token_file
-from dfrl.experiments.driver.results.files import claim_output, new_run_folder
+from dfrl.experiments.driver.results.files import ClaimedFolder, claim_output, new_run_folder
 from dfrl.experiments.driver.results.summary import Results
 
 
@@ -131,16 +131,17 @@ def print_results(results: Results) -> None:
     print(results.output_dir)
 
 
-def output_folder(args: argparse.Namespace, name: str) -> Path:
-    """``--out`` (claimed: empty, or emptied with ``--force``), or a new timestamped folder.
+def output_folder(args: argparse.Namespace, name: str) -> ClaimedFolder:
+    """``--out`` (claimed: empty, or emptied with ``--force``), or a new timestamped folder;
+    the launcher takes it as it is (claimed once).
 
     Raises
     ------
     FileExistsError
     """
     if args.out is not None:
-        return claim_output(args.out, args.force)
-    return new_run_folder(Path("results"), name)
+        return ClaimedFolder(claim_output(args.out, args.force))
+    return ClaimedFolder(new_run_folder(Path("results"), name))
 
 
 def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
@@ -161,7 +162,8 @@ def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
         cfg.check()
         if tls is not None:
             tls = check_node_dir(tls).resolve()
-        out = output_folder(args, cfg.name)
+        claimed = output_folder(args, cfg.name)
+        out = claimed.path
     except ConfigError as exc:
         return config_error(prog, exc)
     except CertError as exc:
@@ -177,7 +179,7 @@ def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
         view = start_view(out, args.view_host, args.view_port, fresh=True)
         print(f"{prog}: live view at {view.url}", file=sys.stderr, flush=True)
     try:
-        results = run(cfg, out, tls=tls)
+        results = run(cfg, claimed, tls=tls)
     except ExperimentError as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
         return 1

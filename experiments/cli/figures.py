@@ -10,7 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from dfrl.experiments.science.report.plots import FORMATS, parse_formats
+from dfrl.experiments.driver.results.plots import FORMATS, parse_formats
 
 
 def _formats(text: str) -> tuple[str, ...]:
@@ -52,7 +52,7 @@ def redraw_experiment(out: Path, args: argparse.Namespace, title: str, prog: str
     resolution was asked: the launcher drew those); a failure is said on stderr."""
     if not wants_redraw(args) or not (out / "metrics.csv").is_file():
         return []
-    from dfrl.experiments.science.report.plots import plot_experiment
+    from dfrl.experiments.driver.results.plots import plot_experiment
 
     try:
         return plot_experiment(out, title, args.figure_format, args.dpi)

@@ -62,7 +62,7 @@ def plt_image(path: Path) -> np.ndarray:
 def test_the_heading_marker_points_along_the_start_yaw() -> None:
     import math
 
-    from dfrl.experiments.science.report.plots import new_figure
+    from dfrl.experiments.driver.results.plots import new_figure
     from dfrl.robots.plots import draw_arena
 
     spec = load_arena("r1")

@@ -1,15 +1,13 @@
 """Where the launcher starts agents and sends them control commands: through one long-lived
-console node per experiment (:class:`dfrl.experiments.driver.console_node.ConsoleNode`, a ``swipl`` child
-driven in JSON lines), never one ``swipl`` process per command."""
+console node per experiment (:class:`dfrl.experiments.driver.console.ConsoleNode`, a ``swipl``
+child driven in JSON lines), never one ``swipl`` process per command."""
 from __future__ import annotations
 
-import shutil
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from dfrl.experiments.driver.console_node import ConsoleNode
-from dfrl.experiments.errors import ExperimentError
+from dfrl.experiments.driver.console import ConsoleNode
 from dfrl.experiments.tokens import Token
 
 Address = tuple[str, int]
@@ -18,20 +16,6 @@ Address = tuple[str, int]
 def agent_name(algo: str) -> str:
     """The name of the dFRL agent that federates the robots learning with ``algo``."""
     return f"fed_{algo}"
-
-
-def swipl_path() -> str:
-    """The ``swipl`` executable.
-
-    Raises
-    ------
-    ExperimentError
-        SWI-Prolog is not installed.
-    """
-    path = shutil.which("swipl")
-    if path is None:
-        raise ExperimentError("swipl is not installed (run scripts/setup.sh)")
-    return path
 
 
 def open_console(token: Token | Sequence[Token], log_path: Path | None = None,

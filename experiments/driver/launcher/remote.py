@@ -8,9 +8,10 @@ from typing import Any
 from dfrl.experiments.driver.config import RobotSpec
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.driver.launcher.agents import open_console, send_control
-from dfrl.experiments.driver.launcher.remote_robots import route_source
+from dfrl.experiments.driver.launcher.remote_hosts import route_source
 from dfrl.experiments.driver.results.agent_log import ControlEvent, read_rounds_log
 from dfrl.experiments.driver.results.files import read_json
+from dfrl.experiments.tls_folder import CertError, check_node_dir
 from dfrl.experiments.tokens import Token, TokenError, run_tokens
 
 
@@ -55,8 +56,6 @@ def driver_tls(results_dir: str | Path, info: dict[str, Any],
     ExperimentError
         The recorded folder is not one on this host (e.g. the results folder was copied).
     """
-    from dfrl.experiments.tls_folder import CertError, check_node_dir
-
     if tls is not None:
         return check_node_dir(tls).resolve()
     recorded = info.get("tls")
@@ -86,9 +85,9 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
     """Load ``program`` into every node of the running experiment, tell the agent(s) to switch
     to ``method``, and wait until each agent acknowledged it in its round log (the ``control``
     event it writes when it takes the command at its next round start). The driver is told
-    first (it keeps the program in ``programs/`` and loads it into robots that join later). Returns agent ->
-    ``"applied"``, or ``"sent"`` for an agent that did not answer within ``wait_s`` (0: do not
-    wait). ``tls``: the driver's TLS folder, instead of the one ``nodes.json`` records.
+    first (it keeps the program in ``programs/`` and loads it into robots that join later).
+    Returns agent -> ``"applied"``, or ``"sent"`` for an agent that did not answer within
+    ``wait_s`` (0: do not wait). ``tls``: the driver's TLS folder, instead of the one ``nodes.json`` records.
 
     Raises
     ------

@@ -1,33 +1,35 @@
 """Robots on other hosts: an already running ``dfrl robot`` service per robot (contract K5).
 
 The launcher reaches each service only through its console node
-(:meth:`dfrl.experiments.driver.console_node.ConsoleNode.robot`): :class:`RemoteRobot` configures the
-robot (the arena file, when the config names one, travels inside the configuration: hosts
-need no shared disk), starts it, follows it by polling ``status`` (:class:`StatusPoller`, one
-thread for all of them), tells it to stop, and at the end copies every result file it lists
-(``files``) into the results folder chunk by chunk (``fetch``). It offers the same few
-members as a local :class:`~dfrl.experiments.driver.launcher.children.RobotChild` (``address``,
-``iteration``, ``running``, ``exit_code()``, ``stop()`` ...), so the launcher's steps treat
-both alike.
+(:meth:`dfrl.experiments.driver.console.node.ConsoleNode.robot`). :class:`RemoteRobot` (a
+:class:`~.robots.Robot`) configures the robot (the arena file, when the config names one,
+travels inside the configuration: hosts need no shared disk), starts it, follows it by polling
+``status`` (:class:`StatusPoller`, one thread for all of them), tells it to stop, and at the end
+copies every result file it lists (``files``) into the results folder chunk by chunk
+(``fetch``).
 
 A robot whose status cannot be read for :data:`LOST_AFTER_S` is *lost* until it answers
 again; a robot in state ``failed`` is lost for good (its ``error`` text is the reason). Both
 end up in the summary and make the run incomplete.
+
+Threading: the poller thread calls :meth:`RemoteRobot.poll` and
+:meth:`RemoteRobot.poll_samples`; the launcher's thread calls the rest. Every field both touch
+is guarded by the robot's lock, which is never held during a request to the service.
 """
 from __future__ import annotations
 
 import base64
 import json
-import socket
 import threading
 import time
-from collections import deque
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 from typing import Any
 
-from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec
+from dfrl.experiments.driver.config import RobotSpec
 from dfrl.experiments.robot_host.config import RobotConfig
-from dfrl.experiments.driver.console_node import ConsoleNode
+from dfrl.experiments.driver.console.node import ConsoleNode
+from dfrl.experiments.driver.launcher.remote_hosts import arena_payload, safe_relative
+from dfrl.experiments.driver.launcher.robots import Address, Progress, RobotStatus
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.robot_host.lines import Evaluation, Sample, parse_eval, parse_sample
 
@@ -39,72 +41,10 @@ POLL_S = 0.5
 FETCH_CHUNK = 256 * 1024
 #: States in which the service runs (or may still run) our experiment.
 ACTIVE = ("configured", "running")
-
-
-def route_source(host: str, port: int = 9) -> str:
-    """The local address this host uses towards ``host`` (its route's source address): the
-    address at which a node of ours is reachable from there. No packet is sent.
-
-    Raises
-    ------
-    ExperimentError
-        ``host`` cannot be resolved or there is no route to it.
-    """
-    try:
-        family = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)[0]
-        with socket.socket(family[0], socket.SOCK_DGRAM) as s:
-            s.connect(family[4])
-            return str(s.getsockname()[0])
-    except OSError as exc:
-        raise ExperimentError(f"no route to robot host {host}: {exc}") from None
-
-
-def console_host(config: ExperimentConfig) -> str:
-    """Where the launcher's console node (and every robot it spawns itself) binds: the
-    config's ``console``; else the route's source address towards the first remote robot;
-    else 127.0.0.1 (every robot on this host)."""
-    if config.console:
-        return config.console
-    remote = config.remote_robots()
-    if remote:
-        host, port = remote[0].robot_host_address or ("127.0.0.1", 9)
-        return route_source(host, port)
-    return "127.0.0.1"
-
-
-def arena_payload(arena: str) -> tuple[str, dict[str, Any] | None]:
-    """The ``node.arena`` name and the ``arena`` object of a configuration: a built-in name
-    goes as it is (object None), an arena file as its JSON object (named by its stem).
-
-    Raises
-    ------
-    ExperimentError
-        The file cannot be read or is not a JSON object.
-    """
-    path = Path(arena)
-    if not path.is_file():
-        return arena, None
-    try:
-        obj = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise ExperimentError(f"arena file {path}: {exc}") from None
-    if not isinstance(obj, dict):
-        raise ExperimentError(f"arena file {path}: not a JSON object")
-    return path.stem, obj
-
-
-def safe_relative(name: str) -> PurePosixPath:
-    """A file name a robot listed, as a path inside the results folder.
-
-    Raises
-    ------
-    ExperimentError
-        An absolute name or one that climbs out (``..``).
-    """
-    p = PurePosixPath(name)
-    if not name or p.is_absolute() or ".." in p.parts or "\\" in name:
-        raise ExperimentError(f"robot listed a file outside its folder: {name!r}")
-    return p
+#: Seconds the service has to answer ``stop`` when the launcher asks (:meth:`request_stop`),
+#: and at least when it insists (:meth:`RemoteRobot.stop`).
+ASK_STOP_S = 10.0
+INSIST_STOP_S = 5.0
 
 
 class RemoteRobot:
@@ -113,201 +53,216 @@ class RemoteRobot:
     Parameters
     ----------
     robot : RobotSpec
-        With ``node`` set.
+        With ``robot_host`` set.
     cfg : RobotConfig
         Sent as the configuration's ``node`` (its ``out_dir`` is ignored by the service).
     console : ConsoleNode
     experiment : str
         Experiment id: the service keeps the files under ``WORKDIR/<experiment>/``.
+    poller : StatusPoller
+        Polls it once it started.
     """
 
     def __init__(self, robot: RobotSpec, cfg: RobotConfig, console: ConsoleNode,
-                 experiment: str) -> None:
-        assert robot.robot_host_address is not None
-        self.robot = robot
-        self.cfg = cfg
-        self.node = robot.robot_host_address
-        self.console = console
-        self.experiment = experiment
-        self.address: tuple[str, int] | None = None
-        self.iteration = 0
-        self.shares = 0
-        self.done = False
-        self.ready = threading.Event()
-        self.state = "unknown"
-        self.error: str | None = None
-        self.advertised: tuple[str, int] | None = None
-        self.last_answer = time.monotonic()
-        self.unreachable: str | None = None          # why the last poll failed
-        self.outages: list[tuple[float, float, str]] = []   # (from, to, why), monotonic times
+                 experiment: str, poller: StatusPoller) -> None:
+        if robot.robot_host_address is None:
+            raise ExperimentError(f"robot {robot.id} names no robot host")
+        self._spec = robot
+        self._cfg = cfg
+        self._node: Address = robot.robot_host_address
+        self._console = console
+        self._experiment = experiment
+        self._poller = poller
         self._lock = threading.Lock()
-        self.stopped = False
+        self._address: Address | None = None      # guarded by _lock, and so on below
+        self._state = "unknown"
+        self._iteration = 0
+        self._shares = 0
+        self._error: str | None = None
+        self._stopped = False
+        self._last_answer = time.monotonic()
+        self._unreachable: str | None = None      # why the last poll failed
         self._down_since = 0.0
-        self.err_path: Path | None = None
-        self.sample: Sample | None = None            # the newest DFRL_SAMPLE it wrote
-        self.sample_error: str | None = None         # why the last read of them failed
-        self.evals: deque[Evaluation] = deque()      # DFRL_EVAL lines not in the view yet
-        self._lines_at = 0                           # bytes of its lines file read
+        self._outages: list[tuple[float, float, str]] = []   # (from, to, why), monotonic
+        self._sample: Sample | None = None        # the newest DFRL_SAMPLE, not taken yet
+        self._sample_error: str | None = None     # why the last read of them failed
+        self._evals: list[Evaluation] = []        # DFRL_EVAL lines not taken yet
+        self._lines_at = 0                        # bytes of its lines file read (poller only)
         self._lines_rest = b""
+        self._err_path: Path | None = None
 
-    # -- the members a RobotChild has -------------------------------------------------------
     @property
-    def pid(self) -> int | None:
+    def spec(self) -> RobotSpec:
+        return self._spec
+
+    @property
+    def config(self) -> RobotConfig:
+        return self._cfg
+
+    # -- what it is doing --------------------------------------------------------------------
+    def _lost(self) -> str | None:
+        """Why it counts as lost now (caller holds the lock)."""
+        if self._state == "failed":
+            return f"failed on its host: {self._error or 'no reason given'}"
+        silent = time.monotonic() - self._last_answer
+        if self._unreachable is not None and silent > LOST_AFTER_S:
+            return f"unreachable for {silent:.0f} s: {self._unreachable}"
         return None
 
-    @property
-    def lost(self) -> str | None:
-        """Why the robot counts as lost now (None while it answers and has not failed)."""
-        if self.state == "failed":
-            return f"failed on its host: {self.error or 'no reason given'}"
-        if self.unreachable is not None and time.monotonic() - self.last_answer > LOST_AFTER_S:
-            return f"unreachable for {time.monotonic() - self.last_answer:.0f} s: " \
-                   f"{self.unreachable}"
-        return None
+    def status(self) -> RobotStatus:
+        with self._lock:
+            lost = self._lost()
+            return RobotStatus(
+                address=self._address, iteration=self._iteration, shares=self._shares,
+                done=self._state == "finished" or self._iteration >= self._cfg.iterations,
+                running=not self._stopped and self._state != "failed" and lost is None,
+                lost=lost)
 
-    @property
-    def running(self) -> bool:
-        """The service runs our experiment or still serves it (finished, not stopped by us)."""
-        return not self.stopped and self.state != "failed" and self.lost is None
+    def take_progress(self) -> Progress:
+        with self._lock:
+            progress = Progress(sample=self._sample, evals=self._evals,
+                                error=self._sample_error, outages=self._outages)
+            self._sample, self._evals, self._outages = None, [], []
+        return progress
 
-    def exit_code(self) -> int | None:
-        """None while running; 0 once stopped or finished cleanly; 1 failed or lost."""
-        if self.running:
-            return None
-        return 1 if self.lost is not None else 0
-
-    def err_tail(self, lines: int = 8) -> str:
-        if self.err_path is None or not self.err_path.is_file():
-            return self.error or self.unreachable or ""
-        text = self.err_path.read_text(encoding="utf-8", errors="replace").splitlines()
+    def log_tail(self, lines: int = 8) -> str:
+        """Its stderr's last lines once gathered, else why it failed or cannot be reached."""
+        with self._lock:
+            path, why = self._err_path, self._error or self._unreachable or ""
+        if path is None or not path.is_file():
+            return why
+        text = path.read_text(encoding="utf-8", errors="replace").splitlines()
         return "\n".join(text[-lines:])
 
-    def close_stdin(self) -> None:
-        """Tell the service to end our experiment (the local child's "stdin closes")."""
-        self._stop()
-
-    def stop(self, timeout_s: float) -> bool:
-        """End the experiment on the service; True if it said so in time."""
-        return self._stop(timeout_s)
-
-    def kill(self) -> None:
-        self._stop(5.0)
-
-    def finish(self) -> None:
-        """Nothing to join: the service outlives the experiment."""
-
-    # -- the service ------------------------------------------------------------------------
+    # -- the service -------------------------------------------------------------------------
     def _ask(self, request: str | dict[str, Any], timeout_s: float = 20.0) -> Any:
-        return self.console.robot(self.node, request, timeout_s=timeout_s)
+        return self._console.robot(self._node, request, timeout_s=timeout_s)
 
-    def configure(self) -> None:
-        """Check the service is free, send the configuration and remember the address the
-        agent will use (the one the config names: the driver reached it there).
+    def start(self) -> None:
+        """Check the service is free, send the configuration, remember the address the agent
+        will use (the one the config names: the driver reached it there), and start it.
 
         Raises
         ------
         ExperimentError
             Unreachable, busy with another experiment, or the configuration was refused.
         """
-        where = f"{self.node[0]}:{self.node[1]}"
+        where = f"{self._node[0]}:{self._node[1]}"
         status = self._ask("status")
         if status.get("state") in ACTIVE:
             raise ExperimentError(f"robot node {where} is busy with experiment "
                                   f"{status.get('experiment')!r} (state {status.get('state')})")
-        name, arena = arena_payload(self.robot.arena)
-        node = {**self.cfg.public_dict(), "arena": name}   # the robot has its own token
-        self._ask({"configure": json.dumps({"experiment": self.experiment, "node": node,
+        name, arena = arena_payload(self._spec.arena)
+        node = {**self._cfg.public_dict(), "arena": name}   # the robot has its own token
+        self._ask({"configure": json.dumps({"experiment": self._experiment, "node": node,
                                             "arena": arena})})
         self._update(self._ask("status"))
-        addr = status.get("address")
-        if isinstance(addr, list) and len(addr) == 2:
-            self.advertised = (str(addr[0]), int(addr[1]))
-        self.address = self.node
-        self.ready.set()
-
-    def start(self) -> None:
+        with self._lock:
+            self._address = self._node
         self._ask("start")
-        self.state = "running"
-
-    def _stop(self, timeout_s: float = 10.0) -> bool:
-        if self.stopped:
-            return True
-        try:
-            if self.state in ACTIVE or self.state == "finished":
-                self._ask("stop", timeout_s=max(1.0, timeout_s))
-            self.stopped = True
-            return True
-        except ExperimentError as exc:
-            self.unreachable = str(exc)
-            return False
+        with self._lock:
+            self._state = "running"
+        self._poller.watch(self)
 
     def _update(self, status: dict[str, Any]) -> None:
-        self.state = str(status.get("state"))
-        self.iteration = int(status.get("iteration") or 0)
-        self.shares = int(status.get("shares") or 0)
-        self.error = status.get("error")
-        self.done = self.state == "finished" or self.iteration >= self.cfg.iterations
+        with self._lock:
+            self._state = str(status.get("state"))
+            self._iteration = int(status.get("iteration") or 0)
+            self._shares = int(status.get("shares") or 0)
+            self._error = status.get("error")
+
+    def _stop(self, timeout_s: float) -> bool:
+        with self._lock:
+            if self._stopped:
+                return True
+            ask = self._state in ACTIVE or self._state == "finished"
+        try:
+            if ask:
+                self._ask("stop", timeout_s=max(1.0, timeout_s))
+        except ExperimentError as exc:
+            with self._lock:
+                self._unreachable = str(exc)
+            return False
+        with self._lock:
+            self._stopped = True
+        return True
+
+    def request_stop(self) -> None:
+        """Tell the service to end our experiment (it answers once it did)."""
+        self._stop(ASK_STOP_S)
+
+    def stop(self, timeout_s: float) -> bool:
+        """End the experiment on the service; True if it said so in time (at least
+        :data:`INSIST_STOP_S` to answer)."""
+        return self._stop(max(INSIST_STOP_S, timeout_s))
+
+    @property
+    def stopped(self) -> bool:
+        """The launcher ended our experiment there (nothing more to poll)."""
+        with self._lock:
+            return self._stopped
 
     def poll(self) -> None:
         """Read the status once (a failure is remembered, never raised)."""
         try:
             status = self._ask("status", timeout_s=5.0)
         except ExperimentError as exc:
-            if self.unreachable is None:
-                self._down_since = time.monotonic()
-            self.unreachable = str(exc)
+            with self._lock:
+                if self._unreachable is None:
+                    self._down_since = time.monotonic()
+                self._unreachable = str(exc)
             return
         now = time.monotonic()
-        if self.unreachable is not None:
-            with self._lock:
-                self.outages.append((self._down_since, now, self.unreachable))
-            self.unreachable = None
-        self.last_answer = now
-        if isinstance(status, dict) and status.get("experiment") in (self.experiment, None):
+        with self._lock:
+            if self._unreachable is not None:
+                self._outages.append((self._down_since, now, self._unreachable))
+            self._unreachable = None
+            self._last_answer = now
+        if isinstance(status, dict) and status.get("experiment") in (self._experiment, None):
             self._update(status)
+
+    def answering(self) -> bool:
+        """It runs or finished our experiment and its last poll was answered."""
+        with self._lock:
+            return self._state in ("running", "finished") and self._unreachable is None
 
     def poll_samples(self) -> None:
         """Read what the service's copy of our protocol lines (``logs/<robot>.out``, one of
         the result files) gained since the last read, and keep the newest ``DFRL_SAMPLE``
-        (the live view's pose and curves) and every ``DFRL_EVAL`` (in ``evals``). A failure
-        is remembered in ``sample_error``."""
+        (the live view's pose and curves) and every ``DFRL_EVAL``. A failure is remembered
+        (the ``error`` of :meth:`take_progress`)."""
         try:
-            chunk = self._ask({"fetch": {"name": f"logs/{self.robot.id}.out",
+            chunk = self._ask({"fetch": {"name": f"logs/{self._spec.id}.out",
                                          "offset": self._lines_at, "max": FETCH_CHUNK}},
                               timeout_s=5.0)
             data = base64.b64decode(chunk["data"])
         except (ExperimentError, KeyError, TypeError, ValueError) as exc:
-            self.sample_error = f"{type(exc).__name__}: {exc}"
+            with self._lock:
+                self._sample_error = f"{type(exc).__name__}: {exc}"
             return
-        self.sample_error = None
         self._lines_at += len(data)
         data = self._lines_rest + data
         cut = data.rfind(b"\n") + 1
         self._lines_rest = data[cut:]
         lines = data[:cut].decode("utf-8", errors="replace").splitlines()
-        for line in reversed(lines):
-            sample = parse_sample(line)
-            if sample is not None:
-                self.sample = sample
-                break
-        self.evals.extend(e for e in map(parse_eval, lines) if e is not None)
-
-    def take_outages(self) -> list[tuple[float, float, str]]:
-        """The outages (from, to, why) that ended since the last call."""
+        sample = next((s for s in map(parse_sample, reversed(lines)) if s is not None), None)
         with self._lock:
-            taken, self.outages = self.outages, []
-        return taken
+            self._sample_error = None
+            self._sample = sample or self._sample
+            self._evals.extend(e for e in map(parse_eval, lines) if e is not None)
 
     def gather(self, out: Path) -> list[str]:
-        """Copy every result file the service lists into ``out`` (same relative names);
-        return the names copied.
+        """Read its last protocol lines (for the view's last events, unless it is lost), then
+        copy every result file the service lists into ``out`` (same relative names); return
+        the names copied.
 
         Raises
         ------
         ExperimentError
-            The list or a chunk could not be read, or a file came back shorter or longer than
-            listed.
+            The list or a chunk could not be read, or a file came back shorter than listed.
         """
+        if self.status().lost is None:
+            self.poll_samples()
         copied = []
         for entry in self._ask("files"):
             rel = safe_relative(str(entry["name"]))
@@ -327,21 +282,24 @@ class RemoteRobot:
                         break
             if offset < size:
                 tmp.unlink()
-                raise ExperimentError(f"robot {self.robot.id}: {rel} came back with {offset} of "
-                                      f"{size} bytes")
+                raise ExperimentError(f"robot {self._spec.id}: {rel} came back with {offset} "
+                                      f"of {size} bytes")
             tmp.replace(target)
             copied.append(str(rel))
-        self.err_path = next((out / c for c in copied if c.startswith("logs/") and
-                              c.endswith(".err")), None)
+        with self._lock:
+            self._err_path = next((out / c for c in copied if c.startswith("logs/") and
+                                   c.endswith(".err")), None)
         return copied
 
 
 class StatusPoller:
-    """One thread polling every remote robot's status (and its newest samples, see
-    :meth:`RemoteRobot.poll_samples`) every :data:`POLL_S` until stopped."""
+    """One thread polling the status of every remote robot it watches (and its newest samples,
+    see :meth:`RemoteRobot.poll_samples`) every :data:`POLL_S` until closed. The list it
+    watches is guarded by its lock."""
 
-    def __init__(self, robots: list[RemoteRobot]) -> None:
-        self._robots = robots
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._robots: list[RemoteRobot] = []
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="remote-status", daemon=True)
 
@@ -349,14 +307,22 @@ class StatusPoller:
         self._thread.start()
         return self
 
+    def watch(self, robot: RemoteRobot) -> None:
+        """Poll ``robot`` from now on (until it is stopped)."""
+        with self._lock:
+            self._robots.append(robot)
+
     def _run(self) -> None:
         while not self._stop.wait(POLL_S):
-            for robot in list(self._robots):
+            with self._lock:
+                robots = list(self._robots)
+            for robot in robots:
                 if not robot.stopped and not self._stop.is_set():
                     robot.poll()
-                    if robot.state in ("running", "finished") and robot.unreachable is None:
+                    if robot.answering():
                         robot.poll_samples()
 
     def close(self) -> None:
         self._stop.set()
-        self._thread.join(timeout=30.0)
+        if self._thread.is_alive():
+            self._thread.join(timeout=30.0)

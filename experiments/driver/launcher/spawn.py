@@ -1,114 +1,157 @@
-"""Starting the robot nodes and the agents of an experiment."""
+"""Starting the robots and the agents of an experiment, and the ``nodes.json`` that lists them."""
 from __future__ import annotations
 
 import os
 import time
+from dataclasses import dataclass
+from pathlib import Path
 
-from dfrl.experiments.driver.config import RobotSpec
-from dfrl.experiments.robot_host.config import Mode, RobotConfig
+from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec
+from dfrl.experiments.driver.console import ConsoleNode
+from dfrl.experiments.driver.launcher.agent_roster import AgentInfo, AgentRoster
 from dfrl.experiments.driver.launcher.agents import agent_name, launch_agent
 from dfrl.experiments.driver.launcher.children import RobotChild
-from dfrl.experiments.driver.launcher.remote_robots import RemoteRobot
-from dfrl.experiments.driver.launcher.state import AgentInfo, RunState
+from dfrl.experiments.driver.launcher.remote_robots import RemoteRobot, StatusPoller
+from dfrl.experiments.driver.launcher.reporter import Reporter
+from dfrl.experiments.driver.launcher.robot_roster import RobotRoster
+from dfrl.experiments.driver.launcher.robots import Robot
 from dfrl.experiments.driver.results.files import write_json
+from dfrl.experiments.robot_host.config import Mode, RobotConfig
 
 
-def robot_seed(state: RunState, robot: RobotSpec) -> int:
+@dataclass(frozen=True)
+class Site:
+    """Where the robots of a run start and what they are told (fixed once its console node
+    is up).
+
+    Attributes
+    ----------
+    config : ExperimentConfig
+        With its token.
+    out : Path
+        The results folder (absolute).
+    console : ConsoleNode
+        The run's console node.
+    console_host : str
+        Where the console node binds; the robot processes of this host bind there too.
+    tls : Path or None
+        TLS folder of the console node and of the robot processes of this host.
+    experiment_id : str
+        Robot hosts file the run's files under it.
+    poller : StatusPoller
+        Follows the robots on other hosts.
+    """
+
+    config: ExperimentConfig
+    out: Path
+    console: ConsoleNode
+    console_host: str
+    tls: Path | None
+    experiment_id: str
+    poller: StatusPoller
+
+
+def robot_seed(config: ExperimentConfig, robot: RobotSpec, joins: int) -> int:
     """A robot's seed: its own, its place in the config, or the next free one for a robot
-    asked to join at runtime."""
-    c = state.config
-    known = [r.id for r in c.robots] + [j.robot.id for j in c.joins]
+    asked to join at runtime (``joins``: joins handled so far, this one included)."""
+    known = [r.id for r in config.robots] + [j.robot.id for j in config.joins]
     if robot.seed is not None or robot.id in known:
-        return c.robot_seed(robot)
-    return c.seed + len(known) + len(state.joined)
+        return config.robot_seed(robot)
+    return config.seed + len(known) + joins
 
 
-def node_config(state: RunState, robot: RobotSpec, iterations: int) -> RobotConfig:
-    """The configuration handed to a robot node process."""
-    c = state.config
+def node_config(site: Site, robot: RobotSpec, iterations: int, joins: int = 0) -> RobotConfig:
+    """The configuration a robot runs."""
+    c = site.config
     grace = 10.0 if c.mode is Mode.SYNC else c.timeout_s
-    return RobotConfig(robot=robot.id, out_dir=str(state.out), arena=robot.arena, algo=robot.algo,
-                      seed=robot_seed(state, robot), iterations=iterations, respite=c.respite,
-                      mode=c.mode, rtf=c.rtf, token=c.token, trainer=dict(c.trainer),
-                      grace_s=grace, sync_timeout_s=max(60.0, c.timeout_s),
-                      host=state.console_host,
-                      eval_every=c.eval_every, eval_steps=c.eval_steps,
-                      # a remote robot has its own TLS folder (dfrl robot --tls): not ours
-                      tls=str(state.tls) if state.tls is not None and robot.robot_host is None
-                      else None)
+    return RobotConfig(robot=robot.id, out_dir=str(site.out), arena=robot.arena,
+                       algo=robot.algo, seed=robot_seed(c, robot, joins), iterations=iterations,
+                       respite=c.respite, mode=c.mode, rtf=c.rtf, token=c.token,
+                       trainer=dict(c.trainer), grace_s=grace,
+                       sync_timeout_s=max(60.0, c.timeout_s), host=site.console_host,
+                       eval_every=c.eval_every, eval_steps=c.eval_steps,
+                       # a remote robot has its own TLS folder (dfrl robot --tls): not ours
+                       tls=None if site.tls is None or robot.robot_host is not None
+                       else str(site.tls))
 
 
-def spawn(state: RunState, robot: RobotSpec, iterations: int) -> RobotChild | RemoteRobot:
-    """Start a robot: a node process on this host (not waiting for it), or, for a robot with
-    a ``node``, configure and start the ``dfrl robot`` service there (waiting for it).
+def start_robot(site: Site, robot: RobotSpec, iterations: int, agents: AgentRoster,
+                joins: int = 0) -> Robot:
+    """Start a robot: a process on this host (not waiting for it to come up), or, for a robot
+    with a ``robot_host``, the ``dfrl robot`` service there (configured and started).
 
     Raises
     ------
     ExperimentError
-        A remote robot could not be configured or started.
+        The robot could not be started.
     """
-    cfg = node_config(state, robot, iterations)
+    cfg = node_config(site, robot, iterations, joins)
+    started: Robot
     if robot.robot_host is None:
-        child: RobotChild | RemoteRobot = RobotChild(robot, cfg, state.out, state.on_event)
+        algo = robot.algo
+        started = RobotChild(robot, cfg, site.out, on_event=lambda rid, op, it:
+                             agents.on_hop(rid, algo, op, it))
     else:
-        assert state.console is not None
-        child = RemoteRobot(robot, cfg, state.console, state.experiment_id)
-        child.configure()
-        child.start()
-    state.children[robot.id] = child
-    return child
+        started = RemoteRobot(robot, cfg, site.console, site.experiment_id, site.poller)
+    started.start()
+    return started
 
 
-def write_nodes(state: RunState) -> None:
+def write_nodes(site: Site, robots: RobotRoster, agents: AgentRoster) -> None:
     """``nodes.json``: the console node (where ``dfrl join`` asks), its TLS folder (null:
-    plaintext), every node that is up and every agent; never the token (``secret.token``)."""
-    nodes = [{"robot": rid, "algo": ch.robot.algo, "arena": ch.robot.arena,
-              "host": ch.address[0], "port": ch.address[1], "pid": ch.pid,
-              "node": ch.robot.robot_host, "joined": rid in state.joined}
-             for rid, ch in state.children.items() if ch.address is not None]
-    console = list(state.console.address) if state.console is not None else None
-    write_json(state.out / "nodes.json", {"console": console,
-                                          "tls": str(state.tls) if state.tls else None,
-                                          "experiment": state.experiment_id,
-                                          "nodes": nodes,
-                                          "agents": [a.to_dict() for a in state.agents.values()]})
+    plaintext), every robot that is up and every agent; never the token (``secret.token``)."""
+    nodes = []
+    for rid, robot in robots.robots().items():
+        status = robot.status()
+        if status.address is not None:
+            nodes.append({"robot": rid, "algo": robot.spec.algo, "arena": robot.spec.arena,
+                          "host": status.address[0], "port": status.address[1],
+                          "pid": status.pid, "node": robot.spec.robot_host,
+                          "joined": robots.joined(rid)})
+    write_json(site.out / "nodes.json", {"console": list(site.console.address),
+                                         "tls": str(site.tls) if site.tls else None,
+                                         "experiment": site.experiment_id,
+                                         "nodes": nodes,
+                                         "agents": [a.to_dict() for a in agents.infos()]})
 
 
-def control_dt(state: RunState) -> float:
+def control_dt(config: ExperimentConfig) -> float:
     """Simulated seconds per iteration of the robots (the trainer's ``control_dt``)."""
-    from dfrl.robots.training import TrainerConfig
+    from dfrl.robots.training import TrainerConfig    # pybullet: only when asked
 
     base = TrainerConfig().to_dict()
-    base.update(state.config.trainer)
+    base.update(config.trainer)
     return TrainerConfig.from_dict(base).sim.control_dt
 
 
-def rest_s(state: RunState) -> float:
+def rest_s(config: ExperimentConfig) -> float:
     """Seconds the agent rests at its first stop between rounds (async only)."""
-    c = state.config
-    if c.mode is Mode.SYNC:
+    if config.mode is Mode.SYNC:
         return 0.0
-    if c.rest_s is not None:
-        return float(c.rest_s)
-    if c.rtf:
-        return c.respite * control_dt(state) / c.rtf
-    share = max(1.0, len(c.robots) / (os.cpu_count() or 1))
-    return round(c.respite * 0.0005 * share, 3)
+    if config.rest_s is not None:
+        return float(config.rest_s)
+    if config.rtf:
+        return config.respite * control_dt(config) / config.rtf
+    share = max(1.0, len(config.robots) / (os.cpu_count() or 1))
+    return round(config.respite * 0.0005 * share, 3)
 
 
-def await_first_respite(state: RunState, children: list[RobotChild | RemoteRobot]) -> None:
-    """Async: wait until the agent's robots reach the first respite boundary, so that rounds
+def await_first_respite(config: ExperimentConfig, robots: RobotRoster,
+                        ids: list[str]) -> None:
+    """Async: wait until the robots ``ids`` reach the first respite boundary, so that rounds
     fall near iterations respite, 2 x respite, ... (the agent rests in between)."""
-    target = min(state.config.respite, state.config.iterations)
-    deadline = time.monotonic() + state.config.timeout_s
+    target = min(config.respite, config.iterations)
+    deadline = time.monotonic() + config.timeout_s
     while time.monotonic() < deadline:
-        state.check_children()
-        if all(ch.iteration >= target or not ch.running for ch in children):
+        robots.check()
+        statuses = robots.statuses()
+        if all(statuses[r].iteration >= target or not statuses[r].running for r in ids):
             return
         time.sleep(0.02)
 
 
-def launch_agents(state: RunState) -> None:
+def launch_agents(site: Site, robots: RobotRoster, agents: AgentRoster,
+                  reporter: Reporter) -> None:
     """One agent per algorithm, over the robots using it, in config order.
 
     Raises
@@ -116,27 +159,30 @@ def launch_agents(state: RunState) -> None:
     ExperimentError
         An agent could not be launched.
     """
-    c = state.config
+    c = site.config
     for algo in c.algorithms():
-        stops = [{"host": ch.address[0], "port": ch.address[1], "robot": rid}
-                 for rid, ch in state.children.items() if ch.robot.algo == algo]
+        stops = []
+        for rid, robot in robots.robots().items():
+            address = robot.status().address
+            if robot.spec.algo == algo and address is not None:
+                stops.append({"host": address[0], "port": address[1], "robot": rid})
         if not stops:
             continue      # only joiners use it: nobody to start with
         name = agent_name(algo)
         if c.mode is Mode.ASYNC:
-            await_first_respite(state, [state.children[s["robot"]] for s in stops])
-        log_path = state.out / f"rounds_{name}.log"
+            await_first_respite(c, robots, [s["robot"] for s in stops])
+        log_path = site.out / f"rounds_{name}.log"
         launch = {"name": name, "itinerary": stops, "method": c.method_for(algo),
-                  "rounds": c.rounds, "rest_s": rest_s(state), "rounds_log": str(log_path),
+                  "rounds": c.rounds, "rest_s": rest_s(c), "rounds_log": str(log_path),
                   # no token: the agent carries the console node's (the run's) tokens
                   "timeout_s": float(c.timeout_s),
                   # the agent posts its round log to the console node, which writes it here:
                   # no shared disk between the hosts the agent visits and the driver's
-                  "log_to": list(state.console.address)}
-        state.agents[name] = AgentInfo(name, algo, c.method_for(algo), c.rounds, str(log_path),
-                                       list(stops))
-        write_nodes(state)
-        write_json(state.out / f"launch_{name}.json", launch)
-        launch_agent(state.console, launch)
-        state.say(f"agent {name} ({c.method_for(algo)}, {c.rounds} rounds) launched to "
-                  f"{' -> '.join(s['robot'] for s in stops)}")
+                  "log_to": list(site.console.address)}
+        agents.add(AgentInfo(name, algo, c.method_for(algo), c.rounds, str(log_path),
+                             tuple(stops)))
+        write_nodes(site, robots, agents)
+        write_json(site.out / f"launch_{name}.json", launch)
+        launch_agent(site.console, launch)
+        reporter.say(f"agent {name} ({c.method_for(algo)}, {c.rounds} rounds) launched to "
+                     f"{' -> '.join(s['robot'] for s in stops)}")

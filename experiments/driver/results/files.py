@@ -1,11 +1,13 @@
 """JSON files of a results folder (``config.json``, ``nodes.json``, launch and node configs), and
-claiming the folder of a new run (:func:`claim_output`, :func:`new_run_folder`)."""
+claiming the folder of a new run (:func:`claim_output`, :func:`new_run_folder`; a folder a
+caller claimed travels as a :class:`ClaimedFolder`, so that it is claimed once)."""
 from __future__ import annotations
 
 import json
 import os
 import shutil
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +25,14 @@ def write_json(path: str | Path, data: Any) -> Path:
     tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
     tmp.replace(p)
     return p
+
+
+@dataclass(frozen=True)
+class ClaimedFolder:
+    """A results folder claimed for one run (by :func:`claim_output` or
+    :func:`new_run_folder`): whoever gets it writes into it without claiming it again."""
+
+    path: Path
 
 
 #: Files whose presence marks a folder as a dfrl results folder (``--force`` empties only such).

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from dfrl.experiments.driver.results.tables import table_sum
+
 METRICS_FIELDS = ("robot", "iteration", "q_sum", "cumulative_reward", "collisions")
 
 _CURVE_DTYPE = np.dtype([("iteration", np.int64), ("q_sum", np.float64),
@@ -19,7 +21,6 @@ def merge_metrics(out_dir: str | Path, robots: list[str]) -> Path:
     (``tables/<robot>.npy``, written after it) sums to something else, one more row at the
     same iteration carries that sum, so that curves and summary end with the last share.
     """
-    from dfrl.experiments.driver.results.tables import table_sum
 
     out = Path(out_dir)
     target = out / "metrics.csv"

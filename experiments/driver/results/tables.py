@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from dfrl.experiments.robot_host.checkpoint import load_checkpoint
+
 
 def table_path(out_dir: str | Path, robot: str) -> Path:
     return Path(out_dir) / "tables" / f"{robot}.npy"
@@ -29,8 +31,6 @@ def keep_checkpoints(out_dir: str | Path, robots: list[str]) -> list[str]:
     """For every robot without ``tables/<robot>.npy``, write it (and ``.visits.npy``) from
     ``checkpoint/<robot>.npy``, with a ``.json`` that says so (its iteration and shares).
     Returns the robots whose table came from a checkpoint."""
-    from dfrl.experiments.robot_host.checkpoint import load_checkpoint
-
     out = Path(out_dir)
     kept = []
     for rid in robots:

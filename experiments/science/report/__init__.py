@@ -1,12 +1,13 @@
-"""Reports and figures: the plots of a federated run (:mod:`.plots`), curve statistics
-(:mod:`.stats`) and the paper reproduction's ``report.md`` (:mod:`.paper`).
+"""Reports and figures: the plots of a federated run
+(:mod:`dfrl.experiments.driver.results.plots`), curve statistics (:mod:`.stats`) and the paper
+reproduction's ``report.md`` (:mod:`.paper`).
 
 Library code only: functions return values (paths, statistics) and raise; nothing prints.
 """
 from __future__ import annotations
 
 from dfrl.experiments.science.report.paper import write_report
-from dfrl.experiments.science.report.plots import plot_both, plot_experiment, plot_metric
+from dfrl.experiments.driver.results.plots import plot_both, plot_experiment, plot_metric
 from dfrl.experiments.science.report.stats import (ALGO_NAMES, COMBOS, CombinationRun, RunStats,
                                                    StandaloneRuns, stats_of)
 from dfrl.experiments.science.statistics import (dip, late_growth, reward_rate, smooth,

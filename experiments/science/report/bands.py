@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from dfrl.experiments.science.report.observations import SeedRun, mean_q, scores
-from dfrl.experiments.science.report.plots import COLOURS, new_figure, save_figure
+from dfrl.experiments.driver.results.plots import COLOURS, new_figure, save_figure
 from dfrl.experiments.science.statistics import t975
 
 
@@ -37,7 +37,7 @@ def plot_groups(groups: Mapping[str, Sequence[SeedRun]], path: Path, title: str,
     """Three panels: robots' mean sum of Q-values, mean cumulative reward, and the greedy
     score (own arena solid, held-out dashed), one colour per group, mean over seeds with a
     95% band; written in each of ``formats`` (see
-    :func:`dfrl.experiments.science.report.plots.save_figure`, screen default 100 dpi)."""
+    :func:`dfrl.experiments.driver.results.plots.save_figure`, screen default 100 dpi)."""
     fig = new_figure(figsize=(15, 4.4))
     axes = fig.subplots(1, 3)
     for (name, runs), colour in zip(groups.items(), COLOURS * 2):

@@ -41,7 +41,7 @@ def write_outputs(result: TransferResult, out: Path) -> None:
 def plot_transfer(result: TransferResult, path: Path, formats: Sequence[str] = ("png",),
                   dpi: float | None = None) -> list[Path]:
     """Cumulative collisions and reward against iterations, mean over seeds, min-max band,
-    in each of ``formats`` at ``dpi`` (:func:`dfrl.experiments.science.report.plots.save_figure`,
+    in each of ``formats`` at ``dpi`` (:func:`dfrl.experiments.driver.results.plots.save_figure`,
     screen default 100 dpi); return the files written.
 
     Raises
@@ -49,7 +49,7 @@ def plot_transfer(result: TransferResult, path: Path, formats: Sequence[str] = (
     ImportError
         matplotlib is not installed (``pip install dfrl[plot]``).
     """
-    from dfrl.experiments.science.report.plots import new_figure, save_figure
+    from dfrl.experiments.driver.results.plots import new_figure, save_figure
 
     fig = new_figure(figsize=(10, 3.8))
     ax_c, ax_r = fig.subplots(1, 2)

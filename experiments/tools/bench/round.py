@@ -3,7 +3,7 @@
 Starts N robot node processes on loopback (:mod:`dfrl.experiments.robot_host` in benchmark mode:
 each holds a random table of ``--entries`` values and serves the agent's requests as soon as
 they arrive, no simulation), launches the real itinerary agent
-(through a console node, :mod:`dfrl.experiments.driver.console_node`) for ``--warmup + --rounds`` rounds without rest and
+(through a console node, :mod:`dfrl.experiments.driver.console`) for ``--warmup + --rounds`` rounds without rest and
 reads the round times from its log (the agent stamps a round's start when it reads the first
 robot and its end after writing the first robot back). Checks that every robot holds the
 same table after each round. Target: median under 50 ms for 5 nodes and 20,000 entries.
@@ -24,7 +24,8 @@ from pathlib import Path
 from dfrl.experiments.driver.config import RobotSpec
 from dfrl.experiments.robot_host.config import RobotConfig
 from dfrl.experiments.driver.launcher.agents import launch_agent, open_console
-from dfrl.experiments.driver.launcher.children import RobotChild, await_ready
+from dfrl.experiments.driver.launcher.children import RobotChild
+from dfrl.experiments.driver.launcher.robots import await_ready
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
 from dfrl.experiments.driver.results.rounds import count_equal, read_shares, write_rounds_csv
 
@@ -60,6 +61,7 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
             cfg = RobotConfig(robot=spec.id, out_dir=str(out), seed=i, bench_table=[states, actions],
                              events=False, progress_every=0)
             children.append(RobotChild(spec, cfg, out))
+            children[-1].start()
         await_ready(children, 120.0)
         log = out / "rounds_bench.log"
         if log.exists():
@@ -67,8 +69,8 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
         total = warmup + rounds
         launch = {"name": "bench", "method": method, "rounds": total, "rest_s": 0.0,
                   "rounds_log": str(log), "token": 1111, "timeout_s": 60.0,
-                  "itinerary": [{"host": ch.address[0], "port": ch.address[1], "robot": ch.robot.id}
-                                for ch in children]}
+                  "itinerary": [{"host": a[0], "port": a[1], "robot": ch.spec.id}
+                                for ch in children if (a := ch.status().address)]}
         t0 = time.monotonic()
         with open_console(1111, out / "logs" / "console.err") as console:
             launch_agent(console, launch)
@@ -83,11 +85,10 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
                                f"({len(agent_log.rounds)} done)")
     finally:
         for ch in children:
-            ch.close_stdin()
+            ch.request_stop()
         for ch in children:
             ch.stop(10.0)
-            ch.finish()
-    ids = [ch.robot.id for ch in children]
+    ids = [ch.spec.id for ch in children]
     shares = {rid: read_shares(out / f"shares_{rid}.csv") for rid in ids}
     rows = write_rounds_csv(out / "rounds.csv", [agent_log], ids, shares)
     timed = [r for r in agent_log.rounds if r.round > warmup]

@@ -82,10 +82,10 @@ def measure(n: int, iterations: int = 2000, respite: int = 500,
 
     def sample() -> None:
         while not done.wait(SAMPLE_S):
-            for child in list(launcher.state.children.values()):
-                rss = _rss_mb(child.proc.pid)
-                if rss is not None:
-                    peak[child.proc.pid] = max(peak.get(child.proc.pid, 0.0), rss)
+            for pid in (r.status().pid for r in launcher.robots().values()):
+                rss = _rss_mb(pid) if pid is not None else None
+                if pid is not None and rss is not None:
+                    peak[pid] = max(peak.get(pid, 0.0), rss)
 
     def target() -> None:
         try:

@@ -41,7 +41,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from dfrl.experiments.tools.view.events import EVENTS_FILE
+from dfrl.experiments.driver.launcher.events import EVENTS_FILE
 from dfrl.experiments.tools.view.robots import RobotTrack
 from dfrl.experiments.tools.view.tail import MAX_BYTES, FileTail, file_mtime
 

@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 
-from dfrl.experiments.driver.console_node import CONSOLE_SCRIPT, ConsoleNode
+from dfrl.experiments.driver.console import CONSOLE_SCRIPT, ConsoleNode
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.tokens import env_with_tokens
 from dfrl.platform_pl import DFRL_AGENT_DIR, PLATFORM_DIR

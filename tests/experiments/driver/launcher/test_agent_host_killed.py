@@ -51,13 +51,13 @@ def test_run_completes_when_the_agents_host_is_killed(tmp_path: Path) -> None:
     assert inject_method(tmp_path, SLOW, "slow") == {"fed_qlearning": "applied"}
     # Execute: the first time the agent reads r2's table with the slow method (it then stays
     # there for 0.5 s), kill r2's process.
-    st = launcher.state
     killed = None
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and runner.is_alive() and killed is None:
-        at = st.agent_at.get("fed_qlearning")
+        at = launcher.agent_at("fed_qlearning")
         if at is not None and at[0] == "r2" and at[1] == "get" and at[2] >= 400:
-            killed = st.children["r2"].proc.pid
+            killed = launcher.robots()["r2"].status().pid
+            assert killed is not None
             os.kill(killed, signal.SIGKILL)
         time.sleep(0.005)
     assert killed is not None, "the agent never read r2's table in round 2 or later"

@@ -21,7 +21,8 @@ from dfrl.experiments.driver.launcher import run
 from dfrl.experiments.robot_host.evaluate import EVAL_FIELDS, eval_seed
 from dfrl.experiments.robot_host.lines import Evaluation, ProtocolLines, parse_eval
 from dfrl.experiments.tokens import env_with_tokens
-from dfrl.experiments.tools.view import EVENTS_FILE, EventSource
+from dfrl.experiments.driver.launcher.events import EVENTS_FILE
+from dfrl.experiments.tools.view import EventSource
 
 from .helpers import diagnose, small_config
 

@@ -12,6 +12,7 @@ import pytest
 
 from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec
 from dfrl.experiments.driver.launcher import Results, run
+from dfrl.experiments.driver.results.files import ClaimedFolder, claim_output
 from dfrl.experiments.driver.results.metrics import read_metrics
 
 from .helpers import diagnose, rounds_csv, run_in_thread, small_config, wait_rounds
@@ -53,6 +54,23 @@ def test_two_robot_smoke_run(tmp_path: Path) -> None:
     assert len({r["digest_r1"] for r in rows}) == 4       # the tables moved on between rounds
     summary = (tmp_path / "summary.md").read_text()
     assert "4/4" in summary
+
+
+def test_output_folder_is_claimed_once(tmp_path: Path) -> None:
+    # Prepare: a folder a caller claimed (as dfrl run does), which then got a file of its own
+    # (the live view's, say); and one nobody claimed holding a foreign file
+    claimed = ClaimedFolder(claim_output(tmp_path / "claimed"))
+    (claimed.path / "view.log").write_text("mine")
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("keep me")
+    # Execute and Assert: the claimed folder is used as it is, the other one is refused
+    res = run(small_config(1), claimed, progress=None)
+    assert res.ok and res.output_dir == claimed.path.resolve()
+    assert (claimed.path / "view.log").read_text() == "mine"
+    with pytest.raises(FileExistsError, match="is not empty"):
+        run(small_config(1), foreign, progress=None)
+    assert [p.name for p in foreign.iterdir()] == ["notes.txt"]
 
 
 def test_sync_mode_same_seed_same_curves(tmp_path: Path) -> None:

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from dfrl.experiments.cli.figures import redraw_experiment
-from dfrl.experiments.science.report.plots import draw_lines, new_figure, plot_experiment, save_figure
+from dfrl.experiments.driver.results.plots import draw_lines, new_figure, plot_experiment, save_figure
 from dfrl.experiments.driver.results.metrics import read_metrics
 
 

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dfrl.experiments.science.report.plots import plot_experiment, robot_label
+from dfrl.experiments.driver.results.plots import plot_experiment, robot_label
 from dfrl.experiments.science.statistics import dip, late_growth, reward_rate, smooth
 
 

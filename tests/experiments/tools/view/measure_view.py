@@ -161,7 +161,7 @@ def settle(pid: int, quiet_s: float = 0.02, every_s: float = 0.5, limit_s: float
 def demo_once(with_view: bool, browser: tuple[str, str] | None, out: Path,
               cpu: dict[str, float] | None = None) -> float:
     from dfrl.experiments.driver.config import ExperimentConfig, resolve_config
-    from dfrl.experiments.driver.launcher.run import run
+    from dfrl.experiments.driver.launcher.experiment import run
 
     cfg = ExperimentConfig.load(resolve_config("demo"))
     view = drv = None
@@ -226,7 +226,7 @@ def screenshot(browser: tuple[str, str], path: Path, at_round: int = 10) -> dict
     """The README's picture: the page during a live demo run (5 robots), taken by the test
     set-up's Chromium once the agent has done ``at_round`` rounds."""
     from dfrl.experiments.driver.config import ExperimentConfig, resolve_config
-    from dfrl.experiments.driver.launcher.run import run
+    from dfrl.experiments.driver.launcher.experiment import run
 
     cfg = ExperimentConfig.load(resolve_config("demo"))
     box: dict[str, Any] = {}

@@ -19,7 +19,7 @@ from typing import Any
 
 import pytest
 
-from dfrl.experiments.driver.launcher.run import Launcher
+from dfrl.experiments.driver.launcher.experiment import Launcher
 from dfrl.experiments.tools.view import start_view
 
 from ...driver.launcher.helpers import small_config
@@ -79,8 +79,9 @@ def test_page_follows_a_run_and_shows_a_killed_robot_dead(tmp_path: Path,
                 samples.append(s)
                 grown = len({x["points"] for x in samples}) >= 3
                 if killed_at is None and s["round"] >= 4 and grown:
-                    child = launcher.state.children["r2"]
-                    os.kill(child.proc.pid, signal.SIGKILL)
+                    pid = launcher.robots()["r2"].status().pid
+                    assert pid is not None
+                    os.kill(pid, signal.SIGKILL)
                     killed_at = time.monotonic()
                 if killed_at is not None and s["robots"].get("r2") == "dead":
                     break

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec
-from dfrl.experiments.driver.launcher.run import run
+from dfrl.experiments.driver.launcher.experiment import run
 from dfrl.experiments.tools.view import EVENTS_FILE, EventSource
 
 pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")

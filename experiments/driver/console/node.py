@@ -18,32 +18,22 @@ Example: ``with ConsoleNode(tokens=[1111]) as console: console.control(("127.0.0
 """
 from __future__ import annotations
 
-import collections
-import contextlib
 import dataclasses
-import itertools
-import json
 import os
 import queue
-import subprocess
-import threading
 import time
 import uuid
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import IO, Any
+from typing import Any
 
-from dfrl.experiments.driver.console_command import CONSOLE_SCRIPT, console_command
+from dfrl.experiments.driver.console.channel import Address, ConsoleChannel
+from dfrl.experiments.driver.console.command import console_command
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.tokens import env_with_tokens
 
-__all__ = ["Address", "CONSOLE_SCRIPT", "ConsoleNode"]
-
-Address = tuple[str, int]
-"""A node's (host, port)."""
-
-_STDERR_LINES = 200
+__all__ = ["Address", "ConsoleNode"]
 
 
 class ConsoleNode:
@@ -85,143 +75,21 @@ class ConsoleNode:
         elif isinstance(tokens, (int, str)):
             tokens = [tokens]
         cmd = console_command(host, port, tls, swipl)
-        env = env_with_tokens(tokens)   # never on the command line, which ps shows to all
-        self._ids = itertools.count(1)
-        self._cond = threading.Condition()
-        self._replies: dict[Any, dict[str, Any]] = {}
-        self._events: queue.Queue[dict[str, Any]] = queue.Queue()
-        self._join_waiters: dict[str, queue.Queue[dict[str, Any]]] = {}
-        self._stderr: collections.deque[str] = collections.deque(maxlen=_STDERR_LINES)
-        self._write_lock = threading.Lock()
-        self._eof = False
-        self._address: Address | None = None
-        self._log: IO[str] | None = open(log_path, "a", encoding="utf-8") if log_path else None
-        self._proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                      stderr=subprocess.PIPE, text=True, encoding="utf-8",
-                                      bufsize=1, env=env)
-        self._reader = threading.Thread(target=self._read_stdout, daemon=True,
-                                        name="console-stdout")
-        self._err_reader = threading.Thread(target=self._read_stderr, daemon=True,
-                                            name="console-stderr")
-        self._reader.start()
-        self._err_reader.start()
-        try:
-            self._await_ready(ready_timeout_s)
-        except BaseException:
-            self.close()
-            raise
+        # the tokens go in its environment, never on the command line, which ps shows to all
+        self._channel = ConsoleChannel(cmd, env_with_tokens(tokens), ready_timeout_s, log_path)
 
-    # -- reading ---------------------------------------------------------------------------
-    def _read_stdout(self) -> None:
-        assert self._proc.stdout is not None
-        try:
-            for line in self._proc.stdout:
-                self._dispatch(line.rstrip("\n"))
-        finally:
-            with self._cond:
-                self._eof = True
-                self._cond.notify_all()
-
-    def _read_stderr(self) -> None:
-        assert self._proc.stderr is not None
-        for line in self._proc.stderr:
-            self._stderr.append(line.rstrip("\n"))
-            if self._log is not None:
-                self._log.write(line)
-                self._log.flush()
-
-    def _dispatch(self, line: str) -> None:
-        try:
-            msg = json.loads(line)
-        except (ValueError, RecursionError):
-            msg = None
-        if not isinstance(msg, dict):
-            if line.strip():
-                self._events.put({"event": "unreadable", "line": line})
-            return
-        event = msg.get("event")
-        if event is None and "id" in msg:
-            with self._cond:
-                self._replies[msg["id"]] = msg
-                self._cond.notify_all()
-        elif event == "ready":
-            with self._cond:
-                self._address = (str(msg["host"]), int(msg["port"]))
-                self._cond.notify_all()
-        else:
-            request = msg.get("request")
-            with self._cond:
-                waiter = self._join_waiters.get(request) \
-                    if event == "reply" and isinstance(request, str) else None
-            (waiter or self._events).put(msg)
-
-    def _await_ready(self, timeout_s: float) -> None:
-        deadline = time.monotonic() + timeout_s
-        with self._cond:
-            while self._address is None and not self._eof:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    break
-                self._cond.wait(left)
-        if self._address is None:
-            gone = "exited before it was ready" if self._eof else \
-                f"did not report its address within {timeout_s} s"
-            raise ExperimentError(f"the console node {gone} ({self._exit_text()})")
-
-    def _exit_text(self) -> str:
-        """The exit code and last stderr lines of a node that stopped answering."""
-        try:
-            code: int | None = self._proc.wait(timeout=2.0)
-        except subprocess.TimeoutExpired:
-            code = None
-        if code is not None:
-            self._err_reader.join(timeout=2.0)       # its last words
-        return f"exit code {code}: {self.stderr_tail()}"
-
-    # -- requests --------------------------------------------------------------------------
     def _request(self, op: str, timeout_s: float, **fields: Any) -> dict[str, Any]:
-        """Send one request; return the reply's fields (without ``id`` and ``ok``)."""
-        rid = next(self._ids)
-        line = json.dumps({"id": rid, "op": op, **fields})
-        self._send(line, op)
-        deadline = time.monotonic() + timeout_s
-        with self._cond:
-            while rid not in self._replies and not self._eof:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    raise ExperimentError(f"the console node did not answer {op} within "
-                                          f"{timeout_s} s")
-                self._cond.wait(left)
-            reply = self._replies.pop(rid, None)
-        if reply is None:
-            raise ExperimentError(f"the console node exited during {op} "
-                                  f"({self._exit_text()})")
-        if not reply.get("ok"):
-            raise ExperimentError(f"{op} failed: {reply.get('error', reply)}")
-        return {k: v for k, v in reply.items() if k not in ("id", "ok")}
-
-    def _send(self, line: str, op: str) -> None:
-        stdin = self._proc.stdin
-        if stdin is None or stdin.closed:
-            raise ExperimentError(f"cannot send {op}: the console node is closed")
-        try:
-            with self._write_lock:
-                stdin.write(line + "\n")
-                stdin.flush()
-        except (BrokenPipeError, OSError, ValueError) as exc:
-            raise ExperimentError(f"cannot send {op} to the console node ({exc}; "
-                                  f"{self._exit_text()})") from None
+        return self._channel.request(op, timeout_s, **fields)
 
     @property
     def address(self) -> Address:
         """The console node's own (host, port)."""
-        assert self._address is not None
-        return self._address
+        return self._channel.address
 
     @property
     def pid(self) -> int:
         """Process id of the ``swipl`` process."""
-        return self._proc.pid
+        return self._channel.pid
 
     def launch_agent(self, plan: Mapping[str, Any], timeout_s: float = 60.0) -> dict[str, Any]:
         """Create the dFRL agent of a launch plan on this node and move it to its first stop.
@@ -308,11 +176,8 @@ class ConsoleNode:
         spec = dataclasses.asdict(robot_spec) if dataclasses.is_dataclass(robot_spec) \
             else dict(robot_spec)
         request = uuid.uuid4().hex
-        waiter: queue.Queue[dict[str, Any]] = queue.Queue()
-        with self._cond:
-            self._join_waiters[request] = waiter
         deadline = time.monotonic() + timeout_s
-        try:
+        with self._channel.expect(request) as waiter:
             self._request("join", timeout_s, to=list(driver), request=request, robot=spec,
                           iterations=iterations)
             try:
@@ -320,9 +185,6 @@ class ConsoleNode:
             except queue.Empty:
                 raise ExperimentError(f"no answer to the join request from {driver[0]}:"
                                       f"{driver[1]} within {timeout_s} s") from None
-        finally:
-            with self._cond:
-                del self._join_waiters[request]
         result = event.get("result")
         if not isinstance(result, dict):
             raise ExperimentError(f"unreadable answer to the join request: {event}")
@@ -344,55 +206,28 @@ class ConsoleNode:
         self._request("program", timeout_s, to=list(driver), name=path.name,
                       text=path.read_text(encoding="utf-8"))
 
-    # -- events ----------------------------------------------------------------------------
+    # -- events and lifecycle ----------------------------------------------------------------
     def next_event(self, timeout_s: float) -> dict[str, Any] | None:
         """The next event the node reported, waiting at most ``timeout_s``; None if none came."""
-        try:
-            return self._events.get(timeout=max(0.0, timeout_s))
-        except queue.Empty:
-            return None
+        return self._channel.next_event(timeout_s)
 
     def events(self) -> list[dict[str, Any]]:
         """The events reported so far and not yet taken (does not wait)."""
-        taken = []
-        while True:
-            try:
-                taken.append(self._events.get_nowait())
-            except queue.Empty:
-                return taken
+        return self._channel.events()
 
     def stderr_tail(self, lines: int = 8) -> str:
         """The last lines the node wrote to stderr."""
-        return "\n".join(list(self._stderr)[-lines:])
+        return self._channel.stderr_tail(lines)
 
     @property
     def running(self) -> bool:
         """Whether the ``swipl`` process is still alive."""
-        return self._proc.poll() is None
+        return self._channel.running
 
-    # -- lifecycle -------------------------------------------------------------------------
-    def close(self, timeout_s: float = 10.0) -> int:
-        """Stop the node (``quit``, then end of input, then kill); return its exit code."""
-        stdin = self._proc.stdin
-        if self._proc.poll() is None and stdin is not None and not stdin.closed:
-            # already gone: the exit code below tells
-            with contextlib.suppress(BrokenPipeError, OSError, ValueError), self._write_lock:
-                stdin.write(json.dumps({"id": "quit", "op": "quit"}) + "\n")
-                stdin.flush()
-        if stdin is not None and not stdin.closed:
-            with contextlib.suppress(BrokenPipeError, OSError):
-                stdin.close()
-        try:
-            code = self._proc.wait(timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            self._proc.kill()
-            code = self._proc.wait(timeout=timeout_s)
-        self._reader.join(timeout=timeout_s)
-        self._err_reader.join(timeout=timeout_s)
-        if self._log is not None and not self._err_reader.is_alive():
-            self._log.close()
-            self._log = None
-        return code
+    def close(self, timeout_s: float = 10.0) -> int | None:
+        """Stop the node (``quit``, then end of input, then stop its process group); return
+        its exit code."""
+        return self._channel.close(timeout_s)
 
     def __enter__(self) -> ConsoleNode:
         return self

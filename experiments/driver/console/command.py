@@ -1,13 +1,13 @@
 """The command line that starts an experiment's console node (a ``swipl`` process running
-``platform_pl/dfrl_agent/dfrl_console.pl``; :class:`dfrl.experiments.driver.console_node.ConsoleNode` drives
-it)."""
+``platform_pl/dfrl_agent/dfrl_console.pl``;
+:class:`dfrl.experiments.driver.console.node.ConsoleNode` drives it)."""
 from __future__ import annotations
 
 import os
-import shutil
 from pathlib import Path
 
-from dfrl.experiments.errors import ExperimentError
+from dfrl.experiments import processes
+from dfrl.experiments.tls_folder import check_node_dir
 from dfrl.platform_pl import DFRL_AGENT_DIR
 
 CONSOLE_SCRIPT: Path = DFRL_AGENT_DIR / "dfrl_console.pl"
@@ -37,12 +37,8 @@ def console_command(host: str, port: int, tls: str | os.PathLike[str] | None = N
     CertError
         ``tls`` does not hold the three files.
     """
-    exe = swipl or shutil.which("swipl")
-    if exe is None:
-        raise ExperimentError("swipl is not installed (run scripts/setup.sh)")
-    cmd = [exe, "-q", str(CONSOLE_SCRIPT), "--host", host, "--port", str(int(port))]
+    cmd = [swipl or processes.swipl(), "-q", str(CONSOLE_SCRIPT), "--host", host,
+           "--port", str(int(port))]
     if tls is not None:
-        from dfrl.experiments.tls_folder import check_node_dir
-
         cmd += ["--tls", str(check_node_dir(tls).resolve())]
     return cmd

@@ -1,0 +1,242 @@
+"""Run one federated experiment, its robots spawned here or running on other hosts:
+:func:`run` and the :class:`Launcher` behind it.
+
+Threading: :meth:`Launcher.run` runs on the caller's thread, which owns the launcher's own
+fields and every process of the run. Alongside it run the robot processes' reader threads
+(hops, :class:`~.agent_roster.AgentRoster`), the remote robots' status poller and the console
+node's readers; what they share lives in the rosters, each guarded by its lock. Another thread
+may look at a running experiment through :meth:`Launcher.robots` and :meth:`Launcher.agent_at`.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any, TextIO
+
+from dfrl.experiments.driver.config import ConfigError, ExperimentConfig
+from dfrl.experiments.driver.launcher.agent_roster import AgentRoster
+from dfrl.experiments.driver.launcher.agents import open_console
+from dfrl.experiments.driver.launcher.joins import Joins
+from dfrl.experiments.driver.launcher.monitor import monitor
+from dfrl.experiments.driver.launcher.remote_hosts import console_host
+from dfrl.experiments.driver.launcher.remote_robots import StatusPoller
+from dfrl.experiments.driver.launcher.reporter import Reporter
+from dfrl.experiments.driver.launcher.robot_roster import RobotRoster
+from dfrl.experiments.driver.launcher.robots import Robot, await_ready
+from dfrl.experiments.driver.launcher.spawn import Site, launch_agents, start_robot, write_nodes
+from dfrl.experiments.driver.results.evaluations import merge_evaluations
+from dfrl.experiments.driver.results.faults import assess
+from dfrl.experiments.driver.results.files import ClaimedFolder, claim_output, write_json
+from dfrl.experiments.driver.results.metrics import merge_metrics
+from dfrl.experiments.driver.results.plots import plot_experiment
+from dfrl.experiments.driver.results.rounds import read_shares, write_rounds_csv
+from dfrl.experiments.driver.results.summary import Results, write_summary
+from dfrl.experiments.driver.results.tables import keep_checkpoints
+from dfrl.experiments.tls_folder import check_node_dir
+from dfrl.experiments.tokens import SECRET_FILE, new_secret, write_secret_file
+
+
+class Launcher:
+    """Runs one experiment; see :func:`run`."""
+
+    def __init__(self, config: ExperimentConfig, output_dir: str | Path | ClaimedFolder,
+                 progress: TextIO | None = sys.stderr, force: bool = False,
+                 tls: str | Path | None = None) -> None:
+        self._claimed = isinstance(output_dir, ClaimedFolder)
+        path = output_dir.path if isinstance(output_dir, ClaimedFolder) else Path(output_dir)
+        self._out = path.resolve()
+        self._config = config
+        self._force = force
+        self._tls = Path(tls).resolve() if tls is not None else None
+        self._reporter = Reporter(self._out, progress)
+        self._robots = RobotRoster(self._out, self._reporter)
+        self._agents = AgentRoster(self._reporter)
+        self._interrupted: str | None = None
+
+    def robots(self) -> dict[str, Robot]:
+        """The robots of the run so far, by id (callable from any thread)."""
+        return self._robots.robots()
+
+    def agent_at(self, agent: str) -> tuple[str, str, int] | None:
+        """Where ``agent`` was last seen: (robot, ``get``/``set``, its iteration) (callable from
+        any thread)."""
+        return self._agents.at(agent)
+
+    def run(self) -> Results:
+        """Run the experiment. SIGTERM and SIGINT (when called from the main thread) stop it
+        cleanly: the robots are told to stop (they save their tables; a robot that does not
+        exit in time is killed and its last checkpoint kept as its table), the partial results
+        are written, and the :class:`Results` come back with ``interrupted`` set.
+
+        Raises
+        ------
+        ConfigError
+            An arena is missing or does not parse, or robots on other hosts but no token
+            (before anything is started).
+        CertError
+            The TLS folder lacks one of its files (before anything is started).
+        FileExistsError
+            The results folder is not empty and ``force`` is not set.
+        """
+        restore = []
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGTERM, signal.SIGINT):
+                restore.append((sig, signal.signal(sig, _interrupt)))
+        try:
+            return self._run()
+        finally:
+            for sig, handler in restore:
+                signal.signal(sig, handler)
+
+    def _prepare(self) -> ExperimentConfig:
+        """Check everything that can be checked before anything starts, claim the results
+        folder (unless the caller did) and write the token and the config into it; return the
+        config with its token."""
+        c = self._config
+        c.check()
+        if c.token is None and c.remote_robots():
+            where = c.remote_robots()[0].robot_host
+            raise ConfigError([f"token: robots on other hosts ({where}) "
+                               "prove the token their dfrl robot was started with: name it "
+                               "in the config (without one a run makes a random token)"])
+        if self._tls is not None:
+            check_node_dir(self._tls)
+        if not self._claimed:
+            claim_output(self._out, self._force)
+        if c.token is None:                 # a strong token of this run only
+            c = c.with_token(new_secret())
+        # the one file of the folder that holds the token (mode 0600): for dfrl join/inject
+        write_secret_file(self._out / SECRET_FILE, [c.token])
+        write_json(self._out / "config.json", c.public_dict())
+        return c
+
+    def _run(self) -> Results:
+        c = self._config = self._prepare()
+        t0 = self._reporter.start_clock()
+        experiment_id = f"{c.name}-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
+        ok = True
+        console = poller = None
+        say = self._reporter.say
+        try:
+            host = console_host(c)
+            console = open_console(c.token, self._out / "logs" / "console.err", host=host,
+                                   tls=self._tls)
+            poller = StatusPoller().start()
+            site = Site(c, self._out, console, host, self._tls, experiment_id, poller)
+            for spec in c.robots:
+                self._robots.add(start_robot(site, spec, c.iterations, self._agents))
+            robots = self._robots.robots()
+            await_ready(list(robots.values()))
+            write_nodes(site, self._robots, self._agents)
+            say(f"{len(robots)} robot nodes up: " + ", ".join(
+                f"{rid}@{s.address[1]}" for rid, s in self._robots.statuses().items()
+                if s.address is not None))
+            launch_agents(site, self._robots, self._agents, self._reporter)
+            monitor(c, self._robots, self._agents, Joins(site, self._robots, self._agents,
+                                                         self._reporter), self._reporter)
+        except KeyboardInterrupt as exc:
+            ok = False
+            self._interrupted = str(exc) or "KeyboardInterrupt"
+            say(f"interrupted ({self._interrupted}): stopping the robots, they save their tables")
+        except BaseException as exc:
+            ok = False
+            self._interrupted = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+            self._robots.kill_all()
+            raise
+        finally:
+            self._robots.end_stalls()
+            try:
+                self._robots.shutdown()
+            except BaseException:
+                self._robots.kill_all()
+                raise
+            if poller is not None:
+                poller.close()
+            self._robots.gather(self._out)
+            if console is not None:
+                console.close()
+            results = self._collect(time.monotonic() - t0, ok)
+        return results
+
+    def _collect(self, wall: float, ok: bool) -> Results:
+        out, c, say = self._out, self._config, self._reporter.say
+        self._agents.read_logs(self._robots)
+        self._robots.show_progress()        # lines the robots wrote after the last look
+        robots = list(self._robots.robots())
+        from_checkpoint = keep_checkpoints(out, robots)
+        for rid in from_checkpoint:
+            say(f"table of {rid} kept from its last checkpoint (tables/{rid}.npy)")
+        merge_metrics(out, robots)
+        merge_evaluations(out, robots)
+        logs = self._agents.logs()
+        shares = {rid: read_shares(out / f"shares_{rid}.csv") for rid in robots}
+        rows = write_rounds_csv(out / "rounds.csv", logs.values(), robots, shares)
+        plots: list[Path] = []
+        plot_error = None
+        try:
+            plots = plot_experiment(out, title=c.default_title())
+        except ImportError as exc:
+            plot_error = f"not drawn: {exc.name or 'matplotlib'} is not installed " \
+                         "(pip install 'dfrl[plot]')"
+        except Exception as exc:  # noqa: BLE001 - plots are optional, results are not
+            plot_error = f"failed: {exc!r}"
+        if plot_error:
+            say(f"plots {plot_error}")
+        finished = {n: lg.finished for n, lg in logs.items()}
+        problems = {n: [f"round {a.round} aborted: {a.error}" for a in lg.aborted]
+                    + [f"unreadable line: {u}" for u in lg.unreadable]
+                    for n, lg in logs.items()}
+        for name, lines in problems.items():
+            for line in lines:
+                say(f"{name}: {line}")
+        rounds = {a.name: a.rounds for a in self._agents.infos()}
+        faults = assess(c, [(lg, rounds[n]) for n, lg in logs.items()], self._robots.lost(),
+                        self._robots.stalls(), self._robots.gather_errors())
+        ok = ok and all(v is not None for v in finished.values()) and faults.complete(c)
+        result = Results(out, c, wall, rows, self._robots.crashed(), finished,
+                         self._robots.iterations(), plots, ok, self._interrupted, problems,
+                         plot_error, faults, self._robots.gathered(), list(from_checkpoint))
+        write_summary(result)
+        return result
+
+
+def _interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+def run(config: ExperimentConfig, output_dir: str | Path | ClaimedFolder,
+        progress: TextIO | None = sys.stderr, force: bool = False,
+        tls: str | Path | None = None) -> Results:
+    """Run a federated experiment on loopback and write its results folder.
+
+    Keeps the run's token (the config's, or a new random one) in ``secret.token`` (mode
+    0600, the only file of the folder that holds it; ``dfrl join`` and ``dfrl inject`` read
+    it) and hands it to every process it starts through its environment, never its command
+    line. Starts one robot node process per robot, waits for their addresses, writes
+    ``nodes.json``, launches one dFRL itinerary agent per learning algorithm (the agent of an
+    algorithm visits only the robots using it), follows the agents' round logs and the nodes'
+    progress lines, starts robots that join during the run, and at the end writes
+    ``metrics.csv``, ``rounds.csv``, the plots and ``summary.md``. A robot that crashes is
+    reported and the others go on; every child is killed on an exception or Ctrl-C.
+
+    Parameters
+    ----------
+    config : ExperimentConfig
+    output_dir : str, Path or ClaimedFolder
+        Results folder: created, or empty (a non-empty one is refused unless ``force``, which
+        empties it first: two runs never mix their files). A :class:`ClaimedFolder` (what
+        ``dfrl run`` passes) was claimed by the caller already and is used as it is.
+    progress : TextIO or None
+        Where progress lines go (None: quiet).
+    force : bool
+    tls : str, Path or None
+        A node's TLS folder (``ca.crt``, ``node.crt``, ``node.key``; ``dfrl certs node``): the
+        console node and every robot node spawned here speak mutual TLS with it (one
+        credential for all local processes); remote robots must run ``dfrl robot --tls``
+        with a certificate of the same CA. None (default): plaintext.
+    """
+    return Launcher(config, output_dir, progress, force, tls).run()
