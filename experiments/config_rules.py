@@ -96,8 +96,8 @@ def to_json_dict(cfg: Any) -> dict[str, Any]:
 @dataclass(frozen=True)
 class Rule:
     """What one key may hold: ``kind`` (``int``, ``float``, ``str``, ``bool``, ``dict``,
-    ``list``), ``None`` allowed when ``nullable``, inclusive bounds ``low``/``high`` (``above``:
-    strictly greater), ``choices`` (a function returning the known values) named ``what``;
+    ``list``), ``None`` allowed when ``nullable``, a lower bound ``low`` (``above``: strictly
+    greater), ``choices`` (a function returning the known values) named ``what``;
     ``check`` (a function returning a problem or None) replaces the kind and bounds (a value of
     more than one kind, such as a token)."""
 
@@ -105,7 +105,6 @@ class Rule:
     nullable: bool = False
     low: float | None = None
     above: float | None = None
-    high: float | None = None
     choices: Callable[[], Sequence[str]] | None = None
     what: str = "value"
     hint: str = ""
@@ -147,8 +146,6 @@ def check_value(path: str, value: Any, rule: Rule) -> list[str]:
         return [f"{path}: must be >= {rule.low:g}, got {value!r}{hint}"]
     if rule.above is not None and value <= rule.above:
         return [f"{path}: must be > {rule.above:g}, got {value!r}{hint}"]
-    if rule.high is not None and value > rule.high:
-        return [f"{path}: must be <= {rule.high:g}, got {value!r}{hint}"]
     if rule.choices is not None:
         known = list(rule.choices())
         if value not in known:
