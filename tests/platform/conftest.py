@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import queue
-import shutil
 import socket
 import subprocess
 import threading
@@ -13,8 +12,9 @@ from pathlib import Path
 import pytest
 
 from dfrl.platform_pl import PLATFORM_DIR
+from dfrl.experiments.processes import find_swipl
 
-SWIPL = shutil.which("swipl")
+SWIPL = find_swipl()
 
 
 def free_port() -> int:

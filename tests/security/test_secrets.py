@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import argparse
 import re
-import shutil
 import subprocess
 
 from dfrl.experiments.tokens import env_with_tokens, new_secret
 from dfrl.platform_pl import PLATFORM_DIR
 from tests.platform.conftest import Proc, start_node
 from tests.platform.wire_client import connect_auth, connect_nonce, frame, read_frame
+from dfrl.experiments.processes import find_swipl
 
-SWIPL = shutil.which("swipl")
+SWIPL = find_swipl()
 NODE_MAIN = str(PLATFORM_DIR / "node_main.pl")
 
 

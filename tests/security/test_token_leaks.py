@@ -7,7 +7,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import shutil
 import stat
 import subprocess
 import sys
@@ -23,8 +22,9 @@ from dfrl.platform_pl import PLATFORM_DIR
 from tests.experiments.driver.launcher.helpers import run_in_thread, small_config
 from tests.platform.conftest import Proc, start_node
 from tests.platform.wire_client import authenticate, connect_nonce
+from dfrl.experiments.processes import find_swipl
 
-SWIPL = shutil.which("swipl")
+SWIPL = find_swipl()
 pytestmark = pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
 
 
@@ -304,7 +304,7 @@ def test_a_node_store_keeps_tokens_from_other_users(tmp_path: Path) -> None:
             add_payload(k1, [(notes, 2)]),
             sleep(0.5), format("STORED~n"), flush_output.
     """)
-    done = subprocess.run([shutil.which("swipl") or "swipl", "-q", "-g", "main", "-t", "halt",
+    done = subprocess.run([find_swipl() or "swipl", "-q", "-g", "main", "-t", "halt",
                            str(script)], capture_output=True, text=True, timeout=60)
     assert "STORED" in done.stdout, done
     holding = files_with(store, token)

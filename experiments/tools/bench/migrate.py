@@ -18,12 +18,12 @@ With ``trace_dir``, both processes time the steps of every hand-over (see
 from __future__ import annotations
 
 import json
-import shutil
 import statistics
 import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
+from dfrl.experiments import processes
 from dfrl.experiments.tokens import env_with_tokens
 
 SCRIPT = Path(__file__).resolve().parent / "bench_migrate.pl"
@@ -75,7 +75,7 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
     ------
     ValueError
         Bad arguments.
-    FileNotFoundError
+    ExperimentError
         swipl is not installed.
     RuntimeError
         The benchmark scripts failed.
@@ -89,17 +89,15 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
             tls_args = [str(check_node_dir(tls).resolve())]
         except CertError as exc:
             raise ValueError(str(exc)) from exc
-    swipl = shutil.which("swipl")
-    if swipl is None:
-        raise FileNotFoundError("swipl is not installed (run scripts/setup.sh)")
+    swipl = processes.swipl()
     env = env_with_tokens([token])            # the token in the environment, never in argv
     if trace_dir is not None:
         env["DFRL_HOP_TRACE"] = str(Path(trace_dir).resolve())
     else:
         env.pop("DFRL_HOP_TRACE", None)
     naive_ms: list[float] | None = None
-    peer = subprocess.Popen([swipl, "-q", str(SCRIPT), "peer", *tls_args],
-                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
+    peer = processes.start([swipl, "-q", str(SCRIPT), "peer", *tls_args],
+                           stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
     try:
         assert peer.stdout is not None
         line = peer.stdout.readline()
@@ -107,11 +105,10 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
             raise RuntimeError(f"peer did not start: {line!r}")
         words = line.split()
         port, naive_port = int(words[1]), int(words[3])
-        home = subprocess.Popen(
+        home = processes.start(
             [swipl, "-q", str(SCRIPT), "home", str(port), str(floats),
              str(hops + warmup), *tls_args],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-            env=env)
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
         try:
             out, err = _read_latencies(home, timeout)
         finally:
@@ -120,12 +117,7 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
             naive_ms = _naive_hops(swipl, env, naive_port, floats, hops + warmup, timeout)
             naive_ms = naive_ms[warmup:]
     finally:
-        if peer.stdin:
-            peer.stdin.close()
-        try:
-            peer.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            peer.kill()
+        _finish(peer)
     lat_line = next((l for l in out.splitlines() if l.startswith("LATENCIES_MS")), None)
     if lat_line is None:
         raise RuntimeError(f"benchmark failed:\n{out}\n{err}")
@@ -149,10 +141,9 @@ def _finish(proc: subprocess.Popen) -> None:
     try:
         if proc.stdin:
             proc.stdin.close()
-        proc.wait(timeout=10)
-    except (subprocess.TimeoutExpired, OSError):
-        proc.kill()
-        proc.wait(timeout=10)
+    except OSError:
+        pass
+    processes.wait_or_stop(proc, timeout_s=10)
 
 
 def _naive_hops(swipl: str, env: dict[str, str], naive_port: int, floats: int, hops: int,
@@ -237,7 +228,7 @@ def _read_latencies(home: subprocess.Popen, timeout: float) -> tuple[str, str]:
     done.wait(timeout)
     if any(l.startswith("LATENCIES_MS") for l in lines):
         return "".join(lines), ""
-    home.kill()
+    processes.stop(home)
     err = home.stderr.read() if home.stderr is not None else ""
     return "".join(lines), err
 

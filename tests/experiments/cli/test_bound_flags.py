@@ -1,16 +1,16 @@
 """``dfrl robot`` passes the bound flags (``--max-agents`` ...) to its embedded node."""
 from __future__ import annotations
 
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from dfrl.experiments.processes import find_swipl
 
 REPO = Path(__file__).resolve().parents[3]
 
-pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="swipl not installed")
+pytestmark = pytest.mark.skipif(find_swipl() is None, reason="swipl not installed")
 
 #  A robot process built from a real command line; it reports its node's options and stops.
 PROBE = """

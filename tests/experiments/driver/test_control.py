@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-import shutil
 import socket
 import subprocess
 import threading
@@ -17,8 +16,9 @@ from dfrl.experiments.driver.console import CONSOLE_SCRIPT, ConsoleNode
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.tokens import env_with_tokens
 from dfrl.platform_pl import DFRL_AGENT_DIR, PLATFORM_DIR
+from dfrl.experiments.processes import find_swipl
 
-SWIPL = shutil.which("swipl")
+SWIPL = find_swipl()
 pytestmark = pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
 
 ROBOTS = Path(__file__).with_name("control_robots.pl")

@@ -6,7 +6,6 @@ import base64
 import csv
 import json
 import os
-import shutil
 import signal
 import socket
 import subprocess
@@ -19,12 +18,13 @@ import numpy as np
 import pytest
 
 from dfrl.experiments.robot_host.checkpoint import load_checkpoint
+from dfrl.experiments.processes import find_swipl
 
 REPO = Path(__file__).resolve().parents[3]
 CLIENT = Path(__file__).with_name("robot_client.pl")
 TOKEN = "1111"
 
-pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="swipl not installed")
+pytestmark = pytest.mark.skipif(find_swipl() is None, reason="swipl not installed")
 
 
 def free_port() -> int:

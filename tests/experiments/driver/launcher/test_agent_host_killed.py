@@ -10,7 +10,6 @@ resurrects it with a higher epoch, and the federation completes its planned roun
 from __future__ import annotations
 
 import os
-import shutil
 import signal
 import threading
 import time
@@ -24,8 +23,9 @@ from dfrl.experiments.driver.launcher import Launcher, inject_method
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
 
 from .helpers import wait_rounds
+from dfrl.experiments.processes import find_swipl
 
-pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
+pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
 SLOW = Path(__file__).parent / "slow_method.pl"
 

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import pytest
@@ -13,8 +12,9 @@ from dfrl.experiments.driver.launcher import join_robot, run
 from dfrl.experiments.driver.results.metrics import read_metrics
 
 from .helpers import rounds_csv, run_in_thread, small_config, wait_rounds
+from dfrl.experiments.processes import find_swipl
 
-pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
+pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
 
 def test_robot_joins_running_experiment(tmp_path: Path) -> None:

@@ -7,7 +7,6 @@ from __future__ import annotations
 import csv
 import json
 import math
-import shutil
 import socket
 import subprocess
 import sys
@@ -25,8 +24,9 @@ from dfrl.experiments.driver.launcher.events import EVENTS_FILE
 from dfrl.experiments.tools.view import EventSource
 
 from .helpers import diagnose, small_config
+from dfrl.experiments.processes import find_swipl
 
-pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
+pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
 
 def _rows(path: Path) -> list[dict[str, str]]:

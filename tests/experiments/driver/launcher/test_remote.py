@@ -1,7 +1,6 @@
 """Acting on a running experiment from outside: injecting a method (``dfrl inject``)."""
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import pytest
@@ -11,8 +10,9 @@ from dfrl.experiments.driver.launcher import Results, inject_method
 from dfrl.platform_pl import DFRL_AGENT_DIR
 
 from .helpers import rounds_csv, run_in_thread, small_config, wait_rounds
+from dfrl.experiments.processes import find_swipl
 
-pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
+pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
 
 MEDIAN = DFRL_AGENT_DIR / "examples" / "median_method.pl"

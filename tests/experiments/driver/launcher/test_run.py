@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import csv
 import json
-import shutil
 import time
 from pathlib import Path
 
@@ -16,8 +15,9 @@ from dfrl.experiments.driver.results.files import ClaimedFolder, claim_output
 from dfrl.experiments.driver.results.metrics import read_metrics
 
 from .helpers import diagnose, rounds_csv, run_in_thread, small_config, wait_rounds
+from dfrl.experiments.processes import find_swipl
 
-pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
+pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
 
 def test_two_robot_smoke_run(tmp_path: Path) -> None:

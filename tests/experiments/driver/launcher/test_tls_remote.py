@@ -22,8 +22,9 @@ from dfrl.experiments.driver.results.agent_log import read_rounds_log
 from dfrl.platform_pl import DFRL_AGENT_DIR
 
 from .helpers import diagnose, rounds_csv, run_in_thread, small_config, wait_rounds
+from dfrl.experiments.processes import find_swipl
 
-pytestmark = [pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl"),
+pytestmark = [pytest.mark.skipif(find_swipl() is None, reason="needs swipl"),
               pytest.mark.skipif(shutil.which("openssl") is None, reason="needs openssl")]
 
 MEDIAN = DFRL_AGENT_DIR / "examples" / "median_method.pl"

@@ -21,8 +21,9 @@ from dfrl.experiments.tools.certs import init_ca, make_node
 from dfrl.experiments.driver.launcher import join_robot, run
 
 from .helpers import diagnose, rounds_csv, run_in_thread, small_config, wait_rounds
+from dfrl.experiments.processes import find_swipl
 
-pytestmark = [pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl"),
+pytestmark = [pytest.mark.skipif(find_swipl() is None, reason="needs swipl"),
               pytest.mark.skipif(shutil.which("openssl") is None, reason="needs openssl")]
 
 

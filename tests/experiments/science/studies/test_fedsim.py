@@ -4,6 +4,7 @@ import pytest
 
 from dfrl.experiments.science.studies.fedsim import AGGREGATIONS, federate
 from dfrl.robots.training import TrainerConfig
+from dfrl.experiments.processes import find_swipl
 
 # the same three tables as the Prolog check of platform_pl/dfrl_agent/examples/max_visited.pl
 Q = [np.array([[1.0, -2.0], [0.0, 5.0]]), np.array([[0.0, -1.0], [2.0, 7.0]]),
@@ -57,7 +58,7 @@ def test_prolog_max_visited_matches_python():
     import subprocess
     from pathlib import Path
 
-    swipl = shutil.which("swipl")
+    swipl = find_swipl()
     if swipl is None:
         pytest.skip("swipl not installed")
     root = Path(__file__).resolve().parents[4] / "platform_pl" / "dfrl_agent"

@@ -2,14 +2,14 @@
 from __future__ import annotations
 
 import json
-import shutil
 
 import pytest
 
 from dfrl.experiments.tools.bench import chaos
 from dfrl.experiments.cli import main
+from dfrl.experiments.processes import find_swipl
 
-pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="swipl not installed")
+pytestmark = pytest.mark.skipif(find_swipl() is None, reason="swipl not installed")
 
 
 def check(report: dict, faults: int) -> None:

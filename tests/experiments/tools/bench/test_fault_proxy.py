@@ -1,7 +1,6 @@
 """The fault proxy with a real echo server and a real platform node (no mocks)."""
 from __future__ import annotations
 
-import shutil
 import socket
 import struct
 import subprocess
@@ -13,8 +12,9 @@ import pytest
 
 from dfrl.experiments.tools.bench.fault_proxy import DROP, PASS, STALL, FaultProxy
 from dfrl.platform_pl import PLATFORM_DIR
+from dfrl.experiments.processes import find_swipl
 
-SWIPL = shutil.which("swipl")
+SWIPL = find_swipl()
 
 
 def frame(body: bytes, kind: bytes = b"T") -> bytes:

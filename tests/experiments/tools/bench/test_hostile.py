@@ -13,8 +13,9 @@ from dfrl.experiments.tools.bench.hostile_attacks import (FRAME_KINDS, PRE_AUTH_
                                                    hostile_frame, outcome_of)
 from dfrl.experiments.tools.bench.hostile_auth_attacks import escape_results
 from dfrl.platform_pl import PLATFORM_DIR
+from dfrl.experiments.processes import find_swipl
 
-pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
+pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
 
 def test_outcome_of_reads_the_nodes_last_error_frame() -> None:

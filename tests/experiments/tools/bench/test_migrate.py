@@ -3,14 +3,14 @@ and the step trace."""
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import pytest
 
 from dfrl.experiments.tools.bench import migrate
+from dfrl.experiments.processes import find_swipl
 
-pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
+pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
 
 def test_migrate_json_has_the_naive_hop_and_its_ratio(capsys: pytest.CaptureFixture[str]) -> None:

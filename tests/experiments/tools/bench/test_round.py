@@ -1,13 +1,13 @@
 """``dfrl bench round`` on real processes, tiny budget."""
 from __future__ import annotations
 
-import shutil
 
 import pytest
 
 from dfrl.experiments.tools.bench.round import bench
+from dfrl.experiments.processes import find_swipl
 
-pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
+pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
 
 def test_bench_round_smoke() -> None:

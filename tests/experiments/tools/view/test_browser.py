@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import os
 import re
-import shutil
 import signal
 import subprocess
 import sys
@@ -24,8 +23,9 @@ from dfrl.experiments.tools.view import start_view
 
 from ...driver.launcher.helpers import small_config
 from .helpers import browser_paths, chrome, finished_run
+from dfrl.experiments.processes import find_swipl
 
-pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
+pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
 SAMPLE = """
 const a = document.querySelector('#agent-marks .agent');

@@ -4,7 +4,6 @@ file over the platform (the channel its status already travels)."""
 from __future__ import annotations
 
 import json
-import shutil
 import socket
 import subprocess
 import sys
@@ -15,8 +14,9 @@ import pytest
 from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec
 from dfrl.experiments.driver.launcher.experiment import run
 from dfrl.experiments.tools.view import EVENTS_FILE, EventSource
+from dfrl.experiments.processes import find_swipl
 
-pytestmark = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
+pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 TOKEN = 1111
 
 

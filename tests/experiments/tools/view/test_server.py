@@ -3,7 +3,6 @@ rounds log, in order, live and when replayed; the page and its assets are served
 from __future__ import annotations
 
 import json
-import shutil
 import urllib.request
 from pathlib import Path
 
@@ -14,8 +13,9 @@ from dfrl.experiments.tools.view import start_view
 
 from ...driver.launcher.helpers import run_in_thread, small_config
 from .helpers import canonical, hop_order, read_stream, write_run
+from dfrl.experiments.processes import find_swipl
 
-needs_swipl = pytest.mark.skipif(shutil.which("swipl") is None, reason="needs swipl")
+needs_swipl = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
 
 def _check_stream(events: list[dict], out: Path, agent: str = "fed_qlearning") -> None:
