@@ -302,7 +302,7 @@ def cmd_join(args: argparse.Namespace) -> int:
     except (ExperimentError, ValueError) as exc:
         print(f"dfrl join: {exc}", file=sys.stderr)
         return 1
-    where = f"robot host {info['node']}" if info.get("node") else f"pid {info['pid']}"
+    where = f"robot host {info['robot_host']}" if info.get("robot_host") else f"pid {info['pid']}"
     print(f"robot {args.robot} runs at {info['host']}:{info['port']} ({where}); "
           f"the agent includes it from its next round")
     return 0

@@ -49,7 +49,7 @@ class RobotProcess:
         self.stdin = StdinWatch(stdin)
         self.out_dir = Path(config.out_dir)
         self.out_dir.mkdir(parents=True, exist_ok=True)
-        self.node: Any = None
+        self.bridge: Any = None
         self.run_: Training | None = None
 
     @property
@@ -69,18 +69,18 @@ class RobotProcess:
         from dfrl.pybridge import Atom, Bridge
 
         c = self.config
-        self.node = Bridge()
-        self.node.load_platform()
-        load_agent_program(self.node, f"robot_node {c.robot}")
-        self.run_ = Training(c, self.node, self.lines, host=_StdinHost(self.stdin), poll_every=50)
+        self.bridge = Bridge()
+        self.bridge.load_platform()
+        load_agent_program(self.bridge, f"robot {c.robot}")
+        self.run_ = Training(c, self.bridge, self.lines, host=_StdinHost(self.stdin), poll_every=50)
         self.run_.open()
         options: dict[str, Any] = {"idle_timeout": 5.0}
         if c.token is not None:         # none: an open node (node_start/3 warns on loopback)
             options["tokens"] = [Atom(c.token) if isinstance(c.token, str) else c.token]
         if c.tls is not None:
             options["tls"] = str(Path(c.tls).resolve())
-        name = self.node.start(c.host, 0, **options)
-        host, port = self.node.address(name)
+        name = self.bridge.start(c.host, 0, **options)
+        host, port = self.bridge.address(name)
         self.lines.node(str(host), int(port))
         return str(host), int(port)
 
@@ -89,7 +89,7 @@ class RobotProcess:
         run = self.run_
         if not run.simulated:
             while not self.stdin.poll():
-                self.node.serve_pending(timeout=0.05)
+                self.bridge.serve_pending(timeout=0.05)
             return 0
         while run.step():
             pass
@@ -101,9 +101,9 @@ class RobotProcess:
 
     def _agents_here(self) -> bool:
         try:
-            return bool(self.node.list_agents())
+            return bool(self.bridge.list_agents())
         except Exception as exc:  # noqa: BLE001 - a failing listing must not keep us alive
-            print(f"robot_node {self.config.robot}: listing agents failed: {exc}", file=sys.stderr)
+            print(f"robot {self.config.robot}: listing agents failed: {exc}", file=sys.stderr)
             return False
 
     def _linger(self) -> None:
@@ -111,7 +111,7 @@ class RobotProcess:
         deadline = time.monotonic() + self.config.grace_s
         sync = self.config.mode is Mode.SYNC
         while time.monotonic() < deadline:
-            self.node.serve_pending(timeout=0.05)
+            self.bridge.serve_pending(timeout=0.05)
             if self.stdin.poll():
                 break
             if sync and not self._agents_here():
@@ -121,8 +121,8 @@ class RobotProcess:
         """Close files, the platform and the simulation."""
         if self.run_ is not None:
             self.run_.close()
-        if self.node is not None:
-            self.node.close()
+        if self.bridge is not None:
+            self.bridge.close()
 
 
 def load_agent_program(node: Any, who: str) -> None:
@@ -155,7 +155,7 @@ def main(argv: list[str] | None = None) -> int:
             data["token"] = tokens[0]
         config = RobotConfig.from_dict(data)
     except (OSError, ValueError, TypeError) as exc:
-        print(f"robot_node: bad config {args.config}: {exc}", file=sys.stderr)
+        print(f"robot process: bad config {args.config}: {exc}", file=sys.stderr)
         return 2
     proc = RobotProcess(config)
     try:

@@ -114,7 +114,7 @@ class RobotService:
         self.advertise = advertise
         self.workdir = Path(workdir).resolve()
         self.out = out
-        self.node: Any = None
+        self.bridge: Any = None
         self.node_name: Any = None
         self.address: tuple[str, int] = (host, int(port))
         self.state = State.IDLE
@@ -130,10 +130,10 @@ class RobotService:
         from dfrl.pybridge import Bridge
 
         self.workdir.mkdir(parents=True, exist_ok=True)
-        self.node = Bridge()
-        self.node.load_platform()
-        load_agent_program(self.node, "dfrl robot")
-        self.node.enable_service()
+        self.bridge = Bridge()
+        self.bridge.load_platform()
+        load_agent_program(self.bridge, "dfrl robot")
+        self.bridge.enable_service()
         host, port = self.bind
         adv = self.advertise
         options: dict[str, Any] = {
@@ -149,8 +149,8 @@ class RobotService:
             options[name] = Atom(value) if isinstance(value, str) else value
         if adv and port:
             options["advertise"] = Term(":", Atom(adv), port)
-        self.node_name = self.node.start(host, port, **options)
-        bound_host, bound_port = self.node.address(self.node_name)
+        self.node_name = self.bridge.start(host, port, **options)
+        bound_host, bound_port = self.bridge.address(self.node_name)
         adv_host = adv or str(bound_host)
         if adv_host in ("0.0.0.0", "::", ""):
             adv_host = socket.gethostname()
@@ -178,9 +178,9 @@ class RobotService:
                 if not more and self.state is State.RUNNING:
                     self._end_run("finished" if not self.run.stopped else "stopped")
             else:
-                self.node.serve_service(self.handle, timeout=0.025)
+                self.bridge.serve_service(self.handle, timeout=0.025)
                 if self._serves_tables():
-                    self.node.serve_pending(timeout=0.025)
+                    self.bridge.serve_pending(timeout=0.025)
         if self.state is State.RUNNING:
             self._end_run("stopped by a signal")
         return 0
@@ -195,9 +195,9 @@ class RobotService:
     def close(self) -> None:
         """Close the current run and the platform."""
         self._close_run()
-        if self.node is not None:
-            self.node.close()
-            self.node = None
+        if self.bridge is not None:
+            self.bridge.close()
+            self.bridge = None
 
     def say(self, line: str) -> None:
         """Print one line on the service's output."""
@@ -207,7 +207,7 @@ class RobotService:
     # -- TrainingHost -------------------------------------------------------------------------------
     def wait(self, seconds: float) -> None:
         """While a run waits: answer service requests (at most ``seconds``)."""
-        self.node.serve_service(self.handle, timeout=max(0.0, seconds))
+        self.bridge.serve_service(self.handle, timeout=max(0.0, seconds))
 
     def should_stop(self) -> bool:
         """A run ends early once the process is signalled or told to stop."""
@@ -235,7 +235,7 @@ class RobotService:
     def status(self) -> dict[str, Any]:
         """What ``status`` answers."""
         run = self.run
-        node_id = self.node.node_value(self.node_name, "id") if self.node is not None else None
+        node_id = self.bridge.node_value(self.node_name, "id") if self.bridge is not None else None
         return {
             "robot": run.config.robot if run is not None else None,
             "state": self.state.value,
@@ -302,7 +302,7 @@ class RobotService:
             err_fh.flush()
             print(message, file=sys.stderr, flush=True)
 
-        run = Training(config, self.node, ProtocolLines(lines_fh, config.robot, config.events),
+        run = Training(config, self.bridge, ProtocolLines(lines_fh, config.robot, config.events),
                   host=self, resume=resume, poll_every=1, warn=warn)
         try:
             run.open()
@@ -330,9 +330,9 @@ class RobotService:
                 or set(experiment) == {"."}:
             raise _config_error(f"experiment {experiment!r}: a name of letters, digits, "
                                 "'.', '_' and '-'")
-        node = data.get("node")
+        node = data.get("robot")
         if not isinstance(node, dict):
-            raise _config_error("'node' must be a JSON object (a node config)")
+            raise _config_error("'robot' must be a JSON object (a robot process config)")
         node = dict(node)
         resume = bool(node.pop("resume", data.get("resume", False)))
         node.pop("out_dir", None)

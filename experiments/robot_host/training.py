@@ -64,7 +64,7 @@ class Training:
     ----------
     config : RobotConfig
         Its ``out_dir`` is the experiment's folder.
-    node : Bridge
+    bridge : Bridge
         The process's bridge; :meth:`open` registers the robot with it.
     lines : ProtocolLines
     host : TrainingHost
@@ -84,11 +84,11 @@ class Training:
         :meth:`finish` ran.
     """
 
-    def __init__(self, config: RobotConfig, node: Any, lines: ProtocolLines, *,
+    def __init__(self, config: RobotConfig, bridge: Any, lines: ProtocolLines, *,
                  host: TrainingHost | None = None, resume: bool = False, poll_every: int = 1,
                  warn: Callable[[str], None] | None = None) -> None:
         self.config = config
-        self.node = node
+        self.bridge = bridge
         self.lines = lines
         self.host: TrainingHost = host or SleepHost()
         self.resume = resume
@@ -176,7 +176,7 @@ class Training:
         self.table = SharedTable(base, c.robot, self._shares, self.lines, on_share, shares)
         if self.trainer is not None:
             self.table.iteration = self.trainer.iteration
-        self.node.register_robot(c.robot, self.table, shape=shape, algorithm=c.algo)
+        self.bridge.register_robot(c.robot, self.table, shape=shape, algorithm=c.algo)
         self._registered = True
         self._next_tick = time.perf_counter()
         return shape
@@ -210,7 +210,7 @@ class Training:
             if not self._wait_for_share():
                 self.stopped = True
         elif c.mode is Mode.ASYNC:
-            self.node.serve_pending()
+            self.bridge.serve_pending()
         if self._evals is not None and not self.stopped and self._evals.due(it):
             self._evals.evaluate(it, self.trainer.q_table)      # after this boundary's share
         if not self.stopped and it % self.poll_every == 0:
@@ -250,14 +250,14 @@ class Training:
         while self.shares == before:
             # one request at a time: the agent's read for the next round may already be
             # queued right behind this round's write, and must wait for the next boundary
-            self.node.serve_pending(max_requests=1, timeout=0.05)
+            self.bridge.serve_pending(max_requests=1, timeout=0.05)
             if self.shares != before:
                 break
             self.host.wait(0.0)
             if self.host.should_stop():
                 return False
             if time.monotonic() > deadline:
-                self.warn(f"robot_node {self.config.robot}: no share within "
+                self.warn(f"robot {self.config.robot}: no share within "
                           f"{self.config.sync_timeout_s} s at iteration {self.iteration}; "
                           "going on")
                 break
@@ -316,9 +316,9 @@ class Training:
         if self._registered:
             self._registered = False
             try:
-                self.node.unregister_robot(self.config.robot)
+                self.bridge.unregister_robot(self.config.robot)
             except Exception as exc:  # noqa: BLE001 - a closing node must still close files
-                self.warn(f"robot_node {self.config.robot}: unregistering failed: {exc}")
+                self.warn(f"robot {self.config.robot}: unregistering failed: {exc}")
         for log in (self._metrics, self._shares, self._evals):
             if log is not None:
                 log.close()

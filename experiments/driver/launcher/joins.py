@@ -83,7 +83,7 @@ class Joins:
         self._say(f"robot {rid} ({spec.robot.arena}, {remaining} iterations) joins {agent} "
                   f"after round {done}")
         return {"robot": rid, "algo": spec.robot.algo, "arena": spec.robot.arena, "host": host,
-                "port": port, "pid": status.pid, "node": spec.robot.robot_host,
+                "port": port, "pid": status.pid, "robot_host": spec.robot.robot_host,
                 "joined": True}
 
     def _due(self, spec: JoinSpec) -> tuple[str | None, str | None]:

@@ -69,7 +69,7 @@ class RemoteRobot:
             raise ExperimentError(f"robot {robot.id} names no robot host")
         self._spec = robot
         self._cfg = cfg
-        self._node: Address = robot.robot_host_address
+        self._service: Address = robot.robot_host_address
         self._console = console
         self._experiment = experiment
         self._poller = poller
@@ -136,7 +136,7 @@ class RemoteRobot:
 
     # -- the service -------------------------------------------------------------------------
     def _ask(self, request: str | dict[str, Any], timeout_s: float = 20.0) -> Any:
-        return self._console.robot(self._node, request, timeout_s=timeout_s)
+        return self._console.robot(self._service, request, timeout_s=timeout_s)
 
     def start(self) -> None:
         """Check the service is free, send the configuration, remember the address the agent
@@ -147,18 +147,18 @@ class RemoteRobot:
         ExperimentError
             Unreachable, busy with another experiment, or the configuration was refused.
         """
-        where = f"{self._node[0]}:{self._node[1]}"
+        where = f"{self._service[0]}:{self._service[1]}"
         status = self._ask("status")
         if status.get("state") in ACTIVE:
-            raise ExperimentError(f"robot node {where} is busy with experiment "
+            raise ExperimentError(f"robot host {where} is busy with experiment "
                                   f"{status.get('experiment')!r} (state {status.get('state')})")
         name, arena = arena_payload(self._spec.arena)
-        node = {**self._cfg.public_dict(), "arena": name}   # the robot has its own token
-        self._ask({"configure": json.dumps({"experiment": self._experiment, "node": node,
+        robot = {**self._cfg.public_dict(), "arena": name}  # the robot has its own token
+        self._ask({"configure": json.dumps({"experiment": self._experiment, "robot": robot,
                                             "arena": arena})})
         self._update(self._ask("status"))
         with self._lock:
-            self._address = self._node
+            self._address = self._service
         self._ask("start")
         with self._lock:
             self._state = "running"

@@ -106,7 +106,7 @@ def write_nodes(site: Site, robots: RobotRoster, agents: AgentRoster) -> None:
         if status.address is not None:
             nodes.append({"robot": rid, "algo": robot.spec.algo, "arena": robot.spec.arena,
                           "host": status.address[0], "port": status.address[1],
-                          "pid": status.pid, "node": robot.spec.robot_host,
+                          "pid": status.pid, "robot_host": robot.spec.robot_host,
                           "joined": robots.joined(rid)})
     write_json(site.out / "nodes.json", {"console": list(site.console.address),
                                          "tls": str(site.tls) if site.tls else None,

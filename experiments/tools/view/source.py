@@ -211,14 +211,14 @@ class EventSource:
             target = int(node_cfg.get("iterations") or target)
         except (OSError, ValueError):
             pass
-        local = n.get("node") is None and str(n.get("host", "")).startswith("127.")
+        local = n.get("robot_host") is None and str(n.get("host", "")).startswith("127.")
         track = RobotTrack(rid, self.dir, target, self.run["stride"], n.get("pid"),
                            self.run["respite"], local, t)
         track.set_start(self.run["t"])
         self.robots[rid] = track
         out.append({"t": t, "kind": "robot", "robot": rid, "host": n.get("host"),
                     "port": n.get("port"), "arena": n.get("arena"), "algo": n.get("algo"),
-                    "node": n.get("node"), "joined": bool(n.get("joined")),
+                    "robot_host": n.get("robot_host"), "joined": bool(n.get("joined")),
                     "iterations": target})
         out.append(_arena_event(rid, str(n.get("arena")), self.dir, t))
 

@@ -84,7 +84,7 @@ class Service:
 def configure(experiment: str, arena_json: object = None, **node: object) -> dict:
     node.setdefault("robot", "r1")
     node.setdefault("arena", "r2")
-    return {"configure": json.dumps({"experiment": experiment, "node": node,
+    return {"configure": json.dumps({"experiment": experiment, "robot": node,
                                      "arena": arena_json})}
 
 

@@ -81,8 +81,8 @@
       case "robot": {
         const r = robot(ev.robot);
         Object.assign(r, { host: ev.host, port: ev.port, arena: ev.arena, algo: ev.algo,
-                           node: ev.node, joined: ev.joined });
-        note(ev, `${ev.joined ? "joined" : "node up"}: ${ev.robot} ${ev.host}:${ev.port} ` +
+                           robot_host: ev.robot_host, joined: ev.joined });
+        note(ev, `${ev.joined ? "joined" : "robot up"}: ${ev.robot} ${ev.host}:${ev.port} ` +
                  `arena ${ev.arena}, ${ev.algo}`);
         break;
       }

@@ -50,7 +50,7 @@ def write_run(out: Path, robots: tuple[str, ...] = ("r1", "r2"), iterations: int
     (out / "nodes.json").write_text(json.dumps({
         "token": 1, "console": ["127.0.0.1", 1],
         "nodes": [{"robot": r, "algo": "qlearning", "arena": arenas[i % 5], "host": "10.0.0.1",
-                   "port": 7000 + i, "pid": None, "node": f"10.0.0.1:{7000 + i}",
+                   "port": 7000 + i, "pid": None, "robot_host": f"10.0.0.1:{7000 + i}",
                    "joined": False} for i, r in enumerate(robots)],
         "agents": [{"name": "fed_qlearning", "algo": "qlearning", "method": "average",
                     "rounds": -(-iterations // respite), "rounds_log": "x",
