@@ -116,7 +116,7 @@ def add_table_shape_arguments(parser: argparse.ArgumentParser) -> None:
 def add_round_arguments(parser: argparse.ArgumentParser) -> None:
     add_table_shape_arguments(parser)
     parser.add_argument("--robots", type=int, nargs="+", default=[5],
-                        help="robot nodes, one benchmark per count (default 5)")
+                        help="robot processes, one benchmark per count (default 5)")
     parser.add_argument("--rounds", type=int, default=30, help="timed rounds (default 30)")
     parser.add_argument("--warmup", type=int, default=3, help="untimed rounds first")
     parser.add_argument("--method", default="average", help="aggregation method")

@@ -2,7 +2,7 @@
 and ``dfrl paper``.
 
 ``dfrl demo`` is the 5-robot dFRL demo on loopback (R1..R5, Q-learning, average, sync): five
-robot node processes, one itinerary agent, about a minute on a 2-core machine; it leaves the
+robot processes, one itinerary agent, about a minute on a 2-core machine; it leaves the
 plots, the CSVs and ``summary.md`` in ``results/demo`` and prints that path.
 """
 from __future__ import annotations
@@ -344,7 +344,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_driver_tls_argument(p)
     p.set_defaults(func=cmd_inject)
 
-    p = subparsers.add_parser("join", help="start a new robot node and add it to a running "
+    p = subparsers.add_parser("join", help="start a new robot process and add it to a running "
                                            "experiment's agent (next round)")
     p.add_argument("results_dir", type=Path, help="results folder of the running experiment")
     p.add_argument("--robot", required=True, help="new robot id, e.g. r6 (required)")

@@ -1,4 +1,4 @@
-"""One robot node process of a federated experiment (a package: one module per job).
+"""One robot process of a federated experiment (a package: one module per job).
 
 ``python -m dfrl.experiments.robot_host --config NODE.json`` embeds SWI-Prolog (``pybridge``),
 loads the platform and the dFRL agent program, starts a platform node on loopback, registers

@@ -1,4 +1,4 @@
-"""The robot node's result files: ``metrics_<robot>.csv`` and ``shares_<robot>.csv``."""
+"""The robot process's result files: ``metrics_<robot>.csv`` and ``shares_<robot>.csv``."""
 from __future__ import annotations
 
 import csv

@@ -1,4 +1,4 @@
-"""The robot node's stdout protocol lines and its stdin watch (the launcher's two channels)."""
+"""The robot process's stdout protocol lines and its stdin watch (the launcher's two channels)."""
 from __future__ import annotations
 
 import math

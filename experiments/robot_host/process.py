@@ -1,4 +1,4 @@
-"""The spawned robot node's life cycle (:class:`RobotProcess`) and its entry point."""
+"""The spawned robot process's life cycle (:class:`RobotProcess`) and its entry point."""
 from __future__ import annotations
 
 import argparse
@@ -31,7 +31,7 @@ class _StdinHost:
 
 
 class RobotProcess:
-    """One spawned robot node (see :mod:`dfrl.experiments.robot_host`).
+    """One spawned robot process (see :mod:`dfrl.experiments.robot_host`).
 
     Parameters
     ----------
@@ -144,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
     never from the command line.
     """
     parser = argparse.ArgumentParser(prog="python -m dfrl.experiments.robot_host",
-                                     description="one robot node of a federated experiment "
+                                     description="one robot process of a federated experiment "
                                                  f"(its token in ${TOKEN_ENV})")
     parser.add_argument("--config", type=Path, required=True, help="node config (JSON)")
     args = parser.parse_args(argv)

@@ -1,4 +1,4 @@
-"""The provider the robot node registers with the bridge: its table, with share bookkeeping.
+"""The provider the robot process registers with the bridge: its table, with share bookkeeping.
 
 The table itself (a :class:`dfrl.robots.training.Trainer`, or a
 :class:`dfrl.pybridge.StaticTable` in benchmark mode) is chosen once, when the node starts;

@@ -1,11 +1,11 @@
 """``dfrl paper``: the paper's experiment K times, greedy evaluations, a report of tests.
 
 For every seed: the four federated combinations (Q-learning / SARSA x average / max, five
-robots in R1..R5, ``experiments/configs/paper_*.json``, real robot node processes and the
+robots in R1..R5, ``experiments/configs/paper_*.json``, real robot processes and the
 dFRL agent), the standalone baselines (each arena alone, the seed its federated robot has),
 and the negative control: federated Q-learning/average and standalone Q-learning in R1 and R4
 with a random behaviour policy (epsilon 1 throughout). Each run's tables are evaluated at
-``points`` evenly spaced iterations (federated: the table history the robot nodes write at
+``points`` evenly spaced iterations (federated: the table history the robot processes write at
 every share; standalone: snapshots) with the greedy policy in the robot's own arena and the
 held-out arenas h1 and h2 (``evaluations.csv`` in the run's folder).
 

@@ -21,7 +21,7 @@ def agent_name(algo: str) -> str:
 def open_console(token: Token | Sequence[Token], log_path: Path | None = None,
                  host: str = "127.0.0.1", tls: str | Path | None = None) -> ConsoleNode:
     """Start the console node of an experiment at ``host`` (an address the robots reach; its
-    token, handed over in its environment, lets it load programs into the robot nodes, drive
+    token, handed over in its environment, lets it load programs into the robot processes, drive
     robot services, and its agents carry it); its stderr
     goes to ``log_path``. With ``tls`` (a node's TLS folder, ``dfrl certs node``) it speaks
     mutual TLS to every node (default: plaintext)."""

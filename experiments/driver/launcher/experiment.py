@@ -132,7 +132,7 @@ class Launcher:
             robots = self._robots.robots()
             await_ready(list(robots.values()))
             write_nodes(site, self._robots, self._agents)
-            say(f"{len(robots)} robot nodes up: " + ", ".join(
+            say(f"{len(robots)} robot processes up: " + ", ".join(
                 f"{rid}@{s.address[1]}" for rid, s in self._robots.statuses().items()
                 if s.address is not None))
             launch_agents(site, self._robots, self._agents, self._reporter)
@@ -216,7 +216,7 @@ def run(config: ExperimentConfig, output_dir: str | Path | ClaimedFolder,
     Keeps the run's token (the config's, or a new random one) in ``secret.token`` (mode
     0600, the only file of the folder that holds it; ``dfrl join`` and ``dfrl inject`` read
     it) and hands it to every process it starts through its environment, never its command
-    line. Starts one robot node process per robot, waits for their addresses, writes
+    line. Starts one robot process per robot, waits for their addresses, writes
     ``nodes.json``, launches one dFRL itinerary agent per learning algorithm (the agent of an
     algorithm visits only the robots using it), follows the agents' round logs and the nodes'
     progress lines, starts robots that join during the run, and at the end writes
@@ -235,7 +235,7 @@ def run(config: ExperimentConfig, output_dir: str | Path | ClaimedFolder,
     force : bool
     tls : str, Path or None
         A node's TLS folder (``ca.crt``, ``node.crt``, ``node.key``; ``dfrl certs node``): the
-        console node and every robot node spawned here speak mutual TLS with it (one
+        console node and every robot process spawned here speak mutual TLS with it (one
         credential for all local processes); remote robots must run ``dfrl robot --tls``
         with a certificate of the same CA. None (default): plaintext.
     """

@@ -60,7 +60,7 @@ def robot_seed(config: ExperimentConfig, robot: RobotSpec, joins: int) -> int:
     return config.seed + len(known) + joins
 
 
-def node_config(site: Site, robot: RobotSpec, iterations: int, joins: int = 0) -> RobotConfig:
+def robot_config(site: Site, robot: RobotSpec, iterations: int, joins: int = 0) -> RobotConfig:
     """The configuration a robot runs."""
     c = site.config
     grace = 10.0 if c.mode is Mode.SYNC else c.timeout_s
@@ -85,7 +85,7 @@ def start_robot(site: Site, robot: RobotSpec, iterations: int, agents: AgentRost
     ExperimentError
         The robot could not be started.
     """
-    cfg = node_config(site, robot, iterations, joins)
+    cfg = robot_config(site, robot, iterations, joins)
     started: Robot
     if robot.robot_host is None:
         algo = robot.algo

@@ -1,7 +1,7 @@
 """The saved tables of a results folder: their sums (what the summary reports) and, for a run
 that was interrupted, tables kept from the robots' last checkpoints.
 
-A robot node writes ``tables/<robot>.npy`` at its end and again after a share that comes
+A robot process writes ``tables/<robot>.npy`` at its end and again after a share that comes
 later (the last share), so these files, not the last metrics row (taken before the last
 share), hold the robots' final tables.
 """

@@ -1,6 +1,6 @@
 """Federated tabular learning in one process, for studies that need many runs.
 
-The transfer and speed-up studies train hundreds of federations; starting robot node
+The transfer and speed-up studies train hundreds of federations; starting robot process
 processes and a mobile agent for each would cost more than the learning. :func:`federate`
 runs the same thing in one process: ``N`` :class:`~dfrl.robots.training.Trainer` (one per
 arena, seeded as the launcher seeds its robots), stepped in turn, and every ``respite``

@@ -1,6 +1,6 @@
 """Greedy evaluations of a run's table history: ``evaluations.csv`` beside the curves.
 
-A federated run's robot nodes write ``tables/history/<robot>_it<N>.npy`` at every share; a
+A federated run's robot processes write ``tables/history/<robot>_it<N>.npy`` at every share; a
 standalone run keeps ``snapshots.npz`` (``it<N>`` keys). :func:`evaluate_tables` measures the
 greedy policy of chosen tables in the robot's own arena and in held-out arenas
 (:func:`dfrl.robots.evaluation.evaluate_policy`, many short seeded episodes, the same seed for

@@ -1,6 +1,6 @@
-"""One full dFRL round (forward and backward over N robot nodes), ms per round.
+"""One full dFRL round (forward and backward over N robot processes), ms per round.
 
-Starts N robot node processes on loopback (:mod:`dfrl.experiments.robot_host` in benchmark mode:
+Starts N robot processes on loopback (:mod:`dfrl.experiments.robot_host` in benchmark mode:
 each holds a random table of ``--entries`` values and serves the agent's requests as soon as
 they arrive, no simulation), launches the real itinerary agent
 (through a console node, :mod:`dfrl.experiments.driver.console`) for ``--warmup + --rounds`` rounds without rest and

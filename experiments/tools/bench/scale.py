@@ -1,4 +1,4 @@
-"""How a federation grows on one machine: N robot node processes, one agent, sync mode.
+"""How a federation grows on one machine: N robot processes, one agent, sync mode.
 
 For each N the benchmark runs a federated experiment of N robots (arenas R1..R5 in turn,
 Q-learning, average) with the real launcher, robot processes and agent, and reports the wall
