@@ -469,6 +469,9 @@ program_clause(SourceId, Clause, M-H-B) :-
     ;   functor(H, F, A),
         mobile_hook(M:F/A)
     ->  true
+    ;   functor(H, F, A),
+        moved_hook(M:F/A, To)
+    ->  refuse(clause_head(M:H), To)
     ;   refuse(clause_head(M:H), 'a clause for another module')
     ).
 
@@ -527,8 +530,18 @@ check_declared(SourceId, D, PI) :-
         )
     ;   mobile_hook(M:F/A)
     ->  true
+    ;   moved_hook(M:F/A, To)
+    ->  refuse(directive(D), To)
     ;   refuse(directive(D), 'declares a predicate of another module')
     ).
+
+%   The aggregation hooks were dfrl_agent's before they moved to the module
+%   named for them: a method written for the old module is told where.
+moved_hook(dfrl_agent:F/A,
+           'the aggregation hooks are in dfrl_aggregation now: write \c
+            dfrl_aggregation:aggregate_init/3, aggregate_step/4, \c
+            aggregate_final/3, method_uses_visits/1') :-
+    mobile_hook(dfrl_aggregation:F/A).
 
 declared(D, F/A) :-
     declaration(D, Specs),

@@ -152,6 +152,20 @@ test(hook_clause_alone) :-                  % no user predicate in the program
     check_program_text(hook_only,
                        "dfrl_aggregation:aggregate_step(s, A, T, B) :- sleep(0.01), A = T, B = T.").
 
+test(hook_of_the_old_module_is_told_where_it_went) :-
+    catch(check_program_text(old_hook,
+                             "dfrl_agent:aggregate_init(m, _, none)."), E, true),
+    assertion(subsumes_term(error(permission_error(install, code, clause_head(dfrl_agent:_)),
+                                  context(_, _)), E)),
+    E = error(_, context(_, Why)),
+    assertion(sub_atom(Why, _, _, _, 'dfrl_aggregation:aggregate_init/3')),
+    catch(check_program_text(old_decl, ":- multifile dfrl_agent:aggregate_step/4."), E2, true),
+    E2 = error(permission_error(install, code, directive(_)), context(_, Why2)),
+    assertion(sub_atom(Why2, _, _, _, 'dfrl_aggregation')),
+    catch(check_program_text(other, "lists:append(_, _, _)."), E3, true),
+    E3 = error(_, context(_, Why3)),
+    assertion(Why3 == 'a clause for another module').
+
 test(aggregation_methods_pass) :-
     forall(member(F0, ['../../platform_pl/dfrl_agent/examples/max_visited.pl',
                        '../../platform_pl/dfrl_agent/examples/median_method.pl',
