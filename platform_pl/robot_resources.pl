@@ -9,7 +9,7 @@
 /** <module> The resources a host process offers to agents: robots' tables
 
 The platform knows nothing about robots. A process that hosts robots (a
-robot node: the Python bridge, pybridge/robot_bridge.pl) says which
+robot process: the Python bridge, pybridge/robot_bridge.pl) says which
 robots it hosts and how their tables are read and written by defining
 clauses of the multifile hooks below; agents (e.g. the dFRL agent,
 dfrl_agent/dfrl_agent.pl) use only the exported predicates of this module.

@@ -1,4 +1,4 @@
-"""A robot node: this Python process hosts a platform node and serves its robots' tables.
+"""A robot process: this Python process hosts a platform node and serves its robots' tables.
 
 Threading model (see README.md): Prolog threads (agents, platform workers) never call
 Python. ``get_qtable/2`` and friends post a request on a Prolog message queue; the robot's
@@ -50,7 +50,7 @@ def _robot_term(robot_id: Any) -> Any:
 
 
 class Bridge(TartarusCommands):
-    """One robot node: embedded Prolog, the bridge, optionally the platform, and robots.
+    """One robot process: embedded Prolog, the bridge, optionally the platform, and robots.
 
     Only one node may be open in a process at a time (the bridge's request queue is
     process-wide). Call :meth:`close` when done (it is also registered with ``atexit``).

@@ -35,7 +35,7 @@
 
 /** <module> Robot tables for agents, served by the Python host between control steps
 
-A robot node is one Python process that embeds SWI-Prolog. Its control loop
+A robot process is one Python process that embeds SWI-Prolog. Its control loop
 registers each robot with bridge_register_robot/2 and, once per control
 step, serves the requests that agents have queued (bridge_next_request/2 and
 bridge_reply/2, called from the Python main thread by `pybridge`).

@@ -80,7 +80,7 @@ the updates of these facts are the agent writing its own state.
 
 Robots are reached through the resource hook of the host process
 (robot_resources.pl: get_robot_table/3, get_robot_tables/4,
-set_robot_table/3), which a robot node implements. Tables are
+set_robot_table/3), which a robot process implements. Tables are
 qtable(Shape, Values) with Values a flat row-major list of floats.
 
 The agent's parts, each loaded with this module wherever it is loaded:
