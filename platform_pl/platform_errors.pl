@@ -132,11 +132,22 @@ prolog:error_message(wire_error(Reason)) -->
     [ 'Malformed frame: ' ],
     wire_reason(Reason).
 
-prolog:message_context(context(node_start/3, weak_secret(Bits, Need))) -->
+%   These clauses are tried on every error's context, which may be
+%   partly unbound (context(_, _) once a catcher matched it): each
+%   checks its context with ==/subsumes_term/2 and never binds it.
+prolog:message_context(Context) -->
+    { subsumes_term(context(node_start/3, weak_secret(_, _)), Context),
+      Context = context(_, weak_secret(Bits, Need)),
+      integer(Bits), integer(Need)
+    },
     [ ': its weakest token has ~d bits of entropy; without TLS, '-[Bits],
       'a node reachable from the network needs ~d '-[Need],
       '(`dfrl secret` prints one), or insecure(true) / --insecure' ].
-prolog:message_context(remote(Address)) -->
+prolog:message_context(Context) -->
+    { subsumes_term(remote(_), Context),
+      Context = remote(Address),
+      ground(Address)
+    },
     [ ' (at ~w)'-[Address] ].
 
 transport_reason(connect(Detail)) -->
