@@ -8,6 +8,7 @@ from pathlib import Path
 from dfrl.experiments.cli.node import (add_bound_arguments, add_token_arguments,
                                        add_trust_argument, bounds_of_args, check_trust_names,
                                        tokens_of_args)
+from dfrl.experiments.robot_host.process import NodeStartError
 from dfrl.experiments.robot_host.service import RobotService
 from dfrl.experiments.tls_folder import CertError, check_node_dir
 from dfrl.experiments.tokens import TOKEN_ENV, TokenError
@@ -46,6 +47,15 @@ def _run(args: argparse.Namespace) -> int:
     service.install_signals()
     try:
         service.start()
+    except NodeStartError as exc:
+        hint = ""
+        if exc.weak_token and args.host not in ("127.0.0.1", "localhost", "::1"):
+            hint = (f"; --host {args.host} serves every interface, "
+                    "--host 127.0.0.1 serves this host only and accepts a short token")
+        print(f"dfrl robot: cannot start on {args.host}:{args.port}: {exc}{hint}",
+              file=sys.stderr)
+        service.close()
+        return 1
     except (BridgeError, OSError) as exc:
         print(f"dfrl robot: cannot start on {args.host}:{args.port}: {exc}", file=sys.stderr)
         service.close()

@@ -8,12 +8,48 @@ import time
 from pathlib import Path
 from typing import Any, TextIO
 
+from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.robot_host.config import Mode, RobotConfig
 from dfrl.experiments.robot_host.lines import ProtocolLines, StdinWatch
 from dfrl.experiments.robot_host.training import Training
 from dfrl.experiments.tokens import TOKEN_ENV, pop_env_tokens
 
-__all__ = ["RobotProcess", "main", "load_agent_program"]
+__all__ = ["RobotProcess", "main", "load_agent_program", "NodeStartError", "start_node"]
+
+
+class NodeStartError(ExperimentError):
+    """The robot's platform node did not start (address taken, a weak token off loopback, ...).
+
+    ``str()`` is the platform's own message for the error (``platform_errors:message_text/2``);
+    ``term`` the Prolog error term as data, ``weak_token`` true when a token was refused as too
+    weak for the address.
+    """
+
+    def __init__(self, message: str, term: Any) -> None:
+        super().__init__(message)
+        self.term = term
+
+    @property
+    def weak_token(self) -> bool:
+        context = getattr(self.term, "args", (None, None))[-1]
+        reason = getattr(context, "args", (None, None))[-1]
+        return getattr(reason, "name", None) == "weak_secret"
+
+
+def start_node(bridge: Any, host: str, port: int, **options: Any) -> Any:
+    """``bridge.start(host, port, **options)``; a Prolog error becomes a :class:`NodeStartError`
+    that reads as the platform prints it (never a ``Term(...)`` repr)."""
+    from dfrl.pybridge import PrologError, Var
+
+    try:
+        return bridge.start(host, port, **options)
+    except PrologError as exc:
+        try:
+            sol = bridge.call("message_text", exc.term, Var("Text"), module="platform_errors")
+            text = str(sol["Text"]) if sol else str(exc)
+        except Exception:  # noqa: BLE001 - the raw error is still better than none
+            text = str(exc)
+        raise NodeStartError(text, exc.term) from exc
 
 
 class _StdinHost:
@@ -79,7 +115,7 @@ class RobotProcess:
             options["tokens"] = [Atom(c.token) if isinstance(c.token, str) else c.token]
         if c.tls is not None:
             options["tls"] = str(Path(c.tls).resolve())
-        name = self.bridge.start(c.host, 0, **options)
+        name = start_node(self.bridge, c.host, 0, **options)
         host, port = self.bridge.address(name)
         self.lines.node(str(host), int(port))
         return str(host), int(port)

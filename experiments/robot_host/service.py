@@ -29,7 +29,7 @@ from typing import Any, TextIO
 
 from dfrl.experiments.robot_host.config import Mode, RobotConfig
 from dfrl.experiments.robot_host.lines import ProtocolLines
-from dfrl.experiments.robot_host.process import load_agent_program
+from dfrl.experiments.robot_host.process import load_agent_program, start_node
 from dfrl.experiments.robot_host.training import Training
 from dfrl.experiments.tokens import Token
 from dfrl.pybridge.serving import RequestError
@@ -149,7 +149,7 @@ class RobotService:
             options[name] = Atom(value) if isinstance(value, str) else value
         if adv and port:
             options["advertise"] = Term(":", Atom(adv), port)
-        self.node_name = self.bridge.start(host, port, **options)
+        self.node_name = start_node(self.bridge, host, port, **options)
         bound_host, bound_port = self.bridge.address(self.node_name)
         adv_host = adv or str(bound_host)
         if adv_host in ("0.0.0.0", "::", ""):
