@@ -17,7 +17,7 @@ in training, with ``target_seeds`` seeds each: the source table's greedy policy 
 there (zero-shot score and collisions), and a robot starting from it learns ``fine_tune``
 steps (collisions per 1,000 during them: what the paper's transfer claim is about). Per source
 seed the target runs are averaged; intervals are over source seeds; each condition is also
-compared with ``standalone`` paired by source seed (Welch interval of the difference).
+compared with ``standalone`` paired by source seed (t interval of the paired differences).
 """
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from dfrl.experiments.science.statistics import Interval, difference, interval
+from dfrl.experiments.science.statistics import Interval, Outcome, interval, judge, paired
 from dfrl.experiments.science.studies.fedsim import federate, in_turn
 from dfrl.experiments.science.studies.history import eval_job
 from dfrl.robots.training import Trainer, TrainerConfig
@@ -122,9 +122,10 @@ def per_source(rows: Sequence[dict[str, Any]], condition: str, measure: str) -> 
 
 
 def summary(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, tuple[Interval, Interval]]]:
-    """condition -> measure -> (interval, difference from ``standalone``)."""
+    """condition -> measure -> (interval, difference from ``standalone``, paired by source
+    seed: every condition's sources are trained with the same seeds)."""
     return {c: {m: (interval(per_source(rows, c, m)),
-                    difference(per_source(rows, c, m), per_source(rows, "standalone", m)))
+                    paired(per_source(rows, c, m), per_source(rows, "standalone", m)))
                 for m in MEASURES} for c in CONDITIONS}
 
 
@@ -134,7 +135,7 @@ def markdown(rows: Sequence[dict[str, Any]], opts: StudyOptions) -> str:
          f"(federations share every {opts.respite}). Targets: {', '.join(opts.targets)} x "
          f"{len(opts.target_seeds)} seeds; zero-shot greedy evaluation ({opts.eval_steps} steps) "
          f"and {opts.fine_tune} steps of learning from the table. Mean ± 95% t half width over "
-         "source seeds; Δ: difference from `standalone` (Welch).", "",
+         "source seeds; Δ: difference from `standalone`, paired by source seed.", "",
          "| source table | zero-shot score | Δ score | zero-shot collisions/1000 | "
          "collisions/1000 while learning | Δ collisions while learning | reward/step while "
          "learning | table min | table sum |", "|---|---|---|---|---|---|---|---|---|"]
@@ -149,25 +150,23 @@ def markdown(rows: Sequence[dict[str, Any]], opts: StudyOptions) -> str:
 
 
 def verdict(rows: Sequence[dict[str, Any]]) -> str:
-    """The paper's claim (federated tables transfer better) in plain words."""
-    d = {c: difference(per_source(rows, "federated_average", "score"),
-                       per_source(rows, c, "score"))
+    """The paper's claim (federated tables transfer better) in the verdict words of
+    :func:`dfrl.experiments.science.statistics.judge`."""
+    d = {c: judge(paired(per_source(rows, "federated_average", "score"),
+                         per_source(rows, c, "score")))
          for c in ("standalone", "standalone_same_experience", "in_turn", "one_shot_average")}
-    sig = {c: (v.half == v.half and v.low > 0) for c, v in d.items()}
-    worse = {c: (v.half == v.half and v.high < 0) for c, v in d.items()}
-    word = lambda c: ("better (interval above 0)" if sig[c] else  # noqa: E731
-                      "worse (interval below 0)" if worse[c] else "no significant difference")
+    held = {c: j.outcome is Outcome.HOLDS for c, j in d.items()}
     L = ["**Verdict on the paper's claim** (a federated table transfers to new arenas). "
-         "Zero-shot greedy score on the unseen arenas, federated average minus:"]
-    for c, v in d.items():
-        L.append(f"{c}: Δ {v}, {word(c)};")
-    if sig["standalone"] and not (sig["in_turn"] or sig["one_shot_average"]):
-        L.append("So the federated table transfers better than a standalone one, but no better "
-                 "than one robot that saw the same arenas in turn or a one-shot average: what "
-                 "helps is the diversity of arenas, not federation.")
-    elif sig["standalone"]:
+         "Zero-shot greedy score on the unseen arenas, federated average minus (paired by "
+         "source seed; the claim is that the difference is above 0):"]
+    for c, j in d.items():
+        L.append(f"{c}: Δ {j.measure}, {j.words()};")
+    if held["standalone"] and not (held["in_turn"] or held["one_shot_average"]):
+        L.append("So the federated table transfers better than a standalone one, but not "
+                 "significantly better than one robot that saw the same arenas in turn or a "
+                 "one-shot average: the diversity of arenas may be what helps, not federation.")
+    elif held["standalone"]:
         L.append("So federation helps transfer, beyond the diversity of its arenas.")
     else:
-        L.append("So the claim does not hold here: the federated table does not transfer "
-                 "significantly better than a standalone table.")
+        L.append(f"So the claim is {d['standalone'].words()} against a standalone table.")
     return " ".join(L)
