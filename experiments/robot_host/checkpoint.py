@@ -21,12 +21,16 @@ people and tools (robot, experiment, iteration, shares, the sha256 of the table,
 it is written after the ``.npy`` and is not read back. Each file is written to a temporary
 name, flushed, fsynced and renamed over the old one, then the directory is fsynced: a crash
 leaves either the old or the new checkpoint, never a torn one.
+
+The final tables (``tables/<robot>.npy``, ``.json``, ``.visits.npy``, in the format of
+:mod:`dfrl.robots.tables`) are replaced the same way by :func:`save_table_atomically`.
 """
 from __future__ import annotations
 
 import io
 import json
 import os
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,7 +41,7 @@ import numpy as np
 from dfrl.experiments.robot_host.files import table_digest
 
 __all__ = ["Checkpoint", "atomic_write", "save_checkpoint", "load_checkpoint",
-           "checkpoint_of", "restore_trainer"]
+           "checkpoint_of", "restore_trainer", "save_table_atomically"]
 
 
 @dataclass
@@ -72,11 +76,39 @@ def atomic_write(path: Path, data: bytes) -> None:
     finally:
         os.close(fd)
     os.replace(tmp, path)
-    dfd = os.open(path.parent, os.O_RDONLY)
+    _fsync_dir(path.parent)
+
+
+def _fsync_dir(directory: Path) -> None:
+    dfd = os.open(directory, os.O_RDONLY)
     try:
         os.fsync(dfd)
     finally:
         os.close(dfd)
+
+
+def save_table_atomically(trainer: Any, path: str | Path) -> Path:
+    """``trainer.save_table(path)`` (``.npy``, ``.visits.npy``, ``.json``; the format of
+    :func:`dfrl.robots.tables.save_table`), each file replaced atomically: written in a
+    temporary folder beside ``path``, fsynced, renamed over the old one (the ``.json`` last),
+    the folder fsynced. A kill leaves the old files or the new ones, never a torn table.
+    Returns the ``.npy`` path."""
+    target = Path(path)
+    folder = target.parent
+    folder.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=folder, prefix=f".{target.name}.tmp-") as tmp:
+        written = Path(trainer.save_table(Path(tmp) / target.name))
+        files = sorted(Path(tmp).iterdir(), key=lambda f: (f.suffix == ".json", f.name))
+        for f in files:
+            fd = os.open(f, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+        for f in files:
+            os.replace(f, folder / f.name)
+    _fsync_dir(folder)
+    return folder / written.name
 
 
 def paths(directory: Path, robot: str) -> tuple[Path, Path]:

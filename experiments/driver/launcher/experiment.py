@@ -35,7 +35,7 @@ from dfrl.experiments.driver.results.metrics import merge_metrics
 from dfrl.experiments.driver.results.plots import plot_experiment
 from dfrl.experiments.driver.results.rounds import read_shares, write_rounds_csv
 from dfrl.experiments.driver.results.summary import Results, write_summary
-from dfrl.experiments.driver.results.tables import keep_checkpoints
+from dfrl.experiments.driver.results.tables import final_tables
 from dfrl.experiments.tls_folder import check_node_dir
 from dfrl.experiments.tokens import SECRET_FILE, new_secret, write_secret_file
 
@@ -167,9 +167,11 @@ class Launcher:
         self._agents.read_logs(self._robots)
         self._robots.show_progress()        # lines the robots wrote after the last look
         robots = list(self._robots.robots())
-        from_checkpoint = keep_checkpoints(out, robots)
+        from_checkpoint, torn = final_tables(out, robots)
         for rid in from_checkpoint:
             say(f"table of {rid} kept from its last checkpoint (tables/{rid}.npy)")
+        for line in torn.values():
+            say(f"TABLE {line}")
         merge_metrics(out, robots)
         merge_evaluations(out, robots)
         logs = self._agents.logs()
@@ -199,7 +201,8 @@ class Launcher:
         ok = ok and all(v is not None for v in finished.values()) and faults.complete(c)
         result = Results(out, c, wall, rows, self._robots.crashed(), finished,
                          self._robots.iterations(), plots, ok, self._interrupted, problems,
-                         plot_error, faults, self._robots.gathered(), list(from_checkpoint))
+                         plot_error, faults, self._robots.gathered(), list(from_checkpoint),
+                         torn)
         write_summary(result)
         return result
 

@@ -32,6 +32,7 @@ class Results:
     faults: Faults | None = None
     gathered: dict[str, list[str]] | None = None
     from_checkpoint: list[str] | None = None
+    table_problems: dict[str, str] | None = None
 
     @property
     def complete(self) -> bool:
@@ -121,6 +122,8 @@ def write_summary(r: Results) -> Path:
                      f"remote robot(s): {n}")
     if r.crashed:
         lines.append(f"- CRASHED robots (exit codes): {r.crashed}")
+    for rid, problem in (r.table_problems or {}).items():
+        lines.append(f"- TORN TABLE {rid}: {problem}")
     if r.faults is not None:
         fault_lines = r.faults.lines()
         verdict = "complete" if r.complete else "INCOMPLETE"
