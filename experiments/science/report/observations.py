@@ -1,9 +1,15 @@
 """The paper's observations as tests that can fail: per-seed statistics, 95% intervals, verdicts.
 
 Every test turns one observation into a number per seed (a :class:`SeedRun` is one
-configuration run with one seed) and asks whether its 95% t interval lies on the claimed side
-of a bound (:func:`dfrl.experiments.science.statistics.interval`). The same test is applied to the negative control (the same configuration with a random behaviour policy, epsilon 1
-throughout): a test the control passes does not detect learning, and the report says so.
+configuration run with one seed) and judges the claim that its mean lies on one side of a
+bound (:func:`dfrl.experiments.science.statistics.judge`: holds, refuted, not significant at
+n = K with the smallest detectable effect, or cannot judge below :data:`MIN_SEEDS` seeds),
+with Holm's correction over every real row of the report (:func:`with_holm`). The same test is
+applied to the negative control (the same configuration with a random behaviour policy,
+epsilon 1 throughout). :meth:`Test.standing` says whether the test can tell learning from not
+learning: not when the control's result is fixed by construction (declared, or the same value
+in every seed), passes, or shows the same effect as a real row that holds; and the report
+cannot judge with no control or fewer than :data:`MIN_SEEDS` seeds.
 
 Learning is read from behaviour, not from the sum of Q-values (which rises whatever the
 robot does): the online reward per step (first quarter of the run vs last quarter), the time
@@ -14,12 +20,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from enum import Enum
 from typing import Any
 
 import numpy as np
 
-from dfrl.experiments.science.statistics import Interval, dip, interval, late_growth, smooth
+from dfrl.experiments.science.statistics import (Interval, Judgement, adjust, dip, interval,
+                                                 judge, late_growth, paired, smooth, welch)
 
 #: A reward gain per step below this is "no learning" (the saturation time is then the budget).
 MIN_GAIN: float = 0.05
@@ -116,14 +124,30 @@ def arena_stat(run: SeedRun, arena: str, fn: Callable[[np.ndarray], float]) -> f
 
 
 # -- verdicts --------------------------------------------------------------------------------
+#: Fewest seeds a verdict is given on; with fewer, the report cannot judge.
+MIN_SEEDS: int = 3
+
+
 @dataclass(frozen=True)
 class Verdict:
-    """One test on one set of runs: the measured interval and whether it passes."""
+    """One claim on one set of runs: the per-seed values and the judgement of their interval.
+
+    ``kind`` (``federated``, ``standalone`` or empty for both) matches real rows with the
+    control rows they are compared with."""
 
     subject: str
-    measure: Interval
-    passed: bool
+    judgement: Judgement
+    values: tuple[float, ...] = ()
     note: str = ""
+    kind: str = ""
+
+    @property
+    def measure(self) -> Interval:
+        return self.judgement.measure
+
+    @property
+    def passed(self) -> bool:
+        return self.judgement.holds
 
 
 def _iv(values: Sequence[float]) -> Interval:
@@ -131,27 +155,47 @@ def _iv(values: Sequence[float]) -> Interval:
     return interval(vals) if vals else Interval(float("nan"), float("nan"), 0)
 
 
-def above(subject: str, values: Sequence[float], bound: float = 0.0, note: str = "") -> Verdict:
-    """Passes when the 95% interval of ``values`` lies wholly above ``bound``."""
-    iv = _iv(values)
-    return Verdict(subject, iv, iv.n >= 2 and iv.low > bound, note)
+def _verdict(subject: str, values: Sequence[float], bound: float, side: str, note: str,
+             kind: str) -> Verdict:
+    vals = tuple(float(v) for v in values if not math.isnan(v))
+    return Verdict(subject, judge(_iv(vals), bound, side, MIN_SEEDS), vals, note, kind)
 
 
-def below(subject: str, values: Sequence[float], bound: float = 0.0, note: str = "") -> Verdict:
-    """Passes when the 95% interval of ``values`` lies wholly below ``bound``."""
-    iv = _iv(values)
-    return Verdict(subject, iv, iv.n >= 2 and iv.high < bound, note)
+def above(subject: str, values: Sequence[float], bound: float = 0.0, note: str = "",
+          kind: str = "") -> Verdict:
+    """The claim "the mean of ``values`` is above ``bound``" (holds when its 95% interval lies
+    wholly above it, with at least :data:`MIN_SEEDS` values)."""
+    return _verdict(subject, values, bound, "above", note, kind)
+
+
+def below(subject: str, values: Sequence[float], bound: float = 0.0, note: str = "",
+          kind: str = "") -> Verdict:
+    """The claim "the mean of ``values`` is below ``bound``"."""
+    return _verdict(subject, values, bound, "below", note, kind)
+
+
+class Standing(Enum):
+    """Whether a test can tell learning from not learning."""
+
+    TEST = "a test of learning"
+    NOT_A_TEST = "not a test"
+    CANNOT_JUDGE = "cannot judge"
 
 
 @dataclass(frozen=True)
 class Test:
-    """An observation as a test: real verdicts, the control's, and what it means."""
+    """An observation as a test: real verdicts, the control's, and what it means.
+
+    ``fixed`` names why the control's result is fixed by construction, when it is by design
+    (a control that is the reference itself); a control whose value is the same in every
+    seed is found from the data."""
 
     key: str
     title: str
     how: str
     real: list[Verdict]
     control: list[Verdict]
+    fixed: str = ""
 
     @property
     def holds(self) -> bool:
@@ -162,13 +206,65 @@ class Test:
         return any(v.passed for v in self.control)
 
     @property
+    def has_control(self) -> bool:
+        return any(v.measure.n > 0 for v in self.control)
+
+    def standing(self) -> tuple[Standing, str]:
+        """Whether this is a test of learning, and why (or why not)."""
+        if not self.has_control:
+            return Standing.CANNOT_JUDGE, "no control run applies"
+        fewest = min(v.measure.n for v in self.real + self.control)
+        if fewest < MIN_SEEDS:
+            return Standing.CANNOT_JUDGE, (f"{fewest} seed(s) in a row, fewer than "
+                                           f"{MIN_SEEDS}")
+        if self.fixed:
+            return Standing.NOT_A_TEST, f"the control's result is fixed by construction ({self.fixed})"
+        for v in self.control:
+            if v.values and max(v.values) == min(v.values):
+                why = WHY_FIXED.get(self.key, "")
+                return Standing.NOT_A_TEST, (
+                    f"the control's result is fixed by construction: {v.subject} is "
+                    f"{v.values[0]:.3g} in every seed" + (f" ({why})" if why else ""))
+        if self.control_passes:
+            why = WHY_CONTROL_PASSES.get(self.key, "")
+            return Standing.NOT_A_TEST, "the control passes it too" + (f" ({why})" if why else "")
+        for v in self.real:
+            if not v.passed:
+                continue
+            for c in self.control:
+                if c.kind and v.kind and c.kind != v.kind:
+                    continue
+                d = judge(control_difference(v.values, c.values), 0.0, v.judgement.side,
+                          MIN_SEEDS)
+                if not d.holds:
+                    return Standing.NOT_A_TEST, (
+                        f"the control shows the same effect: {v.subject} minus {c.subject} "
+                        f"is {d.measure}, {d.words()}")
+        return Standing.TEST, "the control fails it and differs from every run that passes"
+
+    @property
     def is_test(self) -> bool:
-        """False when the control passes it (it does not tell learning from not learning)."""
-        return not self.control_passes
+        """A test of learning: it has a control that can fail, and it fails it."""
+        return self.standing()[0] is Standing.TEST
 
 
-def paired(a: Sequence[SeedRun], b: Sequence[SeedRun],
-           fn: Callable[[SeedRun, SeedRun], float]) -> list[float]:
+def control_difference(real: Sequence[float], control: Sequence[float]) -> Interval:
+    """Real minus control: paired by seed when both have a value for every seed (the
+    control runs with the same seeds, in the same order), otherwise Welch."""
+    return paired(real, control) if len(real) == len(control) else welch(real, control)
+
+
+def with_holm(tests: list[Test]) -> list[Test]:
+    """The tests with Holm's correction applied over the family of every real row of every
+    test (control rows are checks, not claims, and stay as they are)."""
+    family = [v.judgement for t in tests for v in t.real]
+    adjusted = iter(adjust(family))
+    return [replace(t, real=[replace(v, judgement=next(adjusted)) for v in t.real])
+            for t in tests]
+
+
+def by_seed(a: Sequence[SeedRun], b: Sequence[SeedRun],
+            fn: Callable[[SeedRun, SeedRun], float]) -> list[float]:
     return [fn(x, y) for x, y in zip(a, b)]
 
 
@@ -201,33 +297,40 @@ def paper_tests(fed: dict[str, list[SeedRun]], standalone: dict[str, list[SeedRu
         "1b", "The reward the robots earn rises as they learn",
         "reward per step in the last quarter minus the first quarter (robots' mean per seed); "
         "passes when the interval is above 0",
-        [above(k, [g(r) for r in runs]) for k, runs in list(fed.items()) + list(standalone.items())],
-        [above(ctrl_name + " federated", [g(r) for r in control_fed]),
-         above(ctrl_name + " standalone", [g(r) for r in control_sa])]))
+        [above(k, [g(r) for r in runs], kind="federated") for k, runs in fed.items()]
+        + [above(k, [g(r) for r in runs], kind="standalone") for k, runs in standalone.items()],
+        [above(ctrl_name + " federated", [g(r) for r in control_fed], kind="federated"),
+         above(ctrl_name + " standalone", [g(r) for r in control_sa], kind="standalone")]))
     # 1c: the greedy policy drives without colliding
     tests.append(Test(
         "1c", "The learnt greedy policy drives ahead without colliding",
         "greedy score (progress - 0.05 x collisions/1000) at the end, own and held-out arenas, "
         "minus the zero table's score (a random policy); passes when the interval is above 0.1",
-        [above(k, [greedy_gain(r) for r in runs], 0.1)
-         for k, runs in list(fed.items()) + list(standalone.items())],
-        [above(ctrl_name + " federated", [greedy_gain(r) for r in control_fed], 0.1),
-         above(ctrl_name + " standalone", [greedy_gain(r) for r in control_sa], 0.1)]))
+        [above(k, [greedy_gain(r) for r in runs], 0.1, kind="federated")
+         for k, runs in fed.items()]
+        + [above(k, [greedy_gain(r) for r in runs], 0.1, kind="standalone")
+           for k, runs in standalone.items()],
+        [above(ctrl_name + " federated", [greedy_gain(r) for r in control_fed], 0.1,
+               kind="federated"),
+         above(ctrl_name + " standalone", [greedy_gain(r) for r in control_sa], 0.1,
+               kind="standalone")]))
     # 1e: 1c fixed: off-policy Q-learning from random behaviour also learns a table whose
     # greedy policy drives (1c passes the control), so the reference is the control itself
     if control_fed:
-        ref = lambda runs: paired(runs, control_fed,  # noqa: E731
-                                  lambda a, b: final_score(a) - final_score(b))
+        ref = lambda runs: by_seed(runs, control_fed,  # noqa: E731
+                                   lambda a, b: final_score(a) - final_score(b))
         tests.append(Test(
             "1e", "The learnt greedy policy beats the greedy policy learnt from random behaviour",
             "final greedy score (own and held-out arenas) minus the control's of the same seed "
             "(federated control; standalone runs against the standalone control); passes "
-            "above 0. 1c fixed: the control is the reference, so it cannot pass by construction",
+            "above 0. 1c fixed, but the control is the reference, so its own row is 0 by "
+            "definition and cannot fail",
             [above(k, ref(runs)) for k, runs in fed.items()]
-            + [above(k, paired(runs, control_sa, lambda a, b: final_score(a, robots=list(
+            + [above(k, by_seed(runs, control_sa, lambda a, b: final_score(a, robots=list(
                 b.curves)) - final_score(b))) for k, runs in standalone.items()],
-            [Verdict(ctrl_name, Interval(0.0, 0.0, len(control_fed)), False,
-                     "the reference: 0 by construction")]))
+            [below(ctrl_name, [0.0] * len(control_fed), note="the reference: 0 by construction")],
+            fixed="the control is the reference: every row is a run minus the control, so the "
+                  "control's own row is 0 by definition"))
     # 1d: saturation
     sat = lambda runs: [late_growth(mean_q(r)) for r in runs]  # noqa: E731
     tests.append(Test(
@@ -244,7 +347,7 @@ def paper_tests(fed: dict[str, list[SeedRun]], standalone: dict[str, list[SeedRu
     for algo in ("qlearning", "sarsa"):
         mx, av = fed.get(f"{algo}/max"), fed.get(f"{algo}/average")
         if mx and av:
-            real2.append(above(algo, paired(mx, av, lambda a, b: dip(mean_q(a))[0] - dip(mean_q(b))[0]),
+            real2.append(above(algo, by_seed(mx, av, lambda a, b: dip(mean_q(a))[0] - dip(mean_q(b))[0]),
                                note="max dips " + str(_iv([dip(mean_q(r))[0] for r in mx]))))
     tests.append(Test(
         "2", "Max aggregation shows a dip of the sum of Q-values before saturating",
@@ -284,19 +387,27 @@ def paper_tests(fed: dict[str, list[SeedRun]], standalone: dict[str, list[SeedRu
         "5", "Standalone learning saturates faster than federated",
         "iterations for the reward per step to make 90% of its gain, federated minus standalone "
         "(same arenas and seed); passes above 0",
-        [above(k, paired(runs, standalone[k.split("/")[0]], fed_minus_sa))
+        [above(k, by_seed(runs, standalone[k.split("/")[0]], fed_minus_sa))
          for k, runs in fed.items()],
-        [above(ctrl_name, paired(control_fed, control_sa, fed_minus_sa))]))
+        [above(ctrl_name, by_seed(control_fed, control_sa, fed_minus_sa))]))
     # 6: federation helps on unseen arenas
     held = lambda f, s: final_score(f, "held_out") - final_score(s, "held_out")  # noqa: E731
     tests.append(Test(
         "6", "The federated table does better on unseen arenas than a standalone one",
         "final greedy score in the held-out arenas, federated minus standalone (mean over the "
         "standalone arenas), same seed; passes above 0",
-        [above(k, paired(runs, standalone[k.split("/")[0]], held)) for k, runs in fed.items()],
-        [above(ctrl_name, paired(control_fed, control_sa, held))]))
-    return tests
+        [above(k, by_seed(runs, standalone[k.split("/")[0]], held)) for k, runs in fed.items()],
+        [above(ctrl_name, by_seed(control_fed, control_sa, held))]))
+    return with_holm(tests)
 
+
+#: Why a control's value is the same in every seed, where we know.
+WHY_FIXED = {
+    "4": f"t_reward90 is the budget whenever the reward per step gains less than {MIN_GAIN}, "
+         "as it does under random behaviour",
+    "5": f"t_reward90 is the budget whenever the reward per step gains less than {MIN_GAIN}, "
+         "as it does under random behaviour, so federated minus standalone is 0",
+}
 
 #: Why a test passes the control, where we know.
 WHY_CONTROL_PASSES = {
@@ -308,22 +419,52 @@ WHY_CONTROL_PASSES = {
 }
 
 
+def real_words(t: Test) -> str:
+    """How the real runs fare: holds for every row, or how many hold."""
+    n, k = len(t.real), sum(v.passed for v in t.real)
+    if n and k == n:
+        return f"holds ({k}/{n})"
+    return f"holds for {k} of {n}" if n else "no real runs"
+
+
+def control_words(t: Test) -> str:
+    """How the control fares: none, fixed by construction, passes, fails."""
+    why = t.standing()[1]
+    if not t.has_control:
+        return "none"
+    if "fixed by construction" in why:
+        return "fixed by construction"
+    return "passes" if t.control_passes else "fails"
+
+
 def tests_markdown(tests: list[Test]) -> list[str]:
-    """The tests as markdown: one table per test, then its verdict."""
-    L: list[str] = []
+    """The tests as markdown: the family Holm's correction ran over, then one table per test
+    and its verdict."""
+    n = sum(len(t.real) for t in tests)
+    L = [f"Verdicts: a row **holds** when its 95% interval lies on the claimed side of the "
+         f"bound and its p-value, after Holm's correction over the family of all {n} real-run "
+         f"rows below (control rows are checks, not in the family), is under 5%; "
+         f"**refuted (effect excluded at 95%)** when the interval lies on the other side; "
+         f"otherwise **not significant at n = K (smallest detectable effect D)**, D being the "
+         f"true distance from the bound a 5% t test finds with 80% power at that n and spread; "
+         f"with fewer than {MIN_SEEDS} seeds the report **cannot judge**. A test is a test of "
+         f"learning only when its control can fail (not fixed by construction), fails, and "
+         f"differs from every real row that holds (real minus control, paired by seed).", ""]
     for t in tests:
         L += [f"### {t.key}. {t.title}", "", f"Measure: {t.how}.", "",
-              "| runs | mean ± 95% half width (n seeds) | passes | note |", "|---|---|---|---|"]
-        for v in t.real + t.control:
-            L.append(f"| {v.subject} | {v.measure} | {'yes' if v.passed else 'no'} | {v.note} |")
-        verdict = ("**holds**" if t.holds else "**does not hold**") + " for the real runs"
-        if not t.control:
-            verdict += "; no control run applies (the control has no max run)"
-        elif t.control_passes:
-            verdict += ("; **the control passes it too, so it is not a test of learning**"
-                        + (f" ({WHY_CONTROL_PASSES[t.key]})" if t.key in WHY_CONTROL_PASSES
-                           else ""))
-        else:
-            verdict += "; the control fails it"
-        L += ["", f"Verdict: {verdict}.", ""]
+              "| runs | mean ± 95% half width (n seeds) | p (Holm) | verdict | note |",
+              "|---|---|---|---|---|"]
+        for v in t.real:
+            L.append(f"| {v.subject} | {v.measure} | {_p(v.judgement)} | {v.judgement} | "
+                     f"{v.note} |")
+        for v in t.control:
+            L.append(f"| {v.subject} | {v.measure} | {_p(v.judgement, False)} | "
+                     f"{v.judgement} | control. {v.note} |")
+        standing, why = t.standing()
+        L += ["", f"Verdict: the real runs: **{real_words(t)}**; **{standing.value}**: {why}.", ""]
     return L
+
+
+def _p(j: Judgement, adjusted: bool = True) -> str:
+    p = j.p_adjusted if adjusted else j.p
+    return "n/a" if math.isnan(p) else f"{p:.2g}"
