@@ -123,6 +123,7 @@ mobile_hook(dfrl_aggregation:aggregate_init/3).
 mobile_hook(dfrl_aggregation:aggregate_step/4).
 mobile_hook(dfrl_aggregation:aggregate_final/3).
 mobile_hook(dfrl_aggregation:method_uses_visits/1).
+mobile_hook(dfrl_aggregation:method_applies/2).
 
 		 /*******************************
 		 *            TRUST		*
@@ -650,6 +651,8 @@ agent_api(node:node_property(_, P), ( nonvar(P), public_node_property(P) )).
 agent_api(robot_resources:get_robot_table(_, _, _), true).
 agent_api(robot_resources:get_robot_tables(_, _, _, _), true).
 agent_api(robot_resources:set_robot_table(_, _, _), true).
+agent_api(robot_resources:get_robot_params(_, _, _), true).
+agent_api(robot_resources:set_robot_params(_, _, _), true).
 agent_api(robot_resources:hosted_robot(_, _), true).
 agent_api(dfrl_agent:dfrl_tour_event(A, _, _), self(A)).
 agent_api(dfrl_agent:dfrl_tour_main(A, _), self(A)).
@@ -661,6 +664,7 @@ agent_api(dfrl_aggregation:aggregate_init(_, _, _), true).
 agent_api(dfrl_aggregation:aggregate_step(_, _, _, _), true).
 agent_api(dfrl_aggregation:aggregate_final(_, _, _), true).
 agent_api(dfrl_aggregation:method_uses_visits(_), true).
+agent_api(dfrl_aggregation:method_applies(_, _), true).
 agent_api(dfrl_aggregation:aggregate_tables(_, _, _), true).
 
 %   An agent sees its own properties but its tokens; of other agents,

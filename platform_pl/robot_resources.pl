@@ -2,11 +2,13 @@
           [ get_robot_table/3,          % +Robot, -QTable, +Options
             get_robot_tables/4,         % +Robot, -QTable, -Visits, +Options
             set_robot_table/3,          % +Robot, +QTable, +Options
+            get_robot_params/3,         % +Robot, -Params, +Options
+            set_robot_params/3,         % +Robot, +Params, +Options
             hosted_robot/2              % ?Robot, ?Props
           ]).
 :- autoload(library(error), [must_be/2, existence_error/2]).
 
-/** <module> The resources a host process offers to agents: robots' tables
+/** <module> The resources a host process offers to agents: robots' tables and parameters
 
 The platform knows nothing about robots. A process that hosts robots (a
 robot process: the Python bridge, pybridge/robot_bridge.pl) says which
@@ -23,10 +25,21 @@ Hooks, defined as clauses in this module:
   - robot_resources:tables_get(+Robot, -QTable, -Visits, +Options) is det.
     The table and the visit counts, taken together (one snapshot).
   - robot_resources:table_set(+Robot, +QTable, +Options) is det.
+  - robot_resources:params_get(+Robot, -Params, +Options) is det.
+    Params is params(Layout, Samples, Values).
+  - robot_resources:params_set(+Robot, +Params, +Options) is det.
+    Params is params(Layout, Values).
 
 A table is qtable(Shape, Values): Shape = [NStates, NActions], Values the
 flat row-major list of NStates*NActions floats (visit counts as floats
-too). Options: timeout(Seconds), how long the host may take to answer.
+too). A robot's learnable parameters (a function learner's, or a tabular
+one's that also offers them) are one flat list of floats Values with a
+Layout, a list Name-Dims of blocks (each row-major, in order), and
+Samples, the number of steps the learner has learnt from (the FedAvg
+weight). The props of a robot say what it offers: shape(Shape) for a
+table, layout(Layout) for parameters, learner(tabular|function).
+Options: timeout(Seconds), how long the host may take to answer; other
+options of a write say where it comes from (round(N), agent(A), ...).
 
 A host with its tables in Prolog memory (as the platform's tests have):
 
@@ -49,7 +62,9 @@ robot_resources:table_set(R, T, _) :-
     robot/2,                    % ?Robot, ?Props
     table_get/3,                % +Robot, -QTable, +Options
     tables_get/4,               % +Robot, -QTable, -Visits, +Options
-    table_set/3.                % +Robot, +QTable, +Options
+    table_set/3,                % +Robot, +QTable, +Options
+    params_get/3,               % +Robot, -Params, +Options
+    params_set/3.               % +Robot, +Params, +Options
 
 %!  get_robot_table(+Robot, -QTable, +Options) is det.
 %
@@ -85,6 +100,30 @@ set_robot_table(Robot, QTable, Options) :-
     must_be(compound, QTable),
     check_request(Robot, Options),
     hook(table_set(Robot, QTable, Options)).
+
+%!  get_robot_params(+Robot, -Params, +Options) is det.
+%
+%   Params is params(Layout, Samples, Values), the current learnable
+%   parameters of Robot, hosted by this process. Options: timeout(Seconds).
+%   Errors as get_robot_table/3 (the hook params_get/3); a robot that
+%   offers no parameters: the host's error (the bridge's is
+%   existence_error(params, Robot)).
+
+get_robot_params(Robot, Params, Options) :-
+    check_request(Robot, Options),
+    hook(params_get(Robot, Params, Options)).
+
+%!  set_robot_params(+Robot, +Params, +Options) is det.
+%
+%   Replace the parameters of Robot by Params = params(Layout, Values)
+%   (the host validates them). Errors as get_robot_params/3.
+%
+%   @error type_error(compound, Params)
+
+set_robot_params(Robot, Params, Options) :-
+    must_be(compound, Params),
+    check_request(Robot, Options),
+    hook(params_set(Robot, Params, Options)).
 
 %!  hosted_robot(?Robot, ?Props) is nondet.
 %

@@ -21,7 +21,7 @@ from dfrl.pybridge.terms import Atom, Blob, Term, Var
 if TYPE_CHECKING:
     from dfrl.pybridge.codec import Codec
     from dfrl.pybridge.node import Bridge
-    from dfrl.pybridge.providers import StaticTable, TableProvider
+    from dfrl.pybridge.providers import ParamsProvider, StaticParams, StaticTable, TableProvider
 
 __all__ = [
     "BridgeError",
@@ -38,12 +38,16 @@ __all__ = [
     "Bridge",
     "TableProvider",
     "StaticTable",
+    "ParamsProvider",
+    "StaticParams",
 ]
 
 _LAZY = {
     "Bridge": "dfrl.pybridge.node",
     "TableProvider": "dfrl.pybridge.providers",
     "StaticTable": "dfrl.pybridge.providers",
+    "ParamsProvider": "dfrl.pybridge.providers",
+    "StaticParams": "dfrl.pybridge.providers",
     "Codec": "dfrl.pybridge.codec",
 }
 

@@ -21,10 +21,10 @@ import numpy as np
 from dfrl.pybridge.codec import Codec
 from dfrl.pybridge.engine import Prolog, prolog
 from dfrl.pybridge.errors import BridgeError, NodeStateError, PrologError, PrologFailure
-from dfrl.pybridge.providers import TableProvider
+from dfrl.pybridge.providers import TableProvider, check_layout
 from dfrl.pybridge.self_test import SelfTestReport, self_test
 from dfrl.pybridge.serving import MODULE as _MODULE
-from dfrl.pybridge.serving import RegisteredRobot, RequestServer, ServiceHandler
+from dfrl.pybridge.serving import RegisteredRobot, RequestServer, ServiceHandler, layout_term
 from dfrl.pybridge.tartarus_commands import TartarusCommands
 from dfrl.pybridge.terms import Atom, Term, Var, atom_or_self
 
@@ -41,6 +41,10 @@ CODEC_FILE: Path = Path(__file__).resolve().parent / "table_codec.pl"
 
 SERVICE_FILE: Path = Path(__file__).resolve().parent / "robot_service.pl"
 """The ``dfrl_robot(...)`` platform requests of a robot service (module ``robot_service``)."""
+
+
+#: what a provider needs to offer its parameters (ParamsProvider, without learner_kind)
+_PARAMS_ATTRS = ("params", "param_layout", "set_params", "samples")
 
 
 def _robot_term(robot_id: Any) -> Any:
@@ -248,38 +252,75 @@ class Bridge(TartarusCommands):
         return node
 
     # -- robots -------------------------------------------------------------------------------
-    def register_robot(self, robot_id: str | int, provider: TableProvider, *,
-                       shape: Sequence[int] | None = None, algorithm: str = "qlearning") -> None:
-        """Register a robot whose tables agents on this node may read and write.
+    def register_robot(self, robot_id: str | int, provider: Any, *,
+                       shape: Sequence[int] | None = None, algorithm: str = "qlearning",
+                       learner: str | None = None) -> None:
+        """Register a robot whose table or parameters agents on this node may read and write.
+
+        What the robot offers is fixed here and told to agents in its props:
+        ``learner(tabular|function)``, ``shape([S, A])`` for a Q-table, ``layout(L)`` for a
+        parameter vector (``L = [Name-[D1, ...], ...]``).
 
         Parameters
         ----------
         robot_id : str or int
             The robot's id, an atom (str) or integer in Prolog.
-        provider : TableProvider
-            ``q_table`` (float64, shape (S, A)), ``visits`` (int64, (S, A)),
-            ``set_q_table(array)``; e.g. a :class:`dfrl.robots.training.Trainer` or a
-            :class:`dfrl.pybridge.StaticTable`.
+        provider : TableProvider and/or ParamsProvider
+            A tabular learner offers ``q_table`` (float64, shape (S, A)), ``visits``
+            (int64, (S, A)), ``set_q_table(array)``; e.g. a
+            :class:`dfrl.robots.training.Trainer` or a :class:`dfrl.pybridge.StaticTable`.
+            A provider with ``params``, ``param_layout``, ``set_params`` and ``samples``
+            (:class:`dfrl.pybridge.ParamsProvider`, e.g. :class:`dfrl.pybridge.StaticParams`)
+            also offers its parameters; a function learner offers only those.
         shape : (int, int), optional
-            (S, A): the shape of the robot's table, fixed for the registration (every
+            (S, A): the shape of a tabular robot's table, fixed for the registration (every
             table write is checked against it). Give it: without it the provider's
-            ``q_table`` is read once to learn it.
+            ``q_table`` is read once to learn it. Not for a function learner.
         algorithm : str
             Learning algorithm name, given to agents in the robot's props.
+        learner : {"tabular", "function"}, optional
+            Default: the provider's ``learner_kind`` if it has one, else ``"tabular"``.
+
+        Raises
+        ------
+        TypeError
+            The provider lacks what its learner kind must offer.
+        ValueError
+            A bad shape, layout or learner kind.
         """
         self._check_open()
         rid = _robot_term(robot_id)
         names = dir(provider)                  # (hasattr would read the properties)
-        for attr in ("q_table", "visits", "set_q_table"):
-            if attr not in names:
-                raise TypeError(f"provider has no {attr!r}")
-        dims = tuple(np.shape(provider.q_table) if shape is None else shape)
-        if len(dims) != 2 or not all(isinstance(d, (int, np.integer)) and d > 0 for d in dims):
-            raise ValueError(f"a table shape is two positive integers, got {dims}")
-        table_shape = (int(dims[0]), int(dims[1]))
-        props = [Term("algorithm", Atom(algorithm)), Term("shape", list(table_shape))]
+        if learner is None:
+            learner = str(provider.learner_kind) if "learner_kind" in names else "tabular"
+        if learner not in ("tabular", "function"):
+            raise ValueError(f"learner is 'tabular' or 'function', got {learner!r}")
+        offers_params = all(a in names for a in _PARAMS_ATTRS)
+        table_shape: tuple[int, int] | None = None
+        if learner == "tabular":
+            for attr in ("q_table", "visits", "set_q_table"):
+                if attr not in names:
+                    raise TypeError(f"provider has no {attr!r}")
+            dims = tuple(np.shape(provider.q_table) if shape is None else shape)
+            if len(dims) != 2 or not all(isinstance(d, (int, np.integer)) and d > 0 for d in dims):
+                raise ValueError(f"a table shape is two positive integers, got {dims}")
+            table_shape = (int(dims[0]), int(dims[1]))
+        else:
+            if shape is not None:
+                raise ValueError("a function learner has no table shape")
+            for attr in _PARAMS_ATTRS:
+                if attr not in names:
+                    raise TypeError(f"provider of a function learner has no {attr!r}")
+        layout = check_layout(provider.param_layout) if offers_params else None
+        props = [Term("algorithm", Atom(algorithm))]
+        if table_shape is not None:
+            props.append(Term("shape", list(table_shape)))
+        props.append(Term("learner", Atom(learner)))
+        if layout is not None:
+            props.append(Term("layout", layout_term(layout)))
         self._must("bridge_register_robot", rid, props, module=_MODULE)
-        self._robots[rid] = RegisteredRobot(rid, provider, table_shape, algorithm)
+        self._robots[rid] = RegisteredRobot(rid, provider, table_shape, algorithm, layout,
+                                            learner)
 
     def unregister_robot(self, robot_id: str | int) -> None:
         """Forget a robot; later requests for it get ``existence_error(robot, Id)``."""

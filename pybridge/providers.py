@@ -1,16 +1,28 @@
-"""What a robot offers the bridge (:class:`TableProvider`), and a table without a robot.
+"""What a robot offers the bridge, and providers without a robot.
 
-The bridge validates a table write once, where it enters Python (shape, size, finite
+A robot offers its Q-table (:class:`TableProvider`: tabular learners), its learnable
+parameters as one flat float vector with a layout (:class:`ParamsProvider`: function
+learners, and tabular ones that also expose their table that way), or both.
+
+The bridge validates a write once, where it enters Python (shape or layout, size, finite
 values; see :mod:`dfrl.pybridge.serving`), so a provider's ``set_q_table`` always receives a
-float64 array of the registered shape with finite entries.
+float64 array of the registered shape with finite entries, and ``set_params`` a float64
+vector of the registered layout's size with finite entries.
 """
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["TableProvider", "StaticTable"]
+__all__ = ["TableProvider", "ParamsProvider", "StaticTable", "StaticParams", "Layout",
+           "check_layout", "layout_size"]
+
+#: A parameter layout: (name, shape) per block of the flat vector, in order; the vector is
+#: the blocks' row-major values one after the other.
+Layout = list[tuple[str, tuple[int, ...]]]
 
 
 @runtime_checkable
@@ -30,6 +42,71 @@ class TableProvider(Protocol):
     def visits(self) -> np.ndarray: ...
 
     def set_q_table(self, table: np.ndarray) -> None: ...
+
+
+@runtime_checkable
+class ParamsProvider(Protocol):
+    """What a robot whose parameters agents federate offers to the bridge.
+
+    ``params`` : float64 ndarray, shape (layout_size(param_layout),); a plain getter
+    ``param_layout`` : :data:`Layout`, fixed while the robot is registered
+    ``set_params(vec)`` : replace the parameters (already validated by the bridge:
+    float64, the layout's size, finite entries)
+    ``samples`` : int >= 0, the steps learnt from (the FedAvg weight)
+    ``learner_kind`` : ``"tabular"`` or ``"function"``
+    """
+
+    @property
+    def params(self) -> np.ndarray: ...
+
+    @property
+    def param_layout(self) -> Layout: ...
+
+    def set_params(self, vec: np.ndarray) -> None: ...
+
+    @property
+    def samples(self) -> int: ...
+
+    @property
+    def learner_kind(self) -> str: ...
+
+
+def check_layout(layout: Sequence[tuple[str, Sequence[int]]]) -> Layout:
+    """``layout`` as a :data:`Layout` of plain ``str`` and ``int``, checked.
+
+    Raises
+    ------
+    ValueError
+        Not a non-empty sequence of (name, shape) with distinct non-empty names and
+        non-negative integer dimensions, or a layout of size 0.
+    """
+    out: Layout = []
+    try:
+        items = list(layout)
+    except TypeError:
+        raise ValueError(f"a layout is a list of (name, shape), got {layout!r:.80}") from None
+    for item in items:
+        if not (isinstance(item, (tuple, list)) and len(item) == 2):
+            raise ValueError(f"a layout entry is (name, shape), got {item!r:.80}")
+        name, shape = item
+        if not (isinstance(name, str) and name):
+            raise ValueError(f"a layout name is a non-empty str, got {name!r:.80}")
+        dims = tuple(shape) if isinstance(shape, (tuple, list)) else None
+        if dims is None or not all(isinstance(d, (int, np.integer)) and not isinstance(d, bool)
+                                   and d >= 0 for d in dims):
+            raise ValueError(f"the shape of {name!r} is a tuple of integers >= 0, got {shape!r}")
+        out.append((name, tuple(int(d) for d in dims)))
+    names = [n for n, _ in out]
+    if len(set(names)) != len(names):
+        raise ValueError(f"layout names repeat: {names}")
+    if layout_size(out) < 1:
+        raise ValueError("a layout holds at least one parameter")
+    return out
+
+
+def layout_size(layout: Layout) -> int:
+    """The number of floats in a vector of ``layout`` (the product of each shape, summed)."""
+    return sum(math.prod(shape) for _, shape in layout)
 
 
 class StaticTable:
@@ -81,3 +158,78 @@ class StaticTable:
 
     def __repr__(self) -> str:
         return f"<StaticTable shape={self.shape} sets={self.sets}>"
+
+
+class StaticParams:
+    """A params provider without a robot: a random parameter vector only agents change.
+
+    For benchmarks and tests; a real object with the :class:`ParamsProvider` contract. The
+    same layout, seed and samples give the same vectors.
+
+    Parameters
+    ----------
+    layout : Layout
+        (name, shape) per block, e.g. ``[("w1", (4, 16)), ("b1", (16,))]``.
+    seed : int
+        Seeds the values (standard normal).
+    samples : int
+        The steps this "learner" has learnt from (the FedAvg weight), >= 0.
+    learner_kind : str
+        ``"function"`` (default) or ``"tabular"``.
+
+    Attributes
+    ----------
+    sets : int
+        How many times :meth:`set_params` replaced the vector.
+    """
+
+    def __init__(self, layout: Sequence[tuple[str, Sequence[int]]], seed: int = 0,
+                 samples: int = 0, learner_kind: str = "function") -> None:
+        self._layout = check_layout(layout)
+        if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 0:
+            raise ValueError(f"samples is an integer >= 0, got {samples!r}")
+        if learner_kind not in ("tabular", "function"):
+            raise ValueError(f"learner_kind is 'tabular' or 'function', got {learner_kind!r}")
+        self._kind = learner_kind
+        self._vec = np.random.default_rng(seed).standard_normal(layout_size(self._layout))
+        self._samples = int(samples)
+        self.sets = 0
+
+    @property
+    def params(self) -> np.ndarray:
+        """A copy of the parameters, float64, shape (layout_size(param_layout),)."""
+        return self._vec.copy()
+
+    @property
+    def param_layout(self) -> Layout:
+        """The layout given at construction."""
+        return list(self._layout)
+
+    @property
+    def samples(self) -> int:
+        """The FedAvg weight given at construction."""
+        return self._samples
+
+    @property
+    def learner_kind(self) -> str:
+        """``"function"`` or ``"tabular"``."""
+        return self._kind
+
+    def set_params(self, vec: np.ndarray) -> None:
+        """Replace the parameters with a float64 copy of ``vec``.
+
+        Raises
+        ------
+        ValueError
+            ``vec`` is not 1-D of the layout's size with finite entries.
+        """
+        arr = np.asarray(vec, dtype=np.float64)
+        if arr.shape != self._vec.shape or not np.isfinite(arr).all():
+            raise ValueError(f"parameters of shape {self._vec.shape} with finite entries "
+                             f"expected, got shape {arr.shape}")
+        self._vec = arr.copy()
+        self.sets += 1
+
+    def __repr__(self) -> str:
+        return (f"<StaticParams size={self._vec.size} samples={self._samples} "
+                f"sets={self.sets}>")

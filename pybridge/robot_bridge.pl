@@ -10,6 +10,10 @@
             get_visits/3,               % +Robot, -Table, +Options
             get_qtable_and_visits/3,    % +Robot, -Table, -Visits
             get_qtable_and_visits/4,    % +Robot, -Table, -Visits, +Options
+            get_params/2,               % +Robot, -Params
+            get_params/3,               % +Robot, -Params, +Options
+            set_params/2,               % +Robot, +Params
+            set_params/3,               % +Robot, +Params, +Options
             bridge_next_request/2,      % -Request, +TimeoutSeconds
             bridge_service_call/3,      % +Op, -Reply, +Options
             bridge_next_service_request/2, % -Request, +TimeoutSeconds
@@ -29,11 +33,11 @@
             [ must_be/2, domain_error/2, existence_error/2, type_error/2,
               instantiation_error/1 ]).
 :- autoload(library(option), [option/3]).
-:- autoload(library(lists), [member/2]).
-:- autoload(library(apply), [include/3]).
+:- autoload(library(lists), [member/2, append/3]).
+:- autoload(library(apply), [include/3, foldl/4, maplist/2]).
 :- autoload(library(debug), [debug/3]).
 
-/** <module> Robot tables for agents, served by the Python host between control steps
+/** <module> Robot tables and parameters for agents, served by the Python host between control steps
 
 A robot process is one Python process that embeds SWI-Prolog. Its control loop
 registers each robot with bridge_register_robot/2 and, once per control
@@ -67,6 +71,17 @@ A table write is validated once, by the host where it enters Python
 (registered shape, number of values, finite values); here set_qtable/3
 checks only what it needs to build the request.
 
+A robot may offer its learnable parameters instead of (a function
+learner) or beside (a tabular learner that also exposes them) a Q-table:
+one flat vector of floats with a layout, read with get_params/3 as
+params(Layout, Samples, Values) and written with set_params/3 as
+params(Layout, Values). Layout is a list Name-Dims (Name an atom, Dims a
+list of integers), the vector the blocks' row-major values in order;
+Samples the number of steps the learner has learnt from (the FedAvg
+weight). The values travel in the same codec as tables and a write is
+validated by the host the same way (registered layout, number of values,
+finite values).
+
 The bridge implements the platform's resource hook (robot_resources.pl):
 an agent that calls get_robot_table/3, get_robot_tables/4 or
 set_robot_table/3 reaches the robots registered here.
@@ -94,18 +109,29 @@ service_queue(robot_bridge_service).
 %
 %   Register a robot hosted by this process, replacing an earlier
 %   registration of the same robot. Robot is an atom or an integer. Props
-%   is a list that holds at least shape([NStates, NActions]) and usually
-%   algorithm(Name), e.g. `[algorithm(qlearning), shape([64, 4])]`.
+%   is a list that says what the robot offers: shape([NStates, NActions])
+%   for a Q-table, layout(Layout) for a parameter vector (at least one of
+%   them), and usually algorithm(Name) and learner(tabular|function), e.g.
+%   `[algorithm(qlearning), shape([64, 4]), learner(tabular)]` or
+%   `[algorithm(dqn), learner(function), layout([w1-[4,16], b1-[16]])]`.
 %
 %   @error type_error(list, Props)
-%   @error domain_error(robot_props, Props) without a valid shape/1.
+%   @error domain_error(robot_props, Props) without shape/1 or layout/1.
+%   @error domain_error(shape([nstates, nactions]), Shape) for a bad shape.
+%   @error domain_error(param_layout, Layout) for a bad layout.
 
 bridge_register_robot(Robot, Props) :-
     must_be(atomic, Robot),
     must_be(list, Props),
     (   memberchk(shape(Shape), Props)
     ->  check_shape(Shape)
+    ;   memberchk(layout(_), Props)
+    ->  true
     ;   domain_error(robot_props, Props)
+    ),
+    (   memberchk(layout(Layout), Props)
+    ->  layout_size(Layout, _)
+    ;   true
     ),
     ensure_request_queue,
     with_mutex(robot_bridge,
@@ -173,6 +199,7 @@ get_qtable_and_visits(Robot, Table, Visits, Options) :-
     must_be(atomic, Robot),
     must_be(list, Options),
     registered(Robot),
+    offers_table(Robot),
     bridge_call(Robot, get_qtable_and_visits(Robot), PI, Options, Reply),
     (   Reply = tables(table(QShape, QData), table(VShape, VData))
     ->  decode_table(QShape, QData, Table),
@@ -185,6 +212,7 @@ table_request(Op, PI, Options, Table) :-
     must_be(atomic, Robot),
     must_be(list, Options),
     registered(Robot),
+    offers_table(Robot),
     bridge_call(Robot, Op, PI, Options, Reply),
     (   Reply = table(Shape, Data)
     ->  decode_table(Shape, Data, Table)
@@ -231,6 +259,7 @@ set_qtable(Robot, Table, Options) :-
     must_be(atomic, Robot),
     must_be(list, Options),
     registered(Robot),
+    offers_table(Robot),
     (   var(Table)
     ->  instantiation_error(Table)
     ;   Table = qtable(Shape, Values0)
@@ -239,30 +268,155 @@ set_qtable(Robot, Table, Options) :-
     ),
     must_be(ground, Shape),
     must_be(list, Values0),
+    write_values(Robot, set_qtable(Robot, Shape), Values0, set_qtable/2, Options).
+
+%   write_values(+Robot, +Op0, +Values0, +PI, +Options)
+%
+%   Send the write Op0 extended with the encoded Values0 and the write's
+%   origin (set_qtable(Robot, Shape, Data, Origin) or set_params(Robot,
+%   Layout, Data, Origin)); throw the host's error. With fts the values are
+%   first sent as they are (see fts_encoded/2): a type_error(float_list, _)
+%   answer makes it convert them and ask again.
+
+write_values(Robot, Op0, Values0, PI, Options) :-
     (   bridge_codec(fts),
         fts_encoded(Values0, Data0)
-    ->  set_request(Robot, Shape, Data0, Options, Reply0),
+    ->  write_request(Robot, Op0, Data0, PI, Options, Reply0),
         (   Reply0 = error(type_error(float_list, _))
-        ->  set_request_floats(Robot, Shape, Values0, Options, Reply)
+        ->  write_request_floats(Robot, Op0, Values0, PI, Options, Reply)
         ;   Reply = Reply0
         )
-    ;   set_request_floats(Robot, Shape, Values0, Options, Reply)
+    ;   write_request_floats(Robot, Op0, Values0, PI, Options, Reply)
     ),
     (   Reply == ok
     ->  true
-    ;   reply_error(Reply, set_qtable/2)
+    ;   reply_error(Reply, PI)
     ).
 
-set_request_floats(Robot, Shape, Values0, Options, Reply) :-
+write_request_floats(Robot, Op0, Values0, PI, Options, Reply) :-
     float_list(Values0, Values),
     bridge_codec(Codec),
     encode_values(Codec, Values, Data),
-    set_request(Robot, Shape, Data, Options, Reply).
+    write_request(Robot, Op0, Data, PI, Options, Reply).
 
-set_request(Robot, Shape, Data, Options, Reply) :-
+write_request(Robot, Op0, Data, PI, Options, Reply) :-
     write_origin(Options, Origin),
-    bridge_call(Robot, set_qtable(Robot, Shape, Data, Origin), set_qtable/2,
-                Options, Reply).
+    Op0 =.. [Name|Args0],
+    append(Args0, [Data, Origin], Args),
+    Op =.. [Name|Args],
+    bridge_call(Robot, Op, PI, Options, Reply).
+
+%!  get_params(+Robot, -Params) is det.
+%!  get_params(+Robot, -Params, +Options) is det.
+%
+%   Params is params(Layout, Samples, Values): a snapshot of Robot's
+%   learnable parameters taken by the host between two learning steps,
+%   Values a flat list of floats in the order of Layout (Name-Dims
+%   blocks, each row-major) and Samples the number of steps the learner
+%   has learnt from (an integer >= 0, the FedAvg weight). Options:
+%   timeout(Seconds).
+%
+%   @error existence_error(robot, Robot) if Robot is not registered here.
+%   @error existence_error(params, Robot) if Robot offers no parameters.
+%   @error timeout_error(bridge, Robot) if the host did not answer in time.
+%   @error python_error(Class, Message) if serving failed in Python.
+
+get_params(Robot, Params) :-
+    get_params(Robot, Params, []).
+
+get_params(Robot, params(Layout, Samples, Values), Options) :-
+    PI = get_params/2,
+    must_be(atomic, Robot),
+    must_be(list, Options),
+    registered(Robot),
+    offers_params(Robot, _),
+    bridge_call(Robot, get_params(Robot), PI, Options, Reply),
+    (   Reply = params(Layout, Samples, Data)
+    ->  decode_values(Data, Values),
+        layout_size(Layout, N),
+        length(Values, Len),
+        (   Len =:= N
+        ->  true
+        ;   domain_error(params_size(N), Len)
+        )
+    ;   reply_error(Reply, PI)
+    ).
+
+%!  set_params(+Robot, +Params) is det.
+%!  set_params(+Robot, +Params, +Options) is det.
+%
+%   Replace Robot's parameters with Params = params(Layout, Values).
+%   Layout must be the registered layout and Values as many finite
+%   numbers as it holds (integers are converted to floats); the host
+%   checks that where the vector enters Python. If anything is wrong the
+%   robot's parameters are left unchanged. Options as set_qtable/3:
+%   timeout(Seconds), and the write's origin (round(N), agent(A), ...).
+%
+%   @error existence_error(robot, Robot) if Robot is not registered here.
+%   @error existence_error(params, Robot) if Robot offers no parameters.
+%   @error type_error(params, Params) if Params is not params(Layout, Values).
+%   @error type_error(number, X) for a non-number in Values.
+%   @error domain_error(param_layout(Registered), Layout) on a layout mismatch.
+%   @error domain_error(params_size(N), Len) if Values has Len elements.
+%   @error domain_error(finite_float, X) for an infinite or NaN value.
+%   @error timeout_error(bridge, Robot) if the host did not answer in time.
+
+set_params(Robot, Params) :-
+    set_params(Robot, Params, []).
+
+set_params(Robot, Params, Options) :-
+    must_be(atomic, Robot),
+    must_be(list, Options),
+    registered(Robot),
+    offers_params(Robot, _),
+    (   var(Params)
+    ->  instantiation_error(Params)
+    ;   Params = params(Layout, Values0)
+    ->  true
+    ;   type_error(params, Params)
+    ),
+    must_be(ground, Layout),
+    must_be(list, Values0),
+    write_values(Robot, set_params(Robot, Layout), Values0, set_params/2, Options).
+
+%   layout_size(+Layout, -N): N floats in a vector of Layout.
+layout_size(Layout, N) :-
+    (   is_list(Layout),
+        Layout \== [],
+        maplist(layout_block, Layout),
+        foldl(add_block, Layout, 0, N),
+        N > 0
+    ->  true
+    ;   domain_error(param_layout, Layout)
+    ).
+
+layout_block(Name-Dims) :-
+    atom(Name),
+    is_list(Dims),
+    forall(member(D, Dims), ( integer(D), D >= 0 )).
+
+add_block(_-Dims, N0, N) :-
+    foldl(mul_dim, Dims, 1, P),
+    N is N0 + P.
+
+mul_dim(D, P0, P) :-
+    P is P0*D.
+
+offers_table(Robot) :-
+    (   robot_(Robot, Props),
+        memberchk(shape(_), Props)
+    ->  true
+    ;   throw(error(existence_error(qtable, Robot),
+                    context(_, 'the robot offers parameters, no Q-table (a function learner)')))
+    ).
+
+offers_params(Robot, Layout) :-
+    (   robot_(Robot, Props),
+        memberchk(layout(Layout), Props)
+    ->  true
+    ;   throw(error(existence_error(params, Robot),
+                    context(_, 'the robot offers a Q-table, no parameter vector')))
+    ).
 
 %   write_origin(+Options, -Origin): the options of a table write that say
 %   where it comes from (contract K4: round(N), agent(Name), epoch(E), ...):
@@ -390,6 +544,9 @@ timeout_formal(service, timeout_error(robot_service, host)).
 %       or text(String) (see bridge_set_codec/1) and Origin the list of
 %       the write's origin options (round(N), agent(A), epoch(E), ...;
 %       see set_qtable/3)
+%     - get_params(Robot)
+%     - set_params(Robot, Layout, Data, Origin)  Data and Origin as for
+%       set_qtable
 %
 %   Requests whose caller has already given up are dropped. Fails if no
 %   request arrived in time. Answer every request with bridge_reply/2.
@@ -437,7 +594,8 @@ next_request(RQ, Until, Request) :-
 %       encoder, see bridge_set_codec/1)
 %     - tables(table(Shape, QData), table(Shape, VData)) for
 %       get_qtable_and_visits
-%     - ok                  for set_qtable
+%     - params(Layout, Samples, Data)  for get_params
+%     - ok                  for set_qtable and set_params
 %     - error(Formal)       the caller throws error(Formal, Context)
 %
 %   A reply to a caller that has timed out is dropped silently.
@@ -593,7 +751,9 @@ bridge_codec(Codec) :-
     robot_resources:robot/2,
     robot_resources:table_get/3,
     robot_resources:tables_get/4,
-    robot_resources:table_set/3.
+    robot_resources:table_set/3,
+    robot_resources:params_get/3,
+    robot_resources:params_set/3.
 
 robot_resources:robot(Robot, Props) :-
     bridge_robot(Robot, Props).
@@ -603,6 +763,10 @@ robot_resources:tables_get(Robot, Table, Visits, Options) :-
     get_qtable_and_visits(Robot, Table, Visits, Options).
 robot_resources:table_set(Robot, Table, Options) :-
     set_qtable(Robot, Table, Options).
+robot_resources:params_get(Robot, Params, Options) :-
+    get_params(Robot, Params, Options).
+robot_resources:params_set(Robot, Params, Options) :-
+    set_params(Robot, Params, Options).
 
 		 /*******************************
 		 *           MESSAGES           *

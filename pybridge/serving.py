@@ -1,12 +1,15 @@
-"""Serving the agents' table requests from the robots' providers (Python main thread).
+"""Serving the agents' table and parameter requests from the robots' providers (Python main
+thread).
 
 :meth:`RequestServer.serve_pending` takes the requests that agents queued in Prolog
 (``bridge_next_request/2``), answers each from the robot's provider and replies with
 ``bridge_reply/2``. A table write is validated here, once, where it enters Python
 (:func:`validate_write`): registered shape, number of values, float values, finite values.
-Providers receive only valid tables. A write's origin (the agent's options ``round``,
-``agent``, ``epoch``, ...; contract K4) goes to a provider that defines
-``set_q_table_from(table, origin)``, otherwise it is dropped and ``set_q_table(table)`` called.
+A parameter write likewise (:func:`validate_params`): registered layout, number of values,
+float values, finite values. Providers receive only valid tables and vectors. A write's
+origin (the agent's options ``round``, ``agent``, ``epoch``, ...; contract K4) goes to a
+provider that defines ``set_q_table_from(table, origin)`` (``set_params_from(vec, origin)``),
+otherwise it is dropped and ``set_q_table(table)`` (``set_params(vec)``) called.
 
 :meth:`RequestServer.serve_service` serves the host's own service queue the same way, with a
 handler the host gives (``dfrl robot``'s ``dfrl_robot(...)`` requests, robot_service.pl).
@@ -24,11 +27,11 @@ from dfrl.pybridge import codec as _codec
 from dfrl.pybridge.codec import Codec
 from dfrl.pybridge.engine import Prolog
 from dfrl.pybridge.errors import BridgeError, CodecError
-from dfrl.pybridge.providers import TableProvider
+from dfrl.pybridge.providers import Layout, TableProvider, layout_size
 from dfrl.pybridge.terms import Atom, Term, Var
 
 __all__ = ["RequestError", "RegisteredRobot", "RequestServer", "ServiceHandler", "validate_write",
-           "write_origin"]
+           "validate_params", "layout_term", "write_origin"]
 
 #: Answers one service request: takes the request term, returns the reply term
 #: (``ok(...)``, ``ok(json(Text))`` or ``error(Formal)``); may raise :class:`RequestError`.
@@ -47,22 +50,57 @@ class RequestError(Exception):
         self.formal = formal
 
 
-def _note_read(provider: Any) -> None:
-    """Tell a provider that has ``table_read()`` that an agent read its Q-table (its
-    ``q_table`` property is a plain getter)."""
-    note = getattr(type(provider), "table_read", None)
+def _note_read(provider: Any, what: str = "table_read") -> None:
+    """Tell a provider that has ``table_read()`` (``params_read()``) that an agent read its
+    Q-table (parameters); its ``q_table`` (``params``) property is a plain getter."""
+    note = getattr(type(provider), what, None)
     if note is not None:
-        provider.table_read()
+        getattr(provider, what)()
 
 
 @dataclass
 class RegisteredRobot:
-    """A robot this process serves: its provider and the shape given at registration."""
+    """A robot this process serves: its provider and what it offers, fixed at registration.
+
+    ``shape`` is the Q-table's (S, A), ``None`` for a robot without a table (a function
+    learner); ``layout`` its parameter layout, ``None`` for a robot that offers no
+    parameters; ``learner`` is ``"tabular"`` or ``"function"``.
+    """
 
     robot_id: Any
     provider: TableProvider
-    shape: tuple[int, int]
+    shape: tuple[int, int] | None
     algorithm: str
+    layout: Layout | None = None
+    learner: str = "tabular"
+
+    @property
+    def layout_term(self) -> list[Term] | None:
+        """The layout as the agents see it, ``[Name-[D1, ...], ...]`` (``None``: no params)."""
+        return None if self.layout is None else layout_term(self.layout)
+
+
+def layout_term(layout: Layout) -> list[Term]:
+    """A layout as a Prolog term: ``[("w", (2, 3)), ("b", (3,))]`` -> ``[w-[2,3], b-[3]]``."""
+    return [Term("-", Atom(name), [int(d) for d in shape]) for name, shape in layout]
+
+
+def _decode_data(data: Any) -> np.ndarray:
+    """The float64 vector in ``fts(String)`` / ``text(String)``."""
+    if not (isinstance(data, Term) and data.arity == 1 and isinstance(data.args[0], str)
+            and data.name in (Codec.FTS.value, Codec.TEXT.value)):
+        raise BridgeError(f"malformed value data {data!r:.80}")
+    try:
+        return _codec.decode(Codec(data.name), data.args[0].encode("latin-1"))
+    except (CodecError, ValueError) as exc:
+        raise RequestError(Term("type_error", Atom("float_list"), str(exc))) from None
+
+
+def _check_finite(values: np.ndarray) -> None:
+    finite = np.isfinite(values)
+    if not finite.all():
+        bad = float(values[np.argmin(finite)])
+        raise RequestError(Term("domain_error", Atom("finite_float"), bad))
 
 
 def validate_write(shape: tuple[int, int], request_shape: Any, data: Any) -> np.ndarray:
@@ -93,21 +131,49 @@ def validate_write(shape: tuple[int, int], request_shape: Any, data: Any) -> np.
     """
     if not (isinstance(request_shape, list) and tuple(request_shape) == tuple(shape)):
         raise RequestError(Term("domain_error", Term("shape", list(shape)), request_shape))
-    if not (isinstance(data, Term) and data.arity == 1 and isinstance(data.args[0], str)
-            and data.name in (Codec.FTS.value, Codec.TEXT.value)):
-        raise BridgeError(f"malformed table data {data!r:.80}")
-    try:
-        values = _codec.decode(Codec(data.name), data.args[0].encode("latin-1"))
-    except (CodecError, ValueError) as exc:
-        raise RequestError(Term("type_error", Atom("float_list"), str(exc))) from None
+    values = _decode_data(data)
     n = shape[0] * shape[1]
     if values.size != n:
         raise RequestError(Term("domain_error", Term("qtable_size", n), int(values.size)))
-    finite = np.isfinite(values)
-    if not finite.all():
-        bad = float(values[np.argmin(finite)])
-        raise RequestError(Term("domain_error", Atom("finite_float"), bad))
+    _check_finite(values)
     return values.reshape(shape)
+
+
+def validate_params(layout: Layout, request_layout: Any, data: Any) -> np.ndarray:
+    """Check a ``set_params`` request against the registered layout; return the vector.
+
+    Parameters
+    ----------
+    layout : Layout
+        The robot's registered layout.
+    request_layout : Any
+        The layout the agent sent (``[Name-[D1, ...], ...]`` when right).
+    data : Term
+        ``fts(String)`` or ``text(String)``: the encoded values.
+
+    Returns
+    -------
+    np.ndarray
+        float64, shape (layout_size(layout),), all finite.
+
+    Raises
+    ------
+    RequestError
+        ``domain_error(param_layout(Registered), Layout)``, ``type_error(float_list, Why)``
+        (an fts element is not a float: the agent converts and asks again),
+        ``domain_error(params_size(N), Len)`` or ``domain_error(finite_float, X)``.
+    BridgeError
+        Data that no agent side of the bridge sends.
+    """
+    registered = layout_term(layout)
+    if request_layout != registered:
+        raise RequestError(Term("domain_error", Term("param_layout", registered), request_layout))
+    values = _decode_data(data)
+    n = layout_size(layout)
+    if values.size != n:
+        raise RequestError(Term("domain_error", Term("params_size", n), int(values.size)))
+    _check_finite(values)
+    return values
 
 
 @dataclass
@@ -166,6 +232,18 @@ class RequestServer:
         """The reply to one request ``op`` (see the bridge's request protocol)."""
         if not isinstance(op, Term):
             raise BridgeError(f"unknown request {op!r}")
+        if op.name == "get_params" and op.arity == 1:
+            return self._params_reply(self._params_robot(op.args[0]))
+        if op.name == "set_params" and op.arity == 4:
+            rid, layout, data, origin = op.args
+            robot = self._params_robot(rid)
+            vec = validate_params(robot.layout, layout, data)
+            setter = getattr(type(robot.provider), "set_params_from", None)
+            if setter is not None:
+                robot.provider.set_params_from(vec, write_origin(origin))
+            else:
+                robot.provider.set_params(vec)
+            return Atom("ok")
         if op.name == "get_qtable" and op.arity == 1:
             provider = self._robot(op.args[0]).provider
             reply = self._table_reply(provider.q_table)
@@ -191,11 +269,40 @@ class RequestServer:
             return Atom("ok")
         raise BridgeError(f"unknown request {op!r}")
 
-    def _robot(self, rid: Any) -> RegisteredRobot:
+    def _registered(self, rid: Any) -> RegisteredRobot:
         robot = self.robots.get(rid)
         if robot is None:
             raise RequestError(Term("existence_error", Atom("robot"), rid))
         return robot
+
+    def _robot(self, rid: Any) -> RegisteredRobot:
+        """A registered robot with a Q-table."""
+        robot = self._registered(rid)
+        if robot.shape is None:
+            raise RequestError(Term("existence_error", Atom("qtable"), rid))
+        return robot
+
+    def _params_robot(self, rid: Any) -> RegisteredRobot:
+        """A registered robot that offers parameters."""
+        robot = self._registered(rid)
+        if robot.layout is None:
+            raise RequestError(Term("existence_error", Atom("params"), rid))
+        return robot
+
+    def _params_reply(self, robot: RegisteredRobot) -> Term:
+        provider = robot.provider
+        vec = np.asarray(provider.params)
+        n = layout_size(robot.layout)
+        if vec.shape != (n,):
+            raise BridgeError(f"robot {robot.robot_id}'s parameters have shape {vec.shape}, "
+                              f"its layout says ({n},)")
+        samples = provider.samples
+        if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 0:
+            raise BridgeError(f"robot {robot.robot_id}'s samples is {samples!r}, not an int >= 0")
+        data = _codec.encode(self.codec, vec.astype(np.float64, copy=False))
+        reply = Term("params", robot.layout_term, int(samples), Term(self.codec.value, data))
+        _note_read(provider, "params_read")
+        return reply
 
     def _table_reply(self, table: np.ndarray) -> Term:
         arr = np.asarray(table)

@@ -21,13 +21,16 @@
 :- use_module(dfrl_move, [move_to_stop/8]).
 :- use_module(dfrl_aggregation,
               [ aggregate_fold/5, aggregate_finish/3, aggregate_fits/2,
-                fold_hook/3, method_call/3 ]).
+                fold_hook/3, method_call/3, item_shape/2, method_applies_to/2,
+                check_method_applies/2 ]).
 :- reexport(dfrl_aggregation,                   % for the agent's users
             [ dfrl_method/1,            % ?Method
               aggregate_tables/3        % +Method, +Tables, -Table
             ]).
+:- use_module('../platform_errors', [message_text/2]).
 :- use_module('../robot_resources',
-              [get_robot_table/3, get_robot_tables/4, set_robot_table/3]).
+              [ get_robot_table/3, get_robot_tables/4, set_robot_table/3,
+                get_robot_params/3, set_robot_params/3 ]).
 :- autoload(library(error), [must_be/2, domain_error/2]).
 :- autoload(library(lists), [nth0/3, append/3, member/2, memberchk/2]).
 :- autoload(library(apply), [foldl/4]).
@@ -53,6 +56,8 @@ Everything the agent needs travels as payload facts:
     hops, bytes, start, stop}` (acc packed; see dfrl_round_state.pl).
   - dfrl_custody_of(Agent, custody(Epoch, Seq, Holder)): see dfrl_lease.pl.
   - dfrl_retry_of(Agent, retry(Retries, Backoff)).
+  - dfrl_carries_of(Agent, Carried): `tables` or `params` (see below);
+    an agent without it carries tables.
 
 ## Faults
 
@@ -80,8 +85,27 @@ the updates of these facts are the agent writing its own state.
 
 Robots are reached through the resource hook of the host process
 (robot_resources.pl: get_robot_table/3, get_robot_tables/4,
-set_robot_table/3), which a robot process implements. Tables are
-qtable(Shape, Values) with Values a flat row-major list of floats.
+set_robot_table/3, get_robot_params/3, set_robot_params/3), which a
+robot process implements. Tables are qtable(Shape, Values) with Values a
+flat row-major list of floats.
+
+## Tables or parameters
+
+An agent carries Q-tables (`carries(tables)`, the default: its robots
+are tabular learners) or parameter vectors (`carries(params)`: function
+learners, e.g. DQN; one agent per algorithm, so all its robots are of
+one kind), chosen when it is created. In params mode the forward pass
+reads each robot's params(Layout, Samples, Values) with
+get_robot_params/3 and folds it in (every robot must have the layout of
+the first), the backward pass writes params(Layout, Values) with
+set_robot_params/3; everything else (itinerary, faults, log, lease) is
+the same. A method that does not apply to what the agent carries
+(dfrl_aggregation:method_applies/2; of the built-ins only `average`,
+as FedAvg, applies to parameters) is refused by dfrl_create/4 with
+domain_error(params_method, Method), ignored (and logged) as a control
+command method(Name), and, if it got there anyway (a method unknown
+where the agent was created), aborts the round at its first stop with
+that error in the round's log.
 
 The agent's parts, each loaded with this module wherever it is loaded:
 dfrl_round_state.pl (the round state and its packing), dfrl_move.pl
@@ -127,7 +151,7 @@ that arrives during a round also ends that round's tour).
 :- dynamic
     pending/3,                  % Node, Agent, Command (queued control)
     dfrl_plan/2, dfrl_method_of/2, dfrl_state/2, dfrl_custody_of/2,
-    dfrl_retry_of/2.
+    dfrl_retry_of/2, dfrl_carries_of/2.
 
 :- initialization(platform_event(dfrl_agent:dfrl_control/4)).
 
@@ -164,8 +188,9 @@ take_stop(Agent) :-
     !,
     retractall(pending(Node, Agent, stop)).
 
-%   apply_command(+Command, +Plan0-Method0-Stop0, -Plan-Method-Stop, -Status)
-apply_command(join(Stop), plan(I0, R, Re, L, T)-M-S, Plan-M-S, Status) :-
+%   apply_command(+Carried, +Command, +Plan0-Method0-Stop0, -Plan-Method-Stop,
+%                 -Status)
+apply_command(_, join(Stop), plan(I0, R, Re, L, T)-M-S, Plan-M-S, Status) :-
     Stop = stop(H, P, Robot), atomic(H), integer(P), atom(Robot),
     !,
     (   memberchk(Stop, I0)
@@ -175,19 +200,24 @@ apply_command(join(Stop), plan(I0, R, Re, L, T)-M-S, Plan-M-S, Status) :-
         Plan = plan(I, R, Re, L, T),
         Status = applied
     ).
-apply_command(method(New), P-Old-S, P-M-S, Status) :-
+apply_command(Carried, method(New), P-Old-S, P-M-S, Status) :-
     atom(New),
     !,
-    (   dfrl_method(New)
-    ->  M = New,
-        Status = applied
-    ;   M = Old,
+    (   \+ dfrl_method(New)
+    ->  M = Old,
         format(string(Why), "unknown method ~q on this node; keeps ~q", [New, Old]),
         Status = ignored(Why)
+    ;   \+ method_applies_to(New, Carried)
+    ->  M = Old,
+        format(string(Why), "method ~q does not apply to ~w; keeps ~q",
+               [New, Carried, Old]),
+        Status = ignored(Why)
+    ;   M = New,
+        Status = applied
     ).
-apply_command(stop, P-M-_, P-M-true, applied) :-
+apply_command(_, stop, P-M-_, P-M-true, applied) :-
     !.
-apply_command(_, X, X, ignored("not a control command")).
+apply_command(_, _, X, X, ignored("not a control command")).
 
 		 /*******************************
 		 *            CREATE		*
@@ -197,19 +227,29 @@ apply_command(_, X, X, ignored("not a control command")).
 %
 %   Create the agent on Node (not started). Plan is
 %   plan(Itinerary, Rounds, RestSeconds, LogFile, Timeout). Options:
-%   method(M) (default average), tokens(List), retries(N) (default 2:
-%   how often a failed move to a stop is tried again) and backoff(S)
-%   (default 0.2: the first wait before a retry, doubled each time).
-%   Start it by moving it to the first stop, or with the event `launch`
-%   on Node (it then goes to the first stop it can reach).
+%   method(M) (default average), carries(C) (`tables`, the default, or
+%   `params`: what the agent aggregates, see "Tables or parameters"),
+%   tokens(List), retries(N) (default 2: how often a failed move to a
+%   stop is tried again) and backoff(S) (default 0.2: the first wait
+%   before a retry, doubled each time). Start it by moving it to the first
+%   stop, or with the event `launch` on Node (it then goes to the first
+%   stop it can reach).
 %
 %   @error type_error(dfrl_plan, Plan), type_error(stop, Stop)
 %   @error domain_error(non_empty_itinerary, [])
+%   @error domain_error(params_method, M) if method M, known on this
+%   node, does not apply to parameter vectors (table_method for tables).
 
 dfrl_create(Node, Name, Plan, Options) :-
     check_plan(Plan),
     option(method(Method), Options, average),
     must_be(atom, Method),
+    option(carries(Carried), Options, tables),
+    must_be(oneof([tables, params]), Carried),
+    (   dfrl_method(Method)
+    ->  check_method_applies(Method, Carried)
+    ;   true                            % unknown here: checked at the first stop
+    ),
     option(tokens(Tokens), Options, []),
     option(retries(Retries), Options, 2),
     must_be(nonneg, Retries),
@@ -225,7 +265,8 @@ dfrl_create(Node, Name, Plan, Options) :-
                                   dfrl_method_of(Name, Method),
                                   dfrl_state(Name, Packed),
                                   dfrl_custody_of(Name, custody(1, 0, none)),
-                                  dfrl_retry_of(Name, retry(Retries, Backoff)) ]).
+                                  dfrl_retry_of(Name, retry(Retries, Backoff)),
+                                  dfrl_carries_of(Name, Carried) ]).
 
 check_plan(plan(Itinerary, Rounds, Rest, Log, Timeout)) :-
     !,
@@ -338,10 +379,11 @@ step(M, Agent) :-
     ),
     M:dfrl_plan(Agent, plan(Itinerary, _, _, _, Timeout)),
     M:dfrl_method_of(Agent, Method),
+    carried(M, Agent, Carried),
     nth0(Index, Itinerary, stop(_, _, Robot)),
     robot_options(Agent, S1, Timeout, Options),
     (   Phase == forward
-    ->  forward(Method, Robot, Options, S1, S2),
+    ->  forward(Carried-Method, Robot, Options, S1, S2),
         length(Itinerary, N),
         (   Index =:= N - 1
         ->  turn_back(M, Agent, Method, S2)     % writes the last robot here
@@ -361,24 +403,42 @@ robot_options(Agent, S, Timeout, [timeout(Timeout), round(Round), agent(Agent),
     current_node(Node),
     lease_custody(Node, Agent, custody(Epoch, _, _)).
 
+%   What the agent carries: tables or params (an agent created before
+%   params existed has no dfrl_carries_of/2 fact: tables).
+carried(M, Agent, Carried) :-
+    (   catch(M:dfrl_carries_of(Agent, C), error(existence_error(_, _), _), fail)
+    ->  Carried = C
+    ;   Carried = tables
+    ).
+
 %   At the first stop of the round, before the first table is read: take
-%   the queued control commands and note the start time.
+%   the queued control commands and note the start time. A method that
+%   does not apply to what the agent carries (possible only for a method
+%   unknown where the agent was created) aborts the round.
 start_round(M, Agent, S0, S) :-
     M:dfrl_plan(Agent, Plan0),
     M:dfrl_method_of(Agent, Method0),
+    carried(M, Agent, Carried),
     get_dict(round, S0, Round),
     get_dict(stop, S0, Stop0),
     arg(4, Plan0, Log),
     take_commands(Agent, Commands),
-    foldl(take_command(Log, Agent, Round), Commands,
+    foldl(take_command(Log, Agent, Round, Carried), Commands,
           Plan0-Method0-Stop0, Plan-Method-Stop),
     replace_fact(M, dfrl_plan(Agent, Plan)),
     replace_fact(M, dfrl_method_of(Agent, Method)),
     get_time(Start),
-    put_dict(_{start:Start, stop:Stop}, S0, S).
+    put_dict(_{start:Start, stop:Stop}, S0, S1),
+    (   dfrl_method(Method),
+        \+ method_applies_to(Method, Carried)
+    ->  catch(check_method_applies(Method, Carried), E, true),
+        message_text(E, Text),
+        method_failed(error(Text), S1, S)
+    ;   S = S1
+    ).
 
-take_command(Log, Agent, Round, Command, Acc0, Acc) :-
-    apply_command(Command, Acc0, Acc, Status),
+take_command(Log, Agent, Round, Carried, Command, Acc0, Acc) :-
+    apply_command(Carried, Command, Acc0, Acc, Status),
     log_control(Log, Agent, Round, Command, Status).
 
 turn_back(M, Agent, Method, S0) :-
@@ -403,10 +463,10 @@ forward(_, _, _, S0, S) :-
     get_dict(error, S0, _),
     !,
     S = S0.
-forward(Method, Robot, Options, S0, S) :-
+forward(Carried-Method, Robot, Options, S0, S) :-
     get_dict(acc, S0, Acc0),
-    (   catch(( read_robot(Method, Robot, Options, Table),
-                arg(1, Table, Shape),
+    (   catch(( read_robot(Carried, Method, Robot, Options, Table),
+                item_shape(Table, Shape),
                 aggregate_fits(Acc0, Shape)
               ),
               E, true)
@@ -430,18 +490,27 @@ method_failed(error(Error), S0, S) :-
                                  no table is written", [Error])),
     put_dict(_{error:Error, acc:none}, S0, S).
 
-read_robot(Method, Robot, Options, Table) :-
+read_robot(params, _, Robot, Options, Params) :-
+    !,
+    get_robot_params(Robot, Params, Options).
+read_robot(tables, Method, Robot, Options, Table) :-
     (   dfrl_aggregation:method_uses_visits(Method)
     ->  get_robot_tables(Robot, qtable(S, V), qtable(S, W), Options),
         Table = qtable_visits(S, V, W)
     ;   get_robot_table(Robot, Table, Options)
     ).
 
+write_robot(params(L, V), Robot, Options) :-
+    !,
+    set_robot_params(Robot, params(L, V), Options).
+write_robot(Table, Robot, Options) :-
+    set_robot_table(Robot, Table, Options).
+
 write_back(Robot, Options, S0, S) :-
     get_dict(acc, S0, Table),
     (   Table == none
     ->  S = S0
-    ;   catch(set_robot_table(Robot, Table, Options), E, true),
+    ;   catch(write_robot(Table, Robot, Options), E, true),
         (   var(E)
         ->  S = S0
         ;   print_message(warning, E),

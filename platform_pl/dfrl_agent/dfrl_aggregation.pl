@@ -4,6 +4,9 @@
             aggregate_fold/5,           % +Method, +Acc0, +Shape, +Table, -Acc
             aggregate_finish/3,         % +Method, +Acc, -Table
             aggregate_fits/2,           % +Acc, +Shape
+            item_shape/2,               % +Item, -Shape
+            method_applies_to/2,        % +Method, +Carried
+            check_method_applies/2,     % +Method, +Carried
             fold_hook/3,                % +Acc, +Method, -Hook
             method_call/3,              % :Goal, +Hook, -Result
             same_shape/2,               % +Shape0, +Shape
@@ -11,27 +14,48 @@
             mul_lists/3,                % +Xs, +Ys, -Products
             max_lists/3,                % +Xs, +Ys, -Maxima
             scale_list/3,               % +Xs, +N, -Quotients
+            add_scaled/4,               % +Xs, +W, +Ys, -Zs
             weighted_mean/5             % +QWs, +Ws, +Qs, +N, -Values
           ]).
 :- use_module('../platform_errors', [message_text/2]).
 :- autoload(library(apply), [foldl/4]).
 :- autoload(library(lists), [member/2]).
+:- autoload(library(error), [must_be/2]).
 
 /** <module> The dFRL agent's aggregation methods
 
-How the tables of a round become one, for the dFRL agent
-(dfrl_agent.pl). An aggregation method is the clauses of four multifile
-hooks of this module, aggregate_init/3, aggregate_step/4,
-aggregate_final/3 and method_uses_visits/1: the aggregate acc(Shape, A)
-of a round is started from the first table by aggregate_init/3, folded
-with each next table by aggregate_step/4, after a check that the table
-has the aggregate's shape, and finished by aggregate_final/3 into the
-table written back.
+How the tables (or parameter vectors) of a round become one, for the
+dFRL agent (dfrl_agent.pl). An aggregation method is the clauses of five
+multifile hooks of this module, aggregate_init/3, aggregate_step/4,
+aggregate_final/3, method_uses_visits/1 and method_applies/2: the
+aggregate acc(Shape, A) of a round is started from the first table by
+aggregate_init/3, folded with each next table by aggregate_step/4, after
+a check that the table has the aggregate's shape, and finished by
+aggregate_final/3 into the table written back.
 
 Built in: `average` (element-wise mean), `max` (element-wise maximum)
 and `visit_average` (mean weighted by how often each state-action pair
 was visited; pairs nobody visited get the plain mean), defined at the
 end of this file on the element-wise list maths exported here.
+
+## Tables and parameters
+
+An agent carries either Q-tables (`tables`: its robots are tabular
+learners) or parameter vectors (`params`: function learners, e.g. DQN).
+A method applies to what it declares with method_applies/2; a method
+that declares nothing applies to tables only (every method written
+before parameters existed). Of the built-ins only `average` applies to
+parameters, as FedAvg: the mean weighted by the samples each learner
+has learnt from, sum(w_i * x_i) / sum(w_i) (the plain mean if no
+learner has learnt from any sample yet). `max` and `visit_average` are
+refused for parameters by check_method_applies/2, when the agent is
+created or the method is switched: the element-wise maximum of weights
+of different networks is no network, and parameters have no visit
+counts.
+
+In params mode the hooks receive params(Layout, Samples, Values) (the
+aggregate's shape is layout(Layout), checked the same way) and the
+aggregate finishes into params(Layout, Values).
 
 ## Adding a method
 
@@ -65,7 +89,8 @@ round and log why instead of crashing.
     aggregate_init/3,           % +Method, +Table, -Acc
     aggregate_step/4,           % +Method, +Acc0, +Table, -Acc
     aggregate_final/3,          % +Method, +Acc, -Values
-    method_uses_visits/1.       % ?Method
+    method_uses_visits/1,       % ?Method
+    method_applies/2.           % ?Method, ?Carried
 
 :- meta_predicate method_call(0, +, -).
 
@@ -97,6 +122,66 @@ round and log why instead of crashing.
 %   qtable_visits(Shape, Values, Visits), the tables with their visit
 %   counts (e.g. visit_average).
 
+%!  method_applies(?Method, ?Carried) is nondet.
+%
+%   Hook: Method aggregates what an agent carries, Carried `tables`
+%   (qtable/2 or qtable_visits/3 items) or `params` (params/3 items). A
+%   method without a clause of this hook applies to tables only. E.g. a
+%   method for both:
+%
+%   ```
+%   dfrl_aggregation:method_applies(trimmed_mean, tables).
+%   dfrl_aggregation:method_applies(trimmed_mean, params).
+%   ```
+
+%!  method_applies_to(+Method, +Carried) is semidet.
+%
+%   Method may aggregate Carried (`tables` or `params`): it says so with
+%   method_applies/2, or says nothing and Carried is `tables`.
+
+method_applies_to(Method, Carried) :-
+    (   method_applies(Method, _)
+    ->  method_applies(Method, Carried),
+        !
+    ;   Carried == tables
+    ).
+
+%!  check_method_applies(+Method, +Carried) is det.
+%
+%   As method_applies_to/2, or throw a domain error that names Method,
+%   what it cannot aggregate and which methods can.
+%
+%   @error domain_error(params_method, Method) if Method does not apply
+%   to parameter vectors (function learners).
+%   @error domain_error(table_method, Method) if it does not apply to
+%   Q-tables.
+
+check_method_applies(Method, Carried) :-
+    must_be(atom, Method),
+    must_be(oneof([tables, params]), Carried),
+    (   method_applies_to(Method, Carried)
+    ->  true
+    ;   findall(M, ( dfrl_method(M), method_applies_to(M, Carried) ), Ms),
+        atomic_list_concat(Ms, ', ', Fit),
+        refused_because(Method, Carried, Why),
+        carried_words(Carried, Formal, What),
+        format(string(Msg), "aggregation method ~q does not apply to ~w~w; \c
+                             methods that do: ~w", [Method, What, Why, Fit]),
+        throw(error(domain_error(Formal, Method), context(_, Msg)))
+    ).
+
+carried_words(params, params_method,
+              'parameter vectors (an agent of function learners carries params)').
+carried_words(tables, table_method, 'Q-tables (an agent of tabular learners carries tables)').
+
+refused_because(max, params, Why) :-
+    !,
+    Why = ': the element-wise maximum of the weights of different networks is no network'.
+refused_because(visit_average, params, Why) :-
+    !,
+    Why = ': parameters have no visit counts (use average, weighted by samples: FedAvg)'.
+refused_because(_, _, '').
+
 %!  dfrl_method(?Method) is nondet.
 %
 %   Method is an aggregation method known on this node: it has a clause
@@ -116,10 +201,19 @@ dfrl_method(M) :-
 %   Mobile code may call it (see code_safety.pl).
 
 aggregate_tables(Method, [T|Ts], Table) :-
-    arg(1, T, Shape),
+    item_shape(T, Shape),
     aggregate_fold(Method, none, Shape, T, A0),
-    foldl([X, A1, A2]>>(arg(1, X, S), aggregate_fold(Method, A1, S, X, A2)), Ts, A0, A),
+    foldl([X, A1, A2]>>(item_shape(X, S), aggregate_fold(Method, A1, S, X, A2)), Ts, A0, A),
     aggregate_finish(Method, A, Table).
+
+%!  item_shape(+Item, -Shape) is det.
+%
+%   Shape is the shape of what a robot gave: Shape of qtable(Shape, _)
+%   and qtable_visits(Shape, _, _), layout(Layout) of params(Layout, _, _).
+
+item_shape(params(Layout, _, _), layout(Layout)) :- !.
+item_shape(Item, Shape) :-
+    arg(1, Item, Shape).
 
 %!  aggregate_fold(+Method, +Acc0, +Shape, +Table, -Acc) is semidet.
 %
@@ -136,9 +230,13 @@ aggregate_fold(Method, acc(Shape0, A0), _Shape, Table, acc(Shape0, A)) :-
 %!  aggregate_finish(+Method, +Acc, -Table) is semidet.
 %
 %   Table is qtable(Shape, Values), the aggregate Acc finished by
-%   Method's aggregate_final/3; `none` if nothing was aggregated.
+%   Method's aggregate_final/3 (params(Layout, Values) for an aggregate of
+%   parameters, shape layout(Layout)); `none` if nothing was aggregated.
 
 aggregate_finish(_, none, none) :- !.
+aggregate_finish(Method, acc(layout(Layout), A), params(Layout, Values)) :-
+    !,
+    aggregate_final(Method, A, Values).
 aggregate_finish(Method, acc(Shape, A), qtable(Shape, Values)) :-
     aggregate_final(Method, A, Values).
 
@@ -148,8 +246,18 @@ aggregate_finish(Method, acc(Shape, A), qtable(Shape, Values)) :-
 %   or has that shape.
 %
 %   @error domain_error(table_shape(Shape0), Shape), see same_shape/2.
+%   @error domain_error(param_layout(Layout0), Layout) for parameters of
+%   another layout than the aggregate's.
 
 aggregate_fits(none, _) :- !.
+aggregate_fits(acc(layout(L0), _), Shape) :-
+    !,
+    (   Shape == layout(L0)
+    ->  true
+    ;   Shape = layout(L)
+    ->  throw(error(domain_error(param_layout(L0), L), _))
+    ;   throw(error(domain_error(param_layout(L0), Shape), _))
+    ).
 aggregate_fits(acc(Shape0, _), Shape) :-
     same_shape(Shape0, Shape).
 
@@ -206,6 +314,10 @@ same_shape(S, S1) :-
 %
 %   Each element of Xs divided by N.
 
+%!  add_scaled(+Xs, +W, +Ys, -Zs) is semidet.
+%
+%   Zs is Xs + W*Ys element-wise (fails on lists of different lengths).
+
 %!  weighted_mean(+QWs, +Ws, +Qs, +N, -Values) is semidet.
 %
 %   Element-wise QW/W where the weight W is positive, else Q/N: the
@@ -232,6 +344,12 @@ max_lists([A|As], [B|Bs], [C|Cs]) :- C is max(A, B), max_lists(As, Bs, Cs).
 scale_list([], _, []).
 scale_list([A|As], N, [C|Cs]) :- C is A / N, scale_list(As, N, Cs).
 
+add_scaled([], _, [], []).
+add_scaled([A|As], W, [B|Bs], [C|Cs]) :- C is A + W*B, add_scaled(As, W, Bs, Cs).
+
+times_list([], _, []).
+times_list([A|As], W, [C|Cs]) :- C is W*A, times_list(As, W, Cs).
+
 weighted_mean([], [], [], _, []).
 weighted_mean([QW|QWs], [W|Ws], [Q|Qs], N, [V|Vs]) :-
     (   W > 0 -> V is QW / W ; V is Q / N ),
@@ -244,12 +362,59 @@ weighted_mean([QW|QWs], [W|Ws], [Q|Qs], N, [V|Vs]) :-
 		 *      BUILT-IN METHODS	*
 		 *******************************/
 
-aggregate_init(average, qtable(_, V), sum(V, 1)).
-aggregate_step(average, sum(A0, N0), qtable(_, V), sum(A, N)) :-
+method_applies(average, tables).
+method_applies(average, params).
+aggregate_init(average, Item, Acc) :-
+    average_init(Item, Acc).
+aggregate_step(average, Acc0, Item, Acc) :-
+    average_step(Item, Acc0, Acc).
+aggregate_final(average, Acc, Mean) :-
+    average_final(Acc, Mean).
+
+%   (one clause per hook for `average`, the item's or aggregate's functor
+%   picks the case: first-argument indexing leaves no choice point)
+average_init(qtable(_, V), sum(V, 1)).
+average_init(params(_, W, V), Acc) :-
+    fedavg_init(W, V, Acc).
+
+average_step(qtable(_, V), sum(A0, N0), sum(A, N)) :-
     add_lists(A0, V, A),
     N is N0 + 1.
-aggregate_final(average, sum(A, N), Mean) :-
+average_step(params(_, W, V), Acc0, Acc) :-
+    fedavg_step(Acc0, W, V, Acc).
+
+average_final(sum(A, N), Mean) :-
     scale_list(A, N, Mean).
+average_final(fedavg(_, S, T), Mean) :-
+    scale_list(S, T, Mean).
+
+%   FedAvg: fedavg(weighted, Sum of w*x, Sum of w) once some learner has
+%   learnt from samples (a learner with none then weighs nothing);
+%   fedavg(plain, Sum of x, Count) while none has (the plain mean).
+fedavg_init(W, V, Acc) :-
+    must_be(nonneg, W),
+    (   W > 0
+    ->  times_list(V, W, WV),
+        Acc = fedavg(weighted, WV, W)
+    ;   Acc = fedavg(plain, V, 1)
+    ).
+
+fedavg_step(fedavg(Mode, S0, T0), W, V, Acc) :-
+    must_be(nonneg, W),
+    (   W =:= 0
+    ->  (   Mode == plain
+        ->  add_lists(S0, V, S),
+            T is T0 + 1,
+            Acc = fedavg(plain, S, T)
+        ;   Acc = fedavg(weighted, S0, T0)
+        )
+    ;   Mode == plain
+    ->  times_list(V, W, WV),
+        Acc = fedavg(weighted, WV, W)
+    ;   add_scaled(S0, W, V, S),
+        T is T0 + W,
+        Acc = fedavg(weighted, S, T)
+    ).
 
 aggregate_init(max, qtable(_, V), max(V)).
 aggregate_step(max, max(A0), qtable(_, V), max(A)) :-

@@ -358,3 +358,149 @@ test(only_round_logs_in_existing_directories) :-
     assertion(\+ dfrl_agent:log_path_ok(Rc)).
 
 :- end_tests(round_log_path).
+
+/*  Parameter vectors (issue 19): FedAvg by hand, the methods refused for
+    parameters, and an agent that carries params between robots whose
+    parameters are held here (function learners behind the resource hook,
+    beside memory_robots.pl's tables).
+*/
+
+:- dynamic mparams/4.                   % Robot, Layout, Samples, Values
+:- multifile robot_resources:robot/2, robot_resources:params_get/3,
+             robot_resources:params_set/3.
+
+robot_resources:robot(R, [algorithm(test), learner(function), layout(L)]) :-
+    mparams(R, L, _, _).
+robot_resources:params_get(R, params(L, W, V), _) :-
+    mparams(R, L, W, V).
+robot_resources:params_set(R, params(L, V), _) :-
+    with_mutex(mparams, ( retract(mparams(R, L, W, _)),
+                          assertz(mparams(R, L, W, V)) )).
+
+params_start(Robots) :-
+    retractall(mparams(_, _, _, _)),
+    forall(member(R-L-W-V, Robots), assertz(mparams(R, L, W, V))).
+
+params_cleanup(Nodes, Log) :-
+    retractall(mparams(_, _, _, _)),
+    cleanup(Nodes, Log).
+
+:- begin_tests(dfrl_params).
+
+%   sum(w_i x_i) / sum(w_i): (1*[1,2] + 3*[3,6] + 0*[9,9]) / 4 = [2.5, 5.0]
+test(fedavg_weighted_by_samples) :-
+    L = [w-[2]],
+    aggregate_tables(average, [params(L, 1, [1.0,2.0]), params(L, 3, [3.0,6.0]),
+                               params(L, 0, [9.0,9.0])], T),
+    assertion(T == params(L, [2.5,5.0])).
+
+%   a learner without samples weighs nothing, wherever it comes; the
+%   order of the robots changes no value here
+test(fedavg_zero_weight_first) :-
+    L = [w-[1,3], b-[1]],
+    aggregate_tables(average, [params(L, 0, [7.0,7.0,7.0,7.0]),
+                               params(L, 2, [1.0,2.0,3.0,4.0]),
+                               params(L, 2, [3.0,4.0,5.0,-4.0])], T),
+    assertion(T == params(L, [2.0,3.0,4.0,0.0])).
+
+%   no learner has learnt yet: the plain mean
+test(fedavg_all_zero_is_plain_mean) :-
+    L = [w-[2]],
+    aggregate_tables(average, [params(L, 0, [1.0,2.0]), params(L, 0, [3.0,8.0])], T),
+    assertion(T == params(L, [2.0,5.0])).
+
+%   tables keep the plain element-wise mean
+test(average_of_tables_unchanged) :-
+    aggregate_tables(average, [qtable([1,2], [1.0,2.0]), qtable([1,2], [3.0,8.0])], T),
+    assertion(T == qtable([1,2], [2.0,5.0])).
+
+test(params_of_another_layout_do_not_fit,
+     [throws(error(domain_error(param_layout([w-[2]]), [w-[3]]), _))]) :-
+    dfrl_aggregation:item_shape(params([w-[2]], 1, [1.0,2.0]), S0),
+    dfrl_aggregation:aggregate_fold(average, none, S0, params([w-[2]], 1, [1.0,2.0]), Acc),
+    dfrl_aggregation:item_shape(params([w-[3]], 1, [1.0,2.0,3.0]), S1),
+    dfrl_aggregation:aggregate_fits(Acc, S1).
+
+test(which_methods_apply) :-
+    assertion(dfrl_aggregation:method_applies_to(average, params)),
+    assertion(dfrl_aggregation:method_applies_to(average, tables)),
+    assertion(\+ dfrl_aggregation:method_applies_to(max, params)),
+    assertion(\+ dfrl_aggregation:method_applies_to(visit_average, params)),
+    assertion(dfrl_aggregation:method_applies_to(max, tables)),
+    assertion(dfrl_aggregation:method_applies_to(failing_step, tables)).
+
+test(max_refused_for_params_at_create) :-
+    catch(dfrl_create(nowhere, fx, plan([stop(localhost, 1, r1)], 1, 0.0, 'x.jsonl', 5),
+                      [method(max), carries(params)]),
+          E, true),
+    assertion(E = error(domain_error(params_method, max), context(_, _))),
+    E = error(_, context(_, Msg)),
+    assertion(sub_string(Msg, _, _, _, "aggregation method max does not apply to parameter vectors")),
+    assertion(sub_string(Msg, _, _, _, "function learners")),
+    assertion(sub_string(Msg, _, _, _, "methods that do: average")).
+
+test(visit_average_refused_for_params,
+     [throws(error(domain_error(params_method, visit_average), _))]) :-
+    dfrl_aggregation:check_method_applies(visit_average, params).
+
+test(params_round_every_robot_holds_the_fedavg,
+     [cleanup(params_cleanup([C,A,B,D], Log))]) :-
+    tmp_log(Log),
+    L = [w-[2]],
+    params_start([r1-L-1-[1.0,2.0], r2-L-3-[3.0,6.0], r3-L-0-[9.0,9.0]]),
+    nodes(4, [C,A,B,D]),
+    maplist(stop_of, [A,B,D], [r1,r2,r3], Stops),
+    dfrl_create(C, fp, plan(Stops, 2, 0.0, Log, 30),
+                [method(average), carries(params), tokens([7])]),
+    Stops = [stop(H, P, _)|_],
+    with_node(C, move_agent(fp, (H, P))),
+    assertion(wait_for(finished(Log))),
+    forall(member(R, [r1,r2,r3]), assertion(mparams(R, L, _, [2.5,5.0]))),
+    events(Log, round, [R1, R2]),
+    assertion(R1.visited == [r1, r2, r3]),
+    assertion(R1.skipped == []),
+    assertion(R1.method == average),
+    assertion(\+ get_dict(error, R1, _)),
+    assertion(R2.visited == [r1, r2, r3]).
+
+test(params_robot_of_another_layout_is_skipped,
+     [setup(assertz(user:quiet)),
+      cleanup((retractall(user:quiet), params_cleanup([C,A,B], Log)))]) :-
+    tmp_log(Log),
+    params_start([r1-[w-[2]]-1-[1.0,2.0], r2-[w-[3]]-1-[1.0,2.0,3.0]]),
+    nodes(3, [C,A,B]),
+    maplist(stop_of, [A,B], [r1,r2], Stops),
+    dfrl_create(C, fk, plan(Stops, 1, 0.0, Log, 30), [carries(params), tokens([7])]),
+    Stops = [stop(H, P, _)|_],
+    with_node(C, move_agent(fk, (H, P))),
+    assertion(wait_for(finished(Log))),
+    events(Log, round, [R]),
+    assertion(R.visited == [r1]),
+    R.skipped = [Skip],
+    assertion(Skip.robot == r2),
+    assertion(sub_atom(Skip.reason, _, _, _, param_layout)),
+    assertion(mparams(r2, _, _, [1.0,2.0,3.0])).
+
+test(max_command_ignored_for_params,
+     [cleanup(params_cleanup([C,A,B], Log))]) :-
+    tmp_log(Log),
+    L = [w-[1]],
+    params_start([r1-L-1-[1.0], r2-L-1-[3.0]]),
+    nodes(3, [C,A,B]),
+    maplist(stop_of, [A,B], [r1,r2], Stops),
+    node_property(A, address(AA)),
+    agent_post(AA, platform, dfrl_control, x, [fq, method(max)]),
+    assertion(wait_for(dfrl_pending(A, fq, method(_)))),
+    dfrl_create(C, fq, plan(Stops, 1, 0.0, Log, 30), [carries(params), tokens([7])]),
+    Stops = [stop(H, P, _)|_],
+    with_node(C, move_agent(fq, (H, P))),
+    assertion(wait_for(finished(Log))),
+    events(Log, control, [Ctl]),
+    assertion(Ctl.status == ignored),
+    assertion(sub_atom(Ctl.reason, _, _, _, 'does not apply to params')),
+    events(Log, round, [R]),
+    assertion(R.method == average),
+    assertion(mparams(r1, L, _, [2.0])),
+    assertion(mparams(r2, L, _, [2.0])).
+
+:- end_tests(dfrl_params).

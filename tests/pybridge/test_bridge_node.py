@@ -41,7 +41,8 @@ def test_register_and_list_robots(node) -> None:
     node.register_robot("r1", ArrayRobot(3, 2), algorithm="sarsa")
     node.register_robot(7, ArrayRobot(2, 2))
     robots = dict(node.robots())
-    assert robots[Atom("r1")] == [Term("algorithm", Atom("sarsa")), Term("shape", [3, 2])]
+    assert robots[Atom("r1")] == [Term("algorithm", Atom("sarsa")), Term("shape", [3, 2]),
+                                  Term("learner", Atom("tabular"))]
     assert robots[7][1] == Term("shape", [2, 2])
     node.unregister_robot(7)
     assert [r for r, _ in node.robots()] == [Atom("r1")]

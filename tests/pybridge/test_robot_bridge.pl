@@ -174,3 +174,77 @@ wait_queued :-
     ).
 
 :- end_tests(robot_bridge).
+
+%   Parameter vectors: a robot that offers params(Layout, Samples, Values)
+%   (a function learner has no table), the ops the host sees, the hook.
+:- begin_tests(robot_bridge_params, [cleanup(bridge_shutdown)]).
+
+preset :-
+    bridge_shutdown,
+    bridge_set_codec(text),
+    bridge_register_robot(f1, [algorithm(dqn), learner(function),
+                               layout([w-[1,2], b-[1]])]).
+
+%   serve_params(-Op): answer one request with the 3 values below
+serve_params(Op) :-
+    bridge_next_request(request(Id, Op), 5),
+    (   Op = set_params(_, _, _, _)
+    ->  bridge_reply(Id, ok)
+    ;   bridge_reply(Id, params([w-[1,2], b-[1]], 7, text("0.5,-1.0,2.0")))
+    ).
+
+with_params_host(Goal, Ops, Count) :-
+    thread_self(Me),
+    thread_create(( findall(Op, (between(1, Count, _), serve_params(Op)), Ops0),
+                    thread_send_message(Me, served(Ops0)) ), Id, []),
+    call_cleanup(call(Goal),
+                 ( thread_get_message(served(Ops)),
+                   thread_join(Id, _) )).
+
+test(register_layout_only, [setup(preset),
+        Props == [algorithm(dqn), learner(function), layout([w-[1,2], b-[1]])]]) :-
+    hosted_robot(f1, Props).
+test(bad_layout, [setup(preset), error(domain_error(param_layout, [w-[x]]))]) :-
+    bridge_register_robot(f2, [layout([w-[x]])]).
+test(empty_layout, [setup(preset), error(domain_error(param_layout, [w-[0]]))]) :-
+    bridge_register_robot(f2, [layout([w-[0]])]).
+
+test(params_round_trip, [setup(preset),
+        Got-Ops == params([w-[1,2], b-[1]], 7, [0.5,-1.0,2.0])-
+                   [ get_params(f1),
+                     set_params(f1, [w-[1,2], b-[1]], text("0.5,-1.0,2.0"),
+                                [round(2), agent(fed_dqn)]) ]]) :-
+    with_params_host(( get_robot_params(f1, Got, [timeout(5)]),
+                       Got = params(L, _, V),
+                       set_robot_params(f1, params(L, V),
+                                        [timeout(5), round(2), agent(fed_dqn)]) ),
+                     Ops, 2).
+test(params_fts, [setup(preset)]) :-
+    bridge_set_codec(fts),
+    with_params_host(set_params(f1, params([w-[1,2], b-[1]], [1, 2.5, -0.0])), [Op], 1),
+    Op = set_params(f1, _, fts(S), []),
+    fast_term_serialized(Values, S),
+    assertion(Values == [1.0, 2.5, -0.0]).
+
+test(no_table_on_a_function_learner, [setup(preset), error(existence_error(qtable, f1))]) :-
+    get_qtable(f1, _).
+test(no_table_write_either, [setup(preset), error(existence_error(qtable, f1))]) :-
+    set_robot_table(f1, qtable([1,1], [1.0]), []).
+test(no_params_on_a_table_robot, [setup(( preset,
+        bridge_register_robot(r1, [algorithm(q), shape([2, 2]), learner(tabular)]) )),
+        error(existence_error(params, r1))]) :-
+    get_robot_params(r1, _, []).
+test(params_unknown_robot, [setup(preset), error(existence_error(robot, nobody))]) :-
+    get_params(nobody, _).
+test(not_params, [setup(preset), error(type_error(params, qtable([3], [1.0])))]) :-
+    set_params(f1, qtable([3], [1.0])).
+test(params_not_a_number, [setup(preset), error(type_error(number, x))]) :-
+    set_params(f1, params([w-[1,2], b-[1]], [1.0, x, 2.0])).
+test(params_reply_of_wrong_size, [setup(preset), error(domain_error(params_size(3), 2))]) :-
+    thread_create(( bridge_next_request(request(Id, _), 5),
+                    bridge_reply(Id, params([w-[1,2], b-[1]], 1, text("1.0,2.0"))) ), H, []),
+    call_cleanup(get_params(f1, _), thread_join(H, _)).
+test(params_timeout, [setup(preset), error(timeout_error(bridge, f1))]) :-
+    get_robot_params(f1, _, [timeout(0.05)]).
+
+:- end_tests(robot_bridge_params).
