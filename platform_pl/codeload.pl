@@ -94,6 +94,36 @@ load_text(Id, Text) :-
     ;   throw(error(load_errors(Errors), _))
     ).
 
+%   syntax_error_at(+Id, +Text, +What, +Where)
+%
+%   The sandbox's reader refused Text with syntax_error(What): throw it
+%   again as load_errors(["Id:Line:Column: Syntax error: ..."]), the
+%   place found by reading Text term by term (a context of a remote
+%   error is replaced by the peer's address, so the place travels in the
+%   formal, as the messages of other load errors do). If no term of Text
+%   fails to read on its own, the error is thrown as it came.
+
+syntax_error_at(Id, Text, What, Where) :-
+    (   first_syntax_error(Text, Line, LinePos, What1)
+    ->  message_text(error(syntax_error(What1), _), Message),
+        format(string(Located), "~w:~d:~d: ~w", [Id, Line, LinePos, Message]),
+        throw(error(load_errors([Located]), _))
+    ;   throw(error(syntax_error(What), Where))
+    ).
+
+first_syntax_error(Text, Line, LinePos, What) :-
+    setup_call_cleanup(
+        open_string(Text, In),
+        catch(( repeat,
+                read_term(In, Term, [module(user), syntax_errors(error)]),
+                Term == end_of_file,
+                !,
+                fail
+              ),
+              error(syntax_error(What), stream(_, Line, LinePos, _)),
+              true),
+        close(In)).
+
 user:message_hook(Term, error, _Lines) :-
     collecting,
     message_text(Term, Text),
@@ -107,7 +137,8 @@ node:platform_request(load_code(Id, Text), Ctx, Reply, true) :-
         must_be(string, Text),
         (   code_trusted(Ctx)
         ->  true
-        ;   check_program_text(Id, Text)
+        ;   catch(check_program_text(Id, Text), error(syntax_error(What), Where),
+                  syntax_error_at(Id, Text, What, Where))
         ),
         load_text(Id, Text),
         Reply = ok(loaded(Id))

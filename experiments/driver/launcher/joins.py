@@ -75,7 +75,10 @@ class Joins:
         assert status.address is not None
         host, port = status.address
         for program in self._programs.values():     # methods injected before it joined
-            self._site.console.load_program(program, [(host, port)])
+            try:
+                self._site.console.load_program(program, [(host, port)])
+            except ExperimentError as exc:          # the robot joins; its stop lacks the method
+                self._say(f"robot {rid}: injected program {program.name} did not load: {exc}")
         stop = {"host": host, "port": port, "robot": rid}
         first = self._agents.add_stop(agent, stop)
         send_control(self._site.console, (first["host"], first["port"]), agent, {"join": stop})

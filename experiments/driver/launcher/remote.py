@@ -84,8 +84,11 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
                   poll_s: float = 0.2, tls: str | Path | None = None) -> dict[str, str]:
     """Load ``program`` into every node of the running experiment, tell the agent(s) to switch
     to ``method``, and wait until each agent acknowledged it in its round log (the ``control``
-    event it writes when it takes the command at its next round start). The driver is told
-    first (it keeps the program in ``programs/`` and loads it into robots that join later).
+    event it writes when it takes the command at its next round start). The program is loaded
+    into every node of the agents' itineraries first; only once all loaded it is the driver
+    told (it keeps the program in ``programs/`` and loads it into robots that join later) and
+    the command sent. A program a node refuses (syntax error, with its file and line; the
+    sandbox) is stored nowhere and changes no agent's method.
     Returns agent -> ``"applied"``, or ``"sent"`` for an agent that did not answer within
     ``wait_s`` (0: do not wait). ``tls``: the driver's TLS folder, instead of the one ``nodes.json`` records.
 
@@ -93,7 +96,7 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
     ------
     ExperimentError
         No such program or agent, no usable TLS folder (:func:`driver_tls`) or token file
-        (:func:`tokens_of`), a control
+        (:func:`tokens_of`), a node refused the program (the message says why), a control
         command failed, or an agent ignored the command (the message says why, e.g. the
         method is unknown on its node).
     """
@@ -112,12 +115,19 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
     first = targets[0]["itinerary"][0]
     with open_console(tokens_of(results_dir), host=route_source(first["host"], int(first["port"])),
                       tls=tls_dir) as console:
+        for a in targets:            # loaded everywhere first: a refused program goes no further
+            nodes = [(s["host"], s["port"]) for s in a["itinerary"]]
+            try:
+                console.load_program(prog, nodes)
+            except ExperimentError as exc:
+                why = str(exc).removeprefix("load_program failed: ")
+                raise ExperimentError(f"program {prog.name} refused, nothing injected (the "
+                                      f"agents keep their method): {why}") from None
         if info.get("console"):      # the driver gives the program to robots that join later
             console.announce_program(tuple(info["console"]), prog)
         for a in targets:
             nodes = [(s["host"], s["port"]) for s in a["itinerary"]]
-            send_control(console, nodes[0], a["name"], {"method": method}, program=prog,
-                         nodes=nodes)
+            send_control(console, nodes[0], a["name"], {"method": method})
     status = {a["name"]: "sent" for a in targets}
     deadline = time.monotonic() + wait_s
     while wait_s > 0 and "sent" in status.values() and time.monotonic() < deadline:
