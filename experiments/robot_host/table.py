@@ -1,9 +1,12 @@
-"""The provider the robot process registers with the bridge: its table, with share bookkeeping.
+"""The provider the robot process registers with the bridge: its table (and parameters), with
+share bookkeeping.
 
 The table itself (a :class:`dfrl.robots.training.Trainer`, or a
 :class:`dfrl.pybridge.StaticTable` in benchmark mode) is chosen once, when the node starts;
 :class:`SharedTable` adds what the node records about agents' visits, and never calls back
-into the process that owns it.
+into the process that owns it. A base that also offers its learnt parameters as a flat vector
+(a ``Trainer``: ``params``, ``param_layout``, ``set_params``, ``samples``, ``learner_kind``)
+is wrapped in :class:`SharedLearner`, which offers them too (:func:`shared_provider` picks).
 """
 from __future__ import annotations
 
@@ -16,7 +19,7 @@ from dfrl.experiments.robot_host.files import CsvLog, share_row
 from dfrl.experiments.robot_host.lines import ProtocolLines
 from dfrl.pybridge.providers import TableProvider
 
-__all__ = ["SharedTable"]
+__all__ = ["SharedTable", "SharedLearner", "shared_provider"]
 
 
 class SharedTable:
@@ -85,3 +88,57 @@ class SharedTable:
         self.lines.event("set", self.iteration)
         if self.on_share is not None:
             self.on_share()
+
+
+class SharedLearner(SharedTable):
+    """A :class:`SharedTable` whose base also offers its parameters (a
+    :class:`dfrl.pybridge.ParamsProvider`); a parameter write is a share like a table write.
+
+    Its ``q_table``, ``visits`` and ``set_q_table`` are the base's (a function learner's raise:
+    the bridge never asks, it registers such a robot without a table).
+    """
+
+    @property
+    def params(self) -> np.ndarray:
+        return self.base.params
+
+    @property
+    def param_layout(self) -> Any:
+        return self.base.param_layout
+
+    @property
+    def samples(self) -> int:
+        return self.base.samples
+
+    @property
+    def learner_kind(self) -> str:
+        return self.base.learner_kind
+
+    def params_read(self) -> None:
+        """An agent read the parameters (the bridge calls it after serving the read)."""
+        self.lines.event("get", self.iteration)
+
+    def set_params(self, vec: np.ndarray) -> None:
+        self.set_params_from(vec, {})
+
+    def set_params_from(self, vec: np.ndarray, origin: Mapping[str, Any]) -> None:
+        """Apply a share of parameters written by an agent (already validated by the bridge);
+        recorded as a table share is, with the digest of the vector."""
+        self.base.set_params(vec)
+        self.shares += 1
+        self.shares_log.row(share_row(self.robot, self.shares, self.iteration, self.base.params,
+                                      origin), flush=True)
+        self.lines.event("set", self.iteration)
+        if self.on_share is not None:
+            self.on_share()
+
+
+def shared_provider(base: Any, robot: str, shares_log: CsvLog, lines: ProtocolLines,
+                    on_share: Callable[[], None] | None = None,
+                    shares: int = 0) -> SharedTable:
+    """A :class:`SharedLearner` over a base that offers parameters, else a :class:`SharedTable`
+    (arguments as :class:`SharedTable`'s)."""
+    offers = all(name in dir(base) for name in ("params", "param_layout", "set_params", "samples",
+                                                "learner_kind"))
+    cls = SharedLearner if offers else SharedTable
+    return cls(base, robot, shares_log, lines, on_share, shares)

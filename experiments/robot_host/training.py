@@ -28,7 +28,7 @@ from dfrl.experiments.robot_host.checkpoint import (
 from dfrl.experiments.robot_host.evaluate import LiveEvaluator
 from dfrl.experiments.robot_host.files import METRIC_FIELDS, SHARE_FIELDS, CsvLog
 from dfrl.experiments.robot_host.lines import ProtocolLines
-from dfrl.experiments.robot_host.table import SharedTable
+from dfrl.experiments.robot_host.table import SharedTable, shared_provider
 
 __all__ = ["Training", "TrainingHost", "SleepHost", "SAMPLE_S"]
 
@@ -173,10 +173,14 @@ class Training:
                                             c.eval_steps, self.out_dir, self.lines,
                                             upto if cp is not None else None)
         on_share = self.on_share if self.trainer is not None else None
-        self.table = SharedTable(base, c.robot, self._shares, self.lines, on_share, shares)
+        self.table = shared_provider(base, c.robot, self._shares, self.lines, on_share, shares)
         if self.trainer is not None:
             self.table.iteration = self.trainer.iteration
-        self.bridge.register_robot(c.robot, self.table, shape=shape, algorithm=c.algo)
+        # what the robot offers agents: a tabular learner its Q-table (and its parameters, if
+        # its base has them), a function learner (learner_kind "function") its parameters only
+        function = getattr(base, "learner_kind", "tabular") == "function"
+        self.bridge.register_robot(c.robot, self.table, shape=None if function else shape,
+                                   algorithm=c.algo)
         self._registered = True
         self._next_tick = time.perf_counter()
         return shape
