@@ -46,6 +46,7 @@ def test_frames_just_under_the_limit_follow_the_nodes_limit() -> None:
     assert out.stdout.strip() == str(PRE_AUTH_LIMIT), out.stderr
 
 
+@pytest.mark.slow              # ~30 s; the authenticated phases and escapes tests below cover the bench in the default suite
 def test_small_hostile_benchmark_keeps_hops_succeeding() -> None:
     out = subprocess.run([sys.executable, "-m", "dfrl", "bench", "hostile", "--slowloris", "10",
                           "--flood", "50", "--frames", "6", "--frame-size", "200000",
