@@ -92,6 +92,20 @@ def to_json_dict(cfg: Any) -> dict[str, Any]:
     return json.loads(json.dumps(json_form(cfg), default=str))
 
 
+class JsonDicts:
+    """The two dict forms of a config dataclass with a ``token`` field (a mixin)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (the token included: :meth:`public_dict` for files)."""
+        return to_json_dict(self)
+
+    def public_dict(self) -> dict[str, Any]:
+        """:meth:`to_dict` without the token: what a results file or a peer may see."""
+        data = to_json_dict(self)
+        data.pop("token", None)
+        return data
+
+
 # -- rules -------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Rule:

@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from dfrl.experiments.config_rules import (ConfigError, check_value, checked, is_checked,
-                                           json_form, raise_problems, to_json_dict, token_rule)
+from dfrl.experiments.config_rules import (JsonDicts, ConfigError, check_value, checked, is_checked,
+                                           json_form, raise_problems, token_rule)
 from dfrl.experiments.driver.config_check import (BUILTIN_METHODS, COMMENT_KEYS,
                                                   check_experiment, host_port_problem)
 from dfrl.experiments.robot_host.config import DEFAULT_ITERATIONS, Mode, boundaries
@@ -88,7 +88,7 @@ class JoinSpec:
 
 
 @dataclass(frozen=True)
-class ExperimentConfig:
+class ExperimentConfig(JsonDicts):
     """Everything that defines a federated experiment (saved as ``config.json``).
 
     Attributes
@@ -232,16 +232,6 @@ class ExperimentConfig:
                 f"{self.iterations} iterations, respite {self.respite} ({self.mode.value})")
 
     # -- (de)serialisation ---------------------------------------------------------------------
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (the token included: :meth:`public_dict` for files)."""
-        return to_json_dict(self)
-
-    def public_dict(self) -> dict[str, Any]:
-        """:meth:`to_dict` without the token: what ``config.json`` of a results folder holds."""
-        data = to_json_dict(self)
-        data.pop("token", None)
-        return data
-
     @classmethod
     def from_dict(cls, data: dict[str, Any], resources: bool = False) -> "ExperimentConfig":
         """Inverse of :meth:`to_dict`; every problem of ``data`` is reported at once

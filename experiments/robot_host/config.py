@@ -10,9 +10,9 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any
 
-from dfrl.experiments.config_rules import (Rule, check_keys, check_robot_id, check_trainer,
+from dfrl.experiments.config_rules import (JsonDicts, Rule, check_keys, check_robot_id, check_trainer,
                                            checked, is_checked, json_form, known_algorithms,
-                                           raise_problems, to_json_dict, token_rule)
+                                           raise_problems, token_rule)
 
 __all__ = ["DEFAULT_ITERATIONS", "Mode", "RobotConfig", "boundaries", "check_robot_config"]
 
@@ -44,7 +44,7 @@ def boundaries(iterations: int, respite: int) -> list[int]:
 
 
 @dataclass(frozen=True)
-class RobotConfig:
+class RobotConfig(JsonDicts):
     """Everything one robot process needs (written as JSON by the launcher).
 
     Attributes
@@ -109,16 +109,6 @@ class RobotConfig:
         if not is_checked():
             raise_problems(check_robot_config(json_form(self)))
         object.__setattr__(self, "mode", Mode(self.mode))
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (the token included: :meth:`public_dict` for files)."""
-        return to_json_dict(self)
-
-    def public_dict(self) -> dict[str, Any]:
-        """:meth:`to_dict` without the token: what a results file or a peer may see."""
-        data = to_json_dict(self)
-        data.pop("token", None)
-        return data
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "RobotConfig":
