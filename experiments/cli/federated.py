@@ -298,7 +298,12 @@ def cmd_join(args: argparse.Namespace) -> int:
                           iterations=args.iterations, seed=args.seed, node=args.robot_host,
                           tls=tls)
     except ConfigError as exc:
-        return config_error("dfrl join", exc)
+        n = len(exc.problems)
+        print(f"dfrl join: the join request has {n} problem{'s' if n != 1 else ''}; nothing "
+              "was started", file=sys.stderr)
+        for line in exc.problems:
+            print(f"  {line}", file=sys.stderr)
+        return 2
     except (ExperimentError, ValueError) as exc:
         print(f"dfrl join: {exc}", file=sys.stderr)
         return 1

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from dfrl.experiments.driver.config import JoinSpec, RobotSpec
+from dfrl.experiments.driver.config_check import check_robots
 from dfrl.experiments.driver.launcher.agent_roster import AgentRoster
 from dfrl.experiments.driver.launcher.agents import agent_name, send_control
 from dfrl.experiments.driver.launcher.reporter import Reporter
@@ -19,6 +20,31 @@ from dfrl.experiments.driver.launcher.robot_roster import RobotRoster
 from dfrl.experiments.driver.launcher.robots import await_ready
 from dfrl.experiments.driver.launcher.spawn import Site, start_robot, write_nodes
 from dfrl.experiments.errors import ExperimentError
+
+
+#: Key paths of a join request as ``dfrl join`` names them.
+_FLAGS = {"join.id": "--robot", "join.arena": "--arena", "join.algo": "--algo",
+          "join.seed": "--seed", "join.robot_host": "--robot-host", "join": "join"}
+
+
+def check_join(entry: dict[str, Any], robot_ids: list[str],
+               agent_algos: dict[str, str]) -> list[str]:
+    """Problems of a join request before anything is started: the robot entry checked as a
+    config's (id, known algorithm, an arena that exists and parses, ``HOST:PORT``), its id
+    free among ``robot_ids``, an agent learning with its algorithm (``agent_algos``: agent
+    name -> algorithm). Each problem is named after the ``dfrl join`` option."""
+    out = []
+    for problem in check_robots([("join", entry)], resources=True):
+        key, _, why = problem.partition(": ")
+        out.append(f"{_FLAGS.get(key, key)}: {why}")
+    rid, algo = entry.get("id"), entry.get("algo", "qlearning")
+    if rid in robot_ids:
+        out.append(f"--robot: robot {rid} is already part of the experiment")
+    if not any(p.startswith("--algo") for p in out) and algo not in agent_algos.values():
+        known = ", ".join(f"{n} ({a})" for n, a in agent_algos.items()) or "none"
+        out.append(f"--algo: no agent of this experiment learns with {algo} (its agents: "
+                   f"{known})")
+    return out
 
 
 class Joins:
@@ -67,10 +93,17 @@ class Joins:
         """
         rid = spec.robot.id
         self._handled.add(rid)
-        robot = start_robot(self._site, spec.robot, remaining, self._agents,
-                            joins=len(self._handled))
-        self._robots.add(robot, joined=True)
-        await_ready([robot])
+        robot = None
+        try:
+            robot = start_robot(self._site, spec.robot, remaining, self._agents,
+                                joins=len(self._handled))
+            self._robots.add(robot, joined=True)
+            await_ready([robot])
+        except (ExperimentError, OSError, ValueError) as exc:
+            if robot is not None:
+                robot.stop(0.0)
+            self._robots.failed_join(rid, str(exc))    # a failed join, not a lost robot
+            raise
         status = robot.status()
         assert status.address is not None
         host, port = status.address
@@ -128,6 +161,11 @@ class Joins:
     def _answer(self, event: dict[str, Any]) -> None:
         """Start the robot of a ``join_request`` event and reply to its sender."""
         try:
+            entry = {k: v for k, v in dict(event["robot"]).items() if v is not None}
+            problems = check_join(entry, list(self._robots.robots()),
+                                  {a.name: a.algo for a in self._agents.infos()})
+            if problems:
+                raise ExperimentError("; ".join(problems))
             spec = JoinSpec(RobotSpec(**event["robot"]), after_round=0)
             agent, why = self._due(spec)
             if agent is None:

@@ -5,9 +5,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+from dfrl.experiments.config_rules import raise_problems
 from dfrl.experiments.driver.config import RobotSpec
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.driver.launcher.agents import open_console, send_control
+from dfrl.experiments.driver.launcher.joins import check_join
 from dfrl.experiments.driver.launcher.remote_hosts import route_source
 from dfrl.experiments.driver.results.agent_log import ControlEvent, read_rounds_log
 from dfrl.experiments.driver.results.files import read_json
@@ -165,14 +167,24 @@ def join_robot(results_dir: str | Path, robot: str, arena: str, algo: str = "qle
 
     Raises
     ------
+    ConfigError
+        The request cannot be right (checked here before anything is sent or started,
+        :func:`.joins.check_join`): an arena that does not exist or parse, an unknown
+        algorithm or one no agent of the experiment learns with, a robot id taken or
+        malformed, a malformed robot host; every problem at once.
     ExperimentError
-        The robot exists already, no usable TLS folder (:func:`driver_tls`) or token file
+        No usable TLS folder (:func:`driver_tls`) or token file
         (:func:`tokens_of`), the launcher
         refused, or no answer came in ``timeout_s``.
     """
     info = nodes_of(results_dir)
-    if any(n["robot"] == robot for n in info["nodes"]):
-        raise ExperimentError(f"robot {robot} is already part of the experiment")
+    entry: dict[str, Any] = {"id": robot, "arena": arena, "algo": algo}
+    if seed is not None:
+        entry["seed"] = seed
+    if node is not None:
+        entry["robot_host"] = node
+    raise_problems(check_join(entry, [n["robot"] for n in info["nodes"]],
+                              {a["name"]: a["algo"] for a in info["agents"]}))
     if not info.get("console"):
         raise ExperimentError(f"{results_dir}/nodes.json names no console node to ask")
     spec = RobotSpec(robot, arena, algo, seed, node)

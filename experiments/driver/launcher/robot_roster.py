@@ -50,6 +50,7 @@ class RobotRoster:
         self._sample_errors: dict[str, str] = {}   # robot -> the last one shown in the view
         self._gathered: dict[str, list[str]] = {}
         self._gather_errors: list[str] = []
+        self._failed_joins: dict[str, str] = {}    # robot -> why it could not join
 
     # -- the robots ---------------------------------------------------------------------------
     def add(self, robot: Robot, joined: bool = False) -> None:
@@ -58,6 +59,19 @@ class RobotRoster:
             self._robots[robot.spec.id] = robot
             if joined:
                 self._joined.add(robot.spec.id)
+
+    def failed_join(self, rid: str, why: str) -> None:
+        """``rid`` was to join but did not start: it is no part of the run (not lost, not
+        crashed: a failed join)."""
+        with self._lock:
+            self._robots.pop(rid, None)
+            self._joined.discard(rid)
+            self._failed_joins[rid] = why
+
+    def failed_joins(self) -> dict[str, str]:
+        """Robots that were to join and did not start -> why."""
+        with self._lock:
+            return dict(self._failed_joins)
 
     def robots(self) -> dict[str, Robot]:
         """The robots by id, in the order they were added (a copy)."""

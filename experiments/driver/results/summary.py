@@ -11,6 +11,7 @@ from dfrl.experiments.driver.results.faults import Faults
 from dfrl.experiments.driver.results.metrics import read_metrics
 from dfrl.experiments.driver.results.rounds import count_equal
 from dfrl.experiments.driver.results.tables import table_sum
+from dfrl.experiments.provenance import describe, read_provenance
 
 
 @dataclass
@@ -33,6 +34,7 @@ class Results:
     gathered: dict[str, list[str]] | None = None
     from_checkpoint: list[str] | None = None
     table_problems: dict[str, str] | None = None
+    failed_joins: dict[str, str] | None = None
 
     @property
     def complete(self) -> bool:
@@ -66,7 +68,11 @@ def write_summary(r: Results) -> Path:
              f"- wall time: {r.wall_time_s:.1f} s",
              f"- mode: {c.mode.value}, real-time factor: {c.rtf or 'none (flat out)'}",
              f"- seed: {c.seed}; iterations {c.iterations}, respite {c.respite}, "
-             f"rounds planned {c.rounds}", ""]
+             f"rounds planned {c.rounds}"]
+    made_by = read_provenance(r.output_dir)
+    if made_by is not None:
+        lines.append(f"- produced by {describe(made_by)} (provenance.json)")
+    lines.append("")
     metrics_path = r.output_dir / "metrics.csv"
     curves = read_metrics(metrics_path) if metrics_path.is_file() else {}
     lines += ["| robot | arena | algo | iterations | final sum of Q (tables/) | cumulative reward "
@@ -122,6 +128,9 @@ def write_summary(r: Results) -> Path:
                      f"remote robot(s): {n}")
     if r.crashed:
         lines.append(f"- CRASHED robots (exit codes): {r.crashed}")
+    for rid, why in (r.failed_joins or {}).items():
+        lines.append(f"- join of {rid} FAILED (the robot did not start; not a fault of the "
+                     f"federation): {why[:300]}")
     for rid, problem in (r.table_problems or {}).items():
         lines.append(f"- TORN TABLE {rid}: {problem}")
     if r.faults is not None:

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from dfrl.experiments.driver.config import JoinSpec, RobotSpec
-from dfrl.experiments.errors import ExperimentError
+from dfrl.experiments.config_rules import ConfigError
 from dfrl.experiments.driver.launcher import join_robot, run
 from dfrl.experiments.driver.results.metrics import read_metrics
 
@@ -45,7 +45,7 @@ def test_dfrl_join_asks_the_launcher_through_the_platform(tmp_path: Path) -> Non
     # Execute: another process's view (join_robot opens its own console node and posts the
     # request to the launcher's; no request files)
     entry = join_robot(tmp_path, "r3", "r5", iterations=600)
-    with pytest.raises(ExperimentError, match="already part"):
+    with pytest.raises(ConfigError, match="already part"):     # checked up front: exit 2
         join_robot(tmp_path, "r3", "r5")
     t.join(timeout=120)
     # Assert
