@@ -8,6 +8,51 @@ from pathlib import Path
 from typing import Any
 
 from dfrl.experiments.cli.figures import add_figure_arguments, redraw_paper
+from dfrl.experiments.provenance import write_provenance
+
+
+def add_seed_arguments(p: argparse.ArgumentParser, default: int) -> None:
+    """The seeds of a study, said one unambiguous way: ``--seeds S1 S2 ...`` (a list of at
+    least two), ``--n-seeds K`` (the seeds 1..K) or ``--seed S`` (that seed alone); default
+    ``default`` seeds 1..default. :func:`chosen_seeds` reads them."""
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--seeds", type=int, nargs="+", default=None, metavar="S",
+                   help="the seeds, listed (at least two; a lone value is refused as "
+                        "ambiguous: use --n-seeds K or --seed S)")
+    g.add_argument("--n-seeds", type=int, default=None, metavar="K",
+                   help=f"K seeds: 1..K (default: {default})")
+    g.add_argument("--seed", type=int, default=None, metavar="S", help="one seed, S alone")
+    p.set_defaults(default_seed_count=default)
+
+
+def chosen_seeds(args: argparse.Namespace) -> tuple[int, ...]:
+    """The seeds :func:`add_seed_arguments` parsed.
+
+    Raises
+    ------
+    ValueError
+        ``--seeds`` with one value (a count or a seed?), a seed repeated, a count below 1 or a
+        negative seed.
+    """
+    if args.seeds is not None:
+        if len(args.seeds) == 1:
+            k = args.seeds[0]
+            raise ValueError(f"--seeds {k} is ambiguous: write --n-seeds {k} for the seeds "
+                             f"1..{k}, or --seed {k} for seed {k} alone")
+        twice = sorted({s for s in args.seeds if args.seeds.count(s) > 1})
+        if twice:
+            raise ValueError(f"--seeds: seed {', '.join(map(str, twice))} given twice")
+        seeds = tuple(args.seeds)
+    elif args.seed is not None:
+        seeds = (args.seed,)
+    else:
+        k = args.default_seed_count if args.n_seeds is None else args.n_seeds
+        if k < 1:
+            raise ValueError(f"--n-seeds {k}: at least 1")
+        seeds = tuple(range(1, k + 1))
+    if min(seeds) < 0:
+        raise ValueError(f"seeds are >= 0, got {min(seeds)}")
+    return seeds
 
 
 def parse_factor(text: str) -> tuple[str, list[Any]]:
@@ -55,8 +100,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--algo", default="qlearning", help="learner (default: %(default)s)")
     p.add_argument("--iterations", type=int, default=20000,
                    help="training iterations per run (default: %(default)s)")
-    p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3],
-                   help="training seeds (default: %(default)s)")
+    add_seed_arguments(p, 3)
     p.add_argument("--eval-steps", type=int, default=2000,
                    help="evaluation steps per snapshot and arena (default: %(default)s)")
     p.add_argument("--held-out", nargs="*", default=["h1", "h2"],
@@ -76,9 +120,10 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
     factors = dict(args.factors or [parse_factor(f) for f in DEFAULT_FACTORS])
     try:
+        seeds = chosen_seeds(args)
         base = TrainerConfig(arena=args.arena, algo=args.algo,
                              iterations=args.iterations).to_dict()
-        results = sweep(base, factors, args.seeds, args.mode, tuple(args.held_out),
+        results = sweep(base, factors, list(seeds), args.mode, tuple(args.held_out),
                         args.eval_steps, jobs=args.jobs)
     except (KeyError, ValueError, TypeError) as exc:
         print(f"dfrl sweep: {exc}", file=sys.stderr)
@@ -88,6 +133,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     table = markdown_table(results)
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
+        write_provenance(args.out)
         (args.out / "sweep.json").write_text(json.dumps(data, indent=1), encoding="utf-8")
         (args.out / "sweep.md").write_text(table + "\n", encoding="utf-8")
     print(json.dumps(data, indent=1) if args.json else table)
@@ -104,8 +150,7 @@ def register_paper(subparsers: argparse._SubParsersAction) -> None:
                     "with an interval and a verdict. Exit 1 if a federated run failed.")
     p.add_argument("--out", type=Path, default=Path("results/paper"),
                    help="output folder (default: %(default)s)")
-    p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5],
-                   help="seeds, every configuration runs once per seed (default: 1 2 3 4 5)")
+    add_seed_arguments(p, 5)
     p.add_argument("--iterations", type=int, default=None,
                    help="iterations per robot (default: 15000, see --budget)")
     p.add_argument("--budget", choices=("paper", "long"), default="paper",
@@ -134,7 +179,12 @@ def cmd_paper(args: argparse.Namespace) -> int:
     from dfrl.experiments.errors import ExperimentError
     from dfrl.experiments.science.reproduce import PAPER_ITERATIONS, PaperOptions, reproduce_paper
 
-    opts = PaperOptions(seeds=tuple(dict.fromkeys(args.seeds)),
+    try:
+        seeds = chosen_seeds(args)
+    except ValueError as exc:
+        print(f"dfrl paper: {exc}", file=sys.stderr)
+        return 2
+    opts = PaperOptions(seeds=seeds,
                         iterations=args.iterations if args.iterations is not None else
                         (LONG_BUDGET if args.budget == "long" else PAPER_ITERATIONS),
                         respite=args.respite,
@@ -145,6 +195,10 @@ def cmd_paper(args: argparse.Namespace) -> int:
     except (ExperimentError, FileNotFoundError, ValueError) as exc:
         print(f"dfrl paper: {exc}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt as exc:      # SIGTERM or Ctrl-C: the whole study stopped
+        print(f"dfrl paper: stopped ({exc or 'interrupted'}); finished runs are in "
+              f"{args.out} (--skip-existing reuses them)", file=sys.stderr)
+        return 130
     redraw_paper(args.out, done, args)
     print(f"dfrl paper done in {done.total_s:.0f} s", file=sys.stderr)
     print(done.report)
@@ -157,8 +211,7 @@ def register_speedup(subparsers: argparse._SubParsersAction) -> None:
                         "against linear speed-up (markdown table with intervals)")
     p.add_argument("--robots", type=int, nargs="+", default=[1, 2, 5, 10],
                    help="robot counts, one federation each (default: 1 2 5 10)")
-    p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5],
-                   help="seeds per robot count (default: 1 2 3 4 5)")
+    add_seed_arguments(p, 5)
     p.add_argument("--iterations", type=int, default=6000,
                    help="budget per robot (default: %(default)s)")
     p.add_argument("--respite", type=int, default=500,
@@ -179,9 +232,15 @@ def register_speedup(subparsers: argparse._SubParsersAction) -> None:
 
 def cmd_speedup(args: argparse.Namespace) -> int:
     from dfrl.experiments.science.studies.speedup import (EXPLANATION, SpeedupOptions, markdown,
-                                                  speedup)
+                                                          speedup, speedup_rows)
+    from dfrl.experiments.science.tidy import TIDY_FILE, write_tidy
 
-    opts = SpeedupOptions(robots=tuple(args.robots), seeds=tuple(dict.fromkeys(args.seeds)),
+    try:
+        seeds = chosen_seeds(args)
+    except ValueError as exc:
+        print(f"dfrl speedup: {exc}", file=sys.stderr)
+        return 2
+    opts = SpeedupOptions(robots=tuple(args.robots), seeds=seeds,
                           iterations=args.iterations, respite=args.respite,
                           eval_every=args.eval_every, threshold=args.threshold,
                           eval_steps=args.eval_steps, method=args.method, jobs=args.jobs)
@@ -193,6 +252,8 @@ def cmd_speedup(args: argparse.Namespace) -> int:
     text = markdown(rows, opts) + "\n\n" + EXPLANATION
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
+        write_provenance(args.out)
+        write_tidy(args.out / TIDY_FILE, speedup_rows(runs))
         (args.out / "speedup.md").write_text(text + "\n", encoding="utf-8")
         (args.out / "speedup.json").write_text(json.dumps(
             [{**r, "curve": {str(k): v for k, v in r["curve"].items()}} for r in runs],

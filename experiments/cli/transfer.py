@@ -11,6 +11,8 @@ import sys
 from pathlib import Path
 
 from dfrl.experiments.cli.figures import add_figure_arguments, wants_redraw
+from dfrl.experiments.cli.studies import add_seed_arguments, chosen_seeds
+from dfrl.experiments.provenance import write_provenance
 from dfrl.robots.learners import LEARNERS
 from dfrl.robots.state import SensorGrouping
 
@@ -30,8 +32,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="arena name or JSON file, preferably one the table was not trained in")
     p.add_argument("--iterations", type=int, default=3000,
                    help="training steps per run (default: %(default)s)")
-    p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5],
-                   help="seeds, one run per condition and seed (default: 1 2 3 4 5)")
+    add_seed_arguments(p, 5)        # one run per condition and seed
     p.add_argument("--algo", choices=sorted(LEARNERS), default=None,
                    help="learner (default: the table's algorithm)")
     p.add_argument("--grouping", choices=[s.value for s in SensorGrouping], default=None,
@@ -73,7 +74,7 @@ def cmd_transfer(args: argparse.Namespace) -> int:
     try:
         cfg = TransferConfig(
             init=str(args.init), arena=args.arena, iterations=args.iterations,
-            seeds=tuple(dict.fromkeys(args.seeds)), algo=args.algo,
+            seeds=chosen_seeds(args), algo=args.algo,
             grouping=args.grouping, levels=args.levels, eval_steps=args.eval_steps,
             jobs=args.jobs)
         result = run(cfg, args.out)
@@ -164,6 +165,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     text = markdown(rows, opts)
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
+        write_provenance(args.out)
         (args.out / "transfer_study.md").write_text(text + "\n", encoding="utf-8")
         (args.out / "transfer_study.json").write_text(json.dumps(rows, indent=1), encoding="utf-8")
     print(text)

@@ -12,29 +12,39 @@ held-out arenas h1 and h2 (``evaluations.csv`` in the run's folder).
 Layout of ``OUT``: ``seed<S>/<config name>/`` (a federated results folder),
 ``seed<S>/standalone/<algo>_<arena>/``, ``seed<S>/standalone/control_qlearning_<arena>/``,
 ``figures/`` (means over seeds with 95% bands), ``report.md``
-(:mod:`dfrl.experiments.science.report.paper`). Federated runs go one after another (each uses both
-cores); standalone trainings and evaluations run meanwhile on a pool of ``jobs`` processes.
+(:mod:`dfrl.experiments.science.report.paper`), ``provenance.json`` (versions, commit, command
+line: :mod:`dfrl.experiments.provenance`) and ``tidy.csv`` (every curve and evaluation, one
+value per row: :mod:`dfrl.experiments.science.tidy`). Federated runs go one after another (each
+uses both cores); standalone trainings and evaluations run meanwhile on a pool of ``jobs``
+processes. SIGTERM or Ctrl-C stops the whole study (the current run stops cleanly, pending
+jobs are cancelled); ``--skip-existing`` then reuses what finished.
 """
 from __future__ import annotations
 
+import re
+import signal
 import sys
+import threading
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
+from collections.abc import Iterator
 
 import numpy as np
 
 from dfrl.experiments.driver.config import ExperimentConfig, resolve_config
 from dfrl.experiments.driver.launcher import run
 from dfrl.experiments.driver.results.metrics import read_metrics
+from dfrl.experiments.provenance import write_provenance
 from dfrl.experiments.science.report.observations import SeedRun
 from dfrl.experiments.science.report.paper import write_report
 from dfrl.experiments.science.report.stats import COMBOS
 from dfrl.experiments.science.standalone import evaluated_job
 from dfrl.experiments.science.studies.history import (Evaluator, PendingRows, eval_job,
                                                       history_tables, pick, read_rows)
+from dfrl.experiments.science.tidy import TIDY_FILE, curve_rows, evaluation_rows, write_tidy
 from dfrl.robots.state import Discretiser
 from dfrl.robots.training import TrainerConfig, read_metrics_csv
 
@@ -80,6 +90,8 @@ class Reproduction:
     total_s: float
     ok: bool
     walls: dict[str, float] = field(default_factory=dict)
+    seeds: list[int] = field(default_factory=list)
+    reused: dict[str, float] = field(default_factory=dict)   # run -> its recorded wall time
 
 
 def control_learner() -> dict[str, Any]:
@@ -108,22 +120,58 @@ def paper_configs(opts: PaperOptions, seed: int) -> list[tuple[str, ExperimentCo
     return out
 
 
+class StudyInterrupted(KeyboardInterrupt):
+    """SIGTERM or Ctrl-C stopped the study (a :class:`KeyboardInterrupt`, so that callers that
+    only know Ctrl-C stop too)."""
+
+
+def _recorded_wall(d: Path) -> float:
+    """The wall time a finished run's ``summary.md`` recorded (nan if none)."""
+    try:
+        m = re.search(r"^- wall time: ([0-9.]+) s$", (d / "summary.md").read_text(
+            encoding="utf-8"), re.M)
+    except OSError:
+        return float("nan")
+    return float(m.group(1)) if m else float("nan")
+
+
 def _federated(cfg: ExperimentConfig, d: Path, opts: PaperOptions, evaluator: Evaluator,
-               progress: TextIO | None) -> tuple[bool, PendingRows, float]:
-    t0 = time.monotonic()
+               progress: TextIO | None) -> tuple[bool, PendingRows, float, bool]:
+    """Run (or reuse) one federated run and queue its evaluations: (ok, pending rows, wall
+    time of the run, reused)."""
+    reused = opts.skip_existing and (d / "summary.md").is_file()
     ok = True
-    if not (opts.skip_existing and (d / "summary.md").is_file()):
+    if reused:
+        wall = _recorded_wall(d)
+    else:
         if progress is not None:
             print(f"== {d.parent.name}/{cfg.name}: {len(cfg.robots)} robots, {cfg.iterations} "
                   f"iterations", file=progress, flush=True)
-        ok = run(cfg, d, progress=None, force=True).ok   # the paper owns its run folders
-    wall = time.monotonic() - t0
+        t0 = time.monotonic()
+        done = run(cfg, d, progress=None, force=True)    # the paper owns its run folders
+        wall = time.monotonic() - t0
+        if done.interrupted:
+            raise StudyInterrupted(f"{d.parent.name}/{cfg.name} interrupted "
+                                   f"({done.interrupted})")
+        ok = done.ok
     pending = PendingRows()
     arenas = {r.id: r.arena for r in cfg.robots}
     for robot, files in history_tables(d).items():
         for it in pick(files, cfg.iterations, opts.points):
             pending.add(evaluator, robot, it, np.load(files[it]), arenas[robot], HELD_OUT)
-    return ok, pending, wall
+    return ok, pending, wall, reused
+
+
+def _raise_interrupt(signum: int, frame: Any) -> None:
+    raise StudyInterrupted(f"signal {signum}")
+
+
+def _stop_pool(pool: ProcessPoolExecutor) -> None:
+    """Cancel the pending jobs and end the workers now (shutdown alone would wait for the
+    running jobs; the executor has no public way to end its workers before Python 3.14)."""
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        proc.terminate()
 
 
 def reproduce_paper(out: Path, opts: PaperOptions = PaperOptions(),
@@ -135,9 +183,24 @@ def reproduce_paper(out: Path, opts: PaperOptions = PaperOptions(),
     ------
     ExperimentError
         A federated run could not be started.
+    StudyInterrupted
+        SIGTERM or Ctrl-C (SIGINT) stopped the study (handled when called from the main
+        thread); finished runs stay in ``out``.
     """
-    out = Path(out)
+    restore = []
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            restore.append((sig, signal.signal(sig, _raise_interrupt)))
+    try:
+        return _reproduce(Path(out), opts, progress)
+    finally:
+        for sig, handler in restore:
+            signal.signal(sig, handler)
+
+
+def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reproduction:
     out.mkdir(parents=True, exist_ok=True)
+    write_provenance(out)
     t0 = time.monotonic()
     seeds = (list(opts.seeds) if isinstance(opts.seeds, tuple)
              else list(range(opts.first_seed, opts.first_seed + opts.seeds)))
@@ -146,7 +209,9 @@ def reproduce_paper(out: Path, opts: PaperOptions = PaperOptions(),
     arenas = [r.arena for r in fed_cfgs[seeds[0]][0][1].robots]
     all_arenas = list(dict.fromkeys(arenas + list(HELD_OUT)))
     walls: dict[str, float] = {}
-    with ProcessPoolExecutor(max_workers=max(1, opts.jobs)) as pool:
+    reused: dict[str, float] = {}
+    pool = ProcessPoolExecutor(max_workers=max(1, opts.jobs))
+    try:
         n_states = Discretiser(TrainerConfig().discretisation).n_states
         n_actions = len(TrainerConfig().actions.names)
         zero = {a: pool.submit(eval_job, base_cfg, np.zeros((n_states, n_actions)), a, opts.eval_steps,
@@ -177,15 +242,20 @@ def reproduce_paper(out: Path, opts: PaperOptions = PaperOptions(),
                                   EVAL_SEED + s)
             for key, cfg in fed_cfgs[s]:
                 d = out / f"seed{s}" / cfg.name
-                run_ok, pending, wall = _federated(cfg, d, opts, evaluator, progress)
+                run_ok, pending, wall, was_reused = _federated(cfg, d, opts, evaluator,
+                                                               progress)
                 ok = ok and run_ok
-                walls[f"seed{s}/{key}"] = wall
+                (reused if was_reused else walls)[f"seed{s}/{key}"] = wall
                 pendings[(s, key)] = (d, pending)
         for (s, key), (d, pending) in pendings.items():
             pending.write(d / "evaluations.csv")
         for fut in sa_jobs.values():
             fut.result()
         zero_score = {a: f.result()["score"] for a, f in zero.items()}
+    except BaseException:
+        _stop_pool(pool)
+        raise
+    pool.shutdown()
     fed: dict[str, list[SeedRun]] = {}
     control_fed: list[SeedRun] = []
     for (s, key), (d, _) in pendings.items():
@@ -210,9 +280,22 @@ def reproduce_paper(out: Path, opts: PaperOptions = PaperOptions(),
              else standalone.setdefault(algo, []).append(run))
     total = time.monotonic() - t0
     rep = Reproduction(out / "report.md", fed, standalone, control_fed, control_sa, total, ok,
-                       walls)
+                       walls, seeds, reused)
+    write_tidy(out / TIDY_FILE, tidy_rows(rep))
     write_report(out, rep, opts, seeds)
     return rep
+
+
+def tidy_rows(rep: Reproduction) -> Iterator[tuple]:
+    """Every run's curves and evaluations as rows of ``tidy.csv``."""
+    groups = [(k, "federated", v) for k, v in rep.fed.items()]
+    groups += [(f"standalone/{k}", "standalone", v) for k, v in rep.standalone.items()]
+    groups += [("control/qlearning/average", "control federated", rep.control_fed),
+               ("control/standalone/qlearning", "control standalone", rep.control_sa)]
+    for name, condition, runs in groups:
+        for seed, r in zip(rep.seeds, runs):
+            yield from curve_rows(name, seed, condition, r.curves)
+            yield from evaluation_rows(name, seed, condition, r.evals)
 
 
 def _standalone(pool: ProcessPoolExecutor, d: Path, cfg: TrainerConfig, opts: PaperOptions,

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from dfrl.experiments.provenance import describe, read_provenance
 from dfrl.experiments.science.report.bands import plot_groups
 from dfrl.experiments.science.report.observations import (SeedRun, control_words, final_score,
                                                           mean_q, paper_tests, real_words,
@@ -19,6 +20,34 @@ from dfrl.experiments.science.statistics import interval, late_growth
 def _iv(values: list[float]) -> str:
     vals = [v for v in values if v == v]
     return str(interval(vals)) if vals else "n/a"
+
+
+def seeds_words(seeds: Sequence[int]) -> str:
+    """``Seeds 1, 2, 3 (3)``; a run of consecutive seeds as ``Seeds 1..5 (5)``."""
+    ss = list(seeds)
+    if len(ss) > 2 and ss == list(range(ss[0], ss[0] + len(ss))):
+        return f"Seeds {ss[0]}..{ss[-1]} ({len(ss)})"
+    return f"Seed{'s' if len(ss) != 1 else ''} {', '.join(map(str, ss))} ({len(ss)})"
+
+
+def wall_words(rep: Any) -> str:
+    """The wall time of this invocation, and what runs it reused (``--skip-existing``)."""
+    text = (f"Wall time of this `dfrl paper` on this machine ({os.cpu_count()} cores): "
+            f"**{rep.total_s:.0f} s**; federated runs {sum(rep.walls.values()):.0f} s of it "
+            f"(standalone trainings and evaluations ran beside them).")
+    reused = getattr(rep, "reused", {}) or {}
+    if reused:
+        known = [w for w in reused.values() if w == w]
+        text += (f" {len(reused)} federated run(s) reused from an earlier invocation "
+                 f"(--skip-existing), not in that time; their recorded wall time: "
+                 f"{sum(known):.0f} s" + (f" ({len(reused) - len(known)} without a record)"
+                                           if len(known) < len(reused) else "") + ".")
+    return text
+
+
+def _made_by(out: Path) -> str:
+    p = read_provenance(out)
+    return f"{describe(p)} (`provenance.json`)" if p else "an unrecorded version"
 
 
 def _collisions(runs: list[SeedRun], role: str) -> list[float]:
@@ -55,9 +84,9 @@ def figures(out: Path, rep: Any, formats: Sequence[str] = ("png",),
 def write_report(out: Path, rep: Any, opts: Any, seeds: list[int]) -> Path:
     """Write ``OUT/report.md`` from a :class:`dfrl.experiments.science.reproduce.Reproduction`."""
     cfg_runs = next(iter(rep.fed.values()))
-    iters = len(next(iter(cfg_runs[0].curves.values())))
+    iters = max(int(c["iteration"][-1]) for c in cfg_runs[0].curves.values() if len(c))
     L = ["# dFRL: the paper's experiment, several seeds, observations as tests", "",
-         f"Seeds {seeds[0]}..{seeds[-1]} ({len(seeds)}); five robots in R1..R5, {iters} "
+         f"{seeds_words(seeds)}; five robots in R1..R5, {iters} "
          f"iterations each; standalone baselines with the same seeds and budget; negative "
          f"control: federated Q-learning/average and standalone Q-learning in R1 and R4 with a "
          f"random behaviour policy (epsilon 1 throughout). Greedy evaluations at "
@@ -65,9 +94,9 @@ def write_report(out: Path, rep: Any, opts: Any, seeds: list[int]) -> Path:
          f"({opts.eval_steps // opts.episode_steps} episodes of {opts.episode_steps} steps "
          f"from seeded random poses), in the robot's own arena and the held-out arenas h1 and "
          f"h2. Intervals: mean ± 95% Student-t half width over seeds.", "",
-         f"Wall time of the whole `dfrl paper` on this machine ({os.cpu_count()} cores): "
-         f"**{rep.total_s:.0f} s**; federated runs {sum(rep.walls.values()):.0f} s of it "
-         f"(standalone trainings and evaluations ran beside them).", ""]
+         wall_words(rep), "",
+         f"Produced by {_made_by(out)}; every value of every run, one per row: `tidy.csv` "
+         f"(run, seed, condition, robot, iteration, metric, value).", ""]
     names = figures(out, rep)
     L += ["## Figures", ""]
     L += [f"* figures/{n}" for n in names] or ["* (no figures: matplotlib is not installed)"]

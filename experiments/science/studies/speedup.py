@@ -11,7 +11,7 @@ evaluation iteration (per robot) whose score reaches ``threshold``, or the budge
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Any
@@ -83,6 +83,15 @@ def speedup(opts: SpeedupOptions) -> tuple[list[SpeedupRow], list[dict[str, Any]
                                sum(r["reached"] for r in sel), len(sel), interval(ratios),
                                interval([r["curve"][max(r["curve"])] for r in sel])))
     return rows, runs
+
+
+def speedup_rows(runs: Sequence[dict[str, Any]]) -> Iterator[tuple]:
+    """The runs as rows of a tidy table (:mod:`dfrl.experiments.science.tidy`): the greedy
+    score in the held-out arenas at every snapshot of the federation's table."""
+    for r in runs:
+        for it, score in sorted(r["curve"].items()):
+            yield (f"N={r['robots']}", r["seed"], "federated", "federation", int(it),
+                   "score@held_out", float(score))
 
 
 def markdown(rows: Sequence[SpeedupRow], opts: SpeedupOptions) -> str:

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from dfrl.arenas import load_arena
+from dfrl.experiments.provenance import write_provenance
 from dfrl.experiments.science.standalone import EVAL_SEED_OFFSET
 from dfrl.experiments.science.transfer.model import (HEAD_STEPS, METRICS, Condition, RunResult,
                                                      Stat, TransferConfig, TransferResult)
@@ -116,7 +117,8 @@ def summarise(runs: list[RunResult]) -> tuple[dict[str, dict[str, Stat]], dict[s
 def run(config: TransferConfig, output_dir: Path | None = None) -> TransferResult:
     """Train from the saved table and from zeros in ``config.arena``, for every seed.
 
-    Writes, when ``output_dir`` is given: ``config.json`` (this config, the trainer config and
+    Writes, when ``output_dir`` is given: ``provenance.json`` (at the start:
+    :mod:`dfrl.experiments.provenance`), ``config.json`` (this config, the trainer config and
     the table's description), ``runs.csv`` (one row per seed and condition), ``curves.csv``
     (cumulative collisions and reward every ``config.every`` steps), ``summary.json`` and
     ``transfer.png`` (mean cumulative collisions and reward over seeds; needs matplotlib).
@@ -128,6 +130,8 @@ def run(config: TransferConfig, output_dir: Path | None = None) -> TransferResul
         fit the trainer.
     """
     t0 = time.perf_counter()
+    if output_dir is not None:
+        write_provenance(output_dir)
     q, info, state = load_initial_table(config.init)
     tcfg = trainer_config_for(config, q, info, state)
     spec = load_arena(config.arena)  # ArenaError is a ValueError

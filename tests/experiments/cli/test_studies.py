@@ -35,5 +35,38 @@ def test_sweep_command_writes_its_table(tmp_path: Path) -> None:
     assert [d["setting"] for d in data] == ["base", "learner.alpha=0.5"]
     assert len(data[0]["runs"]) == 2
     assert (tmp_path / "sweep.md").read_text().startswith("| setting | score |")
-    bad = _dfrl("sweep", "--set", "learner.nope=1", "--iterations", "300", "--seeds", "1")
+    assert json.loads((tmp_path / "provenance.json").read_text())["command"][:2] == ["dfrl", "sweep"]
+    bad = _dfrl("sweep", "--set", "learner.nope=1", "--iterations", "300", "--seed", "1")
     assert bad.returncode == 2 and "learner.nope" in bad.stderr
+
+
+def test_seed_options_are_unambiguous() -> None:
+    import argparse
+
+    import pytest
+
+    from dfrl.experiments.cli import build_parser
+    from dfrl.experiments.cli.studies import chosen_seeds
+
+    parser = build_parser()
+    seeds = lambda *a: chosen_seeds(parser.parse_args(["paper", *a]))  # noqa: E731
+    assert seeds() == (1, 2, 3, 4, 5)                      # the default count
+    assert seeds("--n-seeds", "3") == (1, 2, 3)
+    assert seeds("--seeds", "4", "9") == (4, 9)
+    assert seeds("--seed", "5") == (5,)
+    with pytest.raises(ValueError, match="--seeds 5 is ambiguous: write --n-seeds 5 .* --seed 5"):
+        seeds("--seeds", "5")
+    with pytest.raises(ValueError, match="given twice"):
+        seeds("--seeds", "2", "2")
+    with pytest.raises(ValueError, match="at least 1"):
+        seeds("--n-seeds", "0")
+    with pytest.raises(SystemExit):                          # one way at a time
+        parser.parse_args(["paper", "--seeds", "1", "2", "--n-seeds", "2"])
+    assert isinstance(parser, argparse.ArgumentParser)
+
+
+def test_ambiguous_seeds_refused_by_every_study(tmp_path: Path) -> None:
+    for cmd in (["paper", "--out", str(tmp_path / "p")], ["speedup"], ["sweep"]):
+        out = _dfrl(*cmd, "--seeds", "5")
+        assert out.returncode == 2 and "--seeds 5 is ambiguous" in out.stderr, (cmd, out.stderr)
+    assert not (tmp_path / "p").exists()                      # nothing started

@@ -77,8 +77,10 @@ def test_command_json_output_and_files(setup: tuple[Path, Path], tmp_path: Path,
         assert set(doc["summary"][cond]) == set(METRICS)
         assert doc["summary"][cond]["cumulative_reward"]["n"] == 2
     assert set(doc["ratio"]) == set(METRICS)
-    for name in ("config.json", "runs.csv", "curves.csv", "summary.json"):
+    for name in ("config.json", "provenance.json", "runs.csv", "curves.csv", "summary.json"):
         assert (out / name).exists(), name
+    made_by = json.loads((out / "provenance.json").read_text(encoding="utf-8"))
+    assert made_by["numpy"] == np.__version__ and isinstance(made_by["command"], list)
     assert (out / "transfer.png").stat().st_size > 10_000
     with open(out / "runs.csv", newline="", encoding="utf-8") as fh:
         rows = list(csv.DictReader(fh))
@@ -90,7 +92,7 @@ def test_command_json_output_and_files(setup: tuple[Path, Path], tmp_path: Path,
 def test_command_readable_table(setup: tuple[Path, Path], capsys: pytest.CaptureFixture[str]) -> None:
     table, arena = setup
     rc = main(["transfer", "--init", str(table), "--arena", str(arena), "--iterations", "100",
-               "--seeds", "1", "--eval-steps", "0", "--algo", "sarsa", "--jobs", "1"])
+               "--seed", "1", "--eval-steps", "0", "--algo", "sarsa", "--jobs", "1"])
     text = capsys.readouterr().out
     assert rc == 0
     assert "into l6_test: sarsa, 100 iterations x 1 seeds" in text
@@ -120,7 +122,7 @@ def test_mismatched_levels_give_a_clear_error(setup: tuple[Path, Path],
                                               capsys: pytest.CaptureFixture[str]) -> None:
     table, arena = setup
     rc = main(["transfer", "--init", str(table), "--arena", str(arena), "--iterations", "10",
-               "--seeds", "1", "--levels", "2"])
+               "--seed", "1", "--levels", "2"])
     err = capsys.readouterr().err
     assert rc == 2
     assert "table shape (81, 3) does not fit the trainer" in err
@@ -163,7 +165,7 @@ def test_unknown_action_names_and_missing_files(tmp_path: Path, setup: tuple[Pat
 def test_same_arena_warning(setup: tuple[Path, Path], capsys: pytest.CaptureFixture[str]) -> None:
     table, _ = setup
     rc = main(["transfer", "--init", str(table), "--arena", "r1", "--iterations", "20",
-               "--seeds", "1", "--eval-steps", "0", "--jobs", "1", "--json"])
+               "--seed", "1", "--eval-steps", "0", "--jobs", "1", "--json"])
     captured = capsys.readouterr()
     assert rc == 0 and json.loads(captured.out)["same_arena"] is True
     assert "warning" in captured.err
