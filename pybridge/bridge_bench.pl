@@ -1,14 +1,16 @@
 :- module(bridge_bench,
           [ bench_table_round_trips/4,  % +Robot, +Warmup, +Count, +Options
+            bench_params_round_trips/4, % +Robot, +Warmup, +Count, +Options
             bench_result/1              % -Result
           ]).
-:- use_module(robot_bridge, [get_qtable/3, set_qtable/3]).
+:- use_module(robot_bridge, [get_qtable/3, set_qtable/3, get_params/3, set_params/3]).
 :- autoload(library(error), [must_be/2]).
 
 /** <module> Agent side of `dfrl bench bridge`
 
 An agent-like thread times get_qtable/3 followed by set_qtable/3 (of the
-table it just read) while the host's control loop serves it.
+table it just read), or get_params/3 followed by set_params/3, while the
+host's control loop serves it.
 */
 
 :- dynamic result_/1.
@@ -21,12 +23,23 @@ table it just read) while the host's control loop serves it.
 %   An exception is recorded as error(E).
 
 bench_table_round_trips(Robot, Warmup, Count, Options) :-
+    round_trips(table, Robot, Warmup, Count, Options).
+
+%!  bench_params_round_trips(+Robot, +Warmup, +Count, +Options) is det.
+%
+%   As bench_table_round_trips/4 with get_params/3 and set_params/3 (of
+%   the parameters just read).
+
+bench_params_round_trips(Robot, Warmup, Count, Options) :-
+    round_trips(params, Robot, Warmup, Count, Options).
+
+round_trips(What, Robot, Warmup, Count, Options) :-
     must_be(nonneg, Warmup),
     must_be(nonneg, Count),
     retractall(result_(_)),
-    catch(( forall(between(1, Warmup, _), pair(Robot, Options, _, _)),
+    catch(( forall(between(1, Warmup, _), pair(What, Robot, Options, _, _)),
             findall(T-G-S, ( between(1, Count, _),
-                             pair(Robot, Options, G, S),
+                             pair(What, Robot, Options, G, S),
                              T is G + S ), Triples),
             pairs(Triples, Ts, Gs, Ss),
             Result = bench(Ts, Gs, Ss)
@@ -34,14 +47,24 @@ bench_table_round_trips(Robot, Warmup, Count, Options) :-
           E, Result = error(E)),
     assertz(result_(Result)).
 
-pair(Robot, Options, GetMs, SetMs) :-
+pair(What, Robot, Options, GetMs, SetMs) :-
     get_time(T0),
-    get_qtable(Robot, Table, Options),
+    get(What, Robot, Got, Options),
     get_time(T1),
-    set_qtable(Robot, Table, Options),
+    set(What, Robot, Got, Options),
     get_time(T2),
     GetMs is (T1 - T0) * 1000,
     SetMs is (T2 - T1) * 1000.
+
+get(table, Robot, Table, Options) :-
+    get_qtable(Robot, Table, Options).
+get(params, Robot, Params, Options) :-
+    get_params(Robot, Params, Options).
+
+set(table, Robot, Table, Options) :-
+    set_qtable(Robot, Table, Options).
+set(params, Robot, params(Layout, _, Values), Options) :-
+    set_params(Robot, params(Layout, Values), Options).
 
 pairs([], [], [], []).
 pairs([T-G-S|R], [T|Ts], [G|Gs], [S|Ss]) :-

@@ -368,6 +368,8 @@ text_atom(X, A) :-
 %     { "name": "fed_q",                            agent name (dfrl)
 %       "itinerary": [{"host": H, "port": P, "robot": R}, ...],
 %       "method": "average",                        (average)
+%       "carries": "params",                        tables (default) or params:
+%                                                   what the agent aggregates
 %       "rounds": 16,                               round budget (1)
 %       "rest_s": 0.0,                              rest at the first stop
 %       "rounds_log": "/abs/rounds.log",            the agent's JSON-lines log
@@ -378,10 +380,11 @@ text_atom(X, A) :-
 %       "timeout_s": 3600 }                         table read/write limit
 %
 %   Plan is plan(Stops, Rounds, Rest, Log, Timeout) with Stops a list of
-%   stop(Host, Port, Robot); Options are method(M) and tokens(List).
+%   stop(Host, Port, Robot); Options are method(M), carries(C) and
+%   tokens(List).
 
 dfrl_launch_plan(D, Name, plan(Stops, Rounds, Rest, Log, Timeout),
-                 [method(Method), tokens(Tokens)]) :-
+                 [method(Method), carries(Carried), tokens(Tokens)]) :-
     must_be(dict, D),
     key(itinerary, D, Stops0),
     must_be(list, Stops0),
@@ -396,6 +399,7 @@ dfrl_launch_plan(D, Name, plan(Stops, Rounds, Rest, Log, Timeout),
     ),
     dict_default(D, timeout_s, 3600, Timeout),
     dict_default(D, method, average, Method0), text_atom(Method0, Method),
+    dict_default(D, carries, tables, Carried0), text_atom(Carried0, Carried),
     dict_default(D, name, dfrl, Name0), text_atom(Name0, Name),
     (   get_dict(token, D, Token0), Token0 \== null
     ->  token_term(Token0, Token), Tokens = [Token]

@@ -172,3 +172,11 @@ def test_write_origin_and_read_notice(node) -> None:
                                     [Term("round", 3), Term("agent", Atom("fed_dqn"))]))
     assert run_agent(node, goal).name == "true"
     assert robot.reads == 1 and robot.origins == [{"round": 3, "agent": "fed_dqn"}]
+
+
+def test_params_bench_smoke() -> None:
+    from dfrl.pybridge.params_bench import bench
+
+    (row,) = bench([8], repeats=2, warmup=0)
+    assert row["floats"] == 8 and row["params"]["pairs"] == 2 and row["table"]["pairs"] == 2
+    assert row["params"]["bit_exact"] and row["params"]["pair"]["median_ms"] > 0
