@@ -12,7 +12,8 @@
 
 A policy that spins in place scores ``collisions_per_1000 = 0`` like a perfect one, but its
 progress and coverage are near 0; that is why the measure has three numbers. Policies are the
-greedy policy of a Q-table, uniform random actions, or any callable ``obs -> action``.
+greedy policy of a Q-table or of a function learner's parameter vector (``linear``, ``dqn``:
+:func:`greedy_policy`), uniform random actions, or any callable ``obs -> action``.
 """
 from __future__ import annotations
 
@@ -22,9 +23,9 @@ from enum import Enum
 
 import numpy as np
 
-from dfrl.robots.learners import greedy_action
+from dfrl.robots.learners import greedy_action, is_tabular
 from dfrl.robots.state import Discretiser
-from dfrl.robots.training import TrainerConfig
+from dfrl.robots.training import TrainerConfig, build_learner
 
 #: Side of the coverage grid's cells (m).
 COVERAGE_CELL: float = 0.05
@@ -33,7 +34,7 @@ COVERAGE_CELL: float = 0.05
 class PolicyKind(str, Enum):
     """Policies that can be evaluated by name."""
 
-    GREEDY = "greedy"  #: argmax of the Q-table (ties broken at random), no learning
+    GREEDY = "greedy"  #: argmax of the Q-table (ties at random) or of the model, no learning
     RANDOM = "random"  #: uniform random actions
 
 
@@ -71,6 +72,37 @@ class EvalResult:
     progress: float = 0.0
     coverage: float = 0.0
     episodes: int = 1
+
+
+def greedy_policy(config: TrainerConfig, params: np.ndarray, obs_dim: int = 8,
+                  n_actions: int | None = None) -> Policy:
+    """The greedy policy of a function learner (``config.algo``) with parameters ``params``.
+
+    Parameters
+    ----------
+    config : TrainerConfig
+        ``algo`` and the learner's own configuration (``features``, ``dqn``).
+    params : np.ndarray, shape (n_params,)
+        As :attr:`dfrl.robots.training.Trainer.params`.
+    obs_dim : int
+    n_actions : int, optional
+        Default: the size of ``config.actions``.
+
+    Raises
+    ------
+    ValueError
+        ``config.algo`` is tabular, or ``params`` does not fit the learner.
+    """
+    if is_tabular(config.algo):
+        raise ValueError(f"'{config.algo}' is a tabular learner: evaluate its Q-table")
+    n = len(config.actions.names) if n_actions is None else n_actions
+    learner = build_learner(config, 1, obs_dim, n, np.random.default_rng(0))
+    learner.set_params(params)
+
+    def greedy(obs: np.ndarray) -> int:
+        return learner.greedy_action(np.asarray(obs, dtype=np.float64))
+
+    return greedy
 
 
 class _Coverage:
@@ -112,6 +144,7 @@ def evaluate_policy(
     seed: int,
     q_table: np.ndarray | None = None,
     episode_steps: int | None = None,
+    params: np.ndarray | None = None,
 ) -> EvalResult:
     """Run a fixed policy in the configured arena and measure it (see the module doc).
 
@@ -121,17 +154,21 @@ def evaluate_policy(
     Parameters
     ----------
     config : TrainerConfig
-        Arena, simulation, actions, reward and discretisation (the learner is unused).
+        Arena, simulation, actions, reward and discretisation; with ``params``, also the
+        learner (``algo`` and its own configuration).
     policy : PolicyKind, its name, or a callable ``obs -> action``
     steps : int
         Control steps to run in all.
     seed : int
         Seeds the start/respawn poses and the random choices.
     q_table : np.ndarray, shape (n_states, n_actions), optional
-        Required for GREEDY.
+        GREEDY of a tabular learner needs it.
     episode_steps : int, optional
         Start a new episode from a fresh random pose every so many steps (many short
         episodes compare policies with fewer steps than one long run). Default: one episode.
+    params : np.ndarray, shape (n_params,), optional
+        GREEDY of a function learner (``config.algo`` ``linear`` or ``dqn``) needs its
+        parameter vector instead of a table (:func:`greedy_policy`).
     """
     from dfrl.robots.env import EPuckEnv
 
@@ -147,9 +184,12 @@ def evaluate_policy(
     env = EPuckEnv(arena=config.arena, config=config.env_config())
     try:
         n_actions = int(env.action_space.n)
-        if kind is PolicyKind.GREEDY:
+        if kind is PolicyKind.GREEDY and q_table is None and params is not None:
+            fn = greedy_policy(config, params, int(env.observation_space.shape[0]), n_actions)
+        elif kind is PolicyKind.GREEDY:
             if q_table is None:
-                raise ValueError("a greedy evaluation needs a Q-table")
+                raise ValueError("a greedy evaluation needs a Q-table (tabular learners) or "
+                                 "params (function learners)")
             if q_table.shape != (disc.n_states, n_actions):
                 raise ValueError(f"Q-table shape {q_table.shape} does not fit the configuration "
                                  f"({disc.n_states}, {n_actions})")

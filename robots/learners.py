@@ -9,128 +9,45 @@ two calls:
   ``q[state, action]`` and the action to take in ``next_state``. Q-learning updates first and
   then chooses; SARSA chooses first and bootstraps on that choice.
 
-New learners subclass :class:`TabularLearner` and register in :data:`LEARNERS`.
+New learners subclass :class:`TabularLearner` and register in :data:`LEARNERS`. The registry
+also holds the learners over the raw observation (``linear``, :mod:`dfrl.robots.linear`;
+``dqn``, :mod:`dfrl.robots.dqn`; base :class:`dfrl.robots.approx.FunctionLearner`), which
+have no table; :func:`learner_kind` tells the two apart.
 """
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from enum import Enum
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
+from dfrl.robots.approx import FunctionLearner
+from dfrl.robots.dqn import DQN
+from dfrl.robots.linear import LinearQ
 
-# -- pure maths ----------------------------------------------------------------------------
-def q_learning_target(reward: float, next_q_row: np.ndarray, gamma: float, terminal: bool) -> float:
-    """Q-learning target ``r + gamma * max_a' Q(s', a')`` (``r`` when terminal).
-
-    Parameters
-    ----------
-    reward : float
-    next_q_row : np.ndarray, shape (n_actions,)
-        ``Q(s', .)``.
-    gamma : float
-        Discount in ``[0, 1]``.
-    terminal : bool
-        No bootstrap after a terminal transition.
-    """
-    if terminal:
-        return float(reward)
-    return float(reward + gamma * max(next_q_row.tolist()))
-
-
-def sarsa_target(reward: float, next_q: float, gamma: float, terminal: bool) -> float:
-    """SARSA target ``r + gamma * Q(s', a')`` for the action ``a'`` actually chosen."""
-    if terminal:
-        return float(reward)
-    return float(reward + gamma * next_q)
-
-
-def td_update(q_sa: float, target: float, alpha: float) -> float:
-    """Move ``q_sa`` towards ``target`` by a step ``alpha``: ``q + alpha * (target - q)``."""
-    return float(q_sa + alpha * (target - q_sa))
-
-
-def greedy_action(q_row: np.ndarray, rng: np.random.Generator | None = None) -> int:
-    """An action of highest value; ties broken uniformly with ``rng`` (lowest index without).
-
-    Parameters
-    ----------
-    q_row : np.ndarray, shape (n_actions,)
-    rng : np.random.Generator, optional
-    """
-    row = q_row.tolist()  # plain floats: faster than numpy for a handful of actions
-    top = max(row)
-    best = [i for i, v in enumerate(row) if v == top]
-    if rng is None or len(best) == 1:
-        return best[0]
-    return best[int(rng.integers(len(best)))]
-
-
-def epsilon_greedy(q_row: np.ndarray, epsilon: float, rng: np.random.Generator) -> int:
-    """With probability ``epsilon`` a uniform random action, else a greedy one.
-
-    Parameters
-    ----------
-    q_row : np.ndarray, shape (n_actions,)
-    epsilon : float
-        Exploration probability in ``[0, 1]``.
-    rng : np.random.Generator
-    """
-    if epsilon > 0.0 and rng.random() < epsilon:
-        return int(rng.integers(q_row.shape[0]))
-    return greedy_action(q_row, rng)
-
-
-class ScheduleKind(str, Enum):
-    """Shape of the exploration schedule."""
-
-    CONSTANT = "constant"  #: epsilon = start
-    LINEAR = "linear"  #: start -> end linearly over ``decay_steps``, then end
-    EXPONENTIAL = "exponential"  #: end + (start - end) * exp(-t / decay_steps)
-
-
-@dataclass(frozen=True)
-class EpsilonSchedule:
-    """Exploration probability as a function of the learner's update count ``t``."""
-
-    kind: ScheduleKind = ScheduleKind.LINEAR
-    start: float = 0.3
-    end: float = 0.02
-    decay_steps: int = 4000
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "kind", ScheduleKind(self.kind))
-        if not (0.0 <= self.end <= 1.0 and 0.0 <= self.start <= 1.0):
-            raise ValueError("epsilon start and end must be in [0, 1]")
-        if self.decay_steps <= 0:
-            raise ValueError("decay_steps must be positive")
-
-    def value(self, t: int) -> float:
-        """Epsilon after ``t`` updates."""
-        if self.kind is ScheduleKind.CONSTANT:
-            return self.start
-        if self.kind is ScheduleKind.LINEAR:
-            frac = min(t / self.decay_steps, 1.0)
-            return self.start + frac * (self.end - self.start)
-        return self.end + (self.start - self.end) * float(np.exp(-t / self.decay_steps))
+# The pure maths live in dfrl.robots.td (shared with the function-approximation learners);
+# they are imported here under their old home, where callers and tests find them.
+from dfrl.robots.td import (EpsilonSchedule, ScheduleKind, epsilon_greedy, greedy_action,
+                            q_learning_target, sarsa_target, td_update)
 
 
 @dataclass(frozen=True)
 class LearnerParams:
-    """Hyper-parameters shared by the tabular learners.
+    """Hyper-parameters shared by the learners.
 
     Attributes
     ----------
     alpha : float
-        Learning rate in ``(0, 1]``.
+        Learning rate in ``(0, 1]``: the fraction of the TD error by which an update moves
+        ``Q(s, a)`` (tabular and ``linear``; ``dqn`` uses its own Adam step size).
     gamma : float
-        Discount factor in ``[0, 1)``.
+        Discount factor in ``[0, 1)`` (every learner).
     epsilon : EpsilonSchedule
-        Exploration schedule.
+        Exploration schedule (every learner).
     initial_q : float
-        Initial value of every table entry.
+        Initial value of every table entry (``linear``: of every action value; unused by
+        ``dqn``).
     """
 
     alpha: float = 0.2
@@ -177,6 +94,8 @@ class TabularLearner(ABC):
 
     #: Registry name.
     name: ClassVar[str] = ""
+    #: What :attr:`dfrl.robots.training.Trainer.learner_kind` reports.
+    kind: ClassVar[str] = "tabular"
 
     def __init__(self, n_states: int, n_actions: int, params: LearnerParams,
                  rng: np.random.Generator) -> None:
@@ -236,16 +155,20 @@ class Sarsa(TabularLearner):
         return next_action
 
 
-#: Registered learners by name; the CLI offers its keys as choices.
-LEARNERS: dict[str, type[TabularLearner]] = {
+#: Registered learners by name; the CLI offers its keys as choices and configs name them in
+#: ``"algo"``. Tabular learners (``kind == "tabular"``) learn on the discretised state;
+#: function-approximation learners (``kind == "function"``, :mod:`dfrl.robots.approx`) on the
+#: raw observation, and have no Q-table: use :func:`is_tabular` before reaching for one.
+LEARNERS: dict[str, type[TabularLearner] | type[FunctionLearner]] = {
     QLearning.name: QLearning,
     Sarsa.name: Sarsa,
+    LinearQ.name: LinearQ,
+    DQN.name: DQN,
 }
 
 
-def make_learner(name: str, n_states: int, n_actions: int, params: LearnerParams,
-                 rng: np.random.Generator) -> TabularLearner:
-    """Instantiate a registered learner.
+def learner_class(name: str) -> type[TabularLearner] | type[FunctionLearner]:
+    """The registered class of ``name``.
 
     Raises
     ------
@@ -253,7 +176,55 @@ def make_learner(name: str, n_states: int, n_actions: int, params: LearnerParams
         Unknown learner name (the message lists the registered ones).
     """
     try:
-        cls = LEARNERS[name]
+        return LEARNERS[name]
     except KeyError:
         raise KeyError(f"unknown learner '{name}'; registered: {sorted(LEARNERS)}") from None
-    return cls(n_states, n_actions, params, rng)
+
+
+def learner_kind(name: str) -> str:
+    """``"tabular"`` or ``"function"`` for a registered learner.
+
+    Raises
+    ------
+    KeyError
+        Unknown learner name (the message lists the registered ones).
+    """
+    return learner_class(name).kind
+
+
+def is_tabular(name: str) -> bool:
+    """True for a registered learner that keeps a Q-table (see :func:`learner_kind`)."""
+    return learner_kind(name) == "tabular"
+
+
+def make_learner(name: str, n_inputs: int, n_actions: int, params: LearnerParams,
+                 rng: np.random.Generator, **options: Any) -> TabularLearner | FunctionLearner:
+    """Instantiate a registered learner.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`LEARNERS`.
+    n_inputs : int
+        Number of states for a tabular learner, length of the observation otherwise.
+    n_actions : int
+    params : LearnerParams
+    rng : np.random.Generator
+    **options
+        Passed to a function-approximation learner (``config=``: a
+        :class:`dfrl.robots.features.TileCoding` for ``linear``, a
+        :class:`dfrl.robots.dqn.DQNConfig` for ``dqn``); a tabular learner takes none.
+
+    Raises
+    ------
+    KeyError
+        Unknown learner name (the message lists the registered ones).
+    TypeError
+        Options given to a tabular learner.
+    """
+    cls = learner_class(name)
+    if issubclass(cls, TabularLearner):
+        if options:
+            raise TypeError(f"tabular learner '{name}' takes no options, got {sorted(options)}")
+        return cls(n_inputs, n_actions, params, rng)
+    return cls(n_inputs, n_actions, params, rng, **options)

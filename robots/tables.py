@@ -135,3 +135,89 @@ def load_table(path: str | Path) -> LoadedTable:
         if visits.shape != q.shape:
             raise ValueError(f"{vis}: shape {visits.shape} differs from the table's {q.shape}")
     return LoadedTable(q=q, meta=meta, visits=visits)
+
+
+# -- parameter files (function-approximation learners) -------------------------------------
+PARAMS_FORMAT = "dfrl-params/1"
+
+
+@dataclass(frozen=True)
+class ParamsMeta:
+    """What a saved parameter vector means (``linear``, ``dqn``).
+
+    Attributes
+    ----------
+    algorithm : str
+        Learner name.
+    arena : str
+    seed : int
+    iterations : int
+        Control steps of learning behind the parameters.
+    actions : list[str]
+        Action names, index-aligned with the model's outputs.
+    layout : list of [name, shape]
+        The arrays the flat vector concatenates, in order, each in C order.
+    model : dict
+        The learner's own configuration (feature map or network), as in ``config.json``.
+    extra : dict
+    """
+
+    algorithm: str
+    arena: str
+    seed: int
+    iterations: int
+    actions: list[str]
+    layout: list[tuple[str, tuple[int, ...]]]
+    model: dict[str, Any]
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def save_params(path: str | Path, vec: np.ndarray, meta: ParamsMeta) -> Path:
+    """Write ``NAME.npy`` (the flat float64 vector) and ``NAME.json`` (format, size, meta).
+
+    Raises
+    ------
+    ValueError
+        The vector does not fit ``meta.layout`` or has a non-finite entry.
+    """
+    from dfrl.robots.approx import validate_params
+
+    layout = [(str(n), tuple(int(d) for d in s)) for n, s in meta.layout]
+    arr = validate_params(vec, layout)
+    npy, js, _ = _paths(path)
+    npy.parent.mkdir(parents=True, exist_ok=True)
+    np.save(npy, arr)
+    doc = {"format": PARAMS_FORMAT, "size": int(arr.shape[0]), "dtype": "float64",
+           **asdict(meta), "layout": [[n, list(s)] for n, s in layout]}
+    js.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    return npy
+
+
+@dataclass(frozen=True)
+class LoadedParams:
+    """A parameter vector read back by :func:`load_params`."""
+
+    params: np.ndarray
+    meta: ParamsMeta
+
+
+def load_params(path: str | Path) -> LoadedParams:
+    """Read a parameter vector and its sidecar; check format, layout and values.
+
+    Raises
+    ------
+    ValueError
+        Not a parameter file, or the vector does not fit its layout.
+    """
+    from dfrl.robots.approx import validate_params
+
+    npy, js, _ = _paths(path)
+    doc = json.loads(js.read_text(encoding="utf-8"))
+    if doc.get("format") != PARAMS_FORMAT:
+        raise ValueError(f"{js}: format {doc.get('format')!r}, expected {PARAMS_FORMAT!r}")
+    layout = [(str(n), tuple(int(d) for d in s)) for n, s in doc["layout"]]
+    vec = validate_params(np.load(npy, allow_pickle=False), layout)
+    meta = ParamsMeta(algorithm=doc["algorithm"], arena=doc["arena"], seed=doc["seed"],
+                      iterations=doc["iterations"], actions=list(doc["actions"]), layout=layout,
+                      model=dict(doc.get("model", {})), extra=dict(doc.get("extra", {})))
+    return LoadedParams(params=vec, meta=meta)

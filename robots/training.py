@@ -1,7 +1,11 @@
 """A steppable training loop: one :meth:`Trainer.step` = one 64 ms control iteration.
 
-The federated layer drives :class:`Trainer` from its own loop and reads/replaces the Q-table
-between steps (``q_table``, ``set_q_table``, ``visits``). ``step()`` never blocks or prints.
+The federated layer drives :class:`Trainer` from its own loop and reads/replaces what the robot
+learnt between steps. Every learner offers the flat parameter vector (``params``,
+``param_layout``, ``set_params``, ``samples``); tabular learners also the Q-table
+(``q_table``, ``set_q_table``, ``visits``), which the function-approximation learners
+(``linear``, ``dqn``: ``learner_kind == "function"``) do not have. ``step()`` never blocks or
+prints.
 
 Collision handling (the robots run continuously, as in the paper): a step that ends in contact
 with a wall or a block is counted, penalised, treated as terminal for the TD update (no
@@ -24,9 +28,13 @@ import numpy as np
 
 from dfrl.robots.env import EnvConfig, EPuckEnv, RewardConfig
 from dfrl.robots.epuck import EPuckConfig
-from dfrl.robots.learners import EpsilonSchedule, LearnerParams, TabularLearner, make_learner
+from dfrl.robots.approx import FunctionLearner, Layout, validate_params
+from dfrl.robots.dqn import DQNConfig
+from dfrl.robots.features import TileCoding
+from dfrl.robots.learners import (EpsilonSchedule, LearnerParams, TabularLearner, learner_class,
+                                  make_learner)
 from dfrl.robots.state import DiscretisationConfig, Discretiser
-from dfrl.robots.tables import TableMeta, save_table
+from dfrl.robots.tables import ParamsMeta, TableMeta, save_params, save_table
 from dfrl.robots.world import SimConfig
 
 #: Training budget (iterations) of the 5-robot demo: learning clearly shows by then.
@@ -53,6 +61,12 @@ class TrainerConfig(EnvConfig):
         Budget used by :func:`train` (a :class:`Trainer` can step beyond it).
     learner : LearnerParams
     discretisation : DiscretisationConfig
+        The tabular learners' states (the function learners see the raw observation; the
+        discrete state is still reported in the metrics).
+    features : TileCoding
+        The ``linear`` learner's feature map.
+    dqn : DQNConfig
+        The ``dqn`` learner's network, replay and optimiser.
     sim : SimConfig
         Control/physics rates, solver, robot.
     actions : ActionSet
@@ -67,6 +81,8 @@ class TrainerConfig(EnvConfig):
     iterations: int = DEMO_ITERATIONS
     learner: LearnerParams = field(default_factory=LearnerParams)
     discretisation: DiscretisationConfig = field(default_factory=DiscretisationConfig)
+    features: TileCoding = field(default_factory=TileCoding)
+    dqn: DQNConfig = field(default_factory=DQNConfig)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -99,6 +115,8 @@ class TrainerConfig(EnvConfig):
         return cls(
             learner=LearnerParams(**learner),
             discretisation=DiscretisationConfig(**d.pop("discretisation", {})),
+            features=TileCoding(**d.pop("features", {})),
+            dqn=DQNConfig(**d.pop("dqn", {})),
             sim=SimConfig(**sim),
             reward=RewardConfig(**d.pop("reward", {})),
             **d,
@@ -128,7 +146,8 @@ class StepMetrics:
     iteration : int
         1-based count of control steps so far.
     q_sum : float
-        Sum of all Q-table entries after the update.
+        Sum of all Q-table entries after the update (function-approximation learners: sum of
+        the parameter vector, a drift indicator only).
     cumulative_reward : float
         Sum of rewards over iterations ``1 .. iteration``.
     collisions : int
@@ -142,7 +161,8 @@ class StepMetrics:
     epsilon : float
         Exploration probability used for the next action.
     state, action : int
-        State and action of the updated entry.
+        State and action of the updated entry (function learners: the discretised state of
+        the observation they learnt from, for the record).
     x, y : float
         Robot position after the step (m).
     """
@@ -168,6 +188,18 @@ class StepMetrics:
         return tuple(getattr(self, f) for f in self.FIELDS)
 
 
+def build_learner(config: TrainerConfig, n_states: int, obs_dim: int, n_actions: int,
+                  rng: np.random.Generator) -> TabularLearner | FunctionLearner:
+    """The learner ``config.algo`` names: tabular over ``n_states`` states, or over the
+    ``obs_dim`` raw readings with its own configuration (the ``TrainerConfig`` field its class
+    names in ``config_field``)."""
+    cls = learner_class(config.algo)
+    if issubclass(cls, TabularLearner):
+        return make_learner(config.algo, n_states, n_actions, config.learner, rng)
+    options = {"config": getattr(config, cls.config_field)} if cls.config_field else {}
+    return make_learner(config.algo, obs_dim, n_actions, config.learner, rng, **options)
+
+
 class Trainer:
     """One robot learning in one arena, advanced one control step at a time.
 
@@ -179,7 +211,7 @@ class Trainer:
     ----------
     env : EPuckEnv
     discretiser : Discretiser
-    learner : TabularLearner
+    learner : TabularLearner or FunctionLearner
     """
 
     def __init__(self, config: TrainerConfig | None = None) -> None:
@@ -189,22 +221,83 @@ class Trainer:
         self.env = EPuckEnv(arena=c.arena, config=c.env_config())
         self.discretiser = Discretiser(c.discretisation)
         n_actions = int(self.env.action_space.n)
-        self.learner: TabularLearner = make_learner(
-            c.algo, self.discretiser.n_states, n_actions, c.learner, np.random.default_rng(learner_seq)
-        )
+        self.learner: TabularLearner | FunctionLearner = build_learner(
+            c, self.discretiser.n_states, int(self.env.observation_space.shape[0]), n_actions,
+            np.random.default_rng(learner_seq))
+        self._tabular = isinstance(self.learner, TabularLearner)
         obs, _ = self.env.reset(seed=int(env_seq.generate_state(1)[0]))
         self._state = self.discretiser(obs)
-        self._action = self.learner.select_action(self._state)
+        self._obs = np.array(obs, dtype=np.float64)
+        self._action = self.learner.select_action(self._state if self._tabular else self._obs)
         self.iteration = 0
         self.cumulative_reward = 0.0
         self.collisions = 0
         self.respawns = 0
 
-    # -- the table, for the federated layer --------------------------------------------------
+    # -- what was learnt, for the federated layer ---------------------------------------------
+    @property
+    def learner_kind(self) -> str:
+        """``"tabular"`` (a Q-table over discrete states) or ``"function"`` (a model over the
+        raw observation, parameters only)."""
+        return self.learner.kind
+
+    @property
+    def params(self) -> np.ndarray:
+        """What the learner learnt as one flat float64 vector (a new copy).
+
+        Tabular: the Q-table in C order (layout ``[("q", (n_states, n_actions))]``);
+        function learners: their arrays in :attr:`param_layout` order.
+        """
+        if self._tabular:
+            return self.learner.q.ravel().copy()
+        return self.learner.get_params()
+
+    @property
+    def param_layout(self) -> Layout:
+        """Names and shapes of the arrays :attr:`params` concatenates, in order (C order each)."""
+        if self._tabular:
+            return [("q", tuple(self.learner.q.shape))]
+        return self.learner.param_layout
+
+    def set_params(self, vec: np.ndarray) -> None:
+        """Replace what the learner learnt from a flat vector of :attr:`param_layout`.
+
+        Tabular: the Q-table (as :meth:`set_q_table`). ``dqn``: the online and the target
+        network (its Adam moments and replay buffer stay). Between two :meth:`step` calls.
+
+        Raises
+        ------
+        ValueError
+            Not 1-D, wrong length, or a non-finite entry.
+        """
+        if self._tabular:
+            q = validate_params(vec, self.param_layout)
+            self.learner.set_table(q.reshape(self.learner.q.shape))
+        else:
+            self.learner.set_params(vec)
+
+    @property
+    def samples(self) -> int:
+        """Environment transitions learnt from so far (the learner's update clock; the
+        weight of this robot in a sample-weighted average)."""
+        return int(self.learner.t)
+
+    def _tabular_only(self, what: str) -> TabularLearner:
+        if not self._tabular:
+            raise TypeError(f"{what}: learner '{self.config.algo}' is a function-approximation "
+                            f"learner without a Q-table; use params / set_params")
+        return self.learner  # type: ignore[return-value]
+
     @property
     def q_table(self) -> np.ndarray:
-        """The live Q-table, float64, shape (n_states, n_actions). Writes go straight in."""
-        return self.learner.q
+        """The live Q-table, float64, shape (n_states, n_actions). Writes go straight in.
+
+        Raises
+        ------
+        TypeError
+            A function-approximation learner (no table).
+        """
+        return self._tabular_only("q_table").q
 
     def set_q_table(self, table: np.ndarray) -> None:
         """Replace the Q-table (copied in place after checking shape and finiteness).
@@ -217,13 +310,21 @@ class Trainer:
         ------
         ValueError
             Wrong shape or a non-finite entry.
+        TypeError
+            A function-approximation learner (no table).
         """
-        self.learner.set_table(table)
+        self._tabular_only("set_q_table").set_table(table)
 
     @property
     def visits(self) -> np.ndarray:
-        """Update counts per state-action pair, int64, shape (n_states, n_actions)."""
-        return self.learner.visits
+        """Update counts per state-action pair, int64, shape (n_states, n_actions).
+
+        Raises
+        ------
+        TypeError
+            A function-approximation learner (no table).
+        """
+        return self._tabular_only("visits").visits
 
     @property
     def n_states(self) -> int:
@@ -252,24 +353,52 @@ class Trainer:
         state, action = self._state, self._action
         obs, reward, terminated, truncated, info = env.step(action)
         next_state = self.discretiser(obs)
-        next_action = self.learner.learn(state, action, reward, next_state, terminated)
+        if self._tabular:
+            next_action = self.learner.learn(state, action, reward, next_state, terminated)
+        else:
+            next_obs = np.array(obs, dtype=np.float64)
+            next_action = self.learner.learn(self._obs, action, reward, next_obs, terminated)
         if terminated or truncated:
             obs, _ = env.reset()
             next_state = self.discretiser(obs)
-            next_action = self.learner.select_action(next_state)
+            next_action = self.learner.select_action(
+                next_state if self._tabular else np.array(obs, dtype=np.float64))
             self.respawns += 1
         self._state, self._action = next_state, next_action
+        if not self._tabular:
+            self._obs = np.array(obs, dtype=np.float64)
         self.iteration += 1
         self.cumulative_reward += reward
         collided = bool(info["collision"])
         self.collisions += collided
         x, y, _ = info["pose"]
         return StepMetrics(
-            iteration=self.iteration, q_sum=float(self.learner.q.sum()),
+            iteration=self.iteration, q_sum=self._q_sum(),
             cumulative_reward=self.cumulative_reward, collisions=self.collisions, reward=reward,
             collided=collided, respawns=self.respawns, epsilon=self.learner.epsilon,
             state=state, action=action, x=x, y=y,
         )
+
+    def _q_sum(self) -> float:
+        if self._tabular:
+            return float(self.learner.q.sum())
+        return float(self.learner.get_params().sum())
+
+    def greedy_action(self, obs: np.ndarray) -> int:
+        """The learnt greedy action for an observation (ties: lowest index), no exploration."""
+        if self._tabular:
+            from dfrl.robots.td import greedy_action
+            return greedy_action(self.learner.q[self.discretiser(obs)])
+        return self.learner.greedy_action(np.asarray(obs, dtype=np.float64))
+
+    def params_meta(self, **extra: Any) -> ParamsMeta:
+        """Sidecar description of the current parameter vector."""
+        c = self.config
+        field_name = getattr(self.learner, "config_field", None)
+        model = _to_jsonable(getattr(c, field_name)) if field_name else {}
+        return ParamsMeta(algorithm=c.algo, arena=self.env.arena.name, seed=c.seed,
+                          iterations=self.iteration, actions=self.action_names,
+                          layout=self.param_layout, model=model, extra=dict(extra))
 
     def table_meta(self, **extra: Any) -> TableMeta:
         """Sidecar description of the current table."""
@@ -282,6 +411,10 @@ class Trainer:
     def save_table(self, path: str | Path) -> Path:
         """Save the table, its sidecar and the visit counts (see :mod:`dfrl.robots.tables`)."""
         return save_table(path, self.q_table, self.table_meta(), visits=self.visits)
+
+    def save_params(self, path: str | Path, **extra: Any) -> Path:
+        """Save :attr:`params` and its sidecar (:func:`dfrl.robots.tables.save_params`)."""
+        return save_params(path, self.params, self.params_meta(**extra))
 
     def close(self) -> None:
         """Release the simulation."""
@@ -302,22 +435,28 @@ class TrainingResult:
     ----------
     metrics : np.ndarray, structured, shape (iterations,)
         One record per iteration with the fields of :class:`StepMetrics`.
-    q_table : np.ndarray, shape (n_states, n_actions)
-    visits : np.ndarray, shape (n_states, n_actions)
+    q_table : np.ndarray, shape (n_states, n_actions), or None
+        None for a function-approximation learner.
+    visits : np.ndarray, shape (n_states, n_actions), or None
+        None for a function-approximation learner.
     wall_time : float
         Seconds spent stepping.
     output_dir : Path or None
     snapshots : dict of int to np.ndarray
-        Copies of the Q-table after every ``snapshot_every`` iterations (and the last one),
-        by iteration; empty without ``snapshot_every``.
+        Copies of the Q-table (function learners: of the parameter vector) after every
+        ``snapshot_every`` iterations (and the last one), by iteration; empty without
+        ``snapshot_every``.
+    params : np.ndarray, shape (n_params,)
+        The final :attr:`Trainer.params` (tabular: the table, flattened).
     """
 
     metrics: np.ndarray
-    q_table: np.ndarray
-    visits: np.ndarray
+    q_table: np.ndarray | None
+    visits: np.ndarray | None
     wall_time: float
     output_dir: Path | None
     snapshots: dict[int, np.ndarray] = field(default_factory=dict)
+    params: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 _METRIC_DTYPE = np.dtype([
@@ -337,8 +476,10 @@ def train(
     """Run ``config.iterations`` steps; optionally write the results into ``output_dir``.
 
     Writes ``config.json``, ``metrics.csv`` (one row per iteration, columns of
-    :class:`StepMetrics`), ``q_table.npy`` + ``q_table.json`` + ``q_table.visits.npy``, and
-    with ``snapshot_every`` also ``snapshots.npz`` (one table per snapshot, key ``it<N>``).
+    :class:`StepMetrics`), ``q_table.npy`` + ``q_table.json`` + ``q_table.visits.npy``
+    (function-approximation learners: ``params.npy`` + ``params.json`` instead,
+    :func:`dfrl.robots.tables.save_params`), and with ``snapshot_every`` also
+    ``snapshots.npz`` (one table or parameter vector per snapshot, key ``it<N>``).
 
     Parameters
     ----------
@@ -354,29 +495,34 @@ def train(
     snapshots: dict[int, np.ndarray] = {}
     rows = np.empty(config.iterations, dtype=_METRIC_DTYPE)
     with Trainer(config) as trainer:
+        tabular = trainer.learner_kind == "tabular"
         t0 = time.perf_counter()
         chunk = max(1, config.iterations // 200)
         for i in range(config.iterations):
             rows[i] = trainer.step().as_row()
             if snapshot_every and ((i + 1) % snapshot_every == 0 or i + 1 == config.iterations):
-                snapshots[i + 1] = trainer.q_table.copy()
+                snapshots[i + 1] = trainer.q_table.copy() if tabular else trainer.params
             if progress is not None and (i + 1) % chunk == 0:
                 progress(chunk)
         wall = time.perf_counter() - t0
         if progress is not None and config.iterations % chunk:
             progress(config.iterations % chunk)
-        result = TrainingResult(metrics=rows, q_table=trainer.q_table.copy(),
-                                visits=trainer.visits.copy(), wall_time=wall,
+        result = TrainingResult(metrics=rows,
+                                q_table=trainer.q_table.copy() if tabular else None,
+                                visits=trainer.visits.copy() if tabular else None, wall_time=wall,
                                 output_dir=Path(output_dir) if output_dir is not None else None,
-                                snapshots=snapshots)
+                                snapshots=snapshots, params=trainer.params)
         if output_dir is not None:
             out = Path(output_dir)
             out.mkdir(parents=True, exist_ok=True)
             (out / "config.json").write_text(json.dumps(config.to_dict(), indent=2) + "\n",
                                              encoding="utf-8")
             write_metrics_csv(out / "metrics.csv", rows)
-            save_table(out / "q_table", trainer.q_table,
-                       trainer.table_meta(wall_time_s=round(wall, 3)), visits=trainer.visits)
+            if tabular:
+                save_table(out / "q_table", trainer.q_table,
+                           trainer.table_meta(wall_time_s=round(wall, 3)), visits=trainer.visits)
+            else:
+                trainer.save_params(out / "params", wall_time_s=round(wall, 3))
             if snapshots:
                 np.savez(out / "snapshots.npz", **{f"it{k}": v for k, v in snapshots.items()})
     return result

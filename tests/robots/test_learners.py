@@ -12,10 +12,19 @@ from dfrl.robots.learners import (LEARNERS, EpsilonSchedule, LearnerParams, QLea
 from dfrl.robots.tables import TableMeta, load_table, save_table
 
 
-def test_registry_has_both_learners() -> None:
-    assert LEARNERS == {"qlearning": QLearning, "sarsa": Sarsa}
+def test_registry_has_the_tabular_and_the_function_learners() -> None:
+    from dfrl.robots.dqn import DQN
+    from dfrl.robots.learners import is_tabular, learner_kind
+    from dfrl.robots.linear import LinearQ
+
+    assert LEARNERS == {"qlearning": QLearning, "sarsa": Sarsa, "linear": LinearQ, "dqn": DQN}
+    assert [learner_kind(n) for n in ("qlearning", "sarsa", "linear", "dqn")] == [
+        "tabular", "tabular", "function", "function"]
+    assert is_tabular("sarsa") and not is_tabular("dqn")
     with pytest.raises(KeyError, match="registered"):
-        make_learner("dqn", 2, 2, LearnerParams(), np.random.default_rng(0))
+        make_learner("ppo", 2, 2, LearnerParams(), np.random.default_rng(0))
+    with pytest.raises(TypeError, match="no options"):
+        make_learner("qlearning", 2, 2, LearnerParams(), np.random.default_rng(0), config=None)
 
 
 def test_targets_and_update_by_hand() -> None:

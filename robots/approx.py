@@ -1,0 +1,164 @@
+"""Learners over the raw observation: the base class and the flat parameter vector.
+
+A function-approximation learner computes action values ``Q(x, .)`` from the observation ``x``
+(the 8 IR proximities of :class:`dfrl.robots.env.EPuckEnv`, float64, shape (obs_dim,)) with a
+model whose parameters are a few named arrays. It is driven like a tabular learner, with the
+observation in place of the discrete state:
+
+* ``select_action(x) -> action`` (epsilon-greedy on ``q_values(x)``);
+* ``learn(x, action, reward, next_x, terminal) -> next_action``.
+
+For the federated layer its parameters are one flat float64 vector, the arrays of
+``param_layout`` (name, shape) concatenated in order, each in C order (:func:`flatten`,
+:func:`unflatten`); ``set_params`` validates length and finiteness (:func:`validate_params`).
+
+New learners subclass :class:`FunctionLearner` and register in
+:data:`dfrl.robots.learners.LEARNERS`.
+"""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+
+from dfrl.robots.td import epsilon_greedy, greedy_action
+
+if TYPE_CHECKING:
+    from dfrl.robots.learners import LearnerParams
+
+#: Names and shapes of a model's arrays, in the order of the flat vector.
+Layout = list[tuple[str, tuple[int, ...]]]
+
+
+def layout_size(layout: Layout) -> int:
+    """Number of floats in a flat vector of ``layout``."""
+    return int(sum(int(np.prod(shape, dtype=np.int64)) for _, shape in layout))
+
+
+def flatten(arrays: list[np.ndarray]) -> np.ndarray:
+    """Concatenate arrays (each in C order) into one new float64 vector."""
+    if not arrays:
+        return np.zeros(0, dtype=np.float64)
+    return np.concatenate([np.asarray(a, dtype=np.float64).ravel(order="C") for a in arrays])
+
+
+def unflatten(vec: np.ndarray, layout: Layout) -> list[np.ndarray]:
+    """Split a flat vector into new float64 arrays of the layout's shapes (inverse of :func:`flatten`).
+
+    Raises
+    ------
+    ValueError
+        The vector's length differs from the layout's size.
+    """
+    vec = np.asarray(vec, dtype=np.float64)
+    if vec.ndim != 1 or vec.shape[0] != layout_size(layout):
+        raise ValueError(f"parameter vector of shape {vec.shape} does not fit the layout "
+                         f"({layout_size(layout)} floats: {layout})")
+    out, start = [], 0
+    for _, shape in layout:
+        n = int(np.prod(shape, dtype=np.int64))
+        out.append(vec[start:start + n].reshape(shape).copy())
+        start += n
+    return out
+
+
+def validate_params(vec: np.ndarray, layout: Layout) -> np.ndarray:
+    """Check a flat parameter vector against a layout; return it as a new float64 array.
+
+    Raises
+    ------
+    ValueError
+        Not 1-D, wrong length, or a non-finite entry.
+    """
+    arr = np.array(vec, dtype=np.float64, copy=True)
+    size = layout_size(layout)
+    if arr.ndim != 1 or arr.shape[0] != size:
+        raise ValueError(f"parameter vector of shape {arr.shape} does not fit the layout "
+                         f"({size} floats)")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"parameter vector has a non-finite entry at index "
+                         f"{int(np.argmax(~np.isfinite(arr)))}")
+    return arr
+
+
+class FunctionLearner(ABC):
+    """Base of the learners over the raw observation.
+
+    Parameters
+    ----------
+    obs_dim : int
+        Length of the observation vector.
+    n_actions : int
+    params : LearnerParams
+        ``gamma`` and ``epsilon`` are used by every subclass; what ``alpha`` means is up to it.
+    rng : np.random.Generator
+        Source of all of the learner's randomness (initial weights, exploration, replay).
+
+    Attributes
+    ----------
+    t : int
+        Transitions learnt from so far (the epsilon schedule's clock).
+    greedy : bool
+        When True, :meth:`select_action` never explores.
+    """
+
+    #: Registry name.
+    name: ClassVar[str] = ""
+    #: What :attr:`dfrl.robots.training.Trainer.learner_kind` reports.
+    kind: ClassVar[str] = "function"
+    #: The :class:`dfrl.robots.training.TrainerConfig` field passed as the ``config`` keyword
+    #: (the learner's own hyper-parameters), or None.
+    config_field: ClassVar[str | None] = None
+
+    def __init__(self, obs_dim: int, n_actions: int, params: "LearnerParams",
+                 rng: np.random.Generator) -> None:
+        if obs_dim < 1 or n_actions < 1:
+            raise ValueError("obs_dim and n_actions must be positive")
+        self.obs_dim = obs_dim
+        self.n_actions = n_actions
+        self.params = params
+        self.rng = rng
+        self.t = 0
+        self.greedy = False
+
+    @property
+    def epsilon(self) -> float:
+        """Current exploration probability."""
+        return 0.0 if self.greedy else self.params.epsilon.value(self.t)
+
+    @abstractmethod
+    def q_values(self, obs: np.ndarray) -> np.ndarray:
+        """Action values of one observation, float64, shape (n_actions,)."""
+
+    def select_action(self, obs: np.ndarray) -> int:
+        """Epsilon-greedy action for ``obs``."""
+        return epsilon_greedy(self.q_values(obs), self.epsilon, self.rng)
+
+    def greedy_action(self, obs: np.ndarray) -> int:
+        """A greedy action for ``obs`` (lowest index on ties), no randomness used."""
+        return greedy_action(self.q_values(obs))
+
+    @abstractmethod
+    def learn(self, obs: np.ndarray, action: int, reward: float, next_obs: np.ndarray,
+              terminal: bool) -> int:
+        """Learn from one transition and return the next action (for ``next_obs``)."""
+
+    @property
+    @abstractmethod
+    def param_layout(self) -> Layout:
+        """Names and shapes of the arrays in :meth:`get_params` order."""
+
+    @abstractmethod
+    def get_params(self) -> np.ndarray:
+        """The parameters as one new flat float64 vector (see the module doc)."""
+
+    @abstractmethod
+    def set_params(self, vec: np.ndarray) -> None:
+        """Replace the parameters from a flat vector.
+
+        Raises
+        ------
+        ValueError
+            Wrong length or a non-finite entry.
+        """
