@@ -36,6 +36,7 @@ from dfrl.experiments.driver.results.plots import plot_experiment
 from dfrl.experiments.driver.results.rounds import read_shares, write_rounds_csv
 from dfrl.experiments.driver.results.summary import Results, write_summary
 from dfrl.experiments.driver.results.tables import final_tables
+from dfrl.experiments.provenance import write_provenance
 from dfrl.experiments.tls_folder import check_node_dir
 from dfrl.experiments.tokens import SECRET_FILE, new_secret, write_secret_file
 
@@ -112,6 +113,7 @@ class Launcher:
         # the one file of the folder that holds the token (mode 0600): for dfrl join/inject
         write_secret_file(self._out / SECRET_FILE, [c.token])
         write_json(self._out / "config.json", c.public_dict())
+        write_provenance(self._out)         # versions, commit, host, command line
         return c
 
     def _run(self) -> Results:

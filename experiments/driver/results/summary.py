@@ -11,6 +11,7 @@ from dfrl.experiments.driver.results.faults import Faults
 from dfrl.experiments.driver.results.metrics import read_metrics
 from dfrl.experiments.driver.results.rounds import count_equal
 from dfrl.experiments.driver.results.tables import table_sum
+from dfrl.experiments.provenance import describe, read_provenance
 
 
 @dataclass
@@ -67,7 +68,11 @@ def write_summary(r: Results) -> Path:
              f"- wall time: {r.wall_time_s:.1f} s",
              f"- mode: {c.mode.value}, real-time factor: {c.rtf or 'none (flat out)'}",
              f"- seed: {c.seed}; iterations {c.iterations}, respite {c.respite}, "
-             f"rounds planned {c.rounds}", ""]
+             f"rounds planned {c.rounds}"]
+    made_by = read_provenance(r.output_dir)
+    if made_by is not None:
+        lines.append(f"- produced by {describe(made_by)} (provenance.json)")
+    lines.append("")
     metrics_path = r.output_dir / "metrics.csv"
     curves = read_metrics(metrics_path) if metrics_path.is_file() else {}
     lines += ["| robot | arena | algo | iterations | final sum of Q (tables/) | cumulative reward "
