@@ -1,10 +1,13 @@
-"""``dfrl sweep`` and ``dfrl --version`` from the command line."""
+"""``dfrl sweep``, the studies' seed options, SIGTERM to ``dfrl paper`` and ``dfrl --version``
+from the command line."""
 from __future__ import annotations
 
 import json
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 import dfrl
 from dfrl.experiments.cli.studies import parse_factor
@@ -43,8 +46,6 @@ def test_sweep_command_writes_its_table(tmp_path: Path) -> None:
 def test_seed_options_are_unambiguous() -> None:
     import argparse
 
-    import pytest
-
     from dfrl.experiments.cli import build_parser
     from dfrl.experiments.cli.studies import chosen_seeds
 
@@ -70,3 +71,38 @@ def test_ambiguous_seeds_refused_by_every_study(tmp_path: Path) -> None:
         out = _dfrl(*cmd, "--seeds", "5")
         assert out.returncode == 2 and "--seeds 5 is ambiguous" in out.stderr, (cmd, out.stderr)
     assert not (tmp_path / "p").exists()                      # nothing started
+
+
+@pytest.mark.slow
+def test_sigterm_stops_the_whole_paper(tmp_path: Path) -> None:
+    import signal
+    import time
+
+    from dfrl.experiments.processes import find_swipl
+
+    if find_swipl() is None:
+        pytest.skip("needs swipl")
+    # Prepare: one seed, five federated runs one after another
+    out = tmp_path / "paper"
+    proc = subprocess.Popen([sys.executable, "-m", "dfrl", "paper", "--out", str(out), "--seed",
+                             "1", "--iterations", "3000", "--respite", "500", "--eval-points",
+                             "1", "--eval-steps", "50", "--jobs", "1"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        # Execute: SIGTERM once the first federated run has its robots up
+        first = out / "seed1" / "paper_qlearning_average" / "nodes.json"
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None and not first.is_file():
+            time.sleep(0.2)
+        assert proc.poll() is None, proc.communicate()
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=90)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    # Assert: the study stopped (not just that run), said so, and started no other run
+    assert proc.returncode == 130, stderr
+    assert "dfrl paper: stopped" in stderr and "--skip-existing" in stderr
+    assert not (out / "seed1" / "paper_qlearning_max").exists()
+    assert (out / "provenance.json").is_file()
