@@ -428,10 +428,12 @@ def real_words(t: Test) -> str:
 
 
 def control_words(t: Test) -> str:
-    """How the control fares: none, fixed by construction, passes, fails."""
-    why = t.standing()[1]
+    """How the control fares: none, too few seeds, fixed by construction, passes, fails."""
+    standing, why = t.standing()
     if not t.has_control:
         return "none"
+    if standing is Standing.CANNOT_JUDGE:
+        return f"fewer than {MIN_SEEDS} seeds"
     if "fixed by construction" in why:
         return "fixed by construction"
     return "passes" if t.control_passes else "fails"

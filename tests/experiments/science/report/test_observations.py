@@ -124,6 +124,7 @@ def test_too_few_seeds_or_no_control_cannot_judge():
         assert not two[key].is_test
     assert str(two["1b"].real[0].judgement) == "cannot judge (n = 2 < 3)"
     assert real_words(two["1b"]).startswith("holds for 0 of")
+    assert control_words(two["1b"]) == "fewer than 3 seeds"
     none = _tests(range(1, 6), control=False)
     assert "1e" not in none
     for t in none.values():
