@@ -76,6 +76,18 @@ test(agent_api_and_output) :-
                                    move_agent(a1, L)),
                (h(Me, L, stop) :- clone_agent(Me, L, _), purge_agent(Me)),
                count(a1, 0) ]).
+test(robot_params_api) :-
+    accepted([ (h(a1, _, main) :- robot_resources:hosted_robot(r1, _),
+                                   robot_resources:get_robot_params(r1, params(L, _, V), []),
+                                   robot_resources:set_robot_params(r1, params(L, V), [])) ]).
+test(dfrl_params_agent_record) :-
+    node_start(localhost:0, N, [token(7), default(false)]),
+    call_cleanup(( tmp_file(log, Log),
+                   dfrl_create(N, dfp, plan([stop(localhost, 1, r1)], 1, 0.0, Log, 5),
+                               [carries(params)]),
+                   agents:agent_export(N, dfp, R),
+                   check_agent_record(R) ),
+                 stop_all([N])).
 test(dfrl_agent_record) :-
     nb_setval(sandbox_tmp, none),
     node_start(localhost:0, N, [token(7), default(false)]),
@@ -151,6 +163,11 @@ test(refused_program_loads_nothing, [cleanup(stop_all([N]))]) :-
 test(hook_clause_alone) :-                  % no user predicate in the program
     check_program_text(hook_only,
                        "dfrl_aggregation:aggregate_step(s, A, T, B) :- sleep(0.01), A = T, B = T.").
+
+test(method_for_params_declares_it) :-       % a method that applies to parameters
+    check_program_text(params_method,
+                       "dfrl_aggregation:method_applies(trimmed, params).\n\c
+                        dfrl_aggregation:aggregate_init(trimmed, params(_, _, V), V).").
 
 test(hook_of_the_old_module_is_told_where_it_went) :-
     catch(check_program_text(old_hook,
