@@ -276,3 +276,41 @@ def evaluate_snapshots(
                          "collisions_per_1000": r.collisions_per_1000, "progress": r.progress,
                          "coverage": r.coverage, "mean_reward": r.mean_reward})
     return rows
+
+
+def learnt_vs_random(config: TrainerConfig, seed: int, steps: int, eval_seed: int,
+                     params: np.ndarray | None = None) -> dict[str, object]:
+    """Train ``config`` with ``seed`` (unless ``params`` are given), then measure its greedy
+    policy and a uniform random one from the same start and respawn poses.
+
+    Works for every learner (a table or a parameter vector); the row has the shape of
+    ``dfrl eval``'s per-seed rows: ``seed``, ``train_s``, ``greedy`` and ``random`` (the
+    :class:`EvalResult` fields).
+
+    Parameters
+    ----------
+    config : TrainerConfig
+    seed : int
+        Training seed.
+    steps : int
+        Evaluation steps per policy.
+    eval_seed : int
+    params : np.ndarray, optional
+        A function learner's parameters to evaluate instead of training.
+    """
+    import time
+
+    from dfrl.robots.training import train
+
+    cfg = config.replace(seed=seed)
+    t0 = time.perf_counter()
+    if params is None:
+        res = train(cfg)
+        table, params = res.q_table, (None if res.q_table is not None else res.params)
+    else:
+        table = None
+    train_s = time.perf_counter() - t0
+    greedy = evaluate_policy(cfg, PolicyKind.GREEDY, steps, eval_seed, q_table=table, params=params)
+    rand = evaluate_policy(cfg, PolicyKind.RANDOM, steps, eval_seed)
+    return {"seed": seed, "train_s": round(train_s, 2), "greedy": greedy.__dict__,
+            "random": rand.__dict__}

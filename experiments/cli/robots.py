@@ -6,6 +6,7 @@ Thin CLI over :mod:`dfrl.robots.training`, :mod:`dfrl.experiments.science.standa
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -18,7 +19,8 @@ from dfrl.robots.training import DEMO_ITERATIONS, TrainerConfig
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``train``, ``eval``, ``baselines`` and ``render-arenas``."""
-    p = subparsers.add_parser("train", help="train one robot standalone (Q-learning or SARSA)")
+    p = subparsers.add_parser("train", help="train one robot standalone (Q-learning, SARSA, "
+                                             "linear Q or DQN)")
     _add_config_arguments(p)
     p.add_argument("--out", type=Path, default=None,
                    help="output folder (default results/train/ARENA_ALGO_sSEED)")
@@ -37,7 +39,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--steps", type=int, default=2000,
                    help="evaluation steps per policy and seed (default: %(default)s)")
     p.add_argument("--table", type=Path, default=None,
-                   help="evaluate this saved table (q_table.npy) instead of training one per seed")
+                   help="evaluate this saved table (q_table.npy) or parameter file (params.npy, "
+                        "linear or dqn) instead of training one per seed")
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default: %(default)s)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=cmd_eval)
@@ -96,6 +99,24 @@ def _add_config_arguments(p: argparse.ArgumentParser, seed: bool = True) -> None
     g.add_argument("--epsilon-end", type=float, default=None, help=f"({d.learner.epsilon.end})")
     g.add_argument("--epsilon-decay", type=int, default=None,
                    help=f"decay steps ({d.learner.epsilon.decay_steps})")
+    g = p.add_argument_group("function-approximation learners (linear, dqn)")
+    g.add_argument("--tilings", type=int, default=None,
+                   help=f"linear: offset tilings per sensor ({d.features.tilings})")
+    g.add_argument("--tiles", type=int, default=None,
+                   help=f"linear: tiles per tiling ({d.features.tiles})")
+    g.add_argument("--hidden", type=int, nargs="+", default=None,
+                   help=f"dqn: hidden layer widths ({' '.join(map(str, d.dqn.hidden))})")
+    g.add_argument("--lr", type=float, default=None, help=f"dqn: Adam step size ({d.dqn.lr})")
+    g.add_argument("--batch-size", type=int, default=None,
+                   help=f"dqn: transitions per gradient step ({d.dqn.batch_size})")
+    g.add_argument("--buffer-size", type=int, default=None,
+                   help=f"dqn: replay capacity ({d.dqn.buffer_size})")
+    g.add_argument("--learning-starts", type=int, default=None,
+                   help=f"dqn: transitions before the first gradient step ({d.dqn.learning_starts})")
+    g.add_argument("--train-every", type=int, default=None,
+                   help=f"dqn: environment steps per gradient step ({d.dqn.train_every})")
+    g.add_argument("--target-update", type=int, default=None,
+                   help=f"dqn: gradient steps between target network copies ({d.dqn.target_update})")
     g = p.add_argument_group("state, actions, simulation")
     g.add_argument("--grouping", choices=[s.value for s in SensorGrouping], default=None,
                    help=f"sensor groups ({d.discretisation.grouping.value})")
@@ -141,6 +162,16 @@ def config_from_args(args: argparse.Namespace) -> TrainerConfig:
         learner_changes["epsilon"] = EpsilonSchedule(**{**eps.__dict__, **eps_changes})
     if learner_changes:
         top["learner"] = LearnerParams(**{**cfg.learner.__dict__, **learner_changes})
+    feats = {k: v for k, v in (("tilings", args.tilings), ("tiles", args.tiles)) if v is not None}
+    if feats:
+        top["features"] = dataclasses.replace(cfg.features, **feats)
+    net = {k: getattr(args, k) for k in ("lr", "batch_size", "buffer_size", "learning_starts",
+                                         "train_every", "target_update")
+           if getattr(args, k) is not None}
+    if args.hidden is not None:
+        net["hidden"] = tuple(args.hidden)
+    if net:
+        top["dqn"] = dataclasses.replace(cfg.dqn, **net)
     disc = {k: v for k, v in (("grouping", args.grouping), ("levels", args.levels)) if v is not None}
     if disc:
         top["discretisation"] = DiscretisationConfig(**{**cfg.discretisation.__dict__, **disc})
@@ -197,8 +228,11 @@ def cmd_train(args: argparse.Namespace) -> int:
           f"{result.wall_time:.1f} s ({rate:.0f} it/s, "
           f"{rate * cfg.sim.control_dt:.0f}x real time)")
     if last is not None:
+        from dfrl.robots.learners import is_tabular
+
+        what = "sum of Q" if is_tabular(cfg.algo) else "sum of parameters"
         print(f"collisions {int(last['collisions'])}, cumulative reward "
-              f"{float(last['cumulative_reward']):.1f}, sum of Q {float(last['q_sum']):.2f}")
+              f"{float(last['cumulative_reward']):.1f}, {what} {float(last['q_sum']):.2f}")
     print(f"results in {out}")
     return 0
 
@@ -213,6 +247,13 @@ def cmd_eval(args: argparse.Namespace) -> int:
     except (ValueError, KeyError) as exc:
         return _fail(str(exc))
     table = str(args.table) if args.table is not None else None
+    from dfrl.robots.learners import is_tabular
+    from dfrl.robots.tables import PARAMS_FORMAT
+
+    if table is not None and _sidecar_format(args.table) == PARAMS_FORMAT:
+        return _eval_function_learner(args, cfg, args.table)
+    if table is None and not is_tabular(cfg.algo):
+        return _eval_function_learner(args, cfg, None)
     if table is not None and args.grouping is None and args.levels is None:
         try:   # evaluate with the table's own discretisation, as recorded in its sidecar
             cfg = with_table_discretisation(cfg, table)
@@ -222,6 +263,11 @@ def cmd_eval(args: argparse.Namespace) -> int:
         summary = evaluate(cfg, list(args.seeds), args.steps, table, args.jobs)
     except (ValueError, OSError) as exc:  # bad table, arena or configuration
         return _fail(str(exc))
+    return _print_eval(args, cfg, summary, table)
+
+
+def _print_eval(args: argparse.Namespace, cfg: TrainerConfig, summary: Any, table: str | None) -> int:
+    """Print a ``dfrl eval`` summary (JSON with ``--json``); 0."""
     if args.json:
         print(json.dumps(summary.to_dict(), indent=2))
         return 0
@@ -238,6 +284,47 @@ def cmd_eval(args: argparse.Namespace) -> int:
           f"{summary.random_collisions_per_1000:>17.2f}")
     print(f"reduction {100 * summary.reduction:.0f}%")
     return 0
+
+
+def _sidecar_format(path: Path) -> str | None:
+    """The ``format`` of a saved table's or parameter file's JSON sidecar (None if unreadable)."""
+    js = path.with_suffix(".json") if path.suffix in (".npy", ".json") else Path(f"{path}.json")
+    try:
+        return json.loads(js.read_text(encoding="utf-8")).get("format")
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def _eval_function_learner(args: argparse.Namespace, cfg: TrainerConfig, params_file: Path | None) -> int:
+    """``dfrl eval`` for ``linear`` and ``dqn``: train per seed (or load ``params_file``), then
+    greedy vs random, reported as for the tables (one process: ``--jobs`` is not used)."""
+    from dfrl.experiments.science.standalone import EVAL_SEED_OFFSET, EvalSummary
+    from dfrl.robots.evaluation import learnt_vs_random
+    from dfrl.robots.learners import learner_class
+    from dfrl.robots.tables import load_params
+
+    params = None
+    try:
+        if params_file is not None:
+            loaded = load_params(params_file)
+            meta = loaded.meta
+            cls = learner_class(meta.algorithm)
+            field = getattr(cls, "config_field", None)
+            changes: dict[str, Any] = {"algo": meta.algorithm}
+            if field:
+                changes[field] = type(getattr(cfg, field))(**meta.model)
+            cfg, params = cfg.replace(**changes), loaded.params
+        rows = [learnt_vs_random(cfg, s, args.steps, EVAL_SEED_OFFSET + s, params)
+                for s in args.seeds]
+    except (ValueError, OSError, KeyError, TypeError) as exc:
+        return _fail(str(exc))
+    total = args.steps * len(rows)
+    g_rate = 1000.0 * sum(r["greedy"]["collisions"] for r in rows) / total
+    r_rate = 1000.0 * sum(r["random"]["collisions"] for r in rows) / total
+    summary = EvalSummary(cfg.arena, cfg.algo, cfg.iterations, list(args.seeds), args.steps,
+                          str(params_file) if params_file else None, rows, g_rate, r_rate,
+                          1.0 - g_rate / r_rate if r_rate > 0 else float("nan"))
+    return _print_eval(args, cfg, summary, str(params_file) if params_file else None)
 
 
 # -- baselines -------------------------------------------------------------------------------

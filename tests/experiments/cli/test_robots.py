@@ -27,8 +27,35 @@ def test_train_rejects_bad_rates(capsys: pytest.CaptureFixture[str]) -> None:
 
 def test_learner_choices_come_from_the_registry(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
-        main(["train", "--algo", "dqn"])
-    assert "choose from 'qlearning', 'sarsa'" in capsys.readouterr().err
+        main(["train", "--algo", "ppo"])
+    assert "choose from 'dqn', 'linear', 'qlearning', 'sarsa'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("algo", ["linear", "dqn"])
+def test_train_and_eval_a_function_learner(algo: str, tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run"
+    rc = main(["train", "--arena", "r1", "--algo", algo, "--iterations", "300", "--seed", "1",
+               "--out", str(out), "--no-progress", "--no-plot", "--tiles", "6",
+               "--hidden", "16", "--learning-starts", "50", "--target-update", "20"])
+    assert rc == 0
+    assert "sum of parameters" in capsys.readouterr().out
+    cfg = json.loads((out / "config.json").read_text())
+    assert cfg["algo"] == algo and cfg["features"]["tiles"] == 6
+    assert cfg["dqn"]["hidden"] == [16] and cfg["dqn"]["learning_starts"] == 50
+    assert (out / "params.npy").exists() and not (out / "q_table.npy").exists()
+    rc = main(["eval", "--arena", "r1", "--table", str(out / "params.npy"), "--seeds", "1",
+               "--steps", "100", "--json"])
+    summary = json.loads(capsys.readouterr().out)
+    assert rc == 0 and summary["algo"] == algo and summary["runs"][0]["greedy"]["steps"] == 100
+
+
+def test_eval_trains_a_function_learner_per_seed(capsys: pytest.CaptureFixture[str]) -> None:
+    rc = main(["eval", "--arena", "r1", "--algo", "linear", "--iterations", "200",
+               "--seeds", "1", "2", "--steps", "100", "--json"])
+    summary = json.loads(capsys.readouterr().out)
+    assert rc == 0 and [r["seed"] for r in summary["runs"]] == [1, 2]
+    assert summary["algo"] == "linear" and summary["iterations"] == 200
 
 
 def test_render_arenas(tmp_path: Path) -> None:
