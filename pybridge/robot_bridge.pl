@@ -324,7 +324,7 @@ write_request(Robot, Op0, Data, PI, Options, Reply) :-
 get_params(Robot, Params) :-
     get_params(Robot, Params, []).
 
-get_params(Robot, params(Layout, Samples, Values), Options) :-
+get_params(Robot, Params, Options) :-
     PI = get_params/2,
     must_be(atomic, Robot),
     must_be(list, Options),
@@ -336,7 +336,7 @@ get_params(Robot, params(Layout, Samples, Values), Options) :-
         layout_size(Layout, N),
         length(Values, Len),
         (   Len =:= N
-        ->  true
+        ->  Params = params(Layout, Samples, Values)
         ;   domain_error(params_size(N), Len)
         )
     ;   reply_error(Reply, PI)

@@ -244,6 +244,8 @@ test(params_reply_of_wrong_size, [setup(preset), error(domain_error(params_size(
     thread_create(( bridge_next_request(request(Id, _), 5),
                     bridge_reply(Id, params([w-[1,2], b-[1]], 1, text("1.0,2.0"))) ), H, []),
     call_cleanup(get_params(f1, _), thread_join(H, _)).
+test(steadfast_get_params, [setup(preset), fail]) :-
+    with_params_host(get_params(f1, params([w-[3]], _, _)), _, 1).
 test(params_timeout, [setup(preset), error(timeout_error(bridge, f1))]) :-
     get_robot_params(f1, _, [timeout(0.05)]).
 
