@@ -38,7 +38,7 @@ from dfrl.experiments.driver.config import ExperimentConfig, resolve_config
 from dfrl.experiments.driver.launcher import run
 from dfrl.experiments.driver.results.metrics import read_metrics
 from dfrl.experiments.provenance import write_provenance
-from dfrl.experiments.science.report.observations import SeedRun
+from dfrl.experiments.science.report.measures import SeedRun
 from dfrl.experiments.science.report.paper import write_report
 from dfrl.experiments.science.report.stats import COMBOS
 from dfrl.experiments.science.standalone import evaluated_job

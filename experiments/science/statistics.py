@@ -4,9 +4,9 @@ detectable effect, and the verdict words every report uses.
 
 Pure functions of numbers and arrays; :mod:`.report` (the paper's observations and figures)
 and :mod:`.studies` (sweep, speed-up, transfer) both use them, neither imports the other.
-Standard library and numpy only: Student's t comes from the regularised incomplete beta
-function (:func:`t_cdf`, :func:`t_quantile`), the normal quantile from
-:class:`statistics.NormalDist` (why not scipy: ``science/README.md``, "Dependencies").
+Student's t, the normal distribution and the bootstrap come from ``scipy.stats`` (why:
+``science/README.md``, "Dependencies"); what is ours is how they are combined: the intervals,
+Holm's correction, the smallest detectable effect and the verdicts.
 
 The verdict of a claim "the mean is above (below) a bound" (:func:`judge`) is one of
 
@@ -21,13 +21,13 @@ The verdict of a claim "the mean is above (below) a bound" (:func:`judge`) is on
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from enum import Enum
-from functools import lru_cache
-from statistics import NormalDist
 
 import numpy as np
+from scipy import stats
 
 #: Two-sided level of every interval and verdict.
 LEVEL: float = 0.95
@@ -90,64 +90,20 @@ def dip(y: np.ndarray) -> tuple[float, int]:
 
 
 # -- Student's t and the normal distribution -------------------------------------------------
-def _betacf(a: float, b: float, x: float) -> float:
-    """Continued fraction of the regularised incomplete beta function (modified Lentz)."""
-    tiny, eps = 1e-300, 1e-15
-    c, d = 1.0, 1.0 - (a + b) * x / (a + 1.0)
-    d = 1.0 / (d if abs(d) > tiny else tiny)
-    h = d
-    for m in range(1, 400):
-        m2 = 2 * m
-        for num in (m * (b - m) * x / ((a + m2 - 1.0) * (a + m2)),
-                    -(a + m) * (a + b + m) * x / ((a + m2) * (a + m2 + 1.0))):
-            d = 1.0 + num * d
-            d = 1.0 / (d if abs(d) > tiny else tiny)
-            c = 1.0 + num / c
-            c = c if abs(c) > tiny else tiny
-            h *= d * c
-        if abs(d * c - 1.0) < eps:
-            break
-    return h
-
-
-def incomplete_beta(a: float, b: float, x: float) -> float:
-    """The regularised incomplete beta function I_x(a, b), for a, b > 0 and 0 <= x <= 1."""
-    if not 0.0 <= x <= 1.0:
-        raise ValueError(f"x = {x} is outside [0, 1]")
-    if x in (0.0, 1.0):
-        return x
-    front = math.exp(math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b)
-                     + a * math.log(x) + b * math.log1p(-x))
-    if x < (a + 1.0) / (a + b + 2.0):
-        return front * _betacf(a, b, x) / a
-    return 1.0 - front * _betacf(b, a, 1.0 - x) / b
-
-
 def t_cdf(t: float, df: float) -> float:
     """P(T <= t) for Student's t with ``df`` > 0 degrees of freedom (not necessarily whole)."""
     if df <= 0:
         raise ValueError(f"degrees of freedom must be > 0, got {df}")
-    if math.isinf(t):
-        return 1.0 if t > 0 else 0.0
-    tail = 0.5 * incomplete_beta(df / 2.0, 0.5, df / (df + t * t))    # P(T > |t|)
-    return 1.0 - tail if t > 0 else tail
+    return float(stats.t.cdf(t, df))
 
 
-@lru_cache(maxsize=4096)
 def t_quantile(p: float, df: float) -> float:
-    """The ``p`` quantile of Student's t with ``df`` degrees of freedom (bisection on
-    :func:`t_cdf` to 1e-10)."""
+    """The ``p`` quantile of Student's t with ``df`` degrees of freedom."""
     if not 0.0 < p < 1.0:
         raise ValueError(f"a quantile needs 0 < p < 1, got {p}")
-    if p < 0.5:
-        return -t_quantile(1.0 - p, df)
-    lo, hi = 0.0, 2.0
-    while t_cdf(hi, df) < p:
-        lo, hi = hi, 2.0 * hi
-    while hi - lo > 1e-10 * max(1.0, hi):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if t_cdf(mid, df) < p else (lo, mid)
-    return 0.5 * (lo + hi)
+    if df <= 0:
+        raise ValueError(f"degrees of freedom must be > 0, got {df}")
+    return float(stats.t.ppf(p, df))
 
 
 def t975(df: float) -> float:
@@ -159,7 +115,7 @@ def t975(df: float) -> float:
 
 def normal_quantile(p: float) -> float:
     """The ``p`` quantile of the standard normal distribution."""
-    return NormalDist().inv_cdf(p)
+    return float(stats.norm.ppf(p))
 
 
 # -- means and intervals over seeds ----------------------------------------------------------
@@ -278,31 +234,15 @@ class BootstrapInterval:
         return f"{self.estimate:.3g} [{self.low:.3g}, {self.high:.3g}]"
 
 
-def jackknife_acceleration(samples: Sequence[np.ndarray],
-                           statistic: Callable[..., float]) -> float:
-    """BCa's acceleration: with the leave-one-out values theta_i of the statistic (one value
-    left out of one sample at a time, over every sample) and their mean m,
-    ``sum((m - theta_i)^3) / (6 (sum((m - theta_i)^2))^1.5)`` (0 when they are all equal)."""
-    loo = []
-    for k, s in enumerate(samples):
-        for i in range(len(s)):
-            rest = [np.delete(s, i) if j == k else t for j, t in enumerate(samples)]
-            loo.append(float(statistic(*rest)))
-    d = np.mean(loo) - np.asarray(loo)
-    den = 6.0 * float(np.sum(d ** 2)) ** 1.5
-    return float(np.sum(d ** 3)) / den if den > 0 else 0.0
-
-
 def bootstrap(samples: Sequence[Sequence[float]], statistic: Callable[..., float],
               resamples: int = 10_000, seed: int = 0, method: str = "bca") -> BootstrapInterval:
-    """95% bootstrap interval of ``statistic(*samples)``: every sample is resampled with
-    replacement on its own (independent groups), ``resamples`` times, from a generator seeded
-    with ``seed``. ``method``: ``percentile`` (the 2.5% and 97.5% quantiles of the resampled
-    statistics) or ``bca`` (bias-corrected and accelerated, Efron 1987: the quantiles at
-    Phi(z0 + (z0 + z)/(1 - a (z0 + z))) for z = Phi^-1(0.025), Phi^-1(0.975), with z0 =
-    Phi^-1(share of resampled values below the estimate) and a from
-    :func:`jackknife_acceleration`). E.g. a ratio of means: ``bootstrap([t1, tn],
-    lambda a, b: a.mean() / b.mean())``.
+    """95% bootstrap interval of ``statistic(*samples)`` (``scipy.stats.bootstrap``): every
+    sample is resampled with replacement on its own (independent groups), ``resamples`` times,
+    from a generator seeded with ``seed``. ``method``: ``percentile`` or ``bca``
+    (bias-corrected and accelerated, Efron 1987); when BCa is undefined (every resampled
+    value on one side of the estimate, e.g. constant data) the percentile interval is given
+    and ``method`` says so. E.g. a ratio of means: ``bootstrap([t1, tn], lambda a, b:
+    a.mean() / b.mean())``.
     """
     if method not in ("percentile", "bca"):
         raise ValueError(f"method: percentile or bca, got {method!r}")
@@ -310,21 +250,24 @@ def bootstrap(samples: Sequence[Sequence[float]], statistic: Callable[..., float
     if not data:
         raise ValueError("no samples")
     est = float(statistic(*data))
-    rng = np.random.default_rng(seed)
-    idx = [rng.integers(0, len(s), size=(resamples, len(s))) for s in data]
-    boot = np.array([statistic(*(s[i[r]] for s, i in zip(data, idx))) for r in range(resamples)],
-                    dtype=np.float64)
-    alpha = (1.0 - LEVEL) / 2.0
-    qs = [alpha, 1.0 - alpha]
-    if method == "bca":
-        below = float(np.mean(boot < est)) + 0.5 * float(np.mean(boot == est))
-        if 0.0 < below < 1.0:
-            z0 = normal_quantile(below)
-            a = jackknife_acceleration(data, statistic)
-            qs = [NormalDist().cdf(z0 + (z0 + z) / (1.0 - a * (z0 + z)))
-                  for z in (normal_quantile(q) for q in qs)]
-    low, high = np.quantile(boot, qs)
-    return BootstrapInterval(est, float(low), float(high), resamples, method)
+
+    def once(*resampled: np.ndarray) -> float:
+        return float(statistic(*resampled))
+
+    def run(how: str) -> tuple[float, float]:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")         # degenerate data: NaN, handled below
+            res = stats.bootstrap(data, once, n_resamples=resamples, vectorized=False,
+                                  paired=False, confidence_level=LEVEL, method=how,
+                                  rng=np.random.default_rng(seed))
+        return float(res.confidence_interval.low), float(res.confidence_interval.high)
+
+    used = method
+    low, high = run("BCa" if method == "bca" else "percentile")
+    if method == "bca" and not (math.isfinite(low) and math.isfinite(high)):
+        used = "percentile"
+        low, high = run("percentile")
+    return BootstrapInterval(est, low, high, resamples, used)
 
 
 # -- multiplicity ----------------------------------------------------------------------------

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dfrl.experiments.science.report.observations import SeedRun, mean_q, scores
+from dfrl.experiments.science.report.measures import SeedRun, mean_q, scores
 from dfrl.experiments.driver.results.plots import COLOURS, new_figure, save_figure
 from dfrl.experiments.science.statistics import t975
 

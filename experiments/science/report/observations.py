@@ -20,107 +20,21 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from enum import Enum
-from typing import Any
 
 import numpy as np
 
+from dfrl.experiments.science.report.measures import (MIN_GAIN, SeedRun, arena_stat, final_score,
+                                                      gain, greedy_gain, last_change, mean_q,
+                                                      rate, robots_mean, t_reward90)
 from dfrl.experiments.science.statistics import (Interval, Judgement, adjust, dip, interval,
-                                                 judge, late_growth, paired, smooth, welch)
+                                                 judge, late_growth, paired, welch)
 
-#: A reward gain per step below this is "no learning" (the saturation time is then the budget).
-MIN_GAIN: float = 0.05
-#: Window (iterations) of the smoothed reward per step.
-RATE_WINDOW: int = 1000
 #: Saturation: Q-sum growth in the last quarter under this share of its total growth.
 SATURATED_GROWTH: float = 0.05
 #: Saturation: greedy score change between the last two evaluations within this.
 STABLE_SCORE: float = 0.1
-
-
-@dataclass
-class SeedRun:
-    """One configuration, one seed: curves per robot, arenas, greedy evaluations."""
-
-    curves: dict[str, np.ndarray]          # robot -> iteration, q_sum, cumulative_reward, ...
-    arenas: dict[str, str]
-    evals: list[dict[str, Any]] = field(default_factory=list)
-    zero_score: dict[str, float] = field(default_factory=dict)   # arena -> zero table's score
-
-
-# -- per-seed statistics ---------------------------------------------------------------------
-def rate(cum: np.ndarray, a: float, b: float) -> float:
-    """Mean reward per step over the fraction ``[a, b)`` of a cumulative-reward curve."""
-    n = len(cum)
-    i, j = int(a * n), max(int(b * n), int(a * n) + 1)
-    before = cum[i - 1] if i > 0 else 0.0
-    return float((cum[j - 1] - before) / (j - i))
-
-
-def gain(cum: np.ndarray) -> float:
-    """Reward per step in the last quarter minus in the first quarter."""
-    return rate(cum, 0.75, 1.0) - rate(cum, 0.0, 0.25)
-
-
-def t_reward90(it: np.ndarray, cum: np.ndarray) -> int:
-    """First iteration at which the smoothed reward per step has made 90% of its gain from
-    the first window to the last quarter; the last iteration when there is no gain."""
-    r = np.diff(np.concatenate([[0.0], cum]))
-    s = smooth(r, RATE_WINDOW)
-    w = min(RATE_WINDOW, len(s)) - 1
-    start, end = s[w], rate(cum, 0.75, 1.0)
-    if end - start < MIN_GAIN:
-        return int(it[-1])
-    hit = np.nonzero(s[w:] >= start + 0.9 * (end - start))[0]
-    return int(it[w + hit[0]]) if len(hit) else int(it[-1])
-
-
-def robots_mean(run: SeedRun, fn: Callable[[np.ndarray], float],
-                arenas: Sequence[str] | None = None) -> float:
-    vals = [fn(c) for r, c in run.curves.items()
-            if len(c) and (arenas is None or run.arenas.get(r) in arenas)]
-    return float(np.mean(vals)) if vals else float("nan")
-
-
-def mean_q(run: SeedRun) -> np.ndarray:
-    n = min(len(c) for c in run.curves.values())
-    return np.mean([c["q_sum"][:n] for c in run.curves.values()], axis=0)
-
-
-def scores(run: SeedRun, role: str | None = None,
-           robots: Sequence[str] | None = None) -> dict[int, float]:
-    by: dict[int, list[float]] = {}
-    for r in run.evals:
-        if (role is None or r["role"] == role) and (robots is None or r["robot"] in robots):
-            by.setdefault(int(r["iteration"]), []).append(float(r["score"]))
-    return {k: float(np.mean(v)) for k, v in sorted(by.items())}
-
-
-def final_score(run: SeedRun, role: str | None = None,
-                robots: Sequence[str] | None = None) -> float:
-    s = scores(run, role, robots)
-    return s[max(s)] if s else float("nan")
-
-
-def greedy_gain(run: SeedRun) -> float:
-    """Final greedy score minus the zero table's, averaged over the evaluated arenas."""
-    last = max((int(r["iteration"]) for r in run.evals), default=None)
-    if last is None:
-        return float("nan")
-    d = [float(r["score"]) - run.zero_score.get(r["arena"], 0.0)
-         for r in run.evals if int(r["iteration"]) == last]
-    return float(np.mean(d))
-
-
-def last_change(run: SeedRun) -> float:
-    """Greedy score at the last evaluation minus at the one before."""
-    s = list(scores(run).values())
-    return s[-1] - s[-2] if len(s) >= 2 else float("nan")
-
-
-def arena_stat(run: SeedRun, arena: str, fn: Callable[[np.ndarray], float]) -> float:
-    return robots_mean(run, fn, [arena])
 
 
 # -- verdicts --------------------------------------------------------------------------------
@@ -417,56 +331,3 @@ WHY_CONTROL_PASSES = {
     "3a": "R4 is the most cluttered arena, so a random robot earns less there too; 3b replaces "
           "this test",
 }
-
-
-def real_words(t: Test) -> str:
-    """How the real runs fare: holds for every row, or how many hold."""
-    n, k = len(t.real), sum(v.passed for v in t.real)
-    if n and k == n:
-        return f"holds ({k}/{n})"
-    return f"holds for {k} of {n}" if n else "no real runs"
-
-
-def control_words(t: Test) -> str:
-    """How the control fares: none, too few seeds, fixed by construction, passes, fails."""
-    standing, why = t.standing()
-    if not t.has_control:
-        return "none"
-    if standing is Standing.CANNOT_JUDGE:
-        return f"fewer than {MIN_SEEDS} seeds"
-    if "fixed by construction" in why:
-        return "fixed by construction"
-    return "passes" if t.control_passes else "fails"
-
-
-def tests_markdown(tests: list[Test]) -> list[str]:
-    """The tests as markdown: the family Holm's correction ran over, then one table per test
-    and its verdict."""
-    n = sum(len(t.real) for t in tests)
-    L = [f"Verdicts: a row **holds** when its 95% interval lies on the claimed side of the "
-         f"bound and its p-value, after Holm's correction over the family of all {n} real-run "
-         f"rows below (control rows are checks, not in the family), is under 5%; "
-         f"**refuted (effect excluded at 95%)** when the interval lies on the other side; "
-         f"otherwise **not significant at n = K (smallest detectable effect D)**, D being the "
-         f"true distance from the bound a 5% t test finds with 80% power at that n and spread; "
-         f"with fewer than {MIN_SEEDS} seeds the report **cannot judge**. A test is a test of "
-         f"learning only when its control can fail (not fixed by construction), fails, and "
-         f"differs from every real row that holds (real minus control, paired by seed).", ""]
-    for t in tests:
-        L += [f"### {t.key}. {t.title}", "", f"Measure: {t.how}.", "",
-              "| runs | mean ± 95% half width (n seeds) | p (Holm) | verdict | note |",
-              "|---|---|---|---|---|"]
-        for v in t.real:
-            L.append(f"| {v.subject} | {v.measure} | {_p(v.judgement)} | {v.judgement} | "
-                     f"{v.note} |")
-        for v in t.control:
-            L.append(f"| {v.subject} | {v.measure} | {_p(v.judgement, False)} | "
-                     f"{v.judgement} | control. {v.note} |")
-        standing, why = t.standing()
-        L += ["", f"Verdict: the real runs: **{real_words(t)}**; **{standing.value}**: {why}.", ""]
-    return L
-
-
-def _p(j: Judgement, adjusted: bool = True) -> str:
-    p = j.p_adjusted if adjusted else j.p
-    return "n/a" if math.isnan(p) else f"{p:.2g}"

@@ -11,9 +11,9 @@ import numpy as np
 
 from dfrl.experiments.provenance import describe, read_provenance
 from dfrl.experiments.science.report.bands import plot_groups
-from dfrl.experiments.science.report.observations import (SeedRun, control_words, final_score,
-                                                          mean_q, paper_tests, real_words,
-                                                          tests_markdown)
+from dfrl.experiments.science.report.measures import SeedRun, final_score, mean_q
+from dfrl.experiments.science.report.observations import paper_tests
+from dfrl.experiments.science.report.verdict_text import control_words, real_words, tests_markdown
 from dfrl.experiments.science.statistics import interval, late_growth
 
 

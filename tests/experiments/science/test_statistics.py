@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dfrl.experiments.science.statistics import (Interval, Outcome, adjust, bootstrap, holm,
-                                                 interval, jackknife_acceleration, judge,
+                                                 interval, judge,
                                                  paired, t975, t_cdf, t_quantile, welch)
 
 
@@ -111,13 +111,6 @@ def test_bootstrap_is_seeded_and_bca_shifts_with_skew() -> None:
     assert pc.high == pytest.approx(interval(sym[0]).high, abs=0.06)
     with pytest.raises(ValueError):
         bootstrap(data, ratio, method="basic")
-
-
-def test_jackknife_acceleration_by_hand() -> None:
-    # mean of (0, 1, 5): leave-one-out means 3, 2.5, 0.5, their mean 2, d = -1, -0.5, 1.5;
-    # sum d^3 = 2.25, sum d^2 = 3.5; a = 2.25 / (6 x 3.5^1.5) = 2.25 / 39.2874 = 0.057270
-    a = jackknife_acceleration([np.array([0.0, 1.0, 5.0])], lambda x: x.mean())
-    assert a == pytest.approx(0.057270, abs=1e-6)
 
 
 def test_holm_by_hand() -> None:

@@ -5,10 +5,10 @@ or no control the report cannot judge."""
 import numpy as np
 
 from dfrl.experiments.science.report.observations import Test as Observation
-from dfrl.experiments.science.report.observations import (SeedRun, Standing, above,
-                                                          control_words, gain, paper_tests,
-                                                          rate, real_words, t_reward90)
-from dfrl.experiments.science.report.observations import tests_markdown as markdown_of
+from dfrl.experiments.science.report.measures import SeedRun, gain, rate, t_reward90
+from dfrl.experiments.science.report.observations import Standing, above, paper_tests
+from dfrl.experiments.science.report.verdict_text import control_words, real_words
+from dfrl.experiments.science.report.verdict_text import tests_markdown as markdown_of
 from dfrl.experiments.science.statistics import interval
 
 N = 4000
