@@ -16,17 +16,16 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, ClassVar
 
-import numpy as np
 
 from dfrl.pybridge.codec import Codec
 from dfrl.pybridge.engine import Prolog, prolog
 from dfrl.pybridge.errors import BridgeError, NodeStateError, PrologError, PrologFailure
-from dfrl.pybridge.providers import TableProvider, check_layout
+from dfrl.pybridge.providers import TableProvider, provider_offer
 from dfrl.pybridge.self_test import SelfTestReport, self_test
 from dfrl.pybridge.serving import MODULE as _MODULE
 from dfrl.pybridge.serving import RegisteredRobot, RequestServer, ServiceHandler, layout_term
 from dfrl.pybridge.tartarus_commands import TartarusCommands
-from dfrl.pybridge.terms import Atom, Term, Var, atom_or_self
+from dfrl.pybridge.terms import Atom, Term, Var, atom_or_self, robot_term
 
 __all__ = ["TableProvider", "Bridge", "BRIDGE_FILE", "CODEC_FILE", "SERVICE_FILE",
            "SelfTestReport"]
@@ -42,15 +41,6 @@ CODEC_FILE: Path = Path(__file__).resolve().parent / "table_codec.pl"
 SERVICE_FILE: Path = Path(__file__).resolve().parent / "robot_service.pl"
 """The ``dfrl_robot(...)`` platform requests of a robot service (module ``robot_service``)."""
 
-
-#: what a provider needs to offer its parameters (ParamsProvider, without learner_kind)
-_PARAMS_ATTRS = ("params", "param_layout", "set_params", "samples")
-
-
-def _robot_term(robot_id: Any) -> Any:
-    if isinstance(robot_id, bool) or not isinstance(robot_id, (str, int, np.integer)):
-        raise TypeError(f"a robot id is a str or an int, not {type(robot_id).__name__}")
-    return atom_or_self(robot_id) if isinstance(robot_id, str) else int(robot_id)
 
 
 class Bridge(TartarusCommands):
@@ -289,29 +279,8 @@ class Bridge(TartarusCommands):
             A bad shape, layout or learner kind.
         """
         self._check_open()
-        rid = _robot_term(robot_id)
-        names = dir(provider)                  # (hasattr would read the properties)
-        if learner is None:
-            learner = str(provider.learner_kind) if "learner_kind" in names else "tabular"
-        if learner not in ("tabular", "function"):
-            raise ValueError(f"learner is 'tabular' or 'function', got {learner!r}")
-        offers_params = all(a in names for a in _PARAMS_ATTRS)
-        table_shape: tuple[int, int] | None = None
-        if learner == "tabular":
-            for attr in ("q_table", "visits", "set_q_table"):
-                if attr not in names:
-                    raise TypeError(f"provider has no {attr!r}")
-            dims = tuple(np.shape(provider.q_table) if shape is None else shape)
-            if len(dims) != 2 or not all(isinstance(d, (int, np.integer)) and d > 0 for d in dims):
-                raise ValueError(f"a table shape is two positive integers, got {dims}")
-            table_shape = (int(dims[0]), int(dims[1]))
-        else:
-            if shape is not None:
-                raise ValueError("a function learner has no table shape")
-            for attr in _PARAMS_ATTRS:
-                if attr not in names:
-                    raise TypeError(f"provider of a function learner has no {attr!r}")
-        layout = check_layout(provider.param_layout) if offers_params else None
+        rid = robot_term(robot_id)
+        learner, table_shape, layout = provider_offer(provider, shape, learner)
         props = [Term("algorithm", Atom(algorithm))]
         if table_shape is not None:
             props.append(Term("shape", list(table_shape)))
@@ -325,7 +294,7 @@ class Bridge(TartarusCommands):
     def unregister_robot(self, robot_id: str | int) -> None:
         """Forget a robot; later requests for it get ``existence_error(robot, Id)``."""
         self._check_open()
-        rid = _robot_term(robot_id)
+        rid = robot_term(robot_id)
         self._must("bridge_unregister_robot", rid, module=_MODULE)
         self._robots.pop(rid, None)
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -233,3 +233,51 @@ class StaticParams:
     def __repr__(self) -> str:
         return (f"<StaticParams size={self._vec.size} samples={self._samples} "
                 f"sets={self.sets}>")
+
+
+#: what a provider needs to offer its parameters (ParamsProvider, without learner_kind)
+_PARAMS_ATTRS = ("params", "param_layout", "set_params", "samples")
+
+
+def provider_offer(provider: Any, shape: Sequence[int] | None = None,
+                   learner: str | None = None
+                   ) -> tuple[str, tuple[int, int] | None, Layout | None]:
+    """What ``provider`` offers agents: ``(learner, table_shape, layout)``, checked.
+
+    ``learner`` defaults to the provider's ``learner_kind``, else ``"tabular"``. A tabular
+    learner needs ``q_table``, ``visits`` and ``set_q_table`` and has a table shape (``shape``,
+    or read once from ``q_table``); a function learner needs the parameter attributes and has
+    no table shape. ``layout`` is the checked parameter layout when the provider offers
+    parameters, else None.
+
+    Raises
+    ------
+    TypeError
+        The provider lacks what its learner kind must offer.
+    ValueError
+        A bad shape, layout or learner kind.
+    """
+    names = dir(provider)                  # (hasattr would read the properties)
+    if learner is None:
+        learner = str(provider.learner_kind) if "learner_kind" in names else "tabular"
+    if learner not in ("tabular", "function"):
+        raise ValueError(f"learner is 'tabular' or 'function', got {learner!r}")
+    table_shape: tuple[int, int] | None = None
+    if learner == "tabular":
+        for attr in ("q_table", "visits", "set_q_table"):
+            if attr not in names:
+                raise TypeError(f"provider has no {attr!r}")
+        dims = tuple(np.shape(provider.q_table) if shape is None else shape)
+        if len(dims) != 2 or not all(isinstance(d, (int, np.integer)) and d > 0 for d in dims):
+            raise ValueError(f"a table shape is two positive integers, got {dims}")
+        table_shape = (int(dims[0]), int(dims[1]))
+    else:
+        if shape is not None:
+            raise ValueError("a function learner has no table shape")
+        for attr in _PARAMS_ATTRS:
+            if attr not in names:
+                raise TypeError(f"provider of a function learner has no {attr!r}")
+    offers_params = all(a in names for a in _PARAMS_ATTRS)
+    layout = check_layout(provider.param_layout) if offers_params else None
+    return learner, table_shape, layout
+

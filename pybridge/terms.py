@@ -26,7 +26,9 @@ import itertools
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["Atom", "Term", "Var", "Blob", "atom_or_self"]
+import numpy as np
+
+__all__ = ["Atom", "Term", "Var", "Blob", "atom_or_self", "robot_term"]
 
 
 class Atom(str):
@@ -86,3 +88,16 @@ def atom_or_self(value: Any) -> Any:
     if isinstance(value, str) and not isinstance(value, Atom):
         return Atom(value)
     return value
+
+
+def robot_term(robot_id: Any) -> Any:
+    """A robot id as Prolog sees it: an atom for a ``str``, an integer for an ``int``.
+
+    Raises
+    ------
+    TypeError
+        Neither (a ``bool`` included).
+    """
+    if isinstance(robot_id, bool) or not isinstance(robot_id, (str, int, np.integer)):
+        raise TypeError(f"a robot id is a str or an int, not {type(robot_id).__name__}")
+    return atom_or_self(robot_id) if isinstance(robot_id, str) else int(robot_id)
