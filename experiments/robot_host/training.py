@@ -24,6 +24,7 @@ from dfrl.experiments.robot_host.checkpoint import (
     load_checkpoint,
     restore_trainer,
     save_checkpoint,
+    save_table_atomically,
 )
 from dfrl.experiments.robot_host.evaluate import LiveEvaluator
 from dfrl.experiments.robot_host.files import METRIC_FIELDS, SHARE_FIELDS, CsvLog
@@ -312,7 +313,7 @@ class Training:
     def save_tables(self) -> None:
         """Save the table files and the checkpoint (also after a share that came late)."""
         if self.trainer is not None:
-            self.trainer.save_table(self.out_dir / "tables" / self.config.robot)
+            save_table_atomically(self.trainer, self.out_dir / "tables" / self.config.robot)
             self.checkpoint()
 
     def close(self) -> None:
