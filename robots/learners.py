@@ -39,8 +39,9 @@ class LearnerParams:
     Attributes
     ----------
     alpha : float
-        Learning rate in ``(0, 1]``: the fraction of the TD error by which an update moves
-        ``Q(s, a)`` (tabular and ``linear``; ``dqn`` uses its own Adam step size).
+        Learning rate of the tabular learners in ``(0, 1]``: the fraction of the TD error by
+        which an update moves ``Q(s, a)`` (``linear`` and ``dqn`` have their own step sizes in
+        their configurations).
     gamma : float
         Discount factor in ``[0, 1)`` (every learner).
     epsilon : EpsilonSchedule
@@ -212,7 +213,7 @@ def make_learner(name: str, n_inputs: int, n_actions: int, params: LearnerParams
     rng : np.random.Generator
     **options
         Passed to a function-approximation learner (``config=``: a
-        :class:`dfrl.robots.features.TileCoding` for ``linear``, a
+        :class:`dfrl.robots.linear.LinearConfig` for ``linear``, a
         :class:`dfrl.robots.dqn.DQNConfig` for ``dqn``); a tabular learner takes none.
 
     Raises

@@ -30,7 +30,7 @@ from dfrl.robots.env import EnvConfig, EPuckEnv, RewardConfig
 from dfrl.robots.epuck import EPuckConfig
 from dfrl.robots.approx import FunctionLearner, Layout, validate_params
 from dfrl.robots.dqn import DQNConfig
-from dfrl.robots.features import TileCoding
+from dfrl.robots.linear import LinearConfig
 from dfrl.robots.learners import (EpsilonSchedule, LearnerParams, TabularLearner, learner_class,
                                   make_learner)
 from dfrl.robots.state import DiscretisationConfig, Discretiser
@@ -63,8 +63,8 @@ class TrainerConfig(EnvConfig):
     discretisation : DiscretisationConfig
         The tabular learners' states (the function learners see the raw observation; the
         discrete state is still reported in the metrics).
-    features : TileCoding
-        The ``linear`` learner's feature map.
+    linear : LinearConfig
+        The ``linear`` learner's step size and feature map.
     dqn : DQNConfig
         The ``dqn`` learner's network, replay and optimiser.
     sim : SimConfig
@@ -81,7 +81,7 @@ class TrainerConfig(EnvConfig):
     iterations: int = DEMO_ITERATIONS
     learner: LearnerParams = field(default_factory=LearnerParams)
     discretisation: DiscretisationConfig = field(default_factory=DiscretisationConfig)
-    features: TileCoding = field(default_factory=TileCoding)
+    linear: LinearConfig = field(default_factory=LinearConfig)
     dqn: DQNConfig = field(default_factory=DQNConfig)
 
     def __post_init__(self) -> None:
@@ -115,7 +115,7 @@ class TrainerConfig(EnvConfig):
         return cls(
             learner=LearnerParams(**learner),
             discretisation=DiscretisationConfig(**d.pop("discretisation", {})),
-            features=TileCoding(**d.pop("features", {})),
+            linear=LinearConfig(**d.pop("linear", {})),
             dqn=DQNConfig(**d.pop("dqn", {})),
             sim=SimConfig(**sim),
             reward=RewardConfig(**d.pop("reward", {})),

@@ -91,7 +91,8 @@ def _add_config_arguments(p: argparse.ArgumentParser, seed: bool = True) -> None
     if seed:
         g.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
     g = p.add_argument_group("learner")
-    g.add_argument("--alpha", type=float, default=None, help=f"learning rate ({d.learner.alpha})")
+    g.add_argument("--alpha", type=float, default=None,
+                   help=f"learning rate of the tabular learners ({d.learner.alpha})")
     g.add_argument("--gamma", type=float, default=None, help=f"discount ({d.learner.gamma})")
     g.add_argument("--epsilon-schedule", choices=[k.value for k in ScheduleKind], default=None,
                    help=f"exploration schedule (default {d.learner.epsilon.kind.value})")
@@ -100,10 +101,12 @@ def _add_config_arguments(p: argparse.ArgumentParser, seed: bool = True) -> None
     g.add_argument("--epsilon-decay", type=int, default=None,
                    help=f"decay steps ({d.learner.epsilon.decay_steps})")
     g = p.add_argument_group("function-approximation learners (linear, dqn)")
+    g.add_argument("--linear-alpha", type=float, default=None,
+                   help=f"linear: fraction of the TD error per update ({d.linear.alpha})")
     g.add_argument("--tilings", type=int, default=None,
-                   help=f"linear: offset tilings per sensor ({d.features.tilings})")
+                   help=f"linear: offset tilings per sensor ({d.linear.tilings})")
     g.add_argument("--tiles", type=int, default=None,
-                   help=f"linear: tiles per tiling ({d.features.tiles})")
+                   help=f"linear: tiles per tiling ({d.linear.tiles})")
     g.add_argument("--hidden", type=int, nargs="+", default=None,
                    help=f"dqn: hidden layer widths ({' '.join(map(str, d.dqn.hidden))})")
     g.add_argument("--lr", type=float, default=None, help=f"dqn: Adam step size ({d.dqn.lr})")
@@ -162,9 +165,10 @@ def config_from_args(args: argparse.Namespace) -> TrainerConfig:
         learner_changes["epsilon"] = EpsilonSchedule(**{**eps.__dict__, **eps_changes})
     if learner_changes:
         top["learner"] = LearnerParams(**{**cfg.learner.__dict__, **learner_changes})
-    feats = {k: v for k, v in (("tilings", args.tilings), ("tiles", args.tiles)) if v is not None}
-    if feats:
-        top["features"] = dataclasses.replace(cfg.features, **feats)
+    lin = {k: v for k, v in (("alpha", args.linear_alpha), ("tilings", args.tilings),
+                             ("tiles", args.tiles)) if v is not None}
+    if lin:
+        top["linear"] = dataclasses.replace(cfg.linear, **lin)
     net = {k: getattr(args, k) for k in ("lr", "batch_size", "buffer_size", "learning_starts",
                                          "train_every", "target_update")
            if getattr(args, k) is not None}

@@ -6,7 +6,7 @@ import pytest
 
 from dfrl.robots.features import TileCoding, active_features, feature_vector
 from dfrl.robots.learners import EpsilonSchedule, LearnerParams
-from dfrl.robots.linear import LinearQ, linear_q, semi_gradient_update
+from dfrl.robots.linear import LinearConfig, LinearQ, linear_q, semi_gradient_update
 
 GREEDY = EpsilonSchedule("constant", 0.0, 0.0, 1)
 
@@ -25,11 +25,15 @@ def test_tile_coding_by_hand() -> None:
     assert phi.sum() == 5 and np.flatnonzero(phi).tolist() == [0, 1, 4, 8, 12]
 
 
-def test_tile_coding_rejects_bad_shapes() -> None:
+def test_tile_coding_and_config_reject_bad_values() -> None:
     with pytest.raises(ValueError):
         TileCoding(tilings=0)
     with pytest.raises(ValueError):
         TileCoding(tiles=1)
+    with pytest.raises(ValueError):
+        LinearConfig(tiles=1)
+    with pytest.raises(ValueError):
+        LinearConfig(alpha=0.0)
 
 
 def test_linear_q_and_update_maths_by_hand() -> None:
@@ -43,8 +47,9 @@ def test_linear_q_and_update_maths_by_hand() -> None:
 
 def test_one_semi_gradient_q_learning_step_by_hand() -> None:
     # Prepare: x = (0, 0.8) has active features {0, 1, 4, 8, 12}, x' = (1, 1) has {0, 3, 6, 9, 12}
-    params = LearnerParams(alpha=0.5, gamma=0.5, epsilon=GREEDY)
-    learner = LinearQ(2, 2, params, np.random.default_rng(0), TileCoding(tilings=2, tiles=3))
+    params = LearnerParams(gamma=0.5, epsilon=GREEDY)
+    learner = LinearQ(2, 2, params, np.random.default_rng(0),
+                      LinearConfig(alpha=0.5, tilings=2, tiles=3))
     learner.weights[0, [0, 12]] = 1.0          # Q(x, 0) = 2, Q(x', 0) = 2
     learner.weights[1, 3] = 4.0                # Q(x', 1) = 4
     x, x2 = np.array([0.0, 0.8]), np.array([1.0, 1.0])

@@ -41,7 +41,7 @@ def test_train_and_eval_a_function_learner(algo: str, tmp_path: Path,
     assert rc == 0
     assert "sum of parameters" in capsys.readouterr().out
     cfg = json.loads((out / "config.json").read_text())
-    assert cfg["algo"] == algo and cfg["features"]["tiles"] == 6
+    assert cfg["algo"] == algo and cfg["linear"]["tiles"] == 6
     assert cfg["dqn"]["hidden"] == [16] and cfg["dqn"]["learning_starts"] == 50
     assert (out / "params.npy").exists() and not (out / "q_table.npy").exists()
     rc = main(["eval", "--arena", "r1", "--table", str(out / "params.npy"), "--seeds", "1",
