@@ -75,9 +75,9 @@ def test_arena_file_that_does_not_parse(tmp_path: Path,
 
 def test_unknown_algorithm(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     cfg = smoke()
-    cfg["robots"][1]["algo"] = "dqn"
+    cfg["robots"][1]["algo"] = "ppo"
     assert_refused(tmp_path, *run_cli(tmp_path, cfg, capsys),
-                   "robots[1].algo: unknown algorithm 'dqn'; known: qlearning, sarsa")
+                   "robots[1].algo: unknown algorithm 'ppo'; known: dqn, linear, qlearning, sarsa")
 
 
 def test_unknown_method_config_and_flag(tmp_path: Path,
