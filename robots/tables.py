@@ -221,3 +221,13 @@ def load_params(path: str | Path) -> LoadedParams:
                       iterations=doc["iterations"], actions=list(doc["actions"]), layout=layout,
                       model=dict(doc.get("model", {})), extra=dict(doc.get("extra", {})))
     return LoadedParams(params=vec, meta=meta)
+
+
+def sidecar_format(path: str | Path) -> str | None:
+    """The ``format`` in the JSON sidecar of a saved table or parameter file (``NAME.npy``,
+    ``NAME.json`` or ``NAME``); None when there is none or it cannot be read."""
+    _, js, _ = _paths(path)
+    try:
+        return json.loads(js.read_text(encoding="utf-8")).get("format")
+    except (OSError, ValueError, AttributeError):
+        return None

@@ -15,177 +15,25 @@ bootstraps). ``iteration`` keeps counting across respawns.
 """
 from __future__ import annotations
 
-import csv
-import dataclasses
 import json
 import time
 from dataclasses import dataclass, field
-from enum import Enum
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
-from dfrl.robots.env import EnvConfig, EPuckEnv, RewardConfig
-from dfrl.robots.epuck import EPuckConfig
 from dfrl.robots.approx import FunctionLearner, Layout, validate_params
-from dfrl.robots.dqn import DQNConfig
-from dfrl.robots.linear import LinearConfig
-from dfrl.robots.learners import (EpsilonSchedule, LearnerParams, TabularLearner, learner_class,
-                                  make_learner)
-from dfrl.robots.state import DiscretisationConfig, Discretiser
+from dfrl.robots.env import EPuckEnv
+from dfrl.robots.learners import TabularLearner, learner_class, make_learner
+from dfrl.robots.metrics import (METRIC_DTYPE, StepMetrics, read_metrics_csv,  # noqa: F401
+                                 write_metrics_csv)
+from dfrl.robots.state import Discretiser
 from dfrl.robots.tables import ParamsMeta, TableMeta, save_params, save_table
-from dfrl.robots.world import SimConfig
+from dfrl.robots.trainer_config import DEMO_ITERATIONS, TrainerConfig, to_jsonable  # noqa: F401
 
-#: Training budget (iterations) of the 5-robot demo: learning clearly shows by then.
-DEMO_ITERATIONS: int = 8000
-
-
-@dataclass(frozen=True)
-class TrainerConfig(EnvConfig):
-    """Everything that defines a training run; the same config and seed give the same run.
-
-    The environment's fields (arena, sim, actions, reward, collision response, stuck
-    detector) come from :class:`dfrl.robots.env.EnvConfig`; the learner's are added here.
-
-    Attributes
-    ----------
-    arena : str
-        Built-in arena name or arena file path.
-    algo : str
-        Learner name, a key of :data:`dfrl.robots.learners.LEARNERS`.
-    seed : int
-        Seeds the environment (start/respawn poses, sensor noise) and the learner
-        (exploration) through independent streams.
-    iterations : int
-        Budget used by :func:`train` (a :class:`Trainer` can step beyond it).
-    learner : LearnerParams
-    discretisation : DiscretisationConfig
-        The tabular learners' states (the function learners see the raw observation; the
-        discrete state is still reported in the metrics).
-    linear : LinearConfig
-        The ``linear`` learner's step size and feature map.
-    dqn : DQNConfig
-        The ``dqn`` learner's network, replay and optimiser.
-    sim : SimConfig
-        Control/physics rates, solver, robot.
-    actions : ActionSet
-    reward : RewardConfig
-    collision_response : CollisionResponse
-    stuck_steps : int
-    stuck_distance : float
-    """
-
-    algo: str = "qlearning"
-    seed: int = 0
-    iterations: int = DEMO_ITERATIONS
-    learner: LearnerParams = field(default_factory=LearnerParams)
-    discretisation: DiscretisationConfig = field(default_factory=DiscretisationConfig)
-    linear: LinearConfig = field(default_factory=LinearConfig)
-    dqn: DQNConfig = field(default_factory=DQNConfig)
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if self.iterations < 0:
-            raise ValueError("iterations must be >= 0")
-
-    def env_config(self) -> EnvConfig:
-        """The environment part of the configuration."""
-        env = {f.name: getattr(self, f.name) for f in dataclasses.fields(EnvConfig)}
-        env["arena"] = str(self.arena)
-        return EnvConfig(**env)
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready nested dict (enums as their values)."""
-        return _to_jsonable(self)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "TrainerConfig":
-        """Inverse of :meth:`to_dict`."""
-        d = dict(data)
-        learner = dict(d.pop("learner", {}))
-        if "epsilon" in learner:
-            learner["epsilon"] = EpsilonSchedule(**learner["epsilon"])
-        sim = dict(d.pop("sim", {}))
-        if "robot" in sim:
-            robot = dict(sim["robot"])
-            if "sensor_angles" in robot:
-                robot["sensor_angles"] = tuple(robot["sensor_angles"])
-            sim["robot"] = EPuckConfig(**robot)
-        return cls(
-            learner=LearnerParams(**learner),
-            discretisation=DiscretisationConfig(**d.pop("discretisation", {})),
-            linear=LinearConfig(**d.pop("linear", {})),
-            dqn=DQNConfig(**d.pop("dqn", {})),
-            sim=SimConfig(**sim),
-            reward=RewardConfig(**d.pop("reward", {})),
-            **d,
-        )
-
-    def replace(self, **changes: Any) -> "TrainerConfig":
-        """A copy with some fields changed."""
-        return dataclasses.replace(self, **changes)
-
-
-def _to_jsonable(obj: Any) -> Any:
-    if dataclasses.is_dataclass(obj):
-        return {f.name: _to_jsonable(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
-    if isinstance(obj, Enum):
-        return obj.value
-    if isinstance(obj, (list, tuple)):
-        return [_to_jsonable(v) for v in obj]
-    return obj
-
-
-@dataclass(frozen=True, slots=True)
-class StepMetrics:
-    """What happened in one iteration.
-
-    Attributes
-    ----------
-    iteration : int
-        1-based count of control steps so far.
-    q_sum : float
-        Sum of all Q-table entries after the update (function-approximation learners: sum of
-        the parameter vector, a drift indicator only).
-    cumulative_reward : float
-        Sum of rewards over iterations ``1 .. iteration``.
-    collisions : int
-        Collisions so far (cumulative).
-    reward : float
-        This step's reward.
-    collided : bool
-        This step ended in a collision.
-    respawns : int
-        Respawns so far (collisions with RESPAWN, and stuck detections).
-    epsilon : float
-        Exploration probability used for the next action.
-    state, action : int
-        State and action of the updated entry (function learners: the discretised state of
-        the observation they learnt from, for the record).
-    x, y : float
-        Robot position after the step (m).
-    """
-
-    iteration: int
-    q_sum: float
-    cumulative_reward: float
-    collisions: int
-    reward: float
-    collided: bool
-    respawns: int
-    epsilon: float
-    state: int
-    action: int
-    x: float
-    y: float
-
-    FIELDS = ("iteration", "q_sum", "cumulative_reward", "collisions", "reward", "collided",
-              "respawns", "epsilon", "state", "action", "x", "y")
-
-    def as_row(self) -> tuple[Any, ...]:
-        """Values in :attr:`FIELDS` order."""
-        return tuple(getattr(self, f) for f in self.FIELDS)
+# TrainerConfig, DEMO_ITERATIONS (robots/trainer_config.py) and StepMetrics, the metrics CSV
+# (robots/metrics.py) are imported here too: callers find them in this module.
 
 
 def build_learner(config: TrainerConfig, n_states: int, obs_dim: int, n_actions: int,
@@ -395,7 +243,7 @@ class Trainer:
         """Sidecar description of the current parameter vector."""
         c = self.config
         field_name = getattr(self.learner, "config_field", None)
-        model = _to_jsonable(getattr(c, field_name)) if field_name else {}
+        model = to_jsonable(getattr(c, field_name)) if field_name else {}
         return ParamsMeta(algorithm=c.algo, arena=self.env.arena.name, seed=c.seed,
                           iterations=self.iteration, actions=self.action_names,
                           layout=self.param_layout, model=model, extra=dict(extra))
@@ -459,14 +307,6 @@ class TrainingResult:
     params: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
-_METRIC_DTYPE = np.dtype([
-    ("iteration", np.int64), ("q_sum", np.float64), ("cumulative_reward", np.float64),
-    ("collisions", np.int64), ("reward", np.float64), ("collided", np.bool_),
-    ("respawns", np.int64), ("epsilon", np.float64), ("state", np.int64), ("action", np.int64),
-    ("x", np.float64), ("y", np.float64),
-])
-
-
 def train(
     config: TrainerConfig,
     output_dir: str | Path | None = None,
@@ -493,7 +333,7 @@ def train(
     if snapshot_every is not None and snapshot_every < 1:
         raise ValueError("snapshot_every must be >= 1")
     snapshots: dict[int, np.ndarray] = {}
-    rows = np.empty(config.iterations, dtype=_METRIC_DTYPE)
+    rows = np.empty(config.iterations, dtype=METRIC_DTYPE)
     with Trainer(config) as trainer:
         tabular = trainer.learner_kind == "tabular"
         t0 = time.perf_counter()
@@ -526,20 +366,3 @@ def train(
             if snapshots:
                 np.savez(out / "snapshots.npz", **{f"it{k}": v for k, v in snapshots.items()})
     return result
-
-
-def write_metrics_csv(path: str | Path, metrics: np.ndarray) -> None:
-    """Write a metrics record array as CSV with a header row."""
-    names = metrics.dtype.names
-    with open(path, "w", newline="", encoding="utf-8") as fh:
-        writer = csv.writer(fh)
-        writer.writerow(names)
-        for rec in metrics.tolist():
-            writer.writerow([int(v) if isinstance(v, bool) else
-                             (repr(v) if isinstance(v, float) else v) for v in rec])
-
-
-def read_metrics_csv(path: str | Path) -> np.ndarray:
-    """Read a ``metrics.csv`` back into a structured array."""
-    data = np.genfromtxt(path, delimiter=",", names=True, dtype=None, encoding="utf-8")
-    return np.atleast_1d(data)

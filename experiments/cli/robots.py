@@ -109,17 +109,14 @@ def _add_config_arguments(p: argparse.ArgumentParser, seed: bool = True) -> None
                    help=f"linear: tiles per tiling ({d.linear.tiles})")
     g.add_argument("--hidden", type=int, nargs="+", default=None,
                    help=f"dqn: hidden layer widths ({' '.join(map(str, d.dqn.hidden))})")
-    g.add_argument("--lr", type=float, default=None, help=f"dqn: Adam step size ({d.dqn.lr})")
-    g.add_argument("--batch-size", type=int, default=None,
-                   help=f"dqn: transitions per gradient step ({d.dqn.batch_size})")
-    g.add_argument("--buffer-size", type=int, default=None,
-                   help=f"dqn: replay capacity ({d.dqn.buffer_size})")
-    g.add_argument("--learning-starts", type=int, default=None,
-                   help=f"dqn: transitions before the first gradient step ({d.dqn.learning_starts})")
-    g.add_argument("--train-every", type=int, default=None,
-                   help=f"dqn: environment steps per gradient step ({d.dqn.train_every})")
-    g.add_argument("--target-update", type=int, default=None,
-                   help=f"dqn: gradient steps between target network copies ({d.dqn.target_update})")
+    for flag, kind, what in (("lr", float, "Adam step size"),
+                             ("batch_size", int, "transitions per gradient step"),
+                             ("buffer_size", int, "replay capacity"),
+                             ("learning_starts", int, "transitions before the first gradient step"),
+                             ("train_every", int, "environment steps per gradient step"),
+                             ("target_update", int, "gradient steps between target network copies")):
+        g.add_argument("--" + flag.replace("_", "-"), type=kind, default=None,
+                       help=f"dqn: {what} ({getattr(d.dqn, flag)})")
     g = p.add_argument_group("state, actions, simulation")
     g.add_argument("--grouping", choices=[s.value for s in SensorGrouping], default=None,
                    help=f"sensor groups ({d.discretisation.grouping.value})")
@@ -252,9 +249,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
         return _fail(str(exc))
     table = str(args.table) if args.table is not None else None
     from dfrl.robots.learners import is_tabular
-    from dfrl.robots.tables import PARAMS_FORMAT
+    from dfrl.robots.tables import PARAMS_FORMAT, sidecar_format
 
-    if table is not None and _sidecar_format(args.table) == PARAMS_FORMAT:
+    if table is not None and sidecar_format(args.table) == PARAMS_FORMAT:
         return _eval_function_learner(args, cfg, args.table)
     if table is None and not is_tabular(cfg.algo):
         return _eval_function_learner(args, cfg, None)
@@ -290,34 +287,19 @@ def _print_eval(args: argparse.Namespace, cfg: TrainerConfig, summary: Any, tabl
     return 0
 
 
-def _sidecar_format(path: Path) -> str | None:
-    """The ``format`` of a saved table's or parameter file's JSON sidecar (None if unreadable)."""
-    js = path.with_suffix(".json") if path.suffix in (".npy", ".json") else Path(f"{path}.json")
-    try:
-        return json.loads(js.read_text(encoding="utf-8")).get("format")
-    except (OSError, ValueError, AttributeError):
-        return None
-
-
 def _eval_function_learner(args: argparse.Namespace, cfg: TrainerConfig, params_file: Path | None) -> int:
     """``dfrl eval`` for ``linear`` and ``dqn``: train per seed (or load ``params_file``), then
     greedy vs random, reported as for the tables (one process: ``--jobs`` is not used)."""
     from dfrl.experiments.science.standalone import EVAL_SEED_OFFSET, EvalSummary
     from dfrl.robots.evaluation import learnt_vs_random
-    from dfrl.robots.learners import learner_class
     from dfrl.robots.tables import load_params
+    from dfrl.robots.trainer_config import with_params_meta
 
     params = None
     try:
         if params_file is not None:
             loaded = load_params(params_file)
-            meta = loaded.meta
-            cls = learner_class(meta.algorithm)
-            field = getattr(cls, "config_field", None)
-            changes: dict[str, Any] = {"algo": meta.algorithm}
-            if field:
-                changes[field] = type(getattr(cfg, field))(**meta.model)
-            cfg, params = cfg.replace(**changes), loaded.params
+            cfg, params = with_params_meta(cfg, loaded.meta), loaded.params
         rows = [learnt_vs_random(cfg, s, args.steps, EVAL_SEED_OFFSET + s, params)
                 for s in args.seeds]
     except (ValueError, OSError, KeyError, TypeError) as exc:

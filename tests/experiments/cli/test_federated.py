@@ -104,7 +104,7 @@ def test_ranges_unique_ids_and_nodes(tmp_path: Path, capsys: pytest.CaptureFixtu
 def test_every_problem_at_once(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     cfg = smoke(iterations="2000", method="median", colour="red")
     cfg["robots"][0]["algorithm"] = "x"
-    cfg["robots"][1].update(algo="dqn", arena="r9")
+    cfg["robots"][1].update(algo="ppo", arena="r9")
     code, err = run_cli(tmp_path, cfg, capsys)
     assert_refused(tmp_path, code, err, "the config has 6 problems", "colour: unknown key",
                    "iterations:", "method:", "robots[0].algorithm:", "robots[1].algo:",
