@@ -132,6 +132,7 @@ def check_robots(entries: list[tuple[str, Any]], resources: bool) -> list[str]:
             continue
         rid, host = r.get("id"), r.get("robot_host")
         out += check_robot_id(f"{path}.id", rid)
+        out += check_learner_kind(f"{path}.algo", r.get("algo"))
         if isinstance(host, str) and host_port_problem(host):
             out.append(f"{path}.robot_host: {host_port_problem(host)}")
         if resources:
@@ -146,6 +147,21 @@ def check_robots(entries: list[tuple[str, Any]], resources: bool) -> list[str]:
                            "per robot host")
             hosts.setdefault(host, path)
     return out
+
+
+def check_learner_kind(path: str, algo: Any) -> list[str]:
+    """A function learner (``linear``, ``dqn``) cannot run in an experiment yet: the robot
+    host still assumes a Q-table (shares, checkpoints, final save)."""
+    if not isinstance(algo, str) or algo not in known_algorithms():
+        return []
+    from dfrl.robots.learners import is_tabular
+
+    if is_tabular(algo):
+        return []
+    tabular = ", ".join(a for a in known_algorithms() if is_tabular(a))
+    return [f"{path}: {algo} is a function learner; dfrl run federates Q-tables only for now "
+            f"(the robot host saves, shares and checkpoints tables); use {tabular}, or train "
+            f"it alone with dfrl train --algo {algo}"]
 
 
 def check_eval_every(data: dict[str, Any]) -> list[str]:

@@ -135,3 +135,12 @@ def test_robot_host_needs_nothing_of_the_driver() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_function_learner_refused_until_it_federates() -> None:
+    from dfrl.experiments.driver.config_check import check_experiment
+
+    data = {"robots": [{"id": "r1", "arena": "r1"}, {"id": "r2", "arena": "r4", "algo": "dqn"}]}
+    problems = check_experiment(data, resources=False)
+    assert len(problems) == 1
+    assert problems[0].startswith("robots[1].algo: dqn is a function learner;")
