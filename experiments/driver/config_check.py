@@ -5,8 +5,8 @@ key path (the rules and the shared checks are in :mod:`dfrl.experiments.config_r
 list of problems, each a line such as
 ``robots[1].algo: unknown algorithm 'dqn'; known: qlearning, sarsa``. What is checked: unknown
 keys, types (``"2000"`` is not an integer, a bool is not a number), ranges, robot ids,
-``HOST:PORT`` robot hosts, unique ids and robot hosts, known algorithms and aggregation methods,
-the ``trainer`` fields, and (``resources=True``) that every arena exists and parses
+``HOST:PORT`` robot hosts, unique ids and robot hosts, known algorithms and aggregation methods
+(and that a function learner's method applies to parameter vectors), the ``trainer`` fields, and (``resources=True``) that every arena exists and parses
 (:func:`dfrl.arenas.load_arena`, whose errors name file and place).
 """
 from __future__ import annotations
@@ -17,7 +17,8 @@ from dfrl.experiments.config_rules import (Rule, check_keys, check_robot_id, che
                                            check_value, known_algorithms, token_rule)
 from dfrl.experiments.robot_host.config import DEFAULT_ITERATIONS, modes
 
-__all__ = ["BUILTIN_METHODS", "COMMENT_KEYS", "check_experiment", "host_port_problem"]
+__all__ = ["BUILTIN_METHODS", "COMMENT_KEYS", "PARAMS_REFUSED", "check_experiment",
+           "host_port_problem"]
 
 #: Aggregation methods built into the agent; others are injected into a running experiment
 #: with ``dfrl inject`` (an experiment config can only name these).
@@ -106,6 +107,7 @@ def check_experiment(data: Any, resources: bool = True) -> list[str]:
         if isinstance(j, dict) and isinstance(j.get("robot"), dict):
             entries.append((f"joins[{i}].robot", j["robot"]))
     out += check_robots(entries, resources)
+    out += check_params_methods(data, entries)
     methods = data.get("methods", {})
     if isinstance(methods, dict):
         algos = known_algorithms()
@@ -132,7 +134,6 @@ def check_robots(entries: list[tuple[str, Any]], resources: bool) -> list[str]:
             continue
         rid, host = r.get("id"), r.get("robot_host")
         out += check_robot_id(f"{path}.id", rid)
-        out += check_learner_kind(f"{path}.algo", r.get("algo"))
         if isinstance(host, str) and host_port_problem(host):
             out.append(f"{path}.robot_host: {host_port_problem(host)}")
         if resources:
@@ -149,19 +150,41 @@ def check_robots(entries: list[tuple[str, Any]], resources: bool) -> list[str]:
     return out
 
 
-def check_learner_kind(path: str, algo: Any) -> list[str]:
-    """A function learner (``linear``, ``dqn``) cannot run in an experiment yet: the robot
-    host still assumes a Q-table (shares, checkpoints, final save)."""
-    if not isinstance(algo, str) or algo not in known_algorithms():
-        return []
+#: Why a built-in method does not apply to parameter vectors (an agent of function learners,
+#: ``linear`` or ``dqn``, carries them); the agent refuses them likewise
+#: (``domain_error(params_method, M)``, ``platform_pl/dfrl_agent/dfrl_aggregation.pl``).
+PARAMS_REFUSED: dict[str, str] = {
+    "max": "the element-wise maximum of the weights of different networks is no network",
+    "visit_average": "parameters have no visit counts",
+}
+
+
+def check_params_methods(data: dict[str, Any], entries: list[tuple[str, Any]]) -> list[str]:
+    """The method of every function learner's algorithm among ``entries`` (robots and joins)
+    applies to parameter vectors: ``average`` (FedAvg) does, ``max`` and ``visit_average``
+    do not."""
     from dfrl.robots.learners import is_tabular
 
-    if is_tabular(algo):
-        return []
-    tabular = ", ".join(a for a in known_algorithms() if is_tabular(a))
-    return [f"{path}: {algo} is a function learner; dfrl run federates Q-tables only for now "
-            f"(the robot host saves, shares and checkpoints tables); use {tabular}, or train "
-            f"it alone with dfrl train --algo {algo}"]
+    methods = data.get("methods") if isinstance(data.get("methods"), dict) else {}
+    out: list[str] = []
+    seen: set[str] = set()
+    for _, r in entries:
+        algo = r.get("algo", "qlearning") if isinstance(r, dict) else None
+        if not isinstance(algo, str) or algo in seen or algo not in known_algorithms():
+            continue
+        seen.add(algo)
+        if is_tabular(algo):
+            continue
+        path = f"methods.{algo}" if algo in methods else "method"
+        method = methods.get(algo, data.get("method", "average"))
+        if not isinstance(method, str) or method not in PARAMS_REFUSED:
+            continue
+        also = (f" (methods: {{\"{algo}\": \"average\"}} keeps {method} for the tabular robots)"
+                if path == "method" else "")
+        out.append(f"{path}: {method} does not apply to the {algo} robots: {algo} is a function "
+                   f"learner, its agent carries parameter vectors, and "
+                   f"{PARAMS_REFUSED[method]}; methods that do: average (FedAvg){also}")
+    return out
 
 
 def check_eval_every(data: dict[str, Any]) -> list[str]:

@@ -2,7 +2,7 @@
 
 Every ``eval_every`` iterations (:class:`dfrl.experiments.robot_host.config.RobotConfig`; never at
 iteration 0) :class:`LiveEvaluator` measures the greedy policy of a copy of the robot's
-current Q-table for ``eval_steps`` control steps with
+current Q-table (a function learner: of its parameter vector) for ``eval_steps`` control steps with
 :func:`dfrl.robots.evaluation.evaluate_policy`. The evaluation builds an environment of its
 own (its own pybullet client, headless) and its own random generator seeded by
 :func:`eval_seed`, so training is not disturbed: the trainer's generator, environment and
@@ -77,19 +77,22 @@ class LiveEvaluator:
         """An evaluation is due after ``iteration``."""
         return iteration > 0 and iteration % self.every == 0
 
-    def evaluate(self, iteration: int, q_table: np.ndarray) -> dict[str, Any]:
-        """Measure the greedy policy of ``q_table`` (copied first), append the row (flushed)
-        and write the ``DFRL_EVAL`` line; return the row.
+    def evaluate(self, iteration: int, q_table: np.ndarray | None = None, *,
+                 params: np.ndarray | None = None) -> dict[str, Any]:
+        """Measure the greedy policy of ``q_table`` (a function learner: of ``params``; copied
+        first), append the row (flushed) and write the ``DFRL_EVAL`` line; return the row.
 
         Raises
         ------
         ValueError
-            The table does not fit the configuration, or a measure is not finite.
+            The table (vector) does not fit the configuration, or a measure is not finite.
         """
         from dfrl.robots.evaluation import PolicyKind, evaluate_policy
 
+        learnt = ({"params": np.array(params)} if params is not None
+                  else {"q_table": np.array(q_table)})
         r = evaluate_policy(self.config, PolicyKind.GREEDY, self.steps,
-                            eval_seed(self.seed, iteration), q_table=np.array(q_table))
+                            eval_seed(self.seed, iteration), **learnt)
         row = {"robot": self.robot, "iteration": iteration, "arena": str(self.config.arena),
                "steps": r.steps, "collisions_per_1000": r.collisions_per_1000,
                "distance": r.distance, "progress": r.progress, "coverage": r.coverage,

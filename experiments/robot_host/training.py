@@ -24,7 +24,7 @@ from dfrl.experiments.robot_host.checkpoint import (
     load_checkpoint,
     restore_trainer,
     save_checkpoint,
-    save_table_atomically,
+    save_learnt_atomically,
 )
 from dfrl.experiments.robot_host.evaluate import LiveEvaluator
 from dfrl.experiments.robot_host.files import METRIC_FIELDS, SHARE_FIELDS, CsvLog
@@ -127,6 +127,12 @@ class Training:
         return self.trainer is not None
 
     @property
+    def function(self) -> bool:
+        """The robot learns with a function learner (``linear``, ``dqn``): parameters, no
+        Q-table."""
+        return self.trainer is not None and self.trainer.learner_kind == "function"
+
+    @property
     def done(self) -> bool:
         """No iteration left (or stopped)."""
         return self.stopped or self.trainer is None or self.iteration >= self.config.iterations
@@ -217,7 +223,10 @@ class Training:
         elif c.mode is Mode.ASYNC:
             self.bridge.serve_pending()
         if self._evals is not None and not self.stopped and self._evals.due(it):
-            self._evals.evaluate(it, self.trainer.q_table)      # after this boundary's share
+            if self.function:                                   # after this boundary's share
+                self._evals.evaluate(it, params=self.trainer.params)
+            else:
+                self._evals.evaluate(it, self.trainer.q_table)
         if not self.stopped and it % self.poll_every == 0:
             self.host.wait(0.0)
             if self.host.should_stop():
@@ -234,12 +243,16 @@ class Training:
         return True
 
     def sample(self, q_sum: float | None = None, cumulative_reward: float | None = None) -> None:
-        """Write a ``DFRL_SAMPLE`` line now: the pose, the sum of Q-values and the
-        cumulative reward at this iteration."""
+        """Write a ``DFRL_SAMPLE`` line now: the pose, the sum of Q-values (a function learner:
+        the sum of its parameters, as its metrics' ``q_sum``) and the cumulative reward at this
+        iteration."""
         if self.trainer is None:
             return
         self._sampled_at = time.monotonic()
-        q = float(self.trainer.q_table.sum()) if q_sum is None else q_sum
+        if q_sum is not None:
+            q = q_sum
+        else:
+            q = float((self.trainer.params if self.function else self.trainer.q_table).sum())
         cr = self.trainer.cumulative_reward if cumulative_reward is None else cumulative_reward
         self.lines.sample(self.iteration, self.trainer.pose, q, cr)
 
@@ -275,14 +288,15 @@ class Training:
 
     def save_history(self) -> None:
         """Write the table just shared as ``tables/history/<robot>_it<N>.npy`` (N: the
-        robot's iteration), for the greedy evaluations a study runs afterwards."""
+        robot's iteration), for the greedy evaluations a study runs afterwards; a function
+        learner's parameter vector as ``params/history/<robot>_it<N>.npy``."""
         if self.trainer is None:
             return
-        d = self.out_dir / "tables" / "history"
+        d = self.out_dir / ("params" if self.function else "tables") / "history"
         d.mkdir(parents=True, exist_ok=True)
         tmp = d / f".{self.config.robot}_it{self.iteration}.npy.tmp"
         with open(tmp, "wb") as fh:
-            np.save(fh, self.trainer.q_table)
+            np.save(fh, self.trainer.params if self.function else self.trainer.q_table)
         os.replace(tmp, d / f"{self.config.robot}_it{self.iteration}.npy")
 
     def checkpoint(self) -> None:
@@ -299,7 +313,8 @@ class Training:
 
     def finish(self) -> None:
         """After the last iteration (or a stop): flush the metrics, save the tables
-        (``tables/<robot>.npy`` + ``.json`` + ``_visits.npy``) and the checkpoint."""
+        (``tables/<robot>.npy`` + ``.json`` + ``.visits.npy``; a function learner:
+        ``params/<robot>.npy`` + ``.json``) and the checkpoint."""
         if self.finished or self.trainer is None:
             self.finished = True
             return
@@ -311,9 +326,10 @@ class Training:
         self.sample()
 
     def save_tables(self) -> None:
-        """Save the table files and the checkpoint (also after a share that came late)."""
+        """Save the table (or parameter) files and the checkpoint (also after a share that came
+        late)."""
         if self.trainer is not None:
-            save_table_atomically(self.trainer, self.out_dir / "tables" / self.config.robot)
+            save_learnt_atomically(self.trainer, self.out_dir, self.config.robot)
             self.checkpoint()
 
     def close(self) -> None:

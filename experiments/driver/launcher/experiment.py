@@ -35,7 +35,7 @@ from dfrl.experiments.driver.results.metrics import merge_metrics
 from dfrl.experiments.driver.results.plots import plot_experiment
 from dfrl.experiments.driver.results.rounds import read_shares, write_rounds_csv
 from dfrl.experiments.driver.results.summary import Results, write_summary
-from dfrl.experiments.driver.results.tables import final_tables
+from dfrl.experiments.driver.results.tables import final_tables, learnt_path
 from dfrl.experiments.provenance import write_provenance
 from dfrl.experiments.tls_folder import check_node_dir
 from dfrl.experiments.tokens import SECRET_FILE, new_secret, write_secret_file
@@ -171,7 +171,9 @@ class Launcher:
         robots = list(self._robots.robots())
         from_checkpoint, torn = final_tables(out, robots)
         for rid in from_checkpoint:
-            say(f"table of {rid} kept from its last checkpoint (tables/{rid}.npy)")
+            kept = learnt_path(out, rid)
+            where = f"{kept.parent.name}/{kept.name}" if kept else f"tables/{rid}.npy"
+            say(f"table of {rid} kept from its last checkpoint ({where})")
         for line in torn.values():
             say(f"TABLE {line}")
         merge_metrics(out, robots)

@@ -17,6 +17,7 @@ from dfrl.experiments.driver.launcher.robot_roster import RobotRoster
 from dfrl.experiments.driver.launcher.robots import Robot
 from dfrl.experiments.driver.results.files import write_json
 from dfrl.experiments.robot_host.config import Mode, RobotConfig
+from dfrl.robots.learners import learner_kind
 
 
 @dataclass(frozen=True)
@@ -152,7 +153,9 @@ def await_first_respite(config: ExperimentConfig, robots: RobotRoster,
 
 def launch_agents(site: Site, robots: RobotRoster, agents: AgentRoster,
                   reporter: Reporter) -> None:
-    """One agent per algorithm, over the robots using it, in config order.
+    """One agent per algorithm, over the robots using it, in config order; an agent of a
+    function learner (``dfrl.robots.learners.learner_kind``: ``linear``, ``dqn``) carries
+    parameter vectors (launch plan ``"carries": "params"``), the others Q-tables.
 
     Raises
     ------
@@ -179,6 +182,8 @@ def launch_agents(site: Site, robots: RobotRoster, agents: AgentRoster,
                   # the agent posts its round log to the console node, which writes it here:
                   # no shared disk between the hosts the agent visits and the driver's
                   "log_to": list(site.console.address)}
+        if learner_kind(algo) == "function":
+            launch["carries"] = "params"     # linear, dqn: FedAvg of parameter vectors
         agents.add(AgentInfo(name, algo, c.method_for(algo), c.rounds, str(log_path),
                              tuple(stops)))
         write_nodes(site, robots, agents)

@@ -127,15 +127,21 @@ def plot_experiment(out_dir: str | Path, title: str = "", formats: Sequence[str]
     if not curves:
         return []
     arenas: dict[str, str] = {}
+    algos: set[str] = set()
     cfg_path = out / "config.json"
     if cfg_path.is_file():
         cfg = json.loads(cfg_path.read_text(encoding="utf-8"))
         for r in cfg.get("robots", []) + [j["robot"] for j in cfg.get("joins", [])]:
             arenas[r["id"]] = r["arena"]
+            algos.add(r.get("algo", "qlearning"))
     shares = share_iterations(out)
+    from dfrl.robots.learners import LEARNERS, is_tabular
+
+    function = sorted(a for a in algos if a in LEARNERS and not is_tabular(a))
+    note = f" ({', '.join(function)}: sum of parameters)" if function else ""
     return [
-        *plot_metric(curves, "q_sum", out / "q_sum.png", f"Sum of Q-values: {title}", arenas,
-                     shares, formats, dpi),
+        *plot_metric(curves, "q_sum", out / "q_sum.png", f"Sum of Q-values{note}: {title}",
+                     arenas, shares, formats, dpi),
         *plot_metric(curves, "cumulative_reward", out / "cumulative_reward.png",
                      f"Cumulative reward: {title}", arenas, shares, formats, dpi),
         *plot_both(curves, out / "curves.png", title, arenas, formats, dpi),

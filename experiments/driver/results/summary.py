@@ -10,7 +10,7 @@ from dfrl.experiments.driver.results.evaluations import last_evaluations
 from dfrl.experiments.driver.results.faults import Faults
 from dfrl.experiments.driver.results.metrics import read_metrics
 from dfrl.experiments.driver.results.rounds import count_equal
-from dfrl.experiments.driver.results.tables import table_sum
+from dfrl.experiments.driver.results.tables import params_path, table_sum
 from dfrl.experiments.provenance import describe, read_provenance
 
 
@@ -86,7 +86,8 @@ def write_summary(r: Results) -> Path:
         last = cur[-1]
         final = table_sum(r.output_dir, rid)
         q = "no table saved" if final is None else f"{final:.2f}" + (
-            " (last checkpoint)" if rid in kept else "")
+            " (sum of parameters, params/)" if params_path(r.output_dir, rid).is_file()
+            else "") + (" (last checkpoint)" if rid in kept else "")
         lines.append(f"| {rid} | {s.arena if s else '?'} | {s.algo if s else '?'} | "
                      f"{int(last['iteration'])} | {q} | "
                      f"{last['cumulative_reward']:.1f} | {int(last['collisions'])} |")

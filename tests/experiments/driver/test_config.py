@@ -137,10 +137,28 @@ def test_robot_host_needs_nothing_of_the_driver() -> None:
     assert out.strip() == "[]"
 
 
-def test_function_learner_refused_until_it_federates() -> None:
+def test_function_learner_method_must_apply_to_params() -> None:
+    """dqn + max and linear + visit_average are refused before anything starts, with the
+    reason and the key; average (FedAvg) is accepted; a tabular robot may keep max."""
     from dfrl.experiments.driver.config_check import check_experiment
 
-    data = {"robots": [{"id": "r1", "arena": "r1"}, {"id": "r2", "arena": "r4", "algo": "dqn"}]}
-    problems = check_experiment(data, resources=False)
+    robots = [{"id": "r1", "arena": "r1"}, {"id": "r2", "arena": "r4", "algo": "dqn"}]
+    assert check_experiment({"robots": robots}, resources=False) == []
+    problems = check_experiment({"robots": robots, "method": "max"}, resources=False)
     assert len(problems) == 1
-    assert problems[0].startswith("robots[1].algo: dqn is a function learner;")
+    assert problems[0].startswith("method: max does not apply to the dqn robots: dqn is a "
+                                  "function learner")
+    assert "is no network" in problems[0] and '{"dqn": "average"}' in problems[0]
+    assert check_experiment({"robots": robots, "method": "max",
+                             "methods": {"dqn": "average"}}, resources=False) == []
+    problems = check_experiment({"robots": [{"id": "r1", "arena": "r1", "algo": "linear"}],
+                                 "methods": {"linear": "visit_average"}}, resources=False)
+    assert len(problems) == 1 and problems[0].startswith("methods.linear: visit_average does "
+                                                         "not apply")
+    assert "no visit counts" in problems[0]
+    joins = [{"robot": {"id": "r3", "arena": "r2", "algo": "dqn"}, "after_round": 1}]
+    problems = check_experiment({"robots": robots[:1], "joins": joins, "method": "max"},
+                                resources=False)
+    assert len(problems) == 1 and problems[0].startswith("method: max does not apply to the dqn")
+    with pytest.raises(ConfigError, match="max does not apply"):
+        ExperimentConfig(robots=(RobotSpec("r1", "r1", "dqn"),), method="max")
