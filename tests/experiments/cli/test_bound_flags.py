@@ -24,7 +24,7 @@ svc = RobotService(args.host, args.port, ["1111"], None, args.workdir, bounds=bo
 svc.start()
 for name in ("max_agents", "agent_cpu_limit", "agent_memory_budget", "max_running_agents",
              "max_frame_size"):
-    sol = svc.node.call("node_option", svc.node_name, Atom(name), Var("V"), module="node")
+    sol = svc.bridge.call("node_option", svc.node_name, Atom(name), Var("V"), module="node")
     print("OPT", name, sol["V"], flush=True)
 svc.close()
 """
