@@ -88,10 +88,19 @@ def test_dqn_federation_same_parameters_every_round_and_reproducible(tmp_path: P
     print(f"tiny dqn run: {wall:.1f} s wall")
 
 
-def test_linear_federation(tmp_path: Path) -> None:
+def test_linear_federation_with_live_evaluations(tmp_path: Path) -> None:
     robots = (RobotSpec("r1", "r1", "linear"), RobotSpec("r2", "r4", "linear"))
-    res = run(small_config(robots=robots, iterations=200, respite=50), tmp_path, progress=None)
+    cfg = small_config(robots=robots, iterations=200, respite=50, eval_every=100, eval_steps=50)
+    res = run(cfg, tmp_path, progress=None)
     assert res.ok, (res.crashed, res.agents_finished)
     digests = _assert_federated(tmp_path, "fed_linear", 4, ("r1", "r2"))
     assert len(set(digests)) == 4
     assert np.load(tmp_path / "params" / "r1.npy").shape == (771,)
+    # the greedy policy of the (just federated) parameters, measured every 100 iterations
+    for rid in ("r1", "r2"):
+        with open(tmp_path / f"eval_{rid}.csv", newline="", encoding="utf-8") as fh:
+            rows = list(csv.DictReader(fh))
+        assert [int(r["iteration"]) for r in rows] == [100, 200]
+        assert all(int(r["steps"]) == 50 for r in rows)
+    assert "last greedy evaluation (iteration 200, 50 steps)" in \
+        (tmp_path / "summary.md").read_text()
