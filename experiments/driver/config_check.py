@@ -3,10 +3,11 @@ key path (the rules and the shared checks are in :mod:`dfrl.experiments.config_r
 
 :func:`check_experiment` takes the JSON form (a dict, as read from a file) and returns the
 list of problems, each a line such as
-``robots[1].algo: unknown algorithm 'dqn'; known: qlearning, sarsa``. What is checked: unknown
-keys, types (``"2000"`` is not an integer, a bool is not a number), ranges, robot ids,
-``HOST:PORT`` robot hosts, unique ids and robot hosts, known algorithms and aggregation methods
-(and that a function learner's method applies to parameter vectors), the ``trainer`` fields, and (``resources=True``) that every arena exists and parses
+``robots[1].algo: unknown algorithm 'ppo'; known: dqn, linear, qlearning, sarsa``. What is
+checked: unknown keys, types (``"2000"`` is not an integer, a bool is not a number), ranges,
+robot ids, ``HOST:PORT`` robot hosts, unique ids and robot hosts, known algorithms and
+aggregation methods (and that a function learner's method applies to parameter vectors), the
+``trainer`` fields, and (``resources=True``) that every arena exists and parses
 (:func:`dfrl.arenas.load_arena`, whose errors name file and place).
 """
 from __future__ import annotations
@@ -166,13 +167,11 @@ def check_params_methods(data: dict[str, Any], entries: list[tuple[str, Any]]) -
     from dfrl.robots.learners import is_tabular
 
     methods = data.get("methods") if isinstance(data.get("methods"), dict) else {}
+    algos = [r.get("algo", "qlearning") for _, r in entries if isinstance(r, dict)]
+    algos = list(dict.fromkeys(a for a in algos if isinstance(a, str) and a in known_algorithms()))
+    tabular = any(is_tabular(a) for a in algos)
     out: list[str] = []
-    seen: set[str] = set()
-    for _, r in entries:
-        algo = r.get("algo", "qlearning") if isinstance(r, dict) else None
-        if not isinstance(algo, str) or algo in seen or algo not in known_algorithms():
-            continue
-        seen.add(algo)
+    for algo in algos:
         if is_tabular(algo):
             continue
         path = f"methods.{algo}" if algo in methods else "method"
@@ -180,7 +179,7 @@ def check_params_methods(data: dict[str, Any], entries: list[tuple[str, Any]]) -
         if not isinstance(method, str) or method not in PARAMS_REFUSED:
             continue
         also = (f" (methods: {{\"{algo}\": \"average\"}} keeps {method} for the tabular robots)"
-                if path == "method" else "")
+                if path == "method" and tabular else "")
         out.append(f"{path}: {method} does not apply to the {algo} robots: {algo} is a function "
                    f"learner, its agent carries parameter vectors, and "
                    f"{PARAMS_REFUSED[method]}; methods that do: average (FedAvg){also}")

@@ -17,6 +17,9 @@ Layout (see ``experiments/README.md``)::
                            aborted and control events)
     nodes/<robot>.json     node configs; logs/<robot>.err, logs/launch_<agent>.out
     tables/<robot>.npy     final tables (robots.tables format)
+    params/<robot>.npy     a function learner's (linear, dqn) final parameters instead
+                           (+ .json, format dfrl-params/1)
+    checkpoint/<robot>.npy each robot's last checkpoint (table or parameters)
 
 Modules: :mod:`.agent_log` (the agent's JSON-lines log), :mod:`.rounds` (shares, their
 matching to rounds, ``rounds.csv``), :mod:`.metrics` (``metrics.csv``), :mod:`.evaluations`

@@ -22,8 +22,8 @@ import numpy as np
 
 from dfrl.experiments.robot_host.checkpoint import atomic_write, load_checkpoint
 
-__all__ = ["table_path", "params_path", "learnt_path", "table_sum", "set_aside_unreadable", "keep_checkpoints",
-           "table_problems", "final_tables"]
+__all__ = ["table_path", "params_path", "learnt_path", "table_sum", "set_aside_unreadable",
+           "keep_checkpoints", "table_problems", "final_tables"]
 
 #: What np.load and json raise on a torn or foreign file.
 _UNREADABLE = (OSError, ValueError, EOFError)

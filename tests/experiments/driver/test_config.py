@@ -160,5 +160,7 @@ def test_function_learner_method_must_apply_to_params() -> None:
     problems = check_experiment({"robots": robots[:1], "joins": joins, "method": "max"},
                                 resources=False)
     assert len(problems) == 1 and problems[0].startswith("method: max does not apply to the dqn")
+    only_dqn = check_experiment({"robots": robots[1:], "method": "max"}, resources=False)
+    assert len(only_dqn) == 1 and "tabular" not in only_dqn[0]     # no hint about others
     with pytest.raises(ConfigError, match="max does not apply"):
         ExperimentConfig(robots=(RobotSpec("r1", "r1", "dqn"),), method="max")
