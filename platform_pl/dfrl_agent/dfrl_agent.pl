@@ -620,6 +620,8 @@ end_round(M, Agent, S) :-
     M:dfrl_plan(Agent, Plan),
     Plan = plan(_, Rounds, Rest, Log, _),
     M:dfrl_method_of(Agent, Method),
+    carried(M, Agent, Carried),
+    next_method(Method, Carried, S, Next, Good),
     get_dict(round, S, Round),
     (   (   Round >= Rounds
         ->  Why = none
@@ -633,12 +635,17 @@ end_round(M, Agent, S) :-
     ),
     lease_progress(Node, Agent,
                    round_done(Round, Last, [dfrl_plan(Agent, Plan),
-                                            dfrl_method_of(Agent, Method)]),
+                                            dfrl_method_of(Agent, Next)]),
                    Verdict),
     (   Verdict = superseded(E2)
     ->  retire(Node, M, Agent, E2)
     ;   lease_custody(Node, Agent, custody(Epoch, _, _)),
         log_round(Log, Agent, Method, Epoch, End, S),
+        (   Next == Method
+        ->  true
+        ;   replace_fact(M, dfrl_method_of(Agent, Next)),
+            log_control(Log, Agent, Round, fallback(Method, Next), applied)
+        ),
         (   Last == true
         ->  (   Why == stop -> log_control(Log, Agent, Round, stop, applied) ; true ),
             take_commands(Agent, Left),             % too late for them
@@ -651,7 +658,7 @@ end_round(M, Agent, S) :-
         ;   Round1 is Round + 1,
             get_dict(index, S, At),
             new_round(Round1, At, S1a),
-            put_dict(phase, S1a, home, S1),
+            put_dict(_{phase:home, good:Good}, S1a, S1),
             put_state(M, Agent, S1),
             rest(Node, Agent, Rest, Verdict1),
             (   Verdict1 = superseded(E3)
@@ -659,6 +666,26 @@ end_round(M, Agent, S) :-
             ;   try_home(M, Agent, S1, 0)
             )
         )
+    ).
+
+%   next_method(+Method, +Carried, +State, -Next, -Good)
+%
+%   The method of the next round and the last method that worked. A round
+%   whose method failed (State has an error) falls back to the last method
+%   that completed a round (the state's `good`), or to average when none
+%   did or that one was the failing method: a method that throws costs one
+%   round, not the run, and sync robots waiting for a share get one again.
+%   A method that works is the new fallback.
+next_method(Method, Carried, S, Next, Good) :-
+    (   get_dict(good, S, Good0) -> true ; Good0 = none ),
+    (   get_dict(error, S, _)
+    ->  (   Good0 \== none, Good0 \== Method, method_applies_to(Good0, Carried)
+        ->  Next = Good0
+        ;   Next = average
+        ),
+        Good = Next
+    ;   Next = Method,
+        Good = Method
     ).
 
 %   Rest between rounds, in short slices, watching for a higher epoch;

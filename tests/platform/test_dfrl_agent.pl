@@ -186,13 +186,42 @@ test(failing_method_aborts_round_loudly, [setup(assertz(user:quiet)),
     assertion(wait_for(finished(Log))),
     events(Log, round, [R1, R2]),
     assertion(R1.error == 'aggregate_step(failing_step) failed'),
-    assertion(R2.error == R1.error),
     assertion(R1.visited == [r1]),          % r2's step failed: nothing after it
     assertion(R1.skipped == []),
-    % every robot keeps its own table: nothing was written
-    assertion(memory_robot_table(r1, [1.0,2.0])),
-    assertion(memory_robot_table(r3, [5.0,6.0])),
-    forall(member(R, [r1,r2,r3]), assertion(memory_robot_sets(R, 0))).
+    % round 1 wrote nothing; no method had worked yet, so round 2 falls back to average
+    events(Log, control, [F]),
+    assertion(F.command == 'fallback(failing_step,average)'),
+    assertion(F.round == 1), assertion(F.status == applied),
+    assertion(R2.method == average),
+    assertion(\+ get_dict(error, R2, _)),
+    forall(member(R, [r1,r2,r3]), assertion(memory_robot_sets(R, 1))),
+    forall(member(R, [r1,r2,r3]), assertion(memory_robot_table(R, [3.0,4.0]))).
+
+test(failing_method_falls_back_to_the_last_that_worked,
+     [setup(assertz(user:quiet)),
+      cleanup((retractall(user:quiet), cleanup([C,A,B], Log)))]) :-
+    tmp_log(Log),
+    memory_robots_start([r1-[1.0,5.0], r2-[3.0,4.0]]),
+    nodes(3, [C,A,B]),
+    maplist(stop_of, [A,B], [r1,r2], Stops),
+    node_property(A, address(AA)),
+    % rounds 1 and 3 with max; the method applied at round 2 fails there
+    dfrl_create(C, fb, plan(Stops, 3, 0.5, Log, 30), [method(max), tokens([7])]),
+    Stops = [stop(H, P, _)|_],
+    with_node(C, move_agent(fb, (H, P))),
+    assertion(wait_for(events(Log, round, [_]), 200)),
+    agent_post(AA, platform, dfrl_control, x, [fb, method(failing_step)]),
+    assertion(wait_for(finished(Log), 400)),
+    events(Log, round, [R1, R2, R3]),
+    assertion(R1.method == max), assertion(\+ get_dict(error, R1, _)),
+    assertion(R2.method == failing_step), assertion(get_dict(error, R2, _)),
+    assertion(R3.method == max), assertion(\+ get_dict(error, R3, _)),
+    events(Log, control, Controls),
+    assertion(( member(M, Controls), get_dict(command, M, 'method(failing_step)') )),
+    assertion(( member(F, Controls), get_dict(command, F, 'fallback(failing_step,max)'),
+                get_dict(round, F, 2), get_dict(status, F, applied) )),
+    forall(member(R, [r1,r2]), assertion(memory_robot_sets(R, 2))),
+    assertion(memory_robot_table(r1, [3.0,5.0])).
 
 test(throwing_method_aborts_round_loudly, [setup(assertz(user:quiet)),
                                            cleanup((retractall(user:quiet),
