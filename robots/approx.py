@@ -25,7 +25,7 @@ import numpy as np
 from dfrl.robots.td import epsilon_greedy, greedy_action
 
 if TYPE_CHECKING:
-    from dfrl.robots.learners import LearnerParams
+    from dfrl.robots.td import LearnerParams
 
 #: Names and shapes of a model's arrays, in the order of the flat vector.
 Layout = list[tuple[str, tuple[int, ...]]]

@@ -33,7 +33,7 @@ import numpy as np
 from dfrl.robots.approx import FunctionLearner, Layout, flatten, unflatten, validate_params
 
 if TYPE_CHECKING:
-    from dfrl.robots.learners import LearnerParams
+    from dfrl.robots.td import LearnerParams
 
 
 @dataclass(frozen=True)

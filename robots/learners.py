@@ -17,7 +17,6 @@ have no table; :func:`learner_kind` tells the two apart.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
@@ -28,39 +27,8 @@ from dfrl.robots.linear import LinearQ
 
 # The pure maths live in dfrl.robots.td (shared with the function-approximation learners);
 # they are imported here under their old home, where callers and tests find them.
-from dfrl.robots.td import (EpsilonSchedule, ScheduleKind, epsilon_greedy, greedy_action,
-                            q_learning_target, sarsa_target, td_update)
-
-
-@dataclass(frozen=True)
-class LearnerParams:
-    """Hyper-parameters shared by the learners.
-
-    Attributes
-    ----------
-    alpha : float
-        Learning rate of the tabular learners in ``(0, 1]``: the fraction of the TD error by
-        which an update moves ``Q(s, a)`` (``linear`` and ``dqn`` have their own step sizes in
-        their configurations).
-    gamma : float
-        Discount factor in ``[0, 1)`` (every learner).
-    epsilon : EpsilonSchedule
-        Exploration schedule (every learner).
-    initial_q : float
-        Initial value of every table entry (``linear``: of every action value; unused by
-        ``dqn``).
-    """
-
-    alpha: float = 0.2
-    gamma: float = 0.95
-    epsilon: EpsilonSchedule = field(default_factory=EpsilonSchedule)
-    initial_q: float = 0.0
-
-    def __post_init__(self) -> None:
-        if not 0.0 < self.alpha <= 1.0:
-            raise ValueError(f"alpha must be in (0, 1], got {self.alpha}")
-        if not 0.0 <= self.gamma < 1.0:
-            raise ValueError(f"gamma must be in [0, 1), got {self.gamma}")
+from dfrl.robots.td import (EpsilonSchedule, LearnerParams, ScheduleKind, epsilon_greedy,
+                            greedy_action, q_learning_target, sarsa_target, td_update)
 
 
 def validate_table(table: np.ndarray, shape: tuple[int, int]) -> np.ndarray:

@@ -31,7 +31,7 @@ from dfrl.robots.features import TileCoding, active_features
 from dfrl.robots.td import q_learning_target
 
 if TYPE_CHECKING:
-    from dfrl.robots.learners import LearnerParams
+    from dfrl.robots.td import LearnerParams
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ every name.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import Enum
 
 import numpy as np
@@ -106,3 +106,34 @@ class EpsilonSchedule:
             frac = min(t / self.decay_steps, 1.0)
             return self.start + frac * (self.end - self.start)
         return self.end + (self.start - self.end) * float(np.exp(-t / self.decay_steps))
+
+
+@dataclass(frozen=True)
+class LearnerParams:
+    """Hyper-parameters shared by the learners.
+
+    Attributes
+    ----------
+    alpha : float
+        Learning rate of the tabular learners in ``(0, 1]``: the fraction of the TD error by
+        which an update moves ``Q(s, a)`` (``linear`` and ``dqn`` have their own step sizes in
+        their configurations).
+    gamma : float
+        Discount factor in ``[0, 1)`` (every learner).
+    epsilon : EpsilonSchedule
+        Exploration schedule (every learner).
+    initial_q : float
+        Initial value of every table entry (``linear``: of every action value; unused by
+        ``dqn``).
+    """
+
+    alpha: float = 0.2
+    gamma: float = 0.95
+    epsilon: EpsilonSchedule = field(default_factory=EpsilonSchedule)
+    initial_q: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.alpha <= 1.0:
+            raise ValueError(f"alpha must be in (0, 1], got {self.alpha}")
+        if not 0.0 <= self.gamma < 1.0:
+            raise ValueError(f"gamma must be in [0, 1), got {self.gamma}")
