@@ -87,6 +87,63 @@ def dip(y: np.ndarray) -> tuple[float, int]:
     return float(drop[k]), k
 
 
+def _grid(iterations: Sequence[float], values: Sequence[float] | None = None
+          ) -> tuple[np.ndarray, np.ndarray | None]:
+    """An evaluation grid checked: at least 2 finite, strictly increasing points, and as many
+    finite values."""
+    x = np.asarray(iterations, dtype=np.float64)
+    if x.ndim != 1 or len(x) < 2:
+        raise ValueError(f"a grid needs at least 2 points, got {x.shape}")
+    if not np.isfinite(x).all() or (np.diff(x) <= 0).any():
+        raise ValueError("grid points must be finite and strictly increasing")
+    if values is None:
+        return x, None
+    y = np.asarray(values, dtype=np.float64)
+    if y.shape != x.shape:
+        raise ValueError(f"{len(y)} values for {len(x)} grid points")
+    if not np.isfinite(y).all():
+        raise ValueError("values must be finite")
+    return x, y
+
+
+def auc(iterations: Sequence[float], values: Sequence[float]) -> float:
+    """Area under a curve measured on an evaluation grid, normalised by the span: the
+    trapezoid rule's integral divided by ``iterations[-1] - iterations[0]``, i.e. the curve's
+    mean level over the span, in the values' unit (a constant curve gives its constant).
+
+    Raises
+    ------
+    ValueError
+        Fewer than 2 points, a grid not strictly increasing, lengths differ, or a value not
+        finite.
+    """
+    x, y = _grid(iterations, values)
+    assert y is not None
+    area = float(np.sum(np.diff(x) * (y[1:] + y[:-1]) / 2.0))
+    return area / float(x[-1] - x[0])
+
+
+def grid_step(iterations: Sequence[float]) -> float:
+    """The largest step of an evaluation grid: the coarsest time it resolves."""
+    x, _ = _grid(iterations)
+    return float(np.max(np.diff(x)))
+
+
+def resolves(iterations: Sequence[float], effect: float) -> bool:
+    """Whether the grid is finer than an effect: every step strictly smaller than ``effect``,
+    a difference in time (iterations) that a measure on this grid is meant to show. A grid
+    whose step equals the effect cannot tell a difference of one step from none.
+
+    Raises
+    ------
+    ValueError
+        A bad grid, or ``effect <= 0``.
+    """
+    if not effect > 0:
+        raise ValueError(f"the effect must be a positive time, got {effect}")
+    return grid_step(iterations) < effect
+
+
 
 
 # -- Student's t and the normal distribution -------------------------------------------------
