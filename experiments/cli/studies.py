@@ -112,6 +112,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_sweep)
     register_paper(subparsers)
     register_speedup(subparsers)
+    register_reference(subparsers)
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
@@ -259,4 +260,75 @@ def cmd_speedup(args: argparse.Namespace) -> int:
             [{**r, "curve": {str(k): v for k, v in r["curve"].items()}} for r in runs],
             indent=1), encoding="utf-8")
     print(text)
+    return 0
+
+
+def register_reference(subparsers: argparse._SubParsersAction) -> None:
+    from dfrl.experiments.science.reference import (DEFAULT_ITERATIONS, DEFAULT_MIN_VISITS,
+                                                    DEFAULT_SEEDS)
+
+    p = subparsers.add_parser(
+        "reference", help="build (or check) the reference Q-table of an arena: the mean of "
+                          "long standalone runs over several seeds, cached with checksums",
+        description="The reference table that table errors are measured against "
+                    "(experiments/science/reference.py): K standalone runs, averaged per "
+                    "state-action pair over the runs that updated it, stored in the cache "
+                    "folder with a JSON sidecar (recipe, sha256 of each array). A cached "
+                    "reference is loaded and verified instead of rebuilt; a checksum mismatch "
+                    "is exit 1 naming the file.")
+    p.add_argument("--arena", default="r1", help="arena name or file (default: %(default)s)")
+    p.add_argument("--algo", default="qlearning", help="tabular learner (default: %(default)s)")
+    p.add_argument("--iterations", type=int, default=DEFAULT_ITERATIONS,
+                   help="iterations per run (default: %(default)s)")
+    add_seed_arguments(p, DEFAULT_SEEDS)
+    p.add_argument("--min-visits", type=int, default=DEFAULT_MIN_VISITS,
+                   help="pairs updated fewer times (summed over the runs) are left out of "
+                        "the error (default: %(default)s)")
+    p.add_argument("--cache", type=Path, default=None,
+                   help="cache folder (default: $DFRL_REFERENCE_CACHE, else "
+                        "~/.cache/dfrl/references)")
+    p.add_argument("--rebuild", action="store_true", help="build even if cached")
+    p.add_argument("--jobs", type=int, default=1, help="processes (default: %(default)s)")
+    p.add_argument("--json", action="store_true", help="print the sidecar's facts as JSON")
+    p.set_defaults(func=cmd_reference)
+
+
+def cmd_reference(args: argparse.Namespace) -> int:
+    """``dfrl reference``: exit 0 with the reference's path, 2 on a bad recipe, 1 when the
+    cached copy fails verification."""
+    from dfrl.experiments.science.reference import (ReferenceError, default_cache,
+                                                    reference_name, reference_recipe,
+                                                    reference_table)
+
+    try:
+        seeds = chosen_seeds(args)
+        name = reference_name(reference_recipe(args.arena, args.algo, args.iterations, seeds,
+                                               min_visits=args.min_visits))
+        cached = not args.rebuild and (
+            (args.cache or default_cache()) / f"{name}.json").is_file()
+        ref = reference_table(args.arena, args.algo, args.iterations, seeds,
+                              cache=args.cache, min_visits=args.min_visits, jobs=args.jobs,
+                              rebuild=args.rebuild)
+    except ReferenceError as exc:
+        print(f"dfrl reference: {exc}", file=sys.stderr)
+        return 1
+    except (KeyError, ValueError) as exc:
+        print(f"dfrl reference: {exc}", file=sys.stderr)
+        return 2
+    counted = int((ref.visits >= args.min_visits).sum())
+    facts = {"path": str(ref.path), "cached": cached, "arena": ref.recipe["arena"], "algo": ref.recipe["algo"],
+             "iterations": ref.recipe["iterations"], "seeds": ref.recipe["seeds"],
+             "pairs_counted": counted, "pairs_visited": int((ref.visits > 0).sum()),
+             "seed_rms": ref.built.get("seed_rms"), "build_seconds": ref.built.get("seconds"),
+             "dfrl": ref.built.get("dfrl"), "git_commit": ref.built.get("git_commit")}
+    if args.json:
+        print(json.dumps(facts, indent=1))
+    else:
+        per_k = 1000 * facts["build_seconds"] / (len(seeds) * args.iterations)
+        print(f"{facts['path']}\n{facts['arena']} {facts['algo']}: {facts['iterations']} "
+              f"iterations x seeds {' '.join(map(str, seeds))}; {counted} pairs updated at "
+              f"least {args.min_visits} times ({facts['pairs_visited']} at all); a run's own "
+              f"RMS error against it {facts['seed_rms']:.3f}; "
+              f"{'loaded and verified; it was ' if cached else ''}built in "
+              f"{facts['build_seconds']:.1f} s ({per_k:.2f} s per 1,000 iterations of one run)")
     return 0

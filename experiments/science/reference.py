@@ -214,7 +214,8 @@ def reference_recipe(arena: str, algo: str, iterations: int, seeds: Sequence[int
     iterations : int
         Steps per run (>= 1).
     seeds : sequence of int
-        One run per seed (at least one, no repeats).
+        One run per seed (at least one, no repeats); recorded sorted, so the order given
+        does not change the reference or its name.
     base : TrainerConfig, optional
         Every other training setting (default: the defaults); its arena, algo, seed and
         iterations are replaced.
@@ -231,7 +232,7 @@ def reference_recipe(arena: str, algo: str, iterations: int, seeds: Sequence[int
 
     if iterations < 1:
         raise ValueError(f"iterations must be >= 1, got {iterations}")
-    seeds = [int(s) for s in seeds]
+    seeds = sorted(int(s) for s in seeds)
     if not seeds or len(set(seeds)) != len(seeds):
         raise ValueError(f"seeds must be distinct and at least one, got {seeds}")
     if learner_kind(algo) != "tabular":
