@@ -1,5 +1,5 @@
-"""Federated experiments: ``dfrl demo``, ``dfrl run CONFIG``, ``dfrl inject``, ``dfrl join``
-and ``dfrl paper``.
+"""Federated experiments: ``dfrl demo``, ``dfrl run CONFIG``, ``dfrl inject``, ``dfrl join``,
+``dfrl collect`` and ``dfrl paper``.
 
 ``dfrl demo`` is the 5-robot dFRL demo on loopback (R1..R5, Q-learning, average, sync): five
 robot processes, one itinerary agent, about a minute on a 2-core machine; it leaves the
@@ -313,8 +313,27 @@ def cmd_join(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_collect(args: argparse.Namespace) -> int:
+    """``dfrl collect``: 0 complete, 1 not, 2 not a results folder."""
+    from dfrl.experiments.driver.collect import NotAResultsFolder, collect
+
+    tls, rc = driver_tls_arg(args, "dfrl collect")
+    if rc:
+        return rc
+    try:
+        results = collect(args.results_dir, wait_s=args.wait, tls=tls)
+    except NotAResultsFolder as exc:
+        print(f"dfrl collect: {exc}", file=sys.stderr)
+        return 2
+    except ExperimentError as exc:
+        print(f"dfrl collect: {exc}", file=sys.stderr)
+        return 1
+    print_results(results)
+    return 0 if results.ok else 1
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``demo``, ``run``, ``inject`` and ``join`` (``paper`` is in :mod:`.studies`)."""
+    """Add ``demo``, ``run``, ``inject``, ``join`` and ``collect`` (``paper``: :mod:`.studies`)."""
     p = subparsers.add_parser("demo", help="the 5-robot dFRL demo on loopback (plots + summary "
                                            "in results/demo/<timestamp>); exit 1 unless the "
                                            "federation completed, 2 on a bad option")
@@ -365,3 +384,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "name; default: a new robot process on the launcher's host)")
     add_driver_tls_argument(p)
     p.set_defaults(func=cmd_join)
+
+    p = subparsers.add_parser("collect", help="write the end-of-run files (rounds.csv, metrics.csv, "
+                                              "tables/, summary.md) of a run whose driver "
+                                              "stopped, fetching what its robot hosts hold; exit "
+                                              "1 unless the federation completed, 2: no results "
+                                              "folder")
+    p.add_argument("results_dir", type=Path, help="results folder of the run")
+    p.add_argument("--wait", type=float, default=30.0, metavar="S",
+                   help="seconds robots still running the run get to end (default: %(default)s)")
+    add_driver_tls_argument(p)
+    p.set_defaults(func=cmd_collect)

@@ -28,14 +28,9 @@ from dfrl.experiments.driver.launcher.reporter import Reporter
 from dfrl.experiments.driver.launcher.robot_roster import RobotRoster
 from dfrl.experiments.driver.launcher.robots import Robot, await_ready
 from dfrl.experiments.driver.launcher.spawn import Site, launch_agents, start_robot, write_nodes
-from dfrl.experiments.driver.results.evaluations import merge_evaluations
-from dfrl.experiments.driver.results.faults import assess
+from dfrl.experiments.driver.results.ending import RunFacts, write_end_files
 from dfrl.experiments.driver.results.files import ClaimedFolder, claim_output, write_json
-from dfrl.experiments.driver.results.metrics import merge_metrics
-from dfrl.experiments.driver.results.plots import plot_experiment
-from dfrl.experiments.driver.results.rounds import read_shares, write_rounds_csv
-from dfrl.experiments.driver.results.summary import Results, write_summary
-from dfrl.experiments.driver.results.tables import final_tables, learnt_path
+from dfrl.experiments.driver.results.summary import Results
 from dfrl.experiments.provenance import write_provenance
 from dfrl.experiments.tls_folder import check_node_dir
 from dfrl.experiments.tokens import SECRET_FILE, new_secret, write_secret_file
@@ -165,50 +160,17 @@ class Launcher:
         return results
 
     def _collect(self, wall: float, ok: bool) -> Results:
-        out, c, say = self._out, self._config, self._reporter.say
+        """Read the agents' logs one last time and write the end-of-run files
+        (:func:`~dfrl.experiments.driver.results.ending.write_end_files`, which ``dfrl collect``
+        also uses)."""
         self._agents.read_logs(self._robots)
         self._robots.show_progress()        # lines the robots wrote after the last look
-        robots = list(self._robots.robots())
-        from_checkpoint, torn = final_tables(out, robots)
-        for rid in from_checkpoint:
-            kept = learnt_path(out, rid)
-            where = f"{kept.parent.name}/{kept.name}" if kept else f"tables/{rid}.npy"
-            say(f"table of {rid} kept from its last checkpoint ({where})")
-        for line in torn.values():
-            say(f"TABLE {line}")
-        merge_metrics(out, robots)
-        merge_evaluations(out, robots)
-        logs = self._agents.logs()
-        shares = {rid: read_shares(out / f"shares_{rid}.csv") for rid in robots}
-        rows = write_rounds_csv(out / "rounds.csv", logs.values(), robots, shares)
-        plots: list[Path] = []
-        plot_error = None
-        try:
-            plots = plot_experiment(out, title=c.default_title())
-        except ImportError as exc:
-            plot_error = f"not drawn: {exc.name or 'matplotlib'} is not installed " \
-                         "(pip install 'dfrl[plot]')"
-        except Exception as exc:  # noqa: BLE001 - plots are optional, results are not
-            plot_error = f"failed: {exc!r}"
-        if plot_error:
-            say(f"plots {plot_error}")
-        finished = {n: lg.finished for n, lg in logs.items()}
-        problems = {n: [f"round {a.round} aborted: {a.error}" for a in lg.aborted]
-                    + [f"unreadable line: {u}" for u in lg.unreadable]
-                    for n, lg in logs.items()}
-        for name, lines in problems.items():
-            for line in lines:
-                say(f"{name}: {line}")
-        rounds = {a.name: a.rounds for a in self._agents.infos()}
-        faults = assess(c, [(lg, rounds[n]) for n, lg in logs.items()], self._robots.lost(),
-                        self._robots.stalls(), self._robots.gather_errors())
-        ok = ok and all(v is not None for v in finished.values()) and faults.complete(c)
-        result = Results(out, c, wall, rows, self._robots.crashed(), finished,
-                         self._robots.iterations(), plots, ok, self._interrupted, problems,
-                         plot_error, faults, self._robots.gathered(), list(from_checkpoint),
-                         torn, self._robots.failed_joins())
-        write_summary(result)
-        return result
+        r = self._robots
+        facts = RunFacts(wall, ok, self._interrupted, r.crashed(), r.iterations(), r.lost(),
+                         r.stalls(), r.gather_errors(), r.gathered(), r.failed_joins())
+        return write_end_files(self._out, self._config, list(r.robots()), self._agents.logs(),
+                               {a.name: a.rounds for a in self._agents.infos()}, facts,
+                               self._reporter.say)
 
 
 def _interrupt(signum: int, frame: Any) -> None:

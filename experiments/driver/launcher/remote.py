@@ -71,7 +71,7 @@ def driver_tls(results_dir: str | Path, info: dict[str, Any],
                               "of the driver's certificate folder with --tls DIR") from exc
 
 
-def _rounds_log(results_dir: str | Path, agent: dict[str, Any]) -> Path:
+def rounds_log(results_dir: str | Path, agent: dict[str, Any]) -> Path:
     """The agent's round log: the path ``nodes.json`` names, or that file in ``results_dir``."""
     named = Path(agent.get("rounds_log") or f"rounds_{agent['name']}.log")
     return named if named.is_file() else Path(results_dir) / named.name
@@ -112,7 +112,7 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
         known = ", ".join(a["name"] for a in info["agents"])
         raise ExperimentError(f"no agent {agent!r} in {results_dir} (agents: {known})")
     command = f"method({method})" if method.isidentifier() else f"method('{method}')"
-    seen = {a["name"]: len(_controls(_rounds_log(results_dir, a), a["name"], command))
+    seen = {a["name"]: len(_controls(rounds_log(results_dir, a), a["name"], command))
             for a in targets}
     first = targets[0]["itinerary"][0]
     with open_console(tokens_of(results_dir), host=route_source(first["host"], int(first["port"])),
@@ -137,7 +137,7 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
             name = a["name"]
             if status[name] != "sent":
                 continue
-            path = _rounds_log(results_dir, a)
+            path = rounds_log(results_dir, a)
             new = _controls(path, name, command)[seen[name]:]
             if new:
                 if new[0].status != "applied":

@@ -263,33 +263,50 @@ class RemoteRobot:
         """
         if self.status().lost is None:
             self.poll_samples()
-        copied = []
-        for entry in self._ask("files"):
-            rel = safe_relative(str(entry["name"]))
-            size = int(entry["size"])
-            target = out / rel
-            target.parent.mkdir(parents=True, exist_ok=True)
-            tmp = target.with_name(target.name + ".part")
-            offset = 0
-            with open(tmp, "wb") as fh:
-                for _ in range(size // FETCH_CHUNK + 2):
-                    chunk = self._ask({"fetch": {"name": str(rel), "offset": offset,
-                                                 "max": FETCH_CHUNK}})
-                    data = base64.b64decode(chunk["data"])
-                    fh.write(data)
-                    offset += len(data)
-                    if chunk["eof"] or not data:
-                        break
-            if offset < size:
-                tmp.unlink()
-                raise ExperimentError(f"robot {self._spec.id}: {rel} came back with {offset} "
-                                      f"of {size} bytes")
-            tmp.replace(target)
-            copied.append(str(rel))
+        copied = fetch_files(self._console, self._service, self._spec.id, out)
         with self._lock:
             self._err_path = next((out / c for c in copied if c.startswith("logs/") and
                                    c.endswith(".err")), None)
         return copied
+
+
+def fetch_files(console: ConsoleNode, service: Address, robot: str, out: Path,
+                timeout_s: float = 20.0) -> list[str]:
+    """Copy every result file the ``dfrl robot`` service at ``service`` lists (``files``: those
+    of the experiment it holds) into ``out`` under the same relative names, chunk by chunk
+    (``fetch``), each through a ``.part`` file; return the names copied. Used by
+    :meth:`RemoteRobot.gather` at the end of a run and by ``dfrl collect`` after it.
+
+    Raises
+    ------
+    ExperimentError
+        The list or a chunk could not be read, or a file came back shorter than listed.
+    """
+    copied = []
+    for entry in console.robot(service, "files", timeout_s=timeout_s):
+        rel = safe_relative(str(entry["name"]))
+        size = int(entry["size"])
+        target = out / rel
+        target.parent.mkdir(parents=True, exist_ok=True)
+        tmp = target.with_name(target.name + ".part")
+        offset = 0
+        with open(tmp, "wb") as fh:
+            for _ in range(size // FETCH_CHUNK + 2):
+                chunk = console.robot(service, {"fetch": {"name": str(rel), "offset": offset,
+                                                          "max": FETCH_CHUNK}},
+                                      timeout_s=timeout_s)
+                data = base64.b64decode(chunk["data"])
+                fh.write(data)
+                offset += len(data)
+                if chunk["eof"] or not data:
+                    break
+        if offset < size:
+            tmp.unlink()
+            raise ExperimentError(f"robot {robot}: {rel} came back with {offset} "
+                                  f"of {size} bytes")
+        tmp.replace(target)
+        copied.append(str(rel))
+    return copied
 
 
 class StatusPoller:

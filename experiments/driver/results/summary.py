@@ -35,6 +35,9 @@ class Results:
     from_checkpoint: list[str] | None = None
     table_problems: dict[str, str] | None = None
     failed_joins: dict[str, str] | None = None
+    #: set by ``dfrl collect``: how the files were collected after the driver stopped, and
+    #: what could not be fetched (lines of the summary)
+    collected: list[str] | None = None
 
     @property
     def complete(self) -> bool:
@@ -138,6 +141,9 @@ def write_summary(r: Results) -> Path:
         fault_lines = r.faults.lines()
         verdict = "complete" if r.complete else "INCOMPLETE"
         lines += ["", f"## Faults: federation {verdict}", ""] + (fault_lines or ["- none"])
+    if r.collected is not None:
+        lines += ["", "## Collected after the driver stopped (dfrl collect)", ""]
+        lines += [f"- {line}" for line in r.collected]
     if r.interrupted:
         lines.append(f"- INTERRUPTED ({r.interrupted}): partial results, robots stopped by "
                      "the launcher" + (f"; tables of {', '.join(sorted(kept))} kept from their "

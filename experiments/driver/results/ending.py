@@ -1,0 +1,125 @@
+"""The files the end of a run writes, from what the folder holds and what the writer knew of
+the run: :func:`write_end_files`. The driver calls it when a run ends
+(``Launcher._collect``), ``dfrl collect`` when the driver did not get there (a driver that
+was killed); both write the same files: ``tables/`` (``params/``) made whole from the last
+checkpoints, ``metrics.csv``, ``live_evaluations.csv``, ``rounds.csv``, the plots and
+``summary.md`` with its verdict.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+from dfrl.experiments.driver.config import ExperimentConfig
+from dfrl.experiments.driver.results.agent_log import AgentLog
+from dfrl.experiments.driver.results.evaluations import merge_evaluations
+from dfrl.experiments.driver.results.faults import assess
+from dfrl.experiments.driver.results.metrics import merge_metrics
+from dfrl.experiments.driver.results.plots import plot_experiment
+from dfrl.experiments.driver.results.rounds import read_shares, write_rounds_csv
+from dfrl.experiments.driver.results.summary import Results, write_summary
+from dfrl.experiments.driver.results.tables import final_tables, learnt_path
+
+
+@dataclass
+class RunFacts:
+    """What the writer knows of a run beyond its files (the driver: what it saw; ``dfrl
+    collect``: what it found out afterwards).
+
+    Attributes
+    ----------
+    wall_time_s : float
+    ok : bool
+        False when the run already failed for a reason of its own (interrupted, an error).
+    interrupted : str or None
+        Why the run was interrupted (a signal), if it was.
+    crashed : dict
+        robot -> exit code of its process.
+    iterations : dict
+        robot -> iterations it ran.
+    lost : dict
+        robot -> why it counts as lost (the verdict counts them).
+    stalls, other : list of str
+        Stalls, and other faults that make the run incomplete (files not gathered ...).
+    gathered : dict
+        robot -> result files fetched from its robot host.
+    failed_joins : dict
+        robot -> why it could not join.
+    collected : list of str or None
+        Set by ``dfrl collect``: the summary's lines on how the files were collected after
+        the driver stopped and what could not be fetched.
+    """
+
+    wall_time_s: float
+    ok: bool = True
+    interrupted: str | None = None
+    crashed: dict[str, int] = field(default_factory=dict)
+    iterations: dict[str, int] = field(default_factory=dict)
+    lost: dict[str, str] = field(default_factory=dict)
+    stalls: list[str] = field(default_factory=list)
+    other: list[str] = field(default_factory=list)
+    gathered: dict[str, list[str]] = field(default_factory=dict)
+    failed_joins: dict[str, str] = field(default_factory=dict)
+    collected: list[str] | None = None
+
+
+def write_end_files(out: Path, config: ExperimentConfig, robots: list[str],
+                    logs: dict[str, AgentLog], budgets: dict[str, int], facts: RunFacts,
+                    say: Callable[[str], None]) -> Results:
+    """Write the end-of-run files of the results folder ``out`` and return the
+    :class:`Results` (``ok``: ``facts.ok``, every agent finished, and the federation complete
+    by :meth:`~.faults.Faults.complete`).
+
+    Parameters
+    ----------
+    out : Path
+    config : ExperimentConfig
+    robots : list of str
+        The run's robots, in order.
+    logs : dict
+        agent -> its round log as read now.
+    budgets : dict
+        agent -> the rounds it was to run.
+    facts : RunFacts
+    say : callable
+        Takes one progress line (what was kept, torn tables, problems of the logs, plots).
+    """
+    from_checkpoint, torn = final_tables(out, robots)
+    for rid in from_checkpoint:
+        kept = learnt_path(out, rid)
+        where = f"{kept.parent.name}/{kept.name}" if kept else f"tables/{rid}.npy"
+        say(f"table of {rid} kept from its last checkpoint ({where})")
+    for line in torn.values():
+        say(f"TABLE {line}")
+    merge_metrics(out, robots)
+    merge_evaluations(out, robots)
+    shares = {rid: read_shares(out / f"shares_{rid}.csv") for rid in robots}
+    rows = write_rounds_csv(out / "rounds.csv", logs.values(), robots, shares)
+    plots: list[Path] = []
+    plot_error = None
+    try:
+        plots = plot_experiment(out, title=config.default_title())
+    except ImportError as exc:
+        plot_error = f"not drawn: {exc.name or 'matplotlib'} is not installed " \
+                     "(pip install 'dfrl[plot]')"
+    except Exception as exc:  # noqa: BLE001 - plots are optional, results are not
+        plot_error = f"failed: {exc!r}"
+    if plot_error:
+        say(f"plots {plot_error}")
+    finished = {n: lg.finished for n, lg in logs.items()}
+    problems = {n: [f"round {a.round} aborted: {a.error}" for a in lg.aborted]
+                + [f"unreadable line: {u}" for u in lg.unreadable]
+                for n, lg in logs.items()}
+    for name, lines in problems.items():
+        for line in lines:
+            say(f"{name}: {line}")
+    faults = assess(config, [(lg, budgets[n]) for n, lg in logs.items()], facts.lost,
+                    facts.stalls, facts.other)
+    ok = facts.ok and all(v is not None for v in finished.values()) and faults.complete(config)
+    result = Results(out, config, facts.wall_time_s, rows, facts.crashed, finished,
+                     facts.iterations, plots, ok, facts.interrupted, problems, plot_error,
+                     faults, facts.gathered, list(from_checkpoint), torn, facts.failed_joins,
+                     facts.collected)
+    write_summary(result)
+    return result
