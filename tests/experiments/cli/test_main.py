@@ -5,7 +5,7 @@ import pytest
 
 from dfrl.experiments.cli import build_parser, main
 
-COMMANDS = ["node", "demo", "run", "inject", "join", "bench", "train", "eval", "baselines",
+COMMANDS = ["node", "demo", "run", "inject", "join", "collect", "bench", "train", "eval", "baselines",
             "render-arenas", "transfer", "transfer-study", "sweep", "paper", "speedup",
             "reference", "robot", "view", "secret", "certs"]
 
