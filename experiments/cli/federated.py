@@ -385,11 +385,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_driver_tls_argument(p)
     p.set_defaults(func=cmd_join)
 
-    p = subparsers.add_parser("collect", help="write the end-of-run files (rounds.csv, metrics.csv, "
-                                              "tables/, summary.md) of a run whose driver "
-                                              "stopped, fetching what its robot hosts hold; exit "
-                                              "1 unless the federation completed, 2: no results "
-                                              "folder")
+    p = subparsers.add_parser("collect", help="write the end-of-run files (rounds.csv, "
+                                              "metrics.csv, tables/, summary.md) of a run whose "
+                                              "driver stopped, fetching what its robot hosts "
+                                              "hold; exit 1 unless the federation completed, "
+                                              "2: no results folder")
     p.add_argument("results_dir", type=Path, help="results folder of the run")
     p.add_argument("--wait", type=float, default=30.0, metavar="S",
                    help="seconds robots still running the run get to end (default: %(default)s)")
