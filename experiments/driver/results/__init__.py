@@ -24,7 +24,8 @@ Layout (see ``experiments/README.md``)::
 Modules: :mod:`.agent_log` (the agent's JSON-lines log), :mod:`.rounds` (shares, their
 matching to rounds, ``rounds.csv``), :mod:`.metrics` (``metrics.csv``), :mod:`.evaluations`
 (``live_evaluations.csv``), :mod:`.files` (JSON files), :mod:`.summary` (:class:`Results` and
-``summary.md``).
+``summary.md``), :mod:`.ending` (all the end-of-run files at once: what the driver writes when a
+run ends and ``dfrl collect`` when the driver did not).
 """
 from __future__ import annotations
 
