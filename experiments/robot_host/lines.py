@@ -71,11 +71,33 @@ class ProtocolLines:
         self.out = out
         self.robot = robot
         self.events = events
+        #: The reader went away (a broken pipe: the driver died); lines are dropped since.
+        self.reader_gone = False
 
     def say(self, line: str) -> None:
-        """Write one line and flush."""
-        self.out.write(line + "\n")
-        self.out.flush()
+        """Write one line and flush. When the reader is gone (the driver was killed), the
+        line is dropped and so are all later ones: the robot goes on to its stop (its stdin
+        is at end of file too) and saves its files instead of dying of a broken pipe."""
+        if self.reader_gone:
+            return
+        try:
+            self.out.write(line + "\n")
+            self.out.flush()
+        except BrokenPipeError:
+            self.reader_gone = True
+            self._drop_output()
+
+    def _drop_output(self) -> None:
+        """Point the stream's descriptor at /dev/null, so that nothing buffered in it (nor
+        the interpreter's flush at exit) raises again."""
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            try:
+                os.dup2(devnull, self.out.fileno())
+            finally:
+                os.close(devnull)
+        except (OSError, ValueError):
+            pass
 
     def node(self, host: str, port: int) -> None:
         """``DFRL_NODE <robot> <host> <port>``: the node listens."""

@@ -164,3 +164,22 @@ def test_node_with_stdin_at_eof_from_the_start_runs_every_iteration(tmp_path: Pa
     with open(tmp_path / "metrics_r7.csv", newline="") as fh:
         assert len(list(csv.DictReader(fh))) == 160
     assert (tmp_path / "checkpoint" / "r7.npy").is_file()
+
+
+def test_a_robot_whose_driver_died_stops_cleanly_and_saves_its_tables(tmp_path: Path) -> None:
+    # the driver killed: its end of our stdout pipe and of our stdin close at once
+    p = _start(tmp_path, iterations=200_000, progress_every=50, events=False, grace_s=0.0)
+    assert _line(p)[0] == "DFRL_NODE"
+    assert _line(p)[0] == "DFRL_PROGRESS"             # training
+    p.stdout.close()                                   # the reader is gone ...
+    p.stdin.close()                                    # ... and so is the writer
+    try:
+        code = p.wait(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    err = p.stderr.read()
+    assert code == 0, err
+    assert "BrokenPipeError" not in err and "Traceback" not in err, err
+    assert (tmp_path / "tables" / "r7.npy").exists()   # stopped early, tables saved
+    assert (tmp_path / "metrics_r7.csv").exists()
