@@ -1,4 +1,6 @@
-"""``dfrl sweep``: hyper-parameter sweeps with several seeds (:mod:`dfrl.experiments.science.studies`)."""
+"""``dfrl sweep``, ``paper``, ``speedup``: studies with several seeds
+(:mod:`dfrl.experiments.science.studies`); ``dfrl reference``: an arena's reference table
+(:mod:`dfrl.experiments.science.reference`)."""
 from __future__ import annotations
 
 import argparse
@@ -296,7 +298,7 @@ def register_reference(subparsers: argparse._SubParsersAction) -> None:
 def cmd_reference(args: argparse.Namespace) -> int:
     """``dfrl reference``: exit 0 with the reference's path, 2 on a bad recipe, 1 when the
     cached copy fails verification."""
-    from dfrl.experiments.science.reference import (ReferenceError, default_cache,
+    from dfrl.experiments.science.reference import (SHIPPED, ReferenceError, default_cache,
                                                     reference_name, reference_recipe,
                                                     reference_table)
 
@@ -304,8 +306,9 @@ def cmd_reference(args: argparse.Namespace) -> int:
         seeds = chosen_seeds(args)
         name = reference_name(reference_recipe(args.arena, args.algo, args.iterations, seeds,
                                                min_visits=args.min_visits))
-        cached = not args.rebuild and (
-            (args.cache or default_cache()) / f"{name}.json").is_file()
+        folder = args.cache or default_cache()
+        cached = not args.rebuild and any(
+            (place / f"{name}.json").is_file() for place in (folder, SHIPPED))
         ref = reference_table(args.arena, args.algo, args.iterations, seeds,
                               cache=args.cache, min_visits=args.min_visits, jobs=args.jobs,
                               rebuild=args.rebuild)
@@ -316,11 +319,12 @@ def cmd_reference(args: argparse.Namespace) -> int:
         print(f"dfrl reference: {exc}", file=sys.stderr)
         return 2
     counted = int((ref.visits >= args.min_visits).sum())
-    facts = {"path": str(ref.path), "cached": cached, "arena": ref.recipe["arena"], "algo": ref.recipe["algo"],
+    facts = {"path": str(ref.path), "cached": cached, "arena": ref.recipe["arena"],
+             "algo": ref.recipe["algo"],
              "iterations": ref.recipe["iterations"], "seeds": ref.recipe["seeds"],
              "pairs_counted": counted, "pairs_visited": int((ref.visits > 0).sum()),
              "seed_rms": ref.built.get("seed_rms"), "build_seconds": ref.built.get("seconds"),
-             "dfrl": ref.built.get("dfrl"), "git_commit": ref.built.get("git_commit")}
+             "dfrl": ref.built.get("dfrl"), "git": ref.built.get("git")}
     if args.json:
         print(json.dumps(facts, indent=1))
     else:

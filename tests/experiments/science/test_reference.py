@@ -9,10 +9,11 @@ import math
 import numpy as np
 import pytest
 
-from dfrl.experiments.science.reference import (REFERENCE_FORMAT, Reference, ReferenceError,
-                                                combine, default_cache, load_reference,
-                                                recipe_key, reference_name, reference_recipe,
-                                                reference_table, save_reference, table_error)
+from dfrl.experiments.science.reference import (REFERENCE_FORMAT, SHIPPED, Reference,
+                                                ReferenceError, combine, default_cache,
+                                                load_reference, recipe_key, reference_name,
+                                                reference_recipe, reference_table,
+                                                save_reference, table_error)
 
 
 # -- the distance ------------------------------------------------------------------------------
@@ -147,7 +148,11 @@ def test_corrupted_or_missing_files_are_errors_naming_the_file(tmp_path) -> None
 def test_reference_end_to_end(tmp_path) -> None:
     """A tiny reference (R1, Q-learning, 3,000 iterations x seeds 1 and 2), built, cached,
     reproduced bit for bit, and the error falling with training for a seed it was not built
-    from; the control (the zero table) must be further than either run, and could fail."""
+    from; the control (the zero table) must be further than either run, and could fail.
+    Against so crude a reference the fall from 1,000 to 3,000 iterations is no law: it held
+    for seeds 3, 4, 5, 6 and 8 and not for 7 (measured once); seed 3 is deterministic, so
+    this test checks the pipeline, not the statistic (README: the curve against the shipped
+    reference)."""
     from dfrl.robots.training import TrainerConfig, train
 
     # Prepare / Execute
@@ -175,3 +180,36 @@ def test_reference_end_to_end(tmp_path) -> None:
     qf.write_bytes(qf.read_bytes()[:-8] + np.float64(1e9).tobytes())
     with pytest.raises(ReferenceError, match=str(qf)):
         reference_table("r1", "qlearning", 3000, [1, 2], cache=tmp_path / "a")
+
+
+# -- the shipped reference ---------------------------------------------------------------------
+SHIPPED_RECIPE = ("r1", "qlearning", 50_000, [1, 2, 3, 4, 5])
+
+
+def test_shipped_reference_verifies_and_matches_todays_defaults(tmp_path) -> None:
+    """The shipped R1 reference loads with its checksums and is what ``reference_table``
+    returns for its recipe without building (an empty cache); if the default configuration
+    changes, its name no longer matches and this test says so."""
+    ref = reference_table(*SHIPPED_RECIPE, cache=tmp_path)
+    assert ref.path is not None and ref.path.parent == SHIPPED
+    assert not any(tmp_path.iterdir())                 # nothing built
+    assert ref.recipe == reference_recipe(*SHIPPED_RECIPE)
+    assert ref.q.shape == (81, 3)
+    # the counts the README quotes: 140 pairs updated, 116 at least 10 times, 80 by all 5 runs
+    assert ((ref.visits > 0).sum(), (ref.visits >= 10).sum(), (ref.runs == 5).sum()) == (
+        140, 116, 80)
+    assert table_error(ref.q, ref).states == 34
+    # a 50,000-iteration run is at about half the zero table's distance: the floor of a run
+    zero = table_error(np.zeros_like(ref.q), ref)
+    assert 0.3 < ref.built["seed_rms"] / zero.rms < 0.8
+
+
+@pytest.mark.slow
+def test_shipped_reference_rebuilds_bit_for_bit(tmp_path) -> None:
+    """About 150 s on one core: the shipped arrays are what today's code trains."""
+    shipped = reference_table(*SHIPPED_RECIPE, cache=tmp_path)
+    again = reference_table(*SHIPPED_RECIPE, cache=tmp_path, rebuild=True, jobs=2)
+    assert again.path is not None and again.path.parent == tmp_path
+    assert np.array_equal(again.q, shipped.q) and np.array_equal(again.visits, shipped.visits)
+    assert (json.loads(again.path.read_text())["sha256"]
+            == json.loads(shipped.path.read_text())["sha256"])
