@@ -144,6 +144,26 @@ def resolves(iterations: Sequence[float], effect: float) -> bool:
     return grid_step(iterations) < effect
 
 
+def first_reach(iterations: Sequence[float], values: Sequence[float], level: float,
+                side: str = "below") -> float | None:
+    """The first grid point at which a curve reaches ``level`` (``side="below"``: a value
+    ``<= level``, as an error falls; ``"above"``: ``>= level``, as a score rises), or None
+    when it never does within the grid: a censored time, known only to exceed the last point.
+    No interpolation: the time is known to the grid step (:func:`grid_step`).
+
+    Raises
+    ------
+    ValueError
+        A bad grid or values (as :func:`auc`), or ``side`` not ``below``/``above``.
+    """
+    x, y = _grid(iterations, values)
+    assert y is not None
+    if side not in ("below", "above"):
+        raise ValueError(f"side must be 'below' or 'above', got {side!r}")
+    hit = np.nonzero(y <= level if side == "below" else y >= level)[0]
+    return float(x[hit[0]]) if len(hit) else None
+
+
 
 
 # -- Student's t and the normal distribution -------------------------------------------------

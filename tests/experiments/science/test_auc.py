@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from dfrl.experiments.science.statistics import auc, grid_step, resolves
+from dfrl.experiments.science.statistics import auc, first_reach, grid_step, resolves
 
 
 def test_auc_by_hand() -> None:
@@ -48,3 +48,14 @@ def test_grid_resolution() -> None:
     assert not resolves(uneven, 500) and resolves(uneven, 700)
     with pytest.raises(ValueError, match="positive"):
         resolves(every_1000, 0)
+
+
+def test_first_reach_and_censoring() -> None:
+    grid = [1000, 2000, 3000, 4000]
+    error = [0.9, 0.8, 0.7, 0.72]
+    assert first_reach(grid, error, 0.8) == 2000.0          # <= counts: reached at 2,000
+    assert first_reach(grid, error, 0.75) == 3000.0         # the later rise does not undo it
+    assert first_reach(grid, error, 0.6) is None            # censored: beyond 4,000
+    assert first_reach(grid, [0.1, 0.5, 0.4, 0.6], 0.5, side="above") == 2000.0
+    with pytest.raises(ValueError, match="side"):
+        first_reach(grid, error, 0.8, side="under")
