@@ -206,7 +206,7 @@ def test_shipped_reference_verifies_and_matches_todays_defaults(tmp_path) -> Non
 
 @pytest.mark.slow
 def test_shipped_reference_rebuilds_bit_for_bit(tmp_path) -> None:
-    """About 150 s on one core: the shipped arrays are what today's code trains."""
+    """About 110 s with two processes: the shipped arrays are what today's code trains."""
     shipped = reference_table(*SHIPPED_RECIPE, cache=tmp_path)
     again = reference_table(*SHIPPED_RECIPE, cache=tmp_path, rebuild=True, jobs=2)
     assert again.path is not None and again.path.parent == tmp_path
