@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import base64
 import json
-import re
 import signal
 import socket
 import sys
@@ -27,9 +26,10 @@ from enum import Enum
 from pathlib import Path
 from typing import Any, TextIO
 
-from dfrl.experiments.robot_host.config import Mode, RobotConfig
+from dfrl.experiments.robot_host.config import Mode
 from dfrl.experiments.robot_host.lines import ProtocolLines
 from dfrl.experiments.robot_host.process import load_agent_program, start_node
+from dfrl.experiments.robot_host.service_config import config_error, parse_configure
 from dfrl.experiments.robot_host.training import Training
 from dfrl.experiments.tokens import Token
 from dfrl.pybridge.serving import RequestError
@@ -39,7 +39,6 @@ __all__ = ["State", "RobotService", "MAX_CHUNK"]
 
 #: Largest ``fetch`` chunk (bytes).
 MAX_CHUNK = 1 << 20
-_EXPERIMENT_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,127}")
 #: Folders of an experiment that are the service's own, not results (``files`` leaves them out).
 PRIVATE_DIRS = ("checkpoint", "service")
 
@@ -52,10 +51,6 @@ class State(str, Enum):
     RUNNING = "running"
     FINISHED = "finished"
     FAILED = "failed"
-
-
-def _config_error(message: str) -> RequestError:
-    return RequestError(Term("robot_config_error", message))
 
 
 def _state_error(action: str, state: State) -> RequestError:
@@ -176,7 +171,7 @@ class RobotService:
                     self._fail(exc)
                     continue
                 if not more and self.state is State.RUNNING:
-                    self._end_run("finished" if not self.run.stopped else "stopped")
+                    self._end_run(self._how_it_ended())
             else:
                 self.bridge.serve_service(self.handle, timeout=0.025)
                 if self._serves_tables():
@@ -184,6 +179,12 @@ class RobotService:
         if self.state is State.RUNNING:
             self._end_run("stopped by a signal")
         return 0
+
+    def _how_it_ended(self) -> str:
+        """A step that returned because of a signal ended the run by that signal."""
+        if self._signalled:
+            return "stopped by a signal"
+        return "stopped" if self.run.stopped else "finished"
 
     def _serves_tables(self) -> bool:
         if self.run is None:
@@ -288,7 +289,7 @@ class RobotService:
     def _configure(self, text: Any) -> Any:
         if self.state not in (State.IDLE, State.FINISHED, State.FAILED):
             raise _state_error("configure", self.state)
-        experiment, config, resume = self._parse_configure(str(text))
+        experiment, config, resume = parse_configure(str(text), self.tokens, self.workdir)
         self._close_run()
         self.experiment, self.error, self.state = experiment, None, State.IDLE
         out = Path(config.out_dir)
@@ -311,51 +312,12 @@ class RobotService:
             self._close_logs()
             self.experiment = None
             if isinstance(exc, FileNotFoundError) and resume:
-                raise _config_error(f"no checkpoint to resume from: {exc.filename}") from None
-            raise _config_error(f"{type(exc).__name__}: {exc}") from None
+                raise config_error(f"no checkpoint to resume from: {exc.filename}") from None
+            raise config_error(f"{type(exc).__name__}: {exc}") from None
         self.run, self.state = run, State.CONFIGURED
         self.say(f"dfrl robot: experiment {experiment} configured (robot {config.robot}, "
                  f"{config.iterations} iterations{', resumed at ' + str(run.iteration) if resume else ''})")
         return Term("ok", Atom("true"))
-
-    def _parse_configure(self, text: str) -> tuple[str, RobotConfig, bool]:
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise _config_error(f"not JSON: {exc}") from None
-        if not isinstance(data, dict):
-            raise _config_error("the configuration is a JSON object")
-        experiment = data.get("experiment")
-        if not isinstance(experiment, str) or not _EXPERIMENT_ID.fullmatch(experiment) \
-                or set(experiment) == {"."}:
-            raise _config_error(f"experiment {experiment!r}: a name of letters, digits, "
-                                "'.', '_' and '-'")
-        node = data.get("robot")
-        if not isinstance(node, dict):
-            raise _config_error("'robot' must be a JSON object (a robot process config)")
-        node = dict(node)
-        resume = bool(node.pop("resume", data.get("resume", False)))
-        node.pop("out_dir", None)
-        # a driver sends no token (the peer proved one); an older one did: it must match
-        if "token" in node and str(node["token"]) not in {str(t) for t in self.tokens}:
-            raise _config_error("the experiment's token differs from this robot's token")
-        node.pop("token", None)
-        out = self.workdir / experiment
-        arena = data.get("arena")
-        if arena is not None:
-            if not isinstance(arena, dict):
-                raise _config_error("'arena' must be an arena's JSON object or null")
-            path = out / "service" / "arena.json"
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_text(json.dumps(arena), encoding="utf-8")
-            node["arena"] = str(path)
-        try:
-            config = RobotConfig.from_dict(dict(node, out_dir=str(out)))
-        except (TypeError, ValueError) as exc:
-            raise _config_error(str(exc)) from None
-        (out / "service").mkdir(parents=True, exist_ok=True)
-        (out / "service" / "configure.json").write_text(text, encoding="utf-8")
-        return experiment, config, resume
 
     def files(self) -> list[tuple[str, int]]:
         """(name relative to the experiment's folder, size) of its result files, sorted."""

@@ -47,7 +47,9 @@ def test_inject_and_join_with_tls_from_a_copied_results_folder(tmp_path: Path) -
     init_ca(tmp_path / "ca")
     node_dir = make_node("local", tmp_path / "ca", tmp_path / "tls-local").directory
     out = tmp_path / "run"
-    cfg = small_config(iterations=3000, respite=100, rtf=20.0)
+    # 24 s of wall time: the refusals, the join and the inject below take seconds each on a
+    # loaded machine (at 3000 iterations and rtf 20 the run ended before the inject in 1 of 4)
+    cfg = small_config(iterations=4500, respite=150, rtf=12.0)
     t, box = run_in_thread(cfg, out, tls=node_dir)
     wait_rounds(out, AGENT, 2)
     copied = tmp_path / "copied"
