@@ -299,8 +299,8 @@ def cmd_reference(args: argparse.Namespace) -> int:
     """``dfrl reference``: exit 0 with the reference's path, 2 on a bad recipe, 1 when the
     cached copy fails verification."""
     from dfrl.experiments.science.reference import (SHIPPED, ReferenceError, default_cache,
-                                                    reference_name, reference_recipe,
-                                                    reference_table)
+                                                    reference_name, reference_recipe)
+    from dfrl.experiments.science.reference_store import reference_table
 
     try:
         seeds = chosen_seeds(args)

@@ -10,8 +10,7 @@ from dfrl.experiments.science.report.paper import write_report
 from dfrl.experiments.driver.results.plots import plot_both, plot_experiment, plot_metric
 from dfrl.experiments.science.report.stats import (ALGO_NAMES, COMBOS, CombinationRun, RunStats,
                                                    StandaloneRuns, stats_of)
-from dfrl.experiments.science.statistics import (dip, late_growth, reward_rate, smooth,
-                                                 t_fraction)
+from dfrl.experiments.science.curves import dip, late_growth, reward_rate, smooth, t_fraction
 
 __all__ = ["ALGO_NAMES", "COMBOS", "CombinationRun", "RunStats", "StandaloneRuns", "dip",
            "late_growth", "plot_both", "plot_experiment", "plot_metric", "reward_rate", "smooth",

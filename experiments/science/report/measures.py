@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from dfrl.experiments.science.statistics import smooth
+from dfrl.experiments.science.curves import smooth
 
 #: A reward gain per step below this is "no learning" (the saturation time is then the budget).
 MIN_GAIN: float = 0.05

@@ -28,8 +28,9 @@ import numpy as np
 from dfrl.experiments.science.report.measures import (MIN_GAIN, SeedRun, arena_stat, final_score,
                                                       gain, greedy_gain, last_change, mean_q,
                                                       rate, robots_mean, t_reward90)
-from dfrl.experiments.science.statistics import (Interval, Judgement, adjust, dip, interval,
-                                                 judge, late_growth, paired, welch)
+from dfrl.experiments.science.curves import dip, late_growth
+from dfrl.experiments.science.statistics import (Interval, Judgement, adjust, interval, judge,
+                                                 paired, welch)
 
 #: Saturation: Q-sum growth in the last quarter under this share of its total growth.
 SATURATED_GROWTH: float = 0.05

@@ -14,7 +14,8 @@ from dfrl.experiments.science.report.bands import plot_groups
 from dfrl.experiments.science.report.measures import SeedRun, final_score, mean_q
 from dfrl.experiments.science.report.observations import paper_tests
 from dfrl.experiments.science.report.verdict_text import control_words, real_words, tests_markdown
-from dfrl.experiments.science.statistics import interval, late_growth
+from dfrl.experiments.science.curves import late_growth
+from dfrl.experiments.science.statistics import interval
 
 
 def _iv(values: list[float]) -> str:

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dfrl.experiments.driver.config import ExperimentConfig
-from dfrl.experiments.science.statistics import dip, late_growth, reward_rate, t_fraction
+from dfrl.experiments.science.curves import dip, late_growth, reward_rate, t_fraction
 
 COMBOS: tuple[tuple[str, str], ...] = (("qlearning", "average"), ("qlearning", "max"),
                                        ("sarsa", "average"), ("sarsa", "max"))

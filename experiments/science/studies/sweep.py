@@ -29,7 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from dfrl.experiments.science.statistics import Interval, interval, late_growth
+from dfrl.experiments.science.curves import late_growth
+from dfrl.experiments.science.statistics import Interval, interval
 from dfrl.robots.evaluation import evaluate_snapshots
 from dfrl.robots.training import TrainerConfig, train
 

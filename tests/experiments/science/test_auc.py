@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from dfrl.experiments.science.statistics import auc, first_reach, grid_step, resolves
+from dfrl.experiments.science.curves import auc, first_reach, grid_step, resolves
 
 
 def test_auc_by_hand() -> None:

@@ -11,9 +11,9 @@ import pytest
 
 from dfrl.experiments.science.reference import (REFERENCE_FORMAT, SHIPPED, Reference,
                                                 ReferenceError, combine, default_cache,
-                                                load_reference, recipe_key, reference_name,
-                                                reference_recipe, reference_table,
-                                                save_reference, table_error)
+                                                recipe_key, reference_name, reference_recipe,
+                                                table_error)
+from dfrl.experiments.science.reference_store import load_reference, reference_table, save_reference
 
 
 # -- the distance ------------------------------------------------------------------------------

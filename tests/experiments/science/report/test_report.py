@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from dfrl.experiments.driver.results.plots import plot_experiment, robot_label
-from dfrl.experiments.science.statistics import dip, late_growth, reward_rate, smooth
+from dfrl.experiments.science.curves import dip, late_growth, reward_rate, smooth
 
 
 def test_smooth_is_a_moving_average_with_a_short_start() -> None:

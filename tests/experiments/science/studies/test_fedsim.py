@@ -54,7 +54,6 @@ def test_prolog_max_visited_matches_python():
     """platform_pl/dfrl_agent/examples/max_visited.pl, loaded into the agent module, folds the
     same tables as aggregate_max_visited (the study's mirror of the injected method)."""
     import json
-    import shutil
     import subprocess
     from pathlib import Path
 
