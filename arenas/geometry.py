@@ -2,15 +2,21 @@
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
+from typing import Protocol
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from dfrl.arenas.spec import Block
+
+class Footprint(Protocol):
+    """What the geometry needs of a block (:class:`dfrl.arenas.spec.Block` has it)."""
+
+    center: Sequence[float]
+    size: Sequence[float]
+    yaw: float
 
 
-def corners(block: Block) -> np.ndarray:
+def corners(block: Footprint) -> np.ndarray:
     """The footprint's four corners, shape (4, 2)."""
     c, s = math.cos(block.yaw), math.sin(block.yaw)
     hx, hy = block.size[0] / 2.0, block.size[1] / 2.0
@@ -19,7 +25,7 @@ def corners(block: Block) -> np.ndarray:
     return local @ rot.T + np.asarray(block.center)
 
 
-def blocks_overlap(a: Block, b: Block, tolerance: float = 1e-9) -> bool:
+def blocks_overlap(a: Footprint, b: Footprint, tolerance: float = 1e-9) -> bool:
     """True when two footprints share area (touching edges do not count).
 
     Separating-axis test on the two rectangles' edge normals.
