@@ -50,6 +50,16 @@ class RequestError(Exception):
         self.formal = formal
 
 
+def _write(provider: Any, setter: str, value: np.ndarray, origin: Any) -> None:
+    """Apply a validated write: ``SETTER_from(value, origin)`` when the provider has it (it
+    records where the write came from), else ``SETTER(value)``."""
+    with_origin = getattr(type(provider), f"{setter}_from", None)
+    if with_origin is not None:
+        getattr(provider, f"{setter}_from")(value, write_origin(origin))
+    else:
+        getattr(provider, setter)(value)
+
+
 def _note_read(provider: Any, what: str = "table_read") -> None:
     """Tell a provider that has ``table_read()`` (``params_read()``) that an agent read its
     Q-table (parameters); its ``q_table`` (``params``) property is a plain getter."""
@@ -238,11 +248,7 @@ class RequestServer:
             rid, layout, data, origin = op.args
             robot = self._params_robot(rid)
             vec = validate_params(robot.layout, layout, data)
-            setter = getattr(type(robot.provider), "set_params_from", None)
-            if setter is not None:
-                robot.provider.set_params_from(vec, write_origin(origin))
-            else:
-                robot.provider.set_params(vec)
+            _write(robot.provider, "set_params", vec, origin)
             return Atom("ok")
         if op.name == "get_qtable" and op.arity == 1:
             provider = self._robot(op.args[0]).provider
@@ -261,11 +267,7 @@ class RequestServer:
             rid, shape, data, origin = op.args
             robot = self._robot(rid)
             table = validate_write(robot.shape, shape, data)
-            setter = getattr(type(robot.provider), "set_q_table_from", None)
-            if setter is not None:
-                robot.provider.set_q_table_from(table, write_origin(origin))
-            else:
-                robot.provider.set_q_table(table)
+            _write(robot.provider, "set_q_table", table, origin)
             return Atom("ok")
         raise BridgeError(f"unknown request {op!r}")
 
