@@ -103,7 +103,9 @@ says how many were suppressed.
     slot_queue_/2,              % Node, Queue (max_running_agents tokens)
     reclaim_due_/1,             % Time: give freed memory back then
     reclaim_pass_/1,            % passes of the current reclaim so far
-    tick_size_/2.               % Id, Bytes: module size this tick
+    tick_size_/2,               % Id, Bytes: module size this tick
+    notice_/4,                  % Node, Agent, Kind, Source: to be sent
+    notice_senders_/1.          % Count: senders draining notice_/4
 
 :- thread_local
     current_call_/4,            % Id, Node, Agent, Limits
@@ -814,6 +816,7 @@ agents:agent_changed(removed, Node, Agent) :-
 
 node:node_stopping(Node) :-
     retractall(arrived_(Node, _, _)),
+    with_mutex(dfrl_bound_notices, retractall(notice_(Node, _, _, _))),
     retractall(report_(Node, _, _, _)),
     with_mutex(dfrl_bounds, retractall(module_size_(Node, _, _))),
     (   with_mutex(dfrl_bounds_monitor, retract(slot_queue_(Node, Queue)))
@@ -846,15 +849,52 @@ bounds_stopped(Node, Agent, Kind) :-
     schedule_reclaim,
     pool_retire.
 
+%   Notices wait in a list (at most 60 per node and minute are taken,
+%   so it stays short) that at most two senders of the pool
+%   dfrl_bound_notices drain. A notice is never dropped because the
+%   senders are busy: when eight agents are stopped at once, the sender
+%   already running takes the ones it finds (with two pool workers and
+%   no list, the third notice was refused by the pool and lost). The
+%   count of running senders and the list change under one mutex, so a
+%   sender cannot leave while a notice it did not see waits.
 notify(Node, Agent, Kind, Source) :-
     max_notices_per_minute(Max),
     window_take(notices(Node), Max, 1, Granted),
     (   Granted =:= 1
-    ->  catch(pool_run(dfrl_bound_notices,
-                       send_notice(Node, Agent, Kind, Source), [max(2)]),
-              E, debug(dfrl(bounds), 'notice dropped: ~p', [E]))
+    ->  with_mutex(dfrl_bound_notices,
+                   ( assertz(notice_(Node, Agent, Kind, Source)),
+                     (   notice_senders_(N), N >= 2
+                     ->  Start = false
+                     ;   change_senders(1),
+                         Start = true
+                     ) )),
+        (   Start == true
+        ->  catch(pool_run(dfrl_bound_notices, send_notices, [max(8)]), E,
+                  ( with_mutex(dfrl_bound_notices, change_senders(-1)),
+                    debug(dfrl(bounds), 'notice sender not started: ~p', [E]) ))
+        ;   true
+        )
     ;   true
     ).
+
+send_notices :-
+    with_mutex(dfrl_bound_notices,
+               (   retract(notice_(Node, Agent, Kind, Source))
+               ->  Next = notice(Node, Agent, Kind, Source)
+               ;   change_senders(-1),
+                   Next = none
+               )),
+    (   Next = notice(Node, Agent, Kind, Source)
+    ->  catch(send_notice(Node, Agent, Kind, Source), E,
+              debug(dfrl(bounds), 'notice of ~p: ~p', [Agent, E])),
+        send_notices
+    ;   true
+    ).
+
+change_senders(Delta) :-
+    (   retract(notice_senders_(N0)) -> true ; N0 = 0 ),
+    N is N0 + Delta,
+    assertz(notice_senders_(N)).
 
 send_notice(Node, Agent, Kind, Source) :-
     node_property(Node, address(Here)),

@@ -57,6 +57,32 @@ send(From, To, Name, Handler) :-
 stopped(Node, Name) :-
     \+ agent_exists(Node, Name).
 
+%   A TCP peer that accepts connections, holds each Hold seconds, closes
+%   it, and counts them (slow_peer_seen/2).
+:- dynamic slow_peer_count/2.
+slow_peer(Hold, peer(Socket, Thread), Port) :-
+    tcp_socket(Socket),
+    tcp_setopt(Socket, reuseaddr),
+    tcp_bind(Socket, localhost:Port),
+    tcp_listen(Socket, 16),
+    retractall(slow_peer_count(Socket, _)),
+    assertz(slow_peer_count(Socket, 0)),
+    thread_create(slow_peer_loop(Socket, Hold), Thread, []).
+slow_peer_loop(Socket, Hold) :-
+    catch(tcp_accept(Socket, Client, _), _, fail),
+    !,
+    with_mutex(slow_peer, ( retract(slow_peer_count(Socket, N0)), N is N0+1,
+                            assertz(slow_peer_count(Socket, N)) )),
+    thread_create(( sleep(Hold), tcp_close_socket(Client) ), _, [detached(true)]),
+    slow_peer_loop(Socket, Hold).
+slow_peer_loop(_, _).
+slow_peer_seen(peer(Socket, _), Min) :-
+    slow_peer_count(Socket, N), N >= Min.
+slow_peer_stop(peer(Socket, Thread)) :-
+    catch(tcp_close_socket(Socket), _, true),
+    catch(thread_signal(Thread, throw(stop)), _, true),
+    catch(thread_join(Thread, _), _, true).
+
 cleanup(Nodes) :-
     retractall(seen(_)),
     retractall(ran(_)),
@@ -240,5 +266,19 @@ test(memory_budget_charges_each_call_its_own_stacks, [cleanup(cleanup([A, B]))])
     assertion(wait_for(agent_bound_report(B, m2, bound(memory_budget(120000000), _, _, _)))),
     assertion(wait_for(ran(slept(s1)))),
     assertion(\+ agent_bound_report(B, s1, _)).
+
+%   Eight agents stopped at once, their source a slow peer (it holds each
+%   connection 0.3 s, then closes it): every notice is tried. With two
+%   pool workers and no waiting list, notices three to eight were refused
+%   by the pool and lost (a CI run lost one of eight memory bombs' reports).
+test(notices_wait_for_a_sender, [cleanup(( cleanup([A]), slow_peer_stop(Peer) ))]) :-
+    node([connect_timeout(2)], A),
+    slow_peer(0.3, Peer, Port),
+    forall(between(1, 8, I),
+           ( atom_concat(n, I, Agent),
+             agent_bounds:notify(A, Agent, cpu(1), localhost:Port) )),
+    assertion(wait_for(slow_peer_seen(Peer, 8), 500)),
+    assertion(wait_for(agent_bounds:notice_senders_(0), 500)),
+    assertion(\+ agent_bounds:notice_(A, _, _, _)).
 
 :- end_tests(agent_bounds).
