@@ -235,7 +235,7 @@ def check_trainer(path: str, trainer: Any) -> list[str]:
         return []
     from dfrl.robots.training import TrainerConfig
 
-    defaults = TrainerConfig().to_dict()
+    defaults = TrainerConfig().to_dict(full=True)
     problems = _check_like(path, trainer, defaults)
     owned = {"arena", "algo", "seed", "iterations"} & set(trainer)
     problems += [f"{path}.{k}: set by the experiment (robots[..].{k} or {k}), not in trainer"

@@ -47,6 +47,12 @@ class TrainerConfig(EnvConfig):
         The ``linear`` learner's step size and feature map.
     dqn : DQNConfig
         The ``dqn`` learner's network, replay and optimiser.
+    reward_shuffle : int
+        0 (the default): the learner learns from the reward the robot earned. ``W > 0``: a
+        negative control, the learner learns from rewards shuffled through a buffer of ``W``
+        observed rewards (:class:`dfrl.robots.reward_shuffle.RewardShuffle`, drawn from a
+        third stream of ``seed``), so that the reward no longer depends on the state and
+        action; the metrics still record the reward earned. Any learner.
     sim : SimConfig
         Control/physics rates, solver, robot.
     actions : ActionSet
@@ -63,11 +69,15 @@ class TrainerConfig(EnvConfig):
     discretisation: DiscretisationConfig = field(default_factory=DiscretisationConfig)
     linear: LinearConfig = field(default_factory=LinearConfig)
     dqn: DQNConfig = field(default_factory=DQNConfig)
+    reward_shuffle: int = 0
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.iterations < 0:
             raise ValueError("iterations must be >= 0")
+        if not isinstance(self.reward_shuffle, int) or self.reward_shuffle < 0:
+            raise ValueError(f"reward_shuffle must be an int >= 0 (0: off), got "
+                             f"{self.reward_shuffle!r}")
 
     def env_config(self) -> EnvConfig:
         """The environment part of the configuration."""
@@ -75,9 +85,17 @@ class TrainerConfig(EnvConfig):
         env["arena"] = str(self.arena)
         return EnvConfig(**env)
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready nested dict (enums as their values)."""
-        return to_jsonable(self)
+    def to_dict(self, full: bool = False) -> dict[str, Any]:
+        """JSON-ready nested dict (enums as their values).
+
+        ``reward_shuffle`` is left out while it is off (0) unless ``full``: the JSON of every
+        ordinary configuration, and every name hashed from it (reference tables), stays as it
+        was before the option existed; ``full`` lists every field (what a config checker
+        accepts)."""
+        d = to_jsonable(self)
+        if not full and not self.reward_shuffle:
+            d.pop("reward_shuffle")
+        return d
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "TrainerConfig":

@@ -12,6 +12,9 @@ with a wall or a block is counted, penalised, treated as terminal for the TD upd
 bootstrap), and the robot respawns at a random free pose. If the robot moves less than
 ``stuck_distance`` in ``stuck_steps`` steps it also respawns (a truncation: the update still
 bootstraps). ``iteration`` keeps counting across respawns.
+
+With ``reward_shuffle`` (a negative control) the update learns from a shuffled reward
+(:mod:`dfrl.robots.reward_shuffle`) while the metrics keep the reward earned.
 """
 from __future__ import annotations
 
@@ -26,6 +29,7 @@ import numpy as np
 from dfrl.robots.approx import FunctionLearner, Layout, validate_params
 from dfrl.robots.env import EPuckEnv
 from dfrl.robots.learners import TabularLearner, learner_class, make_learner
+from dfrl.robots.reward_shuffle import RewardShuffle
 from dfrl.robots.metrics import (METRIC_DTYPE, StepMetrics, read_metrics_csv,  # noqa: F401
                                  write_metrics_csv)
 from dfrl.robots.state import Discretiser
@@ -65,7 +69,14 @@ class Trainer:
     def __init__(self, config: TrainerConfig | None = None) -> None:
         self.config = config or TrainerConfig()
         c = self.config
-        env_seq, learner_seq = np.random.SeedSequence(c.seed).spawn(2)
+        # a third stream only for the shuffle: the first two are the same with or without it
+        env_seq, learner_seq, shuffle_seq = np.random.SeedSequence(c.seed).spawn(3)
+        #: Negative control (``reward_shuffle``): what the learner learns from instead of the
+        #: reward earned; None in an ordinary run.
+        self.reward_shuffle = (RewardShuffle(c.reward_shuffle, np.random.default_rng(shuffle_seq))
+                               if c.reward_shuffle else None)
+        #: The reward the last update learnt from (the one earned unless shuffled).
+        self.learned_reward = 0.0
         self.env = EPuckEnv(arena=c.arena, config=c.env_config())
         self.discretiser = Discretiser(c.discretisation)
         n_actions = int(self.env.action_space.n)
@@ -201,11 +212,13 @@ class Trainer:
         state, action = self._state, self._action
         obs, reward, terminated, truncated, info = env.step(action)
         next_state = self.discretiser(obs)
+        learnt = reward if self.reward_shuffle is None else self.reward_shuffle(reward)
+        self.learned_reward = learnt
         if self._tabular:
-            next_action = self.learner.learn(state, action, reward, next_state, terminated)
+            next_action = self.learner.learn(state, action, learnt, next_state, terminated)
         else:
             next_obs = np.array(obs, dtype=np.float64)
-            next_action = self.learner.learn(self._obs, action, reward, next_obs, terminated)
+            next_action = self.learner.learn(self._obs, action, learnt, next_obs, terminated)
         if terminated or truncated:
             obs, _ = env.reset()
             next_state = self.discretiser(obs)
