@@ -209,58 +209,116 @@ def cmd_paper(args: argparse.Namespace) -> int:
 
 
 def register_speedup(subparsers: argparse._SubParsersAction) -> None:
+    from dfrl.experiments.science.studies.speedup import CONDITIONS, SpeedupOptions
+
+    d = SpeedupOptions()
     p = subparsers.add_parser(
-        "speedup", help="iterations to a greedy performance threshold vs the number of robots, "
-                        "against linear speed-up (markdown table with intervals)")
-    p.add_argument("--robots", type=int, nargs="+", default=[1, 2, 5, 10],
-                   help="robot counts, one federation each (default: 1 2 5 10)")
-    add_seed_arguments(p, 5)
-    p.add_argument("--iterations", type=int, default=6000,
-                   help="budget per robot (default: %(default)s)")
-    p.add_argument("--respite", type=int, default=500,
-                   help="iterations between two shares (default: %(default)s)")
-    p.add_argument("--eval-every", type=int, default=1000,
-                   help="iterations between two greedy evaluations (default: %(default)s)")
-    p.add_argument("--threshold", type=float, default=0.5,
-                   help="greedy score in the held-out arenas (default: %(default)s)")
-    p.add_argument("--eval-steps", type=int, default=1000,
-                   help="evaluation steps per table and arena (default: %(default)s)")
-    p.add_argument("--method", default="average",
-                   help="aggregation method (default: %(default)s)")
-    p.add_argument("--jobs", type=int, default=2, help="processes (default: %(default)s)")
+        "speedup", help="samples to a fixed table error (and a greedy score) against the "
+                        "number of robots, homogeneous and heterogeneous, against linear "
+                        "speed-up (Kaplan-Meier times, bootstrap intervals, verdicts)",
+        description="For every N and seed, N robots learn in one process and share every "
+                    "--share-every iterations; the table error against the shipped R1 "
+                    "reference is measured every --grid iterations, the greedy score in R1 "
+                    "every --score-every. Runs that never reach a target are censored; "
+                    "T(1)/T(N) gets a bootstrap interval and verdicts (science/README.md, "
+                    "'Speed-up').")
+    p.add_argument("--robots", type=int, nargs="+", default=list(d.robots),
+                   help="robot counts, 1 included (default: %(default)s)")
+    p.add_argument("--conditions", nargs="+", choices=CONDITIONS, default=list(d.conditions),
+                   help="homogeneous: all robots in r1; heterogeneous: r1..r5 in turn "
+                        "(default: both)")
+    add_seed_arguments(p, len(d.seeds))
+    p.add_argument("--iterations", type=int, default=d.iterations,
+                   help="budget per robot; a run stops earlier once every target is reached "
+                        "(default: %(default)s)")
+    p.add_argument("--share-every", type=int, default=d.share_every,
+                   help="local steps K between two shares (default: %(default)s)")
+    p.add_argument("--grid", type=int, default=d.grid,
+                   help="iterations between two table-error measurements (default: "
+                        "%(default)s)")
+    p.add_argument("--targets", type=float, nargs="+", default=list(d.targets),
+                   help="relative table errors to reach (default: %(default)s)")
+    p.add_argument("--score-threshold", type=float, default=d.score_threshold,
+                   help="greedy score in r1 to reach (default: %(default)s)")
+    p.add_argument("--score-every", type=int, default=d.score_every,
+                   help="iterations between two greedy evaluations, a multiple of --grid "
+                        "(default: %(default)s)")
+    p.add_argument("--eval-steps", type=int, default=d.eval_steps,
+                   help="steps per greedy evaluation (default: %(default)s)")
+    p.add_argument("--alpha", type=float, default=None,
+                   help="learning rate of every robot (default: the learner's, 0.2)")
+    p.add_argument("--method", default=d.method, help="aggregation method (default: "
+                                                      "%(default)s)")
+    p.add_argument("--linear-fraction", type=float, default=d.linear_fraction,
+                   help="'linear speed-up' means T(1)/T(N) > this x N (default: %(default)s)")
+    p.add_argument("--resamples", type=int, default=d.resamples,
+                   help="bootstrap resamples (default: %(default)s)")
+    p.add_argument("--jobs", type=int, default=d.jobs, help="processes (default: %(default)s)")
     p.add_argument("--out", type=Path, default=None,
-                   help="also write speedup.md and speedup.json there")
+                   help="also write speedup.md, speedup.json, tidy.csv and provenance.json "
+                        "there")
     p.set_defaults(func=cmd_speedup)
 
 
 def cmd_speedup(args: argparse.Namespace) -> int:
-    from dfrl.experiments.science.studies.speedup import (EXPLANATION, SpeedupOptions, markdown,
-                                                          speedup, speedup_rows)
+    """``dfrl speedup``: 0 done, 2 bad options or reference, 130 stopped by a signal."""
+    import signal
+    import time
+
+    from dfrl.experiments.science.reference import ReferenceError
+    from dfrl.experiments.science.reference_store import reference_table
+    from dfrl.experiments.science.studies.speedup import REFERENCE, SpeedupOptions, run_all
+    from dfrl.experiments.science.studies.speedup_report import (analyse, markdown, tidy_rows,
+                                                                 to_json)
     from dfrl.experiments.science.tidy import TIDY_FILE, write_tidy
 
     try:
-        seeds = chosen_seeds(args)
-    except ValueError as exc:
+        opts = SpeedupOptions(
+            robots=tuple(args.robots), seeds=chosen_seeds(args),
+            conditions=tuple(dict.fromkeys(args.conditions)), iterations=args.iterations,
+            share_every=args.share_every, grid=args.grid, targets=tuple(args.targets),
+            score_threshold=args.score_threshold, score_every=args.score_every,
+            eval_steps=args.eval_steps, alpha=args.alpha, method=args.method,
+            linear_fraction=args.linear_fraction, resamples=args.resamples, jobs=args.jobs)
+        opts.check()
+        ref = reference_table(**REFERENCE)
+    except (ValueError, KeyError, ReferenceError) as exc:
         print(f"dfrl speedup: {exc}", file=sys.stderr)
         return 2
-    opts = SpeedupOptions(robots=tuple(args.robots), seeds=seeds,
-                          iterations=args.iterations, respite=args.respite,
-                          eval_every=args.eval_every, threshold=args.threshold,
-                          eval_steps=args.eval_steps, method=args.method, jobs=args.jobs)
+
+    def progress(done: int, total: int, run: dict[str, Any]) -> None:
+        left = ", ".join(f"{m} {'-' if t is None else t}" for m, t in run["times"].items())
+        print(f"[{done}/{total}] N={run['robots']} seed {run['seed']} "
+              f"({'+'.join(run['arenas'][:5])}{'...' if run['robots'] > 5 else ''}): "
+              f"{run['iterations']} iterations, {run['seconds']:.0f} s; {left}",
+              file=sys.stderr, flush=True)
+
+    def stop(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    old = signal.signal(signal.SIGTERM, stop)
+    t0 = time.monotonic()
     try:
-        rows, runs = speedup(opts)
-    except (KeyError, ValueError) as exc:
-        print(f"dfrl speedup: {exc}", file=sys.stderr)
-        return 2
-    text = markdown(rows, opts) + "\n\n" + EXPLANATION
+        results = run_all(opts, ref, progress)
+    except KeyboardInterrupt as exc:
+        print(f"dfrl speedup: stopped ({exc or 'interrupted'})", file=sys.stderr)
+        return 130
+    finally:
+        signal.signal(signal.SIGTERM, old)
+    wall = time.monotonic() - t0
+    if args.out is not None:      # the runs first: a failure below loses no federation
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "speedup_runs.json").write_text(json.dumps(
+            [{"key": [list(k[0]), k[1]], **v} for k, v in results.items()]), encoding="utf-8")
+    rows = analyse(opts, results)
+    text = markdown(rows, opts, wall, ref.name)
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
         write_provenance(args.out)
-        write_tidy(args.out / TIDY_FILE, speedup_rows(runs))
+        write_tidy(args.out / TIDY_FILE, tidy_rows(opts, results))
         (args.out / "speedup.md").write_text(text + "\n", encoding="utf-8")
-        (args.out / "speedup.json").write_text(json.dumps(
-            [{**r, "curve": {str(k): v for k, v in r["curve"].items()}} for r in runs],
-            indent=1), encoding="utf-8")
+        data = to_json(rows, opts, results, {"reference": ref.name, "wall_s": wall})
+        (args.out / "speedup.json").write_text(json.dumps(data, indent=1), encoding="utf-8")
     print(text)
     return 0
 

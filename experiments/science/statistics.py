@@ -1,12 +1,9 @@
-"""The statistics of the reports and the studies, done once: learning-curve measures, Student-t
-intervals (one sample, paired, Welch), bootstrap intervals, Holm's correction, the smallest
-detectable effect, and the verdict words every report uses.
-
-Pure functions of numbers and arrays; :mod:`.report` (the paper's observations and figures)
-and :mod:`.studies` (sweep, speed-up, transfer) both use them, neither imports the other.
-Student's t, the normal distribution and the bootstrap come from ``scipy.stats`` (why:
-``science/README.md``, "Dependencies"); what is ours is how they are combined: the intervals,
-Holm's correction, the smallest detectable effect and the verdicts.
+"""The statistics of the reports and the studies, done once: Student-t intervals (one sample,
+paired, Welch), bootstrap intervals, times to a target that some runs never reach
+(Kaplan-Meier medians and their ratio), Holm's correction, the smallest detectable effect and
+the verdict words every report uses. Pure functions of numbers; :mod:`.report` and
+:mod:`.studies` both use them. Student's t, the normal distribution and the bootstrap come
+from ``scipy.stats`` (``science/README.md``, "Dependencies"); how they combine is ours.
 
 The verdict of a claim "the mean is above (below) a bound" (:func:`judge`) is one of
 
@@ -22,8 +19,8 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field, replace
 from enum import Enum
 
 import numpy as np
@@ -45,10 +42,8 @@ def t_cdf(t: float, df: float) -> float:
 
 def t_quantile(p: float, df: float) -> float:
     """The ``p`` quantile of Student's t with ``df`` degrees of freedom."""
-    if not 0.0 < p < 1.0:
-        raise ValueError(f"a quantile needs 0 < p < 1, got {p}")
-    if df <= 0:
-        raise ValueError(f"degrees of freedom must be > 0, got {df}")
+    if not (0.0 < p < 1.0 and df > 0):
+        raise ValueError(f"a quantile needs 0 < p < 1 and df > 0, got p = {p}, df = {df}")
     return float(stats.t.ppf(p, df))
 
 
@@ -182,14 +177,11 @@ class BootstrapInterval:
 
 def bootstrap(samples: Sequence[Sequence[float]], statistic: Callable[..., float],
               resamples: int = 10_000, seed: int = 0, method: str = "bca") -> BootstrapInterval:
-    """95% bootstrap interval of ``statistic(*samples)`` (``scipy.stats.bootstrap``): every
-    sample is resampled with replacement on its own (independent groups), ``resamples`` times,
-    from a generator seeded with ``seed``. ``method``: ``percentile`` or ``bca``
-    (bias-corrected and accelerated, Efron 1987); when BCa is undefined (every resampled
-    value on one side of the estimate, e.g. constant data) the percentile interval is given
-    and ``method`` says so. E.g. a ratio of means: ``bootstrap([t1, tn], lambda a, b:
-    a.mean() / b.mean())``.
-    """
+    """95% bootstrap interval of ``statistic(*samples)`` (``scipy.stats.bootstrap``): each
+    sample resampled with replacement on its own, ``resamples`` times, from a generator seeded
+    with ``seed``; ``method`` ``percentile`` or ``bca`` (Efron 1987), percentile (and
+    ``method`` says so) where BCa is undefined, e.g. constant data. A ratio of means:
+    ``bootstrap([t1, tn], lambda a, b: a.mean() / b.mean())``."""
     if method not in ("percentile", "bca"):
         raise ValueError(f"method: percentile or bca, got {method!r}")
     data = [np.asarray(_values(s), dtype=np.float64) for s in samples]
@@ -214,6 +206,113 @@ def bootstrap(samples: Sequence[Sequence[float]], statistic: Callable[..., float
         used = "percentile"
         low, high = run("percentile")
     return BootstrapInterval(est, low, high, resamples, used)
+
+
+# -- censored times to a target ----------------------------------------------------------------
+def _censored(times: Sequence[float], reached: Sequence[bool]) -> tuple[np.ndarray, np.ndarray]:
+    t, ev = np.asarray(_values(times)), np.asarray([bool(r) for r in reached], dtype=bool)
+    if len(ev) != len(t):
+        raise ValueError(f"{len(t)} times and {len(ev)} reached flags")
+    return t, ev
+
+
+def _km_steps(t: np.ndarray, ev: np.ndarray) -> Iterator[tuple[float, float]]:
+    s = 1.0
+    for u in np.unique(t[ev]):
+        s *= 1.0 - np.count_nonzero(ev & (t == u)) / np.count_nonzero(t >= u)
+        yield float(u), float(s)
+
+
+def kaplan_meier(times: Sequence[float], reached: Sequence[bool]) -> list[tuple[float, float]]:
+    """The Kaplan-Meier estimate of P(time to target > t) from right-censored times: a run that
+    reached the target at ``times[i]`` (``reached[i]``) is an event there, one that never did is
+    known only to take longer than ``times[i]`` (its budget). At each event time u, with d
+    events and n runs whose time is >= u (a run censored at u still counts at u),
+    S(u) = S(u-) x (1 - d / n). Returns the steps ``[(u, S(u)), ...]`` in time order."""
+    return list(_km_steps(*_censored(times, reached)))
+
+
+def _median(t: np.ndarray, ev: np.ndarray) -> float:
+    return next((u for u, s in _km_steps(t, ev) if s <= 0.5), math.inf)
+
+
+def km_median(times: Sequence[float], reached: Sequence[bool]) -> float:
+    """The Kaplan-Meier median: the first event time u with S(u) <= 1/2; ``inf`` when the curve
+    stays above 1/2 (the median lies beyond the budget)."""
+    return _median(*_censored(times, reached))
+
+
+def _medians(t: np.ndarray, ev: np.ndarray, rng: np.random.Generator, k: int) -> np.ndarray:
+    return np.array([_median(t[i], ev[i]) for i in rng.integers(0, len(t), (k, len(t)))])
+
+
+def _ends(draws: np.ndarray) -> tuple[float, float]:
+    """The 95% percentile interval, undefined (NaN) draws counted against both ends."""
+    tail, nan = (1.0 - LEVEL) / 2.0, np.isnan(draws)
+    return (float(np.quantile(np.where(nan, 0.0, draws), tail, method="lower")),
+            float(np.quantile(np.where(nan, np.inf, draws), 1.0 - tail, method="higher")))
+
+
+@dataclass(frozen=True)
+class CensoredRatio(BootstrapInterval):
+    """``median_a / median_b`` of two groups of censored times (Kaplan-Meier medians) with its
+    95% percentile bootstrap interval (:func:`censored_ratio`). A median beyond the budget is
+    infinite, so a ratio may be 0 or ``inf`` (one side known only as a bound) or undefined
+    (both beyond the budget: ``undefined`` is the share of such resamples; they count against
+    the claim on both sides). :func:`judge` takes it as it takes an :class:`Interval`."""
+
+    n: int
+    undefined: float
+    draws: np.ndarray = field(repr=False, compare=False)
+
+    @property
+    def half(self) -> float:
+        return (self.high - self.low) / 2.0
+
+    def p_value(self, null: float = 1.0) -> float:
+        """Two-sided p of "the ratio is ``null``": twice the smaller share of resamples on one
+        side of it (undefined ones on both), at most 1."""
+        d, nan = self.draws, np.isnan(self.draws)
+        below, above = float(np.mean((d <= null) | nan)), float(np.mean((d >= null) | nan))
+        return min(1.0, 2.0 * min(below, above))
+
+    def detectable(self, power: float = POWER) -> float:
+        """The smallest factor by which the true ratio must differ from the null for a 5% test
+        of this spread to see it with ``power``: exp((z(0.975) + z(power)) x se), se of the log
+        ratio from the interval's width (4 x 1.96 se); ``inf`` for an open interval."""
+        if not (0.0 < self.low and math.isfinite(self.high)):
+            return math.inf
+        se = (math.log(self.high) - math.log(self.low)) / (2.0 * normal_quantile(0.975))
+        return math.exp((normal_quantile(0.975) + normal_quantile(power)) * se)
+
+
+def _ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(np.isinf(a) & np.isinf(b), np.nan, a / b)
+
+
+def censored_ratio(a: tuple[Sequence[float], Sequence[bool]],
+                   b: tuple[Sequence[float], Sequence[bool]],
+                   resamples: int = 4000, seed: int = 0) -> CensoredRatio:
+    """The ratio of Kaplan-Meier medians ``a / b`` (e.g. T(1) / T(N)) of two independent groups
+    of ``(times, reached)``: each group's runs resampled with replacement on their own
+    (generator seeded with ``seed``), censored runs staying censored (none is set to the
+    budget); the percentile interval of the resampled ratios."""
+    rng = np.random.default_rng(seed)
+    (ta, ea), (tb, eb) = _censored(*a), _censored(*b)
+    est = float(_ratio(np.array(_median(ta, ea)), np.array(_median(tb, eb))))
+    draws = _ratio(_medians(ta, ea, rng, resamples), _medians(tb, eb, rng, resamples))
+    return CensoredRatio(est, *_ends(draws), resamples, "percentile", min(len(ta), len(tb)),
+                         float(np.mean(np.isnan(draws))), draws)
+
+
+def km_median_interval(times: Sequence[float], reached: Sequence[bool], resamples: int = 4000,
+                       seed: int = 0) -> BootstrapInterval:
+    """The Kaplan-Meier median with its 95% percentile bootstrap interval (an ``inf`` end: the
+    median may lie beyond the budget)."""
+    t, ev = _censored(times, reached)
+    return BootstrapInterval(_median(t, ev), *_ends(_medians(t, ev, np.random.default_rng(seed),
+                                                             resamples)), resamples, "percentile")
 
 
 # -- multiplicity ----------------------------------------------------------------------------
@@ -281,7 +380,7 @@ class Judgement:
         return self.words()
 
 
-def judge(measure: Interval, bound: float = 0.0, side: str = "above",
+def judge(measure: Interval | CensoredRatio, bound: float = 0.0, side: str = "above",
           min_n: int = MIN_N) -> Judgement:
     """The verdict on "the mean is above (``side="above"``) or below ``bound``", from the 95%
     interval ``measure`` (see the module's docs for the words)."""

@@ -21,6 +21,9 @@ import numpy as np
 from dfrl.robots.training import Trainer, TrainerConfig
 
 Aggregation = Callable[[Sequence[np.ndarray], Sequence[np.ndarray]], np.ndarray]
+#: Called every ``observe_every`` iterations with the iteration (per robot) and the trainers
+#: (after any share at that iteration); returns True to stop the federation there.
+Observer = Callable[[int, Sequence[Trainer]], bool]
 
 
 def _check(tables: Sequence[np.ndarray], visits: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -82,7 +85,8 @@ class Federation:
     Attributes
     ----------
     table : np.ndarray, shape (n_states, n_actions)
-        The aggregate after the last round (every robot holds it).
+        Robot 0's table at the end: the aggregate every robot holds when the run ended
+        with a share (always, unless ``final_share`` is False or an observer stopped it).
     visits : np.ndarray
         Visit counts summed over robots.
     snapshots : dict of int to np.ndarray
@@ -91,6 +95,8 @@ class Federation:
     q_sum, reward : np.ndarray, shape (robots, iterations)
         Each robot's sum of Q-values and cumulative reward per iteration.
     collisions : np.ndarray, shape (robots,)
+    iterations : int
+        Iterations per robot done (below the budget when an observer stopped the run).
     """
 
     table: np.ndarray
@@ -99,11 +105,13 @@ class Federation:
     q_sum: np.ndarray | None = None
     reward: np.ndarray | None = None
     collisions: np.ndarray | None = None
+    iterations: int = 0
 
 
 def federate(configs: Sequence[TrainerConfig], iterations: int, respite: int,
              method: str = "average", snapshot_every: int = 0,
-             initial: np.ndarray | None = None) -> Federation:
+             initial: np.ndarray | None = None, observe: Observer | None = None,
+             observe_every: int = 0, final_share: bool = True) -> Federation:
     """Train one robot per config for ``iterations`` steps each, aggregating every
     ``respite`` (a single config with ``method`` anything is a standalone run).
 
@@ -118,6 +126,14 @@ def federate(configs: Sequence[TrainerConfig], iterations: int, respite: int,
         Keep the aggregate every so many rounds (0: only the last).
     initial : np.ndarray, optional
         Start every robot from this table instead of zeros.
+    observe, observe_every : Observer, int
+        Measure the robots' tables every ``observe_every`` iterations (after the share due
+        then, if any), e.g. their error against a reference on a grid finer than the share
+        period; the observer returning True stops every robot there (``q_sum`` and
+        ``reward`` then end at that iteration).
+    final_share : bool
+        Also share after the last iteration when it is not a multiple of ``respite`` (as the
+        agent's last round does); False keeps every share on the ``respite`` schedule.
 
     Raises
     ------
@@ -129,6 +145,8 @@ def federate(configs: Sequence[TrainerConfig], iterations: int, respite: int,
     agg = AGGREGATIONS[method]
     if iterations < 1 or respite < 1:
         raise ValueError("iterations and respite must be >= 1")
+    if observe is not None and observe_every < 1:
+        raise ValueError("an observer needs observe_every >= 1")
     trainers = [Trainer(c) for c in configs]
     try:
         if initial is not None:
@@ -139,21 +157,26 @@ def federate(configs: Sequence[TrainerConfig], iterations: int, respite: int,
         reward = np.zeros((n, iterations))
         snaps: dict[int, np.ndarray] = {}
         rounds = 0
+        done = iterations
         for i in range(iterations):
             for k, t in enumerate(trainers):
                 m = t.step()
                 q_sum[k, i], reward[k, i] = m.q_sum, m.cumulative_reward
-            if (i + 1) % respite == 0 or i + 1 == iterations:
+            if (i + 1) % respite == 0 or (final_share and i + 1 == iterations):
                 table = agg([t.q_table for t in trainers], [t.visits for t in trainers])
                 for t in trainers:
                     t.set_q_table(table)
                 rounds += 1
                 if (snapshot_every and rounds % snapshot_every == 0) or i + 1 == iterations:
                     snaps[i + 1] = table.copy()
+            if observe is not None and (i + 1) % observe_every == 0 and observe(i + 1, trainers):
+                done = i + 1
+                break
         return Federation(table=trainers[0].q_table.copy(),
                           visits=np.sum([t.visits for t in trainers], axis=0),
-                          snapshots=snaps, q_sum=q_sum, reward=reward,
-                          collisions=np.array([t.collisions for t in trainers]))
+                          snapshots=snaps, q_sum=q_sum[:, :done], reward=reward[:, :done],
+                          collisions=np.array([t.collisions for t in trainers]),
+                          iterations=done)
     finally:
         for t in trainers:
             t.close()

@@ -1,127 +1,217 @@
-"""``dfrl speedup``: iterations to reach a greedy performance threshold against the number of
-robots N, compared with linear speed-up.
+"""``dfrl speedup``: samples to reach a fixed table error (and a greedy score) against the
+number of robots N, in a homogeneous and a heterogeneous federation, compared with the linear
+speed-up of the theory (Khodadadian et al. 2022; Woo, Joshi and Chi 2023).
 
-For every N and seed, N robots (arenas R1..R5 in turn, N = 10 uses each twice with other
-seeds) learn Q-learning with ``average`` every ``respite`` iterations
-(:func:`dfrl.experiments.science.studies.fedsim.federate`). After every ``eval_every`` iterations the
-shared table's greedy policy is measured in the held-out arenas h1 and h2 (the same seeded
-episodes for every N, so the measure does not depend on N); the time to threshold is the first
-evaluation iteration (per robot) whose score reaches ``threshold``, or the budget if none does
-(reported as censored). Linear speed-up would divide the time by N.
+**Design.** Every run is one in-process federation (:func:`.fedsim.federate`): N robots learn
+Q-learning and share (``method``, default ``average``) every ``share_every`` iterations. The
+*target arena* is R1, the arena of the shipped reference table (:mod:`..reference`):
+
+* ``homogeneous``: all N robots in R1 (the theory's setting: one MDP);
+* ``heterogeneous``: robot k in ``r1, r2, r3, r4, r5`` in turn (the paper's arenas; N = 10 has
+  two robots in each), so robot 0 is always in R1.
+
+N = 1 is the same single robot in R1 in both conditions (it is run once and counts in both):
+T(1) is one robot learning R1 alone, and T(1)/T(N) asks how much N - 1 partners, in R1 or in
+other arenas, shorten that. Robot k of seed s has the training seed ``1000 s + k`` whatever N.
+
+**Measures**, on a grid of ``grid`` iterations per robot (default 100, finer than the share
+period): the relative table error (:func:`..reference.table_error`) of each robot in R1
+against the R1 reference, averaged over those robots; every ``score_every`` iterations the
+greedy score of robot 0's table in R1 (``eval_steps`` seeded steps, the same episodes for every
+N). The time to an error target is the first grid point at or below it; the time to the score
+threshold the first of ``score_hold`` consecutive evaluations at or above it. A run stops when
+it has reached every target or at the budget ``iterations``; one that never reached a target is
+*censored* at the budget (:mod:`..statistics`: Kaplan-Meier medians, ratio bootstrap), never
+counted as reaching it there.
 """
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, replace
 from typing import Any
 
-from dfrl.experiments.science.statistics import Interval, interval
+import numpy as np
+
+from dfrl.experiments.science.curves import first_reach
+from dfrl.experiments.science.reference import Reference, table_error
 from dfrl.experiments.science.studies.fedsim import federate
 from dfrl.experiments.science.studies.history import eval_job
-from dfrl.robots.training import TrainerConfig
+from dfrl.robots.training import Trainer, TrainerConfig
 
 PAPER_ARENAS = ("r1", "r2", "r3", "r4", "r5")
+TARGET_ARENA = "r1"
+CONDITIONS = ("homogeneous", "heterogeneous")
+#: The reference the error is measured against (shipped: science/references/).
+REFERENCE = {"arena": TARGET_ARENA, "algo": "qlearning", "iterations": 50_000,
+             "seeds": (1, 2, 3, 4, 5)}
+#: Seed of the greedy evaluations' episodes (the same for every run).
+EVAL_SEED = 70_000
 
 
 @dataclass(frozen=True)
 class SpeedupOptions:
+    """What ``dfrl speedup`` runs (defaults: science/README.md, "Speed-up")."""
+
     robots: tuple[int, ...] = (1, 2, 5, 10)
-    seeds: tuple[int, ...] = (1, 2, 3, 4, 5)
-    iterations: int = 6000
-    respite: int = 500
-    eval_every: int = 1000
-    threshold: float = 0.5
-    eval_steps: int = 1000
+    seeds: tuple[int, ...] = tuple(range(1, 11))
+    conditions: tuple[str, ...] = CONDITIONS
+    iterations: int = 12_000
+    share_every: int = 500
+    grid: int = 100
+    targets: tuple[float, ...] = (0.75, 0.70)
+    score_threshold: float = 0.7
+    score_every: int = 500
+    score_hold: int = 2
+    eval_steps: int = 500
     episode_steps: int = 200
-    held_out: tuple[str, ...] = ("h1", "h2")
+    alpha: float | None = None
     method: str = "average"
+    linear_fraction: float = 0.5
+    resamples: int = 4000
     jobs: int = 2
 
-
-def run_one(n: int, seed: int, opts: SpeedupOptions) -> dict[str, Any]:
-    """One federation of ``n`` robots; its greedy score curve and time to threshold."""
-    cfgs = [TrainerConfig(arena=PAPER_ARENAS[k % 5], seed=1000 * seed + k, iterations=opts.iterations)
-            for k in range(n)]
-    fed = federate(cfgs, opts.iterations, opts.respite, opts.method,
-                   snapshot_every=max(1, opts.eval_every // opts.respite))
-    base = TrainerConfig().to_dict()
-    curve = {}
-    for it, q in sorted(fed.snapshots.items()):
-        vals = [eval_job(base, q, a, opts.eval_steps, opts.episode_steps, 70_000 + seed)["score"]
-                for a in opts.held_out]
-        curve[it] = sum(vals) / len(vals)
-    hit = [it for it, s in curve.items() if s >= opts.threshold]
-    return {"robots": n, "seed": seed, "curve": curve,
-            "time": hit[0] if hit else opts.iterations, "reached": bool(hit)}
-
-
-@dataclass(frozen=True)
-class SpeedupRow:
-    robots: int
-    time: Interval
-    reached: int
-    runs: int
-    speedup: Interval          # T(1) / T(N), per seed
-    final_score: Interval
+    def check(self) -> None:
+        """Raises ValueError naming the first bad option."""
+        bad = [c for c in self.conditions if c not in CONDITIONS]
+        if bad or not self.conditions:
+            raise ValueError(f"conditions: some of {', '.join(CONDITIONS)}, got {bad}")
+        if not self.robots or min(self.robots) < 1 or 1 not in self.robots:
+            raise ValueError(f"robots: counts >= 1 including 1 (T(1) is the baseline), got "
+                             f"{self.robots}")
+        if len(set(self.robots)) != len(self.robots) or len(set(self.seeds)) != len(self.seeds):
+            raise ValueError("robots and seeds must not repeat")
+        for name in ("iterations", "share_every", "grid", "score_every", "score_hold",
+                     "eval_steps", "episode_steps", "resamples", "jobs"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.score_every % self.grid:
+            raise ValueError(f"score_every ({self.score_every}) must be a multiple of grid "
+                             f"({self.grid})")
+        if not self.targets or not all(0 < t < 1 for t in self.targets):
+            raise ValueError(f"targets: relative errors in (0, 1), got {self.targets}")
+        if self.alpha is not None and not 0 < self.alpha <= 1:
+            raise ValueError(f"alpha must be in (0, 1], got {self.alpha}")
+        if not 0 < self.linear_fraction <= 1:
+            raise ValueError(f"linear_fraction must be in (0, 1], got {self.linear_fraction}")
 
 
-def speedup(opts: SpeedupOptions) -> tuple[list[SpeedupRow], list[dict[str, Any]]]:
-    """Run every (N, seed) on ``opts.jobs`` processes; the table rows and the raw runs."""
-    args = [(n, s, opts) for n in opts.robots for s in opts.seeds]
+def arenas(condition: str, n: int) -> tuple[str, ...]:
+    """The arena of each of the ``n`` robots (robot 0 always in the target arena)."""
+    if condition == "homogeneous":
+        return (TARGET_ARENA,) * n
+    if condition == "heterogeneous":
+        return tuple(PAPER_ARENAS[k % len(PAPER_ARENAS)] for k in range(n))
+    raise ValueError(f"condition: one of {', '.join(CONDITIONS)}, got {condition!r}")
+
+
+def measures(opts: SpeedupOptions) -> list[str]:
+    """Names of the times measured: ``error<=0.75``, ..., ``score>=0.7``."""
+    return [f"error<={t:g}" for t in opts.targets] + [f"score>={opts.score_threshold:g}"]
+
+
+def base_config(opts: SpeedupOptions) -> TrainerConfig:
+    """The training configuration every robot shares (arena and seed apart)."""
+    base = TrainerConfig(iterations=opts.iterations)
+    if opts.alpha is not None:
+        base = base.replace(learner=replace(base.learner, alpha=opts.alpha))
+    return base
+
+
+def score_time(its: Sequence[int], scores: Sequence[float], threshold: float,
+               hold: int) -> int | None:
+    """The first evaluation that starts ``hold`` consecutive ones at or above ``threshold``
+    (None: censored)."""
+    for k in range(len(scores) - hold + 1):
+        if all(s >= threshold for s in scores[k:k + hold]):
+            return int(its[k])
+    return None
+
+
+def run_one(arena_list: tuple[str, ...], seed: int, opts: SpeedupOptions,
+            reference: Reference) -> dict[str, Any]:
+    """One federation: its error and score curves and its time to each target (None: not
+    reached within the budget)."""
+    base = base_config(opts)
+    cfgs = [base.replace(arena=a, seed=1000 * seed + k) for k, a in enumerate(arena_list)]
+    in_target = [k for k, a in enumerate(arena_list) if a == TARGET_ARENA]
+    grid: list[int] = []
+    error: list[float] = []
+    score_its: list[int] = []
+    scores: list[float] = []
+    base_dict = base.to_dict()
+
+    def reached_all() -> bool:
+        return (bool(error) and min(error) <= min(opts.targets)
+                and score_time(score_its, scores, opts.score_threshold, opts.score_hold)
+                is not None)
+
+    def observe(it: int, trainers: Sequence[Trainer]) -> bool:
+        grid.append(it)
+        error.append(float(np.mean([table_error(trainers[k].q_table, reference).relative
+                                    for k in in_target])))
+        if it % opts.score_every == 0:
+            score_its.append(it)
+            scores.append(eval_job(base_dict, trainers[0].q_table, TARGET_ARENA,
+                                   opts.eval_steps, opts.episode_steps, EVAL_SEED)["score"])
+        return reached_all()
+
+    t0 = time.perf_counter()
+    fed = federate(cfgs, opts.iterations, opts.share_every, opts.method,
+                   observe=observe, observe_every=opts.grid, final_share=False)
+    times: dict[str, int | None] = {}
+    for t in opts.targets:
+        hit = first_reach(grid, error, t, "below") if len(grid) > 1 else (
+            grid[0] if grid and error[0] <= t else None)
+        times[f"error<={t:g}"] = None if hit is None else int(hit)
+    times[f"score>={opts.score_threshold:g}"] = score_time(score_its, scores,
+                                                           opts.score_threshold,
+                                                           opts.score_hold)
+    return {"robots": len(arena_list), "arenas": list(arena_list), "seed": seed,
+            "iterations": fed.iterations, "budget": opts.iterations, "grid": grid,
+            "error": error, "score_iterations": score_its, "score": scores, "times": times,
+            "seconds": time.perf_counter() - t0}
+
+
+def runs_needed(opts: SpeedupOptions) -> list[tuple[tuple[str, ...], int]]:
+    """The distinct federations (arena list, seed) the study runs, largest first (N = 1 and
+    any N whose arenas coincide across conditions are run once)."""
+    keys = {(arenas(c, n), s) for c in opts.conditions for n in opts.robots for s in opts.seeds}
+    return sorted(keys, key=lambda k: (-len(k[0]), k[0], k[1]))
+
+
+def run_all(opts: SpeedupOptions, reference: Reference,
+            progress: Callable[[int, int, dict[str, Any]], None] | None = None
+            ) -> dict[tuple[tuple[str, ...], int], dict[str, Any]]:
+    """Every federation of the study on ``opts.jobs`` processes; by (arenas, seed).
+
+    Raises
+    ------
+    KeyboardInterrupt
+        Ctrl-C or SIGTERM (when the caller turns it into one): pending runs are cancelled and
+        the workers ended.
+    """
+    from dfrl.experiments.science.reproduce import _stop_pool
+
+    opts.check()
+    keys = runs_needed(opts)
+    out: dict[tuple[tuple[str, ...], int], dict[str, Any]] = {}
     if opts.jobs <= 1:
-        runs = [run_one(*a) for a in args]
-    else:
-        with ProcessPoolExecutor(max_workers=opts.jobs) as pool:
-            runs = list(pool.map(run_one, *zip(*args)))
-    t1 = {r["seed"]: r["time"] for r in runs if r["robots"] == min(opts.robots)}
-    rows = []
-    for n in opts.robots:
-        sel = [r for r in runs if r["robots"] == n]
-        ratios = [t1[r["seed"]] / r["time"] for r in sel if r["seed"] in t1]
-        rows.append(SpeedupRow(n, interval([r["time"] for r in sel]),
-                               sum(r["reached"] for r in sel), len(sel), interval(ratios),
-                               interval([r["curve"][max(r["curve"])] for r in sel])))
-    return rows, runs
-
-
-def speedup_rows(runs: Sequence[dict[str, Any]]) -> Iterator[tuple]:
-    """The runs as rows of a tidy table (:mod:`dfrl.experiments.science.tidy`): the greedy
-    score in the held-out arenas at every snapshot of the federation's table."""
-    for r in runs:
-        for it, score in sorted(r["curve"].items()):
-            yield (f"N={r['robots']}", r["seed"], "federated", "federation", int(it),
-                   "score@held_out", float(score))
-
-
-def markdown(rows: Sequence[SpeedupRow], opts: SpeedupOptions) -> str:
-    n1 = min(opts.robots)
-    L = [f"Threshold: greedy score {opts.threshold} in {', '.join(opts.held_out)} "
-         f"(evaluated every {opts.eval_every} iterations per robot; budget {opts.iterations}; "
-         f"a run that never reaches it counts as the budget, so those times are lower bounds).",
-         "", "| robots N | iterations per robot to threshold | reached | speed-up T(1)/T(N) | "
-         "linear | total samples N x T | final score (held-out) |", "|---|---|---|---|---|---|---|"]
-    for r in rows:
-        L.append(f"| {r.robots} | {r.time} | {r.reached}/{r.runs} | {r.speedup} | "
-                 f"{r.robots / n1:g} | {r.robots * r.time.mean:.0f} | {r.final_score} |")
-    return "\n".join(L)
-
-
-EXPLANATION = """Why the speed-up is far from linear here. The theory of federated Q-learning
-(Khodadadian, Sharma, Joshi and Maguluri, ICML 2022; Woo, Joshi and Chi, ICML 2023) predicts
-a near-linear speed-up in N of the *sample complexity of estimating Q*, under assumptions our
-set-up breaks. (1) Averaging N local updates gives an aggregate that moves like one robot's
-update with 1/N of its variance, not N times as far: the speed-up of the theory comes from
-using that variance reduction, with a step size (or a number of local steps) that grows with
-N; ours is a fixed alpha 0.2 and a fixed respite of 500 iterations, so extra robots only
-steady the table. (2) Every agent of the theory samples the *same* MDP; our robots live in
-five different arenas, so the average is a compromise between different Q-functions
-(heterogeneity bias, bounded separately by Woo et al.) that no amount of robots removes.
-(3) Coverage: with 81 states the learning sits in a few dozen states every robot visits
-within its first thousand iterations, and exploration decays over 4,000 updates whatever N
-is; so the time to the threshold is bounded below by one robot's own schedule and by the
-first respite. (4) Our threshold is on the greedy policy's behaviour, which changes in jumps
-when the argmax of a few states flips, not on the Q error that the bounds control; with many
-robots the averaged table also changes less per round, and the greedy policy often freezes
-for several evaluations. Woo et al.'s importance averaging (weights by visit counts, our
-`visit_average`) addresses uneven coverage, not the heterogeneity of the arenas."""
+        for k in keys:
+            out[k] = run_one(k[0], k[1], opts, reference)
+            if progress is not None:
+                progress(len(out), len(keys), out[k])
+        return out
+    pool = ProcessPoolExecutor(max_workers=opts.jobs)
+    try:
+        futures = {pool.submit(run_one, k[0], k[1], opts, reference): k for k in keys}
+        for fut in as_completed(futures):
+            out[futures[fut]] = fut.result()
+            if progress is not None:
+                progress(len(out), len(keys), out[futures[fut]])
+    except BaseException:
+        _stop_pool(pool)
+        raise
+    pool.shutdown()
+    return out
