@@ -1,10 +1,10 @@
-"""The paper's observation tests in words: how the real runs and the control fare, and the
-markdown of every test with its verdict (used by :mod:`.paper`)."""
+"""The paper's observation tests in words: how the real runs and each control fare, and the
+markdown of every test with its verdict and the summary table (used by :mod:`.paper`)."""
 from __future__ import annotations
 
 import math
 
-from dfrl.experiments.science.report.observations import MIN_SEEDS, Standing, Test
+from dfrl.experiments.science.report.standing import MIN_SEEDS, Standing, Test
 from dfrl.experiments.science.statistics import Judgement
 
 
@@ -28,6 +28,35 @@ def control_words(t: Test) -> str:
     return "passes" if t.control_passes else "fails"
 
 
+def control_results(t: Test) -> str:
+    """Each control row's result: ``zero table: fails (0.01 ± 0.03 (n=3)); ...``."""
+    if not t.control:
+        return "none"
+    out = []
+    for v in t.control:
+        if v.measure.n < MIN_SEEDS:
+            word = f"{v.measure.n} seed(s)"
+        elif v.values and max(v.values) == min(v.values):
+            word = "fixed by construction"
+        else:
+            word = "passes" if v.passed else "fails"
+        out.append(f"{v.subject}: {word} ({v.measure})")
+    return "; ".join(out)
+
+
+def summary_markdown(tests: list[Test]) -> list[str]:
+    """The summary table: per test, the real rows, every control's result and the standing.
+    "yes" only for a test of learning (:meth:`Test.is_test`: at least MIN_SEEDS seeds and a
+    control that fails), never with one seed or no control."""
+    L = ["| test | real runs (rows that hold, after Holm) | each control's result "
+         "(mean ± 95% half width, n) | a test of learning? |", "|---|---|---|---|"]
+    for t in tests:
+        standing, why = t.standing()
+        L.append(f"| {t.key}. {t.title} | {real_words(t)} | {control_results(t)} | "
+                 f"{'yes' if standing is Standing.TEST else f'{standing.value}: {why}'} |")
+    return L
+
+
 def tests_markdown(tests: list[Test]) -> list[str]:
     """The tests as markdown: the family Holm's correction ran over, then one table per test
     and its verdict."""
@@ -39,8 +68,10 @@ def tests_markdown(tests: list[Test]) -> list[str]:
          f"otherwise **not significant at n = K (smallest detectable effect D)**, D being the "
          f"true distance from the bound a 5% t test finds with 80% power at that n and spread; "
          f"with fewer than {MIN_SEEDS} seeds the report **cannot judge**. A test is a test of "
-         f"learning only when its control can fail (not fixed by construction), fails, and "
-         f"differs from every real row that holds (real minus control, paired by seed).", ""]
+         f"learning only when its controls (runs that cannot have learned: the zero table, the "
+         f"shuffled-reward runs) can fail (not fixed by construction), all fail, and each "
+         f"differs from every real row that holds (real minus control, paired by seed); with "
+         f"no control, or fewer than {MIN_SEEDS} seeds, it cannot judge.", ""]
     for t in tests:
         L += [f"### {t.key}. {t.title}", "", f"Measure: {t.how}.", "",
               "| runs | mean ± 95% half width (n seeds) | p (Holm) | verdict | note |",

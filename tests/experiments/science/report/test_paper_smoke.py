@@ -16,12 +16,17 @@ def test_tiny_paper(tmp_path):
     assert rep.ok
     assert sorted(rep.fed) == ["qlearning/average", "qlearning/max", "sarsa/average",
                                "sarsa/max"]
-    assert len(rep.control_fed) == 2 and len(rep.control_sa) == 2
+    c = rep.controls
+    assert [len(x) for x in (c.zero, c.shuffled_fed, c.shuffled_sa, c.reference_fed,
+                             c.reference_sa)] == [2] * 5
+    assert sorted(c.shuffled_sa[0].arenas) == ["r1", "r2", "r3", "r4", "r5"]
     hist = sorted(p.name for p in (tmp_path / "seed1" / "paper_qlearning_average" / "tables"
                                    / "history").glob("r1_*.npy"))
     assert hist == ["r1_it200.npy", "r1_it400.npy"]
-    ev = (tmp_path / "seed2" / "control_qlearning_average" / "evaluations.csv").read_text()
-    assert ev.startswith("robot,iteration,arena,role") and ",h2,held_out," in ev
+    for run in ("control_shuffled_qlearning_average", "reference_qlearning_average",
+                "zero_table"):
+        ev = (tmp_path / "seed2" / run / "evaluations.csv").read_text()
+        assert ev.startswith("robot,iteration,arena,role") and ",h2,held_out," in ev
     text = rep.report.read_text()
     for key in ("1a.", "1b.", "1c.", "1d.", "2.", "3a.", "3b.", "4.", "5.", "6."):
         assert f"### {key}" in text
@@ -42,7 +47,8 @@ def test_tiny_paper(tmp_path):
     with open(tmp_path / "tidy.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert list(rows[0]) == ["run", "seed", "condition", "robot", "iteration", "metric", "value"]
-    assert {r["condition"] for r in rows} == {"federated", "standalone", "control federated",
-                                              "control standalone"}
+    assert {r["condition"] for r in rows} == {
+        "federated", "standalone", "reference federated", "reference standalone",
+        "control shuffled federated", "control shuffled standalone", "control zero table"}
     assert {"q_sum", "score@h1"} <= {r["metric"] for r in rows}
     assert max(int(r["iteration"]) for r in rows) == 400
