@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from dfrl.experiments.driver.config import ConfigError, ExperimentConfig, resolve_config
+from dfrl.experiments.cli.cluster import add_cluster_arguments
 from dfrl.experiments.robot_host.config import Mode
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.tokens import TokenError, pop_env_tokens, read_token_file
@@ -149,8 +150,8 @@ def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
     """Check ``cfg`` and the TLS folder, claim the results folder, run it and report; the
     command's exit code (2: bad config, TLS folder or results folder, before anything
     started; 130: interrupted)."""
+    from dfrl.experiments.cli.cluster import run_experiment_for
     from dfrl.experiments.tls_folder import CertError, check_node_dir
-    from dfrl.experiments.driver.launcher import run
 
     tls = getattr(args, "tls", None)
     try:
@@ -179,7 +180,7 @@ def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
         view = start_view(out, args.view_host, args.view_port, fresh=True)
         print(f"{prog}: live view at {view.url}", file=sys.stderr, flush=True)
     try:
-        results = run(cfg, claimed, tls=tls)
+        results = run_experiment_for(args, cfg, claimed, tls)
     except ExperimentError as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
         return 1
@@ -351,6 +352,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_tls_argument(p)
     add_token_file_argument(p)
     add_override_arguments(p)
+    add_cluster_arguments(p)
     p.set_defaults(func=cmd_run)
 
     p = subparsers.add_parser("inject", help="load an aggregation method into a running "

@@ -1,0 +1,59 @@
+"""``dfrl run --cluster ADDRESS``: the run's robots placed on a Dask cluster
+(:mod:`dfrl.experiments.driver.launcher.cluster`) instead of spawned on the driver's host.
+
+Only the options and the choice of backend live here; ``dfrl run`` (:mod:`.federated`) calls
+:func:`run_experiment_for` where it would call the launcher. Without ``--cluster`` nothing of
+the engine is imported (``dfrl demo`` does not need it).
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from dfrl.experiments.driver.config import ExperimentConfig
+from dfrl.experiments.driver.results.files import ClaimedFolder
+from dfrl.experiments.driver.results.summary import Results
+
+
+def add_cluster_arguments(p: argparse.ArgumentParser) -> None:
+    """``--cluster ADDRESS`` and ``--cluster-cpus N`` of ``dfrl run``."""
+    g = p.add_argument_group("cluster (README: 'Running on a cluster')")
+    g.add_argument("--cluster", default=None, metavar="ADDRESS",
+                   help="place every robot without robot_host on the Dask cluster whose "
+                        "scheduler is ADDRESS (e.g. tcp://10.0.0.1:8786): each starts a dfrl "
+                        "robot service on a worker's host (needs pip install 'dfrl[cluster]', "
+                        "--token-file, and dfrl.token beside every worker)")
+    g.add_argument("--cluster-cpus", type=_positive, default=1.0, metavar="N",
+                   help="the CPU resource each robot asks the cluster for (default 1; workers "
+                        "offer it with dask worker --resources CPU=N)")
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return value
+
+
+def run_experiment_for(args: argparse.Namespace, cfg: ExperimentConfig, claimed: ClaimedFolder,
+                       tls: Path | None) -> Results:
+    """Run ``cfg`` into ``claimed``: on the cluster of ``--cluster`` if given, else with the
+    launcher alone.
+
+    Raises
+    ------
+    ExperimentError
+        As :func:`dfrl.experiments.driver.launcher.run` and, with ``--cluster``,
+        :func:`dfrl.experiments.driver.launcher.cluster.run_on_cluster`.
+    """
+    address = getattr(args, "cluster", None)
+    if address is None:
+        from dfrl.experiments.driver.launcher import run
+
+        return run(cfg, claimed, tls=tls)
+    from dfrl.experiments.driver.launcher.cluster import run_on_cluster
+
+    return run_on_cluster(cfg, claimed, address, cpus=args.cluster_cpus, tls=tls)

@@ -1,0 +1,307 @@
+"""Robots placed on a cluster engine (Dask distributed) instead of spawned here or started by
+hand: ``dfrl run CONFIG --cluster ADDRESS`` (:func:`run_on_cluster`).
+
+Every robot of the config without a ``robot_host`` becomes one task on the cluster
+(:func:`dfrl.experiments.robot_host.cluster_task.serve_robot`), submitted with a resource
+request (``{"CPU": cpus}``: workers offer it with ``dask worker --resources CPU=N``). The task
+starts a ``dfrl robot`` service on its worker's host and reports its address; the robot's
+entry then names that address as its ``robot_host``, and the run goes on exactly as with
+hand-started robot hosts (:class:`~.remote_robots.RemoteRobot`): the agent moves among them
+over the platform and their files come back over the platform at the end. The engine only
+places the services and holds their resources; nothing of the run travels through it but the
+services' addresses (the token stays in ``dfrl.token`` on every host).
+
+:class:`ClusterPlacement` owns the engine's client. While the run goes on, its thread renews
+the run's lease (the tasks end their services if the driver stops renewing it) and watches the
+workers: a worker that leaves the cluster, or a task that ends before the run, is said on the
+progress stream and recorded in ``cluster.json``; the robots on it stop answering and the run
+counts them as lost, as robots of a host that died (``summary.md``, exit status 1).
+
+Threading: the caller's thread calls every public method; the watch thread renews the lease
+and records losses, guarded by the placement's lock.
+"""
+from __future__ import annotations
+
+import json
+import sys
+import threading
+import time
+import uuid
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, TextIO
+
+from dfrl.experiments.driver.config import ExperimentConfig
+from dfrl.experiments.driver.results.files import ClaimedFolder
+from dfrl.experiments.driver.results.summary import Results
+from dfrl.experiments.errors import ExperimentError
+
+#: The resource a robot's task asks for (workers offer it: ``--resources CPU=N``).
+RESOURCE = "CPU"
+#: Seconds to connect to the scheduler, and for every robot to report its service's address.
+CONNECT_S = 20.0
+PLACE_S = 120.0
+#: Seconds between two renewals of the lease (and looks at the workers); the tasks' lease.
+WATCH_S = 1.0
+LEASE_S = 60.0
+#: Seconds the tasks get to end once released.
+RELEASE_S = 40.0
+#: The file of the results folder that records the placements.
+CLUSTER_FILE = "cluster.json"
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where one robot runs: its service's address and the worker that holds its task."""
+
+    robot: str
+    host: str
+    port: int
+    worker: str
+
+
+class ClusterPlacement:
+    """The robots of one run on a Dask cluster (see the module doc).
+
+    Parameters
+    ----------
+    address : str
+        The scheduler, e.g. ``tcp://10.0.0.1:8786``.
+    cpus : float
+        Amount of :data:`RESOURCE` each robot asks for.
+    say : callable
+        Where notices go (one line each).
+    """
+
+    def __init__(self, address: str, cpus: float = 1.0,
+                 say: Callable[[str], None] = lambda line: None) -> None:
+        if cpus <= 0:
+            raise ExperimentError(f"--cluster-cpus must be > 0, got {cpus}")
+        self.address = address
+        self.cpus = float(cpus)
+        self.run_key = uuid.uuid4().hex[:12]
+        self._say = say
+        self._client: Any = None
+        self._futures: dict[str, Any] = {}
+        self._lock = threading.Lock()
+        self._placed: dict[str, Placement] = {}     # guarded by _lock, and so on below
+        self._losses: list[str] = []
+        self._said: set[str] = set()
+        self._ended: dict[str, Any] = {}
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    # -- connecting and placing ----------------------------------------------------------------
+    def open(self) -> ClusterPlacement:
+        """Connect to the scheduler.
+
+        Raises
+        ------
+        ExperimentError
+            The engine is not installed or the scheduler does not answer.
+        """
+        try:
+            from distributed import Client
+        except ImportError:
+            raise ExperimentError("--cluster needs Dask distributed: pip install "
+                                  "'dfrl[cluster]' (or distributed) on this host and on every "
+                                  "worker") from None
+        try:
+            self._client = Client(self.address, timeout=CONNECT_S, set_as_default=False)
+        except (OSError, TimeoutError) as exc:
+            raise ExperimentError(f"cluster {self.address}: cannot connect: {exc}") from None
+        return self
+
+    def offered(self) -> dict[str, float]:
+        """The amount of :data:`RESOURCE` each worker offers (worker address -> amount)."""
+        workers = self._client.scheduler_info(n_workers=-1)["workers"]
+        return {w: float(info.get("resources", {}).get(RESOURCE, 0.0))
+                for w, info in workers.items()}
+
+    def place(self, robots: Sequence[str]) -> dict[str, Placement]:
+        """Submit one task per robot and wait until each reports its service's address.
+
+        Raises
+        ------
+        ExperimentError
+            The workers offer too little of the resource for every robot at once, a task
+            failed (its reason given), or a robot was not placed within :data:`PLACE_S`.
+        """
+        from distributed import Variable
+
+        from dfrl.experiments.robot_host.cluster_task import serve_robot
+
+        offered = self.offered()
+        fits = sum(int(a // self.cpus) for a in offered.values())
+        if fits < len(robots):
+            raise ExperimentError(
+                f"cluster {self.address}: {len(robots)} robots need {self.cpus:g} {RESOURCE} "
+                f"each, but its {len(offered)} workers fit only {fits} at once "
+                f"({RESOURCE} offered: {', '.join(f'{w} {a:g}' for w, a in offered.items()) or 'none'}); "
+                f"start workers with --resources {RESOURCE}=N")
+        for rid in robots:
+            self._futures[rid] = self._client.submit(
+                serve_robot, self.run_key, rid, lease_s=LEASE_S, key=f"dfrl-{self.run_key}-{rid}",
+                resources={RESOURCE: self.cpus}, pure=False, retries=0)
+        self._start_watch()
+        deadline = time.monotonic() + PLACE_S
+        for rid in robots:
+            future, var = self._futures[rid], Variable(f"dfrl-{self.run_key}-{rid}-address",
+                                                       client=self._client)
+            while True:
+                if future.done():
+                    raise ExperimentError(f"robot {rid} was not placed: {self._why(future)}")
+                try:
+                    host, port, worker = var.get(timeout=0.5)
+                    break
+                except TimeoutError:
+                    if time.monotonic() > deadline:
+                        raise ExperimentError(f"robot {rid} was not placed on cluster "
+                                              f"{self.address} within {PLACE_S:.0f} s") from None
+            with self._lock:
+                self._placed[rid] = Placement(rid, str(host), int(port), str(worker))
+        return self.placements()
+
+    @staticmethod
+    def _why(future: Any) -> str:
+        exc = future.exception() if future.status == "error" else None
+        if exc is not None:
+            return f"{type(exc).__name__}: {exc}"
+        return str(future.result().get("ended")) if future.status == "finished" \
+            else f"its task is {future.status}"
+
+    def placements(self) -> dict[str, Placement]:
+        with self._lock:
+            return dict(self._placed)
+
+    def losses(self) -> list[str]:
+        """Workers that left and tasks that ended during the run, one line each."""
+        with self._lock:
+            return list(self._losses)
+
+    # -- while the run goes on -----------------------------------------------------------------
+    def _start_watch(self) -> None:
+        self._thread = threading.Thread(target=self._watch, name="cluster-watch", daemon=True)
+        self._thread.start()
+
+    def _watch(self) -> None:
+        from distributed import Variable
+
+        lease = Variable(f"dfrl-{self.run_key}-lease", client=self._client)
+        beat = 0
+        while not self._stop.wait(WATCH_S):
+            beat += 1
+            try:
+                lease.set(beat)
+                workers = set(self._client.scheduler_info(n_workers=-1)["workers"])
+            except Exception as exc:  # noqa: BLE001 - the scheduler's fault is reported
+                self._lose("scheduler", f"cluster {self.address} did not answer: {exc}")
+                continue
+            for rid, p in self.placements().items():
+                if p.worker not in workers:
+                    self._lose(rid, f"cluster worker {p.worker} left the cluster; robot {rid} "
+                                    f"({p.host}:{p.port}) went with it")
+                elif self._futures[rid].done() and not self._stop.is_set():
+                    self._lose(rid, f"the cluster task of robot {rid} ended on {p.worker}: "
+                                    f"{self._why(self._futures[rid])}")
+
+    def _lose(self, key: str, line: str) -> None:
+        with self._lock:
+            if key in self._said:
+                return
+            self._said.add(key)
+            self._losses.append(line)
+        self._say(f"CLUSTER: {line}")
+
+    # -- the end -------------------------------------------------------------------------------
+    def release(self) -> dict[str, Any]:
+        """End every task (their services stop and save their files), stop watching, close the
+        client; return what each task said (robot -> its result, or why it has none)."""
+        from distributed import Event
+
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=10 * WATCH_S)
+        if self._client is None:
+            return {}
+        ended: dict[str, Any] = {}
+        try:
+            if self._futures:
+                Event(f"dfrl-{self.run_key}-stop", client=self._client).set()
+                deadline = time.monotonic() + RELEASE_S
+                while time.monotonic() < deadline and \
+                        not all(f.done() for f in self._futures.values()):
+                    time.sleep(0.1)
+                for rid, future in self._futures.items():
+                    ended[rid] = future.result() if future.status == "finished" else \
+                        {"robot": rid, "ended": self._why(future)}
+                self._client.cancel(list(self._futures.values()))
+        except Exception as exc:  # noqa: BLE001 - a cluster that is gone is reported
+            ended.setdefault("error", f"{type(exc).__name__}: {exc}")
+        finally:
+            self._client.close(timeout=10)
+            self._client = None
+        self._ended = ended
+        return ended
+
+    def record(self) -> dict[str, Any]:
+        """What ``cluster.json`` holds: the scheduler, the resource request, the placements,
+        the losses and how each task ended."""
+        return {"scheduler": self.address, "resources": {RESOURCE: self.cpus},
+                "placements": {rid: p.__dict__ for rid, p in self.placements().items()},
+                "losses": self.losses(), "tasks": self._ended}
+
+
+def placed_config(config: ExperimentConfig, placed: dict[str, Placement]) -> ExperimentConfig:
+    """``config`` with every placed robot's ``robot_host`` the address of its service."""
+    robots = tuple(replace(r, robot_host=f"{placed[r.id].host}:{placed[r.id].port}")
+                   if r.id in placed else r for r in config.robots)
+    return config.replace(robots=robots)
+
+
+def run_on_cluster(config: ExperimentConfig, output_dir: str | Path | ClaimedFolder,
+                   address: str, cpus: float = 1.0, progress: TextIO | None = sys.stderr,
+                   force: bool = False, tls: str | Path | None = None) -> Results:
+    """Run ``config`` with every robot that names no ``robot_host`` placed on the Dask cluster
+    at ``address`` (see the module doc); the results folder gets ``cluster.json`` and
+    ``summary.md`` a section "Cluster".
+
+    Raises
+    ------
+    ExperimentError
+        No token (the workers' services prove the one in their ``dfrl.token``), the engine is
+        missing, the cluster cannot be reached or cannot hold every robot, a robot could not
+        be placed (nothing of the run started then).
+    """
+    from dfrl.experiments.driver.launcher.experiment import run
+
+    if config.token is None:
+        raise ExperimentError("--cluster: the robots' services prove the token of dfrl.token "
+                              "on their workers: give the same one (--token-file dfrl.token)")
+    if tls is not None:
+        raise ExperimentError("--cluster with --tls is not supported yet: the placed services "
+                              "run without TLS")
+
+    def say(line: str) -> None:
+        if progress is not None:
+            print(line, file=progress, flush=True)
+
+    local = [r.id for r in config.robots if r.robot_host is None]
+    placement = ClusterPlacement(address, cpus, say).open()
+    try:
+        placed = placement.place(local)
+        say(f"cluster {address}: placed " + ", ".join(
+            f"{p.robot}@{p.host}:{p.port}" for p in placed.values()))
+        results = run(placed_config(config, placed), output_dir, progress, force)
+    finally:
+        placement.release()
+    out = results.output_dir
+    (out / CLUSTER_FILE).write_text(json.dumps(placement.record(), indent=2) + "\n",
+                                    encoding="utf-8")
+    with open(out / "summary.md", "a", encoding="utf-8") as fh:
+        fh.write(f"\n## Cluster\n\n{len(placed)} robots placed on the Dask cluster {address} "
+                 f"({RESOURCE} {cpus:g} each); `{CLUSTER_FILE}` says where.\n")
+        for line in placement.losses() or ["no worker left the cluster during the run"]:
+            fh.write(f"- {line}\n")
+    return results
