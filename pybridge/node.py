@@ -265,7 +265,9 @@ class Bridge(TartarusCommands):
         shape : (int, int), optional
             (S, A): the shape of a tabular robot's table, fixed for the registration (every
             table write is checked against it). Give it: without it the provider's
-            ``q_table`` is read once to learn it. Not for a function learner.
+            ``q_table`` is read once to learn it. A function learner has a table only as a
+            view of its Q-function on a state grid (:class:`dfrl.robots.grid_view.GridView`),
+            whose shape is given here.
         algorithm : str
             Learning algorithm name, given to agents in the robot's props.
         learner : {"tabular", "function"}, optional

@@ -247,8 +247,10 @@ def provider_offer(provider: Any, shape: Sequence[int] | None = None,
     ``learner`` defaults to the provider's ``learner_kind``, else ``"tabular"``. A tabular
     learner needs ``q_table``, ``visits`` and ``set_q_table`` and has a table shape (``shape``,
     or read once from ``q_table``); a function learner needs the parameter attributes and has
-    no table shape. ``layout`` is the checked parameter layout when the provider offers
-    parameters, else None.
+    a table shape only when one is given, for a table view of its Q-function
+    (:class:`dfrl.robots.grid_view.GridView`: a heterogeneous federation), which then needs
+    the table attributes too. ``layout`` is the checked parameter layout when the provider
+    offers parameters, else None.
 
     Raises
     ------
@@ -267,17 +269,25 @@ def provider_offer(provider: Any, shape: Sequence[int] | None = None,
         for attr in ("q_table", "visits", "set_q_table"):
             if attr not in names:
                 raise TypeError(f"provider has no {attr!r}")
-        dims = tuple(np.shape(provider.q_table) if shape is None else shape)
-        if len(dims) != 2 or not all(isinstance(d, (int, np.integer)) and d > 0 for d in dims):
-            raise ValueError(f"a table shape is two positive integers, got {dims}")
-        table_shape = (int(dims[0]), int(dims[1]))
+        table_shape = _table_shape(provider, shape)
     else:
-        if shape is not None:
-            raise ValueError("a function learner has no table shape")
         for attr in _PARAMS_ATTRS:
             if attr not in names:
                 raise TypeError(f"provider of a function learner has no {attr!r}")
+        if shape is not None:            # a table view of its Q-function (robots/grid_view.py)
+            for attr in ("q_table", "visits", "set_q_table"):
+                if attr not in names:
+                    raise ValueError(f"a function learner registered with a table shape offers "
+                                     f"a table view (q_table, visits, set_q_table); no {attr!r}")
+            table_shape = _table_shape(provider, shape)
     offers_params = all(a in names for a in _PARAMS_ATTRS)
     layout = check_layout(provider.param_layout) if offers_params else None
     return learner, table_shape, layout
 
+
+
+def _table_shape(provider: Any, shape: Sequence[int] | None) -> tuple[int, int]:
+    dims = tuple(np.shape(provider.q_table) if shape is None else shape)
+    if len(dims) != 2 or not all(isinstance(d, (int, np.integer)) and d > 0 for d in dims):
+        raise ValueError(f"a table shape is two positive integers, got {dims}")
+    return (int(dims[0]), int(dims[1]))

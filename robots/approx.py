@@ -12,13 +12,19 @@ For the federated layer its parameters are one flat float64 vector, the arrays o
 ``param_layout`` (name, shape) concatenated in order, each in C order (:func:`flatten`,
 :func:`unflatten`); ``set_params`` validates length and finiteness (:func:`validate_params`).
 
+For a heterogeneous federation (:mod:`dfrl.robots.grid_view`) a learner also offers its model
+as a differentiable function of its arrays (``q_model``), watchers told of every transition it
+learns from (``watchers``), and ``after_distil`` (run after its arrays were moved by
+:func:`dfrl.robots.distill.distil`).
+
 New learners subclass :class:`FunctionLearner` and register in
 :data:`dfrl.robots.learners.LEARNERS`.
 """
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import TYPE_CHECKING, ClassVar
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -29,6 +35,14 @@ if TYPE_CHECKING:
 
 #: Names and shapes of a model's arrays, in the order of the flat vector.
 Layout = list[tuple[str, tuple[int, ...]]]
+
+#: A model as a function of its arrays: ``(arrays, x (B, obs_dim), xp) -> Q (B, n_actions)``,
+#: written with ``xp`` (``numpy`` or ``autograd.numpy``) so that autograd can differentiate it
+#: with respect to the arrays.
+QModel = Callable[[list[Any], np.ndarray, Any], Any]
+
+#: Told of every transition a learner learns from: ``(observation, action)``.
+Watcher = Callable[[np.ndarray, int], None]
 
 
 def layout_size(layout: Layout) -> int:
@@ -101,6 +115,9 @@ class FunctionLearner(ABC):
         Transitions learnt from so far (the epsilon schedule's clock).
     greedy : bool
         When True, :meth:`select_action` never explores.
+    watchers : list of callables
+        Each called with ``(observation, action)`` of every transition learnt from (by
+        :meth:`learn`, before the update); e.g. a grid view's visit counts.
     """
 
     #: Registry name.
@@ -121,6 +138,7 @@ class FunctionLearner(ABC):
         self.rng = rng
         self.t = 0
         self.greedy = False
+        self.watchers: list[Watcher] = []
 
     @property
     def epsilon(self) -> float:
@@ -142,7 +160,36 @@ class FunctionLearner(ABC):
     @abstractmethod
     def learn(self, obs: np.ndarray, action: int, reward: float, next_obs: np.ndarray,
               terminal: bool) -> int:
-        """Learn from one transition and return the next action (for ``next_obs``)."""
+        """Learn from one transition and return the next action (for ``next_obs``); tells
+        :attr:`watchers` first (:meth:`_observed`)."""
+
+    def _observed(self, obs: np.ndarray, action: int) -> None:
+        for watch in self.watchers:
+            watch(obs, action)
+
+    @abstractmethod
+    def q_model(self) -> tuple[list[np.ndarray], QModel]:
+        """The live arrays the model's values depend on (moved in place by a distillation) and
+        the model as a :data:`QModel` of them."""
+
+    def q_batch(self, obs: np.ndarray) -> np.ndarray:
+        """Action values of a batch of observations.
+
+        Parameters
+        ----------
+        obs : np.ndarray, shape (B, obs_dim)
+
+        Returns
+        -------
+        np.ndarray, float64, shape (B, n_actions)
+        """
+        arrays, model = self.q_model()
+        x = np.asarray(obs, dtype=np.float64).reshape(-1, self.obs_dim)
+        return np.asarray(model(arrays, x, np), dtype=np.float64)
+
+    def after_distil(self) -> None:
+        """Called after a distillation moved the arrays of :meth:`q_model` (default: nothing;
+        ``dqn`` copies its online network into its target network)."""
 
     @property
     @abstractmethod

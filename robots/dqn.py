@@ -30,7 +30,8 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from dfrl.robots.approx import FunctionLearner, Layout, flatten, unflatten, validate_params
+from dfrl.robots.approx import (FunctionLearner, Layout, QModel, flatten, unflatten,
+                               validate_params)
 
 if TYPE_CHECKING:
     from dfrl.robots.td import LearnerParams
@@ -293,6 +294,7 @@ class DQN(FunctionLearner):
 
     def learn(self, obs: np.ndarray, action: int, reward: float, next_obs: np.ndarray,
               terminal: bool) -> int:
+        self._observed(obs, action)
         self.buffer.add(obs, action, reward, next_obs, terminal)
         self.t += 1
         c = self.config
@@ -314,6 +316,14 @@ class DQN(FunctionLearner):
         """Copy the online network into the target network."""
         for t, o in zip(self.target, self.online):
             t[...] = o
+
+    def q_model(self) -> tuple[list[np.ndarray], QModel]:
+        """The online network's arrays and :func:`mlp_forward`."""
+        return self.online, mlp_forward
+
+    def after_distil(self) -> None:
+        """A distilled network is also the target (as after :meth:`set_params`)."""
+        self.sync_target()
 
     @property
     def param_layout(self) -> Layout:

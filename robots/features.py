@@ -84,3 +84,19 @@ def feature_vector(obs: np.ndarray, coding: TileCoding) -> np.ndarray:
     phi = np.zeros(coding.n_features(np.asarray(obs).shape[0]), dtype=np.float64)
     phi[active_features(obs, coding)] = 1.0
     return phi
+
+
+def feature_matrix(obs: np.ndarray, coding: TileCoding) -> np.ndarray:
+    """Dense binary feature vectors of a batch, float64, shape (B, n_features).
+
+    Parameters
+    ----------
+    obs : np.ndarray, shape (B, obs_dim)
+    coding : TileCoding
+    """
+    x = np.asarray(obs, dtype=np.float64)
+    x = x.reshape(1, -1) if x.ndim == 1 else x
+    phi = np.zeros((x.shape[0], coding.n_features(x.shape[1])), dtype=np.float64)
+    for i, row in enumerate(x):
+        phi[i, active_features(row, coding)] = 1.0
+    return phi

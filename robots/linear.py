@@ -26,8 +26,8 @@ import numpy as np
 
 from dataclasses import dataclass
 
-from dfrl.robots.approx import FunctionLearner, Layout, validate_params
-from dfrl.robots.features import TileCoding, active_features
+from dfrl.robots.approx import FunctionLearner, Layout, QModel, validate_params
+from dfrl.robots.features import TileCoding, active_features, feature_matrix
 from dfrl.robots.td import q_learning_target
 
 if TYPE_CHECKING:
@@ -140,6 +140,7 @@ class LinearQ(FunctionLearner):
 
     def learn(self, obs: np.ndarray, action: int, reward: float, next_obs: np.ndarray,
               terminal: bool) -> int:
+        self._observed(obs, action)
         active = self._active(obs)
         next_q = self.q_values(next_obs)
         target = q_learning_target(reward, next_q, self.params.gamma, terminal)
@@ -147,6 +148,21 @@ class LinearQ(FunctionLearner):
                                                             target, self.config.alpha)
         self.t += 1
         return self.select_action(next_obs)
+
+    def q_model(self) -> tuple[list[np.ndarray], QModel]:
+        """``[weights]`` and ``Q(x, .) = phi(x) @ weights.T`` over a batch (the feature matrix
+        of the batch is computed with numpy: it does not depend on the weights)."""
+        coding = self.coding
+        cache: dict[bytes, np.ndarray] = {}             # the last batch's features
+
+        def model(arrays: list, x: np.ndarray, xp: object = np) -> object:
+            key = np.ascontiguousarray(x, dtype=np.float64).tobytes()
+            if key not in cache:
+                cache.clear()
+                cache[key] = feature_matrix(x, coding)
+            return cache[key] @ arrays[0].T
+
+        return [self.weights], model
 
     @property
     def param_layout(self) -> Layout:

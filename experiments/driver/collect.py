@@ -109,9 +109,9 @@ def collect(results_dir: str | Path, progress: TextIO | None = sys.stderr,
         logs[a["name"]] = read_rounds_log(own if own.is_file() else rounds_log(out, a),
                                           a["name"])
         budgets[a["name"]] = int(a["rounds"])
-    for algo in config.algorithms():
-        if agent_name(algo) not in logs and any(s.algo == algo for s in config.robots):
-            other.append(f"agent {agent_name(algo)} was never launched (not in nodes.json)")
+    for label, algos in config.agent_groups():
+        if agent_name(label) not in logs and any(s.algo in algos for s in config.robots):
+            other.append(f"agent {agent_name(label)} was never launched (not in nodes.json)")
     spans = [t for lg in logs.values() for r in lg.rounds for t in (r.start, r.end)]
     wall = max(spans) - min(spans) if spans else 0.0
     facts = RunFacts(wall, iterations=iterations, lost=lost, other=other, gathered=gathered,

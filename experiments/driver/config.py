@@ -19,11 +19,11 @@ from typing import Any
 
 from dfrl.experiments.config_rules import (JsonDicts, ConfigError, check_value, checked, is_checked,
                                            json_form, raise_problems, token_rule)
-from dfrl.experiments.driver.config_check import (BUILTIN_METHODS, COMMENT_KEYS,
+from dfrl.experiments.driver.config_check import (BUILTIN_METHODS, COMMENT_KEYS, GRID,
                                                   check_experiment, host_port_problem)
 from dfrl.experiments.robot_host.config import DEFAULT_ITERATIONS, Mode, boundaries
 
-__all__ = ["BUILTIN_METHODS", "CONFIGS_DIR", "ConfigError", "ExperimentConfig", "JoinSpec",
+__all__ = ["BUILTIN_METHODS", "CONFIGS_DIR", "GRID", "ConfigError", "ExperimentConfig", "JoinSpec",
            "RobotSpec", "parse_host_port", "resolve_config"]
 
 
@@ -38,7 +38,7 @@ class RobotSpec:
     arena : str
         Arena name or file.
     algo : str
-        ``qlearning`` or ``sarsa``.
+        A registered learner: ``qlearning``, ``sarsa``, ``linear`` or ``dqn``.
     seed : int or None
         None: the experiment seed plus the robot's position in the list.
     robot_host : str or None
@@ -147,6 +147,13 @@ class ExperimentConfig(JsonDicts):
     eval_every, eval_steps : int
         Every robot measures its greedy policy every ``eval_every`` iterations (0: never) for
         ``eval_steps`` control steps (``eval_<robot>.csv``, ``live_evaluations.csv``).
+    federation : str
+        ``per_algorithm`` (default): one agent per algorithm, carrying Q-tables (tabular
+        learners) or parameter vectors (function learners). ``grid``: one agent over every
+        robot, whatever its learner, carrying Q-tables on the discretised state grid: a
+        function learner's table is its Q-function at the grid's points and it absorbs the
+        aggregate by distillation (:mod:`dfrl.robots.grid_view`); ``methods`` and ``joins``
+        are refused there.
     """
 
     name: str = "experiment"
@@ -170,6 +177,7 @@ class ExperimentConfig(JsonDicts):
     tolerate_method_errors: int = 0
     eval_every: int = 0
     eval_steps: int = 500
+    federation: str = "per_algorithm"
 
     def __post_init__(self) -> None:
         if not is_checked():
@@ -214,7 +222,15 @@ class ExperimentConfig(JsonDicts):
         return seen
 
     def method_for(self, algo: str) -> str:
+        """The method of the agent of ``algo`` (or of the grid federation's, ``GRID``)."""
         return self.methods.get(algo, self.method)
+
+    def agent_groups(self) -> list[tuple[str, tuple[str, ...]]]:
+        """``(label, algorithms)`` per agent, in launch order: one per algorithm (the label is
+        the algorithm), or in a grid federation one labelled ``GRID`` over every algorithm."""
+        if self.federation == GRID:
+            return [(GRID, tuple(self.algorithms()))]
+        return [(a, (a,)) for a in self.algorithms()]
 
     def robot_seed(self, robot: RobotSpec) -> int:
         if robot.seed is not None:

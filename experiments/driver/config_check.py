@@ -6,8 +6,8 @@ list of problems, each a line such as
 ``robots[1].algo: unknown algorithm 'ppo'; known: dqn, linear, qlearning, sarsa``. What is
 checked: unknown keys, types (``"2000"`` is not an integer, a bool is not a number), ranges,
 robot ids, ``HOST:PORT`` robot hosts, unique ids and robot hosts, known algorithms and
-aggregation methods (and that a function learner's method applies to parameter vectors), the
-``trainer`` fields, and (``resources=True``) that every arena exists and parses
+aggregation methods (and that a function learner's method applies to parameter vectors), a
+grid federation's rules (:func:`check_federation`), the ``trainer`` fields, and (``resources=True``) that every arena exists and parses
 (:func:`dfrl.arenas.load_arena`, whose errors name file and place).
 """
 from __future__ import annotations
@@ -18,12 +18,21 @@ from dfrl.experiments.config_rules import (Rule, check_keys, check_robot_id, che
                                            check_value, known_algorithms, token_rule)
 from dfrl.experiments.robot_host.config import DEFAULT_ITERATIONS, modes
 
-__all__ = ["BUILTIN_METHODS", "COMMENT_KEYS", "PARAMS_REFUSED", "check_experiment",
-           "host_port_problem"]
+__all__ = ["BUILTIN_METHODS", "COMMENT_KEYS", "FEDERATIONS", "GRID", "PARAMS_REFUSED",
+           "check_experiment", "host_port_problem"]
 
 #: Aggregation methods built into the agent; others are injected into a running experiment
 #: with ``dfrl inject`` (an experiment config can only name these).
 BUILTIN_METHODS: tuple[str, ...] = ("average", "max", "visit_average")
+
+#: The federation that puts every robot, whatever its learner, under one agent carrying Q-tables
+#: on the discretised state grid (function learners show their Q-function there:
+#: robots/grid_view.py).
+GRID = "grid"
+
+#: How the robots of an experiment are federated: ``per_algorithm`` (one agent per algorithm:
+#: tables for the tabular learners, parameter vectors for the function learners) or ``grid``.
+FEDERATIONS: tuple[str, ...] = ("per_algorithm", GRID)
 
 #: Keys a config file may carry that are not fields (notes for people).
 COMMENT_KEYS = frozenset({"comment"})
@@ -58,6 +67,7 @@ EXPERIMENT_RULES: dict[str, Rule] = {
     "tolerate_lost_robots": Rule(int, low=0), "tolerate_missing_rounds": Rule(int, low=0),
     "tolerate_method_errors": Rule(int, low=0),
     "eval_every": Rule(int, low=0, hint="0 means no evaluation"), "eval_steps": Rule(int, low=1),
+    "federation": Rule(str, choices=lambda: list(FEDERATIONS), what="federation"),
 }
 
 
@@ -108,7 +118,10 @@ def check_experiment(data: Any, resources: bool = True) -> list[str]:
         if isinstance(j, dict) and isinstance(j.get("robot"), dict):
             entries.append((f"joins[{i}].robot", j["robot"]))
     out += check_robots(entries, resources)
-    out += check_params_methods(data, entries)
+    if data.get("federation") == GRID:
+        out += check_federation(data)
+    else:
+        out += check_params_methods(data, entries)
     methods = data.get("methods", {})
     if isinstance(methods, dict):
         algos = known_algorithms()
@@ -183,6 +196,24 @@ def check_params_methods(data: dict[str, Any], entries: list[tuple[str, Any]]) -
         out.append(f"{path}: {method} does not apply to the {algo} robots: {algo} is a function "
                    f"learner, its agent carries parameter vectors, and "
                    f"{PARAMS_REFUSED[method]}; methods that do: average (FedAvg){also}")
+    return out
+
+
+def check_federation(data: dict[str, Any]) -> list[str]:
+    """A grid federation (``"federation": "grid"``): robots of any learners, tabular and
+    function, share Q-tables on the state grid under one agent, so every built-in method
+    applies; what cannot work with one agent is refused: per-algorithm ``methods`` (the agent
+    has one method, ``method``) and ``joins`` (a joiner is handed to the agent of its
+    algorithm)."""
+    out: list[str] = []
+    methods = data.get("methods")
+    if isinstance(methods, dict) and methods:
+        out.append(f"methods: a grid federation has one agent for all its robots, so one method: "
+                   f"give it in \"method\" instead of per algorithm ({', '.join(methods)})")
+    joins = data.get("joins")
+    if isinstance(joins, list) and joins:
+        out.append("joins: a robot cannot join a grid federation (a joiner is handed to the "
+                   "agent of its algorithm); list it in robots")
     return out
 
 

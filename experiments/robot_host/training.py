@@ -179,15 +179,16 @@ class Training:
                 self._evals = LiveEvaluator(self.trainer.config, c.robot, c.seed, c.eval_every,
                                             c.eval_steps, self.out_dir, self.lines,
                                             upto if cp is not None else None)
+        if self.function:           # its Q-function on the state grid too (robots/grid_view.py)
+            from dfrl.robots.grid_view import GridView
+            base = GridView(self.trainer)
         on_share = self.on_share if self.trainer is not None else None
         self.table = shared_provider(base, c.robot, self._shares, self.lines, on_share, shares)
         if self.trainer is not None:
             self.table.iteration = self.trainer.iteration
-        # what the robot offers agents: a tabular learner its Q-table (and its parameters, if
-        # its base has them), a function learner (learner_kind "function") its parameters only
-        function = getattr(base, "learner_kind", "tabular") == "function"
-        self.bridge.register_robot(c.robot, self.table, shape=None if function else shape,
-                                   algorithm=c.algo)
+        # what the robot offers agents: its Q-table (a function learner: the grid view of its
+        # Q-function, for an agent of a grid federation) and its parameters, if its base has them
+        self.bridge.register_robot(c.robot, self.table, shape=shape, algorithm=c.algo)
         self._registered = True
         self._next_tick = time.perf_counter()
         return shape

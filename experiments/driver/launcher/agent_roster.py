@@ -90,7 +90,7 @@ class AgentRoster:
         table, ``set``: it wrote one): remember where the agent is, tell the live view."""
         with self._lock:
             for name, info in self._agents.items():
-                if info.algo == algo:
+                if info.algo == algo or any(s.get("robot") == robot for s in info.itinerary):
                     self._at[name] = (robot, op, iteration)
                     log = self._logs.get(name)
                     self._event({"kind": "hop", "agent": name, "robot": robot,
@@ -107,7 +107,9 @@ class AgentRoster:
                 self._logs[info.name] = log
                 shown, self._said[info.name] = self._said.get(info.name, 0), len(log.rounds)
             for rec in log.rounds[shown:]:
-                its = " ".join(f"{rid}:{it}" for rid, it in robots.iterations(info.algo).items())
+                mine = {s.get("robot") for s in info.itinerary}     # (a grid agent's: any algo)
+                its = " ".join(f"{rid}:{it}" for rid, it in robots.iterations().items()
+                               if rid in mine)
                 flags = "".join(f" SKIPPED {s.robot} ({' '.join(s.reason.split())[:120]})"
                                 for s in rec.skipped)
                 if rec.error:

@@ -6,7 +6,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec
+from dfrl.experiments.driver.config import GRID, ExperimentConfig, RobotSpec
 from dfrl.experiments.driver.console import ConsoleNode
 from dfrl.experiments.driver.launcher.agent_roster import AgentInfo, AgentRoster
 from dfrl.experiments.driver.launcher.agents import agent_name, launch_agent
@@ -155,7 +155,9 @@ def launch_agents(site: Site, robots: RobotRoster, agents: AgentRoster,
                   reporter: Reporter) -> None:
     """One agent per algorithm, over the robots using it, in config order; an agent of a
     function learner (``dfrl.robots.learners.learner_kind``: ``linear``, ``dqn``) carries
-    parameter vectors (launch plan ``"carries": "params"``), the others Q-tables.
+    parameter vectors (launch plan ``"carries": "params"``), the others Q-tables. In a grid
+    federation (``config.federation``) one agent, ``fed_grid``, carries Q-tables over every
+    robot (``ExperimentConfig.agent_groups``).
 
     Raises
     ------
@@ -163,11 +165,11 @@ def launch_agents(site: Site, robots: RobotRoster, agents: AgentRoster,
         An agent could not be launched.
     """
     c = site.config
-    for algo in c.algorithms():
+    for algo, algos in c.agent_groups():
         stops = []
         for rid, robot in robots.robots().items():
             address = robot.status().address
-            if robot.spec.algo == algo and address is not None:
+            if robot.spec.algo in algos and address is not None:
                 stops.append({"host": address[0], "port": address[1], "robot": rid})
         if not stops:
             continue      # only joiners use it: nobody to start with
@@ -182,7 +184,7 @@ def launch_agents(site: Site, robots: RobotRoster, agents: AgentRoster,
                   # the agent posts its round log to the console node, which writes it here:
                   # no shared disk between the hosts the agent visits and the driver's
                   "log_to": list(site.console.address)}
-        if learner_kind(algo) == "function":
+        if algo != GRID and learner_kind(algo) == "function":
             launch["carries"] = "params"     # linear, dqn: FedAvg of parameter vectors
         agents.add(AgentInfo(name, algo, c.method_for(algo), c.rounds, str(log_path),
                              tuple(stops)))
