@@ -10,7 +10,8 @@
               [agent_property/3, agent_create/4, agent_add_facts/3]).
 :- use_module(dfrl_lease,
               [ lease_arrived/3, lease_check/3, lease_progress/4,
-                lease_ended/3, lease_custody/3 ]).
+                lease_ended/3, lease_custody/3, lease_adopt/5,
+                lease_needs_holder/2 ]).
 :- use_module(dfrl_round_state,
               [ new_round/3, get_state/3, put_state/3, pack_state/2,
                 unpack_state/2, replace_fact/2, skip_robot/4, add_retries/3,
@@ -18,7 +19,7 @@
 :- use_module(dfrl_round_log,                   % log_path_ok/1: also as
               [ log_round/6, log_control/5, log_event/2, check_log/1,
                 log_path_ok/1, log_text/2 ]).   % dfrl_agent:log_path_ok/1
-:- use_module(dfrl_move, [move_to_stop/8]).
+:- use_module(dfrl_move, [move_to_stop/8, skip_after/3]).
 :- use_module(dfrl_aggregation,
               [ aggregate_fold/5, aggregate_finish/3, aggregate_fits/2,
                 fold_hook/3, method_call/3, item_shape/2, method_applies_to/2,
@@ -56,6 +57,8 @@ Everything the agent needs travels as payload facts:
     hops, bytes, start, stop}` (acc packed; see dfrl_round_state.pl).
   - dfrl_custody_of(Agent, custody(Epoch, Seq, Holder)): see dfrl_lease.pl.
   - dfrl_retry_of(Agent, retry(Retries, Backoff)).
+  - dfrl_skip_after_of(Agent, Seconds): the most all tries of one move
+    may take before the stop is skipped (dfrl_move.pl).
   - dfrl_carries_of(Agent, Carried): `tables` or `params` (see below);
     an agent without it carries tables.
 
@@ -151,7 +154,7 @@ that arrives during a round also ends that round's tour).
 :- dynamic
     pending/3,                  % Node, Agent, Command (queued control)
     dfrl_plan/2, dfrl_method_of/2, dfrl_state/2, dfrl_custody_of/2,
-    dfrl_retry_of/2, dfrl_carries_of/2.
+    dfrl_retry_of/2, dfrl_carries_of/2, dfrl_skip_after_of/2.
 
 :- initialization(platform_event(dfrl_agent:dfrl_control/4)).
 
@@ -230,8 +233,10 @@ apply_command(_, _, X, X, ignored("not a control command")).
 %   method(M) (default average), carries(C) (`tables`, the default, or
 %   `params`: what the agent aggregates, see "Tables or parameters"),
 %   tokens(List), retries(N) (default 2: how often a failed move to a
-%   stop is tried again) and backoff(S) (default 0.2: the first wait
-%   before a retry, doubled each time). Start it by moving it to the first
+%   stop is tried again), backoff(S) (default 0.2: the first wait
+%   before a retry, doubled each time) and skip_after(S) (default 4: the
+%   most seconds all tries of one move take before the stop is skipped
+%   for the pass). Start it by moving it to the first
 %   stop, or with the event `launch` on Node (it then goes to the first
 %   stop it can reach).
 %
@@ -255,6 +260,9 @@ dfrl_create(Node, Name, Plan, Options) :-
     must_be(nonneg, Retries),
     option(backoff(Backoff), Options, 0.2),
     must_be(number, Backoff),
+    option(skip_after(SkipAfter), Options, 4),
+    must_be(number, SkipAfter),
+    (   SkipAfter > 0 -> true ; domain_error(positive_seconds, SkipAfter) ),
     (   Tokens == [] -> TokOpts = [] ; TokOpts = [tokens(Tokens)] ),
     % events([]): no peer may post to the tour handler (control comes
     % through the platform event dfrl_control/4, from authenticated peers)
@@ -266,6 +274,7 @@ dfrl_create(Node, Name, Plan, Options) :-
                                   dfrl_state(Name, Packed),
                                   dfrl_custody_of(Name, custody(1, 0, none)),
                                   dfrl_retry_of(Name, retry(Retries, Backoff)),
+                                  dfrl_skip_after_of(Name, SkipAfter),
                                   dfrl_carries_of(Name, Carried) ]).
 
 check_plan(plan(Itinerary, Rounds, Rest, Log, Timeout)) :-
@@ -341,8 +350,9 @@ event(resurrected(Epoch, From, Dead, resume(Packed, Next, Progress)), Node, M,
     nth0(Next, Itinerary, stop(_, _, DeadRobot)),
     log_text(From, FromText),
     log_text(Dead, DeadText),
+    get_time(Now),
     Event = _{event:resurrected, agent:Agent, epoch:Epoch, from:FromText,
-              dead:DeadText},
+              dead:DeadText, time:Now},
     (   Progress = round_done(Round, true)
     ->  % the tour had ended there: end it here
         log_event(Log, Event.put(round, Round)),
@@ -374,7 +384,8 @@ step(M, Agent) :-
     get_dict(index, S0, Index),
     get_dict(origin, S0, Origin),
     (   Phase == forward, Index =:= Origin
-    ->  start_round(M, Agent, S0, S1)
+    ->  ensure_holder(M, Agent, S0),
+        start_round(M, Agent, S0, S1)
     ;   S1 = S0
     ),
     M:dfrl_plan(Agent, plan(Itinerary, _, _, _, Timeout)),
@@ -540,11 +551,9 @@ try_stop(M, Agent, S0, Next, _Dir) :-
         ->  Tries = once                % it failed this round already
         ;   Tries = policy
         ),
-        move_to_stop(M, Agent, S0, S1, Stop, Next, Tries, Result),
+        timed_move(M, Agent, S0, S1, Stop, Next, Tries, Result),
         (   Result = failed(E, Retries)
-        ->  print_message(warning, E),
-            print_message(warning, format("dfrl: skipping stop ~w", [Next])),
-            failed_move(M, Agent, S0, Next, E, Retries)
+        ->  failed_move(M, Agent, S0, Next, E, Retries)
         ;   true
         )
     ;   Phase == forward
@@ -553,6 +562,69 @@ try_stop(M, Agent, S0, Next, _Dir) :-
         turn_back(M, Agent, Method, S0)
     ;   end_round(M, Agent, S0)
     ).
+
+%   move_to_stop/8, and a failure's error as reason(Text): the error's
+%   text and how long the agent tried before it skipped the stop.
+timed_move(M, Agent, S0, S1, Stop, Index, Tries, Result) :-
+    get_time(T0),
+    move_to_stop(M, Agent, S0, S1, Stop, Index, Tries, Result0),
+    (   Result0 = failed(E, Retries)
+    ->  get_time(T1),
+        Waited is T1 - T0,
+        skip_after(M, Agent, Bound),
+        message_text(E, Text0),
+        format(string(Text), "~w (skipped after ~2f s; skip_after ~w s)",
+               [Text0, Waited, Bound]),
+        print_message(warning, format("dfrl: skipping stop ~w: ~w", [Index, Text])),
+        Result = failed(reason(Text), Retries)
+    ;   Result = Result0
+    ).
+
+%   Find the agent a holder if it has none (at its first stop after a
+%   launch, after a resurrection, or its holder lost its checkpoint)
+%   before it works or rests here: another stop of the itinerary keeps a
+%   checkpoint of it under a lease, which resurrects it if this node
+%   stops answering (dfrl_lease:lease_adopt/5). The stops after this one
+%   are asked first, then those before; robots skipped this round are
+%   not asked. A resurrection there starts this round again from the
+%   holder, without this stop.
+ensure_holder(M, Agent, S) :-
+    current_node(Node),
+    (   lease_needs_holder(Node, Agent)
+    ->  M:dfrl_plan(Agent, plan(Itinerary, _, _, _, _)),
+        get_dict(index, S, Here),
+        get_dict(round, S, Round),
+        get_dict(skipped, S, Skipped),
+        length(Itinerary, N),
+        Last is N - 1,
+        (   Here >= 0, nth0(Here, Itinerary, stop(H, P, _))
+        ->  Round0 is Round - 1,
+            findall(Addr-resume(Packed, Here, round_done(Round0, false)),
+                    ( ( between(Here, Last, J) ; between(0, Here, J) ),
+                      J =\= Here,
+                      nth0(J, Itinerary, stop(HJ, PJ, RJ)),
+                      \+ memberchk(skip(RJ, _), Skipped),
+                      Addr = HJ:PJ,
+                      new_round(Round, J, SJ),
+                      pack_state(SJ, Packed)
+                    ),
+                    Offers0),
+            first_n(3, Offers0, Offers),
+            lease_adopt(Node, Agent, H:P, Offers, Holder),
+            (   Holder == none, Offers \== []
+            ->  print_message(warning,
+                              format("dfrl: ~w has no holder at ~w: no other stop took its checkpoint",
+                                     [Agent, H:P]))
+            ;   true
+            )
+        ;   true
+        )
+    ;   true
+    ).
+
+first_n(N, L, Prefix) :-
+    length(L, Len),
+    (   Len =< N -> Prefix = L ; length(Prefix, N), append(Prefix, _, L) ).
 
 %   The move to stop Next failed (or the agent was lost there and is
 %   resurrected from the state S0 it had before): skip its robot and go
@@ -591,11 +663,9 @@ try_home(M, Agent, S0, J) :-
         ->  J1 is J + 1,
             try_home(M, Agent, S0, J1)
         ;   advance_to(J, S0, S1),
-            move_to_stop(M, Agent, S0, S1, Stop, J, policy, Result),
+            timed_move(M, Agent, S0, S1, Stop, J, policy, Result),
             (   Result = failed(E, Retries)
-            ->  print_message(warning, E),
-                print_message(warning, format("dfrl: skipping stop ~w", [J])),
-                failed_move(M, Agent, S0, J, E, Retries)
+            ->  failed_move(M, Agent, S0, J, E, Retries)
             ;   true
             )
         )
@@ -660,6 +730,7 @@ end_round(M, Agent, S) :-
             new_round(Round1, At, S1a),
             put_dict(_{phase:home, good:Good}, S1a, S1),
             put_state(M, Agent, S1),
+            ensure_holder(M, Agent, S1),
             rest(Node, Agent, Rest, Verdict1),
             (   Verdict1 = superseded(E3)
             ->  retire(Node, M, Agent, E3)

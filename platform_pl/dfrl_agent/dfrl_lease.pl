@@ -9,7 +9,10 @@
             lease_custody/3,            % +Node, +Agent, -Custody
             lease_checkpoint/4,         % ?Node, ?Agent, ?Epoch, ?Dest
             lease_epoch_seen/3,         % ?Node, ?Agent, ?Epoch
-            lease_broadcast_epoch/5     % +Node, +Tokens, +Agent, +Epoch, +Stops
+            lease_broadcast_epoch/5,    % +Node, +Tokens, +Agent, +Epoch, +Stops
+            lease_adopt/5,              % +Node, +Agent, +Here, +Offers, -Holder
+            lease_needs_holder/2,       % +Node, +Agent
+            lease_supersede/5           % +Node, +Agent, +Address, +Tokens, -Answer
           ]).
 :- use_module('../node',
               [ node_option/3, node_property/2, local_node/1, ctx_node/2,
@@ -17,7 +20,8 @@
 :- use_module('../agents',
               [ agent_exists/2, agent_property/3, agent_export/3,
                 agent_install/4, agent_execute/4, agent_status/3,
-                agent_remove/2 ]).
+                agent_remove/2, agent_purge/2 ]).
+:- use_module('../code_safety', [check_agent_record/1]).
 :- use_module('../custody', [with_custody/2, custody_unstage/2]).
 :- use_module('../transport', [transport_request/4, address_normalize/2]).
 :- autoload(library(lists), [member/2, append/3, last/2, min_list/2]).
@@ -110,8 +114,12 @@ its first stop and right after a resurrection).
     ckpt/9,                     % Node, Agent, Epoch, Seq, Here, Dest, Record, Resume, Expiry
     gone/6,                     % Node, Agent, Epoch, Seq, How, Time
     seen/3,                     % Node, Agent, Epoch
+    beat/3,                     % Node, Agent, LastBeat: an agent here renews its holder
+    holder_lost/4,              % Node, Agent, Epoch, Seq: its holder has no checkpoint
     watchdog/1,                 % ThreadId
-    watchdog_exited/1.          % ThreadId, to be joined
+    watchdog_exited/1,          % ThreadId, to be joined
+    heart/1,                    % ThreadId of the heartbeat thread
+    heart_exited/1.             % ThreadId, to be joined
 
 :- multifile
     node:platform_request/4,
@@ -219,6 +227,7 @@ lease_arrived(Node, Agent, Verdict) :-
     (   seen(Node, Agent, E2), E2 > E
     ->  Verdict = superseded(E2)
     ;   note_epoch(Node, Agent, E),
+        note_beat(Node, Agent),
         Verdict = ok
     ).
 
@@ -252,7 +261,8 @@ lease_progress(Node, Agent, Progress, Verdict) :-
         (   Answer = superseded(E2)
         ->  note_epoch(Node, Agent, E2),
             Verdict = Answer
-        ;   Verdict = ok
+        ;   beat_answer(Answer, Node, Agent, E, K),
+            Verdict = ok
         )
     ;   Verdict = ok
     ).
@@ -301,6 +311,75 @@ prune_gone(Node, Agent) :-
 lease_broadcast_epoch(Node, Tokens, Agent, Epoch, Stops) :-
     forall(member(S, Stops),
            custody_call(Node, Tokens, S, epoch(Agent, Epoch), _)).
+
+%!  lease_needs_holder(+Node, +Agent) is semidet.
+%
+%   Agent, on Node, has no stop that holds a checkpoint of it: at its
+%   first stop after a launch, right after a resurrection, or its holder
+%   answered a heartbeat that it holds none (it restarted).
+
+lease_needs_holder(Node, Agent) :-
+    lease_custody(Node, Agent, custody(E, K, Holder)),
+    (   Holder == none
+    ->  true
+    ;   holder_lost(Node, Agent, E, K)
+    ).
+
+%!  lease_adopt(+Node, +Agent, +Here, +Offers, -Holder) is det.
+%
+%   Find Agent (on Node, at the stop Here) a holder before it stays
+%   here: Offers is a list Address-Resume, tried in order; the first
+%   stop that stores a checkpoint of the agent as it is now (request
+%   `hold`) becomes its holder (Holder its address; `none` if no stop
+%   did). Resume is what a resurrection there resumes from, as for
+%   lease_depart/6, with the progress round_done(Round, false) already
+%   set and an empty aggregate. The agent's custody advances by one hop
+%   (the old holder, if any, is released), so that its next departure
+%   releases the new holder as any hop does.
+
+lease_adopt(Node, Agent, Here, Offers, Holder) :-
+    lease_custody(Node, Agent, Old),
+    Old = custody(E, K, OldHolder),
+    K1 is K + 1,
+    agent_tokens(Node, Agent, Tokens),
+    adopt(Offers, Node, Agent, Tokens, Here, E, K1, Holder),
+    (   Holder == none
+    ->  set_custody(Node, Agent, Old)
+    ;   locked(retractall(holder_lost(Node, Agent, _, _))),
+        (   OldHolder \== none, OldHolder \== Holder
+        ->  release(Node, Tokens, Agent, OldHolder, E, K, left, _)
+        ;   true
+        )
+    ).
+
+adopt([], _, _, _, _, _, _, none).
+adopt([Address-Resume|Offers], Node, Agent, Tokens, Here, E, K1, Holder) :-
+    set_custody(Node, Agent, custody(E, K1, Address)),
+    agent_export(Node, Agent, Record0),
+    setarg(4, Record0, []),                 % a record that leaves holds no token
+    custody_call(Node, Tokens, Address, hold(Agent, E, K1, Address, Here, Record0, Resume),
+                 Answer),
+    (   Answer == held
+    ->  Holder = Address,
+        debug(dfrl(lease), '~w held by ~w (~w/~w)', [Agent, Address, E, K1])
+    ;   debug(dfrl(lease), 'hold of ~w at ~w: ~p', [Agent, Address, Answer]),
+        (   Answer = superseded(E2) -> note_epoch(Node, Agent, E2) ; true ),
+        adopt(Offers, Node, Agent, Tokens, Here, E, K1, Holder)
+    ).
+
+%!  lease_supersede(+Node, +Agent, +Address, +Tokens, -Answer) is det.
+%
+%   Agent (on Node) was refused at Address because a copy of it is
+%   there: ask Address to discard that copy if it is stale, i.e. of a
+%   lower epoch, or of Agent's epoch and an earlier hop and never
+%   started there (its source decided aborted, see serve/3). Answer is
+%   replaced(Epoch, Seq) (the stale copy's), kept(Epoch, Seq) (it is
+%   not stale: the move stays refused), none (no copy there any more)
+%   or error(E).
+
+lease_supersede(Node, Agent, Address, Tokens, Answer) :-
+    lease_custody(Node, Agent, custody(E, K, _)),
+    custody_call(Node, Tokens, Address, supersede(Agent, E, K), Answer).
 
 		 /*******************************
 		 *           REQUESTS		*
@@ -368,6 +447,75 @@ serve(progress(Agent, E, K, Progress), Node, Answer) :-
 serve(epoch(Agent, E), Node, noted) :-
     note_epoch(Node, Agent, E),
     discard_superseded_arrival(Node, Agent, E).
+serve(hold(Agent, E, K, Here, Dest, Record0, Resume), Node, Answer) :-
+    (   seen(Node, Agent, E2), E2 > E
+    ->  Answer = superseded(E2)
+    ;   \+ hold_ok(Agent, E, K, Here, Dest, Record0, Resume)
+    ->  Answer = refused(hold)
+    ;   catch(check_agent_record(Record0), Refused, true),
+        nonvar(Refused)
+    ->  Answer = refused(Refused)
+    ;   note_epoch(Node, Agent, E),
+        node_property(Node, tokens(Tokens)),
+        setarg(4, Record0, Tokens),         % as an arrival: this node's tokens
+        lease_s(Node, L),
+        get_time(Now),
+        Expiry is Now + L,
+        locked(( forall(( ckpt(Node, Agent, E1, K1, _, _, _, _, _),
+                          ( E1 < E ; E1 =:= E, K1 =< K ) ),
+                        retractall(ckpt(Node, Agent, E1, K1, _, _, _, _, _))),
+                 assertz(ckpt(Node, Agent, E, K, Here, Dest, Record0, Resume, Expiry)),
+                 ensure_watchdog )),
+        Answer = held
+    ).
+serve(supersede(Agent, E, K), Node, Answer) :-
+    note_epoch(Node, Agent, E),
+    with_custody(Node, replace_stale(Node, Agent, E, K, Answer)).
+
+%   What a peer may store as a checkpoint to resurrect (it is installed
+%   unchecked then, beyond the sandbox check of its code): the agent's
+%   record with its custody, and a resume point that starts a new round
+%   with nothing aggregated (no packed term from a peer is ever read).
+hold_ok(Agent, E, K, Here, Dest, Record, resume(State, Next, round_done(R, false))) :-
+    atom(Agent), integer(E), integer(K),
+    ground(Here-Dest),
+    Record = agent(Agent, _, mobile, [], _, _, Clauses, _),
+    is_list(Clauses),
+    memberchk((dfrl_custody_of(Agent, custody(E, K, _)) :- true), Clauses),
+    is_dict(State),
+    get_dict(acc, State, none),
+    get_dict(index, State, I), integer(I),
+    integer(Next), integer(R).
+
+%   A copy of Agent held here is stale for an arriving copy of epoch E
+%   that left its hop K if it has a lower epoch (a late original: a
+%   resurrection superseded it; it is stopped), or Agent's epoch and an
+%   earlier hop and it never started here (staged or in doubt: its
+%   source kept the agent, which went on, so that source decided
+%   aborted). An active copy of the same epoch is never touched.
+replace_stale(Node, Agent, E, K, Answer) :-
+    (   \+ agent_exists(Node, Agent)
+    ->  Answer = none
+    ;   lease_custody(Node, Agent, custody(E0, K0, _)),
+        (   E0 < E
+        ->  true
+        ;   E0 =:= E, K0 < K, arrived_only(Node, Agent)
+        )
+    ->  (   arrived_only(Node, Agent)
+        ->  agent_remove(Node, Agent),
+            custody_unstage(Node, Agent)
+        ;   agent_purge(Node, Agent)
+        ),
+        get_time(Now),
+        assertz(gone(Node, Agent, E0, K0, superseded, Now)),
+        prune_gone(Node, Agent),
+        print_message(warning,
+                      format("dfrl: stale copy of ~w (epoch ~w, hop ~w) replaced by one of epoch ~w, hop ~w",
+                             [Agent, E0, K0, E, K])),
+        Answer = replaced(E0, K0)
+    ;   lease_custody(Node, Agent, custody(E0, K0, _)),
+        Answer = kept(E0, K0)
+    ).
 
 %   A copy of Agent that arrived here from a source that died before
 %   deciding (staged or in_doubt) is superseded by a resurrection with
@@ -477,6 +625,21 @@ probe_timeouts(Node, CT, RT) :-
     CT is max(0.25, min(CT0, L/2)),
     RT is max(0.25, min(RT0, L/2)).
 
+%   Probes and heartbeats wait at most a quarter of the lease: a probe
+%   only confirms what the missing heartbeats said.
+quick_timeouts(Node, T) :-
+    lease_s(Node, L),
+    node_option(Node, connect_timeout, CT0),
+    node_option(Node, reply_timeout, RT0),
+    T is max(0.25, min(min(CT0, RT0), L/4)).
+
+quick_call(Node, Tokens, Address, Request, Answer) :-
+    quick_timeouts(Node, T),
+    catch(transport_request(Address, dfrl_custody(Request), Answer,
+                            [ connect_timeout(T), reply_timeout(T),
+                              tokens(Tokens), action(custody) ]),
+          E, Answer = error(E)).
+
 %   One thread per process, while there are checkpoints: every tick it
 %   handles the checkpoints whose lease expired. It ends when there are
 %   none (the next one to start joins it) or when told to stop (at halt).
@@ -583,7 +746,7 @@ drop(Node, Agent, E, K, Why) :-
 
 probe(Node, Record, Dest, Agent, E, K, Tries, Answer) :-
     record_tokens(Record, Node, Tokens),
-    custody_call(Node, Tokens, Dest, probe(Agent, E, K), A0),
+    quick_call(Node, Tokens, Dest, probe(Agent, E, K), A0),
     (   A0 = error(_), Tries > 1
     ->  sleep(0.1),
         T1 is Tries - 1,
@@ -600,7 +763,7 @@ others_know(Node, Dest, Here, Record, Agent, E, K, Known) :-
 
 others_know_([], _, _, _, _, _, Max, max_epoch(Max)).
 others_know_([S|Ss], Node, Tokens, Agent, E, K, Max0, Known) :-
-    custody_call(Node, Tokens, S, probe(Agent, E, K), Answer),
+    quick_call(Node, Tokens, S, probe(Agent, E, K), Answer),
     (   Answer = superseded(E2)
     ->  Known = known(superseded(S, E2))
     ;   Answer = here(E1, _), E1 >= E
@@ -660,15 +823,120 @@ resurrect(Node, Agent, E, K, MaxSeen, Here, Dest, Record0, Resume, Why) :-
     node_property(Node, link(Link)),
     agent_execute(Node, Agent, Link, resurrected(E1, Here, Dest, Resume)).
 
+		 /*******************************
+		 *           HEARTBEAT		*
+		 *******************************/
+
+%   Every agent that started on a node of this process (lease_arrived/3)
+%   renews its holder's lease from here, in a thread of its own, every
+%   third of the lease: progress(alive) to the holder. So the lease of a
+%   checkpoint runs out only when the node the agent is on has not
+%   answered for a whole lease (killed, stopped, cut off), whatever the
+%   agent does meanwhile (rests, waits for a robot). The thread runs while
+%   there are such agents; an agent that left or ended is dropped.
+note_beat(Node, Agent) :-
+    (   beat(Node, Agent, _)
+    ->  true
+    ;   locked(( beat(Node, Agent, _)
+               ->  true
+               ;   assertz(beat(Node, Agent, 0)),
+                   ensure_heart
+               ))
+    ).
+
+ensure_heart :-
+    (   heart(_)
+    ->  true
+    ;   forall(retract(heart_exited(Old)), catch(thread_join(Old, _), _, true)),
+        thread_create(heart, Tid, []),
+        assertz(heart(Tid))
+    ).
+
+heart :-
+    catch(heart_loop, E, true),
+    thread_self(Me),
+    locked(( retractall(heart(Me)),
+             assertz(heart_exited(Me)) )),
+    (   var(E) -> true ; E == stop -> true ; print_message(warning, E) ).
+
+heart_loop :-
+    (   locked(( beat(_, _, _)
+               ->  true
+               ;   thread_self(Me), retractall(heart(Me)), fail
+               ))
+    ->  beat_tick(T),
+        thread_self(Me),
+        (   thread_get_message(Me, stop, [timeout(T)])
+        ->  throw(stop)
+        ;   true
+        ),
+        findall(N-A, beat(N, A, _), Beats),
+        forall(member(N-A, Beats),
+               catch(beat_once(N, A), Err, print_message(warning, Err))),
+        heart_loop
+    ;   true
+    ).
+
+beat_tick(T) :-
+    findall(L, ( beat(N, _, _), lease_s(N, L) ), Ls),
+    (   Ls == [] -> T = 0.1 ; min_list(Ls, Min), T is max(0.02, min(1.0, Min/8)) ).
+
+beat_once(Node, Agent) :-
+    (   \+ local_node(Node)
+    ->  locked(retractall(beat(Node, Agent, _)))
+    ;   \+ agent_exists(Node, Agent)
+    ->  locked(retractall(beat(Node, Agent, _)))
+    ;   beat(Node, Agent, Last),
+        lease_s(Node, L),
+        get_time(Now),
+        Now - Last >= L/3,
+        agent_status(Node, Agent, Status),
+        \+ Status = staged(_),
+        \+ Status = in_doubt(_, _),
+        \+ Status = departing(_),
+        lease_custody(Node, Agent, custody(E, K, Holder)),
+        Holder \== none,
+        \+ ckpt(Node, Agent, E, K, _, _, _, _, _)    % held here: it is leaving
+    ->  agent_tokens(Node, Agent, Tokens),
+        quick_call(Node, Tokens, Holder, progress(Agent, E, K, alive), Answer),
+        locked(( retract(beat(Node, Agent, _))
+               ->  assertz(beat(Node, Agent, Now))
+               ;   true
+               )),
+        beat_answer(Answer, Node, Agent, E, K)
+    ;   true
+    ).
+
+%   superseded: the agent retires at its next check (it looks at the
+%   epochs this node has seen); unknown: its holder has no checkpoint of
+%   it (restarted, or dropped it), so the agent finds another one at its
+%   next round start (lease_needs_holder/2).
+beat_answer(superseded(E2), Node, Agent, _, _) :-
+    !,
+    note_epoch(Node, Agent, E2).
+beat_answer(unknown, Node, Agent, E, K) :-
+    !,
+    locked(( holder_lost(Node, Agent, E, K)
+           ->  true
+           ;   retractall(holder_lost(Node, Agent, _, _)),
+               assertz(holder_lost(Node, Agent, E, K))
+           )).
+beat_answer(_, _, _, _, _).
+
 :- at_halt(stop_watchdog).
 
 stop_watchdog :-
     forall(watchdog(T), catch(thread_send_message(T, stop), _, true)),
+    forall(heart(T), catch(thread_send_message(T, stop), _, true)),
     forall(watchdog(T), catch(thread_join(T, _), _, true)),
-    forall(retract(watchdog_exited(T)), catch(thread_join(T, _), _, true)).
+    forall(heart(T), catch(thread_join(T, _), _, true)),
+    forall(retract(watchdog_exited(T)), catch(thread_join(T, _), _, true)),
+    forall(retract(heart_exited(T)), catch(thread_join(T, _), _, true)).
 
 %   A node that stops forgets its checkpoints, as a process that dies.
 node:node_stopping(Node) :-
     locked(( retractall(ckpt(Node, _, _, _, _, _, _, _, _)),
              retractall(gone(Node, _, _, _, _, _)),
-             retractall(seen(Node, _, _)) )).
+             retractall(seen(Node, _, _)),
+             retractall(beat(Node, _, _)),
+             retractall(holder_lost(Node, _, _, _)) )).
