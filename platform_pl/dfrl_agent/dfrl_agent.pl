@@ -551,10 +551,15 @@ try_stop(M, Agent, S0, Next, _Dir) :-
         ->  Tries = once                % it failed this round already
         ;   Tries = policy
         ),
-        timed_move(M, Agent, S0, S1, Stop, Next, Tries, Result),
-        (   Result = failed(E, Retries)
-        ->  failed_move(M, Agent, S0, Next, E, Retries)
-        ;   true
+        (   Phase == backward, unanswered(S0, Robot)
+        ->  % no answer in its skip time this round: not waited for again
+            failed_move(M, Agent, S0, Next, reason("no answer earlier this round"), 0)
+        ;   timed_move(M, Agent, S0, S1, Stop, Next, Tries, Result),
+            (   Result = failed(E, Retries, Silent)
+            ->  note_unanswered(Silent, Robot, S0, S0a),
+                failed_move(M, Agent, S0a, Next, E, Retries)
+            ;   true
+            )
         )
     ;   Phase == forward
     ->  % nothing reachable ahead: finish here and turn back
@@ -563,8 +568,11 @@ try_stop(M, Agent, S0, Next, _Dir) :-
     ;   end_round(M, Agent, S0)
     ).
 
-%   move_to_stop/8, and a failure's error as reason(Text): the error's
-%   text and how long the agent tried before it skipped the stop.
+%   move_to_stop/8; a failure is failed(reason(Text), Retries, Silent):
+%   Text is the error's text and how long the agent tried before it
+%   skipped the stop, Silent is true if the stop never answered (a
+%   timeout: frozen or cut off), so that the backward pass does not wait
+%   for it again.
 timed_move(M, Agent, S0, S1, Stop, Index, Tries, Result) :-
     get_time(T0),
     move_to_stop(M, Agent, S0, S1, Stop, Index, Tries, Result0),
@@ -576,9 +584,22 @@ timed_move(M, Agent, S0, S1, Stop, Index, Tries, Result) :-
         format(string(Text), "~w (skipped after ~2f s; skip_after ~w s)",
                [Text0, Waited, Bound]),
         print_message(warning, format("dfrl: skipping stop ~w: ~w", [Index, Text])),
-        Result = failed(reason(Text), Retries)
+        (   E = error(transport_error(_, timeout(_)), _)
+        ->  Silent = true
+        ;   Silent = false
+        ),
+        Result = failed(reason(Text), Retries, Silent)
     ;   Result = Result0
     ).
+
+unanswered(S, Robot) :-
+    get_dict(unanswered, S, Robots),
+    memberchk(Robot, Robots).
+
+note_unanswered(false, _, S, S).
+note_unanswered(true, Robot, S0, S) :-
+    (   get_dict(unanswered, S0, Rs) -> true ; Rs = [] ),
+    put_dict(unanswered, S0, [Robot|Rs], S).
 
 %   Find the agent a holder if it has none (at its first stop after a
 %   launch, after a resurrection, or its holder lost its checkpoint)
@@ -664,7 +685,7 @@ try_home(M, Agent, S0, J) :-
             try_home(M, Agent, S0, J1)
         ;   advance_to(J, S0, S1),
             timed_move(M, Agent, S0, S1, Stop, J, policy, Result),
-            (   Result = failed(E, Retries)
+            (   Result = failed(E, Retries, _)
             ->  failed_move(M, Agent, S0, J, E, Retries)
             ;   true
             )

@@ -127,6 +127,15 @@ its first stop and right after a resurrection).
 
 :- meta_predicate locked(0).
 
+%   Flags (per process), both true by default; false gives the behaviour
+%   of before, for tests that show what these parts change:
+%   dfrl_resting_holder: heartbeats and lease_adopt/5 (false: an agent
+%   with no holder stays without one; leases run out only by time);
+%   dfrl_replace_stale: a supersede request replaces a stale copy
+%   (false: the copy is kept and the arrival stays refused).
+:- create_prolog_flag(dfrl_resting_holder, true, [type(boolean), keep(true)]).
+:- create_prolog_flag(dfrl_replace_stale, true, [type(boolean), keep(true)]).
+
 locked(Goal) :-
     with_mutex(dfrl_lease, Goal).
 
@@ -319,6 +328,7 @@ lease_broadcast_epoch(Node, Tokens, Agent, Epoch, Stops) :-
 %   answered a heartbeat that it holds none (it restarted).
 
 lease_needs_holder(Node, Agent) :-
+    current_prolog_flag(dfrl_resting_holder, true),
     lease_custody(Node, Agent, custody(E, K, Holder)),
     (   Holder == none
     ->  true
@@ -470,7 +480,12 @@ serve(hold(Agent, E, K, Here, Dest, Record0, Resume), Node, Answer) :-
     ).
 serve(supersede(Agent, E, K), Node, Answer) :-
     note_epoch(Node, Agent, E),
-    with_custody(Node, replace_stale(Node, Agent, E, K, Answer)).
+    (   current_prolog_flag(dfrl_replace_stale, true)
+    ->  with_custody(Node, replace_stale(Node, Agent, E, K, Answer))
+    ;   lease_custody(Node, Agent, custody(E0, K0, _))
+    ->  Answer = kept(E0, K0)
+    ;   Answer = none
+    ).
 
 %   What a peer may store as a checkpoint to resurrect (it is installed
 %   unchecked then, beyond the sandbox check of its code): the agent's
@@ -836,6 +851,8 @@ resurrect(Node, Agent, E, K, MaxSeen, Here, Dest, Record0, Resume, Why) :-
 %   there are such agents; an agent that left or ended is dropped.
 note_beat(Node, Agent) :-
     (   beat(Node, Agent, _)
+    ->  true
+    ;   current_prolog_flag(dfrl_resting_holder, false)
     ->  true
     ;   locked(( beat(Node, Agent, _)
                ->  true
