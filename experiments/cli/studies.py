@@ -255,8 +255,11 @@ def register_speedup(subparsers: argparse._SubParsersAction) -> None:
                    help="bootstrap resamples (default: %(default)s)")
     p.add_argument("--jobs", type=int, default=d.jobs, help="processes (default: %(default)s)")
     p.add_argument("--out", type=Path, default=None,
-                   help="also write speedup.md, speedup.json, tidy.csv and provenance.json "
-                        "there")
+                   help="also write speedup.md, speedup.json, tidy.csv, provenance.json and "
+                        "the raw runs (speedup_runs.json) there")
+    p.add_argument("--from-runs", type=Path, default=None, metavar="FILE",
+                   help="analyse the runs an earlier study wrote (its speedup_runs.json) "
+                        "instead of running; give the options it ran with")
     p.set_defaults(func=cmd_speedup)
 
 
@@ -267,7 +270,8 @@ def cmd_speedup(args: argparse.Namespace) -> int:
 
     from dfrl.experiments.science.reference import ReferenceError
     from dfrl.experiments.science.reference_store import reference_table
-    from dfrl.experiments.science.studies.speedup import REFERENCE, SpeedupOptions, run_all
+    from dfrl.experiments.science.studies.speedup import (REFERENCE, SpeedupOptions, load_runs,
+                                                          run_all)
     from dfrl.experiments.science.studies.speedup_report import (analyse, markdown, tidy_rows,
                                                                  to_json)
     from dfrl.experiments.science.tidy import TIDY_FILE, write_tidy
@@ -299,7 +303,11 @@ def cmd_speedup(args: argparse.Namespace) -> int:
     old = signal.signal(signal.SIGTERM, stop)
     t0 = time.monotonic()
     try:
-        results = run_all(opts, ref, progress)
+        results = (load_runs(args.from_runs, opts) if args.from_runs is not None else
+                   run_all(opts, ref, progress))
+    except (OSError, ValueError) as exc:
+        print(f"dfrl speedup: {exc}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt as exc:
         print(f"dfrl speedup: stopped ({exc or 'interrupted'})", file=sys.stderr)
         return 130
@@ -308,8 +316,8 @@ def cmd_speedup(args: argparse.Namespace) -> int:
     wall = time.monotonic() - t0
     if args.out is not None:      # the runs first: a failure below loses no federation
         args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "speedup_runs.json").write_text(json.dumps(
-            [{"key": [list(k[0]), k[1]], **v} for k, v in results.items()]), encoding="utf-8")
+        (args.out / "speedup_runs.json").write_text(json.dumps(list(results.values())),
+                                                    encoding="utf-8")
     rows = analyse(opts, results)
     text = markdown(rows, opts, wall, ref.name)
     if args.out is not None:

@@ -242,27 +242,37 @@ def km_median(times: Sequence[float], reached: Sequence[bool]) -> float:
     return _median(*_censored(times, reached))
 
 
-def _medians(t: np.ndarray, ev: np.ndarray, rng: np.random.Generator, k: int) -> np.ndarray:
-    return np.array([_median(t[i], ev[i]) for i in rng.integers(0, len(t), (k, len(t)))])
+def _bounds(t: np.ndarray, ev: np.ndarray) -> tuple[float, float]:
+    """What the runs say of the median: (m, m), or (largest time, inf) when it lies beyond."""
+    m = _median(t, ev)
+    return (m, m) if math.isfinite(m) else (float(t.max()), math.inf)
 
 
-def _ends(draws: np.ndarray) -> tuple[float, float]:
-    """The 95% percentile interval, undefined (NaN) draws counted against both ends."""
-    tail, nan = (1.0 - LEVEL) / 2.0, np.isnan(draws)
-    return (float(np.quantile(np.where(nan, 0.0, draws), tail, method="lower")),
-            float(np.quantile(np.where(nan, np.inf, draws), 1.0 - tail, method="higher")))
+def _resampled(t: np.ndarray, ev: np.ndarray, rng: np.random.Generator,
+               k: int) -> np.ndarray:
+    """Median bounds of ``k`` resamples with replacement, shape (k, 2)."""
+    return np.array([_bounds(t[i], ev[i]) for i in rng.integers(0, len(t), (k, len(t)))])
+
+
+def _ends(low: np.ndarray, high: np.ndarray) -> tuple[float, float]:
+    tail = (1.0 - LEVEL) / 2.0
+    return (float(np.quantile(low, tail, method="lower")),
+            float(np.quantile(high, 1.0 - tail, method="higher")))
 
 
 @dataclass(frozen=True)
 class CensoredRatio(BootstrapInterval):
     """``median_a / median_b`` of two groups of censored times (Kaplan-Meier medians) with its
     95% percentile bootstrap interval (:func:`censored_ratio`). A median beyond the budget is
-    infinite, so a ratio may be 0 or ``inf`` (one side known only as a bound) or undefined
-    (both beyond the budget: ``undefined`` is the share of such resamples; they count against
-    the claim on both sides). :func:`judge` takes it as it takes an :class:`Interval`."""
+    known only to exceed the group's largest time, so the ratio is then a bound: ``known`` is
+    ``exact``, ``at least`` (a's median beyond), ``at most`` (b's) or ``unknown`` (both;
+    ``estimate`` NaN). Each resample gives the lowest and the highest ratio it allows
+    (``draws``, shape (k, 2)); ``low`` comes from the lowest, ``high`` from the highest, so a
+    censored median never counts for the claim. :func:`judge` takes it as an
+    :class:`Interval`."""
 
     n: int
-    undefined: float
+    known: str
     draws: np.ndarray = field(repr=False, compare=False)
 
     @property
@@ -270,11 +280,10 @@ class CensoredRatio(BootstrapInterval):
         return (self.high - self.low) / 2.0
 
     def p_value(self, null: float = 1.0) -> float:
-        """Two-sided p of "the ratio is ``null``": twice the smaller share of resamples on one
-        side of it (undefined ones on both), at most 1."""
-        d, nan = self.draws, np.isnan(self.draws)
-        below, above = float(np.mean((d <= null) | nan)), float(np.mean((d >= null) | nan))
-        return min(1.0, 2.0 * min(below, above))
+        """Two-sided p of "the ratio is ``null``": twice the smaller share of resamples that
+        allow a ratio on one side of it, at most 1."""
+        below, above = np.mean(self.draws[:, 0] <= null), np.mean(self.draws[:, 1] >= null)
+        return float(min(1.0, 2.0 * min(below, above)))
 
     def detectable(self, power: float = POWER) -> float:
         """The smallest factor by which the true ratio must differ from the null for a 5% test
@@ -285,10 +294,15 @@ class CensoredRatio(BootstrapInterval):
         se = (math.log(self.high) - math.log(self.low)) / (2.0 * normal_quantile(0.975))
         return math.exp((normal_quantile(0.975) + normal_quantile(power)) * se)
 
+    def __str__(self) -> str:
+        sign = {"at least": ">= ", "at most": "<= "}.get(self.known, "")
+        return f"{sign}{self.estimate:.3g} [{self.low:.3g}, {self.high:.3g}]"
 
-def _ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(np.isinf(a) & np.isinf(b), np.nan, a / b)
+
+def _span(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lowest and highest ratio ``a / b`` of median bounds (columns low, high)."""
+    with np.errstate(divide="ignore"):
+        return a[..., 0] / b[..., 1], a[..., 1] / b[..., 0]
 
 
 def censored_ratio(a: tuple[Sequence[float], Sequence[bool]],
@@ -297,22 +311,27 @@ def censored_ratio(a: tuple[Sequence[float], Sequence[bool]],
     """The ratio of Kaplan-Meier medians ``a / b`` (e.g. T(1) / T(N)) of two independent groups
     of ``(times, reached)``: each group's runs resampled with replacement on their own
     (generator seeded with ``seed``), censored runs staying censored (none is set to the
-    budget); the percentile interval of the resampled ratios."""
+    budget); the percentile interval of the lowest and highest ratios the resamples allow."""
     rng = np.random.default_rng(seed)
     (ta, ea), (tb, eb) = _censored(*a), _censored(*b)
-    est = float(_ratio(np.array(_median(ta, ea)), np.array(_median(tb, eb))))
-    draws = _ratio(_medians(ta, ea, rng, resamples), _medians(tb, eb, rng, resamples))
-    return CensoredRatio(est, *_ends(draws), resamples, "percentile", min(len(ta), len(tb)),
-                         float(np.mean(np.isnan(draws))), draws)
+    ba, bb = np.array(_bounds(ta, ea)), np.array(_bounds(tb, eb))
+    lo, hi = _span(ba, bb)
+    known = {(True, True): "exact", (False, True): "at least", (True, False): "at most",
+             (False, False): "unknown"}[(ba[0] == ba[1], bb[0] == bb[1])]
+    est = {"exact": lo, "at least": lo, "at most": hi}.get(known, math.nan)
+    low, high = _span(_resampled(ta, ea, rng, resamples), _resampled(tb, eb, rng, resamples))
+    return CensoredRatio(float(est), *_ends(low, high), resamples, "percentile",
+                         min(len(ta), len(tb)), known, np.stack([low, high], axis=1))
 
 
 def km_median_interval(times: Sequence[float], reached: Sequence[bool], resamples: int = 4000,
                        seed: int = 0) -> BootstrapInterval:
-    """The Kaplan-Meier median with its 95% percentile bootstrap interval (an ``inf`` end: the
-    median may lie beyond the budget)."""
+    """The Kaplan-Meier median (``inf`` beyond the budget) with its 95% percentile bootstrap
+    interval (a resample whose median lies beyond gives its largest time to ``low`` and
+    ``inf`` to ``high``)."""
     t, ev = _censored(times, reached)
-    return BootstrapInterval(_median(t, ev), *_ends(_medians(t, ev, np.random.default_rng(seed),
-                                                             resamples)), resamples, "percentile")
+    d = _resampled(t, ev, np.random.default_rng(seed), resamples)
+    return BootstrapInterval(_median(t, ev), *_ends(d[:, 0], d[:, 1]), resamples, "percentile")
 
 
 # -- multiplicity ----------------------------------------------------------------------------

@@ -26,10 +26,12 @@ counted as reaching it there.
 """
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -214,4 +216,29 @@ def run_all(opts: SpeedupOptions, reference: Reference,
         _stop_pool(pool)
         raise
     pool.shutdown()
+    return out
+
+
+def load_runs(path: str | Path, opts: SpeedupOptions
+              ) -> dict[tuple[tuple[str, ...], int], dict[str, Any]]:
+    """The runs a study wrote (``speedup_runs.json``: a list of :func:`run_one` results), by
+    (arenas, seed), for analysing again.
+
+    Raises
+    ------
+    ValueError
+        A run the options need is missing, or was run with another budget.
+    OSError
+        The file cannot be read.
+    """
+    out = {}
+    for r in json.loads(Path(path).read_text(encoding="utf-8")):
+        out[(tuple(r["arenas"]), int(r["seed"]))] = r
+    for k in runs_needed(opts):
+        if k not in out:
+            raise ValueError(f"{path}: no run of arenas {'+'.join(k[0])} with seed {k[1]}")
+        if out[k]["budget"] != opts.iterations or set(out[k]["times"]) != set(measures(opts)):
+            raise ValueError(f"{path}: the run of {'+'.join(k[0])}, seed {k[1]} measured "
+                             f"{sorted(out[k]['times'])} with budget {out[k]['budget']}, "
+                             f"not these options' {measures(opts)} with {opts.iterations}")
     return out

@@ -117,6 +117,11 @@ def _ival(b: BootstrapInterval, fmt: str = ",.0f", inf: str = "> budget") -> str
     return f"{one(b.estimate)} [{one(b.low)}, {one(b.high)}]"
 
 
+def _ratio(r: CensoredRatio) -> str:
+    sign = {"at least": ">= ", "at most": "<= "}.get(r.known, "")
+    return sign + _ival(r, ".2f", "inf")
+
+
 def markdown(rows: Sequence[SpeedupRow], opts: SpeedupOptions, wall_s: float,
              reference_name: str) -> str:
     """The study's report: design, one table per condition, the theory's settings."""
@@ -131,7 +136,7 @@ def markdown(rows: Sequence[SpeedupRow], opts: SpeedupOptions, wall_s: float,
          f"{opts.score_every} ({opts.eval_steps} steps; the first of {opts.score_hold} "
          f"evaluations in a row at or above the threshold). T = Kaplan-Meier median "
          f"iterations per robot to the target (runs that never reach it are censored at the "
-         f"budget, '> budget': the median is beyond it); intervals: 95% percentile bootstrap "
+         f"budget, '> budget': the median is beyond it; a ratio '>= x' is a bound); intervals: 95% percentile bootstrap "
          f"({opts.resamples} resamples, seeds resampled within each N); verdicts Holm-adjusted "
          f"over all {2 * sum(1 for r in rows if r.ratio is not None)} claims. Wall time "
          f"{wall_s:.0f} s.", ""]
@@ -144,7 +149,7 @@ def markdown(rows: Sequence[SpeedupRow], opts: SpeedupOptions, wall_s: float,
             ar = "+".join(f"{r.arenas.count(a)}x{a}" for a in dict.fromkeys(r.arenas))
             L.append(f"| {r.measure} | {r.robots} | {ar} | {r.reached}/{r.runs} | "
                      f"{_ival(r.time)} | {_num(r.total)} | "
-                     f"{'-' if r.ratio is None else _ival(r.ratio, '.2f', 'inf')} | "
+                     f"{'-' if r.ratio is None else _ratio(r.ratio)} | "
                      f"{opts.linear_fraction * r.robots:g} | "
                      f"{verdict(r.linear, 'linear speed-up')} | "
                      f"{verdict(r.faster, 'speed-up')} |")
@@ -173,8 +178,8 @@ def to_json(rows: Sequence[SpeedupRow], opts: SpeedupOptions,
                  "time": {k: _finite(getattr(r.time, k)) for k in ("estimate", "low", "high")},
                  "total": _finite(r.total),
                  "ratio": None if r.ratio is None else {
-                     k: _finite(getattr(r.ratio, k)) for k in ("estimate", "low", "high",
-                                                                "undefined")},
+                     **{k: _finite(getattr(r.ratio, k)) for k in ("estimate", "low", "high")},
+                     "known": r.ratio.known},
                  "linear": j(r.linear), "speedup": j(r.faster)} for r in rows]
     runs = [{**v, "conditions": [c for c in opts.conditions
                                  if arenas(c, v["robots"]) == tuple(v["arenas"])]}
