@@ -216,12 +216,10 @@ def register_speedup(subparsers: argparse._SubParsersAction) -> None:
         "speedup", help="samples to a fixed table error (and a greedy score) against the "
                         "number of robots, homogeneous and heterogeneous, against linear "
                         "speed-up (Kaplan-Meier times, bootstrap intervals, verdicts)",
-        description="For every N and seed, N robots learn in one process and share every "
-                    "--share-every iterations; the table error against the shipped R1 "
-                    "reference is measured every --grid iterations, the greedy score in R1 "
-                    "every --score-every. Runs that never reach a target are censored; "
-                    "T(1)/T(N) gets a bootstrap interval and verdicts (science/README.md, "
-                    "'Speed-up').")
+        description="N robots learn in one process and share every --share-every "
+                    "iterations; table error against the R1 reference every --grid, greedy "
+                    "score in R1 every --score-every; runs that never reach a target are "
+                    "censored (science/README.md, 'Speed-up').")
     p.add_argument("--robots", type=int, nargs="+", default=list(d.robots),
                    help="robot counts, 1 included (default: %(default)s)")
     p.add_argument("--conditions", nargs="+", choices=CONDITIONS, default=list(d.conditions),
@@ -247,16 +245,14 @@ def register_speedup(subparsers: argparse._SubParsersAction) -> None:
                    help="steps per greedy evaluation (default: %(default)s)")
     p.add_argument("--alpha", type=float, default=None,
                    help="learning rate of every robot (default: the learner's, 0.2)")
-    p.add_argument("--method", default=d.method, help="aggregation method (default: "
-                                                      "%(default)s)")
+    p.add_argument("--method", default=d.method, help="aggregation (default: %(default)s)")
     p.add_argument("--linear-fraction", type=float, default=d.linear_fraction,
                    help="'linear speed-up' means T(1)/T(N) > this x N (default: %(default)s)")
     p.add_argument("--resamples", type=int, default=d.resamples,
                    help="bootstrap resamples (default: %(default)s)")
     p.add_argument("--jobs", type=int, default=d.jobs, help="processes (default: %(default)s)")
-    p.add_argument("--out", type=Path, default=None,
-                   help="also write speedup.md, speedup.json, tidy.csv, provenance.json and "
-                        "the raw runs (speedup_runs.json) there")
+    p.add_argument("--out", type=Path, default=None, help="also write speedup.md, "
+                   "speedup.json, speedup_runs.json, tidy.csv and provenance.json there")
     p.add_argument("--from-runs", type=Path, default=None, metavar="FILE",
                    help="analyse the runs an earlier study wrote (its speedup_runs.json) "
                         "instead of running; give the options it ran with")
@@ -291,10 +287,9 @@ def cmd_speedup(args: argparse.Namespace) -> int:
         return 2
 
     def progress(done: int, total: int, run: dict[str, Any]) -> None:
-        left = ", ".join(f"{m} {'-' if t is None else t}" for m, t in run["times"].items())
-        print(f"[{done}/{total}] N={run['robots']} seed {run['seed']} "
-              f"({'+'.join(run['arenas'][:5])}{'...' if run['robots'] > 5 else ''}): "
-              f"{run['iterations']} iterations, {run['seconds']:.0f} s; {left}",
+        times = ", ".join(f"{m} {'-' if t is None else t}" for m, t in run["times"].items())
+        print(f"[{done}/{total}] N={run['robots']} seed {run['seed']} ({'+'.join(run['arenas'])})"
+              f": {run['iterations']} iterations, {run['seconds']:.0f} s; {times}",
               file=sys.stderr, flush=True)
 
     def stop(signum: int, frame: Any) -> None:
