@@ -7,7 +7,7 @@ from dfrl.experiments.cli import build_parser, main
 
 COMMANDS = ["node", "demo", "run", "inject", "join", "collect", "bench", "train", "eval",
             "baselines", "render-arenas", "transfer", "transfer-study", "sweep", "paper",
-            "speedup", "reference", "robot", "view", "secret", "certs"]
+            "speedup", "reference", "hetero", "robot", "view", "secret", "certs"]
 
 
 def test_every_command_is_listed_in_order() -> None:
