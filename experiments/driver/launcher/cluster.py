@@ -42,6 +42,8 @@ RESOURCE = "CPU"
 #: Seconds to connect to the scheduler, and for every robot to report its service's address.
 CONNECT_S = 20.0
 PLACE_S = 120.0
+#: Seconds without a new worker after which the workers there are taken as all there are.
+SETTLE_S = 3.0
 #: Seconds between two renewals of the lease (and looks at the workers); the tasks' lease.
 WATCH_S = 1.0
 LEASE_S = 60.0
@@ -125,15 +127,27 @@ class ClusterPlacement:
         Raises
         ------
         ExperimentError
-            The workers offer too little of the resource for every robot at once, a task
+            The workers offer too little of the resource for every robot at once (after
+            waiting up to :data:`CONNECT_S` for workers that are still registering), a task
             failed (its reason given), or a robot was not placed within :data:`PLACE_S`.
         """
         from distributed import Variable
 
         from dfrl.experiments.robot_host.cluster_task import serve_robot
 
-        offered = self.offered()
-        fits = sum(int(a // self.cpus) for a in offered.values())
+        # wait for workers still registering: until no new one came for SETTLE_S
+        deadline = time.monotonic() + CONNECT_S
+        seen: set[str] = set()
+        changed = time.monotonic()
+        while True:
+            offered = self.offered()
+            fits = sum(int(a // self.cpus) for a in offered.values())
+            now = time.monotonic()
+            if set(offered) != seen:
+                seen, changed = set(offered), now
+            if fits >= len(robots) or now > deadline or (seen and now - changed > SETTLE_S):
+                break
+            time.sleep(0.5)
         if fits < len(robots):
             raise ExperimentError(
                 f"cluster {self.address}: {len(robots)} robots need {self.cpus:g} {RESOURCE} "
@@ -229,9 +243,10 @@ class ClusterPlacement:
         try:
             if self._futures:
                 Event(f"dfrl-{self.run_key}-stop", client=self._client).set()
+                # a lost robot's task may wait for a free worker again: not for it
+                alive = [f for rid, f in self._futures.items() if rid not in self._said]
                 deadline = time.monotonic() + RELEASE_S
-                while time.monotonic() < deadline and \
-                        not all(f.done() for f in self._futures.values()):
+                while time.monotonic() < deadline and not all(f.done() for f in alive):
                     time.sleep(0.1)
                 for rid, future in self._futures.items():
                     ended[rid] = future.result() if future.status == "finished" else \

@@ -1,0 +1,210 @@
+"""Robots placed on a Dask cluster, following experiments/README.md "Running on a cluster"
+word for word: a cluster of three network namespaces made by the test (the scheduler and the
+driver in ``head``, a worker in ``w1`` and ``w2``), the section's ``dask scheduler``, ``dask
+worker`` and ``dfrl run --cluster`` commands, its config. The run must complete with every
+round visiting every robot and leaving identical tables, every robot on a worker's host (none
+on the driver's), its files back over the platform. A worker killed mid-run (every process of
+its namespace, kill -9) must be reported like a lost robot host: its robots skipped and LOST,
+the worker named under "Cluster", exit status 1, no traceback.
+
+The controls: each robot's address in ``nodes.json`` is a worker's, and a config that asks
+for more CPUs than the workers offer is refused before anything starts.
+
+Runs in CI (as root, ``distributed`` installed by scripts/test.sh); skipped with the reason
+where namespaces cannot be made or the engine is missing.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+from collections.abc import Iterator
+
+import pytest
+
+from dfrl.experiments.driver.results.agent_log import read_rounds_log
+from ..multihost.netns import REPO_ROOT, Lab, leftover_namespaces, unavailable
+
+try:
+    import distributed  # noqa: F401
+    ENGINE = None
+except ImportError:
+    ENGINE = "Dask distributed is not installed (pip install -e '.[cluster]'; scripts/test.sh does)"
+
+WHY = unavailable() or ENGINE
+pytestmark = pytest.mark.skipif(WHY is not None, reason=WHY or "")
+
+README = REPO_ROOT / "experiments" / "README.md"
+WORKERS = ["w1", "w2"]
+
+
+def cluster_blocks() -> dict[str, tuple[str, str]]:
+    """``<!-- cluster:KIND [ARG] -->`` markers of the README -> (ARG, the next fenced block)."""
+    text = README.read_text(encoding="utf-8")
+    found = {m.group(1): (m.group(2), m.group(3)) for m in re.finditer(
+        r"<!-- cluster:(\w+)\s*([^ ]*?)\s*-->\s*```\w*\n(.*?)```", text, re.S)}
+    assert set(found) >= {"token", "scheduler", "worker", "config", "driver"}, found.keys()
+    return found
+
+
+def argv_of(line: str) -> list[str]:
+    """A documented ``dfrl ...`` or ``dask ...`` command as an argv of this interpreter."""
+    words = line.split()
+    assert words[0] in ("dfrl", "dask"), line
+    return [sys.executable, "-m", words[0], *words[1:]]
+
+
+def wait_for(path: Path, pattern: str, timeout_s: float) -> None:
+    """Until ``path`` holds ``pattern`` (bounded: ``timeout_s``)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if path.is_file() and pattern in path.read_text(encoding="utf-8", errors="replace"):
+            return
+        time.sleep(0.1)
+    text = path.read_text(encoding="utf-8", errors="replace") if path.is_file() else ""
+    raise AssertionError(f"no {pattern!r} in {path} within {timeout_s} s: {text[-2000:]}")
+
+
+@contextmanager
+def cluster(tmp: Path, per_worker: int) -> Iterator[tuple[Lab, Path, dict]]:
+    """The README's cluster in namespaces: token, scheduler, workers offering ``per_worker``
+    CPUs; yields the lab, the driver's folder and the blocks. The lab is gone afterwards."""
+    blocks = cluster_blocks()
+    with Lab(["head", *WORKERS]) as lab:
+        head = lab["head"].address
+        drv = tmp / "head"
+        drv.mkdir()
+        cmd = blocks["token"][1].strip()
+        made = lab["head"].run(argv_of(cmd), cwd=drv, capture_output=True, text=True)
+        assert made.returncode == 0, made.stderr
+        token = drv / cmd.split("--out", 1)[1].split()[0]
+        line = blocks["scheduler"][1].strip().replace("HEAD", head)
+        lab["head"].popen(argv_of(line), cwd=drv, stdin=subprocess.DEVNULL,
+                          stdout=subprocess.DEVNULL, stderr=open(drv / "scheduler.log", "w"))
+        wait_for(drv / "scheduler.log", "Scheduler at:", 60)
+        for w in WORKERS:
+            cwd = tmp / w
+            cwd.mkdir()
+            shutil.copy2(token, cwd)                      # scp -p: mode 0600 kept
+            line = (blocks["worker"][1].strip().replace("HEAD", head)
+                    .replace("HOSTn", lab[w].address).replace("=N", f"={per_worker}")
+                    .replace(" N ", f" {per_worker} "))
+            assert " N" not in line and "HOST" not in line, line
+            lab[w].popen(argv_of(line), cwd=cwd, stdin=subprocess.DEVNULL,
+                         stdout=subprocess.DEVNULL, stderr=open(cwd / "worker.log", "w"))
+        for w in WORKERS:
+            wait_for(tmp / w / "worker.log", "Registered to:", 60)
+        yield lab, drv, blocks
+    assert not leftover_namespaces(lab.tag)
+
+
+def driver_cmd(blocks: dict, lab: Lab) -> str:
+    return blocks["driver"][1].strip().replace("HEAD", lab["head"].address)
+
+
+def rounds_of(out: Path) -> list[dict[str, str]]:
+    with open(out / "rounds.csv", newline="", encoding="utf-8") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_the_documented_cluster_run_federates_robots_placed_on_workers(tmp_path: Path) -> None:
+    t0 = time.monotonic()
+    with cluster(tmp_path, 3) as (lab, drv, blocks):
+        name, cfg = blocks["config"]
+        (drv / name).write_text(cfg, encoding="utf-8")
+        cmd = driver_cmd(blocks, lab)
+        done = lab["head"].run(argv_of(cmd), cwd=drv, timeout=240, capture_output=True,
+                               text=True)
+        detail = f"exit {done.returncode}\n{done.stderr[-3000:]}"
+        assert done.returncode == 0, detail
+        out = drv / cmd.split("--out", 1)[1].split()[0]
+        planned = json.loads(cfg)
+        robots = [r["id"] for r in planned["robots"]]
+        rows = rounds_of(out)
+        assert len(rows) == -(-planned["iterations"] // planned["respite"]), detail
+        for row in rows:
+            assert row["visited"].split() == robots, row
+            assert row["skipped"] == "" and row["all_equal"] == "true", row
+            assert len({row[f"digest_{r}"] for r in robots}) == 1, row
+        # every robot ran on a worker's host (control: none on the driver's), both workers used
+        workers = {lab[w].address for w in WORKERS}
+        nodes = json.loads((out / "nodes.json").read_text(encoding="utf-8"))["nodes"]
+        hosts = {n["robot"]: n["host"] for n in nodes}
+        assert set(hosts) == set(robots) and set(hosts.values()) == workers, hosts
+        record = json.loads((out / "cluster.json").read_text(encoding="utf-8"))
+        assert record["losses"] == [], record
+        assert all(t["ended"] == "released by the driver" and t["exit"] == 0
+                   for t in record["tasks"].values()), record
+        for r in robots:     # files came back over the platform from the workers' folders
+            assert (out / f"metrics_{r}.csv").stat().st_size > 0
+            assert (out / "tables" / f"{r}.npy").is_file()
+            w = next(w for w in WORKERS if lab[w].address == hosts[r])
+            assert list((tmp_path / w / "dfrl-robot" / r).glob(f"*/metrics_{r}.csv"))
+        summary = (out / "summary.md").read_text(encoding="utf-8")
+        assert "federation complete" in summary and "## Cluster" in summary, summary
+        # control: more CPUs than offered is refused before anything starts
+        over = lab["head"].run(argv_of(cmd.replace("--out results/", "--cluster-cpus 4 --out "
+                                                   "results/over-")),
+                               cwd=drv, timeout=120, capture_output=True, text=True)
+        assert over.returncode == 1 and "fit only 0 at once" in over.stderr, over.stderr
+        assert "Traceback" not in over.stderr, over.stderr
+    assert time.monotonic() - t0 < 150
+
+
+def test_a_killed_cluster_worker_is_reported_like_a_lost_host(tmp_path: Path) -> None:
+    with cluster(tmp_path, 3) as (lab, drv, blocks):
+        name, cfg = blocks["config"]
+        planned = {**json.loads(cfg), "iterations": 600, "rtf": 4.0, "timeout_s": 150}
+        (drv / name).write_text(json.dumps(planned), encoding="utf-8")
+        cmd = driver_cmd(blocks, lab)
+        out = drv / cmd.split("--out", 1)[1].split()[0]
+        driver = lab["head"].popen(argv_of(cmd), cwd=drv, stdout=subprocess.PIPE,
+                                   stderr=subprocess.PIPE, text=True)
+        log = out / "rounds_fed_qlearning.log"
+        deadline = time.monotonic() + 90
+        while time.monotonic() < deadline and \
+                len(read_rounds_log(log, "fed_qlearning").rounds) < 1:
+            time.sleep(0.1)
+        assert log.is_file(), "no round within 90 s"
+        nodes = json.loads((out / "nodes.json").read_text(encoding="utf-8"))["nodes"]
+        gone = sorted(n["robot"] for n in nodes if n["host"] == lab["w2"].address)
+        assert len(gone) == 3, nodes
+        for pid in _pids_in(lab["w2"].namespace):       # the node dies: every process on it
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        _, stderr = driver.communicate(timeout=200)
+        detail = f"exit {driver.returncode}\n{stderr[-3000:]}"
+        assert driver.returncode == 1, detail
+        assert "Traceback" not in stderr, detail
+        assert "CLUSTER: cluster worker" in stderr and "left the cluster" in stderr, detail
+        rows = rounds_of(out)
+        assert [int(r["round"]) for r in rows] == list(range(1, 7)), detail
+        late = [r for r in rows if not set(gone) & set(r["visited"].split())]
+        assert late, detail
+        for r in late:
+            assert all(g in r["skipped"] for g in gone), r
+            assert r["all_equal"] == "true", r
+        summary = (out / "summary.md").read_text(encoding="utf-8")
+        assert "federation INCOMPLETE" in summary, summary
+        for g in gone:
+            assert f"LOST robot {g}" in summary, summary
+        cluster_part = summary.split("## Cluster", 1)[1]
+        assert f"{lab['w2'].address}" in cluster_part and "left the cluster" in cluster_part
+        kept = [n["robot"] for n in nodes if n["robot"] not in gone]
+        for r in kept:
+            assert (out / f"metrics_{r}.csv").stat().st_size > 0
+
+
+def _pids_in(ns: str) -> list[int]:
+    done = subprocess.run(["ip", "netns", "pids", ns], capture_output=True, text=True)
+    return [int(p) for p in done.stdout.split()] if done.returncode == 0 else []
