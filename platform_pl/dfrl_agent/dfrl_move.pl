@@ -82,12 +82,9 @@ attempt_move(Try, Retries, Backoff, R, Stale, Result) :-
     (   var(E)
     ->  Result = moved(R)
     ;   Stale == fresh,
-        E = error(permission_error(create, agent, Agent), _)
-    ->  % a copy of the agent is there: discard it if it is stale, then once more
-        agent_tokens(Node, Agent, Tokens),
-        lease_supersede(Node, Agent, Address, Tokens, Answer),
-        debug(dfrl(move), 'stale copy of ~w at ~w: ~p', [Agent, Address, Answer]),
-        (   Answer = replaced(_, _) ; Answer == none )
+        E = error(permission_error(create, agent, Agent), _),
+        % a copy of the agent is there: discard it if it is stale, then once more
+        stale_replaced(Node, Agent, Address)
     ->  attempt_move(Try, Retries, Backoff, R, tried, Result)
     ;   R < Retries,
         \+ E = error(permission_error(_, _, _), _),
@@ -99,6 +96,12 @@ attempt_move(Try, Retries, Backoff, R, Stale, Result) :-
         attempt_move(Try, Retries, Backoff, R1, Stale, Result)
     ;   Result = failed(E, R)
     ).
+
+stale_replaced(Node, Agent, Address) :-
+    agent_tokens(Node, Agent, Tokens),
+    lease_supersede(Node, Agent, Address, Tokens, Answer),
+    debug(dfrl(move), 'stale copy of ~w at ~w: ~p', [Agent, Address, Answer]),
+    (   Answer = replaced(_, _) -> true ; Answer == none ).
 
 %   The connect and reply timeouts of one try: the node's, cut to the time
 %   left (at least 0.1 s: a try always gets a chance).

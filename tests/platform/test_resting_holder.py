@@ -51,6 +51,7 @@ main :-
     node_start(localhost:Port, _, [token({TOKEN}), lease_s(Lease), connect_timeout(1),
                                    reply_timeout(Reply), default(true)]),
     format("LISTENING ~w~n", [Port]), flush_output,
+    ( getenv("DFRL_DBG", _) -> debug(dfrl(agent)), debug(dfrl(move)), debug(dfrl(lease)), debug(dfrl(custody)) ; true ),
     serve_stdin(Robot).
 
 serve_stdin(Robot) :-
