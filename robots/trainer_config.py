@@ -49,10 +49,11 @@ class TrainerConfig(EnvConfig):
         The ``dqn`` learner's network, replay and optimiser.
     reward_shuffle : int
         0 (the default): the learner learns from the reward the robot earned. ``W > 0``: a
-        negative control, the learner learns from rewards shuffled through a buffer of ``W``
-        observed rewards (:class:`dfrl.robots.reward_shuffle.RewardShuffle`, drawn from a
-        third stream of ``seed``), so that the reward no longer depends on the state and
-        action; the metrics still record the reward earned. Any learner.
+        negative control, the learner learns from rewards (each with its end-of-episode flag)
+        shuffled through a buffer of ``W`` observed ones
+        (:class:`dfrl.robots.reward_shuffle.RewardShuffle`, drawn from a third stream of
+        ``seed``), so that neither depends on the state and action; the metrics still record
+        the reward earned. Any learner.
     sim : SimConfig
         Control/physics rates, solver, robot.
     actions : ActionSet

@@ -13,8 +13,9 @@ bootstrap), and the robot respawns at a random free pose. If the robot moves les
 ``stuck_distance`` in ``stuck_steps`` steps it also respawns (a truncation: the update still
 bootstraps). ``iteration`` keeps counting across respawns.
 
-With ``reward_shuffle`` (a negative control) the update learns from a shuffled reward
-(:mod:`dfrl.robots.reward_shuffle`) while the metrics keep the reward earned.
+With ``reward_shuffle`` (a negative control) the update learns from a shuffled reward and
+end-of-episode flag (:mod:`dfrl.robots.reward_shuffle`) while the robot still respawns after
+a collision and the metrics keep the reward earned.
 """
 from __future__ import annotations
 
@@ -75,8 +76,9 @@ class Trainer:
         #: reward earned; None in an ordinary run.
         self.reward_shuffle = (RewardShuffle(c.reward_shuffle, np.random.default_rng(shuffle_seq))
                                if c.reward_shuffle else None)
-        #: The reward the last update learnt from (the one earned unless shuffled).
-        self.learned_reward = 0.0
+        #: The reward and end-of-episode flag the last update learnt from (the ones observed
+        #: unless shuffled).
+        self.learned_reward, self.learned_terminal = 0.0, False
         self.env = EPuckEnv(arena=c.arena, config=c.env_config())
         self.discretiser = Discretiser(c.discretisation)
         n_actions = int(self.env.action_space.n)
@@ -212,13 +214,14 @@ class Trainer:
         state, action = self._state, self._action
         obs, reward, terminated, truncated, info = env.step(action)
         next_state = self.discretiser(obs)
-        learnt = reward if self.reward_shuffle is None else self.reward_shuffle(reward)
-        self.learned_reward = learnt
+        learnt, end = ((reward, terminated) if self.reward_shuffle is None
+                       else self.reward_shuffle(reward, terminated))
+        self.learned_reward, self.learned_terminal = learnt, end
         if self._tabular:
-            next_action = self.learner.learn(state, action, learnt, next_state, terminated)
+            next_action = self.learner.learn(state, action, learnt, next_state, end)
         else:
             next_obs = np.array(obs, dtype=np.float64)
-            next_action = self.learner.learn(self._obs, action, learnt, next_obs, terminated)
+            next_action = self.learner.learn(self._obs, action, learnt, next_obs, end)
         if terminated or truncated:
             obs, _ = env.reset()
             next_state = self.discretiser(obs)
