@@ -252,10 +252,12 @@ def register_speedup(subparsers: argparse._SubParsersAction) -> None:
                    help="bootstrap resamples (default: %(default)s)")
     p.add_argument("--jobs", type=int, default=d.jobs, help="processes (default: %(default)s)")
     p.add_argument("--out", type=Path, default=None, help="also write speedup.md, "
-                   "speedup.json, speedup_runs.json, tidy.csv and provenance.json there")
+                   "speedup.json, tidy.csv, provenance.json there, and each federation to "
+                   "speedup_runs.jsonl as it ends")
+    p.add_argument("--resume", action="store_true", help="reuse the federations of --out's "
+                   "speedup_runs.jsonl run with the same options")
     p.add_argument("--from-runs", type=Path, default=None, metavar="FILE",
-                   help="analyse the runs an earlier study wrote (its speedup_runs.json) "
-                        "instead of running; give the options it ran with")
+                   help="only analyse a speedup_runs.jsonl (the options it ran with)")
     p.set_defaults(func=cmd_speedup)
 
 
@@ -266,8 +268,7 @@ def cmd_speedup(args: argparse.Namespace) -> int:
 
     from dfrl.experiments.science.reference import ReferenceError
     from dfrl.experiments.science.reference_store import reference_table
-    from dfrl.experiments.science.studies.speedup import (REFERENCE, SpeedupOptions, load_runs,
-                                                          run_all)
+    from dfrl.experiments.science.studies.speedup import REFERENCE, SpeedupOptions, study_runs
     from dfrl.experiments.science.studies.speedup_report import (analyse, markdown, tidy_rows,
                                                                  to_json)
     from dfrl.experiments.science.tidy import TIDY_FILE, write_tidy
@@ -298,8 +299,7 @@ def cmd_speedup(args: argparse.Namespace) -> int:
     old = signal.signal(signal.SIGTERM, stop)
     t0 = time.monotonic()
     try:
-        results = (load_runs(args.from_runs, opts) if args.from_runs is not None else
-                   run_all(opts, ref, progress))
+        results = study_runs(opts, ref, args.out, args.resume, args.from_runs, progress)
     except (OSError, ValueError) as exc:
         print(f"dfrl speedup: {exc}", file=sys.stderr)
         return 2
@@ -309,10 +309,6 @@ def cmd_speedup(args: argparse.Namespace) -> int:
     finally:
         signal.signal(signal.SIGTERM, old)
     wall = time.monotonic() - t0
-    if args.out is not None:      # the runs first: a failure below loses no federation
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "speedup_runs.json").write_text(json.dumps(list(results.values())),
-                                                    encoding="utf-8")
     rows = analyse(opts, results)
     text = markdown(rows, opts, wall, ref.name)
     if args.out is not None:

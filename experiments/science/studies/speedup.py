@@ -27,8 +27,9 @@ counted as reaching it there.
 from __future__ import annotations
 
 import json
+import signal
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -176,69 +177,125 @@ def run_one(arena_list: tuple[str, ...], seed: int, opts: SpeedupOptions,
             "seconds": time.perf_counter() - t0}
 
 
+#: The options a federation's result depends on (the rest only change the analysis).
+RUN_OPTIONS = ("iterations", "share_every", "grid", "targets", "score_threshold",
+               "score_every", "score_hold", "eval_steps", "episode_steps", "alpha", "method")
+#: One finished federation per line, appended as each ends (``--out``).
+RUNS_FILE = "speedup_runs.jsonl"
+
+
+def recipe(opts: SpeedupOptions) -> dict[str, Any]:
+    """What a federation's result depends on besides its arenas and seed (JSON-ready)."""
+    return {k: list(v) if isinstance(v, tuple) else v
+            for k, v in ((k, getattr(opts, k)) for k in RUN_OPTIONS)}
+
+
 def runs_needed(opts: SpeedupOptions) -> list[tuple[tuple[str, ...], int]]:
-    """The distinct federations (arena list, seed) the study runs, largest first (N = 1 and
-    any N whose arenas coincide across conditions are run once)."""
+    """The distinct federations (arena list, seed) the study runs, the smallest N first (so
+    a study stopped early holds whole N), N = 1 and any N whose arenas coincide across
+    conditions once."""
     keys = {(arenas(c, n), s) for c in opts.conditions for n in opts.robots for s in opts.seeds}
-    return sorted(keys, key=lambda k: (-len(k[0]), k[0], k[1]))
+    return sorted(keys, key=lambda k: (len(k[0]), k[0], k[1]))
+
+
+def _worker_signals() -> None:
+    """A worker ends on SIGTERM and leaves Ctrl-C to the study (a forked worker would inherit
+    the study's SIGTERM handler and outlive the study)."""
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def run_all(opts: SpeedupOptions, reference: Reference,
-            progress: Callable[[int, int, dict[str, Any]], None] | None = None
-            ) -> dict[tuple[tuple[str, ...], int], dict[str, Any]]:
-    """Every federation of the study on ``opts.jobs`` processes; by (arenas, seed).
+            progress: Callable[[int, int, dict[str, Any]], None] | None = None,
+            done: Mapping[tuple[tuple[str, ...], int], dict[str, Any]] | None = None,
+            record: Path | None = None) -> dict[tuple[tuple[str, ...], int], dict[str, Any]]:
+    """Every federation of the study on ``opts.jobs`` processes; by (arenas, seed). Those in
+    ``done`` (:func:`load_runs`) are reused; each new one is appended to ``record`` (a
+    :data:`RUNS_FILE`) as it ends, with :func:`recipe`.
 
     Raises
     ------
     KeyboardInterrupt
         Ctrl-C or SIGTERM (when the caller turns it into one): pending runs are cancelled and
-        the workers ended.
+        the workers ended; the finished ones are in ``record``.
     """
-    from dfrl.experiments.science.reproduce import _stop_pool
-
     opts.check()
     keys = runs_needed(opts)
-    out: dict[tuple[tuple[str, ...], int], dict[str, Any]] = {}
+    out = {k: v for k, v in (done or {}).items() if k in keys}
+    todo = [k for k in keys if k not in out]
+
+    def finished(k: tuple[tuple[str, ...], int], r: dict[str, Any]) -> None:
+        out[k] = r
+        if record is not None:
+            with open(record, "a", encoding="utf-8") as fh:
+                fh.write(json.dumps({"recipe": recipe(opts), **r}) + "\n")
+        if progress is not None:
+            progress(len(out), len(keys), r)
+
     if opts.jobs <= 1:
-        for k in keys:
-            out[k] = run_one(k[0], k[1], opts, reference)
-            if progress is not None:
-                progress(len(out), len(keys), out[k])
+        for k in todo:
+            finished(k, run_one(k[0], k[1], opts, reference))
         return out
-    pool = ProcessPoolExecutor(max_workers=opts.jobs)
+    pool = ProcessPoolExecutor(max_workers=opts.jobs, initializer=_worker_signals)
     try:
-        futures = {pool.submit(run_one, k[0], k[1], opts, reference): k for k in keys}
+        futures = {pool.submit(run_one, k[0], k[1], opts, reference): k for k in todo}
         for fut in as_completed(futures):
-            out[futures[fut]] = fut.result()
-            if progress is not None:
-                progress(len(out), len(keys), out[futures[fut]])
+            finished(futures[fut], fut.result())
     except BaseException:
-        _stop_pool(pool)
+        workers = list((getattr(pool, "_processes", None) or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)   # forgets its workers: taken before
+        for w in workers:
+            w.terminate()
         raise
     pool.shutdown()
     return out
 
 
-def load_runs(path: str | Path, opts: SpeedupOptions
+def load_runs(path: str | Path, opts: SpeedupOptions, complete: bool = True
               ) -> dict[tuple[tuple[str, ...], int], dict[str, Any]]:
-    """The runs a study wrote (``speedup_runs.json``: a list of :func:`run_one` results), by
-    (arenas, seed), for analysing again.
+    """The federations a study recorded (a :data:`RUNS_FILE`) that these options would run
+    with the same :func:`recipe`, by (arenas, seed); the last line of a federation wins.
 
     Raises
     ------
     ValueError
-        A run the options need is missing, or was run with another budget.
+        ``complete`` and a federation the options need is missing (or was run with other
+        options), or a line is not JSON (the message names the line).
     OSError
         The file cannot be read.
     """
-    out = {}
-    for r in json.loads(Path(path).read_text(encoding="utf-8")):
-        out[(tuple(r["arenas"]), int(r["seed"]))] = r
-    for k in runs_needed(opts):
-        if k not in out:
-            raise ValueError(f"{path}: no run of arenas {'+'.join(k[0])} with seed {k[1]}")
-        if out[k]["budget"] != opts.iterations or set(out[k]["times"]) != set(measures(opts)):
-            raise ValueError(f"{path}: the run of {'+'.join(k[0])}, seed {k[1]} measured "
-                             f"{sorted(out[k]['times'])} with budget {out[k]['budget']}, "
-                             f"not these options' {measures(opts)} with {opts.iterations}")
+    want, needed, out = recipe(opts), set(runs_needed(opts)), {}
+    lines = Path(path).read_text(encoding="utf-8").splitlines()
+    for no, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            r = json.loads(line)
+        except ValueError as exc:
+            raise ValueError(f"{path}:{no}: not a JSON line ({exc})") from exc
+        key = (tuple(r["arenas"]), int(r["seed"]))
+        if r.get("recipe") == want and key in needed:
+            out[key] = {k: v for k, v in r.items() if k != "recipe"}
+    missing = [k for k in runs_needed(opts) if k not in out]
+    if complete and missing:
+        k = missing[0]
+        raise ValueError(f"{path}: {len(missing)} federations these options need are missing "
+                         f"or were run with other options, e.g. {'+'.join(k[0])} seed {k[1]}")
     return out
+
+
+def study_runs(opts: SpeedupOptions, reference: Reference, out: Path | None, resume: bool,
+               from_runs: Path | None,
+               progress: Callable[[int, int, dict[str, Any]], None] | None = None
+               ) -> dict[tuple[tuple[str, ...], int], dict[str, Any]]:
+    """The federations of ``dfrl speedup``: read from ``from_runs`` alone, or run, each
+    appended to ``out/``:data:`RUNS_FILE` when ``out`` is given, reusing those already there
+    with ``resume``."""
+    if from_runs is not None:
+        return load_runs(from_runs, opts)
+    record = None if out is None else Path(out) / RUNS_FILE
+    done = (load_runs(record, opts, complete=False)
+            if resume and record is not None and record.is_file() else {})
+    if record is not None:
+        record.parent.mkdir(parents=True, exist_ok=True)
+    return run_all(opts, reference, progress, done, record)

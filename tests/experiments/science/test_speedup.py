@@ -30,9 +30,9 @@ def test_arenas_per_condition_and_n1_run_once() -> None:
     with pytest.raises(ValueError):
         arenas("mixed", 2)
     opts = SpeedupOptions(robots=(1, 2), seeds=(1, 2, 3))
-    # 3 seeds x (N = 1 once, N = 2 homogeneous, N = 2 heterogeneous); largest first
+    # 3 seeds x (N = 1 once, N = 2 homogeneous, N = 2 heterogeneous); smallest N first
     keys = runs_needed(opts)
-    assert len(keys) == 9 and len(keys[0][0]) == 2 and len(keys[-1][0]) == 1
+    assert len(keys) == 9 and len(keys[0][0]) == 1 and len(keys[-1][0]) == 2
     with pytest.raises(ValueError, match="including 1"):
         SpeedupOptions(robots=(2, 5)).check()
     with pytest.raises(ValueError, match="multiple of grid"):
@@ -117,7 +117,7 @@ def test_dfrl_speedup_tiny_end_to_end(tmp_path, capsys: pytest.CaptureFixture[st
     assert "| error<=0.2 | 1 | 1xr1 | 0/3 | > budget" in text          # censored, said so
     assert "| error<=0.999 | 2 | 1xr1+1xr2 | 3/3 | 100 [100, 100]" in text
     for name in ("speedup.md", "speedup.json", "tidy.csv", "provenance.json",
-                 "speedup_runs.json"):
+                 "speedup_runs.jsonl"):
         assert (out / name).is_file(), name
     data = json.loads((out / "speedup.json").read_text())
     censored = [r for r in data["rows"] if r["measure"] == "error<=0.2"]
@@ -131,11 +131,16 @@ def test_dfrl_speedup_tiny_end_to_end(tmp_path, capsys: pytest.CaptureFixture[st
     # N = 1 counts in both conditions: 2 conditions x 2 N x 3 seeds x 2 grid points
     assert len([r for r in rows if r["metric"] == "relative_error@r1"]) == 24
     assert json.loads((out / "provenance.json").read_text())["command"]
-    # the same runs analysed again give the same table
-    assert main([*args[:-2], "--from-runs", str(out / "speedup_runs.json")]) == 0
+    # the same runs analysed again give the same table; other options find none of them
+    runs = out / "speedup_runs.jsonl"
+    assert len(runs.read_text().splitlines()) == 9
+    assert main([*args[:-2], "--from-runs", str(runs)]) == 0
     again = capsys.readouterr().out
     assert again.split("### homogeneous")[1] == text.split("### homogeneous")[1]
-    assert main([*args[:-2], "--iterations", "300", "--from-runs",
-                 str(out / "speedup_runs.json")]) == 2
+    assert main([*args[:-2], "--iterations", "300", "--from-runs", str(runs)]) == 2
+    assert "9 federations these options need are missing" in capsys.readouterr().err
+    # --resume reuses all nine: nothing is run or appended
+    assert main([*args, "--resume"]) == 0
+    assert "[" not in capsys.readouterr().err and len(runs.read_text().splitlines()) == 9
     assert main(["speedup", "--seeds", "5"]) == 2                       # ambiguous
     np.testing.assert_equal(len(data["runs"]), 9)
