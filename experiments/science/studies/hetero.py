@@ -28,6 +28,7 @@ reported too.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -101,7 +102,7 @@ def _score(config: Any, seed: int, options: HeteroOptions, q_table: np.ndarray |
 
 def run_one(run: str, seed: int, options: HeteroOptions) -> dict[str, Any]:
     """One run of one seed (see the module doc): its evaluation rows, the dqn's distillation
-    residuals and its wall time."""
+    residuals, the sha256 of each robot's final parameters (by role) and its wall time."""
     from dfrl.robots.grid_view import GridView
     from dfrl.robots.training import Trainer
 
@@ -130,10 +131,13 @@ def run_one(run: str, seed: int, options: HeteroOptions) -> dict[str, Any]:
                                t.params if function else None)
                     rows.append({"seed": seed, "run": run, "role": role, "algo": algo,
                                  "iteration": i, **m})
+        digests = {role: hashlib.sha256(t.params.tobytes()).hexdigest()
+                   for (role, _, _), t in zip(roster, trainers)}
     finally:
         for t in trainers:
             t.close()
-    return {"rows": rows, "residuals": residuals, "seconds": time.perf_counter() - t0}
+    return {"rows": rows, "residuals": residuals, "digests": digests,
+            "seconds": time.perf_counter() - t0}
 
 
 def _job(args: tuple[str, int, HeteroOptions]) -> tuple[str, int, dict[str, Any]]:
@@ -157,12 +161,15 @@ class HeteroResults:
     residuals : dict
         The dqn's distillation residual RMS over every share of the ``mixed`` runs: ``mean``,
         ``max``, ``shares``.
+    digests : dict
+        ``"RUN/SEED"`` -> role -> sha256 of that robot's final parameters.
     seconds : float
     """
 
     rows: list[dict[str, Any]]
     comparisons: list[dict[str, Any]]
     residuals: dict[str, float]
+    digests: dict[str, dict[str, str]]
     seconds: float
 
     def to_dict(self) -> dict[str, Any]:
@@ -219,6 +226,7 @@ def run(options: HeteroOptions, output_dir: str | Path | None = None) -> HeteroR
         residuals={"mean": float(np.mean(res_rms)) if res_rms else float("nan"),
                    "max": float(np.max(res_rms)) if res_rms else float("nan"),
                    "shares": len(res_rms)},
+        digests={f"{r}/{s}": res["digests"] for r, s, res in done},
         seconds=time.perf_counter() - t0)
     if output_dir is not None:
         out = Path(output_dir)
