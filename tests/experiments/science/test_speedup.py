@@ -19,8 +19,8 @@ from dfrl.experiments.science.studies.speedup import (REFERENCE, SpeedupOptions,
 from dfrl.experiments.science.studies.speedup_report import analyse, verdict
 from dfrl.robots.training import TrainerConfig
 
-TINY = dict(iterations=300, share_every=100, grid=100, score_every=100, eval_steps=60,
-            episode_steps=30, resamples=200, jobs=1)
+TINY = dict(iterations=300, share_every=100, grid=100, score_every=300, score_hold=1,
+            eval_steps=60, episode_steps=30, resamples=200, jobs=1)
 
 
 def test_arenas_per_condition_and_n1_run_once() -> None:
@@ -53,11 +53,10 @@ def test_observer_stops_the_federation_and_final_share_can_be_off() -> None:
                    observe_every=50)
     assert seen == [50, 100, 150, 200] and fed.iterations == 200
     assert fed.q_sum is not None and fed.q_sum.shape == (2, 200)
-    # budget 250 with shares every 100: the default shares once more at 250, final_share=False
-    # leaves the two robots' tables apart after the share at 200
-    shared = federate(cfgs, 250, 100)
-    apart = federate(cfgs, 250, 100, final_share=False)
-    assert 250 in shared.snapshots and 250 not in apart.snapshots
+    # budget 250 with shares every 100: by default one more share at 250 (the last round);
+    # final_share=False keeps the shares at 100 and 200 only
+    apart = federate(cfgs, 250, 100, final_share=False, snapshot_every=1)
+    assert sorted(apart.snapshots) == [100, 200]
     with pytest.raises(ValueError):
         federate(cfgs, 100, 50, observe=lambda it, tr: False)
 
@@ -70,7 +69,7 @@ def test_run_one_is_deterministic_with_its_seed() -> None:
     c = run_one(("r1", "r2"), 5, opts, ref)
     assert a["error"] == b["error"] and a["score"] == b["score"] and a["times"] == b["times"]
     assert a["error"] != c["error"]                     # another seed, another run
-    assert a["grid"] == [100, 200, 300] and a["score_iterations"] == [100, 200, 300]
+    assert a["grid"] == [100, 200, 300] and a["score_iterations"] == [300]
     assert a["times"]["error<=0.999"] == 100            # the zero table is at 1
     assert a["times"]["error<=0.2"] is None             # far below one run's floor: censored
     assert a["iterations"] == 300                       # not every target reached: no stop
@@ -108,7 +107,7 @@ def test_analysis_keeps_censored_runs_censored() -> None:
 def test_dfrl_speedup_tiny_end_to_end(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "study"
     args = ["speedup", "--robots", "1", "2", "--n-seeds", "3", "--iterations", "200",
-            "--share-every", "100", "--grid", "100", "--score-every", "100", "--eval-steps",
+            "--share-every", "100", "--grid", "100", "--score-every", "200", "--eval-steps",
             "50", "--targets", "0.999", "0.2", "--resamples", "200", "--jobs", "1",
             "--out", str(out)]
     assert main(args) == 0
@@ -128,6 +127,7 @@ def test_dfrl_speedup_tiny_end_to_end(tmp_path, capsys: pytest.CaptureFixture[st
     with open(out / "tidy.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert {r["metric"] for r in rows} == {"relative_error@r1", "score@r1"}
+    assert len([r for r in rows if r["metric"] == "score@r1"]) == 12     # one per run
     # N = 1 counts in both conditions: 2 conditions x 2 N x 3 seeds x 2 grid points
     assert len([r for r in rows if r["metric"] == "relative_error@r1"]) == 24
     assert json.loads((out / "provenance.json").read_text())["command"]
