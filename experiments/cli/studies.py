@@ -145,12 +145,15 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 def register_paper(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
-        "paper", help="the paper's experiment with K seeds, the negative control, greedy "
+        "paper", help="the paper's experiment with K seeds, negative controls, greedy "
                       "evaluations, figures with 95%% bands and report.md with tests",
         description="Every federated combination (Q-learning/SARSA x average/max) and the "
-                    "standalone baselines K times, plus the negative control (random "
-                    "behaviour, epsilon 1); report.md states each paper observation as a test "
-                    "with an interval and a verdict. Exit 1 if a federated run failed.")
+                    "standalone baselines K times, plus the negative controls (the zero table "
+                    "and runs trained on shuffled rewards, through the same pipeline) and the "
+                    "off-policy reference (random behaviour, epsilon 1); report.md states each "
+                    "paper observation as a test with an interval and a verdict, and whether "
+                    "it is a test of learning (its controls fail it). Exit 1 if a federated "
+                    "run failed.")
     p.add_argument("--out", type=Path, default=Path("results/paper"),
                    help="output folder (default: %(default)s)")
     add_seed_arguments(p, 5)
@@ -170,7 +173,12 @@ def register_paper(subparsers: argparse._SubParsersAction) -> None:
                    help="evaluation steps per table and arena (default: %(default)s)")
     p.add_argument("--jobs", type=int, default=2,
                    help="processes for standalone runs and evaluations (default: %(default)s)")
-    p.add_argument("--no-control", action="store_true", help="skip the negative control")
+    p.add_argument("--no-control", action="store_true",
+                   help="skip the negative controls and the off-policy reference (every test "
+                        "then says it cannot judge)")
+    p.add_argument("--shuffle-buffer", type=int, default=None, metavar="W",
+                   help="the shuffled-reward control's buffer of observed rewards "
+                        "(default: 1000)")
     p.add_argument("--skip-existing", action="store_true",
                    help="reuse finished runs found in --out")
     add_figure_arguments(p)
@@ -192,7 +200,9 @@ def cmd_paper(args: argparse.Namespace) -> int:
                         (LONG_BUDGET if args.budget == "long" else PAPER_ITERATIONS),
                         respite=args.respite,
                         points=args.eval_points, eval_steps=args.eval_steps, jobs=args.jobs,
-                        control=not args.no_control, skip_existing=args.skip_existing)
+                        control=not args.no_control, skip_existing=args.skip_existing,
+                        **({} if args.shuffle_buffer is None
+                           else {"shuffle_buffer": args.shuffle_buffer}))
     try:
         done = reproduce_paper(args.out, opts)
     except (ExperimentError, FileNotFoundError, ValueError) as exc:
