@@ -9,7 +9,8 @@ process of the worker, on the worker's host::
 
 (``dfrl.token`` in the worker's working folder, as on every robot host: the token never
 travels through the cluster engine), waits for its ``dfrl robot listening on A:P`` line,
-reports ``A:P`` to the driver in the run's variable ``dfrl-<run>-<robot>-address``, and then
+reports ``A:P`` to the driver in the run's variable ``dfrl-<run>-<robot>-address`` (and sets
+the event ``dfrl-<run>-<robot>-listening``), and then
 holds the cluster resources it was placed with until one of:
 
 * the driver sets the run's event ``dfrl-<run>-stop`` (the run ended);
@@ -153,6 +154,7 @@ def serve_robot(run_key: str, robot: str, token_file: str = "dfrl.token",
     try:
         address = _await_listening(proc, out, where)
         Variable(f"{prefix}-{robot}-address").set([address[0], address[1], worker])
+        Event(f"{prefix}-{robot}-listening").set()    # waiting on an event logs no timeouts
         ended = _hold(proc, Event(f"{prefix}-stop"), Variable(f"{prefix}-lease"), lease_s)
     finally:
         code = _end(proc)

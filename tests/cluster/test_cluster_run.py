@@ -62,6 +62,14 @@ def argv_of(line: str) -> list[str]:
     return [sys.executable, "-m", words[0], *words[1:]]
 
 
+T0 = time.monotonic()
+
+
+def phase(what: str) -> None:
+    """A timestamped line on stderr (pytest shows it with a failure): where the time went."""
+    print(f"[{time.monotonic() - T0:7.1f} s] {what}", file=sys.stderr, flush=True)
+
+
 def wait_for(path: Path, pattern: str, timeout_s: float) -> None:
     """Until ``path`` holds ``pattern`` (bounded: ``timeout_s``)."""
     deadline = time.monotonic() + timeout_s
@@ -90,6 +98,7 @@ def cluster(tmp: Path, per_worker: int) -> Iterator[tuple[Lab, Path, dict]]:
         lab["head"].popen(argv_of(line), cwd=drv, stdin=subprocess.DEVNULL,
                           stdout=subprocess.DEVNULL, stderr=open(drv / "scheduler.log", "w"))
         wait_for(drv / "scheduler.log", "Scheduler at:", 60)
+        phase("scheduler up")
         for w in WORKERS:
             cwd = tmp / w
             cwd.mkdir()
@@ -102,7 +111,10 @@ def cluster(tmp: Path, per_worker: int) -> Iterator[tuple[Lab, Path, dict]]:
                          stdout=subprocess.DEVNULL, stderr=open(cwd / "worker.log", "w"))
         for w in WORKERS:
             wait_for(tmp / w / "worker.log", "Registered to:", 60)
+        phase("workers registered")
         yield lab, drv, blocks
+        phase("closing the lab")
+    phase("lab closed")
     assert not leftover_namespaces(lab.tag)
 
 
@@ -121,8 +133,9 @@ def test_the_documented_cluster_run_federates_robots_placed_on_workers(tmp_path:
         name, cfg = blocks["config"]
         (drv / name).write_text(cfg, encoding="utf-8")
         cmd = driver_cmd(blocks, lab)
-        done = lab["head"].run(argv_of(cmd), cwd=drv, timeout=240, capture_output=True,
+        done = lab["head"].run(argv_of(cmd), cwd=drv, timeout=300, capture_output=True,
                                text=True)
+        phase("driver exited")
         detail = f"exit {done.returncode}\n{done.stderr[-3000:]}"
         assert done.returncode == 0, detail
         out = drv / cmd.split("--out", 1)[1].split()[0]
@@ -156,7 +169,8 @@ def test_the_documented_cluster_run_federates_robots_placed_on_workers(tmp_path:
                                cwd=drv, timeout=120, capture_output=True, text=True)
         assert over.returncode == 1 and "fit only 0 at once" in over.stderr, over.stderr
         assert "Traceback" not in over.stderr, over.stderr
-    assert time.monotonic() - t0 < 150
+        phase("over-asking driver refused")
+    assert time.monotonic() - t0 < 300
 
 
 def test_a_killed_cluster_worker_is_reported_like_a_lost_host(tmp_path: Path) -> None:
@@ -169,20 +183,22 @@ def test_a_killed_cluster_worker_is_reported_like_a_lost_host(tmp_path: Path) ->
         driver = lab["head"].popen(argv_of(cmd), cwd=drv, stdout=subprocess.PIPE,
                                    stderr=subprocess.PIPE, text=True)
         log = out / "rounds_fed_qlearning.log"
-        deadline = time.monotonic() + 90
+        deadline = time.monotonic() + 180     # placing 6 services on a loaded CI
         while time.monotonic() < deadline and \
                 len(read_rounds_log(log, "fed_qlearning").rounds) < 1:
             time.sleep(0.1)
-        assert log.is_file(), "no round within 90 s"
+        assert log.is_file(), "no round within 180 s"
         nodes = json.loads((out / "nodes.json").read_text(encoding="utf-8"))["nodes"]
         gone = sorted(n["robot"] for n in nodes if n["host"] == lab["w2"].address)
         assert len(gone) == 3, nodes
+        phase(f"round 1 logged; killing w2 ({', '.join(gone)})")
         for pid in _pids_in(lab["w2"].namespace):       # the node dies: every process on it
             try:
                 os.kill(pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
-        _, stderr = driver.communicate(timeout=200)
+        _, stderr = driver.communicate(timeout=300)
+        phase("driver exited")
         detail = f"exit {driver.returncode}\n{stderr[-3000:]}"
         assert driver.returncode == 1, detail
         assert "Traceback" not in stderr, detail

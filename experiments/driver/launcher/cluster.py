@@ -93,6 +93,7 @@ class ClusterPlacement:
         self._ended: dict[str, Any] = {}
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._lease: Any = None
 
     # -- connecting and placing ----------------------------------------------------------------
     def open(self) -> ClusterPlacement:
@@ -131,7 +132,7 @@ class ClusterPlacement:
             waiting up to :data:`CONNECT_S` for workers that are still registering), a task
             failed (its reason given), or a robot was not placed within :data:`PLACE_S`.
         """
-        from distributed import Variable
+        from distributed import Event, Variable
 
         from dfrl.experiments.robot_host.cluster_task import serve_robot
 
@@ -154,6 +155,8 @@ class ClusterPlacement:
                 f"each, but its {len(offered)} workers fit only {fits} at once "
                 f"({RESOURCE} offered: {', '.join(f'{w} {a:g}' for w, a in offered.items()) or 'none'}); "
                 f"start workers with --resources {RESOURCE}=N")
+        self._lease = Variable(f"dfrl-{self.run_key}-lease", client=self._client)
+        self._lease.set(0)          # before any task looks at it
         for rid in robots:
             self._futures[rid] = self._client.submit(
                 serve_robot, self.run_key, rid, lease_s=LEASE_S, key=f"dfrl-{self.run_key}-{rid}",
@@ -161,18 +164,16 @@ class ClusterPlacement:
         self._start_watch()
         deadline = time.monotonic() + PLACE_S
         for rid in robots:
-            future, var = self._futures[rid], Variable(f"dfrl-{self.run_key}-{rid}-address",
-                                                       client=self._client)
-            while True:
+            future = self._futures[rid]
+            listening = Event(f"dfrl-{self.run_key}-{rid}-listening", client=self._client)
+            while not listening.wait(timeout=0.5):
                 if future.done():
                     raise ExperimentError(f"robot {rid} was not placed: {self._why(future)}")
-                try:
-                    host, port, worker = var.get(timeout=0.5)
-                    break
-                except TimeoutError:
-                    if time.monotonic() > deadline:
-                        raise ExperimentError(f"robot {rid} was not placed on cluster "
-                                              f"{self.address} within {PLACE_S:.0f} s") from None
+                if time.monotonic() > deadline:
+                    raise ExperimentError(f"robot {rid} was not placed on cluster "
+                                          f"{self.address} within {PLACE_S:.0f} s")
+            host, port, worker = Variable(f"dfrl-{self.run_key}-{rid}-address",
+                                          client=self._client).get(timeout=10)
             with self._lock:
                 self._placed[rid] = Placement(rid, str(host), int(port), str(worker))
         return self.placements()
@@ -200,14 +201,11 @@ class ClusterPlacement:
         self._thread.start()
 
     def _watch(self) -> None:
-        from distributed import Variable
-
-        lease = Variable(f"dfrl-{self.run_key}-lease", client=self._client)
         beat = 0
         while not self._stop.wait(WATCH_S):
             beat += 1
             try:
-                lease.set(beat)
+                self._lease.set(beat)
                 workers = set(self._client.scheduler_info(n_workers=-1)["workers"])
             except Exception as exc:  # noqa: BLE001 - the scheduler's fault is reported
                 self._lose("scheduler", f"cluster {self.address} did not answer: {exc}")
@@ -303,14 +301,18 @@ def run_on_cluster(config: ExperimentConfig, output_dir: str | Path | ClaimedFol
             print(line, file=progress, flush=True)
 
     local = [r.id for r in config.robots if r.robot_host is None]
+    t0 = time.monotonic()
     placement = ClusterPlacement(address, cpus, say).open()
     try:
         placed = placement.place(local)
         say(f"cluster {address}: placed " + ", ".join(
-            f"{p.robot}@{p.host}:{p.port}" for p in placed.values()))
+            f"{p.robot}@{p.host}:{p.port}" for p in placed.values())
+            + f" in {time.monotonic() - t0:.1f} s")
         results = run(placed_config(config, placed), output_dir, progress, force)
     finally:
+        t1 = time.monotonic()
         placement.release()
+        say(f"cluster {address}: released the robots' tasks in {time.monotonic() - t1:.1f} s")
     out = results.output_dir
     (out / CLUSTER_FILE).write_text(json.dumps(placement.record(), indent=2) + "\n",
                                     encoding="utf-8")
