@@ -17,7 +17,8 @@ seed's evaluation seed.
 
 Layout of ``OUT``: ``seed<S>/<config name>/`` (a federated results folder, the controls'
 ``control_shuffled_qlearning_average`` and the reference's ``reference_qlearning_average``
-among them), ``seed<S>/standalone/<algo>_<arena>/``, ``seed<S>/standalone/shuffled_qlearning_<arena>/``,
+among them), ``seed<S>/standalone/<algo>_<arena>/``,
+``seed<S>/standalone/shuffled_qlearning_<arena>/``,
 ``seed<S>/standalone/reference_qlearning_<arena>/``, ``seed<S>/zero_table/evaluations.csv``,
 ``figures/`` (means over seeds with 95% bands), ``report.md``
 (:mod:`dfrl.experiments.science.report.paper`), ``provenance.json`` (versions, commit, command
@@ -258,8 +259,8 @@ def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reprod
                         cfg = TrainerConfig.from_dict({**plain.to_dict(),
                                                        "learner": reference_learner()})
                         sa_jobs[(s, "reference", r.arena)] = _standalone(
-                            pool, out / f"seed{s}" / "standalone" / f"reference_qlearning_{r.arena}",
-                            cfg, opts, s)
+                            pool, out / f"seed{s}" / "standalone"
+                            / f"reference_qlearning_{r.arena}", cfg, opts, s)
                 zero_jobs[s] = {a: pool.submit(eval_job, base_cfg, np.zeros((n_states, n_actions)),
                                                a, opts.eval_steps, opts.episode_steps,
                                                EVAL_SEED + s) for a in all_arenas}

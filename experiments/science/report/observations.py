@@ -204,8 +204,10 @@ def paper_tests(fed: dict[str, list[SeedRun]], standalone: dict[str, list[SeedRu
         arenas = sorted(set(f.arenas.values()) & set(s.arenas.values()))
         return robots_mean(f, t90, arenas) - robots_mean(s, t90, arenas)
     held = lambda f, s: final_score(f, "held_out") - final_score(s, "held_out")  # noqa: E731
-    pair_ctrl = lambda fn: ([above(SHUFFLED, by_seed(c.shuffled_fed, c.shuffled_sa, fn))]  # noqa: E731
-                            if c.shuffled_fed and c.shuffled_sa else [])
+    def pair_ctrl(fn: Callable[[SeedRun, SeedRun], float]) -> list[Verdict]:
+        if not (c.shuffled_fed and c.shuffled_sa):
+            return []
+        return [above(SHUFFLED, by_seed(c.shuffled_fed, c.shuffled_sa, fn))]
     tests.append(Test(
         "5", "Standalone learning saturates faster than federated",
         "iterations for the reward per step to make 90% of its gain, federated minus standalone "
