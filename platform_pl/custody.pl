@@ -13,6 +13,7 @@
             custody_unstage/2,          % +Node, +Name
             custody_activated/3,        % +Node, +Name, +MigId
             custody_option/4,           % +Node, +Name, +Default, -Value
+            custody_take_recovered/2,   % +Node, +Name
             with_custody/2              % +Node, :Goal
           ]).
 :- use_module(node, [node_option/3, ctx_node/2]).
@@ -62,7 +63,10 @@ Recovery (custody_open/2, at node start):
     deleting the file): it is deleted;
   - an active agent is installed idle; if it was running it is
     returned in ToRestart (weak migration: its handler starts again
-    with `main`);
+    with `main`) and noted as recovered: custody_take_recovered/2 tells
+    its handler, once, that it starts from the store, not from an
+    arrival (the dFRL agent then asks its holder whether it was
+    resurrected elsewhere meanwhile before it does anything);
   - a staged agent is installed staged; the settle thread of
     migration.pl asks its source at once.
 
@@ -85,6 +89,7 @@ rewrite or delete the agent's file under the node's custody mutex.
     staged_/6,                  % Node, Name, MigId, Source, SourceInc, Since
     via_/3,                     % Node, Name, Via
     run_flag_/3,                % Node, Name, idle|run
+    recovered_/2,               % Node, Name: restarted from the store
     opened_/1.                  % Node
 
 :- multifile agents:agent_changed/3.
@@ -188,6 +193,7 @@ recover_agent(Node, File, custody_agent(Name, State, Via, Record), Restart) :-
         assertz(via_(Node, Name, Via)),
         assertz(run_flag_(Node, Name, Flag)),
         Flag == run,
+        assertz(recovered_(Node, Name)),
         Restart = Name
     ;   State = staged(MigId, Source, SInc, Since)
     ->  catch(agent_install(Node, Record, staged(MigId), Name), E,
@@ -213,8 +219,17 @@ custody_close(Node) :-
                    retractall(staged_(Node, _, _, _, _, _)),
                    retractall(via_(Node, _, _)),
                    retractall(run_flag_(Node, _, _)),
+                   retractall(recovered_(Node, _)),
                    retractall(opened_(Node))
                  )).
+
+%!  custody_take_recovered(+Node, +Name) is semidet.
+%
+%   True, once, if Name was restarted on Node from its store
+%   (custody_open/2 returned it to restart) and has not been asked yet.
+
+custody_take_recovered(Node, Name) :-
+    with_custody(Node, retract(recovered_(Node, Name))).
 
 %!  custody_incarnation(+Node, -Inc) is det.
 

@@ -7,7 +7,8 @@
           ]).
 :- use_module('../tartarus').
 :- use_module('../agents',
-              [agent_property/3, agent_create/4, agent_add_facts/3]).
+              [agent_property/3, agent_create/4, agent_add_facts/3, agent_status/3]).
+:- use_module('../custody', [custody_take_recovered/2]).
 :- use_module(dfrl_lease,
               [ lease_arrived/3, lease_check/3, lease_progress/4,
                 lease_ended/3, lease_custody/3, lease_adopt/5,
@@ -331,7 +332,12 @@ dfrl_tour_event(Agent, _Link, Event) :-
     event(Event, Node, M, Agent).
 
 event(main, Node, M, Agent) :-
-    lease_arrived(Node, Agent, Verdict),
+    (   custody_take_recovered(Node, Agent)
+    ->  % restarted from this node's store: a holder may have resurrected
+        % it elsewhere meanwhile (then this copy is stale and retires)
+        lease_check(Node, Agent, Verdict)
+    ;   lease_arrived(Node, Agent, Verdict)
+    ),
     (   Verdict = superseded(E2)
     ->  retire(Node, M, Agent, E2)
     ;   step(M, Agent)
@@ -358,7 +364,7 @@ event(resurrected(Epoch, From, Dead, resume(Packed, Next, Progress)), Node, M,
         log_event(Log, Event.put(round, Round)),
         log_event(Log, _{event:finished, agent:Agent, round:Round}),
         lease_ended(Node, Agent, finished),
-        purge_agent(Agent)
+        purge_self(Agent)
     ;   Progress = round_done(Round0, false)
     ->  Round is Round0 + 1,
         log_event(Log, Event.put(round, Round)),
@@ -697,7 +703,7 @@ try_home(M, Agent, S0, J) :-
     ;   get_dict(round, S0, Round),
         log_event(Log, _{event:aborted, agent:Agent, round:Round,
                          error:"no stop of the itinerary can be reached"}),
-        purge_agent(Agent)
+        purge_self(Agent)
     ).
 
 %   The round ends where it started (or where the backward pass stopped).
@@ -745,7 +751,7 @@ end_round(M, Agent, S) :-
                                ignored("the agent has finished its tour"))),
             lease_ended(Node, Agent, finished),
             log_event(Log, _{event:finished, agent:Agent, round:Round}),
-            purge_agent(Agent)
+            purge_self(Agent)
         ;   Round1 is Round + 1,
             get_dict(index, S, At),
             new_round(Round1, At, S1a),
@@ -807,6 +813,18 @@ rest_until(Node, Agent, Until, Verdict) :-
         )
     ).
 
+%   The agent ends here: purge the copy that runs this thread, and only
+%   that one. A stale copy may have been replaced meanwhile by a newer
+%   one that arrived under the same name (dfrl_lease: supersede); that
+%   one is not this thread's to purge.
+purge_self(Agent) :-
+    current_node(Node),
+    thread_self(Me),
+    (   agent_status(Node, Agent, running(Me))
+    ->  purge_agent(Agent)
+    ;   true
+    ).
+
 %   A copy that met a higher epoch stops, says so and lets its holder go.
 retire(Node, M, Agent, Epoch2) :-
     lease_custody(Node, Agent, custody(Epoch, _, _)),
@@ -819,4 +837,4 @@ retire(Node, M, Agent, Epoch2) :-
     log_event(Log, _{event:superseded, agent:Agent, round:Round, epoch:Epoch,
                      by:Epoch2}),
     lease_ended(Node, Agent, superseded),
-    purge_agent(Agent).
+    purge_self(Agent).

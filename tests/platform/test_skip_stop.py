@@ -23,7 +23,7 @@ from .test_resting_holder import SLACK_S, Stops, report, rounds_once
 
 pytestmark = pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
 
-REPLY_S = 6.0            # the stops' reply timeout: what a frozen stop cost before
+REPLY_S = 4.0            # the stops' reply timeout: what a frozen stop cost before
 
 
 def freeze_second_round(stops: Stops, skip_after: float, hold_s: float, *, rest: float = 0.6,
