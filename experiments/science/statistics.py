@@ -5,15 +5,12 @@ the verdict words every report uses. Pure functions of numbers; :mod:`.report` a
 :mod:`.studies` both use them. Student's t, the normal distribution and the bootstrap come
 from ``scipy.stats`` (``science/README.md``, "Dependencies"); how they combine is ours.
 
-The verdict of a claim "the mean is above (below) a bound" (:func:`judge`) is one of
-
-* ``holds``: the 95% interval lies wholly on the claimed side (and, in a family of verdicts,
-  the Holm-adjusted p-value is below 5%: :func:`adjust`);
-* ``refuted (effect excluded at 95%)``: the interval lies wholly on the other side (or touches
-  the bound from there), so every effect in the claimed direction is excluded;
-* ``not significant at n = K (smallest detectable effect D)``: neither; D is the true distance
-  from the bound that a test at this n and spread would find with 80% power at the 5% level;
-* ``cannot judge (n = K < M)``: too few values.
+The verdict of a claim "the mean is above (below) a bound" (:func:`judge`): ``holds`` (the 95%
+interval lies wholly on the claimed side and, in a family, the Holm-adjusted p-value is below
+5%: :func:`adjust`); ``refuted (effect excluded at 95%)`` (it lies wholly on the other side or
+touches the bound from there); ``not significant at n = K (smallest detectable effect D)``
+(neither; D is the true distance from the bound a 5% test at this n and spread finds with 80%
+power); ``cannot judge (n = K < M)`` (too few values).
 """
 from __future__ import annotations
 
@@ -248,8 +245,7 @@ def _bounds(t: np.ndarray, ev: np.ndarray) -> tuple[float, float]:
     return (m, m) if math.isfinite(m) else (float(t.max()), math.inf)
 
 
-def _resampled(t: np.ndarray, ev: np.ndarray, rng: np.random.Generator,
-               k: int) -> np.ndarray:
+def _resampled(t: np.ndarray, ev: np.ndarray, rng: np.random.Generator, k: int) -> np.ndarray:
     """Median bounds of ``k`` resamples with replacement, shape (k, 2)."""
     return np.array([_bounds(t[i], ev[i]) for i in rng.integers(0, len(t), (k, len(t)))])
 
@@ -262,14 +258,12 @@ def _ends(low: np.ndarray, high: np.ndarray) -> tuple[float, float]:
 
 @dataclass(frozen=True)
 class CensoredRatio(BootstrapInterval):
-    """``median_a / median_b`` of two groups of censored times (Kaplan-Meier medians) with its
-    95% percentile bootstrap interval (:func:`censored_ratio`). A median beyond the budget is
-    known only to exceed the group's largest time, so the ratio is then a bound: ``known`` is
-    ``exact``, ``at least`` (a's median beyond), ``at most`` (b's) or ``unknown`` (both;
-    ``estimate`` NaN). Each resample gives the lowest and the highest ratio it allows
-    (``draws``, shape (k, 2)); ``low`` comes from the lowest, ``high`` from the highest, so a
-    censored median never counts for the claim. :func:`judge` takes it as an
-    :class:`Interval`."""
+    """``median_a / median_b`` of censored times (Kaplan-Meier medians) with its 95% percentile
+    bootstrap interval (:func:`censored_ratio`). A median beyond the budget only exceeds the
+    group's largest time, so the ratio is a bound: ``known`` is ``exact``, ``at least`` (a's
+    beyond), ``at most`` (b's) or ``unknown`` (both; ``estimate`` NaN). ``draws`` (k, 2): the
+    lowest and highest ratio each resample allows, giving ``low`` and ``high``, so a censored
+    median never counts for a claim. :func:`judge` takes it as an :class:`Interval`."""
 
     n: int
     known: str
@@ -286,9 +280,9 @@ class CensoredRatio(BootstrapInterval):
         return float(min(1.0, 2.0 * min(below, above)))
 
     def detectable(self, power: float = POWER) -> float:
-        """The smallest factor by which the true ratio must differ from the null for a 5% test
-        of this spread to see it with ``power``: exp((z(0.975) + z(power)) x se), se of the log
-        ratio from the interval's width (4 x 1.96 se); ``inf`` for an open interval."""
+        """The smallest factor the true ratio must differ from the null by for a 5% test of this
+        spread to see it with ``power``: exp((z(0.975) + z(power)) se), se of the log ratio =
+        its interval's width / (2 x 1.96); ``inf`` for an open interval."""
         if not (0.0 < self.low and math.isfinite(self.high)):
             return math.inf
         se = (math.log(self.high) - math.log(self.low)) / (2.0 * normal_quantile(0.975))
