@@ -127,42 +127,49 @@ def rounds_of(out: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(fh))
 
 
+def federate(tmp_path: Path, lab: Lab, drv: Path, blocks: dict, cfg: str) -> str:
+    """Run the README's driver command on ``cfg`` and check what the section promises: exit
+    0, every planned round visiting every robot with identical tables, every robot on a
+    worker's host (control: none on the driver's), both workers used, every task released,
+    every robot's files back over the platform. Returns the driver command."""
+    name = blocks["config"][0]
+    (drv / name).write_text(cfg, encoding="utf-8")
+    cmd = driver_cmd(blocks, lab)
+    done = lab["head"].run(argv_of(cmd), cwd=drv, timeout=600, capture_output=True, text=True)
+    phase("driver exited")
+    detail = f"exit {done.returncode}\n{done.stderr[-3000:]}"
+    assert done.returncode == 0, detail
+    out = drv / cmd.split("--out", 1)[1].split()[0]
+    planned = json.loads(cfg)
+    robots = [r["id"] for r in planned["robots"]]
+    rows = rounds_of(out)
+    assert len(rows) == -(-planned["iterations"] // planned["respite"]), detail
+    for row in rows:
+        assert row["visited"].split() == robots, row
+        assert row["skipped"] == "" and row["all_equal"] == "true", row
+        assert len({row[f"digest_{r}"] for r in robots}) == 1, row
+    workers = {lab[w].address for w in WORKERS}
+    nodes = json.loads((out / "nodes.json").read_text(encoding="utf-8"))["nodes"]
+    hosts = {n["robot"]: n["host"] for n in nodes}
+    assert set(hosts) == set(robots) and set(hosts.values()) == workers, hosts
+    record = json.loads((out / "cluster.json").read_text(encoding="utf-8"))
+    assert record["losses"] == [], record
+    assert all(t["ended"] == "released by the driver" and t["exit"] == 0
+               for t in record["tasks"].values()), record
+    for r in robots:     # files came back over the platform from the workers' folders
+        assert (out / f"metrics_{r}.csv").stat().st_size > 0
+        assert (out / "tables" / f"{r}.npy").is_file()
+        w = next(w for w in WORKERS if lab[w].address == hosts[r])
+        assert list((tmp_path / w / "dfrl-robot" / r).glob(f"*/metrics_{r}.csv"))
+    summary = (out / "summary.md").read_text(encoding="utf-8")
+    assert "federation complete" in summary and "## Cluster" in summary, summary
+    return cmd
+
+
 def test_the_documented_cluster_run_federates_robots_placed_on_workers(tmp_path: Path) -> None:
     t0 = time.monotonic()
     with cluster(tmp_path, 3) as (lab, drv, blocks):
-        name, cfg = blocks["config"]
-        (drv / name).write_text(cfg, encoding="utf-8")
-        cmd = driver_cmd(blocks, lab)
-        done = lab["head"].run(argv_of(cmd), cwd=drv, timeout=300, capture_output=True,
-                               text=True)
-        phase("driver exited")
-        detail = f"exit {done.returncode}\n{done.stderr[-3000:]}"
-        assert done.returncode == 0, detail
-        out = drv / cmd.split("--out", 1)[1].split()[0]
-        planned = json.loads(cfg)
-        robots = [r["id"] for r in planned["robots"]]
-        rows = rounds_of(out)
-        assert len(rows) == -(-planned["iterations"] // planned["respite"]), detail
-        for row in rows:
-            assert row["visited"].split() == robots, row
-            assert row["skipped"] == "" and row["all_equal"] == "true", row
-            assert len({row[f"digest_{r}"] for r in robots}) == 1, row
-        # every robot ran on a worker's host (control: none on the driver's), both workers used
-        workers = {lab[w].address for w in WORKERS}
-        nodes = json.loads((out / "nodes.json").read_text(encoding="utf-8"))["nodes"]
-        hosts = {n["robot"]: n["host"] for n in nodes}
-        assert set(hosts) == set(robots) and set(hosts.values()) == workers, hosts
-        record = json.loads((out / "cluster.json").read_text(encoding="utf-8"))
-        assert record["losses"] == [], record
-        assert all(t["ended"] == "released by the driver" and t["exit"] == 0
-                   for t in record["tasks"].values()), record
-        for r in robots:     # files came back over the platform from the workers' folders
-            assert (out / f"metrics_{r}.csv").stat().st_size > 0
-            assert (out / "tables" / f"{r}.npy").is_file()
-            w = next(w for w in WORKERS if lab[w].address == hosts[r])
-            assert list((tmp_path / w / "dfrl-robot" / r).glob(f"*/metrics_{r}.csv"))
-        summary = (out / "summary.md").read_text(encoding="utf-8")
-        assert "federation complete" in summary and "## Cluster" in summary, summary
+        cmd = federate(tmp_path, lab, drv, blocks, blocks["config"][1])
         # control: more CPUs than offered is refused before anything starts
         over = lab["head"].run(argv_of(cmd.replace("--out results/", "--cluster-cpus 4 --out "
                                                    "results/over-")),
@@ -171,6 +178,20 @@ def test_the_documented_cluster_run_federates_robots_placed_on_workers(tmp_path:
         assert "Traceback" not in over.stderr, over.stderr
         phase("over-asking driver refused")
     assert time.monotonic() - t0 < 300
+
+
+@pytest.mark.slow
+def test_24_robots_placed_on_the_cluster_federate(tmp_path: Path) -> None:
+    """The issue's size: the README's config grown to 24 robots (arenas in turn), 12 per
+    worker."""
+    blocks = cluster_blocks()
+    planned = json.loads(blocks["config"][1])
+    arenas = [r["arena"] for r in planned["robots"]]
+    planned["robots"] = [{"id": f"r{i + 1}", "arena": arenas[i % len(arenas)]}
+                         for i in range(24)]
+    planned["iterations"], planned["respite"], planned["timeout_s"] = 200, 100, 600
+    with cluster(tmp_path, 12) as (lab, drv, blocks):
+        federate(tmp_path, lab, drv, blocks, json.dumps(planned))
 
 
 def test_a_killed_cluster_worker_is_reported_like_a_lost_host(tmp_path: Path) -> None:

@@ -112,7 +112,7 @@ class ClusterPlacement:
                                   "worker") from None
         try:
             self._client = Client(self.address, timeout=CONNECT_S, set_as_default=False)
-        except (OSError, TimeoutError) as exc:
+        except (OSError, TimeoutError, ValueError) as exc:
             raise ExperimentError(f"cluster {self.address}: cannot connect: {exc}") from None
         return self
 
