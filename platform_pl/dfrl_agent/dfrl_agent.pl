@@ -66,10 +66,15 @@ Everything the agent needs travels as payload facts:
 ## Faults
 
 A move to a stop that fails is tried again Retries times (default 2),
-waiting Backoff seconds (default 0.2), then twice that, ...; then the
-stop is skipped for this pass and listed in the round's `skipped` with
-the error (on the way back a stop that failed this round is tried once
-more, without retries). A round starts at the first stop the agent can
+waiting Backoff seconds (default 0.2), then twice that, ...; all tries
+together take at most the skip time (option skip_after, default 4 s:
+each try's timeouts are cut to what is left of it); then the stop is
+skipped for this pass and listed in the round's `skipped` with the error
+and how long the agent tried (on the way back a stop that failed this
+round is tried once more, without retries, unless it never answered: a
+frozen or cut-off stop is not waited for twice in a round). A move
+refused because a stale copy of the agent is at the stop has that copy
+replaced (dfrl_move.pl) and is tried again. A round starts at the first stop the agent can
 reach (`origin`; normally the first of the itinerary): when the first
 stop is down the round starts at the next reachable stop, or where the
 agent is, and the backward pass ends there; every round tries the first
@@ -77,9 +82,11 @@ stop again, so a stop that comes back is visited again in the next
 round. The agent never purges itself because a stop is unreachable; it
 aborts only at launch, when no stop at all can be reached.
 
-The agent is not lost with the node it runs on: the stop it came from
-keeps a checkpoint of it under a lease and resurrects it (epoch + 1)
-when that node has died; a late original that meets the higher epoch
+The agent is not lost with the node it runs or rests on: the stop it came
+from (or, where there is none, a stop it asks at its round start and
+before its rest) keeps a checkpoint of it under a lease that the agent's
+node renews while it lives, and resurrects it (epoch + 1) when that node
+stops answering for a lease; a late original that meets the higher epoch
 retires. The protocol, and exactly what it guarantees, is in
 dfrl_lease.pl. Table reads and writes carry round(N), agent(Name) and
 epoch(E) in their options (contract K4).

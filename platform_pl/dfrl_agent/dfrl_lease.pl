@@ -30,16 +30,19 @@
 
 /** <module> Checkpoints, leases and epochs of the dFRL agent (custody)
 
-The dFRL agent (dfrl_agent.pl) must outlive the node it runs on. This
-module keeps, at the stop the agent came from, a checkpoint of the agent
-and resurrects it from there when the node it went to has died.
+The dFRL agent (dfrl_agent.pl) must outlive the node it runs on, and the
+node it rests on. This module keeps, at another stop (normally the one
+the agent came from), a checkpoint of the agent and resurrects it from
+there when the node the agent is on stops answering: the agent has a
+holder at every instant, resting included.
 
 ## The protocol
 
 The agent carries, as payload, custody(Epoch, Seq, Holder): its epoch
 (1 at creation), the number Seq of the hop that brought it here, and the
-address of the stop that holds the checkpoint covering it (`none` at
-its first stop and right after a resurrection).
+address of the stop that holds the checkpoint covering it (`none` until
+it gets one: at its first stop after a launch, right after a
+resurrection).
 
   1. *Depart.* Before a move from stop A to stop B the agent sets its
      custody to custody(E, Seq+1, A), and A records a checkpoint: the
@@ -51,8 +54,25 @@ its first stop and right after a resurrection).
      holder (the stop before A) that it may drop its checkpoint for
      Seq: the agent is now covered by A's. An agent that finishes (or
      retires) releases its holder the same way.
-  3. *Lease.* When a checkpoint's lease expires without a release, the
-     holder probes B (`probe`, up to 2 tries, each within half the lease):
+  3. *Adopt.* An agent with no holder (custody `none`; or its holder
+     answered that it holds no checkpoint of it, e.g. it restarted)
+     asks another stop of its itinerary to hold one before it works or
+     rests (lease_adopt/5, request `hold`, at its round start and before
+     its rest): the stops after it first, then those before. The holder
+     stores the agent's record as it is (its code passes the sandbox
+     check as an arrival's does) with a resume point that starts the
+     round again from the holder without this stop. The custody advances
+     by one hop, so the agent's next departure releases that holder as
+     any hop does.
+  4. *Heartbeat.* While an agent is on a node (from lease_arrived/3 on),
+     a thread of that node's process renews the holder's lease every
+     third of `lease_s` (progress(alive)), whatever the agent does: it
+     rests, waits for a robot, works. So a lease runs out only when the
+     node the agent is on has not answered for a whole lease (killed,
+     frozen, cut off).
+  5. *Lease.* When a checkpoint's lease expires without a release, the
+     holder probes B (`probe`, up to 2 tries, each within a quarter of
+     the lease: it only confirms what the missing heartbeats said):
      B answers here(E, Seq) if the agent is registered there (running or
      idle), staged(E, Seq) if it arrived there and waits for its source's
      decision (staged or in doubt), left(E, Seq') if it holds a checkpoint or
@@ -68,46 +88,69 @@ its first stop and right after a resurrection).
      installed at the holder from the checkpoint with epoch E+1 (one
      more than any epoch seen), started with the event
      resurrected(E1, Dead) so that it skips the dead stop B and goes on
-     from the holder exactly as if its move to B had failed. The new
-     epoch is first sent to every reachable stop (`epoch`); a stop that
-     holds a staged copy with a lower epoch discards it, so that the
-     resurrected agent can enter it.
-  4. *Progress.* When the agent ends a round it tells its holder
+     from the holder exactly as if its move to B had failed (or, after a
+     round end, starts the next round there). The new epoch is first
+     sent to every reachable stop (`epoch`); a stop that holds a staged
+     copy with a lower epoch discards it, so that the resurrected agent
+     can enter it.
+  6. *Progress.* When the agent ends a round it tells its holder
      (progress(round_done(N, [Plan and method facts]))), so that a resurrection
      starts round N+1 instead of repeating the end of round N, and with
      the plan and method as they are then.
-  5. *Epochs.* Every node records the highest epoch it has seen of each
-     agent (agents arriving, probes, releases, the epoch broadcast). An
-     agent that arrives at a node (lease_arrived/3), ends a round or a
-     rest (lease_check/3 asks its holder) and finds a higher epoch
+  7. *Epochs.* Every node records the highest epoch it has seen of each
+     agent (agents arriving, probes, releases, heartbeats, the epoch
+     broadcast). An agent that arrives at a node (lease_arrived/3),
+     rests (every 0.2 s), ends a round or a rest (lease_check/3 asks
+     its holder), or is restarted from its node's store (custody.pl:
+     it asks its holder before anything) and finds a higher epoch
      retires: it logs `superseded` and purges itself.
+  8. *Stale copies.* A move refused because a copy of the agent is at
+     the destination asks it (`supersede`, lease_supersede/5) to discard
+     that copy if it is stale by generation: a lower epoch (a late
+     original; stopped if it runs), or the same epoch, an earlier hop
+     and never started there (its transfer was staged after its source
+     gave up and decided aborted, e.g. a stop frozen or cut off past the
+     mover's skip time). Any other copy is kept and the move stays
+     refused.
 
 ## What is guaranteed, and what is not
 
   - A kill -9 (or crash, or restart without memory) of the node the
-    agent runs on, while its holder and at least one other stop live:
-    the agent is resurrected within about lease_s + 2 probe timeouts,
-    and the federation goes on without the dead stop (which is tried
-    again, and visited again if it came back, in every later round).
-  - A pause (SIGSTOP) or partition of the agent's node that covers a
-    probe is taken for a death. The late original then meets the higher
+    agent runs or rests on, while its holder and at least one other
+    stop live: the agent is resurrected within about lease_s after the
+    node's last heartbeat (plus a probe: at once for a dead process,
+    at most half a lease for a frozen one), and the federation goes on
+    without the dead stop (which is tried again, and visited again if
+    it came back, in every later round). A round it was resting before
+    is not lost: the resurrection starts the next one.
+  - A pause (SIGSTOP) or partition of the agent's node longer than the
+    lease is taken for a death. The late original then meets the higher
     epoch at its next contact with the holder or with any stop that got
-    the epoch broadcast (its next arrival, round end or rest end) and
-    retires there, *before* logging a round. So the two copies never
-    both log the same round, with two exceptions: the original's node
+    the epoch broadcast (its next arrival, heartbeat, round end or rest
+    end) and retires there, *before* logging a round. So the two copies
+    never both log the same round, with two exceptions: the original's node
     is cut off from every stop that knows the new epoch (a partition
     that outlasts the lease: it finishes its round alone, on its own
     stops, and logs it; the round events carry `epoch`, so a reader
     keeps the highest epoch per round), or it is frozen in the few
     microseconds between its holder's answer and its log write. Until
     it retires the original may still read and write the table of the
-    robot it is on.
-  - A pause or partition shorter than a probe's timeout never causes a
+    robot it is on; the newer copy that finds it there replaces it
+    (step 8).
+  - A pause or partition shorter than the lease never causes a
     resurrection.
   - Two faults at once are not covered: if the holder dies too before
-    the agent has moved on, the agent is lost. An agent right after a
-    resurrection, and at its first stop, has no holder until it moves.
-  - Checkpoints are kept in memory: a holder that restarts has none.
+    the agent has moved on (or, resting, before the agent's heartbeat
+    has found that it holds nothing and the next round start adopts
+    another), the agent is lost. An itinerary of one stop, or one whose
+    other stops all refuse the checkpoint, leaves the agent without a
+    holder (a warning says so).
+  - Checkpoints are kept in memory: a holder that restarts has none
+    (the agent adopts another holder at its next round start).
+
+Flags (per process, both true by default): `dfrl_resting_holder` false
+turns off heartbeats and adoption, `dfrl_replace_stale` false keeps
+stale copies (step 8); the behaviour before them, for tests.
 */
 
 :- dynamic

@@ -33,7 +33,7 @@ The file is opened, written and closed per line.
 {"event":"control","agent":"fed_q","round":4,"command":"method(median)",
  "status":"applied"}                      (or "ignored" with a "reason")
 {"event":"resurrected","agent":"fed_q","round":5,"epoch":2,
- "from":"host:port","dead":"host:port"}
+ "from":"host:port","dead":"host:port","time":1764600003.5}
 {"event":"superseded","agent":"fed_q","round":5,"epoch":1,"by":2}
 {"event":"finished","agent":"fed_q","round":16}
 {"event":"aborted","agent":"fed_q","round":1,"error":"..."}
@@ -41,14 +41,17 @@ The file is opened, written and closed per line.
 
 `visited` lists the robots whose tables went into the aggregate, in the
 order of the forward pass; `skipped` the robots of the itinerary that
-could not be read, reached or written, with the error as text;
+could not be read, reached or written, with the error as text (for a
+stop that could not be reached, with how long the agent tried: "...
+(skipped after 1.50 s; skip_after 4 s)");
 `retries` how many moves of the round were tried again; `epoch` the
 epoch of the copy that logged it. `error` (only then) says that an
 aggregation hook failed or threw that round (which hook, and the error):
 the round was aborted there, no robot read after it and no table
 written, so every robot keeps its own table; the next round tries again.
 `resurrected` is logged by the copy that a stop (`from`) resurrected
-after the node `dead` was lost with the agent on it, `superseded` by a
+after the node `dead` was lost with the agent on it (`time`: when, by
+the clock of `from`), `superseded` by a
 late original as it retires. `aborted` is logged only by an agent
 launched with the event `launch` that can reach no stop.
 

@@ -207,7 +207,7 @@ def test_first_stop_killed_in_round_one(tmp_path: Path, procs: list[Proc]) -> No
     # Prepare: four stops, r0 slow: the agent works on its first stop, where the launch left it
     # (it came from the console, no stop: before, it had no holder there).
     lease = 1.5
-    stops = Stops(tmp_path, procs, [2.5, 0.0, 0.0, 0.0], lease_s=lease)
+    stops = Stops(tmp_path, procs, [2.0, 0.0, 0.0, 0.0], lease_s=lease)
     stops.launch(rounds=3, rest=0.2)
     stops.wait(lambda: stops.has_agent(0, "running"), 15, "the agent running on r0")
     time.sleep(0.3)
@@ -233,7 +233,7 @@ def test_first_stop_killed_in_round_one_control(tmp_path: Path, procs: list[Proc
     # Control: the same fault with the behaviour before (flag dfrl_resting_holder false): the
     # agent at its first stop has no holder, so it dies with it: no round, ever.
     lease = 1.5
-    stops = Stops(tmp_path, procs, [2.5, 0.0, 0.0, 0.0], lease_s=lease, legacy=True)
+    stops = Stops(tmp_path, procs, [2.0, 0.0, 0.0, 0.0], lease_s=lease, legacy=True)
     stops.launch(rounds=3, rest=0.2)
     stops.wait(lambda: stops.has_agent(0, "running"), 15, "the agent running on r0")
     time.sleep(0.3)

@@ -5,9 +5,9 @@ A stop is frozen with ``SIGSTOP`` for longer than the skip time (its kernel stil
 agent's transfer, which it stages late, on ``SIGCONT``, after its source gave up: the stale copy
 the next round meets). Real ``swipl`` processes on loopback (``test_resting_holder.Stops``).
 
-Controls: a skip time above the nodes' reply timeout gives the stall of before (one reply
-timeout); the flag ``dfrl_replace_stale`` false on the healed stop keeps the stale copy, and the
-next round is refused there with "No permission to create agent".
+Control (the behaviour before): a skip time above the nodes' reply timeout gives the stall of
+before (one reply timeout); the flag ``dfrl_replace_stale`` false on the healed stop keeps the
+stale copy, and a later round is refused there with "No permission to create agent".
 """
 from __future__ import annotations
 
@@ -50,7 +50,7 @@ def skip_of(r: dict, robot: str) -> dict | None:
 
 def test_frozen_stop_skipped_in_bound_then_visited_again(tmp_path: Path,
                                                          procs: list[Proc]) -> None:
-    # Prepare: four stops, skip time 1.5 s (well under the nodes' 6 s reply timeout).
+    # Prepare: four stops, skip time 1.5 s (well under the nodes' 4 s reply timeout).
     skip = 1.5
     stops = Stops(tmp_path, procs, [0.0] * 4, reply_s=REPLY_S)
     # Execute: freeze r2 from the end of round 1 to the end of round 2, then thaw it.
@@ -79,25 +79,18 @@ def test_frozen_stop_skipped_in_bound_then_visited_again(tmp_path: Path,
     assert not any(stops.has_agent(i) for i in range(4))
 
 
-def test_frozen_stop_control_old_stall(tmp_path: Path, procs: list[Proc]) -> None:
-    # Control: a skip time above the reply timeout: the frozen stop costs one reply timeout,
-    # the stall of before.
-    stops = Stops(tmp_path, procs, [0.0] * 4, reply_s=REPLY_S)
-    freeze_second_round(stops, 30, hold_s=REPLY_S + 2.0, rounds=2, retries=0)
-    stops.wait(lambda: stops.events("finished"), 40, "the end of the tour")
-    r2 = rounds_once(stops, 2)[1]
-    assert skip_of(r2, "r2") is not None, r2
-    assert r2["end"] - r2["start"] >= REPLY_S - 0.5, r2
-
-
-def test_stale_copy_control_refuses(tmp_path: Path, procs: list[Proc]) -> None:
-    # Control: the healed stop keeps the stale copy (flag dfrl_replace_stale false there, as
-    # before): the next round is refused at r2 with "No permission to create agent".
-    skip = 1.5
+def test_frozen_stop_control_before(tmp_path: Path, procs: list[Proc]) -> None:
+    # Control, the behaviour before on both counts: a skip time above the reply timeout, so the
+    # frozen stop costs one reply timeout; and the flag dfrl_replace_stale false, so the healed
+    # stop keeps the stale copy and a later round is refused there with "No permission to create
+    # agent".
     stops = Stops(tmp_path, procs, [0.0] * 4, reply_s=REPLY_S, legacy=True)
-    freeze_second_round(stops, skip, hold_s=0.0)
+    freeze_second_round(stops, 30, hold_s=REPLY_S + 1.5, rounds=4, retries=0)
     stops.wait(lambda: stops.events("finished"), 40, "the end of the tour")
     rounds = rounds_once(stops, 4)
+    r2 = rounds[1]
+    assert skip_of(r2, "r2") is not None, r2
+    assert r2["end"] - r2["start"] >= REPLY_S - 0.5, r2
     refused = [r for r in rounds[2:] if (s := skip_of(r, "r2")) is not None
                and "No permission to create agent" in s["reason"]]
     assert refused, rounds
