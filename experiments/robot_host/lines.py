@@ -26,6 +26,16 @@ def parse_sample(line: str) -> Sample | None:
     return _parse_measures(line, "DFRL_SAMPLE", Sample)
 
 
+def parse_event(line: str) -> tuple[str, int] | None:
+    """``(op, iteration)`` of a ``DFRL_EVENT <robot> get|set <iteration>`` line (None: not
+    such a line, or malformed): an agent read (``get``) or wrote (``set``) the robot's table."""
+    parts = line.split()
+    if len(parts) != 4 or parts[0] != "DFRL_EVENT" or parts[2] not in ("get", "set") \
+            or not parts[3].isdigit():
+        return None
+    return parts[2], int(parts[3])
+
+
 def _parse_measures(line: str, tag: str, kind: type) -> tuple | None:
     """``<tag> <robot> <iteration> <float> ...`` as ``kind(robot, iteration, *floats)``, with
     as many floats as ``kind`` has fields after the first two; None if the line is another

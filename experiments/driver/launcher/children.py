@@ -20,21 +20,18 @@ import sys
 import threading
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import dfrl
 from dfrl.experiments import processes
 from dfrl.experiments.driver.config import RobotSpec
 from dfrl.experiments.robot_host.config import RobotConfig
-from dfrl.experiments.driver.launcher.robots import Address, Progress, RobotStatus
+from dfrl.experiments.driver.launcher.robots import Address, EventHandler, Progress, RobotStatus
 from dfrl.experiments.driver.results.files import write_json
 from dfrl.experiments.errors import ExperimentError
-from dfrl.experiments.robot_host.lines import Evaluation, Sample, parse_eval, parse_sample
+from dfrl.experiments.robot_host.lines import (Evaluation, Sample, parse_eval, parse_event,
+                                                parse_sample)
 from dfrl.experiments.tokens import Token, env_with_tokens
-
-#: Called with (robot id, op ``get``/``set``, iteration) for every ``DFRL_EVENT`` line.
-EventHandler = Callable[[str, str, int], None]
-
 
 def child_env(tokens: Sequence[Token] = ()) -> dict[str, str]:
     """Environment of a Python child: unbuffered, importing this process's ``dfrl``, with
@@ -115,9 +112,10 @@ class RobotChild:
             if not parts:
                 continue
             tag = parts[0]
-            if tag == "DFRL_EVENT" and len(parts) == 4:
-                if self._on_event is not None:
-                    self._on_event(self._spec.id, parts[2], int(parts[3]))
+            if tag == "DFRL_EVENT":
+                event = parse_event(line)
+                if event is not None and self._on_event is not None:
+                    self._on_event(self._spec.id, *event)
                 continue
             with self._lock:
                 if tag == "DFRL_NODE" and len(parts) == 4:

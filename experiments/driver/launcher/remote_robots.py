@@ -29,9 +29,10 @@ from dfrl.experiments.driver.config import RobotSpec
 from dfrl.experiments.robot_host.config import RobotConfig
 from dfrl.experiments.driver.console.node import ConsoleNode
 from dfrl.experiments.driver.launcher.remote_hosts import arena_payload, safe_relative
-from dfrl.experiments.driver.launcher.robots import Address, Progress, RobotStatus
+from dfrl.experiments.driver.launcher.robots import Address, EventHandler, Progress, RobotStatus
 from dfrl.experiments.errors import ExperimentError
-from dfrl.experiments.robot_host.lines import Evaluation, Sample, parse_eval, parse_sample
+from dfrl.experiments.robot_host.lines import (Evaluation, Sample, parse_eval, parse_event,
+                                                parse_sample)
 
 #: Seconds without a status answer after which a remote robot counts as lost.
 LOST_AFTER_S = 10.0
@@ -61,10 +62,14 @@ class RemoteRobot:
         Experiment id: the service keeps the files under ``WORKDIR/<experiment>/``.
     poller : StatusPoller
         Polls it once it started.
+    on_event : EventHandler, optional
+        Called from the poller's thread for every ``DFRL_EVENT`` line its lines gained (an
+        agent read or wrote its table), as for a robot process of this host.
     """
 
     def __init__(self, robot: RobotSpec, cfg: RobotConfig, console: ConsoleNode,
-                 experiment: str, poller: StatusPoller) -> None:
+                 experiment: str, poller: StatusPoller,
+                 on_event: EventHandler | None = None) -> None:
         if robot.robot_host_address is None:
             raise ExperimentError(f"robot {robot.id} names no robot host")
         self._spec = robot
@@ -73,6 +78,7 @@ class RemoteRobot:
         self._console = console
         self._experiment = experiment
         self._poller = poller
+        self._on_event = on_event
         self._lock = threading.Lock()
         self._address: Address | None = None      # guarded by _lock, and so on below
         self._state = "unknown"
@@ -250,6 +256,9 @@ class RemoteRobot:
             self._sample_error = None
             self._sample = sample or self._sample
             self._evals.extend(e for e in map(parse_eval, lines) if e is not None)
+        if self._on_event is not None:
+            for op, iteration in filter(None, map(parse_event, lines)):
+                self._on_event(self._spec.id, op, iteration)
 
     def gather(self, out: Path) -> list[str]:
         """Read its last protocol lines (for the view's last events, unless it is lost), then

@@ -15,7 +15,7 @@ with :meth:`Robot.gather`.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol, runtime_checkable
@@ -24,6 +24,10 @@ from dfrl.experiments.driver.config import RobotSpec
 from dfrl.experiments.robot_host.config import RobotConfig
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.robot_host.lines import Evaluation, Sample
+
+#: Called with (robot id, op ``get``/``set``, iteration) for every ``DFRL_EVENT`` line of a
+#: robot: an agent read or wrote its table.
+EventHandler = Callable[[str, str, int], None]
 
 Address = tuple[str, int]
 """A platform node's (host, port)."""

@@ -88,12 +88,16 @@ def start_robot(site: Site, robot: RobotSpec, iterations: int, agents: AgentRost
     """
     cfg = robot_config(site, robot, iterations, joins)
     started: Robot
+    algo = robot.algo
+
+    def on_event(rid: str, op: str, iteration: int) -> None:
+        agents.on_hop(rid, algo, op, iteration)
+
     if robot.robot_host is None:
-        algo = robot.algo
-        started = RobotChild(robot, cfg, site.out, on_event=lambda rid, op, it:
-                             agents.on_hop(rid, algo, op, it))
+        started = RobotChild(robot, cfg, site.out, on_event=on_event)
     else:
-        started = RemoteRobot(robot, cfg, site.console, site.experiment_id, site.poller)
+        started = RemoteRobot(robot, cfg, site.console, site.experiment_id, site.poller,
+                              on_event=on_event)
     started.start()
     return started
 

@@ -59,6 +59,11 @@ def test_local_and_remote_robots_report_poses_and_progress(tmp_path: Path) -> No
     assert {e["robot"] for e in progress} == {"r2"}                  # the remote one only
     assert progress[-1]["iteration"] == 600 and progress[-1]["q_sum"] != 0.0
     assert not [e for e in events if e["kind"] == "error"], events
+    # the agent is seen at the remote robot too (its DFRL_EVENT lines come with its samples):
+    # the status line and the view say where the agent is, not "at -"
+    for rid in ("r1", "r2"):
+        hops = [e for e in events if e["kind"] == "hop" and e["robot"] == rid]
+        assert {h["phase"] for h in hops} == {"forward", "backward"}, (rid, hops)
     # the view serves them: poses of both, the remote robot's curve before its files came
     src = EventSource(tmp_path / "out")
     got = src.drain()
