@@ -15,7 +15,7 @@ Defaults (:class:`DistilConfig`, measured in robots/README.md, "Heterogeneous fe
 at most 300 steps, Adam step size 0.01 (``dqn``) or 0.02 (``linear``: its weights are per
 tile and 33 of them sum to a value), stop early once the root mean squared residual is below
 0.01. The cost is bounded by ``steps`` forward and backward passes over B = 81 points
-(``dqn``: about 1.5 ms each under load, so at most about 0.5 s per share). ``linear`` cannot
+(``dqn``: 300 steps took 0.35-0.46 s on the shared test machine). ``linear`` cannot
 fit an arbitrary grid table (its values are a sum of one function per sensor): its residual
 stops at the least-squares floor (measured in robots/README.md).
 """
