@@ -16,19 +16,21 @@ distributed = pytest.importorskip("distributed", reason="Dask distributed is not
                                   "(pip install -e '.[cluster]'; scripts/test.sh does)")
 
 
-def dfrl(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "dfrl", *args], cwd=cwd, capture_output=True,
-                          text=True, timeout=120)
+def test_without_a_token_or_with_bad_cpus_nothing_starts(tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch,
+                                                        capsys: pytest.CaptureFixture) -> None:
+    from dfrl.experiments.cli import main
 
-
-def test_without_a_token_or_with_bad_cpus_nothing_starts(tmp_path: Path) -> None:
-    done = dfrl("run", "smoke2", "--cluster", "tcp://127.0.0.1:1", "--out", "o1", cwd=tmp_path)
-    assert done.returncode == 1, done.stderr
-    assert "--token-file dfrl.token" in done.stderr and "Traceback" not in done.stderr
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("DFRL_TOKEN", raising=False)
+    code = main(["run", "smoke2", "--cluster", "tcp://127.0.0.1:1", "--out", "o1"])
+    err = capsys.readouterr().err
+    assert code == 1 and "--token-file dfrl.token" in err and "Traceback" not in err, err
     assert not (tmp_path / "o1" / "nodes.json").exists()
-    bad = dfrl("run", "smoke2", "--cluster", "tcp://127.0.0.1:1", "--cluster-cpus", "0",
-               cwd=tmp_path)
-    assert bad.returncode == 2 and "--cluster-cpus: must be > 0" in bad.stderr, bad.stderr
+    with pytest.raises(SystemExit) as bad:
+        main(["run", "smoke2", "--cluster", "tcp://127.0.0.1:1", "--cluster-cpus", "0"])
+    err = capsys.readouterr().err
+    assert bad.value.code == 2 and "--cluster-cpus: must be > 0" in err, err
 
 
 def test_a_worker_without_the_token_file_is_named(tmp_path: Path,
@@ -39,7 +41,7 @@ def test_a_worker_without_the_token_file_is_named(tmp_path: Path,
 
     monkeypatch.chdir(tmp_path)          # the worker's folder: no dfrl.token in it
     with LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
-                      dashboard_address=None, resources={"CPU": 2}) as cluster:
+                      dashboard_address=":0", resources={"CPU": 2}) as cluster:
         placement = ClusterPlacement(cluster.scheduler_address).open()
         try:
             with pytest.raises(ExperimentError) as err:

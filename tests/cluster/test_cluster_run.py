@@ -7,8 +7,8 @@ on the driver's), its files back over the platform. A worker killed mid-run (eve
 its namespace, kill -9) must be reported like a lost robot host: its robots skipped and LOST,
 the worker named under "Cluster", exit status 1, no traceback.
 
-The controls: each robot's address in ``nodes.json`` is a worker's, and a config that asks
-for more CPUs than the workers offer is refused before anything starts.
+The control: each robot's address in ``nodes.json`` is a worker's, never the driver's host
+(test_cluster_errors.py has the refusals: no token, too few CPUs, no token file on a worker).
 
 Runs in CI (as root, ``distributed`` installed by scripts/test.sh); skipped with the reason
 where namespaces cannot be made or the engine is missing.
@@ -137,6 +137,7 @@ def federate(tmp_path: Path, lab: Lab, drv: Path, blocks: dict, cfg: str) -> str
     cmd = driver_cmd(blocks, lab)
     done = lab["head"].run(argv_of(cmd), cwd=drv, timeout=600, capture_output=True, text=True)
     phase("driver exited")
+    (drv / "driver.err").write_text(done.stderr, encoding="utf-8")
     detail = f"exit {done.returncode}\n{done.stderr[-3000:]}"
     assert done.returncode == 0, detail
     out = drv / cmd.split("--out", 1)[1].split()[0]
@@ -169,14 +170,7 @@ def federate(tmp_path: Path, lab: Lab, drv: Path, blocks: dict, cfg: str) -> str
 def test_the_documented_cluster_run_federates_robots_placed_on_workers(tmp_path: Path) -> None:
     t0 = time.monotonic()
     with cluster(tmp_path, 3) as (lab, drv, blocks):
-        cmd = federate(tmp_path, lab, drv, blocks, blocks["config"][1])
-        # control: more CPUs than offered is refused before anything starts
-        over = lab["head"].run(argv_of(cmd.replace("--out results/", "--cluster-cpus 4 --out "
-                                                   "results/over-")),
-                               cwd=drv, timeout=120, capture_output=True, text=True)
-        assert over.returncode == 1 and "fit only 0 at once" in over.stderr, over.stderr
-        assert "Traceback" not in over.stderr, over.stderr
-        phase("over-asking driver refused")
+        federate(tmp_path, lab, drv, blocks, blocks["config"][1])
     assert time.monotonic() - t0 < 300
 
 
@@ -195,9 +189,10 @@ def test_24_robots_placed_on_the_cluster_federate(tmp_path: Path) -> None:
 
 
 def test_a_killed_cluster_worker_is_reported_like_a_lost_host(tmp_path: Path) -> None:
-    with cluster(tmp_path, 3) as (lab, drv, blocks):
+    with cluster(tmp_path, 2) as (lab, drv, blocks):
         name, cfg = blocks["config"]
         planned = {**json.loads(cfg), "iterations": 600, "rtf": 4.0, "timeout_s": 150}
+        planned["robots"] = planned["robots"][:4]       # 2 per worker: half of them lost
         (drv / name).write_text(json.dumps(planned), encoding="utf-8")
         cmd = driver_cmd(blocks, lab)
         out = drv / cmd.split("--out", 1)[1].split()[0]
@@ -211,7 +206,7 @@ def test_a_killed_cluster_worker_is_reported_like_a_lost_host(tmp_path: Path) ->
         assert log.is_file(), "no round within 180 s"
         nodes = json.loads((out / "nodes.json").read_text(encoding="utf-8"))["nodes"]
         gone = sorted(n["robot"] for n in nodes if n["host"] == lab["w2"].address)
-        assert len(gone) == 3, nodes
+        assert len(gone) == 2, nodes
         phase(f"round 1 logged; killing w2 ({', '.join(gone)})")
         for pid in _pids_in(lab["w2"].namespace):       # the node dies: every process on it
             try:
@@ -220,6 +215,7 @@ def test_a_killed_cluster_worker_is_reported_like_a_lost_host(tmp_path: Path) ->
                 pass
         _, stderr = driver.communicate(timeout=300)
         phase("driver exited")
+        (drv / "driver.err").write_text(stderr, encoding="utf-8")
         detail = f"exit {driver.returncode}\n{stderr[-3000:]}"
         assert driver.returncode == 1, detail
         assert "Traceback" not in stderr, detail
