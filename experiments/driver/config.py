@@ -137,8 +137,8 @@ class ExperimentConfig(JsonDicts):
         address this host uses towards the first remote robot (its route), or 127.0.0.1 when
         every robot is spawned locally.
     tolerate_lost_robots : int
-        Robots that may be lost (crashed, failed, unreachable at the end) with the run still
-        counted as complete.
+        Robots that may be lost (crashed, failed, unreachable at the end) or skipped by their
+        agent in some round with the run still counted as complete.
     tolerate_missing_rounds : int
         Planned rounds per agent that may be missing (never logged) likewise.
     tolerate_method_errors : int

@@ -27,16 +27,21 @@ class Faults:
     other: list[str] = field(default_factory=list)
     #: agent -> "round N: error" for each round whose aggregation method failed
     method_errors: dict[str, list[str]] = field(default_factory=dict)
+    #: robot -> "AGENT: rounds it was skipped in, and when it came back" (it took no part)
+    missed: dict[str, str] = field(default_factory=dict)
 
     def complete(self, config: ExperimentConfig) -> bool:
-        """Every agent logged its planned rounds and no robot was lost, up to what the config
-        tolerates (``tolerate_missing_rounds`` per agent, ``tolerate_lost_robots``,
-        ``tolerate_method_errors`` per agent: rounds whose aggregation method failed), and
-        nothing else (e.g. result files that could not be gathered) went wrong."""
+        """Every agent logged its planned rounds and every robot took part in every round of
+        its agent (none lost, none skipped), up to what the config tolerates
+        (``tolerate_missing_rounds`` per agent, ``tolerate_lost_robots``: robots lost or
+        skipped in some round, ``tolerate_method_errors`` per agent: rounds whose aggregation
+        method failed), and nothing else (e.g. result files that could not be gathered) went
+        wrong."""
         worst = max((len(v) for v in self.missing_rounds.values()), default=0)
         failed = max((len(v) for v in self.method_errors.values()), default=0)
+        absent = set(self.lost) | set(self.missed)
         return (worst <= config.tolerate_missing_rounds
-                and len(self.lost) <= config.tolerate_lost_robots and not self.other
+                and len(absent) <= config.tolerate_lost_robots and not self.other
                 and failed <= config.tolerate_method_errors)
 
     def lines(self) -> list[str]:
@@ -53,6 +58,8 @@ class Faults:
                 out += [f"  - {e}" for e in errors[:20]]
         for rid, why in self.lost.items():
             out.append(f"- LOST robot {rid}: {why}")
+        for rid, what in self.missed.items():
+            out.append(f"- MISSED rounds: {rid} {what}")
         for title, items in (("skipped stops", self.skips),
                              ("resurrections", self.resurrections),
                              ("stalls", self.stalls), ("other faults", self.other)):
@@ -95,7 +102,27 @@ def assess(config: ExperimentConfig, logs: Iterable[tuple[AgentLog, int]],
         f.method_errors[log.agent] = [f"round {rec.round} ({rec.method}): "
                                       f"{' '.join(rec.error.split())}"
                                       for rec in log.rounds if rec.error]
+        _missed(f, log)
         done = {rec.round for rec in log.rounds}
         f.missing_rounds[log.agent] = [n for n in range(1, planned_rounds(log, budget) + 1)
                                        if n not in done]
     return f
+
+
+def _missed(f: Faults, log: AgentLog) -> None:
+    """The robots ``log``'s agent skipped, each with the rounds it missed and, per spell of
+    absence, when it was lost and whether it came back (visited again)."""
+    skipped: dict[str, list[int]] = {}
+    for rec in log.rounds:
+        for s in rec.skipped:
+            skipped.setdefault(s.robot, []).append(rec.round)
+    for rid, rounds in skipped.items():
+        spells = []
+        for first in (r for r in rounds if r - 1 not in rounds):
+            back = next((rec.round for rec in log.rounds
+                         if rec.round > first and rid in rec.visited), None)
+            spells.append(f"lost at round {first}, "
+                          + (f"rejoined at round {back}" if back else "never visited again"))
+        shown = ", ".join(map(str, rounds[:20])) + (" ..." if len(rounds) > 20 else "")
+        line = f"missed {len(rounds)} round(s) of {log.agent}: {shown} ({'; '.join(spells)})"
+        f.missed[rid] = f"{f.missed[rid]}; {line}" if rid in f.missed else line

@@ -43,3 +43,22 @@ def test_the_resurrected_event_is_read() -> None:
     assert _add(log, parse_event('{"event":"resurrected","agent":"fed","round":5,"epoch":2,'
                                  '"from":"h1:7001","dead":"h2:7001"}'))
     assert log.resurrections == [Resurrection(5, 2, "h1:7001", "h2:7001")]
+
+
+def test_a_robot_skipped_then_visited_again_is_no_complete_federation() -> None:
+    # r2 missed rounds 2 and 3 and was visited again in round 4: not lost at the end, but it
+    # took no part in two rounds, so the federation is not complete (the control: the same
+    # log without the skips is)
+    both = ("r1", "r2")
+    gone = (Skip("r2", "no answer within 3 s"),)
+    rounds = [RoundRecord("fed", 1, 1.0, 2.0, 2, 10, "average", both),
+              RoundRecord("fed", 2, 1.0, 2.0, 2, 10, "average", ("r1",), gone),
+              RoundRecord("fed", 3, 1.0, 2.0, 2, 10, "average", ("r1",), gone),
+              RoundRecord("fed", 4, 1.0, 2.0, 2, 10, "average", both)]
+    f = assess(cfg(), [(AgentLog("fed", rounds), 4)], {})
+    assert f.missed == {"r2": "missed 2 round(s) of fed: 2, 3 (lost at round 2, rejoined at "
+                              "round 4)"}
+    assert not f.complete(cfg()) and f.complete(cfg(tolerate_lost_robots=1))
+    assert "- MISSED rounds: r2 missed 2 round(s)" in "\n".join(f.lines())
+    clean = [RoundRecord("fed", n, 1.0, 2.0, 2, 10, "average", both) for n in range(1, 5)]
+    assert assess(cfg(), [(AgentLog("fed", clean), 4)], {}).complete(cfg())
