@@ -410,8 +410,8 @@ adopt([Address-Resume|Offers], Node, Agent, Tokens, Here, E, K1, Holder) :-
     set_custody(Node, Agent, custody(E, K1, Address)),
     agent_export(Node, Agent, Record0),
     setarg(4, Record0, []),                 % a record that leaves holds no token
-    custody_call(Node, Tokens, Address, hold(Agent, E, K1, Address, Here, Record0, Resume),
-                 Answer),
+    quick_call(Node, Tokens, Address, hold(Agent, E, K1, Address, Here, Record0, Resume),
+               Answer),
     (   Answer == held
     ->  Holder = Address,
         debug(dfrl(lease), '~w held by ~w (~w/~w)', [Agent, Address, E, K1])
