@@ -47,7 +47,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _fmt(entry: dict) -> str:
     half = entry["half"]
-    return f"{entry['mean']:+.3f} ± {half:.3f}" if not math.isnan(half) else f"{entry['mean']:+.3f}"
+    mean = f"{entry['mean']:+.3f}"
+    return mean if math.isnan(half) else f"{mean} ± {half:.3f}"
 
 
 def cmd_hetero(args: argparse.Namespace) -> int:

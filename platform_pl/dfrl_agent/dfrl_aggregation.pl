@@ -41,7 +41,10 @@ end of this file on the element-wise list maths exported here.
 ## Tables and parameters
 
 An agent carries either Q-tables (`tables`: its robots are tabular
-learners) or parameter vectors (`params`: function learners, e.g. DQN).
+learners, or, in a grid federation, learners of any kind, a function
+learner's table being its Q-function on the state grid, written back
+by distillation: robots/grid_view.py) or parameter vectors (`params`:
+function learners, e.g. DQN).
 A method applies to what it declares with method_applies/2; a method
 that declares nothing applies to tables only (every method written
 before parameters existed). Of the built-ins only `average` applies to

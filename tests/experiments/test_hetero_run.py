@@ -70,7 +70,8 @@ def test_grid_federation_of_qlearning_and_dqn(tmp_path: Path) -> None:
     out = tmp_path / "a"
     # Assert: one agent carrying tables visited all three robots every round
     launch = json.loads((out / "launch_fed_grid.json").read_text())
-    assert "carries" not in launch and [s["robot"] for s in launch["itinerary"]] == ["r1", "r2", "r3"]
+    assert "carries" not in launch
+    assert [s["robot"] for s in launch["itinerary"]] == ["r1", "r2", "r3"]
     rows = _rounds(out)
     assert [(r["agent"], r["round"], r["visited"]) for r in rows] == [
         ("fed_grid", str(k), "r1 r2 r3") for k in (1, 2, 3)]

@@ -17,7 +17,8 @@ from dfrl.robots.training import Trainer, TrainerConfig
 
 
 def _dqn(seed: int = 0) -> DQN:
-    return DQN(8, 3, LearnerParams(), np.random.default_rng(seed), config=DQNConfig(hidden=(32, 32)))
+    return DQN(8, 3, LearnerParams(), np.random.default_rng(seed),
+               config=DQNConfig(hidden=(32, 32)))
 
 
 def test_grid_points_are_cell_centres_that_map_back() -> None:
@@ -97,7 +98,8 @@ def test_grid_view_of_a_trainer() -> None:
         assert np.array_equal(view.visits, expected) and view.visits.sum() == 60
         # get: the network at the grid points
         q = view.q_table
-        assert q.shape == (81, 3) and np.array_equal(q, t.learner.q_batch(grid_points(t.discretiser)))
+        assert q.shape == (81, 3)
+        assert np.array_equal(q, t.learner.q_batch(grid_points(t.discretiser)))
         # set: distilled, the residual kept; the parameters pass through
         target = q + np.where(np.arange(81)[:, None] % 2 == 0, 1.0, -1.0)
         view.set_q_table(target)
