@@ -96,6 +96,7 @@ class RemoteRobot:
         self._lines_at = 0                        # bytes of its lines file read (poller only)
         self._lines_rest = b""
         self._err_path: Path | None = None
+        self._resumed: list[int] = []             # checkpoint iterations it was resumed at
 
     @property
     def spec(self) -> RobotSpec:
@@ -122,7 +123,7 @@ class RemoteRobot:
                 address=self._address, iteration=self._iteration, shares=self._shares,
                 done=self._state == "finished" or self._iteration >= self._cfg.iterations,
                 running=not self._stopped and self._state != "failed" and lost is None,
-                lost=lost)
+                lost=lost, resumed=tuple(self._resumed))
 
     def take_progress(self) -> Progress:
         with self._lock:
@@ -158,17 +159,45 @@ class RemoteRobot:
         if status.get("state") in ACTIVE:
             raise ExperimentError(f"robot host {where} is busy with experiment "
                                   f"{status.get('experiment')!r} (state {status.get('state')})")
-        name, arena = arena_payload(self._spec.arena)
-        robot = {**self._cfg.public_dict(), "arena": name}  # the robot has its own token
-        self._ask({"configure": json.dumps({"experiment": self._experiment, "robot": robot,
-                                            "arena": arena})})
-        self._update(self._ask("status"))
+        self._configure(resume=False)
         with self._lock:
             self._address = self._service
         self._ask("start")
         with self._lock:
             self._state = "running"
         self._poller.watch(self)
+
+    def _configure(self, resume: bool) -> None:
+        """Send our experiment's configuration (``resume``: from the checkpoint the service's
+        workdir holds) and read the status it leads to."""
+        name, arena = arena_payload(self._spec.arena)
+        robot = {**self._cfg.public_dict(), "arena": name}  # the robot has its own token
+        self._ask({"configure": json.dumps({"experiment": self._experiment, "robot": robot,
+                                            "arena": arena, "resume": resume})})
+        self._update(self._ask("status"))
+
+    def _restarted(self, status: dict[str, Any]) -> bool:
+        """The service answers, idle and holding no experiment, while ours ran there and had
+        iterations left: its process was restarted (its workdir keeps our checkpoint)."""
+        with self._lock:
+            ours = (not self._stopped and self._state in ("running", "configured")
+                    and self._iteration < self._cfg.iterations)
+        return ours and status.get("state") == "idle" and status.get("experiment") is None
+
+    def _resume(self) -> None:
+        """Configure the restarted service with our experiment again, from its checkpoint,
+        and start it: the robot rejoins (the agent visits its stop every round). A failure
+        leaves it failed, with the reason."""
+        try:
+            self._configure(resume=True)
+            self._ask("start")
+        except ExperimentError as exc:
+            with self._lock:
+                self._state, self._error = "failed", f"restarted, could not resume: {exc}"
+            return
+        with self._lock:
+            self._state = "running"
+            self._resumed.append(self._iteration)
 
     def _update(self, status: dict[str, Any]) -> None:
         with self._lock:
@@ -224,7 +253,9 @@ class RemoteRobot:
                 self._outages.append((self._down_since, now, self._unreachable))
             self._unreachable = None
             self._last_answer = now
-        if isinstance(status, dict) and status.get("experiment") in (self._experiment, None):
+        if isinstance(status, dict) and self._restarted(status):
+            self._resume()
+        elif isinstance(status, dict) and status.get("experiment") in (self._experiment, None):
             self._update(status)
 
     def answering(self) -> bool:

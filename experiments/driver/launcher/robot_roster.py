@@ -51,6 +51,7 @@ class RobotRoster:
         self._gathered: dict[str, list[str]] = {}
         self._gather_errors: list[str] = []
         self._failed_joins: dict[str, str] = {}    # robot -> why it could not join
+        self._resumed: dict[str, tuple[int, ...]] = {}   # robot -> checkpoint iterations
 
     # -- the robots ---------------------------------------------------------------------------
     def add(self, robot: Robot, joined: bool = False) -> None:
@@ -116,6 +117,14 @@ class RobotRoster:
 
     def _check_health(self, rid: str, robot: Robot, status: RobotStatus) -> None:
         why, code = status.lost, status.exit_code
+        with self._lock:
+            resumed = status.resumed[len(self._resumed.get(rid, ())):]
+            if resumed:
+                self._resumed[rid] = status.resumed
+        for it in resumed:
+            self._say(f"robot {rid}: its robot host was restarted; resumed from its checkpoint "
+                      f"at iteration {it}")
+            self._event({"kind": "robot_state", "robot": rid, "state": "learning"})
         with self._lock:
             new = why is not None and rid not in self._lost and rid not in self._killed
             back = why is None and rid in self._lost
@@ -250,6 +259,11 @@ class RobotRoster:
     def lost(self) -> dict[str, str]:
         with self._lock:
             return dict(self._lost)
+
+    def resumed(self) -> dict[str, list[int]]:
+        """robot -> the checkpoint iterations it was resumed at after its host restarted."""
+        with self._lock:
+            return {rid: list(its) for rid, its in self._resumed.items()}
 
     def stalls(self) -> list[str]:
         with self._lock:

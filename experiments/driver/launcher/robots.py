@@ -58,6 +58,9 @@ class RobotStatus:
         robot on another host (it has no process here).
     pid : int or None
         Its process id on this host; None for a robot on another host.
+    resumed : tuple of int
+        The iterations its checkpoint held each time it was resumed after its robot host was
+        restarted (empty: never).
     """
 
     address: Address | None
@@ -68,6 +71,7 @@ class RobotStatus:
     lost: str | None = None
     exit_code: int | None = None
     pid: int | None = None
+    resumed: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -49,6 +49,8 @@ class RunFacts:
     collected : list of str or None
         Set by ``dfrl collect``: the summary's lines on how the files were collected after
         the driver stopped and what could not be fetched.
+    resumed : dict
+        robot -> the checkpoint iterations it was resumed at after its robot host restarted.
     """
 
     wall_time_s: float
@@ -62,6 +64,7 @@ class RunFacts:
     gathered: dict[str, list[str]] = field(default_factory=dict)
     failed_joins: dict[str, str] = field(default_factory=dict)
     collected: list[str] | None = None
+    resumed: dict[str, list[int]] = field(default_factory=dict)
 
 
 def write_end_files(out: Path, config: ExperimentConfig, robots: list[str],
@@ -115,7 +118,7 @@ def write_end_files(out: Path, config: ExperimentConfig, robots: list[str],
         for line in lines:
             say(f"{name}: {line}")
     faults = assess(config, [(lg, budgets[n]) for n, lg in logs.items()], facts.lost,
-                    facts.stalls, facts.other)
+                    facts.stalls, facts.other, facts.resumed)
     ok = facts.ok and all(v is not None for v in finished.values()) and faults.complete(config)
     result = Results(out, config, facts.wall_time_s, rows, facts.crashed, finished,
                      facts.iterations, plots, ok, facts.interrupted, problems, plot_error,

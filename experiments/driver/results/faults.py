@@ -81,9 +81,10 @@ def planned_rounds(log: AgentLog, rounds: int) -> int:
 
 def assess(config: ExperimentConfig, logs: Iterable[tuple[AgentLog, int]],
            lost: dict[str, str], stalls: Iterable[str] = (),
-           other: Iterable[str] = ()) -> Faults:
+           other: Iterable[str] = (), resumed: dict[str, list[int]] | None = None) -> Faults:
     """The faults of a run from its agents' logs (each with its round budget) and what the
-    launcher recorded."""
+    launcher recorded (``resumed``: robot -> the checkpoint iterations it was resumed at
+    after its robot host restarted)."""
     f = Faults(lost=dict(lost), stalls=list(stalls), other=list(other))
     for log, budget in logs:
         for rec in log.rounds:
@@ -102,27 +103,32 @@ def assess(config: ExperimentConfig, logs: Iterable[tuple[AgentLog, int]],
         f.method_errors[log.agent] = [f"round {rec.round} ({rec.method}): "
                                       f"{' '.join(rec.error.split())}"
                                       for rec in log.rounds if rec.error]
-        _missed(f, log)
+        _missed(f, log, resumed or {})
         done = {rec.round for rec in log.rounds}
         f.missing_rounds[log.agent] = [n for n in range(1, planned_rounds(log, budget) + 1)
                                        if n not in done]
     return f
 
 
-def _missed(f: Faults, log: AgentLog) -> None:
+def _missed(f: Faults, log: AgentLog, resumed: dict[str, list[int]]) -> None:
     """The robots ``log``'s agent skipped, each with the rounds it missed and, per spell of
-    absence, when it was lost and whether it came back (visited again)."""
+    absence, when it was lost and whether it came back (visited again; the k-th return of a
+    robot resumed after a restart is its k-th resume)."""
     skipped: dict[str, list[int]] = {}
     for rec in log.rounds:
         for s in rec.skipped:
             skipped.setdefault(s.robot, []).append(rec.round)
     for rid, rounds in skipped.items():
         spells = []
+        checkpoints = list(resumed.get(rid, ()))
         for first in (r for r in rounds if r - 1 not in rounds):
             back = next((rec.round for rec in log.rounds
                          if rec.round > first and rid in rec.visited), None)
+            how = ""
+            if back and checkpoints:
+                how = f" from its checkpoint at iteration {checkpoints.pop(0)}"
             spells.append(f"lost at round {first}, "
-                          + (f"rejoined at round {back}" if back else "never visited again"))
+                          + (f"rejoined at round {back}{how}" if back else "never visited again"))
         shown = ", ".join(map(str, rounds[:20])) + (" ..." if len(rounds) > 20 else "")
         line = f"missed {len(rounds)} round(s) of {log.agent}: {shown} ({'; '.join(spells)})"
         f.missed[rid] = f"{f.missed[rid]}; {line}" if rid in f.missed else line
