@@ -39,7 +39,8 @@ from dfrl.experiments.errors import ExperimentError
 
 #: The resource a robot's task asks for (workers offer it: ``--resources CPU=N``).
 RESOURCE = "CPU"
-#: Seconds to connect to the scheduler, and for every robot to report its service's address.
+#: Seconds to connect to the scheduler; seconds without a robot reporting its service's
+#: address after which placing fails (placing many robots may take longer as a whole).
 CONNECT_S = 20.0
 PLACE_S = 120.0
 #: Seconds without a new worker after which the workers there are taken as all there are.
@@ -130,7 +131,7 @@ class ClusterPlacement:
         ExperimentError
             The workers offer too little of the resource for every robot at once (after
             waiting up to :data:`CONNECT_S` for workers that are still registering), a task
-            failed (its reason given), or a robot was not placed within :data:`PLACE_S`.
+            failed (its reason given), or no robot reported for :data:`PLACE_S`.
         """
         from distributed import Event, Variable
 
@@ -162,20 +163,26 @@ class ClusterPlacement:
                 serve_robot, self.run_key, rid, lease_s=LEASE_S, key=f"dfrl-{self.run_key}-{rid}",
                 resources={RESOURCE: self.cpus}, pure=False, retries=0)
         self._start_watch()
-        deadline = time.monotonic() + PLACE_S
-        for rid in robots:
-            future = self._futures[rid]
-            listening = Event(f"dfrl-{self.run_key}-{rid}-listening", client=self._client)
-            while not listening.wait(timeout=0.5):
-                if future.done():
-                    raise ExperimentError(f"robot {rid} was not placed: {self._why(future)}")
-                if time.monotonic() > deadline:
-                    raise ExperimentError(f"robot {rid} was not placed on cluster "
-                                          f"{self.address} within {PLACE_S:.0f} s")
-            host, port, worker = Variable(f"dfrl-{self.run_key}-{rid}-address",
-                                          client=self._client).get(timeout=10)
-            with self._lock:
-                self._placed[rid] = Placement(rid, str(host), int(port), str(worker))
+        waiting = {rid: Event(f"dfrl-{self.run_key}-{rid}-listening", client=self._client)
+                   for rid in robots}
+        moved = time.monotonic()           # the last time a robot reported
+        while waiting:
+            for rid, listening in list(waiting.items()):
+                if not listening.wait(timeout=0.05):
+                    if self._futures[rid].done():
+                        raise ExperimentError(f"robot {rid} was not placed: "
+                                              f"{self._why(self._futures[rid])}")
+                    continue
+                host, port, worker = Variable(f"dfrl-{self.run_key}-{rid}-address",
+                                              client=self._client).get(timeout=10)
+                with self._lock:
+                    self._placed[rid] = Placement(rid, str(host), int(port), str(worker))
+                del waiting[rid]
+                moved = time.monotonic()
+            if waiting and time.monotonic() - moved > PLACE_S:
+                raise ExperimentError(f"robots {', '.join(waiting)} were not placed on cluster "
+                                      f"{self.address}: none reported for {PLACE_S:.0f} s")
+            time.sleep(0.2)
         return self.placements()
 
     @staticmethod
