@@ -90,7 +90,9 @@ def test_frozen_stop_control_before(tmp_path: Path, procs: list[Proc]) -> None:
     rounds = rounds_once(stops, 4)
     r2 = rounds[1]
     assert skip_of(r2, "r2") is not None, r2
+    report("control (before): round with the frozen stop took (s)", r2["end"] - r2["start"])
     assert r2["end"] - r2["start"] >= REPLY_S - 0.5, r2
     refused = [r for r in rounds[2:] if (s := skip_of(r, "r2")) is not None
                and "No permission to create agent" in s["reason"]]
     assert refused, rounds
+    report("control (before): later rounds refused by the stale copy", len(refused))
