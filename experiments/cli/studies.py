@@ -219,7 +219,7 @@ def cmd_paper(args: argparse.Namespace) -> int:
 
 
 def register_speedup(subparsers: argparse._SubParsersAction) -> None:
-    from dfrl.experiments.science.studies.speedup import CONDITIONS, SpeedupOptions
+    from dfrl.experiments.science.studies.speedup import CONDITIONS, SpeedupOptions, parse_budget
 
     d = SpeedupOptions()
     p = subparsers.add_parser(
@@ -239,28 +239,23 @@ def register_speedup(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--iterations", type=int, default=d.iterations,
                    help="budget per robot; a run stops earlier once every target is reached "
                         "(default: %(default)s)")
-    p.add_argument("--share-every", type=int, default=d.share_every,
-                   help="local steps K between two shares (default: %(default)s)")
-    p.add_argument("--grid", type=int, default=d.grid,
-                   help="iterations between two table-error measurements (default: "
-                        "%(default)s)")
+    p.add_argument("--budget", type=parse_budget, action="append", default=None,
+                   metavar="N=ITER", help="another budget at N (repeatable; default: 1=36000)")
     p.add_argument("--targets", type=float, nargs="+", default=list(d.targets),
                    help="relative table errors to reach (default: %(default)s)")
-    p.add_argument("--score-threshold", type=float, default=d.score_threshold,
-                   help="greedy score in r1 to reach (default: %(default)s)")
-    p.add_argument("--score-every", type=int, default=d.score_every,
-                   help="iterations between two greedy evaluations, a multiple of --grid "
-                        "(default: %(default)s)")
-    p.add_argument("--eval-steps", type=int, default=d.eval_steps,
-                   help="steps per greedy evaluation (default: %(default)s)")
     p.add_argument("--alpha", type=float, default=None,
                    help="learning rate of every robot (default: the learner's, 0.2)")
     p.add_argument("--method", default=d.method, help="aggregation (default: %(default)s)")
-    p.add_argument("--linear-fraction", type=float, default=d.linear_fraction,
-                   help="'linear speed-up' means T(1)/T(N) > this x N (default: %(default)s)")
-    p.add_argument("--resamples", type=int, default=d.resamples,
-                   help="bootstrap resamples (default: %(default)s)")
-    p.add_argument("--jobs", type=int, default=d.jobs, help="processes (default: %(default)s)")
+    for flag, kind, hint in (
+            ("--share-every", int, "local steps K between two shares"),
+            ("--grid", int, "iterations between two table-error measurements"),
+            ("--score-threshold", float, "greedy score in r1 to reach"),
+            ("--score-every", int, "iterations between greedy evaluations (a multiple of --grid)"),
+            ("--eval-steps", int, "steps per greedy evaluation"),
+            ("--linear-fraction", float, "'linear speed-up' means T(1)/T(N) > this x N"),
+            ("--resamples", int, "bootstrap resamples"), ("--jobs", int, "processes")):
+        p.add_argument(flag, type=kind, default=getattr(d, flag[2:].replace("-", "_")),
+                       help=f"{hint} (default: %(default)s)")
     p.add_argument("--out", type=Path, default=None, help="also write speedup.md, "
                    "speedup.json, tidy.csv, provenance.json there, and each federation to "
                    "speedup_runs.jsonl as it ends")
@@ -279,7 +274,8 @@ def cmd_speedup(args: argparse.Namespace) -> int:
     from dfrl.experiments.science.reference import ReferenceError
     from dfrl.experiments.science.reference_store import reference_table
     from dfrl.experiments.science.studies.speedup import REFERENCE, SpeedupOptions, study_runs
-    from dfrl.experiments.science.studies.speedup_report import (analyse, markdown, tidy_rows,
+    from dfrl.experiments.science.studies.speedup_report import (analyse, markdown,
+                                                                 progress_line, tidy_rows,
                                                                  to_json)
     from dfrl.experiments.science.tidy import TIDY_FILE, write_tidy
 
@@ -287,6 +283,7 @@ def cmd_speedup(args: argparse.Namespace) -> int:
         opts = SpeedupOptions(
             robots=tuple(args.robots), seeds=chosen_seeds(args),
             conditions=tuple(dict.fromkeys(args.conditions)), iterations=args.iterations,
+            budgets=SpeedupOptions.budgets if args.budget is None else tuple(args.budget),
             share_every=args.share_every, grid=args.grid, targets=tuple(args.targets),
             score_threshold=args.score_threshold, score_every=args.score_every,
             eval_steps=args.eval_steps, alpha=args.alpha, method=args.method,
@@ -298,10 +295,7 @@ def cmd_speedup(args: argparse.Namespace) -> int:
         return 2
 
     def progress(done: int, total: int, run: dict[str, Any]) -> None:
-        times = ", ".join(f"{m} {'-' if t is None else t}" for m, t in run["times"].items())
-        print(f"[{done}/{total}] N={run['robots']} seed {run['seed']} ({'+'.join(run['arenas'])})"
-              f": {run['iterations']} iterations, {run['seconds']:.0f} s; {times}",
-              file=sys.stderr, flush=True)
+        print(f"[{done}/{total}] {progress_line(run)}", file=sys.stderr, flush=True)
 
     def stop(signum: int, frame: Any) -> None:
         raise KeyboardInterrupt(f"signal {signum}")

@@ -61,6 +61,7 @@ class SpeedupOptions:
     seeds: tuple[int, ...] = tuple(range(1, 11))
     conditions: tuple[str, ...] = CONDITIONS
     iterations: int = 12_000
+    budgets: tuple[tuple[int, int], ...] = ((1, 36_000),)
     share_every: int = 500
     grid: int = 100
     targets: tuple[float, ...] = (0.75, 0.70)
@@ -89,6 +90,9 @@ class SpeedupOptions:
                      "eval_steps", "episode_steps", "resamples", "jobs"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if any(n < 1 or b < 1 for n, b in self.budgets):
+            raise ValueError(f"budgets: pairs (N, iterations) of positive numbers, got "
+                             f"{self.budgets}")
         if self.score_every % self.grid:
             raise ValueError(f"score_every ({self.score_every}) must be a multiple of grid "
                              f"({self.grid})")
@@ -98,6 +102,21 @@ class SpeedupOptions:
             raise ValueError(f"alpha must be in (0, 1], got {self.alpha}")
         if not 0 < self.linear_fraction <= 1:
             raise ValueError(f"linear_fraction must be in (0, 1], got {self.linear_fraction}")
+
+
+def parse_budget(text: str) -> tuple[int, int]:
+    """``N=ITERATIONS`` (``--budget``) as a pair; ValueError otherwise."""
+    n, _, it = text.partition("=")
+    if not (n.strip().isdigit() and it.strip().isdigit()):
+        raise ValueError(f"expected N=ITERATIONS, got {text!r}")
+    return int(n), int(it)
+
+
+def budget(opts: SpeedupOptions, n: int) -> int:
+    """Iterations per robot at N = ``n``: ``opts.budgets`` for the N it names, else
+    ``opts.iterations`` (one robot alone needs the longest: its censored runs would leave
+    T(1), the numerator of every ratio, open)."""
+    return dict(opts.budgets).get(n, opts.iterations)
 
 
 def arenas(condition: str, n: int) -> tuple[str, ...]:
@@ -161,7 +180,7 @@ def run_one(arena_list: tuple[str, ...], seed: int, opts: SpeedupOptions,
         return reached_all()
 
     t0 = time.perf_counter()
-    fed = federate(cfgs, opts.iterations, opts.share_every, opts.method,
+    fed = federate(cfgs, budget(opts, len(cfgs)), opts.share_every, opts.method,
                    observe=observe, observe_every=opts.grid, final_share=False)
     times: dict[str, int | None] = {}
     for t in opts.targets:
@@ -172,7 +191,7 @@ def run_one(arena_list: tuple[str, ...], seed: int, opts: SpeedupOptions,
                                                            opts.score_threshold,
                                                            opts.score_hold)
     return {"robots": len(arena_list), "arenas": list(arena_list), "seed": seed,
-            "iterations": fed.iterations, "budget": opts.iterations, "grid": grid,
+            "iterations": fed.iterations, "budget": budget(opts, len(cfgs)), "grid": grid,
             "error": error, "score_iterations": score_its, "score": scores, "times": times,
             "seconds": time.perf_counter() - t0}
 
@@ -184,10 +203,12 @@ RUN_OPTIONS = ("iterations", "share_every", "grid", "targets", "score_threshold"
 RUNS_FILE = "speedup_runs.jsonl"
 
 
-def recipe(opts: SpeedupOptions) -> dict[str, Any]:
-    """What a federation's result depends on besides its arenas and seed (JSON-ready)."""
-    return {k: list(v) if isinstance(v, tuple) else v
-            for k, v in ((k, getattr(opts, k)) for k in RUN_OPTIONS)}
+def recipe(opts: SpeedupOptions, n: int) -> dict[str, Any]:
+    """What a federation of ``n`` robots depends on besides its arenas and seed (JSON-ready;
+    ``iterations`` is its budget)."""
+    out = {k: list(v) if isinstance(v, tuple) else v
+           for k, v in ((k, getattr(opts, k)) for k in RUN_OPTIONS)}
+    return {**out, "iterations": budget(opts, n)}
 
 
 def runs_needed(opts: SpeedupOptions) -> list[tuple[tuple[str, ...], int]]:
@@ -228,7 +249,7 @@ def run_all(opts: SpeedupOptions, reference: Reference,
         out[k] = r
         if record is not None:
             with open(record, "a", encoding="utf-8") as fh:
-                fh.write(json.dumps({"recipe": recipe(opts), **r}) + "\n")
+                fh.write(json.dumps({"recipe": recipe(opts, len(k[0])), **r}) + "\n")
         if progress is not None:
             progress(len(out), len(keys), r)
 
@@ -264,7 +285,7 @@ def load_runs(path: str | Path, opts: SpeedupOptions, complete: bool = True
     OSError
         The file cannot be read.
     """
-    want, needed, out = recipe(opts), set(runs_needed(opts)), {}
+    needed, out = set(runs_needed(opts)), {}
     lines = Path(path).read_text(encoding="utf-8").splitlines()
     for no, line in enumerate(lines, 1):
         if not line.strip():
@@ -274,7 +295,7 @@ def load_runs(path: str | Path, opts: SpeedupOptions, complete: bool = True
         except ValueError as exc:
             raise ValueError(f"{path}:{no}: not a JSON line ({exc})") from exc
         key = (tuple(r["arenas"]), int(r["seed"]))
-        if r.get("recipe") == want and key in needed:
+        if key in needed and r.get("recipe") == recipe(opts, len(key[0])):
             out[key] = {k: v for k, v in r.items() if k != "recipe"}
     missing = [k for k in runs_needed(opts) if k not in out]
     if complete and missing:

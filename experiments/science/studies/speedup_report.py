@@ -100,6 +100,13 @@ def analyse(opts: SpeedupOptions, results: Mapping[tuple[tuple[str, ...], int], 
                     faster=None if r.faster is None else next(adjusted)) for r in rows]
 
 
+def progress_line(run: dict[str, Any]) -> str:
+    """One finished federation in a line (progress output)."""
+    times = ", ".join(f"{m} {'-' if t is None else t}" for m, t in run["times"].items())
+    return (f"N={run['robots']} seed {run['seed']} ({'+'.join(run['arenas'])}): "
+            f"{run['iterations']} iterations, {run['seconds']:.0f} s; {times}")
+
+
 def verdict(j: Judgement | None, claim: str) -> str:
     """The verdict in the study's words (``claim`` + " holds" when it holds)."""
     if j is None:
@@ -131,7 +138,7 @@ def markdown(rows: Sequence[SpeedupRow], opts: SpeedupOptions, wall_s: float,
     eps = cfg.learner.epsilon
     L = [f"Speed-up against the number of robots: {len(opts.seeds)} seeds per N "
          f"({', '.join(map(str, opts.seeds))}), budget {opts.iterations:,} iterations per "
-         f"robot, share ({opts.method}) every {opts.share_every}, table error against "
+         f"robot{''.join(f' ({b:,} at N = {n})' for n, b in opts.budgets)}, share ({opts.method}) every {opts.share_every}, table error against "
          f"{reference_name} every {opts.grid} iterations, greedy score in r1 every "
          f"{opts.score_every} ({opts.eval_steps} steps; the first of {opts.score_hold} "
          f"evaluations in a row at or above the threshold). T = Kaplan-Meier median "

@@ -107,6 +107,7 @@ def test_analysis_keeps_censored_runs_censored() -> None:
 def test_dfrl_speedup_tiny_end_to_end(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "study"
     args = ["speedup", "--robots", "1", "2", "--n-seeds", "3", "--iterations", "200",
+            "--budget", "1=200",
             "--share-every", "100", "--grid", "100", "--score-every", "200", "--eval-steps",
             "50", "--targets", "0.999", "0.2", "--resamples", "200", "--jobs", "1",
             "--out", str(out)]
@@ -138,7 +139,8 @@ def test_dfrl_speedup_tiny_end_to_end(tmp_path, capsys: pytest.CaptureFixture[st
     again = capsys.readouterr().out
     assert again.split("### homogeneous")[1] == text.split("### homogeneous")[1]
     assert main([*args[:-2], "--iterations", "300", "--from-runs", str(runs)]) == 2
-    assert "9 federations these options need are missing" in capsys.readouterr().err
+    # N = 1 keeps its own budget (--budget 1=200): only the six federations of N = 2 differ
+    assert "6 federations these options need are missing" in capsys.readouterr().err
     # --resume reuses all nine: nothing is run or appended
     assert main([*args, "--resume"]) == 0
     assert "[" not in capsys.readouterr().err and len(runs.read_text().splitlines()) == 9
