@@ -35,8 +35,10 @@ fixed, only the variance of the table shrinks with N; the bias (values still gro
 which falls like (1 - c alpha)^t whatever N) does not, so a target the bias dominates shows
 no speed-up and a target near one robot's noise floor the largest. The heterogeneous
 condition is outside both theorems: the average of tables from five arenas converges to a
-compromise, not to R1's values. Test the theory's settings with --alpha and --share-every
-(e.g. --alpha 0.05 --share-every 20)."""
+compromise, not to R1's values. For asynchronous sampling Woo et al. weight the average by
+visits (importance averaging, --method visit_average): the plain average pulls a pair one
+robot never visited towards its initial 0. Test the theory's settings with --alpha,
+--share-every and --method (e.g. --alpha 0.05 --share-every 20 --method visit_average)."""
 
 
 @dataclass(frozen=True)
