@@ -306,3 +306,24 @@ def test_resting_host_restarted_with_its_store(tmp_path: Path, procs: list[Proc]
     assert all(t == tables[0] for t in tables), tables
     time.sleep(0.5)
     assert not any(stops.has_agent(i) for i in range(4))
+
+
+def test_hold_request_checks_what_it_stores(tmp_path: Path, procs: list[Proc]) -> None:
+    # A stop asked to hold a checkpoint stores a record it would install unchecked if it
+    # resurrected it: the record's code passes the sandbox check as an arrival's does, and the
+    # resume point may carry no packed term (nothing a peer sends is deserialised).
+    stops = Stops(tmp_path, procs, [0.0])
+    custody = "(dfrl_custody_of(fx,custody(1,1,'localhost:1')):-true)"
+    resume = "resume(_{acc:none,index:0},0,round_done(0,false))"
+
+    def hold(handler_body: str, resume_term: str = resume) -> str:
+        record = (f"agent(fx,dfrl_tour,mobile,[],[],[dfrl_custody_of/2],"
+                  f"[{custody},(dfrl_tour(_,_,_):-{handler_body})],[])")
+        return request(stops.ports[0], f"dfrl_custody(hold(fx,1,1,'localhost:1','localhost:2',"
+                                       f"{record},{resume_term}))", token=str(TOKEN))
+
+    unsafe = hold("shell(ls)")
+    assert "refused(" in unsafe and "shell" in unsafe, unsafe
+    packed = hold("true", "resume(_{acc:packed(\"x\"),index:0},0,round_done(0,false))")
+    assert "refused(hold)" in packed, packed
+    assert "ok(held)" in hold("true")        # control: a well-formed, safe record is held
