@@ -74,8 +74,9 @@ and how long the agent tried (on the way back a stop that failed this
 round is tried once more, without retries, unless it never answered: a
 frozen or cut-off stop is not waited for twice in a round). A move
 refused because a stale copy of the agent is at the stop has that copy
-replaced (dfrl_move.pl) and is tried again. A round starts at the first stop the agent can
-reach (`origin`; normally the first of the itinerary): when the first
+replaced (dfrl_move.pl) and is tried again. A round starts at the first
+stop the agent can reach (`origin`; normally the first of the
+itinerary): when the first
 stop is down the round starts at the next reachable stop, or where the
 agent is, and the backward pass ends there; every round tries the first
 stop again, so a stop that comes back is visited again in the next
