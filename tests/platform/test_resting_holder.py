@@ -52,7 +52,10 @@ main :-
     node_start(localhost:Port, _, [token({TOKEN}), lease_s(Lease), connect_timeout(1),
                                    reply_timeout(Reply), default(true)|StoreOpts]),
     format("LISTENING ~w~n", [Port]), flush_output,
-    ( getenv("DFRL_DBG", _) -> debug(dfrl(agent)), debug(dfrl(move)), debug(dfrl(lease)), debug(dfrl(custody)) ; true ),
+    (   getenv("DFRL_DBG", _)          % the platform's debug topics, to look into a failure
+    ->  forall(member(T, [agent, move, lease, custody]), debug(dfrl(T)))
+    ;   true
+    ),
     serve_stdin(Robot).
 
 serve_stdin(Robot) :-
@@ -263,8 +266,8 @@ def test_resting_host_killed(tmp_path: Path, procs: list[Proc], restart: bool) -
     assert (res["round"], res["epoch"], res["from"]) == (2, 2, stops.address(1)), res
     rounds = rounds_once(stops, 3)
     stall = rounds[1]["start"] - killed
-    report(f"resting-host kill ({'restart' if restart else 'no restart'}): next round start after kill (s)",
-           stall)
+    report(f"resting-host kill ({'restart' if restart else 'no restart'}): "
+           "next round start after kill (s)", stall)
     assert stall < lease + SLACK_S, stall
     assert rounds[1]["skipped"] and rounds[1]["skipped"][0]["robot"] == "r0"
     assert all(r["epoch"] == 2 for r in rounds[1:])
