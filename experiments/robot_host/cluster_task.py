@@ -8,7 +8,8 @@ process of the worker, on the worker's host::
         --token-file dfrl.token --workdir dfrl-robot/ROBOT
 
 (``dfrl.token`` in the worker's working folder, as on every robot host: the token never
-travels through the cluster engine), waits for its ``dfrl robot listening on A:P`` line,
+travels through the cluster engine), waits for its ``dfrl robot listening on A:P`` line (at most as many services of a worker
+start at once as its host has cores: :data:`STARTING`),
 reports ``A:P`` to the driver in the run's variable ``dfrl-<run>-<robot>-address`` (and sets
 the event ``dfrl-<run>-<robot>-listening``), and then
 holds the cluster resources it was placed with until one of:
@@ -35,6 +36,7 @@ import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -48,6 +50,9 @@ START_S = 120.0
 STOP_S = 20.0
 #: Seconds between two looks at the stop event, the service and the lease.
 LOOK_S = 1.0
+#: Services of this worker process that may be starting at once (a start is ~2 s of CPU:
+#: more at once than the host has cores only makes every one of them late).
+STARTING = threading.BoundedSemaphore(os.cpu_count() or 1)
 
 
 class ClusterTaskError(RuntimeError):
@@ -146,13 +151,21 @@ def serve_robot(run_key: str, robot: str, token_file: str = "dfrl.token",
     folder = (Path(workdir) / robot).resolve()
     folder.mkdir(parents=True, exist_ok=True)
     out = folder / "service.out"
-    with open(out, "w", encoding="utf-8") as out_fh, \
-            open(out.with_suffix(".err"), "w", encoding="utf-8") as err_fh:
-        proc = subprocess.Popen(service_argv(host, token, folder), stdin=subprocess.DEVNULL,
-                                stdout=out_fh, stderr=err_fh, cwd=folder,
-                                preexec_fn=_die_with_parent if os.name == "posix" else None)
+    with STARTING:
+        if Event(f"{prefix}-stop").is_set():          # the run ended while we waited
+            return {"robot": robot, "worker": worker, "address": None, "exit": None,
+                    "ended": "not started: the run ended before"}
+        with open(out, "w", encoding="utf-8") as out_fh, \
+                open(out.with_suffix(".err"), "w", encoding="utf-8") as err_fh:
+            proc = subprocess.Popen(service_argv(host, token, folder), stdin=subprocess.DEVNULL,
+                                    stdout=out_fh, stderr=err_fh, cwd=folder,
+                                    preexec_fn=_die_with_parent if os.name == "posix" else None)
+        try:
+            address = _await_listening(proc, out, where)
+        except BaseException:
+            _end(proc)
+            raise
     try:
-        address = _await_listening(proc, out, where)
         Variable(f"{prefix}-{robot}-address").set([address[0], address[1], worker])
         Event(f"{prefix}-{robot}-listening").set()    # waiting on an event logs no timeouts
         ended = _hold(proc, Event(f"{prefix}-stop"), Variable(f"{prefix}-lease"), lease_s)
