@@ -92,6 +92,7 @@ def collect(results_dir: str | Path, progress: TextIO | None = sys.stderr,
             robots.append(spec.id)
             lost[spec.id] = "never came up (not in nodes.json)"
     iterations: dict[str, int] = {}
+    finished: list[str] = []
     for rid in robots:
         if rid in lost:
             continue
@@ -102,6 +103,8 @@ def collect(results_dir: str | Path, progress: TextIO | None = sys.stderr,
         iterations[rid] = done
         if planned is not None and done < planned and rid not in running:
             lost[rid] = f"stopped at iteration {done} of {planned}"
+        elif planned is not None and done >= planned:
+            finished.append(rid)
     logs: dict[str, AgentLog] = {}
     budgets: dict[str, int] = {}
     for a in info["agents"]:
@@ -115,7 +118,7 @@ def collect(results_dir: str | Path, progress: TextIO | None = sys.stderr,
     spans = [t for lg in logs.values() for r in lg.rounds for t in (r.start, r.end)]
     wall = max(spans) - min(spans) if spans else 0.0
     facts = RunFacts(wall, iterations=iterations, lost=lost, other=other, gathered=gathered,
-                     collected=notes)
+                     collected=notes, finished=finished)
     return write_end_files(out, config, robots, logs, budgets, facts, say)
 
 

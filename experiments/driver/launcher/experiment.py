@@ -168,7 +168,7 @@ class Launcher:
         r = self._robots
         facts = RunFacts(wall, ok, self._interrupted, r.crashed(), r.iterations(), r.lost(),
                          r.stalls(), r.gather_errors(), r.gathered(), r.failed_joins(),
-                         resumed=r.resumed())
+                         resumed=r.resumed(), finished=r.finished())
         return write_end_files(self._out, self._config, list(r.robots()), self._agents.logs(),
                                {a.name: a.rounds for a in self._agents.infos()}, facts,
                                self._reporter.say)

@@ -260,6 +260,10 @@ class RobotRoster:
         with self._lock:
             return dict(self._lost)
 
+    def finished(self) -> list[str]:
+        """Robots that said they ran all their iterations."""
+        return [rid for rid, robot in self.robots().items() if robot.status().done]
+
     def resumed(self) -> dict[str, list[int]]:
         """robot -> the checkpoint iterations it was resumed at after its host restarted."""
         with self._lock:

@@ -51,6 +51,9 @@ class RunFacts:
         the driver stopped and what could not be fetched.
     resumed : dict
         robot -> the checkpoint iterations it was resumed at after its robot host restarted.
+    finished : list of str
+        Robots that ran all their iterations (an agent that skips one afterwards missed
+        nothing of it).
     """
 
     wall_time_s: float
@@ -65,6 +68,7 @@ class RunFacts:
     failed_joins: dict[str, str] = field(default_factory=dict)
     collected: list[str] | None = None
     resumed: dict[str, list[int]] = field(default_factory=dict)
+    finished: list[str] = field(default_factory=list)
 
 
 def write_end_files(out: Path, config: ExperimentConfig, robots: list[str],
@@ -118,7 +122,7 @@ def write_end_files(out: Path, config: ExperimentConfig, robots: list[str],
         for line in lines:
             say(f"{name}: {line}")
     faults = assess(config, [(lg, budgets[n]) for n, lg in logs.items()], facts.lost,
-                    facts.stalls, facts.other, facts.resumed)
+                    facts.stalls, facts.other, facts.resumed, facts.finished)
     ok = facts.ok and all(v is not None for v in finished.values()) and faults.complete(config)
     result = Results(out, config, facts.wall_time_s, rows, facts.crashed, finished,
                      facts.iterations, plots, ok, facts.interrupted, problems, plot_error,

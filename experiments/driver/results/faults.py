@@ -81,10 +81,12 @@ def planned_rounds(log: AgentLog, rounds: int) -> int:
 
 def assess(config: ExperimentConfig, logs: Iterable[tuple[AgentLog, int]],
            lost: dict[str, str], stalls: Iterable[str] = (),
-           other: Iterable[str] = (), resumed: dict[str, list[int]] | None = None) -> Faults:
+           other: Iterable[str] = (), resumed: dict[str, list[int]] | None = None,
+           finished: Iterable[str] = ()) -> Faults:
     """The faults of a run from its agents' logs (each with its round budget) and what the
     launcher recorded (``resumed``: robot -> the checkpoint iterations it was resumed at
-    after its robot host restarted)."""
+    after its robot host restarted; ``finished``: robots that ran all their iterations, whose
+    skips after their last visit are no missed rounds: they had ended)."""
     f = Faults(lost=dict(lost), stalls=list(stalls), other=list(other))
     for log, budget in logs:
         for rec in log.rounds:
@@ -103,14 +105,15 @@ def assess(config: ExperimentConfig, logs: Iterable[tuple[AgentLog, int]],
         f.method_errors[log.agent] = [f"round {rec.round} ({rec.method}): "
                                       f"{' '.join(rec.error.split())}"
                                       for rec in log.rounds if rec.error]
-        _missed(f, log, resumed or {})
+        _missed(f, log, resumed or {}, set(finished))
         done = {rec.round for rec in log.rounds}
         f.missing_rounds[log.agent] = [n for n in range(1, planned_rounds(log, budget) + 1)
                                        if n not in done]
     return f
 
 
-def _missed(f: Faults, log: AgentLog, resumed: dict[str, list[int]]) -> None:
+def _missed(f: Faults, log: AgentLog, resumed: dict[str, list[int]],
+            finished: set[str]) -> None:
     """The robots ``log``'s agent skipped, each with the rounds it missed and, per spell of
     absence, when it was lost and whether it came back (visited again; the k-th return of a
     robot resumed after a restart is its k-th resume)."""
@@ -119,6 +122,11 @@ def _missed(f: Faults, log: AgentLog, resumed: dict[str, list[int]]) -> None:
         for s in rec.skipped:
             skipped.setdefault(s.robot, []).append(rec.round)
     for rid, rounds in skipped.items():
+        last_visit = max((rec.round for rec in log.rounds if rid in rec.visited), default=0)
+        if rid in finished:             # skipped once it had ended: nothing missed
+            rounds = [r for r in rounds if r < last_visit]
+        if not rounds:
+            continue
         spells = []
         checkpoints = list(resumed.get(rid, ()))
         for first in (r for r in rounds if r - 1 not in rounds):

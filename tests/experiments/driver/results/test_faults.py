@@ -62,3 +62,19 @@ def test_a_robot_skipped_then_visited_again_is_no_complete_federation() -> None:
     assert "- MISSED rounds: r2 missed 2 round(s)" in "\n".join(f.lines())
     clean = [RoundRecord("fed", n, 1.0, 2.0, 2, 10, "average", both) for n in range(1, 5)]
     assert assess(cfg(), [(AgentLog("fed", clean), 4)], {}).complete(cfg())
+
+
+def test_skips_of_a_robot_after_it_finished_are_no_missed_rounds() -> None:
+    # r2 (a joiner with fewer iterations) ended after round 2; the agent skipped it in rounds
+    # 3 and 4: nothing missed when it had finished, missed rounds when it had not (control)
+    both = ("r1", "r2")
+    gone = (Skip("r2", "connection refused"),)
+    rounds = [RoundRecord("fed", 1, 1.0, 2.0, 2, 10, "average", both),
+              RoundRecord("fed", 2, 1.0, 2.0, 2, 10, "average", both),
+              RoundRecord("fed", 3, 1.0, 2.0, 2, 10, "average", ("r1",), gone),
+              RoundRecord("fed", 4, 1.0, 2.0, 2, 10, "average", ("r1",), gone)]
+    ended = assess(cfg(), [(AgentLog("fed", rounds), 4)], {}, finished=["r2"])
+    assert ended.missed == {} and ended.complete(cfg())
+    cut = assess(cfg(), [(AgentLog("fed", rounds), 4)], {})
+    assert cut.missed["r2"].startswith("missed 2 round(s) of fed: 3, 4 (lost at round 3, "
+                                       "never visited again)") and not cut.complete(cfg())
