@@ -23,7 +23,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "federation (Q-values on the state grid; the dqn absorbs the aggregate by "
                     "distillation), and the Q-learning robot with a Q-learning peer (control). "
                     "Greedy score and collisions per 1,000 steps at --eval-at, differences "
-                    "paired by seed with 95%% t intervals.")
+                    "paired by seed with 95% t intervals.")
     add_seed_arguments(p, 5)
     p.add_argument("--arena", default="r1", help="arena of every robot (default: %(default)s)")
     p.add_argument("--iterations", type=int, default=8000,
