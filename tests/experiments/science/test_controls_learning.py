@@ -64,7 +64,7 @@ def test_the_shuffled_reward_control_shows_the_effect_here_so_it_is_not_a_test(s
     standing, why = t.standing()
     assert standing is Standing.NOT_A_TEST
     assert why.startswith("the control shows the same effect: trained minus shuffled rewards")
-    assert not any(line.endswith("| yes |") for line in summary_markdown([t]))
+    assert not any("| yes" in line for line in summary_markdown([t]))
 
 
 def test_one_seed_or_no_control_cannot_judge(scores):
@@ -73,5 +73,5 @@ def test_one_seed_or_no_control_cannot_judge(scores):
     assert one.standing() == (Standing.CANNOT_JUDGE, "1 seed(s) in a row, fewer than 3")
     assert none.standing() == (Standing.CANNOT_JUDGE, "no control run applies")
     lines = summary_markdown([one, none])
-    assert not any("| yes |" in line for line in lines)
+    assert not any("| yes" in line for line in lines)
     assert sum("cannot judge" in line for line in lines) == 2
