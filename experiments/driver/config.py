@@ -130,6 +130,9 @@ class ExperimentConfig(JsonDicts):
         ceiling for the default 8000 iterations on a loaded machine; the shipped configs set
         their own (``demo``: 900 s, the budget of a 5-robot demo; the ``paper_*`` configs keep
         3600 s).
+    skip_after_s : float
+        The most the agent spends on one move to a stop it cannot reach (all its tries
+        together) before it skips the stop for that round (default 4 s).
     title : str
         Plot title (default: derived from the config).
     console : str or None
@@ -170,6 +173,7 @@ class ExperimentConfig(JsonDicts):
     trainer: dict[str, Any] = field(default_factory=dict)
     joins: tuple[JoinSpec, ...] = ()
     timeout_s: float = 3600.0
+    skip_after_s: float = 4.0
     title: str = ""
     console: str | None = None
     tolerate_lost_robots: int = 0

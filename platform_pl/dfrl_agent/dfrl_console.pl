@@ -377,14 +377,17 @@ text_atom(X, A) :-
 %                                                   which appends them to rounds_log
 %       "token": 1111,                              optional: the agent's token
 %                                                   (default: this node's tokens)
-%       "timeout_s": 3600 }                         table read/write limit
+%       "timeout_s": 3600,                          table read/write limit
+%       "skip_after_s": 4 }                         the most one move to a stop
+%                                                   may take before it is skipped
 %
 %   Plan is plan(Stops, Rounds, Rest, Log, Timeout) with Stops a list of
-%   stop(Host, Port, Robot); Options are method(M), carries(C) and
-%   tokens(List).
+%   stop(Host, Port, Robot); Options are method(M), carries(C),
+%   tokens(List) and skip_after(S).
 
 dfrl_launch_plan(D, Name, plan(Stops, Rounds, Rest, Log, Timeout),
-                 [method(Method), carries(Carried), tokens(Tokens)]) :-
+                 [method(Method), carries(Carried), tokens(Tokens),
+                  skip_after(SkipAfter)]) :-
     must_be(dict, D),
     key(itinerary, D, Stops0),
     must_be(list, Stops0),
@@ -398,6 +401,11 @@ dfrl_launch_plan(D, Name, plan(Stops, Rounds, Rest, Log, Timeout),
     ;   Log = File
     ),
     dict_default(D, timeout_s, 3600, Timeout),
+    dict_default(D, skip_after_s, 4, SkipAfter),
+    (   number(SkipAfter), SkipAfter > 0
+    ->  true
+    ;   domain_error(positive_number, skip_after_s(SkipAfter))
+    ),
     dict_default(D, method, average, Method0), text_atom(Method0, Method),
     dict_default(D, carries, tables, Carried0), text_atom(Carried0, Carried),
     dict_default(D, name, dfrl, Name0), text_atom(Name0, Name),

@@ -184,7 +184,7 @@ def launch_agents(site: Site, robots: RobotRoster, agents: AgentRoster,
         launch = {"name": name, "itinerary": stops, "method": c.method_for(algo),
                   "rounds": c.rounds, "rest_s": rest_s(c), "rounds_log": str(log_path),
                   # no token: the agent carries the console node's (the run's) tokens
-                  "timeout_s": float(c.timeout_s),
+                  "timeout_s": float(c.timeout_s), "skip_after_s": float(c.skip_after_s),
                   # the agent posts its round log to the console node, which writes it here:
                   # no shared disk between the hosts the agent visits and the driver's
                   "log_to": list(site.console.address)}

@@ -144,7 +144,8 @@ def test_crashed_robot_is_reported_and_results_still_written(tmp_path: Path) -> 
     import os
     import signal
 
-    cfg = small_config(3, iterations=1500, respite=100, rtf=20.0, timeout_s=90)
+    cfg = small_config(3, iterations=1500, respite=100, rtf=20.0, timeout_s=90,
+                       skip_after_s=1.5)
     t, box = run_in_thread(cfg, tmp_path)
     wait_rounds(tmp_path, "fed_qlearning", 2)
     nodes = json.loads((tmp_path / "nodes.json").read_text())
@@ -159,6 +160,7 @@ def test_crashed_robot_is_reported_and_results_still_written(tmp_path: Path) -> 
     rows = rounds_csv(tmp_path)
     assert rows[0]["visited"] == "r1 r2 r3"
     assert rows[-1]["visited"] == "r1 r3"          # the agent skips the dead stop
+    assert "skip_after 1.5 s" in rows[-1]["skipped"]    # within the config's skip time
     assert rows[-1]["all_equal"] == "true"
     curves = read_metrics(tmp_path / "metrics.csv")
     assert len(set(curves["r1"]["iteration"].tolist())) == 1500
