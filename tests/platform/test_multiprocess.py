@@ -1,7 +1,6 @@
 """The platform across real SWI-Prolog processes on loopback."""
 from __future__ import annotations
 
-import shutil
 import socket
 import time
 from pathlib import Path

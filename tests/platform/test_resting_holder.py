@@ -12,7 +12,6 @@ launch has no holder and dies with it.
 from __future__ import annotations
 
 import json
-import os
 import signal
 import time
 from collections import Counter
