@@ -140,12 +140,14 @@ def markdown(rows: Sequence[SpeedupRow], opts: SpeedupOptions, wall_s: float,
     eps = cfg.learner.epsilon
     L = [f"Speed-up against the number of robots: {len(opts.seeds)} seeds per N "
          f"({', '.join(map(str, opts.seeds))}), budget {opts.iterations:,} iterations per "
-         f"robot{''.join(f' ({b:,} at N = {n})' for n, b in opts.budgets)}, share ({opts.method}) every {opts.share_every}, table error against "
+         f"robot{''.join(f' ({b:,} at N = {n})' for n, b in opts.budgets)}, share "
+         f"({opts.method}) every {opts.share_every}, table error against "
          f"{reference_name} every {opts.grid} iterations, greedy score in r1 every "
          f"{opts.score_every} ({opts.eval_steps} steps; the first of {opts.score_hold} "
          f"evaluations in a row at or above the threshold). T = Kaplan-Meier median "
          f"iterations per robot to the target (runs that never reach it are censored at the "
-         f"budget, '> budget': the median is beyond it; a ratio '>= x' is a bound); intervals: 95% percentile bootstrap "
+         f"budget, '> budget': the median is beyond it; a ratio '>= x' is a bound); "
+         f"intervals: 95% percentile bootstrap "
          f"({opts.resamples} resamples, seeds resampled within each N); verdicts Holm-adjusted "
          f"over all {2 * sum(1 for r in rows if r.ratio is not None)} claims. Wall time "
          f"{wall_s:.0f} s.", ""]
