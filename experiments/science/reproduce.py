@@ -47,6 +47,7 @@ from dfrl.experiments.driver.config import ExperimentConfig, resolve_config
 from dfrl.experiments.driver.launcher import run
 from dfrl.experiments.driver.results.metrics import read_metrics
 from dfrl.experiments.provenance import write_provenance
+from dfrl.experiments.science.pool import stop_pool, study_pool
 from dfrl.experiments.science.report.measures import SeedRun
 from dfrl.experiments.science.report.observations import Controls
 from dfrl.experiments.science.report.paper import write_report
@@ -187,14 +188,6 @@ def _raise_interrupt(signum: int, frame: Any) -> None:
     raise StudyInterrupted(f"signal {signum}")
 
 
-def _stop_pool(pool: ProcessPoolExecutor) -> None:
-    """Cancel the pending jobs and end the workers now (shutdown alone would wait for the
-    running jobs; the executor has no public way to end its workers before Python 3.14)."""
-    pool.shutdown(wait=False, cancel_futures=True)
-    for proc in list((getattr(pool, "_processes", None) or {}).values()):
-        proc.terminate()
-
-
 def reproduce_paper(out: Path, opts: PaperOptions = PaperOptions(),
                     progress: TextIO | None = sys.stderr) -> Reproduction:
     """Run everything and write ``OUT/report.md`` and ``OUT/figures`` (progress lines to
@@ -231,7 +224,7 @@ def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reprod
     all_arenas = list(dict.fromkeys(arenas + list(HELD_OUT)))
     walls: dict[str, float] = {}
     reused: dict[str, float] = {}
-    pool = ProcessPoolExecutor(max_workers=max(1, opts.jobs))
+    pool = study_pool(opts.jobs)
     try:
         n_states = Discretiser(TrainerConfig().discretisation).n_states
         n_actions = len(TrainerConfig().actions.names)
@@ -284,7 +277,7 @@ def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reprod
         for s, jobs in zero_jobs.items():
             _write_zero(out / f"seed{s}" / "zero_table", fed_cfgs[s][0][1], jobs)
     except BaseException:
-        _stop_pool(pool)
+        stop_pool(pool)
         raise
     pool.shutdown()
     fed: dict[str, list[SeedRun]] = {}

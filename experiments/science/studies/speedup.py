@@ -27,10 +27,9 @@ counted as reaching it there.
 from __future__ import annotations
 
 import json
-import signal
 import time
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -38,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from dfrl.experiments.science.curves import first_reach
+from dfrl.experiments.science.pool import stop_pool, study_pool
 from dfrl.experiments.science.reference import Reference, table_error
 from dfrl.experiments.science.studies.fedsim import federate
 from dfrl.experiments.science.studies.history import eval_job
@@ -219,13 +219,6 @@ def runs_needed(opts: SpeedupOptions) -> list[tuple[tuple[str, ...], int]]:
     return sorted(keys, key=lambda k: (len(k[0]), k[0], k[1]))
 
 
-def _worker_signals() -> None:
-    """A worker ends on SIGTERM and leaves Ctrl-C to the study (a forked worker would inherit
-    the study's SIGTERM handler and outlive the study)."""
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
 def run_all(opts: SpeedupOptions, reference: Reference,
             progress: Callable[[int, int, dict[str, Any]], None] | None = None,
             done: Mapping[tuple[tuple[str, ...], int], dict[str, Any]] | None = None,
@@ -257,16 +250,13 @@ def run_all(opts: SpeedupOptions, reference: Reference,
         for k in todo:
             finished(k, run_one(k[0], k[1], opts, reference))
         return out
-    pool = ProcessPoolExecutor(max_workers=opts.jobs, initializer=_worker_signals)
+    pool = study_pool(opts.jobs)
     try:
         futures = {pool.submit(run_one, k[0], k[1], opts, reference): k for k in todo}
         for fut in as_completed(futures):
             finished(futures[fut], fut.result())
     except BaseException:
-        workers = list((getattr(pool, "_processes", None) or {}).values())
-        pool.shutdown(wait=False, cancel_futures=True)   # forgets its workers: taken before
-        for w in workers:
-            w.terminate()
+        stop_pool(pool)
         raise
     pool.shutdown()
     return out
