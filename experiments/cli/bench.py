@@ -114,7 +114,14 @@ def add_table_shape_arguments(parser: argparse.ArgumentParser) -> None:
 
 # -- round -----------------------------------------------------------------------------------
 def add_round_arguments(parser: argparse.ArgumentParser) -> None:
-    add_table_shape_arguments(parser)
+    parser.add_argument("--learner", choices=round_bench.LEARNERS, default="table",
+                        help="what each robot holds: a random Q-table of --entries (table, the "
+                             "default) or a random parameter vector of that learner's network "
+                             "(linear, dqn; carried as parameters, FedAvg weighted by samples)")
+    parser.add_argument("--entries", type=int, default=None,
+                        help="Q-table entries (default 20000; a table only)")
+    parser.add_argument("--actions", type=int, default=None,
+                        help="actions per state (default 4; a table only)")
     parser.add_argument("--robots", type=int, nargs="+", default=[5],
                         help="robot processes, one benchmark per count (default 5)")
     parser.add_argument("--rounds", type=int, default=30, help="timed rounds (default 30)")
@@ -131,21 +138,31 @@ def add_round_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def cmd_round(args: argparse.Namespace) -> int:
+    if args.learner != "table" and (args.entries is not None or args.actions is not None):
+        print(f"dfrl bench round: --entries and --actions size a table; a {args.learner} "
+              f"network's size is its layout (drop them, or use --learner table)",
+              file=sys.stderr)
+        return 2
+    entries = 20000 if args.entries is None else args.entries
+    actions = 4 if args.actions is None else args.actions
     for n in args.robots:
         out = args.out / f"robots{n}" if args.out is not None and len(args.robots) > 1 else args.out
         try:
-            r = round_bench.bench(args.entries, args.actions, n, args.rounds, args.warmup,
-                                  args.method, out, args.hop_hops)
+            r = round_bench.bench(entries, actions, n, args.rounds, args.warmup,
+                                  args.method, out, args.hop_hops, args.learner)
         except (RuntimeError, ValueError) as exc:
             print(f"dfrl bench round: {n} robots: {exc}", file=sys.stderr)
             return 1
         if args.json:
             print(json.dumps(r), flush=True)
         else:
-            print(f"{r['robots']} nodes, {r['entries']} entries, {r['method']}: one round "
+            what = (f"{r['entries']} entries" if "entries" in r else
+                    f"{r['learner']} parameters ({r['floats']} floats, {r['payload_bytes']} bytes)")
+            held = "tables" if "entries" in r else "parameters"
+            print(f"{r['robots']} nodes, {what}, {r['method']}: one round "
                   f"(forward + backward, {r['hops']} hops, {r['bytes_carried']} bytes carried) "
                   f"median {r['median_ms']} ms, p90 {r['p90_ms']} ms over {r['rounds']} rounds "
-                  f"(target < {round_bench.TARGET_MS:g} ms); identical tables after "
+                  f"(target < {round_bench.TARGET_MS:g} ms); identical {held} after "
                   f"{r['all_equal_rounds']}/{r['total_rounds']} rounds", flush=True)
             if r["hop_median_ms"] is not None:
                 print(f"  its hops: {r['hops']} x {r['hop_median_ms']} ms (bench migrate, "

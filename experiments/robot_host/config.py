@@ -77,6 +77,11 @@ class RobotConfig(JsonDicts):
         Print ``DFRL_EVENT`` lines.
     bench_table : list of int or None
         ``[S, A]``: no simulation; serve a random table of that shape until stdin closes.
+    bench_params : dict or None
+        ``{"samples": N}``: no simulation; serve a random parameter vector with the layout of
+        the network of ``algo`` (a function learner: ``linear``, ``dqn``; its size from the
+        ``trainer`` config), learnt from ``N`` samples (its FedAvg weight), until stdin
+        closes. A robot has a bench table or bench params, not both.
     host, tls : str, str or None
         Address to bind; a node's TLS folder (``dfrl certs node``; None: plaintext).
     eval_every, eval_steps : int
@@ -100,6 +105,7 @@ class RobotConfig(JsonDicts):
     progress_every: int = 100
     events: bool = True
     bench_table: list[int] | None = None
+    bench_params: dict[str, int] | None = None
     host: str = "127.0.0.1"
     tls: str | None = None
     eval_every: int = 0
@@ -142,7 +148,8 @@ RULES: dict[str, Rule] = {
     "rtf": Rule(float, nullable=True, low=0, hint="null or 0 means flat out"),
     "token": token_rule(), "trainer": Rule(dict), "grace_s": Rule(float, low=0),
     "sync_timeout_s": Rule(float, above=0), "progress_every": Rule(int, low=0),
-    "events": Rule(bool), "bench_table": Rule(list, nullable=True), "host": Rule(str),
+    "events": Rule(bool), "bench_table": Rule(list, nullable=True),
+    "bench_params": Rule(dict, nullable=True), "host": Rule(str),
     "tls": Rule(str, nullable=True),
     "eval_every": Rule(int, low=0, hint=_NO_EVAL), "eval_steps": Rule(int, low=1),
 }
@@ -158,6 +165,31 @@ def check_robot_config(data: Any) -> list[str]:
     if isinstance(table, list) and (len(table) != 2 or not all(
             isinstance(n, int) and not isinstance(n, bool) and n > 0 for n in table)):
         out.append(f"bench_table: expected [STATES, ACTIONS], two positive integers, got {table!r}")
+    out += _check_bench_params(data)
     if "trainer" in data:
         out += check_trainer("trainer", data["trainer"])
+    return out
+
+
+def _check_bench_params(data: dict[str, Any]) -> list[str]:
+    """The problems of ``bench_params``: its form, its learner, and not beside ``bench_table``."""
+    params = data.get("bench_params")
+    if not isinstance(params, dict):
+        return []
+    out = []
+    samples = params.get("samples")
+    if set(params) != {"samples"} or isinstance(samples, bool) or not isinstance(samples, int) \
+            or samples < 0:
+        out.append(f"bench_params: expected {{\"samples\": N}}, N an integer >= 0, "
+                   f"got {params!r}")
+    if data.get("bench_table") is not None:
+        out.append("bench_params: a benchmark robot holds a bench table or bench params, "
+                   "not both (drop bench_table or bench_params)")
+    algo = data.get("algo", "qlearning")
+    if isinstance(algo, str) and algo in known_algorithms():
+        from dfrl.robots.learners import learner_kind
+
+        if learner_kind(algo) != "function":
+            out.append(f"bench_params: algo {algo!r} is a tabular learner, it has no network; "
+                       f"bench params need a function learner (linear, dqn)")
     return out

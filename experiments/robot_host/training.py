@@ -31,10 +31,37 @@ from dfrl.experiments.robot_host.files import METRIC_FIELDS, SHARE_FIELDS, CsvLo
 from dfrl.experiments.robot_host.lines import ProtocolLines
 from dfrl.experiments.robot_host.table import SharedTable, shared_provider
 
-__all__ = ["Training", "TrainingHost", "SleepHost", "SAMPLE_S"]
+__all__ = ["Training", "TrainingHost", "SleepHost", "SAMPLE_S", "network_layout"]
 
 #: Wall seconds between two ``DFRL_SAMPLE`` lines at least (written with progress lines).
 SAMPLE_S = 0.5
+
+
+def network_layout(config: Any) -> list[tuple[str, tuple[int, ...]]]:
+    """The parameter layout a robot of the function learner ``config.algo`` offers agents.
+
+    Built by the learner's own code (:func:`dfrl.robots.training.build_learner`) over the
+    observation and actions of ``config``'s environment (the proximity sensors, the action
+    set), without a simulation: what a benchmark robot holds is what a real one offers.
+
+    Parameters
+    ----------
+    config : dfrl.robots.training.TrainerConfig
+
+    Raises
+    ------
+    ValueError
+        ``config.algo`` is a tabular learner.
+    """
+    from dfrl.robots.learners import learner_kind
+    from dfrl.robots.training import build_learner
+
+    if learner_kind(config.algo) != "function":
+        raise ValueError(f"{config.algo!r} is a tabular learner: it has no network")
+    env = config.env_config()
+    learner = build_learner(config, 1, len(env.sim.robot.sensor_angles), len(env.actions.actions),
+                            np.random.default_rng(0))
+    return learner.param_layout
 
 
 class TrainingHost(Protocol):
@@ -138,9 +165,9 @@ class Training:
         return self.stopped or self.trainer is None or self.iteration >= self.config.iterations
 
     # -- life cycle ----------------------------------------------------------------------------
-    def open(self) -> tuple[int, int]:
-        """Build the robot (or the static table), open the files, register the robot with
-        its shape; return the shape.
+    def open(self) -> tuple[int, int] | None:
+        """Build the robot (or the static table or parameters), open the files, register the
+        robot with its shape; return the shape (None: static parameters, no table).
 
         Raises
         ------
@@ -149,7 +176,7 @@ class Training:
         ValueError
             A checkpoint that does not fit this robot.
         """
-        from dfrl.pybridge import StaticTable
+        from dfrl.pybridge import StaticParams, StaticTable
 
         c = self.config
         self.out_dir.mkdir(parents=True, exist_ok=True)
@@ -157,6 +184,11 @@ class Training:
         if c.bench_table is not None:
             shape = (int(c.bench_table[0]), int(c.bench_table[1]))
             base: Any = StaticTable(shape, c.seed)
+            self._shares = CsvLog(self.out_dir / f"shares_{c.robot}.csv", SHARE_FIELDS)
+        elif c.bench_params is not None:       # a function learner's parameters, no table
+            shape = None
+            base = StaticParams(network_layout(c.trainer_config()), c.seed,
+                                int(c.bench_params["samples"]))
             self._shares = CsvLog(self.out_dir / f"shares_{c.robot}.csv", SHARE_FIELDS)
         else:
             from dfrl.robots.training import Trainer
@@ -334,7 +366,13 @@ class Training:
             self.checkpoint()
 
     def close(self) -> None:
-        """Unregister the robot, close the files and the simulation (idempotent)."""
+        """Unregister the robot, close the files and the simulation (idempotent). A benchmark
+        robot's static parameters are saved first, as ``params/<robot>.npy`` (what the agents
+        left it)."""
+        if self.config.bench_params is not None and self.table is not None and self._registered:
+            d = self.out_dir / "params"
+            d.mkdir(parents=True, exist_ok=True)
+            np.save(d / f"{self.config.robot}.npy", self.table.params)
         if self._registered:
             self._registered = False
             try:

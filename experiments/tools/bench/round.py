@@ -13,9 +13,17 @@ hop with a payload of as many floats as the table has entries (``hop_median_ms``
 ``round_over_hops`` (the round's median over ``hops`` such hops) tells whether a slower round
 is slower hops or the rest of the round (reading, aggregating and writing tables, the agent's
 checkpoints).
+
+With ``learner="dqn"`` (or ``"linear"``) each robot holds, instead of a table, a random
+parameter vector with the layout of that learner's network, built by the learner's own code
+(:func:`dfrl.experiments.robot_host.training.network_layout`: the size a real ``dqn`` robot
+offers), learnt from :func:`bench_samples` samples; the agent carries parameter vectors
+(``"carries": "params"``, FedAvg weighted by samples), as in a ``dfrl run`` with such robots.
+Every robot saves what it holds at the end as ``params/<robot>.npy`` under ``out``.
 """
 from __future__ import annotations
 
+import math
 import statistics
 import tempfile
 import time
@@ -31,23 +39,47 @@ from dfrl.experiments.driver.results.rounds import count_equal, read_shares, wri
 
 TARGET_MS = 50.0
 
+#: ``learner`` values: ``table`` (a random Q-table, the default) or a function learner's name
+LEARNERS = ("table", "linear", "dqn")
+
+
+def bench_samples(index: int) -> int:
+    """The samples (FedAvg weight) of the benchmark's robot ``index`` (0-based) in a params
+    benchmark: 1000, 2000, ... so that the average is a weighted one."""
+    return 1000 * (index + 1)
+
+
+def bench_layout(learner: str) -> list[tuple[str, tuple[int, ...]]]:
+    """The parameter layout of a robot of the function learner ``learner`` with the default
+    trainer config (what each robot of a params benchmark holds)."""
+    from dfrl.experiments.robot_host.training import network_layout
+    from dfrl.robots.training import TrainerConfig
+
+    return network_layout(TrainerConfig(algo=learner))
+
 
 def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int = 30,
           warmup: int = 3, method: str = "average", out: Path | None = None,
-          hop_hops: int = 20) -> dict:
+          hop_hops: int = 20, learner: str = "table") -> dict:
     """Run the benchmark; return its figures. ``hop_hops``: how many migrate hops to time
-    beside the round (0: none; the hop fields are then None).
+    beside the round (0: none; the hop fields are then None). ``learner``: one of
+    :data:`LEARNERS`; for a function learner ``entries`` and ``actions`` are not used.
 
     Raises
     ------
     ValueError
-        ``entries`` is not a multiple of ``actions``.
+        ``entries`` is not a multiple of ``actions``; an unknown ``learner``.
     RuntimeError
         A node did not start, the agent could not be launched or did not finish in time.
     """
-    if entries % actions:
+    if learner not in LEARNERS:
+        raise ValueError(f"--learner {learner!r}: known learners are {', '.join(LEARNERS)}")
+    params = learner != "table"
+    if not params and entries % actions:
         raise ValueError(f"--entries {entries} is not a multiple of --actions {actions}")
     states = entries // actions
+    layout = bench_layout(learner) if params else None
+    floats = sum(math.prod(shape) for _, shape in layout) if layout else entries
     tmp = None
     if out is None:
         tmp = tempfile.TemporaryDirectory(prefix="dfrl_bench_round_")
@@ -58,8 +90,10 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
     try:
         for i in range(robots):
             spec = RobotSpec(f"r{i + 1}", "r1")
-            cfg = RobotConfig(robot=spec.id, out_dir=str(out), seed=i, bench_table=[states, actions],
-                             events=False, progress_every=0)
+            bench_of: dict = ({"algo": learner, "bench_params": {"samples": bench_samples(i)}}
+                              if params else {"bench_table": [states, actions]})
+            cfg = RobotConfig(robot=spec.id, out_dir=str(out), seed=i, events=False,
+                              progress_every=0, **bench_of)
             children.append(RobotChild(spec, cfg, out))
             children[-1].start()
         await_ready(children, 120.0)
@@ -71,6 +105,8 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
                   "rounds_log": str(log), "token": 1111, "timeout_s": 60.0,
                   "itinerary": [{"host": a[0], "port": a[1], "robot": ch.spec.id}
                                 for ch in children if (a := ch.status().address)]}
+        if params:
+            launch["carries"] = "params"      # FedAvg of parameter vectors, as in dfrl run
         t0 = time.monotonic()
         with open_console(1111, out / "logs" / "console.err") as console:
             launch_agent(console, launch)
@@ -93,16 +129,19 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
     rows = write_rounds_csv(out / "rounds.csv", [agent_log], ids, shares)
     timed = [r for r in agent_log.rounds if r.round > warmup]
     ms = sorted(r.duration_ms for r in timed)
-    hop_ms = _hop_median(entries, hop_hops)
+    hop_ms = _hop_median(floats, hop_hops)
     hops = timed[0].hops
+    what: dict = ({"learner": learner, "floats": floats, "payload_bytes": 8 * floats,
+                   "layout": [[name, list(shape)] for name, shape in layout],
+                   "samples": [bench_samples(i) for i in range(robots)]}
+                  if layout else {"entries": entries, "shape": [states, actions]})
     result = {
-        "benchmark": "round", "robots": robots, "entries": entries, "shape": [states, actions],
-        "method": method, "rounds": len(timed), "warmup": warmup,
+        "benchmark": "round", "robots": robots, **what, "method": method, "rounds": len(timed), "warmup": warmup,
         "median_ms": round(statistics.median(ms), 2),
         "p90_ms": round(ms[min(len(ms) - 1, int(0.9 * len(ms)))], 2),
         "min_ms": round(ms[0], 2), "max_ms": round(ms[-1], 2),
         "hops": hops, "bytes_carried": timed[0].bytes,
-        "hop_floats": entries, "hop_median_ms": None if hop_ms is None else round(hop_ms, 3),
+        "hop_floats": floats, "hop_median_ms": None if hop_ms is None else round(hop_ms, 3),
         "round_over_hops": (None if not hop_ms or not hops
                             else round(statistics.median(ms) / (hops * hop_ms), 3)),
         "all_equal_rounds": count_equal(rows), "total_rounds": len(rows),
