@@ -136,7 +136,8 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
                    "samples": [bench_samples(i) for i in range(robots)]}
                   if layout else {"entries": entries, "shape": [states, actions]})
     result = {
-        "benchmark": "round", "robots": robots, **what, "method": method, "rounds": len(timed), "warmup": warmup,
+        "benchmark": "round", "robots": robots, **what, "method": method, "rounds": len(timed),
+        "warmup": warmup,
         "median_ms": round(statistics.median(ms), 2),
         "p90_ms": round(ms[min(len(ms) - 1, int(0.9 * len(ms)))], 2),
         "min_ms": round(ms[0], 2), "max_ms": round(ms[-1], 2),
