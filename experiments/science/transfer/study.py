@@ -1,82 +1,131 @@
-"""``dfrl transfer-study``: does a federated table transfer to unseen arenas better than the
-right controls?
+"""``dfrl transfer-study``: the paper's transfer claim tested as stated: a robot that starts
+from the federated table learns an unseen arena faster and more safely than one that starts
+from a standalone table of any of the source arenas.
 
-Source tables (per source seed, all Q-learning, ``iterations`` per robot):
+Source tables, per source seed ``s`` (Q-learning, ``iterations`` per robot):
 
-* ``zeros``: no training;
-* ``standalone``: one robot in R1 for ``iterations``;
-* ``standalone_same_experience``: one robot in R1 for 5 x ``iterations`` (the federation's
-  total experience);
-* ``in_turn``: one robot in R1..R5 one after the other, ``iterations`` each;
-* ``one_shot_average``: the element-wise mean of five independent standalone tables (R1..R5);
-* ``federated_average``, ``federated_max``, ``federated_max_visited``: five robots in R1..R5
-  sharing every ``respite`` iterations (:func:`dfrl.experiments.science.studies.fedsim.federate`).
+* ``federated_<method>``: five robots in R1..R5, robot k with the training seed 1000 s + k,
+  sharing every ``respite`` iterations (:func:`dfrl.experiments.science.studies.fedsim.federate`);
+* ``standalone_r1`` .. ``standalone_r5``: the matched controls, one robot alone in arena k
+  with the same training seed 1000 s + k as federated robot k, for the same iterations;
+* ``zeros``: no training (a robot learning from scratch).
 
-Targets: the held-out arenas h1 (clutter of thin pillars) and h2 (loop corridor), never seen
-in training, with ``target_seeds`` seeds each: the source table's greedy policy is evaluated
-there (zero-shot score and collisions), and a robot starting from it learns ``fine_tune``
-steps (collisions per 1,000 during them: what the paper's transfer claim is about). Per source
-seed the target runs are averaged; intervals are over source seeds; each condition is also
-compared with ``standalone`` paired by source seed (t interval of the paired differences).
+Learning phase, in every unseen arena (``targets``, h1 and h2 by default) and target seed: a
+robot starts from the source table and learns ``learn`` steps (training seed 90,000 + target
+seed, the same for every source). Measured: **collisions while learning** (per 1,000 steps,
+over the whole phase) and **time to the threshold**: the greedy score of the learning table
+is evaluated at iteration 0 and every ``eval_every`` iterations (``eval_steps`` seeded steps,
+the same episodes at every grid point), and the time is the first grid point of the first
+``confirm`` (2) evaluations in a row at or above ``threshold`` (the score jumps between
+evaluations: one crossing is not learning); a run that never reaches it is censored at ``learn``, never counted as
+reaching it there (evaluations stop once it is reached).
+
+With ``unpaired`` the controls are trained and learn with other seeds (source seed
+s + 10,000, target seeds + 5,000): the comparisons are then Welch's, not paired
+(:mod:`dfrl.experiments.science.transfer.claims`).
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
 
-from dfrl.experiments.science.statistics import Interval, Outcome, interval, judge, paired
-from dfrl.experiments.science.studies.fedsim import federate, in_turn
+from dfrl.experiments.science.studies.fedsim import AGGREGATIONS, federate
 from dfrl.experiments.science.studies.history import eval_job
 from dfrl.robots.training import Trainer, TrainerConfig
 
 ARENAS = ("r1", "r2", "r3", "r4", "r5")
-CONDITIONS = ("zeros", "standalone", "standalone_same_experience", "in_turn",
-              "one_shot_average", "federated_average", "federated_max", "federated_max_visited")
+#: Seed offset of the controls' sources (and of their target seeds / 2) with ``unpaired``.
+UNPAIRED_OFFSET = 10_000
+TARGET_SEED_BASE = 90_000
+EVAL_SEED_BASE = 80_000
 
 
 @dataclass(frozen=True)
 class StudyOptions:
+    """What the study trains and measures (see the module's docs)."""
+
     source_seeds: tuple[int, ...] = (1, 2, 3, 4, 5)
-    target_seeds: tuple[int, ...] = (1, 2)
+    target_seeds: tuple[int, ...] = (1,)
     targets: tuple[str, ...] = ("h1", "h2")
     iterations: int = 4000
     respite: int = 500
-    fine_tune: int = 1000
-    eval_steps: int = 1000
+    method: str = "average"
+    learn: int = 2000
+    eval_every: int = 100
+    eval_steps: int = 300
     episode_steps: int = 200
+    threshold: float = 0.5
+    confirm: int = 2
+    unpaired: bool = False
     jobs: int = 2
+
+    def __post_init__(self) -> None:
+        for name in ("iterations", "respite", "learn", "eval_every", "eval_steps",
+                     "episode_steps", "confirm", "jobs"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if not self.source_seeds or not self.target_seeds or not self.targets:
+            raise ValueError("at least one source seed, target seed and target arena")
+        if len(set(self.source_seeds)) != len(self.source_seeds):
+            raise ValueError(f"source seeds must be distinct, got {list(self.source_seeds)}")
+        if self.method not in AGGREGATIONS:
+            raise ValueError(f"unknown method {self.method!r}; one of {sorted(AGGREGATIONS)}")
+        bad = [a for a in self.targets if a in ARENAS]
+        if bad:
+            raise ValueError(f"target arenas must be unseen, {bad} are source arenas")
+
+    @property
+    def federated(self) -> str:
+        return f"federated_{self.method}"
+
+    @property
+    def conditions(self) -> tuple[str, ...]:
+        return (self.federated,) + tuple(f"standalone_{a}" for a in ARENAS) + ("zeros",)
+
+    def grid(self) -> list[int]:
+        """The evaluation grid of a learning phase: 0, eval_every, ..., learn."""
+        g = list(range(0, self.learn + 1, self.eval_every))
+        return g if g[-1] == self.learn else g + [self.learn]
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+
+
+def pair_seed(condition: str, seed: int, opts: StudyOptions) -> int:
+    """The seed a condition's source is trained with for source seed ``seed``: the same for
+    every condition (paired), else shifted for the controls."""
+    shifted = opts.unpaired and not condition.startswith("federated_")
+    return seed + UNPAIRED_OFFSET if shifted else seed
+
+
+def _alone(c: TrainerConfig) -> np.ndarray:
+    with Trainer(c) as t:
+        for _ in range(c.iterations):
+            t.step()
+        return t.q_table.copy()
 
 
 def source_job(condition: str, seed: int, opts: StudyOptions) -> tuple[str, int, np.ndarray]:
     """The source table of one condition and source seed (a worker job)."""
-    n = opts.iterations
-    cfg = lambda arena, k=0, it=n: TrainerConfig(arena=arena, seed=1000 * seed + k,  # noqa: E731
-                                                 iterations=it)
+    s = pair_seed(condition, seed, opts)
 
-    def alone(c: TrainerConfig) -> np.ndarray:
-        with Trainer(c) as t:
-            for _ in range(c.iterations):
-                t.step()
-            return t.q_table.copy()
+    def cfg(arena: str, k: int) -> TrainerConfig:
+        return TrainerConfig(arena=arena, seed=1000 * s + k, iterations=opts.iterations)
 
     if condition == "zeros":
-        with Trainer(cfg("r1")) as t:
+        with Trainer(cfg("r1", 0)) as t:
             q = np.zeros_like(t.q_table)
-    elif condition == "standalone":
-        q = alone(cfg("r1"))
-    elif condition == "standalone_same_experience":
-        q = alone(cfg("r1", it=n * len(ARENAS)))
-    elif condition == "in_turn":
-        q = in_turn(cfg("r1"), ARENAS, n)
-    elif condition == "one_shot_average":
-        q = np.mean([alone(cfg(a, k)) for k, a in enumerate(ARENAS)], axis=0)
-    elif condition.startswith("federated_"):
-        q = federate([cfg(a, k) for k, a in enumerate(ARENAS)], n, opts.respite,
-                     condition.removeprefix("federated_")).table
+    elif condition.startswith("standalone_"):
+        arena = condition.removeprefix("standalone_")
+        q = _alone(cfg(arena, ARENAS.index(arena)))
+    elif condition == opts.federated:
+        q = federate([cfg(a, k) for k, a in enumerate(ARENAS)], opts.iterations, opts.respite,
+                     opts.method).table
     else:
         raise ValueError(f"unknown condition {condition!r}")
     return condition, seed, q
@@ -84,89 +133,53 @@ def source_job(condition: str, seed: int, opts: StudyOptions) -> tuple[str, int,
 
 def target_job(condition: str, seed: int, q: np.ndarray, arena: str, tseed: int,
                opts: StudyOptions) -> dict[str, Any]:
-    """Zero-shot greedy evaluation and a fine-tuning run of one table in one target."""
-    ev = eval_job(TrainerConfig().to_dict(), q, arena, opts.eval_steps, opts.episode_steps,
-                  80_000 + tseed)
-    with Trainer(TrainerConfig(arena=arena, seed=90_000 + tseed)) as t:
+    """One learning phase from table ``q`` in ``arena``: collisions while learning and the
+    greedy score on the grid until it reaches the threshold."""
+    shift = 5_000 if pair_seed(condition, seed, opts) != seed else 0
+    ev_cfg, ev_seed = TrainerConfig().to_dict(), EVAL_SEED_BASE + tseed + shift
+    grid = opts.grid()
+    scores: list[tuple[int, float]] = []
+    collisions: list[tuple[int, int]] = []
+    time, reached, run = float(opts.learn), False, 0
+    with Trainer(TrainerConfig(arena=arena, seed=TARGET_SEED_BASE + tseed + shift,
+                               iterations=opts.learn)) as t:
         t.set_q_table(q)
-        for _ in range(opts.fine_tune):
-            m = t.step()
-    return {"condition": condition, "source_seed": seed, "arena": arena, "target_seed": tseed,
-            "score": ev["score"], "eval_collisions_per_1000": ev["collisions_per_1000"],
-            "progress": ev["progress"],
-            "fine_tune_collisions_per_1000": 1000.0 * m.collisions / opts.fine_tune,
-            "fine_tune_reward": m.cumulative_reward / opts.fine_tune,
-            "table_min": float(q.min()), "table_sum": float(q.sum())}
+        done = 0
+        for g in grid:
+            for _ in range(g - done):
+                t.step()
+            done = g
+            collisions.append((g, int(t.collisions)))
+            if not reached:
+                ev = eval_job(ev_cfg, t.q_table.copy(), arena, opts.eval_steps,
+                              opts.episode_steps, ev_seed)
+                scores.append((g, float(ev["score"])))
+                run = run + 1 if ev["score"] >= opts.threshold else 0
+                if run == opts.confirm:
+                    time, reached = float(scores[-opts.confirm][0]), True
+    return {"condition": condition, "source_seed": seed,
+            "pair_seed": pair_seed(condition, seed, opts), "arena": arena,
+            "target_seed": tseed,
+            "collisions_per_1000": 1000.0 * collisions[-1][1] / opts.learn,
+            "time_to_threshold": time, "reached": reached,
+            "scores": scores, "collisions": collisions}
 
 
-MEASURES = ("score", "eval_collisions_per_1000", "fine_tune_collisions_per_1000",
-            "fine_tune_reward", "table_min", "table_sum")
-
-
-def transfer_study(opts: StudyOptions) -> list[dict[str, Any]]:
-    """Every source table, then every target run; the target rows."""
-    with ProcessPoolExecutor(max_workers=max(1, opts.jobs)) as pool:
-        srcs = list(pool.map(source_job, *zip(*[(c, s, opts) for c in CONDITIONS
-                                                 for s in opts.source_seeds])))
+def transfer_study(opts: StudyOptions,
+                   progress: Callable[[str], None] | None = None) -> list[dict[str, Any]]:
+    """Every source table, then every learning phase; one row per learning phase."""
+    say = progress or (lambda _msg: None)
+    with ProcessPoolExecutor(max_workers=opts.jobs) as pool:
+        jobs = [(c, s, opts) for c in opts.conditions for s in opts.source_seeds]
+        srcs = []
+        for i, src in enumerate(pool.map(source_job, *zip(*jobs)), 1):
+            srcs.append(src)
+            say(f"source {i}/{len(jobs)}: {src[0]} seed {src[1]}")
         args = [(c, s, q, a, t, opts) for c, s, q in srcs for a in opts.targets
                 for t in opts.target_seeds]
-        return list(pool.map(target_job, *zip(*args)))
-
-
-def per_source(rows: Sequence[dict[str, Any]], condition: str, measure: str) -> list[float]:
-    """One value per source seed: the mean over targets and target seeds."""
-    seeds = sorted({r["source_seed"] for r in rows})
-    return [float(np.mean([r[measure] for r in rows
-                           if r["condition"] == condition and r["source_seed"] == s]))
-            for s in seeds]
-
-
-def summary(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, tuple[Interval, Interval]]]:
-    """condition -> measure -> (interval, difference from ``standalone``, paired by source
-    seed: every condition's sources are trained with the same seeds)."""
-    return {c: {m: (interval(per_source(rows, c, m)),
-                    paired(per_source(rows, c, m), per_source(rows, "standalone", m)))
-                for m in MEASURES} for c in CONDITIONS}
-
-
-def markdown(rows: Sequence[dict[str, Any]], opts: StudyOptions) -> str:
-    s = summary(rows)
-    L = [f"Sources: {len(opts.source_seeds)} seeds, {opts.iterations} iterations per robot "
-         f"(federations share every {opts.respite}). Targets: {', '.join(opts.targets)} x "
-         f"{len(opts.target_seeds)} seeds; zero-shot greedy evaluation ({opts.eval_steps} steps) "
-         f"and {opts.fine_tune} steps of learning from the table. Mean ± 95% t half width over "
-         "source seeds; Δ: difference from `standalone`, paired by source seed.", "",
-         "| source table | zero-shot score | Δ score | zero-shot collisions/1000 | "
-         "collisions/1000 while learning | Δ collisions while learning | reward/step while "
-         "learning | table min | table sum |", "|---|---|---|---|---|---|---|---|---|"]
-    for c in CONDITIONS:
-        m = s[c]
-        L.append(f"| {c} | {m['score'][0]} | {m['score'][1]} | "
-                 f"{m['eval_collisions_per_1000'][0]} | {m['fine_tune_collisions_per_1000'][0]} | "
-                 f"{m['fine_tune_collisions_per_1000'][1]} | {m['fine_tune_reward'][0]} | "
-                 f"{m['table_min'][0]} | {m['table_sum'][0]} |")
-    L += ["", verdict(rows)]
-    return "\n".join(L)
-
-
-def verdict(rows: Sequence[dict[str, Any]]) -> str:
-    """The paper's claim (federated tables transfer better) in the verdict words of
-    :func:`dfrl.experiments.science.statistics.judge`."""
-    d = {c: judge(paired(per_source(rows, "federated_average", "score"),
-                         per_source(rows, c, "score")))
-         for c in ("standalone", "standalone_same_experience", "in_turn", "one_shot_average")}
-    held = {c: j.outcome is Outcome.HOLDS for c, j in d.items()}
-    L = ["**Verdict on the paper's claim** (a federated table transfers to new arenas). "
-         "Zero-shot greedy score on the unseen arenas, federated average minus (paired by "
-         "source seed; the claim is that the difference is above 0):"]
-    for c, j in d.items():
-        L.append(f"{c}: Δ {j.measure}, {j.words()};")
-    if held["standalone"] and not (held["in_turn"] or held["one_shot_average"]):
-        L.append("So the federated table transfers better than a standalone one, but not "
-                 "significantly better than one robot that saw the same arenas in turn or a "
-                 "one-shot average: the diversity of arenas may be what helps, not federation.")
-    elif held["standalone"]:
-        L.append("So federation helps transfer, beyond the diversity of its arenas.")
-    else:
-        L.append(f"So the claim is {d['standalone'].words()} against a standalone table.")
-    return " ".join(L)
+        rows = []
+        for i, row in enumerate(pool.map(target_job, *zip(*args)), 1):
+            rows.append(row)
+            say(f"learning phase {i}/{len(args)}: {row['condition']} seed {row['source_seed']} "
+                f"in {row['arena']}")
+        return rows

@@ -1,0 +1,223 @@
+"""The transfer study's claims, intervals and verdicts, and its files.
+
+Unit of analysis: the source seed. A source's value of a measure is the mean over its
+learning phases (unseen arenas x target seeds). Each claim compares the federated source with
+one control (a standalone source of each source arena, and ``zeros``):
+
+* **collisions while learning**, federated minus control, claimed below 0. Paired t interval
+  of the per-seed differences when both were trained with the same seeds (the controls are
+  matched: standalone robot k has federated robot k's training seed), Welch's otherwise.
+* **time to the threshold**, claimed shorter. When no learning phase of either side is
+  censored: federated minus control in iterations, claimed below 0, paired or Welch as
+  above. When any is: the ratio of Kaplan-Meier medians control / federated over the learning
+  phases (:func:`~dfrl.experiments.science.statistics.censored_ratio`, each side resampled on
+  its own: the pairing is not used), claimed above 1; the censored phases are counted.
+
+Every claim is judged with :func:`~dfrl.experiments.science.statistics.judge` and Holm's
+correction over all claims of the study (:func:`~dfrl.experiments.science.statistics.adjust`).
+The smallest detectable effect D of a t interval is ``(t(0.975, df) + t(0.8, df)) x se``; of
+a censored ratio ``exp((z(0.975) + z(0.8)) x se_log)``, a factor, with se_log the interval's
+width on the log scale / (2 x 1.96).
+"""
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dfrl.experiments.science.statistics import (CensoredRatio, Interval, Judgement, adjust,
+                                                 censored_ratio, interval, judge, paired, welch)
+from dfrl.experiments.science.tidy import TIDY_FILE, Row, write_tidy
+from dfrl.experiments.science.transfer.model import json_safe
+from dfrl.experiments.science.transfer.study import StudyOptions
+
+MEASURES = ("collisions_per_1000", "time_to_threshold")
+#: Fewest source seeds a claim is judged on.
+MIN_SEEDS = 3
+
+
+def per_seed(rows: Sequence[dict[str, Any]], condition: str, measure: str) -> dict[int, float]:
+    """pair seed -> the mean of ``measure`` over that source's learning phases."""
+    mine = [r for r in rows if r["condition"] == condition]
+    seeds = sorted({r["pair_seed"] for r in mine})
+    return {s: float(np.mean([float(r[measure]) for r in mine if r["pair_seed"] == s]))
+            for s in seeds}
+
+
+def compare(a: dict[int, float], b: dict[int, float]) -> tuple[Interval, str]:
+    """``a - b`` with its 95% interval: paired t when both have values for the same seeds
+    (``"paired"``), Welch's otherwise (``"Welch"``)."""
+    if set(a) == set(b):
+        keys = sorted(a)
+        return paired([a[k] for k in keys], [b[k] for k in keys]), "paired"
+    return welch(list(a.values()), list(b.values())), "Welch"
+
+
+@dataclass(frozen=True)
+class Claim:
+    """One comparison of the federated source with a control on one measure."""
+
+    measure: str
+    control: str
+    estimate: Interval | CensoredRatio
+    method: str                 #: "paired", "Welch" or "censored ratio"
+    censored: tuple[int, int]   #: censored learning phases (federated, control)
+    phases: tuple[int, int]     #: learning phases (federated, control)
+    judgement: Judgement
+
+    def statement(self, federated: str) -> str:
+        if self.measure == "collisions_per_1000":
+            return f"{federated} collides less while learning than {self.control}"
+        return f"{federated} reaches the threshold sooner than {self.control}"
+
+    def to_dict(self) -> dict[str, Any]:
+        e = self.estimate
+        return json_safe({
+            "measure": self.measure, "control": self.control, "method": self.method,
+            "estimate": e.estimate if isinstance(e, CensoredRatio) else e.mean,
+            "low": e.low, "high": e.high, "n": e.n,
+            "known": e.known if isinstance(e, CensoredRatio) else "exact",
+            "censored": list(self.censored), "phases": list(self.phases),
+            "bound": self.judgement.bound, "side": self.judgement.side,
+            "p": self.judgement.p, "p_holm": self.judgement.p_adjusted,
+            "detectable": e.detectable(), "verdict": self.judgement.words()})
+
+
+def _times(rows: Sequence[dict[str, Any]], condition: str) -> tuple[list[float], list[bool]]:
+    mine = [r for r in rows if r["condition"] == condition]
+    return [float(r["time_to_threshold"]) for r in mine], [bool(r["reached"]) for r in mine]
+
+
+def claim(rows: Sequence[dict[str, Any]], federated: str, control: str, measure: str,
+          resamples: int = 4000) -> Claim:
+    """The (unadjusted) claim that ``federated`` beats ``control`` on ``measure``."""
+    tf, rf = _times(rows, federated)
+    tc, rc = _times(rows, control)
+    censored = (rf.count(False), rc.count(False))
+    phases = (len(rf), len(rc))
+    if measure == "time_to_threshold" and any(censored):
+        est = censored_ratio((tc, rc), (tf, rf), resamples=resamples, seed=0)
+        n = min(len(per_seed(rows, federated, measure)), len(per_seed(rows, control, measure)))
+        est = CensoredRatio(est.estimate, est.low, est.high, est.resamples, est.method,
+                            n, est.known, est.draws)
+        return Claim(measure, control, est, "censored ratio", censored, phases,
+                     judge(est, 1.0, "above", MIN_SEEDS))
+    est, how = compare(per_seed(rows, federated, measure), per_seed(rows, control, measure))
+    return Claim(measure, control, est, how, censored, phases,
+                 judge(est, 0.0, "below", MIN_SEEDS))
+
+
+def claims(rows: Sequence[dict[str, Any]], opts: StudyOptions,
+           resamples: int = 4000) -> list[Claim]:
+    """Every claim of the study, Holm-adjusted over the family."""
+    raw = [claim(rows, opts.federated, c, m, resamples) for m in MEASURES
+           for c in opts.conditions if c != opts.federated]
+    adj = adjust([c.judgement for c in raw])
+    return [Claim(c.measure, c.control, c.estimate, c.method, c.censored, c.phases, j)
+            for c, j in zip(raw, adj)]
+
+
+# -- report ----------------------------------------------------------------------------------
+def _cell(x: float) -> str:
+    return "inf" if x == math.inf else f"{x:.3g}"
+
+
+def _estimate(c: Claim) -> str:
+    e = c.estimate
+    if isinstance(e, CensoredRatio):
+        return str(e)
+    return f"{_cell(e.mean)} [{_cell(e.low)}, {_cell(e.high)}]"
+
+
+def _level(rows: Sequence[dict[str, Any]], condition: str, measure: str) -> str:
+    if measure == "time_to_threshold":
+        t, r = _times(rows, condition)
+        med = [x for x, ok in zip(t, r) if ok]
+        if len(med) < len(t):
+            return f"{len(t) - len(med)} of {len(t)} censored"
+        return str(interval(list(per_seed(rows, condition, measure).values())))
+    return str(interval(list(per_seed(rows, condition, measure).values())))
+
+
+def markdown(rows: Sequence[dict[str, Any]], opts: StudyOptions, found: Sequence[Claim],
+             wall_time: float) -> str:
+    """The study's report: each source's levels, then every claim with its verdict."""
+    n = len(opts.source_seeds)
+    L = [f"# Transfer to unseen arenas ({', '.join(opts.targets)})", "",
+         f"Sources: {n} source seeds, {opts.iterations} iterations per robot (the federation "
+         f"shares every {opts.respite}, method {opts.method}). Learning phase: {opts.learn} "
+         f"steps from the source table in each unseen arena x {len(opts.target_seeds)} target "
+         f"seed(s); greedy score ({opts.eval_steps} steps) every {opts.eval_every} iterations; "
+         f"threshold {opts.threshold}, reached at the first of {opts.confirm} evaluations in a "
+         f"row at or above it (a phase that never reaches it is censored at "
+         f"{opts.learn}). Wall time {wall_time:.0f} s.", "",
+         "| source | collisions/1000 while learning | time to threshold (iterations) |",
+         "|---|---|---|"]
+    for c in opts.conditions:
+        L.append(f"| {c} | {_level(rows, c, 'collisions_per_1000')} | "
+                 f"{_level(rows, c, 'time_to_threshold')} |")
+    L += ["", f"Claims: {opts.federated} against each control. Collisions: federated minus "
+          "control (claimed < 0). Time: federated minus control (claimed < 0) when no phase is "
+          "censored, else the ratio of Kaplan-Meier medians control / federated (claimed > 1). "
+          "95% intervals; p adjusted by Holm over the "
+          f"{len(found)} claims; D = smallest detectable effect at 80% power "
+          "((t(0.975, df) + t(0.8, df)) x se; for a ratio, a factor).", "",
+          "| measure | control | method | estimate [95%] | censored (fed, control) | p (Holm) "
+          "| verdict |", "|---|---|---|---|---|---|---|"]
+    for c in found:
+        cens = f"{c.censored[0]}/{c.phases[0]}, {c.censored[1]}/{c.phases[1]}"
+        L.append(f"| {c.measure} | {c.control} | {c.method} | {_estimate(c)} | {cens} | "
+                 f"{c.judgement.p_adjusted:.3g} | {c.judgement.words()} |")
+    L += ["", headline(found, opts)]
+    return "\n".join(L)
+
+
+def headline(found: Sequence[Claim], opts: StudyOptions) -> str:
+    """One sentence per measure on the claim against the standalone controls."""
+    out = []
+    for m in MEASURES:
+        cs = [c for c in found if c.measure == m and c.control.startswith("standalone_")]
+        held = sum(c.judgement.holds for c in cs)
+        refuted = [c.control for c in cs if c.judgement.words().startswith("refuted")]
+        word = "collisions while learning" if m == MEASURES[0] else "time to the threshold"
+        s = f"**{word}**: holds against {held} of {len(cs)} standalone controls"
+        if refuted:
+            s += f"; refuted against {', '.join(refuted)}"
+        out.append(s + ".")
+    return "The paper's claim, " + " ".join(out)
+
+
+# -- files -----------------------------------------------------------------------------------
+def tidy_rows(rows: Sequence[dict[str, Any]]) -> Iterator[Row]:
+    """``run`` = source condition, ``seed`` = source seed, ``robot`` = arena/target seed."""
+    for r in rows:
+        cond = r["condition"].split("_")[0]
+        where = f"{r['arena']}/t{r['target_seed']}"
+        run, seed, a = r["condition"], int(r["source_seed"]), r["arena"]
+        for it, v in r["scores"]:
+            yield (run, seed, cond, where, int(it), f"score@{a}", float(v))
+        for it, v in r["collisions"]:
+            yield (run, seed, cond, where, int(it), f"collisions@{a}", float(v))
+        end = int(r["collisions"][-1][0])
+        yield (run, seed, cond, where, end, f"collisions_per_1000_learning@{a}",
+               float(r["collisions_per_1000"]))
+        yield (run, seed, cond, where, end, f"time_to_threshold@{a}",
+               float(r["time_to_threshold"]))
+        yield (run, seed, cond, where, end, f"reached@{a}", float(bool(r["reached"])))
+
+
+def write_study(out: Path, rows: Sequence[dict[str, Any]], opts: StudyOptions,
+                found: Sequence[Claim], text: str, wall_time: float) -> None:
+    """``transfer_study.md``, ``transfer_study.json`` (options, claims, rows) and
+    ``tidy.csv`` (provenance.json is written when the study starts)."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "transfer_study.md").write_text(text + "\n", encoding="utf-8")
+    doc = {"options": opts.to_dict(), "wall_time": round(wall_time, 3),
+           "claims": [c.to_dict() for c in found], "rows": json_safe(list(rows))}
+    (out / "transfer_study.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    write_tidy(out / TIDY_FILE, tidy_rows(rows))
