@@ -135,6 +135,8 @@ def _estimate(c: Claim) -> str:
 
 
 def _level(rows: Sequence[dict[str, Any]], condition: str, measure: str) -> str:
+    if not any(r["condition"] == condition for r in rows):
+        return "-"
     if measure == "time_to_threshold":
         t, r = _times(rows, condition)
         med = [x for x, ok in zip(t, r) if ok]
