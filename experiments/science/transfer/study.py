@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from dfrl.arenas import load_arena
 from dfrl.experiments.science.studies.fedsim import AGGREGATIONS, federate
 from dfrl.experiments.science.studies.history import eval_job
 from dfrl.robots.training import Trainer, TrainerConfig
@@ -169,6 +170,8 @@ def transfer_study(opts: StudyOptions,
                    progress: Callable[[str], None] | None = None) -> list[dict[str, Any]]:
     """Every source table, then every learning phase; one row per learning phase."""
     say = progress or (lambda _msg: None)
+    for arena in opts.targets:          # an unknown arena fails here, before any training
+        load_arena(arena)
     with ProcessPoolExecutor(max_workers=opts.jobs) as pool:
         jobs = [(c, s, opts) for c in opts.conditions for s in opts.source_seeds]
         srcs = []

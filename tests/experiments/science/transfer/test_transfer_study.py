@@ -125,3 +125,12 @@ def test_censored_times_use_kaplan_meier_and_are_counted():
     rows = rows_of([1, 2, 3], [1, 2, 3], times=times)
     text = markdown(rows, opts, [c], 1.0)
     assert "1 of 3 censored" in text and "censored ratio" in text
+
+
+@pytest.mark.parametrize("targets", [["nowhere"], ["r3"]])
+def test_an_unknown_or_source_arena_is_refused_before_any_training(tmp_path, capsys, targets):
+    out = tmp_path / "out"
+    rc = main(["transfer-study", "--seeds", "1", "2", "--targets", *targets, "--out", str(out)])
+    assert rc == 2
+    assert targets[0] in capsys.readouterr().err
+    assert not (out / "transfer_study.json").exists()
