@@ -22,6 +22,11 @@ Usage::
     result = run(TransferConfig(init="results/r1/q_table.npy", arena="my_arena.json",
                                 iterations=3000, seeds=(1, 2, 3, 4, 5)), Path("results/transfer"))
     result.summary["init"]["collisions_per_1000"].mean, result.ratio["collisions_per_1000"]
+
+The paper's transfer claim across seeds and arenas (federated source against a matched
+standalone source of every source arena, collisions while learning and censored time to a
+threshold, paired intervals, Holm, verdicts) is ``dfrl transfer-study``: :mod:`.study` runs it,
+:mod:`.claims` judges it and writes its files.
 """
 from __future__ import annotations
 
