@@ -9,29 +9,31 @@ one control (a standalone source of each source arena, and ``zeros``):
   matched: standalone robot k has federated robot k's training seed), Welch's otherwise.
 * **time to the threshold**, claimed shorter. When no learning phase of either side is
   censored: federated minus control in iterations, claimed below 0, paired or Welch as
-  above. When any is: the ratio of Kaplan-Meier medians control / federated over the learning
-  phases (:func:`~dfrl.experiments.science.statistics.censored_ratio`, each side resampled on
-  its own: the pairing is not used), claimed above 1; the censored phases are counted.
+  above. When any is: the difference of Kaplan-Meier medians federated - control over the
+  learning phases (:func:`censored_difference`, each side resampled on its own: the pairing is
+  not used), claimed below 0; the censored phases are counted. (A difference, not a ratio: a
+  source table may reach the threshold at iteration 0.)
 
 Every claim is judged with :func:`~dfrl.experiments.science.statistics.judge` and Holm's
 correction over all claims of the study (:func:`~dfrl.experiments.science.statistics.adjust`).
 The smallest detectable effect D of a t interval is ``(t(0.975, df) + t(0.8, df)) x se``; of
-a censored ratio ``exp((z(0.975) + z(0.8)) x se_log)``, a factor, with se_log the interval's
-width on the log scale / (2 x 1.96).
+a censored difference ``(z(0.975) + z(0.8)) x se``, se = the interval's width / (2 x 1.96)
+(``inf`` for an open interval).
 """
 from __future__ import annotations
 
 import json
 import math
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from dfrl.experiments.science.statistics import (CensoredRatio, Interval, Judgement, adjust,
-                                                 censored_ratio, interval, judge, paired, welch)
+from dfrl.experiments.science.statistics import (LEVEL, POWER, Interval, Judgement, adjust,
+                                                 interval, judge, km_median, normal_quantile,
+                                                 paired, welch)
 from dfrl.experiments.science.tidy import TIDY_FILE, Row, write_tidy
 from dfrl.experiments.science.transfer.model import json_safe
 from dfrl.experiments.science.transfer.study import StudyOptions
@@ -59,13 +61,83 @@ def compare(a: dict[int, float], b: dict[int, float]) -> tuple[Interval, str]:
 
 
 @dataclass(frozen=True)
+class CensoredDifference:
+    """``median_a - median_b`` of Kaplan-Meier medians of censored times, with its 95%
+    percentile bootstrap interval; a median beyond the budget is known only to exceed the
+    group's largest time, so each resample gives the lowest and highest difference it allows
+    (``low`` from the lowest, ``high`` from the highest: a censored median never counts for a
+    claim). ``known``: ``exact``, ``at least`` (a's beyond), ``at most`` (b's), ``unknown``.
+    Has what :func:`judge` needs of an interval."""
+
+    estimate: float
+    low: float
+    high: float
+    n: int
+    known: str
+    draws: np.ndarray = field(repr=False, compare=False)
+
+    @property
+    def mean(self) -> float:
+        return self.estimate
+
+    @property
+    def half(self) -> float:
+        return (self.high - self.low) / 2.0
+
+    def p_value(self, null: float = 0.0) -> float:
+        """Twice the smaller share of resamples that allow a difference on one side of
+        ``null``, at most 1."""
+        below, above = np.mean(self.draws[:, 0] <= null), np.mean(self.draws[:, 1] >= null)
+        return float(min(1.0, 2.0 * min(below, above)))
+
+    def detectable(self, power: float = POWER) -> float:
+        if not (math.isfinite(self.low) and math.isfinite(self.high)):
+            return math.inf
+        z = normal_quantile(0.5 + LEVEL / 2.0)
+        return (z + normal_quantile(power)) * (self.high - self.low) / (2.0 * z)
+
+    def __str__(self) -> str:
+        sign = {"at least": ">= ", "at most": "<= "}.get(self.known, "")
+        return f"{sign}{_cell(self.estimate)} [{_cell(self.low)}, {_cell(self.high)}]"
+
+
+def _median_bounds(t: np.ndarray, ok: np.ndarray) -> tuple[float, float]:
+    m = km_median(t.tolist(), ok.tolist())
+    return (m, m) if math.isfinite(m) else (float(t.max()), math.inf)
+
+
+def censored_difference(a: tuple[Sequence[float], Sequence[bool]],
+                        b: tuple[Sequence[float], Sequence[bool]], n: int,
+                        resamples: int = 4000, seed: int = 0) -> CensoredDifference:
+    """Kaplan-Meier median of ``a`` minus that of ``b`` (``(times, reached)`` each, reached
+    False: censored at that time), each group resampled with replacement on its own from a
+    generator seeded with ``seed``; ``n`` is the count the verdict is given at."""
+    ta, ea = np.asarray(a[0], dtype=float), np.asarray(a[1], dtype=bool)
+    tb, eb = np.asarray(b[0], dtype=float), np.asarray(b[1], dtype=bool)
+    rng = np.random.default_rng(seed)
+    (al, ah), (bl, bh) = _median_bounds(ta, ea), _median_bounds(tb, eb)
+    known = {(True, True): "exact", (False, True): "at least", (True, False): "at most",
+             (False, False): "unknown"}[(al == ah, bl == bh)]
+    est = {"exact": al - bl, "at least": al - bl, "at most": ah - bl}.get(known, math.nan)
+    draws = np.empty((resamples, 2))
+    for k in range(resamples):
+        i, j = rng.integers(0, len(ta), len(ta)), rng.integers(0, len(tb), len(tb))
+        (xl, xh), (yl, yh) = _median_bounds(ta[i], ea[i]), _median_bounds(tb[j], eb[j])
+        draws[k] = (xl - yh, xh - yl)
+    tail = (1.0 - LEVEL) / 2.0
+    return CensoredDifference(float(est), float(np.quantile(draws[:, 0], tail, method="lower")),
+                              float(np.quantile(draws[:, 1], 1.0 - tail, method="higher")),
+                              n, known, draws)
+
+
+@dataclass(frozen=True)
 class Claim:
     """One comparison of the federated source with a control on one measure."""
 
     measure: str
     control: str
-    estimate: Interval | CensoredRatio
-    method: str                 #: "paired", "Welch" or "censored ratio"
+    estimate: Interval | CensoredDifference
+    method: str                 #: "paired", "Welch" or "censored (KM medians)"
     censored: tuple[int, int]   #: censored learning phases (federated, control)
     phases: tuple[int, int]     #: learning phases (federated, control)
     judgement: Judgement
@@ -79,9 +151,9 @@ class Claim:
         e = self.estimate
         return json_safe({
             "measure": self.measure, "control": self.control, "method": self.method,
-            "estimate": e.estimate if isinstance(e, CensoredRatio) else e.mean,
+            "estimate": e.mean,
             "low": e.low, "high": e.high, "n": e.n,
-            "known": e.known if isinstance(e, CensoredRatio) else "exact",
+            "known": e.known if isinstance(e, CensoredDifference) else "exact",
             "censored": list(self.censored), "phases": list(self.phases),
             "bound": self.judgement.bound, "side": self.judgement.side,
             "p": self.judgement.p, "p_holm": self.judgement.p_adjusted,
@@ -101,12 +173,10 @@ def claim(rows: Sequence[dict[str, Any]], federated: str, control: str, measure:
     censored = (rf.count(False), rc.count(False))
     phases = (len(rf), len(rc))
     if measure == "time_to_threshold" and any(censored):
-        est = censored_ratio((tc, rc), (tf, rf), resamples=resamples, seed=0)
         n = min(len(per_seed(rows, federated, measure)), len(per_seed(rows, control, measure)))
-        est = CensoredRatio(est.estimate, est.low, est.high, est.resamples, est.method,
-                            n, est.known, est.draws)
-        return Claim(measure, control, est, "censored ratio", censored, phases,
-                     judge(est, 1.0, "above", MIN_SEEDS))
+        est = censored_difference((tf, rf), (tc, rc), n, resamples)
+        return Claim(measure, control, est, "censored (KM medians)", censored, phases,
+                     judge(est, 0.0, "below", MIN_SEEDS))
     est, how = compare(per_seed(rows, federated, measure), per_seed(rows, control, measure))
     return Claim(measure, control, est, how, censored, phases,
                  judge(est, 0.0, "below", MIN_SEEDS))
@@ -129,7 +199,7 @@ def _cell(x: float) -> str:
 
 def _estimate(c: Claim) -> str:
     e = c.estimate
-    if isinstance(e, CensoredRatio):
+    if isinstance(e, CensoredDifference):
         return str(e)
     return f"{_cell(e.mean)} [{_cell(e.low)}, {_cell(e.high)}]"
 
@@ -164,11 +234,13 @@ def markdown(rows: Sequence[dict[str, Any]], opts: StudyOptions, found: Sequence
         L.append(f"| {c} | {_level(rows, c, 'collisions_per_1000')} | "
                  f"{_level(rows, c, 'time_to_threshold')} |")
     L += ["", f"Claims: {opts.federated} against each control. Collisions: federated minus "
-          "control (claimed < 0). Time: federated minus control (claimed < 0) when no phase is "
-          "censored, else the ratio of Kaplan-Meier medians control / federated (claimed > 1). "
+          "control (claimed < 0). Time: federated minus control in iterations (claimed < 0), "
+          "from the per-seed means when no phase is censored, else from the Kaplan-Meier "
+          "medians over the learning phases (`>= x`: a bound, a median beyond the budget). "
           "95% intervals; p adjusted by Holm over the "
           f"{len(found)} claims; D = smallest detectable effect at 80% power "
-          "((t(0.975, df) + t(0.8, df)) x se; for a ratio, a factor).", "",
+          "((t(0.975, df) + t(0.8, df)) x se; censored: (z(0.975) + z(0.8)) x se, se = width "
+          "/ 3.92).", "",
           "| measure | control | method | estimate [95%] | censored (fed, control) | p (Holm) "
           "| verdict |", "|---|---|---|---|---|---|---|"]
     for c in found:

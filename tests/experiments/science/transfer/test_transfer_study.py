@@ -60,7 +60,8 @@ def test_a_run_that_never_reaches_the_threshold_is_censored(study):
     doc = json.loads((study / "transfer_study.json").read_text())
     assert all(not r["reached"] and r["time_to_threshold"] == 40 for r in doc["rows"])
     times = [c for c in doc["claims"] if c["measure"] == "time_to_threshold"]
-    assert all(c["method"] == "censored ratio" and c["censored"] == [3, 3] for c in times)
+    assert all(c["method"] == "censored (KM medians)" and c["censored"] == [3, 3]
+               for c in times)
     assert all(c["known"] == "unknown" for c in times)
     assert "3 of 3 censored" in (study / "transfer_study.md").read_text()
     with open(study / "tidy.csv", newline="") as fh:
@@ -117,14 +118,21 @@ def test_censored_times_use_kaplan_meier_and_are_counted():
     times = [(200.0, True), (1000.0, False), (400.0, True)]
     c = claim(rows_of([1, 2, 3], [1, 2, 3], times=times), FED, "standalone_r1",
               "time_to_threshold")
-    assert c.method == "censored ratio" and c.censored == (1, 1) and c.phases == (3, 3)
-    assert c.estimate.estimate == pytest.approx(1.0)    # KM medians 400 / 400
+    assert c.method == "censored (KM medians)" and c.censored == (1, 1) and c.phases == (3, 3)
+    assert c.estimate.estimate == pytest.approx(0.0)    # KM medians 400 - 400
+    # a federated source at the threshold from the start (time 0), controls censored late:
+    fast = rows_of([1, 2, 3], [1, 2, 3], times=[(0.0, True)] * 3)
+    for r in fast[3:]:
+        r["time_to_threshold"], r["reached"] = 1000.0, False
+    c0 = claim(fast, FED, "standalone_r1", "time_to_threshold")
+    assert c0.estimate.known == "at most" and c0.estimate.mean == -1000.0
+    assert c0.judgement.words() == "holds"      # -inf .. 0 - 1000: below 0 in every resample
     uncensored = claim(rows_of([1, 2, 3], [1, 2, 3]), FED, "standalone_r1", "time_to_threshold")
     assert uncensored.method == "paired" and uncensored.censored == (0, 0)
     opts = StudyOptions(source_seeds=(1, 2, 3), targets=("h1",))
     rows = rows_of([1, 2, 3], [1, 2, 3], times=times)
     text = markdown(rows, opts, [c], 1.0)
-    assert "1 of 3 censored" in text and "censored ratio" in text
+    assert "1 of 3 censored" in text and "censored (KM medians)" in text
 
 
 @pytest.mark.parametrize("targets", [["nowhere"], ["r3"]])
