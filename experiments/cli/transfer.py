@@ -162,6 +162,9 @@ def register_study(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=None,
                    help="write transfer_study.md, transfer_study.json, tidy.csv and "
                         "provenance.json there")
+    p.add_argument("--from-json", type=Path, default=None, metavar="FILE",
+                   help="judge the learning phases of a transfer_study.json again (its "
+                        "options; nothing is trained)")
     p.set_defaults(func=cmd_study)
 
 
@@ -173,6 +176,22 @@ def cmd_study(args: argparse.Namespace) -> int:
     from dfrl.experiments.science.transfer.study import StudyOptions, transfer_study
 
     t0 = time.perf_counter()
+    if args.from_json is not None:
+        try:
+            doc = json.loads(args.from_json.read_text(encoding="utf-8"))
+            opts = StudyOptions(**{k: tuple(v) if isinstance(v, list) else v
+                                   for k, v in doc["options"].items()})
+            rows, wall = doc["rows"], float(doc["wall_time"])
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            print(f"dfrl transfer-study: error: {args.from_json}: {exc!r}", file=sys.stderr)
+            return 2
+        found = claims(rows, opts, args.resamples)
+        text = markdown(rows, opts, found, wall)
+        if args.out is not None:
+            write_provenance(args.out)
+            write_study(args.out, rows, opts, found, text, wall)
+        print(text)
+        return 0
     try:
         opts = StudyOptions(source_seeds=chosen_seeds(args),
                             target_seeds=tuple(dict.fromkeys(args.target_seeds)),

@@ -252,16 +252,25 @@ def markdown(rows: Sequence[dict[str, Any]], opts: StudyOptions, found: Sequence
 
 
 def headline(found: Sequence[Claim], opts: StudyOptions) -> str:
-    """One sentence per measure on the claim against the standalone controls."""
+    """One sentence per measure: against how many standalone controls the claim holds, is
+    refuted or is not significant (with the range of D), and the verdict against ``zeros``."""
     out = []
     for m in MEASURES:
         cs = [c for c in found if c.measure == m and c.control.startswith("standalone_")]
-        held = sum(c.judgement.holds for c in cs)
-        refuted = [c.control for c in cs if c.judgement.words().startswith("refuted")]
         word = "collisions while learning" if m == MEASURES[0] else "time to the threshold"
-        s = f"**{word}**: holds against {held} of {len(cs)} standalone controls"
+        held = [c.control for c in cs if c.judgement.holds]
+        refuted = [c.control for c in cs if c.judgement.words().startswith("refuted")]
+        unsure = [c for c in cs if c.judgement.words().startswith("not significant")]
+        s = f"**{word}**: holds against {len(held)} of {len(cs)} standalone controls"
         if refuted:
             s += f"; refuted against {', '.join(refuted)}"
+        if unsure:
+            ds = [c.estimate.detectable() for c in unsure]
+            s += (f"; not significant against {len(unsure)} (D {_cell(min(ds))}"
+                  + (f" to {_cell(max(ds))}" if max(ds) != min(ds) else "") + ")")
+        zero = [c for c in found if c.measure == m and c.control == "zeros"]
+        if zero:
+            s += f"; against zeros (learning from scratch): {zero[0].judgement.words()}"
         out.append(s + ".")
     return "The paper's claim, " + " ".join(out)
 

@@ -69,6 +69,21 @@ def test_a_run_that_never_reaches_the_threshold_is_censored(study):
     assert len(reached) == 21 and set(reached) == {0.0}
 
 
+def test_from_json_judges_the_same_phases_again(study, tmp_path, capsys):
+    again = tmp_path / "again"
+    rc = main(["transfer-study", "--from-json", str(study / "transfer_study.json"),
+               "--resamples", "200", "--out", str(again)])
+    assert rc == 0
+    first = json.loads((study / "transfer_study.json").read_text())
+    second = json.loads((again / "transfer_study.json").read_text())
+    assert second["claims"] == first["claims"] and second["rows"] == first["rows"]
+    assert (again / "tidy.csv").read_text() == (study / "tidy.csv").read_text()
+    bad = tmp_path / "bad.json"
+    bad.write_text("{}")
+    assert main(["transfer-study", "--from-json", str(bad)]) == 2
+    assert "bad.json" in capsys.readouterr().err
+
+
 # -- hand-made numbers -----------------------------------------------------------------------
 def rows_of(fed: list[float], ctrl: list[float], ctrl_seeds=(1, 2, 3), times=None):
     """Learning-phase rows: collisions of the federated source and standalone_r1 per seed;
