@@ -16,15 +16,28 @@ from dfrl.experiments.science.transfer.study import StudyOptions
 FED = "federated_average"
 
 
+TINY = ["transfer-study", "--seeds", "1", "2", "3", "--targets", "h1", "--iterations", "40",
+        "--respite", "20", "--learn", "40", "--eval-every", "20", "--eval-steps", "20",
+        "--resamples", "200", "--jobs", "2"]
+
+
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
     out = tmp_path_factory.mktemp("transfer_study")
-    rc = main(["transfer-study", "--seeds", "1", "2", "3", "--targets", "h1",
-               "--iterations", "40", "--respite", "20", "--learn", "40", "--eval-every", "20",
-               "--eval-steps", "20", "--threshold", "10", "--resamples", "200",
-               "--jobs", "2", "--out", str(out)])
-    assert rc == 0
+    assert main(TINY + ["--threshold", "10", "--out", str(out)]) == 0
     return out
+
+
+def test_same_seeds_same_study(study, tmp_path):
+    """Determinism, and a threshold that is reached: times on the grid, nothing censored."""
+    assert main(TINY + ["--threshold", "-10", "--out", str(tmp_path)]) == 0
+    first = json.loads((study / "transfer_study.json").read_text())["rows"]
+    again = json.loads((tmp_path / "transfer_study.json").read_text())["rows"]
+    strip = lambda rows: [{k: v for k, v in r.items()  # noqa: E731
+                           if k not in ("time_to_threshold", "reached", "scores")} for r in rows]
+    assert strip(again) == strip(first)
+    assert all(r["reached"] and r["time_to_threshold"] == 0 for r in again)
+    assert [r["scores"][:2] for r in again] == [r["scores"][:2] for r in first]
 
 
 def test_study_writes_its_files(study):
