@@ -68,3 +68,19 @@ def wait_rounds(out: Path, agent: str, n: int, timeout: float = 60.0) -> None:
     raise AssertionError(f"fewer than {n} rounds after {timeout} s")
 
 
+
+
+def stop_agents(out: Path, tls: Path | None = None) -> None:
+    """Tell every agent of the running experiment in ``out`` to stop at its next round start
+    (the ``stop`` control command; a sync run then ends within seconds). Tests that act on a
+    running experiment run a long one and end it so once they acted, instead of betting that
+    their commands finish before a short run does (they did not on a loaded machine)."""
+    from dfrl.experiments.driver.launcher import open_console, send_control
+    from dfrl.experiments.driver.launcher.remote import driver_tls, nodes_of, tokens_of
+
+    info = nodes_of(out)
+    with open_console(tokens_of(out), tls=driver_tls(out, info, tls)) as console:
+        for a in info["agents"]:
+            first = a["itinerary"][0]
+            send_control(console, (first["host"], int(first["port"])), a["name"],
+                         {"stop": True})

@@ -15,7 +15,7 @@ from dfrl.experiments.driver.launcher import Results, inject_method, join_robot
 from dfrl.experiments.processes import find_swipl
 from dfrl.platform_pl import DFRL_AGENT_DIR
 
-from .helpers import run_in_thread, small_config, wait_rounds
+from .helpers import run_in_thread, small_config, stop_agents, wait_rounds
 
 pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
@@ -35,7 +35,8 @@ def test_refused_programs_are_not_injected(tmp_path: Path) -> None:
     unsafe = tmp_path / "unsafe_method.pl"
     unsafe.write_text(":- initialization(shell('touch /tmp/dfrl_unsafe_marker')).\n",
                       encoding="utf-8")
-    cfg = small_config(iterations=3000, respite=100, rtf=20.0, timeout_s=180)
+    # a long run (300 rounds, ~100 s), ended by a stop command once the commands were tried
+    cfg = small_config(iterations=30000, respite=100, rtf=20.0, timeout_s=300)
     t, box = run_in_thread(cfg, out)
     wait_rounds(out, "fed_qlearning", 2)
 
@@ -54,6 +55,7 @@ def test_refused_programs_are_not_injected(tmp_path: Path) -> None:
     assert inject_method(out, MEDIAN, "median") == {"fed_qlearning": "applied"}
     assert sorted(p.name for p in (out / "programs").iterdir()) == ["median_method.pl"]
 
+    stop_agents(out)
     t.join(timeout=180)
     res: Results = box.get("res") or pytest.fail(f"run failed: {box.get('exc')!r}")
     assert res.ok, (out / "summary.md").read_text()

@@ -16,7 +16,7 @@ import pytest
 from dfrl.experiments.driver.launcher import Results
 from dfrl.experiments.processes import find_swipl
 
-from .helpers import run_in_thread, small_config, wait_rounds
+from .helpers import run_in_thread, small_config, stop_agents, wait_rounds
 
 pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
@@ -34,7 +34,8 @@ def _dead_port() -> int:
 
 def test_join_checked_and_failed_join_does_not_fail_the_run(tmp_path: Path) -> None:
     out = tmp_path / "run"
-    cfg = small_config(iterations=3000, respite=100, rtf=20.0, timeout_s=180)
+    # a long run (300 rounds, ~100 s), ended by a stop command once the joins were tried
+    cfg = small_config(iterations=30000, respite=100, rtf=20.0, timeout_s=300)
     t, box = run_in_thread(cfg, out)
     wait_rounds(out, "fed_qlearning", 2)
 
@@ -53,6 +54,7 @@ def test_join_checked_and_failed_join_does_not_fail_the_run(tmp_path: Path) -> N
     assert dead.returncode == 1, dead.stderr
     assert "Traceback" not in dead.stderr, dead.stderr
 
+    stop_agents(out)
     t.join(timeout=180)
     res: Results = box.get("res") or pytest.fail(f"run failed: {box.get('exc')!r}")
     summary = (out / "summary.md").read_text()

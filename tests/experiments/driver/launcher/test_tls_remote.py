@@ -21,7 +21,8 @@ from dfrl.experiments.tools.certs import init_ca, make_node
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
 from dfrl.platform_pl import DFRL_AGENT_DIR
 
-from .helpers import diagnose, rounds_csv, run_in_thread, small_config, wait_rounds
+from .helpers import (diagnose, rounds_csv, run_in_thread, small_config, stop_agents,
+                      wait_rounds)
 from dfrl.experiments.processes import find_swipl
 
 pytestmark = [pytest.mark.skipif(find_swipl() is None, reason="needs swipl"),
@@ -47,9 +48,10 @@ def test_inject_and_join_with_tls_from_a_copied_results_folder(tmp_path: Path) -
     init_ca(tmp_path / "ca")
     node_dir = make_node("local", tmp_path / "ca", tmp_path / "tls-local").directory
     out = tmp_path / "run"
-    # 24 s of wall time: the refusals, the join and the inject below take seconds each on a
-    # loaded machine (at 3000 iterations and rtf 20 the run ended before the inject in 1 of 4)
-    cfg = small_config(iterations=4500, respite=150, rtf=12.0)
+    # a long run (300 rounds, ~4 min), ended by a stop command once the refusals, the join and
+    # the inject were done: they take seconds each on a loaded machine, and a run of fixed
+    # length (24 s) ended before the inject in 2 of 3 loaded suite runs
+    cfg = small_config(iterations=45000, respite=150, rtf=12.0, timeout_s=400)
     t, box = run_in_thread(cfg, out, tls=node_dir)
     wait_rounds(out, AGENT, 2)
     copied = tmp_path / "copied"
@@ -97,8 +99,9 @@ def test_inject_and_join_with_tls_from_a_copied_results_folder(tmp_path: Path) -
     done = _dfrl(*inject, "--tls", str(driver), cwd=tmp_path)
     assert done.returncode == 0, done.stdout + done.stderr
     assert f"method median applied by {AGENT}" in done.stdout
+    stop_agents(out)
     t.join(timeout=180)
-    assert not t.is_alive(), "the run did not end within 180 s"
+    assert not t.is_alive(), "the run did not end within 180 s of its stop command"
     res = box.get("res") or pytest.fail(f"run failed: {box.get('exc')!r}")
     assert res.ok, diagnose(out)
     controls = read_rounds_log(out / f"rounds_{AGENT}.log", AGENT).controls
