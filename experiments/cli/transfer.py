@@ -154,6 +154,10 @@ def register_study(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--confirm", type=int, default=2,
                    help="evaluations in a row at or above the threshold that count as reaching "
                         "it; the time is the first of them (default: %(default)s)")
+    p.add_argument("--extra", nargs="+", default=[],
+                   choices=["standalone_same_experience", "in_turn", "one_shot_average"],
+                   help="further controls: one robot in R1 for 5 x --iterations, one robot in "
+                        "R1..R5 in turn, the mean of five standalone tables")
     p.add_argument("--unpaired", action="store_true",
                    help="train the controls with other seeds (Welch intervals, not paired)")
     p.add_argument("--resamples", type=int, default=4000,
@@ -199,7 +203,8 @@ def cmd_study(args: argparse.Namespace) -> int:
                             respite=args.respite, method=args.method, learn=args.learn,
                             eval_every=args.eval_every, eval_steps=args.eval_steps,
                             threshold=args.threshold, confirm=args.confirm,
-                            unpaired=args.unpaired, jobs=args.jobs)
+                            unpaired=args.unpaired, extra=tuple(args.extra),
+                            jobs=args.jobs)
         if args.out is not None:
             args.out.mkdir(parents=True, exist_ok=True)
             write_provenance(args.out)

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from dfrl.arenas import load_arena
-from dfrl.experiments.science.studies.fedsim import AGGREGATIONS, federate
+from dfrl.experiments.science.studies.fedsim import AGGREGATIONS, federate, in_turn
 from dfrl.experiments.science.studies.history import eval_job
 from dfrl.robots.training import Trainer, TrainerConfig
 
@@ -42,6 +42,9 @@ ARENAS = ("r1", "r2", "r3", "r4", "r5")
 #: Seed offset of the controls' sources (and of their target seeds / 2) with ``unpaired``.
 UNPAIRED_OFFSET = 10_000
 TARGET_SEED_BASE = 90_000
+#: Further controls on request (``extra``): one robot in R1 for five times the iterations (the
+#: federation's experience), one robot in R1..R5 in turn, the mean of the five standalone tables.
+EXTRA = ("standalone_same_experience", "in_turn", "one_shot_average")
 EVAL_SEED_BASE = 80_000
 
 
@@ -62,6 +65,7 @@ class StudyOptions:
     threshold: float = 0.5
     confirm: int = 2
     unpaired: bool = False
+    extra: tuple[str, ...] = ()
     jobs: int = 2
 
     def __post_init__(self) -> None:
@@ -75,6 +79,9 @@ class StudyOptions:
             raise ValueError(f"source seeds must be distinct, got {list(self.source_seeds)}")
         if self.method not in AGGREGATIONS:
             raise ValueError(f"unknown method {self.method!r}; one of {sorted(AGGREGATIONS)}")
+        unknown = [c for c in self.extra if c not in EXTRA]
+        if unknown:
+            raise ValueError(f"unknown extra controls {unknown}; one of {list(EXTRA)}")
         bad = [a for a in self.targets if a in ARENAS]
         if bad:
             raise ValueError(f"target arenas must be unseen, {bad} are source arenas")
@@ -85,7 +92,8 @@ class StudyOptions:
 
     @property
     def conditions(self) -> tuple[str, ...]:
-        return (self.federated,) + tuple(f"standalone_{a}" for a in ARENAS) + ("zeros",)
+        return ((self.federated,) + tuple(f"standalone_{a}" for a in ARENAS) + ("zeros",)
+                + tuple(dict.fromkeys(self.extra)))
 
     def grid(self) -> list[int]:
         """The evaluation grid of a learning phase: 0, eval_every, ..., learn."""
@@ -121,6 +129,12 @@ def source_job(condition: str, seed: int, opts: StudyOptions) -> tuple[str, int,
     if condition == "zeros":
         with Trainer(cfg("r1", 0)) as t:
             q = np.zeros_like(t.q_table)
+    elif condition == "standalone_same_experience":
+        q = _alone(cfg("r1", 0).replace(iterations=opts.iterations * len(ARENAS)))
+    elif condition == "in_turn":
+        q = in_turn(cfg("r1", 0), ARENAS, opts.iterations)
+    elif condition == "one_shot_average":
+        q = np.mean([_alone(cfg(a, k)) for k, a in enumerate(ARENAS)], axis=0)
     elif condition.startswith("standalone_"):
         arena = condition.removeprefix("standalone_")
         q = _alone(cfg(arena, ARENAS.index(arena)))
