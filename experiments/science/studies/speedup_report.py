@@ -10,9 +10,9 @@ from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
-from dfrl.experiments.science.statistics import (BootstrapInterval, CensoredRatio, Judgement,
-                                                 Outcome, adjust, censored_ratio, judge,
-                                                 km_median_interval)
+from dfrl.experiments.science.censored import CensoredRatio, censored_ratio, km_median_interval
+from dfrl.experiments.science.statistics import (BootstrapInterval, Judgement, Outcome, adjust,
+                                                 judge)
 from dfrl.experiments.science.studies.speedup import SpeedupOptions, arenas, measures
 
 #: Fewest seeds per N a verdict is given on.

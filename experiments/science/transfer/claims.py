@@ -31,9 +31,9 @@ from typing import Any
 
 import numpy as np
 
+from dfrl.experiments.science.censored import km_median
 from dfrl.experiments.science.statistics import (LEVEL, POWER, Interval, Judgement, adjust,
-                                                 interval, judge, km_median, normal_quantile,
-                                                 paired, welch)
+                                                 interval, judge, normal_quantile, paired, welch)
 from dfrl.experiments.science.tidy import TIDY_FILE, Row, write_tidy
 from dfrl.experiments.science.transfer.model import json_safe
 from dfrl.experiments.science.transfer.study import StudyOptions

@@ -6,8 +6,9 @@ import math
 
 import pytest
 
-from dfrl.experiments.science.statistics import (Outcome, censored_ratio, judge, kaplan_meier,
-                                                 km_median, km_median_interval)
+from dfrl.experiments.science.censored import (censored_ratio, kaplan_meier, km_median,
+                                               km_median_interval)
+from dfrl.experiments.science.statistics import Outcome, judge
 
 
 def test_kaplan_meier_by_hand() -> None:
