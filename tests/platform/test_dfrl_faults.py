@@ -8,7 +8,6 @@ log (JSON lines, written by whichever process the agent is on) is the record che
 """
 from __future__ import annotations
 
-import json
 import os
 import signal
 import threading
@@ -21,8 +20,8 @@ import pytest
 from dfrl.experiments.tools.bench.fault_proxy import PASS, STALL, FaultProxy
 from dfrl.platform_pl import PLATFORM_DIR
 
-from .conftest import SWIPL, Proc, free_port
-from .wire_client import request
+from .conftest import SWIPL, Proc
+from .tour import Tour
 
 pytestmark = pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
 
@@ -61,16 +60,14 @@ main :-
 """
 
 
-class Federation:
+class Federation(Tour):
     """Stop processes r0..r(n-1) on fixed ports, and a console that launches agent ``fx``."""
 
     def __init__(self, tmp_path: Path, procs: list[Proc], delays: list[float]) -> None:
-        self.tmp, self.procs = tmp_path, procs
+        super().__init__(tmp_path, procs, len(delays), TOKEN)
         (tmp_path / "node.pl").write_text(NODE)
         (tmp_path / "console.pl").write_text(CONSOLE)
-        self.log = tmp_path / "rounds.jsonl"
         self.delays = delays
-        self.ports = [free_port() for _ in delays]
         self.nodes: list[Proc] = [self.start(i) for i in range(len(delays))]
 
     def start(self, i: int) -> Proc:
@@ -83,42 +80,8 @@ class Federation:
     def launch(self, rounds: int, rest: float, via: dict[int, int] | None = None) -> None:
         """Start agent ``fx``; ``via`` maps a stop to another port (a proxy) in the plan."""
         ports = [(via or {}).get(i, p) for i, p in enumerate(self.ports)]
-        stops = ",".join(f"stop(localhost,{p},r{i})" for i, p in enumerate(ports))
-        plan = self.tmp / "plan.txt"
-        plan.write_text(f"plan([{stops}], {rounds}, {rest}, {str(self.log)!r}).\n")
-        c = Proc([SWIPL, "-q", "-g", "main", "-t", "halt", str(self.tmp / "console.pl"), str(plan)])
-        self.procs.append(c)
-        c.wait_for("LAUNCHED")
-
-    def events(self, kind: str | None = None) -> list[dict]:
-        if not self.log.exists():
-            return []
-        out = []
-        for line in self.log.read_text().splitlines():
-            if line.strip():
-                e = json.loads(line)
-                if kind is None or e["event"] == kind:
-                    out.append(e)
-        return out
-
-    def has_agent(self, i: int, status: str = "") -> bool:
-        """Node i lists agent fx (with ``status``, e.g. ``running``, if given)."""
-        try:
-            return f"agent(fx,dfrl_tour,mobile,{status}" in request(self.ports[i], "agents", token=str(TOKEN))
-        except (OSError, AssertionError):
-            return False
-
-    def wait(self, cond, timeout: float, what: str) -> None:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if cond():
-                return
-            time.sleep(0.02)
-        raise AssertionError(f"timed out waiting for {what}; log:\n" + "\n".join(
-            json.dumps(e) for e in self.events()))
-
-    def address(self, i: int) -> str:
-        return f"localhost:{self.ports[i]}"
+        self.launch_plan(f"plan([{self.stops_term(ports)}], {rounds}, {rest}, "
+                         f"{str(self.log)!r})")
 
 
 def assert_each_round_once(fed: Federation, rounds: int) -> list[dict]:

@@ -11,7 +11,6 @@ launch has no holder and dies with it.
 """
 from __future__ import annotations
 
-import json
 import signal
 import time
 from collections import Counter
@@ -21,7 +20,8 @@ import pytest
 
 from dfrl.platform_pl import PLATFORM_DIR
 
-from .conftest import SWIPL, Proc, free_port
+from .conftest import SWIPL, Proc
+from .tour import Tour
 from .wire_client import request
 
 pytestmark = pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
@@ -89,7 +89,7 @@ main :-
 """
 
 
-class Stops:
+class Stops(Tour):
     """Stop processes r0..r(n-1) on fixed ports, r_i's table [i, i+1]; a console launches ``fx``.
 
     Parameters
@@ -107,12 +107,11 @@ class Stops:
     def __init__(self, tmp_path: Path, procs: list[Proc], delays: list[float], *,
                  lease_s: float = 1.5, reply_s: float = 8.0, legacy: bool = False,
                  store: bool = False) -> None:
-        self.tmp, self.procs, self.store = tmp_path, procs, store
+        super().__init__(tmp_path, procs, len(delays), TOKEN)
+        self.store = store
         (tmp_path / "node.pl").write_text(NODE)
         (tmp_path / "console.pl").write_text(CONSOLE)
-        self.log = tmp_path / "rounds.jsonl"
         self.delays, self.lease_s, self.reply_s, self.legacy = delays, lease_s, reply_s, legacy
-        self.ports = [free_port() for _ in delays]
         self.nodes: list[Proc] = [self.spawn(i) for i in range(len(delays))]   # in parallel
         for p in self.nodes:
             p.wait_for("LISTENING")
@@ -131,30 +130,8 @@ class Stops:
         return p
 
     def launch(self, rounds: int, rest: float, options: str = "[]") -> None:
-        stops = ",".join(f"stop(localhost,{p},r{i})" for i, p in enumerate(self.ports))
-        plan = self.tmp / "plan.txt"
-        plan.write_text(f"plan([{stops}], {rounds}, {rest}, {str(self.log)!r}, {options}).\n")
-        c = Proc([SWIPL, "-q", "-g", "main", "-t", "halt", str(self.tmp / "console.pl"), str(plan)])
-        self.procs.append(c)
-        c.wait_for("LAUNCHED")
-
-    def events(self, kind: str | None = None) -> list[dict]:
-        if not self.log.exists():
-            return []
-        out = []
-        for line in self.log.read_text().splitlines():
-            if line.strip():
-                e = json.loads(line)
-                if kind is None or e["event"] == kind:
-                    out.append(e)
-        return out
-
-    def has_agent(self, i: int, status: str = "") -> bool:
-        try:
-            return f"agent(fx,dfrl_tour,mobile,{status}" in request(self.ports[i], "agents",
-                                                                     token=str(TOKEN))
-        except (OSError, AssertionError):
-            return False
+        self.launch_plan(f"plan([{self.stops_term()}], {rounds}, {rest}, {str(self.log)!r}, "
+                         f"{options})")
 
     def table(self, i: int) -> list[float]:
         """Robot r_i's table, asked from its process."""
@@ -170,18 +147,6 @@ class Stops:
                     return [float(x) for x in line.split(" ", 2)[2].strip("[]").split(",")]
             time.sleep(0.02)
         raise AssertionError(f"r{i} did not print its table:\n{node.output()}")
-
-    def wait(self, cond, timeout: float, what: str) -> None:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if cond():
-                return
-            time.sleep(0.02)
-        raise AssertionError(f"timed out waiting for {what}; log:\n" + "\n".join(
-            json.dumps(e) for e in self.events()))
-
-    def address(self, i: int) -> str:
-        return f"localhost:{self.ports[i]}"
 
     def kill(self, i: int) -> float:
         """kill -9 stop i; return the time (time.time()) of the kill."""
