@@ -130,7 +130,7 @@ def register_study(subparsers: argparse._SubParsersAction) -> None:
                     "robot learns in the unseen arenas: collisions while learning and the time "
                     "until its greedy score reaches --threshold (censored when never). Paired "
                     "intervals over source seeds (Welch when unpaired), Holm over the claims, "
-                    "verdicts: holds / refuted (effect excluded at 95%%) / not significant at "
+                    "verdicts: holds / refuted (effect excluded at 95%) / not significant at "
                     "n = K (smallest detectable effect D).")
     add_seed_arguments(p, 5)        # the source seeds
     p.add_argument("--target-seeds", type=int, nargs="+", default=[1],
