@@ -31,7 +31,7 @@ from collections.abc import Iterator
 import pytest
 
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
-from ..multihost.netns import REPO_ROOT, Lab, leftover_namespaces, unavailable
+from dfrl.experiments.tools.netns import REPO_ROOT, Lab, leftover_namespaces, unavailable
 
 try:
     import distributed  # noqa: F401
@@ -127,6 +127,14 @@ def rounds_of(out: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(fh))
 
 
+def logs_of(tmp_path: Path) -> str:
+    """The workers' logs and the services' stderr tails (what a failed check shows)."""
+    parts = []
+    for f in sorted(tmp_path.glob("w*/worker.log")) + sorted(tmp_path.glob("w*/dfrl-robot/*/service.*")):
+        parts.append(f"--- {f.relative_to(tmp_path)}\n{f.read_text(errors='replace')[-1500:]}")
+    return "\n".join(parts)
+
+
 def federate(tmp_path: Path, lab: Lab, drv: Path, blocks: dict, cfg: str) -> str:
     """Run the README's driver command on ``cfg`` and check what the section promises: exit
     0, every planned round visiting every robot with identical tables, every robot on a
@@ -156,7 +164,7 @@ def federate(tmp_path: Path, lab: Lab, drv: Path, blocks: dict, cfg: str) -> str
     record = json.loads((out / "cluster.json").read_text(encoding="utf-8"))
     assert record["losses"] == [], record
     assert all(t["ended"] == "released by the driver" and t["exit"] == 0
-               for t in record["tasks"].values()), record
+               for t in record["tasks"].values()), (record["tasks"], logs_of(tmp_path))
     for r in robots:     # files came back over the platform from the workers' folders
         assert (out / f"metrics_{r}.csv").stat().st_size > 0
         assert (out / "tables" / f"{r}.npy").is_file()

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from .netns import REPO_ROOT, Lab, leftover_namespaces, unavailable
+from dfrl.experiments.tools.netns import REPO_ROOT, Lab, leftover_namespaces, unavailable
 
 WHY = unavailable()
 pytestmark = pytest.mark.skipif(WHY is not None, reason=WHY or "")

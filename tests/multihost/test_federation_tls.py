@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from .netns import REPO_ROOT, Lab, leftover_namespaces, unavailable
+from dfrl.experiments.tools.netns import REPO_ROOT, Lab, leftover_namespaces, unavailable
 from .test_federation_hosts import (argv_of, drive_and_check, make_token_file, section_blocks,
                                     wait_line)
 

@@ -14,7 +14,7 @@ import pytest
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
 from dfrl.experiments.tokens import write_secret_file
 
-from .netns import Lab, unavailable
+from dfrl.experiments.tools.netns import Lab, unavailable
 from .test_federation_hosts import README, argv_of, section_blocks, wait_line
 
 WHY = unavailable()

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from .netns import Lab, leftover_namespaces, unavailable
+from dfrl.experiments.tools.netns import Lab, leftover_namespaces, unavailable
 
 WHY = unavailable()
 pytestmark = pytest.mark.skipif(WHY is not None, reason=WHY or "")

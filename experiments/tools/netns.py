@@ -1,4 +1,4 @@
-"""Simulated hosts for tests: Linux network namespaces on a private bridge.
+"""Simulated hosts for tests and benchmarks: Linux network namespaces on a private bridge.
 
 :class:`Lab` creates one namespace holding a bridge and N host namespaces, each joined to the
 bridge by a veth pair and given an address in ``10.200.<lab>.0/24``. Nothing is attached to
