@@ -21,7 +21,14 @@ from dataclasses import dataclass, replace
 from enum import Enum
 
 import numpy as np
-from scipy import stats
+
+
+def _stats():  # noqa: ANN202 - the module scipy.stats
+    """``scipy.stats``, imported when a statistic is first computed: importing it costs about
+    0.4 s, which every ``dfrl`` command would otherwise pay while it builds its parser."""
+    from scipy import stats
+    return stats
+
 
 #: Two-sided level of every interval and verdict.
 LEVEL: float = 0.95
@@ -34,14 +41,14 @@ def t_cdf(t: float, df: float) -> float:
     """P(T <= t) for Student's t with ``df`` > 0 degrees of freedom (not necessarily whole)."""
     if df <= 0:
         raise ValueError(f"degrees of freedom must be > 0, got {df}")
-    return float(stats.t.cdf(t, df))
+    return float(_stats().t.cdf(t, df))
 
 
 def t_quantile(p: float, df: float) -> float:
     """The ``p`` quantile of Student's t with ``df`` degrees of freedom."""
     if not (0.0 < p < 1.0 and df > 0):
         raise ValueError(f"a quantile needs 0 < p < 1 and df > 0, got p = {p}, df = {df}")
-    return float(stats.t.ppf(p, df))
+    return float(_stats().t.ppf(p, df))
 
 
 def t975(df: float) -> float:
@@ -53,7 +60,7 @@ def t975(df: float) -> float:
 
 def normal_quantile(p: float) -> float:
     """The ``p`` quantile of the standard normal distribution."""
-    return float(stats.norm.ppf(p))
+    return float(_stats().norm.ppf(p))
 
 
 # -- means and intervals over seeds ----------------------------------------------------------
@@ -199,7 +206,7 @@ def bootstrap(samples: Sequence[Sequence[float]], statistic: Callable[..., float
     def run(how: str) -> tuple[float, float]:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")         # degenerate data: NaN, handled below
-            res = stats.bootstrap(data, once, n_resamples=resamples, vectorized=False,
+            res = _stats().bootstrap(data, once, n_resamples=resamples, vectorized=False,
                                   paired=False, confidence_level=LEVEL, method=how,
                                   rng=np.random.default_rng(seed))
         return float(res.confidence_interval.low), float(res.confidence_interval.high)
