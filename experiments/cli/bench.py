@@ -9,9 +9,9 @@ import sys
 from dataclasses import asdict
 from pathlib import Path
 
-from dfrl.experiments.cli import bench_hostile
+from dfrl.experiments.cli import bench_faults, bench_hostile
 from dfrl.experiments.tools.bench import bridge, chaos, hostile, migrate, round as round_bench
-from dfrl.experiments.tools.bench import scale, sim
+from dfrl.experiments.tools.bench import faults, scale, sim
 
 
 # -- migrate ---------------------------------------------------------------------------------
@@ -286,6 +286,7 @@ BENCHMARKS = {
     "chaos": (chaos, add_chaos_arguments, cmd_chaos),
     "scale": (scale, add_scale_arguments, cmd_scale),
     "hostile": (hostile, bench_hostile.add_arguments, bench_hostile.cmd),
+    "faults": (faults, bench_faults.add_arguments, bench_faults.cmd),
 }
 
 

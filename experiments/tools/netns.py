@@ -126,6 +126,17 @@ class Lab:
         """Reconnect a host cut off by :meth:`cut`."""
         _ip("link", "set", self.hosts[name].link, "up", ns=self.bridge_ns)
 
+    def kill(self, name: str) -> int:
+        """kill -9 every process in host ``name`` (the host dies; its namespace and link stay,
+        so it can be started again); return how many were killed."""
+        pids = _pids_in(self.hosts[name].namespace)
+        for pid in pids:
+            try:
+                os.kill(pid, 9)
+            except ProcessLookupError:
+                pass
+        return len(pids)
+
     def close(self) -> None:
         """Kill every process started in a host, then delete every namespace."""
         for host in self.hosts.values():

@@ -1,0 +1,223 @@
+"""Faults: a federation of ``dfrl robot`` hosts in network namespaces, one fault at a time.
+
+Each run builds its own :class:`~dfrl.experiments.tools.netns.Lab` (N robot hosts and a
+driver host on a private bridge), starts a short sync experiment across it
+(:mod:`.faults_federation`), does one fault of :mod:`.faults_cases` (kill -9 a robot host
+and restart it, kill it mid-hop, kill the host the agent rests on, cut a link for 30 s or
+90 s, kill the driver then ``dfrl collect``, inject a failing method) and reads what the run
+wrote: ``rounds.csv``, ``summary.md`` and the exit status of the command that gave the
+verdict. Per run it reports the actions and their times, the recovery time (fault -> next
+completed round), the longest gap between two completed rounds, rounds done of planned,
+whether every completed round left identical tables, whether the verdict and exit status
+told the truth, and pass/fail against the case's stated expectation. The lab is closed (every
+process killed, every namespace deleted) after each run, on an exception or Ctrl-C too.
+
+Needs root and ``ip`` (:func:`~dfrl.experiments.tools.netns.unavailable` says why not).
+"""
+from __future__ import annotations
+
+import csv
+import io
+import shutil
+import statistics
+import subprocess
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from dfrl.experiments.tools.bench.faults_cases import CASES, Acted, Case, Expectation
+from dfrl.experiments.tools.bench.faults_federation import FaultBenchError, Federation
+from dfrl.experiments.tools.netns import Lab
+
+VERDICT_LINE = "## Faults: federation "
+
+
+def read_rows(results: Path) -> list[dict[str, str]] | None:
+    """``rounds.csv``'s rows (None when the run wrote none)."""
+    p = results / "rounds.csv"
+    if not p.is_file():
+        return None
+    return list(csv.DictReader(io.StringIO(p.read_text(encoding="utf-8"))))
+
+
+def verdict_of(summary: str) -> str | None:
+    """``complete`` or ``INCOMPLETE`` as summary.md's fault section says (None: no verdict)."""
+    for line in summary.splitlines():
+        if line.startswith(VERDICT_LINE):
+            return line[len(VERDICT_LINE):].strip()
+    return None
+
+
+def measure(rows: list[dict[str, str]], summary: str, exit_status: int, t_fault: float,
+            t0: float, robots: list[str], planned: int, victim: str | None) -> dict[str, Any]:
+    """The figures of one fault run from its rounds.csv rows and summary.md (see module doc).
+
+    ``truth_problems`` lists where the verdict, the exit status or the summary's fault lines
+    disagree with the rounds themselves: the federation was complete only if every planned
+    round completed with every robot visited and no method failed.
+    """
+    done = sorted((r for r in rows if not r["error"]), key=lambda r: float(r["end"]))
+    failed = [r for r in rows if r["error"]]
+    ends = [float(r["end"]) for r in done]
+    after = [e for e in ends if e > t_fault]
+    gaps = [b - a for a, b in zip(ends, ends[1:])]
+    before = [b - a for a, b in zip(ends, ends[1:]) if b <= t_fault]
+    absent: dict[str, list[int]] = {}
+    for r in done:
+        for rid in robots:
+            if rid not in r["visited"].split():
+                absent.setdefault(rid, []).append(int(r["round"]))
+    n_done = len({int(r["round"]) for r in done})
+    rejoined = None
+    if victim is not None:
+        gone = absent.get(victim, [])
+        rejoined = bool(gone) and any(victim in r["visited"].split() and
+                                      int(r["round"]) > max(gone) for r in done)
+    truth_complete = n_done >= planned and not failed and not absent
+    verdict = verdict_of(summary)
+    truth: list[str] = []
+    if verdict is None:
+        truth.append("summary.md gives no verdict" if summary else "no summary.md")
+    elif (verdict == "complete") != truth_complete:
+        truth.append(f"summary says federation {verdict}, but the federation was "
+                     f"{'complete' if truth_complete else 'not complete'}")
+    if (exit_status == 0) != truth_complete:
+        truth.append(f"exit status {exit_status}, but the federation was "
+                     f"{'complete' if truth_complete else 'not complete'}")
+    for rid, missed in absent.items():
+        if f"MISSED rounds: {rid} " not in summary and f"LOST robot {rid}:" not in summary:
+            truth.append(f"summary does not name {rid}, absent from round(s) {missed[:10]}")
+    if failed and "METHOD FAILED" not in summary:
+        truth.append(f"{len(failed)} round(s) whose method failed, not reported")
+    if n_done < planned and not failed and "MISSING rounds" not in summary:
+        truth.append(f"{planned - n_done} planned round(s) not done, not reported")
+    return {
+        "fault_at_s": round(t_fault - t0, 2),
+        "recovery_s": round(after[0] - t_fault, 2) if after else None,
+        "longest_stall_s": round(max(gaps), 2) if gaps else None,
+        "normal_gap_s": round(statistics.median(before), 2) if before else None,
+        "rounds_done": n_done, "rounds_planned": planned, "rounds_failed": len(failed),
+        "tables_identical": bool(done) and all(r["all_equal"] == "true" for r in done),
+        "absent": {rid: len(v) for rid, v in absent.items()},
+        "victim": victim, "rejoined": rejoined,
+        "verdict": verdict, "exit_status": exit_status,
+        "summary_says": [ln.strip() for ln in summary.splitlines()
+                         if ln.startswith(("- MISSED", "- LOST", "- METHOD FAILED",
+                                           "- MISSING"))],
+        "truthful": not truth, "truth_problems": truth,
+    }
+
+
+def judge(m: dict[str, Any], expect: Expectation) -> list[str]:
+    """Where the figures ``m`` of one run miss the case's expectation (empty: it passed)."""
+    problems = []
+    lost = m["rounds_planned"] - m["rounds_done"]
+    if lost > expect.max_rounds_lost:
+        problems.append(f"{lost} planned round(s) not completed (at most "
+                        f"{expect.max_rounds_lost} expected)")
+    if m["recovery_s"] is None:
+        problems.append("no round completed after the fault")
+    elif m["recovery_s"] > expect.recovery_bound_s:
+        problems.append(f"the next round completed {m['recovery_s']} s after the fault "
+                        f"(bound {expect.recovery_bound_s:g} s)")
+    if not m["tables_identical"]:
+        problems.append("a completed round left differing tables")
+    if not m["truthful"]:
+        problems.append("untruthful: " + "; ".join(m["truth_problems"]))
+    victim = m["victim"]
+    if expect.victim_misses and not m["absent"].get(victim):
+        problems.append(f"{victim} missed no round: the fault did not strike")
+    if expect.rejoin and not m["rejoined"]:
+        problems.append(f"{victim} was not visited again after its absence")
+    if expect.method_failed and not m["rounds_failed"]:
+        problems.append("no round's method failed: the injection did not strike")
+    return problems
+
+
+def run_case(case: Case, hosts: int, work: Path) -> dict[str, Any]:
+    """One run of ``case`` on ``hosts`` robot hosts, its files under ``work``; its figures,
+    ``problems`` and ``passed`` (a run the benchmark could not carry out fails with
+    ``error``)."""
+    plan = case.plan(hosts)
+    names = [f"h{i}" for i in range(1, hosts + 1)] + ["driver"]
+    started = time.monotonic()
+    record: dict[str, Any] = {"fault": case.name}
+    with Lab(names) as lab:
+        fed = Federation(lab, work, plan, name=f"faults-{case.name.replace('_', '-')}")
+        try:
+            fed.start_robot_hosts()
+            fed.start_driver()
+            acted: Acted = case.act(fed)
+        except (FaultBenchError, OSError, ValueError, subprocess.TimeoutExpired) as exc:
+            record.update(actions=fed.actions, error=f"{type(exc).__name__}: {exc}",
+                          problems=[f"the benchmark could not carry the run out: {exc}"],
+                          passed=False, wall_s=round(time.monotonic() - started, 1))
+            return record
+    summary_path = acted.results / "summary.md"
+    summary = summary_path.read_text(encoding="utf-8") if summary_path.is_file() else ""
+    rows = read_rows(acted.results)
+    m = measure(rows or [], summary, acted.exit_status, acted.t_fault, fed.t0, fed.robots,
+                plan.rounds, acted.victim)
+    problems = judge(m, case.expect)
+    if rows is None:
+        problems.insert(0, "no rounds.csv was written")
+    record.update(actions=fed.actions, notes=acted.notes, **m, problems=problems,
+                  passed=not problems, wall_s=round(time.monotonic() - started, 1))
+    if not problems:
+        return record
+    record["driver_stderr_tail"] = fed.driver_tail(600)
+    return record
+
+
+def _median(values: list[Any]) -> float | None:
+    xs = [v for v in values if v is not None]
+    return round(statistics.median(xs), 2) if xs else None
+
+
+def summarize(case: Case, runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """The JSON object of one fault: its runs, their medians and the verdict."""
+    return {
+        "fault": case.name, "what": case.what, "expectation": case.expect.text(),
+        "runs": len(runs), "passed_runs": sum(r["passed"] for r in runs),
+        "passed": all(r["passed"] for r in runs),
+        "median": {k: _median([r.get(k) for r in runs])
+                   for k in ("recovery_s", "longest_stall_s", "normal_gap_s", "rounds_done",
+                             "wall_s")},
+        "rounds_planned": runs[0].get("rounds_planned") if runs else None,
+        "tables_identical_runs": sum(bool(r.get("tables_identical")) for r in runs),
+        "truthful_runs": sum(bool(r.get("truthful")) for r in runs),
+        "per_run": runs,
+    }
+
+
+def run(faults: list[str], runs: int = 3, hosts: int = 4, keep: Path | None = None,
+        on_fault: Callable[[dict[str, Any]], None] | None = None,
+        cases: dict[str, Case] | None = None) -> list[dict[str, Any]]:
+    """Run each fault of ``faults`` ``runs`` times on ``hosts`` robot hosts; one summary per
+    fault (see :func:`summarize`), handed to ``on_fault`` as soon as it is done. Files go to
+    ``keep`` (else a temporary folder, removed)."""
+    cases = CASES if cases is None else cases
+    unknown = [f for f in faults if f not in cases]
+    if unknown:
+        raise ValueError(f"unknown fault(s) {', '.join(unknown)}; known: {', '.join(cases)}")
+    if not 2 <= hosts <= 5:
+        raise ValueError(f"--hosts must be 2 to 5 (one arena each), got {hosts}")
+    if runs < 1:
+        raise ValueError(f"--runs must be at least 1, got {runs}")
+    base = keep if keep is not None else Path(tempfile.mkdtemp(prefix="dfrl-faults-"))
+    out = []
+    try:
+        for name in faults:
+            results = [run_case(cases[name], hosts, base / f"{name}-{i}")
+                       for i in range(1, runs + 1)]
+            for i, r in enumerate(results, 1):
+                r["run"] = i
+            out.append(summarize(cases[name], results))
+            if on_fault is not None:
+                on_fault(out[-1])
+    finally:
+        if keep is None:
+            shutil.rmtree(base, ignore_errors=True)
+    return out

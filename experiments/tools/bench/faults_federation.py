@@ -1,0 +1,233 @@
+"""A small federation across simulated hosts, for the fault benchmark (``dfrl bench faults``).
+
+:class:`Federation` starts, inside a :class:`~dfrl.experiments.tools.netns.Lab`, one
+``dfrl robot`` service per robot host (the command of experiments/README.md "Running across
+machines", each in its own folder with the token file) and the driver (``dfrl run CONFIG
+--token-file dfrl.token --out out``) in a namespace of its own. It offers the faults a case
+needs (kill -9 a host, start it again, cut its link) and what a case waits on (the rounds the
+driver has logged, the shares a robot host has written). Every wait is bounded; the lab kills
+every process and removes every namespace when it closes.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from dfrl.experiments.driver.results.agent_log import RoundRecord, read_rounds_log
+from dfrl.experiments.tokens import new_secret, write_secret_file
+from dfrl.experiments.tools.netns import Lab
+
+AGENT = "fed_qlearning"
+ARENAS = ("r1", "r4", "r2", "r3", "r5")
+PORT = 7001
+LISTENING = "dfrl robot listening on"
+
+
+class FaultBenchError(RuntimeError):
+    """The benchmark could not do what a case asked (a host did not start, a wait ran out)."""
+
+
+@dataclass(frozen=True)
+class Plan:
+    """The experiment a fault is tried on: ``hosts`` robot hosts, sync rounds every
+    ``respite`` of ``iterations`` iterations at ``rtf`` x real time."""
+
+    hosts: int = 4
+    iterations: int = 1200
+    respite: int = 100
+    rtf: float = 4.0
+    seed: int = 1
+    timeout_s: float = 240.0
+
+    @property
+    def rounds(self) -> int:
+        return -(-self.iterations // self.respite)
+
+
+def dfrl_argv(*words: str) -> list[str]:
+    """``dfrl WORDS...`` with this interpreter."""
+    return [sys.executable, "-m", "dfrl", *words]
+
+
+def wait_until(cond: Callable[[], object], timeout_s: float, what: str,
+               poll_s: float = 0.05) -> object:
+    """``cond()``'s first true value within ``timeout_s`` seconds, else FaultBenchError."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        got = cond()
+        if got:
+            return got
+        if time.monotonic() >= deadline:
+            raise FaultBenchError(f"timed out after {timeout_s:g} s waiting for {what}")
+        time.sleep(poll_s)
+
+
+class Federation:
+    """Robot hosts ``h1..hN`` (robot ``rI`` on ``hI``) and host ``driver`` in ``lab``; files
+    under ``work``. ``actions`` records what was done and when (seconds since the driver
+    started, ``t0``)."""
+
+    def __init__(self, lab: Lab, work: Path, plan: Plan, name: str) -> None:
+        self.lab, self.work, self.plan, self.name = lab, work, plan, name
+        self.robots = [f"r{i}" for i in range(1, plan.hosts + 1)]
+        self.token = new_secret()
+        self.procs: dict[str, subprocess.Popen] = {}
+        self.driver: subprocess.Popen | None = None
+        self.t0 = time.time()
+        self.actions: list[dict] = []
+        self.out = work / "driver" / "out"
+
+    # -- hosts -----------------------------------------------------------------------------
+    @staticmethod
+    def host_of(robot: str) -> str:
+        return "h" + robot[1:]
+
+    def start_robot_hosts(self, timeout_s: float = 120.0) -> None:
+        """Start every robot host's service (in parallel) and wait until each listens."""
+        offsets = {r: self._start(r) for r in self.robots}
+        for r, offset in offsets.items():
+            self._wait_listening(r, offset, timeout_s)
+
+    def restart(self, robot: str, timeout_s: float = 120.0) -> None:
+        """Start ``robot``'s host service again, the same command in the same folder."""
+        self._wait_listening(robot, self._start(robot), timeout_s)
+        self.mark(f"{self.host_of(robot)} ({robot}) restarted and listening")
+
+    def _start(self, robot: str) -> int:
+        h = self.host_of(robot)
+        cwd = self.work / h
+        if not cwd.exists():
+            cwd.mkdir(parents=True)
+            write_secret_file(cwd / "dfrl.token", [self.token])
+        log = cwd / "robot.log"
+        offset = log.stat().st_size if log.exists() else 0
+        argv = dfrl_argv("robot", "--host", "0.0.0.0", "--port", str(PORT), "--token-file",
+                         "dfrl.token", "--advertise", self.lab[h].address, "--workdir",
+                         "dfrl-robot")
+        with open(log, "ab") as fh:
+            self.procs[robot] = self.lab[h].popen(argv, cwd=cwd, stdin=subprocess.DEVNULL,
+                                                  stdout=fh, stderr=subprocess.STDOUT)
+        return offset
+
+    def _wait_listening(self, robot: str, offset: int, timeout_s: float) -> None:
+        log = self.work / self.host_of(robot) / "robot.log"
+        proc = self.procs[robot]
+
+        def listening() -> bool:
+            if proc.poll() is not None:
+                raise FaultBenchError(f"dfrl robot of {robot} exited {proc.returncode}: "
+                                      f"{log.read_bytes()[offset:][-1500:].decode(errors='replace')}")
+            return LISTENING in log.read_bytes()[offset:].decode(errors="replace")
+
+        wait_until(listening, timeout_s, f"{robot}'s host to listen")
+
+    def kill_host(self, robot: str) -> float:
+        """kill -9 every process of ``robot``'s host; the time of the kill (time.time())."""
+        t = time.time()
+        n = self.lab.kill(self.host_of(robot))
+        self.procs[robot].wait(timeout=10)
+        self.mark(f"kill -9 of the {n} processes of {self.host_of(robot)} ({robot})", t)
+        return t
+
+    def cut(self, robot: str) -> float:
+        t = time.time()
+        self.lab.cut(self.host_of(robot))
+        self.mark(f"link of {self.host_of(robot)} ({robot}) cut", t)
+        return t
+
+    def mend(self, robot: str) -> float:
+        t = time.time()
+        self.lab.mend(self.host_of(robot))
+        self.mark(f"link of {self.host_of(robot)} ({robot}) mended", t)
+        return t
+
+    # -- the driver ------------------------------------------------------------------------
+    def config(self) -> dict:
+        return {"name": self.name, "iterations": self.plan.iterations,
+                "respite": self.plan.respite, "mode": "sync", "rtf": self.plan.rtf,
+                "seed": self.plan.seed, "timeout_s": self.plan.timeout_s,
+                "robots": [{"id": r, "arena": ARENAS[i % len(ARENAS)],
+                            "robot_host": f"{self.lab[self.host_of(r)].address}:{PORT}"}
+                           for i, r in enumerate(self.robots)]}
+
+    def start_driver(self) -> None:
+        drv = self.work / "driver"
+        drv.mkdir(parents=True, exist_ok=True)
+        write_secret_file(drv / "dfrl.token", [self.token])
+        (drv / "faults.json").write_text(json.dumps(self.config(), indent=1), encoding="utf-8")
+        self.t0 = time.time()
+        with open(drv / "driver.out", "wb") as out, open(drv / "driver.err", "wb") as err:
+            self.driver = self.lab["driver"].popen(
+                dfrl_argv("run", "faults.json", "--token-file", "dfrl.token", "--out", "out"),
+                cwd=drv, stdin=subprocess.DEVNULL, stdout=out, stderr=err)
+        self.mark("driver started")
+
+    def kill_driver(self) -> float:
+        """kill -9 every process of the driver's host."""
+        t = time.time()
+        n = self.lab.kill("driver")
+        assert self.driver is not None
+        self.driver.wait(timeout=10)
+        self.mark(f"kill -9 of the {n} processes of the driver's host", t)
+        return t
+
+    def wait_driver(self) -> int:
+        """The driver's exit status (it ends by itself within the config's ``timeout_s``;
+        killed 60 s after that)."""
+        assert self.driver is not None
+        try:
+            rc = self.driver.wait(timeout=self.plan.timeout_s + 60)
+        except subprocess.TimeoutExpired:
+            self.lab.kill("driver")
+            rc = self.driver.wait(timeout=10)
+            self.mark(f"driver did not end within timeout_s + 60 s: killed (exit {rc})")
+        self.mark(f"driver exited {rc}")
+        return rc
+
+    def driver_tail(self, chars: int = 1500) -> str:
+        p = self.work / "driver" / "driver.err"
+        return p.read_text(encoding="utf-8", errors="replace")[-chars:] if p.exists() else ""
+
+    def dfrl_on_driver(self, *words: str, timeout_s: float = 180.0) -> subprocess.CompletedProcess:
+        """``dfrl WORDS...`` run in the driver's host, from its folder (bounded)."""
+        return self.lab["driver"].run(dfrl_argv(*words), cwd=self.work / "driver",
+                                      timeout=timeout_s, capture_output=True, text=True)
+
+    # -- what a case waits on --------------------------------------------------------------
+    def logged_rounds(self) -> list[RoundRecord]:
+        """The rounds the driver has logged so far (its live round log)."""
+        return list(read_rounds_log(self.out / f"rounds_{AGENT}.log", AGENT).rounds)
+
+    def wait_rounds(self, n: int, timeout_s: float = 120.0) -> RoundRecord:
+        """Wait until ``n`` rounds are logged (the driver still running); the last one."""
+        def enough() -> RoundRecord | None:
+            if self.driver is not None and self.driver.poll() is not None:
+                raise FaultBenchError(f"the driver exited {self.driver.returncode} before "
+                                      f"round {n}: {self.driver_tail()}")
+            rs = self.logged_rounds()
+            return rs[-1] if len(rs) >= n else None
+
+        return wait_until(enough, timeout_s, f"round {n} in the driver's log")  # type: ignore[return-value]
+
+    def shares_file(self, robot: str) -> Path | None:
+        """``robot``'s shares file on its host (the experiment's folder there is
+        ``NAME-<time>-<pid>``); None before it exists."""
+        found = sorted((self.work / self.host_of(robot) / "dfrl-robot").glob(
+            f"{self.name}-*/shares_{robot}.csv"))
+        return found[-1] if found else None
+
+    def shares(self, robot: str) -> int:
+        """Tables ``robot``'s host has applied so far (rows of its shares file)."""
+        p = self.shares_file(robot)
+        if p is None or not p.is_file():
+            return 0
+        return max(0, sum(1 for ln in p.read_text(errors="replace").splitlines() if ln) - 1)
+
+    def mark(self, what: str, t: float | None = None) -> None:
+        t = time.time() if t is None else t
+        self.actions.append({"at_s": round(t - self.t0, 2), "what": what})
