@@ -5,10 +5,10 @@
 set -euo pipefail
 . "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
 cd "$DFRL_ROOT"
-# the cluster backend's engine (the optional extra "cluster", which the demo does not need),
-# so that tests/cluster runs
-python -c 'import distributed' 2>/dev/null \
-    || python -m pip install -q -e "$DFRL_ROOT[dev,cluster]"
+# the cluster backend's engine and the TensorBoard writer (the optional extras "cluster" and
+# "tensorboard", which the demo does not need), so that tests/cluster and the --tensorboard test run
+python -c 'import distributed, tensorboardX' 2>/dev/null \
+    || python -m pip install -q -e "$DFRL_ROOT[dev,cluster,tensorboard]"
 # the live view's browser test: Chromium and its driver from Debian's packages (if missing)
 bash scripts/browser-setup.sh >/dev/null \
     || echo "[test] could not install chromium; the browser test will say why it skips" >&2

@@ -15,6 +15,7 @@ from typing import Any
 
 from dfrl.experiments.driver.config import ConfigError, ExperimentConfig, resolve_config
 from dfrl.experiments.cli.cluster import add_cluster_arguments
+from dfrl.experiments.cli.tensorboard_option import add_tensorboard_argument, write_run_tensorboard
 from dfrl.experiments.robot_host.config import Mode
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.tokens import TokenError, pop_env_tokens, read_token_file
@@ -62,6 +63,7 @@ def add_output_arguments(p: argparse.ArgumentParser, name: str) -> None:
     from dfrl.experiments.cli.figures import add_figure_arguments
 
     add_figure_arguments(p)
+    add_tensorboard_argument(p)
 
 
 def add_tls_argument(p: argparse.ArgumentParser) -> None:
@@ -190,6 +192,7 @@ def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
     from dfrl.experiments.cli.figures import redraw_experiment
 
     redraw_experiment(results.output_dir, args, cfg.default_title(), prog)
+    write_run_tensorboard(results, args, prog)
     summary = results.output_dir / "summary.md"
     if show_summary and summary.is_file():
         print(summary.read_text(encoding="utf-8"), file=sys.stderr)

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from dfrl.experiments.cli.figures import add_figure_arguments
+from dfrl.experiments.cli.tensorboard_option import add_tensorboard_argument, write_train_tensorboard
 from dfrl.robots.learners import LEARNERS, EpsilonSchedule, LearnerParams, ScheduleKind
 from dfrl.robots.training import DEMO_ITERATIONS, TrainerConfig
 
@@ -29,6 +30,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--gui", action="store_true",
                    help="watch in a pybullet window (needs a display; not paced to real time)")
     add_figure_arguments(p)
+    add_tensorboard_argument(p)
     p.set_defaults(func=cmd_train)
 
     p = subparsers.add_parser(
@@ -223,6 +225,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         plot_learning_curves({f"{cfg.arena} {cfg.algo}": m}, out / "learning_curves.png",
                              f"{cfg.algo} in {cfg.arena}, seed {cfg.seed}",
                              args.figure_format, args.dpi)
+    if args.tensorboard:
+        write_train_tensorboard(out, m, "dfrl train")
     rate = cfg.iterations / result.wall_time if result.wall_time > 0 else float("nan")
     last = m[-1] if len(m) else None
     print(f"trained {cfg.algo} in {cfg.arena} for {cfg.iterations} iterations in "
