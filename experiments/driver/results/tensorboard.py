@@ -140,7 +140,9 @@ def write_run_scalars(out: str | Path, config: ExperimentConfig,
                       robots: Iterable[str]) -> dict[str, int]:
     """Write the event files of a run's results folder ``out`` from its CSV files (what
     the end of the run wrote: ``metrics.csv``, ``live_evaluations.csv``, ``shares_*.csv``,
-    ``rounds.csv``); return run name -> scalars written.
+    ``rounds.csv``); return run name -> scalars written. ``robots``: the run's robots in
+    order; a robot of ``metrics.csv`` not among them (one that joined while the run went on)
+    comes after them, without ``epsilon`` when ``config`` does not name it.
 
     Raises
     ------
@@ -154,6 +156,8 @@ def write_run_scalars(out: str | Path, config: ExperimentConfig,
     evals = (read_evaluations(out / EVALUATIONS_FILE)
              if (out / EVALUATIONS_FILE).is_file() else [])
     written: dict[str, int] = {}
+    robots = list(robots)
+    robots += [r for r in metrics if r not in robots]     # robots that joined while it ran
     for robot in robots:
         ev = _Events(root / robot)
         try:
