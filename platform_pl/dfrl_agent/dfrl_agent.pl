@@ -30,9 +30,8 @@
               aggregate_tables/3        % +Method, +Tables, -Table
             ]).
 :- use_module('../platform_errors', [message_text/2]).
-:- use_module('../robot_resources',
-              [ get_robot_table/3, get_robot_tables/4, set_robot_table/3,
-                get_robot_params/3, set_robot_params/3 ]).
+:- use_module(dfrl_robot_io, [read_robot/5, write_robot/3]).
+:- use_module(dfrl_tree, [tree_round/5, tree_clone_role/3, tree_clone_run/3]).
 :- autoload(library(error), [must_be/2, domain_error/2]).
 :- autoload(library(lists), [nth0/3, append/3, member/2, memberchk/2]).
 :- autoload(library(apply), [foldl/4]).
@@ -163,7 +162,8 @@ that arrives during a round also ends that round's tour).
 :- dynamic
     pending/3,                  % Node, Agent, Command (queued control)
     dfrl_plan/2, dfrl_method_of/2, dfrl_state/2, dfrl_custody_of/2,
-    dfrl_retry_of/2, dfrl_carries_of/2, dfrl_skip_after_of/2.
+    dfrl_retry_of/2, dfrl_carries_of/2, dfrl_skip_after_of/2,
+    dfrl_itinerary_of/2.
 
 :- initialization(platform_event(dfrl_agent:dfrl_control/4)).
 
@@ -245,12 +245,15 @@ apply_command(_, _, X, X, ignored("not a control command")).
 %   stop is tried again), backoff(S) (default 0.2: the first wait
 %   before a retry, doubled each time) and skip_after(S) (default 4: the
 %   most seconds all tries of one move take before the stop is skipped
-%   for the pass). Start it by moving it to the first
+%   for the pass) and itinerary(I) (`chain`, the default, or tree(K):
+%   each round a tree of clones of fan-out K >= 2, see dfrl_tree.pl).
+%   Start it by moving it to the first
 %   stop, or with the event `launch` on Node (it then goes to the first
 %   stop it can reach).
 %
 %   @error type_error(dfrl_plan, Plan), type_error(stop, Stop)
 %   @error domain_error(non_empty_itinerary, [])
+%   @error domain_error(itinerary, I), domain_error(fanout, K)
 %   @error domain_error(params_method, M) if method M, known on this
 %   node, does not apply to parameter vectors (table_method for tables).
 
@@ -272,6 +275,8 @@ dfrl_create(Node, Name, Plan, Options) :-
     option(skip_after(SkipAfter), Options, 4),
     must_be(number, SkipAfter),
     (   SkipAfter > 0 -> true ; domain_error(positive_seconds, SkipAfter) ),
+    option(itinerary(Kind), Options, chain),
+    check_itinerary_kind(Kind),
     (   Tokens == [] -> TokOpts = [] ; TokOpts = [tokens(Tokens)] ),
     % events([]): no peer may post to the tour handler (control comes
     % through the platform event dfrl_control/4, from authenticated peers)
@@ -284,7 +289,16 @@ dfrl_create(Node, Name, Plan, Options) :-
                                   dfrl_custody_of(Name, custody(1, 0, none)),
                                   dfrl_retry_of(Name, retry(Retries, Backoff)),
                                   dfrl_skip_after_of(Name, SkipAfter),
-                                  dfrl_carries_of(Name, Carried) ]).
+                                  dfrl_carries_of(Name, Carried),
+                                  dfrl_itinerary_of(Name, Kind) ]).
+
+check_itinerary_kind(chain) :- !.
+check_itinerary_kind(tree(K)) :-
+    !,
+    must_be(integer, K),
+    (   K >= 2 -> true ; domain_error(fanout, K) ).
+check_itinerary_kind(Kind) :-
+    domain_error(itinerary, Kind).
 
 check_plan(plan(Itinerary, Rounds, Rest, Log, Timeout)) :-
     !,
@@ -337,7 +351,11 @@ dfrl_tour_main(Agent, Link) :-
 dfrl_tour_event(Agent, _Link, Event) :-
     current_node(Node),
     agent_property(Node, Agent, module(M)),
-    event(Event, Node, M, Agent).
+    (   Event == main,
+        tree_clone_role(M, Agent, Role)
+    ->  tree_clone_run(M, Agent, Role)          % a clone of a tree round
+    ;   event(Event, Node, M, Agent)
+    ).
 
 event(main, Node, M, Agent) :-
     (   custody_take_recovered(Node, Agent)
@@ -407,7 +425,11 @@ step(M, Agent) :-
     carried(M, Agent, Carried),
     nth0(Index, Itinerary, stop(_, _, Robot)),
     robot_options(Agent, S1, Timeout, Options),
-    (   Phase == forward
+    (   Phase == forward,
+        itinerary_kind(M, Agent, tree(K))
+    ->  tree_round(M, Agent, K, S1, S2),
+        end_round(M, Agent, S2.put(itinerary, tree(K)))
+    ;   Phase == forward
     ->  forward(Carried-Method, Robot, Options, S1, S2),
         length(Itinerary, N),
         (   Index =:= N - 1
@@ -427,6 +449,14 @@ robot_options(Agent, S, Timeout, [timeout(Timeout), round(Round), agent(Agent),
     get_dict(round, S, Round),
     current_node(Node),
     lease_custody(Node, Agent, custody(Epoch, _, _)).
+
+%   The agent's itinerary: chain (also for an agent created before trees
+%   existed) or tree(K).
+itinerary_kind(M, Agent, Kind) :-
+    (   catch(M:dfrl_itinerary_of(Agent, K), error(existence_error(_, _), _), fail)
+    ->  Kind = K
+    ;   Kind = chain
+    ).
 
 %   What the agent carries: tables or params (an agent created before
 %   params existed has no dfrl_carries_of/2 fact: tables).
@@ -514,22 +544,6 @@ method_failed(error(Error), S0, S) :-
     print_message(error, format("dfrl: aggregation method: ~w; round aborted, \c
                                  no table is written", [Error])),
     put_dict(_{error:Error, acc:none}, S0, S).
-
-read_robot(params, _, Robot, Options, Params) :-
-    !,
-    get_robot_params(Robot, Params, Options).
-read_robot(tables, Method, Robot, Options, Table) :-
-    (   dfrl_aggregation:method_uses_visits(Method)
-    ->  get_robot_tables(Robot, qtable(S, V), qtable(S, W), Options),
-        Table = qtable_visits(S, V, W)
-    ;   get_robot_table(Robot, Table, Options)
-    ).
-
-write_robot(params(L, V), Robot, Options) :-
-    !,
-    set_robot_params(Robot, params(L, V), Options).
-write_robot(Table, Robot, Options) :-
-    set_robot_table(Robot, Table, Options).
 
 write_back(Robot, Options, S0, S) :-
     get_dict(acc, S0, Table),

@@ -29,7 +29,8 @@ The file is opened, written and closed per line.
 {"event":"round","agent":"fed_q","round":3,"start":1764600000.12,
  "end":1764600000.25,"hops":8,"bytes":4860,"method":"average",
  "visited":["r1","r2","r3"],"skipped":[{"robot":"r4","reason":"..."}],
- "retries":2,"epoch":1}                   (and "error":"..." if the method failed)
+ "retries":2,"epoch":1}                   (and "error":"..." if the method failed;
+                                          "itinerary":"tree","fanout":2 for a tree round)
 {"event":"control","agent":"fed_q","round":4,"command":"method(median)",
  "status":"applied"}                      (or "ignored" with a "reason")
 {"event":"resurrected","agent":"fed_q","round":5,"epoch":2,
@@ -81,9 +82,13 @@ log_round(Log, Agent, Method, Epoch, End, S) :-
               end:End, hops:Hops, bytes:Bytes, method:Method,
               visited:Visited, skipped:Skipped, retries:Retries,
               epoch:Epoch},
+    (   get_dict(itinerary, S, tree(K))
+    ->  Event1 = Event.put(_{itinerary:tree, fanout:K})
+    ;   Event1 = Event
+    ),
     (   get_dict(error, S, Error)
-    ->  log_event(Log, Event.put(error, Error))
-    ;   log_event(Log, Event)
+    ->  log_event(Log, Event1.put(error, Error))
+    ;   log_event(Log, Event1)
     ).
 
 skip_json(skip(Robot, Reason), _{robot:R, reason:Reason}) :-

@@ -1,0 +1,58 @@
+:- module(dfrl_robot_io,
+          [ read_robot/5,               % +Carried, +Method, +Robot, +Options, -Item
+            write_robot/3,              % +Table, +Robot, +Options
+            item_bytes/2                % +Item, -Bytes
+          ]).
+:- use_module('../robot_resources',
+              [ get_robot_table/3, get_robot_tables/4, set_robot_table/3,
+                get_robot_params/3, set_robot_params/3 ]).
+:- autoload(library(lists), [sum_list/2]).
+
+/** <module> Reading and writing a robot for the dFRL agent
+
+What the agent (dfrl_agent.pl) and its clones (dfrl_tree.pl) read from
+the robot of the stop they are at, and write into it: through the
+resource hook of the host process (robot_resources.pl).
+*/
+
+%!  read_robot(+Carried, +Method, +Robot, +Options, -Item) is det.
+%
+%   Item is what Robot gives to the aggregate: params(Layout, Samples,
+%   Values) when Carried is `params`; else qtable_visits(Shape, Values,
+%   Visits) when Method uses visit counts, qtable(Shape, Values) when it
+%   does not. Options are those of the resource hook (timeout, round,
+%   agent, epoch). Raises what the hook raises.
+
+read_robot(params, _, Robot, Options, Params) :-
+    !,
+    get_robot_params(Robot, Params, Options).
+read_robot(tables, Method, Robot, Options, Table) :-
+    (   dfrl_aggregation:method_uses_visits(Method)
+    ->  get_robot_tables(Robot, qtable(S, V), qtable(S, W), Options),
+        Table = qtable_visits(S, V, W)
+    ;   get_robot_table(Robot, Table, Options)
+    ).
+
+%!  write_robot(+Table, +Robot, +Options) is det.
+%
+%   Write the round's aggregate Table (qtable(Shape, Values) or
+%   params(Layout, Values)) into Robot.
+
+write_robot(params(L, V), Robot, Options) :-
+    !,
+    set_robot_params(Robot, params(L, V), Options).
+write_robot(Table, Robot, Options) :-
+    set_robot_table(Robot, Table, Options).
+
+%!  item_bytes(+Item, -Bytes) is det.
+%
+%   Bytes estimates the payload size of Item (a robot's item or a
+%   finished table): 10 per float, as the fast serialisation on the wire.
+
+item_bytes(Item, Bytes) :-
+    (   compound(Item)
+    ->  findall(N, ( arg(_, Item, L), is_list(L), length(L, N) ), Ns),
+        sum_list(Ns, Total),
+        Bytes is 10 * Total
+    ;   Bytes = 0
+    ).

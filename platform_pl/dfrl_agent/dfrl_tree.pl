@@ -1,0 +1,475 @@
+:- module(dfrl_tree,
+          [ tree_round/5,               % +Module, +Agent, +Fanout, +State0, -State
+            tree_clone_role/3,          % +Module, +Agent, -Role
+            tree_clone_run/3,           % +Module, +Agent, +Role
+            tree_children/4,            % +Position, +Fanout, +Size, -Children
+            tree_subtree/4,             % +Position, +Fanout, +Size, -Positions
+            dfrl_tree_msg/3             % +Platform, +Link, +Message (event)
+          ]).
+:- use_module('../tartarus', [current_node/1, node_property/2, purge_agent/1,
+                              platform_event/1, remote_agents/3]).
+:- use_module('../migration', [agent_clone/4]).
+:- use_module('../messages', [agent_post/6]).
+:- use_module(dfrl_lease, [lease_custody/3]).
+:- use_module(dfrl_round_state, [skip_robot/4, add_retries/3]).
+:- use_module(dfrl_robot_io, [read_robot/5, write_robot/3, item_bytes/2]).
+:- use_module(dfrl_aggregation,
+              [ aggregate_fold/5, aggregate_finish/3, aggregate_fits/2,
+                fold_hook/3, method_call/3, item_shape/2 ]).
+:- use_module(dfrl_move, [skip_after/3]).
+:- use_module('../platform_errors', [message_text/2]).
+:- autoload(library(lists), [nth0/3, append/3, member/2, memberchk/2,
+                             numlist/3, subtract/3]).
+:- autoload(library(apply), [foldl/4, maplist/3, include/3]).
+:- autoload(library(debug), [debug/3]).
+
+/** <module> The tree itinerary of the dFRL agent: a round by clones
+
+In a round of an agent whose itinerary is tree(Fanout) (dfrl_agent.pl,
+payload fact dfrl_itinerary_of(Agent, tree(K))) the agent stays at the
+stop where the round starts (the root) and clones itself over a K-ary
+tree of the other stops, the root first and then the rest in itinerary
+order, position P having the children K*P+1 ... K*P+K:
+
+  1. out: each copy clones itself to its children's stops (one after
+     another), then reads its own robot;
+  2. up: each copy collects what its children send up, the items (the
+     robots' tables) of their subtrees and the stops they skipped, and
+     sends all of it, with its own, to its parent;
+  3. the root folds the items with the agent's method in itinerary
+     order, exactly as the chain's forward pass folds them, so a tree
+     round gives bit for bit the table a chain round gives from the same
+     tables, for every method (sums and weights are folded, never
+     averages of partial averages);
+  4. down: the root writes the table into its robot and sends it to its
+     children, each copy writes it into its robot and sends it on;
+  5. each copy reports the stops whose write failed to its parent and
+     purges itself; the root ends the round (dfrl_agent:end_round) and
+     logs it: `visited` are the robots folded, in itinerary order,
+     `hops` the clones made, `bytes` the items and tables sent.
+
+A clone that cannot be made (the stop is down) is tried as a move is
+(dfrl_move.pl: retries with backoff, all within the skip time), then the
+stop is skipped and its children are cloned by the parent instead: only
+the dead stop is missing from the round. A copy waiting for a child (or
+a clone waiting for its parent) asks the child's node every skip time
+whether the child is still there; a child lost with its node has its
+whole subtree skipped, with the reason, and a clone whose parent is lost
+purges itself without writing. So every robot the round visited ends it
+with the same table, and every other one is listed in `skipped`.
+
+Clones carry no custody of their own: the root keeps the agent's lease
+(dfrl_lease.pl) as a chain agent does between moves; a clone lost is a
+subtree skipped for that round, never resurrected.
+
+Copies talk through the platform event dfrl_tree_msg/3 posted to the
+node of the stop the receiver is at: msg(Key, Message), Key a string
+naming the round (agent, epoch, round and a random part), Message one
+of up(P, Items, Skips, Stats), down(P, Table) and done(P, Skips,
+Stats).
+*/
+
+:- dynamic box/3.                       % Node, Key, Message
+
+:- initialization(platform_event(dfrl_tree:dfrl_tree_msg/3)).
+
+%!  dfrl_tree_msg(+Platform, +Link, +Message) is det.
+%
+%   The platform event of the copies of a tree round: keep Message,
+%   msg(Key, Body), on the current node for the copy that waits for it.
+
+dfrl_tree_msg(platform, _Link, msg(Key, Body)) :-
+    string(Key),
+    ground(Body),
+    functor(Body, F, _),
+    memberchk(F, [up, down, done]),
+    !,
+    current_node(Node),
+    assertz(box(Node, Key, Body)).
+dfrl_tree_msg(platform, _Link, Message) :-
+    throw(error(domain_error(dfrl_tree_message, Message), _)).
+
+%!  tree_children(+Position, +Fanout, +Size, -Children) is det.
+%
+%   Children are the positions below Position in a tree of Size
+%   positions with Fanout children each.
+
+tree_children(P, K, N, Cs) :-
+    From is K*P + 1,
+    To is min(K*P + K, N - 1),
+    (   From =< To -> numlist(From, To, Cs) ; Cs = [] ).
+
+%!  tree_subtree(+Position, +Fanout, +Size, -Positions) is det.
+%
+%   Positions are Position and all positions below it.
+
+tree_subtree(P, K, N, [P|Below]) :-
+    tree_children(P, K, N, Cs),
+    foldl([C, B0, B]>>( tree_subtree(C, K, N, Sub), append(B0, Sub, B) ), Cs, [], Below).
+
+		 /*******************************
+		 *             ROOT		*
+		 *******************************/
+
+%!  tree_round(+Module, +Agent, +Fanout, +State0, -State) is det.
+%
+%   Run one round of Agent (its module Module) as the root of a tree of
+%   fan-out Fanout, from the round state State0 (at its origin, the
+%   round started); State is the state at its end.
+
+tree_round(_, _, _, S0, S) :-
+    get_dict(error, S0, _),             % the method does not apply: no reads
+    !,
+    S = S0.
+tree_round(M, Agent, K, S0, S) :-
+    current_node(Node),
+    M:dfrl_plan(Agent, plan(Itinerary, _, _, _, Timeout)),
+    M:dfrl_method_of(Agent, Method),
+    carried(M, Agent, Carried),
+    get_dict(origin, S0, Origin),
+    get_dict(round, S0, Round),
+    get_dict(skipped, S0, Skipped),
+    findall(I-Stop,
+            ( nth0(I, Itinerary, Stop), I =\= Origin,
+              Stop = stop(_, _, R), \+ memberchk(skip(R, _), Skipped) ),
+            Rest),
+    nth0(Origin, Itinerary, Root),
+    Order = [Origin-Root|Rest],
+    lease_custody(Node, Agent, custody(Epoch, _, _)),
+    skip_after(M, Agent, SkipAfter),
+    retry_of(M, Agent, Retry),
+    atom_string(Agent, Name),
+    random_between(0, 0xffffffff, Nonce),
+    format(string(Key), "~w/~w/~w/~16r", [Agent, Epoch, Round, Nonce]),
+    Ctx = ctx(Key, Order, K, info(Name, Epoch, Round, Method, Carried, Timeout,
+                                  SkipAfter, Retry)),
+    call_cleanup(root_round(M, Agent, Ctx, S0, S),
+                 retractall(box(Node, Key, _))).
+
+root_round(M, Agent, Ctx, S0, S) :-
+    out_pass(M, Agent, Ctx, 0, out(Items, Skips1, Stats1, Kids)),
+    Ctx = ctx(_, _, _, info(_, _, _, Method, _, _, _, _)),
+    msort(Items, Sorted),
+    foldl(note_skip, Skips1, S0, S1),
+    fold_items(Sorted, Method, S1, S2),
+    get_dict(acc, S2, Acc),
+    (   get_dict(error, S2, _)
+    ->  Final = none, S3 = S2
+    ;   method_call(aggregate_finish(Method, Acc, Final0), aggregate_final(Method), Result),
+        (   Result == ok
+        ->  Final = Final0, S3 = S2
+        ;   method_failed(Result, S2, S3), Final = none
+        )
+    ),
+    down_pass(Ctx, 0, Final, Kids, Skips2, Stats2),
+    foldl(note_skip, Skips2, S3, S4),
+    add_stats(Stats1, Stats2, stats(Hops, Bytes, Retries)),
+    get_dict(hops, S4, H0), get_dict(bytes, S4, B0),
+    H is H0 + Hops, B is B0 + Bytes,
+    add_retries(Retries, S4, S5),
+    put_dict(_{acc:Final, hops:H, bytes:B}, S5, S).
+
+note_skip(skip(Robot, Text), S0, S) :-
+    skip_robot(Robot, reason(Text), S0, S).
+
+%   Fold the items (I-Robot-Item, in itinerary order) as the chain's
+%   forward pass does: an item that does not fit is skipped, a method
+%   that fails aborts the round.
+fold_items([], _, S, S).
+fold_items([_-Robot-Item|Items], Method, S0, S) :-
+    (   get_dict(error, S0, _)
+    ->  S = S0
+    ;   get_dict(acc, S0, Acc0),
+        catch(( item_shape(Item, Shape), aggregate_fits(Acc0, Shape) ), E, true),
+        (   nonvar(E)
+        ->  print_message(warning, E),
+            skip_robot(Robot, E, S0, S1)
+        ;   fold_hook(Acc0, Method, Hook),
+            method_call(aggregate_fold(Method, Acc0, Shape, Item, Acc1), Hook, Result),
+            (   Result == ok
+            ->  get_dict(visited, S0, V0),
+                append(V0, [Robot], V),
+                put_dict(_{acc:Acc1, visited:V}, S0, S1)
+            ;   method_failed(Result, S0, S1)
+            )
+        ),
+        fold_items(Items, Method, S1, S)
+    ).
+
+method_failed(error(Error), S0, S) :-
+    print_message(error, format("dfrl: aggregation method: ~w; round aborted, \c
+                                 no table is written", [Error])),
+    put_dict(_{error:Error, acc:none}, S0, S).
+
+		 /*******************************
+		 *            CLONES		*
+		 *******************************/
+
+%!  tree_clone_role(+Module, +Agent, -Role) is semidet.
+%
+%   Agent (module Module) is a clone of a tree round with Role: take its
+%   role fact (so that its own clones do not inherit it).
+
+tree_clone_role(M, Agent, Role) :-
+    catch(M:dfrl_tree_role(Agent, Role), _, fail),
+    retractall(M:dfrl_tree_role(Agent, _)).
+
+%!  tree_clone_run(+Module, +Agent, +Role) is det.
+%
+%   Run the clone Agent's part of the round, Role role(Ctx, Position,
+%   Parent, ParentName), and purge it.
+
+tree_clone_run(M, Agent, role(Ctx, P, Parent, ParentName)) :-
+    Ctx = ctx(Key, _, _, info(_, _, _, _, _, _, SkipAfter, _)),
+    current_node(Node),
+    call_cleanup(clone_part(M, Agent, Ctx, P, Parent, ParentName, SkipAfter, Node),
+                 ( retractall(box(Node, Key, _)),
+                   catch(purge_agent(Agent), _, true) )).
+
+clone_part(M, Agent, Ctx, P, Parent, ParentName, SkipAfter, Node) :-
+    Ctx = ctx(Key, _, _, _),
+    out_pass(M, Agent, Ctx, P, out(Items, Skips, Stats0, Kids)),
+    foldl([_-_-Item, B0, B]>>( item_bytes(Item, IB), B is B0 + IB ), Items, 0, Bytes),
+    add_stats(Stats0, stats(0, Bytes, 0), Stats),
+    (   post(Parent, Key, up(P, Items, Skips, Stats), SkipAfter)
+    ->  (   await(Node, Ctx, down, [kid(P, Parent, ParentName)], [Msg], _)
+        ->  Msg = down(P, Final),
+            down_pass(Ctx, P, Final, Kids, Skips1, Stats1),
+            ignore(post(Parent, Key, done(P, Skips1, Stats1), SkipAfter))
+        ;   print_message(warning, format("dfrl: tree clone ~w: its parent at ~w \c
+                                           was lost; nothing written", [Agent, Parent]))
+        )
+    ;   print_message(warning, format("dfrl: tree clone ~w cannot reach its parent \c
+                                       at ~w; nothing written", [Agent, Parent]))
+    ).
+
+		 /*******************************
+		 *        OUT, UP AND DOWN	*
+		 *******************************/
+
+%   out(Items, Skips, Stats, Kids): the items of P's subtree
+%   (I-Robot-Item), the stops skipped in it, what it cost and P's
+%   children that took part (kid(Position, Address, Name)).
+out_pass(M, Self, Ctx, P, out(Items, Skips, Stats, Kids)) :-
+    Ctx = ctx(_, Order, K, Info),
+    Info = info(Root, Epoch, Round, Method, Carried, Timeout, _, _),
+    length(Order, N),
+    tree_children(P, K, N, Cs),
+    spawn(Cs, M, Self, Ctx, P, [], Kids0, [], Skips0, stats(0, 0, 0), Stats0),
+    nth0(P, Order, I-stop(_, _, Robot)),
+    atom_string(RootName, Root),
+    Options = [timeout(Timeout), round(Round), agent(RootName), epoch(Epoch)],
+    (   catch(read_robot(Carried, Method, Robot, Options, Item), E, true)
+    ->  (   var(E)
+        ->  Own = [I-Robot-Item], OwnSkips = []
+        ;   print_message(warning, E),
+            message_text(E, Text), Own = [], OwnSkips = [skip(Robot, Text)]
+        )
+    ;   Own = [], OwnSkips = [skip(Robot, "the robot could not be read")]
+    ),
+    current_node(Node),
+    debug(dfrl(tree), '~w at ~w: read ~w, waits for ~p', [Self, P, Robot, Kids0]),
+    await(Node, Ctx, up, Kids0, Msgs, Lost),
+    debug(dfrl(tree), '~w at ~w: up ~p, lost ~p', [Self, P, Msgs, Lost]),
+    subtract(Kids0, Lost, Kids),
+    lost_skips(Lost, Ctx, "lost before it sent its subtree up", LostSkips),
+    foldl(take_up, Msgs, Own-Stats0, Items-Stats),
+    maplist([up(_, _, S, _), S]>>true, Msgs, SkipLists),
+    append([Skips0, OwnSkips, LostSkips|SkipLists], Skips).
+
+take_up(up(_, Items, _, St), Items0-St0, Items1-St1) :-
+    append(Items0, Items, Items1),
+    add_stats(St0, St, St1).
+
+%   Clone to each child in turn; a child that cannot be cloned is
+%   skipped and its children cloned instead.
+spawn([], _, _, _, _, Kids, Kids, Skips, Skips, St, St).
+spawn([C|Cs], M, Self, Ctx, P, Kids0, Kids, Skips0, Skips, St0, St) :-
+    Ctx = ctx(_, Order, K, info(_, _, _, _, _, _, SkipAfter, retry(Tries, Backoff))),
+    nth0(C, Order, _-stop(H, Port, Robot)),
+    nth0(P, Order, _-stop(PH, PP, _)),
+    atom_string(Self, SelfName),
+    Role = role(Ctx, C, PH:PP, SelfName),
+    get_time(T0),
+    Deadline is T0 + SkipAfter,
+    attempt_clone(M, Self, Role, H:Port, Tries, Backoff, Deadline, 0, Result),
+    (   Result = cloned(Clone, R)
+    ->  add_stats(St0, stats(1, 0, R), St1),
+        append(Kids0, [kid(C, H:Port, Clone)], Kids1),
+        Skips1 = Skips0,
+        Cs1 = Cs
+    ;   Result = failed(E, R),
+        get_time(T1),
+        Waited is T1 - T0,
+        message_text(E, Text0),
+        format(string(Text), "~w (clone skipped after ~2f s; skip_after ~w s)",
+               [Text0, Waited, SkipAfter]),
+        print_message(warning, format("dfrl: skipping stop ~w:~w: ~w", [H, Port, Text])),
+        add_stats(St0, stats(0, 0, R), St1),
+        Kids1 = Kids0,
+        append(Skips0, [skip(Robot, Text)], Skips1),
+        length(Order, N),
+        tree_children(C, K, N, Grand),
+        append(Cs, Grand, Cs1)
+    ),
+    spawn(Cs1, M, Self, Ctx, P, Kids1, Kids, Skips1, Skips, St1, St).
+
+attempt_clone(M, Self, Role, Address, Tries, Backoff, Deadline, R, Result) :-
+    get_time(Now),
+    Left is max(0.1, Deadline - Now),
+    Options = [connect_timeout(Left), reply_timeout(Left)],
+    setup_call_cleanup(assertz(M:dfrl_tree_role(Self, Role)),
+                       catch(agent_clone(Self, Address, Clone, Options), E, true),
+                       retractall(M:dfrl_tree_role(Self, _))),
+    (   var(E)
+    ->  Result = cloned(Clone, R)
+    ;   R < Tries,
+        \+ E = error(permission_error(_, _, _), _),
+        Wait is Backoff * 2**R,
+        get_time(Now1),
+        Now1 + Wait < Deadline
+    ->  sleep(Wait),
+        R1 is R + 1,
+        attempt_clone(M, Self, Role, Address, Tries, Backoff, Deadline, R1, Result)
+    ;   Result = failed(E, R)
+    ).
+
+%   Write the round's table into the robot of this stop (none: the round
+%   was aborted, nothing is written).
+write_own(_, _, none, []) :- !.
+write_own(ctx(_, _, _, Info), Robot, Final, Skips) :-
+    Info = info(Root, Epoch, Round, _, _, Timeout, _, _),
+    atom_string(RootName, Root),
+    catch(write_robot(Final, Robot, [timeout(Timeout), round(Round),
+                                     agent(RootName), epoch(Epoch)]), E, true),
+    (   var(E)
+    ->  Skips = []
+    ;   print_message(warning, E),
+        message_text(E, Text),
+        Skips = [skip(Robot, Text)]
+    ).
+
+%   Send the table down to the kids, write it into this stop's robot,
+%   collect what the kids report back.
+down_pass(Ctx, P, Final, Kids, Skips, Stats) :-
+    Ctx = ctx(Key, Order, _, info(_, _, _, _, _, _, SkipAfter, _)),
+    item_bytes(Final, FB),
+    foldl(send_down(Key, Final, SkipAfter), Kids, []-0, Failed-Sent),
+    nth0(P, Order, _-stop(_, _, Robot)),
+    write_own(Ctx, Robot, Final, OwnSkips),
+    subtract(Kids, Failed, Reached),
+    current_node(Node),
+    await(Node, Ctx, done, Reached, Msgs, Lost),
+    append(Failed, Lost, Gone),
+    lost_skips(Gone, Ctx, "lost before it reported its writes", LostSkips),
+    foldl([done(_, S, St), S0-T0, S1-T1]>>( append(S0, S, S1), add_stats(T0, St, T1) ),
+          Msgs, []-stats(0, 0, 0), DoneSkips-Stats0),
+    Bytes is FB * Sent,
+    add_stats(Stats0, stats(0, Bytes, 0), Stats),
+    append([OwnSkips, LostSkips, DoneSkips], Skips).
+
+send_down(Key, Final, SkipAfter, Kid, F0-N0, F-N) :-
+    Kid = kid(C, Address, _),
+    (   post(Address, Key, down(C, Final), SkipAfter)
+    ->  F = F0, N is N0 + 1
+    ;   F = [Kid|F0], N = N0
+    ).
+
+lost_skips(Lost, ctx(_, Order, K, _), Why, Skips) :-
+    length(Order, N),
+    findall(skip(Robot, Text),
+            ( member(kid(C, Address, _), Lost),
+              tree_subtree(C, K, N, Sub),
+              member(Q, Sub),
+              nth0(Q, Order, _-stop(_, _, Robot)),
+              format(string(Text), "tree clone at ~w ~w", [Address, Why]) ),
+            Skips).
+
+		 /*******************************
+		 *           MESSAGES		*
+		 *******************************/
+
+post(Address, Key, Body, SkipAfter) :-
+    debug(dfrl(tree), 'post to ~w: ~p', [Address, Body]),
+    current_node(Node),
+    node_property(Node, link(Link)),
+    T is max(0.5, SkipAfter),
+    catch(agent_post(Address, platform, dfrl_tree_msg, Link, [msg(Key, Body)],
+                     [connect_timeout(T), reply_timeout(T)]),
+          E,
+          ( print_message(warning, E), fail )).
+
+
+%   await(+Node, +Ctx, +Kind, +Peers, -Msgs, -Lost): wait for a message
+%   Kind about each peer (kid(Position, Address, Name): a message's
+%   first argument is the position), asking the peer's node every skip
+%   time whether the peer is still there; Lost are the peers that are
+%   not. (A clone waits for its parent as kid(Own, ParentAddress, Name):
+%   the parent's message down names the clone's position.)
+await(Node, Ctx, Kind, Peers, Msgs, Lost) :-
+    Ctx = ctx(_, _, _, info(_, _, _, _, _, Timeout, SkipAfter, _)),
+    get_time(T0),
+    Limit is T0 + Timeout + SkipAfter,
+    await_loop(Node, Ctx, Kind, Peers, Limit, [], Msgs, [], Lost).
+
+await_loop(_, _, _, [], _, Msgs, Msgs, Lost, Lost) :- !.
+await_loop(Node, Ctx, Kind, Peers, Limit, Msgs0, Msgs, Lost0, Lost) :-
+    Ctx = ctx(Key, _, _, info(_, _, _, _, _, _, SkipAfter, _)),
+    get_time(Now),
+    Deadline is min(Limit, Now + SkipAfter),
+    (   poll_msg(Node, Key, Kind, Peers, Deadline, Msg)
+    ->  arg(1, Msg, C),
+        include([kid(X, _, _)]>>(X \== C), Peers, Peers1),
+        await_loop(Node, Ctx, Kind, Peers1, Limit, [Msg|Msgs0], Msgs, Lost0, Lost)
+    ;   get_time(Now1),
+        Now1 >= Limit
+    ->  append(Lost0, Peers, Lost), Msgs = Msgs0
+    ;   include(gone(SkipAfter), Peers, Gone),
+        subtract(Peers, Gone, Peers1),
+        append(Lost0, Gone, Lost1),
+        await_loop(Node, Ctx, Kind, Peers1, Limit, Msgs0, Msgs, Lost1, Lost)
+    ).
+
+%   The message, as soon as it is there (looked for every 5 ms), or
+%   failure at Deadline.
+poll_msg(Node, Key, Kind, Peers, Deadline, Msg) :-
+    (   take_msg(Node, Key, Kind, Peers, Msg)
+    ->  true
+    ;   get_time(Now),
+        Now < Deadline
+    ->  sleep(0.005),
+        poll_msg(Node, Key, Kind, Peers, Deadline, Msg)
+    ).
+
+take_msg(Node, Key, Kind, Peers, Msg) :-
+    box(Node, Key, Msg),
+    functor(Msg, Kind, _),
+    arg(1, Msg, C),
+    memberchk(kid(C, _, _), Peers),
+    retract(box(Node, Key, Msg)),
+    !.
+
+%   The peer's node does not answer within the skip time, or no longer
+%   holds the peer.
+gone(SkipAfter, kid(_, Address, Name)) :-
+    T is max(0.5, SkipAfter),
+    atom_string(Agent, Name),
+    (   catch(remote_agents(Address, Agents, [connect_timeout(T), reply_timeout(T)]),
+              _, fail)
+    ->  \+ memberchk(agent(Agent, _, _, _), Agents)
+    ;   true
+    ).
+
+		 /*******************************
+		 *            HELPERS		*
+		 *******************************/
+
+add_stats(stats(H0, B0, R0), stats(H1, B1, R1), stats(H, B, R)) :-
+    H is H0 + H1, B is B0 + B1, R is R0 + R1.
+
+carried(M, Agent, Carried) :-
+    (   catch(M:dfrl_carries_of(Agent, C), _, fail) -> Carried = C ; Carried = tables ).
+
+retry_of(M, Agent, retry(R, B)) :-
+    (   catch(M:dfrl_retry_of(Agent, retry(R, B)), _, fail) -> true ; R = 2, B = 0.2 ).
+

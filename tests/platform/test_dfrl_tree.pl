@@ -1,0 +1,179 @@
+/*  plunit tests of the dFRL agent's tree itinerary (dfrl_tree.pl) on
+    in-process nodes, robots with in-memory tables (memory_robots.pl). Each
+    tree round is checked against what a chain round gives from the same
+    tables (aggregate_tables/3 folds them in itinerary order, as the chain's
+    forward pass does), bit for bit.
+*/
+:- use_module('../../platform_pl/tartarus').
+:- use_module('../../platform_pl/dfrl_agent/dfrl_agent').
+:- use_module('../../platform_pl/dfrl_agent/dfrl_tree',
+              [tree_children/4, tree_subtree/4]).
+:- use_module(memory_robots).
+:- use_module('../../platform_pl/node', [local_node/1]).
+:- use_module(library(plunit)).
+:- use_module(library(http/json)).
+
+:- dynamic quiet/0.
+:- multifile user:message_hook/3.
+:- dynamic user:message_hook/3.
+:- asserta((user:message_hook(_, warning, _) :- quiet)).
+:- asserta((user:message_hook(_, error, _) :- quiet)).
+
+% a method whose result depends on the order of the tables: the first one
+:- multifile dfrl_aggregation:aggregate_init/3, dfrl_aggregation:aggregate_step/4,
+             dfrl_aggregation:aggregate_final/3.
+dfrl_aggregation:aggregate_init(first_table, qtable(_, V), V).
+dfrl_aggregation:aggregate_step(first_table, A, _, A).
+dfrl_aggregation:aggregate_final(first_table, A, A).
+
+wait_for(G) :- wait_for(G, 500).
+wait_for(G, N) :- ( call(G) -> true ; N > 0 -> sleep(0.02), N1 is N-1, wait_for(G, N1) ; fail ).
+
+log_events(File, Events) :-
+    (   exists_file(File)
+    ->  read_file_to_string(File, Text, []),
+        split_string(Text, "\n", "", Lines0),
+        exclude(==(""), Lines0, Lines),
+        maplist([L, D]>>( open_string(L, In),
+                          json_read_dict(In, D, [value_string_as(atom)]) ),
+                Lines, Events)
+    ;   Events = []
+    ).
+
+events(File, Type, Events) :-
+    log_events(File, All),
+    include([D]>>get_dict(event, D, Type), All, Events).
+
+finished(File) :- events(File, finished, [_]).
+
+nodes(N, Nodes) :-
+    length(Nodes, N),
+    maplist([X]>>node_start(localhost:0, X, [token(7), default(false)]), Nodes).
+
+stop_of(Node, R, stop(localhost, P, R)) :- node_property(Node, address(_:P)).
+
+launch(Console, Name, Stops, Method, Rounds, Log, Kind) :-
+    dfrl_create(Console, Name, plan(Stops, Rounds, 0.0, Log, 30),
+                [method(Method), tokens([7]), itinerary(Kind), skip_after(1)]),
+    Stops = [stop(H, P, _)|_],
+    with_node(Console, move_agent(Name, (H, P))).
+
+tmp_log(Log) :-
+    tmp_file(rounds, F),
+    atom_concat(F, '.jsonl', Log).
+
+cleanup_all(Log) :-
+    memory_robots_stop,
+    forall(local_node(N), catch(node_stop(N), _, true)),
+    ( exists_file(Log) -> delete_file(Log) ; true ).
+
+%   Seven robots with different tables (2 actions, 2 states).
+robots(7, Robots) :-
+    findall(R-[A,B,C,D],
+            ( between(1, 7, I), format(atom(R), 'r~w', [I]),
+              A is I * 0.1, B is 1.0 / I, C is I * I * 0.37, D is -0.3 * I ),
+            Robots).
+
+chain_result(Method, Robots, Values) :-
+    maplist([_-V, qtable([2,2], V)]>>true, Robots, Tables),
+    aggregate_tables(Method, Tables, qtable(_, Values)).
+
+:- begin_tests(dfrl_tree).
+
+test(tree_shape) :-
+    tree_children(0, 2, 7, [1,2]),
+    tree_children(2, 2, 7, [5,6]),
+    tree_children(3, 2, 7, []),
+    tree_children(1, 3, 7, [4,5,6]),
+    tree_subtree(1, 2, 7, [1,3,4]),
+    tree_subtree(0, 3, 7, S), msort(S, [0,1,2,3,4,5,6]).
+
+test(average_equals_the_chain_bit_for_bit, [cleanup(cleanup_all(Log))]) :-
+    tmp_log(Log),
+    robots(7, Robots),
+    memory_robots_start(Robots),
+    nodes(8, [C|Ns]),
+    pairs_keys(Robots, Ids),
+    maplist(stop_of, Ns, Ids, Stops),
+    launch(C, ft, Stops, average, 2, Log, tree(2)),
+    assertion(wait_for(finished(Log))),
+    chain_result(average, Robots, Expected1),
+    % round 2 averages seven copies of it (not exactly it again, in floats)
+    maplist([R-_, R-Expected1]>>true, Robots, Robots2),
+    chain_result(average, Robots2, Expected),
+    % the control: the mean of the subtrees' means (r1; r2 r4 r5; r3 r6 r7) is another table
+    Robots = [Q1-_, Q2-_, Q3-_, Q4-_, Q5-_, Q6-_, Q7-_],
+    maplist([Ids0, M]>>( include([R-_]>>memberchk(R, Ids0), Robots, Sub),
+                         chain_result(average, Sub, V), M = x-V ),
+            [[Q1], [Q2,Q4,Q5], [Q3,Q6,Q7]], Means),
+    chain_result(average, Means, OfMeans),
+    assertion(OfMeans \== Expected1),
+    forall(member(R, Ids), assertion(memory_robot_table(R, Expected))),
+    forall(member(R, Ids), assertion(memory_robot_sets(R, 2))),
+    events(Log, round, [R1, R2]),
+    assertion(R1.visited == Ids), assertion(R2.visited == Ids),
+    assertion(R1.skipped == []),
+    assertion(R1.itinerary == tree), assertion(R1.fanout == 2),
+    assertion(R1.hops =:= 6),               % one clone per stop but the root
+    assertion(R1.bytes > 0).
+
+test(order_kept_with_fanout_three, [cleanup(cleanup_all(Log))]) :-
+    tmp_log(Log),
+    robots(7, Robots),
+    memory_robots_start(Robots),
+    nodes(8, [C|Ns]),
+    pairs_keys(Robots, Ids),
+    maplist(stop_of, Ns, Ids, Stops),
+    launch(C, fo, Stops, first_table, 1, Log, tree(3)),
+    assertion(wait_for(finished(Log))),
+    Robots = [_-First|_],
+    forall(member(R, Ids), assertion(memory_robot_table(R, First))),
+    events(Log, round, [R1]),
+    assertion(R1.visited == Ids).
+
+test(max_over_a_tree, [cleanup(cleanup_all(Log))]) :-
+    tmp_log(Log),
+    robots(7, Robots0),
+    Robots0 = [_|Robots],                   % six robots: an incomplete last level
+    memory_robots_start(Robots),
+    nodes(7, [C|Ns]),
+    pairs_keys(Robots, Ids),
+    maplist(stop_of, Ns, Ids, Stops),
+    launch(C, fx, Stops, max, 1, Log, tree(2)),
+    assertion(wait_for(finished(Log))),
+    chain_result(max, Robots, Expected),
+    forall(member(R, Ids), assertion(memory_robot_table(R, Expected))).
+
+test(dead_stop_skipped_its_children_kept, [setup(assertz(user:quiet)),
+                                           cleanup((retractall(user:quiet),
+                                                    cleanup_all(Log)))]) :-
+    tmp_log(Log),
+    robots(7, Robots),
+    memory_robots_start(Robots),
+    nodes(8, [C|Ns]),
+    pairs_keys(Robots, Ids),
+    maplist(stop_of, Ns, Ids, Stops),
+    nth0(1, Ns, Dead),                      % r2: position 1, the parent of r4 and r5
+    node_stop(Dead),
+    launch(C, fd, Stops, average, 1, Log, tree(2)),
+    assertion(wait_for(finished(Log))),
+    events(Log, round, [R1]),
+    subtract(Ids, [r2], Alive),
+    assertion(R1.visited == Alive),
+    assertion(R1.skipped = [_{robot:r2, reason:_}]),
+    R1.skipped = [Skip],
+    assertion(sub_atom(Skip.reason, _, _, _, 'clone skipped after')),
+    subtract(Robots, [r2-_], AliveRobots),
+    chain_result(average, AliveRobots, Expected),
+    forall(member(R, Alive), assertion(memory_robot_table(R, Expected))),
+    assertion(memory_robot_sets(r2, 0)).
+
+test(bad_itinerary_refused, [cleanup(cleanup_all('/nonexistent.jsonl'))]) :-
+    nodes(1, [C]),
+    Plan = plan([stop(localhost, 1, r1)], 1, 0.0, 'x.jsonl', 30),
+    catch(dfrl_create(C, b1, Plan, [itinerary(tree(1))]), E1, true),
+    assertion(E1 = error(domain_error(fanout, 1), _)),
+    catch(dfrl_create(C, b2, Plan, [itinerary(ring)]), E2, true),
+    assertion(E2 = error(domain_error(itinerary, ring), _)).
+
+:- end_tests(dfrl_tree).
