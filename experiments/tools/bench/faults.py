@@ -70,6 +70,7 @@ def measure(rows: list[dict[str, str]], summary: str, exit_status: int, t_fault:
             if rid not in r["visited"].split():
                 absent.setdefault(rid, []).append(int(r["round"]))
     n_done = len({int(r["round"]) for r in done})
+    differing, unverified = _digest_checks(done, robots)
     rejoined = None
     if victim is not None:
         gone = absent.get(victim, [])
@@ -94,12 +95,14 @@ def measure(rows: list[dict[str, str]], summary: str, exit_status: int, t_fault:
     if n_done < planned and not failed and "MISSING rounds" not in summary:
         truth.append(f"{planned - n_done} planned round(s) not done, not reported")
     return {
-        "fault_at_s": round(t_fault - t0, 2),
+        "fault_at_s": round(t_fault - t0, 2), "fault_time": round(t_fault, 3),
         "recovery_s": round(after[0] - t_fault, 2) if after else None,
         "longest_stall_s": round(max(gaps), 2) if gaps else None,
         "normal_gap_s": round(statistics.median(before), 2) if before else None,
         "rounds_done": n_done, "rounds_planned": planned, "rounds_failed": len(failed),
-        "tables_identical": bool(done) and all(r["all_equal"] == "true" for r in done),
+        "tables_identical": bool(done) and not differing,
+        "rounds_unverified": unverified,
+        "driver_all_equal_rounds": sum(r["all_equal"] == "true" for r in done),
         "absent": {rid: len(v) for rid, v in absent.items()},
         "victim": victim, "rejoined": rejoined,
         "verdict": verdict, "exit_status": exit_status,
@@ -108,6 +111,19 @@ def measure(rows: list[dict[str, str]], summary: str, exit_status: int, t_fault:
                                            "- MISSING"))],
         "truthful": not truth, "truth_problems": truth,
     }
+
+
+def _digest_checks(done: list[dict[str, str]], robots: list[str]) -> tuple[int, int]:
+    """Completed rounds after which two visited robots held different tables, and rounds in
+    which some visited robot's table is not on record (``missing``: its shares file never
+    came back, e.g. from a host that died), so that equality cannot be checked there."""
+    differing = unverified = 0
+    for r in done:
+        cells = [r.get(f"digest_{rid}", "") for rid in r["visited"].split() if rid in robots]
+        known = {c for c in cells if c not in ("", "missing")}
+        differing += len(known) > 1
+        unverified += "missing" in cells
+    return differing, unverified
 
 
 def judge(m: dict[str, Any], expect: Expectation) -> list[str]:
@@ -184,7 +200,7 @@ def summarize(case: Case, runs: list[dict[str, Any]]) -> dict[str, Any]:
         "passed": all(r["passed"] for r in runs),
         "median": {k: _median([r.get(k) for r in runs])
                    for k in ("recovery_s", "longest_stall_s", "normal_gap_s", "rounds_done",
-                             "wall_s")},
+                             "rounds_unverified", "wall_s")},
         "rounds_planned": runs[0].get("rounds_planned") if runs else None,
         "tables_identical_runs": sum(bool(r.get("tables_identical")) for r in runs),
         "truthful_runs": sum(bool(r.get("truthful")) for r in runs),

@@ -15,9 +15,10 @@ from pathlib import Path
 
 from dfrl.experiments.tools.bench.faults_federation import Federation, Plan, wait_until
 
-#: the longest a fault may keep the federation from completing a round: the agent's skip
-#: time (``skip_after_s``, 4 s) or one lease, plus a round and the slack of a loaded 2-core
-#: machine
+#: the longest a fault may keep the federation from completing a round: one lease (the
+#: platform node's ``lease_s``, 10 s: a dead host's agent is resurrected within it; an
+#: unreachable stop is skipped after ``skip_after_s``, 4 s), plus 5 s for a round and the
+#: slack of a loaded 2-core machine
 RECOVERY_BOUND_S = 15.0
 #: the round after which every fault strikes (the federation has found its pace)
 FAULT_AFTER_ROUND = 3
@@ -112,10 +113,11 @@ def kill_mid_hop(fed: Federation) -> Acted:
     wait_until(lambda: fed.shares(before) > seen, 60, f"{before}'s share of the next round",
                poll_s=0.003)
     t = fed.kill_host(victim)
+    note = (f"killed {1000 * (t - _last_share_time(fed, before)):.0f} ms after {before} "
+            f"applied round {seen + 1}'s table; {victim} had applied {fed.shares(victim)} "
+            "tables")
     acted = _ended(fed, t, victim)
-    acted.notes.append(f"killed {1000 * (t - _last_share_time(fed, before)):.0f} ms after "
-                       f"{before} applied its table; {victim} had applied {fed.shares(victim)} "
-                       "tables")
+    acted.notes.append(note)
     return acted
 
 
@@ -126,7 +128,8 @@ def _last_share_time(fed: Federation, robot: str) -> float:
 
 
 def failing_method(fed: Federation) -> Acted:
-    """``dfrl inject`` a method whose step fails, after round 2."""
+    """``dfrl inject`` a method whose step fails, after round 2 (the fault's time: when the
+    agent acknowledged it)."""
     fed.wait_rounds(2)
     program = fed.work / "driver" / "failing_method.pl"
     program.write_text(FAILING_METHOD, encoding="utf-8")
@@ -134,8 +137,12 @@ def failing_method(fed: Federation) -> Acted:
     fed.mark("dfrl inject of failing_method.pl (method failing)", t)
     done = fed.dfrl_on_driver("inject", "out", "--program", str(program), "--method",
                               "failing", "--wait", "60", timeout_s=120)
-    fed.mark(f"dfrl inject exited {done.returncode}: {(done.stdout + done.stderr).strip()[:200]}")
-    return _ended(fed, t, None)
+    acked = time.time()
+    fed.mark(f"dfrl inject exited {done.returncode}: {(done.stdout + done.stderr).strip()[:200]}",
+             acked)
+    # the fault strikes in the round the agent applied the method in, which starts once the
+    # injection is acknowledged
+    return _ended(fed, acked if done.returncode == 0 else t, None)
 
 
 def kill_driver(fed: Federation) -> Acted:
