@@ -1,5 +1,6 @@
-"""``dfrl run --cluster ADDRESS``: the run's robots placed on a Dask cluster
-(:mod:`dfrl.experiments.driver.launcher.cluster`) instead of spawned on the driver's host.
+"""``dfrl run --cluster ADDRESS`` (and ``dfrl paper --cluster``): the run's robots placed on a
+Dask cluster (:mod:`dfrl.experiments.driver.launcher.cluster`) instead of spawned on the
+driver's host.
 
 Only the options and the choice of backend live here; ``dfrl run`` (:mod:`.federated`) calls
 :func:`run_experiment_for` where it would call the launcher. Without ``--cluster`` nothing of
@@ -9,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from dfrl.experiments.driver.config import ExperimentConfig
 from dfrl.experiments.driver.results.files import ClaimedFolder
@@ -26,6 +28,41 @@ def add_cluster_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--cluster-cpus", type=_positive, default=1.0, metavar="N",
                    help="the CPU resource each robot asks the cluster for (default 1; workers "
                         "offer it with dask worker --resources CPU=N)")
+
+
+def add_study_cluster_arguments(p: argparse.ArgumentParser) -> None:
+    """``--cluster``, ``--cluster-cpus`` and ``--token-file`` of a study: its federated runs'
+    robots on the cluster."""
+    add_cluster_arguments(p)
+    p.add_argument("--token-file", type=Path, default=None, metavar="FILE",
+                   help="with --cluster: the token the workers' robot services prove (the "
+                        "dfrl.token beside every worker)")
+
+
+def study_cluster(args: argparse.Namespace) -> Any:
+    """The study's :class:`~dfrl.experiments.science.cluster_runs.ClusterOptions` (None
+    without ``--cluster``).
+
+    Raises
+    ------
+    ValueError
+        ``--cluster`` without a readable ``--token-file``, or ``--token-file`` alone.
+    """
+    from dfrl.experiments.science.cluster_runs import ClusterOptions
+    from dfrl.experiments.tokens import TokenError, read_token_file
+
+    if args.cluster is None:
+        if args.token_file is not None:
+            raise ValueError("--token-file is for --cluster (the workers' token)")
+        return None
+    if args.token_file is None:
+        raise ValueError("--cluster needs --token-file FILE: the token of the dfrl.token "
+                         "beside every worker")
+    try:
+        read_token_file(args.token_file)
+    except TokenError as exc:
+        raise ValueError(f"--token-file: {exc}") from None
+    return ClusterOptions(args.cluster, args.token_file.resolve(), args.cluster_cpus)
 
 
 def _positive(text: str) -> float:

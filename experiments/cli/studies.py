@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from dfrl.experiments.cli.cluster import add_study_cluster_arguments, study_cluster
 from dfrl.experiments.cli.figures import add_figure_arguments, redraw_paper
 from dfrl.experiments.provenance import write_provenance
 
@@ -181,6 +182,7 @@ def register_paper(subparsers: argparse._SubParsersAction) -> None:
                         "(default: 1000)")
     p.add_argument("--skip-existing", action="store_true",
                    help="reuse finished runs found in --out")
+    add_study_cluster_arguments(p)
     add_figure_arguments(p)
     p.set_defaults(func=cmd_paper)
 
@@ -192,10 +194,11 @@ def cmd_paper(args: argparse.Namespace) -> int:
 
     try:
         seeds = chosen_seeds(args)
+        cluster = study_cluster(args)
     except ValueError as exc:
         print(f"dfrl paper: {exc}", file=sys.stderr)
         return 2
-    opts = PaperOptions(seeds=seeds,
+    opts = PaperOptions(seeds=seeds, cluster=cluster,
                         iterations=args.iterations if args.iterations is not None else
                         (LONG_BUDGET if args.budget == "long" else PAPER_ITERATIONS),
                         respite=args.respite,

@@ -47,6 +47,8 @@ from dfrl.experiments.driver.config import ExperimentConfig, resolve_config
 from dfrl.experiments.driver.launcher import run
 from dfrl.experiments.driver.results.metrics import read_metrics
 from dfrl.experiments.provenance import write_provenance
+from dfrl.experiments.science.cluster_runs import ClusterOptions, Finished, runs_at_once
+from dfrl.experiments.science.cluster_runs import run_on_cluster as federations_on_cluster
 from dfrl.experiments.science.pool import stop_pool, study_pool
 from dfrl.experiments.science.report.measures import SeedRun
 from dfrl.experiments.science.report.observations import Controls
@@ -92,6 +94,7 @@ class PaperOptions:
     control: bool = True                # the controls and the off-policy reference
     skip_existing: bool = False
     shuffle_buffer: int = SHUFFLE_BUFFER
+    cluster: ClusterOptions | None = None   # federated runs' robots on a Dask cluster
 
 
 @dataclass
@@ -176,12 +179,70 @@ def _federated(cfg: ExperimentConfig, d: Path, opts: PaperOptions, evaluator: Ev
             raise StudyInterrupted(f"{d.parent.name}/{cfg.name} interrupted "
                                    f"({done.interrupted})")
         ok = done.ok
+    return ok, _evaluations(cfg, d, opts, evaluator), wall, reused
+
+
+def _evaluations(cfg: ExperimentConfig, d: Path, opts: PaperOptions,
+                 evaluator: Evaluator) -> PendingRows:
+    """Queue the greedy evaluations of one federated run's table snapshots."""
     pending = PendingRows()
     arenas = {r.id: r.arena for r in cfg.robots}
     for robot, files in history_tables(d).items():
         for it in pick(files, cfg.iterations, opts.points):
             pending.add(evaluator, robot, it, np.load(files[it]), arenas[robot], HELD_OUT)
-    return ok, pending, wall, reused
+    return pending
+
+
+def _federated_on_cluster(fed_cfgs: dict[int, list[tuple[str, ExperimentConfig]]], out: Path,
+                          opts: PaperOptions, evaluators: dict[int, Evaluator],
+                          pendings: dict[tuple[int, str], tuple[Path, PendingRows]],
+                          walls: dict[str, float], reused: dict[str, float],
+                          progress: TextIO | None) -> bool:
+    """Run every seed's federations on ``opts.cluster``, as many at once as it holds, and
+    queue each one's evaluations as it ends; False if any run failed.
+
+    Raises
+    ------
+    ExperimentError
+        The cluster cannot be reached.
+    StudyInterrupted
+        A run was interrupted (the others are stopped).
+    """
+    assert opts.cluster is not None
+    where: dict[Path, tuple[int, str, ExperimentConfig]] = {}
+    todo: list[tuple[ExperimentConfig, Path]] = []
+    for s, cfgs in fed_cfgs.items():
+        for key, cfg in cfgs:
+            d = out / f"seed{s}" / cfg.name
+            if opts.skip_existing and (d / "summary.md").is_file():
+                reused[f"seed{s}/{key}"] = _recorded_wall(d)
+                pendings[(s, key)] = (d, _evaluations(cfg, d, opts, evaluators[s]))
+            else:
+                where[d] = (s, key, cfg)
+                todo.append((cfg, d))
+    if not todo:
+        return True
+    at_once = runs_at_once(opts.cluster, max(len(c.robots) for c, _ in todo))
+    if progress is not None:
+        print(f"== {len(todo)} federated runs on cluster {opts.cluster.address}, {at_once} at "
+              f"once", file=progress, flush=True)
+    failed: list[str] = []
+
+    def done(end: Finished) -> None:
+        s, key, cfg = where[end.out]
+        if end.exit in (130, -signal.SIGTERM, -signal.SIGKILL):   # dfrl run: 130 interrupted
+            raise StudyInterrupted(f"seed{s}/{cfg.name} was interrupted (exit {end.exit})")
+        walls[f"seed{s}/{key}"] = end.wall
+        if not end.ok:
+            failed.append(f"seed{s}/{cfg.name}")
+        if (end.out / "metrics.csv").is_file():
+            pendings[(s, key)] = (end.out, _evaluations(cfg, end.out, opts, evaluators[s]))
+
+    federations_on_cluster(todo, opts.cluster, at_once, done, progress)
+    if failed and progress is not None:
+        print(f"== runs that FAILED on the cluster: {', '.join(failed)}", file=progress,
+              flush=True)
+    return not failed
 
 
 def _raise_interrupt(signum: int, frame: Any) -> None:
@@ -258,17 +319,21 @@ def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reprod
                                                a, opts.eval_steps, opts.episode_steps,
                                                EVAL_SEED + s) for a in all_arenas}
         pendings: dict[tuple[int, str], tuple[Path, PendingRows]] = {}
-        ok = True
-        for s in seeds:
-            evaluator = Evaluator(pool, base_cfg, opts.eval_steps, opts.episode_steps,
-                                  EVAL_SEED + s)
-            for key, cfg in fed_cfgs[s]:
-                d = out / f"seed{s}" / cfg.name
-                run_ok, pending, wall, was_reused = _federated(cfg, d, opts, evaluator,
-                                                               progress)
-                ok = ok and run_ok
-                (reused if was_reused else walls)[f"seed{s}/{key}"] = wall
-                pendings[(s, key)] = (d, pending)
+        evaluators = {s: Evaluator(pool, base_cfg, opts.eval_steps, opts.episode_steps,
+                                   EVAL_SEED + s) for s in seeds}
+        if opts.cluster is not None:
+            ok = _federated_on_cluster(fed_cfgs, out, opts, evaluators, pendings, walls,
+                                       reused, progress)
+        else:
+            ok = True
+            for s in seeds:
+                for key, cfg in fed_cfgs[s]:
+                    d = out / f"seed{s}" / cfg.name
+                    run_ok, pending, wall, was_reused = _federated(cfg, d, opts, evaluators[s],
+                                                                   progress)
+                    ok = ok and run_ok
+                    (reused if was_reused else walls)[f"seed{s}/{key}"] = wall
+                    pendings[(s, key)] = (d, pending)
         for (s, key), (d, pending) in pendings.items():
             pending.write(d / "evaluations.csv")
         for fut in sa_jobs.values():
