@@ -157,6 +157,12 @@ class ExperimentConfig(JsonDicts):
         function learner's table is its Q-function at the grid's points and it absorbs the
         aggregate by distillation (:mod:`dfrl.robots.grid_view`); ``methods`` and ``joins``
         are refused there.
+    itinerary : str
+        How each agent goes over its robots in a round: ``chain`` (default: one walk along
+        the robots and back) or ``tree`` (the agent clones itself over a tree of the robots,
+        ``fanout`` children per stop; every robot still ends the round with the same table).
+    fanout : int
+        Children of each stop in a ``tree`` itinerary (>= 2, default 2).
     """
 
     name: str = "experiment"
@@ -182,6 +188,8 @@ class ExperimentConfig(JsonDicts):
     eval_every: int = 0
     eval_steps: int = 500
     federation: str = "per_algorithm"
+    itinerary: str = "chain"
+    fanout: int = 2
 
     def __post_init__(self) -> None:
         if not is_checked():

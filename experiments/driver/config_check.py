@@ -19,7 +19,7 @@ from dfrl.experiments.config_rules import (Rule, check_keys, check_robot_id, che
                                            check_value, known_algorithms, token_rule)
 from dfrl.experiments.robot_host.config import DEFAULT_ITERATIONS, modes
 
-__all__ = ["BUILTIN_METHODS", "COMMENT_KEYS", "FEDERATIONS", "GRID", "PARAMS_REFUSED",
+__all__ = ["BUILTIN_METHODS", "COMMENT_KEYS", "FEDERATIONS", "GRID", "ITINERARIES", "PARAMS_REFUSED",
            "check_experiment", "host_port_problem"]
 
 #: Aggregation methods built into the agent; others are injected into a running experiment
@@ -34,6 +34,10 @@ GRID = "grid"
 #: How the robots of an experiment are federated: ``per_algorithm`` (one agent per algorithm:
 #: tables for the tabular learners, parameter vectors for the function learners) or ``grid``.
 FEDERATIONS: tuple[str, ...] = ("per_algorithm", GRID)
+
+#: How an agent goes over its robots each round: ``chain`` (one walk out and back, the default)
+#: or ``tree`` (clones over a tree of fan-out ``fanout``, platform_pl/dfrl_agent/dfrl_tree.pl).
+ITINERARIES: tuple[str, ...] = ("chain", "tree")
 
 #: Keys a config file may carry that are not fields (notes for people).
 COMMENT_KEYS = frozenset({"comment"})
@@ -70,6 +74,8 @@ EXPERIMENT_RULES: dict[str, Rule] = {
     "tolerate_method_errors": Rule(int, low=0),
     "eval_every": Rule(int, low=0, hint="0 means no evaluation"), "eval_steps": Rule(int, low=1),
     "federation": Rule(str, choices=lambda: list(FEDERATIONS), what="federation"),
+    "itinerary": Rule(str, choices=lambda: list(ITINERARIES), what="itinerary"),
+    "fanout": Rule(int, low=2, hint="children of each stop in a tree itinerary"),
 }
 
 

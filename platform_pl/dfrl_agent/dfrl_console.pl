@@ -378,16 +378,21 @@ text_atom(X, A) :-
 %       "token": 1111,                              optional: the agent's token
 %                                                   (default: this node's tokens)
 %       "timeout_s": 3600,                          table read/write limit
-%       "skip_after_s": 4 }                         the most one move to a stop
+%       "skip_after_s": 4,                          the most one move to a stop
 %                                                   may take before it is skipped
+%       "itinerary_kind": "tree", "fanout": 2 }     chain (default) or tree: clones
+%                                                   over a tree of fan-out 2 (default)
 %
 %   Plan is plan(Stops, Rounds, Rest, Log, Timeout) with Stops a list of
 %   stop(Host, Port, Robot); Options are method(M), carries(C),
-%   tokens(List) and skip_after(S).
+%   tokens(List), skip_after(S) and itinerary(chain) or itinerary(tree(K)).
+%
+%   @error domain_error(itinerary, Kind) for another itinerary_kind,
+%   domain_error(fanout, K) for a fanout that is not an integer >= 2.
 
 dfrl_launch_plan(D, Name, plan(Stops, Rounds, Rest, Log, Timeout),
                  [method(Method), carries(Carried), tokens(Tokens),
-                  skip_after(SkipAfter)]) :-
+                  skip_after(SkipAfter), itinerary(Kind)]) :-
     must_be(dict, D),
     key(itinerary, D, Stops0),
     must_be(list, Stops0),
@@ -409,6 +414,15 @@ dfrl_launch_plan(D, Name, plan(Stops, Rounds, Rest, Log, Timeout),
     dict_default(D, method, average, Method0), text_atom(Method0, Method),
     dict_default(D, carries, tables, Carried0), text_atom(Carried0, Carried),
     dict_default(D, name, dfrl, Name0), text_atom(Name0, Name),
+    dict_default(D, itinerary_kind, chain, Kind0), text_atom(Kind0, KindName),
+    (   KindName == chain
+    ->  Kind = chain
+    ;   KindName == tree
+    ->  dict_default(D, fanout, 2, K),
+        (   integer(K), K >= 2 -> true ; domain_error(fanout, K) ),
+        Kind = tree(K)
+    ;   domain_error(itinerary, KindName)
+    ),
     (   get_dict(token, D, Token0), Token0 \== null
     ->  token_term(Token0, Token), Tokens = [Token]
     ;   Tokens = []

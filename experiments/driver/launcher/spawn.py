@@ -188,6 +188,9 @@ def launch_agents(site: Site, robots: RobotRoster, agents: AgentRoster,
                   # the agent posts its round log to the console node, which writes it here:
                   # no shared disk between the hosts the agent visits and the driver's
                   "log_to": list(site.console.address)}
+        if c.itinerary != "chain":
+            launch["itinerary_kind"] = c.itinerary     # tree: clones over the robots
+            launch["fanout"] = c.fanout
         if algo != GRID and learner_kind(algo) == "function":
             launch["carries"] = "params"     # linear, dqn: FedAvg of parameter vectors
         agents.add(AgentInfo(name, algo, c.method_for(algo), c.rounds, str(log_path),

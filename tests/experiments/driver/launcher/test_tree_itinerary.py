@@ -1,0 +1,60 @@
+"""A ``"itinerary": "tree"`` run on real processes: the agent clones itself over the robots
+each round, and every robot ends each round with the table a chain run gives."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from dfrl.experiments.driver.config import ConfigError, ExperimentConfig
+from dfrl.experiments.driver.launcher import run
+from dfrl.experiments.processes import find_swipl
+
+from .helpers import diagnose, rounds_csv, small_config
+
+pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
+
+ROBOTS = ["r1", "r2", "r3", "r4", "r5"]
+
+
+def test_tree_rounds_equal_the_chain_rounds(tmp_path: Path) -> None:
+    # Prepare: five robots in different arenas visit their state-actions unequally, so
+    # visit_average weights them differently: a merge that averaged the subtrees' averages
+    # (r1; r2 r4 r5; r3) would give other tables than the chain's one walk
+    kw = dict(iterations=300, respite=100, method="visit_average")
+    chain = small_config(5, **kw)
+    tree = small_config(5, itinerary="tree", fanout=2, **kw)
+    # Execute
+    res_chain = run(chain, tmp_path / "chain", progress=None)
+    res_tree = run(tree, tmp_path / "tree", progress=None)
+    # Assert
+    assert res_chain.ok and res_tree.ok, diagnose(tmp_path / "chain", tmp_path / "tree")
+    rows_chain, rows_tree = rounds_csv(tmp_path / "chain"), rounds_csv(tmp_path / "tree")
+    assert [r["round"] for r in rows_tree] == ["1", "2", "3"]
+    for rc, rt in zip(rows_chain, rows_tree, strict=True):
+        assert rt["all_equal"] == "true" and rt["visited"] == " ".join(ROBOTS), rt
+        assert rt["skipped"] == "" and int(rt["hops"]) == 4      # a clone per robot but r1
+        for robot in ROBOTS:
+            assert rt[f"digest_{robot}"] == rc[f"digest_{robot}"], (rt["round"], robot)
+    assert len({r["digest_r1"] for r in rows_tree}) == 3        # the tables moved on
+    # sync mode, same seed: the same curves whichever itinerary
+    assert (tmp_path / "chain/metrics.csv").read_bytes() == \
+        (tmp_path / "tree/metrics.csv").read_bytes()
+    launch = json.loads((tmp_path / "tree/launch_fed_qlearning.json").read_text())
+    assert launch["itinerary_kind"] == "tree" and launch["fanout"] == 2
+    log = [json.loads(line) for line in
+           (tmp_path / "tree/rounds_fed_qlearning.log").read_text().splitlines()]
+    assert {e.get("itinerary") for e in log if e["event"] == "round"} == {"tree"}
+    # the control of the control: the chain's launch plan names no itinerary kind
+    assert "itinerary_kind" not in json.loads(
+        (tmp_path / "chain/launch_fed_qlearning.json").read_text())
+
+
+@pytest.mark.parametrize("bad, message", [
+    ({"itinerary": "ring"}, "itinerary: unknown itinerary 'ring'; known: chain, tree"),
+    ({"itinerary": "tree", "fanout": 1}, "fanout: must be >= 2, got 1"),
+])
+def test_bad_itinerary_is_refused_where_it_is(bad: dict, message: str) -> None:
+    with pytest.raises(ConfigError, match=message.replace("(", r"\(")):
+        ExperimentConfig.from_dict({"robots": [{"id": "r1", "arena": "r1"}], **bad})
