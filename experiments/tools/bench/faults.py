@@ -138,6 +138,9 @@ def judge(m: dict[str, Any], expect: Expectation) -> list[str]:
     elif m["recovery_s"] > expect.recovery_bound_s:
         problems.append(f"the next round completed {m['recovery_s']} s after the fault "
                         f"(bound {expect.recovery_bound_s:g} s)")
+    if m["longest_stall_s"] is not None and m["longest_stall_s"] > expect.stall_bound_s:
+        problems.append(f"{m['longest_stall_s']} s between two completed rounds (bound "
+                        f"{expect.stall_bound_s:g} s)")
     if not m["tables_identical"]:
         problems.append("a completed round left differing tables")
     if not m["truthful"]:

@@ -42,6 +42,7 @@ class Expectation:
 
     max_rounds_lost: int = 0           #: planned rounds not completed (a failed method's round)
     recovery_bound_s: float = RECOVERY_BOUND_S   #: fault -> next completed round
+    stall_bound_s: float = RECOVERY_BOUND_S      #: the longest gap between completed rounds
     victim_misses: bool = True         #: the struck robot missed at least one round
     rejoin: bool = False               #: ... and was visited again before the end
     method_failed: bool = False        #: at least one round's method failed (and was reported)
@@ -49,6 +50,7 @@ class Expectation:
     def text(self) -> str:
         parts = [f"at most {self.max_rounds_lost} planned round(s) not completed",
                  f"a completed round within {self.recovery_bound_s:g} s of the fault",
+                 f"no gap over {self.stall_bound_s:g} s between two completed rounds",
                  "identical tables in every completed round",
                  "summary verdict and exit status truthful (complete only if every robot "
                  "took part in every round; absent robots and failed methods named)"]
