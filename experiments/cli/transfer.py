@@ -128,7 +128,8 @@ def register_study(subparsers: argparse._SubParsersAction) -> None:
         description="Source tables per source seed: federated (R1..R5), a matched standalone "
                     "table of each source arena (same training seeds) and zeros. From each, a "
                     "robot learns in the unseen arenas: collisions while learning and the time "
-                    "until its greedy score reaches --threshold (censored when never). Paired "
+                    "until its greedy score reaches the arena's threshold (censored when never; "
+                    "derived per arena from reference runs unless --threshold). Paired "
                     "intervals over source seeds (Welch when unpaired), Holm over the claims, "
                     "verdicts: holds / refuted (effect excluded at 95%) / not significant at "
                     "n = K (smallest detectable effect D).")
@@ -149,8 +150,17 @@ def register_study(subparsers: argparse._SubParsersAction) -> None:
                    help="grid of the greedy score while learning (default: %(default)s)")
     p.add_argument("--eval-steps", type=int, default=300,
                    help="steps of each greedy evaluation (default: %(default)s)")
-    p.add_argument("--threshold", type=float, default=0.5,
-                   help="greedy score the time is measured to (default: %(default)s)")
+    p.add_argument("--threshold", nargs="+", default=[], metavar="[ARENA=]SCORE",
+                   help="greedy score the time is measured to: SCORE for every unseen arena, "
+                        "ARENA=SCORE for one (default: derived per arena, --threshold-fraction "
+                        "x the level reference runs from zeros reach in that arena)")
+    p.add_argument("--threshold-fraction", type=float, default=0.75,
+                   help="a derived threshold's share of its arena's reference level "
+                        "(default: %(default)s)")
+    p.add_argument("--threshold-iterations", type=int, default=8000,
+                   help="steps of each reference run (default: %(default)s)")
+    p.add_argument("--threshold-runs", type=int, default=5,
+                   help="reference runs per unseen arena (default: %(default)s)")
     p.add_argument("--confirm", type=int, default=2,
                    help="evaluations in a row at or above the threshold that count as reaching "
                         "it; the time is the first of them (default: %(default)s)")
@@ -170,6 +180,31 @@ def register_study(subparsers: argparse._SubParsersAction) -> None:
                    help="judge the learning phases of a transfer_study.json again (its "
                         "options; nothing is trained)")
     p.set_defaults(func=cmd_study)
+
+
+def thresholds_arg(words: list[str]) -> dict[str, object]:
+    """``--threshold`` words -> ``threshold`` (a bare SCORE) and ``arena_thresholds``
+    (ARENA=SCORE).
+
+    Raises
+    ------
+    ValueError
+        A word that is neither, or two bare scores.
+    """
+    bare, per = [], []
+    for w in words:
+        arena, eq, value = w.rpartition("=")
+        try:
+            score = float(value)
+        except ValueError:
+            raise ValueError(f"--threshold: {w!r} is neither SCORE nor ARENA=SCORE") from None
+        if eq:
+            per.append((arena, score))
+        else:
+            bare.append(score)
+    if len(bare) > 1:
+        raise ValueError(f"--threshold: one SCORE for every arena, got {bare}")
+    return {"threshold": bare[0] if bare else None, "arena_thresholds": tuple(per)}
 
 
 def cmd_study(args: argparse.Namespace) -> int:
@@ -202,7 +237,10 @@ def cmd_study(args: argparse.Namespace) -> int:
                             targets=tuple(args.targets), iterations=args.iterations,
                             respite=args.respite, method=args.method, learn=args.learn,
                             eval_every=args.eval_every, eval_steps=args.eval_steps,
-                            threshold=args.threshold, confirm=args.confirm,
+                            **thresholds_arg(args.threshold),
+                            threshold_fraction=args.threshold_fraction,
+                            threshold_iterations=args.threshold_iterations,
+                            threshold_runs=args.threshold_runs, confirm=args.confirm,
                             unpaired=args.unpaired, extra=tuple(args.extra),
                             jobs=args.jobs)
         if args.out is not None:

@@ -7,12 +7,14 @@ one control (a standalone source of each source arena, and ``zeros``):
 * **collisions while learning**, federated minus control, claimed below 0. Paired t interval
   of the per-seed differences when both were trained with the same seeds (the controls are
   matched: standalone robot k has federated robot k's training seed), Welch's otherwise.
-* **time to the threshold**, claimed shorter. When no learning phase of either side is
-  censored: federated minus control in iterations, claimed below 0, paired or Welch as
-  above. When any is: the difference of Kaplan-Meier medians federated - control over the
-  learning phases (:func:`censored_difference`, each side resampled on its own: the pairing is
-  not used), claimed below 0; the censored phases are counted. (A difference, not a ratio: a
-  source table may reach the threshold at iteration 0.)
+* **time to the threshold** (each arena's own threshold), claimed shorter. When no learning
+  phase of either side is censored: federated minus control in iterations, claimed below 0,
+  paired or Welch as above. When any is: the difference of Kaplan-Meier medians federated -
+  control over the learning phases, claimed below 0; the censored phases are counted. Matched
+  sources: :func:`paired_censored_difference`, the source seeds resampled, each drawn seed
+  bringing its phases of both sides (the pairing kept); otherwise
+  :func:`censored_difference`, each side's phases resampled on their own. (A difference, not
+  a ratio: a source table may reach the threshold at iteration 0.)
 
 Every claim is judged with :func:`~dfrl.experiments.science.statistics.judge` and Holm's
 correction over all claims of the study (:func:`~dfrl.experiments.science.statistics.adjust`).
@@ -106,6 +108,25 @@ def _median_bounds(t: np.ndarray, ok: np.ndarray) -> tuple[float, float]:
     return (m, m) if math.isfinite(m) else (float(t.max()), math.inf)
 
 
+def _difference(ta: np.ndarray, ea: np.ndarray, tb: np.ndarray, eb: np.ndarray, n: int,
+                draws: np.ndarray) -> CensoredDifference:
+    """The estimate of the whole samples and the interval of ``draws`` (lowest and highest
+    difference each resample allows)."""
+    (al, ah), (bl, bh) = _median_bounds(ta, ea), _median_bounds(tb, eb)
+    known = {(True, True): "exact", (False, True): "at least", (True, False): "at most",
+             (False, False): "unknown"}[(al == ah, bl == bh)]
+    est = {"exact": al - bl, "at least": al - bl, "at most": ah - bl}.get(known, math.nan)
+    tail = (1.0 - LEVEL) / 2.0
+    return CensoredDifference(float(est), float(np.quantile(draws[:, 0], tail, method="lower")),
+                              float(np.quantile(draws[:, 1], 1.0 - tail, method="higher")),
+                              n, known, draws)
+
+
+def _draw(ta: np.ndarray, ea: np.ndarray, tb: np.ndarray, eb: np.ndarray) -> tuple[float, float]:
+    (xl, xh), (yl, yh) = _median_bounds(ta, ea), _median_bounds(tb, eb)
+    return xl - yh, xh - yl
+
+
 def censored_difference(a: tuple[Sequence[float], Sequence[bool]],
                         b: tuple[Sequence[float], Sequence[bool]], n: int,
                         resamples: int = 4000, seed: int = 0) -> CensoredDifference:
@@ -115,19 +136,47 @@ def censored_difference(a: tuple[Sequence[float], Sequence[bool]],
     ta, ea = np.asarray(a[0], dtype=float), np.asarray(a[1], dtype=bool)
     tb, eb = np.asarray(b[0], dtype=float), np.asarray(b[1], dtype=bool)
     rng = np.random.default_rng(seed)
-    (al, ah), (bl, bh) = _median_bounds(ta, ea), _median_bounds(tb, eb)
-    known = {(True, True): "exact", (False, True): "at least", (True, False): "at most",
-             (False, False): "unknown"}[(al == ah, bl == bh)]
-    est = {"exact": al - bl, "at least": al - bl, "at most": ah - bl}.get(known, math.nan)
     draws = np.empty((resamples, 2))
     for k in range(resamples):
         i, j = rng.integers(0, len(ta), len(ta)), rng.integers(0, len(tb), len(tb))
-        (xl, xh), (yl, yh) = _median_bounds(ta[i], ea[i]), _median_bounds(tb[j], eb[j])
-        draws[k] = (xl - yh, xh - yl)
-    tail = (1.0 - LEVEL) / 2.0
-    return CensoredDifference(float(est), float(np.quantile(draws[:, 0], tail, method="lower")),
-                              float(np.quantile(draws[:, 1], 1.0 - tail, method="higher")),
-                              n, known, draws)
+        draws[k] = _draw(ta[i], ea[i], tb[j], eb[j])
+    return _difference(ta, ea, tb, eb, n, draws)
+
+
+Phases = tuple[Sequence[float], Sequence[bool]]
+
+
+def paired_censored_difference(a: Sequence[Phases], b: Sequence[Phases], resamples: int = 4000,
+                               seed: int = 0) -> CensoredDifference:
+    """As :func:`censored_difference` for matched sources: ``a[i]`` and ``b[i]`` are the
+    learning phases (times, reached) of source seed i under the two conditions. Each resample
+    draws n seeds with replacement (n = ``len(a)``, the count the verdict is given at) and
+    pools the phases of the drawn seeds on both sides, so a seed whose phases are slow on one
+    side brings its slow phases on the other too.
+
+    Raises
+    ------
+    ValueError
+        ``a`` and ``b`` have not the same number of seeds, or a seed has no phase.
+    """
+    if len(a) != len(b) or not a or any(len(x[0]) == 0 for x in list(a) + list(b)):
+        raise ValueError(f"paired censored times need the same seeds on both sides, each with "
+                         f"phases: {len(a)} and {len(b)} seeds")
+    sa = [(np.asarray(t, dtype=float), np.asarray(r, dtype=bool)) for t, r in a]
+    sb = [(np.asarray(t, dtype=float), np.asarray(r, dtype=bool)) for t, r in b]
+
+    def pool(groups: list[tuple[np.ndarray, np.ndarray]], idx: Sequence[int]
+             ) -> tuple[np.ndarray, np.ndarray]:
+        return (np.concatenate([groups[i][0] for i in idx]),
+                np.concatenate([groups[i][1] for i in idx]))
+
+    rng = np.random.default_rng(seed)
+    draws = np.empty((resamples, 2))
+    for k in range(resamples):
+        idx = rng.integers(0, len(sa), len(sa))
+        draws[k] = _draw(*pool(sa, idx), *pool(sb, idx))
+    everything = range(len(sa))
+    return _difference(*pool(sa, everything), *pool(sb, everything), len(sa), draws)
 
 
 @dataclass(frozen=True)
@@ -137,7 +186,8 @@ class Claim:
     measure: str
     control: str
     estimate: Interval | CensoredDifference
-    method: str                 #: "paired", "Welch" or "censored (KM medians)"
+    method: str                 #: "paired", "Welch", "censored, paired (KM medians)" or
+    #: "censored (KM medians)" (unpaired)
     censored: tuple[int, int]   #: censored learning phases (federated, control)
     phases: tuple[int, int]     #: learning phases (federated, control)
     judgement: Judgement
@@ -160,8 +210,12 @@ class Claim:
             "detectable": e.detectable(), "verdict": self.judgement.words()})
 
 
-def _times(rows: Sequence[dict[str, Any]], condition: str) -> tuple[list[float], list[bool]]:
-    mine = [r for r in rows if r["condition"] == condition]
+def _times(rows: Sequence[dict[str, Any]], condition: str,
+           pair: int | None = None) -> tuple[list[float], list[bool]]:
+    """The times and reached flags of a condition's learning phases (of pair seed ``pair``
+    alone when given)."""
+    mine = [r for r in rows if r["condition"] == condition
+            and (pair is None or r["pair_seed"] == pair)]
     return [float(r["time_to_threshold"]) for r in mine], [bool(r["reached"]) for r in mine]
 
 
@@ -173,9 +227,16 @@ def claim(rows: Sequence[dict[str, Any]], federated: str, control: str, measure:
     censored = (rf.count(False), rc.count(False))
     phases = (len(rf), len(rc))
     if measure == "time_to_threshold" and any(censored):
-        n = min(len(per_seed(rows, federated, measure)), len(per_seed(rows, control, measure)))
-        est = censored_difference((tf, rf), (tc, rc), n, resamples)
-        return Claim(measure, control, est, "censored (KM medians)", censored, phases,
+        fs, cs = per_seed(rows, federated, measure), per_seed(rows, control, measure)
+        if set(fs) == set(cs):
+            est = paired_censored_difference([_times(rows, federated, s) for s in sorted(fs)],
+                                             [_times(rows, control, s) for s in sorted(fs)],
+                                             resamples)
+            how = "censored, paired (KM medians)"
+        else:
+            est = censored_difference((tf, rf), (tc, rc), min(len(fs), len(cs)), resamples)
+            how = "censored (KM medians)"
+        return Claim(measure, control, est, how, censored, phases,
                      judge(est, 0.0, "below", MIN_SEEDS))
     est, how = compare(per_seed(rows, federated, measure), per_seed(rows, control, measure))
     return Claim(measure, control, est, how, censored, phases,
@@ -225,18 +286,23 @@ def markdown(rows: Sequence[dict[str, Any]], opts: StudyOptions, found: Sequence
          f"shares every {opts.respite}, method {opts.method}). Learning phase: {opts.learn} "
          f"steps from the source table in each unseen arena x {len(opts.target_seeds)} target "
          f"seed(s); greedy score ({opts.eval_steps} steps) every {opts.eval_every} iterations; "
-         f"threshold {opts.threshold}, reached at the first of {opts.confirm} evaluations in a "
+         f"the arena's threshold, reached at the first of {opts.confirm} evaluations in a "
          f"row at or above it (a phase that never reaches it is censored at "
          f"{opts.learn}). Wall time {wall_time:.0f} s.", "",
-         "| source | collisions/1000 while learning | time to threshold (iterations) |",
-         "|---|---|---|"]
+         "| unseen arena | threshold | from |", "|---|---|---|"]
+    for arena, (value, origin) in thresholds_of(rows, opts).items():
+        L.append(f"| {arena} | {value:.3g} | {origin} |")
+    L += ["", "| source | collisions/1000 while learning | time to threshold (iterations) |",
+          "|---|---|---|"]
     for c in opts.conditions:
         L.append(f"| {c} | {_level(rows, c, 'collisions_per_1000')} | "
                  f"{_level(rows, c, 'time_to_threshold')} |")
     L += ["", f"Claims: {opts.federated} against each control. Collisions: federated minus "
           "control (claimed < 0). Time: federated minus control in iterations (claimed < 0), "
           "from the per-seed means when no phase is censored, else from the Kaplan-Meier "
-          "medians over the learning phases (`>= x`: a bound, a median beyond the budget). "
+          "medians over the learning phases (`>= x`: a bound, a median beyond the budget; "
+          "matched sources: the source seeds resampled, each with its phases of both "
+          "sides). "
           "95% intervals; p adjusted by Holm over the "
           f"{len(found)} claims; D = smallest detectable effect at 80% power "
           "((t(0.975, df) + t(0.8, df)) x se; censored: (z(0.975) + z(0.8)) x se, se = width "
@@ -249,6 +315,20 @@ def markdown(rows: Sequence[dict[str, Any]], opts: StudyOptions, found: Sequence
                  f"{c.judgement.p_adjusted:.3g} | {c.judgement.words()} |")
     L += ["", headline(found, opts)]
     return "\n".join(L)
+
+
+def thresholds_of(rows: Sequence[dict[str, Any]], opts: StudyOptions
+                  ) -> dict[str, tuple[float, str]]:
+    """arena -> (threshold, how it was chosen) as the learning phases recorded them (rows
+    written before thresholds were per arena: ``opts.threshold``, given)."""
+    out: dict[str, tuple[float, str]] = {}
+    for a in opts.targets:
+        mine = [r for r in rows if r["arena"] == a]
+        if mine and "threshold" in mine[0]:
+            out[a] = (float(mine[0]["threshold"]), str(mine[0]["threshold_from"]))
+        elif opts.threshold is not None:
+            out[a] = (float(opts.threshold), "given")
+    return out
 
 
 def headline(found: Sequence[Claim], opts: StudyOptions) -> str:
@@ -292,6 +372,8 @@ def tidy_rows(rows: Sequence[dict[str, Any]]) -> Iterator[Row]:
         yield (run, seed, cond, where, end, f"time_to_threshold@{a}",
                float(r["time_to_threshold"]))
         yield (run, seed, cond, where, end, f"reached@{a}", float(bool(r["reached"])))
+        if "threshold" in r:
+            yield (run, seed, cond, where, end, f"threshold@{a}", float(r["threshold"]))
 
 
 def write_study(out: Path, rows: Sequence[dict[str, Any]], opts: StudyOptions,

@@ -17,8 +17,11 @@ over the whole phase) and **time to the threshold**: the greedy score of the lea
 is evaluated at iteration 0 and every ``eval_every`` iterations (``eval_steps`` seeded steps,
 the same episodes at every grid point), and the time is the first grid point of the first
 ``confirm`` (2) evaluations in a row at or above ``threshold`` (the score jumps between
-evaluations: one crossing is not learning); a run that never reaches it is censored at ``learn``, never counted as
-reaching it there (evaluations stop once it is reached).
+evaluations: one crossing is not learning); a run that never reaches it is censored at
+``learn``, never counted as reaching it there (evaluations stop once it is reached). Each
+unseen arena has its own threshold: given (``threshold`` for every arena,
+``arena_thresholds`` for some), else derived from reference runs in that arena alone
+(:mod:`dfrl.experiments.science.transfer.thresholds`).
 
 With ``unpaired`` the controls are trained and learn with other seeds (source seed
 s + 10,000, target seeds + 5,000): the comparisons are then Welch's, not paired
@@ -36,6 +39,7 @@ import numpy as np
 from dfrl.arenas import load_arena
 from dfrl.experiments.science.studies.fedsim import AGGREGATIONS, federate, in_turn
 from dfrl.experiments.science.studies.history import eval_job
+from dfrl.experiments.science.transfer.thresholds import Threshold, thresholds_for
 from dfrl.robots.training import Trainer, TrainerConfig
 
 ARENAS = ("r1", "r2", "r3", "r4", "r5")
@@ -62,15 +66,22 @@ class StudyOptions:
     eval_every: int = 100
     eval_steps: int = 300
     episode_steps: int = 200
-    threshold: float = 0.5
+    threshold: float | None = None
+    arena_thresholds: tuple[tuple[str, float], ...] = ()
+    threshold_fraction: float = 0.75
+    threshold_iterations: int = 8000
+    threshold_runs: int = 5
     confirm: int = 2
     unpaired: bool = False
     extra: tuple[str, ...] = ()
     jobs: int = 2
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "arena_thresholds",
+                           tuple((str(a), float(v)) for a, v in self.arena_thresholds))
         for name in ("iterations", "respite", "learn", "eval_every", "eval_steps",
-                     "episode_steps", "confirm", "jobs"):
+                     "episode_steps", "confirm", "jobs", "threshold_iterations",
+                     "threshold_runs"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if not self.source_seeds or not self.target_seeds or not self.targets:
@@ -85,6 +96,13 @@ class StudyOptions:
         bad = [a for a in self.targets if a in ARENAS]
         if bad:
             raise ValueError(f"target arenas must be unseen, {bad} are source arenas")
+        stray = [a for a, _ in self.arena_thresholds if a not in self.targets]
+        if stray:
+            raise ValueError(f"a threshold for {stray}, which are not among the target arenas "
+                             f"{list(self.targets)}")
+        if not 0.0 < self.threshold_fraction <= 1.0:
+            raise ValueError(f"threshold_fraction must be in (0, 1], got "
+                             f"{self.threshold_fraction}")
 
     @property
     def federated(self) -> str:
@@ -94,6 +112,12 @@ class StudyOptions:
     def conditions(self) -> tuple[str, ...]:
         return ((self.federated,) + tuple(f"standalone_{a}" for a in ARENAS) + ("zeros",)
                 + tuple(dict.fromkeys(self.extra)))
+
+    def given_thresholds(self) -> dict[str, float]:
+        """arena -> its threshold where one was given (``threshold`` for every arena,
+        ``arena_thresholds`` over it); the other arenas' are derived."""
+        out = {a: self.threshold for a in self.targets} if self.threshold is not None else {}
+        return {**out, **dict(self.arena_thresholds)}
 
     def grid(self) -> list[int]:
         """The evaluation grid of a learning phase: 0, eval_every, ..., learn."""
@@ -147,9 +171,9 @@ def source_job(condition: str, seed: int, opts: StudyOptions) -> tuple[str, int,
 
 
 def target_job(condition: str, seed: int, q: np.ndarray, arena: str, tseed: int,
-               opts: StudyOptions) -> dict[str, Any]:
+               opts: StudyOptions, threshold: Threshold) -> dict[str, Any]:
     """One learning phase from table ``q`` in ``arena``: collisions while learning and the
-    greedy score on the grid until it reaches the threshold."""
+    greedy score on the grid until it reaches ``threshold`` (the arena's)."""
     shift = 5_000 if pair_seed(condition, seed, opts) != seed else 0
     ev_cfg, ev_seed = TrainerConfig().to_dict(), EVAL_SEED_BASE + tseed + shift
     grid = opts.grid()
@@ -169,30 +193,37 @@ def target_job(condition: str, seed: int, q: np.ndarray, arena: str, tseed: int,
                 ev = eval_job(ev_cfg, t.q_table.copy(), arena, opts.eval_steps,
                               opts.episode_steps, ev_seed)
                 scores.append((g, float(ev["score"])))
-                run = run + 1 if ev["score"] >= opts.threshold else 0
+                run = run + 1 if ev["score"] >= threshold.value else 0
                 if run == opts.confirm:
                     time, reached = float(scores[-opts.confirm][0]), True
     return {"condition": condition, "source_seed": seed,
             "pair_seed": pair_seed(condition, seed, opts), "arena": arena,
             "target_seed": tseed,
             "collisions_per_1000": 1000.0 * collisions[-1][1] / opts.learn,
-            "time_to_threshold": time, "reached": reached,
-            "scores": scores, "collisions": collisions}
+            "time_to_threshold": time, "reached": reached, "threshold": threshold.value,
+            "threshold_from": threshold.origin(), "scores": scores, "collisions": collisions}
 
 
 def transfer_study(opts: StudyOptions,
                    progress: Callable[[str], None] | None = None) -> list[dict[str, Any]]:
-    """Every source table, then every learning phase; one row per learning phase."""
+    """The target arenas' thresholds, every source table, then every learning phase; one row
+    per learning phase (with its arena's ``threshold`` and ``threshold_from``)."""
     say = progress or (lambda _msg: None)
     for arena in opts.targets:          # an unknown arena fails here, before any training
         load_arena(arena)
     with ProcessPoolExecutor(max_workers=opts.jobs) as pool:
+        thresholds = thresholds_for(opts.targets, opts.given_thresholds(),
+                                      opts.threshold_fraction, opts.threshold_iterations,
+                                      opts.threshold_runs, opts.eval_steps, opts.episode_steps,
+                                      pool)
+        for th in thresholds.values():
+            say(f"threshold in {th.arena}: {th.value:.3g} ({th.origin()})")
         jobs = [(c, s, opts) for c in opts.conditions for s in opts.source_seeds]
         srcs = []
         for i, src in enumerate(pool.map(source_job, *zip(*jobs)), 1):
             srcs.append(src)
             say(f"source {i}/{len(jobs)}: {src[0]} seed {src[1]}")
-        args = [(c, s, q, a, t, opts) for c, s, q in srcs for a in opts.targets
+        args = [(c, s, q, a, t, opts, thresholds[a]) for c, s, q in srcs for a in opts.targets
                 for t in opts.target_seeds]
         rows = []
         for i, row in enumerate(pool.map(target_job, *zip(*args)), 1):

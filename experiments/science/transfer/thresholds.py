@@ -1,0 +1,146 @@
+"""The transfer study's threshold of each unseen arena: the greedy score a learning phase
+must reach there (``dfrl transfer-study``).
+
+One threshold for every arena is too coarse: a score that a robot from any trained table
+holds from the start in one arena (h1: open, thin pillars) may be beyond what a robot learns
+in another (h2: a loop corridor) within the learning phase. So, unless given, an arena's
+threshold is derived from that arena alone, with runs of their own that take no part in the
+comparison:
+
+* **reference runs**: ``runs`` robots learn the arena from zeros (Q-learning, the default
+  configuration) for ``iterations`` steps, robot k with the training seed 70,000 + k;
+* each run's **level** is the mean of its greedy score (the study's evaluation:
+  ``eval_steps`` steps in episodes of ``episode_steps``, evaluation seed 75,000 + k) at the
+  five points N/2, 5N/8, 3N/4, 7N/8 and N (N = ``iterations``): the score jumps between
+  evaluations, its mean over the second half of the run is what the robot learnt;
+* the arena's **reference level** is the mean of the runs' levels, and its **threshold**
+  ``fraction`` x the reference level (default 0.75: three quarters of what a robot that
+  learnt the arena itself for N steps holds).
+
+Thresholds given explicitly (``--threshold X`` for every arena, ``--threshold h1=X``) are
+used as they are. The seeds are apart from the sources' (1,000 s + k), the learning phases'
+(90,000 + t) and their evaluations' (80,000 + t), so no source or phase shares a stream with
+a reference run.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from concurrent.futures import Executor
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from dfrl.experiments.science.studies.history import eval_job
+from dfrl.robots.training import Trainer, TrainerConfig
+
+#: Training seed of reference run k: REFERENCE_SEED_BASE + k; its evaluations: + 5,000.
+REFERENCE_SEED_BASE = 70_000
+REFERENCE_EVAL_OFFSET = 5_000
+#: The points of a reference run, as fractions of its steps, whose mean score is its level.
+LEVEL_POINTS = (4, 5, 6, 7, 8)     # eighths: N/2 .. N
+
+
+@dataclass(frozen=True)
+class Threshold:
+    """The threshold of one unseen arena and where it comes from.
+
+    Attributes
+    ----------
+    arena : str
+    value : float
+        The greedy score a learning phase in ``arena`` must reach.
+    given : bool
+        Set on the command line (then ``levels`` is empty).
+    fraction : float
+        ``value`` / reference level (derived thresholds).
+    levels : tuple of float
+        Each reference run's level (mean score over the points ``LEVEL_POINTS``).
+    iterations : int
+        Steps of each reference run.
+    """
+
+    arena: str
+    value: float
+    given: bool
+    fraction: float = float("nan")
+    levels: tuple[float, ...] = ()
+    iterations: int = 0
+
+    @property
+    def level(self) -> float:
+        """The reference level: the mean of the runs' levels (NaN when given)."""
+        return float(np.mean(self.levels)) if self.levels else float("nan")
+
+    def origin(self) -> str:
+        """How it was chosen, in words (the report's and the rows' ``threshold_from``)."""
+        if self.given:
+            return "given"
+        spread = ", ".join(f"{x:.3g}" for x in self.levels)
+        return (f"{self.fraction:g} x {self.level:.3g} (the mean level of {len(self.levels)} "
+                f"reference runs of {self.iterations} steps from zeros in {self.arena}: "
+                f"{spread})")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"arena": self.arena, "value": self.value, "given": self.given,
+                "fraction": None if self.given else self.fraction,
+                "levels": list(self.levels), "iterations": self.iterations,
+                "from": self.origin()}
+
+
+def threshold_from(arena: str, levels: Sequence[float], fraction: float,
+                   iterations: int) -> Threshold:
+    """The derived threshold: ``fraction`` x the mean of ``levels``.
+
+    Raises
+    ------
+    ValueError
+        No level, a level that is not finite, or ``fraction`` outside (0, 1].
+    """
+    if not levels or not all(np.isfinite(levels)):
+        raise ValueError(f"{arena}: reference levels must be finite and at least one, "
+                         f"got {list(levels)}")
+    if not 0.0 < fraction <= 1.0:
+        raise ValueError(f"threshold fraction must be in (0, 1], got {fraction}")
+    level = float(np.mean(levels))
+    return Threshold(arena, fraction * level, False, fraction, tuple(float(x) for x in levels),
+                     iterations)
+
+
+def level_points(iterations: int) -> list[int]:
+    """The steps of a reference run at which its score is taken: N/2, 5N/8, ..., N."""
+    return sorted({max(1, iterations * k // 8) for k in LEVEL_POINTS})
+
+
+def reference_job(arena: str, k: int, iterations: int, eval_steps: int,
+                  episode_steps: int) -> float:
+    """One reference run's level (a worker job): a robot learns ``arena`` from zeros for
+    ``iterations`` steps; the mean of its greedy score at :func:`level_points`."""
+    points = level_points(iterations)
+    scores = []
+    with Trainer(TrainerConfig(arena=arena, seed=REFERENCE_SEED_BASE + k,
+                               iterations=iterations)) as t:
+        for point in points:
+            while t.iteration < point:
+                t.step()
+            ev = eval_job(TrainerConfig().to_dict(), t.q_table.copy(), arena, eval_steps,
+                          episode_steps, REFERENCE_SEED_BASE + REFERENCE_EVAL_OFFSET + k)
+            scores.append(float(ev["score"]))
+    return float(np.mean(scores))
+
+
+def thresholds_for(targets: Sequence[str], given: dict[str, float], fraction: float,
+                     iterations: int, runs: int, eval_steps: int, episode_steps: int,
+                     pool: Executor) -> dict[str, Threshold]:
+    """Every target arena's threshold: ``given[arena]`` when set, else derived from
+    ``runs`` reference runs of ``iterations`` steps run on ``pool``."""
+    out = {a: Threshold(a, float(given[a]), True) for a in targets if a in given}
+    todo = [a for a in targets if a not in given]
+    jobs = [(a, k) for a in todo for k in range(1, runs + 1)]
+    levels = list(pool.map(reference_job, [a for a, _ in jobs], [k for _, k in jobs],
+                           [iterations] * len(jobs), [eval_steps] * len(jobs),
+                           [episode_steps] * len(jobs)))
+    for a in todo:
+        mine = [lv for (arena, _), lv in zip(jobs, levels) if arena == a]
+        out[a] = threshold_from(a, mine, fraction, iterations)
+    return {a: out[a] for a in targets}
