@@ -41,8 +41,11 @@ import time
 from pathlib import Path
 from typing import Any
 
-__all__ = ["ClusterTaskError", "serve_robot", "LISTENING"]
+__all__ = ["ClusterTaskError", "serve_robot", "LISTENING", "TLS_FOLDER"]
 
+#: A TLS run's node folder on every worker's host, beside ``dfrl.token`` (``ca.crt``,
+#: ``node.crt``, ``node.key``, as ``dfrl certs node`` makes it).
+TLS_FOLDER = "dfrl-tls"
 #: The service's line that gives its address.
 LISTENING = re.compile(r"dfrl robot listening on (\S+):(\d+)")
 #: Seconds the service gets to say it listens, and to end once told to stop.
@@ -68,11 +71,13 @@ def _die_with_parent() -> None:
         pass    # not Linux: the service outlives a killed worker until its run ends
 
 
-def service_argv(host: str, token_file: Path, workdir: Path) -> list[str]:
+def service_argv(host: str, token_file: Path, workdir: Path,
+                 tls: Path | None = None) -> list[str]:
     """The ``dfrl robot`` command the task runs (the same as a hand-started robot host's,
-    on a port the OS chooses)."""
+    on a port the OS chooses; with ``--tls`` when the run uses TLS)."""
     return [sys.executable, "-m", "dfrl", "robot", "--host", "0.0.0.0", "--port", "0",
-            "--advertise", host, "--token-file", str(token_file), "--workdir", str(workdir)]
+            "--advertise", host, "--token-file", str(token_file), "--workdir", str(workdir),
+            *(["--tls", str(tls)] if tls is not None else [])]
 
 
 def _await_listening(proc: subprocess.Popen, out: Path, where: str) -> tuple[str, int]:
@@ -104,7 +109,8 @@ def _end(proc: subprocess.Popen) -> int | None:
 
 
 def serve_robot(run_key: str, robot: str, token_file: str = "dfrl.token",
-                workdir: str = "dfrl-robot", lease_s: float = 60.0) -> dict[str, Any]:
+                workdir: str = "dfrl-robot", lease_s: float = 60.0,
+                tls: bool = False) -> dict[str, Any]:
     """Run one robot's ``dfrl robot`` service on this worker for one run (see the module doc).
 
     Parameters
@@ -119,6 +125,9 @@ def serve_robot(run_key: str, robot: str, token_file: str = "dfrl.token",
         The robot services' folder on the worker's host.
     lease_s : float
         Seconds without a renewal of the driver's lease after which the task ends.
+    tls : bool
+        The run uses TLS: the service starts with the node folder :data:`TLS_FOLDER` of the
+        worker's working folder.
 
     Returns
     -------
@@ -130,7 +139,8 @@ def serve_robot(run_key: str, robot: str, token_file: str = "dfrl.token",
     Raises
     ------
     ClusterTaskError
-        No token file, or the service did not start (its stderr's tail given).
+        No token file, no TLS folder in a TLS run, or the service did not start (its
+        stderr's tail given).
     """
     from distributed import Event, Variable, get_worker
     from distributed.comm import get_address_host
@@ -148,6 +158,12 @@ def serve_robot(run_key: str, robot: str, token_file: str = "dfrl.token",
     if not token.is_file():
         raise ClusterTaskError(f"{where}: no token file {token} (copy the run's token file "
                                f"into the folder the worker was started from)")
+    tls_dir = Path(TLS_FOLDER).resolve() if tls else None
+    if tls_dir is not None and not all((tls_dir / f).is_file()
+                                       for f in ("ca.crt", "node.crt", "node.key")):
+        raise ClusterTaskError(f"{where}: the run uses TLS but {tls_dir} is not a node TLS "
+                               f"folder (ca.crt, node.crt, node.key: copy the folder "
+                               f"'dfrl certs node' made for this host there)")
     folder = (Path(workdir) / robot).resolve()
     folder.mkdir(parents=True, exist_ok=True)
     out = folder / "service.out"
@@ -157,9 +173,9 @@ def serve_robot(run_key: str, robot: str, token_file: str = "dfrl.token",
                     "ended": "not started: the run ended before"}
         with open(out, "w", encoding="utf-8") as out_fh, \
                 open(out.with_suffix(".err"), "w", encoding="utf-8") as err_fh:
-            proc = subprocess.Popen(service_argv(host, token, folder), stdin=subprocess.DEVNULL,
-                                    stdout=out_fh, stderr=err_fh, cwd=folder,
-                                    preexec_fn=_die_with_parent if os.name == "posix" else None)
+            proc = subprocess.Popen(service_argv(host, token, folder, tls_dir),
+                                    stdin=subprocess.DEVNULL, stdout=out_fh, stderr=err_fh,
+                                    cwd=folder, preexec_fn=_die_with_parent if os.name == "posix" else None)
         try:
             address = _await_listening(proc, out, where)
         except BaseException:

@@ -75,15 +75,19 @@ class ClusterPlacement:
         Amount of :data:`RESOURCE` each robot asks for.
     say : callable
         Where notices go (one line each).
+    tls : bool
+        The run uses TLS: each service starts with its worker's node TLS folder
+        (:data:`~dfrl.experiments.robot_host.cluster_task.TLS_FOLDER`).
     """
 
     def __init__(self, address: str, cpus: float = 1.0,
-                 say: Callable[[str], None] = lambda line: None) -> None:
+                 say: Callable[[str], None] = lambda line: None, tls: bool = False) -> None:
         if cpus <= 0:
             raise ExperimentError(f"--cluster-cpus must be > 0, got {cpus}")
         self.address = address
         self.cpus = float(cpus)
         self.run_key = uuid.uuid4().hex[:12]
+        self.tls = tls
         self._say = say
         self._client: Any = None
         self._futures: dict[str, Any] = {}
@@ -160,7 +164,8 @@ class ClusterPlacement:
         self._lease.set(0)          # before any task looks at it
         for rid in robots:
             self._futures[rid] = self._client.submit(
-                serve_robot, self.run_key, rid, lease_s=LEASE_S, key=f"dfrl-{self.run_key}-{rid}",
+                serve_robot, self.run_key, rid, lease_s=LEASE_S, tls=self.tls,
+                key=f"dfrl-{self.run_key}-{rid}",
                 resources={RESOURCE: self.cpus}, pure=False, retries=0)
         self._start_watch()
         waiting = {rid: Event(f"dfrl-{self.run_key}-{rid}-listening", client=self._client)
@@ -299,9 +304,6 @@ def run_on_cluster(config: ExperimentConfig, output_dir: str | Path | ClaimedFol
     if config.token is None:
         raise ExperimentError("--cluster: the robots' services prove the token of dfrl.token "
                               "on their workers: give the same one (--token-file dfrl.token)")
-    if tls is not None:
-        raise ExperimentError("--cluster with --tls is not supported yet: the placed services "
-                              "run without TLS")
 
     def say(line: str) -> None:
         if progress is not None:
@@ -309,13 +311,13 @@ def run_on_cluster(config: ExperimentConfig, output_dir: str | Path | ClaimedFol
 
     local = [r.id for r in config.robots if r.robot_host is None]
     t0 = time.monotonic()
-    placement = ClusterPlacement(address, cpus, say).open()
+    placement = ClusterPlacement(address, cpus, say, tls=tls is not None).open()
     try:
         placed = placement.place(local)
         say(f"cluster {address}: placed " + ", ".join(
             f"{p.robot}@{p.host}:{p.port}" for p in placed.values())
             + f" in {time.monotonic() - t0:.1f} s")
-        results = run(placed_config(config, placed), output_dir, progress, force)
+        results = run(placed_config(config, placed), output_dir, progress, force, tls=tls)
     finally:
         t1 = time.monotonic()
         placement.release()
