@@ -255,13 +255,22 @@ def add_scale_arguments(parser: argparse.ArgumentParser) -> None:
                         help="iterations per robot (default: 2000)")
     parser.add_argument("--respite", type=int, default=500,
                         help="iterations between shares (default: 500)")
+    parser.add_argument("--itinerary", nargs="+", choices=["chain", "tree"], default=["chain"],
+                        help="itineraries to run at each robot count (default: chain)")
+    parser.add_argument("--fanout", type=int, default=2,
+                        help="children per stop of a tree itinerary (default: 2)")
+    parser.add_argument("--delay-ms", type=float, nargs="+", default=[0.0],
+                        help="one-way delays on every link between the robots' nodes, each "
+                             "run at every count (a proxy per node; default: 0)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def cmd_scale(args: argparse.Namespace) -> int:
     """Exit 0 only if every point ran all its rounds with identical tables."""
     try:
-        r = scale.bench(args.robots, args.iterations, args.respite)
+        r = scale.bench(args.robots, args.iterations, args.respite,
+                        itineraries=tuple(args.itinerary), fanout=args.fanout,
+                        delays_ms=tuple(args.delay_ms))
     except (ValueError, RuntimeError) as exc:
         print(f"dfrl bench scale: {exc}", file=sys.stderr)
         return 1
@@ -269,10 +278,14 @@ def cmd_scale(args: argparse.Namespace) -> int:
         print(json.dumps(r))
     else:
         for p in r["points"]:
-            print(f"{p['robots']:3d} robots: wall {p['wall_s']:7.1f} s, round median "
+            print(f"{p['robots']:3d} robots, {p['itinerary']:5s} delay {p['delay_ms']:g} ms: "
+                  f"wall {p['wall_s']:7.1f} s, round median "
                   f"{p['round_median_ms']:8.1f} ms, RSS per robot median {p['rss_median_mb']:6.1f} "
                   f"MB (max {p['rss_max_mb']:.1f}), rounds with identical tables "
                   f"{p['rounds_all_equal']}/{p['rounds_planned']}")
+        for c in r["compare"]:
+            print(f"{c['robots']:3d} robots, delay {c['delay_ms']:g} ms: tree/chain round "
+                  f"{c['tree_over_chain']:.3f} ({c['tree_ms']:.0f} / {c['chain_ms']:.0f} ms)")
     ok = all(p["ok"] and p["rounds_all_equal"] == p["rounds_planned"] for p in r["points"])
     return 0 if ok else 1
 

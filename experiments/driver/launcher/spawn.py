@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable
+from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +20,14 @@ from dfrl.experiments.driver.launcher.robots import Robot
 from dfrl.experiments.driver.results.files import write_json
 from dfrl.experiments.robot_host.config import Mode, RobotConfig
 from dfrl.robots.learners import learner_kind
+
+
+#: How the agents reach a robot's platform node: (robot id, its node's (host, port)) -> the
+#: (host, port) written into the itinerary. None (the default): the node's own address. A
+#: benchmark sets it (in the thread that runs the launcher) to put a delaying proxy in front of
+#: every node (``dfrl bench scale --delay-ms``).
+STOP_ROUTE: ContextVar[Callable[[str, tuple[str, int]], tuple[str, int]] | None] = \
+    ContextVar("stop_route", default=None)
 
 
 @dataclass(frozen=True)
@@ -169,12 +179,14 @@ def launch_agents(site: Site, robots: RobotRoster, agents: AgentRoster,
         An agent could not be launched.
     """
     c = site.config
+    route = STOP_ROUTE.get()
     for algo, algos in c.agent_groups():
         stops = []
         for rid, robot in robots.robots().items():
             address = robot.status().address
             if robot.spec.algo in algos and address is not None:
-                stops.append({"host": address[0], "port": address[1], "robot": rid})
+                host, port = route(rid, tuple(address)) if route is not None else address
+                stops.append({"host": host, "port": port, "robot": rid})
         if not stops:
             continue      # only joiners use it: nobody to start with
         name = agent_name(algo)
