@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 from pathlib import Path
 from typing import Any
@@ -44,6 +45,10 @@ def _text(f: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _terminated(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
 def cmd(args: argparse.Namespace) -> int:
     from dfrl.experiments.tools.bench import faults
     from dfrl.experiments.tools.netns import unavailable
@@ -54,6 +59,11 @@ def cmd(args: argparse.Namespace) -> int:
               "runs each host in a Linux network namespace; run it as root)", file=sys.stderr)
         return 2
 
+    # Ctrl-C and a kill (SIGTERM) end the benchmark through its cleanup (every lab's processes
+    # killed, its namespaces deleted), also where the shell started it with SIGINT ignored
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, _terminated)
+
     def show(f: dict[str, Any]) -> None:
         print(json.dumps(f) if args.json else _text(f), flush=True)
 
@@ -62,4 +72,8 @@ def cmd(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"dfrl bench faults: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("dfrl bench faults: interrupted; its hosts were stopped and their namespaces "
+              "removed", file=sys.stderr)
+        return 130
     return 0 if all(f["passed"] for f in done) else 1
