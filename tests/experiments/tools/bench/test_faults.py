@@ -73,6 +73,46 @@ def test_a_robot_host_killed_mid_hop_is_measured_and_judged(tmp_path: Path) -> N
     assert unmet == ["r2 was not visited again after its absence"], unmet
 
 
+def _row(n: int, end: float, visited: str, digests: dict[str, str], error: str = "") -> dict:
+    return {"round": str(n), "end": str(end), "visited": visited, "error": error,
+            "all_equal": "true" if len(set(digests.values())) == 1 else "false",
+            **{f"digest_{r}": digests.get(r, "") for r in ("r1", "r2", "r3")}}
+
+
+def test_measure_on_hand_made_rounds() -> None:
+    # Prepare: 5 planned rounds; the fault at t=102.5; r2 absent from rounds 3 and 4, back in
+    # 5; round 2's r3 share not on record; round 4 a failed method (no table)
+    rows = [_row(1, 101.0, "r1 r2 r3", {"r1": "a", "r2": "a", "r3": "a"}),
+            _row(2, 102.0, "r1 r2 r3", {"r1": "b", "r2": "b", "r3": "missing"}),
+            _row(3, 106.0, "r1 r3", {"r1": "c", "r3": "c"}),
+            _row(4, 107.0, "r1 r3", {}, error="aggregate_step(failing) failed"),
+            _row(5, 108.0, "r1 r2 r3", {"r1": "d", "r2": "d", "r3": "d"})]
+    honest = ("## Faults: federation INCOMPLETE\n- METHOD FAILED in 1 round(s)\n"
+              "- MISSED rounds: r2 missed 2 round(s)\n")
+    # Execute
+    m = faults.measure(rows, honest, 1, 102.5, 100.0, ["r1", "r2", "r3"], 5, "r2")
+    # Assert: hand-computed figures
+    assert (m["fault_at_s"], m["recovery_s"], m["longest_stall_s"]) == (2.5, 3.5, 4.0)
+    assert m["normal_gap_s"] == 1.0
+    assert (m["rounds_done"], m["rounds_planned"], m["rounds_failed"]) == (4, 5, 1)
+    assert m["tables_identical"] and m["rounds_unverified"] == 1
+    assert m["absent"] == {"r2": 1} and m["rejoined"] is True
+    assert m["truthful"], m["truth_problems"]
+    assert faults.judge(m, Expectation(max_rounds_lost=1, rejoin=True, method_failed=True)) == []
+    # controls: differing tables, a verdict that hides the fault, an unreported failed method
+    rows[4]["digest_r3"] = "e"
+    differ = faults.measure(rows, honest, 1, 102.5, 100.0, ["r1", "r2", "r3"], 5, "r2")
+    assert not differ["tables_identical"]
+    assert "a completed round left differing tables" in faults.judge(differ, Expectation(
+        max_rounds_lost=1))
+    hidden = faults.measure(rows, "## Faults: federation complete\n", 0, 102.5, 100.0,
+                            ["r1", "r2", "r3"], 5, "r2")
+    assert len(hidden["truth_problems"]) == 4, hidden["truth_problems"]
+    assert faults.judge(hidden, Expectation(stall_bound_s=3.0, max_rounds_lost=1))[:2] == [
+        "4.0 s between two completed rounds (bound 3 s)", "a completed round left differing "
+        "tables"]
+
+
 def test_bad_requests_are_refused_before_any_host_starts(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="unknown fault.*nope.*known: restart_robot"):
         faults.run(["nope"], keep=tmp_path)
