@@ -6,9 +6,9 @@
             tree_subtree/4,             % +Position, +Fanout, +Size, -Positions
             dfrl_tree_msg/3             % +Platform, +Link, +Message (event)
           ]).
-:- use_module('../tartarus', [current_node/1, node_property/2, purge_agent/1,
+:- use_module('../tartarus', [current_node/1, node_property/2, purge_agent/1, with_node/2,
                               platform_event/1, remote_agents/3]).
-:- use_module('../migration', [agent_clone/4]).
+:- use_module('../migration', [agent_clone/4, agent_move/3]).
 :- use_module('../messages', [agent_post/6]).
 :- use_module(dfrl_lease, [lease_custody/3]).
 :- use_module(dfrl_round_state, [skip_robot/4, add_retries/3]).
@@ -20,8 +20,10 @@
 :- use_module('../platform_errors', [message_text/2]).
 :- autoload(library(lists), [nth0/3, append/3, member/2, memberchk/2,
                              numlist/3, subtract/3]).
-:- autoload(library(apply), [foldl/4, maplist/3, include/3]).
+:- autoload(library(apply), [foldl/4, maplist/3, include/3, exclude/3]).
 :- autoload(library(debug), [debug/3]).
+:- autoload(library(pairs), [pairs_keys/2]).
+:- autoload(library(thread), [concurrent_maplist/3]).
 
 /** <module> The tree itinerary of the dFRL agent: a round by clones
 
@@ -82,7 +84,7 @@ dfrl_tree_msg(platform, _Link, msg(Key, Body)) :-
     string(Key),
     ground(Body),
     functor(Body, F, _),
-    memberchk(F, [up, down, done]),
+    memberchk(F, [up, down, done]),          % moved, failed: only from this node
     !,
     current_node(Node),
     assertz(box(Node, Key, Body)).
@@ -105,7 +107,13 @@ tree_children(P, K, N, Cs) :-
 
 tree_subtree(P, K, N, [P|Below]) :-
     tree_children(P, K, N, Cs),
-    foldl([C, B0, B]>>( tree_subtree(C, K, N, Sub), append(B0, Sub, B) ), Cs, [], Below).
+    subtrees(Cs, K, N, Below).
+
+subtrees([], _, _, []).
+subtrees([C|Cs], K, N, Positions) :-
+    tree_subtree(C, K, N, Sub),
+    subtrees(Cs, K, N, Rest),
+    append(Sub, Rest, Positions).
 
 		 /*******************************
 		 *             ROOT		*
@@ -217,8 +225,13 @@ tree_clone_role(M, Agent, Role) :-
 %!  tree_clone_run(+Module, +Agent, +Role) is det.
 %
 %   Run the clone Agent's part of the round, Role role(Ctx, Position,
-%   Parent, ParentName), and purge it.
+%   Parent, ParentName), and purge it; or, with Role role(..., go(Address)),
+%   first move it to its stop at Address.
 
+tree_clone_run(M, Agent, Role) :-
+    Role = role(_, _, _, _, go(_)),
+    !,
+    go_to_stop(M, Agent, Role).
 tree_clone_run(M, Agent, role(Ctx, P, Parent, ParentName)) :-
     Ctx = ctx(Key, _, _, info(_, _, _, _, _, _, SkipAfter, _)),
     current_node(Node),
@@ -229,7 +242,7 @@ tree_clone_run(M, Agent, role(Ctx, P, Parent, ParentName)) :-
 clone_part(M, Agent, Ctx, P, Parent, ParentName, SkipAfter, Node) :-
     Ctx = ctx(Key, _, _, _),
     out_pass(M, Agent, Ctx, P, out(Items, Skips, Stats0, Kids)),
-    foldl([_-_-Item, B0, B]>>( item_bytes(Item, IB), B is B0 + IB ), Items, 0, Bytes),
+    foldl(add_item_bytes, Items, 0, Bytes),
     add_stats(Stats0, stats(0, Bytes, 0), Stats),
     (   post(Parent, Key, up(P, Items, Skips, Stats), SkipAfter)
     ->  (   await(Node, Ctx, down, [kid(P, Parent, ParentName)], [Msg], _)
@@ -274,55 +287,124 @@ out_pass(M, Self, Ctx, P, out(Items, Skips, Stats, Kids)) :-
     subtract(Kids0, Lost, Kids),
     lost_skips(Lost, Ctx, "lost before it sent its subtree up", LostSkips),
     foldl(take_up, Msgs, Own-Stats0, Items-Stats),
-    maplist([up(_, _, S, _), S]>>true, Msgs, SkipLists),
+    maplist(arg(3), Msgs, SkipLists),
     append([Skips0, OwnSkips, LostSkips|SkipLists], Skips).
+
+add_item_bytes(_-_-Item, B0, B) :-
+    item_bytes(Item, IB),
+    B is B0 + IB.
 
 take_up(up(_, Items, _, St), Items0-St0, Items1-St1) :-
     append(Items0, Items, Items1),
     add_stats(St0, St, St1).
 
-%   Clone to each child in turn; a child that cannot be cloned is
-%   skipped and its children cloned instead.
-spawn([], _, _, _, _, Kids, Kids, Skips, Skips, St, St).
-spawn([C|Cs], M, Self, Ctx, P, Kids0, Kids, Skips0, Skips, St0, St) :-
-    Ctx = ctx(_, Order, K, info(_, _, _, _, _, _, SkipAfter, retry(Tries, Backoff))),
-    nth0(C, Order, _-stop(H, Port, Robot)),
+%   Send a copy to each child's stop, all at once: a copy is cloned on
+%   this node (no network), with its role and the stop to go to, and moves
+%   itself there in its own thread; each says here whether it got there
+%   (moved/failed). A child that cannot be reached is skipped and its
+%   children are sent copies instead.
+spawn([], _, _, _, _, Kids, Kids, Skips, Skips, St, St) :- !.
+spawn(Cs, M, Self, Ctx, P, Kids0, Kids, Skips0, Skips, St0, St) :-
+    Ctx = ctx(Key, Order, K, info(_, _, _, _, _, _, SkipAfter, _)),
     nth0(P, Order, _-stop(PH, PP, _)),
     atom_string(Self, SelfName),
-    Role = role(Ctx, C, PH:PP, SelfName),
+    current_node(Node),
+    node_property(Node, address(Here)),
+    foldl(local_copy(M, Self, Ctx, Here, PH:PP, SelfName), Cs, [], Copies),
+    get_time(T0),
+    Deadline is T0 + SkipAfter + 2,
+    maplist(waiting, Copies, Waiting),
+    await_moves(Node, Key, Waiting, Deadline, Outcomes),
+    length(Order, N),
+    foldl(outcome(Ctx, N, K, Copies), Outcomes,
+          t(Kids0, Skips0, St0, []), t(Kids1, Skips1, St1, Adopted)),
+    spawn(Adopted, M, Self, Ctx, P, Kids1, Kids, Skips1, Skips, St1, St).
+
+waiting(C-_, kid(C, none, none)).
+
+%   A copy of Self on this node with the role of child C (go(Address):
+%   it moves itself to C's stop first); failed(C, Text, 0) if it cannot
+%   even be made.
+local_copy(M, Self, Ctx, Here, Parent, SelfName, C, Copies0, Copies) :-
+    Ctx = ctx(Key, Order, _, _),
+    nth0(C, Order, _-stop(H, Port, _)),
+    Role = role(Ctx, C, Parent, SelfName, go(H:Port)),
+    setup_call_cleanup(assertz(M:dfrl_tree_role(Self, Role)),
+                       once(catch(agent_clone(Self, Here, Copy, []), E, true)),
+                       retractall(M:dfrl_tree_role(Self, _))),
+    (   var(E)
+    ->  append(Copies0, [C-Copy], Copies)
+    ;   message_text(E, Text),
+        current_node(Node),
+        assertz(box(Node, Key, failed(C, Text, 0))),
+        append(Copies0, [C-none], Copies)
+    ).
+
+await_moves(_, _, [], _, []) :- !.
+await_moves(Node, Key, Waiting, Deadline, Outcomes) :-
+    (   poll_any(Node, Key, [moved, failed], Waiting, Deadline, Msg)
+    ->  arg(1, Msg, C),
+        exclude(kid_at(C), Waiting, Waiting1),
+        Outcomes = [Msg|Msgs],
+        await_moves(Node, Key, Waiting1, Deadline, Msgs)
+    ;   findall(failed(C, "its copy neither moved nor failed in time", 0),
+                member(kid(C, _, _), Waiting), Outcomes)
+    ).
+
+poll_any(Node, Key, Kinds, Peers, Deadline, Msg) :-
+    (   member(Kind, Kinds),
+        take_msg(Node, Key, Kind, Peers, Msg)
+    ->  true
+    ;   get_time(Now),
+        Now < Deadline
+    ->  sleep(0.005),
+        poll_any(Node, Key, Kinds, Peers, Deadline, Msg)
+    ).
+
+outcome(Ctx, _, _, Copies, moved(C, R), t(Kids0, Sk, St0, Ad), t(Kids, Sk, St, Ad)) :-
+    Ctx = ctx(_, Order, _, _),
+    nth0(C, Order, _-stop(H, Port, _)),
+    memberchk(C-Copy, Copies),
+    append(Kids0, [kid(C, H:Port, Copy)], Kids),
+    add_stats(St0, stats(1, 0, R), St).
+outcome(Ctx, N, K, _, failed(C, Text0, R), t(Kids, Sk0, St0, Ad0), t(Kids, Sk, St, Ad)) :-
+    Ctx = ctx(_, Order, _, info(_, _, _, _, _, _, SkipAfter, _)),
+    nth0(C, Order, _-stop(H, Port, Robot)),
+    format(string(Text), "~w (a tree clone; skip_after ~w s)", [Text0, SkipAfter]),
+    print_message(warning, format("dfrl: skipping stop ~w:~w: ~w", [H, Port, Text])),
+    append(Sk0, [skip(Robot, Text)], Sk),
+    add_stats(St0, stats(0, 0, R), St),
+    tree_children(C, K, N, Grand),
+    append(Ad0, Grand, Ad).
+
+%   The copy's move to its stop (role go(Address)), with the agent's
+%   retries within its skip time; the outcome is left on this node for
+%   the parent.
+go_to_stop(M, Self, role(Ctx, C, Parent, ParentName, go(Address))) :-
+    Ctx = ctx(Key, _, _, info(_, _, _, _, _, _, SkipAfter, retry(Tries, Backoff))),
+    current_node(Node),
+    assertz(M:dfrl_tree_role(Self, role(Ctx, C, Parent, ParentName))),
     get_time(T0),
     Deadline is T0 + SkipAfter,
-    attempt_clone(M, Self, Role, H:Port, Tries, Backoff, Deadline, 0, Result),
-    (   Result = cloned(Clone, R)
-    ->  add_stats(St0, stats(1, 0, R), St1),
-        append(Kids0, [kid(C, H:Port, Clone)], Kids1),
-        Skips1 = Skips0,
-        Cs1 = Cs
+    attempt_move(Self, Address, Tries, Backoff, Deadline, 0, Result),
+    debug(dfrl(tree), '~w to ~w: ~p', [Self, Address, Result]),
+    (   Result = moved(R)
+    ->  assertz(box(Node, Key, moved(C, R)))
     ;   Result = failed(E, R),
         get_time(T1),
         Waited is T1 - T0,
         message_text(E, Text0),
-        format(string(Text), "~w (clone skipped after ~2f s; skip_after ~w s)",
-               [Text0, Waited, SkipAfter]),
-        print_message(warning, format("dfrl: skipping stop ~w:~w: ~w", [H, Port, Text])),
-        add_stats(St0, stats(0, 0, R), St1),
-        Kids1 = Kids0,
-        append(Skips0, [skip(Robot, Text)], Skips1),
-        length(Order, N),
-        tree_children(C, K, N, Grand),
-        append(Cs, Grand, Cs1)
-    ),
-    spawn(Cs1, M, Self, Ctx, P, Kids1, Kids, Skips1, Skips, St1, St).
+        format(string(Text), "~w (skipped after ~2f s)", [Text0, Waited]),
+        assertz(box(Node, Key, failed(C, Text, R))),
+        catch(purge_agent(Self), _, true)
+    ).
 
-attempt_clone(M, Self, Role, Address, Tries, Backoff, Deadline, R, Result) :-
+attempt_move(Self, Address, Tries, Backoff, Deadline, R, Result) :-
     get_time(Now),
     Left is max(0.1, Deadline - Now),
-    Options = [connect_timeout(Left), reply_timeout(Left)],
-    setup_call_cleanup(assertz(M:dfrl_tree_role(Self, Role)),
-                       catch(agent_clone(Self, Address, Clone, Options), E, true),
-                       retractall(M:dfrl_tree_role(Self, _))),
+    catch(agent_move(Self, Address, [connect_timeout(Left), reply_timeout(Left)]), E, true),
     (   var(E)
-    ->  Result = cloned(Clone, R)
+    ->  Result = moved(R)
     ;   R < Tries,
         \+ E = error(permission_error(_, _, _), _),
         Wait is Backoff * 2**R,
@@ -330,7 +412,7 @@ attempt_clone(M, Self, Role, Address, Tries, Backoff, Deadline, R, Result) :-
         Now1 + Wait < Deadline
     ->  sleep(Wait),
         R1 is R + 1,
-        attempt_clone(M, Self, Role, Address, Tries, Backoff, Deadline, R1, Result)
+        attempt_move(Self, Address, Tries, Backoff, Deadline, R1, Result)
     ;   Result = failed(E, R)
     ).
 
@@ -354,7 +436,11 @@ write_own(ctx(_, _, _, Info), Robot, Final, Skips) :-
 down_pass(Ctx, P, Final, Kids, Skips, Stats) :-
     Ctx = ctx(Key, Order, _, info(_, _, _, _, _, _, SkipAfter, _)),
     item_bytes(Final, FB),
-    foldl(send_down(Key, Final, SkipAfter), Kids, []-0, Failed-Sent),
+    current_node(Node),
+    concurrent_maplist(send_down(Node, Key, Final, SkipAfter), Kids, Sent0),
+    include(not_sent, Sent0, FailedPairs),
+    pairs_keys(FailedPairs, Failed),
+    length(Kids, NK), length(Failed, NF), Sent is NK - NF,
     nth0(P, Order, _-stop(_, _, Robot)),
     write_own(Ctx, Robot, Final, OwnSkips),
     subtract(Kids, Failed, Reached),
@@ -362,17 +448,22 @@ down_pass(Ctx, P, Final, Kids, Skips, Stats) :-
     await(Node, Ctx, done, Reached, Msgs, Lost),
     append(Failed, Lost, Gone),
     lost_skips(Gone, Ctx, "lost before it reported its writes", LostSkips),
-    foldl([done(_, S, St), S0-T0, S1-T1]>>( append(S0, S, S1), add_stats(T0, St, T1) ),
-          Msgs, []-stats(0, 0, 0), DoneSkips-Stats0),
+    foldl(take_done, Msgs, []-stats(0, 0, 0), DoneSkips-Stats0),
     Bytes is FB * Sent,
     add_stats(Stats0, stats(0, Bytes, 0), Stats),
     append([OwnSkips, LostSkips, DoneSkips], Skips).
 
-send_down(Key, Final, SkipAfter, Kid, F0-N0, F-N) :-
+not_sent(_-false).
+
+take_done(done(_, S, St), S0-T0, S1-T1) :-
+    append(S0, S, S1),
+    add_stats(T0, St, T1).
+
+send_down(Node, Key, Final, SkipAfter, Kid, Kid-Sent) :-
     Kid = kid(C, Address, _),
-    (   post(Address, Key, down(C, Final), SkipAfter)
-    ->  F = F0, N is N0 + 1
-    ;   F = [Kid|F0], N = N0
+    (   with_node(Node, post(Address, Key, down(C, Final), SkipAfter))
+    ->  Sent = true
+    ;   Sent = false
     ).
 
 lost_skips(Lost, ctx(_, Order, K, _), Why, Skips) :-
@@ -419,7 +510,7 @@ await_loop(Node, Ctx, Kind, Peers, Limit, Msgs0, Msgs, Lost0, Lost) :-
     Deadline is min(Limit, Now + SkipAfter),
     (   poll_msg(Node, Key, Kind, Peers, Deadline, Msg)
     ->  arg(1, Msg, C),
-        include([kid(X, _, _)]>>(X \== C), Peers, Peers1),
+        exclude(kid_at(C), Peers, Peers1),
         await_loop(Node, Ctx, Kind, Peers1, Limit, [Msg|Msgs0], Msgs, Lost0, Lost)
     ;   get_time(Now1),
         Now1 >= Limit
@@ -429,6 +520,8 @@ await_loop(Node, Ctx, Kind, Peers, Limit, Msgs0, Msgs, Lost0, Lost) :-
         append(Lost0, Gone, Lost1),
         await_loop(Node, Ctx, Kind, Peers1, Limit, Msgs0, Msgs, Lost1, Lost)
     ).
+
+kid_at(C, kid(C, _, _)).
 
 %   The message, as soon as it is there (looked for every 5 ms), or
 %   failure at Deadline.
