@@ -147,7 +147,10 @@ class ClusterPlacement:
         changed = time.monotonic()
         while True:
             offered = self.offered()
-            fits = sum(int(a // self.cpus) for a in offered.values())
+            used: dict[str, float] = {}
+            for p in self.placements().values():
+                used[p.worker] = used.get(p.worker, 0.0) + self.cpus
+            fits = sum(int((a - used.get(w, 0.0)) // self.cpus) for w, a in offered.items())
             now = time.monotonic()
             if set(offered) != seen:
                 seen, changed = set(offered), now
@@ -157,17 +160,19 @@ class ClusterPlacement:
         if fits < len(robots):
             raise ExperimentError(
                 f"cluster {self.address}: {len(robots)} robots need {self.cpus:g} {RESOURCE} "
-                f"each, but its {len(offered)} workers fit only {fits} at once "
+                f"each, but its {len(offered)} workers fit only {fits} more at once "
                 f"({RESOURCE} offered: {', '.join(f'{w} {a:g}' for w, a in offered.items()) or 'none'}); "
                 f"start workers with --resources {RESOURCE}=N")
-        self._lease = Variable(f"dfrl-{self.run_key}-lease", client=self._client)
-        self._lease.set(0)          # before any task looks at it
+        if self._lease is None:
+            self._lease = Variable(f"dfrl-{self.run_key}-lease", client=self._client)
+            self._lease.set(0)          # before any task looks at it
         for rid in robots:
             self._futures[rid] = self._client.submit(
                 serve_robot, self.run_key, rid, lease_s=LEASE_S, tls=self.tls,
                 key=f"dfrl-{self.run_key}-{rid}",
                 resources={RESOURCE: self.cpus}, pure=False, retries=0)
-        self._start_watch()
+        if self._thread is None:
+            self._start_watch()
         waiting = {rid: Event(f"dfrl-{self.run_key}-{rid}-listening", client=self._client)
                    for rid in robots}
         moved = time.monotonic()           # the last time a robot reported
@@ -189,6 +194,19 @@ class ClusterPlacement:
                                       f"{self.address}: none reported for {PLACE_S:.0f} s")
             time.sleep(0.2)
         return self.placements()
+
+    def place_joiner(self, robot: str) -> str:
+        """Place one robot that joins the run; its service's ``host:port`` (its
+        ``robot_host``).
+
+        Raises
+        ------
+        ExperimentError
+            As :meth:`place` (a cluster that is full says so at once).
+        """
+        p = self.place([robot])[robot]
+        self._say(f"cluster {self.address}: placed {robot}@{p.host}:{p.port} (it joins)")
+        return f"{p.host}:{p.port}"
 
     @staticmethod
     def _why(future: Any) -> str:
@@ -317,7 +335,8 @@ def run_on_cluster(config: ExperimentConfig, output_dir: str | Path | ClaimedFol
         say(f"cluster {address}: placed " + ", ".join(
             f"{p.robot}@{p.host}:{p.port}" for p in placed.values())
             + f" in {time.monotonic() - t0:.1f} s")
-        results = run(placed_config(config, placed), output_dir, progress, force, tls=tls)
+        results = run(placed_config(config, placed), output_dir, progress, force, tls=tls,
+                      placer=placement.place_joiner)
     finally:
         t1 = time.monotonic()
         placement.release()

@@ -14,6 +14,7 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -41,13 +42,15 @@ class Launcher:
 
     def __init__(self, config: ExperimentConfig, output_dir: str | Path | ClaimedFolder,
                  progress: TextIO | None = sys.stderr, force: bool = False,
-                 tls: str | Path | None = None) -> None:
+                 tls: str | Path | None = None,
+                 placer: Callable[[str], str] | None = None) -> None:
         self._claimed = isinstance(output_dir, ClaimedFolder)
         path = output_dir.path if isinstance(output_dir, ClaimedFolder) else Path(output_dir)
         self._out = path.resolve()
         self._config = config
         self._force = force
         self._tls = Path(tls).resolve() if tls is not None else None
+        self._placer = placer
         self._reporter = Reporter(self._out, progress)
         self._robots = RobotRoster(self._out, self._reporter)
         self._agents = AgentRoster(self._reporter)
@@ -134,7 +137,8 @@ class Launcher:
                 if s.address is not None))
             launch_agents(site, self._robots, self._agents, self._reporter)
             monitor(c, self._robots, self._agents, Joins(site, self._robots, self._agents,
-                                                         self._reporter), self._reporter)
+                                                         self._reporter, self._placer),
+                    self._reporter)
         except KeyboardInterrupt as exc:
             ok = False
             self._interrupted = str(exc) or "KeyboardInterrupt"
@@ -180,7 +184,8 @@ def _interrupt(signum: int, frame: Any) -> None:
 
 def run(config: ExperimentConfig, output_dir: str | Path | ClaimedFolder,
         progress: TextIO | None = sys.stderr, force: bool = False,
-        tls: str | Path | None = None) -> Results:
+        tls: str | Path | None = None,
+        placer: Callable[[str], str] | None = None) -> Results:
     """Run a federated experiment on loopback and write its results folder.
 
     Keeps the run's token (the config's, or a new random one) in ``secret.token`` (mode
@@ -208,5 +213,9 @@ def run(config: ExperimentConfig, output_dir: str | Path | ClaimedFolder,
         console node and every robot process spawned here speak mutual TLS with it (one
         credential for all local processes); remote robots must run ``dfrl robot --tls``
         with a certificate of the same CA. None (default): plaintext.
+    placer : callable or None
+        Where a robot that joins without a ``robot_host`` runs: ``placer(robot)`` starts its
+        service elsewhere and returns its ``host:port`` (``dfrl run --cluster`` places it on
+        the cluster); None: a robot process spawned here.
     """
-    return Launcher(config, output_dir, progress, force, tls).run()
+    return Launcher(config, output_dir, progress, force, tls, placer).run()

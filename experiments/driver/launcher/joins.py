@@ -8,6 +8,8 @@ launcher's thread alone calls it.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -51,8 +53,9 @@ class Joins:
     """Joins of one run (see the module doc)."""
 
     def __init__(self, site: Site, robots: RobotRoster, agents: AgentRoster,
-                 reporter: Reporter) -> None:
+                 reporter: Reporter, placer: Callable[[str], str] | None = None) -> None:
         self._site = site
+        self._placer = placer                      # places a joiner elsewhere: its robot_host
         self._robots = robots
         self._agents = agents
         self._say = reporter.say
@@ -95,6 +98,9 @@ class Joins:
         self._handled.add(rid)
         robot = None
         try:
+            if self._placer is not None and spec.robot.robot_host is None:
+                spec = replace(spec, robot=replace(spec.robot,
+                                                   robot_host=self._placer(rid)))
             robot = start_robot(self._site, spec.robot, remaining, self._agents,
                                 joins=len(self._handled))
             self._robots.add(robot, joined=True)
