@@ -47,7 +47,7 @@ def test_a_worker_without_the_token_file_is_named(tmp_path: Path,
             with pytest.raises(ExperimentError) as err:
                 placement.place(["r1"])
             # control: the same cluster holds 2 robots of 1 CPU, not 3
-            with pytest.raises(ExperimentError, match="fit only 2 at once"):
+            with pytest.raises(ExperimentError, match="fit only 2 more at once"):
                 placement.place(["r1", "r2", "r3"])
         finally:
             placement.release()
