@@ -10,7 +10,7 @@ import math
 import sys
 from pathlib import Path
 
-from dfrl.experiments.cli.studies import add_seed_arguments, chosen_seeds
+from dfrl.experiments.cli.seeds import add_seed_arguments, chosen_seeds
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -30,7 +30,6 @@ jobs are cancelled); ``--skip-existing`` then reuses what finished.
 """
 from __future__ import annotations
 
-import re
 import signal
 import sys
 import threading
@@ -44,20 +43,17 @@ from collections.abc import Iterator
 import numpy as np
 
 from dfrl.experiments.driver.config import ExperimentConfig, resolve_config
-from dfrl.experiments.driver.launcher import run
 from dfrl.experiments.driver.results.metrics import read_metrics
 from dfrl.experiments.provenance import write_provenance
-from dfrl.experiments.science.cluster_runs import ClusterOptions, Finished, runs_at_once
-from dfrl.experiments.science.cluster_runs import run_on_cluster as federations_on_cluster
+from dfrl.experiments.science.cluster_runs import ClusterOptions
+from dfrl.experiments.science.paper_runs import FederatedRuns, StudyInterrupted  # noqa: F401
 from dfrl.experiments.science.pool import stop_pool, study_pool
 from dfrl.experiments.science.report.measures import SeedRun
 from dfrl.experiments.science.report.observations import Controls
 from dfrl.experiments.science.report.paper import write_report
 from dfrl.experiments.science.report.stats import COMBOS
 from dfrl.experiments.science.standalone import evaluated_job
-from dfrl.experiments.science.studies.history import (Evaluator, PendingRows, eval_job,
-                                                      history_tables, pick, read_rows,
-                                                      write_rows)
+from dfrl.experiments.science.studies.history import Evaluator, eval_job, read_rows, write_rows
 from dfrl.experiments.science.tidy import TIDY_FILE, curve_rows, evaluation_rows, write_tidy
 from dfrl.robots.state import Discretiser
 from dfrl.robots.training import TrainerConfig, read_metrics_csv
@@ -145,106 +141,6 @@ def paper_configs(opts: PaperOptions, seed: int) -> list[tuple[str, ExperimentCo
     return out
 
 
-class StudyInterrupted(KeyboardInterrupt):
-    """SIGTERM or Ctrl-C stopped the study (a :class:`KeyboardInterrupt`, so that callers that
-    only know Ctrl-C stop too)."""
-
-
-def _recorded_wall(d: Path) -> float:
-    """The wall time a finished run's ``summary.md`` recorded (nan if none)."""
-    try:
-        m = re.search(r"^- wall time: ([0-9.]+) s$", (d / "summary.md").read_text(
-            encoding="utf-8"), re.M)
-    except OSError:
-        return float("nan")
-    return float(m.group(1)) if m else float("nan")
-
-
-def _federated(cfg: ExperimentConfig, d: Path, opts: PaperOptions, evaluator: Evaluator,
-               progress: TextIO | None) -> tuple[bool, PendingRows, float, bool]:
-    """Run (or reuse) one federated run and queue its evaluations: (ok, pending rows, wall
-    time of the run, reused)."""
-    reused = opts.skip_existing and (d / "summary.md").is_file()
-    ok = True
-    if reused:
-        wall = _recorded_wall(d)
-    else:
-        if progress is not None:
-            print(f"== {d.parent.name}/{cfg.name}: {len(cfg.robots)} robots, {cfg.iterations} "
-                  f"iterations", file=progress, flush=True)
-        t0 = time.monotonic()
-        done = run(cfg, d, progress=None, force=True)    # the paper owns its run folders
-        wall = time.monotonic() - t0
-        if done.interrupted:
-            raise StudyInterrupted(f"{d.parent.name}/{cfg.name} interrupted "
-                                   f"({done.interrupted})")
-        ok = done.ok
-    return ok, _evaluations(cfg, d, opts, evaluator), wall, reused
-
-
-def _evaluations(cfg: ExperimentConfig, d: Path, opts: PaperOptions,
-                 evaluator: Evaluator) -> PendingRows:
-    """Queue the greedy evaluations of one federated run's table snapshots."""
-    pending = PendingRows()
-    arenas = {r.id: r.arena for r in cfg.robots}
-    for robot, files in history_tables(d).items():
-        for it in pick(files, cfg.iterations, opts.points):
-            pending.add(evaluator, robot, it, np.load(files[it]), arenas[robot], HELD_OUT)
-    return pending
-
-
-def _federated_on_cluster(fed_cfgs: dict[int, list[tuple[str, ExperimentConfig]]], out: Path,
-                          opts: PaperOptions, evaluators: dict[int, Evaluator],
-                          pendings: dict[tuple[int, str], tuple[Path, PendingRows]],
-                          walls: dict[str, float], reused: dict[str, float],
-                          progress: TextIO | None) -> bool:
-    """Run every seed's federations on ``opts.cluster``, as many at once as it holds, and
-    queue each one's evaluations as it ends; False if any run failed.
-
-    Raises
-    ------
-    ExperimentError
-        The cluster cannot be reached.
-    StudyInterrupted
-        A run was interrupted (the others are stopped).
-    """
-    assert opts.cluster is not None
-    where: dict[Path, tuple[int, str, ExperimentConfig]] = {}
-    todo: list[tuple[ExperimentConfig, Path]] = []
-    for s, cfgs in fed_cfgs.items():
-        for key, cfg in cfgs:
-            d = out / f"seed{s}" / cfg.name
-            if opts.skip_existing and (d / "summary.md").is_file():
-                reused[f"seed{s}/{key}"] = _recorded_wall(d)
-                pendings[(s, key)] = (d, _evaluations(cfg, d, opts, evaluators[s]))
-            else:
-                where[d] = (s, key, cfg)
-                todo.append((cfg, d))
-    if not todo:
-        return True
-    at_once = runs_at_once(opts.cluster, max(len(c.robots) for c, _ in todo))
-    if progress is not None:
-        print(f"== {len(todo)} federated runs on cluster {opts.cluster.address}, {at_once} at "
-              f"once", file=progress, flush=True)
-    failed: list[str] = []
-
-    def done(end: Finished) -> None:
-        s, key, cfg = where[end.out]
-        if end.exit in (130, -signal.SIGTERM, -signal.SIGKILL):   # dfrl run: 130 interrupted
-            raise StudyInterrupted(f"seed{s}/{cfg.name} was interrupted (exit {end.exit})")
-        walls[f"seed{s}/{key}"] = end.wall
-        if not end.ok:
-            failed.append(f"seed{s}/{cfg.name}")
-        if (end.out / "metrics.csv").is_file():
-            pendings[(s, key)] = (end.out, _evaluations(cfg, end.out, opts, evaluators[s]))
-
-    federations_on_cluster(todo, opts.cluster, at_once, done, progress)
-    if failed and progress is not None:
-        print(f"== runs that FAILED on the cluster: {', '.join(failed)}", file=progress,
-              flush=True)
-    return not failed
-
-
 def _raise_interrupt(signum: int, frame: Any) -> None:
     raise StudyInterrupted(f"signal {signum}")
 
@@ -283,8 +179,6 @@ def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reprod
     fed_cfgs = {s: paper_configs(opts, s) for s in seeds}
     arenas = [r.arena for r in fed_cfgs[seeds[0]][0][1].robots]
     all_arenas = list(dict.fromkeys(arenas + list(HELD_OUT)))
-    walls: dict[str, float] = {}
-    reused: dict[str, float] = {}
     pool = study_pool(opts.jobs)
     try:
         n_states = Discretiser(TrainerConfig().discretisation).n_states
@@ -318,22 +212,13 @@ def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reprod
                 zero_jobs[s] = {a: pool.submit(eval_job, base_cfg, np.zeros((n_states, n_actions)),
                                                a, opts.eval_steps, opts.episode_steps,
                                                EVAL_SEED + s) for a in all_arenas}
-        pendings: dict[tuple[int, str], tuple[Path, PendingRows]] = {}
-        evaluators = {s: Evaluator(pool, base_cfg, opts.eval_steps, opts.episode_steps,
-                                   EVAL_SEED + s) for s in seeds}
-        if opts.cluster is not None:
-            ok = _federated_on_cluster(fed_cfgs, out, opts, evaluators, pendings, walls,
-                                       reused, progress)
-        else:
-            ok = True
-            for s in seeds:
-                for key, cfg in fed_cfgs[s]:
-                    d = out / f"seed{s}" / cfg.name
-                    run_ok, pending, wall, was_reused = _federated(cfg, d, opts, evaluators[s],
-                                                                   progress)
-                    ok = ok and run_ok
-                    (reused if was_reused else walls)[f"seed{s}/{key}"] = wall
-                    pendings[(s, key)] = (d, pending)
+        runs = FederatedRuns(out, {s: Evaluator(pool, base_cfg, opts.eval_steps,
+                                                opts.episode_steps, EVAL_SEED + s)
+                                   for s in seeds},
+                             opts.points, HELD_OUT, opts.skip_existing, progress)
+        ok = (runs.on_cluster(fed_cfgs, opts.cluster) if opts.cluster is not None
+              else runs.here(fed_cfgs))
+        pendings, walls, reused = runs.pendings, runs.walls, runs.reused
         for (s, key), (d, pending) in pendings.items():
             pending.write(d / "evaluations.csv")
         for fut in sa_jobs.values():

@@ -47,7 +47,7 @@ def test_seed_options_are_unambiguous() -> None:
     import argparse
 
     from dfrl.experiments.cli import build_parser
-    from dfrl.experiments.cli.studies import chosen_seeds
+    from dfrl.experiments.cli.seeds import chosen_seeds
 
     parser = build_parser()
     seeds = lambda *a: chosen_seeds(parser.parse_args(["paper", *a]))  # noqa: E731
