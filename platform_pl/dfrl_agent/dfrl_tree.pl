@@ -3,13 +3,13 @@
             tree_clone_role/3,          % +Module, +Agent, -Role
             tree_clone_run/3,           % +Module, +Agent, +Role
             tree_children/4,            % +Position, +Fanout, +Size, -Children
-            tree_subtree/4,             % +Position, +Fanout, +Size, -Positions
-            dfrl_tree_msg/3             % +Platform, +Link, +Message (event)
+            tree_subtree/4              % +Position, +Fanout, +Size, -Positions
           ]).
-:- use_module('../tartarus', [current_node/1, node_property/2, purge_agent/1, with_node/2,
-                              platform_event/1, remote_agents/3]).
-:- use_module('../migration', [agent_clone/4, agent_move/3]).
-:- use_module('../messages', [agent_post/6]).
+:- use_module('../tartarus', [current_node/1, purge_agent/1, with_node/2]).
+:- use_module(dfrl_tree_msg, [tree_post/4, tree_await/7, tree_forget/2]).
+:- use_module(dfrl_tree_copies,
+              [ tree_children/4, tree_subtree/4, tree_spawn/11, tree_go_to_stop/3,
+                add_stats/3 ]).
 :- use_module(dfrl_lease, [lease_custody/3]).
 :- use_module(dfrl_round_state, [skip_robot/4, add_retries/3]).
 :- use_module(dfrl_robot_io, [read_robot/5, write_robot/3, item_bytes/2]).
@@ -18,8 +18,7 @@
                 fold_hook/3, method_call/3, item_shape/2 ]).
 :- use_module(dfrl_move, [skip_after/3]).
 :- use_module('../platform_errors', [message_text/2]).
-:- autoload(library(lists), [nth0/3, append/3, member/2, memberchk/2,
-                             numlist/3, subtract/3]).
+:- autoload(library(lists), [nth0/3, append/3, member/2, memberchk/2, subtract/3]).
 :- autoload(library(apply), [foldl/4, maplist/3, include/3, exclude/3]).
 :- autoload(library(debug), [debug/3]).
 :- autoload(library(pairs), [pairs_keys/2]).
@@ -33,8 +32,8 @@ stop where the round starts (the root) and clones itself over a K-ary
 tree of the other stops, the root first and then the rest in itinerary
 order, position P having the children K*P+1 ... K*P+K:
 
-  1. out: each copy clones itself to its children's stops (one after
-     another), then reads its own robot;
+  1. out: each copy sends a copy of itself to each of its children's
+     stops, all at once (dfrl_tree_copies.pl), then reads its own robot;
   2. up: each copy collects what its children send up, the items (the
      robots' tables) of their subtrees and the stops they skipped, and
      sends all of it, with its own, to its parent;
@@ -48,72 +47,29 @@ order, position P having the children K*P+1 ... K*P+K:
   5. each copy reports the stops whose write failed to its parent and
      purges itself; the root ends the round (dfrl_agent:end_round) and
      logs it: `visited` are the robots folded, in itinerary order,
-     `hops` the clones made, `bytes` the items and tables sent.
+     `hops` the copies that reached their stops, `bytes` the items and
+     tables sent.
 
-A clone that cannot be made (the stop is down) is tried as a move is
-(dfrl_move.pl: retries with backoff, all within the skip time), then the
-stop is skipped and its children are cloned by the parent instead: only
-the dead stop is missing from the round. A copy waiting for a child (or
-a clone waiting for its parent) asks the child's node every skip time
-whether the child is still there; a child lost with its node has its
-whole subtree skipped, with the reason, and a clone whose parent is lost
-purges itself without writing. So every robot the round visited ends it
-with the same table, and every other one is listed in `skipped`.
+A copy that cannot reach its stop (the stop is down) is tried as a move
+is (the agent's retries with backoff, all within its skip time), then
+the stop is skipped and its children get copies from the parent
+instead: only the dead stop is missing from the round. A copy waiting
+for a child (or for its parent) asks the other's node every skip time
+whether it is still there; a child lost with its node has its whole
+subtree skipped, with the reason, and a copy whose parent is lost purges
+itself without writing. So every robot written in the round gets the
+same table, and every robot not read or not written is listed in
+`skipped` (as in a chain round, a robot read but not written stays in
+`visited` too).
 
 Clones carry no custody of their own: the root keeps the agent's lease
 (dfrl_lease.pl) as a chain agent does between moves; a clone lost is a
 subtree skipped for that round, never resurrected.
 
 Copies talk through the platform event dfrl_tree_msg/3 posted to the
-node of the stop the receiver is at: msg(Key, Message), Key a string
-naming the round (agent, epoch, round and a random part), Message one
-of up(P, Items, Skips, Stats), down(P, Table) and done(P, Skips,
-Stats).
+node of the stop the receiver is at (dfrl_tree_msg.pl), Key a string
+naming the round (agent, epoch, round and a random part).
 */
-
-:- dynamic box/3.                       % Node, Key, Message
-
-:- initialization(platform_event(dfrl_tree:dfrl_tree_msg/3)).
-
-%!  dfrl_tree_msg(+Platform, +Link, +Message) is det.
-%
-%   The platform event of the copies of a tree round: keep Message,
-%   msg(Key, Body), on the current node for the copy that waits for it.
-
-dfrl_tree_msg(platform, _Link, msg(Key, Body)) :-
-    string(Key),
-    ground(Body),
-    functor(Body, F, _),
-    memberchk(F, [up, down, done]),          % moved, failed: only from this node
-    !,
-    current_node(Node),
-    assertz(box(Node, Key, Body)).
-dfrl_tree_msg(platform, _Link, Message) :-
-    throw(error(domain_error(dfrl_tree_message, Message), _)).
-
-%!  tree_children(+Position, +Fanout, +Size, -Children) is det.
-%
-%   Children are the positions below Position in a tree of Size
-%   positions with Fanout children each.
-
-tree_children(P, K, N, Cs) :-
-    From is K*P + 1,
-    To is min(K*P + K, N - 1),
-    (   From =< To -> numlist(From, To, Cs) ; Cs = [] ).
-
-%!  tree_subtree(+Position, +Fanout, +Size, -Positions) is det.
-%
-%   Positions are Position and all positions below it.
-
-tree_subtree(P, K, N, [P|Below]) :-
-    tree_children(P, K, N, Cs),
-    subtrees(Cs, K, N, Below).
-
-subtrees([], _, _, []).
-subtrees([C|Cs], K, N, Positions) :-
-    tree_subtree(C, K, N, Sub),
-    subtrees(Cs, K, N, Rest),
-    append(Sub, Rest, Positions).
 
 		 /*******************************
 		 *             ROOT		*
@@ -152,7 +108,7 @@ tree_round(M, Agent, K, S0, S) :-
     Ctx = ctx(Key, Order, K, info(Name, Epoch, Round, Method, Carried, Timeout,
                                   SkipAfter, Retry)),
     call_cleanup(root_round(M, Agent, Ctx, S0, S),
-                 retractall(box(Node, Key, _))).
+                 tree_forget(Node, Key)).
 
 root_round(M, Agent, Ctx, S0, S) :-
     out_pass(M, Agent, Ctx, 0, out(Items, Skips1, Stats1, Kids)),
@@ -231,12 +187,12 @@ tree_clone_role(M, Agent, Role) :-
 tree_clone_run(M, Agent, Role) :-
     Role = role(_, _, _, _, go(_)),
     !,
-    go_to_stop(M, Agent, Role).
+    tree_go_to_stop(M, Agent, Role).
 tree_clone_run(M, Agent, role(Ctx, P, Parent, ParentName)) :-
     Ctx = ctx(Key, _, _, info(_, _, _, _, _, _, SkipAfter, _)),
     current_node(Node),
     call_cleanup(clone_part(M, Agent, Ctx, P, Parent, ParentName, SkipAfter, Node),
-                 ( retractall(box(Node, Key, _)),
+                 ( tree_forget(Node, Key),
                    catch(purge_agent(Agent), _, true) )).
 
 clone_part(M, Agent, Ctx, P, Parent, ParentName, SkipAfter, Node) :-
@@ -244,11 +200,11 @@ clone_part(M, Agent, Ctx, P, Parent, ParentName, SkipAfter, Node) :-
     out_pass(M, Agent, Ctx, P, out(Items, Skips, Stats0, Kids)),
     foldl(add_item_bytes, Items, 0, Bytes),
     add_stats(Stats0, stats(0, Bytes, 0), Stats),
-    (   post(Parent, Key, up(P, Items, Skips, Stats), SkipAfter)
+    (   tree_post(Parent, Key, up(P, Items, Skips, Stats), SkipAfter)
     ->  (   await(Node, Ctx, down, [kid(P, Parent, ParentName)], [Msg], _)
         ->  Msg = down(P, Final),
             down_pass(Ctx, P, Final, Kids, Skips1, Stats1),
-            ignore(post(Parent, Key, done(P, Skips1, Stats1), SkipAfter))
+            ignore(tree_post(Parent, Key, done(P, Skips1, Stats1), SkipAfter))
         ;   print_message(warning, format("dfrl: tree clone ~w: its parent at ~w \c
                                            was lost; nothing written", [Agent, Parent]))
         )
@@ -268,7 +224,7 @@ out_pass(M, Self, Ctx, P, out(Items, Skips, Stats, Kids)) :-
     Info = info(Root, Epoch, Round, Method, Carried, Timeout, _, _),
     length(Order, N),
     tree_children(P, K, N, Cs),
-    spawn(Cs, M, Self, Ctx, P, [], Kids0, [], Skips0, stats(0, 0, 0), Stats0),
+    tree_spawn(Cs, M, Self, Ctx, P, [], Kids0, [], Skips0, stats(0, 0, 0), Stats0),
     nth0(P, Order, I-stop(_, _, Robot)),
     atom_string(RootName, Root),
     Options = [timeout(Timeout), round(Round), agent(RootName), epoch(Epoch)],
@@ -297,124 +253,6 @@ add_item_bytes(_-_-Item, B0, B) :-
 take_up(up(_, Items, _, St), Items0-St0, Items1-St1) :-
     append(Items0, Items, Items1),
     add_stats(St0, St, St1).
-
-%   Send a copy to each child's stop, all at once: a copy is cloned on
-%   this node (no network), with its role and the stop to go to, and moves
-%   itself there in its own thread; each says here whether it got there
-%   (moved/failed). A child that cannot be reached is skipped and its
-%   children are sent copies instead.
-spawn([], _, _, _, _, Kids, Kids, Skips, Skips, St, St) :- !.
-spawn(Cs, M, Self, Ctx, P, Kids0, Kids, Skips0, Skips, St0, St) :-
-    Ctx = ctx(Key, Order, K, info(_, _, _, _, _, _, SkipAfter, _)),
-    nth0(P, Order, _-stop(PH, PP, _)),
-    atom_string(Self, SelfName),
-    current_node(Node),
-    node_property(Node, address(Here)),
-    foldl(local_copy(M, Self, Ctx, Here, PH:PP, SelfName), Cs, [], Copies),
-    get_time(T0),
-    Deadline is T0 + SkipAfter + 2,
-    maplist(waiting, Copies, Waiting),
-    await_moves(Node, Key, Waiting, Deadline, Outcomes),
-    length(Order, N),
-    foldl(outcome(Ctx, N, K, Copies), Outcomes,
-          t(Kids0, Skips0, St0, []), t(Kids1, Skips1, St1, Adopted)),
-    spawn(Adopted, M, Self, Ctx, P, Kids1, Kids, Skips1, Skips, St1, St).
-
-waiting(C-_, kid(C, none, none)).
-
-%   A copy of Self on this node with the role of child C (go(Address):
-%   it moves itself to C's stop first); failed(C, Text, 0) if it cannot
-%   even be made.
-local_copy(M, Self, Ctx, Here, Parent, SelfName, C, Copies0, Copies) :-
-    Ctx = ctx(Key, Order, _, _),
-    nth0(C, Order, _-stop(H, Port, _)),
-    Role = role(Ctx, C, Parent, SelfName, go(H:Port)),
-    setup_call_cleanup(assertz(M:dfrl_tree_role(Self, Role)),
-                       once(catch(agent_clone(Self, Here, Copy, []), E, true)),
-                       retractall(M:dfrl_tree_role(Self, _))),
-    (   var(E)
-    ->  append(Copies0, [C-Copy], Copies)
-    ;   message_text(E, Text),
-        current_node(Node),
-        assertz(box(Node, Key, failed(C, Text, 0))),
-        append(Copies0, [C-none], Copies)
-    ).
-
-await_moves(_, _, [], _, []) :- !.
-await_moves(Node, Key, Waiting, Deadline, Outcomes) :-
-    (   poll_any(Node, Key, [moved, failed], Waiting, Deadline, Msg)
-    ->  arg(1, Msg, C),
-        exclude(kid_at(C), Waiting, Waiting1),
-        Outcomes = [Msg|Msgs],
-        await_moves(Node, Key, Waiting1, Deadline, Msgs)
-    ;   findall(failed(C, "its copy neither moved nor failed in time", 0),
-                member(kid(C, _, _), Waiting), Outcomes)
-    ).
-
-poll_any(Node, Key, Kinds, Peers, Deadline, Msg) :-
-    (   member(Kind, Kinds),
-        take_msg(Node, Key, Kind, Peers, Msg)
-    ->  true
-    ;   get_time(Now),
-        Now < Deadline
-    ->  sleep(0.005),
-        poll_any(Node, Key, Kinds, Peers, Deadline, Msg)
-    ).
-
-outcome(Ctx, _, _, Copies, moved(C, R), t(Kids0, Sk, St0, Ad), t(Kids, Sk, St, Ad)) :-
-    Ctx = ctx(_, Order, _, _),
-    nth0(C, Order, _-stop(H, Port, _)),
-    memberchk(C-Copy, Copies),
-    append(Kids0, [kid(C, H:Port, Copy)], Kids),
-    add_stats(St0, stats(1, 0, R), St).
-outcome(Ctx, N, K, _, failed(C, Text0, R), t(Kids, Sk0, St0, Ad0), t(Kids, Sk, St, Ad)) :-
-    Ctx = ctx(_, Order, _, info(_, _, _, _, _, _, SkipAfter, _)),
-    nth0(C, Order, _-stop(H, Port, Robot)),
-    format(string(Text), "~w (a tree clone; skip_after ~w s)", [Text0, SkipAfter]),
-    print_message(warning, format("dfrl: skipping stop ~w:~w: ~w", [H, Port, Text])),
-    append(Sk0, [skip(Robot, Text)], Sk),
-    add_stats(St0, stats(0, 0, R), St),
-    tree_children(C, K, N, Grand),
-    append(Ad0, Grand, Ad).
-
-%   The copy's move to its stop (role go(Address)), with the agent's
-%   retries within its skip time; the outcome is left on this node for
-%   the parent.
-go_to_stop(M, Self, role(Ctx, C, Parent, ParentName, go(Address))) :-
-    Ctx = ctx(Key, _, _, info(_, _, _, _, _, _, SkipAfter, retry(Tries, Backoff))),
-    current_node(Node),
-    assertz(M:dfrl_tree_role(Self, role(Ctx, C, Parent, ParentName))),
-    get_time(T0),
-    Deadline is T0 + SkipAfter,
-    attempt_move(Self, Address, Tries, Backoff, Deadline, 0, Result),
-    debug(dfrl(tree), '~w to ~w: ~p', [Self, Address, Result]),
-    (   Result = moved(R)
-    ->  assertz(box(Node, Key, moved(C, R)))
-    ;   Result = failed(E, R),
-        get_time(T1),
-        Waited is T1 - T0,
-        message_text(E, Text0),
-        format(string(Text), "~w (skipped after ~2f s)", [Text0, Waited]),
-        assertz(box(Node, Key, failed(C, Text, R))),
-        catch(purge_agent(Self), _, true)
-    ).
-
-attempt_move(Self, Address, Tries, Backoff, Deadline, R, Result) :-
-    get_time(Now),
-    Left is max(0.1, Deadline - Now),
-    catch(agent_move(Self, Address, [connect_timeout(Left), reply_timeout(Left)]), E, true),
-    (   var(E)
-    ->  Result = moved(R)
-    ;   R < Tries,
-        \+ E = error(permission_error(_, _, _), _),
-        Wait is Backoff * 2**R,
-        get_time(Now1),
-        Now1 + Wait < Deadline
-    ->  sleep(Wait),
-        R1 is R + 1,
-        attempt_move(Self, Address, Tries, Backoff, Deadline, R1, Result)
-    ;   Result = failed(E, R)
-    ).
 
 %   Write the round's table into the robot of this stop (none: the round
 %   was aborted, nothing is written).
@@ -461,7 +299,7 @@ take_done(done(_, S, St), S0-T0, S1-T1) :-
 
 send_down(Node, Key, Final, SkipAfter, Kid, Kid-Sent) :-
     Kid = kid(C, Address, _),
-    (   with_node(Node, post(Address, Key, down(C, Final), SkipAfter))
+    (   with_node(Node, tree_post(Address, Key, down(C, Final), SkipAfter))
     ->  Sent = true
     ;   Sent = false
     ).
@@ -476,93 +314,22 @@ lost_skips(Lost, ctx(_, Order, K, _), Why, Skips) :-
               format(string(Text), "tree clone at ~w ~w", [Address, Why]) ),
             Skips).
 
-		 /*******************************
-		 *           MESSAGES		*
-		 *******************************/
-
-post(Address, Key, Body, SkipAfter) :-
-    debug(dfrl(tree), 'post to ~w: ~p', [Address, Body]),
-    current_node(Node),
-    node_property(Node, link(Link)),
-    T is max(0.5, SkipAfter),
-    catch(agent_post(Address, platform, dfrl_tree_msg, Link, [msg(Key, Body)],
-                     [connect_timeout(T), reply_timeout(T)]),
-          E,
-          ( print_message(warning, E), fail )).
-
-
-%   await(+Node, +Ctx, +Kind, +Peers, -Msgs, -Lost): wait for a message
-%   Kind about each peer (kid(Position, Address, Name): a message's
-%   first argument is the position), asking the peer's node every skip
-%   time whether the peer is still there; Lost are the peers that are
-%   not. (A clone waits for its parent as kid(Own, ParentAddress, Name):
-%   the parent's message down names the clone's position.)
-await(Node, Ctx, Kind, Peers, Msgs, Lost) :-
-    Ctx = ctx(_, _, _, info(_, _, _, _, _, Timeout, SkipAfter, _)),
-    get_time(T0),
-    Limit is T0 + Timeout + SkipAfter,
-    await_loop(Node, Ctx, Kind, Peers, Limit, [], Msgs, [], Lost).
-
-await_loop(_, _, _, [], _, Msgs, Msgs, Lost, Lost) :- !.
-await_loop(Node, Ctx, Kind, Peers, Limit, Msgs0, Msgs, Lost0, Lost) :-
-    Ctx = ctx(Key, _, _, info(_, _, _, _, _, _, SkipAfter, _)),
-    get_time(Now),
-    Deadline is min(Limit, Now + SkipAfter),
-    (   poll_msg(Node, Key, Kind, Peers, Deadline, Msg)
-    ->  arg(1, Msg, C),
-        exclude(kid_at(C), Peers, Peers1),
-        await_loop(Node, Ctx, Kind, Peers1, Limit, [Msg|Msgs0], Msgs, Lost0, Lost)
-    ;   get_time(Now1),
-        Now1 >= Limit
-    ->  append(Lost0, Peers, Lost), Msgs = Msgs0
-    ;   include(gone(SkipAfter), Peers, Gone),
-        subtract(Peers, Gone, Peers1),
-        append(Lost0, Gone, Lost1),
-        await_loop(Node, Ctx, Kind, Peers1, Limit, Msgs0, Msgs, Lost1, Lost)
-    ).
-
-kid_at(C, kid(C, _, _)).
-
-%   The message, as soon as it is there (looked for every 5 ms), or
-%   failure at Deadline.
-poll_msg(Node, Key, Kind, Peers, Deadline, Msg) :-
-    (   take_msg(Node, Key, Kind, Peers, Msg)
-    ->  true
-    ;   get_time(Now),
-        Now < Deadline
-    ->  sleep(0.005),
-        poll_msg(Node, Key, Kind, Peers, Deadline, Msg)
-    ).
-
-take_msg(Node, Key, Kind, Peers, Msg) :-
-    box(Node, Key, Msg),
-    functor(Msg, Kind, _),
-    arg(1, Msg, C),
-    memberchk(kid(C, _, _), Peers),
-    retract(box(Node, Key, Msg)),
-    !.
-
-%   The peer's node does not answer within the skip time, or no longer
-%   holds the peer.
-gone(SkipAfter, kid(_, Address, Name)) :-
-    T is max(0.5, SkipAfter),
-    atom_string(Agent, Name),
-    (   catch(remote_agents(Address, Agents, [connect_timeout(T), reply_timeout(T)]),
-              _, fail)
-    ->  \+ memberchk(agent(Agent, _, _, _), Agents)
-    ;   true
-    ).
 
 		 /*******************************
 		 *            HELPERS		*
 		 *******************************/
 
-add_stats(stats(H0, B0, R0), stats(H1, B1, R1), stats(H, B, R)) :-
-    H is H0 + H1, B is B0 + B1, R is R0 + R1.
+%   await(+Node, +Ctx, +Kind, +Peers, -Msgs, -Lost): tree_await/7 with
+%   the round's probe: every skip time, until the table timeout and one
+%   skip time more.
+await(Node, Ctx, Kind, Peers, Msgs, Lost) :-
+    Ctx = ctx(Key, _, _, info(_, _, _, _, _, Timeout, SkipAfter, _)),
+    get_time(T0),
+    Limit is T0 + Timeout + SkipAfter,
+    tree_await(Node, Key, Kind, Peers, probe(SkipAfter, Limit), Msgs, Lost).
 
 carried(M, Agent, Carried) :-
     (   catch(M:dfrl_carries_of(Agent, C), _, fail) -> Carried = C ; Carried = tables ).
 
 retry_of(M, Agent, retry(R, B)) :-
     (   catch(M:dfrl_retry_of(Agent, retry(R, B)), _, fail) -> true ; R = 2, B = 0.2 ).
-

@@ -1,0 +1,148 @@
+:- module(dfrl_tree_msg,
+          [ tree_post/4,                % +Address, +Key, +Body, +SkipAfter
+            tree_await/7,               % +Node, +Key, +Kind, +Peers, +Probe, -Msgs, -Lost
+            tree_poll/6,                % +Node, +Key, +Kinds, +Peers, +Deadline, -Msg
+            tree_note/3,                % +Node, +Key, +Body
+            tree_forget/2,              % +Node, +Key
+            dfrl_tree_msg/3             % +Platform, +Link, +Message (event)
+          ]).
+:- use_module('../tartarus', [current_node/1, node_property/2, platform_event/1,
+                              remote_agents/3]).
+:- use_module('../messages', [agent_post/6]).
+:- autoload(library(lists), [append/3, memberchk/2, subtract/3, member/2]).
+:- autoload(library(apply), [include/3, exclude/3]).
+:- autoload(library(debug), [debug/3]).
+
+/** <module> The messages between the copies of a tree round (dfrl_tree.pl)
+
+A message is posted to the node of the stop its receiver is at, as the
+platform event dfrl_tree_msg/3 with msg(Key, Body): Key (a string) names
+the round, Body is up(P, Items, Skips, Stats), down(P, Table) or
+done(P, Skips, Stats), P the position of the copy that sends it up or
+receives it down. The node keeps it until the copy it is for takes it
+(tree_await/7, tree_poll/6). A copy's outcome on its own node
+(moved(P, Retries) or failed(P, Text, Retries), dfrl_tree_copies.pl) is
+noted directly with tree_note/3; a peer cannot post those.
+
+Peers are kid(Position, Address, Name): the copy at Position on the
+node at Address, agent Name (a string). A copy waits for a message
+about each peer, and asks a silent peer's node every probe time whether
+the peer is still there.
+*/
+
+:- dynamic box/3.                       % Node, Key, Body
+
+:- initialization(platform_event(dfrl_tree_msg:dfrl_tree_msg/3)).
+
+%!  dfrl_tree_msg(+Platform, +Link, +Message) is det.
+%
+%   The platform event of the copies of a tree round: keep Message,
+%   msg(Key, Body), on the current node for the copy that waits for it.
+%
+%   @error domain_error(dfrl_tree_message, Message) for anything else.
+
+dfrl_tree_msg(platform, _Link, msg(Key, Body)) :-
+    string(Key),
+    ground(Body),
+    functor(Body, F, _),
+    memberchk(F, [up, down, done]),
+    !,
+    current_node(Node),
+    assertz(box(Node, Key, Body)).
+dfrl_tree_msg(platform, _Link, Message) :-
+    throw(error(domain_error(dfrl_tree_message, Message), _)).
+
+%!  tree_note(+Node, +Key, +Body) is det.
+%
+%   Keep Body on Node for the round Key (a message from this node).
+
+tree_note(Node, Key, Body) :-
+    assertz(box(Node, Key, Body)).
+
+%!  tree_forget(+Node, +Key) is det.
+%
+%   Drop what Node keeps for the round Key (late messages included).
+
+tree_forget(Node, Key) :-
+    retractall(box(Node, Key, _)).
+
+%!  tree_post(+Address, +Key, +Body, +SkipAfter) is semidet.
+%
+%   Post Body for the round Key to the node at Address, with connect and
+%   reply timeouts of SkipAfter (at least 0.5 s); fails, with a warning,
+%   if it cannot.
+
+tree_post(Address, Key, Body, SkipAfter) :-
+    debug(dfrl(tree), 'post to ~w: ~p', [Address, Body]),
+    current_node(Node),
+    node_property(Node, link(Link)),
+    T is max(0.5, SkipAfter),
+    catch(agent_post(Address, platform, dfrl_tree_msg, Link, [msg(Key, Body)],
+                     [connect_timeout(T), reply_timeout(T)]),
+          E,
+          ( print_message(warning, E), fail )).
+
+%!  tree_await(+Node, +Key, +Kind, +Peers, +Probe, -Msgs, -Lost) is det.
+%
+%   Wait on Node for a message Kind of the round Key about each of
+%   Peers (its first argument is the peer's position), asking the node
+%   of a peer every Probe = probe(Seconds, Limit) seconds whether the
+%   peer is still there, until the time Limit. Msgs are the messages,
+%   Lost the peers that are not there (or did not answer by Limit).
+
+tree_await(Node, Key, Kind, Peers, Probe, Msgs, Lost) :-
+    await_loop(Node, Key, Kind, Peers, Probe, [], Msgs, [], Lost).
+
+await_loop(_, _, _, [], _, Msgs, Msgs, Lost, Lost) :- !.
+await_loop(Node, Key, Kind, Peers, Probe, Msgs0, Msgs, Lost0, Lost) :-
+    Probe = probe(Every, Limit),
+    get_time(Now),
+    Deadline is min(Limit, Now + Every),
+    (   tree_poll(Node, Key, [Kind], Peers, Deadline, Msg)
+    ->  arg(1, Msg, C),
+        exclude(kid_at(C), Peers, Peers1),
+        await_loop(Node, Key, Kind, Peers1, Probe, [Msg|Msgs0], Msgs, Lost0, Lost)
+    ;   get_time(Now1),
+        Now1 >= Limit
+    ->  append(Lost0, Peers, Lost), Msgs = Msgs0
+    ;   include(gone(Every), Peers, Gone),
+        subtract(Peers, Gone, Peers1),
+        append(Lost0, Gone, Lost1),
+        await_loop(Node, Key, Kind, Peers1, Probe, Msgs0, Msgs, Lost1, Lost)
+    ).
+
+kid_at(C, kid(C, _, _)).
+
+%!  tree_poll(+Node, +Key, +Kinds, +Peers, +Deadline, -Msg) is semidet.
+%
+%   Msg, of one of Kinds, about one of Peers, as soon as Node has it
+%   (looked for every 5 ms); fails at the time Deadline.
+
+tree_poll(Node, Key, Kinds, Peers, Deadline, Msg) :-
+    (   member(Kind, Kinds),
+        take_msg(Node, Key, Kind, Peers, Msg)
+    ->  true
+    ;   get_time(Now),
+        Now < Deadline
+    ->  sleep(0.005),
+        tree_poll(Node, Key, Kinds, Peers, Deadline, Msg)
+    ).
+
+take_msg(Node, Key, Kind, Peers, Msg) :-
+    box(Node, Key, Msg),
+    functor(Msg, Kind, _),
+    arg(1, Msg, C),
+    memberchk(kid(C, _, _), Peers),
+    retract(box(Node, Key, Msg)),
+    !.
+
+%   The peer's node does not answer within the probe time, or no longer
+%   holds the peer.
+gone(Every, kid(_, Address, Name)) :-
+    T is max(0.5, Every),
+    atom_string(Agent, Name),
+    (   catch(remote_agents(Address, Agents, [connect_timeout(T), reply_timeout(T)]),
+              _, fail)
+    ->  \+ memberchk(agent(Agent, _, _, _), Agents)
+    ;   true
+    ).
