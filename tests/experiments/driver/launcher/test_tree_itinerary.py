@@ -58,3 +58,25 @@ def test_tree_rounds_equal_the_chain_rounds(tmp_path: Path) -> None:
 def test_bad_itinerary_is_refused_where_it_is(bad: dict, message: str) -> None:
     with pytest.raises(ConfigError, match=message.replace("(", r"\(")):
         ExperimentConfig.from_dict({"robots": [{"id": "r1", "arena": "r1"}], **bad})
+
+
+@pytest.mark.slow
+def test_scale_bench_compares_the_itineraries_with_a_delay() -> None:
+    # dfrl bench scale with both itineraries behind a 20 ms proxy on every node: both give
+    # identical tables every round, and the delay shows in the chain's rounds (the control
+    # that the proxies are really in the way): 2(N-1) hops of at least 2 x 20 ms each
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-m", "dfrl", "bench", "scale", "--robots", "4",
+                          "--iterations", "60", "--respite", "20", "--itinerary", "chain",
+                          "tree", "--delay-ms", "20", "--json"],
+                         capture_output=True, text=True, timeout=240)
+    assert out.returncode == 0, out.stderr[-2000:]
+    r = json.loads(out.stdout)
+    assert [(p["itinerary"], p["delay_ms"]) for p in r["points"]] == [("chain", 20.0),
+                                                                       ("tree", 20.0)]
+    assert all(p["identical_every_round"] and p["rounds"] == 3 for p in r["points"])
+    chain = r["points"][0]
+    assert chain["round_median_ms"] > 6 * 2 * 20
+    assert r["compare"][0]["robots"] == 4 and r["compare"][0]["tree_over_chain"] > 0
