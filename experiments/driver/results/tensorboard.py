@@ -38,7 +38,6 @@ before a run starts. Writing a folder again replaces its event files.
 """
 from __future__ import annotations
 
-import csv
 import struct
 import time
 from pathlib import Path
