@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 from dfrl.experiments.cli.figures import add_figure_arguments, wants_redraw
-from dfrl.experiments.cli.studies import add_seed_arguments, chosen_seeds
+from dfrl.experiments.cli.seeds import add_seed_arguments, chosen_seeds
 from dfrl.experiments.provenance import write_provenance
 from dfrl.robots.learners import LEARNERS
 from dfrl.robots.state import SensorGrouping
