@@ -20,6 +20,7 @@ Layout (see ``experiments/README.md``)::
     params/<robot>.npy     a function learner's (linear, dqn) final parameters instead
                            (+ .json, format dfrl-params/1)
     checkpoint/<robot>.npy each robot's last checkpoint (table or parameters)
+    tensorboard/           with ``--tensorboard``: event files from the CSVs (:mod:`.tensorboard`)
 
 Modules: :mod:`.agent_log` (the agent's JSON-lines log), :mod:`.rounds` (shares, their
 matching to rounds, ``rounds.csv``), :mod:`.metrics` (``metrics.csv``), :mod:`.evaluations`
