@@ -211,7 +211,11 @@ serve_stream(Node, Pair, Peer, PeerName) :-
 %   input records no position, so that a binary frame's body is moved in
 %   bulk (wire.pl); before, it does: the deadline reader's
 %   read_pending_codes/3 fails on a TLS stream without one (SWI-Prolog
-%   9.0.4: "I/O error in read ... Invalid argument").
+%   9.0.4: "I/O error in read ... Invalid argument"). Once the peer
+%   proved a token, the input buffer grows to 64 KiB (serve_term/3 of
+%   auth(Proofs), while the peer waits for the answer: what the buffer
+%   holds is kept): a large frame is then read in a sixteenth of the
+%   read(2) calls. An unauthenticated connection keeps the default 4 KiB.
 serve_frames(Ctx) :-
     ctx_node(Ctx, Node),
     ctx_input(Ctx, In),
@@ -285,6 +289,8 @@ serve_term(auth(Proofs), Ctx, true) :-
         node_accepts(Node, Proofs/Nonce)
     ->  ctx_set_authenticated(Ctx, true),
         mark_authenticated(Node),
+        ctx_input(Ctx, In),
+        set_stream(In, buffer_size(65536)),     % see below
         request_reply(Out, ok(authenticated))
     ;   ctx_set_authenticated(Ctx, false),
         node_property(Node, address(Here)),

@@ -121,7 +121,9 @@ transport_open(Address0, Conn, Options) :-
     own_tls(Options, Tls),
     connect(Address, CT, Plain),
     (   Tls == none
-    ->  Pair = Plain
+    ->  Pair = Plain,
+        stream_pair(Plain, _, PlainOut),
+        set_stream(PlainOut, buffer_size(65536))    % see setup_stream/2
     ;   catch(tls_connect(Tls, Address, Plain, Pair, [timeout(CT)]),
               E0, (close(Plain, [force(true)]), throw(E0))),
         with_mutex(dfrl_transport_pool, assertz(conn_tls(Pair, Tls)))
@@ -164,7 +166,10 @@ connect_failed(_, E) :-
     throw(E).
 
 %   No position is recorded on a connection's streams: SWI-Prolog then
-%   moves a binary frame's body in bulk (see wire.pl).
+%   moves a binary frame's body in bulk (see wire.pl). A plaintext
+%   connection's output buffer is 64 KiB (transport_open/3; tls.pl sizes
+%   a TLS one's): a frame then leaves in one send(2) per 64 KiB instead
+%   of one per 4 KiB, and wakes the reader as many times fewer.
 setup_stream(Pair, Timeout) :-
     stream_pair(Pair, In, Out),
     set_stream(In, type(binary)),
