@@ -61,9 +61,12 @@ def _migrate_tls(args: argparse.Namespace) -> int:
         if args.json:
             print(json.dumps(asdict(cmp)))
         else:
+            naive = ("" if cmp.plain.naive_median_ms is None else
+                     f"  naive text hop {cmp.plain.naive_median_ms:8.3f} ms  "
+                     f"ratio {cmp.plain.naive_ratio:.3f}")
             print(f"floats={n:>7}  plaintext median {cmp.plain.median_ms:8.3f} ms  "
                   f"TLS median {cmp.tls.median_ms:8.3f} ms  TLS cost {cmp.tls_cost:+.1%}  "
-                  f"(hops={cmp.tls.hops} each)")
+                  f"(hops={cmp.tls.hops} each){naive}")
         sys.stdout.flush()
     return 0
 

@@ -64,3 +64,21 @@ def test_phase_breakdown_orders_the_steps_of_a_hand_over(tmp_path: Path) -> None
 
 def test_phase_breakdown_of_an_empty_folder_is_empty(tmp_path: Path) -> None:
     assert migrate.phase_breakdown(tmp_path) == []
+
+
+def test_migrate_tls_prints_its_cost_beside_the_naive_hop(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from dfrl.experiments.cli import main
+    from dfrl.experiments.tools import certs
+
+    certs.init_ca(tmp_path / "ca")
+    certs.make_node("bench", tmp_path / "ca", tmp_path / "node")
+    assert main(["bench", "migrate", "--floats", "100", "--hops", "2", "--warmup", "0",
+                 "--rounds", "1", "--tls", str(tmp_path / "node")]) == 0
+    out = capsys.readouterr().out
+    assert "TLS cost" in out and "naive text hop" in out and "ratio" in out
+    cost = float(out.split("TLS cost")[1].split("%")[0])
+    assert -100 < cost < 10000
+    # control: a folder without the node's files is refused before any process starts
+    assert main(["bench", "migrate", "--floats", "100", "--hops", "2",
+                 "--tls", str(tmp_path / "ca")]) == 2
