@@ -14,6 +14,10 @@ at most 0.20).
 
 With ``trace_dir``, both processes time the steps of every hand-over (see
 ``bench_migrate.pl``) and :func:`phase_breakdown` sums them up per step.
+
+:func:`compare_checkouts` times this checkout's hop beside another checkout's (a git worktree
+of an older commit), alternating in the same minutes: on a shared machine only such a
+comparison tells whether a change made the hop faster.
 """
 from __future__ import annotations
 
@@ -62,14 +66,16 @@ def percentile(values: list[float], q: float) -> float:
 
 def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         timeout: float = 600, tls: str | Path | None = None, naive: bool = True,
-        trace_dir: str | Path | None = None) -> MigrationResult:
+        trace_dir: str | Path | None = None, script: Path | None = None) -> MigrationResult:
     """Measure ``hops`` hops (after ``warmup`` uncounted ones) with a payload of ``floats`` floats.
 
     With ``tls`` (a node's TLS folder: ``ca.crt``, ``node.crt``, ``node.key``, from ``dfrl certs
     node``), both platforms speak mutual TLS with that certificate. With ``naive`` (default),
     the naive text hop is timed too (as many hops, after as many warm-up ones), against the
     same peer process. With ``trace_dir`` (an existing folder), the processes write their step
-    timings there (``home.jsonl``, ``peer.jsonl``; see :func:`phase_breakdown`).
+    timings there (``home.jsonl``, ``peer.jsonl``; see :func:`phase_breakdown`). ``script``: the
+    benchmark's node program to run (default :data:`SCRIPT`; :func:`compare_checkouts` passes
+    another checkout's, which loads that checkout's platform).
 
     Raises
     ------
@@ -90,13 +96,14 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         except CertError as exc:
             raise ValueError(str(exc)) from exc
     swipl = processes.swipl()
+    program = str(script if script is not None else SCRIPT)
     env = env_with_tokens([token])            # the token in the environment, never in argv
     if trace_dir is not None:
         env["DFRL_HOP_TRACE"] = str(Path(trace_dir).resolve())
     else:
         env.pop("DFRL_HOP_TRACE", None)
     naive_ms: list[float] | None = None
-    peer = processes.start([swipl, "-q", str(SCRIPT), "peer", *tls_args],
+    peer = processes.start([swipl, "-q", program, "peer", *tls_args],
                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
     try:
         assert peer.stdout is not None
@@ -106,7 +113,7 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         words = line.split()
         port, naive_port = int(words[1]), int(words[3])
         home = processes.start(
-            [swipl, "-q", str(SCRIPT), "home", str(port), str(floats),
+            [swipl, "-q", program, "home", str(port), str(floats),
              str(hops + warmup), *tls_args],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
         try:
@@ -114,7 +121,8 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         finally:
             _finish(home)
         if naive:
-            naive_ms = _naive_hops(swipl, env, naive_port, floats, hops + warmup, timeout)
+            naive_ms = _naive_hops(swipl, program, env, naive_port, floats, hops + warmup,
+                                   timeout)
             naive_ms = naive_ms[warmup:]
     finally:
         _finish(peer)
@@ -146,12 +154,12 @@ def _finish(proc: subprocess.Popen) -> None:
     processes.wait_or_stop(proc, timeout_s=10)
 
 
-def _naive_hops(swipl: str, env: dict[str, str], naive_port: int, floats: int, hops: int,
-                timeout: float) -> list[float]:
-    """The naive text hop's figures (ms), ``hops`` of them, from the ``naive`` mode (``env``
-    carries the token)."""
+def _naive_hops(swipl: str, program: str, env: dict[str, str], naive_port: int, floats: int,
+                hops: int, timeout: float) -> list[float]:
+    """The naive text hop's figures (ms), ``hops`` of them, from the ``naive`` mode of
+    ``program`` (``env`` carries the token)."""
     done = subprocess.run(
-        [swipl, "-q", str(SCRIPT), "naive", str(naive_port), str(floats), str(hops)],
+        [swipl, "-q", program, "naive", str(naive_port), str(floats), str(hops)],
         stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=timeout, env=env)
     line = next((l for l in done.stdout.splitlines() if l.startswith("NAIVE_MS")), None)
     if line is None:
@@ -275,3 +283,70 @@ def _pool(results: list[MigrationResult]) -> MigrationResult:
         mean_ms=statistics.fmean(r.mean_ms for r in results), payload_bytes=r0.payload_bytes,
         naive_median_ms=naive_median,
         naive_ratio=statistics.median(meds) / naive_median if naive_median else None)
+
+
+@dataclass
+class CheckoutComparison:
+    """This checkout's hops beside another checkout's, run alternately in the same minutes
+    (medians over the runs of each; ms)."""
+
+    floats: int
+    runs: int
+    this_median_ms: float
+    other_median_ms: float
+    this_over_other: float
+    """``this_median_ms / other_median_ms`` (below 1: this checkout hops faster)."""
+    this_naive_ratio: float | None
+    other_naive_ratio: float | None
+    this_runs_ms: list[float]
+    other_runs_ms: list[float]
+
+
+def other_script(root: str | Path) -> Path:
+    """The benchmark's node program in the checkout at ``root``.
+
+    Raises
+    ------
+    ValueError
+        ``root`` holds no ``experiments/tools/bench/bench_migrate.pl``.
+    """
+    script = Path(root).resolve() / "experiments" / "tools" / "bench" / "bench_migrate.pl"
+    if not script.is_file():
+        raise ValueError(f"{root}: no experiments/tools/bench/bench_migrate.pl there "
+                         "(give the root of a dfrl checkout, e.g. a git worktree)")
+    return script
+
+
+def compare_checkouts(floats: int, hops: int, other_root: str | Path, runs: int = 3,
+                      warmup: int = 2) -> CheckoutComparison:
+    """Time this checkout's hop and the one of the checkout at ``other_root`` (say a worktree
+    of an older commit), ``runs`` runs each, alternating which goes first, so that a change in
+    the machine's load hits both; each run times its own naive text hop too.
+
+    Raises
+    ------
+    ValueError
+        Bad arguments, or ``other_root`` is no checkout (see :func:`other_script`).
+    """
+    if runs < 1:
+        raise ValueError("runs >= 1 is required")
+    other = other_script(other_root)
+    mine: list[MigrationResult] = []
+    theirs: list[MigrationResult] = []
+    for i in range(runs):
+        order = [(mine, None), (theirs, other)]
+        for results, script in (order if i % 2 == 0 else order[::-1]):
+            results.append(run(floats, hops, warmup, script=script))
+
+    def ratio(rs: list[MigrationResult]) -> float | None:
+        xs = [r.naive_ratio for r in rs if r.naive_ratio is not None]
+        return statistics.median(xs) if xs else None
+
+    this_ms = [r.median_ms for r in mine]
+    other_ms = [r.median_ms for r in theirs]
+    return CheckoutComparison(
+        floats=floats, runs=runs, this_median_ms=statistics.median(this_ms),
+        other_median_ms=statistics.median(other_ms),
+        this_over_other=statistics.median(this_ms) / statistics.median(other_ms),
+        this_naive_ratio=ratio(mine), other_naive_ratio=ratio(theirs),
+        this_runs_ms=this_ms, other_runs_ms=other_ms)

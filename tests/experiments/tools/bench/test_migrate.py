@@ -82,3 +82,39 @@ def test_migrate_tls_prints_its_cost_beside_the_naive_hop(
     # control: a folder without the node's files is refused before any process starts
     assert main(["bench", "migrate", "--floats", "100", "--hops", "2",
                  "--tls", str(tmp_path / "ca")]) == 2
+
+
+def test_against_another_checkout_alternates_their_hops(tmp_path: Path) -> None:
+    # the other checkout: a copy of this one's program whose agent records every hop as
+    # 1000 ms, so the test sees that the other side's runs used the other program
+    root = Path(migrate.SCRIPT).parents[3]
+    other = tmp_path / "other"
+    (other / "experiments" / "tools" / "bench").mkdir(parents=True)
+    text = migrate.SCRIPT.read_text().replace(
+        "'../../../platform_pl/", f"'{root.as_posix()}/platform_pl/")
+    (other / "experiments" / "tools" / "bench" / "bench_migrate.pl").write_text(text)
+    handler = (migrate.SCRIPT.parent / "bench_hop_handler.pl").read_text()
+    assert "Ms is (Now - T0) * 1000," in handler
+    (other / "experiments" / "tools" / "bench" / "bench_hop_handler.pl").write_text(
+        handler.replace("Ms is (Now - T0) * 1000,", "Ms is 1000.0 + 0 * (Now - T0),"))
+    cmp = migrate.compare_checkouts(100, 2, other, runs=2, warmup=0)
+    assert cmp.runs == 2 and len(cmp.this_runs_ms) == 2 and len(cmp.other_runs_ms) == 2
+    assert cmp.other_runs_ms == [1000.0, 1000.0]
+    assert all(0 < ms < 1000 for ms in cmp.this_runs_ms)
+    assert cmp.this_over_other == pytest.approx(cmp.this_median_ms / cmp.other_median_ms)
+    assert cmp.this_naive_ratio is not None and cmp.other_naive_ratio is not None
+    # control: a folder that is no checkout is refused before any process starts
+    with pytest.raises(ValueError, match="bench_migrate.pl"):
+        migrate.compare_checkouts(100, 2, tmp_path / "nothing")
+
+
+def test_against_on_the_command_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from dfrl.experiments.cli import main
+
+    root = Path(migrate.SCRIPT).parents[3]
+    assert main(["bench", "migrate", "--floats", "0", "--hops", "2", "--warmup", "0",
+                 "--rounds", "1", "--against", str(root)]) == 0
+    out = capsys.readouterr().out
+    assert "this/against" in out and "naive ratio" in out
+    assert main(["bench", "migrate", "--floats", "0", "--hops", "2",
+                 "--against", str(tmp_path)]) == 2
