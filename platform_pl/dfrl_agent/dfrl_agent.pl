@@ -323,7 +323,8 @@ check_plan(Plan) :-
 %!  dfrl_tour(+Agent, +Link, +Event) is det.
 %
 %   The agent's handler. Events: `main` (an arrival), `launch` (started
-%   on a node that is no stop: go to the first reachable stop) and
+%   on a node that is no stop: go to the first reachable stop),
+%   `tree_next` (a tree agent's next round, see next_round/4) and
 %   resurrected(Epoch, From, Dead, Resume) (started by dfrl_lease at
 %   the stop From after the node Dead was lost with the agent on it).
 %   The clause is copied into the agent's own module, so it calls this
@@ -368,6 +369,9 @@ event(main, Node, M, Agent) :-
     ->  retire(Node, M, Agent, E2)
     ;   step(M, Agent)
     ).
+event(tree_next, _, M, Agent) :-
+    get_state(M, Agent, S),
+    try_home(M, Agent, S, 0).
 event(launch, _, M, Agent) :-
     get_state(M, Agent, S0),
     put_dict(_{phase:home, index: -1}, S0, S),
@@ -783,9 +787,20 @@ end_round(M, Agent, S) :-
             rest(Node, Agent, Rest, Verdict1),
             (   Verdict1 = superseded(E3)
             ->  retire(Node, M, Agent, E3)
-            ;   try_home(M, Agent, S1, 0)
+            ;   next_round(Node, M, Agent, S1)
             )
         )
+    ).
+
+%   Start the next round at the first reachable stop. A tree agent stays
+%   on its node (dfrl_tree.pl), so it starts the round in a new handler
+%   call (event tree_next): a handler call may take agent_cpu_limit
+%   seconds of CPU (agent_bounds.pl), a round each, not a whole tour.
+next_round(Node, M, Agent, S) :-
+    (   itinerary_kind(M, Agent, tree(_))
+    ->  node_property(Node, link(Link)),
+        agents:agent_execute(Node, Agent, Link, tree_next)
+    ;   try_home(M, Agent, S, 0)
     ).
 
 %   next_method(+Method, +Carried, +State, -Next, -Good)

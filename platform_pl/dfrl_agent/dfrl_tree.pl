@@ -6,7 +6,8 @@
             tree_subtree/4              % +Position, +Fanout, +Size, -Positions
           ]).
 :- use_module('../tartarus', [current_node/1, purge_agent/1, with_node/2]).
-:- use_module(dfrl_tree_msg, [tree_post/4, tree_await/7, tree_forget/2]).
+:- use_module(dfrl_tree_msg, [tree_post/4, tree_wait/6, tree_forget/2]).
+:- use_module(dfrl_tree_adopt, [adopt_lost/10, adoption/4]).
 :- use_module(dfrl_tree_copies,
               [ tree_children/4, tree_subtree/4, tree_spawn/11, tree_go_to_stop/3,
                 add_stats/3 ]).
@@ -107,8 +108,24 @@ tree_round(M, Agent, K, S0, S) :-
     format(string(Key), "~w/~w/~w/~16r", [Agent, Epoch, Round, Nonce]),
     Ctx = ctx(Key, Order, K, info(Name, Epoch, Round, Method, Carried, Timeout,
                                   SkipAfter, Retry)),
-    call_cleanup(root_round(M, Agent, Ctx, S0, S),
+    call_cleanup(guarded_round(M, Agent, Ctx, S0, S),
                  tree_forget(Node, Key)).
+
+%   A round that fails or raises (a fault of this code, not of a robot or
+%   a node: those are skips) is logged with the error, nothing written
+%   after it, and the agent goes on with its next round.
+guarded_round(M, Agent, Ctx, S0, S) :-
+    (   catch_with_backtrace(root_round(M, Agent, Ctx, S0, S1),    % errors only: the
+                             error(F, C), E = error(F, C))          % platform's balls
+    ->  true                                                        % (purge, bounds) stop it
+    ;   E = failed
+    ),
+    (   var(E)
+    ->  S = S1
+    ;   (   E == failed -> Text = "the tree round failed" ; message_text(E, Text) ),
+        print_message(error, format("dfrl: ~w: ~w", [Agent, Text])),
+        put_dict(_{error:Text, acc:none}, S0, S)
+    ).
 
 root_round(M, Agent, Ctx, S0, S) :-
     out_pass(M, Agent, Ctx, 0, out(Items, Skips1, Stats1, Kids)),
@@ -125,7 +142,7 @@ root_round(M, Agent, Ctx, S0, S) :-
         ;   method_failed(Result, S2, S3), Final = none
         )
     ),
-    down_pass(Ctx, 0, Final, Kids, Skips2, Stats2),
+    down_pass(Ctx, Agent, 0, Final, Kids, Skips2, Stats2),
     foldl(note_skip, Skips2, S3, S4),
     add_stats(Stats1, Stats2, stats(Hops, Bytes, Retries)),
     get_dict(hops, S4, H0), get_dict(bytes, S4, B0),
@@ -191,7 +208,11 @@ tree_clone_run(M, Agent, Role) :-
 tree_clone_run(M, Agent, role(Ctx, P, Parent, ParentName)) :-
     Ctx = ctx(Key, _, _, info(_, _, _, _, _, _, SkipAfter, _)),
     current_node(Node),
-    call_cleanup(clone_part(M, Agent, Ctx, P, Parent, ParentName, SkipAfter, Node),
+    call_cleanup(( clone_part(M, Agent, Ctx, P, Parent, ParentName, SkipAfter, Node)
+                 ->  true
+                 ;   print_message(error, format("dfrl: tree clone ~w at position ~w \c
+                                                  failed", [Agent, P]))
+                 ),
                  ( tree_forget(Node, Key),
                    catch(purge_agent(Agent), _, true) )).
 
@@ -200,16 +221,37 @@ clone_part(M, Agent, Ctx, P, Parent, ParentName, SkipAfter, Node) :-
     out_pass(M, Agent, Ctx, P, out(Items, Skips, Stats0, Kids)),
     foldl(add_item_bytes, Items, 0, Bytes),
     add_stats(Stats0, stats(0, Bytes, 0), Stats),
-    (   tree_post(Parent, Key, up(P, Items, Skips, Stats), SkipAfter)
-    ->  (   await(Node, Ctx, down, [kid(P, Parent, ParentName)], [Msg], _)
-        ->  Msg = down(P, Final),
-            down_pass(Ctx, P, Final, Kids, Skips1, Stats1),
-            ignore(tree_post(Parent, Key, done(P, Skips1, Stats1), SkipAfter))
-        ;   print_message(warning, format("dfrl: tree clone ~w: its parent at ~w \c
-                                           was lost; nothing written", [Agent, Parent]))
+    atom_string(Agent, Name),
+    send_up(Node, Ctx, P, up(P, Items, Skips, Stats, Name), kid(P, Parent, ParentName), 3,
+            Result),
+    (   Result = down(Final, kid(_, To, _))
+    ->  down_pass(Ctx, Agent, P, Final, Kids, Skips1, Stats1),
+        ignore(tree_post(To, Key, done(P, Skips1, Stats1), SkipAfter))
+    ;   print_message(warning, format("dfrl: tree clone ~w: its parent at ~w was lost \c
+                                       and nobody adopted it; nothing written",
+                                       [Agent, Parent]))
+    ).
+
+%   Send the subtree up to the parent and wait for the table; a parent
+%   lost meanwhile is replaced by the copy that adopts this one (at most
+%   Tries times; dfrl_tree_adopt.pl). Result is down(Table, Parent) or
+%   orphan.
+send_up(Node, Ctx, P, Up, Peer, Tries, Result) :-
+    Ctx = ctx(Key, _, _, info(_, _, _, _, _, _, SkipAfter, _)),
+    Peer = kid(_, To, _),
+    (   tree_post(To, Key, Up, SkipAfter),
+        tree_wait(Node, Ctx, down, [Peer], [down(P, Final)], _)
+    ->  Result = down(Final, Peer)
+    ;   debug(dfrl(tree), 'position ~w: parent ~w lost; waits for an adoption', [P, To]),
+        Tries > 0,
+        adoption(Node, Ctx, P, Adopt)
+    ->  Tries1 is Tries - 1,
+        (   Adopt = adopt(P, A, N, Final)
+        ->  Result = down(Final, kid(P, A, N))
+        ;   Adopt = adopt(P, A, N),
+            send_up(Node, Ctx, P, Up, kid(P, A, N), Tries1, Result)
         )
-    ;   print_message(warning, format("dfrl: tree clone ~w cannot reach its parent \c
-                                       at ~w; nothing written", [Agent, Parent]))
+    ;   Result = orphan
     ).
 
 		 /*******************************
@@ -224,11 +266,12 @@ out_pass(M, Self, Ctx, P, out(Items, Skips, Stats, Kids)) :-
     Info = info(Root, Epoch, Round, Method, Carried, Timeout, _, _),
     length(Order, N),
     tree_children(P, K, N, Cs),
-    tree_spawn(Cs, M, Self, Ctx, P, [], Kids0, [], Skips0, stats(0, 0, 0), Stats0),
+    tree_spawn(Cs, M, Self, Ctx, P, [], Kids0, [], Skips0, stats(0, 0, 0), Stats00),
     nth0(P, Order, I-stop(_, _, Robot)),
     atom_string(RootName, Root),
     Options = [timeout(Timeout), round(Round), agent(RootName), epoch(Epoch)],
-    (   catch(read_robot(Carried, Method, Robot, Options, Item), E, true)
+    (   catch(read_robot(Carried, Method, Robot, Options, Item),   % errors only:
+              error(F, C), E = error(F, C))                         % a purge ends it
     ->  (   var(E)
         ->  Own = [I-Robot-Item], OwnSkips = []
         ;   print_message(warning, E),
@@ -238,10 +281,12 @@ out_pass(M, Self, Ctx, P, out(Items, Skips, Stats, Kids)) :-
     ),
     current_node(Node),
     debug(dfrl(tree), '~w at ~w: read ~w, waits for ~p', [Self, P, Robot, Kids0]),
-    await(Node, Ctx, up, Kids0, Msgs, Lost),
-    debug(dfrl(tree), '~w at ~w: up ~p, lost ~p', [Self, P, Msgs, Lost]),
-    subtract(Kids0, Lost, Kids),
-    lost_skips(Lost, Ctx, "lost before it sent its subtree up", LostSkips),
+    tree_wait(Node, Ctx, up, Kids0, Msgs0, Lost),
+    debug(dfrl(tree), '~w at ~w: up ~p, lost ~p', [Self, P, Msgs0, Lost]),
+    adopt_lost(Node, Ctx, M, Self, P, up, Lost, Adopted, LostSkips, AdoptStats),
+    append(Msgs0, Adopted, Msgs),
+    maplist(kid_of(Order), Msgs, Kids),
+    add_stats(Stats00, AdoptStats, Stats0),
     foldl(take_up, Msgs, Own-Stats0, Items-Stats),
     maplist(arg(3), Msgs, SkipLists),
     append([Skips0, OwnSkips, LostSkips|SkipLists], Skips).
@@ -250,7 +295,10 @@ add_item_bytes(_-_-Item, B0, B) :-
     item_bytes(Item, IB),
     B is B0 + IB.
 
-take_up(up(_, Items, _, St), Items0-St0, Items1-St1) :-
+kid_of(Order, up(C, _, _, _, Name), kid(C, H:P, Name)) :-
+    nth0(C, Order, _-stop(H, P, _)).
+
+take_up(up(_, Items, _, St, _), Items0-St0, Items1-St1) :-
     append(Items0, Items, Items1),
     add_stats(St0, St, St1).
 
@@ -261,7 +309,8 @@ write_own(ctx(_, _, _, Info), Robot, Final, Skips) :-
     Info = info(Root, Epoch, Round, _, _, Timeout, _, _),
     atom_string(RootName, Root),
     catch(write_robot(Final, Robot, [timeout(Timeout), round(Round),
-                                     agent(RootName), epoch(Epoch)]), E, true),
+                                     agent(RootName), epoch(Epoch)]),
+          error(F, C), E = error(F, C)),
     (   var(E)
     ->  Skips = []
     ;   print_message(warning, E),
@@ -271,7 +320,7 @@ write_own(ctx(_, _, _, Info), Robot, Final, Skips) :-
 
 %   Send the table down to the kids, write it into this stop's robot,
 %   collect what the kids report back.
-down_pass(Ctx, P, Final, Kids, Skips, Stats) :-
+down_pass(Ctx, Self, P, Final, Kids, Skips, Stats) :-
     Ctx = ctx(Key, Order, _, info(_, _, _, _, _, _, SkipAfter, _)),
     item_bytes(Final, FB),
     current_node(Node),
@@ -283,9 +332,10 @@ down_pass(Ctx, P, Final, Kids, Skips, Stats) :-
     write_own(Ctx, Robot, Final, OwnSkips),
     subtract(Kids, Failed, Reached),
     current_node(Node),
-    await(Node, Ctx, done, Reached, Msgs, Lost),
+    tree_wait(Node, Ctx, done, Reached, Msgs0, Lost),
     append(Failed, Lost, Gone),
-    lost_skips(Gone, Ctx, "lost before it reported its writes", LostSkips),
+    adopt_lost(Node, Ctx, none, Self, P, down(Final), Gone, Adopted, LostSkips, _),
+    append(Msgs0, Adopted, Msgs),
     foldl(take_done, Msgs, []-stats(0, 0, 0), DoneSkips-Stats0),
     Bytes is FB * Sent,
     add_stats(Stats0, stats(0, Bytes, 0), Stats),
@@ -304,29 +354,10 @@ send_down(Node, Key, Final, SkipAfter, Kid, Kid-Sent) :-
     ;   Sent = false
     ).
 
-lost_skips(Lost, ctx(_, Order, K, _), Why, Skips) :-
-    length(Order, N),
-    findall(skip(Robot, Text),
-            ( member(kid(C, Address, _), Lost),
-              tree_subtree(C, K, N, Sub),
-              member(Q, Sub),
-              nth0(Q, Order, _-stop(_, _, Robot)),
-              format(string(Text), "tree clone at ~w ~w", [Address, Why]) ),
-            Skips).
-
 
 		 /*******************************
 		 *            HELPERS		*
 		 *******************************/
-
-%   await(+Node, +Ctx, +Kind, +Peers, -Msgs, -Lost): tree_await/7 with
-%   the round's probe: every skip time, until the table timeout and one
-%   skip time more.
-await(Node, Ctx, Kind, Peers, Msgs, Lost) :-
-    Ctx = ctx(Key, _, _, info(_, _, _, _, _, Timeout, SkipAfter, _)),
-    get_time(T0),
-    Limit is T0 + Timeout + SkipAfter,
-    tree_await(Node, Key, Kind, Peers, probe(SkipAfter, Limit), Msgs, Lost).
 
 carried(M, Agent, Carried) :-
     (   catch(M:dfrl_carries_of(Agent, C), _, fail) -> Carried = C ; Carried = tables ).

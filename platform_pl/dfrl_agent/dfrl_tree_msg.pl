@@ -1,6 +1,7 @@
 :- module(dfrl_tree_msg,
           [ tree_post/4,                % +Address, +Key, +Body, +SkipAfter
             tree_await/7,               % +Node, +Key, +Kind, +Peers, +Probe, -Msgs, -Lost
+            tree_wait/6,                % +Node, +Ctx, +Kind, +Peers, -Msgs, -Lost
             tree_poll/6,                % +Node, +Key, +Kinds, +Peers, +Deadline, -Msg
             tree_note/3,                % +Node, +Key, +Body
             tree_forget/2,              % +Node, +Key
@@ -17,17 +18,19 @@
 
 A message is posted to the node of the stop its receiver is at, as the
 platform event dfrl_tree_msg/3 with msg(Key, Body): Key (a string) names
-the round, Body is up(P, Items, Skips, Stats), down(P, Table) or
-done(P, Skips, Stats), P the position of the copy that sends it up or
-receives it down. The node keeps it until the copy it is for takes it
+the round, Body is up(P, Items, Skips, Stats, Name), down(P, Table),
+done(P, Skips, Stats), adopt(P, Address, Name) or adopt(P, Address,
+Name, Table), P the position of the copy that sends it up or receives
+it down (or is adopted by the copy Name at Address, dfrl_tree_adopt.pl). The node keeps it until the copy it is for takes it
 (tree_await/7, tree_poll/6). A copy's outcome on its own node
 (moved(P, Retries) or failed(P, Text, Retries), dfrl_tree_copies.pl) is
 noted directly with tree_note/3; a peer cannot post those.
 
 Peers are kid(Position, Address, Name): the copy at Position on the
-node at Address, agent Name (a string). A copy waits for a message
-about each peer, and asks a silent peer's node every probe time whether
-the peer is still there.
+node at Address, agent Name (a string), or until(Time) for a copy whose
+name is not known (an adopted one), taken for lost after Time. A copy
+waits for a message about each peer, and asks a silent peer's node every
+probe time whether the peer is still there.
 */
 
 :- dynamic box/3.                       % Node, Key, Body
@@ -45,7 +48,7 @@ dfrl_tree_msg(platform, _Link, msg(Key, Body)) :-
     string(Key),
     ground(Body),
     functor(Body, F, _),
-    memberchk(F, [up, down, done]),
+    memberchk(F, [up, down, done, adopt]),
     !,
     current_node(Node),
     assertz(box(Node, Key, Body)).
@@ -82,6 +85,17 @@ tree_post(Address, Key, Body, SkipAfter) :-
           E,
           ( print_message(warning, E), fail )).
 
+%!  tree_wait(+Node, +Ctx, +Kind, +Peers, -Msgs, -Lost) is det.
+%
+%   tree_await/7 with the probe of the round Ctx (dfrl_tree.pl): every
+%   skip time, until its table timeout and one skip time more.
+
+tree_wait(Node, Ctx, Kind, Peers, Msgs, Lost) :-
+    Ctx = ctx(Key, _, _, info(_, _, _, _, _, Timeout, SkipAfter, _)),
+    get_time(T0),
+    Limit is T0 + Timeout + SkipAfter,
+    tree_await(Node, Key, Kind, Peers, probe(SkipAfter, Limit), Msgs, Lost).
+
 %!  tree_await(+Node, +Key, +Kind, +Peers, +Probe, -Msgs, -Lost) is det.
 %
 %   Wait on Node for a message Kind of the round Key about each of
@@ -93,7 +107,10 @@ tree_post(Address, Key, Body, SkipAfter) :-
 tree_await(Node, Key, Kind, Peers, Probe, Msgs, Lost) :-
     await_loop(Node, Key, Kind, Peers, Probe, [], Msgs, [], Lost).
 
-await_loop(_, _, _, [], _, Msgs, Msgs, Lost, Lost) :- !.
+await_loop(_, _, _, [], _, Msgs0, Msgs, Lost0, Lost) :-
+    !,
+    Msgs = Msgs0,
+    Lost = Lost0.
 await_loop(Node, Key, Kind, Peers, Probe, Msgs0, Msgs, Lost0, Lost) :-
     Probe = probe(Every, Limit),
     get_time(Now),
@@ -138,6 +155,10 @@ take_msg(Node, Key, Kind, Peers, Msg) :-
 
 %   The peer's node does not answer within the probe time, or no longer
 %   holds the peer.
+gone(_, kid(_, _, until(T))) :-
+    !,
+    get_time(Now),
+    Now > T.
 gone(Every, kid(_, Address, Name)) :-
     T is max(0.5, Every),
     atom_string(Agent, Name),

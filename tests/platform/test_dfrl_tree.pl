@@ -169,6 +169,33 @@ test(dead_stop_skipped_its_children_kept, [setup(assertz(user:quiet)),
     forall(member(R, Alive), assertion(memory_robot_table(R, Expected))),
     assertion(memory_robot_sets(r2, 0)).
 
+test(clone_lost_in_the_round_its_children_adopted,
+     [cleanup(cleanup_all(Log))]) :-
+    tmp_log(Log),
+    robots(7, Robots),
+    memory_robots_start(Robots),
+    memory_robot_delay(r2, 2.5),            % the copy at r2 stays in its read
+    nodes(8, [C|Ns]),
+    pairs_keys(Robots, Ids),
+    maplist(stop_of, Ns, Ids, Stops),
+    launch(C, fl, Stops, average, 1, Log, tree(2)),
+    nth0(1, Ns, R2Node),
+    % the copy at r2 is lost (purged: its node no longer holds it) once r4 and r5 have theirs
+    assertion(wait_for(( agents:agent_list(R2Node, [agent(Copy, _, _, _)]),
+                         memory_robot_options(r5, get, _) ))),
+    with_node(R2Node, purge_agent(Copy)),
+    assertion(wait_for(finished(Log))),
+    events(Log, round, [R1]),
+    subtract(Ids, [r2], Alive),
+    % r2's copy lost inside the round; r4 and r5, below it, adopted by the root
+    assertion(R1.visited == Alive),
+    assertion(R1.skipped = [_{robot:r2, reason:_}]),
+    R1.skipped = [Skip],
+    assertion(sub_atom(Skip.reason, _, _, _, 'its children were adopted')),
+    subtract(Robots, [r2-_], AliveRobots),
+    chain_result(average, AliveRobots, Expected),
+    forall(member(R, Alive), assertion(memory_robot_table(R, Expected))).
+
 test(bad_itinerary_refused, [cleanup(cleanup_all('/nonexistent.jsonl'))]) :-
     nodes(1, [C]),
     Plan = plan([stop(localhost, 1, r1)], 1, 0.0, 'x.jsonl', 30),
