@@ -38,7 +38,9 @@ def _text(f: dict[str, Any]) -> str:
              f"  median recovery {med['recovery_s']} s, longest stall {med['longest_stall_s']} s "
              f"(normal gap {med['normal_gap_s']} s), rounds done {med['rounds_done']}/"
              f"{f['rounds_planned']}; identical tables {f['tables_identical_runs']}/{f['runs']} "
-             f"runs, truthful verdict {f['truthful_runs']}/{f['runs']} runs"]
+             f"runs, truthful verdict {f['truthful_runs']}/{f['runs']} runs"
+             + (f"; median {med['rounds_unverified']} round(s) with a table not on record "
+                "(a dead host's shares)" if med["rounds_unverified"] else "")]
     for r in f["per_run"]:
         if not r["passed"]:
             lines.append(f"  run {r['run']}: " + "; ".join(r["problems"]))
