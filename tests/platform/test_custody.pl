@@ -224,4 +224,71 @@ test(fsync_without_the_helper, [setup(tmp_file(store, Dir)), cleanup(delete_dire
         retractall(custody_store:fsync_helper_failed_)),
     assertion(custody_store:store_read(File, t(3))).
 
+%   A staged agent that starts is marked active in activated/ and its
+%   staged file is not written again; a restart from that store runs it
+%   at once, though its source is gone. Control: the same store without
+%   the marker keeps the agent staged and waits for the source.
+test(activation_marker, [cleanup(retractall(user:gate_open))]) :-
+    activation_restart(keep_marker, Runs, State),
+    assertion(Runs == 1),
+    assertion(State == idle).
+test(activation_marker_control, [cleanup(retractall(user:gate_open))]) :-
+    activation_restart(drop_marker, Runs, State),
+    assertion(Runs == 0),
+    assertion(memberchk(State, [staged, in_doubt])).
+
+activation_restart(What, Runs, State) :-
+    retractall(user:arrived(_, _)),
+    retractall(user:gate_open),
+    tmp_file(custody, D),
+    directory_file_path(D, a, DA), directory_file_path(D, b, DB),
+    start(A, [store(DA)]), start(B, [store(DB)]),
+    with_node(A, ( create_mobile_agent(g1, gated, [k]), add_payload(g1, [(arrivals,2)]) )),
+    migration:decide(A, mg, committed),              % the commit frame is lost:
+    custody_incarnation(A, Inc),
+    transfer_by_hand(A, B, g1, mg, Inc),              % B's settler asks A and starts g1
+    assertion(wait_for(user:arrived(g1, 1))),
+    directory_file_path(DB, 'custody/agents', AgentDir),
+    directory_file_path(DB, 'custody/activated', MarkDir),
+    files(DB, [F]),
+    directory_file_path(AgentDir, F, AgentFile),
+    assertion(custody_store:store_read(AgentFile, custody_agent(g1, staged(mg, _, _, _), mg, _))),
+    directory_files(MarkDir, Ms0),
+    exclude([M]>>sub_atom(M, 0, _, _, '.'), Ms0, [MF]),
+    node_property(B, address(_:P)),
+    stop_all([A, B]),                                 % g1 still runs on B
+    (   What == drop_marker
+    ->  directory_file_path(MarkDir, MF, MarkFile),
+        delete_file(MarkFile)
+    ;   true
+    ),
+    retractall(user:arrived(_, _)),
+    assertz(user:gate_open),
+    opts(O),
+    node_start(localhost:P, B2, [store(DB)|O]),
+    migration:migration_start(B2),
+    (   What == keep_marker
+    ->  assertion(wait_for(( census(B2, L), L == [agent(g1, idle)] )))
+    ;   assertion(wait_for(( census(B2, L), L = [agent(g1, S)], S == in_doubt )))
+    ),
+    aggregate_all(count, user:arrived(g1, _), Runs),
+    census(B2, [agent(g1, State)]),
+    stop_all([B2]),
+    delete_directory_and_contents(D).
+
 :- end_tests(store).
+
+:- dynamic gated/3, user:gate_open/0.
+
+%   An agent that records its arrival and then runs until the test opens
+%   the gate (at most 10 s): it is still running when its node stops.
+gated(guid, _Link, main) :-
+    retract(arrivals(guid, N0)), N is N0 + 1, assertz(arrivals(guid, N)),
+    assertz(user:arrived(guid, N)),
+    gate(500).
+
+gate(N) :-
+    (   user:gate_open -> true
+    ;   N > 0 -> sleep(0.02), N1 is N - 1, gate(N1)
+    ;   true
+    ).
