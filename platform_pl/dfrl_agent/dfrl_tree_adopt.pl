@@ -15,7 +15,8 @@
 A copy whose child X is lost in the round (its node stops answering or
 no longer holds it) skips X's robot and offers itself as the parent of
 X's children: it asks the stop of each child C of X in the tree for the
-copy X sent there (named X's name and _) and posts it adopt(C, Address,
+copy X sent there (named X's name and _; not one still staged there,
+whose move X's loss cut off) and posts it adopt(C, Address,
 Name) (adopt(C, Address, Name, Table) once the table goes down); a stop
 without such a copy (X was lost before it sent one) gets a new copy
 while the items go up (once the table goes down, its subtree is
@@ -73,7 +74,8 @@ offer(Ctx, parent(To, Name), Phase, SkipAfter, K, N, C-Prefix, o(P0, S0, F0), o(
     nth0(C, Order, _-stop(H, Port, Robot)),
     T is max(0.5, SkipAfter),
     (   catch(remote_agents(H:Port, Agents, [connect_timeout(T), reply_timeout(T)]), _, fail)
-    ->  (   member(agent(Copy, _, _, _), Agents),
+    ->  (   member(agent(Copy, _, _, Status), Agents),
+            Status \== staged,             % staged: its move was cut off with X
             sub_atom(Copy, 0, _, _, Prefix)
         ->  (   Phase = down(Final)
             ->  Body = adopt(C, To, Name, Final)

@@ -125,7 +125,27 @@ await_loop(Node, Key, Kind, Peers, Probe, Msgs0, Msgs, Lost0, Lost) :-
     ;   include(gone(Every), Peers, Gone),
         subtract(Peers, Gone, Peers1),
         append(Lost0, Gone, Lost1),
+        waiting_long(Key, Kind, Peers1, Probe),
         await_loop(Node, Key, Kind, Peers1, Probe, Msgs0, Msgs, Lost1, Lost)
+    ).
+
+%   Say once, ten probe times into a wait, which peers still hold it up
+%   (they are there but have not sent their message).
+waiting_long(Key, Kind, Peers, probe(Every, Limit)) :-
+    (   Peers \== [],
+        nb_current(dfrl_tree_waiting, Since-Key-Kind)
+    ->  get_time(Now),
+        (   Now - Since > 10 * Every,
+            \+ nb_current(dfrl_tree_warned, Key-Kind)
+        ->  b_setval(dfrl_tree_warned, Key-Kind),
+            nb_setval(dfrl_tree_warned, Key-Kind),
+            print_message(warning,
+                          format("dfrl: tree round ~w: still waiting for ~w from ~p \c
+                                  (until ~0f)", [Key, Kind, Peers, Limit]))
+        ;   true
+        )
+    ;   get_time(Now),
+        nb_setval(dfrl_tree_waiting, Now-Key-Kind)
     ).
 
 kid_at(C, kid(C, _, _)).
