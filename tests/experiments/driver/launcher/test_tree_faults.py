@@ -4,10 +4,11 @@ Six robots, ``"itinerary": "tree"``, fan-out 2: r1 at the root; r2 (with r4 and 
 and r3 (with r6) its children. After round 1, r2's process is killed with SIGKILL. Whatever the
 agent was doing then, r2 is skipped within the skip time and reported in the round log; its
 children are sent copies by the root instead, so the later rounds visit the five others, every
-one of which then holds the same table. If the kill lands inside a round, that round loses
-r2's whole subtree: the clone at r2 took the items of r4 and r5 with it, and their clones,
-finding their parent gone, purge themselves without writing; the root finds r2's node gone at
-its next probe (one skip time) and ends the round with the others.
+one of which then holds the same table. The kill lands inside round 2 (sync robots keep the
+agent busy): the copy at r2 is lost with it; the root finds r2's node gone at its next probe
+(one skip time) and adopts r4 and r5, whose copies send their tables to it instead (or sends
+them new copies if r2's never got there), so that round too misses r2 only, unless an adopted
+copy is lost as well (then its robots are skipped that round and said so).
 """
 from __future__ import annotations
 
