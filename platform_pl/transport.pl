@@ -20,13 +20,13 @@
 :- use_module(wire, [frame_write/3, frame_read/3, wire_version/1]).
 :- use_module(platform_errors, [transport_error/2, inert_error/2]).
 :- use_module(tls, [tls_connect/5]).
+:- use_module(timed_connect, [timed_connect/4]).
 %   Eager imports (not autoload/2): see node_connection.pl.
 :- use_module(library(socket),
             [tcp_socket/1, tcp_setopt/2, tcp_connect/3, tcp_close_socket/1]).
 :- use_module(library(error), [must_be/2, domain_error/2]).
 :- use_module(library(option), [option/2, option/3]).
 :- use_module(library(sha), [hmac_sha/4]).
-:- use_module(library(time), [call_with_time_limit/2]).
 :- use_module(library(lists), [member/2, min_list/2]).
 :- use_module(library(aggregate), [aggregate_all/3]).
 
@@ -146,10 +146,11 @@ own_tls(Options, Tls) :-
     ;   Tls = none
     ).
 
+%   Bounded by timed_connect/4, not call_with_time_limit/2: a robot
+%   process's Prolog runs without signals (see timed_connect.pl).
 connect(Address, Timeout, Pair) :-
-    catch(call_with_time_limit(Timeout,
-                               tcp_connect(Address, Pair,
-                                           [nodelay(true), bypass_proxy(true)])),
+    catch(timed_connect(Address, Pair, Timeout,
+                        [nodelay(true), bypass_proxy(true)]),
           E,
           connect_failed(Address, E)).
 
