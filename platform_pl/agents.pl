@@ -771,7 +771,8 @@ agent_hop_times(Node, Name, Millis) :-
 %!  agent_record_hop(+Node, +Name, +Hop) is semidet.
 %
 %   Append Hop, hop(From, To, Departed, Arrived) (get_time/1 stamps), to
-%   the hop record of agent Name on Node, keeping the last 1000 hops.
+%   the hop record of agent Name on Node, keeping the last 100 hops (the
+%   record travels with the agent: 74 bytes a hop).
 %   Fails if Name is not on Node.
 
 agent_record_hop(Node, Name, Hop) :-
@@ -785,7 +786,7 @@ agent_record_hop(Node, Name, Hop) :-
             assertz(agent_hops_(Node, Name, Hops))
         )).
 
-max_hops_kept(1000).
+max_hops_kept(100).
 
 keep_last(List, Kept) :-
     max_hops_kept(Max),

@@ -407,7 +407,7 @@ load_tartarus_state(File) :-
 %!  agent_hop_times(+Name, -Millis) is det.
 %
 %   Duration of each hop of agent Name, oldest first (at most the last
-%   1000), from the start of move_agent at the source to the start of
+%   100), from the start of move_agent at the source to the start of
 %   its handler at the destination.
 
 agent_hop_times(Name, Millis) :-

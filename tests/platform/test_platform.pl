@@ -424,6 +424,19 @@ test(record_hop, [cleanup(stop_all([N]))]) :-
     assertion(Ms == [500.0]),
     assertion(\+ agents:agent_record_hop(N, nobody, hop(a, b, 1.0, 1.5))).
 
+test(record_hop_keeps_the_last_100, [cleanup(stop_all([N]))]) :-
+    node_start(localhost:0, N, [default(false), token(test)]),
+    with_node(N, create_mobile_agent(h2, walker, [])),
+    forall(between(1, 150, I),
+           ( T1 is 1.0 + I / 1000,
+             agents:agent_record_hop(N, h2, hop(a, b, 1.0, T1)) )),
+    agents:agent_hop_times(N, h2, Ms),
+    length(Ms, Len),
+    assertion(Len == 100),
+    Ms = [First|_], last(Ms, Last),
+    assertion(abs(First - 51.0) < 1.0e-6),
+    assertion(abs(Last - 150.0) < 1.0e-6).
+
 test(add_facts_travel_as_payload, [cleanup(stop_all([N]))]) :-
     node_start(localhost:0, N, [default(false), token(test)]),
     with_node(N, create_mobile_agent(f1, walker, [])),
