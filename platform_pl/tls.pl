@@ -140,7 +140,7 @@ tls_accept(Dir, Plain, Pair, Name, Options) :-
     context(server, Dir, SSL),
     stream_pair(Plain, In0, Out0),
     nb_setval(dfrl_tls_peer, none),
-    catch(call_with_time_limit(Secs, ssl_negotiate(SSL, In0, Out0, In, Out)),
+    catch(bounded(Secs, In0, ssl_negotiate(SSL, In0, Out0, In, Out)),
           E, handshake_failed(server, E)),
     tune_streams(In0, Out0, Out),
     stream_pair(Pair, In, Out),
@@ -152,7 +152,21 @@ tls_accept(Dir, Plain, Pair, Name, Options) :-
         throw(error(tls_error(server, no_peer_name), _))
     ).
 
+%   A handshake within Secs: call_with_time_limit/2, and each read of
+%   the plain stream In0 bounded by Secs too, because in a process whose
+%   Prolog runs without signals (a robot process: pyswip starts it with
+%   --nosignals) the alarm cannot interrupt a read that waits for a
+%   silent peer; In0's own timeout is put back afterwards.
+bounded(Secs, In0, Goal) :-
+    stream_property(In0, timeout(Before)),
+    setup_call_cleanup(set_stream(In0, timeout(Secs)),
+                       call_with_time_limit(Secs, Goal),
+                       set_stream(In0, timeout(Before))).
+
 handshake_failed(_, time_limit_exceeded) :-
+    !,
+    throw(error(tls_error(handshake, timeout), _)).
+handshake_failed(_, error(timeout_error(read, _), _)) :-
     !,
     throw(error(tls_error(handshake, timeout), _)).
 handshake_failed(_, error(ssl_error(_, _, _, Reason), _)) :-
@@ -175,7 +189,7 @@ tls_connect(Dir, Address, Plain, Pair, Options) :-
     option(timeout(Secs), Options, 5),
     context(client, Dir, SSL),
     stream_pair(Plain, In0, Out0),
-    catch(call_with_time_limit(Secs, ssl_negotiate(SSL, In0, Out0, In, Out)),
+    catch(bounded(Secs, In0, ssl_negotiate(SSL, In0, Out0, In, Out)),
           E, connect_failed(Address, E)),
     tune_streams(In0, Out0, Out),
     stream_pair(Pair, In, Out),
@@ -193,6 +207,9 @@ tune_streams(In0, Out0, Out) :-
     set_stream(Out, buffer_size(16384)).
 
 connect_failed(Address, time_limit_exceeded) :-
+    !,
+    transport_error(Address, tls(timeout)).
+connect_failed(Address, error(timeout_error(read, _), _)) :-
     !,
     transport_error(Address, tls(timeout)).
 connect_failed(Address, error(ssl_error(_, _, _, Reason), _)) :-

@@ -25,17 +25,18 @@ main :-
 
 
 def start(procs: list[Proc], tmp_path: Path, options: str, name: str = "node",
-          consult: tuple[Path, ...] = ()) -> tuple[Proc, int]:
+          consult: tuple[Path, ...] = (), flags: tuple[str, ...] = ()) -> tuple[Proc, int]:
     """Start a node with ``options`` (Prolog list text, e.g. ``"[token(9)]"``); give it and its port.
 
-    ``consult``: files loaded (as ``use_module``) before the node starts.
+    ``consult``: files loaded (as ``use_module``) before the node starts; ``flags``: more
+    ``swipl`` flags, e.g. ``--no-signals`` (as a robot process's embedded Prolog runs).
     """
     assert SWIPL, "swipl missing"
     script = tmp_path / f"{name}.pl"
     consults = "\n".join(f":- use_module({str(f)!r})." for f in consult)
     script.write_text(SCRIPT.format(tartarus=str(PLATFORM_DIR / "tartarus.pl"),
                                     options=options, consults=consults))
-    p = Proc([SWIPL, "-q", str(script)])
+    p = Proc([SWIPL, *flags, "-q", str(script)])
     procs.append(p)
     line = p.wait_for("LISTENING")
     return p, int(line.split()[1])
