@@ -6,8 +6,10 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 from dfrl.experiments.cli import bench_faults, bench_hostile
 from dfrl.experiments.tools.bench import bridge, chaos, hostile, migrate, round as round_bench
@@ -57,44 +59,44 @@ def cmd_migrate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _migrate_against(args: argparse.Namespace) -> int:
+def _per_size(args: argparse.Namespace, compare: Callable[[int], Any],
+              line: Callable[[int, Any], str]) -> int:
+    """One comparison per payload size of ``--floats``: its JSON, or ``line(n, result)``."""
     for n in args.floats:
         try:
-            cmp = migrate.compare_checkouts(n, args.hops, args.against, args.rounds, args.warmup)
+            cmp = compare(n)
         except (ValueError, RuntimeError, FileNotFoundError) as exc:
             print(f"dfrl bench migrate: {exc}", file=sys.stderr)
             return 2 if isinstance(exc, ValueError) else 1
-        if args.json:
-            print(json.dumps(asdict(cmp)))
-        else:
-            ratios = ("" if cmp.this_naive_ratio is None or cmp.other_naive_ratio is None else
-                      f"  naive ratio {cmp.this_naive_ratio:.3f} (against "
-                      f"{cmp.other_naive_ratio:.3f})")
-            print(f"floats={n:>7}  this median {cmp.this_median_ms:8.3f} ms  against "
-                  f"{cmp.other_median_ms:8.3f} ms  this/against {cmp.this_over_other:.3f}  "
-                  f"({cmp.runs} runs each, alternating){ratios}")
+        print(json.dumps(asdict(cmp)) if args.json else line(n, cmp))
         sys.stdout.flush()
     return 0
+
+
+def _migrate_against(args: argparse.Namespace) -> int:
+    def line(n: int, cmp: Any) -> str:
+        ratios = ("" if cmp.this_naive_ratio is None or cmp.other_naive_ratio is None else
+                  f"  naive ratio {cmp.this_naive_ratio:.3f} (against "
+                  f"{cmp.other_naive_ratio:.3f})")
+        return (f"floats={n:>7}  this median {cmp.this_median_ms:8.3f} ms  against "
+                f"{cmp.other_median_ms:8.3f} ms  this/against {cmp.this_over_other:.3f}  "
+                f"({cmp.runs} runs each, alternating){ratios}")
+
+    return _per_size(args, lambda n: migrate.compare_checkouts(
+        n, args.hops, args.against, args.rounds, args.warmup), line)
 
 
 def _migrate_tls(args: argparse.Namespace) -> int:
-    for n in args.floats:
-        try:
-            cmp = migrate.compare_tls(n, args.hops, args.tls, args.warmup, args.rounds)
-        except (ValueError, RuntimeError, FileNotFoundError) as exc:
-            print(f"dfrl bench migrate: {exc}", file=sys.stderr)
-            return 2 if isinstance(exc, ValueError) else 1
-        if args.json:
-            print(json.dumps(asdict(cmp)))
-        else:
-            naive = ("" if cmp.plain.naive_median_ms is None else
-                     f"  naive text hop {cmp.plain.naive_median_ms:8.3f} ms  "
-                     f"ratio {cmp.plain.naive_ratio:.3f}")
-            print(f"floats={n:>7}  plaintext median {cmp.plain.median_ms:8.3f} ms  "
-                  f"TLS median {cmp.tls.median_ms:8.3f} ms  TLS cost {cmp.tls_cost:+.1%}  "
-                  f"(hops={cmp.tls.hops} each){naive}")
-        sys.stdout.flush()
-    return 0
+    def line(n: int, cmp: Any) -> str:
+        naive = ("" if cmp.plain.naive_median_ms is None else
+                 f"  naive text hop {cmp.plain.naive_median_ms:8.3f} ms  "
+                 f"ratio {cmp.plain.naive_ratio:.3f}")
+        return (f"floats={n:>7}  plaintext median {cmp.plain.median_ms:8.3f} ms  "
+                f"TLS median {cmp.tls.median_ms:8.3f} ms  TLS cost {cmp.tls_cost:+.1%}  "
+                f"(hops={cmp.tls.hops} each){naive}")
+
+    return _per_size(args, lambda n: migrate.compare_tls(n, args.hops, args.tls, args.warmup,
+                                                         args.rounds), line)
 
 
 # -- sim -------------------------------------------------------------------------------------
