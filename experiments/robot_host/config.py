@@ -87,6 +87,9 @@ class RobotConfig(JsonDicts):
     eval_every, eval_steps : int
         Greedy evaluation of the table every ``eval_every`` iterations (0: none) for
         ``eval_steps`` control steps, in an environment of its own (:mod:`.evaluate`).
+    clone_limit : int or None
+        Clones that may arrive at the robot's node per minute (the node's ``clone_limit``;
+        None: the platform's default, 60). A tree itinerary's copies are clones.
     """
 
     robot: str
@@ -110,6 +113,7 @@ class RobotConfig(JsonDicts):
     tls: str | None = None
     eval_every: int = 0
     eval_steps: int = 500
+    clone_limit: int | None = None
 
     def __post_init__(self) -> None:
         if not is_checked():
@@ -152,6 +156,7 @@ RULES: dict[str, Rule] = {
     "bench_params": Rule(dict, nullable=True), "host": Rule(str),
     "tls": Rule(str, nullable=True),
     "eval_every": Rule(int, low=0, hint=_NO_EVAL), "eval_steps": Rule(int, low=1),
+    "clone_limit": Rule(int, nullable=True, low=1),
 }
 
 

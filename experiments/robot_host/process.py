@@ -115,6 +115,8 @@ class RobotProcess:
             options["tokens"] = [Atom(c.token) if isinstance(c.token, str) else c.token]
         if c.tls is not None:
             options["tls"] = str(Path(c.tls).resolve())
+        if c.clone_limit is not None:
+            options["clone_limit"] = c.clone_limit
         name = start_node(self.bridge, c.host, 0, **options)
         host, port = self.bridge.address(name)
         self.lines.node(str(host), int(port))

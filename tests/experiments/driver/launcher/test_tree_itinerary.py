@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from dfrl.experiments.driver.config import ConfigError, ExperimentConfig
-from dfrl.experiments.driver.launcher import run
+from dfrl.experiments.driver.launcher import run, spawn
 from dfrl.experiments.processes import find_swipl
 
 from .helpers import diagnose, rounds_csv, small_config
@@ -80,3 +80,22 @@ def test_scale_bench_compares_the_itineraries_with_a_delay() -> None:
     chain = r["points"][0]
     assert chain["round_median_ms"] > 6 * 2 * 20
     assert r["compare"][0]["robots"] == 4 and r["compare"][0]["tree_over_chain"] > 0
+
+
+@pytest.mark.parametrize("limited", [False, True], ids=["tree-clone-limit", "control"])
+def test_many_fast_tree_rounds_skip_nobody(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                           limited: bool) -> None:
+    # 60 rounds of 3 robots as fast as they go: every copy is a clone at the parent's node, and
+    # the platform's default admits 60 clones a minute. The control keeps that default for the
+    # robots' nodes (as before the run set its own): rounds must then skip robots for clones.
+    if limited:
+        monkeypatch.setattr(spawn, "clone_limit", lambda c: None)
+    cfg = small_config(3, iterations=600, respite=10, itinerary="tree", fanout=2)
+    res = run(cfg, tmp_path / "out", progress=None)
+    rows = rounds_csv(tmp_path / "out")
+    refused = [r for r in rows if "clones" in r["skipped"]]
+    if limited:
+        assert refused, "the control skipped nobody: the test could not see the limit"
+        return
+    assert res.ok and len(rows) == 60 and not refused, diagnose(tmp_path / "out")
+    assert all(r["all_equal"] == "true" and r["skipped"] == "" for r in rows)
