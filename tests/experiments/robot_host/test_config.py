@@ -15,9 +15,9 @@ def test_every_problem_with_its_key() -> None:
         RobotConfig.from_dict({"robot": "R1", "out_dir": 3, "mode": "fast", "colur": 1,
                                "rtf": float("inf"), "bench_table": [4, 0]})
     assert info.value.problems == [
-        "colur: unknown key (known: algo, arena, bench_params, bench_table, eval_every, "
-        "eval_steps, events, grace_s, host, iterations, mode, out_dir, progress_every, respite, robot, rtf, seed, "
-        "sync_timeout_s, tls, token, trainer)",
+        "colur: unknown key (known: algo, arena, bench_params, bench_table, clone_limit, "
+        "eval_every, eval_steps, events, grace_s, host, iterations, mode, out_dir, "
+        "progress_every, respite, robot, rtf, seed, sync_timeout_s, tls, token, trainer)",
         "out_dir: expected a string, got 3 (an integer)",
         "mode: unknown mode 'fast'; known: async, sync",
         "rtf: must be a finite number, got inf",
