@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec
-from dfrl.experiments.driver.launcher import run
+from dfrl.experiments.driver.launcher import Launcher, run
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
 
 
@@ -46,12 +46,25 @@ def run_in_thread(cfg: ExperimentConfig, out: Path,
                   **run_options: Any) -> tuple[threading.Thread, dict[str, Any]]:
     """Start ``run(cfg, out, **run_options)`` in a thread (``tls=DIR``, say); its result or
     exception lands in the dict."""
+    return call_in_thread(lambda: run(cfg, out, progress=None, **run_options))
+
+
+def launcher_in_thread(cfg: ExperimentConfig,
+                       out: Path) -> tuple[Launcher, threading.Thread, dict[str, Any]]:
+    """A :class:`Launcher` of ``cfg`` running in a thread (its robots can be reached while it
+    runs); its result or exception lands in the dict."""
+    launcher = Launcher(cfg, out, progress=None)
+    return (launcher, *call_in_thread(launcher.run))
+
+
+def call_in_thread(call: Any) -> tuple[threading.Thread, dict[str, Any]]:
+    """``call()`` in a daemon thread; its result (``res``) or exception (``exc``) in the dict."""
     box: dict[str, Any] = {}
 
     def target() -> None:
         try:
-            box["res"] = run(cfg, out, progress=None, **run_options)
-        except BaseException as exc:  # noqa: BLE001
+            box["res"] = call()
+        except BaseException as exc:  # noqa: BLE001 - the caller asserts on it
             box["exc"] = exc
 
     t = threading.Thread(target=target, daemon=True)

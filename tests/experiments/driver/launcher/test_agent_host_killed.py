@@ -11,18 +11,16 @@ from __future__ import annotations
 
 import os
 import signal
-import threading
 import time
 from pathlib import Path
-from typing import Any
 
 import pytest
 
 from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec
-from dfrl.experiments.driver.launcher import Launcher, inject_method
+from dfrl.experiments.driver.launcher import inject_method
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
 
-from .helpers import wait_rounds
+from .helpers import launcher_in_thread, wait_rounds
 from dfrl.experiments.processes import find_swipl
 
 pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
@@ -36,17 +34,7 @@ def test_run_completes_when_the_agents_host_is_killed(tmp_path: Path) -> None:
                                                 RobotSpec("r3", "r2")),
                            iterations=1200, respite=200, seed=3, mode="sync", rtf=8.0,
                            timeout_s=120, tolerate_lost_robots=1)
-    launcher = Launcher(cfg, tmp_path, progress=None)
-    box: dict[str, Any] = {}
-
-    def target() -> None:
-        try:
-            box["res"] = launcher.run()
-        except BaseException as exc:  # noqa: BLE001 - reported by the assertion below
-            box["exc"] = exc
-
-    runner = threading.Thread(target=target, daemon=True)
-    runner.start()
+    launcher, runner, box = launcher_in_thread(cfg, tmp_path)
     wait_rounds(tmp_path, "fed_qlearning", 1)
     assert inject_method(tmp_path, SLOW, "slow") == {"fed_qlearning": "applied"}
     # Execute: the first time the agent reads r2's table with the slow method (it then stays

@@ -14,18 +14,15 @@ from __future__ import annotations
 
 import os
 import signal
-import threading
 from pathlib import Path
-from typing import Any
 
 import pytest
 
 from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec
-from dfrl.experiments.driver.launcher import Launcher
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
 from dfrl.experiments.processes import find_swipl
 
-from .helpers import rounds_csv, wait_rounds
+from .helpers import launcher_in_thread, rounds_csv, wait_rounds
 
 pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
@@ -39,17 +36,7 @@ def test_tree_run_completes_when_a_clone_host_is_killed(tmp_path: Path) -> None:
                            iterations=600, respite=100, seed=5, mode="sync", rtf=8.0,
                            timeout_s=120, skip_after_s=1.0, tolerate_lost_robots=3,
                            itinerary="tree", fanout=2)
-    launcher = Launcher(cfg, tmp_path, progress=None)
-    box: dict[str, Any] = {}
-
-    def target() -> None:
-        try:
-            box["res"] = launcher.run()
-        except BaseException as exc:  # noqa: BLE001 - reported by the assertion below
-            box["exc"] = exc
-
-    runner = threading.Thread(target=target, daemon=True)
-    runner.start()
+    launcher, runner, box = launcher_in_thread(cfg, tmp_path)
     wait_rounds(tmp_path, "fed_qlearning", 1)
     # Execute: kill r2, the robot process under the root's first clone
     pid = launcher.robots()["r2"].status().pid
