@@ -101,7 +101,7 @@ class JsonDicts:
 
     def public_dict(self) -> dict[str, Any]:
         """:meth:`to_dict` without the token: what a results file or a peer may see."""
-        data = to_json_dict(self)
+        data = self.to_dict()
         data.pop("token", None)
         return data
 

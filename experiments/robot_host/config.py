@@ -120,6 +120,15 @@ class RobotConfig(JsonDicts):
             raise_problems(check_robot_config(json_form(self)))
         object.__setattr__(self, "mode", Mode(self.mode))
 
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (the token included); ``clone_limit`` only when set, so that a
+        ``dfrl robot`` host of an earlier version, which refuses keys it does not know, still
+        takes a chain run's config."""
+        data = super().to_dict()
+        if data.get("clone_limit") is None:
+            data.pop("clone_limit", None)
+        return data
+
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "RobotConfig":
         """Inverse of :meth:`to_dict`; every problem of ``data`` is reported at once.
