@@ -147,3 +147,15 @@ def read_rounds_csv(path: str | Path) -> list[dict[str, Any]]:
 def count_equal(rows: Iterable[dict[str, Any]]) -> int:
     """Rounds after which every visited robot held the same table."""
     return sum(1 for row in rows if row["all_equal"])
+
+
+def count_unverified(rows: Iterable[dict[str, Any]]) -> int:
+    """Rounds not shown equal only because a visited robot's share record is missing (its
+    ``shares_<robot>.csv`` lost with its host, say): the records there are all equal."""
+    n = 0
+    for row in rows:
+        cells = [v for k, v in row.items() if k.startswith("digest_") and v]
+        known = {v for v in cells if v != "missing"}
+        if not row["all_equal"] and "missing" in cells and len(known) <= 1:
+            n += 1
+    return n

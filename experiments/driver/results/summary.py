@@ -9,7 +9,7 @@ from dfrl.experiments.driver.config import ExperimentConfig
 from dfrl.experiments.driver.results.evaluations import last_evaluations
 from dfrl.experiments.driver.results.faults import Faults
 from dfrl.experiments.driver.results.metrics import read_metrics
-from dfrl.experiments.driver.results.rounds import count_equal
+from dfrl.experiments.driver.results.rounds import count_equal, count_unverified
 from dfrl.experiments.driver.results.tables import params_path, table_sum
 from dfrl.experiments.provenance import describe, read_provenance
 
@@ -107,8 +107,11 @@ def write_summary(r: Results) -> Path:
     n_rounds = len(r.rounds)
     durations = sorted(float(row["duration_ms"]) for row in r.rounds)
     med = durations[len(durations) // 2] if durations else float("nan")
+    unverified = count_unverified(r.rounds)
+    also = (f" ({unverified} more not verifiable: a visited robot's share record is missing, "
+            f"e.g. lost with its host; the records there agree)" if unverified else "")
     lines += [f"- agent rounds logged: {n_rounds}; rounds after which every visited robot held "
-              f"the same table: {r.equal_rounds}/{n_rounds}; rounds that skipped robots: "
+              f"the same table: {r.equal_rounds}/{n_rounds}{also}; rounds that skipped robots: "
               f"{len(partial)}; rounds whose method FAILED (no table written): {len(failed)}",
               f"- median round time: {med:.1f} ms",
               f"- methods used: {', '.join(sorted({row['method'] for row in r.rounds})) or '-'}",

@@ -7,9 +7,9 @@ from pathlib import Path
 import pytest
 
 from dfrl.experiments.driver.results.agent_log import AgentLog, RoundRecord, Skip
-from dfrl.experiments.driver.results.rounds import (Share, count_equal, match_shares, read_rounds_csv,
-                                             read_shares,
-                                             write_rounds_csv)
+from dfrl.experiments.driver.results.rounds import (Share, count_equal, count_unverified,
+                                                    match_shares, read_rounds_csv, read_shares,
+                                                    write_rounds_csv)
 
 
 def test_match_shares_picks_the_share_inside_the_round() -> None:
@@ -102,3 +102,17 @@ def test_rounds_csv_says_which_stops_were_skipped_and_why(tmp_path: Path) -> Non
     written = read_rounds_csv(tmp_path / "rounds.csv")[0]
     assert written["skipped"] == "r2: connection refused (after 2 retries)"
     assert written["retries"] == "2" and written["digest_r2"] == ""
+
+
+def test_rounds_whose_missing_record_hides_nothing_are_unverified_not_differing() -> None:
+    rows = [
+        {"all_equal": True, "digest_r1": "a", "digest_r2": "a", "digest_r3": "a"},
+        # r3's record lost with its host; the others agree: not verifiable, not a difference
+        {"all_equal": False, "digest_r1": "b", "digest_r2": "b", "digest_r3": "missing"},
+        # control: the records there disagree: a difference, whatever is missing
+        {"all_equal": False, "digest_r1": "c", "digest_r2": "d", "digest_r3": "missing"},
+        # control: nothing missing, tables differ
+        {"all_equal": False, "digest_r1": "e", "digest_r2": "f", "digest_r3": ""},
+    ]
+    assert count_equal(rows) == 1
+    assert count_unverified(rows) == 1
