@@ -27,11 +27,16 @@ class AgentInfo:
     rounds: int
     rounds_log: str
     itinerary: tuple[dict[str, Any], ...] = field(default_factory=tuple)
+    kind: str = "chain"                 # the itinerary's: chain, or tree (clones)
+    fanout: int = 2
 
     def to_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "algo": self.algo, "method": self.method,
-                "rounds": self.rounds, "rounds_log": self.rounds_log,
-                "itinerary": [dict(s) for s in self.itinerary]}
+        out = {"name": self.name, "algo": self.algo, "method": self.method,
+               "rounds": self.rounds, "rounds_log": self.rounds_log,
+               "itinerary": [dict(s) for s in self.itinerary], "kind": self.kind}
+        if self.kind == "tree":
+            out["fanout"] = self.fanout
+        return out
 
 
 class AgentRoster:

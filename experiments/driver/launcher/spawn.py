@@ -219,7 +219,7 @@ def launch_agents(site: Site, robots: RobotRoster, agents: AgentRoster,
         if algo != GRID and learner_kind(algo) == "function":
             launch["carries"] = "params"     # linear, dqn: FedAvg of parameter vectors
         agents.add(AgentInfo(name, algo, c.method_for(algo), c.rounds, str(log_path),
-                             tuple(stops)))
+                             tuple(stops), c.itinerary, c.fanout))
         write_nodes(site, robots, agents)
         write_json(site.out / f"launch_{name}.json", launch)
         launch_agent(site.console, launch)

@@ -11,6 +11,8 @@ inference):
 * ``waiting``: sync mode, at a respite boundary, its table not written yet;
 * ``stalled``: no new iteration for :data:`STALL_S` seconds;
 * ``learning``: otherwise.
+
+:func:`arena_event` draws a robot's arena small (floor, blocks, start pose).
 """
 from __future__ import annotations
 
@@ -185,3 +187,22 @@ class RobotTrack:
         if quiet > STALL_S:
             return "stalled"
         return "learning"
+
+
+def arena_event(robot: str, arena: str, out_dir: Path, t: float) -> dict[str, Any]:
+    """The robot's arena drawn small: floor, blocks, start pose (or an error event)."""
+    from dfrl.arenas import ArenaError, load_arena
+
+    try:
+        name = arena
+        if not (Path(arena).suffix or Path(arena).exists()) or Path(arena).is_absolute():
+            spec = load_arena(arena)
+        else:
+            spec = load_arena(out_dir / arena if (out_dir / arena).exists() else arena)
+    except (ArenaError, OSError) as exc:
+        return {"t": t, "kind": "error", "text": f"arena of {robot} not drawn: {exc}"}
+    return {"t": t, "kind": "arena", "robot": robot, "name": spec.name or name,
+            "size": list(spec.size),
+            "blocks": [{"center": list(b.center), "size": list(b.size[:2]), "yaw": b.yaw}
+                       for b in spec.blocks],
+            "start": list(spec.start.pose) if spec.start.pose is not None else None}

@@ -9,8 +9,9 @@ new events, each a dict with ``seq`` (0, 1, ...), ``t`` (wall clock) and ``kind`
 ``run``         name, iterations, respite, mode, seed, robots, stride (from ``config.json``)
 ``robot``       robot, host, port, arena, algo, node, joined (``nodes.json``; a later one: a join)
 ``arena``       robot, name, size, blocks ``[{center, size, yaw}]``, start ``[x, y, yaw]``
-``agent``       agent, algo, method, rounds, itinerary (robot ids)
-``hop``         agent, robot, phase (forward/backward), round, inferred (not seen, deduced)
+``agent``       agent, algo, method, rounds, itinerary (robot ids), itinerary_kind (chain, tree)
+``hop``         agent, robot, phase (forward/backward), round, inferred (not seen, deduced);
+                a tree agent's also clone (a copy at that robot, not the agent at the root)
 ``round``       agent, round, start, end, duration_ms, method, visited, skipped, hops, epoch
 ``method``      agent, round, method, previous: the agent switched methods
 ``skip``        agent, round, robot, reason
@@ -31,7 +32,9 @@ new events, each a dict with ``seq`` (0, 1, ...), ``t`` (wall clock) and ``kind`
 Every round of an agent's log comes with its hops, before it: forward over ``visited`` in
 order, then backward in reverse. Hops come from ``events.jsonl`` when the launcher writes
 them, else from the shares files (a table write is a backward hop); the ones not seen are
-deduced (``inferred``) from the itinerary, at the latest when the round is logged.
+deduced (``inferred``) from the itinerary, at the latest when the round is logged. A tree
+agent's copies read and write at every robot at once: its hops come in the order seen, none
+deduced before another.
 """
 from __future__ import annotations
 
@@ -42,7 +45,7 @@ from pathlib import Path
 from typing import Any
 
 from dfrl.experiments.driver.launcher.events import EVENTS_FILE
-from dfrl.experiments.tools.view.robots import RobotTrack
+from dfrl.experiments.tools.view.robots import RobotTrack, arena_event
 from dfrl.experiments.tools.view.tail import MAX_BYTES, FileTail, file_mtime
 
 #: Points kept per robot curve, about (the stride is ``iterations // POINTS``).
@@ -195,12 +198,13 @@ class EventSource:
             name = str(a["name"])
             if name not in self.agents:
                 stops = [str(s["robot"]) for s in a.get("itinerary", [])]
-                self.agents[name] = {"itinerary": stops}
+                kind = str(a.get("kind") or "chain")
+                self.agents[name] = {"itinerary": stops, "kind": kind}
                 self._methods[name] = str(a.get("method"))
                 self._logs[name] = FileTail(self.dir / f"rounds_{name}.log")
                 out.append({"t": mtime, "kind": "agent", "agent": name, "algo": a.get("algo"),
                             "method": a.get("method"), "rounds": a.get("rounds"),
-                            "itinerary": stops})
+                            "itinerary": stops, "itinerary_kind": kind})
 
     def _add_robot(self, out: list[dict[str, Any]], n: dict[str, Any], t: float) -> None:
         assert self.run is not None
@@ -220,7 +224,7 @@ class EventSource:
                     "port": n.get("port"), "arena": n.get("arena"), "algo": n.get("algo"),
                     "robot_host": n.get("robot_host"), "joined": bool(n.get("joined")),
                     "iterations": target})
-        out.append(_arena_event(rid, str(n.get("arena")), self.dir, t))
+        out.append(arena_event(rid, str(n.get("arena")), self.dir, t))
 
     def _read_extra(self, out: list[dict[str, Any]]) -> list[tuple[float, str, Any]]:
         """Timed items of the lines added to ``events.jsonl`` (bad lines: error events)."""
@@ -271,12 +275,25 @@ class EventSource:
                 self.robots[str(ev["robot"])].state = told
             out.append(ev)
 
+    def _tree(self, agent: str) -> bool:
+        return self.agents.get(agent, {}).get("kind") == "tree"
+
+    def _copy_hop(self, agent: str, rnd: int, robot: str, phase: str, t: float,
+                  inferred: bool) -> dict[str, Any]:
+        """A tree agent's hop: a copy's (``clone``) unless at the root."""
+        return {**_hop_event(agent, rnd, robot, phase, t, inferred),
+                "clone": robot != (self.agents[agent].get("itinerary") or [robot])[0]}
+
     def _hop(self, out: list[dict[str, Any]], agent: str, rnd: int, robot: str, phase: str,
              t: float, inferred: bool) -> None:
         """Emit a hop, and first the ones it implies: the forward pass precedes the backward
         pass, and the backward pass runs from the last stop to the first."""
         r = self._rounds.setdefault((agent, rnd), _Round())
         if r.closed or (phase, robot) in r.done:
+            return
+        if self._tree(agent):                # copies at every stop at once: no order to infer
+            r.done.add((phase, robot))
+            out.append(self._copy_hop(agent, rnd, robot, phase, t, inferred))
             return
         stops = [s for s in self.agents.get(agent, {}).get("itinerary", [])
                  if s not in self._skipped.get(agent, set())]
@@ -326,12 +343,14 @@ class EventSource:
                    for s in ev.get("skipped", [])]
         r = self._rounds.setdefault((agent, rnd), _Round())
         if not r.closed:
-            plan = [("forward", s) for s in visited] + [("backward", s) for s in reversed(visited)]
+            tree = self._tree(agent)     # a tree's copies leave no order: the writes not seen
+            plan = [("backward", s) for s in visited] if tree else \
+                [("forward", s) for s in visited] + [("backward", s) for s in reversed(visited)]
             missing = [p for p in plan if p not in r.done]
             for k, (ph, s) in enumerate(missing):
                 t = start + (end - start) * (k + 1) / (len(missing) + 1)
                 r.done.add((ph, s))
-                out.append(_hop_event(agent, rnd, s, ph, t, True))
+                out.append((self._copy_hop if tree else _hop_event)(agent, rnd, s, ph, t, True))
             r.closed = True
         method = str(ev.get("method"))
         if method != self._methods.get(agent):
@@ -367,22 +386,3 @@ def _hop_event(agent: str, rnd: int, robot: str, phase: str, t: float,
                inferred: bool) -> dict[str, Any]:
     return {"t": t, "kind": "hop", "agent": agent, "round": rnd, "robot": robot,
             "phase": phase, "inferred": inferred}
-
-
-def _arena_event(robot: str, arena: str, out_dir: Path, t: float) -> dict[str, Any]:
-    """The robot's arena drawn small: floor, blocks, start pose (or an error event)."""
-    from dfrl.arenas import ArenaError, load_arena
-
-    try:
-        name = arena
-        if not (Path(arena).suffix or Path(arena).exists()) or Path(arena).is_absolute():
-            spec = load_arena(arena)
-        else:
-            spec = load_arena(out_dir / arena if (out_dir / arena).exists() else arena)
-    except (ArenaError, OSError) as exc:
-        return {"t": t, "kind": "error", "text": f"arena of {robot} not drawn: {exc}"}
-    return {"t": t, "kind": "arena", "robot": robot, "name": spec.name or name,
-            "size": list(spec.size),
-            "blocks": [{"center": list(b.center), "size": list(b.size[:2]), "yaw": b.yaw}
-                       for b in spec.blocks],
-            "start": list(spec.start.pose) if spec.start.pose is not None else None}

@@ -47,6 +47,7 @@
     if (!a) {
       a = { name, algo: "", method: "", rounds: 0, round: 0, lastMs: null, at: null,
             phase: "rest", prev: null, moves: 0, itinerary: [], queue: [], shown: null,
+            kind: "chain", clones: new Map(), cloneRound: null, cloneMarks: null,
             color: AGENT_COLORS[S.agents.size % AGENT_COLORS.length] };
       S.agents.set(name, a);
     }
@@ -90,7 +91,7 @@
       case "agent": {
         const a = agent(ev.agent);
         Object.assign(a, { algo: ev.algo, method: ev.method, rounds: ev.rounds,
-                           itinerary: ev.itinerary || [] });
+                           itinerary: ev.itinerary || [], kind: ev.itinerary_kind || "chain" });
         if (!a.at && a.itinerary.length) a.at = a.itinerary[0];
         note(ev, `agent ${ev.agent} (${ev.method}, ${ev.rounds} rounds): ` +
                  ((ev.itinerary || []).length <= 8 ? ev.itinerary.join(" → ") : names(ev.itinerary)));
@@ -98,6 +99,14 @@
       }
       case "hop": {
         const a = agent(ev.agent);
+        if (ev.clone) {
+          // a tree's copy at that robot: the agent stays at its root; the copies of the
+          // round being shown stay drawn until the next round's first copy
+          if (ev.round !== a.cloneRound) { a.clones.clear(); a.cloneRound = ev.round; }
+          a.clones.set(ev.robot, ev.phase); a.moves++;
+          a.round = Math.max(a.round, ev.round - 1); a.current = ev.round;
+          break;
+        }
         a.prev = a.at; a.at = ev.robot; a.phase = ev.phase; a.moves++;
         a.queue.push({ at: a.at, prev: a.prev, phase: a.phase });
         a.round = Math.max(a.round, ev.round - 1);
@@ -252,7 +261,25 @@
       }
     }
     svg("g", { id: "agent-marks" }, root);
-    for (const a of S.agents.values()) a.mark = null;
+    for (const a of S.agents.values()) { a.mark = null; a.cloneMarks = null; }
+  }
+  // a tree agent's copies: a hollow mark at every robot a copy of the round shown is at
+  function drawClones(a, marks, small) {
+    if (!a.cloneMarks) a.cloneMarks = new Map();
+    for (const [id, m] of a.cloneMarks) if (!a.clones.has(id)) setAttr(m, "visibility", "hidden");
+    for (const [id, phase] of a.clones) {
+      const n = svgNodes.get(id);
+      if (!n) continue;
+      let m = a.cloneMarks.get(id);
+      if (!m) {
+        m = svg("g", { class: "agent-clone", "data-agent": a.name, "data-robot": id }, marks);
+        svg("path", { d: "M -6 -5 L 7 0 L -6 5 Z", fill: "none", stroke: a.color, "stroke-width": 2 }, m);
+        a.cloneMarks.set(id, m);
+      }
+      setAttr(m, "visibility", "visible"); setAttr(m, "data-phase", phase);
+      setAttr(m, "transform", `translate(${n.x},${n.y + (small ? -20 : -34)})` +
+                              (phase === "backward" ? " rotate(180)" : ""));
+    }
   }
   function drawNetwork() {
     if (!svgNodes || svgNodes.size !== S.order.length) buildNetwork();
@@ -273,6 +300,7 @@
         a.shown = a.queue.shift();
       }
       more = more || a.queue.length > 0;
+      drawClones(a, marks, small);
       const v = a.shown || { at: a.at, prev: a.prev, phase: a.phase };
       if (!a.mark) {
         const g = svg("g", { class: "agent", "data-agent": a.name }, marks);

@@ -184,3 +184,45 @@ def test_page_stays_responsive_for_a_finished_32_robot_run(tmp_path: Path,
           f"{[round(moves[k]) for k in (0, total // 2, total)]}")
     assert shown_s < 20.0, shown_s
     assert max(moves[k] for k in (0, total // 2, total)) < 3000, moves
+
+
+CLONES = """
+const marks = [...document.querySelectorAll('#agent-marks .agent-clone')]
+  .filter(g => g.getAttribute('visibility') === 'visible');
+return {status: document.getElementById('run-status').dataset.status,
+        round: Number((document.querySelector('.agent-line .round') || {dataset: {round: 0}})
+                      .dataset.round),
+        clones: marks.map(g => [g.dataset.robot, g.dataset.phase]).sort(),
+        agent: (document.querySelector('#agent-marks .agent') || {dataset: {}}).dataset.robot};
+"""
+
+
+@pytest.mark.parametrize("itinerary", ["tree", "chain"])
+def test_a_tree_agents_copies_are_drawn_at_their_robots(tmp_path: Path, browser: tuple[str, str],
+                                                        itinerary: str) -> None:
+    """A finished tree run's page draws the last round's copies, one hollow mark at every
+    robot but the root, having written their tables; the agent's own mark stays at the root.
+    The control, the same run as a chain, draws no copy."""
+    out = tmp_path / itinerary
+    cfg = small_config(3, iterations=300, respite=100, itinerary=itinerary)
+    from dfrl.experiments.driver.launcher import run
+    assert run(cfg, out, progress=None).ok
+    with start_view(out) as view:
+        driver = chrome(*browser)
+        try:
+            driver.get(view.url)
+            deadline = time.monotonic() + 60
+            s = driver.execute_script(CLONES)
+            while time.monotonic() < deadline and (s["status"] != "finished" or s["round"] < 3):
+                time.sleep(0.1)
+                s = driver.execute_script(CLONES)
+            time.sleep(0.5)                       # the frames after the last events
+            s = driver.execute_script(CLONES)
+        finally:
+            driver.quit()
+    assert s["status"] == "finished" and s["round"] == 3, s
+    if itinerary == "chain":
+        assert s["clones"] == [], s
+        return
+    assert s["clones"] == [["r2", "backward"], ["r3", "backward"]], s
+    assert s["agent"] == "r1", s
