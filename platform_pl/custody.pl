@@ -44,9 +44,9 @@ migration.pl needs to survive a kill -9 and a restart:
     (arrived, waiting for its source's decision), one file per agent.
 
 With the node option `store(Dir)` these live under `Dir/custody/`
-(`agents/`, `decisions/`, `activated/`, `incarnation`), each file
-replaced atomically by custody_store.pl (temp, fsync, rename, fsync of
-the directory). Without a store the same state is kept in memory only.
+(`agents/`, `decisions/`, `incarnation`), each file replaced atomically
+by custody_store.pl (temp, fsync, rename, fsync of the directory).
+Without a store the same state is kept in memory only.
 
 An agent's file holds custody_agent(Name, State, Via, Record):
 State is active(idle|run) or staged(MigId, Source, SourceInc, Since);
@@ -54,14 +54,6 @@ Via is the migration it arrived by (or created(Id)), so that a
 committed decision about an *older* copy never deletes a copy that came
 back later. A decision's file holds
 custody_decision(MigId, Name, Dest, Tokens, Via, Time).
-
-A staged agent that starts (custody_activated/3) is not written again:
-a small file in `activated/`, custody_activated(Name, MigId), says that
-the staged copy of Name that arrived by MigId is active(run). Writing
-the record again cost as much as staging it (100,000 floats: about 25
-ms, on the hop's path, before the handler starts); the marker costs a
-few hundred bytes. The next write of the agent's file (it rests, it is
-saved, it is staged again) or its removal deletes the marker.
 
 Recovery (custody_open/2, at node start):
 
@@ -76,10 +68,7 @@ Recovery (custody_open/2, at node start):
     arrival (the dFRL agent then asks its holder whether it was
     resurrected elsewhere meanwhile before it does anything);
   - a staged agent is installed staged; the settle thread of
-    migration.pl asks its source at once; but a staged agent whose
-    marker in `activated/` names the same migration is active(run):
-    installed idle and returned in ToRestart. A marker of no such
-    agent is deleted.
+    migration.pl asks its source at once.
 
 The incarnation is an id of the node's memory: stored in the store (so
 it survives restarts with the store) or made fresh at each start
@@ -156,33 +145,19 @@ open_(Node, ToRestart) :-
         directory_file_path(Dir1, custody, Dir),
         directory_file_path(Dir, agents, AgentDir),
         directory_file_path(Dir, decisions, DecDir),
-        directory_file_path(Dir, activated, ActDir),
         store_make_dirs(AgentDir),
         store_make_dirs(DecDir),
-        store_make_dirs(ActDir),
         assertz(store_dir_(Node, Dir)),
         open_incarnation(Node, Dir),
         store_terms(DecDir, Decisions),
         forall(member(_-D, Decisions), recover_decision(Node, D)),
-        store_terms(ActDir, Marks),
         store_terms(AgentDir, Agents),
         findall(Name,
                 ( member(File-A, Agents),
-                  recover_agent(Node, File, A, Marks, Name)
+                  recover_agent(Node, File, A, Name)
                 ),
-                ToRestart),
-        forall(( member(MarkFile-Mark, Marks),
-                 \+ ( Mark = custody_activated(MName, MigId),
-                       staged_or_run(Node, MName, MigId) )
-               ),
-               store_delete(MarkFile))
+                ToRestart)
     ).
-
-%   A marker is still needed while its agent was recovered from a staged
-%   file of that migration (now running).
-staged_or_run(Node, Name, MigId) :-
-    via_(Node, Name, MigId),
-    run_flag_(Node, Name, run).
 
 open_incarnation(Node, Dir) :-
     directory_file_path(Dir, incarnation, File),
@@ -205,15 +180,10 @@ recover_decision(Node, custody_decision(MigId, Name, Dest, Tokens, Via, Time)) :
 recover_decision(_, Term) :-
     print_message(warning, format('custody: not a decision: ~p', [Term])).
 
-%   recover_agent(+Node, +File, +Term, +Marks, -Name) succeeds for an
-%   agent to restart. Marks are the File-Term pairs of `activated/`.
-recover_agent(Node, File, custody_agent(Name, State0, Via, Record), Marks, Restart) :-
+%   recover_agent(+Node, +File, +Term, -Name) succeeds for an agent to
+%   restart.
+recover_agent(Node, File, custody_agent(Name, State, Via, Record), Restart) :-
     !,
-    (   State0 = staged(MigId, _, _, _),
-        memberchk(_-custody_activated(Name, MigId), Marks)
-    ->  State = active(run)
-    ;   State = State0
-    ),
     (   commit_info_(Node, _, Name, _, _, Via)
     ->  store_delete(File),
         fail
@@ -232,7 +202,7 @@ recover_agent(Node, File, custody_agent(Name, State0, Via, Record), Marks, Resta
         assertz(staged_(Node, Name, MigId, Source, SInc, Since)),
         fail
     ).
-recover_agent(_, File, Term, _, _) :-
+recover_agent(_, File, Term, _) :-
     print_message(warning, format('custody: ~w does not hold an agent: ~p', [File, Term])),
     fail.
 
@@ -373,17 +343,6 @@ agent_file(Node, Name, File) :-
     directory_file_path(Dir, agents, AgentDir),
     store_key_file(AgentDir, Name, term, File).
 
-mark_file(Node, Name, File) :-
-    store_dir_(Node, Dir),
-    directory_file_path(Dir, activated, MarkDir),
-    store_key_file(MarkDir, Name, term, File).
-
-delete_mark(Node, Name) :-
-    (   mark_file(Node, Name, File)
-    ->  store_delete(File)
-    ;   true
-    ).
-
 %!  custody_stage(+Node, +Name, +MigId, +Source, +SourceInc, +Since) is det.
 %
 %   Agent Name (installed staged(MigId)) is held durably as staged,
@@ -414,26 +373,20 @@ custody_unstage(Node, Name) :-
 %!  custody_activated(+Node, +Name, +MigId) is det.
 %
 %   The staged agent Name becomes active (about to run): held durably
-%   as active(run), arrived by MigId (a marker beside its staged file,
-%   see the module comment).
+%   as active(run), arrived by MigId.
 
 custody_activated(Node, Name, MigId) :-
     with_custody(Node,
-                 ( (   mark_file(Node, Name, File)
-                   ->  store_write(File, custody_activated(Name, MigId))
-                   ;   true
-                   ),
+                 ( write_agent(Node, Name, active(run), MigId),
                    retractall(run_flag_(Node, Name, _)),
                    assertz(run_flag_(Node, Name, run)),
                    retractall(staged_(Node, Name, _, _, _, _))
                  )).
 
-%   A full write makes a marker of an earlier activation obsolete.
 write_agent(Node, Name, State, Via) :-
     (   agent_file(Node, Name, File)
     ->  agent_export(Node, Name, Record),
-        store_write(File, custody_agent(Name, State, Via, Record)),
-        delete_mark(Node, Name)
+        store_write(File, custody_agent(Name, State, Via, Record))
     ;   true
     ).
 
@@ -445,8 +398,7 @@ agents:agent_changed(Event, Node, Name) :-
 
 changed(removed, Node, Name) :-
     (   agent_file(Node, Name, File)
-    ->  store_delete(File),
-        delete_mark(Node, Name)
+    ->  store_delete(File)
     ;   true
     ),
     retractall(via_(Node, Name, _)),
