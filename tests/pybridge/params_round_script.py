@@ -8,6 +8,7 @@ between the nodes; this main thread serves the bridge like a control loop. Print
 """
 from __future__ import annotations
 
+import faulthandler
 import hashlib
 import json
 import sys
@@ -36,6 +37,9 @@ def fedavg(x1: np.ndarray, w1: int, x2: np.ndarray, w2: int) -> np.ndarray:
 
 
 def main() -> int:
+    # a hang shows where it is: every thread's Python stack on stderr, exit 1, before the
+    # test's 120 s timeout (it hung once in a CI run and passed thousands of times elsewhere)
+    faulthandler.dump_traceback_later(90, exit=True)
     out: dict = {}
     node = Bridge(request_timeout=10.0)
     node.load_platform()
@@ -74,6 +78,7 @@ def main() -> int:
     out["digests"] = {rid: digest(r.params) for rid, r in robots.items()}
     out["expected"] = {rid: digest(v) for rid, v in expected.items()}
     out["close_left"] = [str(t) for t in node.close()]
+    faulthandler.cancel_dump_traceback_later()
     print(json.dumps(out))
     return 0
 
