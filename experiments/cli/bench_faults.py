@@ -24,6 +24,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--runs", type=int, default=3, help="runs of each fault (default 3)")
     parser.add_argument("--hosts", type=int, default=4,
                         help="robot hosts of the federation, 2 to 5 (default 4)")
+    parser.add_argument("--delay-ms", type=float, default=0.0,
+                        help="hold every chunk into a robot host this many ms each way (a "
+                             "proxy in the host, in front of its dfrl robot); the time bounds "
+                             "grow by the run's normal gap between rounds (default 0: none)")
     parser.add_argument("--keep", type=Path, default=None,
                         help="keep every run's files (hosts' folders, results) here "
                              "(default: a temporary folder, removed)")
@@ -33,8 +37,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _text(f: dict[str, Any]) -> str:
     med = f["median"]
+    delay = f["per_run"][0].get("delay_ms") if f["per_run"] else None
     lines = [f"{f['fault']}: {'PASS' if f['passed'] else 'FAIL'} {f['passed_runs']}/{f['runs']} "
-             f"-- {f['what']}",
+             f"-- {f['what']}" + (f" (links {delay:g} ms slow each way)" if delay else ""),
              f"  median recovery {med['recovery_s']} s, longest stall {med['longest_stall_s']} s "
              f"(normal gap {med['normal_gap_s']} s), rounds done {med['rounds_done']}/"
              f"{f['rounds_planned']}; identical tables {f['tables_identical_runs']}/{f['runs']} "
@@ -70,7 +75,8 @@ def cmd(args: argparse.Namespace) -> int:
         print(json.dumps(f) if args.json else _text(f), flush=True)
 
     try:
-        done = faults.run(args.faults, args.runs, args.hosts, args.keep, on_fault=show)
+        done = faults.run(args.faults, args.runs, args.hosts, args.keep, on_fault=show,
+                          delay_ms=args.delay_ms)
     except ValueError as exc:
         print(f"dfrl bench faults: {exc}", file=sys.stderr)
         return 2

@@ -17,6 +17,7 @@ Needs root and ``ip`` (:func:`~dfrl.experiments.tools.netns.unavailable` says wh
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import shutil
 import statistics
@@ -155,11 +156,11 @@ def judge(m: dict[str, Any], expect: Expectation) -> list[str]:
     return problems
 
 
-def run_case(case: Case, hosts: int, work: Path) -> dict[str, Any]:
-    """One run of ``case`` on ``hosts`` robot hosts, its files under ``work``; its figures,
-    ``problems`` and ``passed`` (a run the benchmark could not carry out fails with
-    ``error``)."""
-    plan = case.plan(hosts)
+def run_case(case: Case, hosts: int, work: Path, delay_ms: float = 0.0) -> dict[str, Any]:
+    """One run of ``case`` on ``hosts`` robot hosts, its files under ``work``, every link
+    into a robot host ``delay_ms`` slow each way; its figures, ``problems`` and ``passed`` (a
+    run the benchmark could not carry out fails with ``error``)."""
+    plan = dataclasses.replace(case.plan(hosts), delay_ms=delay_ms)
     names = [f"h{i}" for i in range(1, hosts + 1)] + ["driver"]
     started = time.monotonic()
     record: dict[str, Any] = {"fault": case.name}
@@ -179,15 +180,25 @@ def run_case(case: Case, hosts: int, work: Path) -> dict[str, Any]:
     rows = read_rows(acted.results)
     m = measure(rows or [], summary, acted.exit_status, acted.t_fault, fed.t0, fed.robots,
                 plan.rounds, acted.victim)
-    problems = judge(m, case.expect)
+    problems = judge(m, slowed(case.expect, delay_ms, m["normal_gap_s"]))
     if rows is None:
         problems.insert(0, "no rounds.csv was written")
-    record.update(actions=fed.actions, notes=acted.notes, **m, problems=problems,
+    record.update(actions=fed.actions, notes=acted.notes, **m, delay_ms=delay_ms,
+                  problems=problems,
                   passed=not problems, wall_s=round(time.monotonic() - started, 1))
     if not problems:
         return record
     record["driver_stderr_tail"] = fed.driver_tail(600)
     return record
+
+
+def slowed(expect: Expectation, delay_ms: float, normal_gap_s: float | None) -> Expectation:
+    """``expect`` on slow links: its time bounds grow by the run's normal gap between rounds
+    (a round at that link's pace); unchanged without a delay."""
+    if delay_ms <= 0 or not normal_gap_s:
+        return expect
+    return dataclasses.replace(expect, recovery_bound_s=expect.recovery_bound_s + normal_gap_s,
+                               stall_bound_s=expect.stall_bound_s + normal_gap_s)
 
 
 def _median(values: list[Any]) -> float | None:
@@ -213,10 +224,11 @@ def summarize(case: Case, runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 def run(faults: list[str], runs: int = 3, hosts: int = 4, keep: Path | None = None,
         on_fault: Callable[[dict[str, Any]], None] | None = None,
-        cases: dict[str, Case] | None = None) -> list[dict[str, Any]]:
-    """Run each fault of ``faults`` ``runs`` times on ``hosts`` robot hosts; one summary per
-    fault (see :func:`summarize`), handed to ``on_fault`` as soon as it is done. Files go to
-    ``keep`` (else a temporary folder, removed)."""
+        cases: dict[str, Case] | None = None, delay_ms: float = 0.0) -> list[dict[str, Any]]:
+    """Run each fault of ``faults`` ``runs`` times on ``hosts`` robot hosts, every link into
+    a robot host ``delay_ms`` slow each way; one summary per fault (see :func:`summarize`),
+    handed to ``on_fault`` as soon as it is done. Files go to ``keep`` (else a temporary
+    folder, removed)."""
     cases = CASES if cases is None else cases
     unknown = [f for f in faults if f not in cases]
     if unknown:
@@ -225,11 +237,13 @@ def run(faults: list[str], runs: int = 3, hosts: int = 4, keep: Path | None = No
         raise ValueError(f"--hosts must be 2 to 5 (one arena each), got {hosts}")
     if runs < 1:
         raise ValueError(f"--runs must be at least 1, got {runs}")
+    if not 0 <= delay_ms <= 2000:
+        raise ValueError(f"--delay-ms must be 0 to 2000, got {delay_ms:g}")
     base = keep if keep is not None else Path(tempfile.mkdtemp(prefix="dfrl-faults-"))
     out = []
     try:
         for name in faults:
-            results = [run_case(cases[name], hosts, base / f"{name}-{i}")
+            results = [run_case(cases[name], hosts, base / f"{name}-{i}", delay_ms)
                        for i in range(1, runs + 1)]
             for i, r in enumerate(results, 1):
                 r["run"] = i

@@ -26,6 +26,7 @@ AGENT = "fed_qlearning"
 ARENAS = ("r1", "r4", "r2", "r3", "r5")
 PORT = 7001
 LISTENING = "dfrl robot listening on"
+LINK_LISTENING = "delay_link listening on"
 
 
 class FaultBenchError(RuntimeError):
@@ -43,6 +44,8 @@ class Plan:
     rtf: float = 4.0
     seed: int = 1
     timeout_s: float = 240.0
+    #: milliseconds every chunk into a robot host is held, each way (0: none; see delay_link)
+    delay_ms: float = 0.0
 
     @property
     def rounds(self) -> int:
@@ -106,13 +109,36 @@ class Federation:
             write_secret_file(cwd / "dfrl.token", [self.token])
         log = cwd / "robot.log"
         offset = log.stat().st_size if log.exists() else 0
-        argv = dfrl_argv("robot", "--host", "0.0.0.0", "--port", str(PORT), "--token-file",
+        bind = "0.0.0.0"
+        if self.plan.delay_ms > 0:
+            # the robot behind a slow link: it binds loopback, the link listens on the
+            # host's address (and dies with the host's other processes on a kill)
+            bind = "127.0.0.1"
+            self._start_link(h, cwd)
+        argv = dfrl_argv("robot", "--host", bind, "--port", str(PORT), "--token-file",
                          "dfrl.token", "--advertise", self.lab[h].address, "--workdir",
                          "dfrl-robot")
         with open(log, "ab") as fh:
             self.procs[robot] = self.lab[h].popen(argv, cwd=cwd, stdin=subprocess.DEVNULL,
                                                   stdout=fh, stderr=subprocess.STDOUT)
         return offset
+
+    def _start_link(self, h: str, cwd: Path) -> None:
+        argv = [sys.executable, "-m", "dfrl.experiments.tools.bench.delay_link",
+                f"{self.lab[h].address}:{PORT}", f"127.0.0.1:{PORT}", f"{self.plan.delay_ms:g}"]
+        log = cwd / "link.log"
+        with open(log, "ab") as fh:
+            offset = fh.tell()
+            proc = self.lab[h].popen(argv, cwd=cwd, stdin=subprocess.DEVNULL, stdout=fh,
+                                     stderr=subprocess.STDOUT)
+
+        def listening() -> bool:
+            if proc.poll() is not None:
+                raise FaultBenchError(f"the delayed link of {h} exited {proc.returncode}: "
+                                      f"{log.read_bytes()[offset:][-800:].decode(errors='replace')}")
+            return LINK_LISTENING in log.read_bytes()[offset:].decode(errors="replace")
+
+        wait_until(listening, 30.0, f"{h}'s delayed link to listen")
 
     def _wait_listening(self, robot: str, offset: int, timeout_s: float) -> None:
         log = self.work / self.host_of(robot) / "robot.log"
