@@ -447,6 +447,35 @@ test(add_facts_travel_as_payload, [cleanup(stop_all([N]))]) :-
     arg(7, Record, Clauses),
     assertion(memberchk((state_of(f1, s{a:1}) :- true), Clauses)).
 
+%   agent_export/3 reads a predicate of one fact by calling it, any
+%   other by decompiling: the record must be what clause/2 gives for
+%   every shape (one fact with shared variables, several facts, a rule,
+%   a fact and a rule, an empty predicate). Control: the same clauses
+%   decompiled one by one.
+test(export_equals_decompiled, [cleanup(stop_all([N]))]) :-
+    node_start(localhost:0, N, [default(false), token(test)]),
+    with_node(N, create_mobile_agent(x1, walker, [])),
+    agents:agent_add_facts(N, x1, [one(f(A, A, _), [1.5, 2.5]), two(1), two(2)]),
+    agents:agent_module(N, x1, M),
+    assertz(M:(rule(X) :- two(X))),
+    assertz(M:mixed(0)),
+    assertz(M:(mixed(X) :- X > 1)),
+    dynamic(M:empty/1),
+    agents:agent_export(N, x1, Record),
+    arg(7, Record, Clauses),
+    arg(6, Record, Preds),
+    findall((H:-B), ( member(F/Ar, Preds), functor(H, F, Ar), clause(M:H, B) ),
+            Expected),
+    assertion(Clauses =@= Expected),
+    assertion(memberchk((one(f(V, V, _), [1.5, 2.5]) :- true), Clauses)),
+    assertion(memberchk((mixed(_) :- _ > 1), Clauses)),
+    assertion(memberchk(empty/1, Preds)),
+    assertion(\+ memberchk((empty(_) :- _), Clauses)),
+    retract(M:one(_, _)),
+    agents:agent_export(N, x1, Record2),
+    arg(7, Record2, Clauses2),
+    assertion(\+ memberchk((one(_, _) :- _), Clauses2)).
+
 :- end_tests(seams).
 
 :- begin_tests(robot_resources).

@@ -156,6 +156,7 @@ traced(agents:agent_export(_, _, _), export).
 traced(transport:transport_acquire(_, _, _, _), acquire).
 traced(wire:frame_write(_, _, T), write(F)) :- term_functor(T, F).
 traced(wire:frame_read(_, Fr, _), read(F)) :- ( Fr = frame(_, T) -> term_functor(T, F) ; F = eof ).
+traced(wire:body_bytes(_, T, _), serialise(F)) :- term_functor(T, F).
 traced(code_safety:check_agent_record(_), check).
 traced(code_safety:record_sealed(_, _, _), sealed).
 traced(agents:agent_install(_, _, _, _), install).
@@ -168,6 +169,19 @@ traced(agents:agent_remove(_, _), remove).
 traced(migration:receive_transfer(_, _, _, _, _, _, _, _, _), receive_transfer).
 traced(migration:activate(_, _, _), activate).
 traced(agents:agent_run(_, _, _, _), agent_run).
+traced(tartarus:move_agent(_, _), move_agent).
+traced(migration:is_self(_, _), is_self).
+traced(migration:begin_departure(_, _, _, _), begin_departure).
+traced(node:node_for_address(_, _), node_for_address).
+traced(migration:prepare(_, _, _, _, _, _, _, _, _), prepare).
+traced(migration:hand_over(_, _, _, _, _, _, _, _, _, _), hand_over).
+traced(migration:send_commit(_, _, _, _), send_commit).
+traced(transport:transport_release(_), release).
+traced(node_connection:serve_term(T, _, _), serve(F)) :- term_functor(T, F).
+traced(agents:agent_execute(_, _, _, _), agent_execute).
+traced(agents:run_handler(_, _, _), handler).
+traced(custody:custody_activated(_, _, _), custody_activated).
+traced(agents:agent_record_hop(_, _, _), record_hop).
 
 term_functor(T, F) :-
     (   var(T)
