@@ -12,4 +12,5 @@ python -c 'import distributed, tensorboardX' 2>/dev/null \
 # the live view's browser test: Chromium and its driver from Debian's packages (if missing)
 bash scripts/browser-setup.sh >/dev/null \
     || echo "[test] could not install chromium; the browser test will say why it skips" >&2
-exec python -m pytest -q "$@"
+# the 25 slowest tests are listed at the end, so the suite's time can be kept in view
+exec python -m pytest -q --durations=25 "$@"
