@@ -33,7 +33,7 @@ from dfrl.experiments.robot_host.service_config import config_error, parse_confi
 from dfrl.experiments.robot_host.training import Training
 from dfrl.experiments.tokens import Token
 from dfrl.pybridge.serving import RequestError
-from dfrl.pybridge.terms import Atom, Term
+from dfrl.pybridge.terms import Atom, Term, Var
 
 __all__ = ["State", "RobotService", "MAX_CHUNK"]
 
@@ -247,7 +247,18 @@ class RobotService:
             "error": self.error,
             "address": [self.address[0], self.address[1]],
             "node_id": None if node_id is None else str(node_id),
+            "clone_limit": self._clone_limit(),
         }
+
+    def _clone_limit(self) -> int | str | None:
+        """The node's clone limit (clones admitted a minute; ``infinite``): a tree run's driver
+        checks it is enough before it starts."""
+        if self.bridge is None:
+            return None
+        sol = self.bridge.prolog.call("node_option", self.node_name, Atom("clone_limit"),
+                                      Var("V"), module="node")
+        value = None if sol is None else sol["V"]
+        return value if isinstance(value, int) or value is None else str(value)
 
     def _start(self) -> Any:
         if self.state is not State.CONFIGURED:

@@ -77,3 +77,21 @@ def safe_relative(name: str) -> PurePosixPath:
     if not name or p.is_absolute() or ".." in p.parts or "\\" in name:
         raise ExperimentError(f"robot listed a file outside its folder: {name!r}")
     return p
+
+
+def short_of_clones(where: str, has: object, needs: int | None) -> None:
+    """Refuse a robot host whose node admits fewer clones a minute (``has``, from its status;
+    None from a service that does not say) than the run's robots need (``needs``: a tree
+    itinerary's, :func:`~.spawn.clone_limit`; None for a chain).
+
+    Raises
+    ------
+    ExperimentError
+        Naming the host, both figures and the ``dfrl robot`` option that fixes it.
+    """
+    if needs is None or not isinstance(has, int) or has >= needs:
+        return
+    raise ExperimentError(
+        f"robot host {where} admits {has} clones a minute, and this tree itinerary needs "
+        f"{needs} (its copies are clones: with fewer, most rounds skip robots); start its "
+        f"dfrl robot with --clone-limit {needs} or more")

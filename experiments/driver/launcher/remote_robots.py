@@ -28,7 +28,8 @@ from typing import Any
 from dfrl.experiments.driver.config import RobotSpec
 from dfrl.experiments.robot_host.config import RobotConfig
 from dfrl.experiments.driver.console.node import ConsoleNode
-from dfrl.experiments.driver.launcher.remote_hosts import arena_payload, safe_relative
+from dfrl.experiments.driver.launcher.remote_hosts import (arena_payload, safe_relative,
+                                                           short_of_clones)
 from dfrl.experiments.driver.launcher.robots import Address, EventHandler, Progress, RobotStatus
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.robot_host.lines import (Evaluation, Sample, parse_eval, parse_event,
@@ -159,6 +160,7 @@ class RemoteRobot:
         if status.get("state") in ACTIVE:
             raise ExperimentError(f"robot host {where} is busy with experiment "
                                   f"{status.get('experiment')!r} (state {status.get('state')})")
+        short_of_clones(where, status.get("clone_limit"), self._cfg.clone_limit)
         self._configure(resume=False)
         with self._lock:
             self._address = self._service
