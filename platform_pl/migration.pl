@@ -120,22 +120,25 @@ agent_move(Name, Address0, Options) :-
     address_normalize(Address0, Address),
     current_node(Node),
     migration_start(Node),
-    (   is_self(Node, Address)
+    local_node_at(Address, Local),
+    (   Local == Node
     ->  move_here(Node, Name)
     ;   with_agents_locked(begin_departure(Node, Name, MigId, Previous)),
-        catch(transfer(Node, Name, Address, move, MigId, _Final, Options),
+        catch(transfer(Node, Name, Address, move, MigId, _Final, Options, Local),
               E,
               ( with_agents_locked(restore(Node, Name, Previous)),
                 throw(E)
               ))
     ).
 
-%   node_is_self/2 (node identity) where node.pl offers it, else the
-%   address-text test.
-is_self(Node, Address) :-
-    (   current_predicate(node:node_is_self/2)
-    ->  node:node_is_self(Node, Address)
-    ;   node_for_address(Address, Node)
+%   The node of this process at Address (by node identity: see
+%   node_for_address/2), or `none`. Asked once per move: whether the
+%   agent stays, and whether its record is sealed for a node of this
+%   process.
+local_node_at(Address, Local) :-
+    (   node_for_address(Address, Local0)
+    ->  Local = Local0
+    ;   Local = none
     ).
 
 restore(Node, Name, Previous) :-
@@ -185,11 +188,12 @@ agent_clone(Name, Address0, Clone, Options) :-
     ),
     new_migration_id(Node, Name, MigId),
     assertz(pending_(Node, MigId)),
-    transfer(Node, Name, Address, clone, MigId, Clone, Options).
+    local_node_at(Address, Local),
+    transfer(Node, Name, Address, clone, MigId, Clone, Options, Local).
 
-transfer(Node, Name, Address, Mode, MigId, Final, Options) :-
-    catch(prepare(Node, Name, Mode, MigId, Address, Options, Record, Tokens,
-                  Conn),
+transfer(Node, Name, Address, Mode, MigId, Final, Options, Local) :-
+    catch(prepare(Node, Name, Mode, MigId, Address, Options, Local, Record,
+                  Tokens, Conn),
           E, ( abort(Node, MigId), throw(E) )),
     catch(hand_over(Node, Conn, Address, Mode, MigId, Name, Record, Tokens,
                     Final, Reuse),
@@ -206,7 +210,8 @@ transfer(Node, Name, Address, Mode, MigId, Final, Options) :-
 %   record sent to a node of this process carries, in place of the
 %   tokens, same_process(Seal) (code_safety:record_seal/3): its code was
 %   trusted here, so it is installed unchecked there.
-prepare(Node, Name, Mode, MigId, Address, Options, Record, Tokens, Conn) :-
+prepare(Node, Name, Mode, MigId, Address, Options, Local, Record, Tokens,
+        Conn) :-
     agent_export(Node, Name, Record0),
     (   Mode == clone
     ->  setarg(1, Record0, rename(Name, Name)),
@@ -215,7 +220,7 @@ prepare(Node, Name, Mode, MigId, Address, Options, Record, Tokens, Conn) :-
     ),
     arg(4, Record0, AgentTokens),
     setarg(4, Record0, []),
-    (   node_for_address(Address, _)
+    (   Local \== none
     ->  record_seal(MigId, Record0, Seal),
         setarg(4, Record0, same_process(Seal))
     ;   true

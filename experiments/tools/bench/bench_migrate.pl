@@ -170,10 +170,10 @@ traced(migration:receive_transfer(_, _, _, _, _, _, _, _, _), receive_transfer).
 traced(migration:activate(_, _, _), activate).
 traced(agents:agent_run(_, _, _, _), agent_run).
 traced(tartarus:move_agent(_, _), move_agent).
-traced(migration:is_self(_, _), is_self).
+traced(migration:local_node_at(_, _), local_node_at).
 traced(migration:begin_departure(_, _, _, _), begin_departure).
 traced(node:node_for_address(_, _), node_for_address).
-traced(migration:prepare(_, _, _, _, _, _, _, _, _), prepare).
+traced(migration:prepare(_, _, _, _, _, _, _, _, _, _), prepare).
 traced(migration:hand_over(_, _, _, _, _, _, _, _, _, _), hand_over).
 traced(migration:send_commit(_, _, _, _), send_commit).
 traced(transport:transport_release(_), release).
