@@ -1,12 +1,18 @@
 /*  The handler of the agent that dfrl bench migrate moves between its
     home and the peer (included by bench_migrate.pl and profile_hop.pl, so
     that both time the same code and the same sandbox check): at every
-    arrival it records the hop's time since its departure, and after Hops
-    hops, back home, prints them as LATENCIES_MS [...].
+    arrival it records the hop's time since its departure and the CPU
+    time its process has used so far (statistics(process_cputime): all
+    threads, user and system), and after Hops hops, back home, prints the
+    CPU stamps as CPU_S [[Port, Seconds], ...] (one per arrival, the
+    start at home first) and then the times as LATENCIES_MS [...].
 */
 
 bench(guid, (_, Port), main) :-
     get_time(Now),
+    statistics(process_cputime, Cpu),
+    retract(cpu(guid, C0)),
+    assertz(cpu(guid, [[Port, Cpu]|C0])),
     (   retract(departed(guid, T0))
     ->  Ms is (Now - T0) * 1000,
         retract(lat(guid, L0)),
@@ -20,6 +26,9 @@ bench(guid, (_, Port), main) :-
     (   Done >= Hops
     ->  (   Port =:= Home
         ->  reverse(L, InOrder),
+            cpu(guid, Cs),
+            reverse(Cs, CpuInOrder),
+            format(user_output, "CPU_S ~w~n", [CpuInOrder]),
             format(user_output, "LATENCIES_MS ~w~n", [InOrder]),
             flush_output
         ;   move_agent(guid, (localhost, Home))

@@ -12,9 +12,11 @@
         figure per hop: from the first byte written to the answer).
     swipl bench_migrate.pl home TOKEN PEER_PORT FLOATS HOPS [TLS_DIR]
         start a platform, create an agent whose payload is a list of FLOATS
-        floats, bounce it HOPS times between home and peer, print one line
-        "LATENCIES_MS [..]" (one figure per hop, from the call of move_agent
-        at the source to the start of the handler at the destination), then
+        floats, bounce it HOPS times between home and peer, print the line
+        "CPU_S [[Port, Seconds], ..]" (each process's CPU time at each
+        arrival, see bench_hop_handler.pl) and the line "LATENCIES_MS [..]"
+        (one figure per hop, from the call of move_agent at the source to
+        the start of the handler at the destination), then
         serve until standard input closes. (The agent prints the line itself:
         its code runs in the sandbox at the peer, which allows output, not
         messages to other threads.)
@@ -34,7 +36,7 @@
 :- use_module(library(prolog_wrap), [wrap_predicate/4]).
 :- use_module(library(http/json), [json_write_dict/3]).
 
-:- dynamic bench/3, data/2, departed/2, lat/2, plan/2, user:bench_done/1.
+:- dynamic bench/3, data/2, departed/2, lat/2, cpu/2, plan/2, user:bench_done/1.
 
 :- initialization(main, main).
 
@@ -92,9 +94,10 @@ bench_agent(Home, Peer, Floats, Hops, Token) :-
     findall(F, ( between(1, Floats, I), F is I * 0.001 + 0.5 ), Data),
     assertz(data(guid, Data)),
     assertz(lat(guid, [])),
+    assertz(cpu(guid, [])),
     assertz(plan(guid, plan(Home, Peer, Hops))),
     create_mobile_agent(bencher, (localhost, Home), bench, [Token]),
-    add_payload(bencher, [(data,2), (lat,2), (plan,2), (departed,2)]).
+    add_payload(bencher, [(data,2), (lat,2), (cpu,2), (plan,2), (departed,2)]).
 
 naive_hop(Pair, Term, Ms) :-
     stream_pair(Pair, In, Out),

@@ -51,6 +51,10 @@ class MigrationResult:
     """Median of the naive text hop with the same payload, same run (None: not measured)."""
     naive_ratio: float | None = None
     """``median_ms / naive_median_ms``."""
+    cpu_ms_per_hop: float | None = None
+    """CPU time of both processes together per timed hop (all threads, user and system; see
+    :func:`cpu_per_hop`), or None if the benchmark program did not report it (an older
+    checkout's)."""
 
 
 def percentile(values: list[float], q: float) -> float:
@@ -131,6 +135,9 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         raise RuntimeError(f"benchmark failed:\n{out}\n{err}")
     all_ms = json.loads(lat_line.split(" ", 1)[1])
     ms = all_ms[warmup:]
+    cpu_line = next((l for l in out.splitlines() if l.startswith("CPU_S")), None)
+    cpu_ms = None if cpu_line is None else cpu_per_hop(json.loads(cpu_line.split(" ", 1)[1]),
+                                                       warmup)
     median = statistics.median(ms)
     naive_median = statistics.median(naive_ms) if naive_ms else None
     return MigrationResult(
@@ -140,7 +147,31 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         payload_bytes=10 * floats + 1,
         naive_median_ms=naive_median,
         naive_ratio=median / naive_median if naive_median else None,
+        cpu_ms_per_hop=cpu_ms,
     )
+
+
+def cpu_per_hop(stamps: list[list[float]], warmup: int) -> float | None:
+    """Both processes' CPU time per hop (ms) from the agent's stamps ``[port, seconds]``, one
+    per arrival (index 0: its start at home, index i: its arrival after hop i), over the hops
+    after the first ``warmup``.
+
+    Each process takes part in every hop (as source or destination), so its CPU time between
+    its first and its last stamp in the window, over the hops between them, is its CPU per hop;
+    the figure is the sum over the two processes. None if a process has fewer than two stamps
+    in the window.
+    """
+    by_port: dict[int, list[tuple[int, float]]] = {}
+    for i, (port, seconds) in enumerate(stamps):
+        if i >= warmup:
+            by_port.setdefault(int(port), []).append((i, float(seconds)))
+    total = 0.0
+    for points in by_port.values():
+        (i0, c0), (i1, c1) = points[0], points[-1]
+        if i1 == i0:
+            return None
+        total += (c1 - c0) * 1000 / (i1 - i0)
+    return total if by_port else None
 
 
 def _finish(proc: subprocess.Popen) -> None:
@@ -282,7 +313,14 @@ def _pool(results: list[MigrationResult]) -> MigrationResult:
         min_ms=min(r.min_ms for r in results), max_ms=max(r.max_ms for r in results),
         mean_ms=statistics.fmean(r.mean_ms for r in results), payload_bytes=r0.payload_bytes,
         naive_median_ms=naive_median,
-        naive_ratio=statistics.median(meds) / naive_median if naive_median else None)
+        naive_ratio=statistics.median(meds) / naive_median if naive_median else None,
+        cpu_ms_per_hop=_median_or_none([r.cpu_ms_per_hop for r in results]))
+
+
+def _median_or_none(xs: list[float | None]) -> float | None:
+    """The median of the figures that are not None (None if there are none)."""
+    got = [x for x in xs if x is not None]
+    return statistics.median(got) if got else None
 
 
 @dataclass
@@ -300,6 +338,11 @@ class CheckoutComparison:
     other_naive_ratio: float | None
     this_runs_ms: list[float]
     other_runs_ms: list[float]
+    this_cpu_ms_per_hop: float | None = None
+    """Median over this checkout's runs of both processes' CPU per hop (see
+    :func:`cpu_per_hop`)."""
+    other_cpu_ms_per_hop: float | None = None
+    """The same for the other checkout (None if its benchmark program reports no CPU)."""
 
 
 def other_script(root: str | Path) -> Path:
@@ -349,4 +392,6 @@ def compare_checkouts(floats: int, hops: int, other_root: str | Path, runs: int 
         other_median_ms=statistics.median(other_ms),
         this_over_other=statistics.median(this_ms) / statistics.median(other_ms),
         this_naive_ratio=ratio(mine), other_naive_ratio=ratio(theirs),
-        this_runs_ms=this_ms, other_runs_ms=other_ms)
+        this_runs_ms=this_ms, other_runs_ms=other_ms,
+        this_cpu_ms_per_hop=_median_or_none([r.cpu_ms_per_hop for r in mine]),
+        other_cpu_ms_per_hop=_median_or_none([r.cpu_ms_per_hop for r in theirs]))

@@ -37,6 +37,27 @@ def test_migrate_text_output_shows_the_ratio(capsys: pytest.CaptureFixture[str])
     assert "naive text hop" in out and "ratio" in out
 
 
+def test_cpu_per_hop_from_hand_made_stamps() -> None:
+    # port 1 at arrivals 0, 2, 4; port 2 at 1, 3, 5 (seconds of CPU so far)
+    stamps = [[1, 0.0], [2, 0.0], [1, 0.010], [2, 0.004], [1, 0.020], [2, 0.008]]
+    # port 1: 20 ms over 4 hops, port 2: 8 ms over 4 hops
+    assert migrate.cpu_per_hop(stamps, 0) == pytest.approx(5.0 + 2.0)
+    # after 2 warm-up hops: port 1 10 ms over 2 hops, port 2 4 ms over 2 hops
+    assert migrate.cpu_per_hop(stamps, 2) == pytest.approx(5.0 + 2.0)
+    # control: a process with one stamp in the window gives no figure
+    assert migrate.cpu_per_hop(stamps, 4) is None
+    assert migrate.cpu_per_hop([], 0) is None
+
+
+def test_run_reports_cpu_per_hop_that_grows_with_the_payload() -> None:
+    small = migrate.run(0, 6, warmup=1, naive=False)
+    large = migrate.run(50000, 6, warmup=1, naive=False)
+    assert small.cpu_ms_per_hop is not None and large.cpu_ms_per_hop is not None
+    assert 0 < small.cpu_ms_per_hop < 1000
+    # serialising, sending, reading and compiling 50,000 floats costs CPU an empty record does not
+    assert large.cpu_ms_per_hop > small.cpu_ms_per_hop + 2
+
+
 def test_run_without_naive_leaves_the_fields_empty() -> None:
     r = migrate.run(0, 2, warmup=0, naive=False)
     assert r.naive_median_ms is None and r.naive_ratio is None
