@@ -436,7 +436,9 @@ step(M, Agent) :-
     ;   Phase == forward
     ->  forward(Carried-Method, Robot, Options, S1, S2),
         length(Itinerary, N),
-        (   Index =:= N - 1
+        (   restart_with_fallback(M, Agent, Method, Carried, S2)
+        ->  true
+        ;   Index =:= N - 1
         ->  turn_back(M, Agent, Method, S2)     % writes the last robot here
         ;   go(M, Agent, S2, +1)
         )
@@ -486,7 +488,10 @@ start_round(M, Agent, S0, S) :-
           Plan0-Method0-Stop0, Plan-Method-Stop),
     replace_fact(M, dfrl_plan(Agent, Plan)),
     replace_fact(M, dfrl_method_of(Agent, Method)),
-    get_time(Start),
+    (   get_dict(start, S0, Start0), Start0 > 0
+    ->  Start = Start0                  % started again after a fallback
+    ;   get_time(Start)
+    ),
     put_dict(_{start:Start, stop:Stop}, S0, S1),
     (   dfrl_method(Method),
         \+ method_applies_to(Method, Carried)
@@ -509,9 +514,69 @@ turn_back(M, Agent, Method, S0) :-
     ;   method_failed(Result, S0, S1),
         Final = none
     ),
-    put_dict(_{phase:backward, acc:Final}, S1, S),
-    put_state(M, Agent, S),
-    step(M, Agent).
+    carried(M, Agent, Carried),
+    (   restart_with_fallback(M, Agent, Method, Carried, S1)
+    ->  true
+    ;   put_dict(_{phase:backward, acc:Final}, S1, S),
+        put_state(M, Agent, S),
+        step(M, Agent)
+    ).
+
+%   A method that failed in the forward pass (State has an error) is
+%   replaced, for this round already, by the method the next round would
+%   fall back to (next_method/5): the round starts again from its first
+%   stop with it, so every robot still gets a table and is released. The
+%   failure stays on record (the state's `fallback`, logged with the
+%   round: the failed method and its error). Once a round: a fallback
+%   that fails too, or a move back to the first stop that fails, aborts
+%   the round as before (no table written). A tree round falls back only
+%   from its next round on (dfrl_tree.pl).
+restart_with_fallback(M, Agent, Method, Carried, S0) :-
+    get_dict(error, S0, Error),
+    \+ get_dict(fallback, S0, _),
+    \+ get_dict(fallback_tried, S0, _),
+    next_method(Method, Carried, S0, Next, _),
+    Next \== Method,
+    get_dict(round, S0, Round),
+    print_message(warning,
+                  format("dfrl: ~w round ~w: method ~w failed (~w); the round starts \c
+                          again from its first stop with ~w", [Agent, Round, Method,
+                                                               Error, Next])),
+    del_dict(error, S0, _, S1),
+    put_dict(_{acc:none, visited:[], phase:forward,
+               fallback:failed(Method, Error)}, S1, S2),
+    replace_fact(M, dfrl_method_of(Agent, Next)),
+    M:dfrl_plan(Agent, plan(Itinerary, _, _, Log, _)),
+    log_control(Log, Agent, Round, fallback(Method, Next), applied),
+    get_dict(origin, S2, Origin),
+    get_dict(index, S2, Index),
+    (   Index =:= Origin
+    ->  put_state(M, Agent, S2),
+        step(M, Agent)
+    ;   nth0(Origin, Itinerary, Stop),
+        advance_to(Origin, S2, S3),
+        timed_move(M, Agent, S2, S3, Stop, Origin, policy, Result),
+        (   Result = failed(E, _, _)
+        ->  % the agent stays here: the round goes on without a table, as before
+            print_message(warning, format("dfrl: ~w round ~w: no way back to the first \c
+                                           stop (~w); round aborted", [Agent, Round, E])),
+            replace_fact(M, dfrl_method_of(Agent, Method)),
+            put_dict(fallback_tried, S0, true, S4),
+            put_state(M, Agent, S4),
+            (   get_dict(phase, S4, forward), \+ last_stop(M, Agent, Index)
+            ->  go(M, Agent, S4, +1)
+            ;   put_dict(_{phase:backward, acc:none}, S4, S5),
+                put_state(M, Agent, S5),
+                step(M, Agent)
+            )
+        ;   true
+        )
+    ).
+
+last_stop(M, Agent, Index) :-
+    M:dfrl_plan(Agent, plan(Itinerary, _, _, _, _)),
+    length(Itinerary, N),
+    Index =:= N - 1.
 
 %   Forward: fold this robot's table into the aggregate. A robot that
 %   cannot be read (or whose table does not fit) is skipped. A method

@@ -66,7 +66,9 @@ written at all is a warning (never an error that would stop the agent).
 %   Log the `round` event of the round that State (the agent's round
 %   state dict, see dfrl_round_state.pl) describes, ended at time End
 %   by the copy of Agent with epoch Epoch, aggregating with Method. A
-%   round whose aggregation failed (State has a key `error`) logs it.
+%   round whose aggregation failed (State has a key `error`) logs it; a
+%   round finished with Method after its own method failed (State has a
+%   key `fallback`) logs that one as failed_method, with its error.
 
 log_round(Log, Agent, Method, Epoch, End, S) :-
     get_dict(round, S, Round),
@@ -88,6 +90,8 @@ log_round(Log, Agent, Method, Epoch, End, S) :-
     ),
     (   get_dict(error, S, Error)
     ->  log_event(Log, Event1.put(error, Error))
+    ;   get_dict(fallback, S, failed(Failed, Error))
+    ->  log_event(Log, Event1.put(_{error:Error, failed_method:Failed}))
     ;   log_event(Log, Event1)
     ).
 

@@ -175,9 +175,9 @@ test(unknown_method_ignored_and_stop, [cleanup(cleanup([C,A,B], Log))]) :-
     assertion(Round.method == max),
     assertion(Finished.round == 1).
 
-test(failing_method_aborts_round_loudly, [setup(assertz(user:quiet)),
-                                          cleanup((retractall(user:quiet),
-                                                   cleanup([C,A,B,D], Log)))]) :-
+test(failing_method_falls_back_within_its_round,
+     [setup(assertz(user:quiet)),
+      cleanup((retractall(user:quiet), cleanup([C,A,B,D], Log)))]) :-
     tmp_log(Log),
     memory_robots_start([r1-[1.0,2.0], r2-[3.0,4.0], r3-[5.0,6.0]]),
     nodes(4, [C,A,B,D]),
@@ -185,16 +185,20 @@ test(failing_method_aborts_round_loudly, [setup(assertz(user:quiet)),
     launch(C, ff, Stops, failing_step, 2, Log),
     assertion(wait_for(finished(Log))),
     events(Log, round, [R1, R2]),
+    % r2's step failed; no method had worked yet, so the round started again from r1
+    % with average and finished: every robot written, the failure on record
+    assertion(R1.method == average),
+    assertion(R1.failed_method == failing_step),
     assertion(R1.error == 'aggregate_step(failing_step) failed'),
-    assertion(R1.visited == [r1]),          % r2's step failed: nothing after it
+    assertion(R1.visited == [r1, r2, r3]),
     assertion(R1.skipped == []),
-    % round 1 wrote nothing; no method had worked yet, so round 2 falls back to average
     events(Log, control, [F]),
     assertion(F.command == 'fallback(failing_step,average)'),
     assertion(F.round == 1), assertion(F.status == applied),
     assertion(R2.method == average),
     assertion(\+ get_dict(error, R2, _)),
-    forall(member(R, [r1,r2,r3]), assertion(memory_robot_sets(R, 1))),
+    assertion(\+ get_dict(failed_method, R2, _)),
+    forall(member(R, [r1,r2,r3]), assertion(memory_robot_sets(R, 2))),
     forall(member(R, [r1,r2,r3]), assertion(memory_robot_table(R, [3.0,4.0]))).
 
 test(failing_method_falls_back_to_the_last_that_worked,
@@ -205,7 +209,8 @@ test(failing_method_falls_back_to_the_last_that_worked,
     nodes(3, [C,A,B]),
     maplist(stop_of, [A,B], [r1,r2], Stops),
     node_property(A, address(AA)),
-    % rounds 1 and 3 with max; the method applied at round 2 fails there
+    % rounds 1 and 3 with max; the method applied at round 2 fails there, and round 2
+    % is done with max
     dfrl_create(C, fb, plan(Stops, 3, 0.5, Log, 30), [method(max), tokens([7])]),
     Stops = [stop(H, P, _)|_],
     with_node(C, move_agent(fb, (H, P))),
@@ -214,18 +219,20 @@ test(failing_method_falls_back_to_the_last_that_worked,
     assertion(wait_for(finished(Log), 400)),
     events(Log, round, [R1, R2, R3]),
     assertion(R1.method == max), assertion(\+ get_dict(error, R1, _)),
-    assertion(R2.method == failing_step), assertion(get_dict(error, R2, _)),
+    assertion(R2.method == max), assertion(R2.failed_method == failing_step),
+    assertion(get_dict(error, R2, _)),
+    assertion(R2.visited == [r1, r2]),
     assertion(R3.method == max), assertion(\+ get_dict(error, R3, _)),
     events(Log, control, Controls),
     assertion(( member(M, Controls), get_dict(command, M, 'method(failing_step)') )),
     assertion(( member(F, Controls), get_dict(command, F, 'fallback(failing_step,max)'),
                 get_dict(round, F, 2), get_dict(status, F, applied) )),
-    forall(member(R, [r1,r2]), assertion(memory_robot_sets(R, 2))),
+    forall(member(R, [r1,r2]), assertion(memory_robot_sets(R, 3))),
     assertion(memory_robot_table(r1, [3.0,5.0])).
 
-test(throwing_method_aborts_round_loudly, [setup(assertz(user:quiet)),
-                                           cleanup((retractall(user:quiet),
-                                                    cleanup([C,A,B], Log)))]) :-
+test(throwing_final_falls_back_within_its_round,
+     [setup(assertz(user:quiet)),
+      cleanup((retractall(user:quiet), cleanup([C,A,B], Log)))]) :-
     tmp_log(Log),
     memory_robots_start([r1-[1.0,2.0], r2-[3.0,4.0]]),
     nodes(3, [C,A,B]),
@@ -235,9 +242,13 @@ test(throwing_method_aborts_round_loudly, [setup(assertz(user:quiet)),
     events(Log, round, [R]),
     assertion(sub_atom(R.error, 0, _, _, 'aggregate_final(throwing_final) raised: ')),
     assertion(sub_atom(R.error, _, _, _, not_a_number)),
+    assertion(R.failed_method == throwing_final),
+    assertion(R.method == average),
     assertion(R.visited == [r1, r2]),
-    forall(member(Rb, [r1,r2]), assertion(memory_robot_sets(Rb, 0))),
-    assertion(memory_robot_table(r2, [3.0,4.0])).
+    % the round started again at r1: four hops, not two
+    assertion(R.hops >= 4),
+    forall(member(Rb, [r1,r2]), assertion(memory_robot_sets(Rb, 1))),
+    forall(member(Rb, [r1,r2]), assertion(memory_robot_table(Rb, [2.0,3.0]))).
 
 test(unreachable_stop_is_skipped, [setup(assertz(user:quiet)),
                                    cleanup((retractall(user:quiet), cleanup([C,A,B], Log)))]) :-

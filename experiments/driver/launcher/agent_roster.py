@@ -117,7 +117,10 @@ class AgentRoster:
                                if rid in mine)
                 flags = "".join(f" SKIPPED {s.robot} ({' '.join(s.reason.split())[:120]})"
                                 for s in rec.skipped)
-                if rec.error:
+                if rec.failed_method:
+                    flags += (f" METHOD {rec.failed_method} FAILED, round done again with "
+                              f"{rec.method}: {rec.error[:300]}")
+                elif rec.error:
                     flags += f" METHOD FAILED, round aborted, no table written: {rec.error[:300]}"
                 self._say(f"{info.name} round {rec.round}/{info.rounds} {rec.method} "
                           f"{rec.duration_ms:.0f} ms, {rec.hops} hops, visited "

@@ -14,7 +14,9 @@ Events the agent writes (``platform_pl/dfrl_agent/dfrl_agent.pl``)::
 
 A round event may also carry ``retries`` (connection attempts repeated that round) and
 ``epoch`` (both default to 0), and ``error``: the aggregation method failed or threw that
-round, which was aborted without writing any table.
+round. With ``failed_method`` too, the round was started again with ``method`` (the method
+the agent falls back to) and finished, every table written; without it the round was
+aborted without writing any table.
 
 Times are the agent's ``get_time/1`` floats. A line that is not one of these objects is kept
 in :attr:`AgentLog.unreadable` (reported, never dropped).
@@ -50,9 +52,17 @@ class RoundRecord:
     skipped: tuple[Skip, ...] = ()
     retries: int = 0
     epoch: int = 0
-    #: the aggregation method failed or threw this round (the message); the round was aborted
-    #: and no table written
+    #: the aggregation method failed or threw this round (the message): the round was aborted
+    #: and no table written, unless ``failed_method`` is set
     error: str = ""
+    #: the method that failed when the round was then done with ``method`` (its fallback),
+    #: every table written; empty otherwise
+    failed_method: str = ""
+
+    @property
+    def aborted(self) -> bool:
+        """Its method failed and no table was written."""
+        return bool(self.error) and not self.failed_method
 
     @property
     def duration_ms(self) -> float:
@@ -135,7 +145,7 @@ def _round(agent: str, ev: dict[str, Any]) -> RoundRecord:
                        int(ev["hops"]), int(ev["bytes"]), str(ev["method"]),
                        tuple(str(v) for v in ev["visited"]), skipped,
                        int(ev.get("retries") or 0), int(ev.get("epoch") or 0),
-                       str(ev.get("error") or ""))
+                       str(ev.get("error") or ""), str(ev.get("failed_method") or ""))
 
 
 def _add(log: AgentLog, ev: dict[str, Any]) -> bool:

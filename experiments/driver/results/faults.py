@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import Iterable
 
 from dfrl.experiments.driver.config import ExperimentConfig
-from dfrl.experiments.driver.results.agent_log import AgentLog
+from dfrl.experiments.driver.results.agent_log import AgentLog, RoundRecord
 
 
 @dataclass
@@ -53,8 +53,7 @@ class Faults:
                 out.append(f"- MISSING rounds of {agent} ({len(rounds)}): {shown}")
         for agent, errors in self.method_errors.items():
             if errors:
-                out.append(f"- METHOD FAILED in {len(errors)} round(s) of {agent} (aborted, "
-                           "no table written):")
+                out.append(f"- METHOD FAILED in {len(errors)} round(s) of {agent}:")
                 out += [f"  - {e}" for e in errors[:20]]
         for rid, why in self.lost.items():
             out.append(f"- LOST robot {rid}: {why}")
@@ -102,14 +101,21 @@ def assess(config: ExperimentConfig, logs: Iterable[tuple[AgentLog, int]],
         for d in log.duplicates:
             f.resurrections.append(f"{log.agent} round {d.round}: also logged by the superseded "
                                    f"copy of epoch {d.epoch} (not counted)")
-        f.method_errors[log.agent] = [f"round {rec.round} ({rec.method}): "
-                                      f"{' '.join(rec.error.split())}"
-                                      for rec in log.rounds if rec.error]
+        f.method_errors[log.agent] = [method_error_text(rec) for rec in log.rounds if rec.error]
         _missed(f, log, resumed or {}, set(finished))
         done = {rec.round for rec in log.rounds}
         f.missing_rounds[log.agent] = [n for n in range(1, planned_rounds(log, budget) + 1)
                                        if n not in done]
     return f
+
+
+def method_error_text(rec: RoundRecord) -> str:
+    """A round whose method failed, in words: which, why, and what became of the round."""
+    error = " ".join(rec.error.split())
+    if rec.failed_method:
+        return (f"round {rec.round} ({rec.failed_method}): {error}; the round was done again "
+                f"with {rec.method}, every table written")
+    return f"round {rec.round} ({rec.method}): {error}; aborted, no table written"
 
 
 def _missed(f: Faults, log: AgentLog, resumed: dict[str, list[int]],

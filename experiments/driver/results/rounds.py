@@ -77,7 +77,7 @@ def match_shares(record: RoundRecord, shares: dict[str, list[Share]],
 
 
 ROUNDS_FIELDS = ("agent", "round", "start", "end", "duration_ms", "hops", "bytes", "method",
-                 "visited", "skipped", "retries", "epoch", "error")
+                 "visited", "skipped", "retries", "epoch", "error", "failed_method")
 
 
 def skipped_text(record: RoundRecord) -> str:
@@ -104,7 +104,7 @@ def write_rounds_csv(path: str | Path, logs: Iterable[AgentLog], robots: list[st
                 "end": repr(rec.end), "duration_ms": f"{rec.duration_ms:.3f}", "hops": rec.hops,
                 "bytes": rec.bytes, "method": rec.method, "visited": " ".join(rec.visited),
                 "skipped": skipped_text(rec), "retries": rec.retries, "epoch": rec.epoch,
-                "error": " ".join(rec.error.split()),
+                "error": " ".join(rec.error.split()), "failed_method": rec.failed_method,
             }
             digests = []
             for robot in robots:

@@ -103,6 +103,7 @@ def write_summary(r: Results) -> Path:
     if evals:
         lines.append("")
     failed = [row for row in r.rounds if row.get("error")]
+    redone = [row for row in failed if row.get("failed_method")]
     partial = [row for row in r.rounds if row.get("skipped") and not row.get("error")]
     n_rounds = len(r.rounds)
     durations = sorted(float(row["duration_ms"]) for row in r.rounds)
@@ -112,13 +113,19 @@ def write_summary(r: Results) -> Path:
             f"e.g. lost with its host; the records there agree)" if unverified else "")
     lines += [f"- agent rounds logged: {n_rounds}; rounds after which every visited robot held "
               f"the same table: {r.equal_rounds}/{n_rounds}{also}; rounds that skipped robots: "
-              f"{len(partial)}; rounds whose method FAILED (no table written): {len(failed)}",
+              f"{len(partial)}; rounds whose method FAILED: {len(failed)} ({len(redone)} done "
+              f"again with a fallback method, every table written; {len(failed) - len(redone)} "
+              f"aborted, no table written)",
               f"- median round time: {med:.1f} ms",
-              f"- methods used: {', '.join(sorted({row['method'] for row in r.rounds})) or '-'}",
+              f"- methods used: {', '.join(sorted({row['method'] for row in r.rounds})) or '-'}"
+              + (f" (and failed: {', '.join(sorted({row['failed_method'] for row in redone}))})"
+                 if redone else ""),
               f"- agents finished: {r.agents_finished}"]
     for row in failed[:10]:
-        lines.append(f"  - FAILED: {row['agent']} round {row['round']} ({row['method']}): "
-                     f"{row['error'][:300]}")
+        then = (f"; done again with {row['method']}" if row.get("failed_method") else
+                "; aborted")
+        lines.append(f"  - FAILED: {row['agent']} round {row['round']} "
+                     f"({row.get('failed_method') or row['method']}): {row['error'][:300]}{then}")
     for row in partial[:10]:
         lines.append(f"  - skipped robots: {row['agent']} round {row['round']}: {row['skipped']}")
     warnings = node_warnings(r.output_dir)

@@ -59,7 +59,8 @@ def measure(rows: list[dict[str, str]], summary: str, exit_status: int, t_fault:
     disagree with the rounds themselves: the federation was complete only if every planned
     round completed with every robot visited and no method failed.
     """
-    done = sorted((r for r in rows if not r["error"]), key=lambda r: float(r["end"]))
+    done = sorted((r for r in rows if not r["error"] or r.get("failed_method")),
+                  key=lambda r: float(r["end"]))
     failed = [r for r in rows if r["error"]]
     ends = [float(r["end"]) for r in done]
     after = [e for e in ends if e > t_fault]

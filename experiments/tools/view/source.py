@@ -366,7 +366,9 @@ class EventSource:
         out.append({"t": end, "kind": "round", "agent": agent, "round": rnd, "start": start,
                     "end": end, "duration_ms": round((end - start) * 1000.0, 1),
                     "method": method, "visited": visited, "skipped": skipped,
-                    "hops": int(ev.get("hops") or 0), "epoch": int(ev.get("epoch") or 0)})
+                    "hops": int(ev.get("hops") or 0), "epoch": int(ev.get("epoch") or 0),
+                    "error": str(ev.get("error") or ""),
+                    "failed_method": str(ev.get("failed_method") or "")})
 
     def _states(self, out: list[dict[str, Any]], now: float) -> None:
         assert self.run is not None

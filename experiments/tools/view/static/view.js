@@ -121,6 +121,10 @@
         note(ev, `${ev.agent} round ${ev.round}: ${ev.method}, ${ev.duration_ms.toFixed(0)} ms, ` +
                  `visited ${names(ev.visited) || "-"}` +
                  (ev.skipped.length ? `, skipped ${names(ev.skipped.map(s => s.robot))}` : ""));
+        if (ev.error)
+          note(ev, `${ev.agent} round ${ev.round}: METHOD ${ev.failed_method || ev.method} FAILED: ` +
+                   `${ev.error}; ` + (ev.failed_method ? `done again with ${ev.method}`
+                                                       : "aborted, no table written"), true);
         break;
       }
       case "method":

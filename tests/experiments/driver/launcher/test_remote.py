@@ -44,8 +44,10 @@ FAILING = Path(__file__).parent / "failing_method.pl"
 
 def test_inject_refused_method_and_failing_method(tmp_path: Path) -> None:
     """An injected method the agent does not know is refused (after the agent said so); one
-    that fails at run time aborts its rounds loudly: the run is not ok, rounds.csv and the
-    summary say which rounds failed, the robots keep their tables."""
+    that fails at run time is replaced, in the round it failed, by the method the agent falls
+    back to: the round is done again and every table written, and it stays loud: the run is
+    not ok, rounds.csv and the summary say which round's method failed and with what the
+    round was done."""
     cfg = small_config(iterations=1600, respite=100, rtf=20.0)
     t, box = run_in_thread(cfg, tmp_path)
     wait_rounds(tmp_path, "fed_qlearning", 2)
@@ -57,9 +59,14 @@ def test_inject_refused_method_and_failing_method(tmp_path: Path) -> None:
     assert not res.ok and not res.complete
     rows = rounds_csv(tmp_path)
     failed = [r for r in rows if r["error"]]
-    assert failed and all(r["method"] == "failing" for r in failed)
+    assert failed and all(r["failed_method"] == "failing" for r in failed)
+    assert all(r["method"] == "average" for r in failed), failed
+    assert all(r["all_equal"] and r["visited"] == "r1 r2" for r in failed), failed
     assert all("aggregate_step(failing) failed" in r["error"] for r in failed)
+    # control: the rounds around it name no failed method
+    assert all(r["failed_method"] == "" for r in rows if not r["error"])
     summary = (tmp_path / "summary.md").read_text()
     assert f"FAILED: fed_qlearning round {failed[0]['round']} (failing)" in summary
+    assert "done again with average" in summary
     assert "METHOD FAILED" in summary
     assert all((tmp_path / "tables" / f"{r}.npy").is_file() for r in ("r1", "r2"))
