@@ -96,7 +96,8 @@ by default the bind address, or the host name when it binds 0.0.0.0).
     node_tokens/2,              % Node, Tokens
     node_opt/2,                 % Node, Option
     default_node/1,             % Node
-    stopping/1.                 % Node
+    stopping/1,                 % Node
+    local_host_seen/3.          % Host, Local (true/false), Time: host_is_local/1
 
 :- thread_local
     current_node_tl/1.
@@ -588,12 +589,25 @@ identify(Address, Since, Id) :-
 %   without a packet sent. A remote address is thus never connected to
 %   for its id, so asking "is this me?" of a stop that is cut off or
 %   down costs microseconds, not a connect timeout (a mover asks it
-%   twice a hop).
+%   once a hop). The kernel's answer (a socket, a bind, a close: about
+%   30 us) is kept for 10 s per host name, so a hop pays a lookup.
 host_is_local(Host:_) :-
-    setup_call_cleanup(
-        tcp_socket(Socket),
-        catch(tcp_bind(Socket, Host:0), _, fail),
-        tcp_close_socket(Socket)).
+    get_time(Now),
+    (   local_host_seen(Host, Local, T),
+        Now - T < 10
+    ->  true
+    ;   (   setup_call_cleanup(
+                tcp_socket(Socket),
+                catch(tcp_bind(Socket, Host:0), _, fail),
+                tcp_close_socket(Socket))
+        ->  Local = true
+        ;   Local = false
+        ),
+        with_mutex(dfrl_node_local_hosts,
+                   ( retractall(local_host_seen(Host, _, _)),
+                     assertz(local_host_seen(Host, Local, Now)) ))
+    ),
+    Local == true.
 
 literal_self(Node, Host:Port) :-
     (   node_ident(Node, _, AH:AP, _),
