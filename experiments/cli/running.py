@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from dfrl.experiments.cli.federated import print_results
+from dfrl.experiments.cli.tensorboard_option import add_tensorboard_argument, write_run_tensorboard
 from dfrl.experiments.driver.config import ConfigError
 from dfrl.experiments.errors import ExperimentError
 
@@ -102,6 +103,7 @@ def cmd_collect(args: argparse.Namespace) -> int:
         print(f"dfrl collect: {exc}", file=sys.stderr)
         return 1
     print_results(results)
+    write_run_tensorboard(results, args, "dfrl collect")
     return 0 if results.ok else 1
 
 
@@ -148,4 +150,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--wait", type=float, default=30.0, metavar="S",
                    help="seconds robots still running the run get to end (default: %(default)s)")
     add_driver_tls_argument(p)
+    add_tensorboard_argument(p)
     p.set_defaults(func=cmd_collect)

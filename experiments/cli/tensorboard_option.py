@@ -1,6 +1,6 @@
-"""``--tensorboard`` of ``dfrl run``, ``demo`` and ``train``: the option (checked while the
-command line is parsed, before anything starts) and the writing once the run has ended
-(:mod:`dfrl.experiments.driver.results.tensorboard`)."""
+"""``--tensorboard`` of ``dfrl run``, ``demo``, ``collect`` and ``train``: the option
+(checked while the command line is parsed, before anything starts) and the writing once the
+run has ended (:mod:`dfrl.experiments.driver.results.tensorboard`)."""
 from __future__ import annotations
 
 import argparse

@@ -91,6 +91,24 @@ def test_control_the_comparison_can_fail(run_folder: Path) -> None:
     assert got["cumulative_reward"] != _curve(metrics, "r2", "cumulative_reward")
 
 
+def test_collect_writes_the_same_scalars(run_folder: Path, tmp_path: Path) -> None:
+    """``dfrl collect --tensorboard`` on the run's folder (its TensorBoard files removed)
+    writes the scalars again, equal to those the run wrote."""
+    import shutil
+
+    copy = tmp_path / "run"
+    shutil.copytree(run_folder, copy)
+    shutil.rmtree(copy / TENSORBOARD_DIR)
+    assert main(["collect", str(copy), "--wait", "0", "--tensorboard"]) == 0
+    for robot in ("r1", "r2"):
+        assert read_scalars(copy / TENSORBOARD_DIR / robot) == \
+            read_scalars(run_folder / TENSORBOARD_DIR / robot), robot
+    # control: without the flag none are written
+    shutil.rmtree(copy / TENSORBOARD_DIR)
+    assert main(["collect", str(copy), "--wait", "0"]) == 0
+    assert not (copy / TENSORBOARD_DIR).exists()
+
+
 def test_a_damaged_event_file_is_a_located_error(run_folder: Path, tmp_path: Path) -> None:
     [src] = list((run_folder / TENSORBOARD_DIR / "r1").glob("events.out.tfevents.*"))
     data = bytearray(src.read_bytes())
