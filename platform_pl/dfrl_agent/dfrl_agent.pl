@@ -431,7 +431,11 @@ step(M, Agent) :-
     robot_options(Agent, S1, Timeout, Options),
     (   Phase == forward,
         itinerary_kind(M, Agent, tree(K))
-    ->  tree_round(M, Agent, K, S1, S2),
+    ->  tree_round(M, Agent, K, S1, S2a),
+        (   tree_fallback(M, Agent, Method, Carried, K, S1, S2a, S2)
+        ->  true
+        ;   S2 = S2a
+        ),
         end_round(M, Agent, S2.put(itinerary, tree(K)))
     ;   Phase == forward
     ->  forward(Carried-Method, Robot, Options, S1, S2),
@@ -529,8 +533,8 @@ turn_back(M, Agent, Method, S0) :-
 %   failure stays on record (the state's `fallback`, logged with the
 %   round: the failed method and its error). Once a round: a fallback
 %   that fails too, or a move back to the first stop that fails, aborts
-%   the round as before (no table written). A tree round falls back only
-%   from its next round on (dfrl_tree.pl).
+%   the round as before (no table written). A tree round is run again
+%   with the fallback (tree_fallback/8).
 restart_with_fallback(M, Agent, Method, Carried, S0) :-
     get_dict(error, S0, Error),
     \+ get_dict(fallback, S0, _),
@@ -572,6 +576,32 @@ restart_with_fallback(M, Agent, Method, Carried, S0) :-
         ;   true
         )
     ).
+
+%   A tree round whose method failed is run again at once with the method
+%   it falls back to (as a chain round, restart_with_fallback/5): its
+%   copies read and write every robot again; the hops of both count.
+tree_fallback(M, Agent, Method, Carried, K, S1, S2, S) :-
+    get_dict(error, S2, Error),
+    \+ get_dict(fallback, S1, _),
+    next_method(Method, Carried, S2, Next, _),
+    Next \== Method,
+    get_dict(round, S1, Round),
+    print_message(warning,
+                  format("dfrl: ~w round ~w: method ~w failed (~w); the tree round runs \c
+                          again with ~w", [Agent, Round, Method, Error, Next])),
+    replace_fact(M, dfrl_method_of(Agent, Next)),
+    M:dfrl_plan(Agent, plan(_, _, _, Log, _)),
+    log_control(Log, Agent, Round, fallback(Method, Next), applied),
+    get_dict(hops, S2, Hops),
+    get_dict(bytes, S2, Bytes),
+    get_dict(retries, S2, Retries),
+    (   del_dict(error, S1, _, S1a)         % the method did not apply at all
+    ->  true
+    ;   S1a = S1
+    ),
+    put_dict(_{hops:Hops, bytes:Bytes, retries:Retries,
+               fallback:failed(Method, Error)}, S1a, S1b),
+    tree_round(M, Agent, K, S1b, S).
 
 last_stop(M, Agent, Index) :-
     M:dfrl_plan(Agent, plan(Itinerary, _, _, _, _)),

@@ -25,6 +25,10 @@
 dfrl_aggregation:aggregate_init(first_table, qtable(_, V), V).
 dfrl_aggregation:aggregate_step(first_table, A, _, A).
 dfrl_aggregation:aggregate_final(first_table, A, A).
+% a method whose step fails
+dfrl_aggregation:aggregate_init(failing_fold, qtable(_, V), V).
+dfrl_aggregation:aggregate_step(failing_fold, _, _, _) :- fail.
+dfrl_aggregation:aggregate_final(failing_fold, A, A).
 
 wait_for(G) :- wait_for(G, 500).
 wait_for(G, N) :- ( call(G) -> true ; N > 0 -> sleep(0.02), N1 is N-1, wait_for(G, N1) ; fail ).
@@ -143,6 +147,32 @@ test(max_over_a_tree, [cleanup(cleanup_all(Log))]) :-
     assertion(wait_for(finished(Log))),
     chain_result(max, Robots, Expected),
     forall(member(R, Ids), assertion(memory_robot_table(R, Expected))).
+
+test(failing_method_falls_back_within_the_tree_round,
+     [setup(assertz(user:quiet)), cleanup((retractall(user:quiet), cleanup_all(Log)))]) :-
+    tmp_log(Log),
+    robots(7, Robots0),
+    Robots0 = [_|Robots],
+    memory_robots_start(Robots),
+    nodes(7, [C|Ns]),
+    pairs_keys(Robots, Ids),
+    maplist(stop_of, Ns, Ids, Stops),
+    launch(C, ft, Stops, failing_fold, 2, Log, tree(2)),
+    assertion(wait_for(finished(Log))),
+    events(Log, round, [R1, R2]),
+    % round 1 ran again with average at once: every robot written, the failure logged
+    assertion(R1.method == average),
+    assertion(R1.failed_method == failing_fold),
+    assertion(R1.error == 'aggregate_step(failing_fold) failed'),
+    assertion(length(R1.visited, 6)),
+    assertion(R2.method == average),
+    assertion(\+ get_dict(error, R2, _)),
+    events(Log, control, [F]),
+    assertion(F.command == 'fallback(failing_fold,average)'),
+    chain_result(average, Robots, Expected0),
+    % round 2 averages equal tables: the same values again
+    forall(member(R, Ids), assertion(memory_robot_table(R, Expected0))),
+    forall(member(R, Ids), assertion(memory_robot_sets(R, 2))).
 
 test(dead_stop_skipped_its_children_kept, [setup(assertz(user:quiet)),
                                            cleanup((retractall(user:quiet),
