@@ -78,6 +78,18 @@ robots(7, Robots) :-
               A is I * 0.1, B is 1.0 / I, C is I * I * 0.37, D is -0.3 * I ),
             Robots).
 
+%   Start the robots and one node per robot plus the console, launch agent
+%   Name over a binary tree of them and wait until it finished.
+run_tree(Robots, Name, Method, Rounds, Log, Ids) :-
+    memory_robots_start(Robots),
+    length(Robots, N),
+    N1 is N + 1,
+    nodes(N1, [C|Ns]),
+    pairs_keys(Robots, Ids),
+    maplist(stop_of, Ns, Ids, Stops),
+    launch(C, Name, Stops, Method, Rounds, Log, tree(2)),
+    assertion(wait_for(finished(Log))).
+
 chain_result(Method, Robots, Values) :-
     maplist([_-V, qtable([2,2], V)]>>true, Robots, Tables),
     aggregate_tables(Method, Tables, qtable(_, Values)).
@@ -95,12 +107,7 @@ test(tree_shape) :-
 test(average_equals_the_chain_bit_for_bit, [cleanup(cleanup_all(Log))]) :-
     tmp_log(Log),
     robots(7, Robots),
-    memory_robots_start(Robots),
-    nodes(8, [C|Ns]),
-    pairs_keys(Robots, Ids),
-    maplist(stop_of, Ns, Ids, Stops),
-    launch(C, ft, Stops, average, 2, Log, tree(2)),
-    assertion(wait_for(finished(Log))),
+    run_tree(Robots, ft, average, 2, Log, Ids),
     chain_result(average, Robots, Expected1),
     % round 2 averages seven copies of it (not exactly it again, in floats)
     maplist([R-_, R-Expected1]>>true, Robots, Robots2),
@@ -139,12 +146,7 @@ test(max_over_a_tree, [cleanup(cleanup_all(Log))]) :-
     tmp_log(Log),
     robots(7, Robots0),
     Robots0 = [_|Robots],                   % six robots: an incomplete last level
-    memory_robots_start(Robots),
-    nodes(7, [C|Ns]),
-    pairs_keys(Robots, Ids),
-    maplist(stop_of, Ns, Ids, Stops),
-    launch(C, fx, Stops, max, 1, Log, tree(2)),
-    assertion(wait_for(finished(Log))),
+    run_tree(Robots, fx, max, 1, Log, Ids),
     chain_result(max, Robots, Expected),
     forall(member(R, Ids), assertion(memory_robot_table(R, Expected))).
 
@@ -153,12 +155,7 @@ test(failing_method_falls_back_within_the_tree_round,
     tmp_log(Log),
     robots(7, Robots0),
     Robots0 = [_|Robots],
-    memory_robots_start(Robots),
-    nodes(7, [C|Ns]),
-    pairs_keys(Robots, Ids),
-    maplist(stop_of, Ns, Ids, Stops),
-    launch(C, ft, Stops, failing_fold, 2, Log, tree(2)),
-    assertion(wait_for(finished(Log))),
+    run_tree(Robots, ft, failing_fold, 2, Log, Ids),
     events(Log, round, [R1, R2]),
     % round 1 ran again with average at once: every robot written, the failure logged
     assertion(R1.method == average),
