@@ -7,6 +7,7 @@
             text_nesting_within/2       % +Text, +MaxDepth
           ]).
 :- use_module(platform_errors, [wire_error/1]).
+:- use_module(bulk_write, [write_bytes/2]).
 %   Eager imports (not autoload/2): see node_connection.pl.
 :- use_module(library(utf8), [utf8_codes//1]).
 :- use_module(library(lists), [append/3]).
@@ -88,7 +89,10 @@ frame_write(Stream, Kind, Term) :-
     ),
     header(Kind, Len, Header),
     write(Stream, Header),
-    write(Stream, Body),
+    (   Len > 8192
+    ->  write_bytes(Stream, Body)       % in one piece (bulk_write.pl)
+    ;   write(Stream, Body)
+    ),
     flush_output(Stream).
 
 %   The header as one string of bytes, written with one write/2 (twelve

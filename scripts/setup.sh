@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Installs what is missing for dfrl, and nothing more: SWI-Prolog from Debian's packages,
+# Installs what is missing for dfrl, and nothing more: SWI-Prolog from Debian's packages (and
+# a C compiler, to build the platform's two foreign libraries),
 # a virtual environment in .venv, and the dfrl package with its dependencies. Safe to run
 # again: each step checks first. Source it (`. scripts/setup.sh`) or run it.
 set -euo pipefail
@@ -18,6 +19,14 @@ if ! command -v swipl >/dev/null 2>&1; then
     as_root apt-get update -qq
     DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq swi-prolog-nox >/dev/null
 fi
+
+# The platform's foreign libraries (platform_pl/native): a C compiler for swipl-ld.
+if ! command -v cc >/dev/null 2>&1; then
+    say "installing a C compiler (gcc) for the platform's foreign libraries"
+    as_root apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq gcc libc6-dev >/dev/null
+fi
+bash "$DFRL_ROOT/platform_pl/native/build.sh"
 
 PYTHON="${PYTHON:-python3}"
 if [ ! -x "$VENV/bin/python" ]; then
