@@ -7,6 +7,7 @@
             hosted_robot/2              % ?Robot, ?Props
           ]).
 :- autoload(library(error), [must_be/2, existence_error/2]).
+:- use_module(float_vectors, [packed_vector/1, vector_floats/2]).
 
 /** <module> The resources a host process offers to agents: robots' tables and parameters
 
@@ -41,6 +42,14 @@ table, layout(Layout) for parameters, learner(tabular|function).
 Options: timeout(Seconds), how long the host may take to answer; other
 options of a write say where it comes from (round(N), agent(A), ...).
 
+Values may also be *packed* (fts(String), see float_vectors.pl): the
+form the dFRL agent carries tables in. A read with the option
+values(packed) may give them packed (a host that does not, gives a
+list: the agent's maths takes both). A write hands packed values to the
+host only if it says it takes them, with the clause
+`robot_resources:takes_packed_values.` (the Python bridge does); for
+any other host they are made a list first.
+
 A host with its tables in Prolog memory (as the platform's tests have):
 
 ```
@@ -64,7 +73,8 @@ robot_resources:table_set(R, T, _) :-
     tables_get/4,               % +Robot, -QTable, -Visits, +Options
     table_set/3,                % +Robot, +QTable, +Options
     params_get/3,               % +Robot, -Params, +Options
-    params_set/3.               % +Robot, +Params, +Options
+    params_set/3,               % +Robot, +Params, +Options
+    takes_packed_values/0.
 
 %!  get_robot_table(+Robot, -QTable, +Options) is det.
 %
@@ -99,7 +109,8 @@ get_robot_tables(Robot, QTable, Visits, Options) :-
 set_robot_table(Robot, QTable, Options) :-
     must_be(compound, QTable),
     check_request(Robot, Options),
-    hook(table_set(Robot, QTable, Options)).
+    host_values(QTable, QTable1),
+    hook(table_set(Robot, QTable1, Options)).
 
 %!  get_robot_params(+Robot, -Params, +Options) is det.
 %
@@ -123,7 +134,8 @@ get_robot_params(Robot, Params, Options) :-
 set_robot_params(Robot, Params, Options) :-
     must_be(compound, Params),
     check_request(Robot, Options),
-    hook(params_set(Robot, Params, Options)).
+    host_values(Params, Params1),
+    hook(params_set(Robot, Params1, Options)).
 
 %!  hosted_robot(?Robot, ?Props) is nondet.
 %
@@ -131,6 +143,17 @@ set_robot_params(Robot, Params, Options) :-
 
 hosted_robot(Robot, Props) :-
     robot(Robot, Props).
+
+%   The values of a write as the host takes them: packed ones become a
+%   list unless it takes packed values.
+host_values(Item0, Item) :-
+    (   Item0 =.. [F, A, V0],
+        packed_vector(V0),
+        \+ takes_packed_values
+    ->  vector_floats(V0, V),
+        Item =.. [F, A, V]
+    ;   Item = Item0
+    ).
 
 check_request(Robot, Options) :-
     must_be(atomic, Robot),

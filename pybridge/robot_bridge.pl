@@ -29,6 +29,8 @@
 :- use_module(table_codec,
               [ encode_values/3, decode_values/2, fts_encoded/2, float_list/2 ]).
 :- use_module('../platform_pl/robot_resources', []).
+:- use_module('../platform_pl/float_vectors',
+              [ packed_vector/1, vector_length/2, vector_floats/2 ]).
 :- autoload(library(error),
             [ must_be/2, domain_error/2, existence_error/2, type_error/2,
               instantiation_error/1 ]).
@@ -202,8 +204,8 @@ get_qtable_and_visits(Robot, Table, Visits, Options) :-
     offers_table(Robot),
     bridge_call(Robot, get_qtable_and_visits(Robot), PI, Options, Reply),
     (   Reply = tables(table(QShape, QData), table(VShape, VData))
-    ->  decode_table(QShape, QData, Table),
-        decode_table(VShape, VData, Visits)
+    ->  decode_table(QShape, QData, Options, Table),
+        decode_table(VShape, VData, Options, Visits)
     ;   reply_error(Reply, PI)
     ).
 
@@ -215,19 +217,29 @@ table_request(Op, PI, Options, Table) :-
     offers_table(Robot),
     bridge_call(Robot, Op, PI, Options, Reply),
     (   Reply = table(Shape, Data)
-    ->  decode_table(Shape, Data, Table)
+    ->  decode_table(Shape, Data, Options, Table)
     ;   reply_error(Reply, PI)
     ).
 
-decode_table(Shape, Data, qtable(Shape, Values)) :-
-    decode_values(Data, Values),
+decode_table(Shape, Data, Options, qtable(Shape, Values)) :-
+    read_values(Data, Options, Values),
     check_size(Shape, Values).
+
+%   With the option values(packed), fts data stay packed (checked whole,
+%   float_vectors.pl), else they are decoded into a list.
+read_values(Data, Options, Values) :-
+    (   memberchk(values(packed), Options),
+        packed_vector(Data)
+    ->  vector_length(Data, _),
+        Values = Data
+    ;   decode_values(Data, Values)
+    ).
 
 check_size(Shape, Values) :-
     check_shape(Shape),
     Shape = [NS, NA],
     N is NS*NA,
-    length(Values, Len),
+    vector_length(Values, Len),
     (   Len =:= N
     ->  true
     ;   domain_error(qtable_size(N), Len)
@@ -267,8 +279,14 @@ set_qtable(Robot, Table, Options) :-
     ;   type_error(qtable, Table)
     ),
     must_be(ground, Shape),
-    must_be(list, Values0),
+    must_be_values(Values0),
     write_values(Robot, set_qtable(Robot, Shape), Values0, set_qtable/2, Options).
+
+must_be_values(Values) :-
+    (   packed_vector(Values)
+    ->  true
+    ;   must_be(list, Values)
+    ).
 
 %   write_values(+Robot, +Op0, +Values0, +PI, +Options)
 %
@@ -278,6 +296,19 @@ set_qtable(Robot, Table, Options) :-
 %   first sent as they are (see fts_encoded/2): a type_error(float_list, _)
 %   answer makes it convert them and ask again.
 
+write_values(Robot, Op0, Values, PI, Options) :-
+    packed_vector(Values),
+    !,
+    (   bridge_codec(fts)
+    ->  vector_length(Values, _),       % checked whole before it is sent
+        write_request(Robot, Op0, Values, PI, Options, Reply),
+        (   Reply == ok
+        ->  true
+        ;   reply_error(Reply, PI)
+        )
+    ;   vector_floats(Values, List),
+        write_values(Robot, Op0, List, PI, Options)
+    ).
 write_values(Robot, Op0, Values0, PI, Options) :-
     (   bridge_codec(fts),
         fts_encoded(Values0, Data0)
@@ -332,9 +363,9 @@ get_params(Robot, Params, Options) :-
     offers_params(Robot, _),
     bridge_call(Robot, get_params(Robot), PI, Options, Reply),
     (   Reply = params(Layout, Samples, Data)
-    ->  decode_values(Data, Values),
+    ->  read_values(Data, Options, Values),
         layout_size(Layout, N),
-        length(Values, Len),
+        vector_length(Values, Len),
         (   Len =:= N
         ->  Params = params(Layout, Samples, Values)
         ;   domain_error(params_size(N), Len)
@@ -376,7 +407,7 @@ set_params(Robot, Params, Options) :-
     ;   type_error(params, Params)
     ),
     must_be(ground, Layout),
-    must_be(list, Values0),
+    must_be_values(Values0),
     write_values(Robot, set_params(Robot, Layout), Values0, set_params/2, Options).
 
 %   layout_size(+Layout, -N): N floats in a vector of Layout.
@@ -753,10 +784,12 @@ bridge_codec(Codec) :-
     robot_resources:tables_get/4,
     robot_resources:table_set/3,
     robot_resources:params_get/3,
-    robot_resources:params_set/3.
+    robot_resources:params_set/3,
+    robot_resources:takes_packed_values/0.
 
 robot_resources:robot(Robot, Props) :-
     bridge_robot(Robot, Props).
+robot_resources:takes_packed_values.
 robot_resources:table_get(Robot, Table, Options) :-
     get_qtable(Robot, Table, Options).
 robot_resources:tables_get(Robot, Table, Visits, Options) :-

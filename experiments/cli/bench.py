@@ -19,7 +19,11 @@ from dfrl.experiments.tools.bench import faults, scale, sim
 # -- migrate ---------------------------------------------------------------------------------
 def add_migrate_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--floats", type=int, nargs="+", default=[0, 1000, 10000, 100000],
-                        help="payload sizes (floats in the agent's payload list)")
+                        help="payload sizes (floats in the agent's payload)")
+    parser.add_argument("--payload", choices=migrate.PAYLOADS, default="packed",
+                        help="how the agent carries the floats: packed, as the dFRL agent "
+                             "carries tables, or as a Prolog list (default: packed; the naive "
+                             "text hop always writes a list)")
     parser.add_argument("--hops", type=int, default=50, help="timed hops per size")
     parser.add_argument("--warmup", type=int, default=2, help="untimed hops first")
     parser.add_argument("--json", action="store_true", help="print one JSON object per size")
@@ -42,7 +46,7 @@ def cmd_migrate(args: argparse.Namespace) -> int:
         return _migrate_tls(args)
     for n in args.floats:
         try:
-            result = migrate.run(n, args.hops, args.warmup)
+            result = migrate.run(n, args.hops, args.warmup, payload=args.payload)
         except (ValueError, RuntimeError, FileNotFoundError) as exc:
             print(f"dfrl bench migrate: {exc}", file=sys.stderr)
             return 1
@@ -83,7 +87,7 @@ def _migrate_against(args: argparse.Namespace) -> int:
                 f"({cmp.runs} runs each, alternating){ratios}")
 
     return _per_size(args, lambda n: migrate.compare_checkouts(
-        n, args.hops, args.against, args.rounds, args.warmup), line)
+        n, args.hops, args.against, args.rounds, args.warmup, args.payload), line)
 
 
 def _migrate_tls(args: argparse.Namespace) -> int:
@@ -96,7 +100,7 @@ def _migrate_tls(args: argparse.Namespace) -> int:
                 f"(hops={cmp.tls.hops} each){naive}")
 
     return _per_size(args, lambda n: migrate.compare_tls(n, args.hops, args.tls, args.warmup,
-                                                         args.rounds), line)
+                                                         args.rounds, args.payload), line)
 
 
 # -- sim -------------------------------------------------------------------------------------

@@ -10,14 +10,18 @@
             fold_hook/3,                % +Acc, +Method, -Hook
             method_call/3,              % :Goal, +Hook, -Result
             same_shape/2,               % +Shape0, +Shape
-            add_lists/3,                % +Xs, +Ys, -Sums
-            mul_lists/3,                % +Xs, +Ys, -Products
-            max_lists/3,                % +Xs, +Ys, -Maxima
-            scale_list/3,               % +Xs, +N, -Quotients
-            add_scaled/4,               % +Xs, +W, +Ys, -Zs
-            weighted_mean/5             % +QWs, +Ws, +Qs, +N, -Values
+            item_floats/2               % +Item, -ListItem
           ]).
 :- use_module('../platform_errors', [message_text/2]).
+%   The element-wise list maths were defined here first; they are
+%   float_vectors.pl's now, and still exported from here.
+:- reexport('../float_vectors',
+            [ add_lists/3, mul_lists/3, max_lists/3, scale_list/3,
+              add_scaled/4, weighted_mean/5 ]).
+:- use_module('../float_vectors',
+              [ vector_add/3, vector_mul/3, vector_max/3, vector_divide/3,
+                vector_times/3, vector_add_scaled/4, vector_weighted_mean/5,
+                vector_floats/2 ]).
 :- autoload(library(apply), [foldl/4]).
 :- autoload(library(lists), [member/2]).
 :- autoload(library(error), [must_be/2]).
@@ -36,7 +40,8 @@ aggregate_final/3 into the table written back.
 Built in: `average` (element-wise mean), `max` (element-wise maximum)
 and `visit_average` (mean weighted by how often each state-action pair
 was visited; pairs nobody visited get the plain mean), defined at the
-end of this file on the element-wise list maths exported here.
+end of this file on the element-wise vector maths of float_vectors.pl
+(its list versions, add_lists/3 etc., are exported here too).
 
 ## Tables and parameters
 
@@ -93,7 +98,8 @@ round and log why instead of crashing.
     aggregate_step/4,           % +Method, +Acc0, +Table, -Acc
     aggregate_final/3,          % +Method, +Acc, -Values
     method_uses_visits/1,       % ?Method
-    method_applies/2.           % ?Method, ?Carried
+    method_applies/2,           % ?Method, ?Carried
+    method_takes_vectors/1.     % ?Method
 
 :- meta_predicate method_call(0, +, -).
 
@@ -136,6 +142,16 @@ round and log why instead of crashing.
 %   dfrl_aggregation:method_applies(trimmed_mean, tables).
 %   dfrl_aggregation:method_applies(trimmed_mean, params).
 %   ```
+
+%!  method_takes_vectors(?Method) is nondet.
+%
+%   Hook: Method's hooks take the values of a table (and its visit
+%   counts, and a parameter vector) as vectors of float_vectors.pl,
+%   a list or packed, and work on them with that module's operations
+%   (vector_add/3, ...). The built-in methods do: the agent carries
+%   tables packed, and their maths then runs on the packed form. Every
+%   other method's hooks receive lists (item_floats/2), as they always
+%   have.
 
 %!  method_applies_to(+Method, +Carried) is semidet.
 %
@@ -224,11 +240,39 @@ item_shape(Item, Shape) :-
 %   Method's hooks: started by aggregate_init/3 if Acc0 is `none`, else
 %   stepped by aggregate_step/4. Fails or throws as the hook does.
 
-aggregate_fold(Method, none, Shape, Table, acc(Shape, A)) :-
+aggregate_fold(Method, none, Shape, Table0, acc(Shape, A)) :-
     !,
+    method_item(Method, Table0, Table),
     aggregate_init(Method, Table, A).
-aggregate_fold(Method, acc(Shape0, A0), _Shape, Table, acc(Shape0, A)) :-
+aggregate_fold(Method, acc(Shape0, A0), _Shape, Table0, acc(Shape0, A)) :-
+    method_item(Method, Table0, Table),
     aggregate_step(Method, A0, Table, A).
+
+%   What Method's hooks receive: the item as it is if the method takes
+%   vectors (method_takes_vectors/1), else with every vector a list.
+method_item(Method, Item0, Item) :-
+    (   method_takes_vectors(Method)
+    ->  Item = Item0
+    ;   item_floats(Item0, Item)
+    ).
+
+%!  item_floats(+Item, -ListItem) is det.
+%
+%   ListItem is Item (qtable/2, qtable_visits/3 or params/3) with its
+%   values (and visit counts) as lists of floats, whether they were
+%   lists or packed (float_vectors.pl).
+
+item_floats(qtable(S, V0), qtable(S, V)) :-
+    !,
+    vector_floats(V0, V).
+item_floats(qtable_visits(S, V0, W0), qtable_visits(S, V, W)) :-
+    !,
+    vector_floats(V0, V),
+    vector_floats(W0, W).
+item_floats(params(L, N, V0), params(L, N, V)) :-
+    !,
+    vector_floats(V0, V).
+item_floats(Item, Item).
 
 %!  aggregate_finish(+Method, +Acc, -Table) is semidet.
 %
@@ -303,67 +347,12 @@ same_shape(S, S1) :-
     throw(error(domain_error(table_shape(S), S1), _)).
 
 		 /*******************************
-		 *      ELEMENT-WISE MATHS	*
-		 *******************************/
-
-%!  add_lists(+Xs, +Ys, -Sums) is semidet.
-%!  mul_lists(+Xs, +Ys, -Products) is semidet.
-%!  max_lists(+Xs, +Ys, -Maxima) is semidet.
-%
-%   Element-wise sum, product and maximum of two lists of numbers of one
-%   length (fails on lists of different lengths).
-
-%!  scale_list(+Xs, +N, -Quotients) is det.
-%
-%   Each element of Xs divided by N.
-
-%!  add_scaled(+Xs, +W, +Ys, -Zs) is semidet.
-%
-%   Zs is Xs + W*Ys element-wise (fails on lists of different lengths).
-
-%!  weighted_mean(+QWs, +Ws, +Qs, +N, -Values) is semidet.
-%
-%   Element-wise QW/W where the weight W is positive, else Q/N: the
-%   visit-weighted mean of N tables from the sums of Q*W (QWs), of the
-%   weights (Ws) and of Q (Qs). Fails on lists of different lengths.
-
-%   The element-wise helpers are compiled with the optimise flag, which
-%   turns is/2 into virtual-machine arithmetic: 2.5 times faster on
-%   20,000-element lists. The flag is restored after them.
-:- dynamic saved_optimise/1.
-:- current_prolog_flag(optimise, O),
-   assertz(saved_optimise(O)),
-   set_prolog_flag(optimise, true).
-
-add_lists([], [], []).
-add_lists([A|As], [B|Bs], [C|Cs]) :- C is A + B, add_lists(As, Bs, Cs).
-
-mul_lists([], [], []).
-mul_lists([A|As], [B|Bs], [C|Cs]) :- C is A * B, mul_lists(As, Bs, Cs).
-
-max_lists([], [], []).
-max_lists([A|As], [B|Bs], [C|Cs]) :- C is max(A, B), max_lists(As, Bs, Cs).
-
-scale_list([], _, []).
-scale_list([A|As], N, [C|Cs]) :- C is A / N, scale_list(As, N, Cs).
-
-add_scaled([], _, [], []).
-add_scaled([A|As], W, [B|Bs], [C|Cs]) :- C is A + W*B, add_scaled(As, W, Bs, Cs).
-
-times_list([], _, []).
-times_list([A|As], W, [C|Cs]) :- C is W*A, times_list(As, W, Cs).
-
-weighted_mean([], [], [], _, []).
-weighted_mean([QW|QWs], [W|Ws], [Q|Qs], N, [V|Vs]) :-
-    (   W > 0 -> V is QW / W ; V is Q / N ),
-    weighted_mean(QWs, Ws, Qs, N, Vs).
-
-:- retract(saved_optimise(O)),
-   set_prolog_flag(optimise, O).
-
-		 /*******************************
 		 *      BUILT-IN METHODS	*
 		 *******************************/
+
+method_takes_vectors(average).
+method_takes_vectors(max).
+method_takes_vectors(visit_average).
 
 method_applies(average, tables).
 method_applies(average, params).
@@ -381,15 +370,15 @@ average_init(params(_, W, V), Acc) :-
     fedavg_init(W, V, Acc).
 
 average_step(qtable(_, V), sum(A0, N0), sum(A, N)) :-
-    add_lists(A0, V, A),
+    vector_add(A0, V, A),
     N is N0 + 1.
 average_step(params(_, W, V), Acc0, Acc) :-
     fedavg_step(Acc0, W, V, Acc).
 
 average_final(sum(A, N), Mean) :-
-    scale_list(A, N, Mean).
+    vector_divide(A, N, Mean).
 average_final(fedavg(_, S, T), Mean) :-
-    scale_list(S, T, Mean).
+    vector_divide(S, T, Mean).
 
 %   FedAvg: fedavg(weighted, Sum of w*x, Sum of w) once some learner has
 %   learnt from samples (a learner with none then weighs nothing);
@@ -397,7 +386,7 @@ average_final(fedavg(_, S, T), Mean) :-
 fedavg_init(W, V, Acc) :-
     must_be(nonneg, W),
     (   W > 0
-    ->  times_list(V, W, WV),
+    ->  vector_times(V, W, WV),
         Acc = fedavg(weighted, WV, W)
     ;   Acc = fedavg(plain, V, 1)
     ).
@@ -406,33 +395,33 @@ fedavg_step(fedavg(Mode, S0, T0), W, V, Acc) :-
     must_be(nonneg, W),
     (   W =:= 0
     ->  (   Mode == plain
-        ->  add_lists(S0, V, S),
+        ->  vector_add(S0, V, S),
             T is T0 + 1,
             Acc = fedavg(plain, S, T)
         ;   Acc = fedavg(weighted, S0, T0)
         )
     ;   Mode == plain
-    ->  times_list(V, W, WV),
+    ->  vector_times(V, W, WV),
         Acc = fedavg(weighted, WV, W)
-    ;   add_scaled(S0, W, V, S),
+    ;   vector_add_scaled(S0, W, V, S),
         T is T0 + W,
         Acc = fedavg(weighted, S, T)
     ).
 
 aggregate_init(max, qtable(_, V), max(V)).
 aggregate_step(max, max(A0), qtable(_, V), max(A)) :-
-    max_lists(A0, V, A).
+    vector_max(A0, V, A).
 aggregate_final(max, max(A), A).
 
 method_uses_visits(visit_average).
 aggregate_init(visit_average, qtable_visits(_, Q, W), wsum(QW, W, Q, 1)) :-
-    mul_lists(Q, W, QW).
+    vector_mul(Q, W, QW).
 aggregate_step(visit_average, wsum(QW0, W0, Q0, N0), qtable_visits(_, Q, W),
                wsum(QW, W1, Q1, N)) :-
-    mul_lists(Q, W, QWi),
-    add_lists(QW0, QWi, QW),
-    add_lists(W0, W, W1),
-    add_lists(Q0, Q, Q1),
+    vector_mul(Q, W, QWi),
+    vector_add(QW0, QWi, QW),
+    vector_add(W0, W, W1),
+    vector_add(Q0, Q, Q1),
     N is N0 + 1.
 aggregate_final(visit_average, wsum(QW, W, Q, N), Values) :-
-    weighted_mean(QW, W, Q, N, Values).
+    vector_weighted_mean(QW, W, Q, N, Values).

@@ -6,6 +6,7 @@
 :- use_module('../robot_resources',
               [ get_robot_table/3, get_robot_tables/4, set_robot_table/3,
                 get_robot_params/3, set_robot_params/3 ]).
+:- use_module('../float_vectors', [vector_length/2, packed_vector/1]).
 :- autoload(library(lists), [sum_list/2]).
 
 /** <module> Reading and writing a robot for the dFRL agent
@@ -25,12 +26,12 @@ resource hook of the host process (robot_resources.pl).
 
 read_robot(params, _, Robot, Options, Params) :-
     !,
-    get_robot_params(Robot, Params, Options).
+    get_robot_params(Robot, Params, [values(packed)|Options]).
 read_robot(tables, Method, Robot, Options, Table) :-
     (   dfrl_aggregation:method_uses_visits(Method)
-    ->  get_robot_tables(Robot, qtable(S, V), qtable(S, W), Options),
+    ->  get_robot_tables(Robot, qtable(S, V), qtable(S, W), [values(packed)|Options]),
         Table = qtable_visits(S, V, W)
-    ;   get_robot_table(Robot, Table, Options)
+    ;   get_robot_table(Robot, Table, [values(packed)|Options])
     ).
 
 %!  write_robot(+Table, +Robot, +Options) is det.
@@ -47,12 +48,19 @@ write_robot(Table, Robot, Options) :-
 %!  item_bytes(+Item, -Bytes) is det.
 %
 %   Bytes estimates the payload size of Item (a robot's item or a
-%   finished table): 10 per float, as the fast serialisation on the wire.
+%   finished table): 10 per float, as the fast serialisation on the wire
+%   (and the packed form, float_vectors.pl).
 
 item_bytes(Item, Bytes) :-
     (   compound(Item)
-    ->  findall(N, ( arg(_, Item, L), is_list(L), length(L, N) ), Ns),
+    ->  findall(N, ( arg(_, Item, L), vector(L), vector_length(L, N) ), Ns),
         sum_list(Ns, Total),
         Bytes is 10 * Total
     ;   Bytes = 0
+    ).
+
+vector(L) :-
+    (   is_list(L)
+    ->  true
+    ;   packed_vector(L)
     ).

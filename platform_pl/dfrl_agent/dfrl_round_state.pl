@@ -12,6 +12,7 @@
 :- use_module('../platform_errors', [message_text/2]).
 :- use_module(dfrl_round_log, [log_text/2]).
 :- autoload(library(lists), [append/3, memberchk/2, sum_list/2]).
+:- use_module('../float_vectors', [vector_length/2, packed_vector/1]).
 
 /** <module> The round state of the dFRL agent (dfrl_agent.pl)
 
@@ -153,11 +154,13 @@ advance_to(Next, S0, S) :-
 
 %   Payload size of the aggregate in bytes: 10 per float in the fast
 %   serialisation used on the wire (an estimate, without the clauses).
-carried_bytes(qtable(_, V), B) :- !, length(V, N), B is 10 * N.
+%   (A list or packed, float_vectors.pl: the same bytes.)
+carried_bytes(qtable(_, V), B) :- !, vector_length(V, N), B is 10 * N.
 carried_bytes(acc(_, A), B) :- !, carried_bytes(A, B).
 carried_bytes(Acc, B) :-
-    (   compound(Acc)
-    ->  findall(N, ( arg(_, Acc, L), is_list(L), length(L, N) ), Ns),
+    (   compound(Acc), \+ packed_vector(Acc)
+    ->  findall(N, ( arg(_, Acc, L), ( is_list(L) ; packed_vector(L) ),
+                     vector_length(L, N) ), Ns),
         sum_list(Ns, Total),
         B is 10 * Total
     ;   B = 0

@@ -12,7 +12,9 @@
         figure per hop: from the first byte written to the answer).
     swipl bench_migrate.pl home TOKEN PEER_PORT FLOATS HOPS [TLS_DIR]
         start a platform, create an agent whose payload is a list of FLOATS
-        floats, bounce it HOPS times between home and peer, print the line
+        floats (FLOATS given as packed:N: the same N floats packed, as
+        float_vectors.pl packs the tables the dFRL agent carries), bounce
+        it HOPS times between home and peer, print the line
         "CPU_S [[Port, Seconds], ..]" (each process's CPU time at each
         arrival, see bench_hop_handler.pl) and the line "LATENCIES_MS [..]"
         (one figure per hop, from the call of move_agent at the source to
@@ -31,6 +33,7 @@
 */
 :- use_module('../../../platform_pl/tartarus').
 :- use_module('../../../platform_pl/secrets', [take_env_tokens/1]).
+:- use_module('../../../platform_pl/float_vectors', [vector_packed/2]).
 :- use_module(library(main)).
 :- use_module(library(socket)).
 :- use_module(library(prolog_wrap), [wrap_predicate/4]).
@@ -63,7 +66,8 @@ main(['peer'|Tls]) :-
 main(['home', Peer0, Floats0, Hops0|Tls]) :-
     trace_start,
     env_token(Token),
-    maplist(atom_number, [Peer0, Floats0, Hops0], [Peer, Floats, Hops]),
+    maplist(atom_number, [Peer0, Hops0], [Peer, Hops]),
+    payload_spec(Floats0, Floats),
     tls_options(Tls, TlsOptions),
     node_start(localhost:0, Node, [token(Token)|TlsOptions]),
     node_property(Node, address(_:Home)),
@@ -89,15 +93,31 @@ main(['naive', Naive0, Floats0, Hops0]) :-
     flush_output,
     node_stop(Node).
 
-%   The benchmark agent, with a payload of Floats floats.
+%   FLOATS: N (a list) or packed:N.
+payload_spec(Spec, Floats) :-
+    (   atomic_list_concat([packed, N0], :, Spec)
+    ->  atom_number(N0, N),
+        Floats = packed(N)
+    ;   atom_number(Spec, Floats)
+    ).
+
+%   The benchmark agent, with a payload of Floats floats (packed(N): N
+%   floats packed).
 bench_agent(Home, Peer, Floats, Hops, Token) :-
-    findall(F, ( between(1, Floats, I), F is I * 0.001 + 0.5 ), Data),
+    (   Floats = packed(N)
+    ->  float_data(N, List),
+        vector_packed(List, Data)
+    ;   float_data(Floats, Data)
+    ),
     assertz(data(guid, Data)),
     assertz(lat(guid, [])),
     assertz(cpu(guid, [])),
     assertz(plan(guid, plan(Home, Peer, Hops))),
     create_mobile_agent(bencher, (localhost, Home), bench, [Token]),
     add_payload(bencher, [(data,2), (lat,2), (cpu,2), (plan,2), (departed,2)]).
+
+float_data(N, Floats) :-
+    findall(F, ( between(1, N, I), F is I * 0.001 + 0.5 ), Floats).
 
 naive_hop(Pair, Term, Ms) :-
     stream_pair(Pair, In, Out),

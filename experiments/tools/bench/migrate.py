@@ -1,12 +1,16 @@
 """Agent migration between two platform processes on loopback: ms per hop.
 
 Runs ``bench_migrate.pl`` (beside this module) as two ``swipl`` processes (a peer and a home
-node); an agent whose payload is a list of N floats bounces between them H times.
+node); an agent whose payload is N floats bounces between them H times. The floats are
+*packed* (``payload="packed"``, the default: one string, as ``float_vectors.pl`` packs the
+tables the dFRL agent carries) or a Prolog list (``payload="list"``, what agents carried
+before, and what any agent that keeps a plain list still carries).
 Each hop is timed from the call of ``move_agent`` at the source to the start of
 the handler at the destination (same host, same clock).
 
 In the same run, against the same peer process, a *naive text hop* is timed: the agent's
-record written as text (``write_canonical``) on a plain socket and read back with
+record with its floats as a list (whatever ``payload``: the naive hop is a naive
+implementation's) written as text (``write_canonical``) on a plain socket and read back with
 ``read_term`` by the peer, which answers ``ok``. The hop's median over the naive hop's median
 (``naive_ratio``) is the figure to watch: it does not move with the machine's load the way
 milliseconds do, so a regression in the hop shows in every run (target at 100,000 floats:
@@ -32,6 +36,9 @@ from dfrl.experiments.tokens import env_with_tokens
 
 SCRIPT = Path(__file__).resolve().parent / "bench_migrate.pl"
 
+#: how the agent carries its floats: packed (the dFRL agent's tables) or a list
+PAYLOADS = ("packed", "list")
+
 
 @dataclass
 class MigrationResult:
@@ -47,6 +54,8 @@ class MigrationResult:
     max_ms: float
     mean_ms: float
     payload_bytes: int
+    payload: str = "list"
+    """How the floats were carried: ``packed`` or ``list`` (see :data:`PAYLOADS`)."""
     naive_median_ms: float | None = None
     """Median of the naive text hop with the same payload, same run (None: not measured)."""
     naive_ratio: float | None = None
@@ -70,8 +79,10 @@ def percentile(values: list[float], q: float) -> float:
 
 def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         timeout: float = 600, tls: str | Path | None = None, naive: bool = True,
-        trace_dir: str | Path | None = None, script: Path | None = None) -> MigrationResult:
-    """Measure ``hops`` hops (after ``warmup`` uncounted ones) with a payload of ``floats`` floats.
+        trace_dir: str | Path | None = None, script: Path | None = None,
+        payload: str = "packed") -> MigrationResult:
+    """Measure ``hops`` hops (after ``warmup`` uncounted ones) with a payload of ``floats`` floats,
+    ``payload`` ``packed`` or ``list`` (:data:`PAYLOADS`).
 
     With ``tls`` (a node's TLS folder: ``ca.crt``, ``node.crt``, ``node.key``, from ``dfrl certs
     node``), both platforms speak mutual TLS with that certificate. With ``naive`` (default),
@@ -92,6 +103,8 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
     """
     if floats < 0 or hops < 1 or warmup < 0:
         raise ValueError("floats >= 0, hops >= 1 and warmup >= 0 are required")
+    if payload not in PAYLOADS:
+        raise ValueError(f"payload must be one of {', '.join(PAYLOADS)}, not {payload!r}")
     tls_args: list[str] = []
     if tls is not None:
         from dfrl.experiments.tls_folder import CertError, check_node_dir
@@ -117,7 +130,8 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         words = line.split()
         port, naive_port = int(words[1]), int(words[3])
         home = processes.start(
-            [swipl, "-q", program, "home", str(port), str(floats),
+            [swipl, "-q", program, "home", str(port),
+             f"packed:{floats}" if payload == "packed" else str(floats),
              str(hops + warmup), *tls_args],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
         try:
@@ -144,7 +158,7 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         floats=floats, hops=len(ms), warmup=warmup,
         median_ms=median, p10_ms=percentile(ms, 0.1), p90_ms=percentile(ms, 0.9),
         min_ms=min(ms), max_ms=max(ms), mean_ms=statistics.fmean(ms),
-        payload_bytes=10 * floats + 1,
+        payload_bytes=10 * floats + 1, payload=payload,
         naive_median_ms=naive_median,
         naive_ratio=median / naive_median if naive_median else None,
         cpu_ms_per_hop=cpu_ms,
@@ -284,7 +298,7 @@ class TlsComparison:
 
 
 def compare_tls(floats: int, hops: int, tls: str | Path, warmup: int = 2,
-                rounds: int = 1) -> TlsComparison:
+                rounds: int = 1, payload: str = "packed") -> TlsComparison:
     """Measure plaintext and TLS hops beside each other, ``rounds`` times each, alternating
     (so a load change on the machine hits both); the figures pool every round's hops."""
     if rounds < 1:
@@ -292,8 +306,8 @@ def compare_tls(floats: int, hops: int, tls: str | Path, warmup: int = 2,
     plain: list[MigrationResult] = []
     secure: list[MigrationResult] = []
     for _ in range(rounds):
-        plain.append(run(floats, hops, warmup))
-        secure.append(run(floats, hops, warmup, tls=tls, naive=False))
+        plain.append(run(floats, hops, warmup, payload=payload))
+        secure.append(run(floats, hops, warmup, tls=tls, naive=False, payload=payload))
     p, t = _pool(plain), _pool(secure)
     return TlsComparison(floats=floats, plain=p, tls=t, tls_cost=t.median_ms / p.median_ms - 1)
 
@@ -312,7 +326,7 @@ def _pool(results: list[MigrationResult]) -> MigrationResult:
         p90_ms=statistics.median(r.p90_ms for r in results),
         min_ms=min(r.min_ms for r in results), max_ms=max(r.max_ms for r in results),
         mean_ms=statistics.fmean(r.mean_ms for r in results), payload_bytes=r0.payload_bytes,
-        naive_median_ms=naive_median,
+        payload=r0.payload, naive_median_ms=naive_median,
         naive_ratio=statistics.median(meds) / naive_median if naive_median else None,
         cpu_ms_per_hop=_median_or_none([r.cpu_ms_per_hop for r in results]))
 
@@ -343,6 +357,10 @@ class CheckoutComparison:
     :func:`cpu_per_hop`)."""
     other_cpu_ms_per_hop: float | None = None
     """The same for the other checkout (None if its benchmark program reports no CPU)."""
+    this_payload: str = "list"
+    other_payload: str = "list"
+    """How each checkout's agent carried the floats: an older checkout whose benchmark
+    cannot pack them carries a list (as its agents did)."""
 
 
 def other_script(root: str | Path) -> Path:
@@ -361,7 +379,7 @@ def other_script(root: str | Path) -> Path:
 
 
 def compare_checkouts(floats: int, hops: int, other_root: str | Path, runs: int = 3,
-                      warmup: int = 2) -> CheckoutComparison:
+                      warmup: int = 2, payload: str = "packed") -> CheckoutComparison:
     """Time this checkout's hop and the one of the checkout at ``other_root`` (say a worktree
     of an older commit), ``runs`` runs each, alternating which goes first, so that a change in
     the machine's load hits both; each run times its own naive text hop too.
@@ -374,12 +392,13 @@ def compare_checkouts(floats: int, hops: int, other_root: str | Path, runs: int 
     if runs < 1:
         raise ValueError("runs >= 1 is required")
     other = other_script(other_root)
+    other_payload = payload if "packed:" in other.read_text(encoding="utf-8") else "list"
     mine: list[MigrationResult] = []
     theirs: list[MigrationResult] = []
     for i in range(runs):
-        order = [(mine, None), (theirs, other)]
-        for results, script in (order if i % 2 == 0 else order[::-1]):
-            results.append(run(floats, hops, warmup, script=script))
+        order = [(mine, None, payload), (theirs, other, other_payload)]
+        for results, script, kind in (order if i % 2 == 0 else order[::-1]):
+            results.append(run(floats, hops, warmup, script=script, payload=kind))
 
     def ratio(rs: list[MigrationResult]) -> float | None:
         xs = [r.naive_ratio for r in rs if r.naive_ratio is not None]
@@ -394,4 +413,5 @@ def compare_checkouts(floats: int, hops: int, other_root: str | Path, runs: int 
         this_naive_ratio=ratio(mine), other_naive_ratio=ratio(theirs),
         this_runs_ms=this_ms, other_runs_ms=other_ms,
         this_cpu_ms_per_hop=_median_or_none([r.cpu_ms_per_hop for r in mine]),
-        other_cpu_ms_per_hop=_median_or_none([r.cpu_ms_per_hop for r in theirs]))
+        other_cpu_ms_per_hop=_median_or_none([r.cpu_ms_per_hop for r in theirs]),
+        this_payload=payload, other_payload=other_payload)
