@@ -6,7 +6,8 @@
 :- use_module('../robot_resources',
               [ get_robot_table/3, get_robot_tables/4, set_robot_table/3,
                 get_robot_params/3, set_robot_params/3 ]).
-:- use_module('../float_vectors', [vector_length/2, packed_vector/1]).
+:- use_module('../float_vectors',
+              [vector_length/2, packed_vector/1, float_vectors_native/1]).
 :- autoload(library(lists), [sum_list/2]).
 
 /** <module> Reading and writing a robot for the dFRL agent
@@ -22,17 +23,27 @@ resource hook of the host process (robot_resources.pl).
 %   Values) when Carried is `params`; else qtable_visits(Shape, Values,
 %   Visits) when Method uses visit counts, qtable(Shape, Values) when it
 %   does not. Options are those of the resource hook (timeout, round,
-%   agent, epoch). Raises what the hook raises.
+%   agent, epoch); the values are asked for packed (float_vectors.pl)
+%   where its C library is built. Raises what the hook raises.
 
-read_robot(params, _, Robot, Options, Params) :-
+read_robot(params, _, Robot, Options0, Params) :-
     !,
-    get_robot_params(Robot, Params, [values(packed)|Options]).
-read_robot(tables, Method, Robot, Options, Table) :-
+    read_options(Options0, Options),
+    get_robot_params(Robot, Params, Options).
+read_robot(tables, Method, Robot, Options0, Table) :-
+    read_options(Options0, Options),
     (   dfrl_aggregation:method_uses_visits(Method)
-    ->  get_robot_tables(Robot, qtable(S, V), qtable(S, W), [values(packed)|Options]),
+    ->  get_robot_tables(Robot, qtable(S, V), qtable(S, W), Options),
         Table = qtable_visits(S, V, W)
-    ;   get_robot_table(Robot, Table, [values(packed)|Options])
+    ;   get_robot_table(Robot, Table, Options)
     ).
+
+%   Values are asked for packed where packed maths runs in C: without the
+%   library, lists are faster (float_vectors.pl).
+read_options(Options, [values(packed)|Options]) :-
+    float_vectors_native(true),
+    !.
+read_options(Options, Options).
 
 %!  write_robot(+Table, +Robot, +Options) is det.
 %

@@ -12,6 +12,7 @@
 :- use_module('../platform_errors', [message_text/2]).
 :- use_module(dfrl_round_log, [log_text/2]).
 :- autoload(library(lists), [append/3, memberchk/2, sum_list/2]).
+:- autoload(library(apply), [maplist/2]).
 :- use_module('../float_vectors', [vector_length/2, packed_vector/1]).
 
 /** <module> The round state of the dFRL agent (dfrl_agent.pl)
@@ -32,9 +33,12 @@ aggregate (none before the first table and after a failed method),
 `retries`, `hops` and `bytes` what the round's moves cost, `start` the
 time the round started and `stop` whether a stop command ends it.
 
-The aggregate travels packed (a fast_term_serialized/2 string): a
-string is copied, asserted and sent as one block, where a list of 20,000
-floats costs milliseconds at each of those steps. It is unpacked only
+The aggregate travels packed: a string is copied, asserted and sent as
+one block, where a list of 20,000 floats costs milliseconds at each of
+those steps. An aggregate of packed vectors (float_vectors.pl: the
+tables as the Python bridge gives them) is packed already and stays as
+it is; one that holds lists (a host that gives lists, a method of its
+own) travels as one fast_term_serialized/2 string and is unpacked only
 where the agent works on it (get_state/3).
 
 The agent's handler runs in the agent's own module, so the facts the
@@ -80,7 +84,11 @@ put_state(M, Agent, S) :-
 
 %!  pack_state(+State, -Packed) is det.
 %
-%   Packed is State with its aggregate packed (as it travels).
+%   Packed is State with its aggregate packed (as it travels): an
+%   aggregate that holds a long list becomes one string (serialised);
+%   one whose values are packed vectors already (float_vectors.pl, how
+%   the agent reads tables from a host that gives them) stays as it is,
+%   as cheap to store and to send.
 
 pack_state(S0, S) :-
     get_dict(acc, S0, Acc),
@@ -89,8 +97,23 @@ pack_state(S0, S) :-
 
 pack(none, none) :- !.
 pack(packed(S), packed(S)) :- !.
+pack(Acc, Acc) :-
+    compact(Acc),
+    !.
 pack(Acc, packed(String)) :-
     fast_term_serialized(Acc, String).
+
+%   No list of more than 64 elements in T.
+compact(T) :-
+    (   is_list(T)
+    ->  length(T, N),
+        N =< 64,
+        maplist(compact, T)
+    ;   compound(T)
+    ->  compound_name_arguments(T, _, Args),
+        maplist(compact, Args)
+    ;   true
+    ).
 
 unpack(none, none) :- !.
 unpack(packed(String), Acc) :-
