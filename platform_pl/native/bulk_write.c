@@ -70,5 +70,5 @@ bulk_write_bytes(term_t stream, term_t bytes)
 
 install_t
 install_bulk_write(void)
-{ PL_register_foreign("bulk_write_bytes", 2, bulk_write_bytes, 0);
+{ PL_register_foreign_in_module("bulk_write", "bulk_write_bytes", 2, bulk_write_bytes, 0);
 }

@@ -98,6 +98,8 @@ get_vec(term_t t, vec *v)
     return FALSE;
   if ( v2 == 0 || v2 % 6 != 0 )
     return FALSE;
+  if ( v2 / 6 > len / 10 )		/* also keeps 10*n below from wrapping */
+    return FALSE;
   v->n = (size_t)(v2 / 6);
   if ( v1 != 10*(uint64_t)v->n + 1 || len - pos != 10*v->n + 1 || b[len-1] != 9 )
     return FALSE;
@@ -309,12 +311,15 @@ fts_vector_weighted_mean(term_t qwt, term_t wt, term_t qt, term_t nt, term_t z)
   return unify_out(z, &o);
 }
 
+#define MODULE "float_vectors"
+
 install_t
 install_float_vectors(void)
 { FUNCTOR_fts1 = PL_new_functor(PL_new_atom("fts"), 1);
-  PL_register_foreign("fts_vector_length", 2, fts_vector_length, 0);
-  PL_register_foreign("fts_vector_binop", 4, fts_vector_binop, 0);
-  PL_register_foreign("fts_vector_scale", 4, fts_vector_scale, 0);
-  PL_register_foreign("fts_vector_add_scaled", 4, fts_vector_add_scaled, 0);
-  PL_register_foreign("fts_vector_weighted_mean", 5, fts_vector_weighted_mean, 0);
+  PL_register_foreign_in_module(MODULE, "fts_vector_length", 2, fts_vector_length, 0);
+  PL_register_foreign_in_module(MODULE, "fts_vector_binop", 4, fts_vector_binop, 0);
+  PL_register_foreign_in_module(MODULE, "fts_vector_scale", 4, fts_vector_scale, 0);
+  PL_register_foreign_in_module(MODULE, "fts_vector_add_scaled", 4, fts_vector_add_scaled, 0);
+  PL_register_foreign_in_module(MODULE, "fts_vector_weighted_mean", 5,
+				fts_vector_weighted_mean, 0);
 }

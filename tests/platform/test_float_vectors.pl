@@ -146,6 +146,33 @@ test(malformed_refused, [forall(member(Name, [tag, truncated, trailer, count, ga
     catch(vector_add(fts(S), fts(S), _), E3, true),
     assertion(E3 = error(domain_error(fts_float_list, _), _)).
 
+%   A count so large that 10 x count wraps round 64 bits to the body's
+%   real length: refused before a byte past the string is read.
+test(count_that_wraps_refused, [error(domain_error(fts_float_list, _))]) :-
+    N is (34 + 2^64) // 10,
+    V2 is 6 * N,
+    varint_codes(35, H1),                      % 10N+1 modulo 2^64
+    varint_codes(V2, H2),
+    Elem = [8, 14, 0, 0, 0, 0, 0, 0, 0xf0, 0x3f],
+    append([Elem, Elem, Elem, [8, 14, 0, 0], [9]], Body),
+    append([[114], H1, H2, Body], Codes),
+    string_codes(S, Codes),
+    vector_length(fts(S), _).
+
+varint_codes(V, Codes) :-
+    varint_groups(V, [], Groups),
+    append(Init, [Last], Groups),
+    maplist([G, C]>>(C is G \/ 0x80), Init, Hi),
+    append(Hi, [Last], Codes).
+
+varint_groups(V, Acc, Groups) :-
+    G is V /\ 0x7f,
+    V1 is V >> 7,
+    (   V1 =:= 0
+    ->  Groups = [G|Acc]
+    ;   varint_groups(V1, [G|Acc], Groups)
+    ).
+
 %   Control: the good vector the bad ones are made from is taken.
 test(unmodified_taken) :-
     vector_packed([1.5, 2.5, 3.5], P),
