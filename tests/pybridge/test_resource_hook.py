@@ -50,3 +50,45 @@ def test_tables_and_errors_through_robot_resources(node) -> None:
         "set_robot_table", Atom("r1"), Term("qtable", [4, 2], [1.0] * 7), [])))
     assert bad.args[0].args[0] == Term("domain_error", Term("qtable_size", 8), 7)
     assert robot.sets == 0
+
+
+def test_packed_values_cross_the_hook_bit_exact(node) -> None:
+    # values(packed): the table comes packed (fts(String), float_vectors.pl) and a packed table
+    # is written as it is; r2 then holds r1's table bit for bit
+    r1, r2 = ArrayRobot(50, 4, seed=3), ArrayRobot(50, 4, seed=4)
+    node.register_robot("r1", r1, shape=(50, 4))
+    node.register_robot("r2", r2, shape=(50, 4))
+    rr = "robot_resources"
+    opts = [Term("values", Atom("packed")), Term("timeout", 5.0)]
+    goal = Term(",", Term(":", Atom(rr), Term("get_robot_table", Atom("r1"),
+                                              Term("qtable", Var("S"), Var("V")), opts)),
+                Term(":", Atom(rr), Term("set_robot_table", Atom("r2"),
+                                         Term("qtable", Var("S"), Var("V")), [])))
+    result = run_agent(node, goal)
+    assert result.name == "true", result
+    table = result.args[0][0].args[1].args[1]
+    assert table.name == "qtable", table
+    packed = table.args[1]
+    assert isinstance(packed, Term) and packed.name == "fts", packed
+    assert r2.sets == 1
+    assert r2.q_table.tobytes() == r1.q_table.tobytes()
+    # control: without the option the values are a list
+    plain = run_agent(node, Term(":", Atom(rr), Term("get_robot_table", Atom("r1"),
+                                                     Var("T"), [])))
+    listed = plain.args[0].args[1].args[1]
+    assert listed.name == "qtable" and isinstance(listed.args[1], list), listed
+    assert np.array_equal(np.array(listed.args[1]), r1.q_table.reshape(-1))
+
+
+def test_malformed_packed_write_is_refused(node) -> None:
+    robot = ArrayRobot(4, 2)
+    node.register_robot("r1", robot, shape=(4, 2))
+    before = robot.q_table.copy()
+    bad = run_agent(node, Term(":", Atom("robot_resources"), Term(
+        "set_robot_table", Atom("r1"), Term("qtable", [4, 2], Term("fts", "r\x05garbage\t")),
+        [])))
+    assert bad.name != "true", bad
+    assert bad.args[0].args[0].name == "domain_error", bad
+    assert bad.args[0].args[0].args[0] == Atom("fts_float_list"), bad
+    assert robot.sets == 0
+    assert np.array_equal(robot.q_table, before)
