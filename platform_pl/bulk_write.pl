@@ -20,19 +20,11 @@ bulk_write_native/1 says which is in use (`dfrl bench migrate` reports
 it).
 */
 
+:- use_module(native_library, [native_library_load/2]).
 :- dynamic native/1.
 
-load_native :-
-    prolog_load_context(directory, Dir),
-    directory_file_path(Dir, 'native/bulk_write', Base),
-    file_name_extension(Base, so, Lib),
-    (   exists_file(Lib),
-        catch(load_foreign_library(Lib), _, fail)
-    ->  assertz(native(true))
-    ;   assertz(native(false))
-    ).
-
-:- initialization(load_native, now).
+:- initialization(( native_library_load(bulk_write, Loaded),
+                    assertz(native(Loaded)) ), now).
 
 %!  bulk_write_native(-Boolean) is det.
 %

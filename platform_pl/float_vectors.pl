@@ -53,19 +53,11 @@ times the list's): the dFRL agent then asks its hosts for lists
 (dfrl_robot_io.pl) and carries them as before.
 */
 
+:- use_module(native_library, [native_library_load/2]).
 :- dynamic native/1.
 
-load_native :-
-    prolog_load_context(directory, Dir),
-    directory_file_path(Dir, 'native/float_vectors', Base),
-    file_name_extension(Base, so, Lib),
-    (   exists_file(Lib),
-        catch(load_foreign_library(Lib), _, fail)
-    ->  assertz(native(true))
-    ;   assertz(native(false))
-    ).
-
-:- initialization(load_native, now).
+:- initialization(( native_library_load(float_vectors, Loaded),
+                    assertz(native(Loaded)) ), now).
 
 %!  float_vectors_native(-Boolean) is det.
 %

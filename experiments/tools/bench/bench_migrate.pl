@@ -11,7 +11,9 @@
         with read_term/3 and answers `ok.`; print "NAIVE_MS [..]" (one
         figure per hop: from the first byte written to the answer).
     swipl bench_migrate.pl home TOKEN PEER_PORT FLOATS HOPS [TLS_DIR]
-        start a platform, create an agent whose payload is a list of FLOATS
+        start a platform, print "NATIVE B V" (whether bulk_write.pl and
+        float_vectors.pl run their foreign code: true/false), create an
+        agent whose payload is a list of FLOATS
         floats (FLOATS given as packed:N: the same N floats packed, as
         float_vectors.pl packs the tables the dFRL agent carries), bounce
         it HOPS times between home and peer, print the line
@@ -33,7 +35,9 @@
 */
 :- use_module('../../../platform_pl/tartarus').
 :- use_module('../../../platform_pl/secrets', [take_env_tokens/1]).
-:- use_module('../../../platform_pl/float_vectors', [vector_packed/2]).
+:- use_module('../../../platform_pl/float_vectors',
+              [vector_packed/2, float_vectors_native/1]).
+:- use_module('../../../platform_pl/bulk_write', [bulk_write_native/1]).
 :- use_module(library(main)).
 :- use_module(library(socket)).
 :- use_module(library(prolog_wrap), [wrap_predicate/4]).
@@ -72,6 +76,10 @@ main(['home', Peer0, Floats0, Hops0|Tls]) :-
     node_start(localhost:0, Node, [token(Token)|TlsOptions]),
     node_property(Node, address(_:Home)),
     bench_agent(Home, Peer, Floats, Hops, Token),
+    bulk_write_native(Bulk),
+    float_vectors_native(Vectors),
+    format("NATIVE ~w ~w~n", [Bulk, Vectors]),
+    flush_output,
     execute_agent(bencher, (localhost, Home), bench),
     read_term(user_input, _, []),   % the agent prints its figures; then stdin closes
     trace_write(home),

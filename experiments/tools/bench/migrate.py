@@ -64,6 +64,10 @@ class MigrationResult:
     """CPU time of both processes together per timed hop (all threads, user and system; see
     :func:`cpu_per_hop`), or None if the benchmark program did not report it (an older
     checkout's)."""
+    native: bool | None = None
+    """Whether the home process ran the platform's foreign code (bulk frame writes and packed
+    maths, ``platform_pl/native``; both or it says false), None if its benchmark program does
+    not say (an older checkout's)."""
 
 
 def percentile(values: list[float], q: float) -> float:
@@ -149,6 +153,8 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         raise RuntimeError(f"benchmark failed:\n{out}\n{err}")
     all_ms = json.loads(lat_line.split(" ", 1)[1])
     ms = all_ms[warmup:]
+    native_line = next((l for l in out.splitlines() if l.startswith("NATIVE")), None)
+    native = None if native_line is None else native_line.split()[1:] == ["true", "true"]
     cpu_line = next((l for l in out.splitlines() if l.startswith("CPU_S")), None)
     cpu_ms = None if cpu_line is None else cpu_per_hop(json.loads(cpu_line.split(" ", 1)[1]),
                                                        warmup)
@@ -161,7 +167,7 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         payload_bytes=10 * floats + 1, payload=payload,
         naive_median_ms=naive_median,
         naive_ratio=median / naive_median if naive_median else None,
-        cpu_ms_per_hop=cpu_ms,
+        cpu_ms_per_hop=cpu_ms, native=native,
     )
 
 
@@ -328,7 +334,7 @@ def _pool(results: list[MigrationResult]) -> MigrationResult:
         mean_ms=statistics.fmean(r.mean_ms for r in results), payload_bytes=r0.payload_bytes,
         payload=r0.payload, naive_median_ms=naive_median,
         naive_ratio=statistics.median(meds) / naive_median if naive_median else None,
-        cpu_ms_per_hop=_median_or_none([r.cpu_ms_per_hop for r in results]))
+        cpu_ms_per_hop=_median_or_none([r.cpu_ms_per_hop for r in results]), native=r0.native)
 
 
 def _median_or_none(xs: list[float | None]) -> float | None:

@@ -65,6 +65,7 @@ def test_packed_payload_costs_less_than_a_list() -> None:
     packed = migrate.run(50000, 6, warmup=1, naive=False, payload="packed")
     listed = migrate.run(50000, 6, warmup=1, naive=False, payload="list")
     assert packed.payload == "packed" and listed.payload == "list"
+    assert packed.native is True        # setup.sh built the foreign libraries
     assert packed.cpu_ms_per_hop is not None and listed.cpu_ms_per_hop is not None
     assert packed.cpu_ms_per_hop * 2 < listed.cpu_ms_per_hop, (packed, listed)
 
