@@ -44,8 +44,11 @@ def concurrent_bombs(procs: list[Proc], tmp_path: Path, port: int, handler: str,
 
 
 def test_eight_memory_bombs_within_node_budget(tmp_path: Path, procs: list[Proc]) -> None:
-    # defaults: agent_stack_limit 256 MiB, agent_memory_budget 1 GiB, max_running_agents 8
-    victim, port = start_victim(procs, tmp_path)
+    # defaults: agent_stack_limit 256 MiB, agent_memory_budget 1 GiB, max_running_agents 8.
+    # The CPU bound is raised to 30 s (as for the assert bombs below): under a CPU hog a bomb
+    # spent 2 s of CPU (building and collecting its list) before it reached a memory bound,
+    # and was stopped by the CPU bound, which is another test's claim.
+    victim, port = start_victim(procs, tmp_path, "agent_cpu_limit(30)")
     pid = victim.popen.pid
     time.sleep(0.3)
     base = status(pid, "VmRSS")
