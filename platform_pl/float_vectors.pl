@@ -20,8 +20,8 @@
             weighted_mean/5             % +QWs, +Ws, +Qs, +N, -Values
           ]).
 :- autoload(library(error), [must_be/2, type_error/2, domain_error/2]).
-:- autoload(library(apply), [maplist/2]).
-:- autoload(library(lists), [member/2]).
+:- autoload(library(apply), [maplist/2, maplist/3]).
+:- autoload(library(lists), [member/2, append/3]).
 
 /** <module> Float vectors: lists of floats, or packed
 
@@ -134,63 +134,29 @@ vector_length(V, N) :-
 %   Element-wise sum, product and maximum (is/2's max/2) of two vectors
 %   of one length; fail on vectors of different lengths.
 
-vector_add(X, Y, Z) :- binop(add, X, Y, Z).
-vector_mul(X, Y, Z) :- binop(mul, X, Y, Z).
-vector_max(X, Y, Z) :- binop(max, X, Y, Z).
-
-binop(Op, X, Y, Z) :-
-    (   packed_vector(X), packed_vector(Y)
-    ->  (   native(true), fts_vector_binop(Op, X, Y, Z0)
-        ->  Z = Z0
-        ;   vector_floats(X, Xs), vector_floats(Y, Ys),
-            list_binop(Op, Xs, Ys, Zs),
-            vector_packed(Zs, Z)
-        )
-    ;   vector_floats(X, Xs), vector_floats(Y, Ys),
-        list_binop(Op, Xs, Ys, Z)
-    ).
-
-list_binop(add, Xs, Ys, Zs) :- add_lists(Xs, Ys, Zs).
-list_binop(mul, Xs, Ys, Zs) :- mul_lists(Xs, Ys, Zs).
-list_binop(max, Xs, Ys, Zs) :- max_lists(Xs, Ys, Zs).
+vector_add(X, Y, Z) :- elementwise([X, Y], fts_vector_binop(add, X, Y), add_lists, Z).
+vector_mul(X, Y, Z) :- elementwise([X, Y], fts_vector_binop(mul, X, Y), mul_lists, Z).
+vector_max(X, Y, Z) :- elementwise([X, Y], fts_vector_binop(max, X, Y), max_lists, Z).
 
 %!  vector_divide(+Xs, +N, -Quotients) is det.
 %!  vector_times(+Xs, +W, -Products) is det.
 %
 %   Each element divided by the number N; each multiplied by W.
 
-vector_divide(X, N, Z) :- scale(divide, X, N, Z).
-vector_times(X, W, Z) :- scale(times, X, W, Z).
+vector_divide(X, N, Z) :- elementwise([X], fts_vector_scale(divide, X, N), divided_by(N), Z).
+vector_times(X, W, Z) :- elementwise([X], fts_vector_scale(times, X, W), times_by(W), Z).
 
-scale(Op, X, K, Z) :-
-    (   packed_vector(X)
-    ->  (   native(true), fts_vector_scale(Op, X, K, Z0)
-        ->  Z = Z0
-        ;   vector_floats(X, Xs),
-            list_scale(Op, Xs, K, Zs),
-            vector_packed(Zs, Z)
-        )
-    ;   list_scale(Op, X, K, Z)
-    ).
-
-list_scale(divide, Xs, K, Zs) :- scale_list(Xs, K, Zs).
-list_scale(times, Xs, K, Zs) :- times_list(Xs, K, Zs).
+divided_by(N, Xs, Zs) :- scale_list(Xs, N, Zs).
+times_by(W, Xs, Zs) :- times_list(Xs, W, Zs).
 
 %!  vector_add_scaled(+Xs, +W, +Ys, -Zs) is semidet.
 %
 %   Zs is Xs + W*Ys element-wise.
 
 vector_add_scaled(X, W, Y, Z) :-
-    (   packed_vector(X), packed_vector(Y)
-    ->  (   native(true), fts_vector_add_scaled(X, W, Y, Z0)
-        ->  Z = Z0
-        ;   vector_floats(X, Xs), vector_floats(Y, Ys),
-            add_scaled(Xs, W, Ys, Zs),
-            vector_packed(Zs, Z)
-        )
-    ;   vector_floats(X, Xs), vector_floats(Y, Ys),
-        add_scaled(Xs, W, Ys, Z)
-    ).
+    elementwise([X, Y], fts_vector_add_scaled(X, W, Y), plus_scaled(W), Z).
+
+plus_scaled(W, Xs, Ys, Zs) :- add_scaled(Xs, W, Ys, Zs).
 
 %!  vector_weighted_mean(+QWs, +Ws, +Qs, +N, -Values) is semidet.
 %
@@ -198,16 +164,30 @@ vector_add_scaled(X, W, Y, Z) :-
 %   weighted_mean/5).
 
 vector_weighted_mean(QW, W, Q, N, V) :-
-    (   packed_vector(QW), packed_vector(W), packed_vector(Q)
-    ->  (   native(true), fts_vector_weighted_mean(QW, W, Q, N, V0)
-        ->  V = V0
-        ;   maplist(vector_floats, [QW, W, Q], [QWs, Ws, Qs]),
-            weighted_mean(QWs, Ws, Qs, N, Vs),
-            vector_packed(Vs, V)
+    elementwise([QW, W, Q], fts_vector_weighted_mean(QW, W, Q, N), mean_of(N), V).
+
+mean_of(N, QWs, Ws, Qs, Vs) :- weighted_mean(QWs, Ws, Qs, N, Vs).
+
+%   elementwise(+Vectors, +Native, +OnLists, -Result): every operation
+%   above. When every vector is packed, Native (a goal of the C library,
+%   called with Result) computes it if the library is loaded and takes
+%   them; else OnLists is called with the vectors as lists and Result,
+%   and Result is packed again when they all were.
+elementwise(Vs, Native, OnLists, Z) :-
+    (   maplist(packed_vector, Vs)
+    ->  (   native(true), call(Native, Z0)
+        ->  Z = Z0
+        ;   on_lists(OnLists, Vs, Zs),
+            vector_packed(Zs, Z)
         )
-    ;   maplist(vector_floats, [QW, W, Q], [QWs, Ws, Qs]),
-        weighted_mean(QWs, Ws, Qs, N, V)
+    ;   on_lists(OnLists, Vs, Z)
     ).
+
+on_lists(OnLists, Vs, Z) :-
+    maplist(vector_floats, Vs, Ls),
+    append(Ls, [Z], Args),
+    Goal =.. [call, OnLists|Args],
+    call(Goal).
 
 		 /*******************************
 		 *     CHECKING A PACKED ONE	*

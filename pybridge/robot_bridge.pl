@@ -225,13 +225,13 @@ decode_table(Shape, Data, Options, qtable(Shape, Values)) :-
     read_values(Data, Options, Values),
     check_size(Shape, Values).
 
-%   With the option values(packed), fts data stay packed (checked whole,
-%   float_vectors.pl), else they are decoded into a list.
+%   With the option values(packed), fts data stay packed (checked whole
+%   by the caller's vector_length/2, float_vectors.pl), else they are
+%   decoded into a list.
 read_values(Data, Options, Values) :-
     (   memberchk(values(packed), Options),
         packed_vector(Data)
-    ->  vector_length(Data, _),
-        Values = Data
+    ->  Values = Data
     ;   decode_values(Data, Values)
     ).
 
