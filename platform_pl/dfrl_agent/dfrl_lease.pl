@@ -221,7 +221,8 @@ lease_depart(Node, Agent, Here, Dest, Resume, Ticket) :-
     (   Here == none
     ->  set_custody(Node, Agent, custody(E, K1, none))
     ;   set_custody(Node, Agent, custody(E, K1, Here)),
-        agent_export(Node, Agent, Record),
+        agent_export(Node, Agent, Record0),
+        without_state(Record0, Record),
         lease_s(Node, L),
         get_time(Now),
         Expiry is Now + L,
@@ -229,6 +230,27 @@ lease_depart(Node, Agent, Here, Dest, Resume, Ticket) :-
                               Expiry)),
                  ensure_watchdog ))
     ).
+
+%   The checkpoint's record keeps the agent's round state as
+%   dfrl_state(Agent, in_resume): a resurrection resumes from the state in
+%   Resume (with_state/3 puts it back), never from the record's, and the
+%   state holds the aggregate (some 200 KB at 20,000 floats), so one
+%   copy of it is stored, not two.
+without_state(Record0, Record) :-
+    Record0 = agent(Name, H, K, T, P, Preds, Cls0, Hops),
+    (   select((dfrl_state(Name, _) :- true), Cls0, Cls1)
+    ->  Cls = [(dfrl_state(Name, in_resume) :- true)|Cls1]
+    ;   Cls = Cls0
+    ),
+    Record = agent(Name, H, K, T, P, Preds, Cls, Hops).
+
+with_state(Record0, resume(State, _, _), Record) :-
+    Record0 = agent(Name, H, K, T, P, Preds, Cls0, Hops),
+    (   select((dfrl_state(Name, in_resume) :- true), Cls0, Cls1)
+    ->  Cls = [(dfrl_state(Name, State) :- true)|Cls1]
+    ;   Cls = Cls0
+    ),
+    Record = agent(Name, H, K, T, P, Preds, Cls, Hops).
 
 %!  lease_stayed(+Ticket) is det.
 %
@@ -865,7 +887,8 @@ resurrect(Node, Agent, E, K, MaxSeen, Here, Dest, Record0, Resume, Why) :-
     locked(retract(ckpt(Node, Agent, E, K, _, _, _, _, _))),
     (   seen(Node, Agent, Seen) -> true ; Seen = E ),
     E1 is max(max(E, MaxSeen), Seen) + 1,
-    Record0 = agent(Name, H, Kind, T, P, Preds, Cls0, Hops),
+    with_state(Record0, Resume, Record1),
+    Record1 = agent(Name, H, Kind, T, P, Preds, Cls0, Hops),
     replace_fact(dfrl_custody_of(Name, custody(E1, K, none)), Cls0, Cls1),
     Record = agent(Name, H, Kind, T, P, Preds, Cls1, Hops),
     note_epoch(Node, Agent, E1),
