@@ -687,10 +687,12 @@ bridge_shutdown :-
 %   thread), wait at most Timeout seconds for them to stop and join those
 %   that are joinable. A detached thread is never joined: in SWI-Prolog
 %   9.0.4 thread_join/2 on a detached thread that is exiting can deadlock
-%   the process (seen here, 1 in 50 closes under load; reproduced in plain
-%   swipl by tests/pybridge/detached_join.pl). Remaining lists the threads still running (e.g. blocked in a system call
-%   that a signal cannot interrupt because the host runs Prolog without
-%   signal handling; the platform must stop those itself). Used by the host
+%   the process (seen here, 1 in 50 closes under load; the loop in
+%   tests/pybridge/stop_detached_script.pl hangs on such a join). A
+%   detached thread frees itself; it is waited for like the others.
+%   Remaining lists the threads still running (e.g. blocked in a system
+%   call that a signal cannot interrupt because the host runs Prolog
+%   without signal handling; the platform must stop those itself). Used by the host
 %   before the interpreter exits, since live threads make the embedding's
 %   cleanup unsafe. Aborted is the number of threads that were running.
 
