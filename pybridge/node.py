@@ -347,7 +347,8 @@ class Bridge(TartarusCommands):
         """Stop everything this node runs in Prolog, so that the interpreter exits cleanly.
 
         Unregisters the robots (waiting agents get ``existence_error(robot, R)``), stops
-        the platform nodes it started, then aborts and joins every other Prolog thread.
+        the platform nodes it started, then aborts every other Prolog thread and joins
+        those that are joinable (a detached thread frees itself).
         Returns the threads that did not stop within ``thread_timeout`` seconds (normally
         empty). Idempotent; also run at interpreter exit.
         """
