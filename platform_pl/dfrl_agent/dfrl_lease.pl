@@ -233,23 +233,15 @@ lease_depart(Node, Agent, Here, Dest, Resume, Ticket) :-
 
 %   The checkpoint's record keeps the agent's round state as
 %   dfrl_state(Agent, in_resume): a resurrection resumes from the state in
-%   Resume (with_state/3 puts it back), never from the record's, and the
-%   state holds the aggregate (some 200 KB at 20,000 floats), so one
-%   copy of it is stored, not two.
+%   Resume (resurrect/10 puts it back into the record), never from the
+%   record's, and the state holds the aggregate (some 200 KB at 20,000
+%   floats), so one copy of it is stored, not two.
 without_state(Record0, Record) :-
-    Record0 = agent(Name, H, K, T, P, Preds, Cls0, Hops),
-    (   select((dfrl_state(Name, _) :- true), Cls0, Cls1)
-    ->  Cls = [(dfrl_state(Name, in_resume) :- true)|Cls1]
-    ;   Cls = Cls0
-    ),
-    Record = agent(Name, H, K, T, P, Preds, Cls, Hops).
+    record_state(Record0, in_resume, Record).
 
-with_state(Record0, resume(State, _, _), Record) :-
+record_state(Record0, State, Record) :-
     Record0 = agent(Name, H, K, T, P, Preds, Cls0, Hops),
-    (   select((dfrl_state(Name, in_resume) :- true), Cls0, Cls1)
-    ->  Cls = [(dfrl_state(Name, State) :- true)|Cls1]
-    ;   Cls = Cls0
-    ),
+    replace_fact(dfrl_state(Name, State), Cls0, Cls),
     Record = agent(Name, H, K, T, P, Preds, Cls, Hops).
 
 %!  lease_stayed(+Ticket) is det.
@@ -887,7 +879,8 @@ resurrect(Node, Agent, E, K, MaxSeen, Here, Dest, Record0, Resume, Why) :-
     locked(retract(ckpt(Node, Agent, E, K, _, _, _, _, _))),
     (   seen(Node, Agent, Seen) -> true ; Seen = E ),
     E1 is max(max(E, MaxSeen), Seen) + 1,
-    with_state(Record0, Resume, Record1),
+    Resume = resume(State, _, _),
+    record_state(Record0, State, Record1),
     Record1 = agent(Name, H, Kind, T, P, Preds, Cls0, Hops),
     replace_fact(dfrl_custody_of(Name, custody(E1, K, none)), Cls0, Cls1),
     Record = agent(Name, H, Kind, T, P, Preds, Cls1, Hops),
