@@ -1,11 +1,13 @@
 :- module(tls,
           [ tls_check_dir/1,            % +Dir
             tls_accept/5,               % +Dir, +PlainPair, -Pair, -PeerName, +Options
-            tls_connect/5               % +Dir, +Address, +PlainPair, -Pair, +Options
+            tls_connect/5,              % +Dir, +Address, +PlainPair, -Pair, +Options
+            tls_direct_native/1         % -Boolean
           ]).
 :- use_module(library(ssl),
               [ ssl_context/3, ssl_negotiate/5, certificate_field/2 ]).
 :- use_module(platform_errors, [transport_error/2]).
+:- use_module(native_library, [native_library_load/2]).
 %   Eager imports (not autoload/2): see node_connection.pl.
 :- use_module(library(error), [must_be/2]).
 :- use_module(library(option), [option/2, option/3]).
@@ -44,9 +46,27 @@ again when one of the files changes.
 */
 
 :- dynamic
-    context_cache/4.            % Role, Dir, Stamp, SSL
+    context_cache/4,            % Role, Dir, Stamp, SSL
+    direct/1.                   % Boolean: native/tls_direct.so loaded
 
-:- multifile prolog:error_message//1.
+:- initialization(( native_library_load(tls_direct, Loaded),
+                    assertz(direct(Loaded)) ), now).
+
+:- multifile prolog:error_message//1, prolog:message//1.
+
+%!  tls_direct_native(-Boolean) is det.
+%
+%   Boolean is `true` if this process's TLS connections write their
+%   records straight to the socket (native/tls_direct.c loaded, and no
+%   connection refused by its checks), `false` if through library(ssl)'s
+%   stream byte by byte.
+
+tls_direct_native(B) :-
+    (   direct(true),
+        \+ direct(refused)
+    ->  B = true
+    ;   B = false
+    ).
 
 %!  tls_check_dir(+Dir) is det.
 %
@@ -142,7 +162,7 @@ tls_accept(Dir, Plain, Pair, Name, Options) :-
     nb_setval(dfrl_tls_peer, none),
     catch(bounded(Secs, In0, ssl_negotiate(SSL, In0, Out0, In, Out)),
           E, handshake_failed(server, E)),
-    tune_streams(In0, Out0, Out),
+    tune_streams(In0, Out0, In, Out),
     stream_pair(Pair, In, Out),
     nb_getval(dfrl_tls_peer, Name0),
     nb_setval(dfrl_tls_peer, none),
@@ -191,20 +211,42 @@ tls_connect(Dir, Address, Plain, Pair, Options) :-
     stream_pair(Plain, In0, Out0),
     catch(bounded(Secs, In0, ssl_negotiate(SSL, In0, Out0, In, Out)),
           E, connect_failed(Address, E)),
-    tune_streams(In0, Out0, Out),
+    tune_streams(In0, Out0, In, Out),
     stream_pair(Pair, In, Out),
     debug(dfrl(tls), 'TLS to ~w established', [Address]).
 
 %   Large frames in few records: what is written to the encrypted stream
 %   Out goes to SSL_write/3 one buffer at a time, each a TLS record, so
 %   its buffer is one full record (16 KiB, TLS's largest) instead of the
-%   default 4 KiB; the socket's stream below takes several records per
-%   send(2). Neither stream below counts lines and columns (see wire.pl).
-tune_streams(In0, Out0, Out) :-
+%   default 4 KiB (a frame's body goes to SSL_write/3 in one piece, see
+%   bulk_write.pl). Neither stream below counts lines and columns (see
+%   wire.pl). The records then go straight to the socket where
+%   native/tls_direct.c is built (tls_direct_write/3: ssl4pl would copy
+%   them into the socket's stream byte by byte); elsewhere through the
+%   socket's stream, several records per send(2).
+tune_streams(In0, Out0, In, Out) :-
+    set_stream(In0, buffer_size(65536)),
+    set_stream(In, buffer_size(65536)),
     set_stream(In0, record_position(false)),
     set_stream(Out0, record_position(false)),
     set_stream(Out0, buffer_size(65536)),
-    set_stream(Out, buffer_size(16384)).
+    set_stream(Out, buffer_size(16384)),
+    (   direct(true)
+    ->  (   tls_direct_write(Out, In0, Out0)
+        ->  true
+        ;   refused_once
+        )
+    ;   true
+    ).
+
+%   The library is built but its checks refused this connection (another
+%   ssl4pl): said once per process, since every connection is refused.
+refused_once :-
+    (   direct(refused)
+    ->  true
+    ;   assertz(direct(refused)),
+        print_message(warning, tls_direct_refused)
+    ).
 
 connect_failed(Address, time_limit_exceeded) :-
     !,
@@ -220,6 +262,10 @@ connect_failed(Address, error(io_error(_, _), _)) :-
     transport_error(Address, tls(closed)).
 connect_failed(_, E) :-
     throw(E).
+
+prolog:message(tls_direct_refused) -->
+    [ 'TLS records go through library(ssl)\'s stream, byte by byte: ',
+      'native/tls_direct.so does not recognise this library(ssl)' ].
 
 prolog:error_message(tls_error(Where, Reason)) -->
     [ 'TLS failed (~w): ~w'-[Where, Reason] ].

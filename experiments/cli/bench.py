@@ -90,6 +90,14 @@ def _migrate_against(args: argparse.Namespace) -> int:
         n, args.hops, args.against, args.rounds, args.warmup, args.payload), line)
 
 
+def _records(direct: bool | None) -> str:
+    """Where the TLS records went (tls.pl's direct write), if the benchmark said."""
+    if direct is None:
+        return ""
+    return ("  records: straight to the socket" if direct else
+            "  records: through library(ssl)'s stream, byte by byte")
+
+
 def _migrate_tls(args: argparse.Namespace) -> int:
     def line(n: int, cmp: Any) -> str:
         naive = ("" if cmp.plain.naive_median_ms is None else
@@ -97,7 +105,7 @@ def _migrate_tls(args: argparse.Namespace) -> int:
                  f"ratio {cmp.plain.naive_ratio:.3f}")
         return (f"floats={n:>7}  plaintext median {cmp.plain.median_ms:8.3f} ms  "
                 f"TLS median {cmp.tls.median_ms:8.3f} ms  TLS cost {cmp.tls_cost:+.1%}  "
-                f"(hops={cmp.tls.hops} each){naive}")
+                f"(hops={cmp.tls.hops} each){naive}{_records(cmp.tls.tls_direct)}")
 
     return _per_size(args, lambda n: migrate.compare_tls(n, args.hops, args.tls, args.warmup,
                                                          args.rounds, args.payload), line)

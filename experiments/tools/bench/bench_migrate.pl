@@ -38,6 +38,7 @@
 :- use_module('../../../platform_pl/float_vectors',
               [vector_packed/2, float_vectors_native/1]).
 :- use_module('../../../platform_pl/bulk_write', [bulk_write_native/1]).
+:- use_module('../../../platform_pl/tls', [tls_direct_native/1]).
 :- use_module(library(main)).
 :- use_module(library(socket)).
 :- use_module(library(prolog_wrap), [wrap_predicate/4]).
@@ -78,7 +79,8 @@ main(['home', Peer0, Floats0, Hops0|Tls]) :-
     bench_agent(Home, Peer, Floats, Hops, Token),
     bulk_write_native(Bulk),
     float_vectors_native(Vectors),
-    format("NATIVE ~w ~w~n", [Bulk, Vectors]),
+    tls_direct_native(Direct),
+    format("NATIVE ~w ~w ~w~n", [Bulk, Vectors, Direct]),
     flush_output,
     execute_agent(bencher, (localhost, Home), bench),
     read_term(user_input, _, []),   % the agent prints its figures; then stdin closes

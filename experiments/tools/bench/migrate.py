@@ -68,6 +68,14 @@ class MigrationResult:
     """Whether the home process ran the platform's foreign code (bulk frame writes and packed
     maths, ``platform_pl/native``; both or it says false), None if its benchmark program does
     not say (an older checkout's)."""
+    tls_direct: bool | None = None
+    """Whether the home process's TLS connections write records straight to the socket
+    (``platform_pl/native/tls_direct.c``; measured only with ``--tls``), None if its benchmark
+    program does not say."""
+
+
+TLS_DIRECT_REFUSED = "native/tls_direct.so does not recognise"
+"""What tls.pl prints (once) when its direct write refuses a connection."""
 
 
 def percentile(values: list[float], q: float) -> float:
@@ -154,7 +162,11 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
     all_ms = json.loads(lat_line.split(" ", 1)[1])
     ms = all_ms[warmup:]
     native_line = next((l for l in out.splitlines() if l.startswith("NATIVE")), None)
-    native = None if native_line is None else native_line.split()[1:] == ["true", "true"]
+    native_words = [] if native_line is None else native_line.split()[1:]
+    native = None if native_line is None else native_words[:2] == ["true", "true"]
+    # the library loaded (its word), and no connection refused by its checks (tls.pl warns)
+    tls_direct = (native_words[2] == "true" and TLS_DIRECT_REFUSED not in err
+                  if len(native_words) > 2 else None)
     cpu_line = next((l for l in out.splitlines() if l.startswith("CPU_S")), None)
     cpu_ms = None if cpu_line is None else cpu_per_hop(json.loads(cpu_line.split(" ", 1)[1]),
                                                        warmup)
@@ -167,7 +179,7 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         payload_bytes=10 * floats + 1, payload=payload,
         naive_median_ms=naive_median,
         naive_ratio=median / naive_median if naive_median else None,
-        cpu_ms_per_hop=cpu_ms, native=native,
+        cpu_ms_per_hop=cpu_ms, native=native, tls_direct=tls_direct,
     )
 
 
@@ -318,6 +330,10 @@ def compare_tls(floats: int, hops: int, tls: str | Path, warmup: int = 2,
     return TlsComparison(floats=floats, plain=p, tls=t, tls_cost=t.median_ms / p.median_ms - 1)
 
 
+def _all_or_none(flags: list[bool | None]) -> bool | None:
+    return None if any(f is None for f in flags) else all(flags)
+
+
 def _pool(results: list[MigrationResult]) -> MigrationResult:
     if len(results) == 1:
         return results[0]
@@ -334,7 +350,8 @@ def _pool(results: list[MigrationResult]) -> MigrationResult:
         mean_ms=statistics.fmean(r.mean_ms for r in results), payload_bytes=r0.payload_bytes,
         payload=r0.payload, naive_median_ms=naive_median,
         naive_ratio=statistics.median(meds) / naive_median if naive_median else None,
-        cpu_ms_per_hop=_median_or_none([r.cpu_ms_per_hop for r in results]), native=r0.native)
+        cpu_ms_per_hop=_median_or_none([r.cpu_ms_per_hop for r in results]), native=r0.native,
+        tls_direct=_all_or_none([r.tls_direct for r in results]))
 
 
 def _median_or_none(xs: list[float | None]) -> float | None:

@@ -117,6 +117,7 @@ def test_migrate_tls_prints_its_cost_beside_the_naive_hop(
     assert "TLS cost" in out and "naive text hop" in out and "ratio" in out
     cost = float(out.split("TLS cost")[1].split("%")[0])
     assert -100 < cost < 10000
+    assert "records: straight to the socket" in out   # setup.sh built native/tls_direct.c
     # control: a folder without the node's files is refused before any process starts
     assert main(["bench", "migrate", "--floats", "100", "--hops", "2",
                  "--tls", str(tmp_path / "ca")]) == 2
