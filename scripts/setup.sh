@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Installs what is missing for dfrl, and nothing more: SWI-Prolog from Debian's packages (and
-# a C compiler, to build the platform's two foreign libraries),
+# a C compiler, to build the platform's three foreign libraries),
 # a virtual environment in .venv, and the dfrl package with its dependencies. Safe to run
 # again: each step checks first. Source it (`. scripts/setup.sh`) or run it.
 set -euo pipefail
