@@ -176,6 +176,10 @@ def add_round_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=None,
                         help="keep the node logs and rounds.csv here, in a subfolder per robot "
                              "count when there are several (default: a temp folder)")
+    parser.add_argument("--trace", type=Path, default=None, metavar="DIR",
+                        help="time the platform's steps in every robot process (their files "
+                             "robot-<id>.jsonl in DIR) and print the sum per step; a traced "
+                             "round is slower, its figures compare steps (default: no trace)")
     parser.add_argument("--json", action="store_true",
                         help="print one JSON object per robot count, one a line")
 
@@ -188,11 +192,14 @@ def cmd_round(args: argparse.Namespace) -> int:
         return 2
     entries = 20000 if args.entries is None else args.entries
     actions = 4 if args.actions is None else args.actions
+    status = 0
     for n in args.robots:
         out = args.out / f"robots{n}" if args.out is not None and len(args.robots) > 1 else args.out
         try:
+            trace = (None if args.trace is None else
+                     args.trace / f"robots{n}" if len(args.robots) > 1 else args.trace)
             r = round_bench.bench(entries, actions, n, args.rounds, args.warmup,
-                                  args.method, out, args.hop_hops, args.learner)
+                                  args.method, out, args.hop_hops, args.learner, trace)
         except (RuntimeError, ValueError) as exc:
             print(f"dfrl bench round: {n} robots: {exc}", file=sys.stderr)
             return 1
@@ -211,9 +218,17 @@ def cmd_round(args: argparse.Namespace) -> int:
                 print(f"  its hops: {r['hops']} x {r['hop_median_ms']} ms (bench migrate, "
                       f"{r['hop_floats']} floats, same run): the round takes "
                       f"{r['round_over_hops']} x its hops", flush=True)
+            for t in r.get("steps", [])[:25]:
+                print(f"  step {t['step']:<28} {t['calls']:6d} calls  median {t['median_ms']:8.3f} "
+                      f"ms  p90 {t['p90_ms']:8.3f} ms  total {t['total_ms']:9.1f} ms", flush=True)
         for problem in r["log_problems"]:
             print(f"dfrl bench round: agent log: {problem}", file=sys.stderr)
-    return 0
+        if r["all_equal_rounds"] < r["total_rounds"] or r["log_problems"]:
+            print(f"dfrl bench round: {n} robots: tables differed after "
+                  f"{r['total_rounds'] - r['all_equal_rounds']} of {r['total_rounds']} rounds, "
+                  f"or the agent's log had problems", file=sys.stderr)
+            status = 1
+    return status
 
 
 # -- bridge ----------------------------------------------------------------------------------

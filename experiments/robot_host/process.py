@@ -87,6 +87,8 @@ class RobotProcess:
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.bridge: Any = None
         self.run_: Training | None = None
+        self.traced = False
+        """Whether this process times the platform's steps (``DFRL_STEP_TRACE``)."""
 
     @property
     def iteration(self) -> int:
@@ -108,6 +110,7 @@ class RobotProcess:
         self.bridge = Bridge()
         self.bridge.load_platform()
         load_agent_program(self.bridge, f"robot {c.robot}")
+        self.traced = start_step_trace(self.bridge)
         self.run_ = Training(c, self.bridge, self.lines, host=_StdinHost(self.stdin), poll_every=50)
         self.run_.open()
         options: dict[str, Any] = {"idle_timeout": 5.0}
@@ -160,7 +163,27 @@ class RobotProcess:
         if self.run_ is not None:
             self.run_.close()
         if self.bridge is not None:
+            if self.traced:
+                self.bridge.call("step_trace_write", f"robot-{self.config.robot}",
+                                 module="step_trace")
             self.bridge.close()
+
+
+def start_step_trace(node: Any) -> bool:
+    """With ``DFRL_STEP_TRACE=DIR`` in the environment (``dfrl bench round --trace DIR``), time
+    the platform's steps in this process (``experiments/tools/bench/step_trace.pl``; written
+    to ``DIR/robot-<id>.jsonl`` at :meth:`RobotProcess.close`). Returns whether it does."""
+    import os
+
+    from dfrl.experiments.tools.bench.step_trace import ENV, PROLOG_FILE
+
+    if not os.environ.get(ENV):
+        return False
+    from dfrl.pybridge import Atom
+
+    node.call("use_module", Atom(str(PROLOG_FILE)))
+    node.call("step_trace_start", module="step_trace")
+    return True
 
 
 def load_agent_program(node: Any, who: str) -> None:

@@ -26,10 +26,8 @@
         messages to other threads.)
     With TLS_DIR (a node's ca.crt, node.crt, node.key), both platforms
     speak mutual TLS (node option tls(Dir)).
-    With the environment variable DFRL_HOP_TRACE=DIR, each process times
-    the steps of every hand-over (wrap_predicate/4 around the platform's
-    predicates, nothing changed in them) and writes them, one JSON object
-    a line {"step", "t0", "t1", "thread"} (get_time/1 stamps), to
+    With the environment variable DFRL_STEP_TRACE=DIR, each process times
+    the steps of every hand-over (step_trace.pl) and writes them to
     DIR/peer.jsonl or DIR/home.jsonl when it ends (migrate.py's
     phase_breakdown/2 reads them).
 */
@@ -41,8 +39,7 @@
 :- use_module('../../../platform_pl/tls', [tls_direct_native/1]).
 :- use_module(library(main)).
 :- use_module(library(socket)).
-:- use_module(library(prolog_wrap), [wrap_predicate/4]).
-:- use_module(library(http/json), [json_write_dict/3]).
+:- use_module(step_trace, [step_trace_start/0, step_trace_write/1]).
 
 :- dynamic bench/3, data/2, departed/2, lat/2, cpu/2, plan/2, user:bench_done/1.
 
@@ -57,7 +54,7 @@ env_token(Token) :-
 
 %   The token comes in the environment (DFRL_TOKEN), never in argv.
 main(['peer'|Tls]) :-
-    trace_start,
+    step_trace_start,
     env_token(Token),
     tls_options(Tls, TlsOptions),
     node_start(localhost:0, Node, [token(Token)|TlsOptions]),
@@ -66,10 +63,10 @@ main(['peer'|Tls]) :-
     format("PORT ~w NAIVE ~w~n", [Port, NaivePort]),
     flush_output,
     read_term(user_input, _, []),   % until stdin closes
-    trace_write(peer),
+    step_trace_write(peer),
     node_stop(Node).
 main(['home', Peer0, Floats0, Hops0|Tls]) :-
-    trace_start,
+    step_trace_start,
     env_token(Token),
     maplist(atom_number, [Peer0, Hops0], [Peer, Hops]),
     payload_spec(Floats0, Floats),
@@ -84,7 +81,7 @@ main(['home', Peer0, Floats0, Hops0|Tls]) :-
     flush_output,
     execute_agent(bencher, (localhost, Home), bench),
     read_term(user_input, _, []),   % the agent prints its figures; then stdin closes
-    trace_write(home),
+    step_trace_write(home),
     node_stop(Node).
 
 main(['naive', Naive0, Floats0, Hops0]) :-
@@ -176,85 +173,3 @@ tls_options([], []).
 tls_options([Dir], [tls(Dir)]).
 
 :- include(bench_hop_handler).
-
-		 /*******************************
-		 *        STEP TRACING		*
-		 *******************************/
-
-:- dynamic step_/4.                     % Step, T0, T1, Thread
-
-%   traced(Module:Head, Step): the steps timed, Step a term of Head's
-%   arguments (bound after the call).
-traced(agents:agent_export(_, _, _), export).
-traced(transport:transport_acquire(_, _, _, _), acquire).
-traced(wire:frame_write(_, _, T), write(F)) :- term_functor(T, F).
-traced(wire:frame_read(_, Fr, _), read(F)) :- ( Fr = frame(_, T) -> term_functor(T, F) ; F = eof ).
-traced(wire:body_bytes(_, T, _), serialise(F)) :- term_functor(T, F).
-traced(code_safety:check_agent_record(_), check).
-traced(code_safety:record_sealed(_, _, _), sealed).
-traced(agents:agent_install(_, _, _, _), install).
-traced(agents:agent_install(_, _, _, _, _), install).
-traced(agent_bounds:bounds_install(_, _, _, _), bounds_install).
-traced(agent_bounds:module_size(_, _), module_size).
-traced(custody:custody_stage(_, _, _, _, _, _), custody_stage).
-traced(custody:commit_(_, _, _, _, _, _), custody_commit).    % not the meta-predicate: a wrapper would lose its module argument
-traced(agents:agent_remove(_, _), remove).
-traced(migration:receive_transfer(_, _, _, _, _, _, _, _, _), receive_transfer).
-traced(migration:activate(_, _, _), activate).
-traced(agents:agent_run(_, _, _, _), agent_run).
-traced(tartarus:move_agent(_, _), move_agent).
-traced(migration:local_node_at(_, _), local_node_at).
-traced(migration:begin_departure(_, _, _, _), begin_departure).
-traced(node:node_for_address(_, _), node_for_address).
-traced(migration:prepare(_, _, _, _, _, _, _, _, _, _), prepare).
-traced(migration:hand_over(_, _, _, _, _, _, _, _, _, _), hand_over).
-traced(migration:send_commit(_, _, _, _), send_commit).
-traced(transport:transport_release(_), release).
-traced(node_connection:serve_term(T, _, _), serve(F)) :- term_functor(T, F).
-traced(agents:agent_execute(_, _, _, _), agent_execute).
-traced(agents:run_handler(_, _, _), handler).
-traced(custody:custody_activated(_, _, _), custody_activated).
-traced(agents:agent_record_hop(_, _, _), record_hop).
-
-term_functor(T, F) :-
-    (   var(T)
-    ->  F = var
-    ;   T = ok(R)
-    ->  term_functor(R, F0),
-        format(atom(F), 'ok(~w)', [F0])
-    ;   compound(T)
-    ->  compound_name_arity(T, F, _)
-    ;   F = T
-    ).
-
-trace_start :-
-    (   getenv('DFRL_HOP_TRACE', _)
-    ->  forall(( traced(M:H, _),
-                 functor(H, N, A),
-                 current_predicate(M:N/A) ),     % steps of this version of the platform
-               ( functor(G, N, A),
-                 wrap_predicate(M:G, dfrl_trace, W, traced_call(M:G, W)) ))
-    ;   true
-    ).
-
-traced_call(MG, W) :-
-    get_time(T0),
-    call(W),
-    get_time(T1),
-    (   traced(MG, Step) -> true ; Step = unknown ),
-    thread_self(Me),
-    ( atom(Me) -> Th = Me ; thread_property(Me, id(Th)) ),
-    assertz(step_(Step, T0, T1, Th)).
-
-trace_write(Role) :-
-    (   getenv('DFRL_HOP_TRACE', Dir)
-    ->  format(atom(File), '~w/~w.jsonl', [Dir, Role]),
-        setup_call_cleanup(
-            open(File, write, Out),
-            forall(step_(Step, T0, T1, Th),
-                   ( format(atom(S), '~w', [Step]),
-                     json_write_dict(Out, _{step:S, t0:T0, t1:T1, thread:Th}, [width(0)]),
-                     nl(Out) )),
-            close(Out))
-    ;   true
-    ).

@@ -33,6 +33,7 @@ from pathlib import Path
 
 from dfrl.experiments import processes
 from dfrl.experiments.tokens import env_with_tokens
+from dfrl.experiments.tools.bench.step_trace import ENV as STEP_TRACE_ENV, read_steps
 
 SCRIPT = Path(__file__).resolve().parent / "bench_migrate.pl"
 
@@ -128,8 +129,10 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
     program = str(script if script is not None else SCRIPT)
     env = env_with_tokens([token])            # the token in the environment, never in argv
     if trace_dir is not None:
-        env["DFRL_HOP_TRACE"] = str(Path(trace_dir).resolve())
+        # step_trace.pl's variable; checkouts older than it read DFRL_HOP_TRACE
+        env[STEP_TRACE_ENV] = env["DFRL_HOP_TRACE"] = str(Path(trace_dir).resolve())
     else:
+        env.pop(STEP_TRACE_ENV, None)
         env.pop("DFRL_HOP_TRACE", None)
     naive_ms: list[float] | None = None
     peer = processes.start([swipl, "-q", program, "peer", *tls_args],
@@ -251,14 +254,7 @@ def phase_breakdown(trace_dir: str | Path, warmup: int = 2) -> list[Phase]:
     ``agent_run`` that starts its handler at the other end; the first ``warmup`` hops are left
     out.
     """
-    steps: list[tuple[float, float, str, str]] = []
-    for process in ("home", "peer"):
-        path = Path(trace_dir) / f"{process}.jsonl"
-        if path.exists():
-            for line in path.read_text().splitlines():
-                d = json.loads(line)
-                steps.append((d["t0"], d["t1"], d["step"], process))
-    steps.sort()
+    steps = [(r.t0, r.t1, r.step, r.role) for r in read_steps(trace_dir, ["home", "peer"])]
     exports = [s for s in steps if s[2] == "export"]
     if len(exports) <= warmup:
         return []

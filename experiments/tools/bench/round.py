@@ -24,6 +24,7 @@ Every robot saves what it holds at the end as ``params/<robot>.npy`` under ``out
 from __future__ import annotations
 
 import math
+import os
 import statistics
 import tempfile
 import time
@@ -36,6 +37,7 @@ from dfrl.experiments.driver.launcher.children import RobotChild
 from dfrl.experiments.driver.launcher.robots import await_ready
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
 from dfrl.experiments.driver.results.rounds import count_equal, read_shares, write_rounds_csv
+from dfrl.experiments.tools.bench.step_trace import ENV as STEP_TRACE_ENV, step_summary
 
 TARGET_MS = 50.0
 
@@ -60,10 +62,14 @@ def bench_layout(learner: str) -> list[tuple[str, tuple[int, ...]]]:
 
 def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int = 30,
           warmup: int = 3, method: str = "average", out: Path | None = None,
-          hop_hops: int = 20, learner: str = "table") -> dict:
+          hop_hops: int = 20, learner: str = "table", trace_dir: Path | None = None) -> dict:
     """Run the benchmark; return its figures. ``hop_hops``: how many migrate hops to time
     beside the round (0: none; the hop fields are then None). ``learner``: one of
     :data:`LEARNERS`; for a function learner ``entries`` and ``actions`` are not used.
+    ``trace_dir``: every robot process times the platform's steps (:mod:`.step_trace`) and
+    writes them there (``robot-<id>.jsonl``); the result then holds ``steps``, the sum per
+    step. A traced round is slower (some 20 us per traced call): its ``median_ms`` is not
+    the untraced figure.
 
     Raises
     ------
@@ -87,6 +93,7 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
     out = out.resolve()
     out.mkdir(parents=True, exist_ok=True)
     children: list[RobotChild] = []
+    trace_env = _TraceEnv(trace_dir)
     try:
         for i in range(robots):
             spec = RobotSpec(f"r{i + 1}", "r1")
@@ -95,7 +102,8 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
             cfg = RobotConfig(robot=spec.id, out_dir=str(out), seed=i, events=False,
                               progress_every=0, **bench_of)
             children.append(RobotChild(spec, cfg, out))
-            children[-1].start()
+            with trace_env:
+                children[-1].start()
         await_ready(children, 120.0)
         log = out / "rounds_bench.log"
         if log.exists():
@@ -151,9 +159,35 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
                                                   for a in agent_log.aborted],
         "meets_target": statistics.median(ms) < TARGET_MS,
     }
+    if trace_dir is not None:
+        result["steps"] = [{"step": t.step, "calls": t.calls, "median_ms": round(t.median_ms, 3),
+                            "p90_ms": round(t.p90_ms, 3), "total_ms": round(t.total_ms, 1)}
+                           for t in step_summary(trace_dir)]
     if tmp is not None:
         tmp.cleanup()
     return result
+
+
+class _TraceEnv:
+    """While entered, ``DFRL_STEP_TRACE`` names ``trace_dir`` (so a child started then traces);
+    nothing for None."""
+
+    def __init__(self, trace_dir: Path | None) -> None:
+        self.value = None if trace_dir is None else str(Path(trace_dir).resolve())
+        self.before: str | None = None
+
+    def __enter__(self) -> None:
+        if self.value is not None:
+            Path(self.value).mkdir(parents=True, exist_ok=True)
+            self.before = os.environ.get(STEP_TRACE_ENV)
+            os.environ[STEP_TRACE_ENV] = self.value
+
+    def __exit__(self, *exc: object) -> None:
+        if self.value is not None:
+            if self.before is None:
+                os.environ.pop(STEP_TRACE_ENV, None)
+            else:
+                os.environ[STEP_TRACE_ENV] = self.before
 
 
 def _hop_median(floats: int, hops: int) -> float | None:

@@ -136,6 +136,8 @@ def test_against_another_checkout_alternates_their_hops(tmp_path: Path) -> None:
     assert "Ms is (Now - T0) * 1000," in handler
     (other / "experiments" / "tools" / "bench" / "bench_hop_handler.pl").write_text(
         handler.replace("Ms is (Now - T0) * 1000,", "Ms is 1000.0 + 0 * (Now - T0),"))
+    (other / "experiments" / "tools" / "bench" / "step_trace.pl").write_text(
+        (migrate.SCRIPT.parent / "step_trace.pl").read_text())
     cmp = migrate.compare_checkouts(100, 2, other, runs=2, warmup=0)
     assert cmp.runs == 2 and len(cmp.this_runs_ms) == 2 and len(cmp.other_runs_ms) == 2
     assert cmp.other_runs_ms == [1000.0, 1000.0]

@@ -1,6 +1,7 @@
 """``dfrl bench round`` on real processes, tiny budget."""
 from __future__ import annotations
 
+from pathlib import Path
 
 import pytest
 
@@ -25,6 +26,22 @@ def test_bench_round_smoke() -> None:
 def test_bench_round_without_hops_leaves_the_hop_fields_empty() -> None:
     r = bench(entries=200, actions=4, robots=2, rounds=1, warmup=0, hop_hops=0)
     assert r["hop_median_ms"] is None and r["round_over_hops"] is None
+    assert "steps" not in r             # the control of the traced run below: no trace asked
+
+
+def test_a_traced_round_times_each_robots_steps(tmp_path: Path) -> None:
+    r = bench(entries=200, actions=4, robots=2, rounds=2, warmup=1, hop_hops=0,
+              trace_dir=tmp_path)
+    assert sorted(p.name for p in tmp_path.glob("*.jsonl")) == ["robot-r1.jsonl",
+                                                                "robot-r2.jsonl"]
+    steps = {s["step"]: s for s in r["steps"]}
+    # every robot is read once on the way out and written once on the way back, each round
+    assert steps["bridge_call"]["calls"] == 2 * 2 * r["total_rounds"], steps
+    assert steps["step"]["calls"] >= steps["bridge_call"]["calls"]
+    assert steps["hand_over"]["calls"] >= r["hops"] * r["rounds"]
+    # (total_ms is rounded to 0.1 ms)
+    assert all(0 <= s["median_ms"] <= s["total_ms"] + 0.05 for s in r["steps"])
+    assert r["all_equal_rounds"] == r["total_rounds"]
 
 
 def test_bench_round_command_takes_a_list_of_robot_counts(capsys: pytest.CaptureFixture[str]) -> None:
