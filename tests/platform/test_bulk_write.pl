@@ -4,6 +4,7 @@
 */
 :- use_module('../../platform_pl/bulk_write').
 :- use_module('../../platform_pl/wire').
+:- use_module(byte_strings).
 :- use_module(library(plunit)).
 :- use_module(library(socket)).
 :- use_module(library(memfile)).
@@ -27,18 +28,6 @@ with_socket_pair(Goal) :-
           catch(close(In, [force(true)]), _, true),
           catch(close(PeerOut, [force(true)]), _, true),
           tcp_close_socket(S) )).
-
-%   Bytes: every byte value in a block of 251 (prime, so the block and
-%   the socket's buffers never line up), repeated to N bytes.
-byte_string(N, String) :-
-    numlist(0, 250, Is),
-    maplist([I, B]>>(B is (I * 97 + 13) mod 256), Is, Codes),
-    string_codes(Block, Codes),
-    K is N // 251 + 1,
-    length(Blocks, K),
-    maplist(=(Block), Blocks),
-    atomics_to_string(Blocks, Long),
-    sub_string(Long, 0, N, _, String).
 
 %   Read N bytes of In in a thread (the writer must not wait on a full
 %   socket buffer for a reader that has not started).

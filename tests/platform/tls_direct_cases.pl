@@ -9,6 +9,7 @@
 */
 :- use_module('../../platform_pl/tls').
 :- use_module('../../platform_pl/bulk_write').
+:- use_module(byte_strings).
 :- use_module(library(plunit)).
 :- use_module(library(socket)).
 
@@ -51,17 +52,6 @@ write_bio(Plain-Tls, Kind) :-
     stream_pair(Plain, In0, Out0),
     stream_pair(Tls, _, Out),
     tls:tls_write_bio(Out, In0, Out0, Kind).
-
-%   Bytes: every byte value in a block of 251, repeated to N bytes.
-byte_string(N, String) :-
-    numlist(0, 250, Is),
-    maplist([I, B]>>(B is (I * 97 + 13) mod 256), Is, Codes),
-    string_codes(Block, Codes),
-    K is N // 251 + 1,
-    length(Blocks, K),
-    maplist(=(Block), Blocks),
-    atomics_to_string(Blocks, Long),
-    sub_string(Long, 0, N, _, String).
 
 %   Bytes written to From arrive at To whole and in order (a reader
 %   thread, so the writer never waits on a full socket for it). Compared
