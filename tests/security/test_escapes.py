@@ -63,6 +63,10 @@ FAMILIES = {
     "cleanup": ("setup_call_cleanup(true, true, shell('touch {m}'))", "setup_call_cleanup("),
     "abort": ("abort, shell('touch {m}')", "abort"),
     "clause_scan": ("clause(H, _), assertz(loot(guid, H)), shell('touch {m}')", "clause("),
+    # the platform's foreign predicates (native/tls_direct.c swaps a connection's write BIO)
+    "foreign_tls": ("tls:tls_direct_write(user_output, user_input, user_output), "
+                    "shell('touch {m}')",
+                    "tls:tls_direct_write/3"),
 }
 ESCAPES.update(FAMILIES)
 
