@@ -20,18 +20,21 @@
 
         config, ssl, sread, swrite, dread, dwrite, ...
 
-    It is used only if that record's wire streams are exactly PlainIn and
-    PlainOut and its data write stream is TlsOut itself; any other layout
-    fails these checks and the predicate fails, leaving the connection as
-    it was (the caller then writes through ssl4pl's BIO, slower). OpenSSL
+    It is used only if TlsOut's functions are ssl4pl's (they lie in
+    ssl4pl.so: dladdr()), and that record's wire streams are exactly
+    PlainIn and PlainOut and its data write stream is TlsOut itself; any
+    other stream or layout fails these checks and the predicate fails,
+    leaving the connection as it was (the caller then writes through ssl4pl's BIO, slower). OpenSSL
     is not linked at build time: its two functions are taken from the
     libssl that ssl4pl has already loaded into the process, so building
     needs no OpenSSL headers, and without ssl4pl loaded this fails too.
 */
+#define _GNU_SOURCE			/* dladdr() */
 #include <SWI-Stream.h>
 #include <SWI-Prolog.h>
 #include <dlfcn.h>
 #include <stddef.h>
+#include <string.h>
 
 typedef struct ssl_st SSL;
 typedef struct bio_st BIO;
@@ -81,14 +84,33 @@ openssl_functions(void)
   return FALSE;
 }
 
+/*  Whether s is a stream of ssl4pl: its table of functions lies in
+    ssl4pl.so. Only then is its handle ssl4pl's record (another stream's
+    handle may be a file descriptor, not a pointer at all).
+*/
+static int
+ssl4pl_stream(IOSTREAM *s)
+{ Dl_info info;
+  const char *base;
+
+  if ( !s->functions || !dladdr((void *)s->functions, &info) || !info.dli_fname )
+    return FALSE;
+  base = strrchr(info.dli_fname, '/');
+  base = base ? base+1 : info.dli_fname;
+  return strcmp(base, "ssl4pl.so") == 0;
+}
+
 /*  The SSL object behind the TLS stream out, whose wire streams are in0
-    and out0; NULL if ssl4pl's record does not have the layout above.
+    and out0; NULL if out is no stream of ssl4pl or its record does not
+    have the layout above.
 */
 static SSL *
 connection_ssl(IOSTREAM *out, IOSTREAM *in0, IOSTREAM *out0)
-{ ssl_instance *inst = out->handle;
+{ ssl_instance *inst;
 
-  if ( inst && inst->sread == in0 && inst->swrite == out0 && inst->dwrite == out )
+  if ( !ssl4pl_stream(out) || !(inst = out->handle) )
+    return NULL;
+  if ( inst->sread == in0 && inst->swrite == out0 && inst->dwrite == out )
     return inst->ssl;
   return NULL;
 }

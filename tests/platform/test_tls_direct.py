@@ -33,5 +33,5 @@ def test_tls_records_go_straight_to_the_socket(tmp_path: Path) -> None:
                          env={**os.environ, "DFRL_TLS_DIR": str(tmp_path / "n1")})
     out = run.stdout + run.stderr
     assert run.returncode == 0, out[-5000:]
-    assert re.search(r"All 6 tests passed", out), out[-5000:]
+    assert re.search(r"All 7 tests passed", out), out[-5000:]
     assert "Warning" not in out, out[-5000:]

@@ -108,7 +108,16 @@ test(swap_refused_for_other_streams) :-
         byte_string(100000, Bytes),
         send_and_check(CT, ST, Bytes))).
 
-%   Control for the test above: a connection made by ssl4pl alone writes
+%   Streams that are no TLS connection's (a file's handle is a descriptor,
+%   a socket's is no ssl4pl record): refused, without touching them.
+test(swap_refused_for_non_tls_streams) :-
+    assertion(\+ tls:tls_direct_write(user_output, user_input, user_output)),
+    assertion(\+ tls:tls_write_bio(user_output, user_input, user_output, _)),
+    with_tls_pair([C-_, _]>>(
+        stream_pair(C, In0, Out0),
+        assertion(\+ tls:tls_direct_write(Out0, In0, Out0)))).
+
+%   Control for both_ends_direct: a connection made by ssl4pl alone writes
 %   through its stream BIO (so `socket` above is the swap's doing).
 test(ssl4pl_alone_writes_through_its_stream) :-
     dir(Dir),
