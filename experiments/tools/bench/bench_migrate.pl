@@ -11,19 +11,19 @@
         with read_term/3 and answers `ok.`; print "NAIVE_MS [..]" (one
         figure per hop: from the first byte written to the answer).
     swipl bench_migrate.pl home TOKEN PEER_PORT FLOATS HOPS [TLS_DIR]
-        start a platform, print "NATIVE B V" (whether bulk_write.pl and
-        float_vectors.pl run their foreign code: true/false), create an
-        agent whose payload is a list of FLOATS
+        start a platform, print "NATIVE B V D" (whether bulk_write.pl,
+        float_vectors.pl and tls.pl's direct write run their foreign code:
+        true/false), create an agent whose payload is a list of FLOATS
         floats (FLOATS given as packed:N: the same N floats packed, as
         float_vectors.pl packs the tables the dFRL agent carries), bounce
-        it HOPS times between home and peer, print the line
-        "CPU_S [[Port, Seconds], ..]" (each process's CPU time at each
-        arrival, see bench_hop_handler.pl) and the line "LATENCIES_MS [..]"
-        (one figure per hop, from the call of move_agent at the source to
-        the start of the handler at the destination), then
-        serve until standard input closes. (The agent prints the line itself:
-        its code runs in the sandbox at the peer, which allows output, not
-        messages to other threads.)
+        it HOPS times between home and peer, printing a line
+        "ARRIVAL Ms Port Seconds" for every arrival (the hop's time, from
+        the call of move_agent at the source to the start of the handler
+        at the destination, `-` for an arrival that ends no timed hop; the
+        process's CPU time then; see bench_hop_handler.pl) and at the end
+        "ARRIVALS_END", then serve until standard input closes. (The agent
+        prints the lines itself: its code runs in the sandbox, which allows
+        output, not messages to other threads.)
     With TLS_DIR (a node's ca.crt, node.crt, node.key), both platforms
     speak mutual TLS (node option tls(Dir)).
     With the environment variable DFRL_STEP_TRACE=DIR, each process times
@@ -41,7 +41,7 @@
 :- use_module(library(socket)).
 :- use_module(step_trace, [step_trace_start/0, step_trace_write/1]).
 
-:- dynamic bench/3, data/2, departed/2, lat/2, cpu/2, plan/2, user:bench_done/1.
+:- dynamic bench/3, data/2, departed/2, done/2, unsaid/2, plan/2, user:bench_done/1.
 
 :- initialization(main, main).
 
@@ -117,11 +117,11 @@ bench_agent(Home, Peer, Floats, Hops, Token) :-
     ;   float_data(Floats, Data)
     ),
     assertz(data(guid, Data)),
-    assertz(lat(guid, [])),
-    assertz(cpu(guid, [])),
+    assertz(done(guid, 0)),
+    assertz(unsaid(guid, [])),
     assertz(plan(guid, plan(Home, Peer, Hops))),
     create_mobile_agent(bencher, (localhost, Home), bench, [Token]),
-    add_payload(bencher, [(data,2), (lat,2), (cpu,2), (plan,2), (departed,2)]).
+    add_payload(bencher, [(data,2), (done,2), (unsaid,2), (plan,2), (departed,2)]).
 
 float_data(N, Floats) :-
     findall(F, ( between(1, N, I), F is I * 0.001 + 0.5 ), Floats).

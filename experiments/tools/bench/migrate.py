@@ -159,10 +159,10 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
             naive_ms = naive_ms[warmup:]
     finally:
         _finish(peer)
-    lat_line = next((l for l in out.splitlines() if l.startswith("LATENCIES_MS")), None)
-    if lat_line is None:
+    figures = _hop_figures(out)
+    if figures is None:
         raise RuntimeError(f"benchmark failed:\n{out}\n{err}")
-    all_ms = json.loads(lat_line.split(" ", 1)[1])
+    all_ms, stamps = figures
     ms = all_ms[warmup:]
     native_line = next((l for l in out.splitlines() if l.startswith("NATIVE")), None)
     native_words = [] if native_line is None else native_line.split()[1:]
@@ -170,9 +170,7 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
     # the library loaded (its word), and no connection refused by its checks (tls.pl warns)
     tls_direct = (native_words[2] == "true" and TLS_DIRECT_REFUSED not in err
                   if len(native_words) > 2 else None)
-    cpu_line = next((l for l in out.splitlines() if l.startswith("CPU_S")), None)
-    cpu_ms = None if cpu_line is None else cpu_per_hop(json.loads(cpu_line.split(" ", 1)[1]),
-                                                       warmup)
+    cpu_ms = None if stamps is None else cpu_per_hop(stamps, warmup)
     median = statistics.median(ms)
     naive_median = statistics.median(naive_ms) if naive_ms else None
     return MigrationResult(
@@ -184,6 +182,30 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         naive_ratio=median / naive_median if naive_median else None,
         cpu_ms_per_hop=cpu_ms, native=native, tls_direct=tls_direct,
     )
+
+
+def _hop_figures(out: str) -> tuple[list[float], list[list[float]] | None] | None:
+    """The hop times (ms) and the CPU stamps ``[port, seconds]`` (one per arrival) in a home
+    process's output: its ``ARRIVAL`` lines up to ``ARRIVALS_END``, or, from a checkout older
+    than them, its ``LATENCIES_MS`` and ``CPU_S`` lines (CPU stamps None if it printed none).
+    None if the output has neither."""
+    lines = out.splitlines()
+    old = next((l for l in lines if l.startswith("LATENCIES_MS")), None)
+    if old is not None:
+        cpu = next((l for l in lines if l.startswith("CPU_S")), None)
+        return (json.loads(old.split(" ", 1)[1]),
+                None if cpu is None else json.loads(cpu.split(" ", 1)[1]))
+    if "ARRIVALS_END" not in lines:
+        return None
+    ms: list[float] = []
+    stamps: list[list[float]] = []
+    for line in lines:
+        words = line.split()
+        if len(words) == 4 and words[0] == "ARRIVAL":
+            if words[1] != "-":
+                ms.append(float(words[1]))
+            stamps.append([int(words[2]), float(words[3])])
+    return ms, stamps
 
 
 def cpu_per_hop(stamps: list[list[float]], warmup: int) -> float | None:
@@ -275,8 +297,12 @@ def phase_breakdown(trace_dir: str | Path, warmup: int = 2) -> list[Phase]:
     return sorted(phases, key=lambda p: p.median_start_ms)
 
 
+#: the line that ends a home process's figures (LATENCIES_MS: a checkout older than ARRIVAL lines)
+_LAST_LINES = ("ARRIVALS_END", "LATENCIES_MS")
+
+
 def _read_latencies(home: subprocess.Popen, timeout: float) -> tuple[str, str]:
-    """Home's output up to its LATENCIES_MS line (or its end, or the timeout); its stderr
+    """Home's output up to its last line of figures (or its end, or the timeout); its stderr
     when it gave none."""
     import threading
 
@@ -287,13 +313,13 @@ def _read_latencies(home: subprocess.Popen, timeout: float) -> tuple[str, str]:
         assert home.stdout is not None
         for line in home.stdout:
             lines.append(line)
-            if line.startswith("LATENCIES_MS"):
+            if line.startswith(_LAST_LINES):
                 break
         done.set()
 
     threading.Thread(target=read, daemon=True).start()
     done.wait(timeout)
-    if any(l.startswith("LATENCIES_MS") for l in lines):
+    if any(l.startswith(_LAST_LINES) for l in lines):
         return "".join(lines), ""
     processes.stop(home)
     err = home.stderr.read() if home.stderr is not None else ""

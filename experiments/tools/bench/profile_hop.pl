@@ -21,7 +21,7 @@
 :- use_module(library(statistics)).
 :- use_module(library(memfile)).
 
-:- dynamic bench/3, data/2, departed/2, lat/2, cpu/2, plan/2.
+:- dynamic bench/3, data/2, departed/2, done/2, unsaid/2, plan/2.
 
 :- initialization(main, main).
 
@@ -40,11 +40,11 @@ main(Argv) :-
     custody_open(Dst, _),
     findall(F, ( between(1, Floats, I), F is I * 0.001 + 0.5 ), Data),
     assertz(data(guid, Data)),
-    assertz(lat(guid, [])),
-    assertz(cpu(guid, [])),
+    assertz(done(guid, 0)),
+    assertz(unsaid(guid, [])),
     assertz(plan(guid, plan(1, 2, 3))),
     with_node(Src, ( create_mobile_agent(bencher, bench, [1]),
-                     add_payload(bencher, [(data,2), (lat,2), (cpu,2), (plan,2), (departed,2)]) )),
+                     add_payload(bencher, [(data,2), (done,2), (unsaid,2), (plan,2), (departed,2)]) )),
     (   memberchk(profile, Flags)
     ->  profile(forall(between(1, Reps, _), sequence(Src, Dst, _)), [top(40)])
     ;   findall(T, ( between(1, Reps, _), sequence(Src, Dst, T) ), Ts),

@@ -159,3 +159,22 @@ def test_against_on_the_command_line(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert "this/against" in out and "naive ratio" in out
     assert main(["bench", "migrate", "--floats", "0", "--hops", "2",
                  "--against", str(tmp_path)]) == 2
+
+
+def test_hop_figures_reads_arrival_lines_and_the_older_format() -> None:
+    new = ("NATIVE true true true\nARRIVAL - 10 0.5\nARRIVAL 1.5 20 0.7\nARRIVAL 2.5 10 0.9\n"
+           "ARRIVAL - 20 1.1\nARRIVALS_END\n")
+    assert migrate._hop_figures(new) == ([1.5, 2.5], [[10, 0.5], [20, 0.7], [10, 0.9],
+                                                      [20, 1.1]])
+    old = "CPU_S [[10, 0.5], [20, 0.7]]\nLATENCIES_MS [1.5]\n"     # a checkout before ARRIVAL
+    assert migrate._hop_figures(old) == ([1.5], [[10, 0.5], [20, 0.7]])
+    # control: output that ended before its figures did is no result
+    assert migrate._hop_figures(new.replace("ARRIVALS_END\n", "")) is None
+
+
+def test_a_long_run_reports_every_hop_across_batches() -> None:
+    # 150 hops: home prints the carried stamps in batches (at most 64 carried), so every hop
+    # is reported once, in order, and the CPU figure has a stamp for every arrival
+    r = migrate.run(0, 150, warmup=0, naive=False)
+    assert r.hops == 150
+    assert r.cpu_ms_per_hop is not None and r.cpu_ms_per_hop > 0
