@@ -7,10 +7,13 @@ set -euo pipefail
 cd "$DFRL_ROOT"
 # the cluster backend's engine and the TensorBoard writer (the optional extras "cluster" and
 # "tensorboard", which the demo does not need), so that tests/cluster and the --tensorboard test run
-python -c 'import distributed, tensorboardX' 2>/dev/null \
+# (and pytest-xdist, of the extra "dev": the suite runs on two workers, see README.md, Tests)
+python -c 'import distributed, tensorboardX, xdist' 2>/dev/null \
     || python -m pip install -q -e "$DFRL_ROOT[dev,cluster,tensorboard]"
 # the live view's browser test: Chromium and its driver from Debian's packages (if missing)
 bash scripts/browser-setup.sh >/dev/null \
     || echo "[test] could not install chromium; the browser test will say why it skips" >&2
-# the 25 slowest tests are listed at the end, so the suite's time can be kept in view
-exec python -m pytest -q --durations=25 "$@"
+# Two workers (DFRL_TEST_WORKERS; 0 runs the suite in this process), each taking whole test
+# files (--dist loadfile: a file's module fixtures and its order stay together). The 25
+# slowest tests are listed at the end, so the suite's time can be kept in view.
+exec python -m pytest -q -n "${DFRL_TEST_WORKERS:-2}" --dist loadfile --durations=25 "$@"
