@@ -707,10 +707,12 @@ module_size(Module, Size) :-
 %   @error resource_error(agent_memory) if it is over.
 
 bounds_check_module(Node, Module) :-
+    module_size(Module, Size),
+    check_module_size(Node, Size).
+
+check_module_size(Node, Size) :-
     node_option(Node, agent_module_limit, Max),
-    (   Max \== infinite,
-        module_size(Module, Size),
-        over(Size, Max)
+    (   over(Size, Max)
     ->  throw(error(resource_error(agent_memory),
                     context(_, too_large(Size, Max))))
     ;   true
@@ -744,8 +746,8 @@ bounds_install(Node, Record, Status, Name) :-
           ( agents:agent_remove(Node, Name), throw(E) )).
 
 admit_memory(Node, Name, Module) :-
-    bounds_check_module(Node, Module),
-    module_size(Module, Size),
+    module_size(Module, Size),                  % measured once
+    check_module_size(Node, Size),
     node_option(Node, agent_memory_budget, Budget),
     with_mutex(dfrl_bounds, admit_memory(Node, Name, Size, Budget, Verdict)),
     (   Verdict = over(Used)

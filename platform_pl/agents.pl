@@ -118,7 +118,16 @@ with_agents_locked(Goal) :-
 %   The module holding the code and payload of agent Name on Node.
 
 agent_module(Node, Name, Module) :-
-    format(atom(Module), 'dfrl_agent@~w/~q', [Node, Name]).
+    (   module_of_(Name, Node, Module0)
+    ->  Module = Module0
+    ;   format(atom(Module), 'dfrl_agent@~w/~q', [Node, Name]),
+        assertz(module_of_(Name, Node, Module))
+    ).
+
+%   The module names made so far (an agent's module outlives it, as
+%   every SWI-Prolog module does; so does its name here): a hop asks for
+%   it some ten times, and format/3 was a tenth of installing an agent.
+:- dynamic module_of_/3.                % Name, Node, Module
 
 %!  agent_create(?Name, +Handler, +Options, +Node) is det.
 %
@@ -720,7 +729,7 @@ agent_install(Node, Record, Status, Name, Options) :-
     ;   Clauses = Clauses0
     ),
     agent_module(Node, Name, M),
-    forall(member(F/A, Preds), dynamic(M:F/A)),
+    forall(member(F/A, Preds), ( functor(H, F, A), ensure_dynamic(M, H) )),
     install_clauses(M, Clauses),
     assertz(agent_tokens_(Node, Name, Tokens)),
     forall(member(P, Payload), assertz(agent_payload_(Node, Name, P))),
