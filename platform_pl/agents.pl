@@ -29,6 +29,7 @@
               [ current_node/1, node_set_current/1, node_clear_current/0,
                 node_property/2 ]).
 :- use_module(worker_pool, [pool_run/3, pool_signal/3]).
+:- use_module(hop_probe, [hop_probe/1]).      % compiled away unless benchmarking
 :- use_module(agent_bounds, [bounds_call/4, bounds_stopped/3, bounds_warning/2]).
 :- autoload(library(error),
             [must_be/2, existence_error/2, permission_error/3, domain_error/2]).
@@ -499,6 +500,7 @@ start_thread(Node, Name, Link, Event) :-
     pool_run(agents, agent_run(Node, Name, Link, Event), []).
 
 agent_run(Node, Name, Link, Event) :-
+    hop_probe(run_started),
     thread_self(Me),
     with_agents_locked(
         (   agent_status_(Node, Name, starting)
@@ -541,12 +543,14 @@ run_agent(Node, Name, Link, Event) :-
     (   agent_entry(Node, Name, Handler, _)
     ->  agent_module(Node, Name, M),
         Goal =.. [Handler, Name, Link, Event],
+        hop_probe(bounds_entering),
         catch(bounds_call(Node, Name, M, run_handler(Node, Name, M:Goal)), E,
               handler_error(Node, Name, E))
     ;   true
     ).
 
 run_handler(Node, Name, Goal) :-
+    hop_probe(handler_called),
     (   call(Goal)
     ->  true
     ;   debug(dfrl(agent), 'Handler of ~p on ~w failed', [Name, Node])

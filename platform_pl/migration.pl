@@ -15,6 +15,7 @@
 :- use_module(agent_bounds, [bounds_admit/3, bounds_arrived/3, bounds_install/4]).
 :- autoload(library(aggregate), [aggregate_all/3]).
 :- use_module(transport).
+:- use_module(hop_probe, [hop_probe/1]).      % compiled away unless benchmarking
 :- use_module(platform_errors, [transport_error/2]).
 :- use_module(code_safety,
               [ check_agent_record/1, code_trusted/1, record_seal/3,
@@ -116,6 +117,7 @@ node:node_stopping(Node) :-
 %   @error transport_error(Address, Reason)
 
 agent_move(Name, Address0, Options) :-
+    hop_probe(move_called),
     must_be(atom, Name),
     address_normalize(Address0, Address),
     current_node(Node),
@@ -195,6 +197,7 @@ transfer(Node, Name, Address, Mode, MigId, Final, Options, Local) :-
     catch(prepare(Node, Name, Mode, MigId, Address, Options, Local, Record,
                   Tokens, Conn),
           E, ( abort(Node, MigId), throw(E) )),
+    hop_probe(prepared),
     catch(hand_over(Node, Conn, Address, Mode, MigId, Name, Record, Tokens,
                     Final, Reuse),
           E2,
@@ -243,7 +246,9 @@ hand_over(Node, Conn, Address, Mode, MigId, Name, Record, Tokens, Final,
     get_time(Departed),
     catch(( transport_send(Conn, binary,
                            transfer(MigId, Mode, Source, Departed, Record, Inc)),
-            transport_receive(Conn, Reply, [phase(transfer)])
+            hop_probe(transfer_sent),
+            transport_receive(Conn, Reply, [phase(transfer)]),
+            hop_probe(answer_read)
           ),
           E,
           ( abort(Node, MigId), throw(E) )),
@@ -256,6 +261,7 @@ hand_over(Node, Conn, Address, Mode, MigId, Name, Record, Tokens, Final,
         ),
         catch(custody_commit(Node, MigId, What, Address, Tokens, OnCommit),
               E2, ( abort(Node, MigId), throw(E2) )),
+        hop_probe(committed),
         retractall(pending_(Node, MigId)),
         send_commit(Node, Conn, MigId, Reuse)
     ;   abort(Node, MigId),
@@ -273,6 +279,7 @@ abort(Node, MigId) :-
 %   its answer is sent again by the settle thread.
 send_commit(Node, Conn, MigId, Reuse) :-
     catch(( transport_send(Conn, text, commit(MigId)),
+            hop_probe(commit_sent),
             transport_receive(Conn, Answer, [phase(commit)])
           ),
           E, Answer = failed(E)),
@@ -349,13 +356,16 @@ receive_transfer(Ctx, MigId, Mode, Source, Departed, Record0, SInc, Reply, After
         aggregate_all(count, agent_exists(Node, _), Present),
         bounds_admit(Node, Mode, Present),
         arriving_record(Ctx, Node, MigId, Record0, Record),
+        hop_probe(checked),
         bounds_install(Node, Record, staged(MigId), Name),
+        hop_probe(installed),
         bounds_arrived(Node, Name, Source),
         get_time(Now),
         catch(custody_stage(Node, Name, MigId, Source, SInc, Now), E,
               ( agent_remove(Node, Name), throw(E) )),
         assertz(arrival_(Node, MigId, Departed)),
         wake_settler_if_due(Node),
+        hop_probe(staged),
         Reply = ok(staged(Name)),
         After = true
     ).
@@ -381,8 +391,10 @@ arriving_record(Ctx, Node, MigId, Record0, Record) :-
 %   Start the staged (or in_doubt) agent Name of migration MigId, once.
 activate(Node, Name, MigId) :-
     with_custody(Node, activate_(Node, Name, MigId, Source, Departed)),
+    hop_probe(activated),
     node_property(Node, link(Link)),
     agent_execute(Node, Name, Link, main),
+    hop_probe(dispatched),
     debug(dfrl(custody), '~w: ~q from ~w started', [Node, Name, Source-Departed]).
 
 activate_(Node, Name, MigId, Source, Departed) :-

@@ -25,6 +25,7 @@
 %   procedure tls:option/3" under a burst of stalled handshakes).
 :- use_module(library(socket), [tcp_setopt/2, tcp_open_socket/2, tcp_close_socket/1]).
 :- use_module(library(debug), [debug/3]).
+:- use_module(hop_probe, [hop_probe/1]).      % compiled away unless benchmarking
 
 /** <module> A node's connection worker: hello, frames, authentication
 
@@ -234,6 +235,7 @@ serve_frames(Ctx) :-
                         max_depth(Depth), parse_slots(Slots, 512) ]
     ),
     await_frame(In, Idle),
+    hop_probe(frame_arrived),
     set_stream(In, timeout(Idle)),
     catch(frame_read(In, Frame, [body_size(Size)|ReadOptions]),
           error(wire_error(Reason), _),
@@ -241,6 +243,7 @@ serve_frames(Ctx) :-
             Frame = end_of_file,
             rejected_frame(Reason)
           )),
+    hop_probe(frame_read),
     (   Frame == end_of_file
     ->  true
     ;   Frame = frame(_, Term),
@@ -305,7 +308,8 @@ serve_term(Request, Ctx, Continue) :-
           ( Reply = error(E), After = true )),
     (   Reply == none
     ->  true
-    ;   request_reply(Out, Reply)
+    ;   request_reply(Out, Reply),
+        hop_probe(replied)
     ),
     (   After == close
     ->  Continue = false

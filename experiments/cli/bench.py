@@ -12,7 +12,8 @@ from pathlib import Path
 from typing import Any
 
 from dfrl.experiments.cli import bench_faults, bench_hostile
-from dfrl.experiments.tools.bench import bridge, chaos, hostile, migrate, round as round_bench
+from dfrl.experiments.tools.bench import (bridge, chaos, hop_timeline, hostile, migrate,
+                                          round as round_bench)
 from dfrl.experiments.tools.bench import faults, scale, sim
 
 
@@ -37,9 +38,18 @@ def add_migrate_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--against", default=None, metavar="DIR",
                         help="compare with the checkout at DIR (e.g. a git worktree of an older "
                              "commit): its hop and this one's, run alternately")
+    parser.add_argument("--timeline", action="store_true",
+                        help="also run each size with the platform's hop probes compiled in and "
+                             "print where a hop's time goes: the median time of each point of "
+                             "the hand-over from the call of move_agent (not with --tls or "
+                             "--against)")
 
 
 def cmd_migrate(args: argparse.Namespace) -> int:
+    if args.timeline and (args.against or args.tls):
+        print("dfrl bench migrate: --timeline goes with neither --tls nor --against",
+              file=sys.stderr)
+        return 2
     if args.against:
         return _migrate_against(args)
     if args.tls:
@@ -47,11 +57,16 @@ def cmd_migrate(args: argparse.Namespace) -> int:
     for n in args.floats:
         try:
             result = migrate.run(n, args.hops, args.warmup, payload=args.payload)
+            probed = (hop_timeline.measure(n, args.hops, args.warmup, args.payload)
+                      if args.timeline else None)
         except (ValueError, RuntimeError, FileNotFoundError) as exc:
             print(f"dfrl bench migrate: {exc}", file=sys.stderr)
             return 1
         if args.json:
-            print(json.dumps(asdict(result)))
+            out = asdict(result)
+            if probed is not None:
+                out["timeline"] = asdict(probed)
+            print(json.dumps(out))
         else:
             naive = ("" if result.naive_median_ms is None else
                      f"  naive text hop {result.naive_median_ms:8.3f} ms  "
@@ -59,6 +74,8 @@ def cmd_migrate(args: argparse.Namespace) -> int:
             print(f"floats={n:>7}  median {result.median_ms:8.3f} ms  p10 {result.p10_ms:8.3f}  "
                   f"p90 {result.p90_ms:8.3f}  min {result.min_ms:8.3f}  max {result.max_ms:8.3f}  "
                   f"(hops={result.hops}){naive}")
+            if probed is not None:
+                print(hop_timeline.table(probed))
         sys.stdout.flush()
     return 0
 

@@ -67,6 +67,9 @@ FAMILIES = {
     "foreign_tls": ("tls:tls_direct_write(user_output, user_input, user_output), "
                     "shell('touch {m}')",
                     "tls:tls_direct_write/3"),
+    # the benchmark's hop probes: their stamps are no agent's to take (or forge)
+    "hop_probe": ("hop_probe:hop_probe_stamps(S), assertz(loot(guid, S)), shell('touch {m}')",
+                  "hop_probe:hop_probe_stamps/1"),
 }
 ESCAPES.update(FAMILIES)
 

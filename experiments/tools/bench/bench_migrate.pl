@@ -29,7 +29,11 @@
     With the environment variable DFRL_STEP_TRACE=DIR, each process times
     the steps of every hand-over (step_trace.pl) and writes them to
     DIR/peer.jsonl or DIR/home.jsonl when it ends (migrate.py's
-    phase_breakdown/2 reads them).
+    phase_breakdown/2 reads them). With DFRL_HOP_PROBE=DIR, the platform
+    is compiled with its hop probes (platform_pl/hop_probe.pl) and each
+    process writes the points it stamped to DIR/peer.probe or
+    DIR/home.probe, one "Point Seconds" a line (migrate.py's
+    hop_timeline/2 reads them).
 */
 :- use_module('../../../platform_pl/tartarus').
 :- use_module('../../../platform_pl/secrets', [take_env_tokens/1]).
@@ -37,6 +41,7 @@
               [vector_packed/2, float_vectors_native/1]).
 :- use_module('../../../platform_pl/bulk_write', [bulk_write_native/1]).
 :- use_module('../../../platform_pl/tls', [tls_direct_native/1]).
+:- use_module('../../../platform_pl/hop_probe', [hop_probe_stamps/1]).
 :- use_module(library(main)).
 :- use_module(library(socket)).
 :- use_module(step_trace, [step_trace_start/0, step_trace_write/1]).
@@ -64,6 +69,7 @@ main(['peer'|Tls]) :-
     flush_output,
     read_term(user_input, _, []),   % until stdin closes
     step_trace_write(peer),
+    probe_write(peer),
     node_stop(Node).
 main(['home', Peer0, Floats0, Hops0|Tls]) :-
     step_trace_start,
@@ -82,6 +88,7 @@ main(['home', Peer0, Floats0, Hops0|Tls]) :-
     execute_agent(bencher, (localhost, Home), bench),
     read_term(user_input, _, []),   % the agent prints its figures; then stdin closes
     step_trace_write(home),
+    probe_write(home),
     node_stop(Node).
 
 main(['naive', Naive0, Floats0, Hops0]) :-
@@ -167,6 +174,18 @@ naive_loop(In, Out) :-
     ;   format(Out, "ok.~n", []),
         flush_output(Out),
         naive_loop(In, Out)
+    ).
+
+%   The hop probes' stamps, to DIR/Role.probe (DFRL_HOP_PROBE=DIR).
+probe_write(Role) :-
+    (   getenv('DFRL_HOP_PROBE', Dir), Dir \== '', Dir \== '0'
+    ->  hop_probe_stamps(Stamps),
+        format(atom(File), '~w/~w.probe', [Dir, Role]),
+        setup_call_cleanup(
+            open(File, write, Out),
+            forall(member(stamp(P, T), Stamps), format(Out, "~w ~6f~n", [P, T])),
+            close(Out))
+    ;   true
     ).
 
 tls_options([], []).

@@ -37,6 +37,10 @@ from dfrl.experiments.tools.bench.step_trace import ENV as STEP_TRACE_ENV, read_
 
 SCRIPT = Path(__file__).resolve().parent / "bench_migrate.pl"
 
+PROBE_ENV = "DFRL_HOP_PROBE"
+"""Set (to a folder) in a node process's environment, it compiles the platform's hop probes in
+(``platform_pl/hop_probe.pl``); ``bench_migrate.pl`` writes their stamps to that folder."""
+
 #: how the agent carries its floats: packed (the dFRL agent's tables) or a list
 PAYLOADS = ("packed", "list")
 
@@ -93,7 +97,7 @@ def percentile(values: list[float], q: float) -> float:
 def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         timeout: float = 600, tls: str | Path | None = None, naive: bool = True,
         trace_dir: str | Path | None = None, script: Path | None = None,
-        payload: str = "packed") -> MigrationResult:
+        payload: str = "packed", probe_dir: str | Path | None = None) -> MigrationResult:
     """Measure ``hops`` hops (after ``warmup`` uncounted ones) with a payload of ``floats`` floats,
     ``payload`` ``packed`` or ``list`` (:data:`PAYLOADS`).
 
@@ -101,7 +105,10 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
     node``), both platforms speak mutual TLS with that certificate. With ``naive`` (default),
     the naive text hop is timed too (as many hops, after as many warm-up ones), against the
     same peer process. With ``trace_dir`` (an existing folder), the processes write their step
-    timings there (``home.jsonl``, ``peer.jsonl``; see :func:`phase_breakdown`). ``script``: the
+    timings there (``home.jsonl``, ``peer.jsonl``; see :func:`phase_breakdown`). With
+    ``probe_dir`` (an existing folder), the platform is compiled with its hop probes and the
+    processes write their stamps there (``home.probe``, ``peer.probe``; see
+    ``hop_timeline.py``). ``script``: the
     benchmark's node program to run (default :data:`SCRIPT`; :func:`compare_checkouts` passes
     another checkout's, which loads that checkout's platform).
 
@@ -134,6 +141,10 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
     else:
         env.pop(STEP_TRACE_ENV, None)
         env.pop("DFRL_HOP_TRACE", None)
+    if probe_dir is not None:
+        env[PROBE_ENV] = str(Path(probe_dir).resolve())
+    else:
+        env.pop(PROBE_ENV, None)
     naive_ms: list[float] | None = None
     peer = processes.start([swipl, "-q", program, "peer", *tls_args],
                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
