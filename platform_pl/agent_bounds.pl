@@ -22,6 +22,9 @@
                 with_node/2, ctx_node/2, ctx_peer/2 ]).
 :- use_module(transport, [transport_request/4]).
 :- use_module(worker_pool, [pool_run/3, pool_signal/3, pool_retire/0]).
+:- use_module(bounds_ledger,
+              [ window_take/4, window_forget/1, windows_forget_node/1, bounds_warning/2,
+                stat_add/2, stat_set/2, stat_max/2, bounds_statistics/1 ]).
 
 :- meta_predicate bounds_call(+, +, +, 0).
 
@@ -92,10 +95,8 @@ says how many were suppressed.
     counters_/2,                % OutStream, ErrStream
     stream_role_/2,             % Stream, out|err
     default_target_/2,          % out|err, Stream
-    window_/3,                  % Key, Start, Count
     arrived_/3,                 % Node, Agent, Source
     report_/4,                  % Node, Agent, Time, Report
-    stat_/2,                    % Name, Value
     monitor_/2,                 % Thread, Queue
     monitor_idle_/0,            % the monitor waits for a call to start
     monitor_hot_/0,             % a node's agents hold over half its budget
@@ -116,10 +117,8 @@ says how many were suppressed.
     node:platform_request/4,
     node:requires_authentication/1,
     node:node_stopping/1,
-    agents:agent_changed/3,
-    prolog:message//1.
+    agents:agent_changed/3.
 
-max_warnings_per_minute(20).
 max_notices_per_minute(60).
 max_reports_kept(100).
 max_signals(10).
@@ -388,7 +387,7 @@ stream_write(S, String) :-
     (   budget_(Node, Agent, Limits, OutTarget, ErrTarget)
     ->  ( Role == out -> Target = OutTarget ; Target = ErrTarget ),
         limit(Limits, log, Limit),
-        line_count(String, N),
+        lines_counted(String, N),
         window_take(log(Node, Agent), Limit, N, Granted),
         (   Granted >= N
         ->  forward(Target, String)
@@ -415,7 +414,7 @@ log_over(Limit) :-
     ;   true
     ).
 
-line_count(String, N) :-
+lines_counted(String, N) :-
     aggregate_all(count, sub_string(String, _, 1, _, "\n"), NL),
     string_length(String, Len),
     N is max(1, NL) + Len // 4096.
@@ -812,9 +811,8 @@ agents:agent_changed(removed, Node, Agent) :-
     ->  schedule_reclaim
     ;   true
     ),
-    with_mutex(dfrl_bounds,
-               ( retractall(window_(log(Node, Agent), _, _)),
-                 retractall(window_(posts(Node, Agent), _, _)) )).
+    window_forget(log(Node, Agent)),
+    window_forget(posts(Node, Agent)).
 
 node:node_stopping(Node) :-
     retractall(arrived_(Node, _, _)),
@@ -825,9 +823,7 @@ node:node_stopping(Node) :-
     ->  catch(message_queue_destroy(Queue), _, true)
     ;   true
     ),
-    with_mutex(dfrl_bounds,
-               forall(( window_(Key, _, _), arg(1, Key, Node) ),
-                      retractall(window_(Key, _, _)))).
+    windows_forget_node(Node).
 
 		 /*******************************
 		 *      STOPPED: WARN, TELL	*
@@ -960,170 +956,3 @@ prune_reports(Node) :-
 
 agent_bound_report(Node, Agent, bound(Kind, From, Peer, Time)) :-
     report_(Node, Agent, Time, bound(Kind, From, Peer)).
-
-		 /*******************************
-		 *     RATE-LIMITED WARNINGS	*
-		 *******************************/
-
-%!  bounds_warning(+Node, +Message) is det.
-%
-%   print_message(warning, Message), at most 20 times per node and
-%   minute; the first warning of the next minute is preceded by the
-%   number suppressed.
-
-bounds_warning(Node, Message) :-
-    max_warnings_per_minute(Max),
-    get_time(Now),
-    with_mutex(dfrl_bounds, warn_take(Node, Max, Now, Verdict)),
-    (   Verdict = print(Suppressed)
-    ->  (   Suppressed > 0
-        ->  print_message(warning, dfrl_bounds(suppressed(Node, Suppressed)))
-        ;   true
-        ),
-        print_message(warning, Message)
-    ;   true
-    ).
-
-warn_take(Node, Max, Now, Verdict) :-
-    Key = warnings(Node),
-    (   window_(Key, Start, Count),
-        Now - Start < 60
-    ->  (   Count < Max
-        ->  Verdict = print(0)
-        ;   Verdict = quiet
-        ),
-        C is Count + 1,
-        retractall(window_(Key, _, _)),
-        assertz(window_(Key, Start, C))
-    ;   (   window_(Key, _, Old)
-        ->  Suppressed is max(0, Old - Max)
-        ;   Suppressed = 0
-        ),
-        retractall(window_(Key, _, _)),
-        assertz(window_(Key, Now, 1)),
-        Verdict = print(Suppressed)
-    ).
-
-%   Take N units from the budget of Key this minute; Granted of them are
-%   within Limit. Every unit asked for counts.
-window_take(_, infinite, N, N) :-
-    !.
-window_take(Key, Limit, N, Granted) :-
-    get_time(Now),
-    with_mutex(dfrl_bounds,
-               (   (   window_(Key, Start, C0),
-                       Now - Start < 60
-                   ->  true
-                   ;   Start = Now,
-                       C0 = 0
-                   ),
-                   Granted is max(0, min(N, Limit - C0)),
-                   C is C0 + N,
-                   retractall(window_(Key, _, _)),
-                   assertz(window_(Key, Start, C))
-               )).
-
-		 /*******************************
-		 *          STATISTICS		*
-		 *******************************/
-
-%!  bounds_statistics(-Stats) is det.
-%
-%   Stats is a dict: `calls` (bounded calls ended), `stopped`,
-%   `resignals`, `ticks` and `monitor_cpu` (seconds of CPU the monitor
-%   thread used so far), and per node `peak_cpu` (the most CPU one call
-%   used) and `peak_stack` (the largest stack use the monitor saw in a
-%   running call), as Node-Value pairs; `slot_waits` (calls that waited
-%   for a max_running_agents slot), `budget_stops` (calls stopped over
-%   agent_memory_budget), `reclaims` (times freed memory was given
-%   back), `peak_memory` (per node, the most its agents held as
-%   agent_memory_budget counts it, seen while a budget was set).
-
-bounds_statistics(bounds{calls:Calls, stopped:Stopped, resignals:Re,
-                         ticks:Ticks, monitor_cpu:CPU,
-                         slot_waits:Waits, budget_stops:BStops,
-                         reclaims:Reclaims,
-                         peak_cpu:PeakCPU, peak_stack:PeakStack,
-                         peak_memory:PeakMem}) :-
-    stat_value(slot_waits, Waits),
-    stat_value(budget_stops, BStops),
-    stat_value(reclaims, Reclaims),
-    findall(N-V, stat_(peak_memory(N), V), PeakMem),
-    stat_value(calls, Calls),
-    stat_value(stopped, Stopped),
-    stat_value(resignals, Re),
-    stat_value(ticks, Ticks),
-    stat_value(monitor_cpu, CPU),
-    findall(N-V, stat_(peak_cpu(N), V), PeakCPU),
-    findall(N-V, stat_(peak_stack(N), V), PeakStack).
-
-stat_value(Name, V) :-
-    (   stat_(Name, V0) -> V = V0 ; V = 0 ).
-
-stat_add(Name, D) :-
-    with_mutex(dfrl_bounds_stats,
-               (   retract(stat_(Name, V0))
-               ->  V is V0 + D,
-                   assertz(stat_(Name, V))
-               ;   assertz(stat_(Name, D))
-               )).
-
-stat_set(Name, V) :-
-    with_mutex(dfrl_bounds_stats,
-               ( retractall(stat_(Name, _)),
-                 assertz(stat_(Name, V)) )).
-
-stat_max(Name, V) :-
-    with_mutex(dfrl_bounds_stats,
-               (   stat_(Name, V0), V0 >= V
-               ->  true
-               ;   retractall(stat_(Name, _)),
-                   assertz(stat_(Name, V))
-               )).
-
-		 /*******************************
-		 *           MESSAGES		*
-		 *******************************/
-
-prolog:message(dfrl_bounds(Message)) -->
-    bounds_message(Message).
-
-bounds_message(stopped(Node, Agent, Kind)) -->
-    [ 'Platform ~w: agent ~q stopped and removed: '-[Node, Agent] ],
-    bound_text(Kind).
-bounds_message(report(Node, Agent, Kind, From)) -->
-    [ 'Platform ~w: agent ~q was stopped at ~w: '-[Node, Agent, From] ],
-    bound_text(Kind).
-bounds_message(refused(Node, What, Max)) -->
-    [ 'Platform ~w: refused an arriving agent: '-[Node] ],
-    refusal_text(What, Max).
-bounds_message(unstoppable(Node, Agent, Kind, Tries)) -->
-    [ 'Platform ~w: the thread of agent ~q did not stop after ~d signals '-[Node, Agent, Tries],
-      '(bound ~q); the agent is purged'-[Kind] ].
-bounds_message(no_slot(Node, Agent, Max, Wait)) -->
-    [ 'Platform ~w: a call of agent ~q waited ~w s for one of ~w slots '-[Node, Agent, Wait, Max],
-      '(max_running_agents) and was not run' ].
-bounds_message(suppressed(Node, N)) -->
-    [ 'Platform ~w: ~D warnings about agents suppressed in the last minute'-[Node, N] ].
-
-bound_text(cpu(L)) -->
-    [ 'it used more than ~w s of CPU in one handler call (agent_cpu_limit)'-[L] ].
-bound_text(memory(L)) -->
-    [ 'its stacks outgrew ~w bytes (agent_stack_limit)'-[L] ].
-bound_text(module_memory(L)) -->
-    [ 'its own facts outgrew ~w bytes (agent_module_limit)'-[L] ].
-bound_text(memory_budget(L)) -->
-    [ 'the node\'s agents held more than ~w bytes and it held most '-[L],
-      '(agent_memory_budget)' ].
-bound_text(posts(L)) -->
-    [ 'it sent more than ~w posts in a minute (agent_post_limit)'-[L] ].
-bound_text(log(L)) -->
-    [ 'it wrote more than ~w lines in a minute (agent_log_limit); '-[L],
-      'the rest of its output was dropped' ].
-
-refusal_text(agents, Max) -->
-    [ 'it holds ~w agents (max_agents)'-[Max] ].
-refusal_text(clones, Max) -->
-    [ 'more than ~w clones arrived in a minute (clone_limit)'-[Max] ].
-refusal_text(agent_memory, Max) -->
-    [ 'its agents would hold more than ~w bytes (agent_memory_budget)'-[Max] ].
