@@ -647,10 +647,12 @@ forget(Node, Name) :-
 agent_export(Node, Name, agent(Name, Handler, Kind, Tokens, Payload,
                                Preds, Clauses, Hops)) :-
     must_exist(Node, Name),
-    agent_entry(Node, Name, Handler, Kind),
-    agent_tokens_(Node, Name, Tokens),
+    % once/1: with several agents on Node, indexing on Node alone left a
+    % choice point here (move_agent/2 then too, often)
+    once(agent_entry(Node, Name, Handler, Kind)),
+    once(agent_tokens_(Node, Name, Tokens)),
     findall(P, agent_payload_(Node, Name, P), Payload),
-    agent_hops_(Node, Name, Hops),
+    once(agent_hops_(Node, Name, Hops)),
     agent_module(Node, Name, M),
     findall(F/A,
             ( current_predicate(_, M:H),

@@ -145,6 +145,29 @@ test(move_with_stores_leaves_one_file, [cleanup((stop_all([A,B]), delete_directo
     assertion(wait_for(resting(DB, s1))),
     decisions(DA, Dec), assertion(Dec == []).     % confirmed, forgotten
 
+%   The source removes its copy of a moved agent only after writing the
+%   commit frame. Staged here by hand: A's copy of c1 left by the committed
+%   move m9 (departing, decided) and is still registered when c1 comes
+%   straight back from B. The arrival must take the name back, and A's
+%   late removal must then leave the new copy and its custody file alone.
+test(arrival_takes_back_a_name_its_departed_copy_holds,
+     [cleanup((stop_all([A,B]), delete_directory_and_contents(D)))]) :-
+    tmp_file(custody, D),
+    directory_file_path(D, a, DA),
+    start(A, [store(DA)]), start(B, []),
+    parcel_on(A, c1),
+    parcel_on(B, c1),
+    node_property(B, address(BA)),
+    agents:with_agents_locked(agents:agent_set_status(A, c1, departing(m9))),
+    custody_commit(A, m9, move(c1), BA, [k], true),
+    node_property(A, address(AA)),
+    with_node(B, agent_move(c1, AA, [])),         % refused before: the name was taken
+    assertion(wait_for(user:arrived(c1, 1))),
+    migration:remove_departed(A, c1, m9),         % A's own thread, late
+    assertion(agents:agent_exists(A, c1)),
+    assertion(\+ agents:agent_status(A, c1, departing(_))),
+    assertion(wait_for(resting(DA, c1))).
+
 test(restart_recovers_agents, [cleanup((stop_all([B2]), delete_directory_and_contents(D)))]) :-
     tmp_file(custody, D),
     start(B, [store(D)]),
