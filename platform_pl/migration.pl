@@ -137,7 +137,11 @@ agent_move(Name, Address0, Options) :-
     ;   with_agents_locked(begin_departure(Node, Name, MigId, Previous)),
         catch(transfer(Node, Name, Address, move, MigId, _Final, Options, Local),
               E,
-              ( with_agents_locked(restore(Node, Name, Previous)),
+              ( with_agents_locked(restore(Node, Name, MigId, Previous, Left)),
+                (   Left == true
+                ->  remove_departed(Node, Name, MigId)
+                ;   true
+                ),
                 throw(E)
               ))
     ).
@@ -152,10 +156,19 @@ local_node_at(Address, Local) :-
     ;   Local = none
     ).
 
-restore(Node, Name, Previous) :-
-    (   agent_status(Node, Name, departing(_))
-    ->  agent_set_status(Node, Name, Previous)
-    ;   true
+%   The move raised E: the agent runs here again as before (Left =
+%   false), unless its move was committed (an exception, a signal, came
+%   after the decision, before its copy was removed): it has left then,
+%   and never runs here again (Left = true: the copy is to be removed,
+%   outside the registry mutex, which is taken after the custody one).
+restore(Node, Name, MigId, Previous, Left) :-
+    (   departing_copy(Node, Name, MigId)
+    ->  (   custody_decision(Node, MigId, committed)
+        ->  Left = true
+        ;   agent_set_status(Node, Name, Previous),
+            Left = false
+        )
+    ;   Left = false
     ).
 
 begin_departure(Node, Name, MigId, Previous) :-

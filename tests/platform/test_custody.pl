@@ -168,6 +168,25 @@ test(arrival_takes_back_a_name_its_departed_copy_holds,
     assertion(\+ agents:agent_status(A, c1, departing(_))),
     assertion(wait_for(resting(DA, c1))).
 
+%   A move that raises after its commit decision (a signal between the
+%   decision and the removal of the copy) must not bring the copy back to
+%   life: the agent runs at its destination. Control: the same call on a
+%   move that was not committed restores the agent.
+test(committed_copy_is_never_restored, [cleanup(stop_all([A]))]) :-
+    start(A, []),
+    parcel_on(A, r8), parcel_on(A, r9),
+    agents:with_agents_locked(agents:agent_set_status(A, r9, departing(m7))),
+    custody_commit(A, m7, move(r9), 'localhost:1', [k], true),
+    agents:with_agents_locked(migration:restore(A, r9, m7, idle, Left)),
+    assertion(Left == true),
+    assertion(agents:agent_status(A, r9, departing(m7))),
+    migration:remove_departed(A, r9, m7),
+    assertion(\+ agents:agent_exists(A, r9)),
+    agents:with_agents_locked(agents:agent_set_status(A, r8, departing(m6))),
+    agents:with_agents_locked(migration:restore(A, r8, m6, idle, Left8)),
+    assertion(Left8 == false),
+    assertion(agents:agent_status(A, r8, idle)).
+
 test(restart_recovers_agents, [cleanup((stop_all([B2]), delete_directory_and_contents(D)))]) :-
     tmp_file(custody, D),
     start(B, [store(D)]),
