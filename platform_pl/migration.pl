@@ -317,6 +317,7 @@ take_back_name(Node, Record) :-
         compound_name_arity(Record, agent, 8),
         arg(1, Record, Name),
         atom(Name),
+        agent_exists(Node, Name),           % usually not: no exception raised
         departing_copy(Node, Name, MigId)
     ->  remove_departed(Node, Name, MigId)
     ;   true
