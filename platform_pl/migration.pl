@@ -43,13 +43,15 @@ custody.pl for the files and recovery):
   | 6    | on that answer: forgets committed(M)    |                                      |
 
 S removes its copy of a moved A right after the commit frame is written,
-not before: the destination starts A meanwhile (some 0.1 ms of a hop,
-measured with `dfrl bench migrate --timeline`). The copy is departing(M)
-and committed, so nothing runs it; an arrival of A at S that finds it
-there (A came straight back before S's thread got to it) removes it
-first, and whichever of the two comes second finds nothing to remove
-(remove_departed/3, under the custody mutex: the removal deletes A's
-custody file, which a new staged copy of A would have replaced).
+not before: the destination starts A meanwhile (the removal was some
+0.06 ms of a hop, measured with `dfrl bench migrate --timeline`). The
+copy is departing(M) and committed, so nothing runs it: an exception
+that reaches agent_move/3 after the decision removes it instead of
+restoring it. An arrival of A at S that finds it there (A came straight
+back before S's thread got to it) removes it first, and whichever of the
+two comes second finds nothing to remove (remove_departed/3, under the
+custody mutex: the removal deletes A's custody file, which a new staged
+copy of A would have replaced).
 
 I is S's incarnation (custody_incarnation/2). Without the staged answer
 (refusal, reply timeout, closed connection, a failure to store the
