@@ -54,9 +54,32 @@ hop_probe(Point) :-
     ;   true
     ).
 
-stamp(Point) :-
+stamp(Point0) :-
     get_time(T),
+    point_name(Point0, Point),
     assertz(stamp_(Point, T)).
+
+%   A frame read or answered is named by its request's functor
+%   (frame_read(transfer), replied(commit)): the frame itself may hold
+%   100,000 floats, and the reader of the stamps must tell a transfer
+%   from the hello of a new connection.
+point_name(frame_read(frame(_, Term)), frame_read(F)) :-
+    !,
+    request_name(Term, F).
+point_name(frame_read(_), frame_read(end_of_file)) :-
+    !.
+point_name(replied(Request), replied(F)) :-
+    !,
+    request_name(Request, F).
+point_name(Point, Point).
+
+request_name(Term, F) :-
+    (   compound(Term)
+    ->  compound_name_arity(Term, F, _)
+    ;   atom(Term)
+    ->  F = Term
+    ;   F = other
+    ).
 
 %!  hop_probe_stamps(-Stamps) is det.
 %

@@ -243,7 +243,7 @@ serve_frames(Ctx) :-
             Frame = end_of_file,
             rejected_frame(Reason)
           )),
-    hop_probe(frame_read),
+    hop_probe(frame_read(Frame)),
     (   Frame == end_of_file
     ->  true
     ;   Frame = frame(_, Term),
@@ -309,7 +309,7 @@ serve_term(Request, Ctx, Continue) :-
     (   Reply == none
     ->  true
     ;   request_reply(Out, Reply),
-        hop_probe(replied)
+        hop_probe(replied(Request))
     ),
     (   After == close
     ->  Continue = false

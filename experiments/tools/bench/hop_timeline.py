@@ -10,7 +10,8 @@ Each probe stamps a point of the hand-over in the process that passes it:
 * destination, the connection's worker: ``frame_arrived`` (its first byte is there),
   ``frame_read``, ``checked`` (the code check), ``installed``, ``staged``, ``replied``, for the
   transfer; then ``frame_arrived``, ``frame_read``, ``activated``, ``dispatched`` (to an agent
-  worker) and ``replied`` for the commit;
+  worker) and ``replied`` for the commit (the stamps of frames name their request, so the
+  hello and proof of a new connection in the same hop are left out);
 * destination, the agent's worker: ``run_started``, ``bounds_entering``, ``handler_called``
   (the hop's end as the benchmark times it).
 
@@ -34,10 +35,12 @@ SOURCE_POINTS = ("move_called", "prepared", "transfer_sent", "answer_read", "com
                  "commit_sent")
 """The points the source process stamps in the agent's thread, in their order."""
 
-#: destination points stamped once per frame: labelled with the frame's request
-PER_FRAME = ("frame_arrived", "frame_read", "replied")
-FRAMES = ("transfer", "commit")
-END = "handler_called"
+DEST_POINTS = ("frame_arrived (transfer)", "frame_read (transfer)", "checked", "installed",
+               "staged", "replied (transfer)", "frame_arrived (commit)", "frame_read (commit)",
+               "activated", "dispatched", "replied (commit)", "run_started", "bounds_entering",
+               "handler_called")
+"""The points the destination stamps, labelled (a frame's by its request: a hop may also see
+the hello and proof of a new connection, which are left out)."""
 
 
 @dataclass
@@ -67,10 +70,15 @@ def read_stamps(probe_dir: str | Path, role: str) -> list[tuple[float, str]]:
 
 def timeline(probe_dir: str | Path, warmup: int = 2,
              roles: tuple[str, str] = ("home", "peer")) -> list[Point]:
-    """The median timeline of the hops probed into ``probe_dir`` (both processes' files),
-    leaving out the first ``warmup`` hops and any hop whose end (``handler_called`` at the
-    destination) is missing, in the order of the medians (the destination's answer to the
-    commit and the start of the agent run side by side, so either may come first)."""
+    """The median timeline of the hops probed into ``probe_dir`` (both processes' files of
+    the benchmark's bounce), in the order of the medians, over the hops after the first
+    ``warmup`` that passed every point of :data:`SOURCE_POINTS` and :data:`DEST_POINTS`.
+
+    Only complete hops count, so every median is taken over the same hops and the medians
+    keep the order the points have in each hop. A hop's points are looked for until the
+    source's next ``move_called``: a thread preempted after sending may stamp its point after
+    the agent has already moved on (the destination answers the commit beside the agent's
+    start, so either may come first)."""
     files = {role: read_stamps(probe_dir, role) for role in roles}
     starts = sorted((t, role) for role, stamps in files.items()
                     for t, p in stamps if p == "move_called")
@@ -78,15 +86,14 @@ def timeline(probe_dir: str | Path, warmup: int = 2,
     for i, (t0, source) in enumerate(starts):
         if i < warmup:
             continue
-        t_next = starts[i + 1][0] if i + 1 < len(starts) else float("inf")
+        t_end = next((t for t, r in starts[i + 1:] if r == source), float("inf"))
         dest = next(r for r in roles if r != source)
-        hop = _one_hop(files[source], files[dest], t0, t_next)
+        hop = _one_hop(files[source], files[dest], t0, t_end)
         if hop is not None:
             for key, t in hop.items():
                 at.setdefault(key, []).append((t - t0) * 1000)
-    hops = max((len(v) for v in at.values()), default=0)
-    rows = sorted(((statistics.median(v), side, point, len(v))
-                   for (side, point), v in at.items() if len(v) >= hops // 2))
+    rows = sorted((statistics.median(v), side, point, len(v))
+                  for (side, point), v in at.items())
     points: list[Point] = []
     before = 0.0
     for median, side, point, n in rows:
@@ -96,27 +103,38 @@ def timeline(probe_dir: str | Path, warmup: int = 2,
 
 
 def _one_hop(source: list[tuple[float, str]], dest: list[tuple[float, str]], t0: float,
-             t_next: float) -> dict[tuple[str, str], float] | None:
-    """The points of the hop that started at ``t0`` (the next one starts at ``t_next``): the
-    source's own points and the destination's (its answer to the commit may come after the
-    handler started); None if the destination did not reach ``handler_called``."""
+             t_end: float) -> dict[tuple[str, str], float] | None:
+    """The points of the hop that started at ``t0``, looked for until ``t_end``: the source's
+    own points and the destination's; None if one is missing."""
     hop: dict[tuple[str, str], float] = {}
     for t, p in source:
-        if t0 <= t < t_next and p in SOURCE_POINTS and ("source", p) not in hop:
-            hop[("source", p)] = t
-    frames = {p: 0 for p in PER_FRAME}
-    for t, p in dest:
-        if t < t0 or t >= t_next:
-            continue
-        if p in PER_FRAME:
-            if frames[p] >= len(FRAMES):
-                continue
-            label = f"{p} ({FRAMES[frames[p]]})"
-            frames[p] += 1
-        else:
-            label = p
-        hop.setdefault(("destination", label), t)
-    return hop if ("destination", END) in hop else None
+        if t0 <= t < t_end and p in SOURCE_POINTS:
+            hop.setdefault(("source", p), t)
+    window = [(t, p) for t, p in dest if t0 <= t < t_end]
+    for i, (t, p) in enumerate(window):
+        label = _dest_label(p, window[i + 1:])
+        if label is not None:
+            hop.setdefault(("destination", label), t)
+    complete = (all(("source", p) in hop for p in SOURCE_POINTS)
+                and all(("destination", p) in hop for p in DEST_POINTS))
+    return hop if complete else None
+
+
+def _dest_label(point: str, later: list[tuple[float, str]]) -> str | None:
+    """The label of a destination point (one of :data:`DEST_POINTS`), or None. Frame points
+    carry their request (``frame_read(transfer)``, ``replied(commit)``; ``frame_arrived``
+    takes the request of the next frame read); those of other requests, and the points the
+    same process stamps as the next hop's source, are left out."""
+    if point == "frame_arrived":
+        kind = next((p[len("frame_read("):-1] for _, p in later if p.startswith("frame_read(")),
+                    None)
+        label = f"frame_arrived ({kind})"
+    else:
+        label = point
+        for name in ("frame_read", "replied"):
+            if point.startswith(name + "("):
+                label = f"{name} ({point[len(name) + 1:-1]})"
+    return label if label in DEST_POINTS else None
 
 
 @dataclass
