@@ -54,6 +54,9 @@ send(From, To, Name, Handler) :-
     link(To, Link),
     with_node(From, move_agent(Name, Link)).
 
+%   The stopped agent's thread tells its sender before it removes the
+%   agent (bounds_stopped/3 needs where it came from, which the removal
+%   forgets), so a test that saw the report waits for the removal.
 stopped(Node, Name) :-
     \+ agent_exists(Node, Name).
 
@@ -108,7 +111,7 @@ test(stack_overflow_is_memory_bound, [cleanup(cleanup([A, B]))]) :-
     node([], B),
     send(B, A, m1, bomb),
     assertion(wait_for(agent_bound_report(B, m1, bound(memory(50000000), _, _, _)))),
-    assertion(stopped(A, m1)),
+    assertion(wait_for(stopped(A, m1))),
     send(B, A, g1, good),                       % the node still takes agents
     assertion(wait_for(ran(g1))).
 
@@ -117,7 +120,7 @@ test(post_limit, [cleanup(cleanup([A, B]))]) :-
     node([], B),
     send(B, A, p1, poster),
     assertion(wait_for(agent_bound_report(B, p1, bound(posts(10), _, _, _)))),
-    assertion(stopped(A, p1)).
+    assertion(wait_for(stopped(A, p1))).
 
 test(max_agents_refused, [cleanup(cleanup([A, B]))]) :-
     node([max_agents(2)], A),
@@ -245,7 +248,7 @@ test(memory_budget_stops_biggest_call, [cleanup(cleanup([A, B]))]) :-
     node([], B),
     send(B, A, m1, bomb),
     assertion(wait_for(agent_bound_report(B, m1, bound(memory_budget(40000000), _, _, _)))),
-    assertion(stopped(A, m1)),
+    assertion(wait_for(stopped(A, m1))),
     send(B, A, g1, good),
     assertion(wait_for(ran(g1))).
 
