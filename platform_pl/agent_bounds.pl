@@ -3,7 +3,6 @@
             bounds_stopped/3,           % +Node, +Agent, +Kind
             bounds_admit/3,             % +Node, +Mode, +Agents
             bounds_arrived/3,           % +Node, +Agent, +Source
-            bounds_check_module/2,      % +Node, +Module
             bounds_install/4,           % +Node, +Record, +Status, -Name
             bounds_node_memory/2,       % +Node, -Bytes
             bounds_post/0,
@@ -704,17 +703,8 @@ module_size(Module, Size) :-
                   ),
                   Size).
 
-%!  bounds_check_module(+Node, +Module) is det.
-%
-%   Check the size of an arriving agent's Module against Node's
+%   An arriving agent's module, of Size bytes, against Node's
 %   agent_module_limit.
-%
-%   @error resource_error(agent_memory) if it is over.
-
-bounds_check_module(Node, Module) :-
-    module_size(Module, Size),
-    check_module_size(Node, Size).
-
 check_module_size(Node, Size) :-
     node_option(Node, agent_module_limit, Max),
     (   over(Size, Max)
