@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from collections.abc import Callable
 from dataclasses import asdict
@@ -34,7 +35,10 @@ def add_migrate_arguments(parser: argparse.ArgumentParser) -> None:
                              "plaintext only)")
     parser.add_argument("--rounds", type=int, default=3,
                         help="with --tls: alternating plaintext/TLS runs per size; with "
-                             "--against: alternating runs of each checkout (default 3)")
+                             "--against: alternating runs of each checkout (default 3). "
+                             "With two or more, each pair's ratio and the 95%% interval of "
+                             "their geometric mean are printed too (how far the figure moves "
+                             "with the machine)")
     parser.add_argument("--against", default=None, metavar="DIR",
                         help="compare with the checkout at DIR (e.g. a git worktree of an older "
                              "commit): its hop and this one's, run alternately")
@@ -99,9 +103,10 @@ def _migrate_against(args: argparse.Namespace) -> int:
         ratios = ("" if cmp.this_naive_ratio is None or cmp.other_naive_ratio is None else
                   f"  naive ratio {cmp.this_naive_ratio:.3f} (against "
                   f"{cmp.other_naive_ratio:.3f})")
+        pairs = "" if cmp.pairs is None else f"  run by run {cmp.pairs}"
         return (f"floats={n:>7}  this median {cmp.this_median_ms:8.3f} ms  against "
                 f"{cmp.other_median_ms:8.3f} ms  this/against {cmp.this_over_other:.3f}  "
-                f"({cmp.runs} runs each, alternating){ratios}")
+                f"({cmp.runs} runs each, alternating){ratios}{pairs}")
 
     return _per_size(args, lambda n: migrate.compare_checkouts(
         n, args.hops, args.against, args.rounds, args.warmup, args.payload), line)
@@ -115,6 +120,17 @@ def _records(direct: bool | None) -> str:
             "  records: through library(ssl)'s stream, byte by byte")
 
 
+def _tls_rounds(rounds: Any) -> str:
+    """The TLS cost round by round: its spread and the 95% interval of its mean."""
+    if rounds is None:
+        return ""
+    costs = ", ".join(f"{r - 1:+.0%}" for r in rounds.ratios)
+    if math.isnan(rounds.low):
+        return f"  rounds {costs}"
+    return (f"  rounds {costs}; mean {rounds.mean - 1:+.1%}, 95% interval "
+            f"{rounds.low - 1:+.1%} to {rounds.high - 1:+.1%}")
+
+
 def _migrate_tls(args: argparse.Namespace) -> int:
     def line(n: int, cmp: Any) -> str:
         naive = ("" if cmp.plain.naive_median_ms is None else
@@ -122,7 +138,8 @@ def _migrate_tls(args: argparse.Namespace) -> int:
                  f"ratio {cmp.plain.naive_ratio:.3f}")
         return (f"floats={n:>7}  plaintext median {cmp.plain.median_ms:8.3f} ms  "
                 f"TLS median {cmp.tls.median_ms:8.3f} ms  TLS cost {cmp.tls_cost:+.1%}  "
-                f"(hops={cmp.tls.hops} each){naive}{_records(cmp.tls.tls_direct)}")
+                f"(hops={cmp.tls.hops} each){_tls_rounds(cmp.rounds)}{naive}"
+                f"{_records(cmp.tls.tls_direct)}")
 
     return _per_size(args, lambda n: migrate.compare_tls(n, args.hops, args.tls, args.warmup,
                                                          args.rounds, args.payload), line)

@@ -26,12 +26,14 @@ comparison tells whether a change made the hop faster.
 from __future__ import annotations
 
 import json
+import math
 import statistics
 import subprocess
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from dfrl.experiments import processes
+from dfrl.experiments.science.statistics import interval
 from dfrl.experiments.tokens import env_with_tokens
 from dfrl.experiments.tools.bench.step_trace import ENV as STEP_TRACE_ENV, read_steps
 
@@ -337,6 +339,50 @@ def _read_latencies(home: subprocess.Popen, timeout: float) -> tuple[str, str]:
     return "".join(lines), err
 
 
+@dataclass(frozen=True)
+class RatioInterval:
+    """How two conditions measured in pairs of runs compare: each pair's ratio of run medians
+    (runs side by side in the same minutes, so that a change in the machine's speed hits both
+    of a pair), their geometric mean, and the 95% t interval of that mean (taken on the logs,
+    df = pairs - 1, and turned back into a ratio). With one pair, ``low`` and ``high`` are
+    NaN: one pair says nothing of the spread."""
+
+    ratios: list[float]
+    mean: float
+    low: float
+    high: float
+
+    def __str__(self) -> str:
+        if math.isnan(self.low):
+            return f"{self.mean:.3f} (1 pair)"
+        return (f"{self.mean:.3f} [{self.low:.3f}, {self.high:.3f}] "
+                f"(95% interval, {len(self.ratios)} pairs)")
+
+
+def paired_ratio(a_ms: list[float], b_ms: list[float]) -> RatioInterval:
+    """Compare run medians ``a_ms[i]`` and ``b_ms[i]`` measured as pair ``i`` (see
+    :class:`RatioInterval`).
+
+    Raises
+    ------
+    ValueError
+        Lengths differ, no pairs, or a figure that is not a positive number.
+    """
+    if len(a_ms) != len(b_ms):
+        raise ValueError(f"paired runs need equal counts, got {len(a_ms)} and {len(b_ms)}")
+    if not a_ms:
+        raise ValueError("no pairs of runs")
+    if any(not (x > 0) for x in [*a_ms, *b_ms]):   # also NaN
+        raise ValueError(f"run medians must be positive: {a_ms} against {b_ms}")
+    logs = [math.log(a) - math.log(b) for a, b in zip(a_ms, b_ms)]
+    iv = interval(logs)
+    ratios = [a / b for a, b in zip(a_ms, b_ms)]
+    if len(logs) < 2:
+        return RatioInterval(ratios, math.exp(iv.mean), float("nan"), float("nan"))
+    return RatioInterval(ratios, math.exp(iv.mean), math.exp(iv.mean - iv.half),
+                         math.exp(iv.mean + iv.half))
+
+
 @dataclass
 class TlsComparison:
     """Plaintext and TLS hops with the same payload, measured alternately (medians in ms)."""
@@ -346,6 +392,9 @@ class TlsComparison:
     tls: MigrationResult
     tls_cost: float
     """``tls.median_ms / plain.median_ms - 1`` (0.2 means TLS costs 20% more per hop)."""
+    rounds: RatioInterval | None = field(default=None)
+    """TLS against plaintext, round by round (each round runs plaintext, then TLS): how far
+    the cost moves with the machine; None for one round."""
 
 
 def compare_tls(floats: int, hops: int, tls: str | Path, warmup: int = 2,
@@ -360,7 +409,10 @@ def compare_tls(floats: int, hops: int, tls: str | Path, warmup: int = 2,
         plain.append(run(floats, hops, warmup, payload=payload))
         secure.append(run(floats, hops, warmup, tls=tls, naive=False, payload=payload))
     p, t = _pool(plain), _pool(secure)
-    return TlsComparison(floats=floats, plain=p, tls=t, tls_cost=t.median_ms / p.median_ms - 1)
+    paired = (paired_ratio([r.median_ms for r in secure], [r.median_ms for r in plain])
+              if rounds > 1 else None)
+    return TlsComparison(floats=floats, plain=p, tls=t, tls_cost=t.median_ms / p.median_ms - 1,
+                         rounds=paired)
 
 
 def _all_or_none(flags: list[bool | None]) -> bool | None:
@@ -417,6 +469,9 @@ class CheckoutComparison:
     other_payload: str = "list"
     """How each checkout's agent carried the floats: an older checkout whose benchmark
     cannot pack them carries a list (as its agents did)."""
+    pairs: RatioInterval | None = None
+    """This checkout against the other, run by run (run ``i`` of each is a pair, measured
+    one right after the other); None for one run each."""
 
 
 def other_script(root: str | Path) -> Path:
@@ -470,4 +525,5 @@ def compare_checkouts(floats: int, hops: int, other_root: str | Path, runs: int 
         this_runs_ms=this_ms, other_runs_ms=other_ms,
         this_cpu_ms_per_hop=_median_or_none([r.cpu_ms_per_hop for r in mine]),
         other_cpu_ms_per_hop=_median_or_none([r.cpu_ms_per_hop for r in theirs]),
-        this_payload=payload, other_payload=other_payload)
+        this_payload=payload, other_payload=other_payload,
+        pairs=paired_ratio(this_ms, other_ms) if runs > 1 else None)

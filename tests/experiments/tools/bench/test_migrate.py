@@ -112,11 +112,18 @@ def test_migrate_tls_prints_its_cost_beside_the_naive_hop(
     certs.init_ca(tmp_path / "ca")
     certs.make_node("bench", tmp_path / "ca", tmp_path / "node")
     assert main(["bench", "migrate", "--floats", "100", "--hops", "2", "--warmup", "0",
-                 "--rounds", "1", "--tls", str(tmp_path / "node")]) == 0
+                 "--rounds", "2", "--tls", str(tmp_path / "node")]) == 0
     out = capsys.readouterr().out
     assert "TLS cost" in out and "naive text hop" in out and "ratio" in out
     cost = float(out.split("TLS cost")[1].split("%")[0])
     assert -100 < cost < 10000
+    # two rounds: each round's cost, and the interval of their mean around that mean
+    rounds = out.split("  rounds ")[1].split(";")[0].split(", ")
+    assert len(rounds) == 2 and all(r.endswith("%") for r in rounds)
+    low, high = (float(x.rstrip("%")) for x in
+                 out.split("95% interval ")[1].split("  ")[0].split(" to "))
+    mean = float(out.split("; mean ")[1].split("%")[0])
+    assert low <= mean <= high
     assert "records: straight to the socket" in out   # setup.sh built native/tls_direct.c
     # control: a folder without the node's files is refused before any process starts
     assert main(["bench", "migrate", "--floats", "100", "--hops", "2",
@@ -143,6 +150,10 @@ def test_against_another_checkout_alternates_their_hops(tmp_path: Path) -> None:
     assert cmp.other_runs_ms == [1000.0, 1000.0]
     assert all(0 < ms < 1000 for ms in cmp.this_runs_ms)
     assert cmp.this_over_other == pytest.approx(cmp.this_median_ms / cmp.other_median_ms)
+    # run by run: run i of this checkout against run i of the other
+    assert cmp.pairs is not None
+    assert cmp.pairs.ratios == pytest.approx([a / 1000.0 for a in cmp.this_runs_ms])
+    assert cmp.pairs.low <= cmp.pairs.mean <= cmp.pairs.high
     assert cmp.this_naive_ratio is not None and cmp.other_naive_ratio is not None
     # control: a folder that is no checkout is refused before any process starts
     with pytest.raises(ValueError, match="bench_migrate.pl"):
@@ -178,3 +189,38 @@ def test_a_long_run_reports_every_hop_across_batches() -> None:
     r = migrate.run(0, 150, warmup=0, naive=False)
     assert r.hops == 150
     assert r.cpu_ms_per_hop is not None and r.cpu_ms_per_hop > 0
+
+
+def test_paired_ratio_is_a_t_interval_on_the_logs() -> None:
+    import math
+
+    from scipy import stats
+
+    tls = [1.10, 1.32, 1.21, 1.15]
+    plain = [1.00, 1.10, 1.00, 1.05]
+    r = migrate.paired_ratio(tls, plain)
+    logs = [math.log(a / b) for a, b in zip(tls, plain)]
+    m = sum(logs) / 4
+    se = math.sqrt(sum((x - m) ** 2 for x in logs) / 3 / 4)
+    half = stats.t.ppf(0.975, 3) * se
+    assert r.ratios == pytest.approx([a / b for a, b in zip(tls, plain)])
+    assert r.mean == pytest.approx(math.exp(m))
+    assert (r.low, r.high) == pytest.approx((math.exp(m - half), math.exp(m + half)))
+    # control: the other way round is the reciprocal, interval included
+    back = migrate.paired_ratio(plain, tls)
+    assert back.mean == pytest.approx(1 / r.mean)
+    assert (back.low, back.high) == pytest.approx((1 / r.high, 1 / r.low))
+    # identical pairs: no spread; one pair: no interval
+    same = migrate.paired_ratio([2.0, 4.0], [1.0, 2.0])
+    assert (same.mean, same.low, same.high) == pytest.approx((2.0, 2.0, 2.0))
+    one = migrate.paired_ratio([2.0], [1.0])
+    assert one.mean == pytest.approx(2.0) and math.isnan(one.low) and math.isnan(one.high)
+
+
+@pytest.mark.parametrize("a, b, match", [([1.0, 2.0], [1.0], "equal counts"),
+                                         ([], [], "no pairs"),
+                                         ([1.0, 0.0], [1.0, 1.0], "positive"),
+                                         ([1.0, float("nan")], [1.0, 1.0], "positive")])
+def test_paired_ratio_refuses_bad_runs(a: list[float], b: list[float], match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        migrate.paired_ratio(a, b)

@@ -1,0 +1,209 @@
+:- module(lease_book,
+          [ ckpt/9,                     % Node, Agent, Epoch, Seq, Here, Dest, Record, Resume, Expiry
+            gone/6,                     % Node, Agent, Epoch, Seq, How, Time
+            seen/3,                     % Node, Agent, Epoch
+            beat/3,                     % Node, Agent, LastBeat
+            holder_lost/4,              % Node, Agent, Epoch, Seq
+            locked/1,                   % :Goal
+            lease_s/2,                  % +Node, -Seconds
+            lease_custody/3,            % +Node, +Agent, -Custody
+            set_custody/3,              % +Node, +Agent, +Custody
+            note_epoch/3,               % +Node, +Agent, +Epoch
+            prune_gone/2,               % +Node, +Agent
+            agent_tokens/3,             % +Node, +Agent, -Tokens
+            custody_call/5,             % +Node, +Tokens, +Address, +Request, -Answer
+            quick_call/5,               % +Node, +Tokens, +Address, +Request, -Answer
+            record_state/3,             % +Record0, +State, -Record
+            replace_fact/3              % +Fact, +Clauses0, -Clauses
+          ]).
+:- use_module('../node', [node_option/3, node_property/2]).
+:- use_module('../agents', [agent_property/3]).
+:- use_module('../transport', [transport_request/4]).
+:- autoload(library(lists), [append/3, last/2]).
+:- autoload(library(apply), [exclude/3]).
+
+/** <module> What a node knows of the dFRL agent's leases, and how it asks its peers
+
+The state of the lease protocol (dfrl_lease.pl has the protocol) on the
+nodes of this process, shared by the agent's side and the holder's
+(dfrl_lease.pl) and by the threads that watch leases and renew them
+(lease_watch.pl):
+
+  - ckpt/9: the checkpoints a node holds, each with its lease's expiry;
+  - gone/6: the last 64 departures and ends of each agent a node saw;
+  - seen/3: the highest epoch of each agent a node has seen;
+  - beat/3: the agents on a node that renew their holder's lease;
+  - holder_lost/4: an agent whose holder answered that it holds none.
+
+Every change to them is made under one mutex (locked/1). An agent's own
+custody, custody(Epoch, Seq, Holder), lives in its payload
+(lease_custody/3, set_custody/3). The requests to peers carry the
+agent's tokens and wait at most a half (custody_call/5) or a quarter
+(quick_call/5) of the lease, so that a dead peer is found out within it.
+*/
+
+:- dynamic
+    ckpt/9,
+    gone/6,
+    seen/3,
+    beat/3,
+    holder_lost/4.
+
+:- multifile
+    node:node_stopping/1.
+
+:- meta_predicate locked(0).
+
+%   Flags (per process), both true by default; false gives the behaviour
+%   of before, for tests that show what these parts change:
+%   dfrl_resting_holder: heartbeats and lease_adopt/5 (false: an agent
+%   with no holder stays without one; leases run out only by time);
+%   dfrl_replace_stale: a supersede request replaces a stale copy
+%   (false: the copy is kept and the arrival stays refused).
+:- create_prolog_flag(dfrl_resting_holder, true, [type(boolean), keep(true)]).
+:- create_prolog_flag(dfrl_replace_stale, true, [type(boolean), keep(true)]).
+
+%!  locked(:Goal) is semidet.
+%
+%   Run Goal holding the lease book's mutex.
+
+locked(Goal) :-
+    with_mutex(dfrl_lease, Goal).
+
+%!  lease_s(+Node, -Seconds) is det.
+%
+%   The lease of Node's checkpoints: node option `lease_s` (default 10).
+
+lease_s(Node, L) :-
+    (   catch(node_option(Node, lease_s, L0), _, fail),
+        number(L0), L0 > 0
+    ->  L = L0
+    ;   L = 10
+    ).
+
+%!  lease_custody(+Node, +Agent, -Custody) is det.
+%
+%   Custody is custody(Epoch, Seq, Holder) of Agent on Node (read from
+%   its payload; custody(1, 0, none) for an agent without one).
+
+lease_custody(Node, Agent, Custody) :-
+    (   agent_property(Node, Agent, module(M)),
+        catch(M:dfrl_custody_of(Agent, C), _, fail)
+    ->  Custody = C
+    ;   Custody = custody(1, 0, none)
+    ).
+
+%!  set_custody(+Node, +Agent, +Custody) is det.
+
+set_custody(Node, Agent, Custody) :-
+    agent_property(Node, Agent, module(M)),
+    retractall(M:dfrl_custody_of(Agent, _)),
+    assertz(M:dfrl_custody_of(Agent, Custody)).
+
+%!  note_epoch(+Node, +Agent, +Epoch) is det.
+%
+%   Node has seen Epoch of Agent (the highest is kept).
+
+note_epoch(Node, Agent, E) :-
+    locked(( seen(Node, Agent, E0), E0 >= E
+           ->  true
+           ;   retractall(seen(Node, Agent, _)),
+               assertz(seen(Node, Agent, E))
+           )).
+
+%!  prune_gone(+Node, +Agent) is det.
+%
+%   Keep the last 64 records of departures and ends per agent and node.
+
+prune_gone(Node, Agent) :-
+    findall(T, gone(Node, Agent, _, _, _, T), Ts),
+    length(Ts, N),
+    (   N > 64
+    ->  msort(Ts, Sorted),
+        Drop is N - 64,
+        length(Old, Drop),
+        append(Old, _, Sorted),
+        last(Old, Cut),
+        locked(forall(( gone(Node, Agent, E, K, H, T), T =< Cut ),
+                      retract(gone(Node, Agent, E, K, H, T))))
+    ;   true
+    ).
+
+%!  agent_tokens(+Node, +Agent, -Tokens) is det.
+%
+%   The tokens Agent proves to peers: its own, else Node's.
+
+agent_tokens(Node, Agent, Tokens) :-
+    (   agent_property(Node, Agent, tokens(Tokens))
+    ->  true
+    ;   node_property(Node, tokens(Tokens))
+    ->  true
+    ;   Tokens = []
+    ).
+
+%!  custody_call(+Node, +Tokens, +Address, +Request, -Answer) is det.
+%
+%   One authenticated request, with timeouts bounded by half the lease;
+%   Answer is error(E) if it could not be made.
+
+custody_call(Node, Tokens, Address, Request, Answer) :-
+    probe_timeouts(Node, CT, RT),
+    catch(transport_request(Address, dfrl_custody(Request), Answer,
+                            [ connect_timeout(CT), reply_timeout(RT),
+                              tokens(Tokens), action(custody) ]),
+          E, Answer = error(E)).
+
+probe_timeouts(Node, CT, RT) :-
+    lease_s(Node, L),
+    node_option(Node, connect_timeout, CT0),
+    node_option(Node, reply_timeout, RT0),
+    CT is max(0.25, min(CT0, L/2)),
+    RT is max(0.25, min(RT0, L/2)).
+
+%!  quick_call(+Node, +Tokens, +Address, +Request, -Answer) is det.
+%
+%   As custody_call/5 within a quarter of the lease: probes and
+%   heartbeats only confirm what missing heartbeats said.
+
+quick_call(Node, Tokens, Address, Request, Answer) :-
+    quick_timeouts(Node, T),
+    catch(transport_request(Address, dfrl_custody(Request), Answer,
+                            [ connect_timeout(T), reply_timeout(T),
+                              tokens(Tokens), action(custody) ]),
+          E, Answer = error(E)).
+
+quick_timeouts(Node, T) :-
+    lease_s(Node, L),
+    node_option(Node, connect_timeout, CT0),
+    node_option(Node, reply_timeout, RT0),
+    T is max(0.25, min(min(CT0, RT0), L/4)).
+
+%!  record_state(+Record0, +State, -Record) is det.
+%
+%   Record0 with the agent's round state dfrl_state(Agent, State).
+
+record_state(Record0, State, Record) :-
+    Record0 = agent(Name, H, K, T, P, Preds, Cls0, Hops),
+    replace_fact(dfrl_state(Name, State), Cls0, Cls),
+    Record = agent(Name, H, K, T, P, Preds, Cls, Hops).
+
+%!  replace_fact(+Fact, +Clauses0, -Clauses) is det.
+%
+%   Clauses0 with the facts of Fact's predicate and first argument
+%   replaced by Fact.
+
+replace_fact(Fact, Cls0, Cls) :-
+    functor(Fact, F, A),
+    functor(Old, F, A),
+    arg(1, Fact, Name),
+    arg(1, Old, Name),
+    exclude([C]>>( C = (Old0 :- _), subsumes_term(Old, Old0) ), Cls0, Cls1),
+    Cls = [(Fact :- true)|Cls1].
+
+%   A node that stops forgets its checkpoints, as a process that dies.
+node:node_stopping(Node) :-
+    locked(( retractall(ckpt(Node, _, _, _, _, _, _, _, _)),
+             retractall(gone(Node, _, _, _, _, _)),
+             retractall(seen(Node, _, _)),
+             retractall(beat(Node, _, _)),
+             retractall(holder_lost(Node, _, _, _)) )).

@@ -1,0 +1,348 @@
+:- module(lease_watch,
+          [ ensure_watchdog/0,
+            note_beat/2,                % +Node, +Agent
+            beat_answer/5,              % +Answer, +Node, +Agent, +Epoch, +Seq
+            lease_broadcast_epoch/5     % +Node, +Tokens, +Agent, +Epoch, +Stops
+          ]).
+:- use_module('../node', [node_property/2, local_node/1]).
+:- use_module('../agents',
+              [ agent_exists/2, agent_install/4, agent_execute/4, agent_status/3 ]).
+:- use_module('../transport', [address_normalize/2]).
+:- use_module(lease_book).
+:- autoload(library(lists), [member/2, min_list/2]).
+:- autoload(library(apply), [exclude/3]).
+:- autoload(library(debug), [debug/3]).
+
+/** <module> The threads of the dFRL agent's leases: the watchdog and the heartbeat
+
+Two threads per process, each running only while it has work (steps 4
+and 5 of the protocol in dfrl_lease.pl):
+
+  - the *watchdog*, while a node of this process holds checkpoints:
+    every tick it takes the checkpoints whose lease expired, probes the
+    stop the agent went to, asks the other stops of its itinerary if
+    that one does not know it, and resurrects the agent with a new epoch
+    when none knows of a later hop;
+  - the *heartbeat*, while agents are on nodes of this process: every
+    third of the lease it renews each one's holder (progress(alive)).
+
+Both are stopped and joined at halt.
+*/
+
+:- dynamic
+    watchdog/1,                 % ThreadId
+    watchdog_exited/1,          % ThreadId, to be joined
+    heart/1,                    % ThreadId of the heartbeat thread
+    heart_exited/1.             % ThreadId, to be joined
+
+		 /*******************************
+		 *           WATCHDOG		*
+		 *******************************/
+
+%!  ensure_watchdog is det.
+%
+%   One thread per process, while there are checkpoints: every tick it
+%   handles the checkpoints whose lease expired. It ends when there are
+%   none (the next one to start joins it) or when told to stop (at halt).
+%   Called holding the lock.
+ensure_watchdog :-
+    (   watchdog(_)
+    ->  true
+    ;   forall(retract(watchdog_exited(Old)), catch(thread_join(Old, _), _, true)),
+        thread_create(watch, Tid, []),
+        assertz(watchdog(Tid))
+    ).
+
+watch :-
+    catch(watch_loop, E, true),
+    thread_self(Me),
+    locked(( retractall(watchdog(Me)),
+             assertz(watchdog_exited(Me)) )),
+    (   var(E) -> true ; E == stop -> true ; print_message(warning, E) ).
+
+watch_loop :-
+    (   locked(( ckpt(_, _, _, _, _, _, _, _, _)
+               ->  true
+               ;   thread_self(Me), retractall(watchdog(Me)), fail
+               ))
+    ->  tick(T),
+        thread_self(Me),
+        (   thread_get_message(Me, stop, [timeout(T)])
+        ->  throw(stop)
+        ;   true                        % the timeout: a tick
+        ),
+        get_time(Now),
+        findall(ckpt(N, A, E, K), ( ckpt(N, A, E, K, _, _, _, _, X), X < Now ),
+                Due),
+        forall(member(C, Due),
+               catch(expired(C), Err, print_message(warning, Err))),
+        watch_loop
+    ;   true
+    ).
+
+tick(T) :-
+    findall(L, ( ckpt(N, _, _, _, _, _, _, _, _), lease_s(N, L) ), Ls),
+    (   Ls == [] -> T = 0.1 ; min_list(Ls, Min), T is max(0.02, min(0.5, Min/5)) ).
+
+expired(ckpt(Node, Agent, E, K)) :-
+    (   ckpt(Node, Agent, E, K, Here, Dest, Record, Resume, _)
+    ->  (   \+ local_node(Node)
+        ->  drop(Node, Agent, E, K, node_stopped)
+        ;   seen(Node, Agent, E2), E2 > E
+        ->  drop(Node, Agent, E, K, superseded(E2))
+        ;   agent_exists(Node, Agent)
+        ->  drop(Node, Agent, E, K, back_here)
+        ;   probe(Node, Record, Dest, Agent, E, K, 2, Answer),
+            judge(Answer, Dest, Node, Agent, E, K, Here, Record, Resume)
+        )
+    ;   true
+    ).
+
+judge(here(E1, _), _, Node, Agent, E, K, _, _, _) :-
+    E1 =< E,
+    !,
+    renew(Node, Agent, E, K).
+judge(staged(E1, _), _, Node, Agent, E, K, _, _, _) :-
+    E1 =< E,
+    !,
+    renew(Node, Agent, E, K).
+judge(unknown, Dest, Node, Agent, E, K, Here, Record, Resume) :-
+    !,
+    others_know(Node, Dest, Here, Record, Agent, E, K, Known),
+    (   Known = known(Why)
+    ->  drop(Node, Agent, E, K, Why)
+    ;   Known = max_epoch(Max),
+        resurrect(Node, Agent, E, K, Max, Here, Dest, Record, Resume, lost)
+    ).
+judge(error(Why), Dest, Node, Agent, E, K, Here, Record, Resume) :-
+    !,
+    others_know(Node, Dest, Here, Record, Agent, E, K, Known),
+    (   Known = known(Reason)
+    ->  drop(Node, Agent, E, K, Reason)
+    ;   Known = max_epoch(Max),
+        resurrect(Node, Agent, E, K, Max, Here, Dest, Record, Resume,
+                  unreachable(Why))
+    ).
+judge(Answer, _, Node, Agent, E, K, _, _, _) :-
+    (   Answer = superseded(E2) -> note_epoch(Node, Agent, E2) ; true ),
+    drop(Node, Agent, E, K, Answer).
+
+renew(Node, Agent, E, K) :-
+    lease_s(Node, L),
+    get_time(Now),
+    Expiry is Now + L,
+    locked(( retract(ckpt(Node, Agent, E, K, H, D, R, S, _))
+           ->  assertz(ckpt(Node, Agent, E, K, H, D, R, S, Expiry))
+           ;   true
+           )).
+
+drop(Node, Agent, E, K, Why) :-
+    debug(dfrl(lease), 'drop checkpoint ~w/~w/~w on ~w: ~p', [Agent, E, K, Node, Why]),
+    get_time(Now),
+    locked(( retract(ckpt(Node, Agent, E, K, _, _, _, _, _))
+           ->  assertz(gone(Node, Agent, E, K, released(dropped), Now))
+           ;   true
+           )),
+    prune_gone(Node, Agent).
+
+probe(Node, Record, Dest, Agent, E, K, Tries, Answer) :-
+    record_tokens(Record, Node, Tokens),
+    quick_call(Node, Tokens, Dest, probe(Agent, E, K), A0),
+    (   A0 = error(_), Tries > 1
+    ->  sleep(0.1),
+        T1 is Tries - 1,
+        probe(Node, Record, Dest, Agent, E, K, T1, Answer)
+    ;   Answer = A0
+    ).
+
+%   Does any other stop know of a later hop or a higher epoch?
+others_know(Node, Dest, Here, Record, Agent, E, K, Known) :-
+    record_stops(Record, Agent, Stops0),
+    exclude([S]>>( same_address(S, Dest) ; same_address(S, Here) ), Stops0, Stops),
+    record_tokens(Record, Node, Tokens),
+    others_know_(Stops, Node, Tokens, Agent, E, K, E, Known).
+
+others_know_([], _, _, _, _, _, Max, max_epoch(Max)).
+others_know_([S|Ss], Node, Tokens, Agent, E, K, Max0, Known) :-
+    quick_call(Node, Tokens, S, probe(Agent, E, K), Answer),
+    (   Answer = superseded(E2)
+    ->  Known = known(superseded(S, E2))
+    ;   Answer = here(E1, _), E1 >= E
+    ->  Known = known(here(S))          % staged(_, _): arrived, never ran: not known
+    ;   ( Answer = left(_, K1) ; Answer = finished(_, K1) ), K1 > K
+    ->  Known = known(Answer)
+    ;   others_know_(Ss, Node, Tokens, Agent, E, K, Max0, Known)
+    ).
+
+%   The tokens to prove for the agent: those in its checkpoint, or the
+%   node's (a record may carry none).
+record_tokens(Record, Node, Tokens) :-
+    arg(4, Record, Tokens0),
+    (   Tokens0 \== []
+    ->  Tokens = Tokens0
+    ;   agent_tokens(Node, none, Tokens)
+    ).
+
+record_stops(agent(_, _, _, _, _, _, Clauses, _), Agent, Stops) :-
+    (   member((dfrl_plan(Agent, plan(It, _, _, _, _)) :- _), Clauses)
+    ->  findall(H:P, member(stop(H, P, _), It), Stops0),
+        sort(Stops0, Stops)
+    ;   Stops = []
+    ).
+
+same_address(A, B) :-
+    catch(( address_normalize(A, H1:P1),
+            address_normalize(B, H2:P2) ), _, fail),
+    P1 =:= P2,
+    (   H1 == H2
+    ->  true
+    ;   loopback(H1), loopback(H2)
+    ).
+
+loopback(localhost).
+loopback('127.0.0.1').
+
+%   Install the agent at the holder with a new epoch and start it with
+%   resurrected(OldEpoch, Dead); tell the other stops.
+resurrect(Node, Agent, E, K, MaxSeen, Here, Dest, Record0, Resume, Why) :-
+    locked(retract(ckpt(Node, Agent, E, K, _, _, _, _, _))),
+    (   seen(Node, Agent, Seen) -> true ; Seen = E ),
+    E1 is max(max(E, MaxSeen), Seen) + 1,
+    Resume = resume(State, _, _),
+    record_state(Record0, State, Record1),
+    Record1 = agent(Name, H, Kind, T, P, Preds, Cls0, Hops),
+    replace_fact(dfrl_custody_of(Name, custody(E1, K, none)), Cls0, Cls1),
+    Record = agent(Name, H, Kind, T, P, Preds, Cls1, Hops),
+    note_epoch(Node, Agent, E1),
+    agent_install(Node, Record, idle, Agent),
+    print_message(warning, format("dfrl: ~w lost at ~w (~p); resurrected at ~w with epoch ~w",
+                                  [Agent, Dest, Why, Node, E1])),
+    % The other stops hear of the new epoch before the agent can move to
+    % one of them (a copy staged there by the dead stop is discarded).
+    record_stops(Record, Agent, Stops0),
+    exclude([S]>>( same_address(S, Dest) ; same_address(S, Here) ), Stops0, Stops),
+    record_tokens(Record, Node, Tokens),
+    lease_broadcast_epoch(Node, Tokens, Agent, E1, Stops),
+    node_property(Node, link(Link)),
+    agent_execute(Node, Agent, Link, resurrected(E1, Here, Dest, Resume)).
+
+%!  lease_broadcast_epoch(+Node, +Tokens, +Agent, +Epoch, +Stops) is det.
+%
+%   Tell each of Stops (Host:Port addresses) that Agent now has Epoch,
+%   proving Tokens (the agent's). Unreachable stops are skipped.
+
+lease_broadcast_epoch(Node, Tokens, Agent, Epoch, Stops) :-
+    forall(member(S, Stops),
+           custody_call(Node, Tokens, S, epoch(Agent, Epoch), _)).
+
+		 /*******************************
+		 *           HEARTBEAT		*
+		 *******************************/
+
+%   Every agent that started on a node of this process (lease_arrived/3)
+%   renews its holder's lease from here, in a thread of its own, every
+%   third of the lease: progress(alive) to the holder. So the lease of a
+%   checkpoint runs out only when the node the agent is on has not
+%   answered for a whole lease (killed, stopped, cut off), whatever the
+%   agent does meanwhile (rests, waits for a robot). The thread runs while
+%   there are such agents; an agent that left or ended is dropped.
+note_beat(Node, Agent) :-
+    (   beat(Node, Agent, _)
+    ->  true
+    ;   current_prolog_flag(dfrl_resting_holder, false)
+    ->  true
+    ;   locked(( beat(Node, Agent, _)
+               ->  true
+               ;   assertz(beat(Node, Agent, 0)),
+                   ensure_heart
+               ))
+    ).
+
+ensure_heart :-
+    (   heart(_)
+    ->  true
+    ;   forall(retract(heart_exited(Old)), catch(thread_join(Old, _), _, true)),
+        thread_create(heart, Tid, []),
+        assertz(heart(Tid))
+    ).
+
+heart :-
+    catch(heart_loop, E, true),
+    thread_self(Me),
+    locked(( retractall(heart(Me)),
+             assertz(heart_exited(Me)) )),
+    (   var(E) -> true ; E == stop -> true ; print_message(warning, E) ).
+
+heart_loop :-
+    (   locked(( beat(_, _, _)
+               ->  true
+               ;   thread_self(Me), retractall(heart(Me)), fail
+               ))
+    ->  beat_tick(T),
+        thread_self(Me),
+        (   thread_get_message(Me, stop, [timeout(T)])
+        ->  throw(stop)
+        ;   true
+        ),
+        findall(N-A, beat(N, A, _), Beats),
+        forall(member(N-A, Beats),
+               catch(beat_once(N, A), Err, print_message(warning, Err))),
+        heart_loop
+    ;   true
+    ).
+
+beat_tick(T) :-
+    findall(L, ( beat(N, _, _), lease_s(N, L) ), Ls),
+    (   Ls == [] -> T = 0.1 ; min_list(Ls, Min), T is max(0.02, min(1.0, Min/8)) ).
+
+beat_once(Node, Agent) :-
+    (   \+ local_node(Node)
+    ->  locked(retractall(beat(Node, Agent, _)))
+    ;   \+ agent_exists(Node, Agent)
+    ->  locked(retractall(beat(Node, Agent, _)))
+    ;   beat(Node, Agent, Last),
+        lease_s(Node, L),
+        get_time(Now),
+        Now - Last >= L/3,
+        agent_status(Node, Agent, Status),
+        \+ Status = staged(_),
+        \+ Status = in_doubt(_, _),
+        \+ Status = departing(_),
+        lease_custody(Node, Agent, custody(E, K, Holder)),
+        Holder \== none,
+        \+ ckpt(Node, Agent, E, K, _, _, _, _, _)    % held here: it is leaving
+    ->  agent_tokens(Node, Agent, Tokens),
+        quick_call(Node, Tokens, Holder, progress(Agent, E, K, alive), Answer),
+        locked(( retract(beat(Node, Agent, _))
+               ->  assertz(beat(Node, Agent, Now))
+               ;   true
+               )),
+        beat_answer(Answer, Node, Agent, E, K)
+    ;   true
+    ).
+
+%   superseded: the agent retires at its next check (it looks at the
+%   epochs this node has seen); unknown: its holder has no checkpoint of
+%   it (restarted, or dropped it), so the agent finds another one at its
+%   next round start (lease_needs_holder/2).
+beat_answer(superseded(E2), Node, Agent, _, _) :-
+    !,
+    note_epoch(Node, Agent, E2).
+beat_answer(unknown, Node, Agent, E, K) :-
+    !,
+    locked(( holder_lost(Node, Agent, E, K)
+           ->  true
+           ;   retractall(holder_lost(Node, Agent, _, _)),
+               assertz(holder_lost(Node, Agent, E, K))
+           )).
+beat_answer(_, _, _, _, _).
+
+:- at_halt(stop_watchdog).
+
+stop_watchdog :-
+    forall(watchdog(T), catch(thread_send_message(T, stop), _, true)),
+    forall(heart(T), catch(thread_send_message(T, stop), _, true)),
+    forall(watchdog(T), catch(thread_join(T, _), _, true)),
+    forall(heart(T), catch(thread_join(T, _), _, true)),
+    forall(retract(watchdog_exited(T)), catch(thread_join(T, _), _, true)),
+    forall(retract(heart_exited(T)), catch(thread_join(T, _), _, true)).
