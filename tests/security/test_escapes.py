@@ -70,6 +70,12 @@ FAMILIES = {
     # the benchmark's hop probes: their stamps are no agent's to take (or forge)
     "hop_probe": ("hop_probe:hop_probe_stamps(S), assertz(loot(guid, S)), shell('touch {m}')",
                   "hop_probe:hop_probe_stamps/1"),
+    # the dFRL agent's lease book (a node that hosts the dFRL agent has it loaded): a forged
+    # checkpoint would be resurrected unchecked, and a forged epoch retires the real agent
+    "lease_checkpoint": ("assertz(lease_book:ckpt(n, a, 9, 9, h, d, r, s, 0)), "
+                         "shell('touch {m}')", "assertz("),
+    "lease_epoch": ("lease_book:note_epoch(n, dfrl, 99), shell('touch {m}')",
+                    "lease_book:note_epoch/3"),
 }
 ESCAPES.update(FAMILIES)
 
@@ -123,7 +129,8 @@ def _victim(procs: list[Proc], tmp_path: Path, options: str) -> tuple[Proc, int]
     extra.write_text(":- dynamic user:sit/3, user:secret/2.\n"
                      "user:sit(guid, _, _).\nuser:secret(guid, 'payload of sitter').\n"
                      ":- initialization((node:current_node(_) -> true ; true)).\n")
-    return hostile_node.start(procs, tmp_path, options, consult=(extra,))
+    return hostile_node.start(procs, tmp_path, options,
+                              consult=(PLATFORM_DIR / "dfrl_agent" / "dfrl_agent.pl", extra))
 
 
 def _check_refusals(out: str, markers: dict[str, Path]) -> None:
