@@ -30,10 +30,39 @@ Both are stopped and joined at halt.
 */
 
 :- dynamic
-    watchdog/1,                 % ThreadId
-    watchdog_exited/1,          % ThreadId, to be joined
-    heart/1,                    % ThreadId of the heartbeat thread
-    heart_exited/1.             % ThreadId, to be joined
+    running_/2,                 % Role (watchdog or heart), ThreadId
+    exited_/2.                  % Role, ThreadId: ended, to be joined
+
+%   Start the thread of Role (watchdog or heart) unless it runs; one that
+%   ended is joined first. Called holding the lock: a thread ends, when
+%   it finds no more work, under the same lock.
+ensure_thread(Role) :-
+    (   running_(Role, _)
+    ->  true
+    ;   forall(retract(exited_(Role, Old)), catch(thread_join(Old, _), _, true)),
+        thread_create(run_thread(Role), Tid, []),
+        assertz(running_(Role, Tid))
+    ).
+
+run_thread(Role) :-
+    thread_loop(Role, Loop),
+    catch(Loop, E, true),
+    thread_self(Me),
+    locked(( retractall(running_(Role, Me)),
+             assertz(exited_(Role, Me)) )),
+    (   var(E) -> true ; E == stop -> true ; print_message(warning, E) ).
+
+thread_loop(watchdog, watch_loop).
+thread_loop(heart, heart_loop).
+
+%   The loop of Role goes on while Work (a goal) finds some; when it
+%   finds none, the thread is no longer Role's (the next to need it
+%   starts a new one).
+has_work(Role, Work) :-
+    locked(( Work
+           ->  true
+           ;   thread_self(Me), retractall(running_(Role, Me)), fail
+           )).
 
 		 /*******************************
 		 *           WATCHDOG		*
@@ -46,25 +75,10 @@ Both are stopped and joined at halt.
 %   none (the next one to start joins it) or when told to stop (at halt).
 %   Called holding the lock.
 ensure_watchdog :-
-    (   watchdog(_)
-    ->  true
-    ;   forall(retract(watchdog_exited(Old)), catch(thread_join(Old, _), _, true)),
-        thread_create(watch, Tid, []),
-        assertz(watchdog(Tid))
-    ).
-
-watch :-
-    catch(watch_loop, E, true),
-    thread_self(Me),
-    locked(( retractall(watchdog(Me)),
-             assertz(watchdog_exited(Me)) )),
-    (   var(E) -> true ; E == stop -> true ; print_message(warning, E) ).
+    ensure_thread(watchdog).
 
 watch_loop :-
-    (   locked(( ckpt(_, _, _, _, _, _, _, _, _)
-               ->  true
-               ;   thread_self(Me), retractall(watchdog(Me)), fail
-               ))
+    (   has_work(watchdog, ckpt(_, _, _, _, _, _, _, _, _))
     ->  tick(T),
         thread_self(Me),
         (   thread_get_message(Me, stop, [timeout(T)])
@@ -254,30 +268,12 @@ note_beat(Node, Agent) :-
     ;   locked(( beat(Node, Agent, _)
                ->  true
                ;   assertz(beat(Node, Agent, 0)),
-                   ensure_heart
+                   ensure_thread(heart)
                ))
     ).
-
-ensure_heart :-
-    (   heart(_)
-    ->  true
-    ;   forall(retract(heart_exited(Old)), catch(thread_join(Old, _), _, true)),
-        thread_create(heart, Tid, []),
-        assertz(heart(Tid))
-    ).
-
-heart :-
-    catch(heart_loop, E, true),
-    thread_self(Me),
-    locked(( retractall(heart(Me)),
-             assertz(heart_exited(Me)) )),
-    (   var(E) -> true ; E == stop -> true ; print_message(warning, E) ).
 
 heart_loop :-
-    (   locked(( beat(_, _, _)
-               ->  true
-               ;   thread_self(Me), retractall(heart(Me)), fail
-               ))
+    (   has_work(heart, beat(_, _, _))
     ->  beat_tick(T),
         thread_self(Me),
         (   thread_get_message(Me, stop, [timeout(T)])
@@ -337,12 +333,9 @@ beat_answer(unknown, Node, Agent, E, K) :-
            )).
 beat_answer(_, _, _, _, _).
 
-:- at_halt(stop_watchdog).
+:- at_halt(stop_threads).
 
-stop_watchdog :-
-    forall(watchdog(T), catch(thread_send_message(T, stop), _, true)),
-    forall(heart(T), catch(thread_send_message(T, stop), _, true)),
-    forall(watchdog(T), catch(thread_join(T, _), _, true)),
-    forall(heart(T), catch(thread_join(T, _), _, true)),
-    forall(retract(watchdog_exited(T)), catch(thread_join(T, _), _, true)),
-    forall(retract(heart_exited(T)), catch(thread_join(T, _), _, true)).
+stop_threads :-
+    forall(running_(_, T), catch(thread_send_message(T, stop), _, true)),
+    forall(running_(_, T), catch(thread_join(T, _), _, true)),
+    forall(retract(exited_(_, T)), catch(thread_join(T, _), _, true)).
