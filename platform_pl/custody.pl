@@ -4,7 +4,7 @@
             custody_agents/2,           % +Node, -Agents
             custody_incarnation/2,      % +Node, -Incarnation
             custody_decide/3,           % +Node, +MigId, +Decision
-            custody_commit/6,           % +Node, +MigId, +Name, +Dest, +Tokens, :OnCommit
+            custody_commit/5,           % +Node, +MigId, +What, +Dest, +Tokens
             custody_decision/3,         % ?Node, ?MigId, ?Decision
             custody_unacked/6,          % ?Node, ?MigId, ?Dest, ?Tokens, ?Time, ?Name
             custody_acked/2,            % +Node, +MigId
@@ -26,8 +26,7 @@
 :- autoload(library(error), [must_be/2]).
 
 :- meta_predicate
-    with_custody(+, 0),
-    custody_commit(+, +, +, +, +, 0).
+    with_custody(+, 0).
 
 /** <module> Custody of agents: what a node holds and what it decided, durably
 
@@ -247,7 +246,7 @@ custody_incarnation(Node, Inc) :-
 %!  custody_decide(+Node, +MigId, +Decision) is det.
 %
 %   Record a decision in memory (aborted; or committed for a clone-free
-%   test). Durable commits go through custody_commit/6.
+%   test). Durable commits go through custody_commit/5.
 
 custody_decide(Node, MigId, Decision) :-
     must_be(oneof([committed, aborted]), Decision),
@@ -268,21 +267,20 @@ prune_decisions(Now) :-
              \+ commit_info_(N, I, _, _, _, _) ),
            retract(decision_(N, I, D, T))).
 
-%!  custody_commit(+Node, +MigId, +What, +Dest, +Tokens, :OnCommit) is det.
+%!  custody_commit(+Node, +MigId, +What, +Dest, +Tokens) is det.
 %
-%   Decide committed for MigId, durably if Node has a store, then run
-%   OnCommit (removing the source's copy of a moved agent) in the same
-%   critical section. What is move(Name) (the copy of Name held here
-%   leaves) or clone(Name) (Name stays). The decision is kept until
-%   custody_acked/2.
+%   Decide committed for MigId, durably if Node has a store. What is
+%   move(Name) (the copy of Name held here leaves: migration.pl removes
+%   it once the commit frame is written) or clone(Name) (Name stays).
+%   The decision is kept until custody_acked/2.
 %
 %   @error the file system's error if the decision cannot be written;
 %   then nothing was decided.
 
-custody_commit(Node, MigId, Name, Dest, Tokens, OnCommit) :-
-    with_custody(Node, commit_(Node, MigId, Name, Dest, Tokens, OnCommit)).
+custody_commit(Node, MigId, What, Dest, Tokens) :-
+    with_custody(Node, commit_(Node, MigId, What, Dest, Tokens)).
 
-commit_(Node, MigId, What, Dest, Tokens, OnCommit) :-
+commit_(Node, MigId, What, Dest, Tokens) :-
     get_time(Now),
     (   What = move(Name),
         via_(Node, Name, Via0)
@@ -296,8 +294,7 @@ commit_(Node, MigId, What, Dest, Tokens, OnCommit) :-
     ;   true
     ),
     assertz(decision_(Node, MigId, committed, Now)),
-    assertz(commit_info_(Node, MigId, Name, Dest, Tokens, Via)),
-    call(OnCommit).
+    assertz(commit_info_(Node, MigId, Name, Dest, Tokens, Via)).
 
 %!  custody_decision(?Node, ?MigId, ?Decision) is nondet.
 

@@ -11,8 +11,9 @@ hop_probe(Point). When the process that loads the platform has the
 environment variable DFRL_HOP_PROBE set (to anything but `0`), each
 such goal is compiled to a call that records Point and the time
 (get_time/1; a frame read or answered is recorded by its request's
-name); otherwise it is compiled to `true` and costs nothing. `dfrl bench migrate --timeline` sets the variable in
-its two node processes and reads the stamps (hop_probe_stamps/1, called
+name); otherwise it is compiled to `true` and costs nothing.
+`dfrl bench migrate --timeline` sets the variable in its two node
+processes and reads the stamps (hop_probe_stamps/1, called
 by bench_migrate.pl at the end) to show where a hop's time goes, at a
 cost of one assertz/1 a point (some 2 us) instead of the some 10 us a
 call of step_trace.pl's wrappers (library(prolog_wrap)) costs.

@@ -283,7 +283,7 @@ hand_over(Node, Conn, Address, Mode, MigId, Name, Record, Tokens, Final,
         ;   What = clone(Final),
             Leave = true
         ),
-        catch(custody_commit(Node, MigId, What, Address, Tokens, true),
+        catch(custody_commit(Node, MigId, What, Address, Tokens),
               E2, ( abort(Node, MigId), throw(E2) )),
         hop_probe(committed),
         retractall(pending_(Node, MigId)),

@@ -27,7 +27,7 @@ round's time.
 
 %   traced(Module:Head, Step): the steps timed, Step a term of Head's
 %   arguments (bound after the call). No meta-predicate: its goal would
-%   run in this module (hence custody's commit_/6, not custody_commit/6).
+%   run in this module.
 %   The hop: leaving, the hand-over, arriving.
 traced(agents:agent_export(_, _, _), export).
 traced(transport:transport_acquire(_, _, _, _), acquire).
@@ -41,7 +41,7 @@ traced(agents:agent_install(_, _, _, _, _), install).
 traced(agent_bounds:bounds_install(_, _, _, _), bounds_install).
 traced(agent_bounds:module_size(_, _), module_size).
 traced(custody:custody_stage(_, _, _, _, _, _), custody_stage).
-traced(custody:commit_(_, _, _, _, _, _), custody_commit).    % not the meta-predicate: a wrapper would lose its module argument
+traced(custody:custody_commit(_, _, _, _, _), custody_commit).
 traced(agents:agent_remove(_, _), remove).
 traced(migration:receive_transfer(_, _, _, _, _, _, _, _, _), receive_transfer).
 traced(migration:activate(_, _, _), activate).
