@@ -29,11 +29,11 @@ import json
 import math
 import statistics
 import subprocess
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from dfrl.experiments import processes
-from dfrl.experiments.science.statistics import interval
+from dfrl.experiments.science.statistics import paired
 from dfrl.experiments.tokens import env_with_tokens
 from dfrl.experiments.tools.bench.step_trace import ENV as STEP_TRACE_ENV, read_steps
 
@@ -374,13 +374,9 @@ def paired_ratio(a_ms: list[float], b_ms: list[float]) -> RatioInterval:
         raise ValueError("no pairs of runs")
     if any(not (x > 0) for x in [*a_ms, *b_ms]):   # also NaN
         raise ValueError(f"run medians must be positive: {a_ms} against {b_ms}")
-    logs = [math.log(a) - math.log(b) for a, b in zip(a_ms, b_ms)]
-    iv = interval(logs)
-    ratios = [a / b for a, b in zip(a_ms, b_ms)]
-    if len(logs) < 2:
-        return RatioInterval(ratios, math.exp(iv.mean), float("nan"), float("nan"))
-    return RatioInterval(ratios, math.exp(iv.mean), math.exp(iv.mean - iv.half),
-                         math.exp(iv.mean + iv.half))
+    iv = paired([math.log(a) for a in a_ms], [math.log(b) for b in b_ms])   # half: NaN for 1
+    return RatioInterval([a / b for a, b in zip(a_ms, b_ms)], math.exp(iv.mean),
+                         math.exp(iv.mean - iv.half), math.exp(iv.mean + iv.half))
 
 
 @dataclass
@@ -392,7 +388,7 @@ class TlsComparison:
     tls: MigrationResult
     tls_cost: float
     """``tls.median_ms / plain.median_ms - 1`` (0.2 means TLS costs 20% more per hop)."""
-    rounds: RatioInterval | None = field(default=None)
+    rounds: RatioInterval | None = None
     """TLS against plaintext, round by round (each round runs plaintext, then TLS): how far
     the cost moves with the machine; None for one round."""
 
