@@ -170,11 +170,12 @@ def test_control_escapes_run_when_trusted(tmp_path: Path, procs: list[Proc]) -> 
     markers: the escapes are live, and the refusals above are what kept them from running."""
     markers = {n: tmp_path / f"marker_{n}" for n in ESCAPES if n in
                ("attr_hook", "attr_hook_findall", "message_goal", "format_portray_goal",
-                        "dollar_call")}
+                        "dollar_call", "lease_checkpoint", "lease_epoch")}
     clauses = "\n".join(f"{n}(guid, _, main) :- {ESCAPES[n][0].format(m=markers[n])}."
                         for n in markers)
     prog = f"""
     :- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
+    :- use_module({str(PLATFORM_DIR / 'dfrl_agent' / 'dfrl_agent.pl')!r}).
     :- dynamic {", ".join(f"{n}/3" for n in markers)}.
     {clauses}
     main :- node_start(localhost:0, _, [token({_prolog_atom(TOKEN)})]),
