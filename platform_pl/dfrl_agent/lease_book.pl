@@ -147,18 +147,12 @@ agent_tokens(Node, Agent, Tokens) :-
 %   Answer is error(E) if it could not be made.
 
 custody_call(Node, Tokens, Address, Request, Answer) :-
-    probe_timeouts(Node, CT, RT),
-    catch(transport_request(Address, dfrl_custody(Request), Answer,
-                            [ connect_timeout(CT), reply_timeout(RT),
-                              tokens(Tokens), action(custody) ]),
-          E, Answer = error(E)).
-
-probe_timeouts(Node, CT, RT) :-
     lease_s(Node, L),
     node_option(Node, connect_timeout, CT0),
     node_option(Node, reply_timeout, RT0),
     CT is max(0.25, min(CT0, L/2)),
-    RT is max(0.25, min(RT0, L/2)).
+    RT is max(0.25, min(RT0, L/2)),
+    request(Address, Tokens, Request, CT, RT, Answer).
 
 %!  quick_call(+Node, +Tokens, +Address, +Request, -Answer) is det.
 %
@@ -166,17 +160,17 @@ probe_timeouts(Node, CT, RT) :-
 %   heartbeats only confirm what missing heartbeats said.
 
 quick_call(Node, Tokens, Address, Request, Answer) :-
-    quick_timeouts(Node, T),
-    catch(transport_request(Address, dfrl_custody(Request), Answer,
-                            [ connect_timeout(T), reply_timeout(T),
-                              tokens(Tokens), action(custody) ]),
-          E, Answer = error(E)).
-
-quick_timeouts(Node, T) :-
     lease_s(Node, L),
     node_option(Node, connect_timeout, CT0),
     node_option(Node, reply_timeout, RT0),
-    T is max(0.25, min(min(CT0, RT0), L/4)).
+    T is max(0.25, min(min(CT0, RT0), L/4)),
+    request(Address, Tokens, Request, T, T, Answer).
+
+request(Address, Tokens, Request, CT, RT, Answer) :-
+    catch(transport_request(Address, dfrl_custody(Request), Answer,
+                            [ connect_timeout(CT), reply_timeout(RT),
+                              tokens(Tokens), action(custody) ]),
+          E, Answer = error(E)).
 
 %!  record_state(+Record0, +State, -Record) is det.
 %
