@@ -112,6 +112,50 @@ def test_refuses_unauthenticated_and_bad_requests_and_stays_up(service: Service)
                                                                                 service.port]
 
 
+def _rss_kib(pid: int) -> int:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1])
+    raise AssertionError("no VmRSS")
+
+
+def test_arenas_are_names_of_its_own_never_paths(service: Service, tmp_path: Path) -> None:
+    """A token holder names arenas, never files of the host: /etc/passwd, /dev/zero, ``../``,
+    a missing path and a link out of the service's arena folder get one message that does not
+    depend on the file (no oracle), the service stays up and small; the service's own
+    ``arenas/NAME.json`` and a built-in name are accepted (the controls)."""
+    workdir = Path(service.proc.args[service.proc.args.index("--workdir") + 1])
+    own = workdir / "arenas"
+    own.mkdir(parents=True, exist_ok=True)
+    (own / "mine.json").write_text((REPO / "arenas" / "r3.json").read_text())
+    (own / "out.json").symlink_to("/etc/passwd")
+    secret = tmp_path / "secret.json"                      # a valid arena outside the folder
+    secret.write_text((REPO / "arenas" / "r3.json").read_text())
+    rss0 = _rss_kib(service.proc.pid)
+    names = ["/etc/passwd", "/dev/zero", "../arenas/mine", "../../../../etc/passwd",
+             str(tmp_path / "missing.json"), str(secret), "out", "mine.json", "r1/../r2",
+             "/proc/self/environ"]
+    answers = service.ask(*[configure(f"a{i}", arena=n) for i, n in enumerate(names)])
+    messages = []
+    for name, answer in zip(names, answers):
+        assert "error" in answer and "unknown arena" in answer["message"], (name, answer)
+        messages.append(answer["message"].replace(repr(name[:64]), "NAME"))
+    assert len(set(messages)) == 1, messages                  # nothing about the file itself
+    assert "mine" in messages[0] and "r1" in messages[0] and "passwd" not in messages[0]
+    assert service.proc.poll() is None
+    assert _rss_kib(service.proc.pid) - rss0 < 50_000, "the service grew reading an arena"
+    assert service.status()["state"] in ("idle", "finished", "failed")
+    # controls: its own arena file and a built-in name configure a run
+    for experiment, name in (("a_own", "mine"), ("a_builtin", "R2")):
+        assert service.ask(configure(experiment, arena=name, iterations=10), "start") \
+            == [{"ok": True}, {"ok": True}], name
+        assert service.wait_state("finished")["experiment"] == experiment
+    tables = {e: json.loads((workdir / e / "tables" / "r1.json").read_text())
+              for e in ("a_own", "a_builtin")}
+    assert tables["a_own"]["arena"] == "R3" or tables["a_own"]["arena"].lower() == "r3"
+    assert tables["a_builtin"]["arena"].lower() == "r2"
+
+
 def _fetch_all(service: Service, files: list[list]) -> dict[str, bytes]:
     """Every file in chunks of 4096 bytes (one client run)."""
     requests, names = [], []
