@@ -500,9 +500,13 @@ hook_precheck(T) :-
 
 head_hook_check(M, F/A) :-
     (   M \== '$program',
-        mobile_hook(M:F/A)
-    ->  true
-    ;   hook_refusal(F/A, Q, Why)
+        (   mobile_hook(M:F/A)
+        ;   moved_hook(M:F/A, _)
+        )
+    ->  true                                    % program_clause/2 tells
+    ;   M == '$program'
+    ->  own_predicate(F/A)
+    ;   qualified_hook(M, F/A, Q, Why)
     ->  refuse(hook(Q:F/A), Why)
     ;   true
     ).
@@ -528,13 +532,26 @@ program_clause(Clause, Where-H-B) :-
         own_predicate(F/A)
     ;   mobile_hook(M:F/A)
     ->  Where = M
-    ;   hook_refusal(F/A, Q, Why)
-    ->  refuse(hook(Q:F/A), Why)
     ;   moved_hook(M:F/A, To)
     ->  refuse(clause_head(M:H), To)
-    ;   refuse(clause_head(M:H), 'a clause for another module (a program sent by a \c
-                                   peer loads into a module of its own)')
+    ;   qualified_hook(M, F/A, Q, Why)
+    ->  refuse(hook(Q:F/A), Why)
+    ;   refuse(clause_head(M:H), 'a clause for another module')
     ).
+
+%   qualified_hook(+Module, +PI, -Q, -Why): a clause or declaration for
+%   Module:PI would define a hook: Module is user, prolog or system, or
+%   declares PI multifile, or the system calls PI by name.
+qualified_hook(M, F/A, Q, Why) :-
+    hook_refusal(F/A, Q, Why),
+    (   memberchk(M, [user, prolog, system])
+    ->  true
+    ;   called_by_name(_:F/A)
+    ->  true
+    ;   functor(H, F, A),
+        catch(predicate_property(M:H, multifile), _, fail)
+    ),
+    !.
 
 %   A program's own predicate: one that nothing calls by name.
 own_predicate(PI) :-
@@ -577,17 +594,16 @@ check_declared(D, PI) :-
     ;   refuse(directive(D), 'not a predicate indicator')
     ),
     (   M == '$program'
-    ->  own_predicate(F/A),
-        (   D = multifile(_)
+    ->  (   D = multifile(_)
         ->  refuse(directive(D), 'declares a hook')
-        ;   true
+        ;   own_predicate(F/A)
         )
     ;   mobile_hook(M:F/A)
     ->  true
-    ;   hook_refusal(F/A, Q, Why)
-    ->  refuse(hook(Q:F/A), Why)
     ;   moved_hook(M:F/A, To)
     ->  refuse(directive(D), To)
+    ;   qualified_hook(M, F/A, Q, Why)
+    ->  refuse(hook(Q:F/A), Why)
     ;   refuse(directive(D), 'declares a predicate of another module')
     ).
 
