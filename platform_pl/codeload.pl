@@ -9,6 +9,7 @@
 :- use_module(platform_errors, [message_text/2]).
 :- use_module(code_safety, [check_program_text/2, code_trusted/1, forget_checked_code/0]).
 :- use_module(agent_bounds, [bounds_call/4, bounds_warning/2]).
+:- use_module(worker_pool, [pool_run/3, pool_retire/0]).
 :- use_module(transport).
 :- autoload(library(error), [must_be/2]).
 :- autoload(library(option), [option/2, option/3]).
@@ -156,23 +157,55 @@ load_text(Node, Id, Text, Checked) :-
     run_inits(Inits, Node, Id, M).
 
 %   The initialization goals of a checked program, in order, each a
-%   bounded call in its module. A goal that fails is reported as a load
-%   error would be (SWI-Prolog prints a warning); an exception is a load
-%   error; a bound unloads the program.
+%   bounded call in its module, run as an agent's handler is: in a worker
+%   of the `agents` pool (agent_bounds.pl stops it by signalling that
+%   thread, which then retires with whatever the stop left in it), while
+%   this connection's worker waits for the outcome. A goal that fails is
+%   reported as SWI-Prolog reports a failed initialization goal (a
+%   warning); an exception is a load error; a bound unloads the program.
 run_inits([], _, _, _).
 run_inits([G|Gs], Node, Id, M) :-
     init_wall_limit(Node, Wall),
-    catch(( bounds_call(Node, program(Id), M,
-                        codeload:init_call(Wall, M:G))
-          ->  Result = true
-          ;   Result = false
-          ),
-          Ball, init_stopped(Ball, Node, Wall, Id, M)),
-    (   Result == false
+    init_outcome(Node, Id, M, G, Wall, Outcome),
+    (   Outcome == true
+    ->  true
+    ;   Outcome == false
     ->  print_message(warning, init_goal_failed(failed, @(M:G, M:0)))
-    ;   true
+    ;   Outcome = ball(Ball),
+        init_stopped(Ball, Node, Wall, Id, M)
     ),
     run_inits(Gs, Node, Id, M).
+
+%   The job always answers (it catches everything); the wait is bounded
+%   all the same, by the wall clock plus the monitor's ten signals.
+init_outcome(Node, Id, M, G, Wall, Outcome) :-
+    (   Wall == infinite
+    ->  Options = []
+    ;   Timeout is Wall + 30,
+        Options = [timeout(Timeout)]
+    ),
+    setup_call_cleanup(
+        message_queue_create(Queue),
+        (   pool_run(agents, codeload:init_job(Queue, Node, Id, M, G, Wall), []),
+            (   thread_get_message(Queue, outcome(Outcome0), Options)
+            ->  Outcome = Outcome0
+            ;   Outcome = ball(time_limit_exceeded)
+            )
+        ),
+        message_queue_destroy(Queue)).
+
+init_job(Queue, Node, Id, M, G, Wall) :-
+    catch(( bounds_call(Node, program(Id), M, codeload:init_call(Wall, M:G))
+          ->  Outcome = true
+          ;   Outcome = false
+          ),
+          Ball, Outcome = ball(Ball)),
+    (   Outcome = ball(B),
+        stop_kind(B, Wall, _)
+    ->  pool_retire                     % the stop may have left state in this thread
+    ;   true
+    ),
+    catch(thread_send_message(Queue, outcome(Outcome)), _, true).
 
 %   The wall-clock limit of an initialization goal: 5 x agent_cpu_limit.
 init_wall_limit(Node, Wall) :-
