@@ -60,12 +60,19 @@ Culprit the offending goal, clause head or directive):
   - A goal whose predicate cannot be told (call/1 of a variable) or an
     undefined predicate is refused.
   - An agent's handler must be defined by its own clauses.
-  - A program may define clauses in `user` of predicates that are not
-    hooks (not multifile), not imported, not built in and not defined by
-    another file; elsewhere only the hooks declared with mobile_hook/1
-    (the dFRL aggregation hooks). Its directives may only declare
-    predicates (dynamic, discontiguous, multifile of those same
-    predicates), load libraries, and run a safe initialization goal.
+  - A program loads into a module of its own (codeload.pl,
+    program_module/2) and may define clauses of its own predicates
+    there (unqualified heads) and of the hooks declared with
+    mobile_hook/1 (the dFRL aggregation hooks), nothing else. Hooks are
+    default-deny: no clause or declaration, qualified or not, of a name
+    that the Prolog system, a library or the node calls by name
+    (hook_refusal/3: SWI-Prolog's hooks called by name, names of
+    `system`, of `prolog` and of the node's `user`, names declared
+    multifile anywhere, library exports); the refusal's culprit is
+    hook(Module:Name/Arity). Its directives may only declare its
+    predicates (dynamic, discontiguous, non_terminal), load libraries,
+    and name safe initialization goals, which codeload.pl runs after
+    the load under the agent bounds.
 
 Side doors. library(sandbox) judges a goal by the predicates it calls;
 some goals run without being a visible call in the checked code. Each
@@ -76,13 +83,14 @@ refusals, applied at any depth of the sandbox's walk):
   |---------------------------------------|-----------------------------|
   | attribute hooks: put_attr/3, put_attrs/2 (attr_unify_hook, attribute_goals, portray_attvar of the attribute's module run with the value), freeze/when/dif | refused: put_attr(V, freeze, user:shell(C)), V = 1 ran C |
   | attributed variables or cycles in data (records, binary frames) | refused before anyone unifies them (wire.pl for frames, plain_data/1 for programs) |
-  | directives of programs                | only declarations of the program's own predicates, libraries of an allow-list (sandbox_policy:safe_library/1), initialization/1 and initialization(G, now) with G checked; if/elif, op, flags, include, module, table, encoding refused |
+  | directives of programs                | only declarations of the program's own predicates, libraries of an allow-list (sandbox_policy:safe_library/1), initialization/1 and initialization(G, now) with G checked and run after the load under the agent bounds and a wall clock (codeload.pl; a loop used to spin a connection worker for ever); if/elif, op, flags, include, module, table, encoding refused |
   | quasi quotations                      | refused: their parsers run when the text is read |
   | print_message/2, message_to_string/2, message translation | refused: a format(F, A) message with ~@ calls a goal, and message hooks are the node's |
   | format/1,2,3                          | ~@ arguments checked by the sandbox; ~W refused (its options may hold portray_goal(G)); output only to atoms/strings, current output, user_output, user_error |
-  | portray, print                        | print/1 and ~p call the node's portray/1 hook, which a peer cannot define (multifile hooks are refused as clause heads) |
-  | exception, signal, halt hooks (exception/3, prolog_exception_hook/4, on_signal/3, at_halt/1) | refused: hooks are multifile or not in the sandbox |
-  | goal and term expansion               | a program may not define expansion hooks (multifile); the node's own expand the checked terms |
+  | portray, print                        | print/1 and ~p call the node's portray/1 hook, which a peer cannot define (hooks are refused by name) |
+  | hooks the system calls by name, declared or not (prolog_exception_hook/4 is not declared in 9.0.4: with `repeat, fail` it spun a worker at every malformed frame of an unauthenticated peer), exception/3, thread_message_hook/3, prolog_trace_interception/4, prolog_event_hook/1, portray_attvar/1, prolog_predicate_name/2, prolog:message//1, ... | refused by name, in the program's module or qualified (hook_refusal/3); on_signal/3 and at_halt/1 are not in the sandbox |
+  | goal and term expansion               | a program may not define expansion hooks (they would run in its module while it loads, after the check); the node's own expand the checked terms |
+  | names in `user`                       | programs sent by peers load into modules of their own: the first program to define a name no longer owns it for every other peer's program |
   | flags: set_prolog_flag/2, create_prolog_flag/3, set_prolog_stack/2 | refused: flags are the process's (double_quotes broke every later program load) |
   | reading flags                         | only arithmetic and syntax flags (argv, os_argv, executable, home are refused: argv held tokens) |
   | environment: getenv/2, setenv/2       | refused (the sandbox has neither) |
