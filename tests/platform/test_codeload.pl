@@ -17,6 +17,8 @@
 :- use_module('../../platform_pl/code_safety', [check_program_text/2]).
 :- use_module('../../platform_pl/dfrl_agent/dfrl_aggregation', []).
 :- use_module(library(plunit)).
+:- use_module(library(filesex), [directory_member/3, directory_file_path/3]).
+:- use_module(library(readutil), [read_file_to_string/3]).
 
 %   The node's warning about each program it stopped is expected here.
 :- multifile user:message_hook/3.
@@ -143,6 +145,80 @@ test(user_qualified_clause_refused) :-
     catch(check_program_text(q, "user:injected(1)."), E, true),
     assertion(subsumes_term(error(permission_error(install, code, clause_head(user:_)), _),
                             E)).
+
+%   The hooks derived again from the installed SWI-Prolog: every
+%   user:Name/Arity and prolog:Name/Arity (or //Arity) its boot/ and
+%   library/ sources name, and the user:, prolog: and unqualified entries
+%   of library(prolog_xref)'s table of hooks, are refused by name.
+test(hooks_derived_from_the_installed_sources) :-
+    swi_hooks(Hooks),
+    length(Hooks, N),
+    assertion(N > 100),
+    forall(member(_:F/A, Hooks),
+           assertion(code_safety:hook_refusal(F/A, _, _))).
+
+swi_hooks(Hooks) :-
+    current_prolog_flag(home, Home),
+    findall(File,
+            ( member(Sub, [boot, library]),
+              directory_file_path(Home, Sub, Dir),
+              directory_member(Dir, File, [recursive(true), extensions([pl])]) ),
+            Files),
+    findall(Hook,
+            ( member(File, Files),
+              read_file_to_string(File, Text, []),
+              named_hook(Text, Hook) ),
+            Named),
+    absolute_file_name(library(prolog_xref), Xref, [file_type(prolog), access(read)]),
+    read_file_to_string(Xref, XrefText, []),
+    split_string(XrefText, "\n", "", Lines),
+    findall(Q:F/A,
+            ( member(Line, Lines),
+              string_concat("hook(", _, Line),
+              catch(term_string(hook(H), Line), _, fail),
+              (   H = Q:T -> true ; Q = attribute, T = H ),
+              memberchk(Q, [user, prolog, attribute]),
+              functor(T, F, A) ),
+            Listed),
+    append(Named, Listed, Hooks0),
+    sort(Hooks0, Hooks).
+
+named_hook(Text, Q:F/A) :-
+    member(Q, [user, prolog]),
+    atom_concat(Q, ':', Prefix),
+    sub_string(Text, B, L, _, Prefix),
+    P is B + L,
+    name_at(Text, P, F, P1),
+    (   sub_string(Text, P1, 2, _, "//")
+    ->  P2 is P1 + 2, Extra = 2
+    ;   sub_string(Text, P1, 1, _, "/")
+    ->  P2 is P1 + 1, Extra = 0
+    ),
+    digits_at(Text, P2, A0),
+    A is A0 + Extra.
+
+name_at(Text, P, Name, End) :-
+    sub_string(Text, P, 1, _, C0),
+    char_type(C0, csymf), \+ char_type(C0, upper), C0 \== "_",
+    span(Text, P, csym, End),
+    End > P,
+    Len is End - P,
+    sub_atom(Text, P, Len, _, Name).
+
+digits_at(Text, P, N) :-
+    span(Text, P, digit(_), End),
+    End > P,
+    Len is End - P,
+    sub_string(Text, P, Len, _, S),
+    number_string(N, S).
+
+span(Text, P, Type, End) :-
+    (   sub_string(Text, P, 1, _, C),
+        char_type(C, Type)
+    ->  P1 is P + 1,
+        span(Text, P1, Type, End)
+    ;   End = P
+    ).
 
 :- end_tests(program_hooks).
 
