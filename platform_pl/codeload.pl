@@ -46,8 +46,8 @@ loaded (code_safety:check_program_text/2: every clause and directive;
 no hook the Prolog system or a library calls by name), unless the peer
 is trusted by name (node option trusted_peers(Names)); a refused program
 loads nothing and the sender gets the error. Its initialization goals
-(initialization/1 and initialization(G, now), checked as bodies) do not
-run while it loads: after the load they run in order, each in M under
+(initialization/1 and initialization(G, now), checked as bodies unless
+the peer is trusted) do not run while it loads: after the load they run in order, each in M under
 the agent bounds of the node (agent_bounds:bounds_call/4: CPU time,
 stacks, the size of M, output lines, a slot of max_running_agents) and a
 wall-clock limit of 5 times the node's agent_cpu_limit (10 s by default;
@@ -129,18 +129,18 @@ program_module(Id, Module) :-
     must_be(atomic, Id),
     format(atom(Module), 'dfrl_program://~w', [Id]).
 
-%   load_text(+Node, +Id, +Text, +Checked): load Text as source
-%   dfrl_program://Id into its module. A checked program's
-%   initialization goals are held back while it loads (the expansion
-%   below) and run afterwards under the bounds; a trusted peer's run as
-%   the loader runs them.
-load_text(Node, Id, Text, Checked) :-
+%   load_text(+Node, +Id, +Text): load Text as source dfrl_program://Id
+%   into its module. Its initialization goals are held back while it
+%   loads (the expansion below) and run afterwards under the bounds,
+%   also for a trusted peer (bounds are about resources, not trust: its
+%   agents run bounded too).
+load_text(Node, Id, Text) :-
     program_module(Id, M),
     SourceId = M,
     setup_call_cleanup(
         ( open_string(Text, In),
           assertz(collecting),
-          (   Checked == true -> assertz(deferring(SourceId)) ; true )
+          assertz(deferring(SourceId))
         ),
         load_files(M:SourceId, [stream(In), if(true)]),
         ( close(In),
@@ -156,7 +156,7 @@ load_text(Node, Id, Text, Checked) :-
     ),
     run_inits(Inits, Node, Id, M).
 
-%   The initialization goals of a checked program, in order, each a
+%   The initialization goals of a program, in order, each a
 %   bounded call in its module, run as an agent's handler is: in a worker
 %   of the `agents` pool (agent_bounds.pl stops it by signalling that
 %   thread, which then retires with whatever the stop left in it), while
@@ -252,7 +252,7 @@ unload_program(M) :-
              \+ predicate_property(M:H, imported_from(_)) ),
            catch(abolish(M:F/A), _, true)).
 
-%   While a checked program loads, its initialization goals are noted
+%   While a program sent by a peer loads, its initialization goals are noted
 %   instead of run: a directive is split into its parts, and the
 %   initialization/1 and initialization(G, now) parts are kept back.
 %   (A program's own expansion hooks are refused; this runs last, after
@@ -322,12 +322,11 @@ node:platform_request(load_code(Id, Text), Ctx, Reply, true) :-
     ->  must_be(atomic, Id),
         must_be(string, Text),
         (   code_trusted(Ctx)
-        ->  Checked = false
+        ->  true
         ;   catch(check_program_text(Id, Text), error(syntax_error(What), Where),
-                  syntax_error_at(Id, Text, What, Where)),
-            Checked = true
+                  syntax_error_at(Id, Text, What, Where))
         ),
-        load_text(Node, Id, Text, Checked),
+        load_text(Node, Id, Text),
         Reply = ok(loaded(Id))
     ;   node_property(Node, address(Here)),
         Reply = error(error(permission_error(load, platform, Here), _))
