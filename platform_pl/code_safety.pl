@@ -431,12 +431,17 @@ check_program_text(Id, Text) :-
                        read_program(In, Terms0),
                        close(In)),
     plain_data(Terms0),
-    maplist(hook_precheck, Terms0),
+    findall(Head, ( member(T, Terms0), raw_head(T, Head) ), Heads0),
+    sort(Heads0, Heads),                        % each name is looked up once
+    maplist(head_hook_check, Heads),
     maplist(expand, Terms0, Expanded),
     append(Expanded, Terms),
     partition_terms(Terms, Directives, Clauses),
     maplist(check_directive, Directives),
     maplist(program_clause, Clauses, Parts),
+    findall(PI, ( member(own-H-_, Parts), functor(H, F, A), PI = F/A ), Own0),
+    sort(Own0, Own),
+    maplist(own_predicate, Own),
     findall(P, ( member(D, Directives), declared(D, P) ), Declared),
     include(own_part, Parts, OwnParts),
     findall(H-B, ( member(own-H-B, OwnParts), B \== true ), LocalRules),
@@ -479,34 +484,25 @@ non_terminal_decl((:- non_terminal(_))).
 %   Clause heads are checked for hooks before the terms are expanded:
 %   expansion runs the node's hooks on them (library(sandbox)'s refuses
 %   a sandbox:safe_primitive/1 clause without naming the hook).
-hook_precheck(T) :-
-    (   var(T)
-    ->  true
-    ;   T = (:- _)
-    ->  true
-    ;   T = (?- _)
-    ->  true
-    ;   T = (H0 --> _)
+raw_head(T, M-(F/A)) :-
+    nonvar(T),
+    T \= (:- _),
+    T \= (?- _),
+    (   T = (H0 --> _)
     ->  (   nonvar(H0), H0 = (H1, _) -> true ; H1 = H0 ),
-        (   callable(H1)
-        ->  strip_module('$program':H1, M, H),
-            functor(H, F, A0),
-            A is A0 + 2,
-            head_hook_check(M, F/A)
-        ;   true
-        )
+        callable(H1),
+        strip_module('$program':H1, M, H),
+        callable(H),
+        functor(H, F, A0),
+        A is A0 + 2
     ;   clause_parts(T, QH-_),
-        callable(QH)
-    ->  strip_module('$program':QH, M, H),
-        (   callable(H)
-        ->  functor(H, F, A),
-            head_hook_check(M, F/A)
-        ;   true
-        )
-    ;   true
+        callable(QH),
+        strip_module('$program':QH, M, H),
+        callable(H),
+        functor(H, F, A)
     ).
 
-head_hook_check(M, F/A) :-
+head_hook_check(M-(F/A)) :-
     (   M \== '$program',
         (   mobile_hook(M:F/A)
         ;   moved_hook(M:F/A, _)
@@ -536,8 +532,7 @@ program_clause(Clause, Where-H-B) :-
     check_head(H-B),
     functor(H, F, A),
     (   M == '$program'
-    ->  Where = own,
-        own_predicate(F/A)
+    ->  Where = own
     ;   mobile_hook(M:F/A)
     ->  Where = M
     ;   moved_hook(M:F/A, To)
