@@ -661,7 +661,7 @@ directive_init(D, G) :-
 %     - it is one of the hooks that SWI-Prolog 9.0.4 calls by name
 %       (called_by_name/1: its manual, its C core, and every
 %       user:/prolog: hook its library and boot files declare, which
-%       tests/platform/test_program_hooks.pl derives again from the
+%       tests/platform/test_codeload.pl derives again from the
 %       installed sources);
 %     - `system` defines it (built-ins, system hooks such as
 %       term_expansion/2);

@@ -82,9 +82,9 @@ load_program(File) :-
 %
 %   Send the text of File to the platform at Address, which loads it
 %   without a restart into a module of its own, program_module(Id, M)
-%   with Id the base name of File (see the module doc). Options: tokens(List), the
-%   tokens to prove (default the current node's), and the timeouts of
-%   transport_open/3.
+%   with Id the base name of File (see the module doc). Options:
+%   tokens(List), the tokens to prove (default the current node's), and
+%   the timeouts of transport_open/3.
 %
 %   @error permission_error(load, platform, Address) if no token fits.
 %   @error permission_error(install, code, Culprit) if the sandbox there
@@ -136,7 +136,7 @@ program_module(Id, Module) :-
 %   agents run bounded too).
 load_text(Node, Id, Text) :-
     program_module(Id, M),
-    SourceId = M,
+    SourceId = M,                       % the module is named as the source
     setup_call_cleanup(
         ( open_string(Text, In),
           assertz(collecting),
