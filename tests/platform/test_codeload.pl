@@ -267,6 +267,15 @@ test(init_runs_after_load, [cleanup(stop_all([N]))]) :-
     program_module(init_ok, M),
     assertion(M:init_seen(1)).
 
+%   An error in an initialization goal is a load error of the program,
+%   which stays loaded (as a file whose initialization raised).
+test(init_error_is_a_load_error, [cleanup(stop_all([N]))]) :-
+    node(N, A, []),
+    send(A, init_err, "err_marker(1).\n:- initialization(atom_length(1, a)).\n", E),
+    assertion(subsumes_term(error(load_errors([_]), _), E)),
+    program_module(init_err, M),
+    assertion(M:err_marker(1)).
+
 %   A loop in initialization is stopped by the CPU bound; the program is
 %   taken out again and the node takes an ordinary program afterwards.
 test(init_loop_stopped_by_cpu, [cleanup(stop_all([N]))]) :-
