@@ -488,7 +488,12 @@ raw_head(T, M-(F/A)) :-
     nonvar(T),
     T \= (:- _),
     T \= (?- _),
-    (   T = (H0 --> _)
+    (   T = Q:(QH :- _),                        % Module:(Head :- Body)
+        atom(Q), callable(QH)
+    ->  strip_module(Q:QH, M, H),
+        callable(H),
+        functor(H, F, A)
+    ;   T = (H0 --> _)
     ->  (   nonvar(H0), H0 = (H1, _) -> true ; H1 = H0 ),
         callable(H1),
         strip_module('$program':H1, M, H),
@@ -591,9 +596,9 @@ pi_member(PI, [H|T]) :- !, ( pi_member(PI, H) ; pi_member(PI, T) ).
 pi_member(_, []) :- !, fail.
 pi_member(PI, PI).
 
-check_declared(D, PI) :-
-    (   PI = M0:F/A, atom(M0), atom(F), integer(A) -> M = M0
-    ;   PI = F/A, atom(F), integer(A) -> M = '$program'
+check_declared(D, PI0) :-
+    (   PI0 = M0:PI1 -> true ; M0 = '$program', PI1 = PI0 ),
+    (   atom(M0), pred_indicator(PI1, F, A) -> M = M0
     ;   refuse(directive(D), 'not a predicate indicator')
     ),
     (   M == '$program'
@@ -620,10 +625,21 @@ moved_hook(dfrl_agent:F/A,
 
 declared(D, F/A) :-
     declaration(D, Specs),
-    pi_member(F/A, Specs),
-    atom(F), integer(A).
+    pi_member(PI, Specs),
+    pred_indicator(PI, F, A).
+
 declared((A, B), PI) :-
     (   declared(A, PI) ; declared(B, PI) ).
+
+%   Name/Arity, or Name//Arity of a non-terminal (Arity + 2 arguments).
+pred_indicator(PI, F, A) :-
+    nonvar(PI),
+    (   PI = F/A
+    ->  atom(F), integer(A)
+    ;   PI = F//A0
+    ->  atom(F), integer(A0),
+        A is A0 + 2
+    ).
 
 library_directive(use_module(library(X))) :- safe_library(X).
 library_directive(use_module(library(X), _)) :- safe_library(X).

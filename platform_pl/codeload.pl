@@ -50,8 +50,8 @@ loads nothing and the sender gets the error. Its initialization goals
 the peer is trusted) do not run while it loads: after the load they run in order, each in M under
 the agent bounds of the node (agent_bounds:bounds_call/4: CPU time,
 stacks, the size of M, output lines, a slot of max_running_agents) and a
-wall-clock limit of 5 times the node's agent_cpu_limit (10 s by default;
-a goal that sleeps takes no CPU). A goal
+wall-clock limit of 5 times the node's agent_cpu_limit (10 s by default,
+60 s if it is infinite; a goal that sleeps takes no CPU). A goal
 stopped by a bound unloads the program (its module and hook clauses) and
 the sender gets resource_error(program_initialization(Id, Kind)).
 */
@@ -179,15 +179,11 @@ run_inits([G|Gs], Node, Id, M) :-
 %   The job always answers (it catches everything); the wait is bounded
 %   all the same, by the wall clock plus the monitor's ten signals.
 init_outcome(Node, Id, M, G, Wall, Outcome) :-
-    (   Wall == infinite
-    ->  Options = []
-    ;   Timeout is Wall + 30,
-        Options = [timeout(Timeout)]
-    ),
+    Timeout is Wall + 30,
     setup_call_cleanup(
         message_queue_create(Queue),
         (   pool_run(agents, codeload:init_job(Queue, Node, Id, M, G, Wall), []),
-            (   thread_get_message(Queue, outcome(Outcome0), Options)
+            (   thread_get_message(Queue, outcome(Outcome0), [timeout(Timeout)])
             ->  Outcome = Outcome0
             ;   Outcome = ball(time_limit_exceeded)
             )
@@ -207,19 +203,18 @@ init_job(Queue, Node, Id, M, G, Wall) :-
     ),
     catch(thread_send_message(Queue, outcome(Outcome)), _, true).
 
-%   The wall-clock limit of an initialization goal: 5 x agent_cpu_limit.
+%   The wall-clock limit of an initialization goal: 5 x agent_cpu_limit,
+%   60 s if that is infinite (the goal holds a connection worker and the
+%   sender's reply, whatever the node allows its agents).
 init_wall_limit(Node, Wall) :-
     node_option(Node, agent_cpu_limit, CPU),
     (   CPU == infinite
-    ->  Wall = infinite
+    ->  Wall = 60
     ;   Wall is 5 * CPU
     ).
 
 init_call(Wall, Goal) :-
-    (   Wall == infinite
-    ->  call(Goal)
-    ;   call_with_time_limit(Wall, Goal)
-    ).
+    call_with_time_limit(Wall, Goal).
 
 init_stopped(Ball, Node, Wall, Id, M) :-
     stop_kind(Ball, Wall, Kind),

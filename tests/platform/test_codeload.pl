@@ -77,6 +77,9 @@ hook_program("prolog:message(_) --> { repeat, fail }.", message/3).
 hook_program("prolog:error_message(_) --> { repeat, fail }.", error_message/3).
 hook_program(":- dynamic prolog_exception_hook/4.", prolog_exception_hook/4).
 hook_program(":- dynamic user:thread_message_hook/3.", thread_message_hook/3).
+hook_program(":- multifile prolog:message//1.", message/3).
+hook_program(":- discontiguous attribute_goals//1.", attribute_goals/3).
+hook_program("user:(portray(_) :- repeat, fail).", portray/1).
 hook_program("sandbox:safe_primitive(system:shell(_)).", safe_primitive/1).
 hook_program("safe_primitive(system:shell(_)).", safe_primitive/1).
 hook_program("platform_request(x, _, ok(x), true).", platform_request/4).
