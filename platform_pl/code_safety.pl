@@ -698,22 +698,25 @@ hook_refusal_(F/A, _, Q, 'a hook the Prolog system or a library calls by name') 
     called_by_name(Q:F/A).
 hook_refusal_(F/A, _, system, 'a predicate of the Prolog system') :-
     current_predicate(system:F/A).
-hook_refusal_(F/A, H, Q, 'a predicate or hook the node defines') :-
+hook_refusal_(F/A, _, Q, 'a predicate or hook the node defines') :-
     member(Q, [user, prolog]),
-    (   current_predicate(Q:F/A)
-    ;   predicate_property(Q:H, multifile)
-    ;   predicate_property(Q:H, dynamic)
-    ).
+    current_predicate(Q:F/A).                   % also declared dynamic or multifile
 hook_refusal_(_, H, Q, 'a hook (declared multifile there)') :-
-    predicate_property(Q:H, multifile),
-    \+ program_or_agent_module(Q).
+    current_predicate(_, Q:H),
+    \+ program_or_agent_module(Q),
+    predicate_property(Q:H, multifile).
 hook_refusal_(F/A, _, Q, 'a predicate of a library') :-
     '$in_library'(F, A, Path),
     file_base_name(Path, Q).
 hook_refusal_(_, H, Q, 'a predicate of a library') :-
-    predicate_property(Q:H, exported),
+    current_predicate(_, Q:H),
     module_property(Q, class(Class)),
-    memberchk(Class, [library, system]).
+    memberchk(Class, [library, system]),
+    predicate_property(Q:H, exported).
+
+%   (current_predicate/1,2 come first: predicate_property/2 of a name
+%   that is not defined autoloads its library, and a program could make
+%   the node load any library by naming it.)
 
 program_or_agent_module(M) :-
     (   sub_atom(M, 0, _, _, 'dfrl_program://')

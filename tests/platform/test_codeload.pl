@@ -144,6 +144,13 @@ test(library_and_system_names_refused) :-
              assertion(subsumes_term(error(permission_error(install, code, hook(_:PI)), _),
                                      E)) )).
 
+%   Looking a name up loads nothing: predicate_property/2 of an
+%   undefined name would autoload its library into the node.
+test(name_lookup_autoloads_nothing, [condition(\+ current_module(backward_compatibility))]) :-
+    catch(check_program_text(names, "merge(_, _, _)."), E, true),
+    assertion(subsumes_term(error(permission_error(install, code, hook(_:merge/3)), _), E)),
+    assertion(\+ current_module(backward_compatibility)).
+
 test(user_qualified_clause_refused) :-
     catch(check_program_text(q, "user:injected(1)."), E, true),
     assertion(subsumes_term(error(permission_error(install, code, clause_head(user:_)), _),
