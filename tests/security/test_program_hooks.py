@@ -144,16 +144,34 @@ def test_every_hook_refused_by_name(tmp_path: Path, procs: list[Proc]) -> None:
     assert results["good"].endswith(" ok"), a.output()
     # the refused exception hook is not there: a malformed frame from an unauthenticated peer
     # is answered (or the connection closed) and leaves no worker spinning
+    _malformed_frame(port)
+    assert _idle_cpu(node.popen.pid) < 0.5
+    assert "pong" in request(port, "ping", token=TOKEN)
+
+
+def _malformed_frame(port: int) -> None:
+    """A malformed frame from an unauthenticated peer; the hello and the reply (or the close)
+    are awaited, 5 s each at most (a node whose worker spins sends neither)."""
     with socket.create_connection(("127.0.0.1", port), timeout=5) as s:
-        s.recv(4096)                                            # the hello
-        s.sendall(frame(b"this is ( not a term .\n"))
-        s.settimeout(5)
         try:
+            s.recv(4096)                                        # the hello
+            s.sendall(frame(b"this is ( not a term .\n"))
             s.recv(4096)
         except OSError:
             pass
-    assert _idle_cpu(node.popen.pid) < 0.5
-    assert "pong" in request(port, "ping", token=TOKEN)
+
+
+def test_control_the_exception_hook_spins_when_installed(tmp_path: Path,
+                                                          procs: list[Proc]) -> None:
+    """Control: the same hook consulted locally (trusted code, into ``user``) makes an
+    unauthenticated peer's connection spin a worker (at its first exception: the hello's, or the
+    malformed frame's), so the probe above can see the harm."""
+    hook = tmp_path / "hook.pl"
+    hook.write_text(":- module(hook, []).\n:- multifile user:prolog_exception_hook/4.\n"
+                    "user:prolog_exception_hook(_, _, _, _) :- repeat, fail.\n")
+    node, port = hostile_node.start(procs, tmp_path, f"[token('{TOKEN}')]", consult=(hook,))
+    _malformed_frame(port)
+    assert _idle_cpu(node.popen.pid) > 0.5
 
 
 def test_same_names_do_not_clash(tmp_path: Path, procs: list[Proc]) -> None:
