@@ -556,8 +556,11 @@ qualified_hook(M, F/A, Q, Why) :-
     ->  true
     ;   called_by_name(_:F/A)
     ->  true
-    ;   functor(H, F, A),
-        catch(predicate_property(M:H, multifile), _, fail)
+    ;   atom(M),
+        current_module(M),                      % makes no module, loads nothing
+        current_predicate(M:F/A),
+        functor(H, F, A),
+        predicate_property(M:H, multifile)
     ),
     !.
 
