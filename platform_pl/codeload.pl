@@ -252,8 +252,10 @@ unload_program(M) :-
 %   initialization/1 and initialization(G, now) parts are kept back.
 %   (A program's own expansion hooks are refused; this runs last, after
 %   the node's.)
-system:term_expansion((:- D), Terms) :-
+system:term_expansion(Directive, Terms) :-
     deferring(SourceId),
+    nonvar(Directive),
+    (   Directive = (:- D) -> true ; Directive = (?- D) ),
     prolog_load_context(source, SourceId),
     init_parts(D, Inits, Rest),
     Inits \== [],

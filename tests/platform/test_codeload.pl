@@ -290,14 +290,19 @@ test(init_error_is_a_load_error, [cleanup(stop_all([N]))]) :-
 %   taken out again and the node takes an ordinary program afterwards.
 test(init_loop_stopped_by_cpu, [cleanup(stop_all([N]))]) :-
     node(N, A, [agent_cpu_limit(0.5)]),
-    get_time(T0),
-    send(A, init_loop, "loop_marker(1).\n:- initialization((repeat, fail)).\n", E),
-    get_time(T1),
-    assertion(subsumes_term(error(resource_error(program_initialization(init_loop,
-                                                                        cpu(_))), _), E)),
-    assertion(T1 - T0 < 8),
-    program_module(init_loop, M),
-    assertion(\+ catch(M:loop_marker(_), _, fail)),
+    forall(member(Text, [ "loop_marker(1).\n:- initialization((repeat, fail)).\n",
+                          "loop_marker(1).\n?- initialization((repeat, fail)).\n",
+                          "loop_marker(1).\n:- dynamic(d/1), initialization((repeat, fail), now).\n"
+                        ]),
+           ( get_time(T0),
+             send(A, init_loop, Text, E),
+             get_time(T1),
+             assertion(subsumes_term(error(resource_error(program_initialization(init_loop,
+                                                                                 cpu(_))), _),
+                                     E)),
+             assertion(T1 - T0 < 8),
+             program_module(init_loop, M),
+             assertion(\+ catch(M:loop_marker(_), _, fail)) )),
     send(A, after_loop, "after(1).\n", Ok),
     assertion(Ok == ok).
 
