@@ -88,7 +88,7 @@ def _victim(procs: list[Proc], tmp_path: Path) -> tuple[Proc, int]:
 
 
 def _attacker(procs: list[Proc], tmp_path: Path, port: int, sends: dict[str, str],
-              tail: str = "") -> Proc:
+              tail: str = "", name: str = "attacker") -> Proc:
     """A console that sends each program of ``sends`` (id -> text) and prints its result."""
     calls = "\n".join(
         f"report({n}, load_program_text('127.0.0.1':{port}, {n}, {_pl_string(t)}, "
@@ -113,7 +113,7 @@ def _attacker(procs: list[Proc], tmp_path: Path, port: int, sends: dict[str, str
             {tail}
             format("DONE~n"), flush_output.
     """
-    path = tmp_path / "attacker.pl"
+    path = tmp_path / f"{name}.pl"
     path.write_text(prog)
     p = Proc([SWIPL, "-q", "-g", "main", "-t", "halt", str(path)])
     procs.append(p)
@@ -175,15 +175,18 @@ def test_control_the_exception_hook_spins_when_installed(tmp_path: Path,
 
 
 def test_same_names_do_not_clash(tmp_path: Path, procs: list[Proc]) -> None:
+    """Two peers (two processes) send programs that define the same names."""
     node, port = _victim(procs, tmp_path)
+    a = _attacker(procs, tmp_path, port, {"prog_a": CLASH_A}, name="peer_a")
+    a.wait_for("DONE", timeout=60)
     tail = (f"create_mobile_agent(c1, clash, ['{TOKEN}']), "
             f"report(agent, move_agent(c1, ('127.0.0.1', {port}))),")
-    a = _attacker(procs, tmp_path, port, {"prog_a": CLASH_A, "prog_b": CLASH_B}, tail)
-    a.wait_for("DONE", timeout=60)
-    results = _results(a.output())
-    assert results["prog_a"].endswith(" ok"), a.output()
-    assert results["prog_b"].endswith(" ok"), a.output()     # today: 'defined by another file'
-    assert results["agent"].endswith(" ok"), a.output()
+    b = _attacker(procs, tmp_path, port, {"prog_b": CLASH_B}, tail, name="peer_b")
+    b.wait_for("DONE", timeout=60)
+    assert _results(a.output())["prog_a"].endswith(" ok"), a.output()
+    results = _results(b.output())
+    assert results["prog_b"].endswith(" ok"), b.output()     # main: 'defined by another file'
+    assert results["agent"].endswith(" ok"), b.output()
     assert node.wait_for("CLASH") == "CLASH 3 20"              # each method its own helper
 
 
