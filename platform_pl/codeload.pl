@@ -92,7 +92,8 @@ load_program(File) :-
 %   @error load_errors(Messages) if the program had errors there.
 %   @error resource_error(program_initialization(Id, Kind)) if an
 %   initialization goal of the program went over a bound there (Kind as
-%   agent_bounds.pl's, or wall_time(Sec)); the program was unloaded.
+%   agent_bounds.pl's, wall_time(Sec), or running_agents if no slot
+%   was free in time); the program was unloaded.
 
 load_program_at(Address, File, Options) :-
     read_file_to_string(File, Text, []),
@@ -233,6 +234,7 @@ init_stopped(Ball, _, _, _, _) :-
 stop_kind('$dfrl_bound'(Kind), _, Kind).
 stop_kind(time_limit_exceeded, Wall, wall_time(Wall)).
 stop_kind(time_limit_exceeded(_), Wall, wall_time(Wall)).
+stop_kind(error(resource_error(running_agents), _), _, running_agents).   % no slot in time
 
 %   Take a program out again: the predicates of its module and its
 %   clauses of the mobile hooks.
