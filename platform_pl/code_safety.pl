@@ -29,7 +29,7 @@
    ).
 :- use_module(node, [ctx_node/2, node_property/2]).
 :- use_module(agents, [agent_property/3]).
-:- autoload(library(error), [permission_error/3]).
+:- autoload(library(error), [must_be/2, permission_error/3]).
 :- autoload(library(lists), [member/2, append/2, append/3]).
 :- autoload(library(apply), [maplist/2, include/3, exclude/3]).
 :- autoload(library(crypto), [crypto_n_random_bytes/2, crypto_data_hash/3]).
@@ -60,12 +60,19 @@ Culprit the offending goal, clause head or directive):
   - A goal whose predicate cannot be told (call/1 of a variable) or an
     undefined predicate is refused.
   - An agent's handler must be defined by its own clauses.
-  - A program may define clauses in `user` of predicates that are not
-    hooks (not multifile), not imported, not built in and not defined by
-    another file; elsewhere only the hooks declared with mobile_hook/1
-    (the dFRL aggregation hooks). Its directives may only declare
-    predicates (dynamic, discontiguous, multifile of those same
-    predicates), load libraries, and run a safe initialization goal.
+  - A program loads into a module of its own (codeload.pl,
+    program_module/2) and may define clauses of its own predicates
+    there (unqualified heads) and of the hooks declared with
+    mobile_hook/1 (the dFRL aggregation hooks), nothing else. Hooks are
+    default-deny: no clause or declaration, qualified or not, of a name
+    that the Prolog system, a library or the node calls by name
+    (hook_refusal/3: SWI-Prolog's hooks called by name, names of
+    `system`, of `prolog` and of the node's `user`, names declared
+    multifile anywhere, library exports); the refusal's culprit is
+    hook(Module:Name/Arity). Its directives may only declare its
+    predicates (dynamic, discontiguous, non_terminal), load libraries,
+    and name safe initialization goals, which codeload.pl runs after
+    the load under the agent bounds.
 
 Side doors. library(sandbox) judges a goal by the predicates it calls;
 some goals run without being a visible call in the checked code. Each
@@ -76,13 +83,14 @@ refusals, applied at any depth of the sandbox's walk):
   |---------------------------------------|-----------------------------|
   | attribute hooks: put_attr/3, put_attrs/2 (attr_unify_hook, attribute_goals, portray_attvar of the attribute's module run with the value), freeze/when/dif | refused: put_attr(V, freeze, user:shell(C)), V = 1 ran C |
   | attributed variables or cycles in data (records, binary frames) | refused before anyone unifies them (wire.pl for frames, plain_data/1 for programs) |
-  | directives of programs                | only declarations of the program's own predicates, libraries of an allow-list (sandbox_policy:safe_library/1), initialization/1 and initialization(G, now) with G checked; if/elif, op, flags, include, module, table, encoding refused |
+  | directives of programs                | only declarations of the program's own predicates, libraries of an allow-list (sandbox_policy:safe_library/1), initialization/1 and initialization(G, now) with G checked and run after the load under the agent bounds and a wall clock (codeload.pl; a loop used to spin a connection worker for ever); if/elif, op, flags, include, module, table, encoding refused |
   | quasi quotations                      | refused: their parsers run when the text is read |
   | print_message/2, message_to_string/2, message translation | refused: a format(F, A) message with ~@ calls a goal, and message hooks are the node's |
   | format/1,2,3                          | ~@ arguments checked by the sandbox; ~W refused (its options may hold portray_goal(G)); output only to atoms/strings, current output, user_output, user_error |
-  | portray, print                        | print/1 and ~p call the node's portray/1 hook, which a peer cannot define (multifile hooks are refused as clause heads) |
-  | exception, signal, halt hooks (exception/3, prolog_exception_hook/4, on_signal/3, at_halt/1) | refused: hooks are multifile or not in the sandbox |
-  | goal and term expansion               | a program may not define expansion hooks (multifile); the node's own expand the checked terms |
+  | portray, print                        | print/1 and ~p call the node's portray/1 hook, which a peer cannot define (hooks are refused by name) |
+  | hooks the system calls by name, declared or not (prolog_exception_hook/4 is not declared in 9.0.4: with `repeat, fail` it spun a worker at every malformed frame of an unauthenticated peer), exception/3, thread_message_hook/3, prolog_trace_interception/4, prolog_event_hook/1, portray_attvar/1, prolog_predicate_name/2, prolog:message//1, ... | refused by name, in the program's module or qualified (hook_refusal/3); on_signal/3 and at_halt/1 are not in the sandbox |
+  | goal and term expansion               | a program may not define expansion hooks (they would run in its module while it loads, after the check); the node's own expand the checked terms |
+  | names in `user`                       | programs sent by peers load into modules of their own: the first program to define a name no longer owns it for every other peer's program |
   | flags: set_prolog_flag/2, create_prolog_flag/3, set_prolog_stack/2 | refused: flags are the process's (double_quotes broke every later program load) |
   | reading flags                         | only arithmetic and syntax flags (argv, os_argv, executable, home are refused: argv held tokens) |
   | environment: getenv/2, setenv/2       | refused (the sandbox has neither) |
@@ -406,29 +414,41 @@ check_post(_, _, Goal) :-
 %!  check_program_text(+Id, +Text) is det.
 %
 %   Check a program a peer sent (see the module comment) before it is
-%   loaded into `user` as dfrl_program://Id.
+%   loaded as dfrl_program://Id into a module of its own (codeload.pl,
+%   program_module/2): its clauses define its own predicates (none the
+%   Prolog system, a library or the node calls by name: hook_refusal/3)
+%   and the mobile hooks (mobile_hook/1); its directives declare them,
+%   load safe libraries and name initialization goals, which are
+%   checked here as bodies and run later under the agent bounds.
 %
 %   @error permission_error(install, code, Culprit)
 %   @error syntax_error(...) if Text does not read.
 
 check_program_text(Id, Text) :-
-    format(atom(SourceId), 'dfrl_program://~w', [Id]),
+    must_be(atomic, Id),
+    must_be(string, Text),
     setup_call_cleanup(open_string(Text, In),
                        read_program(In, Terms0),
                        close(In)),
     plain_data(Terms0),
+    findall(Head, ( member(T, Terms0), raw_head(T, Head) ), Heads0),
+    sort(Heads0, Heads),                        % each name is looked up once
+    maplist(head_hook_check, Heads),
     maplist(expand, Terms0, Expanded),
     append(Expanded, Terms),
     partition_terms(Terms, Directives, Clauses),
-    maplist(check_directive(SourceId), Directives),
-    maplist(program_clause(SourceId), Clauses, Parts),
+    maplist(check_directive, Directives),
+    maplist(program_clause, Clauses, Parts),
+    findall(PI, ( member(own-H-_, Parts), functor(H, F, A), PI = F/A ), Own0),
+    sort(Own0, Own),
+    maplist(own_predicate, Own),
     findall(P, ( member(D, Directives), declared(D, P) ), Declared),
-    include(user_part, Parts, UserParts),
-    findall(H-B, ( member(user-H-B, UserParts), B \== true ), LocalRules),
-    findall(F/A, ( member(user-H-_, UserParts), functor(H, F, A) ), Local0),
+    include(own_part, Parts, OwnParts),
+    findall(H-B, ( member(own-H-B, OwnParts), B \== true ), LocalRules),
+    findall(F/A, ( member(own-H-_, OwnParts), functor(H, F, A) ), Local0),
     append(Declared, Local0, Local),
     findall(B, ( member(_-_-B, Parts), B \== true ), Bodies),
-    findall(G, ( member(D, Directives), init_goal(D, G) ), Inits),
+    findall(G, ( member(D, Directives), directive_init(D, G) ), Inits),
     append(Bodies, Inits, ToCheck),
     (   ToCheck == []
     ->  true
@@ -448,59 +468,119 @@ read_program(In, Terms) :-
         read_program(In, Rest)
     ).
 
+%   A grammar rule's translation declares its head non_terminal/1 (in
+%   the module it is read in): the declaration is the rule's, not a
+%   directive of the program.
 expand(T, Ts) :-
     expand_term(T, X),
-    (   is_list(X) -> Ts = X ; Ts = [X] ).
+    (   is_list(X) -> Ts0 = X ; Ts0 = [X] ),
+    (   nonvar(T), T = (_ --> _)
+    ->  exclude(non_terminal_decl, Ts0, Ts)
+    ;   Ts = Ts0
+    ).
+
+non_terminal_decl((:- non_terminal(_))).
+
+%   Clause heads are checked for hooks before the terms are expanded:
+%   expansion runs the node's hooks on them (library(sandbox)'s refuses
+%   a sandbox:safe_primitive/1 clause without naming the hook).
+raw_head(T, M-(F/A)) :-
+    nonvar(T),
+    T \= (:- _),
+    T \= (?- _),
+    (   T = Q:(QH :- _),                        % Module:(Head :- Body)
+        atom(Q), callable(QH)
+    ->  strip_module(Q:QH, M, H),
+        callable(H),
+        functor(H, F, A)
+    ;   T = (H0 --> _)
+    ->  (   nonvar(H0), H0 = (H1, _) -> true ; H1 = H0 ),
+        callable(H1),
+        strip_module('$program':H1, M, H),
+        callable(H),
+        functor(H, F, A0),
+        A is A0 + 2
+    ;   clause_parts(T, QH-_),
+        callable(QH),
+        strip_module('$program':QH, M, H),
+        callable(H),
+        functor(H, F, A)
+    ).
+
+head_hook_check(M-(F/A)) :-
+    (   M \== '$program',
+        (   mobile_hook(M:F/A)
+        ;   moved_hook(M:F/A, _)
+        )
+    ->  true                                    % program_clause/2 tells
+    ;   M == '$program'
+    ->  own_predicate(F/A)
+    ;   qualified_hook(M, F/A, Q, Why)
+    ->  refuse(hook(Q:F/A), Why)
+    ;   true
+    ).
 
 partition_terms([], [], []).
 partition_terms([(:- D)|Ts], [D|Ds], Cs) :- !, partition_terms(Ts, Ds, Cs).
 partition_terms([(?- D)|Ts], [D|Ds], Cs) :- !, partition_terms(Ts, Ds, Cs).
 partition_terms([C|Ts], Ds, [C|Cs]) :- partition_terms(Ts, Ds, Cs).
 
-user_part(user-_-_).
+own_part(own-_-_).
 
-%   program_clause(+SourceId, +Clause, -Module-Head-Body)
-program_clause(SourceId, Clause, M-H-B) :-
+%   program_clause(+Clause, -Where-Head-Body): Where is `own` for a
+%   clause of the program's own module (an unqualified head), else the
+%   module of a mobile hook.
+program_clause(Clause, Where-H-B) :-
     clause_parts(Clause, QH-B),
     (   var(QH) -> refuse(clause_head(QH), 'a variable as clause head') ; true ),
-    strip_module(user:QH, M, H),
+    strip_module('$program':QH, M, H),
     check_head(H-B),
-    (   M == user
-    ->  user_head(SourceId, H)
-    ;   functor(H, F, A),
-        mobile_hook(M:F/A)
-    ->  true
-    ;   functor(H, F, A),
-        moved_hook(M:F/A, To)
+    functor(H, F, A),
+    (   M == '$program'
+    ->  Where = own
+    ;   mobile_hook(M:F/A)
+    ->  Where = M
+    ;   moved_hook(M:F/A, To)
     ->  refuse(clause_head(M:H), To)
+    ;   qualified_hook(M, F/A, Q, Why)
+    ->  refuse(hook(Q:F/A), Why)
     ;   refuse(clause_head(M:H), 'a clause for another module')
     ).
 
-%   A program may not redefine what the node has: hooks, imports,
-%   built-ins and predicates of other files.
-user_head(SourceId, H) :-
-    (   predicate_property(user:H, built_in)
-    ->  refuse(clause_head(H), 'a built-in predicate')
-    ;   predicate_property(user:H, multifile)
-    ->  refuse(clause_head(H), 'a hook of this node')
-    ;   predicate_property(user:H, imported_from(M))
-    ->  functor(H, F, A),
-        refuse(clause_head(M:F/A), 'a predicate this node imports')
-    ;   predicate_property(user:H, file(F)), F \== SourceId
-    ->  refuse(clause_head(H), 'a predicate defined by another file')
+%   qualified_hook(+Module, +PI, -Q, -Why): a clause or declaration for
+%   Module:PI would define a hook: Module is user, prolog or system, or
+%   declares PI multifile, or the system calls PI by name.
+qualified_hook(M, F/A, Q, Why) :-
+    hook_refusal(F/A, Q, Why),
+    (   memberchk(M, [user, prolog, system])
+    ->  true
+    ;   called_by_name(_:F/A)
+    ->  true
+    ;   atom(M),
+        current_module(M),                      % makes no module, loads nothing
+        current_predicate(M:F/A),
+        functor(H, F, A),
+        predicate_property(M:H, multifile)
+    ),
+    !.
+
+%   A program's own predicate: one that nothing calls by name.
+own_predicate(PI) :-
+    (   hook_refusal(PI, Q, Why)
+    ->  refuse(hook(Q:PI), Why)
     ;   true
     ).
 
 %   Directives: declarations of the program's own predicates, libraries
-%   and an initialization goal (checked as a body).
-check_directive(SourceId, D) :-
+%   and initialization goals (checked as bodies).
+check_directive(D) :-
     (   var(D)
     ->  refuse(directive(D), 'a variable')
     ;   D = (A, B)
-    ->  check_directive(SourceId, A),
-        check_directive(SourceId, B)
+    ->  check_directive(A),
+        check_directive(B)
     ;   declaration(D, Specs)
-    ->  forall(pi_member(PI, Specs), check_declared(SourceId, D, PI))
+    ->  forall(pi_member(PI, Specs), check_declared(D, PI))
     ;   library_directive(D)
     ->  true
     ;   init_goal(D, _)
@@ -511,6 +591,7 @@ check_directive(SourceId, D) :-
 declaration(dynamic(S), S).
 declaration(discontiguous(S), S).
 declaration(multifile(S), S).
+declaration(non_terminal(S), S).
 
 pi_member(_, V) :- var(V), !, fail.
 pi_member(PI, (A, B)) :- !, ( pi_member(PI, A) ; pi_member(PI, B) ).
@@ -518,21 +599,22 @@ pi_member(PI, [H|T]) :- !, ( pi_member(PI, H) ; pi_member(PI, T) ).
 pi_member(_, []) :- !, fail.
 pi_member(PI, PI).
 
-check_declared(SourceId, D, PI) :-
-    (   PI = M0:F/A, atom(M0), atom(F), integer(A) -> M = M0
-    ;   PI = F/A, atom(F), integer(A) -> M = user
+check_declared(D, PI0) :-
+    (   PI0 = M0:PI1 -> true ; M0 = '$program', PI1 = PI0 ),
+    (   atom(M0), pred_indicator(PI1, F, A) -> M = M0
     ;   refuse(directive(D), 'not a predicate indicator')
     ),
-    (   M == user
-    ->  functor(H, F, A),
-        (   D = multifile(_)
+    (   M == '$program'
+    ->  (   D = multifile(_)
         ->  refuse(directive(D), 'declares a hook')
-        ;   user_head(SourceId, H)
+        ;   own_predicate(F/A)
         )
     ;   mobile_hook(M:F/A)
     ->  true
     ;   moved_hook(M:F/A, To)
     ->  refuse(directive(D), To)
+    ;   qualified_hook(M, F/A, Q, Why)
+    ->  refuse(hook(Q:F/A), Why)
     ;   refuse(directive(D), 'declares a predicate of another module')
     ).
 
@@ -547,10 +629,20 @@ moved_hook(dfrl_agent:F/A,
 declared(D, F/A) :-
     declaration(D, Specs),
     pi_member(PI, Specs),
-    (   PI = F/A ; PI = user:F/A ),
-    atom(F), integer(A).
+    pred_indicator(PI, F, A).
+
 declared((A, B), PI) :-
     (   declared(A, PI) ; declared(B, PI) ).
+
+%   Name/Arity, or Name//Arity of a non-terminal (Arity + 2 arguments).
+pred_indicator(PI, F, A) :-
+    nonvar(PI),
+    (   PI = F/A
+    ->  atom(F), integer(A)
+    ;   PI = F//A0
+    ->  atom(F), integer(A0),
+        A is A0 + 2
+    ).
 
 library_directive(use_module(library(X))) :- safe_library(X).
 library_directive(use_module(library(X), _)) :- safe_library(X).
@@ -559,8 +651,238 @@ library_directive(ensure_loaded(library(X))) :- safe_library(X).
 %   initialization(G, main) would halt the node after G, the other
 %   moments (restore, program, after_load) run G when the program
 %   cannot be checked again: only now and after loading are allowed.
+%   Both run after the program is loaded, under the agent bounds
+%   (codeload.pl).
 init_goal(initialization(G), G).
 init_goal(initialization(G, now), G).
+
+directive_init(D, G) :-
+    (   init_goal(D, G)
+    ;   D = (A, B),
+        (   directive_init(A, G) ; directive_init(B, G) )
+    ).
+
+		 /*******************************
+		 *     HOOKS: DEFAULT DENY	*
+		 *******************************/
+
+%!  hook_refusal(+Name/Arity, -Module, -Why) is semidet.
+%
+%   A program sent by a peer may not define Name/Arity, in its own
+%   module or elsewhere (but for the mobile hooks), because the Prolog
+%   system, a library or the node calls a predicate of that name (in
+%   Module): SWI-Prolog looks several hooks up in `user` whether or not
+%   they are declared (user:prolog_exception_hook/4 is not, in 9.0.4),
+%   expansion hooks run in the module being loaded, and attribute hooks
+%   in the module named by the attribute. Rather than a list alone, a
+%   name is refused if
+%
+%     - it is one of the hooks that SWI-Prolog 9.0.4 calls by name
+%       (called_by_name/1: its manual, its C core, and every
+%       user:/prolog: hook its library and boot files declare, which
+%       tests/platform/test_codeload.pl derives again from the
+%       installed sources);
+%     - `system` defines it (built-ins, system hooks such as
+%       term_expansion/2);
+%     - `prolog` or `user` defines or declares it (the node's own
+%       predicates; programs sent by peers never load into `user`);
+%     - any module of the process declares it multifile (a hook by
+%       definition: sandbox:safe_primitive/1, node:platform_request/4);
+%     - a library exports it (the autoload index, or a loaded library
+%       module).
+
+hook_refusal(F/A, Q, Why) :-
+    atom(F), integer(A),
+    functor(H, F, A),
+    hook_refusal_(F/A, H, Q, Why),
+    !.
+
+hook_refusal_(F/A, _, Q, 'a hook the Prolog system or a library calls by name') :-
+    called_by_name(Q:F/A).
+hook_refusal_(F/A, _, system, 'a predicate of the Prolog system') :-
+    current_predicate(system:F/A).
+hook_refusal_(F/A, _, Q, 'a predicate or hook the node defines') :-
+    member(Q, [user, prolog]),
+    current_predicate(Q:F/A).                   % also declared dynamic or multifile
+hook_refusal_(_, H, Q, 'a hook (declared multifile there)') :-
+    current_predicate(_, Q:H),
+    \+ program_or_agent_module(Q),
+    predicate_property(Q:H, multifile).
+hook_refusal_(F/A, _, Q, 'a predicate of a library') :-
+    '$in_library'(F, A, Path),
+    file_base_name(Path, Q).
+hook_refusal_(_, H, Q, 'a predicate of a library') :-
+    current_predicate(_, Q:H),
+    module_property(Q, class(Class)),
+    memberchk(Class, [library, system]),
+    predicate_property(Q:H, exported).
+
+%   (current_predicate/1,2 come first: predicate_property/2 of a name
+%   that is not defined autoloads its library, and a program could make
+%   the node load any library by naming it.)
+
+program_or_agent_module(M) :-
+    (   sub_atom(M, 0, _, _, 'dfrl_program://')
+    ;   sub_atom(M, 0, _, _, 'dfrl_agent@')
+    ;   scratch_module(M)
+    ),
+    !.
+
+%!  called_by_name(?Module:Name/Arity) is nondet.
+%
+%   Hooks SWI-Prolog 9.0.4 calls by name (non-terminals Name//N are
+%   given as Name/N+2). From its manual and C core: the exception,
+%   trace, event, signal and undefined-procedure hooks, expansion,
+%   portray, attribute hooks (called in the module named by the
+%   attribute); then every user:Name/Arity and prolog:Name/Arity its
+%   boot/ and library/ sources declare or call (grep of
+%   `(user|prolog):Name/Arity` and `//Arity`; the test derives it again).
+
+called_by_name(user:F/A) :- user_hook(F/A).
+called_by_name(prolog:F/A) :- prolog_hook(F/A).
+called_by_name(system:F/A) :- system_hook(F/A).
+called_by_name(attribute:F/A) :- attribute_hook(F/A).
+
+%   Looked up in user (boot/, library/, the C core).
+user_hook(prolog_exception_hook/4).
+user_hook(exception/3).
+user_hook(message_hook/3).
+user_hook(thread_message_hook/3).
+user_hook(portray/1).
+user_hook(portray_message/2).
+user_hook(message_property/2).
+user_hook(prolog_load_file/2).
+user_hook(term_expansion/2).
+user_hook(term_expansion/4).
+user_hook(term_expansion/6).
+user_hook(goal_expansion/2).
+user_hook(goal_expansion/4).
+user_hook(prolog_trace_interception/4).
+user_hook(prolog_event_hook/1).
+user_hook(prolog_predicate_name/2).
+user_hook(prolog_clause_name/2).
+user_hook(prolog_list_goal/1).
+user_hook(prolog_stack_frame_property/2).
+user_hook(resource/2).
+user_hook(resource/3).
+user_hook(file_search_path/2).
+user_hook(library_directory/1).
+user_hook(prolog_file_type/2).
+user_hook(expand_query/4).
+user_hook(expand_answer/2).
+user_hook(url_path/2).
+user_hook(generate_message_hook/3).
+user_hook(portray_attvar/1).
+user_hook(exception_hook/4).
+user_hook(prolog_on_signal/2).
+user_hook(prolog_alert_signal/2).
+user_hook(message_prefix_hook/2).
+user_hook(prolog_edit/1).
+user_hook(prolog_stack_property/2).
+
+%   Looked up in prolog (boot/, library/).
+prolog_hook(prolog_exception_hook/5).
+prolog_hook(alternate_syntax/4).
+prolog_hook(assertion_failed/2).
+prolog_hook(break_hook/7).
+prolog_hook(build_config/5).
+prolog_hook(build_environment/2).
+prolog_hook(build_file/2).
+prolog_hook(build_step/4).
+prolog_hook(called_by/2).
+prolog_hook(called_by/4).
+prolog_hook(comment_hook/3).
+prolog_hook(complete_input/4).
+prolog_hook(confirm/2).
+prolog_hook(console_color/2).
+prolog_hook(debug_control_hook/1).
+prolog_hook(debug_print_hook/3).
+prolog_hook(deprecated/3).
+prolog_hook(deprecated/4).
+prolog_hook(doc_autolink_extension/2).
+prolog_hook(doc_canonical_object/2).
+prolog_hook(doc_category/3).
+prolog_hook(doc_directory/1).
+prolog_hook(doc_file_index_header/4).
+prolog_hook(doc_file_title/5).
+prolog_hook(doc_is_public_object/1).
+prolog_hook(doc_links/4).
+prolog_hook(doc_nav_tree/4).
+prolog_hook(doc_object_footer/4).
+prolog_hook(doc_object_href/2).
+prolog_hook(doc_object_link/4).
+prolog_hook(doc_object_page/4).
+prolog_hook(doc_object_page_footer/4).
+prolog_hook(doc_object_summary/4).
+prolog_hook(doc_object_title/2).
+prolog_hook(doc_page_header/4).
+prolog_hook(doc_places_menu/3).
+prolog_hook(doc_search_field/3).
+prolog_hook(doc_url_expansion/3).
+prolog_hook(doc_wiki_face/4).
+prolog_hook(error_message/3).
+prolog_hook(error_message/4).
+prolog_hook(general_exception/2).
+prolog_hook(generated_predicate/1).
+prolog_hook(gpp_options/1).
+prolog_hook(heartbeat/0).
+prolog_hook(help_hook/1).
+prolog_hook(history/2).
+prolog_hook(history_line/2).
+prolog_hook(hook/1).
+prolog_hook(initialize_now/2).
+prolog_hook(locate_clauses/2).
+prolog_hook(make_hook/2).
+prolog_hook(message/3).
+prolog_hook(message/4).
+prolog_hook(message_context/3).
+prolog_hook(message_context/4).
+prolog_hook(message_line_element/2).
+prolog_hook(message_location/3).
+prolog_hook(message_location/4).
+prolog_hook(message_prefix_hook/2).
+prolog_hook(meta_goal/2).
+prolog_hook(no_autoload_module/1).
+prolog_hook(obfuscate_identifiers/1).
+prolog_hook(open_source_hook/3).
+prolog_hook(portray/1).
+prolog_hook(predicate_summary/2).
+prolog_hook(quasi_quotation_syntax/2).
+prolog_hook(rename_predicate/2).
+prolog_hook(residual_goals/2).
+prolog_hook(runtime_config/2).
+prolog_hook(sandbox_allowed_clause/1).
+prolog_hook(sandbox_allowed_directive/1).
+prolog_hook(sandbox_allowed_expansion/1).
+prolog_hook(sandbox_allowed_goal/1).
+prolog_hook(show_profile_hook/1).
+prolog_hook(show_profile_hook/2).
+prolog_hook(theme/1).
+prolog_hook(translate_bindings/5).
+prolog_hook(translate_message/3).
+prolog_hook(tripwire/2).
+prolog_hook(url_expansion_hook/3).
+prolog_hook(version_msg/1).
+prolog_hook(xref_close_source/2).
+prolog_hook(xref_open_source/2).
+prolog_hook(xref_source_directory/2).
+prolog_hook(xref_source_file/3).
+prolog_hook(xref_source_identifier/2).
+prolog_hook(xref_source_time/2).
+prolog_hook(xref_update_syntax/2).
+
+%   Looked up in system (expansion of every module's code).
+system_hook(term_expansion/2).
+system_hook(term_expansion/4).
+system_hook(goal_expansion/2).
+system_hook(goal_expansion/4).
+
+%   Called as Attribute:Hook(...) when a variable with that attribute is
+%   unified, copied or printed.
+attribute_hook(attr_unify_hook/2).
+attribute_hook(attribute_goals/3).
+attribute_hook(attr_portray_hook/2).
+attribute_hook(project_attributes/2).
 
 		 /*******************************
 		 *    THE AGENT API AS SAFE	*

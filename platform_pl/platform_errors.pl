@@ -224,6 +224,8 @@ code_culprit(unknown_call(G)) -->
     !, [ 'cannot tell which predicate ~q calls'-[G] ].
 code_culprit(clause_head(H)) -->
     !, [ 'it may not define ~q'-[H] ].
+code_culprit(hook(M:PI)) -->
+    !, [ 'it may not define ~q, a hook called by name'-[M:PI] ].
 code_culprit(directive(D)) -->
     !, [ 'directive ~q is not allowed'-[D] ].
 code_culprit(handler(H)) -->

@@ -292,11 +292,11 @@ test(unknown_request, [cleanup(stop_all([N]))]) :-
 test(remote_load_needs_token, [cleanup(stop_all([N]))]) :-
     node_start(localhost:0, N, [token(abc), default(false)]),
     port(N, P),
-    catch(load_program_text(localhost:P, x, "user:injected(1).", [tokens([wrong])]), E, true),
+    catch(load_program_text(localhost:P, x, "injected(1).", [tokens([wrong])]), E, true),
     assertion(subsumes_term(error(permission_error(load, platform, _), _), E)),
-    assertion(\+ catch(user:injected(_), _, fail)),
-    load_program_text(localhost:P, x, "user:injected(1).", [tokens([abc])]),
-    assertion(user:injected(1)).
+    assertion(\+ catch('dfrl_program://x':injected(_), _, fail)),
+    load_program_text(localhost:P, x, "injected(1).", [tokens([abc])]),
+    assertion('dfrl_program://x':injected(1)).   % a peer's program loads into its own module
 
 :- end_tests(bad_input).
 

@@ -10,6 +10,7 @@
 :- use_module(library(plunit)).
 :- use_module(library(readutil)).
 :- use_module('../../platform_pl/agents', [agent_create/4]).
+:- use_module('../../platform_pl/codeload', [program_module/2]).
 
 :- prolog_load_context(directory, D), asserta(user:sandbox_test_dir(D)).
 
@@ -155,10 +156,12 @@ test(refused_program_loads_nothing, [cleanup(stop_all([N]))]) :-
                           "sandbox_marker(1).\n:- set_token(evil).\n" ]),
            ( catch(load_program_text(localhost:P, evil, Text, [tokens([k])]), E, true),
              assertion(subsumes_term(error(permission_error(install, code, _), _), E)),
-             assertion(\+ catch(user:sandbox_marker(_), _, fail)) )),
+             program_module(evil, Evil),
+             assertion(\+ catch(Evil:sandbox_marker(_), _, fail)) )),
     assertion(\+ exists_file('/tmp/dfrl_pwned')),
     load_program_text(localhost:P, good, "sandbox_marker(1).\n", [tokens([k])]),
-    assertion(user:sandbox_marker(1)).
+    program_module(good, M),
+    assertion(M:sandbox_marker(1)).
 
 test(hook_clause_alone) :-                  % no user predicate in the program
     check_program_text(hook_only,

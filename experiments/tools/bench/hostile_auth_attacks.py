@@ -7,7 +7,9 @@ started at ``nice -n 19``); the frame attackers are threads of the benchmark's n
 process (:class:`AuthFrames`, run by :mod:`hostile_child`).
 
 ``escapes``    agents and programs trying side doors of the sandbox (see
-               ``hostile_auth_node.pl``, ``escape/4``): each is refused or accepted, and ran or
+               ``hostile_auth_node.pl``, ``escape/4``; also programs defining system hooks and
+               one whose initialization loops, ``stopped`` by the bounds): each is refused or
+               accepted, and ran or
                not (its marker file exists, it carried home what it looked for, or the target's
                ``double_quotes`` flag changed): :func:`escape_results`;
 ``loop``, ``memory``, ``clone``, ``assert``, ``log``, ``post``
@@ -128,6 +130,7 @@ def escape_results(attempts: list[dict[str, Any]], token: int,
     return {"attempts": out, "tried": len(out),
             "refused": sum(a["verdict"] == "refused" for a in out),
             "accepted": sum(a["verdict"] == "accepted" for a in out),
+            "stopped": sum(a["verdict"] == "stopped" for a in out),
             "ran": sum(a["ran"] for a in out),
             "ran_names": [f"{a['via']}:{a['name']}" for a in out if a["ran"]]}
 

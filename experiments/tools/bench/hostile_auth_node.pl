@@ -9,7 +9,9 @@
       escapes  agents and programs (load_program_text/4) that try to run a
                goal through side doors of the target's sandbox, one after
                another (escape/4); each touches a marker file in
-               --marker-dir or posts what it got to a collector here
+               --marker-dir or posts what it got to a collector here;
+               programs that define system hooks or spin in their
+               initialization (verdict stopped when a bound ends it)
       loop     agents spinning in `repeat, fail`
       memory   agents building numlist(1, --size, _)
       clone    an agent cloning itself twice on the target at every stop,
@@ -111,6 +113,15 @@ escape(other_payload, agent, _-P, (current_node(N), agent_property(N, victim, pa
 escape(freeze_init, program, Cmd-_, (put_attr(V, freeze, user:shell(Cmd)), V = 1)).
 escape(print_message, program, Cmd-_, print_message(error, format("~@", [shell(Cmd)]))).
 escape(portray_goal, program, Cmd-_, format("~W", [Cmd, [portray_goal(shell)]])).
+%   Via hook: a program whose clause is a hook the system calls by name
+%   (issue 32: with prolog_exception_hook/4 every malformed frame of an
+%   unauthenticated peer spun a worker); init_loop: a program whose
+%   initialization spins (it ran outside every bound).
+escape(exception_hook, hook, _, (prolog_exception_hook(_, _, _, _) :- repeat, fail)).
+escape(thread_message_hook, hook, _, (thread_message_hook(_, _, _) :- repeat, fail)).
+escape(trace_interception, hook, _, (prolog_trace_interception(_, _, _, _) :- repeat, fail)).
+escape(event_hook, hook, _, (prolog_event_hook(_) :- repeat, fail)).
+escape(init_loop, program, _, (repeat, fail)).
 escape(double_quotes, agent, _-F,
        (set_prolog_flag(double_quotes, atom), current_prolog_flag(double_quotes, F))).
 escape(double_quotes, program, _, set_prolog_flag(double_quotes, atom)).
@@ -174,8 +185,12 @@ try_escape(agent, Name, Got, Goal, a(Token, Port, Target, Wait), R) :-
     carried(Back, Carried),
     R = _{verdict: Verdict, error: Text, reported: Carried.home,
           carried: Carried.value}.
-try_escape(program, Name, _, Goal, a(Token, _, Target, _), R) :-
-    format(string(Text), '~q.~n', [(:- initialization(Goal))]),
+try_escape(hook, Name, Got, Clause, A, R) :-
+    try_escape(text, Name, Got, Clause, A, R).
+try_escape(program, Name, Got, Goal, A, R) :-
+    try_escape(text, Name, Got, (:- initialization(Goal)), A, R).
+try_escape(text, Name, _, Term, a(Token, _, Target, _), R) :-
+    format(string(Text), '~q.~n', [Term]),
     atom_concat(escape_, Name, Id),
     catch(( load_program_text(('127.0.0.1', Target), Id, Text, [tokens([Token])]),
             Verdict = accepted ),
@@ -188,6 +203,10 @@ try_escape(program, Name, _, Goal, a(Token, _, Target, _), R) :-
 verdict(E, refused) :-
     format(string(S), '~q', [E]),
     sub_string(S, _, _, _, "permission_error(install,code,"),
+    !.
+verdict(E, stopped) :-                  % an initialization goal over a bound
+    format(string(S), '~q', [E]),
+    sub_string(S, _, _, _, "program_initialization("),
     !.
 verdict(_, error).
 

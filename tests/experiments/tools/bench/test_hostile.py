@@ -128,7 +128,12 @@ def test_authenticated_phases_have_their_figures_and_no_escape_runs() -> None:
         assert p["pass"] == (p["why"] == [])
     quiet, escapes, loop, frames = r["phases"]
     e = escapes["escapes"]
-    assert e["tried"] == 11 and e["tried"] == len(e["attempts"])
+    assert e["tried"] == 16 and e["tried"] == len(e["attempts"])
+    hooks = [a for a in e["attempts"] if a["via"] == "hook"]
+    assert len(hooks) == 4 and all(a["verdict"] == "refused" for a in hooks), hooks
+    assert all("hook(" in a["error"] for a in hooks), hooks   # the refusal names the hook
+    init_loop = next(a for a in e["attempts"] if a["name"] == "init_loop")
+    assert init_loop["verdict"] == "stopped", init_loop    # the bounds ended the loop
     assert {(a["via"], a["name"]) for a in e["attempts"]} >= {
         ("agent", "freeze_handler"), ("agent", "freeze_findall"), ("program", "freeze_init"),
         ("agent", "print_message"), ("agent", "portray_goal"), ("agent", "double_quotes"),
