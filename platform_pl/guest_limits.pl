@@ -3,6 +3,8 @@
             guest_hazard/1,             % ?Name/Arity
             guest_text_size/4,          % +Term, +Quoted, +Max, -Chars
             guest_eval/2,               % -Value, +Expression
+            guest_static_refusal/2,     % +Goal, -Why
+            guest_context/1,            % +Module
             % the checked versions, under the names guests write
             (is)/2, (<)/2, (>)/2, (=<)/2, (>=)/2, (=:=)/2, (=\=)/2,
             tab/1, tab/2,
@@ -227,6 +229,88 @@ guest_module_init(M) :-
 must_be_atom(M) :-
     (   atom(M) -> true ; throw(error(type_error(atom, M), _)) ).
 
+%!  guest_context(+Module) is semidet.
+%
+%   Module is one where guest code runs or is checked: a call written
+%   there without a module reaches this module's checked versions (an
+%   agent's module), or is code under check (code_safety.pl's scratch
+%   module, where a program's clauses are checked too).
+
+guest_context(guest_limits).
+guest_context(code_safety_scratch).
+guest_context(M) :-
+    atom(M),
+    sub_atom(M, 0, _, _, 'dfrl_agent@').
+
+%!  guest_static_refusal(+Goal, -Why) is semidet.
+%
+%   Goal, a call of one of the checked predicates as written in guest
+%   code, is over a limit whatever happens before it: an expression, a
+%   format's arguments or a tab/1 count that are known (ground) when the
+%   code is checked. Why is an atom that says which size and limit.
+
+guest_static_refusal(G, Why) :-
+    callable(G),
+    catch(setup_call_cleanup(b_setval(guest_limits_static, true),
+                             static_check(G),
+                             b_setval(guest_limits_static, false)),
+          error(resource_error(R), context(Culprit, size(Size, Max))),
+          true),
+    nonvar(R),
+    (   R == guest_integer
+    ->  system:format(atom(Why), 'integer of ~D bits at ~q (over dfrl_guest_integer_bits, ~D)',
+                      [Size, Culprit, Max])
+    ;   system:format(atom(Why), 'text of ~D characters by ~q (over dfrl_guest_text_limit, ~D)',
+                      [Size, Culprit, Max])
+    ).
+
+static_check(G) :-
+    functor(G, Name, Arity),
+    (   Name == is, Arity == 2
+    ->  arg(2, G, E), static_eval(E)
+    ;   Arity == 2, memberchk(Name, [<, >, =<, >=, =:=, =\=])
+    ->  arg(1, G, A), arg(2, G, B), static_eval(A), static_eval(B)
+    ;   Name == tab
+    ->  arg(Arity, G, N), static_eval(N),
+        (   ground(N) -> guest_eval(V, N), check_text(tab/Arity, V) ; true )
+    ;   Name == format
+    ->  static_format(G, Arity)
+    ;   true
+    ).
+
+%   Only ground expressions are evaluated at check time (their errors,
+%   other than sizes, are the run's).
+static_eval(E) :-
+    (   ground(E)
+    ->  catch(guest_eval(_, E), error(Formal, Context),
+              (   Formal = resource_error(_)
+              ->  throw(error(Formal, Context))
+              ;   true
+              ))
+    ;   true
+    ).
+
+static_format(G, Arity) :-
+    (   Arity =:= 1 -> arg(1, G, F), Args = [] ; true ),
+    (   Arity =:= 2 -> arg(1, G, F), arg(2, G, Args) ; true ),
+    (   Arity =:= 3 -> arg(2, G, F), arg(3, G, Args) ; true ),
+    (   ground(F), catch(format_spec(F, Spec), _, fail)
+    ->  text_limit(Max),
+        forall(member(escape(number(N), _, _), Spec),
+               (   N > Max -> throw(error(resource_error(guest_text),
+                                          context(format(F), size(N, Max))))
+               ;   true
+               )),
+        (   ground(Args)
+        ->  format_size(format/Arity, F, Args)
+        ;   true
+        )
+    ;   true
+    ).
+
+member(X, [X|_]).
+member(X, [_|T]) :- member(X, T).
+
 		 /*******************************
 		 *            LIMITS		*
 		 *******************************/
@@ -240,9 +324,11 @@ over_bits(Culprit, Size, Max) :-
     over(integer_size(Max), guest_integer, Culprit, Size, Max).
 
 %   Inside a bounded call the agent is stopped (and its source told);
-%   elsewhere a resource error.
+%   elsewhere (and when checking code before it is installed) a
+%   resource error.
 over(Kind, Resource, Culprit, Size, Max) :-
-    (   catch(agent_bounds:current_call_(_, _, _, _), _, fail)
+    (   \+ nb_current(guest_limits_static, true),
+        catch(agent_bounds:current_call_(_, _, _, _), _, fail)
     ->  throw('$dfrl_bound'(Kind))
     ;   throw(error(resource_error(Resource), context(Culprit, size(Size, Max))))
     ).
