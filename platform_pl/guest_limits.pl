@@ -73,6 +73,7 @@ with '$dfrl_bound'(text_size(Limit)) or '$dfrl_bound'(integer_size(Limit))
 resource_error(guest_text) or resource_error(guest_integer).
 */
 
+:- set_prolog_flag(optimise, true).     % this file: arithmetic compiled inline
 :- create_prolog_flag(dfrl_guest_text_limit, 8388608, [type(integer), keep(true)]).
 :- create_prolog_flag(dfrl_guest_integer_bits, 8388608, [type(integer), keep(true)]).
 
@@ -341,7 +342,14 @@ check_text(Culprit, Size) :-
 		 *          ARITHMETIC		*
 		 *******************************/
 
-X is E :- guest_eval(V, E), X = V.
+X is E :-
+    (   number(E)
+    ->  X = E
+    ;   cheap(E, 1024, _)
+    ->  system:is(X, E)
+    ;   guest_eval(V, E),
+        X = V
+    ).
 A < B :- guest_eval(X, A), guest_eval(Y, B), system:(X < Y).
 A > B :- guest_eval(X, A), guest_eval(Y, B), system:(X > Y).
 A =< B :- guest_eval(X, A), guest_eval(Y, B), system:(X =< Y).
@@ -357,6 +365,8 @@ A =\= B :- guest_eval(X, A), guest_eval(Y, B), system:(X =\= Y).
 guest_eval(V, E) :-
     (   number(E)
     ->  V = E
+    ;   cheap(E, 1024, _)                    % at most 65,536 bits
+    ->  system:is(V, E)
     ;   compound(E),
         \+ E = [_|_],
         compound_name_arity(E, F, A),
@@ -367,6 +377,46 @@ guest_eval(V, E) :-
         system:is(V, E1)
     ;   system:is(V, E)
     ).
+
+%   cheap(+Expr, +Room0, -Room): Expr has no power or shift, its
+%   integers fit in 60 bits and it has fewer than Room0 leaves: no value
+%   of it has more than 64 bits a leaf (a product of n such numbers has
+%   at most 64n bits: 65,536 bits, under any sensible
+%   dfrl_guest_integer_bits; a smaller limit is checked node by node for
+%   expressions of more than a few leaves only). The common case (N + 1,
+%   X * 2.0 + Y), evaluated at once.
+cheap(E, R0, R) :-
+    (   integer(E)
+    ->  E > -1152921504606846976, E < 1152921504606846976,
+        R is R0 - 1, R > 0
+    ;   float(E)
+    ->  R is R0 - 1, R > 0
+    ;   atom(E)
+    ->  R is R0 - 1, R > 0
+    ;   compound(E),
+        compound_name_arity(E, F, A),
+        \+ risky(F),
+        A > 0, A =< 3,
+        \+ E = [_|_]
+    ->  cheap_args(A, E, R0, R)
+    ).
+
+cheap_args(0, _, R, R) :- !.
+cheap_args(I, E, R0, R) :-
+    arg(I, E, X),
+    cheap(X, R0, R1),
+    I1 is I - 1,
+    cheap_args(I1, E, R1, R).
+
+risky(^).
+risky(**).
+risky(<<).
+risky(>>).
+risky(powm).
+risky(roundtoward).
+risky(rdiv).
+risky(rational).
+risky(rationalize).
 
 eval_args(F, I, A, E, E1, Vs) :-
     (   I > A
@@ -455,7 +505,12 @@ sumlist(Xs, Sum) :- sum_(Xs, 0, Sum).
 
 sum_(V, _, _) :- var(V), !, throw(error(instantiation_error, _)).
 sum_([], S, S).
-sum_([X|Xs], S0, S) :- guest_eval(S1, S0 + X), sum_(Xs, S1, S).
+sum_([X|Xs], S0, S) :-
+    (   number(X), number(S0)
+    ->  system:is(S1, S0 + X)                % adding numbers: linear
+    ;   guest_eval(S1, S0 + X)
+    ),
+    sum_(Xs, S1, S).
 
 max_list([H|T], Max) :- foldl_eval(T, max, H, Max0), guest_eval(Max, Max0).
 min_list([H|T], Min) :- foldl_eval(T, min, H, Min0), guest_eval(Min, Min0).
@@ -463,7 +518,10 @@ min_list([H|T], Min) :- foldl_eval(T, min, H, Min0), guest_eval(Min, Min0).
 foldl_eval([], _, V, V).
 foldl_eval([X|Xs], Op, V0, V) :-
     E =.. [Op, V0, X],
-    guest_eval(V1, E),
+    (   number(X), number(V0)
+    ->  system:is(V1, E)                     % max, min of numbers
+    ;   guest_eval(V1, E)
+    ),
     foldl_eval(Xs, Op, V1, V).
 
 %   aggregate_all/3: sum, max and min evaluate the caller's template;
@@ -680,11 +738,31 @@ format(Out, F, M:Args) :-
 %   parse is left to the built-in (which raises).
 format_size(Culprit, F, Args0) :-
     (   is_list(Args0) -> Args = Args0 ; Args = [Args0] ),
-    (   catch(format_spec(F, Spec), _, fail)
+    (   parsed_format(F, Spec)
     ->  text_limit(Max),
         catch(spec_size(Spec, Args, Max, 0, 0, Size), over(Size), true),
         (   Size > Max -> over_text(Culprit, Size, Max) ; true )
     ;   true
+    ).
+
+%   parsed_format(+Format, -Spec): format_spec/2 (a parser in Prolog,
+%   some 20 us) once per format text; the last 1,000 are kept.
+:- dynamic spec_/3.                     % Hash, Format, Spec
+
+parsed_format(F, Spec) :-
+    (   atomic(F)
+    ->  term_hash(F, H),
+        (   spec_(H, F0, Spec0), F0 == F
+        ->  Spec = Spec0
+        ;   catch(format_spec(F, Spec), _, fail),
+            (   predicate_property(spec_(_, _, _), number_of_clauses(N)),
+                N >= 1000
+            ->  retractall(spec_(_, _, _))
+            ;   true
+            ),
+            assertz(spec_(H, F, Spec))
+        )
+    ;   catch(format_spec(F, Spec), _, fail)
     ).
 
 %   spec_size(+Spec, +Args, +Max, +Column, +Size0, -Size): Column is the
