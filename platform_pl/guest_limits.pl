@@ -5,6 +5,10 @@
             guest_eval/2,               % -Value, +Expression
             guest_static_refusal/2,     % +Goal, -Why
             guest_context/1,            % +Module
+            guest_goal/1,               % :Goal
+            guest_closure/2, guest_closure/3, guest_closure/4,
+            guest_closure/5, guest_closure/6, guest_closure/7,
+            guest_closure/8,
             % the checked versions, under the names guests write
             (is)/2, (<)/2, (>)/2, (=<)/2, (>=)/2, (=:=)/2, (=\=)/2,
             tab/1, tab/2,
@@ -131,7 +135,15 @@ resource_error(guest_text) or resource_error(guest_integer).
     format(+, +, :),
     write_term(?, :),
     write_term(+, ?, :),
-    aggregate_all(?, 0, -).
+    aggregate_all(?, 0, -),
+    guest_goal(0),
+    guest_closure(1, ?),
+    guest_closure(2, ?, ?),
+    guest_closure(3, ?, ?, ?),
+    guest_closure(4, ?, ?, ?, ?),
+    guest_closure(5, ?, ?, ?, ?, ?),
+    guest_closure(6, ?, ?, ?, ?, ?, ?),
+    guest_closure(7, ?, ?, ?, ?, ?, ?, ?).
 
 %!  guest_hazard(?PI) is nondet.
 %
@@ -205,7 +217,8 @@ user:message_hook(import_private(_, guest_limits:_), warning, _).
 %   This module's own arithmetic is the built-in's (its exported is/2
 %   and comparisons are the checked ones, for guests).
 goal_expansion(G, system:G) :-
-    prolog_load_context(module, guest_limits),
+    prolog_load_context(source, File),
+    module_property(guest_limits, file(File)),
     compound(G),
     compound_name_arity(G, F, 2),
     memberchk(F, [is, <, >, =<, >=, =:=, =\=]).
@@ -834,3 +847,164 @@ directive(_, Num, Args, Args, _, Col, Col, Add) :-
 
 take([], _, []).
 take([A|As], A, As).
+
+		 /*******************************
+		 *      PROGRAMS FROM PEERS	*
+		 *******************************/
+
+%   A program a peer sent is loaded into `user` (codeload.pl, source
+%   dfrl_program://Id), which does not inherit from this module. While it
+%   loads, its goals are rewritten: a call of a checked predicate without
+%   a module becomes guest_limits:Goal (SWI-Prolog's expansion applies
+%   this inside findall/forall goals and closures, maplist(is, ...)
+%   included), and a goal or closure that is a variable in a meta-argument
+%   (call(G), findall(X, G, L), maplist(C, L)) is wrapped in
+%   guest_goal/1 or guest_closure/N, which rewrite it the same way when
+%   it is called. Locally loaded programs are not touched.
+
+:- multifile system:goal_expansion/2.
+
+system:goal_expansion(G0, G) :-
+    prolog_load_context(source, Source),
+    atom(Source),
+    sub_atom(Source, 0, _, _, 'dfrl_program://'),
+    \+ prolog_load_context(module, guest_limits),
+    program_goal(G0, G).
+
+program_goal(G0, G) :-
+    callable(G0),
+    \+ G0 = _:_,
+    rewrite(G0, G1),
+    wrap_meta(G1, G),
+    G \== G0.
+
+%   Variables in meta-arguments of a goal (not of a control construct:
+%   the expansion visits their parts) are wrapped.
+wrap_meta(G0, G) :-
+    (   \+ G0 = _:_,
+        \+ control(G0),
+        catch(predicate_property(user:G0, meta_predicate(Spec)), _, fail)
+    ->  G0 =.. [Name|Args0],
+        Spec =.. [_|Specs],
+        wrap_vars(Specs, Args0, Args, _),
+        G =.. [Name|Args]
+    ;   G = G0
+    ).
+
+control((_,_)).
+control((_;_)).
+control((_->_)).
+control((_*->_)).
+control(\+ _).
+
+wrap_vars([], [], [], _).
+wrap_vars([S|Ss], [A0|As0], [A|As], Changed) :-
+    (   var(A0), S == 0
+    ->  A = guest_limits:guest_goal(A0), Changed = true
+    ;   var(A0), integer(S), S > 0, S =< 7
+    ->  A = guest_limits:guest_closure(A0), Changed = true
+    ;   A = A0
+    ),
+    wrap_vars(Ss, As0, As, Changed).
+
+%!  guest_goal(:Goal) is nondet.
+%
+%   Call Goal with its calls of checked predicates (at any depth of
+%   control constructs, meta-arguments and yall lambdas) rewritten to
+%   this module's versions.
+
+guest_goal(M:G0) :-
+    rewrite(G0, G),
+    call(M:G).
+
+%!  guest_closure(:Closure, ?A1, ...) is nondet.
+%
+%   As call/N of Closure, rewritten as guest_goal/1 does.
+
+guest_closure(M:C, A1) :- closure_goal(C, [A1], G), guest_goal(M:G).
+guest_closure(M:C, A1, A2) :- closure_goal(C, [A1,A2], G), guest_goal(M:G).
+guest_closure(M:C, A1, A2, A3) :- closure_goal(C, [A1,A2,A3], G), guest_goal(M:G).
+guest_closure(M:C, A1, A2, A3, A4) :- closure_goal(C, [A1,A2,A3,A4], G), guest_goal(M:G).
+guest_closure(M:C, A1, A2, A3, A4, A5) :- closure_goal(C, [A1,A2,A3,A4,A5], G), guest_goal(M:G).
+guest_closure(M:C, A1, A2, A3, A4, A5, A6) :- closure_goal(C, [A1,A2,A3,A4,A5,A6], G), guest_goal(M:G).
+guest_closure(M:C, A1, A2, A3, A4, A5, A6, A7) :- closure_goal(C, [A1,A2,A3,A4,A5,A6,A7], G), guest_goal(M:G).
+
+closure_goal(C, Extra, G) :-
+    (   var(C)
+    ->  throw(error(instantiation_error, _))
+    ;   C = Q:C1
+    ->  closure_goal(C1, Extra, G1), G = Q:G1
+    ;   C =.. L0,
+        append_(L0, Extra, L),
+        G =.. L
+    ).
+
+append_([], L, L).
+append_([H|T], L, [H|R]) :- append_(T, L, R).
+
+%   rewrite(+Goal0, -Goal): the run-time form of the expansion above.
+rewrite(G0, G) :-
+    (   var(G0)
+    ->  G = G0
+    ;   G0 = _:_
+    ->  G = G0
+    ;   G0 = (A0, B0) -> rewrite(A0, A), rewrite(B0, B), G = (A, B)
+    ;   G0 = (A0 ; B0) -> rewrite(A0, A), rewrite(B0, B), G = (A ; B)
+    ;   G0 = (A0 -> B0) -> rewrite(A0, A), rewrite(B0, B), G = (A -> B)
+    ;   G0 = (A0 *-> B0) -> rewrite(A0, A), rewrite(B0, B), G = (A *-> B)
+    ;   G0 = (\+ A0) -> rewrite(A0, A), G = (\+ A)
+    ;   lambda(G0, G)
+    ->  true
+    ;   callable(G0),
+        functor(G0, Name, Arity),
+        guest_hazard(Name/Arity)
+    ->  G = guest_limits:G0
+    ;   callable(G0),
+        catch(predicate_property(user:G0, meta_predicate(Spec)), _, fail)
+    ->  G0 =.. [Name|Args0],
+        Spec =.. [_|Specs],
+        rewrite_args(Specs, Args0, Args),
+        G =.. [Name|Args]
+    ;   G = G0
+    ).
+
+rewrite_args([], [], []).
+rewrite_args([S|Ss], [A0|As0], [A|As]) :-
+    (   S == 0 -> rewrite(A0, A)
+    ;   S == ^ -> rewrite_hat(A0, A)
+    ;   integer(S), S > 0, nonvar(A0), \+ A0 = _:_
+    ->  rewrite_closure(S, A0, A)
+    ;   A = A0
+    ),
+    rewrite_args(Ss, As0, As).
+
+rewrite_hat(G0, G) :-
+    (   nonvar(G0), G0 = V^G1
+    ->  rewrite_hat(G1, G2), G = V^G2
+    ;   rewrite(G0, G)
+    ).
+
+%   A closure of N arguments: a checked predicate is qualified, a lambda
+%   gets its body rewritten.
+rewrite_closure(N, C0, C) :-
+    (   lambda_closure(C0, C)
+    ->  true
+    ;   callable(C0),
+        functor(C0, Name, A0),
+        A is A0 + N,
+        guest_hazard(Name/A)
+    ->  C = guest_limits:C0
+    ;   C = C0
+    ).
+
+lambda_closure(Ps>>B0, Ps>>B) :- rewrite(B0, B).
+lambda_closure(Free/L0, Free/L) :- nonvar(L0), lambda_closure(L0, L).
+lambda_closure(\X^B0, \X^B) :- rewrite_hat(B0, B).
+
+%   A lambda called with its arguments: >>(Params, Body, A1, ...).
+lambda(G0, G) :-
+    compound(G0),
+    compound_name_arguments(G0, F, [P, B0|Rest]),
+    memberchk(F, [>>, /]),
+    (   F == (>>) -> rewrite(B0, B) ; nonvar(B0), lambda_closure(B0, B) ),
+    compound_name_arguments(G, F, [P, B|Rest]).
