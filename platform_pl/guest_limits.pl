@@ -874,7 +874,9 @@ system:goal_expansion(G0, G) :-
 program_goal(G0, G) :-
     callable(G0),
     \+ G0 = _:_,
+    b_setval(guest_limits_compiling, true),
     rewrite(G0, G1),
+    b_setval(guest_limits_compiling, false),
     wrap_meta(G1, G),
     G \== G0.
 
@@ -987,8 +989,11 @@ rewrite_hat(G0, G) :-
 %   A closure of N arguments: a checked predicate is qualified, a lambda
 %   gets its body rewritten.
 rewrite_closure(N, C0, C) :-
-    (   lambda_closure(C0, C)
-    ->  true
+    (   lambda_closure(C0, C1)
+    ->  (   nb_current(guest_limits_compiling, true)
+        ->  C = guest_limits:guest_closure(C0)      % see below
+        ;   C = C1
+        )
     ;   callable(C0),
         functor(C0, Name, A0),
         A is A0 + N,
@@ -997,6 +1002,11 @@ rewrite_closure(N, C0, C) :-
     ;   C = C0
     ).
 
+%   While a program loads, a lambda is wrapped whole rather than its
+%   body rewritten: library(yall) compiles a lambda into a predicate of
+%   its own and decides which variables it shares with the clause by
+%   looking at the body, where it does not look inside Module:Goal (a
+%   rewritten body lost a shared variable: max_visited.pl's N).
 lambda_closure(Ps>>B0, Ps>>B) :- rewrite(B0, B).
 lambda_closure(Free/L0, Free/L) :- nonvar(L0), lambda_closure(L0, L).
 lambda_closure(\X^B0, \X^B) :- rewrite_hat(B0, B).
