@@ -6,9 +6,9 @@
             guest_static_refusal/2,     % +Goal, -Why
             guest_context/1,            % +Module
             guest_goal/1,               % :Goal
-            guest_closure/2, guest_closure/3, guest_closure/4,
-            guest_closure/5, guest_closure/6, guest_closure/7,
-            guest_closure/8,
+            guest_closure/3, guest_closure/4, guest_closure/5,
+            guest_closure/6, guest_closure/7, guest_closure/8,
+            guest_closure/9,
             % the checked versions, under the names guests write
             (is)/2, (<)/2, (>)/2, (=<)/2, (>=)/2, (=:=)/2, (=\=)/2,
             tab/1, tab/2,
@@ -136,14 +136,7 @@ resource_error(guest_text) or resource_error(guest_integer).
     write_term(?, :),
     write_term(+, ?, :),
     aggregate_all(?, 0, -),
-    guest_goal(0),
-    guest_closure(1, ?),
-    guest_closure(2, ?, ?),
-    guest_closure(3, ?, ?, ?),
-    guest_closure(4, ?, ?, ?, ?),
-    guest_closure(5, ?, ?, ?, ?, ?),
-    guest_closure(6, ?, ?, ?, ?, ?, ?),
-    guest_closure(7, ?, ?, ?, ?, ?, ?, ?).
+    guest_goal(0).
 
 %!  guest_hazard(?PI) is nondet.
 %
@@ -893,6 +886,9 @@ wrap_meta(G0, G) :-
     ;   G = G0
     ).
 
+load_module(M) :-
+    (   prolog_load_context(module, M0) -> M = M0 ; M = user ).
+
 control((_,_)).
 control((_;_)).
 control((_->_)).
@@ -904,7 +900,8 @@ wrap_vars([S|Ss], [A0|As0], [A|As], Changed) :-
     (   var(A0), S == 0
     ->  A = guest_limits:guest_goal(A0), Changed = true
     ;   var(A0), integer(S), S > 0, S =< 7
-    ->  A = guest_limits:guest_closure(A0), Changed = true
+    ->  load_module(M),
+        A = guest_limits:guest_closure(M, A0), Changed = true
     ;   A = A0
     ),
     wrap_vars(Ss, As0, As, Changed).
@@ -919,17 +916,19 @@ guest_goal(M:G0) :-
     rewrite(G0, G),
     call(M:G).
 
-%!  guest_closure(:Closure, ?A1, ...) is nondet.
+%!  guest_closure(+Module, +Closure, ?A1, ...) is nondet.
 %
-%   As call/N of Closure, rewritten as guest_goal/1 does.
+%   As call/N of Module:Closure, rewritten as guest_goal/1 does. Module
+%   is an argument, not a meta-argument, so that the load's expansion
+%   leaves Closure alone (library(yall) would compile a lambda in it).
 
-guest_closure(M:C, A1) :- closure_goal(C, [A1], G), guest_goal(M:G).
-guest_closure(M:C, A1, A2) :- closure_goal(C, [A1,A2], G), guest_goal(M:G).
-guest_closure(M:C, A1, A2, A3) :- closure_goal(C, [A1,A2,A3], G), guest_goal(M:G).
-guest_closure(M:C, A1, A2, A3, A4) :- closure_goal(C, [A1,A2,A3,A4], G), guest_goal(M:G).
-guest_closure(M:C, A1, A2, A3, A4, A5) :- closure_goal(C, [A1,A2,A3,A4,A5], G), guest_goal(M:G).
-guest_closure(M:C, A1, A2, A3, A4, A5, A6) :- closure_goal(C, [A1,A2,A3,A4,A5,A6], G), guest_goal(M:G).
-guest_closure(M:C, A1, A2, A3, A4, A5, A6, A7) :- closure_goal(C, [A1,A2,A3,A4,A5,A6,A7], G), guest_goal(M:G).
+guest_closure(M, C, A1) :- closure_goal(C, [A1], G), guest_goal(M:G).
+guest_closure(M, C, A1, A2) :- closure_goal(C, [A1,A2], G), guest_goal(M:G).
+guest_closure(M, C, A1, A2, A3) :- closure_goal(C, [A1,A2,A3], G), guest_goal(M:G).
+guest_closure(M, C, A1, A2, A3, A4) :- closure_goal(C, [A1,A2,A3,A4], G), guest_goal(M:G).
+guest_closure(M, C, A1, A2, A3, A4, A5) :- closure_goal(C, [A1,A2,A3,A4,A5], G), guest_goal(M:G).
+guest_closure(M, C, A1, A2, A3, A4, A5, A6) :- closure_goal(C, [A1,A2,A3,A4,A5,A6], G), guest_goal(M:G).
+guest_closure(M, C, A1, A2, A3, A4, A5, A6, A7) :- closure_goal(C, [A1,A2,A3,A4,A5,A6,A7], G), guest_goal(M:G).
 
 closure_goal(C, Extra, G) :-
     (   var(C)
@@ -991,7 +990,8 @@ rewrite_hat(G0, G) :-
 rewrite_closure(N, C0, C) :-
     (   lambda_closure(C0, C1)
     ->  (   nb_current(guest_limits_compiling, true)
-        ->  C = guest_limits:guest_closure(C0)      % see below
+        ->  load_module(M),
+            C = guest_limits:guest_closure(M, C0)   % see below
         ;   C = C1
         )
     ;   callable(C0),
