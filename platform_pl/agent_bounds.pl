@@ -57,7 +57,12 @@ agent_clone/4 raises. Memory of the node as a whole:
 
 so the stacks of agents never exceed N x agent_stack_limit, and what
 they hold is kept near the budget (README "Bounds on agents" has the
-measurements). Every bound takes `infinite`.
+measurements). The budget also bounds the process's resident memory
+(node_memory.pl): over its baseline + the budget, the running call that
+has used most CPU is stopped, one a tick; this catches what C code
+allocates outside stacks and modules, write by write. Sizes of single C
+calls are checked before them (guest_limits.pl). Every bound takes
+`infinite`.
 
 An agent over a per-call bound is stopped: the term '$dfrl_bound'(Kind)
 is thrown in its thread (thread_signal/2), Kind one of cpu(Limit),
