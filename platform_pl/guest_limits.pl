@@ -18,7 +18,8 @@
             write_canonical/2, write_term/3,
             atom_concat/3, atomic_list_concat/2, atomic_list_concat/3,
             string_concat/3, upcase_atom/2, downcase_atom/2, string_upper/2,
-            string_lower/2, term_to_atom/2, term_string/2, text_concat/3,
+            string_lower/2, term_to_atom/2, term_string/2, term_string/3,
+            write_length/3, text_concat/3,
             atom_number/2, number_codes/2, number_chars/2, atom_length/2,
             atom_string/2, number_string/2, atom_codes/2, atom_chars/2,
             string_codes/2, string_chars/2, string_to_atom/2,
@@ -115,6 +116,8 @@ resource_error(guest_text) or resource_error(guest_integer).
 :- redefine_system_predicate(string_lower(_,_)).
 :- redefine_system_predicate(term_to_atom(_,_)).
 :- redefine_system_predicate(term_string(_,_)).
+:- redefine_system_predicate(term_string(_,_,_)).
+:- redefine_system_predicate(write_length(_,_,_)).
 :- redefine_system_predicate(text_concat(_,_,_)).
 :- redefine_system_predicate(atom_number(_,_)).
 :- redefine_system_predicate(number_codes(_,_)).
@@ -179,6 +182,8 @@ guest_hazard(string_upper/2).
 guest_hazard(string_lower/2).
 guest_hazard(term_to_atom/2).
 guest_hazard(term_string/2).
+guest_hazard(term_string/3).
+guest_hazard(write_length/3).
 guest_hazard(text_concat/3).
 guest_hazard(atom_number/2).
 guest_hazard(number_codes/2).
@@ -714,6 +719,14 @@ term_to_atom(T, A) :-
 term_string(T, S) :-
     (   var(S) -> check_terms(term_string/2, true, [T]) ; true ),
     system:term_string(T, S).
+term_string(T, S, Opts) :-
+    (   var(S) -> check_terms(term_string/3, true, [T]) ; true ),
+    system:term_string(T, S, Opts).
+%   write_length/3 writes to nowhere, but a term with shared subterms
+%   is written in full, in C: exponential time no signal stops.
+write_length(T, L, Opts) :-
+    check_terms(write_length/3, true, [T]),
+    system:write_length(T, L, Opts).
 
 		 /*******************************
 		 *            OUTPUT		*

@@ -87,6 +87,10 @@ test(shared_subterms) :-                % written size exponential in the stacks
     run((t(S) :- numlist(1, 40, Ks), foldl([_, T0, f(T0, T0)]>>true, Ks, x, T),
                  term_to_atom(T, S)), R),
     assertion(too_big(R)).
+test(write_length_shared) :-           % writes to nowhere, in exponential time
+    run((t(L) :- numlist(1, 60, Ks), foldl([_, T0, f(T0, T0)]>>true, Ks, x, T),
+                 write_length(T, L, [])), R),
+    assertion(too_big(R)).
 test(tab) :-
     run((t(_) :- with_output_to(string(_), tab(400000000))), R), assertion(too_big(R)).
 test(control_text) :-
@@ -95,8 +99,9 @@ test(control_text) :-
                                atomic_list_concat(Xs, B), atom_length(B, L2),
                                numlist(1, 10, Ks),
                                foldl([_, A0, A1]>>atom_concat(A0, A0, A1), Ks, x, C),
-                               atom_length(C, L3), term_to_atom(f(x, "y"), S)), R),
-    assertion(R == t([20, 1000, 1024, 'f(x,"y")'])).
+                               atom_length(C, L3), term_to_atom(f(x, "y"), S0),
+                               write_length(S0, L4, []), S = S0-L4), R),
+    assertion(R == t([20, 1000, 1024, 'f(x,"y")'-8])).
 
 :- end_tests(text).
 
