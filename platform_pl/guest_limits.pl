@@ -947,13 +947,31 @@ guest_goal(M:G0) :-
 %   is an argument, not a meta-argument, so that the load's expansion
 %   leaves Closure alone (library(yall) would compile a lambda in it).
 
-guest_closure(M, C, A1) :- closure_goal(C, [A1], G), guest_goal(M:G).
-guest_closure(M, C, A1, A2) :- closure_goal(C, [A1,A2], G), guest_goal(M:G).
-guest_closure(M, C, A1, A2, A3) :- closure_goal(C, [A1,A2,A3], G), guest_goal(M:G).
-guest_closure(M, C, A1, A2, A3, A4) :- closure_goal(C, [A1,A2,A3,A4], G), guest_goal(M:G).
-guest_closure(M, C, A1, A2, A3, A4, A5) :- closure_goal(C, [A1,A2,A3,A4,A5], G), guest_goal(M:G).
-guest_closure(M, C, A1, A2, A3, A4, A5, A6) :- closure_goal(C, [A1,A2,A3,A4,A5,A6], G), guest_goal(M:G).
-guest_closure(M, C, A1, A2, A3, A4, A5, A6, A7) :- closure_goal(C, [A1,A2,A3,A4,A5,A6,A7], G), guest_goal(M:G).
+guest_closure(M, C, A1) :- closure_call(M, C, [A1]).
+guest_closure(M, C, A1, A2) :- closure_call(M, C, [A1,A2]).
+guest_closure(M, C, A1, A2, A3) :- closure_call(M, C, [A1,A2,A3]).
+guest_closure(M, C, A1, A2, A3, A4) :- closure_call(M, C, [A1,A2,A3,A4]).
+guest_closure(M, C, A1, A2, A3, A4, A5) :- closure_call(M, C, [A1,A2,A3,A4,A5]).
+guest_closure(M, C, A1, A2, A3, A4, A5, A6) :- closure_call(M, C, [A1,A2,A3,A4,A5,A6]).
+guest_closure(M, C, A1, A2, A3, A4, A5, A6, A7) :- closure_call(M, C, [A1,A2,A3,A4,A5,A6,A7]).
+
+%   The closure is rewritten once for a run of calls with the same
+%   closure (maplist/N over a table calls it once an element): the last
+%   one and its rewriting are kept in a backtrackable global variable
+%   of the thread, which shares the closure's variables, so == tells it.
+closure_call(M, C, Extra) :-
+    (   nb_current(guest_limits_closure, C0-C1),
+        C0 == C
+    ->  true
+    ;   length(Extra, N),
+        (   nonvar(C), \+ C = _:_
+        ->  rewrite_closure(N, C, C1)
+        ;   C1 = C
+        ),
+        b_setval(guest_limits_closure, C-C1)
+    ),
+    closure_goal(C1, Extra, G),
+    (   C1 = _:_ -> call(G) ; call(M:G) ).
 
 closure_goal(C, Extra, G) :-
     (   var(C)
