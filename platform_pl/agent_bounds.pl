@@ -14,13 +14,14 @@
 :- use_module(library(prolog_stream), [open_prolog_stream/4]).
 :- use_module(library(aggregate), [aggregate_all/3]).
 :- use_module(library(apply), [foldl/4]).
-:- use_module(library(lists), [sum_list/2, member/2]).
+:- use_module(library(lists), [sum_list/2, member/2, max_list/2]).
 :- use_module(library(debug), [debug/3]).
 :- use_module(node,
               [ node_option/3, node_property/2, node_for_address/2,
                 with_node/2, ctx_node/2, ctx_peer/2 ]).
 :- use_module(transport, [transport_request/4]).
 :- use_module(worker_pool, [pool_run/3, pool_signal/3, pool_retire/0]).
+:- use_module(node_memory, [node_memory_note_idle/0, node_memory_check/2]).
 :- use_module(bounds_ledger,
               [ window_take/4, window_forget/1, windows_forget_node/1, bounds_warning/2,
                 stat_add/2, stat_set/2, stat_max/2, bounds_statistics/1 ]).
@@ -56,7 +57,12 @@ agent_clone/4 raises. Memory of the node as a whole:
 
 so the stacks of agents never exceed N x agent_stack_limit, and what
 they hold is kept near the budget (README "Bounds on agents" has the
-measurements). Every bound takes `infinite`.
+measurements). The budget also bounds the process's resident memory
+(node_memory.pl): over its baseline + the budget, the running call that
+has used most CPU is stopped, one a tick; this catches what C code
+allocates outside stacks and modules, write by write. Sizes of single C
+calls are checked before them (guest_limits.pl). Every bound takes
+`infinite`.
 
 An agent over a per-call bound is stopped: the term '$dfrl_bound'(Kind)
 is thrown in its thread (thread_signal/2), Kind one of cpu(Limit),
@@ -267,6 +273,7 @@ enter(Id, Node, Agent, Module, Limits, saved(Stack0, Out0, Err0, Cur0)) :-
     set_stream(Err, alias(user_error)),
     set_output(Out),
     assertz(current_call_(Id, Node, Agent, Limits)),
+    (   call_(_, _, _, _, _, _, _) -> true ; node_memory_note_idle ),
     assertz(call_(Id, Node, Agent, Module, Me, CPU0, Limits)),
     monitor_wake.
 
@@ -498,7 +505,8 @@ monitor_tick :-
                  E, debug(dfrl(bounds), 'check ~w: ~p', [Id, E]))),
     findall(Node, call_(_, Node, _, _, _, _, _), Nodes0),
     sort(Nodes0, Nodes),
-    foldl(check_budget, Nodes, false, Hot),
+    foldl(check_budget, Nodes, false, Hot0),
+    check_rss(Nodes, Hot0, Hot),
     retractall(monitor_hot_),
     (   Hot == true -> assertz(monitor_hot_) ; true ),
     thread_self(Me),
@@ -588,6 +596,37 @@ check_budget(Node, Hot0, Hot) :-
         ;   true
         ),
         (   Used * 2 > Budget -> Hot = true ; Hot = Hot0 )
+    ).
+
+%   The process's RSS over its baseline + the largest budget of the
+%   nodes running calls (node_memory.pl): work done in C (atoms, GMP,
+%   memory streams) is not in the count above. Over it, the running call
+%   that has used most CPU is stopped with memory_budget(B), one a tick.
+check_rss(Nodes, Hot0, Hot) :-
+    findall(B, ( member(N, Nodes),
+                 node_option(N, agent_memory_budget, B),
+                 B \== infinite ), Bs),
+    (   Bs == []
+    ->  Hot = Hot0
+    ;   max_list(Bs, Budget),
+        node_memory_check(Budget, Verdict),
+        (   Verdict = over(Rss, _)
+        ->  stat_max(peak_rss, Rss),
+            (   aggregate_all(max(Used, Id-T),
+                              ( call_(Id, _, _, _, T, CPU0, _),
+                                \+ signalled_(Id, _, _, _),
+                                catch(thread_statistics(T, cputime, C), _, fail),
+                                Used is C - CPU0 ),
+                              max(_, BigId-BigT))
+            ->  stat_add(rss_stops, 1),
+                stop_call(BigId, BigT, memory_budget(Budget))
+            ;   true
+            ),
+            Hot = true
+        ;   Verdict = near(_, _)
+        ->  Hot = true
+        ;   Hot = Hot0
+        )
     ).
 
 call_memory(Module, Thread, Mem) :-
@@ -689,7 +728,8 @@ reclaim_if_due :-
         ->  assertz(reclaim_pass_(P)),
             Next is Now + 0.1,
             with_mutex(dfrl_bounds, assertz(reclaim_due_(Next)))
-        ;   trim_heap,
+        ;   garbage_collect_atoms,          % atoms a stopped call made
+            trim_heap,
             stat_add(reclaims, 1)
         )
     ).
@@ -919,7 +959,8 @@ node:platform_request(bound_notice(Agent, Kind, From), Ctx, ok(noted), true) :-
 valid_notice(Agent, Kind, Host:Port) :-
     atom(Agent), atom_length(Agent, AL), AL =< 256,
     compound(Kind), compound_name_arity(Kind, K, 1),
-    memberchk(K, [cpu, memory, module_memory, memory_budget, posts, log]),
+    memberchk(K, [cpu, memory, module_memory, memory_budget, posts, log,
+                  text_size, integer_size]),
     arg(1, Kind, Limit),
     ( number(Limit) ; Limit == infinite ),
     atomic(Host), \+ number(Host), atom_length(Host, HL), HL =< 256,

@@ -31,6 +31,7 @@
 :- use_module(worker_pool, [pool_run/3, pool_signal/3]).
 :- use_module(hop_probe, [hop_probe/1]).      % compiled away unless benchmarking
 :- use_module(agent_bounds, [bounds_call/4, bounds_stopped/3, bounds_warning/2]).
+:- use_module(guest_limits, [guest_module_init/1]).
 :- autoload(library(error),
             [must_be/2, existence_error/2, permission_error/3, domain_error/2]).
 :- autoload(library(option), [option/2, option/3]).
@@ -122,6 +123,7 @@ agent_module(Node, Name, Module) :-
     (   module_of_(Name, Node, Module0)
     ->  Module = Module0
     ;   format(atom(Module), 'dfrl_agent@~w/~q', [Node, Name]),
+        guest_module_init(Module),      % sizes of C-level work checked
         assertz(module_of_(Name, Node, Module))
     ).
 

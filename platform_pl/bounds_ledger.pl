@@ -209,6 +209,12 @@ bound_text(module_memory(L)) -->
 bound_text(memory_budget(L)) -->
     [ 'the node\'s agents held more than ~w bytes and it held most '-[L],
       '(agent_memory_budget)' ].
+bound_text(text_size(L)) -->
+    [ 'one call would have made more than ~D characters of text '-[L],
+      '(dfrl_guest_text_limit, guest_limits.pl)' ].
+bound_text(integer_size(L)) -->
+    [ 'one call would have made or divided an integer of more than ~D bits '-[L],
+      '(dfrl_guest_integer_bits, guest_limits.pl)' ].
 bound_text(posts(L)) -->
     [ 'it sent more than ~w posts in a minute (agent_post_limit)'-[L] ].
 bound_text(log(L)) -->

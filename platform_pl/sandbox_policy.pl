@@ -10,6 +10,8 @@
 :- use_module(library(prolog_wrap), [wrap_predicate/4]).
 :- use_module(library(prolog_format), [format_spec/2]).
 :- autoload(library(lists), [member/2]).
+:- autoload(library(occurs), [sub_term/2]).
+:- use_module(guest_limits, [guest_hazard/1, guest_static_refusal/2, guest_context/1]).
 
 /** <module> What library(sandbox) accepts and mobile code may still not do
 
@@ -102,6 +104,9 @@ refused(predicate_options:predicate_options/3, _, 'predicate_options/3: a table 
 refused(settings:F/A, _, 'settings: the node''s configuration') :-
     memberchk(F/A, [setting/2, setting/4, current_setting/1, set_setting/2]).
 refused(prolog:translate_bindings/5, _, 'toplevel internals').
+refused(_:F/A, G, Why) :-
+    guest_hazard(F/A),
+    guest_static_refusal(G, Why).
 
 tabling(abolish_all_tables/0).
 tabling('$wrap_tabled'/2).
@@ -211,6 +216,60 @@ safe_library(dcg/high_order).
 safe_library(strings).
 
 		 /*******************************
+		 *   SIZES OF WORK DONE IN C	*
+		 *******************************/
+
+%   unchecked_builtin(+Goal, +Module, +Parents, -Why): Goal, as the walk
+%   meets it, is one of the predicates guest_limits.pl holds a checked
+%   version of, and it is reached in a way that skips the checked
+%   version: guest code resolves unqualified calls (and meta-calls of
+%   unqualified closures) in its own module, which takes the checked
+%   ones; an explicit module does not. Refused: system:is(X, E),
+%   call(lists:is, X, E), apply:maplist(is, Xs, Es) (the closure is
+%   resolved in apply), lists:sum_list(L, S). Allowed: a library's own
+%   clause calling it (lists:sum_list/3 adding), which is reached from
+%   guest code only through a library predicate that is itself checked
+%   or computes on its own values.
+unchecked_builtin(G, M, Parents, Why) :-
+    nonvar(G),
+    strip_module(M:G, Q, Plain),
+    callable(Plain),
+    functor(Plain, Name, Arity),
+    guest_hazard(Name/Arity),
+    \+ guest_context(Q),
+    (   nonvar(G), G = _:_
+    ->  true
+    ;   Parents == []
+    ->  true
+    ;   Parents = [P|_],
+        \+ library_clause_calls(P, Q, Name/Arity)
+    ),
+    format(atom(Why), 'sizes: ~q, called in ~q, skips the size checks of \c
+                       guest_limits.pl (call it without a module)', [Name/Arity, Q]).
+
+%   The walk met the goal in a clause of Parent's predicate, defined in
+%   Module, whose body calls Name/Arity (a library's own call, as
+%   lists:numlist/3 calling must_be/2), not in a meta-argument of Parent
+%   (apply:maplist(is, Xs, Es) resolves `is` in apply, but maplist's
+%   clauses do not call is/2).
+library_clause_calls(Parent, Module, Name/Arity) :-
+    nonvar(Parent),
+    strip_module(Parent, PM, PG),
+    callable(PG),
+    functor(PG, PN, PA),
+    functor(Head, PN, PA),
+    (   catch(predicate_property(PM:Head, imported_from(D)), _, fail)
+    ->  true
+    ;   D = PM
+    ),
+    D == Module,
+    catch(clause(D:Head, Body), _, fail),
+    sub_term(T, Body),
+    callable(T),
+    functor(T, Name, Arity),
+    !.
+
+		 /*******************************
 		 *     THE WRAPPER ON THE WALK	*
 		 *******************************/
 
@@ -242,7 +301,10 @@ policy_safe_goal(Goal) :-
 %   as a leaf, so that the walk goes on and the sandbox may still refuse
 %   something itself; elsewhere it is refused at once.
 policy_check(G, M, Parents, Walk) :-
-    (   policy_refusal(M, G, Why)
+    (   (   unchecked_builtin(G, M, Parents, Why)
+        ->  true
+        ;   policy_refusal(M, G, Why)
+        )
     ->  strip_module(M:G, Q, Plain),
         Error = error(permission_error(call, sandboxed, Q:Plain),
                       sandbox(Q:Plain, [policy(Why)|Parents])),

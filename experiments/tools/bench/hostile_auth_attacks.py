@@ -36,7 +36,7 @@ from dfrl.experiments import processes
 from dfrl.experiments.tools.bench.hostile_attacks import MAGIC, HEADER, frame_header
 
 AUTH_SCRIPT = Path(__file__).resolve().parent / "hostile_auth_node.pl"
-AGENT_ATTACKS = ("loop", "memory", "clone", "assert", "log", "post")
+AGENT_ATTACKS = ("loop", "memory", "clone", "assert", "log", "post", "catom", "gmp")
 AUTH_ATTACKS = ("escapes", *AGENT_ATTACKS, "authframes")
 
 

@@ -19,6 +19,10 @@
       assert   agents asserting --size facts into their own module
       log      agents printing --size lines to the target's output
       post     agents posting --size events to themselves
+      catom    agents making one atom of --size characters in C
+               (format ~*c, atomic_list_concat/2, atom_concat/3 doubling,
+               by turns; the size known at run time only)
+      gmp      agents computing 7^--size (GMP, outside the stacks)
 
     Every attack but escapes sends a wave of --per-wave agents, then one
     more wave every --wave-s seconds, until --duration-s has passed or
@@ -244,6 +248,8 @@ size_default(clone, 12).
 size_default(assert, 1000000).
 size_default(log, 1000000000).
 size_default(post, 1000000000).
+size_default(catom, 400000000).
+size_default(gmp, 400000000).
 
 handler(loop, bomb_loop, []).
 handler(memory, bomb_memory, []).
@@ -251,6 +257,8 @@ handler(clone, bomb_clone, [(gen, 2)]).
 handler(assert, bomb_assert, [(junk, 3)]).
 handler(log, bomb_log, []).
 handler(post, bomb_post, []).
+handler(catom, bomb_catom, []).
+handler(gmp, bomb_gmp, []).
 
 send_agent(Attack, Handler, Preds, Size, Token, Port, Target) :-
     retractall(plan(guid, _, _)),
@@ -311,6 +319,30 @@ bomb_log(guid, (_, Here), main) :-
         fail
     ;   true
     ).
+
+bomb_catom(guid, (_, Here), main) :-
+    plan(guid, Home, N),
+    Here =\= Home,
+    Way is random(3),
+    (   Way =:= 0
+    ->  format(atom(A), "~*c", [N, 0'x])
+    ;   Way =:= 1
+    ->  M is N // 100,
+        format(atom(B), "~*c", [M, 0'y]),
+        length(L, 100),
+        maplist(=(B), L),
+        atomic_list_concat(L, A)
+    ;   D is msb(N),
+        numlist(0, D, Ks),
+        foldl([_, A0, A1]>>atom_concat(A0, A0, A1), Ks, x, A)
+    ),
+    atom_length(A, _).
+
+bomb_gmp(guid, (_, Here), main) :-
+    plan(guid, Home, N),
+    Here =\= Home,
+    X is 7^N,
+    X > 0.
 
 bomb_post(guid, _, sink).
 bomb_post(guid, (Ip, Here), main) :-
