@@ -106,7 +106,8 @@ def cluster_access(address: str, tls: str | Path | None = None,
     ----------
     address : str
         The scheduler: ``tls://HOST:PORT``, or ``tcp://HOST:PORT`` (plaintext; also an address
-        without a scheme, as Dask reads it).
+        without a scheme, as Dask reads it), or ``inproc://...`` (a scheduler in this
+        process, as a test's ``LocalCluster(processes=False)``).
     tls : path or None
         The driver's cluster folder (``ca.crt``, ``cluster.crt``, ``cluster.key``); needed
         with ``tls://``, refused with ``tcp://``.
@@ -121,6 +122,8 @@ def cluster_access(address: str, tls: str | Path | None = None,
         without ``insecure`` (anyone who reaches such a scheduler runs code on its workers).
     """
     scheme, _, rest = address.partition("://") if "://" in address else ("tcp", "", address)
+    if scheme == "inproc":                  # a scheduler in this process: no network at all
+        return ClusterAccess(address)
     if scheme not in ("tls", "tcp"):
         raise ClusterAccessError(f"--cluster {address}: use a tls:// address (or tcp:// on "
                                  f"loopback), not {scheme}://")
