@@ -150,8 +150,8 @@ def output_folder(args: argparse.Namespace, name: str) -> ClaimedFolder:
 def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
                    show_summary: bool = False) -> int:
     """Check ``cfg`` and the TLS folder, claim the results folder, run it and report; the
-    command's exit code (2: bad config, TLS folder or results folder, before anything
-    started; 130: interrupted)."""
+    command's exit code (2: an unsafe or incomplete --cluster access, bad config, TLS folder
+    or results folder, before anything started; 130: interrupted)."""
     from dfrl.experiments.cli.cluster import cluster_access_of, run_experiment_for
     from dfrl.experiments.tls_folder import CertError, check_node_dir
 
