@@ -142,6 +142,6 @@ def rounds_of(out: Path) -> list[dict[str, str]]:
 def logs_of(tmp_path: Path) -> str:
     """The workers' logs and the services' stderr tails (what a failed check shows)."""
     parts = []
-    for f in sorted(tmp_path.glob("w*/worker.log")) + sorted(tmp_path.glob("w*/dfrl-robot/*/service.*")):
+    for f in sorted(tmp_path.glob("w*/worker.log")) + sorted(tmp_path.glob("w*/dfrl-robot/*/service-*")):
         parts.append(f"--- {f.relative_to(tmp_path)}\n{f.read_text(errors='replace')[-1500:]}")
     return "\n".join(parts)
