@@ -8,6 +8,16 @@ A node's TLS folder (the platform's ``tls(Dir)`` option, ``--tls DIR`` on the co
 
 ``dfrl certs`` makes such folders (:mod:`dfrl.experiments.tools.certs`); the driver, the robot
 host and ``dfrl node`` only check them here (:func:`check_node_dir`) before a node starts.
+
+A cluster member's folder (the Dask scheduler's, a worker's or the driver's on a ``dfrl run
+--cluster tls://...`` cluster; ``--cluster-tls DIR``, ``dask ... --tls-*``)::
+
+    CLUSTER_DIR/ca.crt        the cluster CA's certificate (kept beside the project CA, in
+                              CA_DIR/cluster-ca/; not the project CA: see tools/certs.py)
+    CLUSTER_DIR/cluster.crt   the member's certificate: CN and subjectAltName DNS = its name
+    CLUSTER_DIR/cluster.key   its private key (mode 0600)
+
+The names differ from a node folder's so that one is never taken for the other.
 """
 from __future__ import annotations
 
@@ -21,6 +31,9 @@ CA_CERT = "ca.crt"
 NODE_CERT = "node.crt"
 NODE_KEY = "node.key"
 NODE_FILES = (CA_CERT, NODE_CERT, NODE_KEY)
+CLUSTER_CERT = "cluster.crt"
+CLUSTER_KEY = "cluster.key"
+CLUSTER_FILES = (CA_CERT, CLUSTER_CERT, CLUSTER_KEY)
 
 #: A node name: what a DNS label sequence allows (letters, digits, ``-``, ``.``), at most 64
 #: characters (the X.509 limit for a common name), starting and ending with a letter or digit.
@@ -50,4 +63,20 @@ def check_node_dir(directory: str | os.PathLike[str]) -> Path:
     if missing:
         raise CertError(f"{d} is not a node TLS directory: missing {', '.join(missing)} "
                         "(make one with 'dfrl certs node NAME CA_DIR --out DIR')")
+    return d
+
+
+def check_cluster_dir(directory: str | os.PathLike[str]) -> Path:
+    """Return ``directory`` as a path if it holds a cluster member's TLS files.
+
+    Raises
+    ------
+    CertError
+        A file of :data:`CLUSTER_FILES` is missing.
+    """
+    d = Path(directory)
+    missing = [f for f in CLUSTER_FILES if not (d / f).is_file()]
+    if missing:
+        raise CertError(f"{d} is not a cluster TLS directory: missing {', '.join(missing)} "
+                        "(make one with 'dfrl certs cluster NAME CA_DIR --out DIR')")
     return d

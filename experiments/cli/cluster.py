@@ -18,13 +18,22 @@ from dfrl.experiments.driver.results.summary import Results
 
 
 def add_cluster_arguments(p: argparse.ArgumentParser) -> None:
-    """``--cluster ADDRESS`` and ``--cluster-cpus N`` of ``dfrl run``."""
+    """``--cluster ADDRESS``, ``--cluster-tls DIR``, ``--insecure`` and ``--cluster-cpus N``
+    of ``dfrl run``."""
     g = p.add_argument_group("cluster (README: 'Running on a cluster')")
     g.add_argument("--cluster", default=None, metavar="ADDRESS",
                    help="place every robot without robot_host on the Dask cluster whose "
-                        "scheduler is ADDRESS (e.g. tcp://10.0.0.1:8786): each starts a dfrl "
-                        "robot service on a worker's host (needs pip install 'dfrl[cluster]', "
-                        "--token-file, and dfrl.token beside every worker)")
+                        "scheduler is ADDRESS (e.g. tls://10.0.0.1:8786, with --cluster-tls): "
+                        "each starts a dfrl robot service on a worker's host (needs pip "
+                        "install 'dfrl[cluster]', --token-file, and dfrl.token beside every "
+                        "worker)")
+    g.add_argument("--cluster-tls", type=Path, default=None, metavar="DIR",
+                   help="with a tls:// --cluster: this host's cluster certificate folder "
+                        "(ca.crt, cluster.crt, cluster.key: 'dfrl certs cluster NAME CA_DIR "
+                        "--out DIR')")
+    g.add_argument("--insecure", action="store_true",
+                   help="accept a plaintext tcp:// --cluster off loopback (refused otherwise: "
+                        "anyone who reaches such a scheduler runs code on its workers)")
     g.add_argument("--cluster-cpus", type=_positive, default=1.0, metavar="N",
                    help="the CPU resource each robot asks the cluster for (default 1; workers "
                         "offer it with dask worker --resources CPU=N)")
@@ -39,6 +48,28 @@ def add_study_cluster_arguments(p: argparse.ArgumentParser) -> None:
                         "dfrl.token beside every worker)")
 
 
+def cluster_access_of(args: argparse.Namespace) -> Any:
+    """The :class:`~dfrl.experiments.driver.launcher.cluster.ClusterAccess` of ``--cluster``,
+    ``--cluster-tls`` and ``--insecure`` (None without ``--cluster``). Imports no engine.
+
+    Raises
+    ------
+    ClusterAccessError
+        As :func:`~dfrl.experiments.driver.launcher.cluster.cluster_access`, or
+        ``--cluster-tls`` / ``--insecure`` without ``--cluster``.
+    """
+    from dfrl.experiments.driver.launcher.cluster import ClusterAccessError, cluster_access
+
+    address = getattr(args, "cluster", None)
+    if address is None:
+        for flag, given in (("--cluster-tls", getattr(args, "cluster_tls", None) is not None),
+                            ("--insecure", getattr(args, "insecure", False))):
+            if given:
+                raise ClusterAccessError(f"{flag} is for --cluster ADDRESS")
+        return None
+    return cluster_access(address, args.cluster_tls, args.insecure)
+
+
 def study_cluster(args: argparse.Namespace) -> Any:
     """The study's :class:`~dfrl.experiments.science.cluster_runs.ClusterOptions` (None
     without ``--cluster``).
@@ -46,12 +77,18 @@ def study_cluster(args: argparse.Namespace) -> Any:
     Raises
     ------
     ValueError
-        ``--cluster`` without a readable ``--token-file``, or ``--token-file`` alone.
+        ``--cluster`` without a readable ``--token-file``, or ``--token-file`` alone; an
+        unsafe or incomplete cluster access (:func:`cluster_access_of`).
     """
+    from dfrl.experiments.driver.launcher.cluster import ClusterAccessError
     from dfrl.experiments.science.cluster_runs import ClusterOptions
     from dfrl.experiments.tokens import TokenError, read_token_file
 
-    if args.cluster is None:
+    try:
+        access = cluster_access_of(args)
+    except ClusterAccessError as exc:
+        raise ValueError(f"{exc}; nothing was started") from None
+    if access is None:
         if args.token_file is not None:
             raise ValueError("--token-file is for --cluster (the workers' token)")
         return None
@@ -62,7 +99,8 @@ def study_cluster(args: argparse.Namespace) -> Any:
         read_token_file(args.token_file)
     except TokenError as exc:
         raise ValueError(f"--token-file: {exc}") from None
-    return ClusterOptions(args.cluster, args.token_file.resolve(), args.cluster_cpus)
+    return ClusterOptions(access.address, args.token_file.resolve(), args.cluster_cpus,
+                          tls=access.tls, insecure=args.insecure)
 
 
 def _positive(text: str) -> float:
@@ -93,4 +131,5 @@ def run_experiment_for(args: argparse.Namespace, cfg: ExperimentConfig, claimed:
         return run(cfg, claimed, tls=tls)
     from dfrl.experiments.driver.launcher.cluster import run_on_cluster
 
-    return run_on_cluster(cfg, claimed, address, cpus=args.cluster_cpus, tls=tls)
+    return run_on_cluster(cfg, claimed, address, cpus=args.cluster_cpus, tls=tls,
+                          cluster_tls=args.cluster_tls, insecure=args.insecure)

@@ -150,12 +150,17 @@ def output_folder(args: argparse.Namespace, name: str) -> ClaimedFolder:
 def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
                    show_summary: bool = False) -> int:
     """Check ``cfg`` and the TLS folder, claim the results folder, run it and report; the
-    command's exit code (2: bad config, TLS folder or results folder, before anything
-    started; 130: interrupted)."""
-    from dfrl.experiments.cli.cluster import run_experiment_for
+    command's exit code (2: an unsafe or incomplete --cluster access, bad config, TLS folder
+    or results folder, before anything started; 130: interrupted)."""
+    from dfrl.experiments.cli.cluster import cluster_access_of, run_experiment_for
     from dfrl.experiments.tls_folder import CertError, check_node_dir
 
     tls = getattr(args, "tls", None)
+    try:
+        cluster_access_of(args)         # a plaintext cluster off loopback: refused first
+    except ExperimentError as exc:
+        print(f"{prog}: {exc}; nothing was started", file=sys.stderr)
+        return 2
     try:
         cfg = run_token(cfg, args)
     except TokenError as exc:

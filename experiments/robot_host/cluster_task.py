@@ -166,7 +166,7 @@ def serve_robot(run_key: str, robot: str, token_file: str = "dfrl.token",
                                f"'dfrl certs node' made for this host there)")
     folder = (Path(workdir) / robot).resolve()
     folder.mkdir(parents=True, exist_ok=True)
-    out = folder / "service.out"
+    out = folder / f"service-{run_key}.out"      # per run: two runs may place one robot id
     with STARTING:
         if Event(f"{prefix}-stop").is_set():          # the run ended while we waited
             return {"robot": robot, "worker": worker, "address": None, "exit": None,

@@ -34,11 +34,15 @@ STOP_S = 60.0
 @dataclass(frozen=True)
 class ClusterOptions:
     """Where a study's federated runs go: the scheduler, each robot's ``CPU`` request, the
-    token file the workers' services prove (``dfrl.token`` beside every worker)."""
+    token file the workers' services prove (``dfrl.token`` beside every worker), the driver's
+    cluster folder for a ``tls://`` scheduler, and whether a plaintext one off loopback is
+    accepted (``--insecure``)."""
 
     address: str
     token_file: Path
     cpus: float = 1.0
+    tls: Path | None = None
+    insecure: bool = False
 
 
 @dataclass(frozen=True)
@@ -60,11 +64,13 @@ def runs_at_once(opts: ClusterOptions, robots: int) -> int:
     Raises
     ------
     ExperimentError
-        The engine is missing or the scheduler does not answer.
+        The engine is missing or the scheduler does not answer; an unsafe access
+        (:class:`~dfrl.experiments.driver.launcher.cluster.ClusterAccessError`).
     """
-    from dfrl.experiments.driver.launcher.cluster import ClusterPlacement
+    from dfrl.experiments.driver.launcher.cluster import ClusterPlacement, cluster_access
 
-    placement = ClusterPlacement(opts.address, opts.cpus, lambda _line: None).open()
+    access = cluster_access(opts.address, opts.tls, opts.insecure)
+    placement = ClusterPlacement(access, opts.cpus, lambda _line: None).open()
     try:
         fits = sum(int(a // opts.cpus) for a in placement.offered().values())
     finally:
@@ -76,7 +82,9 @@ def run_argv(config_file: Path, out: Path, opts: ClusterOptions) -> list[str]:
     """The ``dfrl run`` command of one federated run on the cluster."""
     return [sys.executable, "-m", "dfrl", "run", str(config_file), "--out", str(out), "--force",
             "--cluster", opts.address, "--cluster-cpus", f"{opts.cpus:g}",
-            "--token-file", str(opts.token_file)]
+            "--token-file", str(opts.token_file),
+            *(["--cluster-tls", str(opts.tls)] if opts.tls is not None else []),
+            *(["--insecure"] if opts.insecure else [])]
 
 
 def run_on_cluster(runs: Sequence[tuple[ExperimentConfig, Path]], opts: ClusterOptions,

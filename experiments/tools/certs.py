@@ -14,6 +14,21 @@ Keys are ECDSA on P-256 (a short handshake); certificates are X.509 v3, the CA's
 (``serverAuth``, ``clientAuth``), since every node is a server to some peers and a client of
 others. Names are checked against an allow-list by the platform (``tls_peers(Names)``);
 host names are not part of the check, so a node's name need not be its address.
+
+The Dask cluster of ``dfrl run --cluster tls://...`` has a CA of its own, kept in the project
+CA's folder and made by the first ``dfrl certs cluster`` (:func:`make_cluster_member`)::
+
+    CA_DIR/cluster-ca/ca.crt           the cluster CA's certificate (self-signed)
+    CA_DIR/cluster-ca/ca.key           its private key (mode 0600)
+    CLUSTER_DIR/ca.crt                 a copy of the cluster CA certificate
+    CLUSTER_DIR/cluster.crt            the member's certificate (scheduler, worker or driver)
+    CLUSTER_DIR/cluster.key            its private key (mode 0600)
+
+Why not the project CA itself: Dask checks only that a peer's certificate chains to its CA (no
+name list), and any member of the cluster can run code on every worker, while the platform
+accepts a node certificate and still sandboxes the agents of peers it does not trust
+(``trusted_peers``). With one CA every node certificate would be a key to the workers; with
+two, a node certificate opens no cluster and a cluster certificate no node.
 """
 from __future__ import annotations
 
@@ -24,10 +39,12 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from dfrl.experiments.tls_folder import (CA_CERT, NODE_CERT, NODE_FILES, NODE_KEY, CertError,
+from dfrl.experiments.tls_folder import (CA_CERT, CLUSTER_FILES, NODE_FILES, CertError,
                                          is_node_name)
 
 CA_KEY = "ca.key"
+#: The cluster CA's folder inside the project CA's folder.
+CLUSTER_CA = "cluster-ca"
 CA_DAYS = 3650
 NODE_DAYS = 825
 
@@ -130,20 +147,59 @@ def make_node(name: str, ca_directory: str | os.PathLike[str],
     CertError
         For a bad name, a missing CA, files in the way (and not ``force``), or openssl failing.
     """
+    ca = Path(ca_directory)
+    node_dir = Path(out) if out is not None else ca / name
+    _sign(name, ca, node_dir, NODE_FILES, force)
+    return NodeCert(name, node_dir)
+
+
+def make_cluster_member(name: str, ca_directory: str | os.PathLike[str],
+                        out: str | os.PathLike[str] | None = None,
+                        force: bool = False) -> NodeCert:
+    """Make a certificate for cluster member ``name`` (the scheduler, a worker's host, the
+    driver) signed by the cluster CA of the project CA in ``ca_directory``.
+
+    The cluster CA (``ca_directory/cluster-ca``) is made on the first call; the project CA
+    must be there (``dfrl certs init``), so that both stay in one folder. Writes
+    ``out/{ca.crt,cluster.crt,cluster.key}`` (default ``out``: ``ca_directory/cluster-ca/name``).
+
+    Raises
+    ------
+    CertError
+        For a bad name, a missing project CA, files in the way (and not ``force``), or openssl
+        failing.
+    """
     check_name(name)
     ca = Path(ca_directory)
-    ca_cert, ca_key = ca / CA_CERT, ca / CA_KEY
-    for f in (ca_cert, ca_key):
+    _require_ca(ca)
+    cluster_ca = ca / CLUSTER_CA
+    if not all((cluster_ca / f).is_file() for f in (CA_CERT, CA_KEY)):
+        init_ca(cluster_ca, name="dfrl cluster CA")
+    member_dir = Path(out) if out is not None else cluster_ca / name
+    _sign(name, cluster_ca, member_dir, CLUSTER_FILES, force)
+    return NodeCert(name, member_dir)
+
+
+def _require_ca(ca: Path) -> None:
+    for f in (ca / CA_CERT, ca / CA_KEY):
         if not f.is_file():
             raise CertError(f"no CA in {ca}: {f} is missing (make one with 'dfrl certs init {ca}')")
-    node_dir = Path(out) if out is not None else ca / name
-    if node_dir.exists() and not node_dir.is_dir():
-        raise CertError(f"{node_dir} is not a directory")
-    _refuse_existing([node_dir / f for f in NODE_FILES], force)
-    node_dir.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=node_dir, prefix=".node-") as tmp:
+
+
+def _sign(name: str, ca: Path, out: Path, files: tuple[str, str, str], force: bool) -> None:
+    """Write a new key and a certificate for ``name`` signed by the CA in ``ca`` to ``out``
+    under ``files`` (the CA copy's, the certificate's and the key's names)."""
+    check_name(name)
+    _require_ca(ca)
+    ca_cert, ca_key = ca / CA_CERT, ca / CA_KEY
+    if out.exists() and not out.is_dir():
+        raise CertError(f"{out} is not a directory")
+    _refuse_existing([out / f for f in files], force)
+    out.mkdir(parents=True, exist_ok=True)
+    copy_name, cert_name, key_name = files
+    with tempfile.TemporaryDirectory(dir=out, prefix=".node-") as tmp:
         t = Path(tmp)
-        key, csr, cert, ext = t / NODE_KEY, t / "node.csr", t / NODE_CERT, t / "ext.cnf"
+        key, csr, cert, ext = t / key_name, t / "req.csr", t / cert_name, t / "ext.cnf"
         _new_key(key)
         _run(["req", "-new", "-key", str(key), "-out", str(csr), "-subj", f"/CN={name}"],
              "make the certificate request")
@@ -156,11 +212,10 @@ def make_node(name: str, ca_directory: str | os.PathLike[str],
         _run(["x509", "-req", "-in", str(csr), "-CA", str(ca_cert), "-CAkey", str(ca_key),
               "-set_serial", _serial(), "-out", str(cert),
               "-days", str(NODE_DAYS), "-sha256", "-extfile", str(ext)],
-             "sign the node certificate")
-        shutil.copyfile(ca_cert, t / CA_CERT)
-        for f in NODE_FILES:
-            os.replace(t / f, node_dir / f)
-    return NodeCert(name, node_dir)
+             "sign the certificate")
+        shutil.copyfile(ca_cert, t / copy_name)
+        for f in files:
+            os.replace(t / f, out / f)
 
 
 def _serial() -> str:

@@ -54,7 +54,7 @@ def test_a_worker_without_the_token_file_is_named(tmp_path: Path,
     text = str(err.value)
     assert "robot r1 was not placed" in text and "no token file" in text, text
     assert str(tmp_path / "dfrl.token") in text and "cluster worker" in text, text
-    assert not (tmp_path / "dfrl-robot" / "r1" / "service.out").exists()
+    assert not list((tmp_path / "dfrl-robot" / "r1").glob("service-*.out"))
 
 
 def test_a_plain_run_does_not_import_the_engine() -> None:

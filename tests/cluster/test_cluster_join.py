@@ -17,7 +17,7 @@ import pytest
 
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
 
-from .test_cluster_run import WORKERS, argv_of, cluster, driver_cmd, phase, rounds_of
+from .readme_cluster import WORKERS, argv_of, cluster, driver_cmd, phase, rounds_of
 
 pytestmark = pytest.mark.slow
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from .test_cluster_run import cluster, phase, WORKERS
+from .readme_cluster import WORKERS, cluster, phase
 
 pytestmark = pytest.mark.slow
 
@@ -29,11 +29,13 @@ def _interval(out: Path) -> tuple[float, float]:
 def test_paper_spreads_its_federations_over_the_cluster(tmp_path: Path) -> None:
     with cluster(tmp_path, 5) as (lab, drv, blocks):
         token = drv / blocks["token"][1].split("--out", 1)[1].split()[0]
-        address = f"tcp://{lab['head'].address}:8786"
+        driver = blocks["driver"][1].split()
+        address = driver[driver.index("--cluster") + 1].replace("HEAD", lab["head"].address)
+        member = drv / driver[driver.index("--cluster-tls") + 1]
         argv = [sys.executable, "-m", "dfrl", "paper", "--out", "paper", "--n-seeds", "2",
                 "--iterations", "200", "--respite", "100", "--eval-points", "1",
                 "--eval-steps", "50", "--no-control", "--jobs", "1",
-                "--cluster", address, "--token-file", str(token)]
+                "--cluster", address, "--cluster-tls", str(member), "--token-file", str(token)]
         done = lab["head"].run(argv, cwd=drv, timeout=900, capture_output=True, text=True)
         phase("paper exited")
         detail = f"exit {done.returncode}\n{done.stderr[-4000:]}"

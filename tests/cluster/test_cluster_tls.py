@@ -18,20 +18,21 @@ import pytest
 
 from dfrl.experiments.robot_host.cluster_task import TLS_FOLDER
 
-from .test_cluster_run import WORKERS, argv_of, cluster, driver_cmd, phase, rounds_of
+from .readme_cluster import WORKERS, argv_of, cluster, driver_cmd, phase, rounds_of
 
 pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(shutil.which("openssl") is None, reason="needs openssl")]
 
 
 def _certs(lab, drv: Path, tmp: Path, workers: list[str]) -> Path:  # noqa: ANN001
-    """The README's certificates: a CA, one folder per worker host (copied beside its token
-    as ``dfrl-tls``) and the driver's; returns the driver's folder."""
+    """The README's node certificates from the project CA the cluster's recipe made (``ca``):
+    one folder per worker host (copied beside its token as ``dfrl-tls``) and the driver's;
+    returns the driver's folder."""
     def dfrl(*args: str) -> None:
         done = subprocess.run([sys.executable, "-m", "dfrl", "certs", *args], cwd=drv,
                               capture_output=True, text=True, timeout=60)
         assert done.returncode == 0, done.stderr
-    dfrl("init", "ca")
+    assert (drv / "ca" / "ca.key").is_file()       # made by the README's cluster:certs block
     for w in workers:
         dfrl("node", lab[w].address, "ca", "--out", f"tls-{w}")
         shutil.copytree(drv / f"tls-{w}", tmp / w / TLS_FOLDER)

@@ -17,11 +17,20 @@ workers: a worker that leaves the cluster, or a task that ends before the run, i
 progress stream and recorded in ``cluster.json``; the robots on it stop answering and the run
 counts them as lost, as robots of a host that died (``summary.md``, exit status 1).
 
+Who may use the cluster (:func:`cluster_access`): a ``tls://`` scheduler is reached over
+mutual TLS with the driver's cluster folder (``--cluster-tls DIR``: ``ca.crt``, ``cluster.crt``,
+``cluster.key``, made by ``dfrl certs cluster``); the scheduler and the workers, started as the
+README says, accept only certificates of that cluster CA, so a process without one can neither
+list the workers nor run a task. A plaintext ``tcp://`` scheduler asks nobody for anything:
+whoever reaches it runs code on every worker. It is accepted on loopback (tests, a local
+cluster) and elsewhere only when the caller says ``insecure``.
+
 Threading: the caller's thread calls every public method; the watch thread renews the lease
 and records losses, guarded by the placement's lock.
 """
 from __future__ import annotations
 
+import ipaddress
 import json
 import sys
 import threading
@@ -36,6 +45,8 @@ from dfrl.experiments.driver.config import ExperimentConfig
 from dfrl.experiments.driver.results.files import ClaimedFolder
 from dfrl.experiments.driver.results.summary import Results
 from dfrl.experiments.errors import ExperimentError
+from dfrl.experiments.tls_folder import CA_CERT, CLUSTER_CERT, CLUSTER_KEY, CertError, \
+    check_cluster_dir
 
 #: The resource a robot's task asks for (workers offer it: ``--resources CPU=N``).
 RESOURCE = "CPU"
@@ -54,6 +65,104 @@ RELEASE_S = 40.0
 CLUSTER_FILE = "cluster.json"
 
 
+class ClusterAccessError(ExperimentError):
+    """The scheduler's address and the cluster options do not make a safe connection (said
+    before anything starts: a plaintext address off loopback without ``insecure``, a
+    ``tls://`` address without a cluster folder, a folder that is not one)."""
+
+
+@dataclass(frozen=True)
+class ClusterAccess:
+    """How the driver reaches the scheduler (:func:`cluster_access` checks and makes it).
+
+    Attributes
+    ----------
+    address : str
+        The scheduler, ``tls://HOST:PORT`` or ``tcp://HOST:PORT``.
+    tls : Path or None
+        The driver's cluster folder for a ``tls://`` address (None for ``tcp://``).
+    """
+
+    address: str
+    tls: Path | None = None
+
+    def security(self) -> Any:
+        """The ``distributed.Security`` of the driver's client: its certificate and the
+        cluster CA, encryption required (None for a ``tcp://`` address)."""
+        if self.tls is None:
+            return None
+        from distributed import Security
+
+        return Security(tls_ca_file=str(self.tls / CA_CERT),
+                        tls_client_cert=str(self.tls / CLUSTER_CERT),
+                        tls_client_key=str(self.tls / CLUSTER_KEY), require_encryption=True)
+
+
+def cluster_access(address: str, tls: str | Path | None = None,
+                   insecure: bool = False) -> ClusterAccess:
+    """Check that ``address`` with the cluster folder ``tls`` makes a safe connection.
+
+    Parameters
+    ----------
+    address : str
+        The scheduler: ``tls://HOST:PORT``, or ``tcp://HOST:PORT`` (plaintext; also an address
+        without a scheme, as Dask reads it), or ``inproc://...`` (a scheduler in this
+        process, as a test's ``LocalCluster(processes=False)``).
+    tls : path or None
+        The driver's cluster folder (``ca.crt``, ``cluster.crt``, ``cluster.key``); needed
+        with ``tls://``, refused with ``tcp://``.
+    insecure : bool
+        Accept a plaintext ``tcp://`` address off loopback.
+
+    Raises
+    ------
+    ClusterAccessError
+        A scheme other than ``tls`` or ``tcp``; ``tls://`` without a cluster folder or with a
+        folder missing a file; ``tcp://`` with a cluster folder; ``tcp://`` off loopback
+        without ``insecure`` (anyone who reaches such a scheduler runs code on its workers).
+    """
+    scheme, _, rest = address.partition("://") if "://" in address else ("tcp", "", address)
+    if scheme == "inproc":                  # a scheduler in this process: no network at all
+        return ClusterAccess(address)
+    if scheme not in ("tls", "tcp"):
+        raise ClusterAccessError(f"--cluster {address}: use a tls:// address (or tcp:// on "
+                                 f"loopback), not {scheme}://")
+    if scheme == "tls":
+        if tls is None:
+            raise ClusterAccessError(
+                f"--cluster {address} needs --cluster-tls DIR: the driver's cluster certificate "
+                f"folder (make it with 'dfrl certs cluster driver CA_DIR --out DIR')")
+        try:
+            return ClusterAccess(address, check_cluster_dir(tls).resolve())
+        except CertError as exc:
+            raise ClusterAccessError(f"--cluster-tls: {exc}") from None
+    if tls is not None:
+        raise ClusterAccessError(f"--cluster-tls is for a tls:// scheduler; {address} is "
+                                 f"plaintext (write tls://{rest})")
+    if not (_on_loopback(rest) or insecure):
+        raise ClusterAccessError(
+            f"--cluster {address} is plaintext TCP off loopback: the scheduler asks no "
+            f"certificate, so anyone who reaches it can run code on every worker (and read "
+            f"dfrl.token there); start the cluster with TLS as the README says ('Running on a "
+            f"cluster') and use --cluster tls://{rest} --cluster-tls DIR, or say --insecure "
+            f"if the network is yours alone")
+    return ClusterAccess(address)
+
+
+def _on_loopback(host_port: str) -> bool:
+    """True if the host of ``HOST:PORT`` (``[V6]:PORT`` too) is ``localhost`` or a loopback
+    address."""
+    host = host_port.rsplit(":", 1)[0] if host_port.count(":") == 1 or \
+        host_port.startswith("[") else host_port
+    host = host.strip("[]")
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
 @dataclass(frozen=True)
 class Placement:
     """Where one robot runs: its service's address and the worker that holds its task."""
@@ -69,8 +178,9 @@ class ClusterPlacement:
 
     Parameters
     ----------
-    address : str
-        The scheduler, e.g. ``tcp://10.0.0.1:8786``.
+    access : ClusterAccess or str
+        The scheduler and the driver's certificate (:func:`cluster_access`); a string is
+        checked by it without a folder (``tcp://`` on loopback only).
     cpus : float
         Amount of :data:`RESOURCE` each robot asks for.
     say : callable
@@ -80,11 +190,12 @@ class ClusterPlacement:
         (:data:`~dfrl.experiments.robot_host.cluster_task.TLS_FOLDER`).
     """
 
-    def __init__(self, address: str, cpus: float = 1.0,
+    def __init__(self, access: ClusterAccess | str, cpus: float = 1.0,
                  say: Callable[[str], None] = lambda line: None, tls: bool = False) -> None:
         if cpus <= 0:
             raise ExperimentError(f"--cluster-cpus must be > 0, got {cpus}")
-        self.address = address
+        self.access = access if isinstance(access, ClusterAccess) else cluster_access(access)
+        self.address = self.access.address
         self.cpus = float(cpus)
         self.run_key = uuid.uuid4().hex[:12]
         self.tls = tls
@@ -116,7 +227,8 @@ class ClusterPlacement:
                                   "'dfrl[cluster]' (or distributed) on this host and on every "
                                   "worker") from None
         try:
-            self._client = Client(self.address, timeout=CONNECT_S, set_as_default=False)
+            self._client = Client(self.address, timeout=CONNECT_S, set_as_default=False,
+                                  security=self.access.security())
         except (OSError, TimeoutError, ValueError) as exc:
             raise ExperimentError(f"cluster {self.address}: cannot connect: {exc}") from None
         return self
@@ -291,7 +403,9 @@ class ClusterPlacement:
     def record(self) -> dict[str, Any]:
         """What ``cluster.json`` holds: the scheduler, the resource request, the placements,
         the losses and how each task ended."""
-        return {"scheduler": self.address, "resources": {RESOURCE: self.cpus},
+        return {"scheduler": self.address,
+                "cluster_tls": str(self.access.tls) if self.access.tls is not None else None,
+                "resources": {RESOURCE: self.cpus},
                 "placements": {rid: p.__dict__ for rid, p in self.placements().items()},
                 "losses": self.losses(), "tasks": self._ended}
 
@@ -305,13 +419,18 @@ def placed_config(config: ExperimentConfig, placed: dict[str, Placement]) -> Exp
 
 def run_on_cluster(config: ExperimentConfig, output_dir: str | Path | ClaimedFolder,
                    address: str, cpus: float = 1.0, progress: TextIO | None = sys.stderr,
-                   force: bool = False, tls: str | Path | None = None) -> Results:
+                   force: bool = False, tls: str | Path | None = None,
+                   cluster_tls: str | Path | None = None, insecure: bool = False) -> Results:
     """Run ``config`` with every robot that names no ``robot_host`` placed on the Dask cluster
     at ``address`` (see the module doc); the results folder gets ``cluster.json`` and
-    ``summary.md`` a section "Cluster".
+    ``summary.md`` a section "Cluster". ``tls`` is the platform's node folder (the run over
+    mutual TLS), ``cluster_tls`` the driver's cluster folder (a ``tls://`` scheduler),
+    ``insecure`` accepts a plaintext ``tcp://`` scheduler off loopback.
 
     Raises
     ------
+    ClusterAccessError
+        As :func:`cluster_access` (before anything else).
     ExperimentError
         No token (the workers' services prove the one in their ``dfrl.token``), the engine is
         missing, the cluster cannot be reached or cannot hold every robot, a robot could not
@@ -319,6 +438,7 @@ def run_on_cluster(config: ExperimentConfig, output_dir: str | Path | ClaimedFol
     """
     from dfrl.experiments.driver.launcher.experiment import run
 
+    access = cluster_access(address, cluster_tls, insecure)
     if config.token is None:
         raise ExperimentError("--cluster: the robots' services prove the token of dfrl.token "
                               "on their workers: give the same one (--token-file dfrl.token)")
@@ -329,7 +449,7 @@ def run_on_cluster(config: ExperimentConfig, output_dir: str | Path | ClaimedFol
 
     local = [r.id for r in config.robots if r.robot_host is None]
     t0 = time.monotonic()
-    placement = ClusterPlacement(address, cpus, say, tls=tls is not None).open()
+    placement = ClusterPlacement(access, cpus, say, tls=tls is not None).open()
     try:
         placed = placement.place(local)
         say(f"cluster {address}: placed " + ", ".join(
