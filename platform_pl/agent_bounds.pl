@@ -61,14 +61,31 @@ agent_clone/4 raises. Memory of the node as a whole:
   | agents together  | agent_memory_budget(Bytes)      | 1 GiB     | module sizes (last measured) + allocated stacks of running calls (monitor, arrival) |
   | calls at once    | max_running_agents(N)           | 8         | N slots; a call waits agent_slot_wait(Sec) (60) for one |
 
+A slot costs wall time, and one peer (bounds_peer/2: its TLS
+certificate's name, else its IP address) cannot take a node from the
+others:
+
+  | bound               | node option                  | default  | measured by |
+  |---------------------|------------------------------|----------|-------------|
+  | slot held           | agent_wall_limit(Sec)        | 60 s     | wall time of the call less time parked (monitor) |
+  | idle, or parked     | agent_idle_limit(Sec)        | 600 s    | since an agent from a peer last ran (monitor); a call's parked time |
+  | agents of a peer    | max_agents_per_peer(N)       | 50       | counted with max_agents, under the registry mutex |
+  | slots of a peer     | max_running_per_peer(N)      | 4        | a queue of N tokens per node and peer, taken before the node's |
+  | posts from a peer   | peer_post_limit(PerMinute)   | 6000     | counted as a post request arrives (bounds_peer_post/1) |
+
+Node code that waits in a handler call (the dFRL agent's rest, robot
+calls, tree-round messages) parks with bounds_park/1: its slots are
+free meanwhile. Arriving code cannot park (it is not in the agent API).
+
 so the stacks of agents never exceed N x agent_stack_limit, and what
 they hold is kept near the budget (README "Bounds on agents" has the
 measurements). Every bound takes `infinite`.
 
 An agent over a per-call bound is stopped: the term '$dfrl_bound'(Kind)
 is thrown in its thread (thread_signal/2), Kind one of cpu(Limit),
-memory(Limit), module_memory(Limit), memory_budget(Limit), posts(Limit)
-or log(Limit); a stack
+memory(Limit), module_memory(Limit), memory_budget(Limit), posts(Limit),
+log(Limit), wall(Limit) or idle(Limit) (a call parked too long); an
+idle agent is removed by the monitor with the same warning and notice; a stack
 overflow of the call is memory(Limit). The caller (agents.pl,
 messages.pl) removes the agent from the node and calls bounds_stopped/3,
 which prints one warning and tells the node the agent came from (the
