@@ -130,6 +130,9 @@ usage(Why) :-
             [--agent-module-limit BYTES] [--agent-post-limit N] \c
             [--agent-log-limit N] [--max-agents N] [--clone-limit N] \c
             [--agent-memory-budget BYTES] [--max-running-agents N] \c
+            [--agent-wall-limit SEC] [--agent-idle-limit SEC] \c
+            [--max-agents-per-peer N] [--max-running-per-peer N] \c
+            [--peer-post-limit N] \c
             [--agent-slot-wait SEC] [--max-frame-size BYTES] \c
             (a bound's value may be infinite)~n", []),
     halt(2).
