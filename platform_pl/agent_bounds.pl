@@ -122,6 +122,7 @@ says how many were suppressed.
     report_/4,                  % Node, Agent, Time, Report
     monitor_/2,                 % Thread, Queue
     monitor_idle_/0,            % the monitor waits for a call to start
+    monitor_until_/1,           % Time|infinite: the monitor wakes by then
     monitor_hot_/0,             % a node's agents hold over half its budget
     module_size_/3,             % Node, Agent, Bytes (last measured)
     slot_queue_/2,              % Node, Queue (max_running_agents tokens)
@@ -292,7 +293,7 @@ agent_peer(Node, Agent, Peer) :-
 %   a tree round). Time parked is not counted in agent_wall_limit but
 %   in agent_idle_limit (the most a call may stay parked, in all); CPU,
 %   stacks and memory are counted as ever. After Goal the call takes a
-%   slot again (waiting as for a new call). Outside a bounded call, or
+%   slot again (waiting, parked, up to twice agent_slot_wait). Outside a bounded call, or
 %   inside a parked one, it is call/1 under once/1. Not in the agent API:
 %   an arriving agent's own code cannot park.
 %
@@ -315,12 +316,20 @@ bounds_park(Goal) :-
         ;   true
         ),
         retractall(held_slot_(_)),              % waiting for a slot is parked
-        catch(take_slot(Node, Agent, Slot1), E1, ( unpark(Id), throw(E1) )),
+        catch(retake_slot(Node, Agent, Slot1), E1, ( unpark(Id), throw(E1) )),
         assertz(held_slot_(Slot1)),
         unpark(Id),
         (   nonvar(E) -> throw(E) ; Result == true )
     ;   once(Goal)
     ).
+
+%   A parked call waits for a slot twice as long as a new one (two
+%   agent_slot_wait): it has run already, and giving up costs its work.
+retake_slot(Node, Agent, Slot) :-
+    catch(take_slot(Node, Agent, Slot), error(resource_error(running_agents), _), fail),
+    !.
+retake_slot(Node, Agent, Slot) :-
+    take_slot(Node, Agent, Slot).
 
 stops_call('$dfrl_bound'(_)).
 stops_call('$dfrl_purged').
@@ -624,6 +633,9 @@ monitor_loop(Queue) :-
         (   Period1 == infinite -> Period = Wait ; Period is min(Period1, Wait) )
     ;   Period = Period1
     ),
+    retractall(monitor_until_(_)),
+    (   Period == infinite -> Until = infinite ; Until is Now + Period ),
+    assertz(monitor_until_(Until)),
     (   Period == infinite
     ->  thread_get_message(Queue, _)
     ;   thread_get_message(Queue, _, [timeout(Period)])
@@ -1061,11 +1073,23 @@ bounds_arrived(Node, Agent, Source, Peer) :-
         with_mutex(dfrl_bounds,
                    ( retractall(active_(Node, Agent, _)),
                      assertz(active_(Node, Agent, Now)) )),
-        (   monitor_(_, Queue)
-        ->  true
-        ;   with_mutex(dfrl_bounds_monitor, monitor_start(Queue))
-        ),
-        thread_send_message(Queue, wake)
+        idle_wake(Node, Now)
+    ).
+
+%   The monitor is woken for a new idle clock only if it would not wake
+%   by the new agent's time anyway (a hop adds no wake-up while agents
+%   from peers are present: the first one's time is earlier).
+idle_wake(Node, Now) :-
+    (   monitor_(_, Queue)
+    ->  true
+    ;   with_mutex(dfrl_bounds_monitor, monitor_start(Queue))
+    ),
+    (   monitor_until_(Until),
+        number(Until),
+        node_option(Node, agent_idle_limit, Limit),
+        ( Limit == infinite -> true ; Until =< Now + Limit )
+    ->  true
+    ;   thread_send_message(Queue, wake)
     ).
 
 %!  bounds_peer(+Ctx, -Peer) is det.

@@ -17,6 +17,10 @@
       assert   agents asserting --size facts into their own module
       log      agents printing --size lines to the target's output
       post     agents posting --size events to themselves
+      sleep    agents sleeping --size seconds in their handler (holding a
+               run slot: agent_wall_limit stops them)
+      idle     agents that stay on the target, idle (agent_idle_limit
+               removes them; max_agents_per_peer refuses them at 50)
 
     Every attack but escapes sends a wave of --per-wave agents, then one
     more wave every --wave-s seconds, until --duration-s has passed or
@@ -225,6 +229,8 @@ size_default(clone, 12).
 size_default(assert, 1000000).
 size_default(log, 1000000000).
 size_default(post, 1000000000).
+size_default(sleep, 3600).
+size_default(idle, 0).
 
 handler(loop, bomb_loop, []).
 handler(memory, bomb_memory, []).
@@ -232,6 +238,8 @@ handler(clone, bomb_clone, [(gen, 2)]).
 handler(assert, bomb_assert, [(junk, 3)]).
 handler(log, bomb_log, []).
 handler(post, bomb_post, []).
+handler(sleep, bomb_sleep, []).
+handler(idle, bomb_idle, []).
 
 send_agent(Attack, Handler, Preds, Size, Token, Port, Target) :-
     retractall(plan(guid, _, _)),
@@ -292,6 +300,13 @@ bomb_log(guid, (_, Here), main) :-
         fail
     ;   true
     ).
+
+bomb_sleep(guid, (_, Here), main) :-
+    plan(guid, Home, N),
+    Here =\= Home,
+    sleep(N).
+
+bomb_idle(guid, _, main).
 
 bomb_post(guid, _, sink).
 bomb_post(guid, (Ip, Here), main) :-
