@@ -122,7 +122,6 @@ says how many were suppressed.
     report_/4,                  % Node, Agent, Time, Report
     monitor_/2,                 % Thread, Queue
     monitor_idle_/0,            % the monitor waits for a call to start
-    monitor_until_/1,           % Time|infinite: the monitor wakes by then
     monitor_hot_/0,             % a node's agents hold over half its budget
     module_size_/3,             % Node, Agent, Bytes (last measured)
     slot_queue_/2,              % Node, Queue (max_running_agents tokens)
@@ -626,16 +625,13 @@ monitor_loop(Queue) :-
         ->  Period1 is Period0 / 5
         ;   Period1 = Period0
         )
-    ;   Period1 = infinite
+    ;   idle_poll(Period1)
     ),
     (   aggregate_all(min(T), ( reclaim_due_(T) ; idle_due(T) ), Due)
     ->  Wait is max(0, Due - Now),
         (   Period1 == infinite -> Period = Wait ; Period is min(Period1, Wait) )
     ;   Period = Period1
     ),
-    retractall(monitor_until_(_)),
-    (   Period == infinite -> Until = infinite ; Until is Now + Period ),
-    assertz(monitor_until_(Until)),
     (   Period == infinite
     ->  thread_get_message(Queue, _)
     ;   thread_get_message(Queue, _, [timeout(Period)])
@@ -648,6 +644,13 @@ monitor_loop(Queue) :-
     catch(reclaim_if_due, E2, print_message(warning, E2)),
     catch(expire_idle, E3, print_message(warning, E3)),
     monitor_loop(Queue).
+
+%   With no call running, the monitor still wakes every 10 s (about
+%   0.2 ms) to find agents from peers that arrived since (their idle
+%   clocks, agent_idle_limit): an arrival does not wake it, the agent's
+%   first handler call does (every arriving agent is started), and an
+%   agent installed and never started is found by this wake.
+idle_poll(10.0).
 
 drain(Queue) :-
     (   thread_get_message(Queue, _, [timeout(0)])
@@ -1072,24 +1075,7 @@ bounds_arrived(Node, Agent, Source, Peer) :-
     ;   get_time(Now),
         with_mutex(dfrl_bounds,
                    ( retractall(active_(Node, Agent, _)),
-                     assertz(active_(Node, Agent, Now)) )),
-        idle_wake(Node, Now)
-    ).
-
-%   The monitor is woken for a new idle clock only if it would not wake
-%   by the new agent's time anyway (a hop adds no wake-up while agents
-%   from peers are present: the first one's time is earlier).
-idle_wake(Node, Now) :-
-    (   monitor_(_, Queue)
-    ->  true
-    ;   with_mutex(dfrl_bounds_monitor, monitor_start(Queue))
-    ),
-    (   monitor_until_(Until),
-        number(Until),
-        node_option(Node, agent_idle_limit, Limit),
-        ( Limit == infinite -> true ; Until =< Now + Limit )
-    ->  true
-    ;   thread_send_message(Queue, wake)
+                     assertz(active_(Node, Agent, Now)) ))
     ).
 
 %!  bounds_peer(+Ctx, -Peer) is det.

@@ -8,7 +8,8 @@
 :- use_module('../../platform_pl/tartarus').
 :- use_module('../../platform_pl/agent_bounds').
 :- use_module('../../platform_pl/agents',
-              [agent_exists/2, agent_property/3, agent_export/3, agent_set_status/3]).
+              [agent_exists/2, agent_property/3, agent_export/3, agent_set_status/3,
+               agent_execute/4]).
 :- use_module('../../platform_pl/transport', [transport_request/4]).
 :- use_module(library(plunit)).
 
@@ -44,8 +45,20 @@ send(From, To, Name, Handler) :-
     with_node(From, move_agent(Name, Link)).
 
 %   Install on To a copy of agent Name (made on From) as if it had come
-%   from Peer, idle, as migration.pl does for a transfer.
+%   from Peer, and start it, as migration.pl does for a transfer; return
+%   once its main handler is done.
 arrive(From, To, Name, Handler, Peer) :-
+    with_node(From, create_mobile_agent(Name, Handler, [5])),
+    agent_export(From, Name, Record),
+    bounds_install(To, Record, idle, Name, Peer),
+    node_property(From, address(Source)),
+    bounds_arrived(To, Name, Source, Peer),
+    link(To, Link),
+    agent_execute(To, Name, Link, main),
+    assertion(wait_for(agent_property(To, Name, status(idle)))).
+
+%   Installed and never started: the monitor's idle poll (10 s) finds it.
+arrive_unstarted(From, To, Name, Handler, Peer) :-
     with_node(From, create_mobile_agent(Name, Handler, [5])),
     agent_export(From, Name, Record),
     bounds_install(To, Record, idle, Name, Peer),
@@ -172,5 +185,12 @@ test(peer_post_limit, [cleanup(cleanup([A, B]))]) :-
     assertion(S1.refused_posts - S0.refused_posts =:= 3),
     assertion(wait_for(ran(ping(5)))),
     assertion(\+ ran(ping(6))).
+
+test(unstarted_agent_found_by_the_idle_poll, [cleanup(cleanup([A, B]))]) :-
+    node([agent_idle_limit(0.5)], A),
+    node([], B),
+    sleep(0.5),                                 % the monitor is waiting, no call runs
+    arrive_unstarted(B, A, u1, idler, tls(mallory)),
+    assertion(wait_for(\+ agent_exists(A, u1), 800)).
 
 :- end_tests(agent_slots).
