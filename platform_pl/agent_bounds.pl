@@ -100,7 +100,8 @@ says the thread did not stop.
 
 The monitor is one thread per process (`dfrl_bounds_monitor`, started on
 the first bounded call). It wakes every `dfrl_bounds_period` seconds
-(flag, 0.2) while calls run and blocks on its queue when none does; a
+(flag, 0.2) while calls run; when none does, it waits on its queue until
+the first idle clock runs out (agent_idle_limit), at most 10 s; a
 tick reads each running call's thread CPU time (about 0.6 us) and the
 size of its agent's module.
 
