@@ -20,7 +20,32 @@
 :- asserta((user:message_hook(dfrl_bounds(M), warning, _) :- assertz(seen(M)))).
 :- asserta((user:message_hook(dfrl(agent_crashed(_, _, _)), warning, _))).
 
-:- dynamic long_sleeper/3, parker/3, good/3, ran/1, idler/3, listener/3.
+:- dynamic long_sleeper/3, parker/3, good/3, ran/1, idler/3, listener/3, asker/3,
+    silent_port/1.
+%   blocked in remote_agents/3 on a listener that never says hello, with
+%   timeouts of an hour
+asker(guid, _, main) :-
+    user:silent_port(P),
+    catch(remote_agents(localhost:P, _, [connect_timeout(3600), reply_timeout(3600)]),
+          E, ( E = '$dfrl_bound'(_) -> throw(E) ; true )),
+    assertz(user:ran(asked(guid))).
+
+%   A TCP listener that accepts and stays silent.
+silent_listener(listener(Socket, Thread), Port) :-
+    tcp_socket(Socket),
+    tcp_setopt(Socket, reuseaddr),
+    tcp_bind(Socket, localhost:Port),
+    tcp_listen(Socket, 16),
+    thread_create(silent_loop(Socket, []), Thread, []).
+silent_loop(Socket, Held) :-
+    (   catch(tcp_accept(Socket, Client, _), _, fail)
+    ->  silent_loop(Socket, [Client|Held])
+    ;   forall(member(C, Held), catch(tcp_close_socket(C), _, true))
+    ).
+silent_stop(listener(Socket, Thread)) :-
+    catch(tcp_close_socket(Socket), _, true),
+    catch(thread_signal(Thread, throw(stop)), _, true),
+    catch(thread_join(Thread, _), _, true).
 long_sleeper(guid, _, main) :- sleep(30), assertz(user:ran(slept(guid))).
 %   node code (trusted) that waits parked: its wait holds no slot
 parker(guid, _, main) :-
@@ -185,6 +210,18 @@ test(peer_post_limit, [cleanup(cleanup([A, B]))]) :-
     assertion(S1.refused_posts - S0.refused_posts =:= 3),
     assertion(wait_for(ran(ping(5)))),
     assertion(\+ ran(ping(6))).
+
+%   A blocking call the agent API allows (remote_agents/3, timeouts of an
+%   hour, a listener that never answers) is cut by the wall bound.
+test(wall_limit_cuts_a_blocked_remote_call,
+     [cleanup(( cleanup([A, B]), silent_stop(L), retractall(user:silent_port(_)) ))]) :-
+    silent_listener(L, Port),
+    assertz(user:silent_port(Port)),
+    node([agent_wall_limit(1)], A),
+    node([], B),
+    send(B, A, q1, asker),
+    assertion(wait_for(agent_bound_report(B, q1, bound(wall(1), _, _, _)), 250)),
+    assertion(\+ ran(asked(q1))).
 
 test(unstarted_agent_found_by_the_idle_poll, [cleanup(cleanup([A, B]))]) :-
     node([agent_idle_limit(0.5)], A),
