@@ -7,7 +7,8 @@
             bounds_install/5,           % +Node, +Record, +Status, -Name, +Peer
             bounds_arrived/4,           % +Node, +Agent, +Source, +Peer
             bounds_peer/2,              % +Ctx, -Peer
-            bounds_peer_post/1,         % +Ctx
+            bounds_peer/3,              % +Ctx, +Claim, -Peer
+            bounds_peer_post/2,         % +Ctx, +Link
             bounds_park/1,              % :Goal
             bounds_node_memory/2,       % +Node, -Bytes
             bounds_post/0,
@@ -27,7 +28,8 @@
 :- use_module(transport, [transport_request/4]).
 :- use_module(worker_pool, [pool_run/3, pool_signal/3, pool_retire/0]).
 :- use_module(bounds_ledger,
-              [ window_take/4, window_forget/1, windows_forget_node/1, bounds_warning/2,
+              [ window_take/4, window_forget/1, window_live/1, windows_prune/2,
+                windows_forget_node/1, bounds_warning/2,
                 stat_add/2, stat_set/2, stat_max/2, bounds_statistics/1 ]).
 
 :- meta_predicate
@@ -936,6 +938,7 @@ idle_due(Due) :-
     Due is T + Limit.
 
 expire_idle :-
+    sweep_peer_queues,
     get_time(Now),
     findall(Node-Agent-Limit,
             ( active_(Node, Agent, T),
@@ -946,6 +949,29 @@ expire_idle :-
     forall(member(Node-Agent-Limit, Due),
            catch(expire(Node, Agent, Limit), E,
                  debug(dfrl(bounds), 'expire ~p: ~p', [Agent, E]))).
+
+%   The slot queue of a peer that has no agent left on its node, and
+%   whose tokens are all back, is destroyed (at most every 10 s): a
+%   plaintext peer may claim a new address with every agent it sends.
+:- dynamic queues_swept_/1.
+
+sweep_peer_queues :-
+    get_time(Now),
+    (   queues_swept_(T), Now - T < 10
+    ->  true
+    ;   retractall(queues_swept_(_)),
+        assertz(queues_swept_(Now)),
+        with_mutex(dfrl_bounds_monitor,
+                   findall(Q,
+                           ( slot_queue_(Node-Peer, Q),
+                             \+ agents:agent_property(Node, _, peer(Peer)),
+                             catch(node_option(Node, max_running_per_peer, Max), _, fail),
+                             integer(Max),
+                             message_queue_property(Q, size(Max)),
+                             retract(slot_queue_(Node-Peer, Q)) ),
+                           Qs)),
+        forall(member(Q, Qs), catch(message_queue_destroy(Q), _, true))
+    ).
 
 expire(Node, Agent, Limit) :-
     (   agents:agent_take_idle(Node, Agent)
@@ -1081,12 +1107,10 @@ bounds_arrived(Node, Agent, Source, Peer) :-
 
 %!  bounds_peer(+Ctx, -Peer) is det.
 %
-%   Peer identifies the peer of the connection Ctx for the per-peer
-%   bounds: tls(Name), the common name of its verified certificate, on a
-%   TLS connection; else its IP address as tcp_accept/3 gave it (e.g.
-%   ip(127,0,0,1)), without the port. A plaintext peer cannot be told
-%   apart more finely: what it says of itself (the source address of a
-%   transfer, the link of a post) is its own claim.
+%   Peer is what the connection Ctx proves of its peer: tls(Name), the
+%   common name of its verified certificate, on a TLS connection; else
+%   its IP address as tcp_accept/3 gave it (e.g. ip(127,0,0,1)), without
+%   the port.
 
 bounds_peer(Ctx, Peer) :-
     (   ctx_peer_name(Ctx, Name)
@@ -1100,21 +1124,75 @@ bounds_peer(Ctx, Peer) :-
 peer_host(Host:_, Host) :- !.
 peer_host(Host, Host) :- ground(Host).
 
-%!  bounds_peer_post(+Ctx) is det.
+%!  bounds_peer(+Ctx, +Claim, -Peer) is det.
 %
-%   Count one post delivered from the peer of Ctx against the node's
-%   peer_post_limit(N) (per peer and minute).
+%   Peer identifies the peer of Ctx for the per-peer bounds: tls(Name)
+%   on a TLS connection (Claim is not used: the certificate says who it
+%   is); on plaintext claim(IP, Address), its IP address and the node
+%   address it claims (Claim: the source address of a transfer, the link
+%   of a post; Host:Port or (Host,Port), else `none`). A plaintext peer
+%   proves nothing but its IP address and a token, so every process on
+%   one host (all robots of a loopback federation) has one IP: the
+%   claimed address tells them apart, and is believed. A token holder
+%   that claims many addresses gets many shares: the node-wide bounds
+%   (max_agents, max_running_agents, the pool of posts) and the wall
+%   and idle bounds still hold it; TLS gives names it cannot forge.
+
+bounds_peer(Ctx, Claim, Peer) :-
+    bounds_peer(Ctx, Peer0),
+    (   Peer0 = tls(_)
+    ->  Peer = Peer0
+    ;   claimed_address(Claim, Address)
+    ->  Peer = claim(Peer0, Address)
+    ;   Peer = claim(Peer0, none)
+    ).
+
+claimed_address(Host:Port, Host:Port) :-
+    short_atomic(Host),
+    integer(Port),
+    !.
+claimed_address((Host, Port), Host:Port) :-
+    short_atomic(Host),
+    integer(Port).
+
+%   At most 1024 peers of a node have a post window at a time.
+max_post_peers(1024).
+
+post_key(Node, Peer0, Peer) :-
+    (   Peer0 = claim(IP, _),
+        \+ window_live(peer_posts(Node, Peer0)),
+        max_post_peers(Max),
+        windows_prune(peer_posts(Node, _), Live),
+        Live >= Max
+    ->  Peer = claim(IP, many)
+    ;   Peer = Peer0
+    ).
+
+short_atomic(X) :-
+    atomic(X),
+    \+ string(X),
+    atom_length(X, L),
+    L =< 255.
+%!  bounds_peer_post(+Ctx, +Link) is det.
+%
+%   Count one post delivered from the peer of Ctx (bounds_peer/3, Link
+%   the link the post carries, the sender's address by convention)
+%   against the node's peer_post_limit(N) (per peer and minute). The
+%   windows are kept for at most 1024 peers of a node at a time (those
+%   of the last minute); a post from a peer beyond them counts for
+%   claim(IP, many), shared by all such peers of its IP address.
 %
 %   @error resource_error(posts) if the peer delivered N posts this
 %   minute already; such refusals are counted (bounds_statistics/1,
 %   `refused_posts`) and a warning printed (rate-limited).
 
-bounds_peer_post(Ctx) :-
+bounds_peer_post(Ctx, Link) :-
     ctx_node(Ctx, Node),
     node_option(Node, peer_post_limit, Max),
     (   Max == infinite
     ->  true
-    ;   bounds_peer(Ctx, Peer),
+    ;   bounds_peer(Ctx, Link, Peer0),
+        post_key(Node, Peer0, Peer),
         window_take(peer_posts(Node, Peer), Max, 1, Granted),
         (   Granted < 1
         ->  stat_add(refused_posts, 1),

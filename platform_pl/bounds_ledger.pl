@@ -1,6 +1,8 @@
 :- module(bounds_ledger,
           [ window_take/4,              % +Key, +Limit, +N, -Granted
             window_forget/1,            % +Key
+            window_live/1,              % +Key
+            windows_prune/2,            % +Pattern, -Live
             windows_forget_node/1,      % +Node
             bounds_warning/2,           % +Node, +Message
             stat_add/2,                 % +Name, +Delta
@@ -101,6 +103,31 @@ window_take(Key, Limit, N, Granted) :-
 
 window_forget(Key) :-
     with_mutex(dfrl_bounds_windows, retractall(window_(Key, _, _))).
+
+%!  window_live(+Key) is semidet.
+%
+%   True if Key has a window that started less than a minute ago.
+
+window_live(Key) :-
+    get_time(Now),
+    window_(Key, Start, _),
+    Now - Start < 60,
+    !.
+
+%!  windows_prune(+Pattern, -Live) is det.
+%
+%   Forget the windows whose key unifies with Pattern and that started a
+%   minute ago or earlier; Live is the number of those left.
+
+windows_prune(Pattern, Live) :-
+    get_time(Now),
+    with_mutex(dfrl_bounds_windows,
+               (   forall(( window_(Key, Start, _),
+                            Now - Start >= 60,
+                            \+ Key \= Pattern ),
+                          retractall(window_(Key, Start, _))),
+                   aggregate_all(count, ( window_(Key, _, _), \+ Key \= Pattern ), Live)
+               )).
 
 %!  windows_forget_node(+Node) is det.
 %

@@ -13,7 +13,7 @@
 :- use_module(agents).
 :- use_module(custody).
 :- use_module(agent_bounds, [bounds_admit/3, bounds_arrived/4, bounds_install/5,
-                              bounds_peer/2]).
+                              bounds_peer/3]).
 :- autoload(library(aggregate), [aggregate_all/3]).
 :- use_module(transport).
 :- use_module(hop_probe, [hop_probe/1]).      % compiled away unless benchmarking
@@ -416,7 +416,7 @@ receive_transfer(Ctx, MigId, Mode, Source, Departed, Record0, SInc, Reply, After
         take_back_name(Node, Record0),
         aggregate_all(count, agent_exists(Node, _), Present),
         bounds_admit(Node, Mode, Present),
-        arriving_record(Ctx, Node, MigId, Record0, Record, Peer),
+        arriving_record(Ctx, Node, MigId, Source, Record0, Record, Peer),
         hop_probe(checked),
         bounds_install(Node, Record, staged(MigId), Name, Peer),
         hop_probe(installed),
@@ -432,8 +432,9 @@ receive_transfer(Ctx, MigId, Mode, Source, Departed, Record0, SInc, Reply, After
     ).
 
 %   Peer, for the per-peer bounds (agent_bounds.pl), is `local` for an
-%   agent sealed by a node of this process, else the connection's peer.
-arriving_record(Ctx, Node, MigId, Record0, Record, Peer) :-
+%   agent sealed by a node of this process, else the connection's peer
+%   (with the Source it claims, on plaintext).
+arriving_record(Ctx, Node, MigId, Source, Record0, Record, Peer) :-
     (   compound(Record0), compound_name_arity(Record0, agent, 8)
     ->  true
     ;   throw(error(type_error(agent_record, Record0), _))
@@ -443,7 +444,7 @@ arriving_record(Ctx, Node, MigId, Record0, Record, Peer) :-
         setarg(4, Record0, []),
         record_sealed(MigId, Record0, S)
     ->  Peer = local
-    ;   bounds_peer(Ctx, Peer),
+    ;   bounds_peer(Ctx, Source, Peer),
         (   code_trusted(Ctx)
         ->  true
         ;   check_agent_record(Record0)
