@@ -63,9 +63,9 @@ agent_clone/4 raises. Memory of the node as a whole:
   | agents together  | agent_memory_budget(Bytes)      | 1 GiB     | module sizes (last measured) + allocated stacks of running calls (monitor, arrival) |
   | calls at once    | max_running_agents(N)           | 8         | N slots; a call waits agent_slot_wait(Sec) (60) for one |
 
-A slot costs wall time, and one peer (bounds_peer/2: its TLS
-certificate's name, else its IP address) cannot take a node from the
-others:
+A slot costs wall time, and one peer (bounds_peer/3: its TLS
+certificate's name, else its IP address and the node address it claims)
+cannot take a node from the others:
 
   | bound               | node option                  | default  | measured by |
   |---------------------|------------------------------|----------|-------------|

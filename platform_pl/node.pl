@@ -268,8 +268,9 @@ by default the bind address, or the host name when it binds 0.0.0.0).
 %                                 most one call may stay parked
 %                                 (default 600)
 %     - max_agents_per_peer(+N)   agents one peer (its TLS certificate
-%                                 name, else its IP address) may have on
-%                                 the node (default 50)
+%                                 name, else its IP address and claimed
+%                                 node address) may have on the node
+%                                 (default 50)
 %     - max_running_per_peer(+N)  slots the calls of one peer's agents
 %                                 may hold at once (default 4)
 %     - peer_post_limit(+N)       posts one peer may deliver per minute;
