@@ -40,7 +40,7 @@ def test_robot_passes_bounds_to_its_node(tmp_path: Path) -> None:
     opts = dict(line.split()[1:3] for line in run.stdout.splitlines() if line.startswith("OPT "))
     assert opts == {"max_agents": "5", "agent_cpu_limit": "infinite",
                     "agent_memory_budget": "268435456", "max_running_agents": "3",
-                    "max_frame_size": "33554432", "agent_wall_limit": "90",
+                    "max_frame_size": "33554432", "agent_wall_limit": "90.0",
                     "max_agents_per_peer": "infinite"}, run.stdout + run.stderr
 
 
