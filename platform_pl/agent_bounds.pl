@@ -4,6 +4,12 @@
             bounds_admit/3,             % +Node, +Mode, +Agents
             bounds_arrived/3,           % +Node, +Agent, +Source
             bounds_install/4,           % +Node, +Record, +Status, -Name
+            bounds_install/5,           % +Node, +Record, +Status, -Name, +Peer
+            bounds_arrived/4,           % +Node, +Agent, +Source, +Peer
+            bounds_peer/2,              % +Ctx, -Peer
+            bounds_peer/3,              % +Ctx, +Claim, -Peer
+            bounds_peer_post/2,         % +Ctx, +Link
+            bounds_park/1,              % :Goal
             bounds_node_memory/2,       % +Node, -Bytes
             bounds_post/0,
             bounds_warning/2,           % +Node, +Message
@@ -18,15 +24,18 @@
 :- use_module(library(debug), [debug/3]).
 :- use_module(node,
               [ node_option/3, node_property/2, node_for_address/2,
-                with_node/2, ctx_node/2, ctx_peer/2 ]).
+                with_node/2, ctx_node/2, ctx_peer/2, ctx_peer_name/2 ]).
 :- use_module(transport, [transport_request/4]).
 :- use_module(worker_pool, [pool_run/3, pool_signal/3, pool_retire/0]).
 :- use_module(node_memory, [node_memory_note_idle/0, node_memory_check/2]).
 :- use_module(bounds_ledger,
-              [ window_take/4, window_forget/1, windows_forget_node/1, bounds_warning/2,
+              [ window_take/4, window_forget/1, window_live/1, windows_prune/2,
+                windows_forget_node/1, bounds_warning/2,
                 stat_add/2, stat_set/2, stat_max/2, bounds_statistics/1 ]).
 
-:- meta_predicate bounds_call(+, +, +, 0).
+:- meta_predicate
+    bounds_call(+, +, +, 0),
+    bounds_park(0).
 
 /** <module> Bounds on what an agent may take from a node
 
@@ -55,6 +64,22 @@ agent_clone/4 raises. Memory of the node as a whole:
   | agents together  | agent_memory_budget(Bytes)      | 1 GiB     | module sizes (last measured) + allocated stacks of running calls (monitor, arrival) |
   | calls at once    | max_running_agents(N)           | 8         | N slots; a call waits agent_slot_wait(Sec) (60) for one |
 
+A slot costs wall time, and one peer (bounds_peer/3: its TLS
+certificate's name, else its IP address and the node address it claims)
+cannot take a node from the others:
+
+  | bound               | node option                  | default  | measured by |
+  |---------------------|------------------------------|----------|-------------|
+  | slot held           | agent_wall_limit(Sec)        | 60 s     | wall time of the call less time parked (monitor) |
+  | idle, or parked     | agent_idle_limit(Sec)        | 600 s    | since an agent from a peer last ran (monitor); a call's parked time |
+  | agents of a peer    | max_agents_per_peer(N)       | 50       | counted with max_agents, under the registry mutex |
+  | slots of a peer     | max_running_per_peer(N)      | 4        | a queue of N tokens per node and peer, taken before the node's |
+  | posts from a peer   | peer_post_limit(PerMinute)   | 6000     | counted as a post request arrives (bounds_peer_post/1) |
+
+Node code that waits in a handler call (the dFRL agent's rest, robot
+calls, tree-round messages) parks with bounds_park/1: its slots are
+free meanwhile. Arriving code cannot park (it is not in the agent API).
+
 so the stacks of agents never exceed N x agent_stack_limit, and what
 they hold is kept near the budget (README "Bounds on agents" has the
 measurements). The budget also bounds the process's resident memory
@@ -66,8 +91,9 @@ calls are checked before them (guest_limits.pl). Every bound takes
 
 An agent over a per-call bound is stopped: the term '$dfrl_bound'(Kind)
 is thrown in its thread (thread_signal/2), Kind one of cpu(Limit),
-memory(Limit), module_memory(Limit), memory_budget(Limit), posts(Limit)
-or log(Limit); a stack
+memory(Limit), module_memory(Limit), memory_budget(Limit), posts(Limit),
+log(Limit), wall(Limit) or idle(Limit) (a call parked too long); an
+idle agent is removed by the monitor with the same warning and notice; a stack
 overflow of the call is memory(Limit). The caller (agents.pl,
 messages.pl) removes the agent from the node and calls bounds_stopped/3,
 which prints one warning and tells the node the agent came from (the
@@ -82,7 +108,8 @@ says the thread did not stop.
 
 The monitor is one thread per process (`dfrl_bounds_monitor`, started on
 the first bounded call). It wakes every `dfrl_bounds_period` seconds
-(flag, 0.2) while calls run and blocks on its queue when none does; a
+(flag, 0.2) while calls run; when none does, it waits on its queue until
+the first idle clock runs out (agent_idle_limit), at most 10 s; a
 tick reads each running call's thread CPU time (about 0.6 us) and the
 size of its agent's module.
 
@@ -111,11 +138,14 @@ says how many were suppressed.
     reclaim_pass_/1,            % passes of the current reclaim so far
     tick_size_/2,               % Id, Bytes: module size this tick
     notice_/4,                  % Node, Agent, Kind, Source: to be sent
-    notice_senders_/1.          % Count: senders draining notice_/4
+    notice_senders_/1,          % Count: senders draining notice_/4
+    call_time_/4,               % Id, Start, Parked (s so far), ParkedSince|none
+    active_/3.                  % Node, Agent, Time: an agent from a peer last ran
 
 :- thread_local
     current_call_/4,            % Id, Node, Agent, Limits
     budget_/5,                  % Node, Agent, Limits, OutTarget, ErrTarget
+    held_slot_/1,               % Slot: the run slot this thread's call holds
     swallowed_/1.               % Kind: the call ended after its signal
 
 :- multifile
@@ -152,7 +182,7 @@ bounds_call(Node, Agent, Module, Goal) :-
     node_limits(Node, Limits),
     flag(dfrl_bounds_calls, Id, Id+1),
     setup_call_cleanup(
-        take_slot(Node, Agent, Slot),
+        hold_slot(Node, Agent),
         setup_call_cleanup(
             enter(Id, Node, Agent, Module, Limits, Saved),
             (   catch(Goal, E, call_error(E, Limits))
@@ -160,7 +190,7 @@ bounds_call(Node, Agent, Module, Goal) :-
             ;   Result = false
             ),
             leave(Id, Saved)),
-        give_slot(Slot)),
+        release_slot),
     (   retract(swallowed_(Kind))
     ->  throw('$dfrl_bound'(Kind))
     ;   true
@@ -178,38 +208,163 @@ bounds_call(Node, Agent, Module, Goal) :-
 %   message queue holding N tokens) before it starts, and waits for one
 %   when all are taken, at most agent_slot_wait(Sec) (node option, 60).
 %   Waiting costs no CPU and is not counted in the call's bounds.
+%   max_running_per_peer(P): a call of an agent that arrived from a peer
+%   first takes one of that peer's P slots (a queue per node and peer),
+%   so that one peer's calls never hold more than P of the N slots and
+%   another peer's call finds one free. Both waits together take at
+%   most agent_slot_wait. The slot held is kept thread-locally, so that
+%   bounds_park/1 can give it back while the call waits.
+hold_slot(Node, Agent) :-
+    retractall(held_slot_(_)),
+    take_slot(Node, Agent, Slot),
+    assertz(held_slot_(Slot)).
+
+release_slot :-
+    (   retract(held_slot_(Slot))
+    ->  give_slot(Slot)
+    ;   true
+    ).
+
 take_slot(Node, Agent, Slot) :-
     node_option(Node, max_running_agents, Max),
+    node_option(Node, agent_slot_wait, Wait),
+    get_time(T0),
+    Deadline is T0 + Wait,
+    agent_peer(Node, Agent, Peer),
+    node_option(Node, max_running_per_peer, PeerMax),
+    (   ( Peer == local ; PeerMax == infinite )
+    ->  PeerSlot = none
+    ;   slot_queue(Node-Peer, PeerMax, PeerQueue),
+        (   wait_token(PeerQueue, Deadline)
+        ->  PeerSlot = PeerQueue
+        ;   bounds_warning(Node, dfrl_bounds(no_slot(Node, Agent, PeerMax, Wait))),
+            throw(error(resource_error(running_agents), context(_, peer_limit(PeerMax))))
+        )
+    ),
     (   Max == infinite
-    ->  Slot = none
+    ->  Slot = slot(none, PeerSlot)
     ;   slot_queue(Node, Max, Queue),
-        node_option(Node, agent_slot_wait, Wait),
-        (   thread_get_message(Queue, slot, [timeout(0)])
-        ->  true
-        ;   stat_add(slot_waits, 1),
-            thread_get_message(Queue, slot, [timeout(Wait)])
-        ->  true
-        ;   bounds_warning(Node, dfrl_bounds(no_slot(Node, Agent, Max, Wait))),
+        (   wait_token(Queue, Deadline)
+        ->  Slot = slot(Queue, PeerSlot)
+        ;   give_slot(slot(none, PeerSlot)),
+            bounds_warning(Node, dfrl_bounds(no_slot(Node, Agent, Max, Wait))),
             throw(error(resource_error(running_agents), context(_, limit(Max))))
-        ),
-        Slot = slot(Queue)
+        )
+    ).
+
+wait_token(Queue, Deadline) :-
+    (   thread_get_message(Queue, slot, [timeout(0)])
+    ->  true
+    ;   stat_add(slot_waits, 1),
+        get_time(Now),
+        Left is max(0, Deadline - Now),
+        thread_get_message(Queue, slot, [timeout(Left)])
     ).
 
 give_slot(none).
-give_slot(slot(Queue)) :-
+give_slot(parked).
+give_slot(slot(Queue, PeerQueue)) :-
+    give_token(PeerQueue),
+    give_token(Queue).
+
+give_token(none) :- !.
+give_token(Queue) :-
     catch(thread_send_message(Queue, slot), _, true).
 
-slot_queue(Node, Max, Queue) :-
-    (   slot_queue_(Node, Q0)
+%   The queue of the slots of Key (a node, or Node-Peer), made with Max
+%   tokens on first use.
+slot_queue(Key, Max, Queue) :-
+    (   slot_queue_(Key, Q0)
     ->  Queue = Q0
     ;   with_mutex(dfrl_bounds_monitor,
-                   (   slot_queue_(Node, Q0)
+                   (   slot_queue_(Key, Q0)
                    ->  Queue = Q0
                    ;   message_queue_create(Queue),
                        forall(between(1, Max, _), thread_send_message(Queue, slot)),
-                       assertz(slot_queue_(Node, Queue))
+                       assertz(slot_queue_(Key, Queue))
                    ))
     ).
+
+%   The peer an agent arrived from (agents.pl keeps it), `local` for an
+%   agent made here, or one that is gone.
+agent_peer(Node, Agent, Peer) :-
+    (   agents:agent_property(Node, Agent, peer(P))
+    ->  Peer = P
+    ;   Peer = local
+    ).
+
+%!  bounds_park(:Goal) is semidet.
+%
+%   Call Goal (once) with the run slot of the current bounded call given
+%   back: for node code that an agent's handler calls to wait (the dFRL
+%   agent resting between rounds, waiting for a robot or for messages of
+%   a tree round). Time parked is not counted in agent_wall_limit but
+%   in agent_idle_limit (the most a call may stay parked, in all); CPU,
+%   stacks and memory are counted as ever. After Goal the call takes a
+%   slot again (waiting, parked, up to twice agent_slot_wait). Outside a bounded call, or
+%   inside a parked one, it is call/1 under once/1. Not in the agent API:
+%   an arriving agent's own code cannot park.
+%
+%   @error resource_error(running_agents) if no slot came back in
+%   agent_slot_wait.
+
+bounds_park(Goal) :-
+    (   current_call_(Id, Node, Agent, _),
+        held_slot_(Slot),
+        Slot \== parked
+    ->  park(Id, Slot),
+        (   catch(Goal, E, true)
+        ->  Result = true
+        ;   Result = false
+        ),
+        (   nonvar(E),
+            stops_call(E)
+        ->  unpark(Id),
+            throw(E)
+        ;   true
+        ),
+        retractall(held_slot_(_)),              % waiting for a slot is parked
+        catch(retake_slot(Node, Agent, Slot1), E1, ( unpark(Id), throw(E1) )),
+        assertz(held_slot_(Slot1)),
+        unpark(Id),
+        (   nonvar(E) -> throw(E) ; Result == true )
+    ;   once(Goal)
+    ).
+
+%   A parked call waits for a slot twice as long as a new one (two
+%   agent_slot_wait): it has run already, and giving up costs its work.
+retake_slot(Node, Agent, Slot) :-
+    catch(take_slot(Node, Agent, Slot), error(resource_error(running_agents), _), fail),
+    !.
+retake_slot(Node, Agent, Slot) :-
+    take_slot(Node, Agent, Slot).
+
+stops_call('$dfrl_bound'(_)).
+stops_call('$dfrl_purged').
+stops_call('$aborted').
+stops_call(unwind(_)).
+stops_call(time_limit_exceeded).
+
+park(Id, Slot) :-
+    retractall(held_slot_(_)),
+    assertz(held_slot_(parked)),
+    give_slot(Slot),
+    get_time(Now),
+    with_mutex(dfrl_bounds,
+               (   retract(call_time_(Id, Start, Parked, _))
+               ->  assertz(call_time_(Id, Start, Parked, Now))
+               ;   true
+               )).
+
+unpark(Id) :-
+    get_time(Now),
+    with_mutex(dfrl_bounds,
+               (   retract(call_time_(Id, Start, Parked0, Since)),
+                   number(Since)
+               ->  Parked is Parked0 + Now - Since,
+                   assertz(call_time_(Id, Start, Parked, none))
+               ;   true
+               )).
 
 %   The last measured size of an agent still on its node.
 note_module_size(Node, Agent, Size) :-
@@ -235,18 +390,22 @@ stack_resource(global_stack).
 stack_resource(local_stack).
 stack_resource(trail_stack).
 
-node_limits(Node, limits(CPU, Stack, Module, Posts, Log)) :-
+node_limits(Node, limits(CPU, Stack, Module, Posts, Log, Wall, Idle)) :-
     node_option(Node, agent_cpu_limit, CPU),
     node_option(Node, agent_stack_limit, Stack),
     node_option(Node, agent_module_limit, Module),
     node_option(Node, agent_post_limit, Posts),
-    node_option(Node, agent_log_limit, Log).
+    node_option(Node, agent_log_limit, Log),
+    node_option(Node, agent_wall_limit, Wall),
+    node_option(Node, agent_idle_limit, Idle).
 
-limit(limits(L, _, _, _, _), cpu, L).
-limit(limits(_, L, _, _, _), stack, L).
-limit(limits(_, _, L, _, _), module, L).
-limit(limits(_, _, _, L, _), posts, L).
-limit(limits(_, _, _, _, L), log, L).
+limit(limits(L, _, _, _, _, _, _), cpu, L).
+limit(limits(_, L, _, _, _, _, _), stack, L).
+limit(limits(_, _, L, _, _, _, _), module, L).
+limit(limits(_, _, _, L, _, _, _), posts, L).
+limit(limits(_, _, _, _, L, _, _), log, L).
+limit(limits(_, _, _, _, _, L, _), wall, L).
+limit(limits(_, _, _, _, _, _, L), idle, L).
 
 over(Value, Limit) :-
     Limit \== infinite,
@@ -274,6 +433,8 @@ enter(Id, Node, Agent, Module, Limits, saved(Stack0, Out0, Err0, Cur0)) :-
     set_output(Out),
     assertz(current_call_(Id, Node, Agent, Limits)),
     (   call_(_, _, _, _, _, _, _) -> true ; node_memory_note_idle ),
+    get_time(Start),
+    with_mutex(dfrl_bounds, assertz(call_time_(Id, Start, 0, none))),
     assertz(call_(Id, Node, Agent, Module, Me, CPU0, Limits)),
     monitor_wake.
 
@@ -281,13 +442,15 @@ enter(Id, Node, Agent, Module, Limits, saved(Stack0, Out0, Err0, Cur0)) :-
 %   clean-up finds no call to stop; its last output is counted still.
 leave(Id, saved(Stack0, Out0, Err0, Cur0)) :-
     retractall(current_call_(Id, _, _, _)),
-    (   retract(call_(Id, Node, _, _, Me, CPU0, _))
+    (   retract(call_(Id, Node, Agent, _, Me, CPU0, _))
     ->  catch(( thread_statistics(Me, cputime, CPU1),
                 Used is CPU1 - CPU0,
                 stat_max(peak_cpu(Node), Used)
-              ), _, true)
+              ), _, true),
+        note_active(Node, Agent)
     ;   true
     ),
+    with_mutex(dfrl_bounds, retractall(call_time_(Id, _, _, _))),
     (   retract(signalled_(Id, Kind, _, _))
     ->  retractall(swallowed_(_)),
         assertz(swallowed_(Kind))           % a handler that took the signal
@@ -472,9 +635,9 @@ monitor_loop(Queue) :-
         ->  Period1 is Period0 / 5
         ;   Period1 = Period0
         )
-    ;   Period1 = infinite
+    ;   idle_poll(Period1)
     ),
-    (   aggregate_all(min(T), reclaim_due_(T), Due)
+    (   aggregate_all(min(T), ( reclaim_due_(T) ; idle_due(T) ), Due)
     ->  Wait is max(0, Due - Now),
         (   Period1 == infinite -> Period = Wait ; Period is min(Period1, Wait) )
     ;   Period = Period1
@@ -489,7 +652,15 @@ monitor_loop(Queue) :-
     drain(Queue),
     catch(monitor_tick, E, print_message(warning, E)),
     catch(reclaim_if_due, E2, print_message(warning, E2)),
+    catch(expire_idle, E3, print_message(warning, E3)),
     monitor_loop(Queue).
+
+%   With no call running, the monitor still wakes every 10 s (about
+%   0.2 ms) to find agents from peers that arrived since (their idle
+%   clocks, agent_idle_limit): an arrival does not wake it, the agent's
+%   first handler call does (every arriving agent is started), and an
+%   agent installed and never started is found by this wake.
+idle_poll(10.0).
 
 drain(Queue) :-
     (   thread_get_message(Queue, _, [timeout(0)])
@@ -537,7 +708,7 @@ check_call(Id, Node, Agent, _Module, Thread, _, _, Now) :-
         catch(agents:agent_purge(Node, Agent), _, true)
     ;   true
     ).
-check_call(Id, Node, _Agent, Module, Thread, CPU0, Limits, _) :-
+check_call(Id, Node, _Agent, Module, Thread, CPU0, Limits, Now) :-
     thread_statistics(Thread, cputime, CPU),
     Used is CPU - CPU0,
     catch(( thread_statistics(Thread, globalused, G),
@@ -547,13 +718,36 @@ check_call(Id, Node, _Agent, Module, Thread, CPU0, Limits, _) :-
             stat_max(peak_stack(Node), Stack) ), _, true),
     limit(Limits, cpu, MaxCPU),
     limit(Limits, module, MaxModule),
+    limit(Limits, wall, MaxWall),
+    limit(Limits, idle, MaxParked),
+    wall_times(Id, Now, Held, Parked),
     (   over(Used, MaxCPU)
     ->  stop_call(Id, Thread, cpu(MaxCPU))
+    ;   over(Held, MaxWall)
+    ->  stat_add(wall_stops, 1),
+        stop_call(Id, Thread, wall(MaxWall))
+    ;   over(Parked, MaxParked)
+    ->  stat_add(wall_stops, 1),
+        stop_call(Id, Thread, idle(MaxParked))
     ;   MaxModule \== infinite,
         tick_module_size(Id, Module, Size),
         over(Size, MaxModule)
     ->  stop_call(Id, Thread, module_memory(MaxModule))
     ;   true
+    ).
+
+%   agent_wall_limit: the seconds call Id held a slot (since it started,
+%   less the time it was parked with bounds_park/1) and, for
+%   agent_idle_limit, the seconds it was parked in all.
+wall_times(Id, Now, Held, Parked) :-
+    (   call_time_(Id, Start, Parked0, Since)
+    ->  (   number(Since)
+        ->  Parked is Parked0 + Now - Since
+        ;   Parked = Parked0
+        ),
+        Held is Now - Start - Parked
+    ;   Held = 0,
+        Parked = 0
     ).
 
 %   A module's size, measured once per tick: predicate_property(size(B))
@@ -754,6 +948,87 @@ check_module_size(Node, Size) :-
     ).
 
 		 /*******************************
+		 *          IDLE AGENTS		*
+		 *******************************/
+
+%   agent_idle_limit(Sec): an agent that arrived from a peer (not one
+%   made on this node, nor one a node of this process sent: agents.pl
+%   knows them as peer `local`) is removed when it has not run for Sec
+%   seconds: since it arrived or since its last handler call (its main
+%   handler or a posted event) ended. The monitor wakes when the first
+%   such agent is due. Only an agent that is `idle` is removed (under
+%   the registry mutex): one running (a call parked with bounds_park/1
+%   included), staged, in doubt or departing has its clock restarted.
+%   It is removed as an agent over a bound is: one warning, and its
+%   source gets bound_notice(Agent, idle(Sec), Here).
+
+note_active(Node, Agent) :-
+    get_time(Now),
+    with_mutex(dfrl_bounds,
+               (   retract(active_(Node, Agent, _))
+               ->  assertz(active_(Node, Agent, Now))
+               ;   true
+               )).
+
+%   When the first agent of any node falls due.
+idle_due(Due) :-
+    active_(Node, _, T),
+    catch(node_option(Node, agent_idle_limit, Limit), _, fail),
+    Limit \== infinite,
+    Due is T + Limit.
+
+expire_idle :-
+    sweep_peer_queues,
+    get_time(Now),
+    findall(Node-Agent-Limit,
+            ( active_(Node, Agent, T),
+              catch(node_option(Node, agent_idle_limit, Limit), _, fail),
+              over(Now - T, Limit)
+            ),
+            Due),
+    forall(member(Node-Agent-Limit, Due),
+           catch(expire(Node, Agent, Limit), E,
+                 debug(dfrl(bounds), 'expire ~p: ~p', [Agent, E]))).
+
+%   The slot queue of a peer that has no agent left on its node, and
+%   whose tokens are all back, is destroyed (at most every 10 s): a
+%   plaintext peer may claim a new address with every agent it sends.
+:- dynamic queues_swept_/1.
+
+sweep_peer_queues :-
+    get_time(Now),
+    (   queues_swept_(T), Now - T < 10
+    ->  true
+    ;   retractall(queues_swept_(_)),
+        assertz(queues_swept_(Now)),
+        with_mutex(dfrl_bounds_monitor,
+                   findall(Q,
+                           ( slot_queue_(Node-Peer, Q),
+                             \+ agents:agent_property(Node, _, peer(Peer)),
+                             catch(node_option(Node, max_running_per_peer, Max), _, fail),
+                             integer(Max),
+                             message_queue_property(Q, size(Max)),
+                             retract(slot_queue_(Node-Peer, Q)) ),
+                           Qs)),
+        forall(member(Q, Qs), catch(message_queue_destroy(Q), _, true))
+    ).
+
+expire(Node, Agent, Limit) :-
+    (   agents:agent_take_idle(Node, Agent)
+    ->  stat_add(idle_expired, 1),
+        Kind = idle(Limit),
+        bounds_warning(Node, dfrl_bounds(stopped(Node, Agent, Kind))),
+        (   arrived_(Node, Agent, Source)
+        ->  notify(Node, Agent, Kind, Source)
+        ;   true
+        ),
+        agents:agent_purge(Node, Agent)
+    ;   agents:agent_exists(Node, Agent)
+    ->  note_active(Node, Agent)
+    ;   with_mutex(dfrl_bounds, retractall(active_(Node, Agent, _)))
+    ).
+
+		 /*******************************
 		 *          ARRIVALS		*
 		 *******************************/
 
@@ -771,11 +1046,26 @@ check_module_size(Node, Size) :-
 %   @error resource_error(agent_memory)
 
 bounds_install(Node, Record, Status, Name) :-
+    bounds_install(Node, Record, Status, Name, local).
+
+%!  bounds_install(+Node, +Record, +Status, -Name, +Peer) is det.
+%
+%   As bounds_install/4, for an agent that arrives from Peer
+%   (bounds_peer/2; `local` for a node of this process): Node holds at
+%   most max_agents_per_peer(N) agents of one peer (counted as max_agents
+%   is), so that one peer cannot fill max_agents for the others.
+%
+%   @error resource_error(peer_agents)
+
+bounds_install(Node, Record, Status, Name, Peer) :-
     node_option(Node, max_agents, Max),
-    catch(agents:agent_install(Node, Record, Status, Name, [max_agents(Max)]),
-          error(resource_error(agents), C),
-          ( bounds_warning(Node, dfrl_bounds(refused(Node, agents, Max))),
-            throw(error(resource_error(agents), C)) )),
+    node_option(Node, max_agents_per_peer, MaxPeer),
+    catch(agents:agent_install(Node, Record, Status, Name,
+                               [max_agents(Max), peer(Peer), max_per_peer(MaxPeer)]),
+          error(resource_error(What), C),
+          ( ( What == peer_agents -> Limit = MaxPeer ; Limit = Max ),
+            bounds_warning(Node, dfrl_bounds(refused(Node, What, Limit))),
+            throw(error(resource_error(What), C)) )),
     agents:agent_module(Node, Name, Module),
     catch(admit_memory(Node, Name, Module), E,
           ( agents:agent_remove(Node, Name), throw(E) )).
@@ -839,8 +1129,123 @@ bounds_arrived(Node, Agent, Source) :-
     retractall(arrived_(Node, Agent, _)),
     assertz(arrived_(Node, Agent, Source)).
 
+%!  bounds_arrived(+Node, +Agent, +Source, +Peer) is det.
+%
+%   As bounds_arrived/3, Agent having come from Peer (bounds_peer/2):
+%   unless Peer is `local`, its idle time counts from now
+%   (agent_idle_limit).
+
+bounds_arrived(Node, Agent, Source, Peer) :-
+    bounds_arrived(Node, Agent, Source),
+    (   Peer == local
+    ->  true
+    ;   get_time(Now),
+        with_mutex(dfrl_bounds,
+                   ( retractall(active_(Node, Agent, _)),
+                     assertz(active_(Node, Agent, Now)) ))
+    ).
+
+%!  bounds_peer(+Ctx, -Peer) is det.
+%
+%   Peer is what the connection Ctx proves of its peer: tls(Name), the
+%   common name of its verified certificate, on a TLS connection; else
+%   its IP address as tcp_accept/3 gave it (e.g. ip(127,0,0,1)), without
+%   the port.
+
+bounds_peer(Ctx, Peer) :-
+    (   ctx_peer_name(Ctx, Name)
+    ->  Peer = tls(Name)
+    ;   ctx_peer(Ctx, Address),
+        peer_host(Address, Host)
+    ->  Peer = Host
+    ;   Peer = unknown
+    ).
+
+peer_host(Host:_, Host) :- !.
+peer_host(Host, Host) :- ground(Host).
+
+%!  bounds_peer(+Ctx, +Claim, -Peer) is det.
+%
+%   Peer identifies the peer of Ctx for the per-peer bounds: tls(Name)
+%   on a TLS connection (Claim is not used: the certificate says who it
+%   is); on plaintext claim(IP, Address), its IP address and the node
+%   address it claims (Claim: the source address of a transfer, the link
+%   of a post; Host:Port or (Host,Port), else `none`). A plaintext peer
+%   proves nothing but its IP address and a token, so every process on
+%   one host (all robots of a loopback federation) has one IP: the
+%   claimed address tells them apart, and is believed. A token holder
+%   that claims many addresses gets many shares: the node-wide bounds
+%   (max_agents, max_running_agents, the pool of posts) and the wall
+%   and idle bounds still hold it; TLS gives names it cannot forge.
+
+bounds_peer(Ctx, Claim, Peer) :-
+    bounds_peer(Ctx, Peer0),
+    (   Peer0 = tls(_)
+    ->  Peer = Peer0
+    ;   claimed_address(Claim, Address)
+    ->  Peer = claim(Peer0, Address)
+    ;   Peer = claim(Peer0, none)
+    ).
+
+claimed_address(Host:Port, Host:Port) :-
+    short_atomic(Host),
+    integer(Port),
+    !.
+claimed_address((Host, Port), Host:Port) :-
+    short_atomic(Host),
+    integer(Port).
+
+%   At most 1024 peers of a node have a post window at a time.
+max_post_peers(1024).
+
+post_key(Node, Peer0, Peer) :-
+    (   Peer0 = claim(IP, _),
+        \+ window_live(peer_posts(Node, Peer0)),
+        max_post_peers(Max),
+        windows_prune(peer_posts(Node, _), Live),
+        Live >= Max
+    ->  Peer = claim(IP, many)
+    ;   Peer = Peer0
+    ).
+
+short_atomic(X) :-
+    atomic(X),
+    \+ string(X),
+    atom_length(X, L),
+    L =< 255.
+%!  bounds_peer_post(+Ctx, +Link) is det.
+%
+%   Count one post delivered from the peer of Ctx (bounds_peer/3, Link
+%   the link the post carries, the sender's address by convention)
+%   against the node's peer_post_limit(N) (per peer and minute). The
+%   windows are kept for at most 1024 peers of a node at a time (those
+%   of the last minute); a post from a peer beyond them counts for
+%   claim(IP, many), shared by all such peers of its IP address.
+%
+%   @error resource_error(posts) if the peer delivered N posts this
+%   minute already; such refusals are counted (bounds_statistics/1,
+%   `refused_posts`) and a warning printed (rate-limited).
+
+bounds_peer_post(Ctx, Link) :-
+    ctx_node(Ctx, Node),
+    node_option(Node, peer_post_limit, Max),
+    (   Max == infinite
+    ->  true
+    ;   bounds_peer(Ctx, Link, Peer0),
+        post_key(Node, Peer0, Peer),
+        window_take(peer_posts(Node, Peer), Max, 1, Granted),
+        (   Granted < 1
+        ->  stat_add(refused_posts, 1),
+            stat_add(refused_posts(Node), 1),
+            bounds_warning(Node, dfrl_bounds(refused_posts(Node, Peer, Max))),
+            throw(error(resource_error(posts), context(_, peer_limit(Max))))
+        ;   true
+        )
+    ).
+
 agents:agent_changed(removed, Node, Agent) :-
     retractall(arrived_(Node, Agent, _)),
+    with_mutex(dfrl_bounds, retractall(active_(Node, Agent, _))),
     (   with_mutex(dfrl_bounds, retract(module_size_(Node, Agent, Size))),
         reclaim_threshold(Big),
         Size >= Big
@@ -855,10 +1260,15 @@ node:node_stopping(Node) :-
     with_mutex(dfrl_bound_notices, retractall(notice_(Node, _, _, _))),
     retractall(report_(Node, _, _, _)),
     with_mutex(dfrl_bounds, retractall(module_size_(Node, _, _))),
-    (   with_mutex(dfrl_bounds_monitor, retract(slot_queue_(Node, Queue)))
-    ->  catch(message_queue_destroy(Queue), _, true)
-    ;   true
-    ),
+    with_mutex(dfrl_bounds, retractall(active_(Node, _, _))),
+    with_mutex(dfrl_bounds_monitor,
+               findall(Queue,
+                       ( slot_queue_(Key, Queue),
+                         ( Key == Node ; Key = Node-_ ),
+                         retract(slot_queue_(Key, Queue)) ),
+                       Queues)),
+    forall(member(Queue, Queues),
+           catch(message_queue_destroy(Queue), _, true)),
     windows_forget_node(Node).
 
 		 /*******************************
@@ -960,7 +1370,7 @@ valid_notice(Agent, Kind, Host:Port) :-
     atom(Agent), atom_length(Agent, AL), AL =< 256,
     compound(Kind), compound_name_arity(Kind, K, 1),
     memberchk(K, [cpu, memory, module_memory, memory_budget, posts, log,
-                  text_size, integer_size]),
+                  text_size, integer_size, wall, idle]),
     arg(1, Kind, Limit),
     ( number(Limit) ; Limit == infinite ),
     atomic(Host), \+ number(Host), atom_length(Host, HL), HL =< 256,

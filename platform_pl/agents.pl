@@ -17,6 +17,7 @@
             agent_remove/2,             % +Node, +Name
             agent_set_status/3,         % +Node, +Name, +Status
             agent_status/3,             % +Node, +Name, -Status
+            agent_take_idle/2,          % +Node, +Name
             agent_hop_times/3,          % +Node, +Name, -Millis
             agent_record_hop/3,         % +Node, +Name, +Hop
             agent_fresh_name/3,         % +Node, +Base, -Name
@@ -68,7 +69,8 @@ program writes its own module, which is where its handler runs.
     agent_tokens_/3,            % Node, Name, Tokens
     agent_status_/3,            % Node, Name, Status
     agent_payload_/3,           % Node, Name, Pred/Arity
-    agent_hops_/3.              % Node, Name, Hops
+    agent_hops_/3,              % Node, Name, Hops
+    agent_peer_/3.              % Node, Name, Peer (arrived from; absent: local)
 
 :- thread_local
     current_agent_tl/1.
@@ -275,7 +277,9 @@ agent_exists(Node, Name) :-
 %!  agent_property(?Node, ?Name, ?Property) is nondet.
 %
 %   Properties: handler(H), kind(K), tokens(L), status(S), payload(L),
-%   module(M), hops(N).
+%   module(M), hops(N), peer(P): the peer the agent arrived from
+%   (agent_install/5 option peer(P), e.g. tls(Name) or ip(A,B,C,D)), or
+%   `local` for an agent made or installed here without one.
 
 agent_property(Node, Name, Property) :-
     agent_entry(Node, Name, Handler, Kind),
@@ -294,6 +298,8 @@ agent_property_(module(M), Node, Name, _, _) :-
 agent_property_(hops(N), Node, Name, _, _) :-
     agent_hops_(Node, Name, Hops),
     length(Hops, N).
+agent_property_(peer(P), Node, Name, _, _) :-
+    (   agent_peer_(Node, Name, P0) -> P = P0 ; P = local ).
 
 %!  agent_list(+Node, -Agents) is det.
 %
@@ -327,6 +333,18 @@ agent_status(Node, Name, Status) :-
 agent_set_status(Node, Name, Status) :-
     retractall(agent_status_(Node, Name, _)),
     assertz(agent_status_(Node, Name, Status)).
+
+%!  agent_take_idle(+Node, +Name) is semidet.
+%
+%   If agent Name on Node is idle, mark it `expiring` (so that it cannot
+%   be started, moved or cloned) and succeed; fail otherwise. For
+%   agent_bounds.pl, which then purges it (agent_idle_limit).
+
+agent_take_idle(Node, Name) :-
+    with_agents_locked(
+        (   agent_status_(Node, Name, idle)
+        ->  agent_set_status(Node, Name, expiring)
+        )).
 
 must_exist(Node, Name) :-
     (   agent_entry(Node, Name, _, _)
@@ -630,7 +648,8 @@ forget(Node, Name) :-
           retractall(agent_tokens_(Node, Name, _)),
           retractall(agent_status_(Node, Name, _)),
           retractall(agent_payload_(Node, Name, _)),
-          retractall(agent_hops_(Node, Name, _))
+          retractall(agent_hops_(Node, Name, _)),
+          retractall(agent_peer_(Node, Name, _))
         )).
 
 		 /*******************************
@@ -723,15 +742,29 @@ agent_install(Node, Record, Status, Name) :-
 %                         default). Counted and registered under the
 %                         registry mutex, so simultaneous arrivals never
 %                         make more than Max.
+%     - peer(+Peer)       the peer the agent arrives from (a ground
+%                         term; default `local`): its property peer(P)
+%     - max_per_peer(+Max) refuse the agent if Node holds Max agents of
+%                         Peer already (default `infinite`; never for
+%                         `local`), counted as max_agents is.
 %
 %   @error resource_error(agents) if Node holds Max agents.
+%   @error resource_error(peer_agents) if it holds Max agents of Peer.
 
 agent_install(Node, Record, Status, Name, Options) :-
     check_record(Record),
     option(max_agents(Max), Options, infinite),
+    option(peer(Peer), Options, local),
+    must_be(ground, Peer),
+    option(max_per_peer(MaxPeer), Options, infinite),
     Record = agent(Name0, Handler, Kind, Tokens, Payload, Preds, Clauses0, Hops),
     with_agents_locked(( room_for_one(Node, Max),
-                         install_entry(Node, Name0, Handler, Kind, Name) )),
+                         room_for_one_of(Node, Peer, MaxPeer),
+                         install_entry(Node, Name0, Handler, Kind, Name),
+                         (   Peer == local
+                         ->  true
+                         ;   assertz(agent_peer_(Node, Name, Peer))
+                         ) )),
     (   Name0 = rename(Old, _)
     ->  replace_guid(Clauses0, Old, Name, Clauses)
     ;   Clauses = Clauses0
@@ -751,6 +784,17 @@ room_for_one(Node, Max) :-
     (   N < Max
     ->  true
     ;   throw(error(resource_error(agents), context(_, limit(Max))))
+    ).
+
+room_for_one_of(_, local, _) :-
+    !.
+room_for_one_of(_, _, infinite) :-
+    !.
+room_for_one_of(Node, Peer, Max) :-
+    aggregate_all(count, agent_peer_(Node, _, Peer), N),
+    (   N < Max
+    ->  true
+    ;   throw(error(resource_error(peer_agents), context(_, limit(Max))))
     ).
 
 install_entry(Node, rename(_, Base), Handler, Kind, Name) :-

@@ -1,6 +1,8 @@
 :- module(bounds_ledger,
           [ window_take/4,              % +Key, +Limit, +N, -Granted
             window_forget/1,            % +Key
+            window_live/1,              % +Key
+            windows_prune/2,            % +Pattern, -Live
             windows_forget_node/1,      % +Node
             bounds_warning/2,           % +Node, +Message
             stat_add/2,                 % +Name, +Delta
@@ -102,6 +104,31 @@ window_take(Key, Limit, N, Granted) :-
 window_forget(Key) :-
     with_mutex(dfrl_bounds_windows, retractall(window_(Key, _, _))).
 
+%!  window_live(+Key) is semidet.
+%
+%   True if Key has a window that started less than a minute ago.
+
+window_live(Key) :-
+    get_time(Now),
+    window_(Key, Start, _),
+    Now - Start < 60,
+    !.
+
+%!  windows_prune(+Pattern, -Live) is det.
+%
+%   Forget the windows whose key unifies with Pattern and that started a
+%   minute ago or earlier; Live is the number of those left.
+
+windows_prune(Pattern, Live) :-
+    get_time(Now),
+    with_mutex(dfrl_bounds_windows,
+               (   forall(( window_(Key, Start, _),
+                            Now - Start >= 60,
+                            \+ Key \= Pattern ),
+                          retractall(window_(Key, Start, _))),
+                   aggregate_all(count, ( window_(Key, _, _), \+ Key \= Pattern ), Live)
+               )).
+
 %!  windows_forget_node(+Node) is det.
 %
 %   Forget every window of Node (its keys have Node as first argument).
@@ -125,14 +152,24 @@ windows_forget_node(Node) :-
 %   for a max_running_agents slot), `budget_stops` (calls stopped over
 %   agent_memory_budget), `reclaims` (times freed memory was given
 %   back), `peak_memory` (per node, the most its agents held as
-%   agent_memory_budget counts it, seen while a budget was set).
+%   agent_memory_budget counts it, seen while a budget was set);
+%   `wall_stops` (calls stopped over agent_wall_limit, or parked over
+%   agent_idle_limit), `idle_expired` (agents removed over
+%   agent_idle_limit), `refused_posts` (posts refused over
+%   peer_post_limit) and per node `refused_posts_of` as Node-Count.
 
 bounds_statistics(bounds{calls:Calls, stopped:Stopped, resignals:Re,
                          ticks:Ticks, monitor_cpu:CPU,
                          slot_waits:Waits, budget_stops:BStops,
                          reclaims:Reclaims,
                          peak_cpu:PeakCPU, peak_stack:PeakStack,
-                         peak_memory:PeakMem}) :-
+                         peak_memory:PeakMem, wall_stops:WallStops,
+                         idle_expired:Expired, refused_posts:Refused,
+                         refused_posts_of:RefusedOf}) :-
+    stat_value(wall_stops, WallStops),
+    stat_value(idle_expired, Expired),
+    stat_value(refused_posts, Refused),
+    findall(N-V, stat_(refused_posts(N), V), RefusedOf),
     stat_value(slot_waits, Waits),
     stat_value(budget_stops, BStops),
     stat_value(reclaims, Reclaims),
@@ -197,6 +234,9 @@ bounds_message(unstoppable(Node, Agent, Kind, Tries)) -->
 bounds_message(no_slot(Node, Agent, Max, Wait)) -->
     [ 'Platform ~w: a call of agent ~q waited ~w s for one of ~w slots '-[Node, Agent, Wait, Max],
       '(max_running_agents) and was not run' ].
+bounds_message(refused_posts(Node, Peer, Max)) -->
+    [ 'Platform ~w: refused a post from peer ~q: over ~w posts a minute '-[Node, Peer, Max],
+      '(peer_post_limit)' ].
 bounds_message(suppressed(Node, N)) -->
     [ 'Platform ~w: ~D warnings about agents suppressed in the last minute'-[Node, N] ].
 
@@ -217,12 +257,20 @@ bound_text(integer_size(L)) -->
       '(dfrl_guest_integer_bits, guest_limits.pl)' ].
 bound_text(posts(L)) -->
     [ 'it sent more than ~w posts in a minute (agent_post_limit)'-[L] ].
+bound_text(wall(L)) -->
+    [ 'one handler call held a running slot more than ~w s of wall time '-[L],
+      '(agent_wall_limit)' ].
+bound_text(idle(L)) -->
+    [ 'it was idle (or one handler call waited, parked) more than ~w s '-[L],
+      '(agent_idle_limit)' ].
 bound_text(log(L)) -->
     [ 'it wrote more than ~w lines in a minute (agent_log_limit); '-[L],
       'the rest of its output was dropped' ].
 
 refusal_text(agents, Max) -->
     [ 'it holds ~w agents (max_agents)'-[Max] ].
+refusal_text(peer_agents, Max) -->
+    [ 'its peer has ~w agents there (max_agents_per_peer)'-[Max] ].
 refusal_text(clones, Max) -->
     [ 'more than ~w clones arrived in a minute (clone_limit)'-[Max] ].
 refusal_text(agent_memory, Max) -->

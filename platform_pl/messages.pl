@@ -11,7 +11,7 @@
 :- use_module(agents).
 :- use_module(worker_pool, [pool_run/3]).
 :- use_module(agent_bounds, [bounds_call/4, bounds_post/0, bounds_stopped/3,
-                             bounds_warning/2]).
+                             bounds_warning/2, bounds_peer_post/2]).
 :- use_module(transport).
 :- use_module(code_safety, [check_post/3]).
 :- autoload(library(error), [must_be/2, existence_error/2]).
@@ -184,9 +184,13 @@ remote_execute(Address0, Agent, Event, Options) :-
                           [action(execute)|Options1])
     ).
 
+%   A peer delivers at most peer_post_limit(N) posts a minute
+%   (agent_bounds:bounds_peer_post/2); more are refused with
+%   resource_error(posts) before anything of them is looked at.
 node:platform_request(post(Agent, Handler, Link, Args), Ctx, ok(delivered),
                       true) :-
     ctx_node(Ctx, Node),
+    bounds_peer_post(Ctx, Link),
     must_be(atom, Handler),
     must_be(list, Args),
     deliver(Node, Agent, Handler, Link, Args).

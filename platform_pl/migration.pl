@@ -12,7 +12,8 @@
                 node_for_address/2, ctx_node/2, ctx_authenticated/1 ]).
 :- use_module(agents).
 :- use_module(custody).
-:- use_module(agent_bounds, [bounds_admit/3, bounds_arrived/3, bounds_install/4]).
+:- use_module(agent_bounds, [bounds_admit/3, bounds_arrived/4, bounds_install/5,
+                              bounds_peer/3]).
 :- autoload(library(aggregate), [aggregate_all/3]).
 :- use_module(transport).
 :- use_module(hop_probe, [hop_probe/1]).      % compiled away unless benchmarking
@@ -415,11 +416,11 @@ receive_transfer(Ctx, MigId, Mode, Source, Departed, Record0, SInc, Reply, After
         take_back_name(Node, Record0),
         aggregate_all(count, agent_exists(Node, _), Present),
         bounds_admit(Node, Mode, Present),
-        arriving_record(Ctx, Node, MigId, Record0, Record),
+        arriving_record(Ctx, Node, MigId, Source, Record0, Record, Peer),
         hop_probe(checked),
-        bounds_install(Node, Record, staged(MigId), Name),
+        bounds_install(Node, Record, staged(MigId), Name, Peer),
         hop_probe(installed),
-        bounds_arrived(Node, Name, Source),
+        bounds_arrived(Node, Name, Source, Peer),
         get_time(Now),
         catch(custody_stage(Node, Name, MigId, Source, SInc, Now), E,
               ( agent_remove(Node, Name), throw(E) )),
@@ -430,7 +431,10 @@ receive_transfer(Ctx, MigId, Mode, Source, Departed, Record0, SInc, Reply, After
         After = true
     ).
 
-arriving_record(Ctx, Node, MigId, Record0, Record) :-
+%   Peer, for the per-peer bounds (agent_bounds.pl), is `local` for an
+%   agent sealed by a node of this process, else the connection's peer
+%   (with the Source it claims, on plaintext).
+arriving_record(Ctx, Node, MigId, Source, Record0, Record, Peer) :-
     (   compound(Record0), compound_name_arity(Record0, agent, 8)
     ->  true
     ;   throw(error(type_error(agent_record, Record0), _))
@@ -439,10 +443,12 @@ arriving_record(Ctx, Node, MigId, Record0, Record) :-
     (   Seal = same_process(S),
         setarg(4, Record0, []),
         record_sealed(MigId, Record0, S)
-    ->  true
-    ;   code_trusted(Ctx)
-    ->  true
-    ;   check_agent_record(Record0)
+    ->  Peer = local
+    ;   bounds_peer(Ctx, Source, Peer),
+        (   code_trusted(Ctx)
+        ->  true
+        ;   check_agent_record(Record0)
+        )
     ),
     node_property(Node, tokens(Tokens)),
     Record0 = agent(Name, Handler, Kind, _, Payload, Preds, Clauses, Hops),

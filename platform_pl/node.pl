@@ -140,6 +140,11 @@ by default the bind address, or the host name when it binds 0.0.0.0).
                        agent_memory_budget(any),
                        max_running_agents(any),
                        agent_slot_wait(number),
+                       agent_wall_limit(any),
+                       agent_idle_limit(any),
+                       max_agents_per_peer(any),
+                       max_running_per_peer(any),
+                       peer_post_limit(any),
                        default(boolean)
                      ]).
 
@@ -253,6 +258,24 @@ by default the bind address, or the host name when it binds 0.0.0.0).
 %                                 N x agent_stack_limit
 %     - agent_slot_wait(+Sec)     how long a call waits for one of those
 %                                 slots (default 60)
+%     - agent_wall_limit(+Sec)    wall time a handler call may hold a
+%                                 slot (time parked with bounds_park/1
+%                                 not counted); over it the call is
+%                                 stopped with wall(Sec) (default 60)
+%     - agent_idle_limit(+Sec)    an agent that arrived from a peer and
+%                                 has not run (nor been parked) for Sec
+%                                 is removed with idle(Sec); also the
+%                                 most one call may stay parked
+%                                 (default 600)
+%     - max_agents_per_peer(+N)   agents one peer (its TLS certificate
+%                                 name, else its IP address and claimed
+%                                 node address) may have on the node
+%                                 (default 50)
+%     - max_running_per_peer(+N)  slots the calls of one peer's agents
+%                                 may hold at once (default 4)
+%     - peer_post_limit(+N)       posts one peer may deliver per minute;
+%                                 more are refused with
+%                                 resource_error(posts) (default 6000)
 %
 %   Secrets. A node bound to an address other than loopback (0.0.0.0
 %   included) refuses to start if it is open or one of its tokens has
@@ -353,11 +376,14 @@ check_options(Options) :-
     forall(( member(Name, [agent_cpu_limit, agent_stack_limit,
                            agent_module_limit, agent_post_limit,
                            agent_log_limit, max_agents, clone_limit,
-                           agent_memory_budget, max_running_agents]),
+                           agent_memory_budget, max_running_agents,
+                           agent_wall_limit, agent_idle_limit,
+                           max_agents_per_peer, max_running_per_peer,
+                           peer_post_limit]),
              Opt =.. [Name, V],
              option(Opt, Options),
              V \== infinite ),
-           (   Name == agent_cpu_limit
+           (   memberchk(Name, [agent_cpu_limit, agent_wall_limit, agent_idle_limit])
            ->  must_be(number, V),
                (   V > 0 -> true ; must_be(positive_integer, V) )
            ;   must_be(positive_integer, V)
@@ -512,6 +538,11 @@ option_default(clone_limit, 60).
 option_default(agent_memory_budget, 1073741824).
 option_default(max_running_agents, 8).
 option_default(agent_slot_wait, 60).
+option_default(agent_wall_limit, 60).
+option_default(agent_idle_limit, 600).
+option_default(max_agents_per_peer, 50).
+option_default(max_running_per_peer, 4).
+option_default(peer_post_limit, 6000).
 
 %!  local_node(?Node) is nondet.
 %

@@ -38,7 +38,9 @@
     each taking a value or `infinite`: --agent-cpu-limit SEC,
     --agent-stack-limit BYTES, --agent-module-limit BYTES,
     --agent-post-limit N, --agent-log-limit N, --max-agents N,
-    --clone-limit N, --agent-memory-budget BYTES, --max-running-agents N;
+    --clone-limit N, --agent-memory-budget BYTES, --max-running-agents N,
+    --agent-wall-limit SEC, --agent-idle-limit SEC, --max-agents-per-peer N,
+    --max-running-per-peer N, --peer-post-limit N;
     and --agent-slot-wait SEC, --max-frame-size BYTES (values only).
 
     The arguments are parsed here, not with library(optparse): --token,
@@ -128,6 +130,9 @@ usage(Why) :-
             [--agent-module-limit BYTES] [--agent-post-limit N] \c
             [--agent-log-limit N] [--max-agents N] [--clone-limit N] \c
             [--agent-memory-budget BYTES] [--max-running-agents N] \c
+            [--agent-wall-limit SEC] [--agent-idle-limit SEC] \c
+            [--max-agents-per-peer N] [--max-running-per-peer N] \c
+            [--peer-post-limit N] \c
             [--agent-slot-wait SEC] [--max-frame-size BYTES] \c
             (a bound's value may be infinite)~n", []),
     halt(2).
@@ -175,6 +180,11 @@ bound_flag('--clone-limit', clone_limit, limit(integer)).
 bound_flag('--agent-memory-budget', agent_memory_budget, limit(integer)).
 bound_flag('--max-running-agents', max_running_agents, limit(integer)).
 bound_flag('--agent-slot-wait', agent_slot_wait, positive(number)).
+bound_flag('--agent-wall-limit', agent_wall_limit, limit(number)).
+bound_flag('--agent-idle-limit', agent_idle_limit, limit(number)).
+bound_flag('--max-agents-per-peer', max_agents_per_peer, limit(integer)).
+bound_flag('--max-running-per-peer', max_running_per_peer, limit(integer)).
+bound_flag('--peer-post-limit', peer_post_limit, limit(integer)).
 bound_flag('--max-frame-size', max_frame_size, positive(integer)).
 
 typed_value(atom, _, V, V).

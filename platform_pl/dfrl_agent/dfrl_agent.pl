@@ -9,6 +9,7 @@
 :- use_module('../agents',
               [agent_property/3, agent_create/4, agent_add_facts/3, agent_status/3]).
 :- use_module('../custody', [custody_take_recovered/2]).
+:- use_module('../agent_bounds', [bounds_park/1]).
 :- use_module(dfrl_lease,
               [ lease_arrived/3, lease_check/3, lease_progress/4,
                 lease_ended/3, lease_custody/3, lease_adopt/5,
@@ -920,11 +921,14 @@ next_method(Method, Carried, S, Next, Good) :-
 
 %   Rest between rounds, in short slices, watching for a higher epoch;
 %   then ask the holder (a long pause may have made it resurrect us).
+%   The rest is parked (agent_bounds:bounds_park/1): it holds no run slot
+%   of the node and counts against agent_idle_limit (600 s by default,
+%   with the robot waits of the same handler call), not agent_wall_limit.
 rest(Node, Agent, Rest, Verdict) :-
     (   Rest > 0
     ->  get_time(T0),
         Until is T0 + Rest,
-        rest_until(Node, Agent, Until, Verdict0),
+        bounds_park(rest_until(Node, Agent, Until, Verdict0)),
         (   Verdict0 == ok
         ->  lease_check(Node, Agent, Verdict)
         ;   Verdict = Verdict0

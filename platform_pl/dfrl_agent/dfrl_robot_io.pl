@@ -6,6 +6,7 @@
 :- use_module('../robot_resources',
               [ get_robot_table/3, get_robot_tables/4, set_robot_table/3,
                 get_robot_params/3, set_robot_params/3 ]).
+:- use_module('../agent_bounds', [bounds_park/1]).
 :- use_module('../float_vectors',
               [vector_length/2, packed_vector/1, float_vectors_native/1]).
 :- autoload(library(lists), [sum_list/2]).
@@ -15,6 +16,11 @@
 What the agent (dfrl_agent.pl) and its clones (dfrl_tree.pl) read from
 the robot of the stop they are at, and write into it: through the
 resource hook of the host process (robot_resources.pl).
+
+A robot may make the agent wait (a synchronous robot answers at its
+next respite boundary), so each hook call is parked
+(agent_bounds:bounds_park/1): it holds no run slot of the node, and its
+time counts against agent_idle_limit, not agent_wall_limit.
 */
 
 %!  read_robot(+Carried, +Method, +Robot, +Options, -Item) is det.
@@ -29,13 +35,13 @@ resource hook of the host process (robot_resources.pl).
 read_robot(params, _, Robot, Options0, Params) :-
     !,
     read_options(Options0, Options),
-    get_robot_params(Robot, Params, Options).
+    bounds_park(get_robot_params(Robot, Params, Options)).
 read_robot(tables, Method, Robot, Options0, Table) :-
     read_options(Options0, Options),
     (   dfrl_aggregation:method_uses_visits(Method)
-    ->  get_robot_tables(Robot, qtable(S, V), qtable(S, W), Options),
+    ->  bounds_park(get_robot_tables(Robot, qtable(S, V), qtable(S, W), Options)),
         Table = qtable_visits(S, V, W)
-    ;   get_robot_table(Robot, Table, Options)
+    ;   bounds_park(get_robot_table(Robot, Table, Options))
     ).
 
 %   Values are asked for packed where packed maths runs in C: without the
@@ -52,9 +58,9 @@ read_options(Options, Options).
 
 write_robot(params(L, V), Robot, Options) :-
     !,
-    set_robot_params(Robot, params(L, V), Options).
+    bounds_park(set_robot_params(Robot, params(L, V), Options)).
 write_robot(Table, Robot, Options) :-
-    set_robot_table(Robot, Table, Options).
+    bounds_park(set_robot_table(Robot, Table, Options)).
 
 %!  item_bytes(+Item, -Bytes) is det.
 %

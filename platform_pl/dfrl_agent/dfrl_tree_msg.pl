@@ -10,6 +10,7 @@
 :- use_module('../tartarus', [current_node/1, node_property/2, platform_event/1,
                               remote_agents/3]).
 :- use_module('../messages', [agent_post/6]).
+:- use_module('../agent_bounds', [bounds_park/1]).
 :- autoload(library(lists), [append/3, memberchk/2, subtract/3, member/2]).
 :- autoload(library(apply), [include/3, exclude/3]).
 :- autoload(library(debug), [debug/3]).
@@ -155,14 +156,20 @@ kid_at(C, kid(C, _, _)).
 %   Msg, of one of Kinds, about one of Peers, as soon as Node has it
 %   (looked for every 5 ms); fails at the time Deadline.
 
+%   The wait is parked (agent_bounds:bounds_park/1): it holds no run
+%   slot, and counts against agent_idle_limit, not agent_wall_limit.
+
 tree_poll(Node, Key, Kinds, Peers, Deadline, Msg) :-
+    bounds_park(poll(Node, Key, Kinds, Peers, Deadline, Msg)).
+
+poll(Node, Key, Kinds, Peers, Deadline, Msg) :-
     (   member(Kind, Kinds),
         take_msg(Node, Key, Kind, Peers, Msg)
     ->  true
     ;   get_time(Now),
         Now < Deadline
     ->  sleep(0.005),
-        tree_poll(Node, Key, Kinds, Peers, Deadline, Msg)
+        poll(Node, Key, Kinds, Peers, Deadline, Msg)
     ).
 
 take_msg(Node, Key, Kind, Peers, Msg) :-

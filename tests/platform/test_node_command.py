@@ -57,21 +57,29 @@ def test_bound_flags_reach_the_node() -> None:
     bounds = {"agent_cpu_limit": 0.5, "agent_stack_limit": 134217728,
               "agent_module_limit": "infinite", "agent_post_limit": 7, "agent_log_limit": 9,
               "max_agents": 3, "clone_limit": 4, "agent_memory_budget": 536870912,
-              "max_running_agents": 2, "agent_slot_wait": 5, "max_frame_size": 1048576}
+              "max_running_agents": 2, "agent_slot_wait": 5, "max_frame_size": 1048576,
+              "agent_wall_limit": 7.5, "agent_idle_limit": "infinite", "max_agents_per_peer": 6,
+              "max_running_per_peer": 2, "peer_post_limit": 100}
     cmd = node_command(port=0, interactive=True, bounds=bounds)
     got = _node_options(cmd, list(bounds))
     assert got == {k: str(v) for k, v in bounds.items()}, got
     # without the flags: the defaults
     got = _node_options(node_command(port=0, interactive=True),
-                        ["agent_memory_budget", "max_running_agents", "max_frame_size"])
+                        ["agent_memory_budget", "max_running_agents", "max_frame_size",
+                         "agent_wall_limit", "agent_idle_limit", "max_agents_per_peer",
+                         "max_running_per_peer", "peer_post_limit"])
     assert got == {"agent_memory_budget": "1073741824", "max_running_agents": "8",
-                   "max_frame_size": "33554432"}
+                   "max_frame_size": "33554432", "agent_wall_limit": "60",
+                   "agent_idle_limit": "600", "max_agents_per_peer": "50",
+                   "max_running_per_peer": "4", "peer_post_limit": "6000"}
 
 
 @pytest.mark.parametrize("flag, value", [
     ("--max-agents", "0"), ("--agent-cpu-limit", "fast"), ("--agent-stack-limit", "1.5"),
     ("--agent-memory-budget", "-1"), ("--max-frame-size", "infinite"),
-    ("--agent-slot-wait", "infinite"),
+    ("--agent-slot-wait", "infinite"), ("--agent-wall-limit", "0"),
+    ("--agent-idle-limit", "soon"), ("--max-agents-per-peer", "2.5"),
+    ("--max-running-per-peer", "-1"), ("--peer-post-limit", "0"),
 ])
 def test_bad_bound_exits_2_naming_the_flag(flag: str, value: str) -> None:
     run = subprocess.run([sys.executable, "-m", "experiments", "node", "--port", "0", flag, value],

@@ -16,11 +16,14 @@ TICK = os.sysconf("SC_CLK_TCK")
 MIB = 1024 * 1024
 
 
-def start_victim(procs: list[Proc], tmp_path: Path, options: str = "") -> tuple[Proc, int]:
-    """A node with token 5 and the given extra node options; return it and its port."""
+def start_victim(procs: list[Proc], tmp_path: Path, options: str = "",
+                 prelude: str = "") -> tuple[Proc, int]:
+    """A node with token 5 and the given extra node options (and ``prelude``, clauses and
+    directives loaded before it starts); return it and its port."""
     path = tmp_path / f"victim_{len(procs)}.pl"
     path.write_text(f"""
     :- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
+    {prelude}
     main :- node_start(localhost:0, N, [token(5), default(true){', ' + options if options else ''}]),
             node_property(N, address(H:P)),
             format("dfrl node listening on ~w:~w~n", [H, P]), flush_output,
@@ -33,8 +36,10 @@ def start_victim(procs: list[Proc], tmp_path: Path, options: str = "") -> tuple[
     return p, int(line.rsplit(":", 1)[1])
 
 
-def attacker(procs: list[Proc], tmp_path: Path, clauses: str, body: str) -> Proc:
-    """A process with its own node (token 5) that runs ``body``; its agents are ``clauses``.
+def attacker(procs: list[Proc], tmp_path: Path, clauses: str, body: str,
+             node_options: str = "") -> Proc:
+    """A process with its own node (token 5, and ``node_options``, e.g. its ``tls(Dir)``) that
+    runs ``body``; its agents are ``clauses``.
 
     ``await_report(Name, Secs)`` prints ``REPORT Name Kind`` once the victim told this node
     that its agent Name was stopped, or ``NO REPORT Name`` after Secs.
@@ -66,7 +71,7 @@ def attacker(procs: list[Proc], tmp_path: Path, clauses: str, body: str) -> Proc
         ;   format("NO REPORT ~w~n", [Name])
         ),
         flush_output.
-    main :- node_start(localhost:0, _, [token(5)]),
+    main :- node_start(localhost:0, _, [token(5){', ' + node_options if node_options else ''}]),
             {body}
             format("DONE~n"), flush_output.
     """

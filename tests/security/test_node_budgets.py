@@ -48,7 +48,10 @@ def test_eight_memory_bombs_within_node_budget(tmp_path: Path, procs: list[Proc]
     # The CPU bound is raised to 30 s (as for the assert bombs below): under a CPU hog a bomb
     # spent 2 s of CPU (building and collecting its list) before it reached a memory bound,
     # and was stopped by the CPU bound, which is another test's claim.
-    victim, port = start_victim(procs, tmp_path, "agent_cpu_limit(30)")
+    # the 8 bombs come from one peer: max_running_per_peer (4) would run only 4 at once, so it
+    # is off here, for the node-wide bounds to meet 8
+    victim, port = start_victim(procs, tmp_path,
+                                "agent_cpu_limit(30), max_running_per_peer(infinite)")
     pid = victim.popen.pid
     time.sleep(0.3)
     base = status(pid, "VmRSS")
@@ -74,7 +77,10 @@ def test_eight_memory_bombs_within_node_budget(tmp_path: Path, procs: list[Proc]
 
 
 def test_eight_assert_bombs_within_node_budget(tmp_path: Path, procs: list[Proc]) -> None:
-    victim, port = start_victim(procs, tmp_path, "agent_cpu_limit(30)")
+    # the 8 bombs come from one peer: max_running_per_peer (4) would run only 4 at once, so it
+    # is off here, for the node-wide bounds to meet 8
+    victim, port = start_victim(procs, tmp_path,
+                                "agent_cpu_limit(30), max_running_per_peer(infinite)")
     pid = victim.popen.pid
     time.sleep(0.3)
     base = status(pid, "VmRSS")
@@ -98,7 +104,8 @@ def test_eight_assert_bombs_within_node_budget(tmp_path: Path, procs: list[Proc]
 def test_assert_bombs_stopped_by_node_budget(tmp_path: Path, procs: list[Proc]) -> None:
     # a budget below the sum of the module limits (8 x 64 MiB): the budget stops them
     victim, port = start_victim(procs, tmp_path,
-                                "agent_cpu_limit(30), agent_memory_budget(268435456)")
+                                "agent_cpu_limit(30), agent_memory_budget(268435456), "
+                                "max_running_per_peer(infinite)")       # see above
     pid = victim.popen.pid
     time.sleep(0.3)
     base = status(pid, "VmRSS")

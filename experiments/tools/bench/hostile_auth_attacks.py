@@ -12,9 +12,10 @@ process (:class:`AuthFrames`, run by :mod:`hostile_child`).
                accepted, and ran or
                not (its marker file exists, it carried home what it looked for, or the target's
                ``double_quotes`` flag changed): :func:`escape_results`;
-``loop``, ``memory``, ``clone``, ``assert``, ``log``, ``post``
+``loop``, ``memory``, ``clone``, ``assert``, ``log``, ``post``, ``sleep``, ``idle``
                waves of agents that spin, build a huge list, clone themselves twice at every
-               stop, assert facts, print lines or post to themselves on the target;
+               stop, assert facts, print lines, post to themselves, sleep an hour in their
+               handler (holding a run slot) or stay idle on the target;
 ``authframes`` text frames near the target's ``max_frame_size`` and a flood of small requests,
                on authenticated connections.
 """
@@ -36,7 +37,8 @@ from dfrl.experiments import processes
 from dfrl.experiments.tools.bench.hostile_attacks import MAGIC, HEADER, frame_header
 
 AUTH_SCRIPT = Path(__file__).resolve().parent / "hostile_auth_node.pl"
-AGENT_ATTACKS = ("loop", "memory", "clone", "assert", "log", "post", "catom", "gmp")
+AGENT_ATTACKS = ("loop", "memory", "clone", "assert", "log", "post", "catom", "gmp", "sleep",
+                 "idle")
 AUTH_ATTACKS = ("escapes", *AGENT_ATTACKS, "authframes")
 
 

@@ -23,6 +23,10 @@
                (format ~*c, atomic_list_concat/2, atom_concat/3 doubling,
                by turns; the size known at run time only)
       gmp      agents computing 7^--size (GMP, outside the stacks)
+      sleep    agents sleeping --size seconds in their handler (holding a
+               run slot: agent_wall_limit stops them)
+      idle     agents that stay on the target, idle (agent_idle_limit
+               removes them; max_agents_per_peer refuses them at 50)
 
     Every attack but escapes sends a wave of --per-wave agents, then one
     more wave every --wave-s seconds, until --duration-s has passed or
@@ -250,6 +254,8 @@ size_default(log, 1000000000).
 size_default(post, 1000000000).
 size_default(catom, 400000000).
 size_default(gmp, 400000000).
+size_default(sleep, 3600).
+size_default(idle, 0).
 
 handler(loop, bomb_loop, []).
 handler(memory, bomb_memory, []).
@@ -259,6 +265,8 @@ handler(log, bomb_log, []).
 handler(post, bomb_post, []).
 handler(catom, bomb_catom, []).
 handler(gmp, bomb_gmp, []).
+handler(sleep, bomb_sleep, []).
+handler(idle, bomb_idle, []).
 
 send_agent(Attack, Handler, Preds, Size, Token, Port, Target) :-
     retractall(plan(guid, _, _)),
@@ -343,6 +351,12 @@ bomb_gmp(guid, (_, Here), main) :-
     Here =\= Home,
     X is 7^N,
     X > 0.
+bomb_sleep(guid, (_, Here), main) :-
+    plan(guid, Home, N),
+    Here =\= Home,
+    sleep(N).
+
+bomb_idle(guid, _, main).
 
 bomb_post(guid, _, sink).
 bomb_post(guid, (Ip, Here), main) :-
