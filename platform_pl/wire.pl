@@ -8,7 +8,7 @@
           ]).
 :- use_module(platform_errors, [wire_error/1]).
 :- use_module(bulk_write, [write_bytes/2]).
-:- use_module(fast_term_check, [fast_term_bytes_check/3]).
+:- use_module(fast_term_check, [fast_term_bytes_check/3, fast_term_read/5]).
 %   Eager imports (not autoload/2): see node_connection.pl.
 :- use_module(library(utf8), [utf8_codes//1]).
 :- use_module(library(lists), [append/3]).
@@ -246,16 +246,21 @@ read_frame_plain(Stream, Max, AllowBinary, Decode, Frame, Len) :-
         Frame = frame(Kind, Term)
     ).
 
-%   A binary body is read whole (read_string/3: on a stream that records
-%   no position, see the module comment, its bytes are copied in bulk),
-%   then checked completely (fast_term_check.pl) before it is decoded:
-%   fast_read/2 and fast_term_serialized/2 trust their input and abort
-%   the process on a mutated body. A body with bytes after its term is
-%   refused as protocol(binary_length(Len)), as one that is not the
-%   serialisation of a plain term is as syntax(binary).
-read_binary_body(Stream, Len, Depth, Term) :-
-    read_body(Stream, Len, Body),
-    decode_binary(Body, Depth, Term).
+%   A binary body is read whole and checked completely before it is
+%   decoded (fast_term_read/5 of fast_term_check.pl: in C, the bytes
+%   move in bulk on a stream that records no position, see the module
+%   comment, and no Prolog string of them is made): fast_read/2 and
+%   fast_term_serialized/2 trust their input and abort the process on a
+%   mutated body.
+read_binary_body(Stream, Len, Depth0, Term) :-
+    binary_depth(Depth0, Depth),
+    fast_term_read(Stream, Len, Depth, Term, Result),
+    (   Result == true
+    ->  true
+    ;   Result == truncated
+    ->  wire_error(truncated)
+    ;   binary_refused(Result, Len, Depth)
+    ).
 
 check_header(Header, Max, AllowBinary, Kind, Len) :-
     parse_header(Header, Kind, Len),
@@ -623,21 +628,29 @@ with_parse_slot(slots(Queue, _), _, Limit, Goal) :-
 %   keeps; without max_depth(D) a binary term may nest binary_max_depth
 %   levels.
 decode_binary(Body, Depth0, Term) :-
-    (   Depth0 == none
-    ->  binary_max_depth(Depth)
-    ;   Depth = Depth0
-    ),
+    binary_depth(Depth0, Depth),
     fast_term_bytes_check(Body, Depth, Result),
     (   Result == true
     ->  fast_term_serialized(Term, Body)
-    ;   debug(dfrl(wire), 'binary body refused: ~w', [Result]),
-        (   Result == trailing_bytes
-        ->  string_length(Body, Len),
-            wire_error(protocol(binary_length(Len)))
-        ;   Result == too_deep
-        ->  wire_error(too_deep(Depth))
-        ;   wire_error(syntax(binary))
-        )
+    ;   string_length(Body, Len),
+        binary_refused(Result, Len, Depth)
+    ).
+
+binary_depth(none, Depth) :-
+    !,
+    binary_max_depth(Depth).
+binary_depth(Depth, Depth).
+
+%   A body with bytes after its term is refused as
+%   protocol(binary_length(Len)), one nested too deep as too_deep(Depth),
+%   any other fault as syntax(binary).
+binary_refused(Result, Len, Depth) :-
+    debug(dfrl(wire), 'binary body refused: ~w', [Result]),
+    (   Result == trailing_bytes
+    ->  wire_error(protocol(binary_length(Len)))
+    ;   Result == too_deep
+    ->  wire_error(too_deep(Depth))
+    ;   wire_error(syntax(binary))
     ).
 
 binary_max_depth(10000).

@@ -42,7 +42,18 @@
     fast_term_check(+Bytes, +MaxDepth, -Result): Result is `true`, or an
     atom naming the first fault. Bytes is a string of code points below
     256; a string with wider ones gives `not_bytes`.
+
+    fast_term_stream_read(+Stream, +Len, +MaxDepth, -Term, -Result): read Len
+    bytes from Stream (Sfread(): in bulk on a stream that records no
+    position), check them as above and, if they pass, decode them into
+    Term with PL_recorded_external() (what fast_term_serialized/2 does
+    with a string): no Prolog string of the body is made. Result is
+    `true`, a fault, or `truncated` if the stream ended first; an I/O
+    error or timeout of the stream is raised. The buffer grows as the
+    bytes arrive (from 64 KiB, doubling), so a header that claims more
+    than is sent costs no more memory than what was sent.
 */
+#include <SWI-Stream.h>
 #include <SWI-Prolog.h>
 #include <stdlib.h>
 #include <string.h>
@@ -429,8 +440,80 @@ fast_term_check(term_t bytes, term_t max_depth, term_t result)
 }
 
 
+static foreign_t
+fast_term_read(term_t stream, term_t tlen, term_t max_depth, term_t term,
+	       term_t result)
+{ IOSTREAM *s;
+  int64_t len, depth;
+  size_t cap, got = 0;
+  char *buf;
+  const char *err = NULL;
+  int rc;
+
+  if ( !PL_get_int64_ex(tlen, &len) || !PL_get_int64_ex(max_depth, &depth) )
+    return FALSE;
+  if ( len < 0 )
+    return PL_domain_error("not_less_than_zero", tlen);
+  if ( depth < 0 )
+    return PL_domain_error("not_less_than_zero", max_depth);
+  if ( !PL_get_stream(stream, &s, SIO_INPUT) )
+    return FALSE;
+  cap = (len < 65536) ? (size_t)len : 65536;
+  if ( !(buf = malloc(cap ? cap : 1)) )
+  { PL_release_stream(s);
+    return PL_resource_error("memory");
+  }
+  while ( got < (size_t)len )
+  { size_t n, want;
+
+    if ( got == cap )
+    { size_t cap2 = (cap*2 < (size_t)len) ? cap*2 : (size_t)len;
+      char *b2 = realloc(buf, cap2);
+      if ( !b2 )
+      { free(buf);
+	PL_release_stream(s);
+	return PL_resource_error("memory");
+      }
+      buf = b2;
+      cap = cap2;
+    }
+    want = cap - got;
+    n = Sfread(buf+got, 1, want, s);	/* short only at the end or an error */
+    got += n;
+    if ( n < want )
+    { if ( Sferror(s) )
+      { free(buf);
+	return PL_release_stream(s);	/* raises the stream's error */
+      }
+      break;				/* the end of the stream */
+    }
+  }
+  if ( !PL_release_stream(s) )
+  { free(buf);
+    return FALSE;
+  }
+  if ( got < (size_t)len )
+    err = "truncated";
+  else
+    err = check_bytes((const unsigned char *)buf, (size_t)len, (size_t)depth);
+  if ( err )
+  { free(buf);
+    return PL_unify_atom_chars(result, err);
+  }
+  { term_t t = PL_new_term_ref();	/* PL_recorded_external() puts, */
+					/* it does not unify */
+    rc = PL_recorded_external(buf, t);
+    free(buf);
+    if ( !rc )
+      return FALSE;			/* e.g. out of global stack: raised */
+    return PL_unify(term, t) && PL_unify_atom_chars(result, "true");
+  }
+}
+
 install_t
 install_fast_term_check(void)
 { PL_register_foreign_in_module("fast_term_check", "fast_term_check", 3,
 				fast_term_check, 0);
+  PL_register_foreign_in_module("fast_term_check", "fast_term_stream_read", 5,
+				fast_term_read, 0);
 }

@@ -9,6 +9,7 @@
 :- use_module(library(plunit)).
 :- use_module(library(random)).
 :- use_module(library(lists)).
+:- use_module(library(memfile)).
 
 :- begin_tests(fast_term_check).
 
@@ -73,6 +74,40 @@ test(not_bytes) :-
 
 test(decode_refuses, [throws(error(domain_error(fast_term_bytes, cells_mismatch), _))]) :-
     fast_term_decode("r\x1\\x2\\x9\", _, []).
+
+%   fast_term_read/5 on a stream of Bytes then "rest", in C and in Prolog.
+read_from(Bytes, Len, Native, Term, Result, Rest) :-
+    setup_call_cleanup(
+        new_memory_file(MF),
+        ( setup_call_cleanup(open_memory_file(MF, write, W, [encoding(octet)]),
+                             ( write(W, Bytes), write(W, "rest") ), close(W)),
+          setup_call_cleanup(
+              open_memory_file(MF, read, In, [encoding(octet)]),
+              ( set_stream(In, record_position(false)),
+                with_native(Native, fast_term_read(In, Len, 50, Term, Result)),
+                read_string(In, _, Rest) ),
+              close(In)) ),
+        free_memory_file(MF)).
+
+with_native(true, Goal) :- call(Goal).
+with_native(false, Goal) :-
+    setup_call_cleanup(
+        ( retract(fast_term_check:native(Was)), assertz(fast_term_check:native(false)) ),
+        Goal,
+        ( retractall(fast_term_check:native(_)), assertz(fast_term_check:native(Was)) )).
+
+test(stream_read, [forall(member(Native, [true, false]))]) :-
+    T = f("abc", [1.5, 2.5], _X, 'ωx'),
+    fast_term_serialized(T, B),
+    string_length(B, Len),
+    read_from(B, Len, Native, T1, R1, Rest1),
+    assertion(R1 == true), assertion(T1 =@= T), assertion(Rest1 == "rest"),
+    Short is Len - 2,                           % the header claims 2 bytes less
+    read_from(B, Short, Native, _, R2, _),
+    assertion(R2 == code_past_end),
+    Long is Len + 10,                           % the stream ends first
+    read_from(B, Long, Native, _, R3, _),
+    assertion(R3 == truncated).
 
 %   Mutations of every sample: C and Prolog agree on accepting, and what is
 %   accepted decodes and serialises back to the same bytes. Seeded; the
