@@ -21,7 +21,7 @@ does both.
 
 The check walks the bytes once as the decoder would and accepts only
 what fast_term_serialized/2 itself writes for a term without attributed
-variables, cycles, dicts or rationals (the byte format is described in
+variables, cycles or rationals (the byte format is described in
 native/fast_term_check.c): every opcode known, every length inside the
 bytes, every integer in the range of its opcode, every variable number
 below the count in the header and all of them used, wide text made of
@@ -56,7 +56,7 @@ fast_term_check_native(B) :-
 %
 %   Result is `true` if Bytes (a string of code points below 256) is
 %   what fast_term_serialized/2 writes for a term at most MaxDepth deep
-%   without attributed variables, cycles, dicts or rationals, else an
+%   without attributed variables, cycles or rationals, else an
 %   atom naming the first fault found (e.g. `cells_mismatch`,
 %   `bad_opcode`, `too_deep`, `not_bytes`).
 
@@ -164,7 +164,7 @@ check_codes([H|Cs], Max) :-
         ;   true
         ),
         ( Cells < 1<<31, NVars =< Len -> true ; fault(bad_header) ),
-        walk(Code, [l(1, false)], 0, s(Cells, NVars, Max), 0, 0)
+        walk(Code, [l(1, plain)], 0, s(Cells, NVars, Max), 0, 0)
     ;   fault(bad_header)
     ).
 check_codes([], _) :-
@@ -174,12 +174,18 @@ header_varint(Cs, V, Rest) :-
     (   varint(Cs, V, Rest) -> true ; fault(bad_header) ).
 
 %   walk(+Codes, +Levels, +Cells, +Limits, +Seen, +Depth): Levels is a
-%   stack of l(Left, List), the terms still to read at each open level
-%   (List: a list cell's level, whose tail stays on it); Cells the cells
+%   stack of l(Left, Kind), the terms still to read at each open level
+%   and its kind: plain, list (a list cell's level, whose tail stays on
+%   it) or dict(Arity, Keys) (the keys read so far); Cells the cells
 %   counted so far, Seen the variables seen so far, Depth the number of
 %   levels below the root.
-walk(Codes, [l(0, _)|Up], Cells, S, Seen, D) :-
+walk(Codes, [l(0, Kind)|Up], Cells, S, Seen, D) :-
     !,
+    (   Kind = dict(_, Keys)
+    ->  msort(Keys, Sorted),
+        ( adjacent_equal(Sorted) -> fault(duplicate_key) ; true )
+    ;   true
+    ),
     (   Up == []
     ->  S = s(Want, NVars, _),
         (   Codes \== [] -> fault(trailing_bytes)
@@ -193,20 +199,48 @@ walk(Codes, [l(0, _)|Up], Cells, S, Seen, D) :-
 walk([], _, _, _, _, _) :-
     !,
     fault(code_past_end).
-walk([Op|C0], [l(Left, List)|Up], Cells0, S, Seen0, D) :-
+walk([Op|C0], [l(Left, dict(Arity, Keys))|Up], Cells, S, Seen, D) :-
+    Slot is Arity - Left,
+    Slot > 0, Slot mod 2 =:= 0,                 % a key: an atom or a small integer
+    !,
+    dict_key(Op, C0, C1, Key),
+    Left1 is Left - 1,
+    walk(C1, [l(Left1, dict(Arity, [Key|Keys]))|Up], Cells, S, Seen, D).
+walk([Op|C0], [l(Left, Kind)|Up], Cells0, S, Seen0, D) :-
+    (   Kind = dict(Arity, _), Arity =:= Left,  % the tag: a variable or an atom
+        \+ memberchk(Op, [1, 11, 12])
+    ->  fault(bad_dict_tag)
+    ;   true
+    ),
     Left1 is Left - 1,
     S = s(Want, NVars, Max),
     opcode(Op, C0, C1, Cells0, Cells, NVars, Seen0, Seen, Opens),
     ( Cells =< Want -> true ; fault(cells_mismatch) ),
-    (   Opens = opens(Arity, IsCons)
-    ->  (   IsCons == true, List == true, Left1 =:= 0
-        ->  walk(C1, [l(2, true)|Up], Cells, S, Seen, D)
+    (   Opens = opens(Arity1, Kind1)
+    ->  (   Kind1 == list, Kind == list, Left1 =:= 0
+        ->  walk(C1, [l(2, list)|Up], Cells, S, Seen, D)
         ;   D1 is D + 1,
             ( D1 =< Max -> true ; fault(too_deep) ),
-            walk(C1, [l(Arity, IsCons), l(Left1, List)|Up], Cells, S, Seen, D1)
+            walk(C1, [l(Arity1, Kind1), l(Left1, Kind)|Up], Cells, S, Seen, D1)
         )
-    ;   walk(C1, [l(Left1, List)|Up], Cells, S, Seen, D)
+    ;   walk(C1, [l(Left1, Kind)|Up], Cells, S, Seen, D)
     ).
+
+adjacent_equal([K, K|_]) :- !.
+adjacent_equal([_|Ks]) :-
+    adjacent_equal(Ks).
+
+dict_key(Op, C0, C, key(Op, Text)) :-
+    ( Op =:= 11 ; Op =:= 12 ),
+    !,
+    ( varint(C0, N, C1) -> true ; fault(bad_varint) ),
+    ( take(N, C1, Text, C) -> true ; fault(atom_past_end) ),
+    ( Op =:= 12, \+ ucs4_ok(Text) -> fault(bad_wide_atom) ; true ).
+dict_key(4, C0, C, key(4, V)) :-
+    !,
+    ( int64_field(C0, V, C), V >= -(1<<56), V < 1<<56 -> true ; fault(bad_integer) ).
+dict_key(_, _, _, _) :-
+    fault(bad_dict_key).
 
 %   opcode(+Op, +Codes, -Rest, +Cells0, -Cells, +NVars, +Seen0, -Seen,
 %          -Opens): one term's opcode and operands; Opens is
@@ -264,21 +298,23 @@ opcode(14, C0, C, Cells0, Cells, _, Seen, Seen, none) :-
     !,
     (   C0 = [_, _, _, _, _, _, _, _|C] -> true ; fault(float_past_end) ),
     Cells is Cells0 + 3.
-opcode(8, C, C, Cells0, Cells, _, Seen, Seen, opens(2, true)) :-
+opcode(8, C, C, Cells0, Cells, _, Seen, Seen, opens(2, list)) :-
     !,
     Cells is Cells0 + 3.
 opcode(13, C0, C, Cells0, Cells, _, Seen, Seen, Opens) :-
     !,
     ( varint(C0, Arity, C1) -> true ; fault(bad_varint) ),
     (   C1 = [Name|C2] -> true ; fault(code_past_end) ),
-    (   Name =:= 9 -> C = C2
+    (   Name =:= 9 -> C = C2, Kind = plain
+    ;   Name =:= 10
+    ->  ( Arity mod 2 =:= 1 -> C = C2, Kind = dict(Arity, []) ; fault(bad_dict) )
     ;   Arity =:= 2, Name =:= 11, C2 = [3, 0'[, 0'|, 0']|_]
     ->  fault(bad_functor_name)             % a list cell is written as 8
-    ;   ( Name =:= 11 ; Name =:= 12 ) -> atom_text(Name, C2, C)
+    ;   ( Name =:= 11 ; Name =:= 12 ) -> atom_text(Name, C2, C), Kind = plain
     ;   fault(bad_functor_name)
     ),
     Cells is Cells0 + Arity + 1,
-    (   Arity > 0 -> Opens = opens(Arity, false) ; Opens = none ).
+    (   Arity > 0 -> Opens = opens(Arity, Kind) ; Opens = none ).
 opcode(_, _, _, _, _, _, _, _, _) :-
     fault(bad_opcode).
 

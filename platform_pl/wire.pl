@@ -40,7 +40,7 @@ aborts the process (`copy_record: Assertion failed`). So a binary body
 is read whole and checked completely before it is decoded
 (fast_term_check.pl, in C where native/fast_term_check.c is built): the
 decoder only ever sees bytes that fast_term_serialized/2 itself writes
-for a plain term (no attributed variables, cycles, dicts or rationals)
+for a plain term (no attributed variables, cycles or rationals)
 at most max_depth(D) deep (default 10,000). frame_read/3 still accepts
 a binary frame only when the caller says the connection is
 authenticated (the peer proved a token of this node).

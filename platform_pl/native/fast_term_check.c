@@ -7,7 +7,7 @@
     opcode or a length past the end aborts the process (an assertion) or
     corrupts its memory. This file walks the bytes once, as the decoder
     would, and accepts only what fast_term_serialized/2 itself writes for
-    a term without attributed variables, cycles, dicts or rationals:
+    a term without attributed variables, cycles or rationals:
 
       byte 0      0x76  an integer only: N (1..8), N bytes big-endian
                   0x7a  an atom only: an atom opcode (below)
@@ -22,7 +22,10 @@
                   8 list cell, 9 [], 11 atom (varint length, bytes),
                   12 wide atom (varint length, UCS-4 LE, one code above
                     255 at least), 13 compound (varint arity, then 9, 11
-                    or 12 for its name), 14 float (8 bytes),
+                    or 12 for its name, or 10 for a dict: an odd arity,
+                    the tag a variable or an atom, then value-key pairs,
+                    each key an atom or a tagged integer, all different;
+                    the decoder sorts them), 14 float (8 bytes),
                   18 big integer (4-byte signed size S, |S| bytes of
                     magnitude, first non-zero, outside int64)
       cells       compound arity+1, list cell 3, float 3, integer 3,
@@ -65,6 +68,7 @@
 #define OP_STRING     6
 #define OP_CONS       8
 #define OP_NIL        9
+#define OP_DICT      10
 #define OP_ATOM      11
 #define OP_WATOM     12
 #define OP_COMPOUND  13
@@ -86,10 +90,72 @@ typedef struct
   size_t pos;
 } input;
 
+#define LV_PLAIN 0
+#define LV_LIST  1			/* a list cell's level: its tail stays here */
+#define LV_DICT  2			/* a dict: tag, then value-key pairs */
+
 typedef struct
 { uint64_t left;			/* terms still to read at this level */
-  int      list;			/* a list cell's level: its tail stays here */
+  uint64_t arity;
+  int      kind;			/* LV_* */
+  size_t   keys;			/* a dict's first key in the key array */
 } level;
+
+typedef struct				/* a dict's key: atom text or small int */
+{ const unsigned char *text;		/* NULL for an integer */
+  size_t   len;
+  int      op;
+  int64_t  ival;
+} dict_key;
+
+typedef struct
+{ dict_key *at;
+  size_t    n, cap;
+} key_array;
+
+static int
+compare_keys(const void *a, const void *b)
+{ const dict_key *x = a, *y = b;
+
+  if ( x->op != y->op )
+    return x->op < y->op ? -1 : 1;
+  if ( !x->text )
+    return x->ival < y->ival ? -1 : x->ival > y->ival ? 1 : 0;
+  if ( x->len != y->len )
+    return x->len < y->len ? -1 : 1;
+  return memcmp(x->text, y->text, x->len);
+}
+
+/* The keys of the dict whose first key is keys[from] are all different */
+static int
+keys_unique(key_array *keys, size_t from)
+{ size_t i, n = keys->n - from;
+  dict_key *k = keys->at + from;
+
+  if ( n > 1 )
+  { qsort(k, n, sizeof(*k), compare_keys);
+    for(i = 1; i < n; i++)
+    { if ( compare_keys(&k[i-1], &k[i]) == 0 )
+	return FALSE;
+    }
+  }
+  keys->n = from;
+  return TRUE;
+}
+
+static int
+add_key(key_array *keys, const dict_key *k)
+{ if ( keys->n == keys->cap )
+  { size_t cap = keys->cap ? keys->cap*2 : 16;
+    dict_key *at = realloc(keys->at, cap * sizeof(*at));
+    if ( !at )
+      return FALSE;
+    keys->at = at;
+    keys->cap = cap;
+  }
+  keys->at[keys->n++] = *k;
+  return TRUE;
+}
 
 static int
 varint(input *in, uint64_t *v)
@@ -189,19 +255,25 @@ check_code(input *in, uint64_t want_cells, uint64_t nvars, size_t max_depth)
   size_t sp = 0, cap = 64;
   uint64_t cells = 0, seen = 0;
   const char *err = NULL;
+  key_array keys = { NULL, 0, 0 };
 
   if ( !(stack = malloc(cap * sizeof(*stack))) )
     return "no_memory";
   stack[0].left = 1;			/* the root term */
-  stack[0].list = FALSE;
+  stack[0].arity = 1;
+  stack[0].kind = LV_PLAIN;
 
   for(;;)
-  { int op;
+  { int op, is_dict = FALSE;
     uint64_t arity = 0;
     int opens = FALSE, is_cons = FALSE;
 
     while ( stack[sp].left == 0 )	/* levels read completely */
-    { if ( sp == 0 )
+    { if ( stack[sp].kind == LV_DICT && !keys_unique(&keys, stack[sp].keys) )
+      { err = "duplicate_key";
+	goto out;
+      }
+      if ( sp == 0 )
 	goto done;
       sp--;
     }
@@ -210,6 +282,36 @@ check_code(input *in, uint64_t want_cells, uint64_t nvars, size_t max_depth)
       break;
     }
     op = in->b[in->pos++];
+    if ( stack[sp].kind == LV_DICT )	/* dict(Tag, V1, K1, V2, K2, ...) */
+    { uint64_t slot = stack[sp].arity - stack[sp].left;
+
+      if ( slot == 0 )			/* the tag: a variable or an atom */
+      { if ( op != OP_VAR && op != OP_ATOM && op != OP_WATOM )
+	{ err = "bad_dict_tag"; goto out; }
+      } else if ( slot % 2 == 0 )	/* a key: an atom or a small integer */
+      { dict_key k;
+
+	if ( op == OP_ATOM || op == OP_WATOM )
+	{ uint64_t n;
+	  if ( (err = atom_text(in, op, &n)) )
+	    goto out;
+	  k.text = in->b + in->pos - n;
+	  k.len = (size_t)n;
+	} else if ( op == OP_TAGGED )
+	{ if ( !int64_field(in, &k.ival) ||
+	       k.ival < TAGGED_MIN || k.ival > TAGGED_MAX )
+	  { err = "bad_integer"; goto out; }
+	  k.text = NULL;
+	  k.len = 0;
+	} else
+	{ err = "bad_dict_key"; goto out; }
+	k.op = op;
+	if ( !add_key(&keys, &k) )
+	{ err = "no_memory"; goto out; }
+	stack[sp].left--;
+	continue;			/* atomic: no cells, nothing opens */
+      }
+    }
     stack[sp].left--;
 
     switch(op)
@@ -318,6 +420,10 @@ check_code(input *in, uint64_t want_cells, uint64_t nvars, size_t max_depth)
 	  { err = "bad_functor_name";	/* a list cell is written as 8 */
 	    goto out;
 	  }
+	} else if ( nop == OP_DICT )
+	{ if ( arity % 2 != 1 )		/* a tag and pairs */
+	  { err = "bad_dict"; goto out; }
+	  is_dict = TRUE;
 	} else if ( nop != OP_NIL )
 	{ err = "bad_functor_name"; goto out; }
 	cells += arity + 1;
@@ -334,7 +440,7 @@ check_code(input *in, uint64_t want_cells, uint64_t nvars, size_t max_depth)
       break;
     }
     if ( opens )
-    { if ( is_cons && stack[sp].list && stack[sp].left == 0 )
+    { if ( is_cons && stack[sp].kind == LV_LIST && stack[sp].left == 0 )
       { stack[sp].left = 2;		/* the tail of a list: same level */
       } else
       { if ( sp + 1 > max_depth )
@@ -352,7 +458,9 @@ check_code(input *in, uint64_t want_cells, uint64_t nvars, size_t max_depth)
 	}
 	sp++;
 	stack[sp].left = arity;
-	stack[sp].list = is_cons;
+	stack[sp].arity = arity;
+	stack[sp].kind = is_cons ? LV_LIST : is_dict ? LV_DICT : LV_PLAIN;
+	stack[sp].keys = keys.n;
       }
     }
   }
@@ -368,6 +476,7 @@ done:
 
 out:
   free(stack);
+  free(keys.at);
   return err;
 }
 
