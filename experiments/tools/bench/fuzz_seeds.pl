@@ -9,7 +9,8 @@
         a migration's (whose record the node refuses: no such migration),
         and unknown requests holding integers of every width, floats, a
         packed vector, strings and atoms (wide ones too), variables,
-        compounds of arity 0, a long list, nesting 60 deep.
+        compounds of arity 0, dicts (as the dFRL agent's state), a long
+        list, nesting 60 deep.
 */
 :- initialization(main, main).
 
@@ -39,6 +40,7 @@ seed(numbers, fuzz(numbers, [0, 1, -1, 127, 128, -129, 65535, 72057594037927935,
 seed(text, fuzz(text, "plain string", "wide ωστε", 'wide atom →', '', "",
                 f(), '[]'(x), [a|b], 'quoted atom''s')).
 seed(variables, fuzz(vars, g(X, Y, X, _Z, Y), [X, Y])).
+seed(dicts, fuzz(dicts, _{acc:packed("x"), round:3, robots:[r1, r2]}, t{k:_{7:v, 'ω':w}})).
 seed(long_list, fuzz(list, Fs)) :-
     floats(300, Fs).
 seed(nested, fuzz(nested, Deep, DeepList)) :-
