@@ -47,7 +47,7 @@ test(serialised_terms_accepted, [forall(sample(T))]) :-
 test(dict_keys) :-
     fast_term_serialized(_{a:1, b:2}, B),
     string_codes(B, C0),
-    append(Pre, [11, 1, 0'b|Post], C0),         % key b renamed a: a duplicate
+    once(append(Pre, [11, 1, 0'b|Post], C0)),   % key b renamed a: a duplicate
     append(Pre, [11, 1, 0'a|Post], C1),
     string_codes(Dup, C1),
     fast_term_bytes_check(Dup, 10, R1),
