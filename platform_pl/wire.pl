@@ -8,6 +8,7 @@
           ]).
 :- use_module(platform_errors, [wire_error/1]).
 :- use_module(bulk_write, [write_bytes/2]).
+:- use_module(fast_term_check, [fast_term_bytes_check/3, fast_term_read/5]).
 %   Eager imports (not autoload/2): see node_connection.pl.
 :- use_module(library(utf8), [utf8_codes//1]).
 :- use_module(library(lists), [append/3]).
@@ -34,11 +35,15 @@ can count and cut frames without decoding them. A text body is the term
 written canonically (UTF-8) and is read back with read_term/3, so any
 peer may send one. A binary body is the term as fast_term_serialized/2
 writes it (SWI-Prolog's fast serialization): it is quick for large float
-lists, but the C reader trusts its input and crashes the process on
-garbage, so frame_read/3 accepts a binary frame only when the caller says
-the connection is authenticated (the peer proved a token of this node).
-A binary body is decoded straight from the stream with fast_read/2 (its
-length is checked against the header where the stream counts bytes).
+lists, but SWI-Prolog's decoder trusts its input, and one mutated byte
+aborts the process (`copy_record: Assertion failed`). So a binary body
+is read whole and checked completely before it is decoded
+(fast_term_check.pl, in C where native/fast_term_check.c is built): the
+decoder only ever sees bytes that fast_term_serialized/2 itself writes
+for a plain term (no attributed variables, cycles or rationals)
+at most max_depth(D) deep (default 10,000). frame_read/3 still accepts
+a binary frame only when the caller says the connection is
+authenticated (the peer proved a token of this node).
 
 Streams that carry frames should record no position
 (`set_stream(S, record_position(false))`, as transport.pl and the node's
@@ -179,7 +184,9 @@ open_codes_stream(Codes, In) :-
 %     - max_depth(+Depth)
 %       The text may nest brackets at most Depth deep
 %       (text_nesting_within/2, checked before it is parsed) and the
-%       term read may be at most Depth deep (term_depth_within/2).
+%       term read may be at most Depth deep (term_depth_within/2). A
+%       binary body is checked against Depth before it is decoded
+%       (default 10,000 levels).
 %     - body_size(-Bytes)
 %       Unified with the length of the frame's body (0 at the end of
 %       the stream), e.g. to give memory back after a large frame.
@@ -193,7 +200,9 @@ open_codes_stream(Codes, In) :-
 %   @error wire_error(Reason) for a malformed, oversized, late or
 %   refused frame: too_large(Len, Max), binary_not_allowed,
 %   deadline(Sec), truncated, pipelined, too_deep(Depth), syntax(What)
-%   (syntax(resource_error(c_stack)) if the reader ran out of C stack).
+%   (syntax(resource_error(c_stack)) if the reader ran out of C stack;
+%   syntax(binary) for a binary body that the check refused),
+%   protocol(binary_length(Len)) for a binary body longer than its term.
 
 frame_read(Stream, Frame, Options) :-
     option(max_size(Max), Options, 1048576),
@@ -229,51 +238,29 @@ read_frame_plain(Stream, Max, AllowBinary, Decode, Frame, Len) :-
         Header = [B0|Rest],
         check_header(Header, Max, AllowBinary, Kind, Len),
         (   Kind == binary
-        ->  read_binary_body(Stream, Len, Term)
+        ->  Decode = decode(Depth, _, _),
+            read_binary_body(Stream, Len, Depth, Term)
         ;   read_body(Stream, Len, Body),
             decode_body(Kind, Body, Decode, Term)
         ),
         Frame = frame(Kind, Term)
     ).
 
-%   A binary body is decoded straight from the stream (fast_read/2): no
-%   copy of it is made as a string first, and on a stream that records
-%   no position (see the module comment) the decoder copies its bytes in
-%   bulk. Where the stream counts bytes, the body must be exactly Len of
-%   them; where it does not, a body that lies about its length leaves
-%   the stream out of step, and the next frame's header is refused.
-read_binary_body(Stream, Len, Term) :-
-    (   stream_property(Stream, position(_))
-    ->  byte_count(Stream, B0),
-        decode_binary_stream(Stream, Term),
-        byte_count(Stream, B1),
-        (   B1 - B0 =:= Len
-        ->  true
-        ;   wire_error(protocol(binary_length(Len)))
-        )
-    ;   decode_binary_stream(Stream, Term)
-    ).
-
-decode_binary_stream(Stream, Term) :-
-    catch(fast_read(Stream, Term0), E, binary_failed(Stream, E)),
-    (   Term0 == end_of_file
+%   A binary body is read whole and checked completely before it is
+%   decoded (fast_term_read/5 of fast_term_check.pl: in C, the bytes
+%   move in bulk on a stream that records no position, see the module
+%   comment, and no Prolog string of them is made): fast_read/2 and
+%   fast_term_serialized/2 trust their input and abort the process on a
+%   mutated body.
+read_binary_body(Stream, Len, Depth0, Term) :-
+    binary_depth(Depth0, Depth),
+    fast_term_read(Stream, Len, Depth, Term, Result),
+    (   Result == true
+    ->  true
+    ;   Result == truncated
     ->  wire_error(truncated)
-    ;   plain_term(Term0)
-    ->  Term = Term0
+    ;   binary_refused(Result, Len, Depth)
     ).
-
-%   A body the decoder cannot read is truncated if the stream ended in it
-%   (seen without waiting for more: end_of_stream/1 is a property of what
-%   the stream has read so far), else malformed.
-binary_failed(Stream, error(syntax_error(_), _)) :-
-    !,
-    (   stream_property(Stream, end_of_stream(At)),
-        At \== not
-    ->  wire_error(truncated)
-    ;   wire_error(syntax(binary))
-    ).
-binary_failed(_, E) :-
-    throw(E).
 
 check_header(Header, Max, AllowBinary, Kind, Len) :-
     parse_header(Header, Kind, Len),
@@ -583,8 +570,8 @@ read_body(Stream, Len, Body) :-
 %   nesting is checked first; with parse slots both hold one.
 decode_body(text, Body, decode(Depth, Slots, Limit), Term) :-
     with_parse_slot(Slots, Body, Limit, decode_text(Body, Depth, Term)).
-decode_body(binary, Body, _, Term) :-
-    decode_binary(Body, Term).
+decode_body(binary, Body, decode(Depth, _, _), Term) :-
+    decode_binary(Body, Depth, Term).
 
 decode_text(Body, Depth, Term) :-
     (   Depth == none
@@ -635,21 +622,35 @@ with_parse_slot(slots(Queue, _), _, Limit, Goal) :-
         ;   true
         )).
 
-%   fast_term_serialized/2 keeps attributes and cycles: a variable with
-%   a freeze/2 attribute would run its goal at the first unification of
-%   the decoded term (a pattern match of the request), and a cyclic term
-%   loops whatever walks it. Both are refused before anyone sees them.
-decode_binary(Body, Term) :-
-    (   catch(fast_term_serialized(Term0, Body), _, fail)
-    ->  plain_term(Term0),
-        Term = Term0
+%   The check refuses attributed variables (a freeze/2 goal would run at
+%   the first unification of the decoded term) and cycles (whatever
+%   walks the term would loop), both of which fast_term_serialized/2
+%   keeps; without max_depth(D) a binary term may nest binary_max_depth
+%   levels.
+decode_binary(Body, Depth0, Term) :-
+    binary_depth(Depth0, Depth),
+    fast_term_bytes_check(Body, Depth, Result),
+    (   Result == true
+    ->  fast_term_serialized(Term, Body)
+    ;   string_length(Body, Len),
+        binary_refused(Result, Len, Depth)
+    ).
+
+binary_depth(none, Depth) :-
+    !,
+    binary_max_depth(Depth).
+binary_depth(Depth, Depth).
+
+%   A body with bytes after its term is refused as
+%   protocol(binary_length(Len)), one nested too deep as too_deep(Depth),
+%   any other fault as syntax(binary).
+binary_refused(Result, Len, Depth) :-
+    debug(dfrl(wire), 'binary body refused: ~w', [Result]),
+    (   Result == trailing_bytes
+    ->  wire_error(protocol(binary_length(Len)))
+    ;   Result == too_deep
+    ->  wire_error(too_deep(Depth))
     ;   wire_error(syntax(binary))
     ).
 
-plain_term(Term) :-
-    (   \+ acyclic_term(Term)
-    ->  wire_error(syntax(cyclic))
-    ;   term_attvars(Term, [_|_])
-    ->  wire_error(syntax(attributed_variable))
-    ;   true
-    ).
+binary_max_depth(10000).

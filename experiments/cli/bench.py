@@ -1,4 +1,4 @@
-"""``dfrl bench migrate|sim|round|bridge|chaos|scale|hostile``: run a benchmark and print its
+"""``dfrl bench migrate|sim|round|bridge|chaos|scale|hostile|fuzz``: run a benchmark and print its
 figures (JSON with ``--json``). The benchmarks themselves are :mod:`dfrl.experiments.tools.bench`;
 ``hostile``'s options and output are :mod:`.bench_hostile`."""
 from __future__ import annotations
@@ -15,7 +15,7 @@ from typing import Any
 from dfrl.experiments.cli import bench_faults, bench_hostile
 from dfrl.experiments.tools.bench import (bridge, chaos, hop_timeline, hostile, migrate,
                                           round as round_bench)
-from dfrl.experiments.tools.bench import faults, scale, sim
+from dfrl.experiments.tools.bench import faults, fuzz, scale, sim
 
 
 # -- migrate ---------------------------------------------------------------------------------
@@ -382,6 +382,40 @@ def cmd_scale(args: argparse.Namespace) -> int:
     return 0 if ok else 1
 
 
+def add_fuzz_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--frames", type=int, default=20_000, help="mutated frames to send")
+    parser.add_argument("--seed", type=int, default=None,
+                        help="seed of every random choice (default: drawn, and printed)")
+    parser.add_argument("--checkout", type=Path, default=None, metavar="DIR",
+                        help="run the target node of the dfrl checkout at DIR (e.g. main's, "
+                             "as the control); default: this one")
+    parser.add_argument("--max-s", type=float, default=3600.0, help="time limit of the run")
+    parser.add_argument("--max-crashes", type=int, default=20,
+                        help="stop after that many crashes (the node is restarted after each)")
+    parser.add_argument("--prolog-check", action="store_true",
+                        help="the node checks bodies in Prolog (as without its C library)")
+    parser.add_argument("--json", action="store_true", help="print the result as JSON")
+
+
+def cmd_fuzz(args: argparse.Namespace) -> int:
+    cfg = fuzz.FuzzConfig(frames=args.frames, seed=args.seed, checkout=args.checkout,
+                          max_s=args.max_s, max_crashes=args.max_crashes,
+                          native_check=not args.prolog_check)
+
+    def progress(k: int, r: fuzz.FuzzResult) -> None:
+        print(f"[fuzz] {k} frames, {len(r.crashes)} crashes", file=sys.stderr, flush=True)
+
+    result = fuzz.run(cfg, progress=None if args.json else progress)
+    if args.json:
+        print(json.dumps(result.as_dict()))
+    else:
+        print(f"seed {result.seed}: {result.frames} frames in {result.seconds} s, "
+              f"{len(result.crashes)} crashes (first at frame {result.first_crash_frame}), "
+              f"node pids {result.node_pids}")
+        print("answers: " + ", ".join(f"{k} {v}" for k, v in sorted(result.replies.items())))
+    return 1 if result.crashes else 0
+
+
 #: benchmark name -> (its module, whose doc gives the help line; add arguments; run)
 BENCHMARKS = {
     "migrate": (migrate, add_migrate_arguments, cmd_migrate),
@@ -392,6 +426,7 @@ BENCHMARKS = {
     "scale": (scale, add_scale_arguments, cmd_scale),
     "hostile": (hostile, bench_hostile.add_arguments, bench_hostile.cmd),
     "faults": (faults, bench_faults.add_arguments, bench_faults.cmd),
+    "fuzz": (fuzz, add_fuzz_arguments, cmd_fuzz),
 }
 
 

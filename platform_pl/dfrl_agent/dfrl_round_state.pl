@@ -14,6 +14,7 @@
 :- autoload(library(lists), [append/3, memberchk/2, sum_list/2]).
 :- autoload(library(apply), [maplist/2]).
 :- use_module('../float_vectors', [vector_length/2, packed_vector/1]).
+:- use_module('../fast_term_check', [fast_term_decode/3]).
 
 /** <module> The round state of the dFRL agent (dfrl_agent.pl)
 
@@ -116,9 +117,9 @@ compact(T) :-
     ).
 
 unpack(none, none) :- !.
-unpack(packed(String), Acc) :-
+unpack(packed(String), Acc) :-            % it came with the agent: checked
     !,
-    fast_term_serialized(Acc, String).
+    fast_term_decode(String, Acc, []).
 unpack(Acc, Acc).
 
 %!  replace_fact(+Module, +Fact) is det.
