@@ -58,12 +58,7 @@ def check_node_dir(directory: str | os.PathLike[str]) -> Path:
     CertError
         A file of :data:`NODE_FILES` is missing.
     """
-    d = Path(directory)
-    missing = [f for f in NODE_FILES if not (d / f).is_file()]
-    if missing:
-        raise CertError(f"{d} is not a node TLS directory: missing {', '.join(missing)} "
-                        "(make one with 'dfrl certs node NAME CA_DIR --out DIR')")
-    return d
+    return _check_dir(directory, NODE_FILES, "node")
 
 
 def check_cluster_dir(directory: str | os.PathLike[str]) -> Path:
@@ -74,9 +69,16 @@ def check_cluster_dir(directory: str | os.PathLike[str]) -> Path:
     CertError
         A file of :data:`CLUSTER_FILES` is missing.
     """
+    return _check_dir(directory, CLUSTER_FILES, "cluster")
+
+
+def _check_dir(directory: str | os.PathLike[str], files: tuple[str, ...],
+               kind: str) -> Path:
+    """``directory`` as a path if it holds every one of ``files``, else the error naming the
+    missing ones and the ``dfrl certs KIND`` command that makes such a folder."""
     d = Path(directory)
-    missing = [f for f in CLUSTER_FILES if not (d / f).is_file()]
+    missing = [f for f in files if not (d / f).is_file()]
     if missing:
-        raise CertError(f"{d} is not a cluster TLS directory: missing {', '.join(missing)} "
-                        "(make one with 'dfrl certs cluster NAME CA_DIR --out DIR')")
+        raise CertError(f"{d} is not a {kind} TLS directory: missing {', '.join(missing)} "
+                        f"(make one with 'dfrl certs {kind} NAME CA_DIR --out DIR')")
     return d
