@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from dfrl.experiments import processes
+from dfrl.pybridge.codec import varint
 
 HERE = Path(__file__).resolve().parent
 TOKEN = "4243"
@@ -92,15 +93,6 @@ def seeds() -> list[tuple[str, bytes]]:
             for name, hexed in (line.split() for line in out.splitlines() if line.strip())]
 
 
-def _varint(n: int) -> bytes:
-    groups = [n & 0x7F]
-    n >>= 7
-    while n:
-        groups.append(0x80 | (n & 0x7F))
-        n >>= 7
-    return bytes(reversed(groups))
-
-
 def deep_body(rng: random.Random) -> tuple[bytes, str]:
     """A body nesting 5,000 to 100,000 levels (``f(f(...))`` or ``[[...]]``), valid as written,
     or with its cell count off by one."""
@@ -115,7 +107,7 @@ def deep_body(rng: random.Random) -> tuple[bytes, str]:
         shape = "list"
     if rng.random() < 0.3:
         cells += rng.choice((-1, 1))
-    return b"\x72" + _varint(len(code)) + _varint(cells) + code, f"deep_{shape}_{depth}"
+    return b"\x72" + varint(len(code)) + varint(cells) + code, f"deep_{shape}_{depth}"
 
 
 def mutate(rng: random.Random, body: bytes) -> tuple[bytes, int | None, list[str]]:
