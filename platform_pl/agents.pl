@@ -36,7 +36,8 @@
 :- autoload(library(error),
             [must_be/2, existence_error/2, permission_error/3, domain_error/2]).
 :- autoload(library(option), [option/2, option/3]).
-:- autoload(library(lists), [member/2, subtract/3, union/3, max_member/2, append/3]).
+:- autoload(library(lists), [member/2, subtract/3, union/3, max_member/2, append/3,
+                             last/2]).
 :- autoload(library(apply), [maplist/2, maplist/3, include/3]).
 :- autoload(library(aggregate), [aggregate_all/3]).
 
@@ -277,7 +278,8 @@ agent_exists(Node, Name) :-
 %!  agent_property(?Node, ?Name, ?Property) is nondet.
 %
 %   Properties: handler(H), kind(K), tokens(L), status(S), payload(L),
-%   module(M), hops(N), peer(P): the peer the agent arrived from
+%   module(M), hops(N), arrived(T): when its last hop arrived (this
+%   node's clock; none for an agent that never moved), peer(P): the peer the agent arrived from
 %   (agent_install/5 option peer(P), e.g. tls(Name) or ip(A,B,C,D)), or
 %   `local` for an agent made or installed here without one.
 
@@ -298,6 +300,9 @@ agent_property_(module(M), Node, Name, _, _) :-
 agent_property_(hops(N), Node, Name, _, _) :-
     agent_hops_(Node, Name, Hops),
     length(Hops, N).
+agent_property_(arrived(T), Node, Name, _, _) :-
+    agent_hops_(Node, Name, Hops),
+    last(Hops, hop(_, _, _, T)).
 agent_property_(peer(P), Node, Name, _, _) :-
     (   agent_peer_(Node, Name, P0) -> P = P0 ; P = local ).
 

@@ -13,7 +13,7 @@
 :- use_module(dfrl_lease,
               [ lease_arrived/3, lease_check/3, lease_progress/4,
                 lease_ended/3, lease_custody/3, lease_adopt/5,
-                lease_needs_holder/2 ]).
+                lease_needs_holder/2, lease_write_gate/2, lease_valid/2 ]).
 :- use_module(dfrl_round_state,
               [ new_round/3, get_state/3, put_state/3, pack_state/2,
                 unpack_state/2, replace_fact/2, skip_robot/4, add_retries/3,
@@ -378,9 +378,14 @@ event(launch, _, M, Agent) :-
     put_dict(_{phase:home, index: -1}, S0, S),
     put_state(M, Agent, S),
     try_home(M, Agent, S, 0).
-event(resurrected(Epoch, From, Dead, resume(Packed, Next, Progress)), Node, M,
+event(resurrected(Epoch, From, Dead, resume(Packed, Next, Progress0)), Node, M,
       Agent) :-
     unpack_state(Packed, S0),
+    (   Progress0 == fresh              % the old copy may still be in its round:
+    ->  get_dict(round, S0, R0),        % start the next one (dfrl_lease)
+        Progress = round_done(R0, false)
+    ;   Progress = Progress0
+    ),
     M:dfrl_plan(Agent, plan(Itinerary, _, _, Log, _)),
     format(string(Why), "lost with its node ~w; resurrected at ~w with epoch ~w",
            [Dead, From, Epoch]),
@@ -421,10 +426,18 @@ step(M, Agent) :-
     get_dict(index, S0, Index),
     get_dict(origin, S0, Origin),
     (   Phase == forward, Index =:= Origin
-    ->  ensure_holder(M, Agent, S0),
-        start_round(M, Agent, S0, S1)
-    ;   S1 = S0
-    ),
+    ->  (   round_gate(M, Agent, S0)
+        ->  start_round(M, Agent, S0, S1),
+            step_work(M, Agent, S1)
+        ;   true                        % it retired
+        )
+    ;   step_work(M, Agent, S0)
+    ).
+
+step_work(M, Agent, S1) :-
+    get_dict(phase, S1, Phase),
+    get_dict(index, S1, Index),
+    get_dict(origin, S1, Origin),
     M:dfrl_plan(Agent, plan(Itinerary, _, _, _, Timeout)),
     M:dfrl_method_of(Agent, Method),
     carried(M, Agent, Carried),
@@ -647,8 +660,13 @@ method_failed(error(Error), S0, S) :-
 
 write_back(Robot, Options, S0, S) :-
     get_dict(acc, S0, Table),
+    current_node(Node),
+    memberchk(agent(Agent), Options),
     (   Table == none
     ->  S = S0
+    ;   \+ lease_write_gate(Node, Agent)
+    ->  skip_robot(Robot, reason("not written: the agent's lease could not be renewed \c
+                                  (fenced)"), S0, S)
     ;   catch(write_robot(Table, Robot, Options), E, true),
         (   var(E)
         ->  S = S0
@@ -769,6 +787,50 @@ ensure_holder(M, Agent, S) :-
         ;   true
         )
     ;   true
+    ).
+
+%   A round starts only under a lease that its holder knows covers this
+%   round (progress started(Round)): a holder that resurrects the agent
+%   then starts the round after it, never this one again. Without it (the
+%   holder cut off or frozen, no other stop takes a checkpoint), the agent
+%   waits, parked, and tries again every half second, up to 900 s; a
+%   higher epoch met meanwhile retires it (and the gate fails).
+round_gate(M, Agent, S) :-
+    current_node(Node),
+    get_time(T0),
+    round_gate(Node, M, Agent, S, T0, 0).
+
+round_gate(Node, M, Agent, S, T0, Tries) :-
+    ensure_holder(M, Agent, S),
+    get_dict(round, S, Round),
+    lease_progress(Node, Agent, started(Round), Verdict),
+    (   Verdict = superseded(E2)
+    ->  retire(Node, M, Agent, E2),
+        fail
+    ;   Tries =:= 0,
+        lease_needs_holder(Node, Agent)
+    ->  round_gate(Node, M, Agent, S, T0, 1)    % its holder was lost just now
+    ;   lease_valid(Node, Agent)
+    ->  true
+    ;   get_time(Now),
+        Now - T0 > 900
+    ->  throw(error(timeout_error(round_gate, Agent),
+                    context(dfrl_agent:round_gate/3,
+                            'no lease for 900 s: its holder and every other stop are silent')))
+    ;   (   Tries =< 1
+        ->  print_message(warning,
+                          format("dfrl: ~w waits to start round ~w: its lease cannot be renewed \c
+                                  and no other stop holds it", [Agent, Round]))
+        ;   true
+        ),
+        bounds_park(sleep(0.5)),
+        lease_arrived(Node, Agent, V),
+        (   V = superseded(E3)
+        ->  retire(Node, M, Agent, E3),
+            fail
+        ;   Tries1 is Tries + 2,
+            round_gate(Node, M, Agent, S, T0, Tries1)
+        )
     ).
 
 first_n(N, L, Prefix) :-

@@ -10,6 +10,9 @@
             lease_epoch_seen/3,         % ?Node, ?Agent, ?Epoch
             lease_adopt/5,              % +Node, +Agent, +Here, +Offers, -Holder
             lease_needs_holder/2,       % +Node, +Agent
+            lease_write_gate/2,         % +Node, +Agent
+            lease_fenced/4,             % +Node, +Options, -Verdict, -Why
+            lease_note_write/3,         % +Node, +Robot, +Options
             lease_supersede/5           % +Node, +Agent, +Address, +Tokens, -Answer
           ]).
 :- use_module('../node', [node_property/2, ctx_node/2, ctx_authenticated/1]).
@@ -20,7 +23,8 @@
 :- use_module('../custody', [with_custody/2, custody_unstage/2]).
 :- use_module(lease_book).
 :- reexport(lease_book, [lease_custody/3]).     % +Node, +Agent, -Custody
-:- use_module(lease_watch, [ensure_watchdog/0, note_beat/2, beat_answer/5]).
+:- use_module(lease_watch, [ensure_watchdog/0, note_beat/2, beat_answer/6]).
+:- reexport(lease_book, [lease_valid/2]).     % +Node, +Agent
 :- reexport(lease_watch, [lease_broadcast_epoch/5]). % +Node, +Tokens, +Agent, +Epoch, +Stops
 :- autoload(library(lists), [member/2, append/3, last/2]).
 :- autoload(library(apply), [foldl/4]).
@@ -209,11 +213,22 @@ lease_stayed(ticket(Node, Agent, Old, E, K1, _)) :-
 
 %!  lease_departed(+Ticket) is det.
 %
-%   The move succeeded: release the old holder (best effort; a holder
-%   that misses it finds out with its probe). Called from the thread
-%   that moved the agent, after the move.
+%   The move succeeded: the checkpoint's lease starts again now (the
+%   agent's new node counts its side of the lease from when the agent
+%   arrived there, which was before: see note_valid/3), and the old
+%   holder is released (best effort; a holder that misses it finds out
+%   with its probe). Called from the thread that moved the agent, after
+%   the move.
 
-lease_departed(ticket(Node, Agent, custody(E, K, Holder), _, _, Tokens)) :-
+lease_departed(ticket(Node, Agent, custody(E, K, Holder), E, K1, Tokens)) :-
+    lease_s(Node, L),
+    get_time(Now),
+    Expiry is Now + L,
+    locked(( retractall(valid(Node, Agent, _)),
+             (   retract(ckpt(Node, Agent, E, K1, H, D, R, S, _))
+             ->  assertz(ckpt(Node, Agent, E, K1, H, D, R, S, Expiry))
+             ;   true
+             ) )),
     release(Node, Tokens, Agent, Holder, E, K, left, _).
 
 release(_, _, _, none, _, _, _, none) :- !.
@@ -234,6 +249,7 @@ lease_ended(Node, Agent, How) :-
     lease_custody(Node, Agent, custody(E, K, Holder)),
     get_time(Now),
     assertz(gone(Node, Agent, E, K, How, Now)),
+    locked(retractall(valid(Node, Agent, _))),
     prune_gone(Node, Agent),
     agent_tokens(Node, Agent, Tokens),
     release(Node, Tokens, Agent, Holder, E, K, How, _).
@@ -248,8 +264,20 @@ lease_arrived(Node, Agent, Verdict) :-
     (   seen(Node, Agent, E2), E2 > E
     ->  Verdict = superseded(E2)
     ;   note_epoch(Node, Agent, E),
+        note_arrival(Node, Agent),
         note_beat(Node, Agent),
         Verdict = ok
+    ).
+
+%   The copy's side of the lease starts when it arrived here: its holder
+%   started the checkpoint's lease again once it learnt that the move
+%   succeeded (lease_departed/1), which was after that.
+note_arrival(Node, Agent) :-
+    (   valid(Node, Agent, _)
+    ->  true
+    ;   agent_property(Node, Agent, arrived(T))
+    ->  note_valid(Node, Agent, T)
+    ;   true
     ).
 
 %!  lease_check(+Node, +Agent, -Verdict) is det.
@@ -277,15 +305,80 @@ lease_progress(Node, Agent, Progress, Verdict) :-
     ;   lease_custody(Node, Agent, custody(E, K, Holder)),
         Holder \== none
     ->  agent_tokens(Node, Agent, Tokens),
+        get_time(Sent),
         custody_call(Node, Tokens, Holder, progress(Agent, E, K, Progress),
                      Answer),
         (   Answer = superseded(E2)
         ->  note_epoch(Node, Agent, E2),
             Verdict = Answer
-        ;   beat_answer(Answer, Node, Agent, E, K),
+        ;   beat_answer(Answer, Node, Agent, E, K, Sent),
             Verdict = ok
         )
     ;   Verdict = ok
+    ).
+
+%!  lease_write_gate(+Node, +Agent) is semidet.
+%
+%   True if the copy of Agent on Node may write a robot now: it holds
+%   its lease (lease_valid/2), or its holder renews it now. A copy that
+%   cannot renew its lease writes nothing: its holder may resurrect it
+%   once the lease has run out by the holder's clock, and by then this
+%   copy's side of it (shorter by the clock drift, lease_drift/1) has
+%   run out too.
+
+lease_write_gate(Node, Agent) :-
+    (   lease_valid(Node, Agent)
+    ->  true
+    ;   lease_progress(Node, Agent, alive, Verdict),
+        Verdict == ok,
+        lease_valid(Node, Agent)
+    ).
+
+%!  lease_fenced(+Node, +Options, -Verdict, -Why) is det.
+%
+%   The robot's side of fencing, for a table write with Options (those
+%   of the resource hook: agent(A), epoch(E), round(R)) at a robot of
+%   Node: Verdict is `ok`, or `fenced` with Why (a string) when Node has
+%   seen a higher epoch of the agent (a superseded copy) or this robot
+%   was already written in this round or a later one by the agent (a
+%   round is written once). Writes without an agent are not fenced.
+
+lease_fenced(Node, Options, Verdict, Why) :-
+    (   memberchk(agent(A), Options),
+        memberchk(epoch(E), Options),
+        integer(E)
+    ->  (   seen(Node, A, E2), E2 > E
+        ->  Verdict = fenced,
+            format(string(Why), "fenced: ~w epoch ~w is superseded by epoch ~w here",
+                   [A, E, E2])
+        ;   note_epoch(Node, A, E),
+            memberchk(round(R), Options),
+            memberchk(robot(Robot), Options),
+            written(Node, A, Robot, R0, E0),
+            R =< R0
+        ->  Verdict = fenced,
+            format(string(Why), "fenced: ~w round ~w written here already (round ~w, epoch ~w)",
+                   [A, R, R0, E0])
+        ;   Verdict = ok,
+            Why = ""
+        )
+    ;   Verdict = ok,
+        Why = ""
+    ).
+
+%!  lease_note_write(+Node, +Robot, +Options) is det.
+%
+%   The agent of Options (agent(A), epoch(E), round(R)) wrote Robot on
+%   Node: later writes of that round or an earlier one are fenced.
+
+lease_note_write(Node, Robot, Options) :-
+    (   memberchk(agent(A), Options),
+        memberchk(epoch(E), Options),
+        memberchk(round(R), Options),
+        integer(R)
+    ->  locked(( retractall(written(Node, A, Robot, _, _)),
+                 assertz(written(Node, A, Robot, R, E)) ))
+    ;   true
     ).
 
 %!  lease_checkpoint(?Node, ?Agent, ?Epoch, ?Dest) is nondet.
@@ -305,8 +398,9 @@ lease_epoch_seen(Node, Agent, Epoch) :-
 %!  lease_needs_holder(+Node, +Agent) is semidet.
 %
 %   Agent, on Node, has no stop that holds a checkpoint of it: at its
-%   first stop after a launch, right after a resurrection, or its holder
-%   answered a heartbeat that it holds none (it restarted).
+%   first stop after a launch, right after a resurrection, its holder
+%   answered a heartbeat that it holds none (it restarted), or its lease
+%   ran out (its holder did not answer: cut off, frozen or dead).
 
 lease_needs_holder(Node, Agent) :-
     current_prolog_flag(dfrl_resting_holder, true),
@@ -314,6 +408,8 @@ lease_needs_holder(Node, Agent) :-
     (   Holder == none
     ->  true
     ;   holder_lost(Node, Agent, E, K)
+    ->  true
+    ;   \+ lease_valid(Node, Agent)
     ).
 
 %!  lease_adopt(+Node, +Agent, +Here, +Offers, -Holder) is det.
@@ -348,10 +444,13 @@ adopt([Address-Resume|Offers], Node, Agent, Tokens, Here, E, K1, Holder) :-
     set_custody(Node, Agent, custody(E, K1, Address)),
     agent_export(Node, Agent, Record0),
     setarg(4, Record0, []),                 % a record that leaves holds no token
+    get_time(Sent),
     quick_call(Node, Tokens, Address, hold(Agent, E, K1, Address, Here, Record0, Resume),
                Answer),
     (   Answer == held
     ->  Holder = Address,
+        locked(retractall(valid(Node, Agent, _))),
+        note_valid(Node, Agent, Sent),
         debug(dfrl(lease), '~w held by ~w (~w/~w)', [Agent, Address, E, K1])
     ;   debug(dfrl(lease), 'hold of ~w at ~w: ~p', [Agent, Address, Answer]),
         (   Answer = superseded(E2) -> note_epoch(Node, Agent, E2) ; true ),
@@ -417,9 +516,13 @@ serve(progress(Agent, E, K, Progress), Node, Answer) :-
                ;   Answer = unknown
                ))
     ).
-serve(epoch(Agent, E), Node, noted) :-
-    note_epoch(Node, Agent, E),
-    discard_superseded_arrival(Node, Agent, E).
+serve(epoch(Agent, E), Node, Answer) :-
+    (   seen(Node, Agent, E2), E2 > E
+    ->  Answer = superseded(E2)
+    ;   note_epoch(Node, Agent, E),
+        discard_superseded_arrival(Node, Agent, E),
+        Answer = noted
+    ).
 serve(hold(Agent, E, K, Here, Dest, Record0, Resume), Node, Answer) :-
     (   seen(Node, Agent, E2), E2 > E
     ->  Answer = superseded(E2)
@@ -519,6 +622,8 @@ discard_superseded_arrival(Node, Agent, E) :-
 %   is resurrected): `alive`, or the end of a round with the agent's
 %   plan and method as plain ground facts of the shapes the agent sends.
 progress_ok(_, alive).
+progress_ok(_, started(Round)) :-
+    integer(Round).
 progress_ok(Agent, round_done(Round, Last, Facts)) :-
     integer(Round),
     memberchk(Last, [true, false]),
@@ -539,6 +644,8 @@ progress_fact(Agent, dfrl_method_of(Agent, Method)) :-
 %   A round ended where the agent is: a resurrection starts the next
 %   round from the holder, with the facts (plan, method) as they are now.
 apply_progress(alive, _, Rec, Res, Rec, Res).
+apply_progress(started(Round), _, Rec, resume(S0, Next, _), Rec,
+               resume(S0, Next, started(Round))).
 apply_progress(round_done(Round, Last, Facts), _, Rec0, resume(S0, Next, _),
                Rec, resume(S0, Next, round_done(Round, Last))) :-
     Rec0 = agent(Name, H, K, T, P, Preds, Cls0, Hops),

@@ -7,6 +7,8 @@
               [ get_robot_table/3, get_robot_tables/4, set_robot_table/3,
                 get_robot_params/3, set_robot_params/3 ]).
 :- use_module('../agent_bounds', [bounds_park/1]).
+:- use_module('../tartarus', [current_node/1]).
+:- use_module(dfrl_lease, [lease_fenced/4, lease_note_write/3]).
 :- use_module('../float_vectors',
               [vector_length/2, packed_vector/1, float_vectors_native/1]).
 :- autoload(library(lists), [sum_list/2]).
@@ -54,12 +56,29 @@ read_options(Options, Options).
 %!  write_robot(+Table, +Robot, +Options) is det.
 %
 %   Write the round's aggregate Table (qtable(Shape, Values) or
-%   params(Layout, Values)) into Robot.
+%   params(Layout, Values)) into Robot, unless the robot's node fences
+%   the write (dfrl_lease:lease_fenced/4): it has seen a higher epoch of
+%   the agent of Options, or this robot was written in this round (or a
+%   later one) already.
+%
+%   @error permission_error(write, robot_table, Robot) with the reason
+%   as context, for a fenced write (nothing written).
 
-write_robot(params(L, V), Robot, Options) :-
+write_robot(Table, Robot, Options) :-
+    current_node(Node),
+    Fence = [robot(Robot)|Options],
+    lease_fenced(Node, Fence, Verdict, Why),
+    (   Verdict == ok
+    ->  write_robot_(Table, Robot, Options),
+        lease_note_write(Node, Robot, Options)
+    ;   throw(error(permission_error(write, robot_table, Robot),
+                    context(dfrl_robot_io:write_robot/3, Why)))
+    ).
+
+write_robot_(params(L, V), Robot, Options) :-
     !,
     bounds_park(set_robot_params(Robot, params(L, V), Options)).
-write_robot(Table, Robot, Options) :-
+write_robot_(Table, Robot, Options) :-
     bounds_park(set_robot_table(Robot, Table, Options)).
 
 %!  item_bytes(+Item, -Bytes) is det.

@@ -11,7 +11,7 @@
 :- use_module(dfrl_tree_copies,
               [ tree_children/4, tree_subtree/4, tree_spawn/11, tree_go_to_stop/3,
                 add_stats/3 ]).
-:- use_module(dfrl_lease, [lease_custody/3]).
+:- use_module(dfrl_lease, [lease_custody/3, lease_write_gate/2]).
 :- use_module(dfrl_round_state, [skip_robot/4, add_retries/3]).
 :- use_module(dfrl_robot_io, [read_robot/5, write_robot/3, item_bytes/2]).
 :- use_module(dfrl_aggregation,
@@ -142,13 +142,22 @@ root_round(M, Agent, Ctx, S0, S) :-
         ;   method_failed(Result, S2, S3), Final = none
         )
     ),
-    down_pass(Ctx, Agent, 0, Final, Kids, Skips2, Stats2),
-    foldl(note_skip, Skips2, S3, S4),
+    (   Final \== none,
+        \+ ( current_node(Node), lease_write_gate(Node, Agent) )
+    ->  print_message(warning, format("dfrl: ~w: round not written: its lease could not be \c
+                                       renewed (fenced)", [Agent])),
+        Final1 = none,
+        S3a = S3.put(fenced, true)
+    ;   Final1 = Final,
+        S3a = S3
+    ),
+    down_pass(Ctx, Agent, 0, Final1, Kids, Skips2, Stats2),
+    foldl(note_skip, Skips2, S3a, S4),
     add_stats(Stats1, Stats2, stats(Hops, Bytes, Retries)),
     get_dict(hops, S4, H0), get_dict(bytes, S4, B0),
     H is H0 + Hops, B is B0 + Bytes,
     add_retries(Retries, S4, S5),
-    put_dict(_{acc:Final, hops:H, bytes:B}, S5, S).
+    put_dict(_{acc:Final1, hops:H, bytes:B}, S5, S).
 
 note_skip(skip(Robot, Text), S0, S) :-
     skip_robot(Robot, reason(Text), S0, S).

@@ -4,6 +4,13 @@
             seen/3,                     % Node, Agent, Epoch
             beat/3,                     % Node, Agent, LastBeat
             holder_lost/4,              % Node, Agent, Epoch, Seq
+            valid/3,                    % Node, Agent, Until
+            written/5,                  % Node, Agent, Robot, Round, Epoch
+            lease_forget/1,             % +Node
+            note_valid/3,               % +Node, +Agent, +Since
+            lease_valid/2,              % +Node, +Agent
+            lease_drift/1,              % -Fraction
+            majority/2,                 % +Stops, -Count
             locked/1,                   % :Goal
             lease_s/2,                  % +Node, -Seconds
             lease_custody/3,            % +Node, +Agent, -Custody
@@ -33,7 +40,11 @@ nodes of this process, shared by the agent's side and the holder's
   - gone/6: the last 64 departures and ends of each agent a node saw;
   - seen/3: the highest epoch of each agent a node has seen;
   - beat/3: the agents on a node that renew their holder's lease;
-  - holder_lost/4: an agent whose holder answered that it holds none.
+  - holder_lost/4: an agent whose holder answered that it holds none;
+  - written/5: the last round (and epoch) in which each agent wrote each
+    robot of a node (the robot's side of fencing, dfrl_lease:lease_fenced/4);
+  - valid/3: until when the copy of an agent on a node may write (its
+    side of the lease, see note_valid/3).
 
 Every change to them is made under one mutex (locked/1). An agent's own
 custody, custody(Epoch, Seq, Holder), lives in its payload
@@ -47,7 +58,9 @@ agent's tokens and wait at most a half (custody_call/5) or a quarter
     gone/6,
     seen/3,
     beat/3,
-    holder_lost/4.
+    holder_lost/4,
+    valid/3,
+    written/5.
 
 :- multifile
     node:node_stopping/1.
@@ -110,6 +123,61 @@ note_epoch(Node, Agent, E) :-
            ;   retractall(seen(Node, Agent, _)),
                assertz(seen(Node, Agent, E))
            )).
+
+%!  lease_drift(-Fraction) is det.
+%
+%   The bound on how much faster one host's clock may run than
+%   another's over a lease (rate, not offset): 1%. A copy's side of the
+%   lease ends that much sooner than its holder's.
+
+lease_drift(0.01).
+
+%!  note_valid(+Node, +Agent, +Since) is det.
+%
+%   The holder of Agent granted or renewed its lease in answer to a
+%   request that left Node at time Since (Node's clock), or the agent
+%   arrived on Node at Since by a move its holder recorded after it: the
+%   holder's lease runs to at least Since + lease_s by the holder's
+%   clock, so the copy on Node may write until Since + lease_s x (1 -
+%   drift) by its own (valid/3). A later grant only extends it.
+
+note_valid(Node, Agent, Since) :-
+    lease_s(Node, L),
+    lease_drift(D),
+    Until is Since + L * (1 - D),
+    locked(( valid(Node, Agent, U0), U0 >= Until
+           ->  true
+           ;   retractall(valid(Node, Agent, _)),
+               assertz(valid(Node, Agent, Until))
+           )).
+
+%!  lease_valid(+Node, +Agent) is semidet.
+%
+%   The copy of Agent on Node holds its lease now: it has no holder
+%   (nobody can resurrect it: after a launch or a resurrection, before
+%   it adopts one), its holder holds no checkpoint of it (holder_lost/4:
+%   it answered so, or its process is gone), or its side of the lease
+%   (valid/3) has not run out.
+
+lease_valid(Node, Agent) :-
+    lease_custody(Node, Agent, custody(E, K, Holder)),
+    (   Holder == none
+    ->  true
+    ;   holder_lost(Node, Agent, E, K)
+    ->  true
+    ;   valid(Node, Agent, Until),
+        get_time(Now),
+        Now < Until
+    ).
+
+%!  majority(+Stops, -Count) is det.
+%
+%   Count is the majority of the distinct stops Stops: more than half.
+
+majority(Stops, Count) :-
+    sort(Stops, Set),
+    length(Set, N),
+    Count is N // 2 + 1.
 
 %!  prune_gone(+Node, +Agent) is det.
 %
@@ -194,10 +262,21 @@ replace_fact(Fact, Cls0, Cls) :-
     exclude([C]>>( C = (Old0 :- _), subsumes_term(Old, Old0) ), Cls0, Cls1),
     Cls = [(Fact :- true)|Cls1].
 
+%!  lease_forget(+Node) is det.
+%
+%   Node forgets all it knows of agents' leases, epochs and writes, as
+%   when it stops: a robot host that starts serving another experiment
+%   (whose agent may bear the same name) calls it.
+
 %   A node that stops forgets its checkpoints, as a process that dies.
 node:node_stopping(Node) :-
+    lease_forget(Node).
+
+lease_forget(Node) :-
     locked(( retractall(ckpt(Node, _, _, _, _, _, _, _, _)),
              retractall(gone(Node, _, _, _, _, _)),
              retractall(seen(Node, _, _)),
              retractall(beat(Node, _, _)),
-             retractall(holder_lost(Node, _, _, _)) )).
+             retractall(holder_lost(Node, _, _, _)),
+             retractall(valid(Node, _, _)),
+             retractall(written(Node, _, _, _, _)) )).

@@ -1,7 +1,7 @@
 :- module(lease_watch,
           [ ensure_watchdog/0,
             note_beat/2,                % +Node, +Agent
-            beat_answer/5,              % +Answer, +Node, +Agent, +Epoch, +Seq
+            beat_answer/6,              % +Answer, +Node, +Agent, +Epoch, +Seq, +Sent
             lease_broadcast_epoch/5     % +Node, +Tokens, +Agent, +Epoch, +Stops
           ]).
 :- use_module('../node', [node_property/2, local_node/1]).
@@ -9,9 +9,10 @@
               [ agent_exists/2, agent_install/4, agent_execute/4, agent_status/3 ]).
 :- use_module('../transport', [address_normalize/2]).
 :- use_module(lease_book).
-:- autoload(library(lists), [member/2, min_list/2]).
+:- autoload(library(lists), [member/2, memberchk/2, min_list/2]).
 :- autoload(library(apply), [exclude/3]).
 :- autoload(library(debug), [debug/3]).
+:- autoload(library(occurs), [sub_term/2]).
 
 /** <module> The threads of the dFRL agent's leases: the watchdog and the heartbeat
 
@@ -31,7 +32,8 @@ Both are stopped and joined at halt.
 
 :- dynamic
     running_/2,                 % Role (watchdog or heart), ThreadId
-    exited_/2.                  % Role, ThreadId: ended, to be joined
+    exited_/2,                  % Role, ThreadId: ended, to be joined
+    tried_/3.                   % Node, Agent, Epoch: a resurrection that found no majority
 
 %   Start the thread of Role (watchdog or heart) unless it runs; one that
 %   ended is joined first. Called holding the lock: a thread ends, when
@@ -46,7 +48,10 @@ ensure_thread(Role) :-
 
 run_thread(Role) :-
     thread_loop(Role, Loop),
-    catch(Loop, E, true),
+    (   catch(Loop, E, true)
+    ->  true
+    ;   E = error(failed(Loop), _)      % a bug: say so, never end silently
+    ),
     thread_self(Me),
     locked(( retractall(running_(Role, Me)),
              assertz(exited_(Role, Me)) )),
@@ -112,31 +117,27 @@ expired(ckpt(Node, Agent, E, K)) :-
     ;   true
     ).
 
-judge(here(E1, _), _, Node, Agent, E, K, _, _, _) :-
+judge(here(E1, K1), _, Node, Agent, E, K, _, _, _) :-
     E1 =< E,
     !,
-    renew(Node, Agent, E, K).
+    (   E1 =:= E, K1 > K
+    ->  drop(Node, Agent, E, K, here_later(K1))     % a later hop holds it now
+    ;   renew(Node, Agent, E, K)
+    ).
 judge(staged(E1, _), _, Node, Agent, E, K, _, _, _) :-
     E1 =< E,
     !,
     renew(Node, Agent, E, K).
 judge(unknown, Dest, Node, Agent, E, K, Here, Record, Resume) :-
     !,
-    others_know(Node, Dest, Here, Record, Agent, E, K, Known),
-    (   Known = known(Why)
-    ->  drop(Node, Agent, E, K, Why)
-    ;   Known = max_epoch(Max),
-        resurrect(Node, Agent, E, K, Max, Here, Dest, Record, Resume, lost)
-    ).
+    lost(Node, Agent, E, K, Here, Dest, Record, Resume, gone, lost).
 judge(error(Why), Dest, Node, Agent, E, K, Here, Record, Resume) :-
     !,
-    others_know(Node, Dest, Here, Record, Agent, E, K, Known),
-    (   Known = known(Reason)
-    ->  drop(Node, Agent, E, K, Reason)
-    ;   Known = max_epoch(Max),
-        resurrect(Node, Agent, E, K, Max, Here, Dest, Record, Resume,
-                  unreachable(Why))
-    ).
+    (   refused(Why)
+    ->  Dest_ = gone                    % nothing listens there: the copy died with it
+    ;   Dest_ = silent                  % cut off or frozen: the copy may still run
+    ),
+    lost(Node, Agent, E, K, Here, Dest, Record, Resume, Dest_, unreachable(Why)).
 judge(Answer, _, Node, Agent, E, K, _, _, _) :-
     (   Answer = superseded(E2) -> note_epoch(Node, Agent, E2) ; true ),
     drop(Node, Agent, E, K, Answer).
@@ -169,24 +170,79 @@ probe(Node, Record, Dest, Agent, E, K, Tries, Answer) :-
     ;   Answer = A0
     ).
 
-%   Does any other stop know of a later hop or a higher epoch?
-others_know(Node, Dest, Here, Record, Agent, E, K, Known) :-
+%   The stop Dest the agent went to does not have it (Dest_ = gone: it
+%   answered without it, or refused the connection) or does not answer
+%   (silent). Resurrect the agent only if no other stop knows of a later
+%   hop or a higher epoch, and a majority of the itinerary's stops (this
+%   one included; Dest if it answered) answered: a holder cut off with a
+%   minority never resurrects (the majority's side may have the agent).
+%   Without a majority the checkpoint is kept and asked about again half
+%   a lease later.
+lost(Node, Agent, E, K, Here, Dest, Record, Resume, Dest_, Why) :-
+    others_know(Node, Dest, Here, Record, Agent, E, K, Known, Answered),
+    record_stops(Record, Agent, Stops),
+    majority(Stops, Need),
+    (   Dest_ == gone -> DestCount = 1 ; DestCount = 0 ),
+    Have is 1 + DestCount + Answered,
+    (   Known = known(Reason)
+    ->  drop(Node, Agent, E, K, Reason)
+    ;   Have >= Need
+    ->  Known = max_epoch(Max),
+        resurrect(Node, Agent, E, K, Max, Here, Dest, Record, Resume, Dest_, Why)
+    ;   print_message(warning,
+                      format("dfrl: ~w lost at ~w (~p), but only ~w of ~w stops answered \c
+                              (a majority is ~w): not resurrected here; asked again later",
+                             [Agent, Dest, Why, Have, Stops, Need])),
+        wait_again(Node, Agent, E, K)
+    ).
+
+wait_again(Node, Agent, E, K) :-
+    lease_s(Node, L),
+    get_time(Now),
+    Expiry is Now + L/2,
+    locked(( retract(ckpt(Node, Agent, E, K, H, D, R, S, _))
+           ->  assertz(ckpt(Node, Agent, E, K, H, D, R, S, Expiry))
+           ;   true
+           )).
+
+%   Does any other stop know of a later hop or a higher epoch? Answered
+%   counts the stops that answered at all. An epoch this holder itself
+%   tried to resurrect with (tried_/3) is no news.
+others_know(Node, Dest, Here, Record, Agent, E, K, Known, Answered) :-
     record_stops(Record, Agent, Stops0),
     exclude([S]>>( same_address(S, Dest) ; same_address(S, Here) ), Stops0, Stops),
     record_tokens(Record, Node, Tokens),
-    others_know_(Stops, Node, Tokens, Agent, E, K, E, Known).
+    (   tried_(Node, Agent, Tried) -> true ; Tried = E ),
+    others_know_(Stops, Node, Tokens, Agent, E, K, Tried, E, Known, 0, Answered).
 
-others_know_([], _, _, _, _, _, Max, max_epoch(Max)).
-others_know_([S|Ss], Node, Tokens, Agent, E, K, Max0, Known) :-
+others_know_([], _, _, _, _, _, _, Max, max_epoch(Max), N, N).
+others_know_([S|Ss], Node, Tokens, Agent, E, K, Tried, Max0, Known, N0, N) :-
     quick_call(Node, Tokens, S, probe(Agent, E, K), Answer),
-    (   Answer = superseded(E2)
-    ->  Known = known(superseded(S, E2))
+    (   Answer = error(_)
+    ->  N1 = N0
+    ;   N1 is N0 + 1
+    ),
+    (   Answer = superseded(E2), E2 > Tried
+    ->  Known = known(superseded(S, E2)), N = N1
     ;   Answer = here(E1, _), E1 >= E
-    ->  Known = known(here(S))          % staged(_, _): arrived, never ran: not known
+    ->  Known = known(here(S)), N = N1  % staged(_, _): arrived, never ran: not known
     ;   ( Answer = left(_, K1) ; Answer = finished(_, K1) ), K1 > K
-    ->  Known = known(Answer)
-    ;   others_know_(Ss, Node, Tokens, Agent, E, K, Max0, Known)
+    ->  Known = known(Answer), N = N1
+    ;   (   Answer = superseded(E3) -> Max1 is max(Max0, E3) ; Max1 = Max0 ),
+        others_know_(Ss, Node, Tokens, Agent, E, K, Tried, Max1, Known, N1, N)
     ).
+
+%   A connection refused: the node's process is gone (killed, crashed,
+%   stopped), nothing of it runs; a timeout or an unreachable network is
+%   no such proof.
+refused(E) :-
+    sub_term(T, E),
+    atom(T),
+    (   T == econnrefused
+    ->  true
+    ;   sub_atom_icasechk(T, _, 'refused')
+    ),
+    !.
 
 %   The tokens to prove for the agent: those in its checkpoint, or the
 %   node's (a record may carry none).
@@ -217,11 +273,81 @@ loopback(localhost).
 loopback('127.0.0.1').
 
 %   Install the agent at the holder with a new epoch and start it with
-%   resurrected(OldEpoch, Dead); tell the other stops.
-resurrect(Node, Agent, E, K, MaxSeen, Here, Dest, Record0, Resume, Why) :-
-    locked(retract(ckpt(Node, Agent, E, K, _, _, _, _, _))),
+%   resurrected(OldEpoch, Dead). The new epoch is first promised by a
+%   majority of the stops (request `epoch`: each notes it and refuses
+%   the old copy from then on; a stop that knows a higher one refuses
+%   it), else nothing is installed and the checkpoint waits. Where the
+%   old copy may still run (Dest silent), the resurrected one starts a
+%   new round (its round number is one the old copy cannot have
+%   entered: see resume_point/3): a round is never written by two copies.
+resurrect(Node, Agent, E, K, MaxSeen, Here, Dest, Record0, Resume0, Dest_, Why) :-
     (   seen(Node, Agent, Seen) -> true ; Seen = E ),
-    E1 is max(max(E, MaxSeen), Seen) + 1,
+    (   tried_(Node, Agent, Tried) -> true ; Tried = E ),
+    E1 is max(max(max(E, MaxSeen), Seen), Tried) + 1,
+    record_stops(Record0, Agent, Stops0),
+    exclude([S]>>( same_address(S, Dest) ; same_address(S, Here) ), Stops0, Others),
+    record_tokens(Record0, Node, Tokens0),
+    promise(Others, Node, Tokens0, Agent, E1, 0, Promised, Refused),
+    majority(Stops0, Need),
+    (   Dest_ == gone -> DestCount = 1 ; DestCount = 0 ),
+    (   Refused == none,
+        1 + DestCount + Promised >= Need
+    ->  locked(( retract(ckpt(Node, Agent, E, K, _, _, _, _, _)),
+                 retractall(tried_(Node, Agent, _)) )),
+        resurrect_(Node, Agent, E1, K, Here, Dest, Record0, Resume0, Dest_, Why)
+    ;   Refused = superseded(E2)
+    ->  note_epoch(Node, Agent, E2),
+        drop(Node, Agent, E, K, superseded(E2))
+    ;   locked(( retractall(tried_(Node, Agent, _)),
+                 assertz(tried_(Node, Agent, E1)) )),
+        print_message(warning,
+                      format("dfrl: ~w: epoch ~w promised by ~w stops, a majority is ~w: \c
+                              not resurrected; asked again later", [Agent, E1, Promised, Need])),
+        wait_again(Node, Agent, E, K)
+    ).
+
+promise([], _, _, _, _, N, N, none).
+promise([S|Ss], Node, Tokens, Agent, E1, N0, N, Refused) :-
+    quick_call(Node, Tokens, S, epoch(Agent, E1), Answer),
+    (   Answer == noted
+    ->  N1 is N0 + 1,
+        promise(Ss, Node, Tokens, Agent, E1, N1, N, Refused)
+    ;   Answer = superseded(E2), E2 > E1
+    ->  N = N0, Refused = superseded(E2)
+    ;   promise(Ss, Node, Tokens, Agent, E1, N0, N, Refused)
+    ).
+
+%   resume_point(+Dest_, +Kind, +Resume0, -Resume)
+%
+%   Where a resurrection resumes: the checkpoint's resume point, except
+%   where the old copy may still run (Dest silent: cut off, frozen) and
+%   could write in the round it is in. Then the new copy starts the next
+%   round that the old copy cannot have entered: a round it had not
+%   started (round_done(R, false) unchanged: it starts R+1 only after its
+%   holder noted started(R+1)); started(R) -> after R; mid-round (none)
+%   -> after the round of the state (fresh). Where the old copy is gone,
+%   a round it was in goes on from the checkpoint (none), and a chain's
+%   round that had only started at its first stop starts again.
+resume_point(gone, chain, resume(S, Next, started(R)), resume(S, Next, round_done(R0, false))) :-
+    !,
+    R0 is R - 1.
+resume_point(_, _, resume(S, Next, started(R)), resume(S, Next, round_done(R, false))) :- !.
+resume_point(silent, _, resume(S, Next, none), resume(S, Next, fresh)) :- !.
+resume_point(_, _, Resume, Resume).
+
+%   A chain agent holds started(R) only at the stop where round R starts,
+%   before its first move (then its next holder takes over): it wrote no
+%   robot of another stop in R. A tree's root stays at its stop all round,
+%   while its copies write the other robots.
+record_itinerary(agent(_, _, _, _, _, _, Clauses, _), Agent, Kind) :-
+    (   memberchk((dfrl_itinerary_of(Agent, tree(_)) :- _), Clauses)
+    ->  Kind = tree
+    ;   Kind = chain
+    ).
+
+resurrect_(Node, Agent, E1, K, Here, Dest, Record0, Resume0, Dest_, Why) :-
+    record_itinerary(Record0, Agent, Itinerary),
+    resume_point(Dest_, Itinerary, Resume0, Resume),
     Resume = resume(State, _, _),
     record_state(Record0, State, Record1),
     Record1 = agent(Name, H, Kind, T, P, Preds, Cls0, Hops),
@@ -231,12 +357,14 @@ resurrect(Node, Agent, E, K, MaxSeen, Here, Dest, Record0, Resume, Why) :-
     agent_install(Node, Record, idle, Agent),
     print_message(warning, format("dfrl: ~w lost at ~w (~p); resurrected at ~w with epoch ~w",
                                   [Agent, Dest, Why, Node, E1])),
-    % The other stops hear of the new epoch before the agent can move to
-    % one of them (a copy staged there by the dead stop is discarded).
-    record_stops(Record, Agent, Stops0),
-    exclude([S]>>( same_address(S, Dest) ; same_address(S, Here) ), Stops0, Stops),
+    % The other stops heard of the new epoch (promise/8) before the agent
+    % can move to one of them (a copy staged there by the dead stop is
+    % discarded); Dest hears of it too, if it answers.
     record_tokens(Record, Node, Tokens),
-    lease_broadcast_epoch(Node, Tokens, Agent, E1, Stops),
+    (   Dest_ == gone
+    ->  lease_broadcast_epoch(Node, Tokens, Agent, E1, [Dest])
+    ;   true
+    ),
     node_property(Node, link(Link)),
     agent_execute(Node, Agent, Link, resurrected(E1, Here, Dest, Resume)).
 
@@ -309,29 +437,40 @@ beat_once(Node, Agent) :-
         \+ ckpt(Node, Agent, E, K, _, _, _, _, _)    % held here: it is leaving
     ->  agent_tokens(Node, Agent, Tokens),
         quick_call(Node, Tokens, Holder, progress(Agent, E, K, alive), Answer),
-        locked(( retract(beat(Node, Agent, _))
-               ->  assertz(beat(Node, Agent, Now))
-               ;   true
-               )),
-        beat_answer(Answer, Node, Agent, E, K)
+        (   Answer = error(_)
+        ->  true                    % tried again at the next tick
+        ;   locked(( retract(beat(Node, Agent, _))
+                   ->  assertz(beat(Node, Agent, Now))
+                   ;   true
+                   ))
+        ),
+        beat_answer(Answer, Node, Agent, E, K, Now)
     ;   true
     ).
 
+%   renewed: the copy may write until lease_s after Sent (note_valid/3);
 %   superseded: the agent retires at its next check (it looks at the
 %   epochs this node has seen); unknown: its holder has no checkpoint of
 %   it (restarted, or dropped it), so the agent finds another one at its
-%   next round start (lease_needs_holder/2).
-beat_answer(superseded(E2), Node, Agent, _, _) :-
+%   next round start (lease_needs_holder/2), as when its lease ran out.
+beat_answer(renewed, Node, Agent, _, _, Sent) :-
+    !,
+    note_valid(Node, Agent, Sent).
+beat_answer(superseded(E2), Node, Agent, _, _, _) :-
     !,
     note_epoch(Node, Agent, E2).
-beat_answer(unknown, Node, Agent, E, K) :-
+beat_answer(error(Why), Node, Agent, E, K, Sent) :-
+    refused(Why),                       % its process is gone, its checkpoints too
+    !,
+    beat_answer(unknown, Node, Agent, E, K, Sent).
+beat_answer(unknown, Node, Agent, E, K, _) :-
     !,
     locked(( holder_lost(Node, Agent, E, K)
            ->  true
            ;   retractall(holder_lost(Node, Agent, _, _)),
                assertz(holder_lost(Node, Agent, E, K))
            )).
-beat_answer(_, _, _, _, _).
+beat_answer(_, _, _, _, _, _).
 
 :- at_halt(stop_threads).
 

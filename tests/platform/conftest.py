@@ -75,6 +75,8 @@ def procs() -> Iterator[list[Proc]]:
     yield started
     for p in started:
         p.stop()
+    for i, p in enumerate(started):      # shown by pytest only when the test failed
+        print(f"--- process {i}: {' '.join(p.popen.args[:3])}\n{p.output()}")
 
 
 def start_node(procs: list[Proc], *args: str,
