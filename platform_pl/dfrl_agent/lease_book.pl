@@ -75,6 +75,10 @@ agent's tokens and wait at most a half (custody_call/5) or a quarter
 %   (false: the copy is kept and the arrival stays refused).
 :- create_prolog_flag(dfrl_resting_holder, true, [type(boolean), keep(true)]).
 :- create_prolog_flag(dfrl_replace_stale, true, [type(boolean), keep(true)]).
+%   dfrl_quorum: a holder resurrects only with a majority of the stops
+%   answering and promising the new epoch (false: it resurrects alone, as
+%   before issue 33; the control of the partition tests).
+:- create_prolog_flag(dfrl_quorum, true, [type(boolean), keep(true)]).
 
 %!  locked(:Goal) is semidet.
 %
@@ -172,12 +176,16 @@ lease_valid(Node, Agent) :-
 
 %!  majority(+Stops, -Count) is det.
 %
-%   Count is the majority of the distinct stops Stops: more than half.
+%   Count is the majority of the distinct stops Stops: more than half
+%   (1 when the flag dfrl_quorum is false).
 
 majority(Stops, Count) :-
-    sort(Stops, Set),
-    length(Set, N),
-    Count is N // 2 + 1.
+    (   current_prolog_flag(dfrl_quorum, false)
+    ->  Count = 1
+    ;   sort(Stops, Set),
+        length(Set, N),
+        Count is N // 2 + 1
+    ).
 
 %!  prune_gone(+Node, +Agent) is det.
 %

@@ -4,7 +4,8 @@
             memory_robot_table/2,       % ?Robot, ?Values
             memory_robot_sets/2,        % ?Robot, ?Count
             memory_robot_delay/2,       % +Robot, +Seconds
-            memory_robot_options/3      % ?Robot, ?Op, ?Options
+            memory_robot_options/3,     % ?Robot, ?Op, ?Options
+            memory_robot_history/2      % +Robot, +CsvFile
           ]).
 /** <module> Robots with in-memory tables, for the platform's tests
 
@@ -19,10 +20,10 @@ options of the last read and write of each robot are kept
 */
 :- use_module('../../platform_pl/robot_resources', []).
 :- autoload(library(apply), [maplist/3]).
-:- autoload(library(lists), [member/2]).
+:- autoload(library(lists), [member/2, memberchk/2]).
 :- autoload(library(error), [must_be/2]).
 
-:- dynamic table_/2, sets_/2, delay_/2, options_/3.
+:- dynamic table_/2, sets_/2, delay_/2, options_/3, history_/2.
 
 :- multifile
     robot_resources:robot/2,
@@ -72,6 +73,39 @@ seen(R, Op, O) :-
 
 %!  memory_robot_table(?Robot, ?Values) is nondet.
 
+%!  memory_robot_history(+Robot, +CsvFile) is det.
+%
+%   Every later write of Robot appends a row to CsvFile, in the columns
+%   of a robot process's shares_<robot>.csv (robot, share_index,
+%   iteration, wall_time, digest, round, agent, epoch: the write's
+%   options; the digest is the SHA-1 of the values), so that the history
+%   checker reads it as it reads a run's.
+
+memory_robot_history(R, File) :-
+    retractall(history_(R, _)),
+    assertz(history_(R, File)),
+    setup_call_cleanup(open(File, write, Out),
+                       format(Out, "robot,share_index,iteration,wall_time,digest,round,agent,epoch~n", []),
+                       close(Out)).
+
+note_history(R, N, V, O) :-
+    (   history_(R, File)
+    ->  get_time(T),
+        variant_sha1(V, Digest),
+        option_or_empty(round, O, Round),
+        option_or_empty(agent, O, Agent),
+        option_or_empty(epoch, O, Epoch),
+        setup_call_cleanup(open(File, append, Out),
+                           format(Out, "~w,~w,0,~6f,~w,~w,~w,~w~n",
+                                  [R, N, T, Digest, Round, Agent, Epoch]),
+                           close(Out))
+    ;   true
+    ).
+
+option_or_empty(Name, Options, Value) :-
+    Opt =.. [Name, V],
+    (   memberchk(Opt, Options) -> Value = V ; Value = '' ).
+
 memory_robot_table(R, V) :-
     table_(R, V).
 
@@ -109,4 +143,5 @@ robot_resources:table_set(R, T, O) :-
                  assertz(table_(R, V)),
                  retract(sets_(R, N)),
                  N1 is N + 1,
-                 assertz(sets_(R, N1)) )).
+                 assertz(sets_(R, N1)),
+                 note_history(R, N1, V, O) )).
