@@ -45,11 +45,11 @@ from enum import Enum
 from pathlib import Path
 from typing import Any
 
-from dfrl.experiments.driver.results.rounds import Share
+from dfrl.experiments.driver.results.rounds import Share, counted_writes
 from dfrl.experiments.errors import ExperimentError
 
 __all__ = ["HistoryInputError", "HistoryVerdict", "Violation", "ViolationKind",
-           "check_history", "check_shares", "read_history_file"]
+           "check_history", "check_shares", "read_history", "read_history_file"]
 
 #: Columns a shares file must have (``round``, ``agent`` and ``epoch`` may be missing: an
 #: older node's file, whose rows are then all ignored).
@@ -267,14 +267,7 @@ def _stale(agent: str, rows_of: dict[str, list[Share]]) -> list[Violation]:
 
 
 def _split(agent: str, rows_of: dict[str, list[Share]]) -> list[Violation]:
-    # round -> robot -> the write that counts (highest epoch, the last of them)
-    counted: dict[int, dict[str, Share]] = {}
-    for robot, rows in rows_of.items():
-        for s in rows:
-            assert s.round is not None
-            held = counted.setdefault(s.round, {}).get(robot)
-            if held is None or _epoch(s) >= _epoch(held):
-                counted[s.round][robot] = s
+    counted = counted_writes(rows_of, agent)
     out = []
     for n, writes in counted.items():
         digests: dict[str, list[str]] = {}
@@ -358,16 +351,11 @@ def _share(path: Path, line: int, col: dict[str, int], cells: list[str], robot: 
                  number("epoch", optional=True))
 
 
-def check_history(out_dir: Path, robots: Sequence[str] | None = None) -> HistoryVerdict:
-    """Check the ``shares_<robot>.csv`` files of a results folder (see the module doc).
-
-    Parameters
-    ----------
-    out_dir : Path
-        The results folder.
-    robots : sequence of str, optional
-        The robots whose files to read (a missing file: no rows); default: every
-        ``shares_*.csv`` of the folder.
+def read_history(out_dir: Path,
+                 robots: Sequence[str] | None = None) -> tuple[dict[str, list[Share]], int]:
+    """The shares files of a results folder read strictly: (robot -> its rows, torn last
+    lines left out). ``robots``: whose files to read (a missing file: no rows); default:
+    every ``shares_*.csv`` of the folder.
 
     Raises
     ------
@@ -389,4 +377,24 @@ def check_history(out_dir: Path, robots: Sequence[str] | None = None) -> History
     for rid in robots:
         shares[rid], t = read_history_file(out / f"shares_{rid}.csv", rid)
         torn += t
+    return shares, torn
+
+
+def check_history(out_dir: Path, robots: Sequence[str] | None = None) -> HistoryVerdict:
+    """Check the ``shares_<robot>.csv`` files of a results folder (see the module doc).
+
+    Parameters
+    ----------
+    out_dir : Path
+        The results folder.
+    robots : sequence of str, optional
+        The robots whose files to read (a missing file: no rows); default: every
+        ``shares_*.csv`` of the folder.
+
+    Raises
+    ------
+    HistoryInputError
+        See :func:`read_history`.
+    """
+    shares, torn = read_history(out_dir, robots)
     return check_shares(shares, torn)
