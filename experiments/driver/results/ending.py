@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 from dfrl.experiments.driver.config import ExperimentConfig
 from dfrl.experiments.driver.results.agent_log import AgentLog
@@ -158,13 +158,13 @@ def ended_short(out: Path, config: ExperimentConfig, robots: list[str],
     was to. I: its last iteration in ``metrics.csv``, else ``iterations`` (what the writer
     knew); N: its node config's (``nodes/<robot>.json``), its checkpoint's, else the
     config's for a robot of the config (a robot whose plan is unknown is not judged)."""
-    curves = {}
+    curves: dict[str, Any] = {}
     try:
         curves = read_metrics(out / "metrics.csv")
     except (OSError, ValueError, KeyError):
         pass
     own = {s.id for s in config.robots}
-    out_lines = {}
+    out_lines: dict[str, str] = {}
     for rid in robots:
         cur = curves.get(rid)
         done = int(cur["iteration"].max()) if cur is not None and len(cur) else \

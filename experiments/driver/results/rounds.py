@@ -51,7 +51,7 @@ def read_shares(path: str | Path) -> list[Share]:
     return rows
 
 
-def match_shares(record: RoundRecord, shares: dict[str, list[Share]],
+def match_shares(record: RoundRecord, shares: Mapping[str, Sequence[Share]],
                  slack_s: float = 1e-4) -> dict[str, Share | None]:
     """For each robot the round visited, the share it received during that round.
 
