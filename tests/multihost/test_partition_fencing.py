@@ -33,7 +33,7 @@ pytestmark = [pytest.mark.skipif(WHY is not None, reason=WHY or ""), pytest.mark
 
 HERE = Path(__file__).resolve().parent
 MEMORY_ROBOTS = HERE.parent / "platform" / "memory_robots.pl"
-TOKEN = 7
+TOKEN = 463709187335281729054263357812893156702
 PORT = 7300
 LEASE_S = 2.0
 STOPS = 5
