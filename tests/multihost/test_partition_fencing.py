@@ -64,6 +64,11 @@ serve_stdin :-
         findall(A-S, agent_property(N, A, status(S)), L),
         format("AGENTS ~q~n", [L]), flush_output,
         serve_stdin
+    ;   split_string(Line, " ", "", ["delay", D]),
+        number_string(S, D)
+    ->  forall(memory_robot_table(R, _), memory_robot_delay(R, S)),
+        format("DELAY ~w~n", [S]), flush_output,
+        serve_stdin
     ;   serve_stdin
     ).
 """
@@ -105,11 +110,12 @@ class Federation:
             assert p.stdout is not None
             assert p.stdout.readline().startswith("LISTENING"), "a stop did not start"
 
-    def launch(self, rounds: int, rest: float) -> None:
+    def launch(self, rounds: int, rest: float, itinerary: str = "chain") -> None:
         stops = ",".join(f"stop('{self.lab[f's{i}'].address}',{PORT},r{i})" for i in range(STOPS))
         plan = self.tmp / "plan.txt"
+        kind = "" if itinerary == "chain" else ", itinerary(tree(2))"
         plan.write_text(f"plan([{stops}], {rounds}, {rest}, {str(self.log)!r}, "
-                        f"[skip_after(1.0)]).\n")
+                        f"[skip_after(1.0){kind}]).\n")
         drv = self.lab["drv"]
         done = drv.run([SWIPL, "-q", "-g", "main", "-t", "halt", str(self.tmp / "console.pl"),
                         drv.address, str(plan)], timeout=60, capture_output=True, text=True)
@@ -138,6 +144,13 @@ class Federation:
         p.stdin.flush()
         return p.stdout.readline().strip()
 
+    def command(self, i: int, line: str) -> str:
+        p = self.nodes[i]
+        assert p.stdin is not None and p.stdout is not None
+        p.stdin.write(line + "\n")
+        p.stdin.flush()
+        return p.stdout.readline().strip()
+
     def stderr(self) -> str:
         return "\n".join(f"--- s{i}\n" + (self.tmp / f"s{i}.err").read_text()[-3000:]
                          for i in range(STOPS))
@@ -161,10 +174,14 @@ def _judge(fed: Federation) -> None:
         assert "fx" not in fed.agents(i), (i, fed.agents(i))
 
 
-def test_cut_holder_does_not_resurrect(tmp_path: Path) -> None:
+ITINERARIES = ["chain", "tree"]
+
+
+@pytest.mark.parametrize("itinerary", ITINERARIES)
+def test_cut_holder_does_not_resurrect(tmp_path: Path, itinerary: str) -> None:
     with Lab([*(f"s{i}" for i in range(STOPS)), "drv"]) as lab:
         fed = Federation(lab, tmp_path)
-        fed.launch(rounds=16, rest=0.6)
+        fed.launch(rounds=16, rest=0.6, itinerary=itinerary)
         _cut_after_a_round(fed, "s1", 4 * LEASE_S)
         fed.wait(lambda: fed.events("finished"), 120, "the end of the tour")
         time.sleep(LEASE_S)              # a late copy would show itself now
@@ -176,10 +193,11 @@ def test_cut_holder_does_not_resurrect(tmp_path: Path) -> None:
         assert cut_rounds, "the cut of s1 did not cost s1 a round"
 
 
-def test_cut_agent_host_leaves_one_writer(tmp_path: Path) -> None:
+@pytest.mark.parametrize("itinerary", ITINERARIES)
+def test_cut_agent_host_leaves_one_writer(tmp_path: Path, itinerary: str) -> None:
     with Lab([*(f"s{i}" for i in range(STOPS)), "drv"]) as lab:
         fed = Federation(lab, tmp_path)
-        fed.launch(rounds=16, rest=0.6)
+        fed.launch(rounds=16, rest=0.6, itinerary=itinerary)
         _cut_after_a_round(fed, "s0", 4 * LEASE_S)
         fed.wait(lambda: fed.events("finished"), 120, "the end of the tour")
         fed.wait(lambda: fed.events("superseded"), 20, "the cut copy to retire")
@@ -207,3 +225,24 @@ def test_cut_holder_without_quorum_is_split_brain(tmp_path: Path) -> None:
         assert [r["from"] for r in fed.events("resurrected")] == [f"{lab['s1'].address}:{PORT}"]
         verdict = check_history(fed.tmp)
         assert not verdict.ok, verdict.text()
+
+
+def test_cut_mid_round_starts_a_new_round(tmp_path: Path) -> None:
+    # The agent sits at s2 (its robot slow to read) in the forward pass when s2 is cut off:
+    # its holder s1, with the majority, resurrects it into the next round (the copy at s2 might
+    # still write r2 in this one); the copy cut off writes nothing once its lease ran out.
+    with Lab([*(f"s{i}" for i in range(STOPS)), "drv"]) as lab:
+        fed = Federation(lab, tmp_path)
+        fed.launch(rounds=12, rest=0.6)
+        fed.wait(lambda: len(fed.events("round")) >= 3, 60, "three rounds")
+        assert fed.command(2, "delay 3.0").startswith("DELAY")
+        fed.wait(lambda: "fx-running" in fed.agents(2), 30, "the agent reading r2")
+        fed.lab.cut("s2")
+        time.sleep(4 * LEASE_S)
+        fed.lab.mend("s2")
+        fed.command(2, "delay 0.0")
+        fed.wait(lambda: fed.events("finished"), 120, "the end of the tour")
+        fed.wait(lambda: fed.events("superseded"), 20, "the cut copy to retire")
+        [res] = fed.events("resurrected")
+        assert res["epoch"] == 2 and res["from"] == f"{lab['s1'].address}:{PORT}", res
+        _judge(fed)
