@@ -326,9 +326,19 @@ class RobotService:
                 raise config_error(f"no checkpoint to resume from: {exc.filename}") from None
             raise config_error(f"{type(exc).__name__}: {exc}") from None
         self.run, self.state = run, State.CONFIGURED
+        self._forget_leases(warn)
         self.say(f"dfrl robot: experiment {experiment} configured (robot {config.robot}, "
                  f"{config.iterations} iterations{', resumed at ' + str(run.iteration) if resume else ''})")
         return Term("ok", Atom("true"))
+
+    def _forget_leases(self, warn: Any) -> None:
+        """The node forgets the epochs, writes and checkpoints of the agents of the experiment
+        before (lease_book:lease_forget/1): the next experiment's agent may bear the same name
+        and starts again at epoch 1 and round 1, which the robot's fencing would refuse."""
+        try:
+            self.bridge.prolog.call("lease_forget", self.node_name, module="lease_book")
+        except Exception as exc:  # noqa: BLE001 - the run goes on; the warning says what failed
+            warn(f"dfrl robot: the node kept the leases of the experiment before: {exc}")
 
     def files(self) -> list[tuple[str, int]]:
         """(name relative to the experiment's folder, size) of its result files, sorted."""

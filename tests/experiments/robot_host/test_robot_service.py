@@ -201,6 +201,9 @@ def test_runs_experiments_in_a_row_and_serves_their_files(service: Service,
     with open(workdir / "e2" / "metrics_r4.csv", newline="") as fh:
         assert [int(r["iteration"]) for r in csv.DictReader(fh)] == list(range(1, 61))
     assert (workdir / "e1" / "metrics_r1.csv").is_file()          # the first one's files stay
+    # each configure made the node forget the leases and writes of the experiment before
+    for err in (workdir / "e1" / "logs" / "r1.err", workdir / "e2" / "logs" / "r4.err"):
+        assert "kept the leases" not in err.read_text(), err.read_text()
 
 
 def test_stop_ends_a_run_early(service: Service) -> None:
