@@ -126,19 +126,38 @@ resurrection).
     it came back, in every later round). A round it was resting before
     is not lost: the resurrection starts the next one.
   - A pause (SIGSTOP) or partition of the agent's node longer than the
-    lease is taken for a death. The late original then meets the higher
-    epoch at its next contact with the holder or with any stop that got
-    the epoch broadcast (its next arrival, heartbeat, round end or rest
-    end) and retires there, *before* logging a round. So the two copies
-    never both log the same round, with two exceptions: the original's node
-    is cut off from every stop that knows the new epoch (a partition
-    that outlasts the lease: it finishes its round alone, on its own
-    stops, and logs it; the round events carry `epoch`, so a reader
-    keeps the highest epoch per round), or it is frozen in the few
-    microseconds between its holder's answer and its log write. Until
-    it retires the original may still read and write the table of the
-    robot it is on; the newer copy that finds it there replaces it
-    (step 8).
+    lease is taken for a death, but only by a holder that reaches a
+    majority of the itinerary's stops (itself included; the lost stop
+    counts only if it answered without the agent or refused the
+    connection) and gets a majority to promise the new epoch (request
+    `epoch`: a stop that knows a higher one refuses). A holder cut off
+    with a minority resurrects nothing: it keeps its checkpoint and asks
+    again every half lease, and drops it once a stop tells of a later
+    hop (the agent found another holder meanwhile).
+  - *Fencing.* The copy on a node writes a robot only under its side of
+    the lease: until lease_s x (1 - 1%) after the request that last
+    renewed it left (heartbeat, progress, hold), or after it arrived (its
+    holder starts the checkpoint's lease again once the move succeeded,
+    lease_departed/1). Its holder resurrects only after a whole lease_s
+    without a renewal by its own clock, so the old copy has stopped
+    writing by then as long as no clock runs more than 1% faster than
+    another over a lease (a step of the wall clock, e.g. a manual
+    reset, is not covered). A round starts only once its holder noted
+    started(Round) (dfrl_agent's round gate); a copy that cannot renew
+    its lease nor find another holder waits, parked, without writing,
+    and retires when it meets the higher epoch. The robot's node refuses
+    a write of an epoch lower than the highest it has seen of the agent,
+    and a second write of a round (lease_fenced/4).
+  - *Rounds.* Where the old copy may still run (the lost stop did not
+    answer: cut off or frozen), the resurrected copy starts the next
+    round the old one cannot have entered (resume_point/4 in
+    lease_watch.pl): after a mid-round checkpoint, the next round; after
+    started(R), R+1. So no round is written by two copies. Where the old
+    copy is gone (its stop answered without it or refused the
+    connection: killed, restarted), a chain's round goes on from the
+    checkpoint as before.
+  - The flag `dfrl_quorum` (per process, true) false lets a holder
+    resurrect alone, as before (the control of the partition tests).
   - A pause or partition shorter than the lease never causes a
     resurrection.
   - Two faults at once are not covered: if the holder dies too before
