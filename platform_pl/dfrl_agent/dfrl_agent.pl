@@ -790,9 +790,10 @@ ensure_holder(M, Agent, S) :-
     ).
 
 %   A round starts only under a lease that its holder knows covers this
-%   round (progress started(Round)): a holder that resurrects the agent
-%   then starts the round after it, never this one again. Without it (the
-%   holder cut off or frozen, no other stop takes a checkpoint), the agent
+%   round (progress started(Round), one request a round): a holder that
+%   resurrects the agent where the old copy may still run then starts
+%   the round after it, never this one again. Without it (the holder cut
+%   off or frozen, and no other stop takes a checkpoint), the agent
 %   waits, parked, and tries again every half second, up to 900 s; a
 %   higher epoch met meanwhile retires it (and the gate fails).
 round_gate(M, Agent, S) :-
@@ -808,6 +809,7 @@ round_gate(Node, M, Agent, S, T0, Tries) :-
     ->  retire(Node, M, Agent, E2),
         fail
     ;   Tries =:= 0,
+        \+ lease_valid(Node, Agent),
         lease_needs_holder(Node, Agent)
     ->  round_gate(Node, M, Agent, S, T0, 1)    % its holder was lost just now
     ;   lease_valid(Node, Agent)

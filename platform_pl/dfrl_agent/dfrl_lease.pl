@@ -244,10 +244,7 @@ lease_departed(ticket(Node, Agent, custody(E, K, Holder), E, K1, Tokens)) :-
     get_time(Now),
     Expiry is Now + L,
     locked(( retractall(valid(Node, Agent, _)),
-             (   retract(ckpt(Node, Agent, E, K1, H, D, R, S, _))
-             ->  assertz(ckpt(Node, Agent, E, K1, H, D, R, S, Expiry))
-             ;   true
-             ) )),
+             set_expiry(Node, Agent, E, K1, Expiry) )),
     release(Node, Tokens, Agent, Holder, E, K, left, _).
 
 release(_, _, _, none, _, _, _, none) :- !.
@@ -527,12 +524,23 @@ serve(progress(Agent, E, K, Progress), Node, Answer) :-
         lease_s(Node, L),
         get_time(Now),
         Expiry is Now + L,
-        locked(( retract(ckpt(Node, Agent, E, K, Here, Dest, Rec0, Res0, _))
-               ->  apply_progress(Progress, Here, Rec0, Res0, Rec, Res),
+        locked(( \+ ckpt(Node, Agent, E, K, _, _, _, _, _)
+               ->  Answer = unknown
+               ;   Progress == alive            % a heartbeat: the expiry only
+               ->  set_expiry(Node, Agent, E, K, Expiry),
+                   Answer = renewed
+               ;   Progress = started(Round)    % a round starts: noted beside it
+               ->  set_expiry(Node, Agent, E, K, Expiry),
+                   retractall(entered(Node, Agent, E, K, _)),
+                   assertz(entered(Node, Agent, E, K, Round)),
+                   Answer = renewed
+               ;   retract(ckpt(Node, Agent, E, K, Here, Dest, Rec0, Res0, _)),
+                   apply_progress(Progress, Here, Rec0, Res0, Rec, Res),
                    assertz(ckpt(Node, Agent, E, K, Here, Dest, Rec, Res,
                                 Expiry)),
+                   retractall(renewed(Node, Agent, E, K, _)),
+                   retractall(entered(Node, Agent, E, K, _)),
                    Answer = renewed
-               ;   Answer = unknown
                ))
     ).
 serve(epoch(Agent, E), Node, Answer) :-
@@ -663,8 +671,6 @@ progress_fact(Agent, dfrl_method_of(Agent, Method)) :-
 %   A round ended where the agent is: a resurrection starts the next
 %   round from the holder, with the facts (plan, method) as they are now.
 apply_progress(alive, _, Rec, Res, Rec, Res).
-apply_progress(started(Round), _, Rec, resume(S0, Next, _), Rec,
-               resume(S0, Next, started(Round))).
 apply_progress(round_done(Round, Last, Facts), _, Rec0, resume(S0, Next, _),
                Rec, resume(S0, Next, round_done(Round, Last))) :-
     Rec0 = agent(Name, H, K, T, P, Preds, Cls0, Hops),

@@ -5,6 +5,10 @@
             beat/3,                     % Node, Agent, LastBeat
             holder_lost/4,              % Node, Agent, Epoch, Seq
             valid/3,                    % Node, Agent, Until
+            renewed/5,                  % Node, Agent, Epoch, Seq, Expiry
+            entered/5,                  % Node, Agent, Epoch, Seq, Round
+            set_expiry/5,               % +Node, +Agent, +Epoch, +Seq, +Expiry
+            ckpt_expiry/5,              % ?Node, ?Agent, ?Epoch, ?Seq, -Expiry
             written/5,                  % Node, Agent, Robot, Round, Epoch
             lease_forget/1,             % +Node
             note_valid/3,               % +Node, +Agent, +Since
@@ -36,7 +40,12 @@ nodes of this process, shared by the agent's side and the holder's
 (dfrl_lease.pl) and by the threads that watch leases and renew them
 (lease_watch.pl):
 
-  - ckpt/9: the checkpoints a node holds, each with its lease's expiry;
+  - ckpt/9: the checkpoints a node holds, each with its lease's expiry
+    when it was stored; renewed/5: a later expiry of one (a renewal
+    stores only that, not again the checkpoint, which holds the agent's
+    aggregate: some 200 KB at 20,000 floats); entered/5: the round the
+    agent told the holder of a checkpoint it starts (progress
+    started(Round));
   - gone/6: the last 64 departures and ends of each agent a node saw;
   - seen/3: the highest epoch of each agent a node has seen;
   - beat/3: the agents on a node that renew their holder's lease;
@@ -60,6 +69,8 @@ agent's tokens and wait at most a half (custody_call/5) or a quarter
     beat/3,
     holder_lost/4,
     valid/3,
+    renewed/5,
+    entered/5,
     written/5.
 
 :- multifile
@@ -127,6 +138,30 @@ note_epoch(Node, Agent, E) :-
            ;   retractall(seen(Node, Agent, _)),
                assertz(seen(Node, Agent, E))
            )).
+
+%!  set_expiry(+Node, +Agent, +Epoch, +Seq, +Expiry) is det.
+%
+%   The lease of the checkpoint Epoch/Seq of Agent on Node now runs to
+%   Expiry (if Node holds it). Call holding the lock.
+
+set_expiry(Node, Agent, E, K, Expiry) :-
+    retractall(renewed(Node, Agent, E, K, _)),
+    (   ckpt(Node, Agent, E, K, _, _, _, _, _)
+    ->  assertz(renewed(Node, Agent, E, K, Expiry))
+    ;   true
+    ).
+
+%!  ckpt_expiry(?Node, ?Agent, ?Epoch, ?Seq, -Expiry) is nondet.
+%
+%   Expiry is when the lease of a checkpoint runs out: the later of its
+%   stored expiry and its last renewal.
+
+ckpt_expiry(Node, Agent, E, K, Expiry) :-
+    ckpt(Node, Agent, E, K, _, _, _, _, X0),
+    (   renewed(Node, Agent, E, K, X1)
+    ->  Expiry is max(X0, X1)
+    ;   Expiry = X0
+    ).
 
 %!  lease_drift(-Fraction) is det.
 %
@@ -287,4 +322,6 @@ lease_forget(Node) :-
              retractall(beat(Node, _, _)),
              retractall(holder_lost(Node, _, _, _)),
              retractall(valid(Node, _, _)),
+             retractall(renewed(Node, _, _, _, _)),
+             retractall(entered(Node, _, _, _, _)),
              retractall(written(Node, _, _, _, _)) )).

@@ -91,8 +91,11 @@ watch_loop :-
         ;   true                        % the timeout: a tick
         ),
         get_time(Now),
-        findall(ckpt(N, A, E, K), ( ckpt(N, A, E, K, _, _, _, _, X), X < Now ),
-                Due),
+        findall(ckpt(N, A, E, K), ( ckpt_expiry(N, A, E, K, X), X < Now ), Due),
+        locked(forall(( ( renewed(N, A, E, K, _) ; entered(N, A, E, K, _) ),
+                        \+ ckpt(N, A, E, K, _, _, _, _, _) ),
+                      ( retractall(renewed(N, A, E, K, _)),
+                        retractall(entered(N, A, E, K, _)) ))),
         forall(member(C, Due),
                catch(expired(C), Err, print_message(warning, Err))),
         watch_loop
@@ -146,10 +149,7 @@ renew(Node, Agent, E, K) :-
     lease_s(Node, L),
     get_time(Now),
     Expiry is Now + L,
-    locked(( retract(ckpt(Node, Agent, E, K, H, D, R, S, _))
-           ->  assertz(ckpt(Node, Agent, E, K, H, D, R, S, Expiry))
-           ;   true
-           )).
+    locked(set_expiry(Node, Agent, E, K, Expiry)).
 
 drop(Node, Agent, E, K, Why) :-
     debug(dfrl(lease), 'drop checkpoint ~w/~w/~w on ~w: ~p', [Agent, E, K, Node, Why]),
@@ -200,10 +200,7 @@ wait_again(Node, Agent, E, K) :-
     lease_s(Node, L),
     get_time(Now),
     Expiry is Now + L/2,
-    locked(( retract(ckpt(Node, Agent, E, K, H, D, R, S, _))
-           ->  assertz(ckpt(Node, Agent, E, K, H, D, R, S, Expiry))
-           ;   true
-           )).
+    locked(set_expiry(Node, Agent, E, K, Expiry)).
 
 %   Does any other stop know of a later hop or a higher epoch? Answered
 %   counts the stops that answered at all. An epoch this holder itself
@@ -317,28 +314,29 @@ promise([S|Ss], Node, Tokens, Agent, E1, N0, N, Refused) :-
     ;   promise(Ss, Node, Tokens, Agent, E1, N0, N, Refused)
     ).
 
-%   resume_point(+Dest_, +Kind, +Resume0, -Resume)
+%   resume_point(+Dest_, +Itinerary, +Entered, +Resume0, -Resume)
 %
-%   Where a resurrection resumes: the checkpoint's resume point, except
-%   where the old copy may still run (Dest silent: cut off, frozen) and
-%   could write in the round it is in. Then the new copy starts the next
-%   round that the old copy cannot have entered: a round it had not
-%   started (round_done(R, false) unchanged: it starts R+1 only after its
-%   holder noted started(R+1)); started(R) -> after R; mid-round (none)
-%   -> after the round of the state (fresh). Where the old copy is gone,
-%   a round it was in goes on from the checkpoint (none), and a chain's
-%   round that had only started at its first stop starts again.
-resume_point(gone, chain, resume(S, Next, started(R)), resume(S, Next, round_done(R0, false))) :-
-    !,
-    R0 is R - 1.
-resume_point(_, _, resume(S, Next, started(R)), resume(S, Next, round_done(R, false))) :- !.
-resume_point(silent, _, resume(S, Next, none), resume(S, Next, fresh)) :- !.
-resume_point(_, _, Resume, Resume).
+%   Where a resurrection resumes. A copy enters a round only once its
+%   holder noted it (progress started(Round), kept as entered/5: Entered
+%   is that round, or none). Where the old copy may still run and write
+%   (Dest silent: cut off or frozen), the new copy starts a round the old
+%   one cannot have entered: after the round it entered, or after the
+%   round of a mid-round checkpoint (none: fresh); a round_done(R) not
+%   followed by started(R+1) starts R+1 as before. Where the old copy is
+%   gone (its stop answered without it or refused the connection), a
+%   chain goes on as before (a mid-round checkpoint goes on with its
+%   round; a round it had only entered at its first stop, before its
+%   first move, starts again: it wrote no other robot in it). A tree's
+%   root stays at its stop all round while its copies write the other
+%   robots: a round it entered is never started again.
+resume_point(_, _, _, resume(S, Next, round_done(R, true)), resume(S, Next, round_done(R, true))) :- !.
+resume_point(gone, chain, _, Resume, Resume) :- !.
+resume_point(_, _, R, resume(S, Next, round_done(_, false)), resume(S, Next, round_done(R, false))) :-
+    integer(R),
+    !.
+resume_point(_, _, _, resume(S, Next, round_done(R, false)), resume(S, Next, round_done(R, false))) :- !.
+resume_point(_, _, _, resume(S, Next, none), resume(S, Next, fresh)).
 
-%   A chain agent holds started(R) only at the stop where round R starts,
-%   before its first move (then its next holder takes over): it wrote no
-%   robot of another stop in R. A tree's root stays at its stop all round,
-%   while its copies write the other robots.
 record_itinerary(agent(_, _, _, _, _, _, Clauses, _), Agent, Kind) :-
     (   memberchk((dfrl_itinerary_of(Agent, tree(_)) :- _), Clauses)
     ->  Kind = tree
@@ -347,7 +345,8 @@ record_itinerary(agent(_, _, _, _, _, _, Clauses, _), Agent, Kind) :-
 
 resurrect_(Node, Agent, E1, K, Here, Dest, Record0, Resume0, Dest_, Why) :-
     record_itinerary(Record0, Agent, Itinerary),
-    resume_point(Dest_, Itinerary, Resume0, Resume),
+    (   entered(Node, Agent, E0, K, Entered), E0 < E1 -> true ; Entered = none ),
+    resume_point(Dest_, Itinerary, Entered, Resume0, Resume),
     Resume = resume(State, _, _),
     record_state(Record0, State, Record1),
     Record1 = agent(Name, H, Kind, T, P, Preds, Cls0, Hops),
