@@ -17,7 +17,8 @@ from dfrl.experiments.driver.results.evaluations import merge_evaluations
 from dfrl.experiments.driver.results.faults import assess
 from dfrl.experiments.driver.results.files import read_json
 from dfrl.experiments.driver.results.history import (HistoryInputError, HistoryVerdict,
-                                                     check_shares, read_history)
+                                                     approximate_robots, check_shares,
+                                                     read_history)
 from dfrl.experiments.driver.results.metrics import merge_metrics, read_metrics
 from dfrl.experiments.driver.results.plots import plot_experiment
 from dfrl.experiments.driver.results.rounds import Share, read_shares, write_rounds_csv
@@ -148,7 +149,7 @@ def _check_history(out: Path, robots: list[str]) -> tuple[dict[str, list[Share]]
     except HistoryInputError as exc:
         lenient = {rid: read_shares(out / f"shares_{rid}.csv") for rid in robots}
         return lenient, None, [f"history not checked: {exc}"]
-    verdict = check_shares(shares, torn)
+    verdict = check_shares(shares, torn, approximate_robots(out))
     return shares, verdict, [f"{v.kind.value}: {v.detail}" for v in verdict.violations]
 
 

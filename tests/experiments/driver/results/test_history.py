@@ -242,3 +242,25 @@ def test_a_real_run_passes_and_a_doubled_write_added_to_it_fails(tmp_path: Path)
     assert "## History: VIOLATED" in summary and "federation INCOMPLETE" in summary
     assert "HISTORY VIOLATED" in summary and "r2 applied 2 writes" in summary
     assert main(["check-history", str(tmp_path)]) == 1
+
+
+def test_a_grid_federations_function_learners_are_left_out_of_split_round(
+        tmp_path: Path) -> None:
+    # r3 learns with dqn in a grid federation: after a share it holds its own Q-function at
+    # the grid (distilled), not the aggregate; r1 and r2 hold the aggregate
+    from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec
+    from dfrl.experiments.driver.results.files import write_json
+
+    writes = [(r, n, 1, float(n) + (0.5 if r == "r3" else 0.0)) for n in (1, 2)
+              for r in ("r1", "r2", "r3")]
+    write_history(tmp_path, writes, agent="fed_grid")
+    # control: without a config saying so, r3's tables are a split round
+    assert kinds(tmp_path) == [ViolationKind.SPLIT_ROUND] * 2
+    config = ExperimentConfig(robots=(RobotSpec("r1", "r1"), RobotSpec("r2", "r4"),
+                                      RobotSpec("r3", "r2", "dqn")), federation="grid")
+    write_json(tmp_path / "config.json", config.public_dict())
+    assert check_history(tmp_path).ok
+    # r1's table differing still is one
+    write_history(tmp_path, writes[:-3] + [("r1", 2, 1, 9.0), ("r2", 2, 1, 2.0),
+                                           ("r3", 2, 1, 2.5)], agent="fed_grid")
+    assert kinds(tmp_path) == [ViolationKind.SPLIT_ROUND]
