@@ -21,6 +21,9 @@ from dfrl.experiments.errors import ExperimentError
 STALL_S = 15.0
 #: Seconds all robots together get to end once told to stop.
 SHUTDOWN_S = 15.0
+#: Seconds the roster holds back calling robot hosts lost when it reaches none of them (the
+#: config's ``partition_wait_s`` when the launcher makes the roster).
+PARTITION_WAIT_S = 120.0
 
 
 class RobotRoster:
@@ -31,9 +34,17 @@ class RobotRoster:
     out : Path
         The results folder.
     reporter : Reporter
+    partition_wait_s : float
+        How long robots on robot hosts that all stopped answering together are held back
+        from being lost (see :meth:`partitioned`).
     """
 
-    def __init__(self, out: Path, reporter: Reporter) -> None:
+    def __init__(self, out: Path, reporter: Reporter,
+                 partition_wait_s: float = PARTITION_WAIT_S) -> None:
+        self._partition_wait_s = partition_wait_s
+        self._cut_since: float | None = None       # when the driver's partition began
+        self._cut_said = False                     # "driver partitioned" was said
+        self._cut_expired = False                  # and its wait ran out
         self._out = out
         self._say = reporter.say
         self._event = reporter.event
@@ -98,21 +109,91 @@ class RobotRoster:
                 if algo is None or robot.spec.algo == algo}
 
     def all_exited(self) -> bool:
-        return all(not s.running for s in self.statuses().values())
+        """Every robot ended (robots held back by a driver partition have not)."""
+        return not self.partitioned() and all(not s.running for s in self.statuses().values())
 
     def robots_done(self) -> bool:
         """Every robot ended or ran all its iterations."""
-        return all(not s.running or s.iteration >= r.config.iterations
-                   for r, s in ((r, r.status()) for r in self.robots().values()))
+        return not self.partitioned() and \
+            all(not s.running or s.iteration >= r.config.iterations
+                for r, s in ((r, r.status()) for r in self.robots().values()))
+
+    # -- the driver's own partition -----------------------------------------------------------
+    def partitioned(self) -> bool:
+        """The driver is taken to be cut off from the network (since :meth:`check` saw it, for
+        at most ``partition_wait_s``): it reaches none of its robots on robot hosts."""
+        with self._lock:
+            return self._cut_since is not None and \
+                time.monotonic() - self._cut_since <= self._partition_wait_s
+
+    def _held(self, statuses: dict[str, RobotStatus], now: float) -> set[str]:
+        """Robots whose silence may be the driver's own partition: on robot hosts (at least
+        two of them still in the run), silent, and no robot answered since this one went
+        silent; empty once the partition lasted ``partition_wait_s``. Says when the driver
+        reaches none of them, and when one answers again."""
+        with self._lock:
+            killed = set(self._killed)
+        remote = {rid: s for rid, s in statuses.items()
+                  if s.answered_at is not None and rid not in killed and not s.done}
+        silent = {rid: s.silent_since for rid, s in remote.items() if s.silent_since is not None}
+        last = max((s.answered_at for s in remote.values() if s.answered_at is not None),
+                   default=0.0)
+        held = {rid for rid, since in silent.items() if since is not None and last <= since}
+        every = len(remote) >= 2 and len(silent) == len(remote)
+        with self._lock:
+            began, said = self._cut_since, self._cut_said
+            if every and began is None:
+                began = self._cut_since = min(v for v in silent.values() if v is not None)
+        if began is not None and not every:
+            with self._lock:
+                self._cut_since, self._cut_said, self._cut_expired = None, False, False
+            if said:
+                self._say(f"driver partition healed: robot hosts answer again after "
+                          f"{now - began:.0f} s")
+                self._event({"kind": "driver_partition", "state": "healed",
+                             "seconds": round(now - began, 1)})
+                with self._lock:
+                    self._stalls.append(f"driver partitioned from all {len(remote)} robot "
+                                        f"hosts from {self._elapsed(began):.1f} s to "
+                                        f"{self._elapsed(now):.1f} s (waited; not counted "
+                                        "as lost)")
+            return held if len(remote) >= 2 else set()
+        if began is None or len(remote) < 2:
+            return set()
+        if not said:
+            with self._lock:
+                self._cut_said = True
+            self._say(f"DRIVER PARTITIONED: none of the {len(remote)} robot hosts answers "
+                      f"(silent {now - began:.0f} s); waiting up to "
+                      f"{self._partition_wait_s:.0f} s before calling them lost")
+            self._event({"kind": "driver_partition", "state": "partitioned",
+                         "robots": sorted(remote)})
+        if now - began > self._partition_wait_s:
+            with self._lock:
+                expired, self._cut_expired = not self._cut_expired, True
+                if expired:
+                    self._stalls.append(f"driver partitioned from all {len(remote)} robot "
+                                        f"hosts from {self._elapsed(began):.1f} s; after "
+                                        f"{self._partition_wait_s:.0f} s (partition_wait_s) "
+                                        "they count as lost")
+            if expired:
+                self._say(f"driver partitioned for {now - began:.0f} s: the robot hosts that "
+                          "do not answer count as lost from now on")
+            return set()
+        return held
 
     # -- how they fare ------------------------------------------------------------------------
     def check(self) -> None:
         """Record (and say) every robot process that died with a non-zero exit code, every
         robot that failed or stopped answering (and came back), and stalls."""
         now = time.monotonic()
-        for rid, robot in self.robots().items():
-            status = robot.status()
-            self._check_health(rid, robot, status)
+        robots = self.robots()
+        statuses = {rid: robot.status() for rid, robot in robots.items()}
+        held = self._held(statuses, now)
+        for rid, robot in robots.items():
+            status = statuses[rid]
+            if rid not in held:
+                self._check_health(rid, robot, status)
             self._check_progress(rid, robot, status, now)
 
     def _check_health(self, rid: str, robot: Robot, status: RobotStatus) -> None:
