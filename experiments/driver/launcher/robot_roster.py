@@ -13,6 +13,7 @@ import threading
 import time
 from pathlib import Path
 
+from dfrl.experiments.driver.launcher.remote_robots import LOST_AFTER_S
 from dfrl.experiments.driver.launcher.reporter import Reporter
 from dfrl.experiments.driver.launcher.robots import Robot, RobotStatus
 from dfrl.experiments.errors import ExperimentError
@@ -43,8 +44,10 @@ class RobotRoster:
                  partition_wait_s: float = PARTITION_WAIT_S) -> None:
         self._partition_wait_s = partition_wait_s
         self._cut_since: float | None = None       # when the driver's partition began
-        self._cut_said = False                     # "driver partitioned" was said
-        self._cut_expired = False                  # and its wait ran out
+        self._cut_robots = 0                       # robot hosts it cut the driver from
+        self._cut_expired = False                  # its wait ran out
+        self._healed_at: float | None = None       # when the last partition healed
+        self._held_now: set[str] = set()           # robots held back from being lost
         self._out = out
         self._say = reporter.say
         self._event = reporter.event
@@ -120,62 +123,65 @@ class RobotRoster:
 
     # -- the driver's own partition -----------------------------------------------------------
     def partitioned(self) -> bool:
-        """The driver is taken to be cut off from the network (since :meth:`check` saw it, for
-        at most ``partition_wait_s``): it reaches none of its robots on robot hosts."""
+        """The driver takes itself to be cut off the network, or has just healed and some of
+        its robot hosts were not asked again yet (see :meth:`check`): robots held back from
+        being lost count as running."""
         with self._lock:
-            return self._cut_since is not None and \
-                time.monotonic() - self._cut_since <= self._partition_wait_s
+            return bool(self._held_now)
 
     def _held(self, statuses: dict[str, RobotStatus], now: float) -> set[str]:
-        """Robots whose silence may be the driver's own partition: on robot hosts (at least
-        two of them still in the run), silent, and no robot answered since this one went
-        silent; empty once the partition lasted ``partition_wait_s``. Says when the driver
-        reaches none of them, and when one answers again."""
+        """Robots whose silence may be the driver's own partition (they are not called lost).
+
+        A robot on a robot host (at least two of them in the run) is held while it is silent
+        and no robot answered since it went silent: the driver reaches none of them. When
+        every one of them is silent the driver says it is partitioned; when one answers again,
+        that the partition healed, and the others silent since before are held until they are
+        asked again (:data:`~.remote_robots.LOST_AFTER_S`). Nothing is held once the partition
+        lasted ``partition_wait_s``."""
         with self._lock:
             killed = set(self._killed)
         remote = {rid: s for rid, s in statuses.items()
-                  if s.answered_at is not None and rid not in killed and not s.done}
-        silent = {rid: s.silent_since for rid, s in remote.items() if s.silent_since is not None}
-        last = max((s.answered_at for s in remote.values() if s.answered_at is not None),
-                   default=0.0)
-        held = {rid for rid, since in silent.items() if since is not None and last <= since}
-        every = len(remote) >= 2 and len(silent) == len(remote)
-        with self._lock:
-            began, said = self._cut_since, self._cut_said
-            if every and began is None:
-                began = self._cut_since = min(v for v in silent.values() if v is not None)
-        if began is not None and not every:
-            with self._lock:
-                self._cut_since, self._cut_said, self._cut_expired = None, False, False
-            if said:
-                self._say(f"driver partition healed: robot hosts answer again after "
-                          f"{now - began:.0f} s")
-                self._event({"kind": "driver_partition", "state": "healed",
-                             "seconds": round(now - began, 1)})
-                with self._lock:
-                    self._stalls.append(f"driver partitioned from all {len(remote)} robot "
-                                        f"hosts from {self._elapsed(began):.1f} s to "
-                                        f"{self._elapsed(now):.1f} s (waited; not counted "
-                                        "as lost)")
-            return held if len(remote) >= 2 else set()
-        if began is None or len(remote) < 2:
+                  if s.answered_at is not None and rid not in killed}
+        if len(remote) < 2:
             return set()
-        if not said:
+        silent = {rid: s.silent_since for rid, s in remote.items() if s.silent_since is not None}
+        last = max(s.answered_at for s in remote.values() if s.answered_at is not None)
+        held = {rid for rid, since in silent.items() if since is not None and last <= since}
+        with self._lock:
+            began, healed = self._cut_since, self._healed_at
+        if began is None and silent and len(silent) == len(remote):
+            began = min(v for v in silent.values() if v is not None)
             with self._lock:
-                self._cut_said = True
+                self._cut_since, self._cut_robots = began, len(remote)
             self._say(f"DRIVER PARTITIONED: none of the {len(remote)} robot hosts answers "
                       f"(silent {now - began:.0f} s); waiting up to "
                       f"{self._partition_wait_s:.0f} s before calling them lost")
             self._event({"kind": "driver_partition", "state": "partitioned",
                          "robots": sorted(remote)})
-        if now - began > self._partition_wait_s:
+        elif began is not None and len(silent) < len(remote):
+            with self._lock:
+                self._cut_since, self._healed_at, count = None, now, self._cut_robots
+                expired, self._cut_expired = self._cut_expired, False
+                if not expired:
+                    self._stalls.append(f"driver partitioned from all {count} robot hosts "
+                                        f"from {self._elapsed(began):.1f} s to "
+                                        f"{self._elapsed(now):.1f} s (waited; not counted "
+                                        "as lost)")
+            self._say(f"driver partition healed: robot hosts answer again after "
+                      f"{now - began:.0f} s")
+            self._event({"kind": "driver_partition", "state": "healed",
+                         "seconds": round(now - began, 1)})
+            began, healed = None, now
+        if healed is not None and now - healed < LOST_AFTER_S:
+            held |= {rid for rid, since in silent.items() if since is not None and since < healed}
+        if began is not None and now - began > self._partition_wait_s:
             with self._lock:
                 expired, self._cut_expired = not self._cut_expired, True
                 if expired:
-                    self._stalls.append(f"driver partitioned from all {len(remote)} robot "
-                                        f"hosts from {self._elapsed(began):.1f} s; after "
-                                        f"{self._partition_wait_s:.0f} s (partition_wait_s) "
-                                        "they count as lost")
+                    self._stalls.append(f"driver partitioned from all {self._cut_robots} "
+                                        f"robot hosts from {self._elapsed(began):.1f} s; "
+                                        f"after {self._partition_wait_s:.0f} s "
+                                        "(partition_wait_s) they count as lost")
             if expired:
                 self._say(f"driver partitioned for {now - began:.0f} s: the robot hosts that "
                           "do not answer count as lost from now on")
@@ -190,6 +196,8 @@ class RobotRoster:
         robots = self.robots()
         statuses = {rid: robot.status() for rid, robot in robots.items()}
         held = self._held(statuses, now)
+        with self._lock:
+            self._held_now = held
         for rid, robot in robots.items():
             status = statuses[rid]
             if rid not in held:
