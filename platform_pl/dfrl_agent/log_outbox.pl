@@ -8,7 +8,7 @@
 :- use_module('../messages', [agent_post/6]).
 :- autoload(library(error), [must_be/2]).
 :- autoload(library(option), [option/2, option/3]).
-:- autoload(library(lists), [member/2]).
+:- autoload(library(lists), [member/2, append/3]).
 
 /** <module> The round log's outbox: lines for the console, kept and sent later
 
@@ -26,14 +26,19 @@ node it is on and walks on. Per node:
     line the agent logged on that node, delivered or not.
   - The line is put in the node's outbox, a message queue of at most
     `max_lines` lines (default 10000). When it is full the oldest line
-    is dropped from the queue (it stays in the kept log), with a
-    warning once per node and the count in outbox_property/2.
+    in the queue is dropped (it stays in the kept log), with a warning
+    once per node and the count in outbox_property/2.
   - One delivery thread per node takes the lines in order and posts
-    each to its console (platform event dfrl_log/3 of dfrl_console.pl);
-    a post that fails is tried again, the same line, after 0.2 s,
-    doubling to at most 5 s, until it is accepted or the node stops.
-    An outage is a warning when it starts and a message when the lines
-    flow again.
+    them to their console (platform event dfrl_log/3 of dfrl_console.pl),
+    every line waiting (at most 500, any agent's) in one post, which the
+    console appends in one go: it runs each post in a thread of its own,
+    so lines posted apart in quick succession (a backlog) could be
+    appended out of order. A post that fails is tried again, with the
+    lines queued meanwhile added, after 0.2 s, doubling to at most 5 s,
+    until it is accepted or the node stops. An outage is a warning when
+    it starts and a message when the lines flow again. The lines being
+    posted (at most 500, and at most `max_lines`) are held by the
+    thread, beside the queue: the outbox holds at most twice `max_lines`.
 
 A line may reach the console twice (its post was accepted but the reply
 was lost, and it was sent again): lines are whole JSON events with the
@@ -46,18 +51,17 @@ The outbox costs the agent a file append and a queue send once per
 logged event (a round, a control, an ending), never per hop.
 
 Threading: outbox_post/4 is called by agent threads; the delivery
-thread of a node is started by its first post and ends a second after
-its node stopped (its queue is destroyed then; lines not delivered are
-in the kept log). The facts below are changed under the mutex
-log_outbox.
+thread of a node is started by its first post and ended when its node
+stops (hook node:node_stopping/1; its queue is destroyed then; lines not
+delivered are in the kept log). The facts below are changed under the
+mutex log_outbox.
 */
 
 :- dynamic
     conf/3,                     % Node, KeepDir (or none), MaxLines
     outbox/3,                   % Node, Queue, Thread
     tally/3,                    % Node, Key (delivered, dropped, failures), Count
-    said_full/1,                % Node: the warning on a full outbox was given
-    in_flight/1.                % Node: its delivery thread is posting a line
+    said_full/1.                % Node: the warning on a full outbox was given
 
 %!  outbox_configure(+Node, +Options) is det.
 %
@@ -111,6 +115,7 @@ outbox_post(Node, Console, File, Line) :-
     ;   true
     ),
     node_outbox(Node, Queue),
+    count(Node, posted),
     enqueue(Node, Queue, line(Console, File, Line), 3).
 
 append_kept(Kept, Line) :-
@@ -130,7 +135,7 @@ start_outbox(Node, Queue) :-
     ->  Queue = Queue0
     ;   (   conf(Node, _, Max) -> true ; Max = 10000 ),
         message_queue_create(Queue, [max_size(Max)]),
-        thread_create(deliver_loop(Node, Queue), Tid, [detached(true)]),
+        thread_create(deliver_loop(Node, Queue), Tid, []),
         assertz(outbox(Node, Queue, Tid))
     ).
 
@@ -167,8 +172,11 @@ dropped(Node) :-
     ).
 
 count(Node, Key) :-
+    count(Node, Key, 1).
+
+count(Node, Key, K) :-
     with_mutex(log_outbox,
-               (   (   retract(tally(Node, Key, N0)) -> N is N0 + 1 ; N = 1 ),
+               (   (   retract(tally(Node, Key, N0)) -> N is N0 + K ; N = K ),
                    assertz(tally(Node, Key, N))
                )).
 
@@ -184,19 +192,129 @@ deliver_loop(Node, Queue) :-
 
 deliver_lines(Node, Queue) :-
     node_set_current(Node),
-    repeat,
-    (   thread_get_message(Queue, Msg, [timeout(1)])
-    ->  assertz(in_flight(Node)),
-        call_cleanup(deliver(Node, Msg, 0.2), retractall(in_flight(Node)))
-    ;   true
+    deliver_from(Node, Queue, []).
+
+%   Pending: lines taken from the queue, not delivered yet, in order.
+deliver_from(Node, Queue, Pending) :-
+    (   Pending == [],
+        \+ thread_peek_message(Queue, _)
+    ->  (   thread_get_message(Queue, Msg, [timeout(1)])
+        ->  deliver_from(Node, Queue, [Msg])
+        ;   node_runs(Node)
+        ->  deliver_from(Node, Queue, [])
+        ;   true
+        )
+    ;   attempt(Node, Queue, Pending, 0.2)
+    ).
+
+%   Post the lines waiting for the first console, topped up from the
+%   queue (at most batch_lines/2), as one post; on failure wait, top up
+%   and try again, until the console accepts them or the node stops. The
+%   console runs each post in a thread of its own: lines posted apart in
+%   quick succession could be appended out of order; a batch is appended
+%   in one go, and a backlog goes as one batch (up to batch_lines/2).
+attempt(Node, Queue, Pending0, Wait) :-
+    batch_lines(Node, Max),
+    top_up(Queue, Pending0, Max, Pending),
+    Pending = [line(Console, _, _)|_],
+    lead(Pending, Console, Entries, Rest),
+    length(Entries, N),
+    (   node_property(Node, link(Link))
+    ->  catch(agent_post(Console, platform, dfrl_log, Link, [entries(Entries)],
+                         [connect_timeout(5), reply_timeout(10)]),
+              E, true)
+    ;   E = node_stopped
     ),
-    \+ node_runs(Node),
-    !.
+    (   var(E)
+    ->  count(Node, delivered, N),
+        outage_over(Node, Console),
+        deliver_from(Node, Queue, Rest)
+    ;   E \== node_stopped,
+        node_runs(Node)
+    ->  outage(Node, Console, E),
+        sleep(Wait),
+        Wait1 is min(5.0, Wait * 2),
+        attempt(Node, Queue, Pending, Wait1)
+    ;   true                            % the node stopped
+    ).
+
+%   At most 500 lines, and no more than the queue holds: the outbox holds
+%   at most twice max_lines.
+batch_lines(Node, Max) :-
+    outbox_property(Node, max_lines(M)),
+    Max is min(500, M).
+
+top_up(Queue, Pending0, Max, Pending) :-
+    length(Pending0, N),
+    Room is Max - N,
+    take_more(Queue, Room, More),
+    append(Pending0, More, Pending).
+
+take_more(Queue, Room, More) :-
+    (   Room > 0,
+        thread_get_message(Queue, Msg, [timeout(0)])
+    ->  More = [Msg|Rest],
+        Room1 is Room - 1,
+        take_more(Queue, Room1, Rest)
+    ;   More = []
+    ).
+
+%   The leading lines for Console, as File-Line pairs, and the rest.
+lead([line(C, F, L)|Msgs], C, [F-L|Entries], Rest) :-
+    !,
+    lead(Msgs, C, Entries, Rest).
+lead(Msgs, _, [], Msgs).
+
+outage(Node, Console, E) :-
+    (   tally(Node, outage, _)
+    ->  true
+    ;   print_message(warning,
+                      format("dfrl: round log to console ~w failed (~p); \c
+                              the lines wait in the outbox of ~w and are sent \c
+                              when it answers", [Console, E, Node]))
+    ),
+    count(Node, outage),
+    count(Node, failures).
+
+outage_over(Node, Console) :-
+    (   retract(tally(Node, outage, Failures))
+    ->  print_message(informational,
+                      format("dfrl: round log: console ~w reached again after \c
+                              ~D failed posts; the lines kept meanwhile are sent",
+                             [Console, Failures]))
+    ;   true
+    ).
 
 stopped(_, E) :-
-    (   E = error(existence_error(platform, _), _)
+    (   (   E == outbox_stop
+        ;   E = error(existence_error(platform, _), _)
+        )
     ->  true
     ;   print_message(warning, E)
+    ).
+
+:- multifile node:node_stopping/1.
+
+%   The node stops: its delivery thread ends now (it may be waiting for a
+%   reply or sleeping before a retry); waited for at most 2 s, then left
+%   to end by itself.
+node:node_stopping(Node) :-
+    (   outbox(Node, _, Tid)
+    ->  catch(thread_signal(Tid, throw(outbox_stop)), _, true),
+        (   wait_thread_end(Tid, 100)
+        ->  catch(thread_join(Tid, _), _, true)
+        ;   catch(thread_detach(Tid), _, true)
+        )
+    ;   true
+    ).
+
+wait_thread_end(Tid, N) :-
+    (   \+ catch(thread_property(Tid, status(running)), _, fail)
+    ->  true
+    ;   N > 0
+    ->  sleep(0.02),
+        N1 is N - 1,
+        wait_thread_end(Tid, N1)
     ).
 
 forget_outbox(Node, Queue) :-
@@ -209,65 +327,33 @@ forget_outbox(Node, Queue) :-
 node_runs(Node) :-
     node_property(Node, id(_)).
 
-%   Post one line until the console accepts it or the node stops.
-deliver(Node, Msg, Wait) :-
-    Msg = line(Console, File, Line),
-    (   node_property(Node, link(Link))
-    ->  deliver(Node, Link, Console, File, Line, Msg, Wait)
-    ;   true                            % the node stopped
-    ).
-
-deliver(Node, Link, Console, File, Line, Msg, Wait) :-
-    catch(agent_post(Console, platform, dfrl_log, Link, [entry(File, Line)],
-                     [connect_timeout(5), reply_timeout(10)]),
-          E, true),
-    (   var(E)
-    ->  count(Node, delivered),
-        (   retract(tally(Node, outage, Failures))
-        ->  print_message(informational,
-                          format("dfrl: round log: console ~w reached again after \c
-                                  ~D failed posts; delivering the kept lines",
-                                 [Console, Failures]))
-        ;   true
-        )
-    ;   node_runs(Node)
-    ->  (   tally(Node, outage, _)
-        ->  true
-        ;   print_message(warning,
-                          format("dfrl: round log to console ~w failed (~p); \c
-                                  the lines wait in the outbox of ~w and are sent \c
-                                  when it answers", [Console, E, Node]))
-        ),
-        count(Node, outage),
-        count(Node, failures),
-        sleep(Wait),
-        Wait1 is min(5.0, Wait * 2),
-        deliver(Node, Msg, Wait1)
-    ;   true
-    ).
-
 		 /*******************************
 		 *            STATE		*
 		 *******************************/
 
 %!  outbox_property(+Node, ?Property) is nondet.
 %
-%   Properties of the outbox of Node: queued(N) (lines waiting, not
-%   counting one being posted), delivered(N), dropped(N) (from a full
-%   outbox), failures(N) (posts that failed), keep_dir(Dir) (or none),
-%   max_lines(N).
+%   Properties of the outbox of Node: posted(N) (lines handed to it),
+%   queued(N) (lines waiting, not counting one being posted),
+%   delivered(N), dropped(N) (from a full outbox, or not sent when the
+%   node stopped), failures(N) (posts that failed), keep_dir(Dir) (or
+%   none), max_lines(N).
 
 outbox_property(Node, Property) :-
     must_be(atom, Node),
-    member(Property, [queued(_), delivered(_), dropped(_), failures(_),
-                      keep_dir(_), max_lines(_)]),
-    property(Property, Node).
+    (   nonvar(Property)
+    ->  property(Property, Node)
+    ;   member(Property, [posted(_), queued(_), delivered(_), dropped(_), failures(_),
+                          keep_dir(_), max_lines(_)]),
+        property(Property, Node)
+    ).
 
 property(queued(N), Node) :-
     (   outbox(Node, Q, _), catch(message_queue_property(Q, size(N)), _, fail)
     ->  true
     ;   N = 0
     ).
+property(posted(N), Node) :- tally_of(Node, posted, N).
 property(delivered(N), Node) :- tally_of(Node, delivered, N).
 property(dropped(N), Node) :- tally_of(Node, dropped, N).
 property(failures(N), Node) :- tally_of(Node, failures, N).
@@ -279,8 +365,9 @@ tally_of(Node, Key, N) :-
 
 %!  outbox_wait_empty(+Node, +Timeout) is semidet.
 %
-%   Wait at most Timeout seconds until the outbox of Node holds no line
-%   and none is being posted (for a host that ends, and for tests).
+%   Wait at most Timeout seconds until every line posted to the outbox
+%   of Node was delivered or dropped (for a host that ends, and for
+%   tests).
 
 outbox_wait_empty(Node, Timeout) :-
     must_be(atom, Node),
@@ -298,5 +385,7 @@ wait_empty(Node, Deadline) :-
     ).
 
 empty(Node) :-
-    outbox_property(Node, queued(0)),
-    \+ in_flight(Node).
+    tally_of(Node, posted, Posted),
+    tally_of(Node, delivered, Delivered),
+    tally_of(Node, dropped, Dropped),
+    Posted =:= Delivered + Dropped.

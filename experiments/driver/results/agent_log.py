@@ -201,7 +201,8 @@ def read_rounds_log(path: str | Path, agent: str,
                     kept: list[Path] | tuple[Path, ...] = ()) -> AgentLog:
     """Read an agent's rounds log (a missing file is an empty log), and with ``kept`` the
     robot nodes' kept logs too (:func:`kept_logs`): each line once (an identical line read
-    again is skipped); with ``kept``, rounds sorted by number (the files interleave).
+    again is skipped), rounds sorted by number (the files interleave, and lines posted
+    from two nodes may reach the console out of order).
 
     A torn last line (the agent is still writing it) shows up in ``unreadable`` until the
     next read.
@@ -211,8 +212,7 @@ def read_rounds_log(path: str | Path, agent: str,
     for p in (Path(path), *map(Path, kept)):
         if p.is_file():
             _read_into(log, p, seen)
-    if kept:
-        log.rounds.sort(key=lambda r: r.round)
+    log.rounds.sort(key=lambda r: r.round)
     return log
 
 
