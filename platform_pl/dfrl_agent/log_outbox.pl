@@ -60,7 +60,9 @@ mutex log_outbox.
 :- dynamic
     conf/3,                     % Node, KeepDir (or none), MaxLines
     outbox/3,                   % Node, Queue, Thread
-    tally/3,                    % Node, Key (delivered, dropped, failures), Count
+    tally/3,                    % Node, Key, Count: posted, delivered, dropped,
+                                % failures; outage (failed posts since the last
+                                % delivery, while the console does not answer)
     said_full/1.                % Node: the warning on a full outbox was given
 
 %!  outbox_configure(+Node, +Options) is det.
@@ -158,7 +160,7 @@ dropped(Node) :-
     count(Node, dropped),
     (   said_full(Node)
     ->  true
-    ;   assertz(said_full(Node)),
+    ;   with_mutex(log_outbox, assertz(said_full(Node))),
         outbox_property(Node, keep_dir(Where)),
         outbox_property(Node, max_lines(Max)),
         (   Where == none
@@ -185,10 +187,8 @@ count(Node, Key, K) :-
 		 *******************************/
 
 deliver_loop(Node, Queue) :-
-    setup_call_cleanup(
-        true,
-        catch(deliver_lines(Node, Queue), E, stopped(Node, E)),
-        forget_outbox(Node, Queue)).
+    call_cleanup(catch(deliver_lines(Node, Queue), E, stopped(Node, E)),
+                 forget_outbox(Node, Queue)).
 
 deliver_lines(Node, Queue) :-
     node_set_current(Node),
