@@ -136,8 +136,8 @@ class RobotRoster:
         and no robot answered since it went silent: the driver reaches none of them. When
         every one of them is silent the driver says it is partitioned; when one answers again,
         that the partition healed, and the others silent since before are held until they are
-        asked again (:data:`~.remote_robots.LOST_AFTER_S`). Nothing is held once the partition
-        lasted ``partition_wait_s``."""
+        asked again (:data:`~.remote_robots.LOST_AFTER_S`). Nothing is held once the partition,
+        or the robot's silence, lasted ``partition_wait_s``."""
         with self._lock:
             killed = set(self._killed)
         remote = {rid: s for rid, s in statuses.items()
@@ -146,7 +146,8 @@ class RobotRoster:
             return set()
         silent = {rid: s.silent_since for rid, s in remote.items() if s.silent_since is not None}
         last = max(s.answered_at for s in remote.values() if s.answered_at is not None)
-        held = {rid for rid, since in silent.items() if since is not None and last <= since}
+        held = {rid for rid, since in silent.items() if since is not None and last <= since
+                and now - since <= self._partition_wait_s}
         with self._lock:
             began, healed = self._cut_since, self._healed_at
         if began is None and silent and len(silent) == len(remote):
