@@ -5,8 +5,11 @@ The driver writes ``rounds.csv``, ``metrics.csv``, ``tables/`` (``params/``), th
 ``summary.md`` when a run ends. When the driver dies first, what the run did is still there:
 in the results folder (``config.json``, ``nodes.json``, the agents' ``rounds_<agent>.log``, and
 for the robot processes of this host their ``metrics_<robot>.csv``, ``shares_<robot>.csv``,
-``tables/`` and ``checkpoint/``) and on the robot hosts (each ``dfrl robot`` keeps the files
-of the experiment it holds). :func:`collect` fetches the remote robots' files as the driver
+``tables/``, ``checkpoint/`` and the round-log lines the agents logged on their nodes,
+``agent_logs/<robot>/rounds_<agent>.log``) and on the robot hosts (each ``dfrl robot`` keeps
+the files of the experiment it holds, its ``agent_logs/`` included). The agents' lines are
+read from ``rounds_<agent>.log`` and every kept log, each line once: a round the console never
+got (its driver was dead, its host cut off) is still counted. :func:`collect` fetches the remote robots' files as the driver
 does at the end of a run (:func:`~.launcher.remote_robots.fetch_files`, through a console
 node of its own with the run's ``secret.token``), then writes the same files with the same
 code (:func:`~.results.ending.write_end_files`). The verdict follows the same criteria, judged
@@ -19,8 +22,8 @@ stdin's end of file as *stop*: each ends training at its next stdin check (every
 iterations) or sooner, when a protocol line on its stdout (now a broken pipe) fails; it
 saves ``tables/`` and its checkpoint when it gets to its end (a ``BrokenPipeError`` traceback
 in ``logs/<robot>.err`` follows) and exits within seconds; none lingers. The console node
-ends with its stdin too; the agent then appends its round lines to ``rounds_<agent>.log``
-itself (on this host the same file) until its robots are gone. ``dfrl robot`` services do not
+ends with its stdin too; the agent's lines then stay in its nodes' kept logs (and their
+outboxes) until its robots are gone. ``dfrl robot`` services do not
 depend on the driver: they run the experiment to its end and keep its files until they are
 configured for another one.
 """
@@ -37,7 +40,7 @@ from dfrl.experiments.driver.launcher.agents import agent_name, open_console
 from dfrl.experiments.driver.launcher.remote import driver_tls, rounds_log, tokens_of
 from dfrl.experiments.driver.launcher.remote_hosts import route_source
 from dfrl.experiments.driver.launcher.remote_robots import fetch_files
-from dfrl.experiments.driver.results.agent_log import AgentLog, read_rounds_log
+from dfrl.experiments.driver.results.agent_log import AgentLog, kept_logs, read_rounds_log
 from dfrl.experiments.driver.results.ending import RunFacts, write_end_files
 from dfrl.experiments.driver.results.files import read_json
 from dfrl.experiments.driver.results.metrics import read_metrics
@@ -110,7 +113,7 @@ def collect(results_dir: str | Path, progress: TextIO | None = sys.stderr,
     for a in info["agents"]:
         own = out / f"rounds_{a['name']}.log"      # this folder's, even if it was moved
         logs[a["name"]] = read_rounds_log(own if own.is_file() else rounds_log(out, a),
-                                          a["name"])
+                                          a["name"], kept=kept_logs(out, a["name"]))
         budgets[a["name"]] = int(a["rounds"])
     for label, algos in config.agent_groups():
         if agent_name(label) not in logs and any(s.algo in algos for s in config.robots):

@@ -133,6 +133,11 @@ class ExperimentConfig(JsonDicts):
     skip_after_s : float
         The most the agent spends on one move to a stop it cannot reach (all its tries
         together) before it skips the stop for that round (default 4 s).
+    partition_wait_s : float
+        How long the driver holds back calling robots on robot hosts LOST when it reaches none
+        of them (at least two; none answered since the first went silent): its own host is
+        probably cut off, not theirs. It says ``driver partitioned`` and waits; when one
+        answers again the run goes on; after this long they are LOST (default 120 s).
     title : str
         Plot title (default: derived from the config).
     console : str or None
@@ -180,6 +185,7 @@ class ExperimentConfig(JsonDicts):
     joins: tuple[JoinSpec, ...] = ()
     timeout_s: float = 3600.0
     skip_after_s: float = 4.0
+    partition_wait_s: float = 120.0
     title: str = ""
     console: str | None = None
     tolerate_lost_robots: int = 0

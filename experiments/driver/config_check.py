@@ -69,6 +69,7 @@ EXPERIMENT_RULES: dict[str, Rule] = {
     "method": _METHOD, "methods": Rule(dict), "rest_s": Rule(float, nullable=True, low=0),
     "token": token_rule(), "trainer": Rule(dict), "joins": Rule(list),
     "timeout_s": Rule(float, above=0), "skip_after_s": Rule(float, above=0),
+    "partition_wait_s": Rule(float, low=0, hint="0: no wait, robots not answering are lost"),
     "title": Rule(str), "console": Rule(str, nullable=True),
     "tolerate_lost_robots": Rule(int, low=0), "tolerate_missing_rounds": Rule(int, low=0),
     "tolerate_method_errors": Rule(int, low=0),

@@ -14,7 +14,8 @@ from dfrl.experiments.robot_host.lines import ProtocolLines, StdinWatch
 from dfrl.experiments.robot_host.training import Training
 from dfrl.experiments.tokens import TOKEN_ENV, pop_env_tokens
 
-__all__ = ["RobotProcess", "main", "load_agent_program", "NodeStartError", "start_node"]
+__all__ = ["RobotProcess", "main", "load_agent_program", "NodeStartError", "start_node",
+           "keep_agent_logs"]
 
 
 class NodeStartError(ExperimentError):
@@ -121,6 +122,7 @@ class RobotProcess:
         if c.clone_limit is not None:
             options["clone_limit"] = c.clone_limit
         name = start_node(self.bridge, c.host, 0, **options)
+        keep_agent_logs(self.bridge, name, self.out_dir / "agent_logs" / c.robot)
         host, port = self.bridge.address(name)
         self.lines.node(str(host), int(port))
         return str(host), int(port)
@@ -195,6 +197,18 @@ def load_agent_program(node: Any, who: str) -> None:
         node.assert_file_to_tartarus(str(agent_file))
     else:
         print(f"{who}: warning: {agent_file} not found", file=sys.stderr)
+
+
+def keep_agent_logs(bridge: Any, node: Any, folder: Path) -> Path:
+    """Make the round-log outbox of ``node`` keep every line an agent logs there in
+    ``folder`` (``folder/rounds_<agent>.log``, see ``platform_pl/dfrl_agent/log_outbox.pl``):
+    on this host, whatever the console's host can reach. Returns ``folder``."""
+    from dfrl.platform_pl import DFRL_AGENT_DIR
+    from dfrl.pybridge import Atom, Term
+
+    bridge.call("use_module", Atom(str(DFRL_AGENT_DIR / "log_outbox.pl")))
+    bridge.call("outbox_configure", node, [Term("keep_dir", str(folder))], module="log_outbox")
+    return folder
 
 
 def main(argv: list[str] | None = None) -> int:

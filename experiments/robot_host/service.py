@@ -28,7 +28,7 @@ from typing import Any, TextIO
 
 from dfrl.experiments.robot_host.config import Mode
 from dfrl.experiments.robot_host.lines import ProtocolLines
-from dfrl.experiments.robot_host.process import load_agent_program, start_node
+from dfrl.experiments.robot_host.process import keep_agent_logs, load_agent_program, start_node
 from dfrl.experiments.robot_host.service_config import config_error, parse_configure
 from dfrl.experiments.robot_host.training import Training
 from dfrl.experiments.tokens import Token
@@ -305,6 +305,7 @@ class RobotService:
         self.experiment, self.error, self.state = experiment, None, State.IDLE
         out = Path(config.out_dir)
         (out / "logs").mkdir(parents=True, exist_ok=True)
+        keep_agent_logs(self.bridge, self.node_name, out / "agent_logs" / config.robot)
         lines_fh = open(out / "logs" / f"{config.robot}.out", "a", encoding="utf-8")
         err_fh = open(out / "logs" / f"{config.robot}.err", "a", encoding="utf-8")
         self._logs = [lines_fh, err_fh]

@@ -506,24 +506,50 @@ accept_log(File) :-
 %!  dfrl_log(+Platform, +Link, +Entry) is det.
 %
 %   Platform event: an agent launched from this console, wherever it is,
-%   posts entry(File, Line), one line of its round log; the line is
-%   appended to File on this host. Only files named by a launch of this
-%   console are written; anything else is reported as an event and
-%   dropped.
+%   posts entry(File, Line), one line of its round log, or (from the
+%   outbox of its node, log_outbox.pl) entries(Entries), File-Line pairs
+%   in order; each line is appended to its File on this host, a batch in
+%   one go. Only files named by a launch of this console are written;
+%   anything else is reported as an event and dropped (a batch whole).
 
 dfrl_log(platform, _Link, entry(File, Line)) :-
-    atom(File), log_file(File), string(Line),
-    \+ sub_string(Line, _, _, _, "\n"),
+    log_lines_ok([File-Line]),
     !,
-    with_mutex(dfrl_console_log,
-               setup_call_cleanup(open(File, append, Out, [encoding(utf8)]),
-                                  format(Out, "~s~n", [Line]),
-                                  close(Out))).
+    append_log_lines([File-Line]).
+dfrl_log(platform, _Link, entries(Entries)) :-
+    is_list(Entries),
+    log_lines_ok(Entries),
+    !,
+    append_log_lines(Entries).
 dfrl_log(platform, Link, Entry) :-
     format(string(M), '~q', [Entry]),
     format(string(From), '~w', [Link]),
     emit(_{event:bad_message, message:M, error:"not a round-log line of an agent launched here",
            from:From}).
+
+log_lines_ok(Entries) :-
+    forall(member(E, Entries),
+           (   nonvar(E), E = File-Line,
+               atom(File), log_file(File),
+               string(Line), \+ sub_string(Line, _, _, _, "\n")
+           )).
+
+append_log_lines(Entries) :-
+    with_mutex(dfrl_console_log, append_runs(Entries)).
+
+%   Consecutive lines for one file are written with one open.
+append_runs([]).
+append_runs([File-Line|Entries]) :-
+    same_file(Entries, File, Lines, Rest),
+    setup_call_cleanup(open(File, append, Out, [encoding(utf8)]),
+                       forall(member(L, [Line|Lines]), format(Out, "~s~n", [L])),
+                       close(Out)),
+    append_runs(Rest).
+
+same_file([File-Line|Entries], File, [Line|Lines], Rest) :-
+    !,
+    same_file(Entries, File, Lines, Rest).
+same_file(Entries, _, [], Entries).
 
 		 /*******************************
 		 *      JOINS THROUGH THE PLATFORM	*

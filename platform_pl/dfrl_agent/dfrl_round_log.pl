@@ -6,7 +6,8 @@
             log_path_ok/1,              % +File
             log_text/2                  % +Term, -String
           ]).
-:- use_module('../tartarus', [current_node/1, node_property/2, agent_post/5]).
+:- use_module('../tartarus', [current_node/1]).
+:- use_module(log_outbox, [outbox_post/4]).
 :- autoload(library(error), [must_be/2]).
 :- autoload(library(lists), [memberchk/2]).
 :- autoload(library(apply), [maplist/3, foldl/4]).
@@ -21,9 +22,13 @@ where the log says, wherever the agent is.
 
 A log is a file name (the agent appends to it on the host it runs on:
 one machine, or a shared disk), or console(Host, Port, File): every line
-is posted to the console node at Host:Port (platform event dfrl_log/3 of
+goes to the console node at Host:Port (platform event dfrl_log/3 of
 dfrl_console.pl), which appends it to its File, on the driver's disk.
-The file is opened, written and closed per line.
+It goes there through the outbox of the node the agent is on
+(log_outbox.pl): the line is appended to the node's kept log on this
+host, if the host names one, and queued; a thread of the node posts it,
+and tries again until the console answers. The agent never waits for
+the console. A file is opened, written and closed per line.
 
 ```
 {"event":"round","agent":"fed_q","round":3,"start":1764600000.12,
@@ -32,7 +37,7 @@ The file is opened, written and closed per line.
  "retries":2,"epoch":1}                   (and "error":"..." if the method failed;
                                           "itinerary":"tree","fanout":2 for a tree round)
 {"event":"control","agent":"fed_q","round":4,"command":"method(median)",
- "status":"applied"}                      (or "ignored" with a "reason")
+ "status":"applied","time":1764600000.3}  (or "ignored" with a "reason")
 {"event":"resurrected","agent":"fed_q","round":5,"epoch":2,
  "from":"host:port","dead":"host:port","time":1764600003.5}
 {"event":"superseded","agent":"fed_q","round":5,"epoch":1,"by":2}
@@ -56,9 +61,10 @@ the clock of `from`), `superseded` by a
 late original as it retires. `aborted` is logged only by an agent
 launched with the event `launch` that can reach no stop.
 
-A line is never dropped silently: a console that cannot be reached gets
-the line appended to File on this host, and a line that cannot be
-written at all is a warning (never an error that would stop the agent).
+A line is never dropped silently: a console that cannot be reached
+gets it later, from the outbox, and the node's kept log has it anyway;
+an outbox that is full, or a line that cannot be written at all, is a
+warning (never an error that would stop the agent).
 */
 
 %!  log_round(+Log, +Agent, +Method, +Epoch, +End, +State) is det.
@@ -105,11 +111,12 @@ skip_json(skip(Robot, Reason), _{robot:R, reason:Reason}) :-
 
 log_control(Log, Agent, Round, Command, Status) :-
     format(string(C), '~q', [Command]),
+    get_time(Time),
     (   Status = ignored(Why)
     ->  log_event(Log, _{event:control, agent:Agent, round:Round, command:C,
-                         status:ignored, reason:Why})
+                         status:ignored, reason:Why, time:Time})
     ;   log_event(Log, _{event:control, agent:Agent, round:Round, command:C,
-                         status:applied})
+                         status:applied, time:Time})
     ).
 
 %!  log_text(+Term, -String) is det.
@@ -138,32 +145,26 @@ check_log(Log) :-
 %!  log_event(+Log, +Dict) is det.
 %
 %   Write Dict as one JSON line to Log (see check_log/1). The agent name
-%   and method, atoms, are written as strings. A console that cannot be
-%   reached gets the line appended to File on this host instead, with a
-%   warning: a line is never dropped silently.
+%   and method, atoms, are written as strings. A line for a console goes
+%   to the outbox of the current node (log_outbox.pl) and this returns
+%   at once: the console may be unreachable for a while.
 
 log_event(Log, Dict0) :-
     foldl(stringify, [agent, method], Dict0, Dict),
     with_output_to(string(Line), json_write_dict(current_output, Dict, [width(0)])),
     (   Log = console(H, P, File)
-    ->  catch(post_log_line(H, P, File, Line), E, true),
-        (   var(E)
-        ->  true
-        ;   print_message(warning, format("dfrl: round log to console ~w:~w failed (~p); \c
-                                           line kept in ~w on this host", [H, P, E, File])),
-            append_line_or_warn(File, Line)
-        )
+    ->  catch(( current_node(Node),
+                outbox_post(Node, H:P, File, Line)
+              ),
+              E,
+              print_message(warning, format("dfrl: round log line for console ~w:~w \c
+                                             not queued: ~p", [H, P, E])))
     ;   append_line_or_warn(Log, Line)
     ).
 
 append_line_or_warn(File, Line) :-
     catch(append_line(File, Line), E,
           print_message(warning, format("dfrl: round log line not written: ~p", [E]))).
-
-post_log_line(H, P, File, Line) :-
-    current_node(Node),
-    node_property(Node, link(Link)),
-    agent_post(H:P, platform, dfrl_log, Link, [entry(File, Line)]).
 
 %   The log path comes with the agent, from whichever node sent it: it
 %   may only name a round log (`.log` or `.jsonl`) in a directory that

@@ -1,7 +1,11 @@
 """``dfrl collect`` after the driver of a run across hosts was killed (issue 20): the robot
 hosts run the experiment to its end without their driver, and collecting from them gives the
 rounds, metrics and summary an uninterrupted run with the same seed gives (up to wall-clock
-columns). The control: the same run, not interrupted, on the same hosts."""
+columns). The control: the same run, not interrupted, on the same hosts.
+
+The robot hosts' folders (``tmp/h<i>/dfrl-robot``) are not the driver's (``tmp/driver``): the
+rounds logged after the kill, which the console (ended with its driver) never got, come from
+the agent lines the robot nodes kept (``agent_logs/``, issue 33)."""
 from __future__ import annotations
 
 import csv
@@ -15,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from dfrl.experiments.driver.results.agent_log import read_rounds_log
+from dfrl.experiments.driver.results.agent_log import kept_logs, read_rounds_log
 from dfrl.experiments.tokens import write_secret_file
 
 from dfrl.experiments.tools.netns import Lab, unavailable
@@ -89,6 +93,12 @@ def test_collect_from_robot_hosts_equals_an_uninterrupted_run(tmp_path: Path) ->
                                       timeout=150, capture_output=True, text=True)
     detail = f"exit {collected.returncode}\n{collected.stderr[-3000:]}"
     assert collected.returncode == 0, detail
+    # the console ended with its driver: the later rounds are only in the robot hosts' kept
+    # logs (their folders are not the driver's; nothing writes the driver's path there)
+    budget = len(read_rounds_log(drv / "whole" / f"rounds_{AGENT}.log", AGENT).rounds)
+    console = read_rounds_log(out / f"rounds_{AGENT}.log", AGENT)
+    assert len(console.rounds) < budget and console.finished is None, len(console.rounds)
+    assert kept_logs(out, AGENT), sorted(p.name for p in out.iterdir())
     assert _csv_without_clock(out / "rounds.csv") == _csv_without_clock(drv / "whole" / "rounds.csv")
     assert _csv_without_clock(out / "metrics.csv") == \
         _csv_without_clock(drv / "whole" / "metrics.csv")

@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import threading
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 from dfrl.experiments.driver.launcher.reporter import Reporter
 from dfrl.experiments.driver.launcher.robot_roster import RobotRoster
-from dfrl.experiments.driver.results.agent_log import AgentLog, read_rounds_log
+from dfrl.experiments.driver.results.agent_log import AgentLog, kept_logs, read_rounds_log
 
 
 @dataclass(frozen=True)
@@ -103,11 +104,14 @@ class AgentRoster:
                                  "round": (len(log.rounds) if log else 0) + 1,
                                  "iteration": iteration})
 
-    def read_logs(self, robots: RobotRoster) -> None:
+    def read_logs(self, robots: RobotRoster, kept_in: Path | None = None) -> None:
         """Re-read every agent's log; say each round not said yet (with the iterations of the
-        agent's robots now)."""
+        agent's robots now). ``kept_in``: a results folder whose robots' kept logs
+        (``agent_logs/<robot>/rounds_<agent>.log``) are read too, for lines the console did
+        not get (at the end of a run, once the robots' files are gathered)."""
         for info in self.infos():
-            log = read_rounds_log(info.rounds_log, info.name)
+            kept = kept_logs(kept_in, info.name) if kept_in is not None else []
+            log = read_rounds_log(info.rounds_log, info.name, kept=kept)
             with self._lock:
                 self._logs[info.name] = log
                 shown, self._said[info.name] = self._said.get(info.name, 0), len(log.rounds)

@@ -52,7 +52,7 @@ class Launcher:
         self._tls = Path(tls).resolve() if tls is not None else None
         self._placer = placer
         self._reporter = Reporter(self._out, progress)
-        self._robots = RobotRoster(self._out, self._reporter)
+        self._robots = RobotRoster(self._out, self._reporter, config.partition_wait_s)
         self._agents = AgentRoster(self._reporter)
         self._interrupted: str | None = None
 
@@ -166,8 +166,8 @@ class Launcher:
     def _collect(self, wall: float, ok: bool) -> Results:
         """Read the agents' logs one last time and write the end-of-run files
         (:func:`~dfrl.experiments.driver.results.ending.write_end_files`, which ``dfrl collect``
-        also uses)."""
-        self._agents.read_logs(self._robots)
+        also uses), with the lines the robots kept that the console did not get."""
+        self._agents.read_logs(self._robots, kept_in=self._out)
         self._robots.show_progress()        # lines the robots wrote after the last look
         r = self._robots
         facts = RunFacts(wall, ok, self._interrupted, r.crashed(), r.iterations(), r.lost(),

@@ -124,7 +124,9 @@ class RemoteRobot:
                 address=self._address, iteration=self._iteration, shares=self._shares,
                 done=self._state == "finished" or self._iteration >= self._cfg.iterations,
                 running=not self._stopped and self._state != "failed" and lost is None,
-                lost=lost, resumed=tuple(self._resumed))
+                lost=lost, resumed=tuple(self._resumed),
+                silent_since=self._down_since if self._unreachable is not None else None,
+                answered_at=self._last_answer)
 
     def take_progress(self) -> Progress:
         with self._lock:

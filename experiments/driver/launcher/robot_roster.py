@@ -13,6 +13,7 @@ import threading
 import time
 from pathlib import Path
 
+from dfrl.experiments.driver.launcher.remote_robots import LOST_AFTER_S
 from dfrl.experiments.driver.launcher.reporter import Reporter
 from dfrl.experiments.driver.launcher.robots import Robot, RobotStatus
 from dfrl.experiments.errors import ExperimentError
@@ -21,6 +22,9 @@ from dfrl.experiments.errors import ExperimentError
 STALL_S = 15.0
 #: Seconds all robots together get to end once told to stop.
 SHUTDOWN_S = 15.0
+#: Seconds the roster holds back calling robot hosts lost when it reaches none of them (the
+#: config's ``partition_wait_s`` when the launcher makes the roster).
+PARTITION_WAIT_S = 120.0
 
 
 class RobotRoster:
@@ -31,9 +35,19 @@ class RobotRoster:
     out : Path
         The results folder.
     reporter : Reporter
+    partition_wait_s : float
+        How long robots on robot hosts that all stopped answering together are held back
+        from being lost (see :meth:`partitioned`).
     """
 
-    def __init__(self, out: Path, reporter: Reporter) -> None:
+    def __init__(self, out: Path, reporter: Reporter,
+                 partition_wait_s: float = PARTITION_WAIT_S) -> None:
+        self._partition_wait_s = partition_wait_s
+        self._cut_since: float | None = None       # when the driver's partition began
+        self._cut_robots = 0                       # robot hosts it cut the driver from
+        self._cut_expired = False                  # its wait ran out
+        self._healed_at: float | None = None       # when the last partition healed
+        self._held_now: set[str] = set()           # robots held back from being lost
         self._out = out
         self._say = reporter.say
         self._event = reporter.event
@@ -98,21 +112,97 @@ class RobotRoster:
                 if algo is None or robot.spec.algo == algo}
 
     def all_exited(self) -> bool:
-        return all(not s.running for s in self.statuses().values())
+        """Every robot ended (robots held back by a driver partition have not)."""
+        return not self.partitioned() and all(not s.running for s in self.statuses().values())
 
     def robots_done(self) -> bool:
         """Every robot ended or ran all its iterations."""
-        return all(not s.running or s.iteration >= r.config.iterations
-                   for r, s in ((r, r.status()) for r in self.robots().values()))
+        return not self.partitioned() and \
+            all(not s.running or s.iteration >= r.config.iterations
+                for r, s in ((r, r.status()) for r in self.robots().values()))
+
+    # -- the driver's own partition -----------------------------------------------------------
+    def partitioned(self) -> bool:
+        """The driver takes itself to be cut off the network, or has just healed and some of
+        its robot hosts were not asked again yet (see :meth:`check`): robots held back from
+        being lost count as running."""
+        with self._lock:
+            return bool(self._held_now)
+
+    def _held(self, statuses: dict[str, RobotStatus], now: float) -> set[str]:
+        """Robots whose silence may be the driver's own partition (they are not called lost).
+
+        A robot on a robot host (at least two of them in the run) is held while it is silent
+        and no robot answered since it went silent: the driver reaches none of them. When
+        every one of them is silent the driver says it is partitioned; when one answers again,
+        that the partition healed, and the others silent since before are held until they are
+        asked again (:data:`~.remote_robots.LOST_AFTER_S`). Nothing is held once the partition,
+        or the robot's silence, lasted ``partition_wait_s``."""
+        with self._lock:
+            killed = set(self._killed)
+        remote = {rid: s for rid, s in statuses.items()
+                  if s.answered_at is not None and rid not in killed}
+        if len(remote) < 2:
+            return set()
+        silent = {rid: s.silent_since for rid, s in remote.items() if s.silent_since is not None}
+        last = max(s.answered_at for s in remote.values() if s.answered_at is not None)
+        held = {rid for rid, since in silent.items() if since is not None and last <= since
+                and now - since <= self._partition_wait_s}
+        with self._lock:
+            began, healed = self._cut_since, self._healed_at
+        if began is None and silent and len(silent) == len(remote):
+            began = min(v for v in silent.values() if v is not None)
+            with self._lock:
+                self._cut_since, self._cut_robots = began, len(remote)
+            self._say(f"DRIVER PARTITIONED: none of the {len(remote)} robot hosts answers "
+                      f"(silent {now - began:.0f} s); waiting up to "
+                      f"{self._partition_wait_s:.0f} s before calling them lost")
+            self._event({"kind": "driver_partition", "state": "partitioned",
+                         "robots": sorted(remote)})
+        elif began is not None and len(silent) < len(remote):
+            with self._lock:
+                self._cut_since, self._healed_at, count = None, now, self._cut_robots
+                expired, self._cut_expired = self._cut_expired, False
+                if not expired:
+                    self._stalls.append(f"driver partitioned from all {count} robot hosts "
+                                        f"from {self._elapsed(began):.1f} s to "
+                                        f"{self._elapsed(now):.1f} s (waited; not counted "
+                                        "as lost)")
+            self._say(f"driver partition healed: robot hosts answer again after "
+                      f"{now - began:.0f} s")
+            self._event({"kind": "driver_partition", "state": "healed",
+                         "seconds": round(now - began, 1)})
+            began, healed = None, now
+        if healed is not None and now - healed < LOST_AFTER_S:
+            held |= {rid for rid, since in silent.items() if since is not None and since < healed}
+        if began is not None and now - began > self._partition_wait_s:
+            with self._lock:
+                expired, self._cut_expired = not self._cut_expired, True
+                if expired:
+                    self._stalls.append(f"driver partitioned from all {self._cut_robots} "
+                                        f"robot hosts from {self._elapsed(began):.1f} s; "
+                                        f"after {self._partition_wait_s:.0f} s "
+                                        "(partition_wait_s) they count as lost")
+            if expired:
+                self._say(f"driver partitioned for {now - began:.0f} s: the robot hosts that "
+                          "do not answer count as lost from now on")
+            return set()
+        return held
 
     # -- how they fare ------------------------------------------------------------------------
     def check(self) -> None:
         """Record (and say) every robot process that died with a non-zero exit code, every
         robot that failed or stopped answering (and came back), and stalls."""
         now = time.monotonic()
-        for rid, robot in self.robots().items():
-            status = robot.status()
-            self._check_health(rid, robot, status)
+        robots = self.robots()
+        statuses = {rid: robot.status() for rid, robot in robots.items()}
+        held = self._held(statuses, now)
+        with self._lock:
+            self._held_now = held
+        for rid, robot in robots.items():
+            status = statuses[rid]
+            if rid not in held:
+                self._check_health(rid, robot, status)
             self._check_progress(rid, robot, status, now)
 
     def _check_health(self, rid: str, robot: Robot, status: RobotStatus) -> None:

@@ -61,6 +61,11 @@ class RobotStatus:
     resumed : tuple of int
         The iterations its checkpoint held each time it was resumed after its robot host was
         restarted (empty: never).
+    silent_since : float or None
+        For a robot on another host whose last status poll failed: since when (``time.monotonic``)
+        it has not answered; None while it answers, and for a robot of this host.
+    answered_at : float or None
+        For a robot on another host: when (``time.monotonic``) it last answered a poll.
     """
 
     address: Address | None
@@ -72,6 +77,8 @@ class RobotStatus:
     exit_code: int | None = None
     pid: int | None = None
     resumed: tuple[int, ...] = ()
+    silent_since: float | None = None
+    answered_at: float | None = None
 
 
 @dataclass(frozen=True)

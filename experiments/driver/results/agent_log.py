@@ -18,8 +18,18 @@ round. With ``failed_method`` too, the round was started again with ``method`` (
 the agent falls back to) and finished, every table written; without it the round was
 aborted without writing any table.
 
-Times are the agent's ``get_time/1`` floats. A line that is not one of these objects is kept
-in :attr:`AgentLog.unreadable` (reported, never dropped).
+Times are the agent's ``get_time/1`` floats (a ``control`` event also has its ``time``). A
+line that is not one of these objects is kept in :attr:`AgentLog.unreadable` (reported, never
+dropped).
+
+Where the lines are: the console node appends them to ``rounds_<agent>.log`` in the results
+folder; each robot node also keeps the lines the agent logged there, in
+``agent_logs/<robot>/rounds_<agent>.log`` of the robot's own folder (its results folder on
+this host, its experiment folder on a robot host, fetched with its other files), and posts
+them to the console from a bounded outbox (``platform_pl/dfrl_agent/log_outbox.pl``). A line
+posted twice (its first post's reply was lost) or read from both places is the same text:
+:func:`read_rounds_log` reads a line identical to one already read once (every event line is
+unique by its times or its round).
 """
 from __future__ import annotations
 
@@ -181,23 +191,39 @@ def _add(log: AgentLog, ev: dict[str, Any]) -> bool:
     return True
 
 
-def read_rounds_log(path: str | Path, agent: str) -> AgentLog:
-    """Read an agent's rounds log (a missing file is an empty log).
+def kept_logs(results_dir: str | Path, agent: str) -> list[Path]:
+    """The kept logs of ``agent`` under ``results_dir``: ``agent_logs/<robot>/rounds_<agent>.log``
+    of every robot node it logged on (see the module doc), sorted."""
+    return sorted(Path(results_dir).glob(f"agent_logs/*/rounds_{agent}.log"))
+
+
+def read_rounds_log(path: str | Path, agent: str,
+                    kept: list[Path] | tuple[Path, ...] = ()) -> AgentLog:
+    """Read an agent's rounds log (a missing file is an empty log), and with ``kept`` the
+    robot nodes' kept logs too (:func:`kept_logs`): each line once (an identical line read
+    again is skipped), rounds sorted by number (the files interleave, and lines posted
+    from two nodes may reach the console out of order).
 
     A torn last line (the agent is still writing it) shows up in ``unreadable`` until the
     next read.
     """
     log = AgentLog(agent)
-    p = Path(path)
-    if not p.is_file():
-        return log
+    seen: set[str] = set()
+    for p in (Path(path), *map(Path, kept)):
+        if p.is_file():
+            _read_into(log, p, seen)
+    log.rounds.sort(key=lambda r: r.round)
+    return log
+
+
+def _read_into(log: AgentLog, p: Path, seen: set[str]) -> None:
     for line in p.read_text(encoding="utf-8", errors="replace").splitlines():
-        if not line.strip():
+        if not line.strip() or line in seen:
             continue
+        seen.add(line)
         try:
             known = _add(log, parse_event(line))
         except (ValueError, KeyError, TypeError):
             known = False
         if not known:
             log.unreadable.append(line)
-    return log

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import json
+import time
 from pathlib import Path
 
 import pytest
@@ -125,6 +126,71 @@ def test_roster_says_a_lost_robot_host_and_its_return(tmp_path: Path) -> None:
     assert "ROBOT r1 LOST at iteration 50: unreachable for 11 s" in said.getvalue()
     assert "robot r1 answers again (iteration 60)" in said.getvalue()
     assert [e["state"] for e in events(tmp_path)] == ["dead", "learning"]
+
+
+def _silent(rid: str, it: int, since: float, answered: float) -> RobotStatus:
+    """A robot host's status while its polls fail (silent since ``since``)."""
+    return RobotStatus(("10.0.0.7", 7001), it, 0, False, running=False,
+                       lost=f"unreachable for 11 s: {rid} timeout", silent_since=since,
+                       answered_at=answered)
+
+
+def test_roster_waits_out_its_own_partition(tmp_path: Path) -> None:
+    # Prepare: three robots on robot hosts, all answering (times: time.monotonic's)
+    t = time.monotonic()
+    said = io.StringIO()
+    roster = RobotRoster(tmp_path, Reporter(tmp_path, said), partition_wait_s=60.0)
+    robots = [ScriptedRobot(f"r{i}", robot_host=f"10.0.0.{i}:7001") for i in (1, 2, 3)]
+    for r in robots:
+        r.start()
+        roster.add(r)
+        r.now = RobotStatus(("10.0.0.7", 7001), 10, 0, False, running=True, answered_at=t - 20)
+    roster.check()
+    # Execute: all three go silent together (none answered since), then come back
+    for r in robots:
+        r.now = _silent(r.spec.id, 20, t - 11, t - 12)
+    roster.check()
+    cut = roster.partitioned(), roster.all_exited(), roster.robots_done(), roster.lost()
+    for r in robots:
+        r.now = RobotStatus(("10.0.0.7", 7001), 30, 0, False, running=True, answered_at=t + 1)
+    roster.check()
+    # Assert: no robot called lost; the run is not over; a partition said, then healed
+    assert cut == (True, False, False, {}), cut
+    assert roster.lost() == {} and not roster.partitioned()
+    text = said.getvalue()
+    assert "DRIVER PARTITIONED: none of the 3 robot hosts answers" in text, text
+    assert "driver partition healed" in text and "LOST" not in text, text
+    assert [e["state"] for e in events(tmp_path)] == ["partitioned", "healed"]
+    assert any("driver partitioned from all 3 robot hosts" in s for s in roster.stalls())
+
+
+def test_roster_loses_a_silent_host_while_others_answer(tmp_path: Path) -> None:
+    # Control: one robot host silent while the other answered since: that one is lost at once
+    said = io.StringIO()
+    roster = RobotRoster(tmp_path, Reporter(tmp_path, said), partition_wait_s=60.0)
+    r1, r2 = (ScriptedRobot(f"r{i}", robot_host=f"10.0.0.{i}:7001") for i in (1, 2))
+    for r in (r1, r2):
+        r.start()
+        roster.add(r)
+    t = time.monotonic()
+    r1.now = _silent("r1", 20, t - 11, t - 12)
+    r2.now = RobotStatus(("10.0.0.2", 7001), 20, 0, False, running=True, answered_at=t - 0.5)
+    roster.check()
+    assert list(roster.lost()) == ["r1"] and not roster.partitioned()
+    assert "ROBOT r1 LOST" in said.getvalue()
+
+
+def test_roster_loses_them_after_the_partition_wait(tmp_path: Path) -> None:
+    said = io.StringIO()
+    roster = RobotRoster(tmp_path, Reporter(tmp_path, said), partition_wait_s=0.0)
+    robots = [ScriptedRobot(f"r{i}", robot_host=f"10.0.0.{i}:7001") for i in (1, 2)]
+    for r in robots:
+        r.start()
+        roster.add(r)
+        r.now = _silent(r.spec.id, 20, 1.0, 0.5)      # silent for long (monotonic 1.0)
+    roster.check()
+    assert sorted(roster.lost()) == ["r1", "r2"] and not roster.partitioned()
+    assert "count as lost from now on" in said.getvalue()
 
 
 def test_roster_records_a_stall_when_the_robot_moves_again(

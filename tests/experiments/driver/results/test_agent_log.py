@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from dfrl.experiments.driver.results.agent_log import (Aborted, ControlEvent, RoundRecord, Skip, Superseded,
-                                                parse_event, read_rounds_log)
+                                                kept_logs, parse_event, read_rounds_log)
 
 
 def _write(path: Path, *lines: str) -> Path:
@@ -83,3 +83,37 @@ def test_a_round_logged_by_a_late_copy_and_its_replacement_counts_once(tmp_path:
     assert [(x.round, x.epoch) for x in got.duplicates] == [(2, 1)]
     assert got.superseded == [Superseded(3, 1, 2)] and len(got.resurrections) == 1
     assert got.unreadable == []
+
+
+def _round_line(n: int, start: float) -> str:
+    return (f'{{"event":"round","agent":"fed","round":{n},"start":{start},"end":{start + 0.5},'
+            '"hops":2,"bytes":10,"method":"average","visited":["r1","r2"],"skipped":[]}')
+
+
+def test_kept_logs_merged_each_line_once(tmp_path: Path) -> None:
+    # Prepare: the console got rounds 2 (twice: a post sent again), 1 (late, out of order);
+    # robot r1 kept 1..3 and the finished line, robot r2 kept round 3 (logged there after a
+    # resurrection, epoch 2); another agent's kept log and a non-log file beside them
+    console = _write(tmp_path / "rounds_fed.log", _round_line(2, 20.0), _round_line(2, 20.0),
+                     _round_line(1, 10.0))
+    (tmp_path / "agent_logs" / "r1").mkdir(parents=True)
+    (tmp_path / "agent_logs" / "r2").mkdir()
+    _write(tmp_path / "agent_logs" / "r1" / "rounds_fed.log", _round_line(1, 10.0),
+           _round_line(2, 20.0), _round_line(3, 30.0),
+           '{"event":"finished","agent":"fed","round":3}')
+    r3 = _round_line(3, 31.0).replace('"skipped":[]', '"skipped":[],"epoch":2')
+    _write(tmp_path / "agent_logs" / "r2" / "rounds_fed.log", r3)
+    _write(tmp_path / "agent_logs" / "r2" / "rounds_other.log", _round_line(9, 90.0))
+    # Execute
+    kept = kept_logs(tmp_path, "fed")
+    alone = read_rounds_log(console, "fed")
+    merged = read_rounds_log(console, "fed", kept=kept)
+    # Assert: the console's file alone: rounds 1, 2 in order, the repeated line read once;
+    # merged: every round once, round 3 from the higher epoch and the other one a duplicate
+    assert kept == [tmp_path / "agent_logs" / "r1" / "rounds_fed.log",
+                    tmp_path / "agent_logs" / "r2" / "rounds_fed.log"]
+    assert [r.round for r in alone.rounds] == [1, 2] and alone.duplicates == []
+    assert [(r.round, r.start, r.epoch) for r in merged.rounds] == \
+        [(1, 10.0, 0), (2, 20.0, 0), (3, 31.0, 2)]
+    assert [(r.round, r.start) for r in merged.duplicates] == [(3, 30.0)]
+    assert merged.finished == 3 and merged.unreadable == []
