@@ -156,6 +156,16 @@ class Federation:
                          for i in range(STOPS))
 
 
+def _tour_with_a_cut(lab: Lab, tmp: Path, host: str, itinerary: str = "chain",
+                     quorum: bool = True) -> Federation:
+    """Launch a 16-round tour, cut ``host`` for four leases after round 4, wait for the end."""
+    fed = Federation(lab, tmp, quorum)
+    fed.launch(rounds=16, rest=0.6, itinerary=itinerary)
+    _cut_after_a_round(fed, host, 4 * LEASE_S)
+    fed.wait(lambda: fed.events("finished"), 120, "the end of the tour")
+    return fed
+
+
 def _cut_after_a_round(fed: Federation, host: str, seconds: float) -> None:
     """Wait for round 4 to be logged (the agent then rests at s0, held by s1), cut ``host``
     for ``seconds``, mend it."""
@@ -180,10 +190,7 @@ ITINERARIES = ["chain", "tree"]
 @pytest.mark.parametrize("itinerary", ITINERARIES)
 def test_cut_holder_does_not_resurrect(tmp_path: Path, itinerary: str) -> None:
     with Lab([*(f"s{i}" for i in range(STOPS)), "drv"]) as lab:
-        fed = Federation(lab, tmp_path)
-        fed.launch(rounds=16, rest=0.6, itinerary=itinerary)
-        _cut_after_a_round(fed, "s1", 4 * LEASE_S)
-        fed.wait(lambda: fed.events("finished"), 120, "the end of the tour")
+        fed = _tour_with_a_cut(lab, tmp_path, "s1", itinerary)
         time.sleep(LEASE_S)              # a late copy would show itself now
         assert fed.events("resurrected") == [], fed.events("resurrected")
         _judge(fed)
@@ -196,10 +203,7 @@ def test_cut_holder_does_not_resurrect(tmp_path: Path, itinerary: str) -> None:
 @pytest.mark.parametrize("itinerary", ITINERARIES)
 def test_cut_agent_host_leaves_one_writer(tmp_path: Path, itinerary: str) -> None:
     with Lab([*(f"s{i}" for i in range(STOPS)), "drv"]) as lab:
-        fed = Federation(lab, tmp_path)
-        fed.launch(rounds=16, rest=0.6, itinerary=itinerary)
-        _cut_after_a_round(fed, "s0", 4 * LEASE_S)
-        fed.wait(lambda: fed.events("finished"), 120, "the end of the tour")
+        fed = _tour_with_a_cut(lab, tmp_path, "s0", itinerary)
         fed.wait(lambda: fed.events("superseded"), 20, "the cut copy to retire")
         [res] = fed.events("resurrected")
         assert res["epoch"] == 2 and res["dead"].startswith(lab["s0"].address), res
@@ -217,10 +221,7 @@ def test_cut_holder_without_quorum_is_split_brain(tmp_path: Path) -> None:
     # behaviour before issue 33): the holder cut off resurrects a second copy, and the
     # history checker sees what it did.
     with Lab([*(f"s{i}" for i in range(STOPS)), "drv"]) as lab:
-        fed = Federation(lab, tmp_path, quorum=False)
-        fed.launch(rounds=16, rest=0.6)
-        _cut_after_a_round(fed, "s1", 4 * LEASE_S)
-        fed.wait(lambda: len(fed.events("finished")) >= 1, 120, "the end of a tour")
+        fed = _tour_with_a_cut(lab, tmp_path, "s1", quorum=False)
         time.sleep(2 * LEASE_S)
         assert [r["from"] for r in fed.events("resurrected")] == [f"{lab['s1'].address}:{PORT}"]
         verdict = check_history(fed.tmp)
