@@ -16,8 +16,8 @@ from collections.abc import Sequence
 from dfrl import __version__
 
 #: Modules (of this package) that add subcommands, in the order of ``dfrl --help``.
-COMMAND_MODULES = ("node", "federated", "running", "bench", "robots", "transfer", "studies",
-                   "hetero", "robot", "view", "secret", "certs")
+COMMAND_MODULES = ("node", "federated", "running", "history", "bench", "robots", "transfer",
+                   "studies", "hetero", "robot", "view", "secret", "certs")
 
 
 def build_parser(only: Sequence[str] | None = None) -> argparse.ArgumentParser:

@@ -10,7 +10,8 @@ Layout (see ``experiments/README.md``)::
     q_sum.png, cumulative_reward.png, curves.png
     summary.md
     metrics_<robot>.csv    per-robot metrics, written by the node while it runs
-    shares_<robot>.csv     per-robot applied shares (index, iteration, time, sha256)
+    shares_<robot>.csv     per-robot applied shares (index, iteration, time, sha256, and the
+                           write's round, agent, epoch): the history :mod:`.history` checks
     eval_<robot>.csv       greedy evaluations while learning (``eval_every``), and
     live_evaluations.csv   all robots' in one file (:mod:`.evaluations`)
     rounds_<agent>.log     the agent's log: one JSON object per line (round, finished,
@@ -25,7 +26,9 @@ Layout (see ``experiments/README.md``)::
 Modules: :mod:`.agent_log` (the agent's JSON-lines log), :mod:`.rounds` (shares, their
 matching to rounds, ``rounds.csv``), :mod:`.metrics` (``metrics.csv``), :mod:`.evaluations`
 (``live_evaluations.csv``), :mod:`.files` (JSON files), :mod:`.summary` (:class:`Results` and
-``summary.md``), :mod:`.ending` (all the end-of-run files at once: what the driver writes when a
+``summary.md``), :mod:`.history` (the history checker: did the writes the robots recorded
+keep the rules: no doubled write, no epoch regressed, no stale epoch, no split round),
+:mod:`.ending` (all the end-of-run files at once: what the driver writes when a
 run ends and ``dfrl collect`` when the driver did not).
 """
 from __future__ import annotations
@@ -33,12 +36,15 @@ from __future__ import annotations
 from dfrl.experiments.driver.results.agent_log import (Aborted, AgentLog, ControlEvent, RoundRecord,
                                                 Skip, parse_event, read_rounds_log)
 from dfrl.experiments.driver.results.files import read_json, write_json
+from dfrl.experiments.driver.results.history import (HistoryVerdict, Violation, check_history,
+                                                     check_shares)
 from dfrl.experiments.driver.results.metrics import METRICS_FIELDS, merge_metrics, read_metrics
 from dfrl.experiments.driver.results.rounds import (ROUNDS_FIELDS, Share, count_equal, match_shares,
                                              read_rounds_csv, read_shares, write_rounds_csv)
 from dfrl.experiments.driver.results.summary import Results, node_warnings, write_summary
 
-__all__ = ["Aborted", "AgentLog", "ControlEvent", "METRICS_FIELDS", "ROUNDS_FIELDS", "Results",
-           "RoundRecord", "Share", "Skip", "count_equal", "match_shares", "merge_metrics",
+__all__ = ["Aborted", "AgentLog", "ControlEvent", "HistoryVerdict", "METRICS_FIELDS",
+           "ROUNDS_FIELDS", "Results", "RoundRecord", "Share", "Skip", "Violation",
+           "check_history", "check_shares", "count_equal", "match_shares", "merge_metrics",
            "node_warnings", "parse_event", "read_json", "read_metrics", "read_rounds_csv",
            "read_rounds_log", "read_shares", "write_json", "write_rounds_csv", "write_summary"]

@@ -5,8 +5,8 @@ import pytest
 
 from dfrl.experiments.cli import build_parser, main
 
-COMMANDS = ["node", "demo", "run", "inject", "join", "collect", "bench", "train", "eval",
-            "baselines", "render-arenas", "transfer", "transfer-study", "sweep", "paper",
+COMMANDS = ["node", "demo", "run", "inject", "join", "collect", "check-history", "bench", "train",
+            "eval", "baselines", "render-arenas", "transfer", "transfer-study", "sweep", "paper",
             "speedup", "reference", "hetero", "robot", "view", "secret", "certs"]
 
 
