@@ -38,6 +38,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from dfrl.experiments.driver.results.history import check_history
 from dfrl.experiments.tools.bench.faults_cases import (
     CASES, SKIP_AFTER_S, Acted, Case, Expectation)
 from dfrl.experiments.tools.bench.faults_federation import FaultBenchError, Federation
@@ -211,11 +212,7 @@ def write_gaps(shares: dict[str, list[dict[str, str]]]) -> tuple[float | None, f
 def judge_history(folder: Path, robots: list[str]) -> dict[str, Any]:
     """The history checker's verdict on the ``shares_<robot>.csv`` files in ``folder``:
     ``ok``, ``counts`` by kind, the first violations; ``ok`` None with ``error`` when it
-    could not run."""
-    try:
-        from dfrl.experiments.driver.results.history import check_history
-    except ImportError as exc:
-        return {"ok": None, "error": f"no history checker on this branch ({exc})"}
+    could not read a file."""
     try:
         verdict = check_history(folder, robots)
     except Exception as exc:   # noqa: BLE001 - a malformed file is a finding, not a crash
@@ -225,9 +222,7 @@ def judge_history(folder: Path, robots: list[str]) -> dict[str, Any]:
         kind = getattr(v.kind, "value", str(v.kind))
         counts[kind] = counts.get(kind, 0) + 1
     return {"ok": bool(verdict.ok), "counts": counts,
-            "first": [v.to_json() if hasattr(v, "to_json") else str(v)
-                      for v in verdict.violations[:5]],
-            "text": verdict.text()}
+            "first": [v.to_json() for v in verdict.violations[:3]]}
 
 
 def gather_shares(fed: Federation, folder: Path) -> dict[str, list[dict[str, str]]]:
