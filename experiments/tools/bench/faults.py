@@ -38,7 +38,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from dfrl.experiments.driver.results.history import check_history
+from dfrl.experiments.driver.results.history import HistoryInputError, check_history
 from dfrl.experiments.tools.bench.faults_cases import (
     CASES, SKIP_AFTER_S, Acted, Case, Expectation)
 from dfrl.experiments.tools.bench.faults_federation import FaultBenchError, Federation
@@ -215,7 +215,7 @@ def judge_history(folder: Path, robots: list[str]) -> dict[str, Any]:
     could not read a file."""
     try:
         verdict = check_history(folder, robots)
-    except Exception as exc:   # noqa: BLE001 - a malformed file is a finding, not a crash
+    except HistoryInputError as exc:   # a malformed file is a finding, not a crash
         return {"ok": None, "error": f"{type(exc).__name__}: {exc}"}
     counts: dict[str, int] = {}
     for v in verdict.violations:
