@@ -86,15 +86,21 @@ class Host:
               **kwargs) -> subprocess.Popen:  # noqa: ANN003
         """Start ``argv`` inside this host, from ``cwd`` (this host's path); it is killed when
         the lab closes."""
-        proc = subprocess.Popen(*self._args(argv, cwd), **kwargs)
+        cmd, here = self._args(argv, cwd)
+        proc = subprocess.Popen(cmd, cwd=here, **kwargs)
         self.procs.append(proc)
         return proc
 
     def run(self, argv: list[str], timeout: float = 60.0, cwd: str | Path | None = None,
             **kwargs) -> subprocess.CompletedProcess:  # noqa: ANN003
-        return subprocess.run(*self._args(argv, cwd), timeout=timeout, **kwargs)
+        """Run ``argv`` inside this host, from ``cwd`` (this host's path), bounded."""
+        cmd, here = self._args(argv, cwd)
+        return subprocess.run(cmd, cwd=here, timeout=timeout, **kwargs)
 
-    def _args(self, argv: list[str], cwd: str | Path | None) -> tuple[list[str], str | Path | None]:
+    def _args(self, argv: list[str],
+              cwd: str | Path | None) -> tuple[list[str], str | Path | None]:
+        """The command and the working directory to start it from (this process's view: a
+        host with a disk of its own takes its working directory after entering it)."""
         if self.keeper is None:
             return self.command(argv), cwd
         return self.command(argv, cwd), None
