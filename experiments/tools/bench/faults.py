@@ -269,6 +269,7 @@ def run_case(case: Case, hosts: int, work: Path, delay_ms: float = 0.0,
         # the robots may still be writing (a run whose driver was cut or killed): bounded
         wait_robots_idle(fed, 30.0)
         shares = gather_shares(fed, work / "history")
+        foreign = fed.foreign_files()
         copy_problems = fed.copy_out()
     summary_path = acted.results / "summary.md"
     summary = summary_path.read_text(encoding="utf-8") if summary_path.is_file() else ""
@@ -283,6 +284,8 @@ def run_case(case: Case, hosts: int, work: Path, delay_ms: float = 0.0,
     m["summary_missed"], m["summary_lost"] = named["missed"], named["lost"]
     m["any_lost"] = bool(named["lost"])
     m["no_shared_disk"] = True
+    # files a host wrote under a path of another host's (its copy: work/<host>/_foreign/)
+    m["foreign_files"] = foreign
     if "collect_exit" in acted.extra:
         m["collect_rounds_found"] = m["rounds_done"]
     problems = judge(m, slowed(case.expect, delay_ms, m["normal_gap_s"]))

@@ -106,17 +106,41 @@ class Federation:
 
     def copy_out(self) -> list[str]:
         """Copy every host's folder (``work/<host>`` as that host sees it) to this process's
-        ``work/<host>``; the hosts whose folder could not be read, with why."""
+        ``work/<host>``, and what a host wrote elsewhere under ``work`` (a path of another
+        host's, say the driver's ``out``) to ``work/<host>/_foreign/``; the hosts whose
+        folder could not be read, with why."""
         problems = []
         for h in self.lab.hosts:
-            src = self.view(h, self.work / h)
-            try:
-                if src.is_dir():
-                    shutil.copytree(src, self.work / h, dirs_exist_ok=True,
-                                    ignore_dangling_symlinks=True)
-            except (OSError, shutil.Error) as exc:
-                problems.append(f"{h}: {exc}"[:300])
+            for src, dst in [(self.view(h, self.work / h), self.work / h)] + [
+                    (self.view(h, self.work / rel), self.work / h / "_foreign" / rel)
+                    for rel in self.foreign_files().get(h, [])]:
+                try:
+                    if src.is_dir():
+                        shutil.copytree(src, dst, dirs_exist_ok=True,
+                                        ignore_dangling_symlinks=True)
+                    elif src.is_file():
+                        dst.parent.mkdir(parents=True, exist_ok=True)
+                        shutil.copy2(src, dst)
+                except (OSError, shutil.Error) as exc:
+                    problems.append(f"{h}: {exc}"[:300])
         return problems
+
+    def foreign_files(self, most: int = 50) -> dict[str, list[str]]:
+        """Per host, the files (at most ``most``, relative to ``work``) it has under ``work``
+        outside its own folder ``work/<host>``: on hosts that share no disk, what a process
+        there wrote to a path meant for another host (none expected)."""
+        found: dict[str, list[str]] = {}
+        for h in self.lab.hosts:
+            root = self.view(h, self.work)
+            try:
+                tops = [e for e in root.iterdir() if e.name != h]
+            except OSError:
+                continue
+            for top in tops:
+                for f in ([top] if top.is_file() else sorted(top.rglob("*"))):
+                    if f.is_file() and len(found.setdefault(h, [])) < most:
+                        found[h].append(str(f.relative_to(root)))
+        return {h: fs for h, fs in found.items() if fs}
 
     def start_robot_hosts(self, timeout_s: float = 120.0) -> None:
         """Start every robot host's service (in parallel) and wait until each listens."""
