@@ -25,6 +25,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from dfrl.experiments.driver.launcher.spawn import TREE_ROUNDS_PER_S
 from dfrl.experiments.driver.results.agent_log import RoundRecord, read_rounds_log
 from dfrl.experiments.tokens import new_secret, write_secret_file
 from dfrl.experiments.tools.netns import Lab
@@ -171,6 +172,9 @@ class Federation:
         argv = dfrl_argv("robot", "--host", bind, "--port", str(PORT), "--token-file",
                          "dfrl.token", "--advertise", self.lab[h].address, "--workdir",
                          "dfrl-robot")
+        if self.plan.itinerary == "tree":
+            # a tree's copies are clones: admit as many as a tree run's driver asks for
+            argv += ["--clone-limit", str(self.plan.fanout * TREE_ROUNDS_PER_S * 60)]
         with open(log, "ab") as fh:
             self.procs[robot] = self.lab[h].popen(argv, cwd=cwd, stdin=subprocess.DEVNULL,
                                                   stdout=fh, stderr=subprocess.STDOUT)
