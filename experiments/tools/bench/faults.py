@@ -286,6 +286,7 @@ def run_case(case: Case, hosts: int, work: Path, delay_ms: float = 0.0,
     m["no_shared_disk"] = True
     # files a host wrote under a path of another host's (its copy: work/<host>/_foreign/)
     m["foreign_files"] = foreign
+    m["round_log_lines_not_written"] = lines_not_written(work, fed.robots, fed.host_of)
     if "collect_exit" in acted.extra:
         m["collect_rounds_found"] = m["rounds_done"]
     problems = judge(m, slowed(case.expect, delay_ms, m["normal_gap_s"]))
@@ -300,6 +301,24 @@ def run_case(case: Case, hosts: int, work: Path, delay_ms: float = 0.0,
         return record
     record["driver_stderr_tail"] = fed.driver_tail(600)
     return record
+
+
+#: the warning of a robot host's node that could neither post a round log line to the
+#: driver's console nor append it to the log's path on its own disk (dfrl_round_log.pl)
+NOT_WRITTEN = "round log line not written"
+
+
+def lines_not_written(work: Path, robots: list[str],
+                      host_of: Callable[[str], str]) -> dict[str, int]:
+    """Per robot host (its ``robot.log``, copied out to ``work/<host>``), the round log lines
+    its node could not write anywhere: lost from the run's round log (only hosts with some)."""
+    out = {}
+    for rid in robots:
+        log = work / host_of(rid) / "robot.log"
+        text = log.read_text(encoding="utf-8", errors="replace") if log.is_file() else ""
+        if text.count(NOT_WRITTEN):
+            out[host_of(rid)] = text.count(NOT_WRITTEN)
+    return out
 
 
 def wait_robots_idle(fed: Federation, timeout_s: float) -> None:
