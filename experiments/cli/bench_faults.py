@@ -22,6 +22,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"faults to run, in order (default: all, cheapest first: "
                              f"{' '.join(CASES)})")
     parser.add_argument("--runs", type=int, default=3, help="runs of each fault (default 3)")
+    parser.add_argument("--rounds", type=int, default=None,
+                        help="sync rounds of every run, 5 to 200 (default: each fault's own "
+                             "plan; 30 for issue 33's cut_holder_*, cut_agent_host_*, "
+                             "cut_driver_* and kill_driver_collect)")
+    parser.add_argument("--itinerary", nargs="+", choices=["chain", "tree"], default=["chain"],
+                        help="the agent's itineraries, each fault run over each (tree: "
+                             "fan-out 2) (default: chain)")
     parser.add_argument("--hosts", type=int, default=4,
                         help="robot hosts of the federation, 2 to 5 (default 4)")
     parser.add_argument("--delay-ms", type=float, default=0.0,
@@ -38,14 +45,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _text(f: dict[str, Any]) -> str:
     med = f["median"]
     delay = f["per_run"][0].get("delay_ms") if f["per_run"] else None
-    lines = [f"{f['fault']}: {'PASS' if f['passed'] else 'FAIL'} {f['passed_runs']}/{f['runs']} "
+    lines = [f"{f['fault']} ({f.get('itinerary', 'chain')}): "
+             f"{'PASS' if f['passed'] else 'FAIL'} {f['passed_runs']}/{f['runs']} "
              f"-- {f['what']}" + (f" (links {delay:g} ms slow each way)" if delay else ""),
              f"  median recovery {med['recovery_s']} s, longest stall {med['longest_stall_s']} s "
              f"(normal gap {med['normal_gap_s']} s), rounds done {med['rounds_done']}/"
              f"{f['rounds_planned']}; identical tables {f['tables_identical_runs']}/{f['runs']} "
              f"runs, truthful verdict {f['truthful_runs']}/{f['runs']} runs"
              + (f"; median {med['rounds_unverified']} round(s) with a table not on record "
-                "(a dead host's shares)" if med["rounds_unverified"] else "")]
+                "(a dead host's shares)" if med["rounds_unverified"] else "")
+             + f"; history clean {f.get('history_clean_runs')}/{f['runs']} runs"]
     for r in f["per_run"]:
         if not r["passed"]:
             lines.append(f"  run {r['run']}: " + "; ".join(r["problems"]))
@@ -76,7 +85,8 @@ def cmd(args: argparse.Namespace) -> int:
 
     try:
         done = faults.run(args.faults, args.runs, args.hosts, args.keep, on_fault=show,
-                          delay_ms=args.delay_ms)
+                          delay_ms=args.delay_ms, rounds=args.rounds,
+                          itineraries=tuple(args.itinerary))
     except ValueError as exc:
         print(f"dfrl bench faults: {exc}", file=sys.stderr)
         return 2

@@ -6,7 +6,20 @@ the machine's own namespace: the hosts reach each other and nothing else, and ev
 test uses is one the lab made. ``close()`` (or leaving the ``with`` block) kills what was
 started in the hosts and deletes every namespace, which removes the veths and the bridge.
 
+With ``private=DIR`` every host also gets a mount namespace of its own with a private tmpfs
+mounted over ``DIR``: what a host writes under ``DIR`` exists only in that host (no shared
+disk between hosts, nor with the process that made the lab, which sees its own ``DIR``). The
+mount namespace is held by a keeper process (``unshare --mount ... sleep``) that lives in the
+machine's network namespace, so that ``kill`` of a host (its network namespace's processes)
+leaves its disk as a killed machine's disk stays: a restarted host finds its files. Every
+command of a host enters it (``ip netns exec NS nsenter -t KEEPER -m env -C CWD ...``; the
+working directory is taken after entering, so it is a path of the host's own disk), and
+:meth:`Host.view` gives the path under which the process that made the lab reads and writes a
+host's file (``/proc/KEEPER/root/...``, as root): that is how a benchmark copies a host's files
+out, never through a shared folder.
+
 Needs root (CAP_NET_ADMIN) and ``ip``; :func:`unavailable` says why not, for ``pytest.skip``.
+Private disks need ``unshare``, ``nsenter`` and ``env -C`` (util-linux, coreutils).
 """
 from __future__ import annotations
 
@@ -18,6 +31,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 SUBNET_PREFIX = "10.200"
+#: the longest a host's disk (its keeper process) lives; the lab kills it when it closes
+KEEPER_S = 6 * 3600
 
 
 def unavailable() -> str | None:
@@ -50,19 +65,45 @@ class Host:
     address: str
     link: str                    #: the veth end on the bridge (cut it to cut the host off)
     procs: list[subprocess.Popen] = field(default_factory=list)
+    #: the process holding this host's mount namespace (None: the host shares the disk)
+    keeper: subprocess.Popen | None = None
 
-    def command(self, argv: list[str]) -> list[str]:
-        """``argv`` run inside this host."""
-        return ["ip", "netns", "exec", self.namespace, *argv]
+    def command(self, argv: list[str], cwd: str | Path | None = None) -> list[str]:
+        """``argv`` run inside this host, from ``cwd`` (a path as this host sees it)."""
+        if self.keeper is None:
+            return ["ip", "netns", "exec", self.namespace, *argv]
+        return ["ip", "netns", "exec", self.namespace, "nsenter", "-t", str(self.keeper.pid),
+                "-m", "env", "-C", str(cwd if cwd is not None else "/"), *argv]
 
-    def popen(self, argv: list[str], **kwargs) -> subprocess.Popen:  # noqa: ANN003
-        """Start ``argv`` inside this host; it is killed when the lab closes."""
-        proc = subprocess.Popen(self.command(argv), **kwargs)
+    def view(self, path: str | Path) -> Path:
+        """Where the lab's maker reads and writes this host's ``path`` (absolute)."""
+        path = Path(path)
+        if self.keeper is None:
+            return path
+        return Path(f"/proc/{self.keeper.pid}/root") / path.relative_to("/")
+
+    def popen(self, argv: list[str], cwd: str | Path | None = None,
+              **kwargs) -> subprocess.Popen:  # noqa: ANN003
+        """Start ``argv`` inside this host, from ``cwd`` (this host's path); it is killed when
+        the lab closes."""
+        cmd, here = self._args(argv, cwd)
+        proc = subprocess.Popen(cmd, cwd=here, **kwargs)
         self.procs.append(proc)
         return proc
 
-    def run(self, argv: list[str], timeout: float = 60.0, **kwargs) -> subprocess.CompletedProcess:  # noqa: ANN003
-        return subprocess.run(self.command(argv), timeout=timeout, **kwargs)
+    def run(self, argv: list[str], timeout: float = 60.0, cwd: str | Path | None = None,
+            **kwargs) -> subprocess.CompletedProcess:  # noqa: ANN003
+        """Run ``argv`` inside this host, from ``cwd`` (this host's path), bounded."""
+        cmd, here = self._args(argv, cwd)
+        return subprocess.run(cmd, cwd=here, timeout=timeout, **kwargs)
+
+    def _args(self, argv: list[str],
+              cwd: str | Path | None) -> tuple[list[str], str | Path | None]:
+        """The command and the working directory to start it from (this process's view: a
+        host with a disk of its own takes its working directory after entering it)."""
+        if self.keeper is None:
+            return self.command(argv), cwd
+        return self.command(argv, cwd), None
 
 
 class Lab:
@@ -74,9 +115,13 @@ class Lab:
         Host names (also the last part of their namespace names).
     lab_id : int
         Third octet of the subnet, so that labs of parallel test runs do not share one.
+    private : Path, optional
+        A folder (absolute, existing) that each host sees as a tmpfs of its own (see the
+        module doc); None: the hosts share the machine's disk.
     """
 
-    def __init__(self, hosts: list[str], lab_id: int | None = None) -> None:
+    def __init__(self, hosts: list[str], lab_id: int | None = None,
+                 private: Path | None = None) -> None:
         self.tag = f"dfrl{os.getpid() % 100000}"
         self.lab_id = (os.getpid() % 200) + 1 if lab_id is None else lab_id
         self.bridge_ns = f"{self.tag}-br"
@@ -84,6 +129,9 @@ class Lab:
         self._made: list[str] = []
         try:
             self._make(hosts)
+            if private is not None:
+                for host in self.hosts.values():
+                    self._give_disk(host, Path(private))
         except BaseException:
             self.close()
             raise
@@ -108,6 +156,31 @@ class Lab:
             _ip("link", "set", "eth0", "up", ns=ns)
             _ip("link", "set", "lo", "up", ns=ns)
             self.hosts[name] = Host(name, ns, address, link)
+
+    def _give_disk(self, host: Host, private: Path) -> None:
+        """A mount namespace for ``host`` with a tmpfs of its own over ``private``."""
+        if not private.is_absolute() or not private.is_dir():
+            raise ValueError(f"private must be an existing absolute folder, got {private}")
+        keeper = subprocess.Popen(["unshare", "--mount", "--propagation", "private", "--",
+                                   "sleep", str(KEEPER_S)], stdin=subprocess.DEVNULL)
+        host.keeper = keeper
+        mine = os.readlink("/proc/self/ns/mnt")
+        deadline = time.monotonic() + 10
+        while True:          # until unshare has made the namespace (then it execs sleep)
+            try:
+                if os.readlink(f"/proc/{keeper.pid}/ns/mnt") != mine:
+                    break
+            except OSError:
+                pass
+            if keeper.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"unshare --mount for {host.name} failed "
+                                   f"(exit {keeper.poll()})")
+            time.sleep(0.01)
+        done = subprocess.run(["nsenter", "-t", str(keeper.pid), "-m", "mount", "-t", "tmpfs",
+                               "-o", "mode=0755", f"dfrl-{host.name}", str(private)],
+                              capture_output=True, text=True, timeout=30)
+        if done.returncode != 0:
+            raise RuntimeError(f"tmpfs for {host.name} over {private}: {done.stderr.strip()}")
 
     def __enter__(self) -> "Lab":
         return self
@@ -161,6 +234,14 @@ class Lab:
                     break
                 time.sleep(0.1)
         self._made.clear()
+        # the hosts' disks go with their keepers (the last process of each mount namespace)
+        for host in self.hosts.values():
+            if host.keeper is not None and host.keeper.poll() is None:
+                host.keeper.kill()
+                try:
+                    host.keeper.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    pass
 
 
 def _pids_in(ns: str) -> list[int]:

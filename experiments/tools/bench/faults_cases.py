@@ -5,6 +5,23 @@ A case's ``act`` runs once the driver has started: it waits for a few rounds, do
 waits for the end of the run (and, for the killed driver, runs ``dfrl collect``) and returns
 :class:`Acted`: when the fault struck, which robot it struck, and which exit status and which
 results folder carry the run's verdict. Cases are listed cheapest first in :data:`CASES`.
+
+Issue 33's cases cut, for 30 s or 90 s, one of the three places the resting agent depends on
+(its plan: :data:`DEFAULT_ROUNDS` rounds unless ``--rounds`` says otherwise):
+
+- ``cut_holder_S``: the host holding the resting agent's lease. In a sync run the agent rests
+  between rounds on the round's first stop; its holder is the stop it came from
+  (platform_pl/README.md "The dFRL agent: faults"; dfrl_lease.pl "Depart"): in a chain the
+  last stop of the backward pass before the first, the round's second stop; in a tree the
+  root never moves, and its holder is the stop it adopted (request ``hold``, the stops after
+  it first), again the second stop. The case locates it at fault time from the round just
+  logged (:func:`holder_of`: ``visited[1]`` of the driver's last ``round`` record, visited in
+  itinerary order), right after that round is logged, while the agent rests.
+- ``cut_agent_host_S``: the host the agent rests on (``visited[0]`` of that record).
+- ``cut_driver_S``: the driver's host (its link to the bridge); the robots and the agent go on.
+
+``kill_driver_collect`` is ``kill_driver`` on hosts that share no disk (every run of this
+benchmark: :mod:`.faults_federation`), reporting what ``dfrl collect`` found.
 """
 from __future__ import annotations
 
@@ -22,6 +39,10 @@ from dfrl.experiments.tools.bench.faults_federation import Federation, Plan, wai
 RECOVERY_BOUND_S = 15.0
 #: the round after which every fault strikes (the federation has found its pace)
 FAULT_AFTER_ROUND = 3
+#: rounds of issue 33's cases unless ``--rounds`` says otherwise
+DEFAULT_ROUNDS = 30
+#: the agent's ``skip_after`` (dfrl_create/4's default): the longest one move is tried
+SKIP_AFTER_S = 4.0
 
 #: an aggregation method whose step fails at run time (written where ``dfrl inject`` reads it)
 FAILING_METHOD = """\
@@ -46,6 +67,13 @@ class Expectation:
     victim_misses: bool = True         #: the struck robot missed at least one round
     rejoin: bool = False               #: ... and was visited again before the end
     method_failed: bool = False        #: at least one round's method failed (and was reported)
+    #: the robots' shares pass the history checker (no doubled write, no stale epoch...)
+    history_clean: bool = True
+    #: the longest gap between rounds written on the robots stays below the agent's skip
+    #: time plus one normal round (a fault the rounds need not wait for: the driver's)
+    gap_within_skip: bool = False
+    #: the run's verdict must be INCOMPLETE and its exit status non-zero (a robot was cut)
+    incomplete: bool = False
 
     def text(self) -> str:
         parts = [f"at most {self.max_rounds_lost} planned round(s) not completed",
@@ -61,6 +89,13 @@ class Expectation:
         if self.method_failed:
             parts.append("the failing method's round reported and the next rounds complete "
                          "(fallback)")
+        if self.history_clean:
+            parts.append("the robots' shares pass the history checker")
+        if self.gap_within_skip:
+            parts.append(f"no gap between rounds written on the robots over skip time "
+                         f"({SKIP_AFTER_S:g} s) plus one normal round")
+        if self.incomplete:
+            parts.append("verdict INCOMPLETE and a non-zero exit status")
         return "; ".join(parts)
 
 
@@ -74,6 +109,8 @@ class Acted:
     exit_status: int
     results: Path
     notes: list[str] = field(default_factory=list)
+    #: figures of the case's own, copied into the run's record
+    extra: dict[str, object] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -155,9 +192,47 @@ def kill_driver(fed: Federation) -> Acted:
                               timeout_s=fed.plan.timeout_s + 90)
     fed.mark(f"dfrl collect exited {done.returncode}")
     acted = Acted(t, None, done.returncode, fed.out)
+    acted.extra["collect_exit"] = done.returncode
     if done.returncode != 0:
         acted.notes.append(f"dfrl collect: {done.stderr.strip()[-500:]}")
     return acted
+
+
+def holder_of(visited: tuple[str, ...]) -> str:
+    """The robot whose host holds the resting agent's lease, from the round just logged
+    (``visited`` in itinerary order): the stop it came from, the round's second stop (see
+    the module doc; a one-stop round has no holder: ValueError)."""
+    if len(visited) < 2:
+        raise ValueError(f"a round that visited {list(visited)} leaves the agent no holder")
+    return visited[1]
+
+
+def _cut_for(seconds: float, which: str) -> Callable[[Federation], Acted]:
+    """Cut, right after round 3 is logged (the agent resting), ``which`` host's link for
+    ``seconds``: ``holder`` (the lease holder's), ``agent`` (the resting agent's) or
+    ``driver``; then mend it and wait for the end of the run."""
+    def cut(fed: Federation) -> Acted:
+        last = fed.wait_rounds(FAULT_AFTER_ROUND)
+        visited = tuple(last.visited)
+        if which == "driver":
+            t = fed.cut_host("driver")
+            victim = None
+        else:
+            victim = holder_of(visited) if which == "holder" else visited[0]
+            t = fed.cut(victim)
+        located = (f"round {last.round} (epoch {last.epoch}) visited {' '.join(visited)}: the "
+                   f"agent rests on {visited[0]}, its lease holder is {holder_of(visited)}")
+        time.sleep(max(0.0, t + seconds - time.time()))
+        if which == "driver":
+            fed.mend_host("driver")
+        else:
+            fed.mend(victim)
+        acted = _ended(fed, t, victim)
+        acted.notes.append(located)
+        acted.extra.update(rests_on=visited[0], holder=holder_of(visited), cut_s=seconds)
+        return acted
+    cut.__doc__ = f"cut the {which} host's link after round 3 for {seconds:g} s, then mend it"
+    return cut
 
 
 def kill_resting(fed: Federation) -> Acted:
@@ -183,6 +258,10 @@ def _cut(seconds: float) -> Callable[[Federation], Acted]:
     return cut
 
 
+def _default_rounds() -> Callable[[int], Plan]:
+    return _rounds_plan(DEFAULT_ROUNDS)
+
+
 def _cut_plan(seconds: float) -> Callable[[int], Plan]:
     # enough rounds that the run outlasts the cut by ~8 rounds even at ~1.5 s a round
     return _rounds_plan(FAULT_AFTER_ROUND + int(seconds / 1.5) + 8)
@@ -204,4 +283,17 @@ CASES: dict[str, Case] = {c.name: c for c in (
          Expectation(rejoin=True), _cut_plan(30), _cut(30)),
     Case("cut_90s", "cut a robot host's link for 90 s (Lab.cut, Lab.mend)",
          Expectation(rejoin=True), _cut_plan(90), _cut(90)),
+    Case("kill_driver_collect", "kill -9 the driver's host after round 3, then dfrl collect "
+         "on hosts that share no disk", Expectation(victim_misses=False), _default_rounds(),
+         kill_driver),
+    *(Case(f"cut_{which_name}_{s}", f"cut the {what} host's link for {s} s after round 3",
+           expect, _default_rounds(), _cut_for(s, which))
+      for s in (30, 90)
+      for which_name, which, what, expect in (
+          ("holder", "holder", "resting agent's lease holder's",
+           Expectation(incomplete=True)),
+          ("agent_host", "agent", "resting agent's",
+           Expectation(incomplete=True)),
+          ("driver", "driver", "driver's",
+           Expectation(victim_misses=False, gap_within_skip=True)))),
 )}

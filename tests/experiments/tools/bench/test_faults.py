@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from dfrl.experiments.tools.bench import faults
+from dfrl.experiments.tools.bench import faults, faults_cases
 from dfrl.experiments.tools.bench.faults_cases import CASES, Case, Expectation
 from dfrl.experiments.tools.bench.faults_federation import Plan
 from dfrl.experiments.tools.netns import leftover_namespaces, unavailable
@@ -129,3 +129,69 @@ def test_bad_requests_are_refused_before_any_host_starts(tmp_path: Path) -> None
 def test_other_faults_once(tmp_path: Path, name: str) -> None:
     [f] = faults.run([name], runs=1, hosts=3, keep=tmp_path)
     assert f["passed"], json.dumps(f, indent=1)
+
+
+#: issue 33's cut of the resting agent's host, shortened: a 15 s cut after round 3 of 8
+SHORT_CUT = Case("cut_agent_host_30", CASES["cut_agent_host_30"].what,
+                 CASES["cut_agent_host_30"].expect,
+                 lambda hosts: Plan(hosts=hosts, iterations=800, timeout_s=120.0),
+                 faults_cases._cut_for(15, "agent"))
+
+
+@pytest.mark.slow
+@needs_namespaces
+def test_a_cut_of_the_resting_agents_host_is_judged_by_the_history(tmp_path: Path) -> None:
+    # Execute: one run on 3 hosts that share no disk
+    [f] = faults.run(["cut_agent_host_30"], runs=1, hosts=3, keep=tmp_path,
+                     cases={"cut_agent_host_30": SHORT_CUT})
+    [r] = f["per_run"]
+    detail = json.dumps(r, indent=1)
+    json.dumps(f)
+    # Assert: the fields issue 33 asks for, present and sane (not whether the platform passes)
+    assert "error" not in r, detail
+    assert r["itinerary"] == "chain" and r["no_shared_disk"] is True
+    assert r["rests_on"] in ("r1", "r2", "r3") and r["holder"] in ("r1", "r2", "r3")
+    assert r["victim"] == r["rests_on"] != r["holder"], detail
+    h = r["history"]
+    assert h["ok"] in (True, False), detail
+    assert set(h["counts"]) <= {"doubled_write", "epoch_regressed", "stale_epoch",
+                                "split_round"}, detail
+    assert h["ok"] == (sum(h["counts"].values()) == 0), detail
+    assert isinstance(r["exit_status"], int) and r["verdict"] in ("complete", "INCOMPLETE")
+    assert set(r["summary_missed"]) | set(r["summary_lost"]) <= {"r1", "r2", "r3"}
+    assert isinstance(r["any_lost"], bool) and r["any_lost"] == bool(r["summary_lost"])
+    assert r["longest_write_gap_s"] is not None and r["longest_write_gap_s"] > 0, detail
+    assert r["write_gap_bound_s"] > faults_cases.SKIP_AFTER_S, detail
+    assert [a["what"] for a in r["actions"]][:2] == [
+        "driver started", f"link of h{r['victim'][1:]} ({r['victim']}) cut"], detail
+    # every robot's shares came from its own host's disk, copied out after the run
+    for rid in ("r1", "r2", "r3"):
+        assert (tmp_path / "cut_agent_host_30-1" / "history" / f"shares_{rid}.csv").is_file()
+    assert not leftover_namespaces(f"dfrl{os.getpid() % 100000}-")
+
+
+def test_issue_33_figures_on_hand_made_files() -> None:
+    # Prepare: what the robots wrote (round 3 written twice, by two epochs) and a summary
+    shares = {"r1": [{"round": "1", "wall_time": "10.0"}, {"round": "2", "wall_time": "11.5"},
+                     {"round": "3", "wall_time": "19.5"}, {"round": "3", "wall_time": "20.0"}],
+              "r2": [{"round": "1", "wall_time": "10.2"}, {"round": "", "wall_time": "12.0"}]}
+    summary = ("## Faults: federation INCOMPLETE\n- MISSED rounds: r2 missed 2 round(s)\n"
+               "- LOST robot r3: its host stopped answering\n")
+    # Execute, Assert: round times 10.2, 11.5, 20.0: gaps 1.3 and 8.5
+    assert faults.write_gaps(shares) == (8.5, 4.9)
+    assert faults.write_gaps({"r1": []}) == (None, None)
+    assert faults.named_in_summary(summary) == {"missed": ["r2"], "lost": ["r3"]}
+    assert faults_cases.holder_of(("r1", "r2", "r3")) == "r2"
+    with pytest.raises(ValueError, match="no holder"):
+        faults_cases.holder_of(("r1",))
+    m = {"rounds_planned": 5, "rounds_done": 5, "recovery_s": 1.0, "longest_stall_s": 2.0,
+         "tables_identical": True, "truthful": True, "victim": None, "absent": {},
+         "rounds_failed": 0, "verdict": "complete", "exit_status": 0,
+         "history": {"ok": False, "counts": {"doubled_write": 2, "stale_epoch": 0}},
+         "longest_write_gap_s": 8.5, "write_gap_bound_s": 5.5}
+    assert faults.judge(m, Expectation(victim_misses=False, gap_within_skip=True)) == [
+        "the robots' shares break the history: 2 doubled_write",
+        "8.5 s between two rounds written on the robots (bound: skip time 4 s + one round "
+        "= 5.5 s)"]
+    assert faults.judge(m, Expectation(victim_misses=False, incomplete=True))[-1].startswith(
+        "verdict complete and exit status 0 after a robot host was cut")
