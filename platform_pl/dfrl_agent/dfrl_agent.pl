@@ -381,8 +381,9 @@ event(launch, _, M, Agent) :-
 event(resurrected(Epoch, From, Dead, resume(Packed, Next, Progress0)), Node, M,
       Agent) :-
     unpack_state(Packed, S0),
-    (   Progress0 == fresh              % the old copy may still be in its round:
-    ->  get_dict(round, S0, R0),        % start the next one (dfrl_lease)
+    (   Progress0 = fresh(W)            % the old copy may still be in its round:
+    ->  get_dict(round, S0, R00),       % start the next one no stop has written
+        R0 is max(R00, W),              % (lease_watch:resume_point/6)
         Progress = round_done(R0, false)
     ;   Progress = Progress0
     ),
@@ -526,7 +527,11 @@ take_command(Log, Agent, Round, Carried, Command, Acc0, Acc) :-
 turn_back(M, Agent, Method, S0) :-
     get_dict(acc, S0, Acc),
     method_call(aggregate_finish(Method, Acc, Final0), aggregate_final(Method), Result),
-    (   Result == ok
+    (   Result == ok,
+        alone(M, Agent, S0)
+    ->  S1 = S0,                        % nothing federated: nothing written
+        Final = none
+    ;   Result == ok
     ->  S1 = S0,
         Final = Final0
     ;   method_failed(Result, S0, S1),
@@ -539,6 +544,15 @@ turn_back(M, Agent, Method, S0) :-
         put_state(M, Agent, S),
         step(M, Agent)
     ).
+
+%   A round that read no robot but its own, of an itinerary of several,
+%   federated nothing: it writes nothing (not even that robot's own table
+%   back), so that a copy cut off from every other stop writes nothing
+%   in a round that a resurrected copy may run too (lease_watch.pl).
+alone(M, Agent, S) :-
+    get_dict(visited, S, [_]),
+    M:dfrl_plan(Agent, plan(Itinerary, _, _, _, _)),
+    Itinerary = [_, _|_].
 
 %   A method that failed in the forward pass (State has an error) is
 %   replaced, for this round already, by the method the next round would

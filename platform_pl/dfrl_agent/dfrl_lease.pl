@@ -26,7 +26,7 @@
 :- use_module(lease_watch, [ensure_watchdog/0, note_beat/2, beat_answer/6]).
 :- reexport(lease_book, [lease_valid/2]).     % +Node, +Agent
 :- reexport(lease_watch, [lease_broadcast_epoch/5]). % +Node, +Tokens, +Agent, +Epoch, +Stops
-:- autoload(library(lists), [member/2, append/3, last/2]).
+:- autoload(library(lists), [member/2, append/3, last/2, max_list/2]).
 :- autoload(library(apply), [foldl/4]).
 :- autoload(library(debug), [debug/3]).
 
@@ -548,7 +548,9 @@ serve(epoch(Agent, E), Node, Answer) :-
     ->  Answer = superseded(E2)
     ;   note_epoch(Node, Agent, E),
         discard_superseded_arrival(Node, Agent, E),
-        Answer = noted
+        findall(R, written(Node, Agent, _, R, _), Rs),
+        max_list([0|Rs], W),
+        Answer = noted(W)               % and the last round it wrote here
     ).
 serve(hold(Agent, E, K, Here, Dest, Record0, Resume), Node, Answer) :-
     (   seen(Node, Agent, E2), E2 > E

@@ -143,6 +143,11 @@ root_round(M, Agent, Ctx, S0, S) :-
         )
     ),
     (   Final \== none,
+        Sorted = [_],                   % nothing federated: nothing written
+        M:dfrl_plan(Agent, plan([_, _|_], _, _, _, _))    % (dfrl_agent:alone/3)
+    ->  Final1 = none,
+        S3a = S3
+    ;   Final \== none,
         \+ ( current_node(Node), lease_write_gate(Node, Agent) )
     ->  print_message(warning, format("dfrl: ~w: round not written: its lease could not be \c
                                        renewed (fenced)", [Agent])),

@@ -284,14 +284,14 @@ resurrect(Node, Agent, E, K, MaxSeen, Here, Dest, Record0, Resume0, Dest_, Why) 
     record_stops(Record0, Agent, Stops0),
     exclude([S]>>( same_address(S, Dest) ; same_address(S, Here) ), Stops0, Others),
     record_tokens(Record0, Node, Tokens0),
-    promise(Others, Node, Tokens0, Agent, E1, 0, Promised, Refused),
+    promise(Others, Node, Tokens0, Agent, E1, 0-0, Promised-Written, Refused),
     majority(Stops0, Need),
     (   Dest_ == gone -> DestCount = 1 ; DestCount = 0 ),
     (   Refused == none,
         1 + DestCount + Promised >= Need
     ->  locked(( retract(ckpt(Node, Agent, E, K, _, _, _, _, _)),
                  retractall(tried_(Node, Agent, _)) )),
-        resurrect_(Node, Agent, E1, K, Here, Dest, Record0, Resume0, Dest_, Why)
+        resurrect_(Node, Agent, E1, K, Here, Dest, Record0, Resume0, Dest_, Written, Why)
     ;   Refused = superseded(E2)
     ->  note_epoch(Node, Agent, E2),
         drop(Node, Agent, E, K, superseded(E2))
@@ -303,39 +303,50 @@ resurrect(Node, Agent, E, K, MaxSeen, Here, Dest, Record0, Resume0, Dest_, Why) 
         wait_again(Node, Agent, E, K)
     ).
 
-promise([], _, _, _, _, N, N, none).
-promise([S|Ss], Node, Tokens, Agent, E1, N0, N, Refused) :-
+%   promise(+Stops, +Node, +Tokens, +Agent, +Epoch, +Acc0, -Acc, -Refused)
+%
+%   Acc is Promised-Written: how many of Stops promised Epoch, and the
+%   last round the agent wrote at any of them (a stop answers noted(W);
+%   one of before issue 33 answers noted: 0).
+promise([], _, _, _, _, Acc, Acc, none).
+promise([S|Ss], Node, Tokens, Agent, E1, N0-W0, Acc, Refused) :-
     quick_call(Node, Tokens, S, epoch(Agent, E1), Answer),
-    (   Answer == noted
+    (   ( Answer == noted -> W = 0 ; Answer = noted(W), integer(W) )
     ->  N1 is N0 + 1,
-        promise(Ss, Node, Tokens, Agent, E1, N1, N, Refused)
+        W1 is max(W0, W),
+        promise(Ss, Node, Tokens, Agent, E1, N1-W1, Acc, Refused)
     ;   Answer = superseded(E2), E2 > E1
-    ->  N = N0, Refused = superseded(E2)
-    ;   promise(Ss, Node, Tokens, Agent, E1, N0, N, Refused)
+    ->  Acc = N0-W0, Refused = superseded(E2)
+    ;   promise(Ss, Node, Tokens, Agent, E1, N0-W0, Acc, Refused)
     ).
 
-%   resume_point(+Dest_, +Itinerary, +Entered, +Resume0, -Resume)
+%   resume_point(+Dest_, +Itinerary, +Entered, +Written, +Resume0, -Resume)
 %
 %   Where a resurrection resumes. A copy enters a round only once its
 %   holder noted it (progress started(Round), kept as entered/5: Entered
-%   is that round, or none). Where the old copy may still run and write
-%   (Dest silent: cut off or frozen), the new copy starts a round the old
-%   one cannot have entered: after the round it entered, or after the
-%   round of a mid-round checkpoint (none: fresh); a round_done(R) not
-%   followed by started(R+1) starts R+1 as before. Where the old copy is
-%   gone (its stop answered without it or refused the connection), a
-%   chain goes on as before (a mid-round checkpoint goes on with its
-%   round; a round it had only entered at its first stop, before its
-%   first move, starts again: it wrote no other robot in it). A tree's
-%   root stays at its stop all round while its copies write the other
-%   robots: a round it entered is never started again.
-resume_point(_, _, _, resume(S, Next, round_done(R, true)), resume(S, Next, round_done(R, true))) :- !.
-resume_point(gone, chain, _, Resume, Resume) :- !.
-resume_point(_, _, R, resume(S, Next, round_done(_, false)), resume(S, Next, round_done(R, false))) :-
-    integer(R),
-    !.
-resume_point(_, _, _, resume(S, Next, round_done(R, false)), resume(S, Next, round_done(R, false))) :- !.
-resume_point(_, _, _, resume(S, Next, none), resume(S, Next, fresh)).
+%   is that round, or none); Written is the last round the agent wrote
+%   at any stop that promised the new epoch. Where the old copy is gone
+%   (its stop answered without it or refused the connection), a chain
+%   goes on as before: a mid-round checkpoint goes on with its round; a
+%   round it had entered at its first stop, before its first move,
+%   starts again (it wrote no other robot in it: a move takes a new
+%   checkpoint). Otherwise (Dest silent: cut off or frozen, the old copy
+%   may still run; or a tree, whose root stays at its stop all round
+%   while its copies write the other robots) the new copy starts a round
+%   no copy wrote at a stop it can reach: the round the old one entered
+%   (or the next one after a round_done) unless some stop has it
+%   written, else the round after. A copy alone with its own robot writes
+%   nothing (dfrl_agent), so a stop cut off keeps no write of that round
+%   either. After a mid-round checkpoint of a silent stop: the round
+%   after the state's (fresh).
+resume_point(_, _, _, _, resume(S, Next, round_done(R, true)), resume(S, Next, round_done(R, true))) :- !.
+resume_point(gone, chain, _, _, Resume, Resume) :- !.
+resume_point(_, _, Entered, W, resume(S, Next, round_done(R0, false)), resume(S, Next, round_done(R1, false))) :-
+    !,
+    (   integer(Entered) -> Start0 = Entered ; Start0 is R0 + 1 ),
+    Start is max(Start0, W + 1),
+    R1 is Start - 1.
+resume_point(_, _, _, W, resume(S, Next, none), resume(S, Next, fresh(W))).
 
 record_itinerary(agent(_, _, _, _, _, _, Clauses, _), Agent, Kind) :-
     (   memberchk((dfrl_itinerary_of(Agent, tree(_)) :- _), Clauses)
@@ -343,10 +354,10 @@ record_itinerary(agent(_, _, _, _, _, _, Clauses, _), Agent, Kind) :-
     ;   Kind = chain
     ).
 
-resurrect_(Node, Agent, E1, K, Here, Dest, Record0, Resume0, Dest_, Why) :-
+resurrect_(Node, Agent, E1, K, Here, Dest, Record0, Resume0, Dest_, Written, Why) :-
     record_itinerary(Record0, Agent, Itinerary),
     (   entered(Node, Agent, E0, K, Entered), E0 < E1 -> true ; Entered = none ),
-    resume_point(Dest_, Itinerary, Entered, Resume0, Resume),
+    resume_point(Dest_, Itinerary, Entered, Written, Resume0, Resume),
     Resume = resume(State, _, _),
     record_state(Record0, State, Record1),
     Record1 = agent(Name, H, Kind, T, P, Preds, Cls0, Hops),
