@@ -3,21 +3,25 @@ the run: :func:`write_end_files`. The driver calls it when a run ends
 (``Launcher._collect``), ``dfrl collect`` when the driver did not get there (a driver that
 was killed); both write the same files: ``tables/`` (``params/``) made whole from the last
 checkpoints, ``metrics.csv``, ``live_evaluations.csv``, ``rounds.csv``, the plots and
-``summary.md`` with its verdict.
+``summary.md`` with its verdict, which includes the history checker's (:mod:`.history`).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 from dfrl.experiments.driver.config import ExperimentConfig
 from dfrl.experiments.driver.results.agent_log import AgentLog
 from dfrl.experiments.driver.results.evaluations import merge_evaluations
 from dfrl.experiments.driver.results.faults import assess
-from dfrl.experiments.driver.results.metrics import merge_metrics
+from dfrl.experiments.driver.results.files import read_json
+from dfrl.experiments.driver.results.history import (HistoryInputError, HistoryVerdict,
+                                                     approximate_robots, check_shares,
+                                                     read_history)
+from dfrl.experiments.driver.results.metrics import merge_metrics, read_metrics
 from dfrl.experiments.driver.results.plots import plot_experiment
-from dfrl.experiments.driver.results.rounds import read_shares, write_rounds_csv
+from dfrl.experiments.driver.results.rounds import Share, read_shares, write_rounds_csv
 from dfrl.experiments.driver.results.summary import Results, write_summary
 from dfrl.experiments.driver.results.tables import final_tables, learnt_path
 
@@ -76,7 +80,8 @@ def write_end_files(out: Path, config: ExperimentConfig, robots: list[str],
                     say: Callable[[str], None]) -> Results:
     """Write the end-of-run files of the results folder ``out`` and return the
     :class:`Results` (``ok``: ``facts.ok``, every agent finished, and the federation complete
-    by :meth:`~.faults.Faults.complete`).
+    by :meth:`~.faults.Faults.complete`, which includes the history checker's verdict on the
+    robots' shares: a violation, or a shares file it cannot read, makes it incomplete).
 
     Parameters
     ----------
@@ -101,7 +106,8 @@ def write_end_files(out: Path, config: ExperimentConfig, robots: list[str],
         say(f"TABLE {line}")
     merge_metrics(out, robots)
     merge_evaluations(out, robots)
-    shares = {rid: read_shares(out / f"shares_{rid}.csv") for rid in robots}
+    shares, history, history_lines = _check_history(out, robots)
+    say(history.text() if history is not None else history_lines[0])
     rows = write_rounds_csv(out / "rounds.csv", logs.values(), robots, shares)
     plots: list[Path] = []
     plot_error = None
@@ -122,11 +128,59 @@ def write_end_files(out: Path, config: ExperimentConfig, robots: list[str],
         for line in lines:
             say(f"{name}: {line}")
     faults = assess(config, [(lg, budgets[n]) for n, lg in logs.items()], facts.lost,
-                    facts.stalls, facts.other, facts.resumed, facts.finished)
+                    facts.stalls, facts.other, facts.resumed, facts.finished, shares,
+                    ended_short(out, config, robots, facts.iterations), history_lines)
     ok = facts.ok and all(v is not None for v in finished.values()) and faults.complete(config)
     result = Results(out, config, facts.wall_time_s, rows, facts.crashed, finished,
                      facts.iterations, plots, ok, facts.interrupted, problems, plot_error,
                      faults, facts.gathered, list(from_checkpoint), torn, facts.failed_joins,
-                     facts.collected)
+                     facts.collected, history)
     write_summary(result)
     return result
+
+
+def _check_history(out: Path, robots: list[str]) -> tuple[dict[str, list[Share]],
+                                                          HistoryVerdict | None, list[str]]:
+    """The robots' shares, the history checker's verdict on them and its violations as
+    lines; when a shares file cannot be read strictly: the shares read leniently (bad rows
+    left out), no verdict, and one line saying why."""
+    try:
+        shares, torn = read_history(out, robots)
+    except HistoryInputError as exc:
+        lenient = {rid: read_shares(out / f"shares_{rid}.csv") for rid in robots}
+        return lenient, None, [f"history not checked: {exc}"]
+    verdict = check_shares(shares, torn, approximate_robots(out))
+    return shares, verdict, [f"{v.kind.value}: {v.detail}" for v in verdict.violations]
+
+
+def ended_short(out: Path, config: ExperimentConfig, robots: list[str],
+                iterations: dict[str, int]) -> dict[str, str]:
+    """robot -> "ended at iteration I of N" for each robot that ran fewer iterations than it
+    was to. I: its last iteration in ``metrics.csv``, else ``iterations`` (what the writer
+    knew); N: its node config's (``nodes/<robot>.json``), its checkpoint's, else the
+    config's for a robot of the config (a robot whose plan is unknown is not judged)."""
+    curves: dict[str, Any] = {}
+    try:
+        curves = read_metrics(out / "metrics.csv")
+    except (OSError, ValueError, KeyError):
+        pass
+    own = {s.id for s in config.robots}
+    out_lines: dict[str, str] = {}
+    for rid in robots:
+        cur = curves.get(rid)
+        done = int(cur["iteration"].max()) if cur is not None and len(cur) else \
+            iterations.get(rid)
+        planned = _planned(out, rid) or (config.iterations if rid in own else None)
+        if done is not None and planned is not None and done < planned:
+            out_lines[rid] = f"ended at iteration {done} of {planned}"
+    return out_lines
+
+
+def _planned(out: Path, rid: str) -> int | None:
+    """Iterations robot ``rid`` was to run, by its node config or its checkpoint."""
+    for path in (out / "nodes" / f"{rid}.json", out / "checkpoint" / f"{rid}.json"):
+        try:
+            return int(read_json(path)["iterations"])
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+    return None

@@ -26,7 +26,10 @@ Checks, per agent (each broken rule is one :class:`Violation` of that kind):
 ``split_round``
     The robots written in a round do not all hold the same table: each robot's write of the
     round (the one of the highest epoch, the last of them if several, as ``rounds.csv``
-    counts it) has its digest, and these differ.
+    counts it) has its digest, and these differ. Robots whose table after a write is not the
+    aggregate itself are left out of this check (``approximate``: in a grid federation a
+    function learner absorbs the aggregate by distillation and records its own Q-function
+    at the grid, :func:`approximate_robots`).
 
 Rows without an agent or a round (a table set by hand, an older node) are not checked; they
 are counted in :attr:`HistoryVerdict.ignored`.
@@ -39,17 +42,20 @@ from __future__ import annotations
 
 import csv
 import io
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
 from typing import Any
 
-from dfrl.experiments.driver.results.rounds import Share
+from dfrl.experiments.driver.config_check import GRID
+from dfrl.experiments.driver.results.files import read_json
+from dfrl.experiments.driver.results.rounds import Share, counted_writes
 from dfrl.experiments.errors import ExperimentError
 
 __all__ = ["HistoryInputError", "HistoryVerdict", "Violation", "ViolationKind",
-           "check_history", "check_shares", "read_history_file"]
+           "approximate_robots", "check_history", "check_shares", "read_history",
+           "read_history_file"]
 
 #: Columns a shares file must have (``round``, ``agent`` and ``epoch`` may be missing: an
 #: older node's file, whose rows are then all ignored).
@@ -76,6 +82,7 @@ class Violation:
     detail: str
 
     def to_json(self) -> dict[str, Any]:
+        """The violation as a JSON-ready dict."""
         return {"kind": self.kind.value, "agent": self.agent, "robots": list(self.robots),
                 "round": self.round, "detail": self.detail}
 
@@ -160,14 +167,17 @@ class HistoryInputError(ExperimentError):
 
 
 def _short(digest: str) -> str:
+    """A digest's first 12 hex digits (enough to tell tables apart in a sentence)."""
     return digest[:12]
 
 
 def _epoch(s: Share) -> int:
+    """A write's epoch (a row without one: 0, as :func:`~.rounds.match_shares` counts it)."""
     return s.epoch if s.epoch is not None else 0
 
 
-def check_shares(shares: Mapping[str, Sequence[Share]], torn: int = 0) -> HistoryVerdict:
+def check_shares(shares: Mapping[str, Sequence[Share]], torn: int = 0,
+                 approximate: Collection[str] = ()) -> HistoryVerdict:
     """Check a history held in memory (see the module doc for the rules).
 
     Parameters
@@ -177,6 +187,9 @@ def check_shares(shares: Mapping[str, Sequence[Share]], torn: int = 0) -> Histor
         the key it is listed under).
     torn : int
         Torn last lines the reader left out, carried into the verdict.
+    approximate : collection of str
+        Robots left out of ``split_round`` (their table after a write is not the aggregate
+        itself; see the module doc).
     """
     ignored = 0
     # agent -> robot -> its rows of that agent, in file order
@@ -198,7 +211,9 @@ def check_shares(shares: Mapping[str, Sequence[Share]], torn: int = 0) -> Histor
         writes += sum(len(rows) for rows in rows_of.values())
         rounds += len({s.round for rows in rows_of.values() for s in rows})
         found = (_doubled(agent, rows_of) + _regressed(agent, rows_of)
-                 + _stale(agent, rows_of) + _split(agent, rows_of))
+                 + _stale(agent, rows_of)
+                 + _split(agent, {r: rows for r, rows in rows_of.items()
+                                  if r not in approximate}))
         violations += sorted(found, key=lambda v: (list(ViolationKind).index(v.kind), v.round,
                                                    v.robots))
     return HistoryVerdict(tuple(violations), writes, ignored, rounds, robots,
@@ -206,6 +221,7 @@ def check_shares(shares: Mapping[str, Sequence[Share]], torn: int = 0) -> Histor
 
 
 def _doubled(agent: str, rows_of: dict[str, list[Share]]) -> list[Violation]:
+    """Each robot's rounds it applied more than one write of."""
     out = []
     for robot, rows in rows_of.items():
         per_round: dict[int, list[Share]] = {}
@@ -226,6 +242,7 @@ def _doubled(agent: str, rows_of: dict[str, list[Share]]) -> list[Violation]:
 
 
 def _regressed(agent: str, rows_of: dict[str, list[Share]]) -> list[Violation]:
+    """Each write a robot applied after one of a higher epoch."""
     out = []
     for robot, rows in rows_of.items():
         top: Share | None = None
@@ -242,6 +259,8 @@ def _regressed(agent: str, rows_of: dict[str, list[Share]]) -> list[Violation]:
 
 
 def _stale(agent: str, rows_of: dict[str, list[Share]]) -> list[Violation]:
+    """Each write of a round later than one a higher epoch wrote first
+    (the rule in the module doc: by round numbers, never by clocks)."""
     # epoch -> (the earliest round a robot recorded with it, that robot)
     first: dict[int, tuple[int, str]] = {}
     for robot, rows in rows_of.items():
@@ -267,14 +286,8 @@ def _stale(agent: str, rows_of: dict[str, list[Share]]) -> list[Violation]:
 
 
 def _split(agent: str, rows_of: dict[str, list[Share]]) -> list[Violation]:
-    # round -> robot -> the write that counts (highest epoch, the last of them)
-    counted: dict[int, dict[str, Share]] = {}
-    for robot, rows in rows_of.items():
-        for s in rows:
-            assert s.round is not None
-            held = counted.setdefault(s.round, {}).get(robot)
-            if held is None or _epoch(s) >= _epoch(held):
-                counted[s.round][robot] = s
+    """Each round whose robots hold different tables after it."""
+    counted = counted_writes(rows_of, agent)
     out = []
     for n, writes in counted.items():
         digests: dict[str, list[str]] = {}
@@ -358,16 +371,11 @@ def _share(path: Path, line: int, col: dict[str, int], cells: list[str], robot: 
                  number("epoch", optional=True))
 
 
-def check_history(out_dir: Path, robots: Sequence[str] | None = None) -> HistoryVerdict:
-    """Check the ``shares_<robot>.csv`` files of a results folder (see the module doc).
-
-    Parameters
-    ----------
-    out_dir : Path
-        The results folder.
-    robots : sequence of str, optional
-        The robots whose files to read (a missing file: no rows); default: every
-        ``shares_*.csv`` of the folder.
+def read_history(out_dir: Path,
+                 robots: Sequence[str] | None = None) -> tuple[dict[str, list[Share]], int]:
+    """The shares files of a results folder read strictly: (robot -> its rows, torn last
+    lines left out). ``robots``: whose files to read (a missing file: no rows); default:
+    every ``shares_*.csv`` of the folder.
 
     Raises
     ------
@@ -389,4 +397,57 @@ def check_history(out_dir: Path, robots: Sequence[str] | None = None) -> History
     for rid in robots:
         shares[rid], t = read_history_file(out / f"shares_{rid}.csv", rid)
         torn += t
-    return check_shares(shares, torn)
+    return shares, torn
+
+
+def approximate_robots(out_dir: Path) -> set[str]:
+    """The robots of a results folder whose table after a write is not the aggregate itself:
+    in a grid federation (``config.json``), those with a function learner (their algorithm by
+    the config's robots and joins, and by ``nodes.json`` for robots that joined by ``dfrl
+    join``). None in any other folder."""
+    from dfrl.robots.learners import is_tabular
+
+    try:
+        config = read_json(Path(out_dir) / "config.json")
+    except (OSError, ValueError):
+        return set()
+    if not isinstance(config, dict) or config.get("federation") != GRID:
+        return set()
+    entries = list(config.get("robots") or [])
+    entries += [j.get("robot") for j in config.get("joins") or [] if isinstance(j, dict)]
+    try:
+        entries += [{"id": n.get("robot"), "algo": n.get("algo")}
+                    for n in read_json(Path(out_dir) / "nodes.json")["nodes"]]
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        pass
+    out = set()
+    for e in entries:
+        if not isinstance(e, dict) or not isinstance(e.get("id"), str):
+            continue
+        try:
+            if not is_tabular(str(e.get("algo") or "qlearning")):
+                out.add(e["id"])
+        except KeyError:
+            continue
+    return out
+
+
+def check_history(out_dir: Path, robots: Sequence[str] | None = None) -> HistoryVerdict:
+    """Check the ``shares_<robot>.csv`` files of a results folder (see the module doc; the
+    robots of :func:`approximate_robots` are left out of ``split_round``).
+
+    Parameters
+    ----------
+    out_dir : Path
+        The results folder.
+    robots : sequence of str, optional
+        The robots whose files to read (a missing file: no rows); default: every
+        ``shares_*.csv`` of the folder.
+
+    Raises
+    ------
+    HistoryInputError
+        See :func:`read_history`.
+    """
+    shares, torn = read_history(out_dir, robots)
+    return check_shares(shares, torn, approximate_robots(out_dir))

@@ -4,7 +4,8 @@ from __future__ import annotations
 import csv
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
 
 from dfrl.experiments.driver.results.agent_log import AgentLog, RoundRecord
 
@@ -50,7 +51,7 @@ def read_shares(path: str | Path) -> list[Share]:
     return rows
 
 
-def match_shares(record: RoundRecord, shares: dict[str, list[Share]],
+def match_shares(record: RoundRecord, shares: Mapping[str, Sequence[Share]],
                  slack_s: float = 1e-4) -> dict[str, Share | None]:
     """For each robot the round visited, the share it received during that round.
 
@@ -76,58 +77,143 @@ def match_shares(record: RoundRecord, shares: dict[str, list[Share]],
     return out
 
 
+def counted_writes(shares: Mapping[str, Sequence[Share]],
+                   agent: str) -> dict[int, dict[str, Share]]:
+    """round -> robot -> the write of ``agent``'s round the robot holds after it: of its
+    writes of that round, the one of the highest epoch (the last of them if several), as
+    :func:`~.rounds.match_shares` takes it. Writes without a round are left out."""
+    out: dict[int, dict[str, Share]] = {}
+    for robot, rows in shares.items():
+        for s in rows:
+            if s.agent != agent or s.round is None:
+                continue
+            held = out.setdefault(s.round, {}).get(robot)
+            if held is None or (s.epoch or 0) >= (held.epoch or 0):
+                out[s.round][robot] = s
+    return out
+
+
+def share_agents(shares: Mapping[str, Sequence[Share]]) -> list[str]:
+    """The agents named by the shares' writes, sorted."""
+    return sorted({s.agent for rows in shares.values() for s in rows
+                   if s.agent is not None and s.round is not None})
+
+
 ROUNDS_FIELDS = ("agent", "round", "start", "end", "duration_ms", "hops", "bytes", "method",
-                 "visited", "skipped", "retries", "epoch", "error", "failed_method")
+                 "visited", "skipped", "retries", "epoch", "error", "failed_method", "written",
+                 "reconstructed", "note")
 
 
-def skipped_text(record: RoundRecord) -> str:
-    """The ``skipped`` cell: ``robot: reason`` per skipped stop, ``; ``-separated."""
-    return "; ".join(f"{s.robot}: {' '.join(s.reason.split())}" for s in record.skipped)
+def skipped_text(record: RoundRecord, written: Iterable[str] = ()) -> str:
+    """The ``skipped`` cell: ``robot: reason`` per skipped stop, ``; ``-separated, leaving
+    out the robots in ``written`` (they recorded a write of the round)."""
+    kept = set(written)
+    return "; ".join(f"{s.robot}: {' '.join(s.reason.split())}" for s in record.skipped
+                     if s.robot not in kept)
+
+
+def _in_order(names: Iterable[str], robots: list[str]) -> list[str]:
+    """``names`` in the run's robot order, any others after them, sorted."""
+    got = set(names)
+    return [r for r in robots if r in got] + sorted(got - set(robots))
+
+
+def _digest_cells(row: dict[str, Any], robots: list[str], cells: dict[str, str]) -> None:
+    """``digest_<robot>`` cells and ``all_equal`` from ``cells`` (robot -> digest or
+    ``missing``; robots not in it: empty)."""
+    for robot in robots:
+        row[f"digest_{robot}"] = cells.get(robot, "")
+    digests = list(cells.values())
+    row["all_equal"] = bool(digests) and "missing" not in digests and len(set(digests)) == 1
+
+
+def _logged_row(rec: RoundRecord, robots: list[str], shares: Mapping[str, Sequence[Share]],
+                writes: Mapping[str, Share]) -> dict[str, Any]:
+    """The row of a round the agent logged; ``writes``: robot -> its recorded write of the
+    round (:func:`counted_writes`)."""
+    matched = match_shares(rec, shares)
+    extra = {r: s for r, s in writes.items() if r not in matched}
+    skipped = {s.robot for s in rec.skipped}
+    notes = [f"{r} logged skipped but recorded a write of this round: counted written"
+             for r in _in_order(set(extra) & skipped, robots)]
+    notes += [f"{r} not in the logged round but recorded a write of it: counted written"
+              for r in _in_order(set(extra) - skipped, robots)]
+    written = [r for r, s in matched.items() if s is not None] + list(extra)
+    row: dict[str, Any] = {
+        "agent": rec.agent, "round": rec.round, "start": repr(rec.start),
+        "end": repr(rec.end), "duration_ms": f"{rec.duration_ms:.3f}", "hops": rec.hops,
+        "bytes": rec.bytes, "method": rec.method, "visited": " ".join(rec.visited),
+        "skipped": skipped_text(rec, extra), "retries": rec.retries, "epoch": rec.epoch,
+        "error": " ".join(rec.error.split()), "failed_method": rec.failed_method,
+        "written": " ".join(_in_order(written, robots)), "reconstructed": False,
+        "note": "; ".join(notes),
+    }
+    cells = {r: (s.digest if s is not None else "missing") for r, s in matched.items()}
+    cells.update({r: s.digest for r, s in extra.items()})
+    _digest_cells(row, robots, cells)
+    return row
+
+
+def _rebuilt_row(agent: str, n: int, robots: list[str],
+                 writes: Mapping[str, Share]) -> dict[str, Any]:
+    """The row of round ``n`` the agent's log lacks, from the writes the robots recorded:
+    the robots written, the epoch, the digests; start and end are the first and last write's
+    wall times on the robots' clocks; what only the log knows (hops, bytes, method, duration)
+    is left empty."""
+    written = _in_order(writes, robots)
+    times = [s.wall_time for s in writes.values()]
+    row: dict[str, Any] = {
+        "agent": agent, "round": n, "start": repr(min(times)), "end": repr(max(times)),
+        "duration_ms": "", "hops": "", "bytes": "", "method": "", "visited": " ".join(written),
+        "skipped": "", "retries": "", "epoch": max(s.epoch or 0 for s in writes.values()),
+        "error": "", "failed_method": "", "written": " ".join(written), "reconstructed": True,
+        "note": "not in the agent's log: rebuilt from the robots' shares (start, end: the "
+                "robots' clocks)",
+    }
+    _digest_cells(row, robots, {r: s.digest for r, s in writes.items()})
+    return row
 
 
 def write_rounds_csv(path: str | Path, logs: Iterable[AgentLog], robots: list[str],
-                     shares: dict[str, list[Share]]) -> list[dict[str, Any]]:
-    """Write ``rounds.csv``; return its rows (``all_equal`` as a bool).
+                     shares: Mapping[str, Sequence[Share]]) -> list[dict[str, Any]]:
+    """Write ``rounds.csv``; return its rows (``all_equal`` and ``reconstructed`` as bools).
 
-    Columns: :data:`ROUNDS_FIELDS` (``skipped``: the stops the agent could not visit and why,
-    see :func:`skipped_text`; ``retries``, ``epoch`` as the agent logged them), then
-    ``digest_<robot>`` for every robot (empty when the robot was not visited that round,
-    ``missing`` when it was but no share was recorded), and ``all_equal``: every visited
-    robot holds the same table right after the share.
+    Columns: :data:`ROUNDS_FIELDS` (``visited``, ``skipped``, ``retries``, ``epoch`` as the
+    agent logged them, but a robot that recorded a write of the round is never listed
+    skipped; ``written``: the robots that recorded a write of the round; ``reconstructed``:
+    the round is not in the agent's log, its row was rebuilt from the shares; ``note``: where
+    the shares and the log disagree), then ``digest_<robot>`` for every robot (empty when
+    the robot was neither visited nor written that round, ``missing`` when it was visited
+    but no share was recorded), and ``all_equal``: every robot visited or written holds the
+    same table right after the share.
     """
     rows: list[dict[str, Any]] = []
+    logged: set[str] = set()
     for log in logs:
+        logged.add(log.agent)
+        counted = counted_writes(shares, log.agent)
         for rec in log.rounds:
-            matched = match_shares(rec, shares)
-            row: dict[str, Any] = {
-                "agent": rec.agent, "round": rec.round, "start": repr(rec.start),
-                "end": repr(rec.end), "duration_ms": f"{rec.duration_ms:.3f}", "hops": rec.hops,
-                "bytes": rec.bytes, "method": rec.method, "visited": " ".join(rec.visited),
-                "skipped": skipped_text(rec), "retries": rec.retries, "epoch": rec.epoch,
-                "error": " ".join(rec.error.split()), "failed_method": rec.failed_method,
-            }
-            digests = []
-            for robot in robots:
-                if robot not in matched:
-                    row[f"digest_{robot}"] = ""
-                else:
-                    s = matched[robot]
-                    row[f"digest_{robot}"] = s.digest if s is not None else "missing"
-                    digests.append(s.digest if s is not None else None)
-            row["all_equal"] = bool(digests) and None not in digests and len(set(digests)) == 1
-            rows.append(row)
+            rows.append(_logged_row(rec, robots, shares, counted.get(rec.round, {})))
+        done = {rec.round for rec in log.rounds}
+        rows += [_rebuilt_row(log.agent, n, robots, counted[n]) for n in counted if n not in done]
+    for agent in share_agents(shares):
+        if agent not in logged:             # no log of this agent at all
+            rows += [_rebuilt_row(agent, n, robots, w)
+                     for n, w in counted_writes(shares, agent).items()]
     rows.sort(key=lambda r: (r["agent"], int(r["round"]), float(r["start"])))
     fields = list(ROUNDS_FIELDS) + [f"digest_{r}" for r in robots] + ["all_equal"]
     with open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.DictWriter(fh, fieldnames=fields)
         w.writeheader()
         for row in rows:
-            w.writerow({**row, "all_equal": str(row["all_equal"]).lower()})
+            w.writerow({**row, "all_equal": str(row["all_equal"]).lower(),
+                        "reconstructed": str(row["reconstructed"]).lower()})
     return rows
 
 
 def read_rounds_csv(path: str | Path) -> list[dict[str, Any]]:
-    """Rows of a ``rounds.csv`` as written by :func:`write_rounds_csv` (``all_equal`` a bool).
+    """Rows of a ``rounds.csv`` as written by :func:`write_rounds_csv` (``all_equal`` and
+    ``reconstructed`` bools; an older file without ``reconstructed``: False).
 
     Raises
     ------
@@ -140,7 +226,8 @@ def read_rounds_csv(path: str | Path) -> list[dict[str, Any]]:
             flag = row.get("all_equal")
             if flag not in ("true", "false"):
                 raise ValueError(f"{path}: all_equal is {flag!r} in round {row.get('round')}")
-            rows.append({**row, "all_equal": flag == "true"})
+            rows.append({**row, "all_equal": flag == "true",
+                         "reconstructed": row.get("reconstructed") == "true"})
     return rows
 
 

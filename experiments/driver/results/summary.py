@@ -8,6 +8,8 @@ from typing import Any
 from dfrl.experiments.driver.config import ExperimentConfig
 from dfrl.experiments.driver.results.evaluations import last_evaluations
 from dfrl.experiments.driver.results.faults import Faults
+from dfrl.experiments.driver.results.files import read_json
+from dfrl.experiments.driver.results.history import HistoryVerdict
 from dfrl.experiments.driver.results.metrics import read_metrics
 from dfrl.experiments.driver.results.rounds import count_equal, count_unverified
 from dfrl.experiments.driver.results.tables import params_path, table_sum
@@ -38,11 +40,15 @@ class Results:
     #: set by ``dfrl collect``: how the files were collected after the driver stopped, and
     #: what could not be fetched (lines of the summary)
     collected: list[str] | None = None
+    #: the history checker's verdict on the robots' shares (None: not checked, see
+    #: ``faults.history``)
+    history: HistoryVerdict | None = None
 
     @property
     def complete(self) -> bool:
-        """The federation completed: every planned round logged, no robot lost (up to what
-        the config tolerates); see :meth:`Faults.complete`."""
+        """The federation completed: every planned round done, no robot lost (up to what
+        the config tolerates), the history of table writes kept its rules; see
+        :meth:`Faults.complete`."""
         return self.faults is None or self.faults.complete(self.config)
 
     @property
@@ -64,6 +70,29 @@ def node_warnings(out_dir: Path) -> list[str]:
     return found
 
 
+def robot_kinds(out_dir: Path, config: ExperimentConfig) -> dict[str, tuple[str, str]]:
+    """robot -> (arena, algo): the config's robots and joins, then the robots ``nodes.json``
+    lists (a robot that joined through ``dfrl join`` is in no config), then the node configs
+    (``nodes/<robot>.json``)."""
+    kinds = {s.id: (s.arena, s.algo) for s in list(config.robots) + [j.robot for j in
+                                                                         config.joins]}
+    entries: list[dict[str, Any]] = []
+    try:
+        entries += [n for n in read_json(out_dir / "nodes.json")["nodes"] if isinstance(n, dict)]
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    for path in sorted((out_dir / "nodes").glob("*.json")):
+        try:
+            entries.append(read_json(path))
+        except (OSError, ValueError):
+            continue
+    for n in entries:
+        rid = n.get("robot")
+        if isinstance(rid, str) and rid not in kinds and n.get("arena") and n.get("algo"):
+            kinds[rid] = (str(n["arena"]), str(n["algo"]))
+    return kinds
+
+
 def write_summary(r: Results) -> Path:
     """``summary.md``: what ran, what came out."""
     c = r.config
@@ -80,18 +109,18 @@ def write_summary(r: Results) -> Path:
     curves = read_metrics(metrics_path) if metrics_path.is_file() else {}
     lines += ["| robot | arena | algo | iterations | final sum of Q (tables/) | cumulative reward "
               "| collisions |", "|---|---|---|---|---|---|---|"]
-    specs = {s.id: s for s in list(c.robots) + [j.robot for j in c.joins]}
+    kinds = robot_kinds(r.output_dir, c)
     kept = set(r.from_checkpoint or ())
     for rid, cur in curves.items():
         if len(cur) == 0:
             continue
-        s = specs.get(rid)
+        arena, algo = kinds.get(rid, ("?", "?"))
         last = cur[-1]
         final = table_sum(r.output_dir, rid)
         q = "no table saved" if final is None else f"{final:.2f}" + (
             " (sum of parameters, params/)" if params_path(r.output_dir, rid).is_file()
             else "") + (" (last checkpoint)" if rid in kept else "")
-        lines.append(f"| {rid} | {s.arena if s else '?'} | {s.algo if s else '?'} | "
+        lines.append(f"| {rid} | {arena} | {algo} | "
                      f"{int(last['iteration'])} | {q} | "
                      f"{last['cumulative_reward']:.1f} | {int(last['collisions'])} |")
     lines.append("")
@@ -106,18 +135,22 @@ def write_summary(r: Results) -> Path:
     redone = [row for row in failed if row.get("failed_method")]
     partial = [row for row in r.rounds if row.get("skipped") and not row.get("error")]
     n_rounds = len(r.rounds)
-    durations = sorted(float(row["duration_ms"]) for row in r.rounds)
+    durations = sorted(float(row["duration_ms"]) for row in r.rounds if row["duration_ms"] != "")
     med = durations[len(durations) // 2] if durations else float("nan")
+    rebuilt = sum(1 for row in r.rounds if row.get("reconstructed"))
     unverified = count_unverified(r.rounds)
     also = (f" ({unverified} more not verifiable: a visited robot's share record is missing, "
             f"e.g. lost with its host; the records there agree)" if unverified else "")
-    lines += [f"- agent rounds logged: {n_rounds}; rounds after which every visited robot held "
+    lines += [f"- agent rounds logged: {n_rounds - rebuilt}"
+              + (f" (and {rebuilt} only in the robots' shares, rebuilt)" if rebuilt else "")
+              + f"; rounds after which every visited robot held "
               f"the same table: {r.equal_rounds}/{n_rounds}{also}; rounds that skipped robots: "
               f"{len(partial)}; rounds whose method FAILED: {len(failed)} ({len(redone)} done "
               f"again with a fallback method, every table written; {len(failed) - len(redone)} "
               f"aborted, no table written)",
               f"- median round time: {med:.1f} ms",
-              f"- methods used: {', '.join(sorted({row['method'] for row in r.rounds})) or '-'}"
+              f"- methods used: "
+              f"{', '.join(sorted({row['method'] for row in r.rounds} - {''})) or '-'}"
               + (f" (and failed: {', '.join(sorted({row['failed_method'] for row in redone}))})"
                  if redone else ""),
               f"- agents finished: {r.agents_finished}"]
@@ -151,6 +184,11 @@ def write_summary(r: Results) -> Path:
         fault_lines = r.faults.lines()
         verdict = "complete" if r.complete else "INCOMPLETE"
         lines += ["", f"## Faults: federation {verdict}", ""] + (fault_lines or ["- none"])
+    if r.history is not None:
+        lines += ["", f"## History: {'ok' if r.history.ok else 'VIOLATED'}", "",
+                  r.history.text(shown=10)]
+    elif r.faults is not None and r.faults.history:
+        lines += ["", "## History: NOT CHECKED", "", r.faults.history[0]]
     if r.collected is not None:
         lines += ["", "## Collected after the driver stopped (dfrl collect)", ""]
         lines += [f"- {line}" for line in r.collected]

@@ -190,8 +190,10 @@ def write_run_scalars(out: str | Path, config: ExperimentConfig,
 
 
 def _round_values(row: dict[str, Any]) -> dict[str, float]:
-    """The scalars of one ``rounds.csv`` row (as :func:`read_rounds_csv` gives it)."""
-    values = {key: float(row[key]) for key in ("duration_ms", "hops", "bytes")}
+    """The scalars of one ``rounds.csv`` row (as :func:`read_rounds_csv` gives it); a row
+    rebuilt from the shares has no duration, hops or bytes (empty cells: no scalar)."""
+    values = {key: float(row[key]) for key in ("duration_ms", "hops", "bytes")
+              if row.get(key) not in ("", None)}
     values["visited"] = float(len(str(row["visited"]).split()))
     skipped = str(row["skipped"]).strip()
     values["skipped"] = float(len(skipped.split("; ")) if skipped else 0)

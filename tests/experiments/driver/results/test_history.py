@@ -207,3 +207,60 @@ def test_check_history_command_exit_codes(tmp_path: Path,
     assert report["violations"][0]["robots"] == ["r2"]
     assert main(["check-history", str(empty)]) == 2
     assert "no shares_<robot>.csv" in capsys.readouterr().err
+
+
+# --- a real run ----------------------------------------------------------------------------
+
+def test_a_real_run_passes_and_a_doubled_write_added_to_it_fails(tmp_path: Path) -> None:
+    from dfrl.experiments.driver.collect import collect
+    from dfrl.experiments.driver.launcher import run
+    from dfrl.experiments.processes import find_swipl
+
+    from ..launcher.helpers import small_config
+
+    if find_swipl() is None:
+        pytest.skip("needs swipl")
+    # Prepare: a short real run of 2 robots
+    res = run(small_config(), tmp_path, progress=None)
+    assert res.ok and res.history is not None and res.history.ok, res.history
+    verdict = check_history(tmp_path)
+    assert verdict.ok and (verdict.writes, verdict.rounds, verdict.robots) == (8, 4, 2)
+    assert "## History: ok" in (tmp_path / "summary.md").read_text(encoding="utf-8")
+    # Execute: r2 applies round 2 again (a late copy of a lower epoch, another table), as a
+    # robot process appends it, and the end-of-run files are written again (dfrl collect)
+    last = read_history_file(tmp_path / "shares_r2.csv", "r2")[0][-1]
+    log = CsvLog(tmp_path / "shares_r2.csv", SHARE_FIELDS, keep=lambda row: True)
+    log.row(share_row("r2", last.index + 1, last.iteration, table(7.0),
+                      {"round": 2, "agent": last.agent, "epoch": 0}))
+    log.close()
+    again = collect(tmp_path, progress=None, wait_s=0.0)
+    # Assert: the checker names the doubled write, the run is no longer complete
+    found = {v.kind for v in check_history(tmp_path).violations}
+    assert ViolationKind.DOUBLED_WRITE in found and ViolationKind.EPOCH_REGRESSED in found
+    assert not again.ok and not again.complete
+    summary = (tmp_path / "summary.md").read_text(encoding="utf-8")
+    assert "## History: VIOLATED" in summary and "federation INCOMPLETE" in summary
+    assert "HISTORY VIOLATED" in summary and "r2 applied 2 writes" in summary
+    assert main(["check-history", str(tmp_path)]) == 1
+
+
+def test_a_grid_federations_function_learners_are_left_out_of_split_round(
+        tmp_path: Path) -> None:
+    # r3 learns with dqn in a grid federation: after a share it holds its own Q-function at
+    # the grid (distilled), not the aggregate; r1 and r2 hold the aggregate
+    from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec
+    from dfrl.experiments.driver.results.files import write_json
+
+    writes = [(r, n, 1, float(n) + (0.5 if r == "r3" else 0.0)) for n in (1, 2)
+              for r in ("r1", "r2", "r3")]
+    write_history(tmp_path, writes, agent="fed_grid")
+    # control: without a config saying so, r3's tables are a split round
+    assert kinds(tmp_path) == [ViolationKind.SPLIT_ROUND] * 2
+    config = ExperimentConfig(robots=(RobotSpec("r1", "r1"), RobotSpec("r2", "r4"),
+                                      RobotSpec("r3", "r2", "dqn")), federation="grid")
+    write_json(tmp_path / "config.json", config.public_dict())
+    assert check_history(tmp_path).ok
+    # r1's table differing still is one
+    write_history(tmp_path, writes[:-3] + [("r1", 2, 1, 9.0), ("r2", 2, 1, 2.0),
+                                           ("r3", 2, 1, 2.5)], agent="fed_grid")
+    assert kinds(tmp_path) == [ViolationKind.SPLIT_ROUND]

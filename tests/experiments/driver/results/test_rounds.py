@@ -116,3 +116,44 @@ def test_rounds_whose_missing_record_hides_nothing_are_unverified_not_differing(
     ]
     assert count_equal(rows) == 1
     assert count_unverified(rows) == 1
+
+
+def test_the_shares_win_over_a_log_that_skipped_a_robot_they_show_written(tmp_path: Path) -> None:
+    # Prepare: the log skipped r1 in round 2, but r1 recorded a write of round 2 (the other
+    # copy wrote it); r2, the robot that was cut off, recorded none
+    recs = [RoundRecord("fed", 1, 1.0, 2.0, 3, 10, "average", ("r1", "r2", "r3")),
+            RoundRecord("fed", 2, 3.0, 4.0, 2, 10, "average", ("r3",),
+                        (Skip("r1", "no answer"), Skip("r2", "no answer")))]
+    shares = {"r1": [Share("r1", 1, 5, 1.5, "x", 1, "fed", 1),
+                     Share("r1", 2, 10, 3.5, "y", 2, "fed", 1)],
+              "r2": [Share("r2", 1, 5, 1.5, "x", 1, "fed", 1)],
+              "r3": [Share("r3", 1, 5, 1.5, "x", 1, "fed", 1),
+                     Share("r3", 2, 10, 3.5, "y", 2, "fed", 1)]}
+    # Execute
+    rows = write_rounds_csv(tmp_path / "rounds.csv", [AgentLog("fed", recs)],
+                            ["r1", "r2", "r3"], shares)
+    # Assert: r1 is counted written, not skipped, and the row says why; r2 stays skipped
+    row = read_rounds_csv(tmp_path / "rounds.csv")[1]
+    assert row["skipped"] == "r2: no answer" and row["written"] == "r1 r3"
+    assert row["note"] == "r1 logged skipped but recorded a write of this round: counted written"
+    assert row["digest_r1"] == row["digest_r3"] == "y" and row["digest_r2"] == ""
+    assert rows[1]["all_equal"] is True and row["reconstructed"] is False
+
+
+def test_a_round_only_in_the_shares_is_rebuilt_and_marked(tmp_path: Path) -> None:
+    log = AgentLog("fed", [RoundRecord("fed", 1, 1.0, 2.0, 2, 10, "average", ("r1", "r2"))])
+    shares = {"r1": [Share("r1", 1, 5, 1.5, "x", 1, "fed", 0),
+                     Share("r1", 2, 10, 7.25, "y", 2, "fed", 1)],
+              "r2": [Share("r2", 1, 5, 1.5, "x", 1, "fed", 0),
+                     Share("r2", 2, 10, 7.5, "y", 2, "fed", 1)],
+              "r3": [Share("r3", 1, 5, 9.0, "z", 1, "other", 0)]}
+    write_rounds_csv(tmp_path / "rounds.csv", [log], ["r1", "r2", "r3"], shares)
+    rows = read_rounds_csv(tmp_path / "rounds.csv")
+    assert [(r["agent"], r["round"], r["reconstructed"]) for r in rows] == \
+        [("fed", "1", False), ("fed", "2", True), ("other", "1", True)]
+    rebuilt = rows[1]
+    assert rebuilt["written"] == rebuilt["visited"] == "r1 r2" and rebuilt["epoch"] == "1"
+    assert (rebuilt["start"], rebuilt["end"]) == ("7.25", "7.5")
+    assert rebuilt["duration_ms"] == rebuilt["hops"] == rebuilt["method"] == ""
+    assert rebuilt["all_equal"] and rebuilt["digest_r1"] == "y" and "rebuilt" in rebuilt["note"]
+    assert rows[2]["written"] == "r3" and rows[2]["digest_r3"] == "z"
