@@ -123,7 +123,10 @@ def measure(rows: list[dict[str, str]], summary: str, exit_status: int, t_fault:
         "verdict": verdict, "exit_status": exit_status,
         "summary_says": [ln.strip() for ln in summary.splitlines()
                          if ln.startswith(("- MISSED", "- LOST", "- METHOD FAILED",
-                                           "- MISSING"))],
+                                           "- MISSING", "- ENDED SHORT", "- NOT LOGGED",
+                                           "- HISTORY VIOLATED"))],
+        # rounds the agent's log lacks, rebuilt from the robots' shares by the driver
+        "rounds_rebuilt": sum(r.get("reconstructed") == "true" for r in rows),
         "truthful": not truth, "truth_problems": truth,
     }
 
