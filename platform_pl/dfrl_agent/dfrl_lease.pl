@@ -73,7 +73,7 @@ resurrection).
      node the agent is on has not answered for a whole lease (killed,
      frozen, cut off).
   5. *Lease.* When a checkpoint's lease expires without a release, the
-     holder probes B (`probe`, up to 2 tries, each within a quarter of
+     holder probes B (`probe`, up to 2 tries (one if it timed out), each within a quarter of
      the lease: it only confirms what the missing heartbeats said):
      B answers here(E, Seq) if the agent is registered there (running or
      idle), staged(E, Seq) if it arrived there and waits for its source's

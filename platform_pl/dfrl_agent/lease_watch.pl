@@ -163,7 +163,8 @@ drop(Node, Agent, E, K, Why) :-
 probe(Node, Record, Dest, Agent, E, K, Tries, Answer) :-
     record_tokens(Record, Node, Tokens),
     quick_call(Node, Tokens, Dest, probe(Agent, E, K), A0),
-    (   A0 = error(_), Tries > 1
+    (   A0 = error(Why), Tries > 1,
+        \+ sub_term(timeout(_), Why)    % a stop silent for a quarter lease is silent
     ->  sleep(0.1),
         T1 is Tries - 1,
         probe(Node, Record, Dest, Agent, E, K, T1, Answer)
