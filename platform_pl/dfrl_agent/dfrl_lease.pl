@@ -27,7 +27,7 @@
 :- reexport(lease_book, [lease_valid/2]).     % +Node, +Agent
 :- reexport(lease_watch, [lease_broadcast_epoch/5]). % +Node, +Tokens, +Agent, +Epoch, +Stops
 :- autoload(library(lists), [member/2, append/3, last/2, max_list/2]).
-:- autoload(library(apply), [foldl/4]).
+:- autoload(library(apply), [foldl/4, exclude/3]).
 :- autoload(library(debug), [debug/3]).
 
 /** <module> Checkpoints, leases and epochs of the dFRL agent (custody)
@@ -416,7 +416,8 @@ lease_epoch_seen(Node, Agent, Epoch) :-
 %   Agent, on Node, has no stop that holds a checkpoint of it: at its
 %   first stop after a launch, right after a resurrection, its holder
 %   answered a heartbeat that it holds none (it restarted), or its lease
-%   ran out (its holder did not answer: cut off, frozen or dead).
+%   ran out or its holder did not answer a heartbeat in time (cut off,
+%   frozen or dead).
 
 lease_needs_holder(Node, Agent) :-
     current_prolog_flag(dfrl_resting_holder, true),
@@ -424,6 +425,8 @@ lease_needs_holder(Node, Agent) :-
     (   Holder == none
     ->  true
     ;   holder_lost(Node, Agent, E, K)
+    ->  true
+    ;   holder_silent(Node, Agent, E, K)
     ->  true
     ;   \+ lease_valid(Node, Agent)
     ).
@@ -440,15 +443,20 @@ lease_needs_holder(Node, Agent) :-
 %   (the old holder, if any, is released), so that its next departure
 %   releases the new holder as any hop does.
 
-lease_adopt(Node, Agent, Here, Offers, Holder) :-
+lease_adopt(Node, Agent, Here, Offers0, Holder) :-
     lease_custody(Node, Agent, Old),
     Old = custody(E, K, OldHolder),
+    (   holder_silent(Node, Agent, E, K)            % not asked again now
+    ->  exclude([A-_]>>(A == OldHolder), Offers0, Offers)
+    ;   Offers = Offers0
+    ),
     K1 is K + 1,
     agent_tokens(Node, Agent, Tokens),
     adopt(Offers, Node, Agent, Tokens, Here, E, K1, Holder),
     (   Holder == none
     ->  set_custody(Node, Agent, Old)
-    ;   locked(retractall(holder_lost(Node, Agent, _, _))),
+    ;   locked(( retractall(holder_lost(Node, Agent, _, _)),
+                 retractall(holder_silent(Node, Agent, _, _)) )),
         (   OldHolder \== none, OldHolder \== Holder
         ->  release(Node, Tokens, Agent, OldHolder, E, K, left, _)
         ;   true

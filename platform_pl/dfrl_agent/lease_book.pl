@@ -4,6 +4,7 @@
             seen/3,                     % Node, Agent, Epoch
             beat/3,                     % Node, Agent, LastBeat
             holder_lost/4,              % Node, Agent, Epoch, Seq
+            holder_silent/4,            % Node, Agent, Epoch, Seq
             valid/3,                    % Node, Agent, Until
             renewed/5,                  % Node, Agent, Epoch, Seq, Expiry
             entered/5,                  % Node, Agent, Epoch, Seq, Round
@@ -50,6 +51,8 @@ nodes of this process, shared by the agent's side and the holder's
   - seen/3: the highest epoch of each agent a node has seen;
   - beat/3: the agents on a node that renew their holder's lease;
   - holder_lost/4: an agent whose holder answered that it holds none;
+  - holder_silent/4: an agent whose holder did not answer a heartbeat in
+    time (the agent finds another at its next round start);
   - written/5: the last round (and epoch) in which each agent wrote each
     robot of a node (the robot's side of fencing, dfrl_lease:lease_fenced/4);
   - valid/3: until when the copy of an agent on a node may write (its
@@ -68,6 +71,7 @@ agent's tokens and wait at most a half (custody_call/5) or a quarter
     seen/3,
     beat/3,
     holder_lost/4,
+    holder_silent/4,
     valid/3,
     renewed/5,
     entered/5,
@@ -321,6 +325,7 @@ lease_forget(Node) :-
              retractall(seen(Node, _, _)),
              retractall(beat(Node, _, _)),
              retractall(holder_lost(Node, _, _, _)),
+             retractall(holder_silent(Node, _, _, _)),
              retractall(valid(Node, _, _)),
              retractall(renewed(Node, _, _, _, _)),
              retractall(entered(Node, _, _, _, _)),

@@ -466,6 +466,7 @@ beat_once(Node, Agent) :-
 %   next round start (lease_needs_holder/2), as when its lease ran out.
 beat_answer(renewed, Node, Agent, _, _, Sent) :-
     !,
+    locked(retractall(holder_silent(Node, Agent, _, _))),
     note_valid(Node, Agent, Sent).
 beat_answer(superseded(E2), Node, Agent, _, _, _) :-
     !,
@@ -474,6 +475,14 @@ beat_answer(error(Why), Node, Agent, E, K, Sent) :-
     refused(Why),                       % its process is gone, its checkpoints too
     !,
     beat_answer(unknown, Node, Agent, E, K, Sent).
+beat_answer(error(Why), Node, Agent, E, K, _) :-
+    sub_term(timeout(_), Why),          % cut off or frozen: it may still hold one
+    !,
+    locked(( holder_silent(Node, Agent, E, K)
+           ->  true
+           ;   retractall(holder_silent(Node, Agent, _, _)),
+               assertz(holder_silent(Node, Agent, E, K))
+           )).
 beat_answer(unknown, Node, Agent, E, K, _) :-
     !,
     locked(( holder_lost(Node, Agent, E, K)
