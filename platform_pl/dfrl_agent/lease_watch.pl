@@ -154,6 +154,7 @@ renew(Node, Agent, E, K) :-
 drop(Node, Agent, E, K, Why) :-
     debug(dfrl(lease), 'drop checkpoint ~w/~w/~w on ~w: ~p', [Agent, E, K, Node, Why]),
     get_time(Now),
+    locked(retractall(tried_(Node, Agent, _))),
     locked(( retract(ckpt(Node, Agent, E, K, _, _, _, _, _))
            ->  assertz(gone(Node, Agent, E, K, released(dropped), Now))
            ;   true
@@ -277,7 +278,7 @@ loopback('127.0.0.1').
 %   it), else nothing is installed and the checkpoint waits. Where the
 %   old copy may still run (Dest silent), the resurrected one starts a
 %   new round (its round number is one the old copy cannot have
-%   entered: see resume_point/3): a round is never written by two copies.
+%   entered: see resume_point/6): a round is never written by two copies.
 resurrect(Node, Agent, E, K, MaxSeen, Here, Dest, Record0, Resume0, Dest_, Why) :-
     (   seen(Node, Agent, Seen) -> true ; Seen = E ),
     (   tried_(Node, Agent, Tried) -> true ; Tried = E ),

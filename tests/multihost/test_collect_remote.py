@@ -20,10 +20,9 @@ from pathlib import Path
 import pytest
 
 from dfrl.experiments.driver.results.agent_log import kept_logs, read_rounds_log
-from dfrl.experiments.tokens import write_secret_file
 
 from dfrl.experiments.tools.netns import Lab, unavailable
-from .test_federation_hosts import README, argv_of, section_blocks, wait_line
+from .test_federation_hosts import argv_of, start_readme_robots
 
 WHY = unavailable()
 TOKEN = 318220964417253118400912235517760031279
@@ -58,15 +57,8 @@ def _summary_without_clock(path: Path) -> list[str]:
 
 
 def test_collect_from_robot_hosts_equals_an_uninterrupted_run(tmp_path: Path) -> None:
-    robot_cmd = section_blocks(README.read_text(encoding="utf-8"))["robot"][1].strip()
     with Lab(["h1", "h2", "h3", "driver"]) as lab:
-        for h in HOSTS:
-            (tmp_path / h).mkdir()
-            write_secret_file(tmp_path / h / "dfrl.token", [TOKEN])
-            proc = lab[h].popen(argv_of(robot_cmd.replace("HOSTn", lab[h].address)),
-                                cwd=tmp_path / h, stdin=subprocess.DEVNULL,
-                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-            wait_line(proc, "dfrl robot listening on", 60)
+        start_readme_robots(lab, tmp_path, HOSTS, TOKEN)
         drv = tmp_path / "driver"
         drv.mkdir()
         # the control: an uninterrupted run

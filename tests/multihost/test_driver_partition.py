@@ -14,10 +14,9 @@ from pathlib import Path
 import pytest
 
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
-from dfrl.experiments.tokens import write_secret_file
 
 from dfrl.experiments.tools.netns import Lab, unavailable
-from .test_federation_hosts import README, argv_of, section_blocks, wait_line
+from .test_federation_hosts import argv_of, start_readme_robots
 
 WHY = unavailable()
 TOKEN = 201734520938475610293847561029384756102
@@ -29,15 +28,8 @@ CUT_S = 25.0
 
 
 def test_a_cut_driver_waits_and_the_run_completes(tmp_path: Path) -> None:
-    robot_cmd = section_blocks(README.read_text(encoding="utf-8"))["robot"][1].strip()
     with Lab([*HOSTS, "driver"]) as lab:
-        for h in HOSTS:
-            (tmp_path / h).mkdir()
-            write_secret_file(tmp_path / h / "dfrl.token", [TOKEN])
-            proc = lab[h].popen(argv_of(robot_cmd.replace("HOSTn", lab[h].address)),
-                                cwd=tmp_path / h, stdin=subprocess.DEVNULL,
-                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-            wait_line(proc, "dfrl robot listening on", 60)
+        start_readme_robots(lab, tmp_path, HOSTS, TOKEN)
         cfg = {"name": "cut", "iterations": 800, "respite": 100, "mode": "sync", "rtf": 4.0,
                "token": TOKEN, "timeout_s": 240, "partition_wait_s": 90,
                "robots": [{"id": f"r{i}", "arena": a, "robot_host": f"{lab[h].address}:7001"}

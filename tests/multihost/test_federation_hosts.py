@@ -90,6 +90,22 @@ def make_token_file(lab: Lab, drv: Path, blocks: dict[str, tuple[str, str]]) -> 
     return path
 
 
+def start_readme_robots(lab: Lab, tmp: Path, hosts: tuple[str, ...] | list[str],
+                        token: int) -> None:
+    """On each of ``hosts``, the README's ``dfrl robot`` command in its own folder ``tmp/<host>``
+    with the README's token file (``token``), waited for until it listens."""
+    from dfrl.experiments.tokens import write_secret_file
+
+    robot_cmd = section_blocks(README.read_text(encoding="utf-8"))["robot"][1].strip()
+    for h in hosts:
+        (tmp / h).mkdir()
+        write_secret_file(tmp / h / "dfrl.token", [token])
+        proc = lab[h].popen(argv_of(robot_cmd.replace("HOSTn", lab[h].address)),
+                            cwd=tmp / h, stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        wait_line(proc, "dfrl robot listening on", 60)
+
+
 def wait_line(proc: subprocess.Popen, pattern: str, timeout_s: float) -> str:
     """The first stdout line of ``proc`` containing ``pattern``, read in a thread (bounded)."""
     found: list[str] = []
