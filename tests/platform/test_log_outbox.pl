@@ -96,8 +96,10 @@ test(full_outbox_drops_the_oldest_keeps_the_file,
     node_start(localhost:P, C, [token(7), default(false)]),
     assertion(wait_for(outbox_wait_empty(R, 0.1))),
     % Assert: the kept log has all ten; the outbox held at most 3 queued and 3 being
-    % posted: the console got the newest three and some of the oldest, in order; the
-    % rest counted as dropped
+    % posted: the console got the newest three and some of the oldest, each post in
+    % order (two posts in quick succession may be appended in either order: the
+    % console runs each in a thread of its own, see log_outbox.pl); the rest counted
+    % as dropped
     directory_file_path(Dir, 'rounds_fx.log', Kept),
     kept_lines(Kept, KeptLines),
     assertion(KeptLines == Lines),
@@ -105,8 +107,10 @@ test(full_outbox_drops_the_oldest_keeps_the_file,
     length(Got, NGot),
     assertion(NGot + Dropped =:= 10),
     assertion(Dropped >= 4),
-    assertion(append(_, ["line 8", "line 9", "line 10"], Got)),
-    assertion(subsequence(Got, Lines)).
+    Newest = ["line 8", "line 9", "line 10"],
+    assertion(append(_, Newest, Got) ; append(Newest, _, Got)),
+    subtract(Got, Newest, Older),
+    assertion(subsequence(Older, Lines)).
 
 test(no_keep_dir_memory_only, [cleanup(cleanup([R, C]))]) :-
     node_start(localhost:0, C, [token(7), default(false)]),
