@@ -11,13 +11,18 @@ __all__ = ["cmd_check_history", "register"]
 
 
 def cmd_check_history(args: argparse.Namespace) -> int:
-    """``dfrl check-history``: 0 no violation, 1 violations, 2 no readable history."""
+    """``dfrl check-history``: 0 no violation, 1 violations, 2 no readable history (or one
+    without a single agent write)."""
     from dfrl.experiments.driver.results.history import HistoryInputError, check_history
 
     try:
         verdict = check_history(args.results_dir)
     except HistoryInputError as exc:
         print(f"dfrl check-history: {exc}", file=sys.stderr)
+        return 2
+    if verdict.writes == 0:                 # nothing checked is no verdict, never an "ok"
+        print(f"dfrl check-history: {args.results_dir}: its shares files hold no agent's "
+              "write: nothing to check", file=sys.stderr)
         return 2
     if args.json:
         print(json.dumps(verdict.to_json(), indent=2))

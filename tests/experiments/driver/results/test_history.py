@@ -207,6 +207,11 @@ def test_check_history_command_exit_codes(tmp_path: Path,
     assert report["violations"][0]["robots"] == ["r2"]
     assert main(["check-history", str(empty)]) == 2
     assert "no shares_<robot>.csv" in capsys.readouterr().err
+    # shares files without one agent write: nothing was checked, which is no "ok"
+    (empty / "shares_r1.csv").write_text(
+        "robot,share_index,iteration,wall_time,digest,round,agent,epoch\n")
+    assert main(["check-history", str(empty)]) == 2
+    assert "nothing to check" in capsys.readouterr().err
 
 
 # --- a real run ----------------------------------------------------------------------------
