@@ -10,6 +10,7 @@
             bounds_peer/3,              % +Ctx, +Claim, -Peer
             bounds_peer_post/2,         % +Ctx, +Link
             bounds_park/1,              % :Goal
+            bounds_stop_ball/1,         % @Exception
             bounds_node_memory/2,       % +Node, -Bytes
             bounds_post/0,
             bounds_warning/2,           % +Node, +Message
@@ -338,6 +339,16 @@ retake_slot(Node, Agent, Slot) :-
     !.
 retake_slot(Node, Agent, Slot) :-
     take_slot(Node, Agent, Slot).
+
+%!  bounds_stop_ball(@Exception) is semidet.
+%
+%   Exception stops an agent's call (a bound, a purge, an abort): code
+%   that catches errors of its own work on the agent's behalf (a request
+%   to a peer) must throw it on, never turn it into an answer.
+
+bounds_stop_ball(E) :-
+    nonvar(E),
+    stops_call(E).
 
 stops_call('$dfrl_bound'(_)).
 stops_call('$dfrl_purged').

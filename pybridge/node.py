@@ -11,6 +11,8 @@ from __future__ import annotations
 import atexit
 import logging
 import math
+import os
+import re
 import threading
 from collections.abc import Sequence
 from pathlib import Path
@@ -187,6 +189,17 @@ class Bridge(TartarusCommands):
             raise BridgeError(f"platform entry point {path} does not exist")
         self._must("ensure_loaded", Atom(str(path)))
         self._platform_loaded = True
+        self._debug_topics(os.environ.get("DFRL_PL_DEBUG", ""))
+
+    def _debug_topics(self, spec: str) -> None:
+        """Turn on the Prolog debug topics of ``spec`` (``DFRL_PL_DEBUG``, e.g.
+        ``dfrl(lease),dfrl(custody)``: ``name`` or ``name(arg)`` items, comma-separated),
+        printed to stderr."""
+        for item in re.findall(r"\w+(?:\(\w+\))?", spec):
+            name, _, arg = item.rstrip(")").partition("(")
+            topic = Term(name, Atom(arg)) if arg else Atom(name)
+            if self.prolog.call("debug", topic) is None:
+                log.warning("DFRL_PL_DEBUG: could not turn on debug topic %s", item)
 
     def start(self, host: str = "127.0.0.1", port: int = 0, **options: Any) -> Any:
         """Start a platform node listening on host:port (0: OS-chosen) in this process.

@@ -13,7 +13,8 @@
 :- use_module(dfrl_lease,
               [ lease_arrived/3, lease_check/3, lease_progress/4,
                 lease_ended/3, lease_custody/3, lease_adopt/5,
-                lease_needs_holder/2, lease_write_gate/2, lease_valid/2 ]).
+                lease_needs_holder/2, lease_write_gate/2, lease_valid/2,
+                copy_owned/2 ]).
 :- use_module(dfrl_round_state,
               [ new_round/3, get_state/3, put_state/3, pack_state/2,
                 unpack_state/2, replace_fact/2, skip_robot/4, add_retries/3,
@@ -816,6 +817,7 @@ round_gate(M, Agent, S) :-
     round_gate(Node, M, Agent, S, T0, 0).
 
 round_gate(Node, M, Agent, S, T0, Tries) :-
+    copy_owned(Node, Agent),            % not replaced while it waited
     ensure_holder(M, Agent, S),
     get_dict(round, S, Round),
     lease_progress(Node, Agent, started(Round), Verdict),
@@ -1041,6 +1043,7 @@ purge_self(Agent) :-
 
 %   A copy that met a higher epoch stops, says so and lets its holder go.
 retire(Node, M, Agent, Epoch2) :-
+    copy_owned(Node, Agent),
     lease_custody(Node, Agent, custody(Epoch, _, _)),
     M:dfrl_plan(Agent, plan(_, _, _, Log, _)),
     get_state(M, Agent, S),

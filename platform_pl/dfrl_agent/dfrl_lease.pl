@@ -18,13 +18,17 @@
 :- use_module('../node', [node_property/2, ctx_node/2, ctx_authenticated/1]).
 :- use_module('../agents',
               [ agent_exists/2, agent_export/3, agent_status/3, agent_remove/2,
-                agent_purge/2 ]).
+                agent_purge/2, agent_module/3 ]).
+:- use_module('../tartarus', [with_node/2]).
+:- use_module(dfrl_round_log, [log_event/2]).
+:- use_module(dfrl_round_state, [get_state/3]).
 :- use_module('../code_safety', [check_agent_record/1]).
 :- use_module('../custody', [with_custody/2, custody_unstage/2]).
 :- use_module(lease_book).
 :- reexport(lease_book, [lease_custody/3]).     % +Node, +Agent, -Custody
 :- use_module(lease_watch, [ensure_watchdog/0, note_beat/2, beat_answer/6]).
 :- reexport(lease_book, [lease_valid/2]).     % +Node, +Agent
+:- reexport(lease_book, [copy_owned/2]).      % +Node, +Agent
 :- reexport(lease_watch, [lease_broadcast_epoch/5]). % +Node, +Tokens, +Agent, +Epoch, +Stops
 :- autoload(library(lists), [member/2, append/3, last/2, max_list/2]).
 :- autoload(library(apply), [foldl/4, exclude/3]).
@@ -79,11 +83,15 @@ resurrection).
      idle), staged(E, Seq) if it arrived there and waits for its source's
      decision (staged or in doubt), left(E, Seq') if it holds a checkpoint or
      a record of a later departure, finished(E, Seq) if the tour ended
-     there, superseded(E') if it knows a higher epoch, or unknown.
+     there, superseded(E') if it knows a higher epoch, written(E1, Ago)
+     if a copy of epoch E1 >= E wrote one of its robots less than a
+     lease ago, or unknown.
      `here` and `staged` renew the lease; `left`, `finished` and
-     `superseded` drop the checkpoint; `unknown` and no answer at all
-     make the holder ask every other stop of the itinerary the same
-     question. Only if none knows of a later hop (or a higher epoch) is
+     `superseded` drop the checkpoint; `unknown`, `written` and no
+     answer at all make the holder ask every other stop of the itinerary
+     the same question. If B did not answer and another stop answers
+     `written`, the agent lives (the holder was the one cut off) and the
+     holder asks again half a lease later. Only if none knows of a later hop (or a higher epoch) is
      the agent *resurrected*; a copy *staged* at another stop does not
      count (its source died between transfer and commit, so it never
      ran, and only that source could decide to start it):
@@ -392,8 +400,11 @@ lease_note_write(Node, Robot, Options) :-
         memberchk(epoch(E), Options),
         memberchk(round(R), Options),
         integer(R)
-    ->  locked(( retractall(written(Node, A, Robot, _, _)),
-                 assertz(written(Node, A, Robot, R, E)) ))
+    ->  get_time(Now),
+        locked(( retractall(written(Node, A, Robot, _, _)),
+                 assertz(written(Node, A, Robot, R, E)),
+                 retractall(last_write(Node, A, _, _)),
+                 assertz(last_write(Node, A, E, Now)) ))
     ;   true
     ).
 
@@ -622,7 +633,8 @@ replace_stale(Node, Agent, E, K, Answer) :-
     ->  (   arrived_only(Node, Agent)
         ->  agent_remove(Node, Agent),
             custody_unstage(Node, Agent)
-        ;   agent_purge(Node, Agent)
+        ;   log_replaced(Node, Agent, E0, E),
+            agent_purge(Node, Agent)
         ),
         get_time(Now),
         assertz(gone(Node, Agent, E0, K0, superseded, Now)),
@@ -633,6 +645,24 @@ replace_stale(Node, Agent, E, K, Answer) :-
         Answer = replaced(E0, K0)
     ;   lease_custody(Node, Agent, custody(E0, K0, _)),
         Answer = kept(E0, K0)
+    ).
+
+%   A copy that ran here (parked, cut off with its old epoch E0) is
+%   stopped for the arriving copy of epoch E: its round log says so, as
+%   when a copy retires by itself (event superseded, how: replaced).
+log_replaced(Node, Agent, E0, E) :-
+    (   catch(( agent_module(Node, Agent, M),
+                M:dfrl_plan(Agent, plan(_, _, _, Log, _)),
+                (   catch(get_state(M, Agent, S), _, fail),
+                    get_dict(round, S, Round)
+                ->  true
+                ;   Round = null
+                ),
+                with_node(Node, log_event(Log, _{event:superseded, agent:Agent, round:Round,
+                                                 epoch:E0, by:E, how:replaced}))
+              ), Err, ( print_message(warning, Err), fail ))
+    ->  true
+    ;   true                            % not a dFRL agent: nothing to log
     ).
 
 %   A copy of Agent that arrived here from a source that died before
@@ -687,7 +717,12 @@ apply_progress(round_done(Round, Last, Facts), _, Rec0, resume(S0, Next, _),
     foldl(replace_fact, Facts, Cls0, Cls),
     Rec = agent(Name, H, K, T, P, Preds, Cls, Hops).
 
-
+%   What Node knows of Agent for a holder of its checkpoint (epoch E, hop
+%   K): superseded(E2), here(E1, K1) or staged(E1, K1) (the agent is on
+%   Node), left(E, K2) or finished(E, K2) (a later hop passed here),
+%   written(E1, Ago) (a copy of epoch E1 >= E wrote a robot of Node Ago
+%   seconds ago, less than a lease: it lives, wherever its holder is), or
+%   unknown.
 probe_answer(Node, Agent, E, K, Answer) :-
     (   seen(Node, Agent, E2), E2 > E
     ->  Answer = superseded(E2)
@@ -705,6 +740,13 @@ probe_answer(Node, Agent, E, K, Answer) :-
     ->  msort(L, Sorted),
         last(Sorted, K2-How),
         Answer =.. [How, E, K2]
+    ;   last_write(Node, Agent, E1, T),
+        E1 >= E,
+        get_time(Now),
+        lease_s(Node, L),
+        Ago is Now - T,
+        Ago < L
+    ->  Answer = written(E1, Ago)       % the agent lives: it wrote here just now
     ;   Answer = unknown
     ).
 

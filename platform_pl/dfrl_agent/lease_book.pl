@@ -11,6 +11,7 @@
             set_expiry/5,               % +Node, +Agent, +Epoch, +Seq, +Expiry
             ckpt_expiry/5,              % ?Node, ?Agent, ?Epoch, ?Seq, -Expiry
             written/5,                  % Node, Agent, Robot, Round, Epoch
+            last_write/4,               % Node, Agent, Epoch, Time
             lease_forget/1,             % +Node
             note_valid/3,               % +Node, +Agent, +Since
             lease_valid/2,              % +Node, +Agent
@@ -20,6 +21,7 @@
             lease_s/2,                  % +Node, -Seconds
             lease_custody/3,            % +Node, +Agent, -Custody
             set_custody/3,              % +Node, +Agent, +Custody
+            copy_owned/2,               % +Node, +Agent
             note_epoch/3,               % +Node, +Agent, +Epoch
             prune_gone/2,               % +Node, +Agent
             agent_tokens/3,             % +Node, +Agent, -Tokens
@@ -29,7 +31,8 @@
             replace_fact/3              % +Fact, +Clauses0, -Clauses
           ]).
 :- use_module('../node', [node_option/3, node_property/2]).
-:- use_module('../agents', [agent_property/3]).
+:- use_module('../agents', [agent_property/3, agent_status/3]).
+:- use_module('../agent_bounds', [bounds_stop_ball/1]).
 :- use_module('../transport', [transport_request/4]).
 :- autoload(library(lists), [append/3, last/2]).
 :- autoload(library(apply), [exclude/3]).
@@ -55,6 +58,9 @@ nodes of this process, shared by the agent's side and the holder's
     time (the agent finds another at its next round start);
   - written/5: the last round (and epoch) in which each agent wrote each
     robot of a node (the robot's side of fencing, dfrl_lease:lease_fenced/4);
+  - last_write/4: when each agent last wrote a robot of a node, and with
+    which epoch (a stop written less than a lease ago tells a holder
+    that the agent lives: dfrl_lease:probe_answer/5);
   - valid/3: until when the copy of an agent on a node may write (its
     side of the lease, see note_valid/3).
 
@@ -75,7 +81,8 @@ agent's tokens and wait at most a half (custody_call/5) or a quarter
     valid/3,
     renewed/5,
     entered/5,
-    written/5.
+    written/5,
+    last_write/4.
 
 :- multifile
     node:node_stopping/1.
@@ -128,9 +135,26 @@ lease_custody(Node, Agent, Custody) :-
 %!  set_custody(+Node, +Agent, +Custody) is det.
 
 set_custody(Node, Agent, Custody) :-
+    copy_owned(Node, Agent),
     agent_property(Node, Agent, module(M)),
     retractall(M:dfrl_custody_of(Agent, _)),
     assertz(M:dfrl_custody_of(Agent, Custody)).
+
+%!  copy_owned(+Node, +Agent) is det.
+%
+%   The calling thread may change Agent's state on Node: it is not a
+%   thread of an earlier copy of the agent, replaced (purged, then a new
+%   copy installed under the same name) while it waited on a peer. Such
+%   a thread stops as a purged call ('$dfrl_purged', ended quietly by
+%   the handler); it must never write into the new copy's module.
+
+copy_owned(Node, Agent) :-
+    (   agent_status(Node, Agent, running(T)),
+        thread_self(Me),
+        T \== Me
+    ->  throw('$dfrl_purged')
+    ;   true
+    ).
 
 %!  note_epoch(+Node, +Agent, +Epoch) is det.
 %
@@ -259,7 +283,9 @@ agent_tokens(Node, Agent, Tokens) :-
 %!  custody_call(+Node, +Tokens, +Address, +Request, -Answer) is det.
 %
 %   One authenticated request, with timeouts bounded by half the lease;
-%   Answer is error(E) if it could not be made.
+%   Answer is error(E) if it could not be made. An exception that stops
+%   the agent's call (it was purged meanwhile: bounds_stop_ball/1) is
+%   thrown on: a copy replaced while it waited must not go on.
 
 custody_call(Node, Tokens, Address, Request, Answer) :-
     lease_s(Node, L),
@@ -285,7 +311,7 @@ request(Address, Tokens, Request, CT, RT, Answer) :-
     catch(transport_request(Address, dfrl_custody(Request), Answer,
                             [ connect_timeout(CT), reply_timeout(RT),
                               tokens(Tokens), action(custody) ]),
-          E, Answer = error(E)).
+          E, ( bounds_stop_ball(E) -> throw(E) ; Answer = error(E) )).
 
 %!  record_state(+Record0, +State, -Record) is det.
 %
@@ -329,4 +355,5 @@ lease_forget(Node) :-
              retractall(valid(Node, _, _)),
              retractall(renewed(Node, _, _, _, _)),
              retractall(entered(Node, _, _, _, _)),
-             retractall(written(Node, _, _, _, _)) )).
+             retractall(written(Node, _, _, _, _)),
+             retractall(last_write(Node, _, _, _)) )).

@@ -131,7 +131,8 @@ judge(staged(E1, _), _, Node, Agent, E, K, _, _, _) :-
     E1 =< E,
     !,
     renew(Node, Agent, E, K).
-judge(unknown, Dest, Node, Agent, E, K, Here, Record, Resume) :-
+judge(Unknown, Dest, Node, Agent, E, K, Here, Record, Resume) :-
+    ( Unknown == unknown ; Unknown = written(_, _) ),    % it answered without the agent
     !,
     lost(Node, Agent, E, K, Here, Dest, Record, Resume, gone, lost).
 judge(error(Why), Dest, Node, Agent, E, K, Here, Record, Resume) :-
@@ -181,13 +182,19 @@ probe(Node, Record, Dest, Agent, E, K, Tries, Answer) :-
 %   Without a majority the checkpoint is kept and asked about again half
 %   a lease later.
 lost(Node, Agent, E, K, Here, Dest, Record, Resume, Dest_, Why) :-
-    others_know(Node, Dest, Here, Record, Agent, E, K, Known, Answered),
+    others_know(Node, Dest, Dest_, Here, Record, Agent, E, K, Known, Answered),
     record_stops(Record, Agent, Stops),
     majority(Stops, Need),
     (   Dest_ == gone -> DestCount = 1 ; DestCount = 0 ),
     Have is 1 + DestCount + Answered,
     (   Known = known(Reason)
     ->  drop(Node, Agent, E, K, Reason)
+    ;   Known = lives(S, Ago)
+    ->  print_message(warning,
+                      format("dfrl: ~w lost at ~w (~p), but ~w was written by it ~3f s ago \c
+                              (less than a lease): not resurrected; asked again later",
+                             [Agent, Dest, Why, S, Ago])),
+        wait_again(Node, Agent, E, K)
     ;   Have >= Need
     ->  Known = max_epoch(Max),
         resurrect(Node, Agent, E, K, Max, Here, Dest, Record, Resume, Dest_, Why)
@@ -206,16 +213,21 @@ wait_again(Node, Agent, E, K) :-
 
 %   Does any other stop know of a later hop or a higher epoch? Answered
 %   counts the stops that answered at all. An epoch this holder itself
-%   tried to resurrect with (tried_/3) is no news.
-others_know(Node, Dest, Here, Record, Agent, E, K, Known, Answered) :-
+%   tried to resurrect with (tried_/3) is no news. Where the lost stop may
+%   still run the agent (Dest_ silent), a stop it wrote less than a lease
+%   ago (written(E1, Ago)) shows that it lives (Known = lives(Stop, Ago)):
+%   its holder was cut off, not the agent (it may not have found another
+%   holder yet); asked again later. Where the lost stop is gone, its copy
+%   writes nothing more and such writes are no news.
+others_know(Node, Dest, Dest_, Here, Record, Agent, E, K, Known, Answered) :-
     record_stops(Record, Agent, Stops0),
     exclude([S]>>( same_address(S, Dest) ; same_address(S, Here) ), Stops0, Stops),
     record_tokens(Record, Node, Tokens),
     (   tried_(Node, Agent, Tried) -> true ; Tried = E ),
-    others_know_(Stops, Node, Tokens, Agent, E, K, Tried, E, Known, 0, Answered).
+    others_know_(Stops, Node, Tokens, Agent, E, K, Tried-Dest_, E, Known, 0, Answered).
 
 others_know_([], _, _, _, _, _, _, Max, max_epoch(Max), N, N).
-others_know_([S|Ss], Node, Tokens, Agent, E, K, Tried, Max0, Known, N0, N) :-
+others_know_([S|Ss], Node, Tokens, Agent, E, K, Tried-Dest_, Max0, Known, N0, N) :-
     quick_call(Node, Tokens, S, probe(Agent, E, K), Answer),
     (   Answer = error(_)
     ->  N1 = N0
@@ -227,8 +239,10 @@ others_know_([S|Ss], Node, Tokens, Agent, E, K, Tried, Max0, Known, N0, N) :-
     ->  Known = known(here(S)), N = N1  % staged(_, _): arrived, never ran: not known
     ;   ( Answer = left(_, K1) ; Answer = finished(_, K1) ), K1 > K
     ->  Known = known(Answer), N = N1
+    ;   Answer = written(_, Ago), Dest_ == silent
+    ->  Known = lives(S, Ago), N = N1
     ;   (   Answer = superseded(E3) -> Max1 is max(Max0, E3) ; Max1 = Max0 ),
-        others_know_(Ss, Node, Tokens, Agent, E, K, Tried, Max1, Known, N1, N)
+        others_know_(Ss, Node, Tokens, Agent, E, K, Tried-Dest_, Max1, Known, N1, N)
     ).
 
 %   A connection refused: the node's process is gone (killed, crashed,
