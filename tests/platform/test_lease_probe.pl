@@ -56,30 +56,26 @@ test(written_a_lease_ago_is_unknown, [cleanup(stop_all([A, B])), Answer == unkno
     quick_call(A, [k], BAddr, probe(fx, 1, 1), Answer).
 
 %   The holder A lost the agent at Dest (not listening: the answer does not
-%   matter here, others_know only asks the other stops B and C).
-test(silent_stop_and_a_fresh_write_is_life, [cleanup(stop_all([A, B, C])), Known = lives(BAddr, _)]) :-
+%   matter here, others_know only asks the other stops B and C), Dest
+%   being silent or gone; B written by the agent just now if Write is true.
+ask_others(Dest_, Write, BAddr, Known, Answered) :-
     start(A), start(B), start(C),
     maplist(address, [A, B, C], [AAddr, BAddr, CAddr]),
     Dest = localhost:1,
     record([AAddr, BAddr, CAddr, Dest], Record),
-    wrote(B, 1, 3),
-    lease_watch:others_know(A, Dest, silent, AAddr, Record, fx, 1, 1, Known, Answered),
+    (   Write == true -> wrote(B, 1, 3) ; true ),
+    call_cleanup(lease_watch:others_know(A, Dest, Dest_, AAddr, Record, fx, 1, 1, Known, Answered),
+                 stop_all([A, B, C])).
+
+test(silent_stop_and_a_fresh_write_is_life, Known = lives(BAddr, _)) :-
+    ask_others(silent, true, BAddr, Known, Answered),
     assertion(Answered >= 1).
 
-test(gone_stop_and_a_fresh_write_is_no_news, [cleanup(stop_all([A, B, C])), Known == max_epoch(1)]) :-
-    start(A), start(B), start(C),
-    maplist(address, [A, B, C], [AAddr, BAddr, CAddr]),
-    Dest = localhost:1,
-    record([AAddr, BAddr, CAddr, Dest], Record),
-    wrote(B, 1, 3),
-    lease_watch:others_know(A, Dest, gone, AAddr, Record, fx, 1, 1, Known, Answered),
+test(gone_stop_and_a_fresh_write_is_no_news, Known == max_epoch(1)) :-
+    ask_others(gone, true, _, Known, Answered),
     assertion(Answered =:= 2).
 
-test(silent_stop_and_no_write_is_no_news, [cleanup(stop_all([A, B, C])), Known == max_epoch(1)]) :-
-    start(A), start(B), start(C),
-    maplist(address, [A, B, C], [AAddr, BAddr, CAddr]),
-    Dest = localhost:1,
-    record([AAddr, BAddr, CAddr, Dest], Record),
-    lease_watch:others_know(A, Dest, silent, AAddr, Record, fx, 1, 1, Known, _).
+test(silent_stop_and_no_write_is_no_news, Known == max_epoch(1)) :-
+    ask_others(silent, false, _, Known, _).
 
 :- end_tests(lease_probe).
