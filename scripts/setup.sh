@@ -43,10 +43,10 @@ fi
 stamp="$VENV/.dfrl-installed"
 want="$(sha256sum "$DFRL_ROOT/pyproject.toml" | cut -d' ' -f1)"
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ] \
-        || ! "$VENV/bin/python" -c 'import pybullet, pyswip, gymnasium, matplotlib, pytest, autograd' 2>/dev/null; then
+        || ! "$VENV/bin/python" -c 'import pybullet, pyswip, gymnasium, matplotlib, pytest, autograd, statsmodels, rliable' 2>/dev/null; then
     say "installing the dfrl package and its dependencies into $VENV"
     "$VENV/bin/python" -m pip install -q --upgrade pip >/dev/null
-    "$VENV/bin/python" -m pip install -q -e "$DFRL_ROOT[dev]"
+    "$VENV/bin/python" -m pip install -q -e "$DFRL_ROOT[dev,science]"
     echo "$want" > "$stamp"
 fi
 

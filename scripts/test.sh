@@ -9,7 +9,7 @@ cd "$DFRL_ROOT"
 # "tensorboard", which the demo does not need), so that tests/cluster and the --tensorboard test run
 # (and pytest-xdist, of the extra "dev": the suite runs on two workers, see README.md, Tests)
 python -c 'import distributed, tensorboardX, xdist' 2>/dev/null \
-    || python -m pip install -q -e "$DFRL_ROOT[dev,cluster,tensorboard]"
+    || python -m pip install -q -e "$DFRL_ROOT[dev,cluster,tensorboard,science]"
 # the live view's browser test: Chromium and its driver from Debian's packages (if missing)
 bash scripts/browser-setup.sh >/dev/null \
     || echo "[test] could not install chromium; the browser test will say why it skips" >&2

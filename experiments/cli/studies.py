@@ -103,26 +103,32 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 def register_paper(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
-        "paper", help="the paper's experiment with K seeds, negative controls, greedy "
-                      "evaluations, figures with 95%% bands and report.md with tests",
-        description="Every federated combination (Q-learning/SARSA x average/max) and the "
-                    "standalone baselines K times, plus the negative controls (the zero table "
-                    "and runs trained on shuffled rewards, through the same pipeline) and the "
-                    "off-policy reference (random behaviour, epsilon 1); report.md states each "
-                    "paper observation as a test with an interval and a verdict, and whether "
-                    "it is a test of learning (its controls fail it). Exit 1 if a federated "
-                    "run failed.")
-    p.add_argument("--out", type=Path, default=Path("results/paper"),
-                   help="output folder (default: %(default)s)")
+        "paper", help="the paper's experiment with K seeds: questions L, F, T, M answered by "
+                      "contrasts against controls, with intervals, Holm and power",
+        description="Federated (Q-learning/SARSA x average/max, Q-learning/visit_average) and "
+                    "standalone robots K times, the untrained table and a learning control per "
+                    "algorithm and setting, through the same pipeline; report.md answers L (do "
+                    "robots learn), F (does federation help), T (do federated tables transfer "
+                    "better), M (which method), each row a contrast paired by seed with its "
+                    "interval, Holm-adjusted p, verdict and the power it had "
+                    "(experiments/science/README.md, 'Questions'). --from DIR judges a study "
+                    "again from DIR/evaluations.csv without running anything. Exit 1 if a "
+                    "federated run failed.")
+    p.add_argument("--out", type=Path, default=None,
+                   help="output folder (default: results/paper; with --from: DIR)")
+    p.add_argument("--from", dest="source", type=Path, default=None, metavar="DIR",
+                   help="judge the questions again from DIR/evaluations.csv (no run); writes "
+                        "questions.md, questions.csv and contrasts_by_seed.csv into --out")
+    p.add_argument("--delta", action="append", default=[], metavar="Q=EFFECT",
+                   help="smallest effect of interest of question Q (L, F, T or M), in greedy "
+                        "score units (default: 0.1 each); repeat for several")
     add_seed_arguments(p, 5)
     p.add_argument("--iterations", type=int, default=None,
                    help="iterations per robot (default: 15000, see --budget)")
     p.add_argument("--budget", choices=("paper", "long"), default="paper",
-                   help="paper: 15,000 iterations (5 seeds fit 15 minutes; the configs' "
-                        "20,000 took 17.7); "
-                        "long: 150,000, where the sum of Q-values of one robot flattens "
-                        "(robots/README.md, 'Budget'); --iterations overrides both "
-                        "(default: %(default)s)")
+                   help="paper: 15,000 iterations; long: 150,000, where the sum of Q-values of "
+                        "one robot flattens (robots/README.md, 'Budget'); --iterations "
+                        "overrides both (default: %(default)s)")
     p.add_argument("--respite", type=int, default=None,
                    help="iterations between two shares (default: the configs', 500)")
     p.add_argument("--eval-points", type=int, default=4,
@@ -132,11 +138,13 @@ def register_paper(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--jobs", type=int, default=2,
                    help="processes for standalone runs and evaluations (default: %(default)s)")
     p.add_argument("--no-control", action="store_true",
-                   help="skip the negative controls and the off-policy reference (every test "
-                        "then says it cannot judge)")
+                   help="skip the untrained table and the learning controls (question L then "
+                        "cannot be judged)")
+    p.add_argument("--diagnostics", action="store_true",
+                   help="also run the off-policy reference (Q-learning from random behaviour, "
+                        "epsilon 1), a diagnostic")
     p.add_argument("--shuffle-buffer", type=int, default=None, metavar="W",
-                   help="the shuffled-reward control's buffer of observed rewards "
-                        "(default: 1000)")
+                   help="the learning control's buffer of observed rewards (default: 1000)")
     p.add_argument("--skip-existing", action="store_true",
                    help="reuse finished runs found in --out")
     add_study_cluster_arguments(p)
@@ -144,23 +152,54 @@ def register_paper(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_paper)
 
 
+def parse_deltas(items: list[str]) -> dict[str, float]:
+    """``["F=0.05", ...]`` -> ``{"F": 0.05}``.
+
+    Raises
+    ------
+    ValueError
+        Not ``Q=EFFECT``, an unknown question, or an effect that is not a number > 0.
+    """
+    out = {}
+    for item in items:
+        q, sep, value = item.partition("=")
+        q = q.strip().upper()
+        if not sep or q not in ("L", "F", "T", "M"):
+            raise ValueError(f"--delta {item!r}: expected Q=EFFECT with Q one of L, F, T, M")
+        try:
+            effect = float(value)
+        except ValueError:
+            raise ValueError(f"--delta {item!r}: {value!r} is not a number") from None
+        if not (effect > 0 and effect < float("inf")):
+            raise ValueError(f"--delta {item!r}: the effect must be a number > 0")
+        out[q] = effect
+    return out
+
+
 def cmd_paper(args: argparse.Namespace) -> int:
-    """``dfrl paper``: exit 0 when every federated run succeeded."""
+    """``dfrl paper``: exit 0 when every federated run succeeded (``--from``: when the
+    evaluations could be read)."""
     from dfrl.experiments.errors import ExperimentError
     from dfrl.experiments.science.reproduce import PAPER_ITERATIONS, PaperOptions, reproduce_paper
 
     try:
+        deltas = parse_deltas(args.delta)
+        if args.source is not None:
+            return _rejudge(args, deltas)
         seeds = chosen_seeds(args)
         cluster = study_cluster(args)
     except ValueError as exc:
         print(f"dfrl paper: {exc}", file=sys.stderr)
         return 2
+    if args.out is None:
+        args.out = Path("results/paper")
     opts = PaperOptions(seeds=seeds, cluster=cluster,
                         iterations=args.iterations if args.iterations is not None else
                         (LONG_BUDGET if args.budget == "long" else PAPER_ITERATIONS),
                         respite=args.respite,
                         points=args.eval_points, eval_steps=args.eval_steps, jobs=args.jobs,
-                        control=not args.no_control, skip_existing=args.skip_existing,
+                        control=not args.no_control, diagnostics=args.diagnostics,
+                        skip_existing=args.skip_existing, deltas=tuple(deltas.items()),
                         **({} if args.shuffle_buffer is None
                            else {"shuffle_buffer": args.shuffle_buffer}))
     try:
@@ -176,6 +215,28 @@ def cmd_paper(args: argparse.Namespace) -> int:
     print(f"dfrl paper done in {done.total_s:.0f} s", file=sys.stderr)
     print(done.report)
     return 0 if done.ok else 1
+
+
+def _rejudge(args: argparse.Namespace, deltas: dict[str, float]) -> int:
+    """``dfrl paper --from DIR``: judge again, print the summary and the report's path."""
+    from dfrl.experiments.science.questions.evaluations import EvaluationsError
+    from dfrl.experiments.science.reproduce import rejudge
+
+    out = args.out if args.out is not None else args.source
+    try:
+        ans, path = rejudge(args.source, deltas, out)
+    except (EvaluationsError, OSError) as exc:
+        print(f"dfrl paper --from: {exc}", file=sys.stderr)
+        return 2
+    for run, verdict in ans.learns().items():
+        print(f"L  {run}: {verdict}")
+    for c in ans.checks:
+        print(f"check  {c.row.a}: {c.words()}")
+    for q in ("F", "T", "M"):
+        for a in ans.questions.get(q, []):
+            print(f"{q}  {a.row.label}: {a.judged.words()}")
+    print(path)
+    return 0
 
 
 def register_speedup(subparsers: argparse._SubParsersAction) -> None:

@@ -1,32 +1,30 @@
-"""``dfrl paper``: the paper's experiment K times, greedy evaluations, a report of tests.
+"""``dfrl paper``: the paper's experiment K times, greedy evaluations, the questions judged.
 
-For every seed: the four federated combinations (Q-learning / SARSA x average / max, five
-robots in R1..R5, ``experiments/configs/paper_*.json``, real robot processes and the
-dFRL agent), the standalone baselines (each arena alone, the seed its federated robot has),
-the negative controls, runs that cannot have learned, through the same pipeline (same seeds,
-arenas and evaluations: :mod:`dfrl.experiments.science.report.observations`): the zero table
-(never trained) and federated Q-learning/average and standalone Q-learning in every arena
-trained on shuffled rewards (the ``reward_shuffle`` trainer option); and the off-policy
-reference: federated Q-learning/average and standalone Q-learning in R1 and R4 with a random
-behaviour policy (epsilon 1 throughout), which Q-learning learns from as well as from any other
-behaviour, so it is no control. Each run's tables are evaluated at ``points`` evenly spaced
-iterations (federated: the table history the robot processes write at every share;
-standalone: snapshots) with the greedy policy in the robot's own arena and the held-out arenas
-h1 and h2 (``evaluations.csv`` in the run's folder); the zero table once per seed, with that
-seed's evaluation seed.
+For every seed (:func:`plan`): the federated conditions (Q-learning / SARSA x average / max and
+Q-learning / visit_average, five robots in R1..R5, ``experiments/configs/paper_*.json``, real
+robot processes and the dFRL agent), the standalone conditions (each arena alone, with the
+seed its federated robot has), the learning controls, runs that cannot learn what question L
+asks, through the same pipeline (federated average and standalone of each algorithm trained
+with the control's rewards, the ``reward_shuffle`` trainer option), the untrained table, and
+with ``diagnostics`` the off-policy reference (Q-learning with random behaviour, epsilon 1,
+which Q-learning learns from as from any other behaviour: no control, a diagnostic). Each run's
+tables are evaluated at ``points`` evenly spaced iterations (federated: the table history the
+robot processes write at every share; standalone: snapshots) with the greedy policy in the
+robot's own arena and the held-out arenas h1 and h2, with the seed's evaluation episodes (the
+same for every condition of a seed); the untrained table once per seed and arena.
 
-Layout of ``OUT``: ``seed<S>/<config name>/`` (a federated results folder, the controls'
-``control_shuffled_qlearning_average`` and the reference's ``reference_qlearning_average``
-among them), ``seed<S>/standalone/<algo>_<arena>/``,
-``seed<S>/standalone/shuffled_qlearning_<arena>/``,
-``seed<S>/standalone/reference_qlearning_<arena>/``, ``seed<S>/zero_table/evaluations.csv``,
-``figures/`` (means over seeds with 95% bands), ``report.md``
-(:mod:`dfrl.experiments.science.report.paper`), ``provenance.json`` (versions, commit, command
-line: :mod:`dfrl.experiments.provenance`) and ``tidy.csv`` (every curve and evaluation, one
-value per row: :mod:`dfrl.experiments.science.tidy`). Federated runs go one after another (each
-uses both cores); standalone trainings and evaluations run meanwhile on a pool of ``jobs``
-processes. SIGTERM or Ctrl-C stops the whole study (the current run stops cleanly, pending
-jobs are cancelled); ``--skip-existing`` then reuses what finished.
+Layout of ``OUT``: ``seed<S>/<config name>/`` (a federated results folder),
+``seed<S>/standalone/<algo>_<arena>/`` (``control_<algo>_<arena>``,
+``reference_qlearning_<arena>``), ``seed<S>/untrained/evaluations.csv``, ``evaluations.csv``
+(every evaluation of the study, one row each: :mod:`dfrl.experiments.science.questions.
+evaluations`), ``questions.csv`` and ``contrasts_by_seed.csv`` (every number a verdict uses),
+``figures/``, ``report.md`` (:mod:`dfrl.experiments.science.report.paper`),
+``provenance.json`` and ``tidy.csv`` (every curve and evaluation, one value per row).
+Federated runs go one after another (each uses both cores); standalone trainings and
+evaluations run meanwhile on a pool of ``jobs`` processes. SIGTERM or Ctrl-C stops the whole
+study (the current run stops cleanly, pending jobs are cancelled); ``--skip-existing`` then
+reuses what finished. :func:`rejudge` judges a study's folder again from its
+``evaluations.csv`` without running anything (``dfrl paper --from``).
 """
 from __future__ import annotations
 
@@ -34,11 +32,11 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Iterator, Mapping
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
-from collections.abc import Iterator
 
 import numpy as np
 
@@ -48,10 +46,14 @@ from dfrl.experiments.provenance import write_provenance
 from dfrl.experiments.science.cluster_runs import ClusterOptions
 from dfrl.experiments.science.paper_runs import FederatedRuns, StudyInterrupted  # noqa: F401
 from dfrl.experiments.science.pool import stop_pool, study_pool
+from dfrl.experiments.science.questions.answers import Answers, answer
+from dfrl.experiments.science.questions.catalogue import CONTROL, REFERENCE, UNTRAINED
+from dfrl.experiments.science.questions.evaluations import (EVALUATIONS_FILE, Evaluation,
+                                                            from_rows, read_evaluations,
+                                                            write_evaluations)
+from dfrl.experiments.science.questions.report import write_files
 from dfrl.experiments.science.report.measures import SeedRun
-from dfrl.experiments.science.report.observations import Controls
-from dfrl.experiments.science.report.paper import write_report
-from dfrl.experiments.science.report.stats import COMBOS
+from dfrl.experiments.science.report.paper import write_questions_report, write_report
 from dfrl.experiments.science.standalone import evaluated_job
 from dfrl.experiments.science.studies.history import Evaluator, eval_job, read_rows, write_rows
 from dfrl.experiments.science.tidy import TIDY_FILE, curve_rows, evaluation_rows, write_tidy
@@ -64,15 +66,16 @@ RANDOM_BEHAVIOUR = {"kind": "constant", "start": 1.0, "end": 1.0, "decay_steps":
 HELD_OUT = ("h1", "h2")
 #: Arenas of the off-policy reference's standalone runs.
 REFERENCE_ARENAS = ("r1", "r4")
-#: The shuffled-reward control's buffer (``reward_shuffle``): rewards a learnt reward is
-#: drawn from, the smoothing window of the reward-per-step measures.
+#: The learning control's buffer (``reward_shuffle``).
 SHUFFLE_BUFFER = 1000
-#: Default iterations per robot. 5 seeds of everything at 20,000 took 1,060 s (17.7 min) on
-#: this 2-core machine shared with other test suites; at 15,000 the same wall time under a
-#: heavier load, with 1,406 s of CPU (703 s if both cores were ours). See robots/README.md.
+#: Default iterations per robot.
 PAPER_ITERATIONS = 15_000
-#: Evaluation seeds: this plus the training seed (the same for every configuration).
+#: Evaluation seeds: this plus the study seed (the same for every condition of a seed).
 EVAL_SEED = 50_000
+#: The algorithms, and the federated conditions (algo, method) of every seed.
+ALGOS = ("qlearning", "sarsa")
+FEDERATED = (("qlearning", "average"), ("qlearning", "max"), ("qlearning", "visit_average"),
+             ("sarsa", "average"), ("sarsa", "max"))
 
 
 @dataclass(frozen=True)
@@ -87,20 +90,25 @@ class PaperOptions:
     eval_steps: int = 1000              # per table and arena
     episode_steps: int = 200
     jobs: int = 2
-    control: bool = True                # the controls and the off-policy reference
+    control: bool = True                # the learning controls and the untrained table
+    diagnostics: bool = False           # the off-policy reference (epsilon 1)
     skip_existing: bool = False
     shuffle_buffer: int = SHUFFLE_BUFFER
+    deltas: tuple[tuple[str, float], ...] = ()   # question -> smallest effect of interest
     cluster: ClusterOptions | None = None   # federated runs' robots on a Dask cluster
 
 
 @dataclass
 class Reproduction:
-    """What :func:`reproduce_paper` produced; ``ok``: every federated run succeeded."""
+    """What :func:`reproduce_paper` produced; ``ok``: every federated run succeeded.
+
+    ``runs``: condition -> one :class:`SeedRun` per seed, in the order of ``seeds`` (a
+    standalone condition's SeedRun holds every arena's robot; the untrained table's has
+    evaluations only)."""
 
     report: Path
-    fed: dict[str, list[SeedRun]]
-    standalone: dict[str, list[SeedRun]]
-    controls: Controls
+    runs: dict[str, list[SeedRun]]
+    answers: Answers
     total_s: float
     ok: bool
     walls: dict[str, float] = field(default_factory=dict)
@@ -115,29 +123,63 @@ def reference_learner() -> dict[str, Any]:
     return learner
 
 
+def control_trainer(trainer: Mapping[str, Any], opts: PaperOptions) -> dict[str, Any]:
+    """A trainer configuration turned into the learning control's."""
+    return {**trainer, "reward_shuffle": opts.shuffle_buffer}
+
+
 def paper_configs(opts: PaperOptions, seed: int) -> list[tuple[str, ExperimentConfig]]:
-    """(key, config) of the federated runs of one seed; with ``opts.control`` the off-policy
-    reference (key ``reference``) and the shuffled-reward control (``shuffled``) last."""
+    """(condition, config) of the federated runs of one seed: :data:`FEDERATED`, then with
+    ``opts.control`` each algorithm's control (``control/<algo>/average``), with
+    ``opts.diagnostics`` the off-policy reference (``reference/qlearning/average``)."""
     changes: dict[str, Any] = {"seed": seed}
     if opts.iterations is not None:
         changes["iterations"] = opts.iterations
     if opts.respite is not None:
         changes["respite"] = opts.respite
+
+    def base(algo: str) -> ExperimentConfig:
+        return ExperimentConfig.load(resolve_config(f"paper_{algo}_average")).replace(**changes)
     out = []
-    for algo, method in COMBOS:
-        cfg = ExperimentConfig.load(resolve_config(f"paper_{algo}_{method}")).replace(**changes)
-        out.append((f"{algo}/{method}", cfg))
+    for algo, method in FEDERATED:
+        if method in ("average", "max"):
+            cfg = ExperimentConfig.load(resolve_config(f"paper_{algo}_{method}"))
+            out.append((f"{algo}/{method}", cfg.replace(**changes)))
+        else:
+            out.append((f"{algo}/{method}", base(algo).replace(
+                name=f"paper_{algo}_{method}", method=method,
+                title=f"paper: 5 robots in R1..R5, {algo}, {method}")))
     if opts.control:
-        base = ExperimentConfig.load(resolve_config("paper_qlearning_average")).replace(**changes)
-        trainer = dict(base.trainer)
-        trainer["learner"] = reference_learner()
-        out.append(("reference", base.replace(
+        for algo in ALGOS:
+            b = base(algo)
+            out.append((f"{CONTROL}{algo}/average", b.replace(
+                name=f"control_{algo}_average", trainer=control_trainer(b.trainer, opts),
+                title=f"learning control: {algo}, average, control rewards")))
+    if opts.diagnostics:
+        b = base("qlearning")
+        trainer = {**b.trainer, "learner": reference_learner()}
+        out.append((f"{REFERENCE}qlearning/average", b.replace(
             name="reference_qlearning_average", trainer=trainer,
             title="off-policy reference: random behaviour (epsilon 1)")))
-        out.append(("shuffled", base.replace(
-            name="control_shuffled_qlearning_average",
-            trainer={**base.trainer, "reward_shuffle": opts.shuffle_buffer},
-            title=f"control: shuffled rewards (buffer {opts.shuffle_buffer})")))
+    return out
+
+
+def standalone_plan(opts: PaperOptions, cfg: ExperimentConfig) -> list[tuple[str, str, TrainerConfig]]:
+    """(condition, folder name, trainer config) of one seed's standalone runs: each arena of
+    ``cfg``'s robots alone with its robot's training seed."""
+    out = []
+    for r in cfg.robots:
+        for algo in ALGOS:
+            plain = TrainerConfig(arena=r.arena, algo=algo, seed=cfg.robot_seed(r),
+                                  iterations=cfg.iterations)
+            out.append((f"standalone/{algo}", f"{algo}_{r.arena}", plain))
+            if opts.control:
+                ctrl = TrainerConfig.from_dict(control_trainer(plain.to_dict(), opts))
+                out.append((f"{CONTROL}standalone/{algo}", f"control_{algo}_{r.arena}", ctrl))
+        if opts.diagnostics and r.arena in REFERENCE_ARENAS:
+            ref = TrainerConfig(arena=r.arena, seed=cfg.robot_seed(r), iterations=cfg.iterations)
+            ref = TrainerConfig.from_dict({**ref.to_dict(), "learner": reference_learner()})
+            out.append((f"{REFERENCE}standalone/qlearning", f"reference_qlearning_{r.arena}", ref))
     return out
 
 
@@ -147,8 +189,8 @@ def _raise_interrupt(signum: int, frame: Any) -> None:
 
 def reproduce_paper(out: Path, opts: PaperOptions = PaperOptions(),
                     progress: TextIO | None = sys.stderr) -> Reproduction:
-    """Run everything and write ``OUT/report.md`` and ``OUT/figures`` (progress lines to
-    ``progress``).
+    """Run everything and write ``OUT/report.md``, the questions' files and ``OUT/figures``
+    (progress lines to ``progress``).
 
     Raises
     ------
@@ -169,123 +211,134 @@ def reproduce_paper(out: Path, opts: PaperOptions = PaperOptions(),
             signal.signal(sig, handler)
 
 
+def _seeds(opts: PaperOptions) -> list[int]:
+    return (list(opts.seeds) if isinstance(opts.seeds, tuple)
+            else list(range(opts.first_seed, opts.first_seed + opts.seeds)))
+
+
 def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reproduction:
     out.mkdir(parents=True, exist_ok=True)
     write_provenance(out)
     t0 = time.monotonic()
-    seeds = (list(opts.seeds) if isinstance(opts.seeds, tuple)
-             else list(range(opts.first_seed, opts.first_seed + opts.seeds)))
+    seeds = _seeds(opts)
     base_cfg = TrainerConfig().to_dict()
     fed_cfgs = {s: paper_configs(opts, s) for s in seeds}
-    arenas = [r.arena for r in fed_cfgs[seeds[0]][0][1].robots]
-    all_arenas = list(dict.fromkeys(arenas + list(HELD_OUT)))
     pool = study_pool(opts.jobs)
     try:
         n_states = Discretiser(TrainerConfig().discretisation).n_states
-        n_actions = len(TrainerConfig().actions.names)
-        zero = {a: pool.submit(eval_job, base_cfg, np.zeros((n_states, n_actions)), a, opts.eval_steps,
-                               opts.episode_steps, EVAL_SEED) for a in all_arenas}
+        zero = np.zeros((n_states, len(TrainerConfig().actions.names)))
         sa_jobs: dict[tuple[int, str, str], Future] = {}
         zero_jobs: dict[int, dict[str, Future]] = {}
         for s in seeds:
             cfg0 = fed_cfgs[s][0][1]
-            iters = cfg0.iterations
-            for algo in ("qlearning", "sarsa"):
-                for r in cfg0.robots:
-                    sa_jobs[(s, algo, r.arena)] = _standalone(
-                        pool, out / f"seed{s}" / "standalone" / f"{algo}_{r.arena}",
-                        TrainerConfig(arena=r.arena, algo=algo, seed=cfg0.robot_seed(r),
-                                      iterations=iters), opts, s)
+            for run, name, tcfg in standalone_plan(opts, cfg0):
+                sa_jobs[(s, run, tcfg.arena)] = _standalone(
+                    pool, out / f"seed{s}" / "standalone" / name, tcfg, opts, s)
             if opts.control:
-                for r in cfg0.robots:
-                    plain = TrainerConfig(arena=r.arena, seed=cfg0.robot_seed(r),
-                                          iterations=iters)
-                    sa_jobs[(s, "shuffled", r.arena)] = _standalone(
-                        pool, out / f"seed{s}" / "standalone" / f"shuffled_qlearning_{r.arena}",
-                        plain.replace(reward_shuffle=opts.shuffle_buffer), opts, s)
-                    if r.arena in REFERENCE_ARENAS:
-                        cfg = TrainerConfig.from_dict({**plain.to_dict(),
-                                                       "learner": reference_learner()})
-                        sa_jobs[(s, "reference", r.arena)] = _standalone(
-                            pool, out / f"seed{s}" / "standalone"
-                            / f"reference_qlearning_{r.arena}", cfg, opts, s)
-                zero_jobs[s] = {a: pool.submit(eval_job, base_cfg, np.zeros((n_states, n_actions)),
-                                               a, opts.eval_steps, opts.episode_steps,
-                                               EVAL_SEED + s) for a in all_arenas}
+                arenas = dict.fromkeys([r.arena for r in cfg0.robots] + list(HELD_OUT))
+                zero_jobs[s] = {a: pool.submit(eval_job, base_cfg, zero, a, opts.eval_steps,
+                                               opts.episode_steps, EVAL_SEED + s)
+                                for a in arenas}
         runs = FederatedRuns(out, {s: Evaluator(pool, base_cfg, opts.eval_steps,
                                                 opts.episode_steps, EVAL_SEED + s)
                                    for s in seeds},
                              opts.points, HELD_OUT, opts.skip_existing, progress)
         ok = (runs.on_cluster(fed_cfgs, opts.cluster) if opts.cluster is not None
               else runs.here(fed_cfgs))
-        pendings, walls, reused = runs.pendings, runs.walls, runs.reused
-        for (s, key), (d, pending) in pendings.items():
+        for (s, key), (d, pending) in runs.pendings.items():
             pending.write(d / "evaluations.csv")
         for fut in sa_jobs.values():
             fut.result()
-        zero_score = {a: f.result()["score"] for a, f in zero.items()}
         for s, jobs in zero_jobs.items():
-            _write_zero(out / f"seed{s}" / "zero_table", fed_cfgs[s][0][1], jobs)
+            _write_untrained(out / f"seed{s}" / "untrained", fed_cfgs[s][0][1], jobs)
     except BaseException:
         stop_pool(pool)
         raise
     pool.shutdown()
-    fed: dict[str, list[SeedRun]] = {}
-    controls = Controls()
-    for (s, key), (d, _) in pendings.items():
+    by_run: dict[str, list[SeedRun]] = {}
+    evals: list[Evaluation] = []
+    for (s, key), (d, _) in runs.pendings.items():
         cfg = dict(fed_cfgs[s])[key]
-        run = SeedRun(read_metrics(d / "metrics.csv"), {r.id: r.arena for r in cfg.robots},
-                      read_rows(d / "evaluations.csv"), zero_score)
-        into = {"reference": controls.reference_fed, "shuffled": controls.shuffled_fed}
-        (into[key] if key in into else fed.setdefault(key, [])).append(run)
-    standalone: dict[str, list[SeedRun]] = {}
+        arenas = {r.id: r.arena for r in cfg.robots}
+        run = SeedRun(read_metrics(d / "metrics.csv"), arenas, read_rows(d / "evaluations.csv"))
+        by_run.setdefault(key, []).append(run)
+        evals += from_rows(key, s, run.evals, arenas)
     for s in seeds:
-        if s in zero_jobs:
-            rows = read_rows(out / f"seed{s}" / "zero_table" / "evaluations.csv")
-            controls.zero.append(SeedRun({}, {r["robot"]: r["robot"] for r in rows}, rows,
-                                         zero_score))
-        for algo in ("qlearning", "sarsa", "shuffled", "reference"):
-            keys = [k for k in sa_jobs if k[0] == s and k[1] == algo]
-            if not keys:
-                continue
-            run = SeedRun({}, {}, [], zero_score)
-            for k in keys:
+        for name in dict.fromkeys(k[1] for k in sa_jobs if k[0] == s):
+            run = SeedRun({}, {}, [])
+            for k in (k for k in sa_jobs if k[0] == s and k[1] == name):
                 d = Path(sa_jobs[k].result())
                 run.curves[k[2]] = read_metrics_csv(d / "metrics.csv")
                 run.arenas[k[2]] = k[2]
                 run.evals += read_rows(d / "evaluations.csv")
-            into = {"reference": controls.reference_sa, "shuffled": controls.shuffled_sa}
-            (into[algo] if algo in into else standalone.setdefault(algo, [])).append(run)
-    total = time.monotonic() - t0
-    rep = Reproduction(out / "report.md", fed, standalone, controls, total, ok, walls, seeds,
-                       reused)
+            by_run.setdefault(name, []).append(run)
+            evals += from_rows(name, s, run.evals)
+        if s in zero_jobs:
+            rows = read_rows(out / f"seed{s}" / "untrained" / "evaluations.csv")
+            by_run.setdefault(UNTRAINED, []).append(
+                SeedRun({}, {r["robot"]: r["robot"] for r in rows}, rows))
+            evals += from_rows(UNTRAINED, s, rows)
+    ans = _judge(out, evals, opts)
+    rep = Reproduction(out / "report.md", by_run, ans, time.monotonic() - t0, ok,
+                       runs.walls, seeds, runs.reused)
     write_tidy(out / TIDY_FILE, tidy_rows(rep))
     write_report(out, rep, opts, seeds)
     return rep
 
 
+def _judge(out: Path, evals: list[Evaluation], opts: PaperOptions) -> Answers:
+    """Write ``evaluations.csv``, judge the questions, write their files."""
+    write_evaluations(out / EVALUATIONS_FILE, evals)
+    ans = answer(evals, dict(opts.deltas))
+    write_files(out, ans)
+    return ans
+
+
+def rejudge(folder: Path, deltas: Mapping[str, float] | None = None,
+            out: Path | None = None) -> tuple[Answers, Path]:
+    """Judge a study's questions again from ``folder/evaluations.csv``, running nothing;
+    write ``questions.csv``, ``contrasts_by_seed.csv`` and ``questions.md`` into ``out``
+    (default: ``folder``). Returns the answers and the report's path.
+
+    Raises
+    ------
+    EvaluationsError
+        A row that cannot be read (file and line named).
+    OSError
+        No ``evaluations.csv`` in ``folder``.
+    """
+    evals = read_evaluations(Path(folder) / EVALUATIONS_FILE)
+    ans = answer(evals, deltas)
+    dest = Path(out) if out is not None else Path(folder)
+    dest.mkdir(parents=True, exist_ok=True)
+    write_files(dest, ans)
+    return ans, write_questions_report(dest, ans, Path(folder))
+
+
+#: The condition column of ``tidy.csv`` for a run name.
+def condition_of(run: str) -> str:
+    if run == UNTRAINED:
+        return "untrained"
+    kind = "standalone" if "standalone/" in run else "federated"
+    if run.startswith(CONTROL):
+        return f"control {kind}"
+    if run.startswith(REFERENCE):
+        return f"reference {kind}"
+    return kind
+
+
 def tidy_rows(rep: Reproduction) -> Iterator[tuple]:
     """Every run's curves and evaluations as rows of ``tidy.csv``."""
-    groups = [(k, "federated", v) for k, v in rep.fed.items()]
-    groups += [(f"standalone/{k}", "standalone", v) for k, v in rep.standalone.items()]
-    c = rep.controls
-    groups += [("reference/qlearning/average", "reference federated", c.reference_fed),
-               ("reference/standalone/qlearning", "reference standalone", c.reference_sa),
-               ("control/shuffled/qlearning/average", "control shuffled federated",
-                c.shuffled_fed),
-               ("control/shuffled/standalone/qlearning", "control shuffled standalone",
-                c.shuffled_sa),
-               ("control/zero_table", "control zero table", c.zero)]
-    for name, condition, runs in groups:
+    for name, runs in rep.runs.items():
         for seed, r in zip(rep.seeds, runs):
-            yield from curve_rows(name, seed, condition, r.curves)
-            yield from evaluation_rows(name, seed, condition, r.evals)
+            yield from curve_rows(name, seed, condition_of(name), r.curves)
+            yield from evaluation_rows(name, seed, condition_of(name), r.evals)
 
 
-def _write_zero(d: Path, cfg: ExperimentConfig, jobs: dict[str, Future]) -> None:
-    """``d/evaluations.csv`` of the zero table: one robot per arena the federated robots learn
-    in (robot = arena), its own arena and the held-out ones, at the budget's iteration (the
-    table never changes)."""
+def _write_untrained(d: Path, cfg: ExperimentConfig, jobs: dict[str, Future]) -> None:
+    """``d/evaluations.csv`` of the untrained (all-zero) table: one robot per arena the
+    federated robots learn in (robot = arena), its own arena and the held-out ones, at the
+    budget's iteration (the table never changes)."""
     rows = []
     for arena in dict.fromkeys(r.arena for r in cfg.robots):
         for a, role in [(arena, "own")] + [(h, "held_out") for h in HELD_OUT]:

@@ -1,6 +1,8 @@
-"""``report.md`` of ``dfrl paper``: figures with bands, the paper's observations as tests with
-intervals and verdicts against negative controls that cannot have learned
-(:mod:`dfrl.experiments.science.report.observations`), the off-policy reference."""
+"""``report.md`` of ``dfrl paper``: the questions with their contrasts, checks and verdicts
+(:mod:`dfrl.experiments.science.questions`), robust aggregates, figures with bands, and the
+diagnostics (the sum of Q-values and its late growth, the off-policy reference), which are
+printed as numbers, never as tests. ``questions.md`` (:func:`write_questions_report`) is the
+questions' part alone, written by ``dfrl paper --from``."""
 from __future__ import annotations
 
 import os
@@ -11,11 +13,12 @@ from typing import Any
 import numpy as np
 
 from dfrl.experiments.provenance import describe, read_provenance
+from dfrl.experiments.science.curves import late_growth
+from dfrl.experiments.science.questions.answers import Answers
+from dfrl.experiments.science.questions.catalogue import UNTRAINED
+from dfrl.experiments.science.questions.report import aggregates_markdown, markdown
 from dfrl.experiments.science.report.bands import plot_groups
 from dfrl.experiments.science.report.measures import SeedRun, final_score, mean_q
-from dfrl.experiments.science.report.observations import paper_tests
-from dfrl.experiments.science.report.verdict_text import summary_markdown, tests_markdown
-from dfrl.experiments.science.curves import late_growth
 from dfrl.experiments.science.statistics import interval
 
 
@@ -48,21 +51,15 @@ def wall_words(rep: Any) -> str:
 
 
 def controls_words(rep: Any, opts: Any) -> str:
-    """What the controls and the reference were, or that there were none."""
-    c = rep.controls
-    if not (c.zero or c.shuffled_fed):
-        return ("No negative control (`--no-control`): no test can be judged a test of "
-                "learning.")
-    return (f"Negative controls, runs that cannot have learned, with the same seeds, arenas and "
-            f"evaluations: the **zero table** (never trained; greedy with random ties) and "
-            f"federated Q-learning/average and standalone Q-learning in every arena trained on "
-            f"**shuffled rewards** (the `reward_shuffle` trainer option: each update learns a "
-            f"reward drawn from a seeded buffer of the last "
-            f"{getattr(opts, 'shuffle_buffer', '?')} rewards observed, so the reward no longer "
-            f"depends on state and action). The **off-policy reference** (federated "
-            f"Q-learning/average and standalone Q-learning in R1 and R4 with random behaviour, "
-            f"epsilon 1 throughout) is no control: Q-learning is off-policy, its greedy table "
-            f"converges towards the same Q* as any other; test 1e compares with it.")
+    """What the controls were, or that there were none."""
+    if UNTRAINED not in rep.runs:
+        return ("No control (`--no-control`): question L cannot be judged.")
+    return (f"Controls, through the same pipeline (seeds, arenas, evaluation episodes): the "
+            f"**untrained table** (all zeros, greedy with random ties: a uniform random policy) "
+            f"and, per algorithm, standalone and federated, a **learning control** trained on "
+            f"the control rewards (`reward_shuffle`, buffer "
+            f"{getattr(opts, 'shuffle_buffer', '?')}: robots/README.md, \"Controls\", says "
+            f"what it is and shows it learns nothing).")
 
 
 def _made_by(out: Path) -> str:
@@ -73,6 +70,8 @@ def _made_by(out: Path) -> str:
 def _collisions(runs: list[SeedRun], role: str) -> list[float]:
     out = []
     for r in runs:
+        if not r.evals:
+            continue
         last = max(int(e["iteration"]) for e in r.evals)
         sel = [float(e["collisions_per_1000"]) for e in r.evals
                if int(e["iteration"]) == last and e["role"] == role]
@@ -82,19 +81,16 @@ def _collisions(runs: list[SeedRun], role: str) -> list[float]:
 
 def figures(out: Path, rep: Any, formats: Sequence[str] = ("png",),
             dpi: float | None = None) -> list[str]:
-    """Draw the band figures in each of ``formats`` at ``dpi``; return the names of the first
-    format's files (empty without matplotlib)."""
+    """Draw the band figures (one per algorithm: its conditions and its controls) in each of
+    ``formats`` at ``dpi``; return the names of the first format's files (empty without
+    matplotlib)."""
     names = []
     try:
         for algo in ("qlearning", "sarsa"):
-            groups = {k: v for k, v in rep.fed.items() if k.startswith(algo)}
-            groups[f"{algo} standalone"] = rep.standalone.get(algo, [])
-            c = rep.controls
-            if algo == "qlearning" and c.shuffled_fed:
-                groups["control: shuffled rewards, federated"] = c.shuffled_fed
-                groups["control: shuffled rewards, standalone"] = c.shuffled_sa
-                groups["off-policy reference, federated"] = c.reference_fed
-                groups["off-policy reference, standalone (R1, R4)"] = c.reference_sa
+            groups = {k: v for k, v in rep.runs.items()
+                      if algo in k.split("/") and any(len(r.curves) for r in v)}
+            if not groups:
+                continue
             paths = plot_groups(groups, out / "figures" / f"{algo}_bands.png",
                                 f"{'Q-learning' if algo == 'qlearning' else 'SARSA'}",
                                 formats, dpi)
@@ -104,60 +100,75 @@ def figures(out: Path, rep: Any, formats: Sequence[str] = ("png",),
     return names
 
 
+def _numbers(rep: Any) -> list[str]:
+    L = ["## Final numbers and diagnostics (mean ± 95% half width over seeds)", "",
+         "Diagnostics, not tests: the sum of Q-values rises whatever a robot learns (positive "
+         "rewards, zero start) and its growth in the last quarter says how far from flat it "
+         "is; the off-policy reference (`--diagnostics`: Q-learning from random behaviour) "
+         "learns like any other Q-learner.", "",
+         "| condition | final sum Q (robots' mean) | Q-sum growth in last quarter | greedy "
+         "score own | greedy score held-out | collisions/1000 own | collisions/1000 held-out |",
+         "|---|---|---|---|---|---|---|"]
+    for name, runs in rep.runs.items():
+        curved = [r for r in runs if r.curves]
+        q = (f"{_iv([float(mean_q(r)[-1]) for r in curved])} | "
+             f"{_iv([late_growth(mean_q(r)) for r in curved])}") if curved else "0 | -"
+        L.append(f"| {name} | {q} | {_iv([final_score(r, 'own') for r in runs])} | "
+                 f"{_iv([final_score(r, 'held_out') for r in runs])} | "
+                 f"{_iv(_collisions(runs, 'own'))} | {_iv(_collisions(runs, 'held_out'))} |")
+    return L + [""]
+
+
+def _summary(ans: Answers) -> list[str]:
+    L = ["## Summary", ""]
+    for run, verdict in ans.learns().items():
+        L.append(f"- L, {run}: {verdict}")
+    for c in ans.checks:
+        L.append(f"- check, {c.row.a}: {c.words()}")
+    for q in ("F", "T", "M"):
+        for a in ans.questions.get(q, []):
+            L.append(f"- {q}, {a.row.label}: {a.judged.words()}")
+    return L + [""]
+
+
 def write_report(out: Path, rep: Any, opts: Any, seeds: list[int]) -> Path:
     """Write ``OUT/report.md`` from a :class:`dfrl.experiments.science.reproduce.Reproduction`."""
-    cfg_runs = next(iter(rep.fed.values()))
-    iters = max(int(c["iteration"][-1]) for c in cfg_runs[0].curves.values() if len(c))
-    L = ["# dFRL: the paper's experiment, several seeds, observations as tests", "",
-         f"{seeds_words(seeds)}; five robots in R1..R5, {iters} "
-         f"iterations each; standalone baselines with the same seeds and budget. "
-         + controls_words(rep, opts) + " Greedy evaluations at "
-         f"{opts.points} points of every run, {opts.eval_steps} steps per table and arena "
-         f"({opts.eval_steps // opts.episode_steps} episodes of {opts.episode_steps} steps "
-         f"from seeded random poses), in the robot's own arena and the held-out arenas h1 and "
-         f"h2. Intervals: mean ± 95% Student-t half width over seeds.", "",
+    curved = [c for runs in rep.runs.values() for r in runs for c in r.curves.values() if len(c)]
+    iters = max((int(c["iteration"][-1]) for c in curved), default=0)
+    L = ["# dFRL: the paper's experiment, several seeds, questions answered by contrasts", "",
+         f"{seeds_words(seeds)}; five robots in R1..R5, {iters} iterations each; standalone "
+         f"robots with the same seeds and budget. " + controls_words(rep, opts) + " Greedy "
+         f"evaluations at {opts.points} points of every run, {opts.eval_steps} steps per table "
+         f"and arena ({opts.eval_steps // opts.episode_steps} episodes of {opts.episode_steps} "
+         f"steps from seeded random poses, the same for every condition of a seed), in the "
+         f"robot's own arena and the held-out arenas h1 and h2.", "",
          wall_words(rep), "",
-         f"Produced by {_made_by(out)}; every value of every run, one per row: `tidy.csv` "
-         f"(run, seed, condition, robot, iteration, metric, value).", ""]
+         f"Produced by {_made_by(out)}. The data: `evaluations.csv` (every greedy evaluation, "
+         f"one row each; `dfrl paper --from {out}` judges it again), `tidy.csv` (every curve "
+         f"and evaluation, one value per row).", ""]
+    L += _summary(rep.answers)
+    L += markdown(rep.answers)
+    L += aggregates_markdown(rep.answers)
     names = figures(out, rep)
     L += ["## Figures", ""]
     L += [f"* figures/{n}" for n in names] or ["* (no figures: matplotlib is not installed)"]
     L += ["", "Per run and seed: `seed<S>/<run>/` (q_sum.png, cumulative_reward.png, "
-          "metrics.csv, evaluations.csv).", "",
-          "## Final numbers (mean ± 95% half width over seeds)", "",
-          "| runs | final sum Q (robots' mean) | Q-sum growth in last quarter | greedy score own "
-          "| greedy score held-out | collisions/1000 own | collisions/1000 held-out |",
-          "|---|---|---|---|---|---|---|"]
-    groups = dict(rep.fed)
-    groups.update({f"{k} standalone": v for k, v in rep.standalone.items()})
-    c = rep.controls
-    if c.shuffled_fed:
-        groups["control: shuffled rewards, federated"] = c.shuffled_fed
-        groups["control: shuffled rewards, standalone"] = c.shuffled_sa
-        groups["off-policy reference, federated"] = c.reference_fed
-        groups["off-policy reference, standalone (R1, R4)"] = c.reference_sa
-    for name, runs in groups.items():
-        L.append(f"| {name} | {_iv([float(mean_q(r)[-1]) for r in runs])} | "
-                 f"{_iv([late_growth(mean_q(r)) for r in runs])} | "
-                 f"{_iv([final_score(r, 'own') for r in runs])} | "
-                 f"{_iv([final_score(r, 'held_out') for r in runs])} | "
-                 f"{_iv(_collisions(runs, 'own'))} | {_iv(_collisions(runs, 'held_out'))} |")
-    if c.zero:
-        L.append(f"| control: zero table (never trained) | 0 | - | "
-                 f"{_iv([final_score(r, 'own') for r in c.zero])} | "
-                 f"{_iv([final_score(r, 'held_out') for r in c.zero])} | "
-                 f"{_iv(_collisions(c.zero, 'own'))} | {_iv(_collisions(c.zero, 'held_out'))} |")
-    zero = next(iter(cfg_runs)).zero_score
-    L += ["", "Zero table (greedy with random ties = a uniform random policy), score per arena: "
-          + ", ".join(f"{a} {v:.2f}" for a, v in zero.items()) + ".", "",
-          "## The paper's observations as tests", ""]
-    tests = paper_tests(rep.fed, rep.standalone, c)
-    L += tests_markdown(tests)
-    L += ["## Summary", ""] + summary_markdown(tests)
-    L += ["", "Caveats: our e-puck, reward and state discretisation are our own reconstruction "
-          "(robots/README.md); absolute values are not comparable with the paper's. The "
-          "saturation tests use the sum of Q-values, which with a constant learning rate keeps "
-          "moving; robots/README.md gives the budgets at which it flattens."]
+          "metrics.csv, evaluations.csv).", ""]
+    L += _numbers(rep)
+    L += ["Caveats: our e-puck, reward and state discretisation are our own reconstruction "
+          "(robots/README.md); absolute values are not comparable with the paper's."]
     path = Path(out) / "report.md"
     path.write_text("\n".join(L) + "\n", encoding="utf-8")
     return path
+
+
+def write_questions_report(out: Path, ans: Answers, source: Path) -> Path:
+    """``OUT/questions.md``: the questions judged from ``source/evaluations.csv`` alone."""
+    L = ["# dFRL: the questions, judged again from the evaluations", "",
+         f"From `{Path(source) / 'evaluations.csv'}`; nothing was run. Smallest effects of "
+         "interest: " + ", ".join(f"{q} {d:g}" for q, d in ans.deltas.items()) + ".", ""]
+    L += _summary(ans) + markdown(ans) + aggregates_markdown(ans)
+    path = Path(out) / "questions.md"
+    path.write_text("\n".join(L) + "\n", encoding="utf-8")
+    return path
+
