@@ -4,14 +4,14 @@ Columns (:data:`METRICS_FIELDS`)::
 
     robot, iteration
     q_sum                the sum of the robot's table (a function learner: of its parameters)
-                         at the end of the iteration: after its update and after the table
-                         writes (shares) applied in that iteration
+                         at the end of the iteration: after its update and after the shares
+                         applied in that iteration
     cumulative_reward    reward summed over iterations 1 .. iteration
     collisions           collisions so far
-    shared               table writes the robot applied in that iteration (its rows of
+    shared               shares the robot applied in that iteration (its rows of
                          ``shares_<robot>.csv`` with that iteration): 0, 1 at a share, more
-                         when several landed in one iteration (late writes after its last)
-    q_sum_before_share   the sum after the update, before those writes (what the robot's
+                         when several landed in one iteration (late ones after its last)
+    q_sum_before_share   the sum after the update, before those shares (what the robot's
                          ``metrics_<robot>.csv`` holds); empty when ``shared`` is 0
 
 :func:`merge_metrics` builds it from each robot's ``metrics_<robot>.csv`` (a row per iteration,
