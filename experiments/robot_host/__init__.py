@@ -17,7 +17,9 @@ agent are served according to the pacing mode (:class:`Mode`):
   boundary. Same config and seed give the same curves.
 
 Every applied ``set_q_table`` appends a row to ``shares_<robot>.csv``: the share index, the
-iteration, the wall time and the sha256 of the table's float64 bytes right after the set.
+iteration, the wall time, the sha256 of the table's float64 bytes right after the set, the
+write's round, agent and epoch, and ``q_sum``, the sum the set left (a function learner's:
+its parameters'; the metrics row of that iteration was written before the set).
 
 Other lines on stdout, for the launcher's progress display::
 

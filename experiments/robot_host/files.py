@@ -15,7 +15,7 @@ __all__ = ["METRIC_FIELDS", "SHARE_FIELDS", "ORIGIN_FIELDS", "table_digest", "Cs
 
 METRIC_FIELDS: tuple[str, ...] = ("robot", "iteration", "q_sum", "cumulative_reward", "collisions")
 SHARE_FIELDS: tuple[str, ...] = ("robot", "share_index", "iteration", "wall_time", "digest",
-                                  "round", "agent", "epoch")
+                                  "round", "agent", "epoch", "q_sum")
 #: The options of an agent's table write recorded with each share (contract K4).
 ORIGIN_FIELDS: tuple[str, ...] = ("round", "agent", "epoch")
 
@@ -81,9 +81,13 @@ class CsvLog:
 
 
 def share_row(robot: str, share_index: int, iteration: int, table: np.ndarray,
-              origin: Mapping[str, Any] | None = None) -> tuple[Any, ...]:
+              origin: Mapping[str, Any] | None = None,
+              q_sum: float | None = None) -> tuple[Any, ...]:
     """A ``shares_<robot>.csv`` row for a table just set (wall time: now); ``origin`` holds
-    the write's ``round``, ``agent`` and ``epoch`` (each empty when absent)."""
+    the write's ``round``, ``agent`` and ``epoch`` (each empty when absent); ``q_sum`` the sum
+    the write left, as the robot's metrics measure it (the table's sum; a function learner's:
+    its parameters'), empty when not given."""
     origin = origin or {}
     extra = tuple("" if origin.get(f) is None else origin[f] for f in ORIGIN_FIELDS)
-    return (robot, share_index, iteration, repr(time.time()), table_digest(table)) + extra
+    return (robot, share_index, iteration, repr(time.time()), table_digest(table)) + extra + \
+        ("" if q_sum is None else repr(float(q_sum)),)

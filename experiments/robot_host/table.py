@@ -28,7 +28,8 @@ class SharedTable:
     Every read of the Q-table by an agent (the bridge calls :meth:`table_read`) writes a
     ``DFRL_EVENT get`` line; every applied
     ``set_q_table`` (already validated by the bridge) counts a share, appends a row to the
-    shares file (with the write's origin: round, agent, epoch), writes a ``DFRL_EVENT set``
+    shares file (with the write's origin: round, agent, epoch, and the sum it left,
+    :attr:`q_sum`), writes a ``DFRL_EVENT set``
     line and calls ``on_share`` (the robot's checkpoint).
 
     Parameters
@@ -67,6 +68,11 @@ class SharedTable:
     def q_table(self) -> np.ndarray:
         return self.base.q_table
 
+    @property
+    def q_sum(self) -> float:
+        """The sum the robot's metrics call ``q_sum``: its table's (recorded with each share)."""
+        return float(self.base.q_table.sum())
+
     def table_read(self) -> None:
         """An agent read the Q-table (the bridge calls it after serving the read)."""
         self.lines.event("get", self.iteration)
@@ -84,7 +90,7 @@ class SharedTable:
         self.base.set_q_table(table)
         self.shares += 1
         self.shares_log.row(share_row(self.robot, self.shares, self.iteration, self.base.q_table,
-                                      origin), flush=True)
+                                      origin, self.q_sum), flush=True)
         self.lines.event("set", self.iteration)
         if self.on_share is not None:
             self.on_share()
@@ -101,6 +107,14 @@ class SharedLearner(SharedTable):
     @property
     def params(self) -> np.ndarray:
         return self.base.params
+
+    @property
+    def q_sum(self) -> float:
+        """The sum the robot's metrics call ``q_sum``: a function learner's parameters' (a
+        grid federation's write too: it is distilled into them), a tabular one's table's."""
+        if self.base.learner_kind == "function":
+            return float(self.base.params.sum())
+        return super().q_sum
 
     @property
     def param_layout(self) -> Any:
@@ -127,7 +141,7 @@ class SharedLearner(SharedTable):
         self.base.set_params(vec)
         self.shares += 1
         self.shares_log.row(share_row(self.robot, self.shares, self.iteration, self.base.params,
-                                      origin), flush=True)
+                                      origin, self.q_sum), flush=True)
         self.lines.event("set", self.iteration)
         if self.on_share is not None:
             self.on_share()

@@ -4,14 +4,16 @@ Layout (see ``experiments/README.md``)::
 
     config.json            the experiment config (ExperimentConfig.to_dict)
     nodes.json             robots' addresses, the agents and their itineraries
-    metrics.csv            robot, iteration, q_sum, cumulative_reward, collisions (all robots)
+    metrics.csv            robot, iteration, q_sum, cumulative_reward, collisions, shared,
+                           q_sum_before_share: one row per robot and iteration (:mod:`.metrics`)
     rounds.csv             one row per agent round: times, hops, bytes, method, a digest per
                            robot right after the share, all_equal
     q_sum.png, cumulative_reward.png, curves.png
     summary.md
     metrics_<robot>.csv    per-robot metrics, written by the node while it runs
-    shares_<robot>.csv     per-robot applied shares (index, iteration, time, sha256, and the
-                           write's round, agent, epoch): the history :mod:`.history` checks
+    shares_<robot>.csv     per-robot applied shares (index, iteration, time, sha256, the
+                           write's round, agent, epoch, and the sum it left): the history
+                           :mod:`.history` checks
     eval_<robot>.csv       greedy evaluations while learning (``eval_every``), and
     live_evaluations.csv   all robots' in one file (:mod:`.evaluations`)
     rounds_<agent>.log     the agent's log: one JSON object per line (round, finished,
@@ -38,12 +40,14 @@ from dfrl.experiments.driver.results.agent_log import (Aborted, AgentLog, Contro
 from dfrl.experiments.driver.results.files import read_json, write_json
 from dfrl.experiments.driver.results.history import (HistoryVerdict, Violation, check_history,
                                                      check_shares)
-from dfrl.experiments.driver.results.metrics import METRICS_FIELDS, merge_metrics, read_metrics
+from dfrl.experiments.driver.results.metrics import (METRICS_FIELDS, MetricsFormatError,
+                                                     merge_metrics, read_metrics)
 from dfrl.experiments.driver.results.rounds import (ROUNDS_FIELDS, Share, count_equal, match_shares,
                                              read_rounds_csv, read_shares, write_rounds_csv)
 from dfrl.experiments.driver.results.summary import Results, node_warnings, write_summary
 
 __all__ = ["Aborted", "AgentLog", "ControlEvent", "HistoryVerdict", "METRICS_FIELDS",
+           "MetricsFormatError",
            "ROUNDS_FIELDS", "Results", "RoundRecord", "Share", "Skip", "Violation",
            "check_history", "check_shares", "count_equal", "match_shares", "merge_metrics",
            "node_warnings", "parse_event", "read_json", "read_metrics", "read_rounds_csv",

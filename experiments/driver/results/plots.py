@@ -2,8 +2,9 @@
 against iterations, for the sum of Q-values and for the cumulative reward. Each figure is
 written in the formats asked for (PNG by default; PDF and SVG are vector formats for print) at
 the resolution asked for (``dpi``: a figure's own screen default, 110, unless given; 300 for
-print). The curves end with the last share: ``metrics.csv`` closes each robot's curve with the
-sum of its saved table (:mod:`dfrl.experiments.driver.results.metrics`), and every row is drawn.
+print). The curves end with the last share: a row of ``metrics.csv`` holds the sum at the end of
+its iteration, after that iteration's share (:mod:`dfrl.experiments.driver.results.metrics`),
+so a robot's last row is the sum of the table it ended with; every row is drawn.
 
 matplotlib is an optional extra (``pip install dfrl[plot]``); it is imported when a figure is
 drawn, through its object-oriented API (no pyplot state, no backend switch).
@@ -51,7 +52,7 @@ def robot_label(robot: str, arenas: Mapping[str, str]) -> str:
 def draw_lines(ax: Any, curves: Mapping[str, np.ndarray], field: str,
                arenas: Mapping[str, str] | None = None) -> list[Any]:
     """One line per robot of ``field`` against iterations on ``ax``, every row of the curve
-    (so the last point is the last share's); return the lines."""
+    (so the last point is after the last share); return the lines."""
     lines = []
     for (robot, cur), colour in zip(curves.items(), COLOURS * 3):
         if len(cur):

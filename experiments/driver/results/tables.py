@@ -5,8 +5,9 @@ each is whole, and tables kept from the robots' last checkpoints. A function lea
 sum of the parameters).
 
 A robot process writes ``tables/<robot>.npy`` at its end and again after a share that comes
-later (the last share), so these files, not the last metrics row (taken before the last
-share), hold the robots' final tables. A robot killed while it wrote them (or an older robot
+later (the last share), so these files, not the robot's last ``metrics_<robot>.csv`` row
+(taken before the last share), hold the robots' final tables (``metrics.csv``'s last row of a
+robot has the sum after its last share). A robot killed while it wrote them (or an older robot
 host that does not write them atomically) may leave a torn file: :func:`set_aside_unreadable`
 moves it to ``tables/<robot>.npy.torn`` and says why, and :func:`keep_checkpoints` then
 writes the table from the robot's last complete checkpoint, as for a robot that wrote none.

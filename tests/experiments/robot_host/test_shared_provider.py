@@ -50,3 +50,17 @@ def test_a_params_write_is_a_share(tmp_path: Path) -> None:
         (row,) = list(csv.DictReader(fh))
     assert row["digest"] == table_digest(vec)
     assert (row["round"], row["agent"], row["epoch"]) == ("2", "fed_dqn", "1")
+    assert float(row["q_sum"]) == 28.0            # the sum the write left: 0 + 1 + ... + 7
+
+
+def test_a_table_write_records_the_sum_it_left(tmp_path: Path) -> None:
+    # Prepare: a static 3x2 table
+    provider, log, _, _ = _shared(StaticTable((3, 2), seed=1), tmp_path)
+    table = np.array([[0.5, 1.0], [2.0, -1.0], [0.25, 0.0]])
+    # Execute: one write
+    provider.set_q_table_from(table, {"round": 1, "agent": "fed_qlearning", "epoch": 1})
+    log.flush()
+    # Assert: the row holds the table's sum (what metrics.csv's q_sum shows after a share)
+    with open(tmp_path / "shares_r1.csv") as fh:
+        (row,) = list(csv.DictReader(fh))
+    assert float(row["q_sum"]) == 2.75 and provider.q_sum == 2.75

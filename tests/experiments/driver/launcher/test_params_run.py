@@ -12,6 +12,7 @@ import pytest
 
 from dfrl.experiments.driver.config import RobotSpec
 from dfrl.experiments.driver.launcher import run
+from dfrl.experiments.driver.results.metrics import read_metrics
 from dfrl.experiments.processes import find_swipl
 from dfrl.experiments.robot_host import table_digest
 from dfrl.experiments.robot_host.checkpoint import load_checkpoint
@@ -58,6 +59,14 @@ def _assert_federated(out: Path, agent: str, rounds: int, robots: tuple[str, ...
         cp = load_checkpoint(out / "checkpoint", rid)
         assert cp.q is None and table_digest(cp.params) == digests[-1]
         assert (out / "params" / "history" / f"{rid}_it{cp.iteration}.npy").is_file()
+        # metrics.csv: a row per iteration, the shares marked, its q_sum the parameters' sum
+        # after each write (the last: the saved parameters')
+        cur = read_metrics(out / "metrics.csv")[rid]
+        assert len(set(cur["iteration"].tolist())) == len(cur)
+        assert cur["iteration"][cur["shared"] > 0].tolist() == \
+            [int(s["iteration"]) for s in shares]
+        assert cur["q_sum"][cur["shared"] > 0].tolist() == [float(s["q_sum"]) for s in shares]
+        assert cur["q_sum"][-1] == float(final.sum())
     assert not (out / "tables").exists()
     launch = json.loads((out / f"launch_{agent}.json").read_text())
     assert launch["carries"] == "params"

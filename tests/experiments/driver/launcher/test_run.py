@@ -34,10 +34,26 @@ def test_two_robot_smoke_run(tmp_path: Path) -> None:
     assert all(n["host"] == "127.0.0.1" and n["port"] > 0 for n in nodes["nodes"])
     curves = read_metrics(tmp_path / "metrics.csv")
     assert list(curves) == ["r1", "r2"]
+    with open(tmp_path / "metrics.csv", newline="") as fh:
+        keys = [(r["robot"], int(r["iteration"])) for r in csv.DictReader(fh)]
+    assert len(keys) == len(set(keys)) == 400          # one row per robot and iteration
     summary = (tmp_path / "summary.md").read_text()
     for rid, cur in curves.items():
-        its = cur["iteration"].tolist()     # one row per iteration, then the last share's
-        assert its[:200] == list(range(1, 201)) and its[200:] in ([], [200])
+        assert cur["iteration"].tolist() == list(range(1, 201))
+        # the shares file's writes are the rows marked shared; such a row holds the sum the
+        # write left, and the learner's from before it, as the robot's own file has it
+        with open(tmp_path / f"shares_{rid}.csv", newline="") as fh:
+            writes = list(csv.DictReader(fh))
+        assert [int(w["iteration"]) for w in writes] == [50, 100, 150, 200]
+        marked = cur["shared"] > 0
+        assert cur["iteration"][marked].tolist() == [50, 100, 150, 200]
+        assert set(cur["shared"].tolist()) == {0, 1}
+        assert cur["q_sum"][marked].tolist() == [float(w["q_sum"]) for w in writes]
+        own = read_metrics(tmp_path / f"metrics_{rid}.csv")[rid]
+        assert np.array_equal(cur["q_sum_before_share"][marked], own["q_sum"][marked])
+        assert np.array_equal(cur["q_sum"][~marked], own["q_sum"][~marked])
+        assert np.isnan(cur["q_sum_before_share"][~marked]).all()
+        assert (cur["q_sum"][marked] != own["q_sum"][marked]).all()     # the shares moved it
         assert cur["q_sum"][-1] > 0 and cur["cumulative_reward"][-1] > 0
         # numbers agree: the curve and the summary end with the saved table's sum
         table = np.load(tmp_path / "tables" / f"{rid}.npy")
@@ -54,6 +70,9 @@ def test_two_robot_smoke_run(tmp_path: Path) -> None:
     assert len({r["digest_r1"] for r in rows}) == 4       # the tables moved on between rounds
     summary = (tmp_path / "summary.md").read_text()
     assert "4/4" in summary
+    # after each share both robots hold the average: the same sum in their shared rows
+    assert curves["r1"]["q_sum"][curves["r1"]["shared"] > 0].tolist() == \
+        curves["r2"]["q_sum"][curves["r2"]["shared"] > 0].tolist()
 
 
 def test_output_folder_is_claimed_once(tmp_path: Path) -> None:
@@ -135,9 +154,15 @@ def test_async_mode_with_real_time_factor(tmp_path: Path) -> None:
     assert len(rows) == 4
     assert all(r["all_equal"] == "true" for r in rows)
     curves = read_metrics(tmp_path / "metrics.csv")
-    # one row per iteration (plus one at the last iteration when the last share changed it)
-    assert all(sorted(set(c["iteration"].tolist())) == list(range(1, 101))
-               for c in curves.values())
+    for rid, cur in curves.items():
+        assert cur["iteration"].tolist() == list(range(1, 101))      # one row per iteration
+        # async: writes land at whatever iteration the robot is at; each is counted in its row
+        with open(tmp_path / f"shares_{rid}.csv", newline="") as fh:
+            its = [int(w["iteration"]) for w in csv.DictReader(fh)]
+        assert len(its) == 4 and min(its) >= 1
+        marked = cur["shared"] > 0
+        assert cur["iteration"][marked].tolist() == sorted(set(its))
+        assert int(cur["shared"].sum()) == 4
 
 
 def test_crashed_robot_is_reported_and_results_still_written(tmp_path: Path) -> None:

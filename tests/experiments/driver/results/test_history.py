@@ -162,10 +162,10 @@ def test_a_torn_last_line_is_left_out_and_counted(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("row, line, why", [
-    ("r1,3,150,17.0,abc,3,fed_q\n", 4, "7 cells, the header has 8"),
-    ("r1,3,150,17.0,abc,three,fed_q,0\n", 4, "round is 'three'"),
-    ("r2,3,150,17.0,abc,3,fed_q,0\n", 4, "of robot 'r2'"),
-    ("r1,3,150,17.0,,3,fed_q,0\n", 4, "no digest"),
+    ("r1,3,150,17.0,abc,3,fed_q\n", 4, f"7 cells, the header has {len(SHARE_FIELDS)}"),
+    ("r1,3,150,17.0,abc,three,fed_q,0,1.5\n", 4, "round is 'three'"),
+    ("r2,3,150,17.0,abc,3,fed_q,0,1.5\n", 4, "of robot 'r2'"),
+    ("r1,3,150,17.0,,3,fed_q,0,1.5\n", 4, "no digest"),
 ])
 def test_a_malformed_row_is_located(tmp_path: Path, row: str, line: int, why: str) -> None:
     write_history(tmp_path, clean(robots=("r1",), rounds=2))

@@ -13,7 +13,7 @@ import pytest
 
 from dfrl.experiments.cli.figures import redraw_experiment
 from dfrl.experiments.driver.results.plots import draw_lines, new_figure, plot_experiment, save_figure
-from dfrl.experiments.driver.results.metrics import read_metrics
+from dfrl.experiments.driver.results.metrics import METRICS_FIELDS, read_metrics
 
 
 def png_dpi(path: Path) -> tuple[float, float]:
@@ -31,10 +31,17 @@ def png_dpi(path: Path) -> tuple[float, float]:
     raise AssertionError(f"{path}: no pHYs chunk")
 
 
-def tiny_results(folder: Path) -> Path:
-    rows = ["robot,iteration,q_sum,cumulative_reward,collisions"]
-    rows += [f"{r},{i},{0.1 * i},{0.5 * i},0" for r in ("r1", "r2") for i in range(1, 51)]
-    rows += ["r1,50,99.0,25.0,0", "r2,50,99.0,25.0,0"]     # the last share's row
+def tiny_results(folder: Path, older: bool = False) -> Path:
+    """A ``metrics.csv`` of two robots, 50 iterations, a share at the last one that left 99.0
+    (``older``: in the format before ``shared``, its own row after the last)."""
+    if older:
+        rows = ["robot,iteration,q_sum,cumulative_reward,collisions"]
+        rows += [f"{r},{i},{0.1 * i},{0.5 * i},0" for r in ("r1", "r2") for i in range(1, 51)]
+        rows += ["r1,50,99.0,25.0,0", "r2,50,99.0,25.0,0"]     # the last share's row
+    else:
+        rows = [",".join(METRICS_FIELDS)]
+        rows += [f"{r},{i},{0.1 * i},{0.5 * i},0,0," if i < 50 else f"{r},50,99.0,25.0,0,1,5.0"
+                 for r in ("r1", "r2") for i in range(1, 51)]
     (folder / "metrics.csv").write_text("\n".join(rows) + "\n", encoding="utf-8")
     return folder
 
@@ -67,12 +74,13 @@ def test_bad_format_or_dpi_is_refused(tmp_path: Path) -> None:
         save_figure(fig, tmp_path / "f.png", ("png",), dpi=0)
 
 
-def test_curves_end_with_the_last_share(tmp_path: Path) -> None:
-    curves = read_metrics(tiny_results(tmp_path) / "metrics.csv")
+@pytest.mark.parametrize("older", [False, True])
+def test_curves_end_with_the_last_share(tmp_path: Path, older: bool) -> None:
+    curves = read_metrics(tiny_results(tmp_path, older) / "metrics.csv")
     ax = new_figure().subplots()
     lines = draw_lines(ax, curves, "q_sum")
     assert [(line.get_xdata()[-1], line.get_ydata()[-1]) for line in lines] == [(50, 99.0)] * 2
-    assert all(len(line.get_xdata()) == 51 for line in lines)
+    assert all(len(line.get_xdata()) == 50 for line in lines)      # a point per iteration
     assert np.all(np.diff(lines[0].get_xdata()) >= 0)
 
 
