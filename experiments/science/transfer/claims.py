@@ -374,7 +374,10 @@ def _level(rows: Sequence[dict[str, Any]], condition: str, measure: str) -> str:
         med = [x for x, ok in zip(t, r) if ok]
         if len(med) < len(t):
             return f"{len(t) - len(med)} of {len(t)} censored"
-    return str(interval(list(per_seed(rows, condition, measure).values())))
+    iv = interval(list(per_seed(rows, condition, measure).values()))
+    if iv.half == 0.0:                  # no zero-width interval: the same value in every seed
+        return f"{iv.mean:.3g} in every seed (n={iv.n})"
+    return str(iv)
 
 
 def floor(rows: Sequence[dict[str, Any]], arena: str) -> tuple[int, int, int]:
@@ -430,7 +433,8 @@ def markdown(rows: Sequence[dict[str, Any]], opts: StudyOptions, found: Sequence
           "| family | measure | control | method | estimate [95%] | censored (fed, control) "
           "| p (Holm) | verdict |", "|---|---|---|---|---|---|---|---|"]
     for c in found:
-        cens = f"{c.censored[0]}/{c.phases[0]}, {c.censored[1]}/{c.phases[1]}"
+        cens = (f"{c.censored[0]}/{c.phases[0]}, {c.censored[1]}/{c.phases[1]}"
+                if c.measure == "time_to_threshold" else "-")
         L.append(f"| {c.family} | {c.measure} | {c.control} | {c.method} | {_estimate(c)} | "
                  f"{cens} | {_cell(c.judgement.p_adjusted)} | {c.words()} |")
     L += ["", headline(found, opts)]
