@@ -124,18 +124,25 @@ def register_study(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "transfer-study",
         help="the paper's transfer claim: does a federated table learn unseen arenas (h1, h2) "
-             "with fewer collisions and sooner than standalone tables of every source arena?",
+             "with fewer collisions and a higher score than standalone tables of every source "
+             "arena?",
         description="Source tables per source seed: federated (R1..R5), a matched standalone "
                     "table of each source arena (same training seeds) and zeros. From each, a "
-                    "robot learns in the unseen arenas: collisions while learning and the time "
-                    "until its greedy score reaches the arena's threshold (censored when never; "
-                    "derived per arena from reference runs unless --threshold). Paired "
-                    "intervals over source seeds (Welch when unpaired), Holm over the claims, "
-                    "verdicts: holds / refuted (effect excluded at 95%) / not significant at "
-                    "n = K (smallest detectable effect D).")
+                    "robot learns in the unseen arenas, with seeds of its source seed's own "
+                    "(shared by that seed's sources, by no other seed). Primary measures: "
+                    "collisions while learning and the greedy score while learning (its mean "
+                    "over the phase). Secondary: the time until the score reaches the arena's "
+                    "threshold (derived per arena from reference runs unless --threshold, "
+                    "lifted above every phase's iteration-0 score; censored when never "
+                    "reached). Paired intervals over source seeds (Welch when unpaired), Holm "
+                    "within each family, verdicts: holds / refuted (effect excluded at 95%) / "
+                    "not significant at n = K (smallest detectable effect D) / cannot judge "
+                    "(the reason: too few seeds, or an interval of zero width).")
     add_seed_arguments(p, 5)        # the source seeds
     p.add_argument("--target-seeds", type=int, nargs="+", default=[1],
-                   help="seeds of the learning phase in each unseen arena (default: 1)")
+                   help="learning phases per source seed and unseen arena, 0..499: phase t of "
+                        "source seed s trains with the seed 1,000,000 + 1,000 s + t "
+                        "(default: 1)")
     p.add_argument("--targets", nargs="+", default=["h1", "h2"],
                    help="unseen arenas (default: h1 h2)")
     p.add_argument("--iterations", type=int, default=4000,
@@ -153,7 +160,8 @@ def register_study(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--threshold", nargs="+", default=[], metavar="[ARENA=]SCORE",
                    help="greedy score the time is measured to: SCORE for every unseen arena, "
                         "ARENA=SCORE for one (default: derived per arena, --threshold-fraction "
-                        "x the level reference runs from zeros reach in that arena)")
+                        "x the level reference runs from zeros reach in that arena); lifted "
+                        "above every learning phase's iteration-0 score in the arena")
     p.add_argument("--threshold-fraction", type=float, default=0.75,
                    help="a derived threshold's share of its arena's reference level "
                         "(default: %(default)s)")
@@ -171,7 +179,8 @@ def register_study(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--unpaired", action="store_true",
                    help="train the controls with other seeds (Welch intervals, not paired)")
     p.add_argument("--resamples", type=int, default=4000,
-                   help="bootstrap resamples of a censored ratio (default: %(default)s)")
+                   help="bootstrap resamples of a censored difference of times "
+                        "(default: %(default)s)")
     p.add_argument("--jobs", type=int, default=2, help="processes (default: %(default)s)")
     p.add_argument("--out", type=Path, default=None,
                    help="write transfer_study.md, transfer_study.json, tidy.csv and "
@@ -221,10 +230,11 @@ def cmd_study(args: argparse.Namespace) -> int:
             opts = StudyOptions(**{k: tuple(v) if isinstance(v, list) else v
                                    for k, v in doc["options"].items()})
             rows, wall = doc["rows"], float(doc["wall_time"])
+            found = claims(rows, opts, args.resamples)
         except (OSError, ValueError, KeyError, TypeError) as exc:
-            print(f"dfrl transfer-study: error: {args.from_json}: {exc!r}", file=sys.stderr)
+            said = str(exc) if type(exc) is ValueError else repr(exc)
+            print(f"dfrl transfer-study: error: {args.from_json}: {said}", file=sys.stderr)
             return 2
-        found = claims(rows, opts, args.resamples)
         text = markdown(rows, opts, found, wall)
         if args.out is not None:
             write_provenance(args.out)

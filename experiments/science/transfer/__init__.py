@@ -24,9 +24,10 @@ Usage::
     result.summary["init"]["collisions_per_1000"].mean, result.ratio["collisions_per_1000"]
 
 The paper's transfer claim across seeds and arenas (federated source against a matched
-standalone source of every source arena, collisions while learning and censored time to a
-threshold, paired intervals, Holm, verdicts) is ``dfrl transfer-study``: :mod:`.study` runs it,
-:mod:`.claims` judges it and writes its files.
+standalone source of every source arena; collisions and greedy score while learning, and the
+censored time to a threshold lifted above every start; learning phases seeded per source seed;
+paired intervals, Holm, verdicts, no verdict from a degenerate interval) is
+``dfrl transfer-study``: :mod:`.study` runs it, :mod:`.claims` judges it and writes its files.
 """
 from __future__ import annotations
 

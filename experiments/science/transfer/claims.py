@@ -2,22 +2,29 @@
 
 Unit of analysis: the source seed. A source's value of a measure is the mean over its
 learning phases (unseen arenas x target seeds). Each claim compares the federated source with
-one control (a standalone source of each source arena, and ``zeros``):
+one control (a standalone source of each source arena, and ``zeros``). Two families:
 
-* **collisions while learning**, federated minus control, claimed below 0. Paired t interval
-  of the per-seed differences when both were trained with the same seeds (the controls are
-  matched: standalone robot k has federated robot k's training seed), Welch's otherwise.
-* **time to the threshold** (each arena's own threshold), claimed shorter. When no learning
-  phase of either side is censored: federated minus control in iterations, claimed below 0,
-  paired or Welch as above. When any is: the difference of Kaplan-Meier medians federated -
-  control over the learning phases, claimed below 0; the censored phases are counted. Matched
-  sources: :func:`paired_censored_difference`, the source seeds resampled, each drawn seed
-  bringing its phases of both sides (the pairing kept); otherwise
-  :func:`censored_difference`, each side's phases resampled on their own. (A difference, not
-  a ratio: a source table may reach the threshold at iteration 0.)
+* **primary** (:data:`PRIMARY`), Holm's correction over their claims together:
+  **collisions while learning**, federated minus control, claimed below 0; the **score while
+  learning** (the mean greedy score over the phase, the area under its curve), federated minus
+  control, claimed above 0. Paired t interval of the per-seed differences when both were
+  trained with the same seeds (the controls are matched: standalone robot k has federated
+  robot k's training seed, and the learning phases of a source seed share their seeds), Welch's
+  otherwise.
+* **secondary**, Holm over its own claims: the **time to the threshold** (each arena's own,
+  lifted above every phase's iteration-0 score), claimed shorter. When no learning phase of
+  either side is censored: federated minus control in iterations, paired or Welch as above.
+  When any is: the difference of Kaplan-Meier medians federated - control over the learning
+  phases; the censored phases are counted. Matched sources:
+  :func:`paired_censored_difference`, the source seeds resampled, each drawn seed bringing its
+  phases of both sides (the pairing kept); otherwise :func:`censored_difference`, each side's
+  phases resampled on their own.
 
-Every claim is judged with :func:`~dfrl.experiments.science.statistics.judge` and Holm's
-correction over all claims of the study (:func:`~dfrl.experiments.science.statistics.adjust`).
+Every claim is judged with :func:`~dfrl.experiments.science.statistics.judge`, except that an
+interval that cannot carry a verdict is **cannot judge** with the reason
+(:func:`degenerate`): zero width (the difference is the same in every seed, or every resample
+gives one value) or every resample giving the same difference; such a claim has no p-value and
+takes no place in its Holm family (:func:`~dfrl.experiments.science.statistics.adjust`).
 The smallest detectable effect D of a t interval is ``(t(0.975, df) + t(0.8, df)) x se``; of
 a censored difference ``(z(0.975) + z(0.8)) x se``, se = the interval's width / (2 x 1.96)
 (``inf`` for an open interval).
@@ -27,20 +34,30 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from dfrl.experiments.science.censored import km_median
-from dfrl.experiments.science.statistics import (LEVEL, POWER, Interval, Judgement, adjust,
-                                                 interval, judge, normal_quantile, paired, welch)
+from dfrl.experiments.science.statistics import (LEVEL, POWER, Interval, Judgement, Outcome,
+                                                 adjust, interval, judge, normal_quantile, paired,
+                                                 welch)
 from dfrl.experiments.science.tidy import TIDY_FILE, Row, write_tidy
 from dfrl.experiments.science.transfer.model import json_safe
 from dfrl.experiments.science.transfer.study import StudyOptions
 
-MEASURES = ("collisions_per_1000", "time_to_threshold")
+MEASURES = ("collisions_per_1000", "score_auc", "time_to_threshold")
+#: The measures of the primary family (Holm over their claims together); the others are
+#: secondary (Holm over their own).
+PRIMARY = ("collisions_per_1000", "score_auc")
+#: The side of 0 the claim puts federated minus control on.
+SIDE = {"collisions_per_1000": "below", "score_auc": "above", "time_to_threshold": "below"}
+#: Each measure in the report's words.
+WORDS = {"collisions_per_1000": "collisions while learning",
+         "score_auc": "score while learning",
+         "time_to_threshold": "time to the threshold"}
 #: Fewest source seeds a claim is judged on.
 MIN_SEEDS = 3
 
@@ -179,6 +196,43 @@ def paired_censored_difference(a: Sequence[Phases], b: Sequence[Phases], resampl
     return _difference(*pool(sa, everything), *pool(sb, everything), len(sa), draws)
 
 
+def degenerate(estimate: Interval | CensoredDifference) -> str | None:
+    """Why an interval cannot carry a verdict, or None when it can: zero width (a t interval
+    of differences that are the same in every seed, a bootstrap interval whose ends meet) or
+    a bootstrap whose every resample gives the same difference (its ends then say nothing of
+    the spread between seeds: its p-value would be 0 or 1 by construction)."""
+    if isinstance(estimate, CensoredDifference):
+        d = estimate.draws
+        if len(d) and bool((d == d[0]).all()):
+            lo, hi = float(d[0, 0]), float(d[0, 1])
+            said = _cell(lo) if lo == hi else f"[{_cell(lo)}, {_cell(hi)}]"
+            return f"every resample gives the same difference, {said}"
+        if estimate.low == estimate.high:
+            return f"zero width: every resample's difference is {_cell(estimate.low)}"
+        return None
+    if estimate.half == 0.0:
+        return f"zero width: the difference is {_cell(estimate.mean)} in every seed"
+    return None
+
+
+def verdict(estimate: Interval | CensoredDifference, side: str
+            ) -> tuple[Judgement, str]:
+    """The (unadjusted) verdict on "federated minus control is ``side`` 0" and, for cannot
+    judge, its reason: :func:`judge` with at least :data:`MIN_SEEDS` seeds, else cannot
+    judge; a :func:`degenerate` interval is cannot judge too. A claim that cannot be judged
+    has no p-value (NaN), so that Holm's correction leaves it out of the family."""
+    j = judge(estimate, 0.0, side, MIN_SEEDS)
+    if estimate.n < MIN_SEEDS:
+        reason = f"n = {estimate.n} < {MIN_SEEDS}"
+    else:
+        reason = degenerate(estimate) or ""
+        if not reason and j.outcome is Outcome.CANNOT_JUDGE:
+            reason = f"no interval: {estimate}"
+    if reason:
+        j = replace(j, outcome=Outcome.CANNOT_JUDGE, p=math.nan, p_adjusted=math.nan)
+    return j, reason
+
+
 @dataclass(frozen=True)
 class Claim:
     """One comparison of the federated source with a control on one measure."""
@@ -191,23 +245,38 @@ class Claim:
     censored: tuple[int, int]   #: censored learning phases (federated, control)
     phases: tuple[int, int]     #: learning phases (federated, control)
     judgement: Judgement
+    reason: str = ""            #: why it cannot be judged ("" otherwise)
+
+    @property
+    def family(self) -> str:
+        """``primary`` or ``secondary`` (the Holm family it is adjusted in)."""
+        return "primary" if self.measure in PRIMARY else "secondary"
+
+    def words(self) -> str:
+        """The verdict in the report's words (cannot judge with its reason)."""
+        if self.judgement.outcome is Outcome.CANNOT_JUDGE:
+            return f"cannot judge ({self.reason})"
+        return self.judgement.words()
 
     def statement(self, federated: str) -> str:
         if self.measure == "collisions_per_1000":
             return f"{federated} collides less while learning than {self.control}"
+        if self.measure == "score_auc":
+            return f"{federated} scores higher while learning than {self.control}"
         return f"{federated} reaches the threshold sooner than {self.control}"
 
     def to_dict(self) -> dict[str, Any]:
         e = self.estimate
         return json_safe({
-            "measure": self.measure, "control": self.control, "method": self.method,
-            "estimate": e.mean,
+            "measure": self.measure, "family": self.family, "control": self.control,
+            "method": self.method, "estimate": e.mean,
             "low": e.low, "high": e.high, "n": e.n,
             "known": e.known if isinstance(e, CensoredDifference) else "exact",
             "censored": list(self.censored), "phases": list(self.phases),
             "bound": self.judgement.bound, "side": self.judgement.side,
             "p": self.judgement.p, "p_holm": self.judgement.p_adjusted,
-            "detectable": e.detectable(), "verdict": self.judgement.words()})
+            "detectable": e.detectable(), "verdict": self.words(),
+            "reason": self.reason})
 
 
 def _times(rows: Sequence[dict[str, Any]], condition: str,
@@ -226,6 +295,7 @@ def claim(rows: Sequence[dict[str, Any]], federated: str, control: str, measure:
     tc, rc = _times(rows, control)
     censored = (rf.count(False), rc.count(False))
     phases = (len(rf), len(rc))
+    est: Interval | CensoredDifference
     if measure == "time_to_threshold" and any(censored):
         fs, cs = per_seed(rows, federated, measure), per_seed(rows, control, measure)
         if set(fs) == set(cs):
@@ -236,26 +306,57 @@ def claim(rows: Sequence[dict[str, Any]], federated: str, control: str, measure:
         else:
             est = censored_difference((tf, rf), (tc, rc), min(len(fs), len(cs)), resamples)
             how = "censored (KM medians)"
-        return Claim(measure, control, est, how, censored, phases,
-                     judge(est, 0.0, "below", MIN_SEEDS))
-    est, how = compare(per_seed(rows, federated, measure), per_seed(rows, control, measure))
-    return Claim(measure, control, est, how, censored, phases,
-                 judge(est, 0.0, "below", MIN_SEEDS))
+    else:
+        est, how = compare(per_seed(rows, federated, measure), per_seed(rows, control, measure))
+    return Claim(measure, control, est, how, censored, phases, *verdict(est, SIDE[measure]))
+
+
+def check_rows(rows: Sequence[dict[str, Any]]) -> None:
+    """Refuse learning phases this version cannot judge.
+
+    Raises
+    ------
+    ValueError
+        No row, or rows recorded before the learning phases had seeds of their own per source
+        seed and a score on the whole grid (no ``phase_seed`` or ``score_auc``): their target
+        seed was shared by every source seed and their scores stopped at the threshold.
+    """
+    if not rows:
+        raise ValueError("no learning phase")
+    old = [r for r in rows if "phase_seed" not in r or "score_auc" not in r]
+    if old:
+        raise ValueError(f"{len(old)} of {len(rows)} learning phases were recorded by an "
+                         f"earlier version (one target seed shared by every source seed, "
+                         f"scores stopped at the threshold): run the study again")
 
 
 def claims(rows: Sequence[dict[str, Any]], opts: StudyOptions,
            resamples: int = 4000) -> list[Claim]:
-    """Every claim of the study, Holm-adjusted over the family."""
+    """Every claim of the study, Holm-adjusted within its family (primary, secondary).
+
+    Raises
+    ------
+    ValueError
+        Rows :func:`check_rows` refuses.
+    """
+    check_rows(rows)
     raw = [claim(rows, opts.federated, c, m, resamples) for m in MEASURES
            for c in opts.conditions if c != opts.federated]
-    adj = adjust([c.judgement for c in raw])
-    return [Claim(c.measure, c.control, c.estimate, c.method, c.censored, c.phases, j)
-            for c, j in zip(raw, adj)]
+    out = list(raw)
+    for family in ("primary", "secondary"):
+        idx = [i for i, c in enumerate(raw) if c.family == family]
+        for i, j in zip(idx, adjust([raw[i].judgement for i in idx])):
+            out[i] = replace(raw[i], judgement=j)
+    return out
 
 
 # -- report ----------------------------------------------------------------------------------
 def _cell(x: float) -> str:
-    return "inf" if x == math.inf else f"{x:.3g}"
+    if math.isnan(x):
+        return "-"
+    if math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    return f"{x:,.0f}" if abs(x) >= 1000 else f"{x:.3g}"
 
 
 def _estimate(c: Claim) -> str:
@@ -273,84 +374,108 @@ def _level(rows: Sequence[dict[str, Any]], condition: str, measure: str) -> str:
         med = [x for x, ok in zip(t, r) if ok]
         if len(med) < len(t):
             return f"{len(t) - len(med)} of {len(t)} censored"
-        return str(interval(list(per_seed(rows, condition, measure).values())))
-    return str(interval(list(per_seed(rows, condition, measure).values())))
+    iv = interval(list(per_seed(rows, condition, measure).values()))
+    if iv.half == 0.0:                  # no zero-width interval: the same value in every seed
+        return f"{iv.mean:.3g} in every seed (n={iv.n})"
+    return str(iv)
+
+
+def floor(rows: Sequence[dict[str, Any]], arena: str) -> tuple[int, int, int]:
+    """The floor in ``arena``: the learning phases whose iteration-0 score is at or above
+    the arena's threshold before the lift (``threshold_base``: at the threshold before they
+    learnt anything), those at or above the threshold used (0 by construction) and all."""
+    mine = [r for r in rows if r["arena"] == arena]
+    return (sum(r["start_score"] >= r["threshold_base"] for r in mine),
+            sum(r["start_score"] >= r["threshold"] for r in mine), len(mine))
 
 
 def markdown(rows: Sequence[dict[str, Any]], opts: StudyOptions, found: Sequence[Claim],
              wall_time: float) -> str:
-    """The study's report: each source's levels, then every claim with its verdict."""
+    """The study's report: the thresholds, each source's levels, then every claim with its
+    verdict."""
     n = len(opts.source_seeds)
     L = [f"# Transfer to unseen arenas ({', '.join(opts.targets)})", "",
          f"Sources: {n} source seeds, {opts.iterations} iterations per robot (the federation "
          f"shares every {opts.respite}, method {opts.method}). Learning phase: {opts.learn} "
          f"steps from the source table in each unseen arena x {len(opts.target_seeds)} target "
-         f"seed(s); greedy score ({opts.eval_steps} steps) every {opts.eval_every} iterations; "
-         f"the arena's threshold, reached at the first of {opts.confirm} evaluations in a "
-         f"row at or above it (a phase that never reaches it is censored at "
-         f"{opts.learn}). Wall time {wall_time:.0f} s.", "",
-         "| unseen arena | threshold | from |", "|---|---|---|"]
+         f"seed(s), seeded per source seed (the sources of a seed share the phase's seeds, no "
+         f"two seeds do); greedy score ({opts.eval_steps} steps) at 0 and every "
+         f"{opts.eval_every} iterations. Score while learning: its mean over the phase (area "
+         f"under the score curve / {opts.learn}). Time: the first of {opts.confirm} "
+         f"evaluations in a row at or above the arena's threshold, lifted above every phase's "
+         f"iteration-0 score (a phase that never reaches it is censored at {opts.learn}). "
+         f"Wall time {wall_time:.0f} s.", "",
+         "| unseen arena | threshold | from | phases at the unlifted threshold at iteration 0 "
+         "| at the threshold used |", "|---|---|---|---|---|"]
     for arena, (value, origin) in thresholds_of(rows, opts).items():
-        L.append(f"| {arena} | {value:.3g} | {origin} |")
-    L += ["", "| source | collisions/1000 while learning | time to threshold (iterations) |",
-          "|---|---|---|"]
+        base, used, k = floor(rows, arena)
+        L.append(f"| {arena} | {value:.4g} | {origin} | {base} of {k} | {used} of {k} |")
+    L += ["", "| source | collisions/1000 while learning | score while learning "
+          "| score at iteration 0 | time to threshold (iterations) |", "|---|---|---|---|---|"]
     for c in opts.conditions:
         L.append(f"| {c} | {_level(rows, c, 'collisions_per_1000')} | "
+                 f"{_level(rows, c, 'score_auc')} | {_level(rows, c, 'start_score')} | "
                  f"{_level(rows, c, 'time_to_threshold')} |")
-    L += ["", f"Claims: {opts.federated} against each control. Collisions: federated minus "
-          "control (claimed < 0). Time: federated minus control in iterations (claimed < 0), "
-          "from the per-seed means when no phase is censored, else from the Kaplan-Meier "
-          "medians over the learning phases (`>= x`: a bound, a median beyond the budget; "
-          "matched sources: the source seeds resampled, each with its phases of both "
-          "sides). "
-          "95% intervals; p adjusted by Holm over the "
-          f"{len(found)} claims; D = smallest detectable effect at 80% power "
-          "((t(0.975, df) + t(0.8, df)) x se; censored: (z(0.975) + z(0.8)) x se, se = width "
-          "/ 3.92).", "",
-          "| measure | control | method | estimate [95%] | censored (fed, control) | p (Holm) "
-          "| verdict |", "|---|---|---|---|---|---|---|"]
+    fam = {f: sum(c.family == f and c.judgement.outcome is not Outcome.CANNOT_JUDGE
+                  for c in found) for f in ("primary", "secondary")}
+    L += ["", f"Claims: {opts.federated} against each control, federated minus control. "
+          "Primary: collisions while learning (claimed < 0) and score while learning (claimed "
+          "> 0), paired t over source seeds (Welch when unpaired). Secondary: time to the "
+          "threshold in iterations (claimed < 0), from the per-seed means when no phase is "
+          "censored, else from the Kaplan-Meier medians over the learning phases (`>= x`: a "
+          "bound, a median beyond the budget; matched sources: the source seeds resampled, "
+          "each with its phases of both sides). 95% intervals; p adjusted by Holm within "
+          f"each family ({fam['primary']} primary, {fam['secondary']} secondary claims that "
+          "can be judged); an interval of zero width or whose every resample is the same "
+          "cannot be judged (no p, outside the family); D = smallest detectable effect at "
+          "80% power ((t(0.975, df) + t(0.8, df)) x se; censored: (z(0.975) + z(0.8)) x se, "
+          "se = width / 3.92).", "",
+          "| family | measure | control | method | estimate [95%] | censored (fed, control) "
+          "| p (Holm) | verdict |", "|---|---|---|---|---|---|---|---|"]
     for c in found:
-        cens = f"{c.censored[0]}/{c.phases[0]}, {c.censored[1]}/{c.phases[1]}"
-        L.append(f"| {c.measure} | {c.control} | {c.method} | {_estimate(c)} | {cens} | "
-                 f"{c.judgement.p_adjusted:.3g} | {c.judgement.words()} |")
+        cens = (f"{c.censored[0]}/{c.phases[0]}, {c.censored[1]}/{c.phases[1]}"
+                if c.measure == "time_to_threshold" else "-")
+        L.append(f"| {c.family} | {c.measure} | {c.control} | {c.method} | {_estimate(c)} | "
+                 f"{cens} | {_cell(c.judgement.p_adjusted)} | {c.words()} |")
     L += ["", headline(found, opts)]
     return "\n".join(L)
 
 
 def thresholds_of(rows: Sequence[dict[str, Any]], opts: StudyOptions
                   ) -> dict[str, tuple[float, str]]:
-    """arena -> (threshold, how it was chosen) as the learning phases recorded them (rows
-    written before thresholds were per arena: ``opts.threshold``, given)."""
+    """arena -> (threshold, how it was chosen) as the learning phases recorded them."""
     out: dict[str, tuple[float, str]] = {}
     for a in opts.targets:
         mine = [r for r in rows if r["arena"] == a]
-        if mine and "threshold" in mine[0]:
+        if mine:
             out[a] = (float(mine[0]["threshold"]), str(mine[0]["threshold_from"]))
-        elif opts.threshold is not None:
-            out[a] = (float(opts.threshold), "given")
     return out
 
 
 def headline(found: Sequence[Claim], opts: StudyOptions) -> str:
     """One sentence per measure: against how many standalone controls the claim holds, is
-    refuted or is not significant (with the range of D), and the verdict against ``zeros``."""
+    refuted, is not significant (with the range of D) or cannot be judged, and the verdict
+    against ``zeros``."""
     out = []
     for m in MEASURES:
         cs = [c for c in found if c.measure == m and c.control.startswith("standalone_")]
-        word = "collisions while learning" if m == MEASURES[0] else "time to the threshold"
         held = [c.control for c in cs if c.judgement.holds]
-        refuted = [c.control for c in cs if c.judgement.words().startswith("refuted")]
-        unsure = [c for c in cs if c.judgement.words().startswith("not significant")]
-        s = f"**{word}**: holds against {len(held)} of {len(cs)} standalone controls"
+        refuted = [c.control for c in cs if c.judgement.outcome is Outcome.REFUTED]
+        unsure = [c for c in cs if c.judgement.outcome is Outcome.NOT_SIGNIFICANT]
+        blind = [c.control for c in cs if c.judgement.outcome is Outcome.CANNOT_JUDGE]
+        s = f"**{WORDS[m]}** ({'primary' if m in PRIMARY else 'secondary'}): holds against " \
+            f"{len(held)} of {len(cs)} standalone controls"
         if refuted:
             s += f"; refuted against {', '.join(refuted)}"
         if unsure:
             ds = [c.estimate.detectable() for c in unsure]
             s += (f"; not significant against {len(unsure)} (D {_cell(min(ds))}"
                   + (f" to {_cell(max(ds))}" if max(ds) != min(ds) else "") + ")")
+        if blind:
+            s += f"; cannot judge against {', '.join(blind)}"
         zero = [c for c in found if c.measure == m and c.control == "zeros"]
         if zero:
-            s += f"; against zeros (learning from scratch): {zero[0].judgement.words()}"
+            s += f"; against zeros (learning from scratch): {zero[0].words()}"
         out.append(s + ".")
     return "The paper's claim, " + " ".join(out)
 
@@ -369,11 +494,11 @@ def tidy_rows(rows: Sequence[dict[str, Any]]) -> Iterator[Row]:
         end = int(r["collisions"][-1][0])
         yield (run, seed, cond, where, end, f"collisions_per_1000_learning@{a}",
                float(r["collisions_per_1000"]))
+        yield (run, seed, cond, where, end, f"score_auc@{a}", float(r["score_auc"]))
         yield (run, seed, cond, where, end, f"time_to_threshold@{a}",
                float(r["time_to_threshold"]))
         yield (run, seed, cond, where, end, f"reached@{a}", float(bool(r["reached"])))
-        if "threshold" in r:
-            yield (run, seed, cond, where, end, f"threshold@{a}", float(r["threshold"]))
+        yield (run, seed, cond, where, end, f"threshold@{a}", float(r["threshold"]))
 
 
 def write_study(out: Path, rows: Sequence[dict[str, Any]], opts: StudyOptions,

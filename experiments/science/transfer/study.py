@@ -10,21 +10,26 @@ Source tables, per source seed ``s`` (Q-learning, ``iterations`` per robot):
   with the same training seed 1000 s + k as federated robot k, for the same iterations;
 * ``zeros``: no training (a robot learning from scratch).
 
-Learning phase, in every unseen arena (``targets``, h1 and h2 by default) and target seed: a
-robot starts from the source table and learns ``learn`` steps (training seed 90,000 + target
-seed, the same for every source). Measured: **collisions while learning** (per 1,000 steps,
-over the whole phase) and **time to the threshold**: the greedy score of the learning table
-is evaluated at iteration 0 and every ``eval_every`` iterations (``eval_steps`` seeded steps,
-the same episodes at every grid point), and the time is the first grid point of the first
-``confirm`` (2) evaluations in a row at or above ``threshold`` (the score jumps between
-evaluations: one crossing is not learning); a run that never reaches it is censored at
-``learn``, never counted as reaching it there (evaluations stop once it is reached). Each
-unseen arena has its own threshold: given (``threshold`` for every arena,
-``arena_thresholds`` for some), else derived from reference runs in that arena alone
-(:mod:`dfrl.experiments.science.transfer.thresholds`).
+Learning phase, in every unseen arena (``targets``, h1 and h2 by default) and target seed t: a
+robot starts from the source table and learns ``learn`` steps. Its seeds are those of its
+source seed (:func:`phase_seeds`): training seed 1,000,000 + 1,000 s + t, evaluation seed
+that + 500. So the sources of one source seed learn from the same seeds (paired within the
+seed) and different source seeds learn from different ones (independent across seeds; the
+``zeros`` source too, whose table is the same for every seed). The greedy score of the
+learning table is evaluated at iteration 0 and every ``eval_every`` iterations to the end
+(``eval_steps`` seeded steps, the same episodes at every grid point). Measured: **collisions
+while learning** (per 1,000 steps, over the whole phase), the **score while learning** (the
+area under the score curve over the phase divided by its span, its mean level:
+:func:`dfrl.experiments.science.curves.auc`) and, read off the score curve once every phase
+has run, the **time to the threshold** (:func:`with_times`): each unseen arena's threshold
+(given: ``threshold`` for every arena, ``arena_thresholds`` for some; else derived from
+reference runs in that arena alone), lifted above every phase's iteration-0 score in that
+arena (:mod:`dfrl.experiments.science.transfer.thresholds`), reached at the first of
+``confirm`` (2) evaluations in a row at or above it (the score jumps between evaluations: one
+crossing is not learning); a phase that never reaches it is censored at ``learn``.
 
-With ``unpaired`` the controls are trained and learn with other seeds (source seed
-s + 10,000, target seeds + 5,000): the comparisons are then Welch's, not paired
+With ``unpaired`` the controls are trained, and learn, with other seeds (source seed
+s + 10,000): the comparisons are then Welch's, not paired
 (:mod:`dfrl.experiments.science.transfer.claims`).
 """
 from __future__ import annotations
@@ -37,19 +42,24 @@ from typing import Any
 import numpy as np
 
 from dfrl.arenas import load_arena
+from dfrl.experiments.science.curves import auc
 from dfrl.experiments.science.studies.fedsim import AGGREGATIONS, federate, in_turn
 from dfrl.experiments.science.studies.history import eval_job
-from dfrl.experiments.science.transfer.thresholds import Threshold, thresholds_for
+from dfrl.experiments.science.transfer.thresholds import (Threshold, lift, thresholds_for,
+                                                          time_to_threshold)
 from dfrl.robots.training import Trainer, TrainerConfig
 
 ARENAS = ("r1", "r2", "r3", "r4", "r5")
-#: Seed offset of the controls' sources (and of their target seeds / 2) with ``unpaired``.
+#: Seed offset of the controls' sources (and so of their learning phases) with ``unpaired``.
 UNPAIRED_OFFSET = 10_000
-TARGET_SEED_BASE = 90_000
+#: Learning phase t of pair seed s trains with PHASE_SEED_BASE + PHASE_STRIDE x s + t and is
+#: evaluated with that + PHASE_EVAL_OFFSET (so target seeds are below PHASE_EVAL_OFFSET).
+PHASE_SEED_BASE = 1_000_000
+PHASE_STRIDE = 1_000
+PHASE_EVAL_OFFSET = 500
 #: Further controls on request (``extra``): one robot in R1 for five times the iterations (the
 #: federation's experience), one robot in R1..R5 in turn, the mean of the five standalone tables.
 EXTRA = ("standalone_same_experience", "in_turn", "one_shot_average")
-EVAL_SEED_BASE = 80_000
 
 
 @dataclass(frozen=True)
@@ -88,6 +98,11 @@ class StudyOptions:
             raise ValueError("at least one source seed, target seed and target arena")
         if len(set(self.source_seeds)) != len(self.source_seeds):
             raise ValueError(f"source seeds must be distinct, got {list(self.source_seeds)}")
+        if min(self.source_seeds) < 0:
+            raise ValueError(f"source seeds must be >= 0, got {list(self.source_seeds)}")
+        if not all(0 <= t < PHASE_EVAL_OFFSET for t in self.target_seeds):
+            raise ValueError(f"target seeds must be in 0..{PHASE_EVAL_OFFSET - 1}, got "
+                             f"{list(self.target_seeds)}")
         if self.method not in AGGREGATIONS:
             raise ValueError(f"unknown method {self.method!r}; one of {sorted(AGGREGATIONS)}")
         unknown = [c for c in self.extra if c not in EXTRA]
@@ -136,6 +151,15 @@ def pair_seed(condition: str, seed: int, opts: StudyOptions) -> int:
     return seed + UNPAIRED_OFFSET if shifted else seed
 
 
+def phase_seeds(pair: int, target_seed: int) -> tuple[int, int]:
+    """The training and evaluation seeds of learning phase ``target_seed`` of pair seed
+    ``pair`` (:func:`pair_seed`): ``PHASE_SEED_BASE + PHASE_STRIDE x pair + target_seed`` and
+    that + ``PHASE_EVAL_OFFSET``. The sources of one pair seed share them; no two pair seeds
+    do (for target seeds below ``PHASE_EVAL_OFFSET``)."""
+    train = PHASE_SEED_BASE + PHASE_STRIDE * int(pair) + int(target_seed)
+    return train, train + PHASE_EVAL_OFFSET
+
+
 def _alone(c: TrainerConfig) -> np.ndarray:
     with Trainer(c) as t:
         for _ in range(c.iterations):
@@ -171,63 +195,85 @@ def source_job(condition: str, seed: int, opts: StudyOptions) -> tuple[str, int,
 
 
 def target_job(condition: str, seed: int, q: np.ndarray, arena: str, tseed: int,
-               opts: StudyOptions, threshold: Threshold) -> dict[str, Any]:
-    """One learning phase from table ``q`` in ``arena``: collisions while learning and the
-    greedy score on the grid until it reaches ``threshold`` (the arena's)."""
-    shift = 5_000 if pair_seed(condition, seed, opts) != seed else 0
-    ev_cfg, ev_seed = TrainerConfig().to_dict(), EVAL_SEED_BASE + tseed + shift
-    grid = opts.grid()
+               opts: StudyOptions) -> dict[str, Any]:
+    """One learning phase from table ``q`` in ``arena`` (a worker job): collisions while
+    learning and the greedy score on the whole grid (:meth:`StudyOptions.grid`), its mean
+    level over the phase (``score_auc``) and its iteration-0 value (``start_score``)."""
+    pair = pair_seed(condition, seed, opts)
+    train_seed, ev_seed = phase_seeds(pair, tseed)
+    ev_cfg = TrainerConfig().to_dict()
     scores: list[tuple[int, float]] = []
     collisions: list[tuple[int, int]] = []
-    time, reached, run = float(opts.learn), False, 0
-    with Trainer(TrainerConfig(arena=arena, seed=TARGET_SEED_BASE + tseed + shift,
-                               iterations=opts.learn)) as t:
+    with Trainer(TrainerConfig(arena=arena, seed=train_seed, iterations=opts.learn)) as t:
         t.set_q_table(q)
         done = 0
-        for g in grid:
+        for g in opts.grid():
             for _ in range(g - done):
                 t.step()
             done = g
             collisions.append((g, int(t.collisions)))
-            if not reached:
-                ev = eval_job(ev_cfg, t.q_table.copy(), arena, opts.eval_steps,
-                              opts.episode_steps, ev_seed)
-                scores.append((g, float(ev["score"])))
-                run = run + 1 if ev["score"] >= threshold.value else 0
-                if run == opts.confirm:
-                    time, reached = float(scores[-opts.confirm][0]), True
-    return {"condition": condition, "source_seed": seed,
-            "pair_seed": pair_seed(condition, seed, opts), "arena": arena,
-            "target_seed": tseed,
+            ev = eval_job(ev_cfg, t.q_table.copy(), arena, opts.eval_steps,
+                          opts.episode_steps, ev_seed)
+            scores.append((g, float(ev["score"])))
+    return {"condition": condition, "source_seed": seed, "pair_seed": pair, "arena": arena,
+            "target_seed": tseed, "phase_seed": train_seed, "eval_seed": ev_seed,
             "collisions_per_1000": 1000.0 * collisions[-1][1] / opts.learn,
-            "time_to_threshold": time, "reached": reached, "threshold": threshold.value,
-            "threshold_from": threshold.origin(), "scores": scores, "collisions": collisions}
+            "score_auc": auc([g for g, _ in scores], [v for _, v in scores]),
+            "start_score": scores[0][1], "scores": scores, "collisions": collisions}
+
+
+def with_times(rows: list[dict[str, Any]], thresholds: dict[str, Threshold],
+               confirm: int, budget: int) -> tuple[list[dict[str, Any]], dict[str, Threshold]]:
+    """Every arena's threshold lifted above the iteration-0 scores of its learning phases
+    (:func:`~dfrl.experiments.science.transfer.thresholds.lift`), and each row with its
+    arena's ``threshold``, ``threshold_base`` (before the lift), ``threshold_from`` and its
+    ``time_to_threshold`` and ``reached`` on its score curve.
+
+    Raises
+    ------
+    ValueError
+        An arena of ``thresholds`` without a learning phase.
+    """
+    lifted = {a: lift(th, [r["start_score"] for r in rows if r["arena"] == a])
+              for a, th in thresholds.items()}
+    out = []
+    for r in rows:
+        th = lifted[r["arena"]]
+        time, reached = time_to_threshold(r["scores"], th.value, confirm, budget)
+        out.append({**r, "threshold": th.value, "threshold_base": th.base,
+                    "threshold_from": th.origin(), "time_to_threshold": time,
+                    "reached": reached})
+    return out, lifted
 
 
 def transfer_study(opts: StudyOptions,
                    progress: Callable[[str], None] | None = None) -> list[dict[str, Any]]:
-    """The target arenas' thresholds, every source table, then every learning phase; one row
-    per learning phase (with its arena's ``threshold`` and ``threshold_from``)."""
+    """The target arenas' thresholds, every source table, every learning phase, then each
+    phase's time to its arena's threshold lifted above every phase's start
+    (:func:`with_times`); one row per learning phase."""
     say = progress or (lambda _msg: None)
     for arena in opts.targets:          # an unknown arena fails here, before any training
         load_arena(arena)
     with ProcessPoolExecutor(max_workers=opts.jobs) as pool:
         thresholds = thresholds_for(opts.targets, opts.given_thresholds(),
-                                      opts.threshold_fraction, opts.threshold_iterations,
-                                      opts.threshold_runs, opts.eval_steps, opts.episode_steps,
-                                      pool)
+                                    opts.threshold_fraction, opts.threshold_iterations,
+                                    opts.threshold_runs, opts.eval_steps, opts.episode_steps,
+                                    pool)
         for th in thresholds.values():
-            say(f"threshold in {th.arena}: {th.value:.3g} ({th.origin()})")
+            say(f"threshold in {th.arena} before the lift: {th.value:.3g} ({th.origin()})")
         jobs = [(c, s, opts) for c in opts.conditions for s in opts.source_seeds]
         srcs = []
         for i, src in enumerate(pool.map(source_job, *zip(*jobs)), 1):
             srcs.append(src)
             say(f"source {i}/{len(jobs)}: {src[0]} seed {src[1]}")
-        args = [(c, s, q, a, t, opts, thresholds[a]) for c, s, q in srcs for a in opts.targets
+        args = [(c, s, q, a, t, opts) for c, s, q in srcs for a in opts.targets
                 for t in opts.target_seeds]
         rows = []
         for i, row in enumerate(pool.map(target_job, *zip(*args)), 1):
             rows.append(row)
             say(f"learning phase {i}/{len(args)}: {row['condition']} seed {row['source_seed']} "
                 f"in {row['arena']}")
-        return rows
+    rows, lifted = with_times(rows, thresholds, opts.confirm, opts.learn)
+    for th in lifted.values():
+        say(f"threshold in {th.arena}: {th.value:.4g} ({th.origin()})")
+    return rows

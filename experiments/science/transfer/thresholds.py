@@ -18,15 +18,23 @@ comparison:
   learnt the arena itself for N steps holds).
 
 Thresholds given explicitly (``--threshold X`` for every arena, ``--threshold h1=X``) are
-used as they are. The seeds are apart from the sources' (1,000 s + k), the learning phases'
-(90,000 + t) and their evaluations' (80,000 + t), so no source or phase shares a stream with
-a reference run.
+used as they are. The seeds are apart from the sources' (1,000 s + k) and the learning
+phases' (1,000,000 + 1,000 s + t, their evaluations + 500), so no source or phase shares a
+stream with a reference run.
+
+**No source starts at the threshold** (:func:`lift`): a threshold at or below a learning
+phase's score at iteration 0 gives that phase a time of 0 whatever it then learns (a floor:
+with 0.5 in h1, 7-10 of 20 phases were there from the start). So once every phase has run,
+an arena's threshold (derived or given) is lifted to just above the best iteration-0 score of
+any phase in that arena, of any source: no phase reaches it before it has learnt something.
+:func:`time_to_threshold` reads a phase's time off its score curve.
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from concurrent.futures import Executor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -49,15 +57,23 @@ class Threshold:
     ----------
     arena : str
     value : float
-        The greedy score a learning phase in ``arena`` must reach.
+        The greedy score a learning phase in ``arena`` must reach: ``base``, or just above
+        ``best_start`` when that is higher (:func:`lift`).
     given : bool
         Set on the command line (then ``levels`` is empty).
     fraction : float
-        ``value`` / reference level (derived thresholds).
+        ``base`` / reference level (derived thresholds).
     levels : tuple of float
         Each reference run's level (mean score over the points ``LEVEL_POINTS``).
     iterations : int
         Steps of each reference run.
+    base : float
+        The threshold as given or derived, before :func:`lift` (NaN: the same as ``value``).
+    best_start : float
+        The best iteration-0 score of the learning phases in ``arena`` (NaN before
+        :func:`lift`).
+    phases : int
+        The learning phases ``best_start`` is the best of.
     """
 
     arena: str
@@ -66,26 +82,89 @@ class Threshold:
     fraction: float = float("nan")
     levels: tuple[float, ...] = ()
     iterations: int = 0
+    base: float = float("nan")
+    best_start: float = float("nan")
+    phases: int = 0
+
+    def __post_init__(self) -> None:
+        if math.isnan(self.base):
+            object.__setattr__(self, "base", float(self.value))
 
     @property
     def level(self) -> float:
         """The reference level: the mean of the runs' levels (NaN when given)."""
         return float(np.mean(self.levels)) if self.levels else float("nan")
 
+    @property
+    def lifted(self) -> bool:
+        """Raised above ``base`` by :func:`lift` (a phase started at or above ``base``)."""
+        return self.value > self.base
+
     def origin(self) -> str:
         """How it was chosen, in words (the report's and the rows' ``threshold_from``)."""
         if self.given:
-            return "given"
-        spread = ", ".join(f"{x:.3g}" for x in self.levels)
-        return (f"{self.fraction:g} x {self.level:.3g} (the mean level of {len(self.levels)} "
-                f"reference runs of {self.iterations} steps from zeros in {self.arena}: "
-                f"{spread})")
+            said = f"given {self.base:.3g}"
+        else:
+            spread = ", ".join(f"{x:.3g}" for x in self.levels)
+            said = (f"{self.fraction:g} x {self.level:.3g} = {self.base:.3g} (the mean level "
+                    f"of {len(self.levels)} reference runs of {self.iterations} steps from "
+                    f"zeros in {self.arena}: {spread})")
+        if self.lifted:
+            said += (f"; lifted to just above {self.best_start:.4g}, the best iteration-0 "
+                     f"score of the {self.phases} learning phases")
+        elif self.phases:
+            said += (f"; above every iteration-0 score of the {self.phases} learning phases "
+                     f"(best {self.best_start:.3g})")
+        return said
 
     def to_dict(self) -> dict[str, Any]:
         return {"arena": self.arena, "value": self.value, "given": self.given,
                 "fraction": None if self.given else self.fraction,
                 "levels": list(self.levels), "iterations": self.iterations,
-                "from": self.origin()}
+                "base": self.base, "lifted": self.lifted,
+                "best_start": None if math.isnan(self.best_start) else self.best_start,
+                "phases": self.phases, "from": self.origin()}
+
+
+def lift(threshold: Threshold, starts: Sequence[float]) -> Threshold:
+    """``threshold`` lifted, if need be, to just above the best of ``starts`` (the iteration-0
+    scores of the learning phases in its arena, of every source): the smallest float above it
+    (``numpy.nextafter``), so a phase must score higher than any phase started to reach it.
+    A threshold already above every start is kept as it is.
+
+    Raises
+    ------
+    ValueError
+        No start, or one that is not finite.
+    """
+    if len(starts) == 0 or not all(np.isfinite(starts)):
+        raise ValueError(f"{threshold.arena}: the iteration-0 scores must be finite and at "
+                         f"least one, got {list(starts)}")
+    best = float(max(starts))
+    value = max(threshold.base, float(np.nextafter(best, math.inf)))
+    return replace(threshold, value=value, best_start=best, phases=len(starts))
+
+
+def time_to_threshold(scores: Sequence[tuple[int, float]], threshold: float, confirm: int,
+                      budget: int) -> tuple[float, bool]:
+    """A learning phase's time to ``threshold`` and whether it reached it: the grid point of
+    the first of ``confirm`` evaluations in a row at or above it (``scores``: (iteration,
+    greedy score) on the phase's grid, in order); ``(budget, False)``, censored, when no
+    ``confirm`` evaluations in a row are.
+
+    Raises
+    ------
+    ValueError
+        ``confirm`` < 1.
+    """
+    if confirm < 1:
+        raise ValueError(f"confirm must be >= 1, got {confirm}")
+    run = 0
+    for k, (_, score) in enumerate(scores):
+        run = run + 1 if score >= threshold else 0
+        if run == confirm:
+            return float(scores[k - confirm + 1][0]), True
+    return float(budget), False
 
 
 def threshold_from(arena: str, levels: Sequence[float], fraction: float,

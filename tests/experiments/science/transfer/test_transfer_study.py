@@ -29,16 +29,35 @@ def study(tmp_path_factory):
 
 
 def test_same_seeds_same_study(study, tmp_path):
-    """Determinism, and a threshold that is reached: times on the grid, nothing censored."""
+    """Determinism; a threshold given below every score is lifted above every phase's
+    iteration-0 score, so no phase is at it from the start (the floor)."""
     assert main(TINY + ["--threshold", "-10", "--out", str(tmp_path)]) == 0
     first = json.loads((study / "transfer_study.json").read_text())["rows"]
     again = json.loads((tmp_path / "transfer_study.json").read_text())["rows"]
-    strip = lambda rows: [{k: v for k, v in r.items()  # noqa: E731
-                           if k not in ("time_to_threshold", "reached", "scores", "threshold")}
-                          for r in rows]
-    assert strip(again) == strip(first)
-    assert all(r["reached"] and r["time_to_threshold"] == 0 for r in again)
-    assert [r["scores"][:2] for r in again] == [r["scores"][:2] for r in first]
+    measured = ("collisions_per_1000", "score_auc", "start_score", "scores", "collisions",
+                "phase_seed", "eval_seed")
+    assert [{k: r[k] for k in measured} for r in again] == \
+        [{k: r[k] for k in measured} for r in first]
+    best = max(r["start_score"] for r in again)
+    assert all(r["threshold_base"] == -10 and r["threshold"] > best for r in again)
+    assert not any(r["reached"] and r["time_to_threshold"] == 0 for r in again)
+    text = (tmp_path / "transfer_study.md").read_text()
+    assert "| 21 of 21 | 0 of 21 |" in text     # at the unlifted threshold, at the one used
+
+
+def test_learning_phases_are_seeded_per_source_seed(study):
+    """No pseudo-replication: the zeros source has one table for every source seed, so its
+    learning phases differ between seeds only through their seeds; they must differ (with one
+    target seed shared by every source seed they were the same phase, 10.2 +- 0). Within a
+    source seed every source learns from the same seeds (paired)."""
+    rows = json.loads((study / "transfer_study.json").read_text())["rows"]
+    zeros = [(r["scores"], r["collisions"]) for r in rows if r["condition"] == "zeros"]
+    assert len(zeros) == 3
+    assert zeros[0] != zeros[1] and zeros[0] != zeros[2] and zeros[1] != zeros[2]
+    seeds = {s: {(r["phase_seed"], r["eval_seed"]) for r in rows if r["source_seed"] == s}
+             for s in (1, 2, 3)}
+    assert all(len(v) == 1 for v in seeds.values())          # paired within a seed
+    assert len(set.union(*seeds.values())) == 3              # independent across seeds
 
 
 def test_study_writes_its_files(study):
@@ -76,7 +95,10 @@ def test_a_run_that_never_reaches_the_threshold_is_censored(study):
     times = [c for c in doc["claims"] if c["measure"] == "time_to_threshold"]
     assert all(c["method"] == "censored, paired (KM medians)" and c["censored"] == [3, 3]
                for c in times)
-    assert all(c["known"] == "unknown" for c in times)
+    # every resample allows any difference: no verdict, no p, outside the Holm family
+    assert all(c["known"] == "unknown" and c["p"] is None and c["p_holm"] is None
+               and c["verdict"] == "cannot judge (every resample gives the same difference, "
+                                   "[-inf, inf])" for c in times)
     assert "3 of 3 censored" in (study / "transfer_study.md").read_text()
     with open(study / "tidy.csv", newline="") as fh:
         reached = [float(r["value"]) for r in csv.DictReader(fh) if r["metric"] == "reached@h1"]
@@ -107,8 +129,11 @@ def rows_of(fed: list[float], ctrl: list[float], ctrl_seeds=(1, 2, 3), times=Non
         for i, (s, v) in enumerate(zip(seeds, vals)):
             t, ok = times[i] if times else (100.0, True)
             out.append({"condition": cond, "source_seed": s, "pair_seed": s, "arena": "h1",
-                        "target_seed": 1, "collisions_per_1000": v, "time_to_threshold": t,
-                        "reached": ok, "scores": [(0, 0.0)], "collisions": [(0, 0)]})
+                        "target_seed": 1, "phase_seed": 1_001_001, "eval_seed": 1_001_501,
+                        "collisions_per_1000": v, "score_auc": 0.5, "start_score": 0.1,
+                        "time_to_threshold": t, "reached": ok, "threshold": 0.4,
+                        "threshold_base": 0.4, "threshold_from": "given 0.4",
+                        "scores": [(0, 0.1), (1000, 0.9)], "collisions": [(0, 0), (1000, 1)]})
     return out
 
 
@@ -155,7 +180,11 @@ def test_censored_times_use_kaplan_meier_and_are_counted():
         r["time_to_threshold"], r["reached"] = 1000.0, False
     c0 = claim(fast, FED, "standalone_r1", "time_to_threshold")
     assert c0.estimate.known == "at most" and c0.estimate.mean == -1000.0
-    assert c0.judgement.words() == "holds"      # -inf .. 0 - 1000: below 0 in every resample
+    # -inf .. 0 - 1000 in every resample: the spread between seeds unseen, so no verdict
+    # (it was "holds" with p = 0)
+    assert c0.words() == "cannot judge (every resample gives the same difference, " \
+                         "[-inf, -1,000])"
+    assert math.isnan(c0.judgement.p)
     uncensored = claim(rows_of([1, 2, 3], [1, 2, 3]), FED, "standalone_r1", "time_to_threshold")
     assert uncensored.method == "paired" and uncensored.censored == (0, 0)
     opts = StudyOptions(source_seeds=(1, 2, 3), targets=("h1",))
