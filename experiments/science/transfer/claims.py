@@ -200,7 +200,8 @@ def degenerate(estimate: Interval | CensoredDifference) -> str | None:
     """Why an interval cannot carry a verdict, or None when it can: zero width (a t interval
     of differences that are the same in every seed, a bootstrap interval whose ends meet) or
     a bootstrap whose every resample gives the same difference (its ends then say nothing of
-    the spread between seeds: its p-value would be 0 or 1 by construction)."""
+    the spread between seeds: its p-value would be 0 or 1 by construction), or one open at
+    both ends (-inf, inf: it excludes nothing, its p-value is 1 by construction)."""
     if isinstance(estimate, CensoredDifference):
         d = estimate.draws
         if len(d) and bool((d == d[0]).all()):
@@ -209,6 +210,9 @@ def degenerate(estimate: Interval | CensoredDifference) -> str | None:
             return f"every resample gives the same difference, {said}"
         if estimate.low == estimate.high:
             return f"zero width: every resample's difference is {_cell(estimate.low)}"
+        if math.isinf(estimate.low) and math.isinf(estimate.high):
+            return ("open at both ends: in most resamples a source never reached the "
+                    "threshold, the difference is unbounded")
         return None
     if estimate.half == 0.0:
         return f"zero width: the difference is {_cell(estimate.mean)} in every seed"

@@ -69,7 +69,8 @@ def test_claim_pairs_censored_times_of_matched_sources():
     assert paired.judgement.words() == "holds"
     unpaired = claim(rows(ctrl_seeds=(4, 5, 6)), FED, CTRL, "time_to_threshold", resamples=2000)
     assert unpaired.method == "censored (KM medians)" and unpaired.estimate.high == math.inf
-    assert unpaired.judgement.words().startswith("not significant at n = 3")
+    # unpaired, most resamples leave a median beyond the budget: open at both ends, no verdict
+    assert unpaired.words().startswith("cannot judge (open at both ends")
 
 
 def test_paired_needs_the_same_seeds():

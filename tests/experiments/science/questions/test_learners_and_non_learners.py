@@ -1,0 +1,95 @@
+"""Question L on real training and real evaluations (pybullet, small budgets), judged through
+``dfrl paper --from``: fed a clearly learnt run, L holds; fed non-learners as its "real" runs
+(the untrained table, a uniform random policy), no L contrast holds; the learning control's
+check includes 0.
+
+Budget chosen by measurement: standalone Q-learning, arenas R1 and R2, 6,000 iterations,
+seeds 1-4; greedy evaluations of 400 steps in episodes of 100 in the own arena and h1, the
+evaluation seed 50,000 + seed as ``dfrl paper`` evaluates.
+"""
+import subprocess
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dfrl.experiments.science.questions.evaluations import Evaluation, write_evaluations
+from dfrl.experiments.science.reproduce import EVAL_SEED, PaperOptions, control_trainer
+from dfrl.experiments.science.studies.history import COLLISION_COST
+from dfrl.robots.evaluation import PolicyKind, evaluate_policy
+from dfrl.robots.training import TrainerConfig, train
+
+SEEDS = (1, 2, 3, 4)
+ARENAS = ("r1", "r2")
+ITERATIONS = 6000
+STEPS, EPISODE = 400, 100
+KINDS = ("trained", "control", "zeros", "random")
+
+
+def _evaluations(kind: str, seed: int, arena: str) -> list[tuple]:
+    cfg = TrainerConfig(arena=arena, seed=1000 * seed, iterations=ITERATIONS)
+    if kind == "trained":
+        q = train(cfg).q_table
+    elif kind == "control":
+        q = train(TrainerConfig.from_dict(control_trainer(cfg.to_dict(), PaperOptions()))).q_table
+    else:
+        q = np.zeros((81, 3))
+    out = []
+    for where, role in ((arena, "own"), ("h1", "held_out")):
+        r = evaluate_policy(cfg.replace(arena=where),
+                            PolicyKind.RANDOM if kind == "random" else PolicyKind.GREEDY,
+                            STEPS, EVAL_SEED + seed, q_table=q, episode_steps=EPISODE)
+        out.append((kind, seed, arena, where, role,
+                    r.progress - COLLISION_COST * r.collisions_per_1000,
+                    r.collisions_per_1000, r.progress))
+    return out
+
+
+@pytest.fixture(scope="module")
+def measured() -> dict[str, list[tuple]]:
+    with ProcessPoolExecutor(2) as pool:
+        futs = [pool.submit(_evaluations, k, s, a) for k in KINDS for s in SEEDS for a in ARENAS]
+        rows = [r for f in futs for r in f.result()]
+    return {k: [r for r in rows if r[0] == k] for k in KINDS}
+
+
+def _folder(tmp: Path, as_real: str, measured: dict[str, list[tuple]]) -> Path:
+    """A study folder whose ``standalone/qlearning`` is ``as_real`` (the untrained table may
+    be both that and itself)."""
+    evals = []
+    for kind, run in ((as_real, "standalone/qlearning"), ("control", "control/standalone/qlearning"),
+                      ("zeros", "untrained")):
+        evals += [Evaluation(run, seed, arena, arena, ITERATIONS, where, role, score, coll, prog)
+                  for (_k, seed, arena, where, role, score, coll, prog) in measured[kind]]
+    d = tmp / as_real
+    d.mkdir()
+    write_evaluations(d / "evaluations.csv", evals)
+    return d
+
+
+def _judge(d: Path) -> str:
+    r = subprocess.run([sys.executable, "-m", "dfrl", "paper", "--from", str(d)],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    return r.stdout
+
+
+def test_the_learning_control_learns_nothing(measured, tmp_path):
+    out = _judge(_folder(tmp_path, "trained", measured))
+    assert "check  control/standalone/qlearning: includes 0" in out, out
+
+
+def test_a_clearly_learnt_run_holds(measured, tmp_path):
+    out = _judge(_folder(tmp_path, "trained", measured))
+    assert "L  standalone/qlearning: holds" in out, out
+
+
+@pytest.mark.parametrize("as_real", ["zeros", "random"])
+def test_non_learners_as_real_runs_hold_no_l_contrast(measured, tmp_path, as_real):
+    d = _folder(tmp_path, as_real, measured)
+    out = _judge(d)
+    assert "L  standalone/qlearning: holds" not in out, out
+    rows = (d / "questions.csv").read_text().splitlines()
+    assert not [r for r in rows if r.startswith("L,") and ",holds," in r]
