@@ -37,7 +37,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec
 from dfrl.experiments.driver.config_check import BUILTIN_METHODS
@@ -52,7 +52,8 @@ from dfrl.experiments.science.studies.fedsim import AGGREGATIONS, federate
 from dfrl.robots.learners import learner_kind
 from dfrl.robots.training import StepMetrics, Trainer, TrainerConfig
 
-__all__ = ["Replica", "replica_problems", "replica_trainer_configs", "run_replica"]
+__all__ = ["Replica", "replica_job", "replica_problems", "replica_trainer_configs",
+           "run_replica"]
 
 #: The line of ``summary.md`` that tells a replica from a driver run.
 REPLICA_LINE = ("- replicated in one process (dfrl.experiments.science.fed_replicas): no robot "
@@ -189,6 +190,14 @@ def run_replica(cfg: ExperimentConfig, out: str | Path, *, force: bool = False,
     wall = time.monotonic() - t0
     _write_summary(out, cfg, wall, shares)
     return Replica(out, cfg, wall, shares)
+
+
+def replica_job(cfg_dict: dict[str, Any], out: str, force: bool = True) -> dict[str, Any]:
+    """:func:`run_replica` as a process-pool job (plain data in and out): the config's
+    :meth:`~ExperimentConfig.to_dict`, the folder; returns ``{"out", "wall_time_s",
+    "shares"}``."""
+    rep = run_replica(ExperimentConfig.from_dict(cfg_dict), out, force=force)
+    return {"out": str(rep.output_dir), "wall_time_s": rep.wall_time_s, "shares": rep.shares}
 
 
 def _save_history(folder: Path, robot: str, iteration: int, trainer: Trainer) -> None:

@@ -4,6 +4,7 @@ robot's final table and visit counts, its table history at every share and ``met
 (the sum of Q and the cumulative reward of every robot at every iteration, as ``repr``)."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -12,8 +13,11 @@ import pytest
 from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec, resolve_config
 from dfrl.experiments.driver.launcher import run
 from dfrl.experiments.processes import find_swipl
-from dfrl.experiments.science.fed_replicas import REPLICA_LINE, replica_problems, run_replica
+from dfrl.experiments.driver.results.metrics import read_metrics
+from dfrl.experiments.science.fed_replicas import (REPLICA_LINE, replica_job,
+                                                   replica_problems, run_replica)
 from dfrl.experiments.science.paper_runs import recorded_wall
+from dfrl.experiments.science.reproduce import PaperOptions, paper_configs
 from dfrl.experiments.science.studies.fedsim import AGGREGATIONS
 from dfrl.experiments.science.studies.history import history_tables
 
@@ -64,15 +68,20 @@ def run_both(cfg: ExperimentConfig, tmp_path: Path) -> tuple[Path, Path]:
     return driver, replica
 
 
+#: The federated runs of one seed of ``dfrl paper`` (its configs, controls included), short.
+SHORT = PaperOptions(iterations=600, respite=100)
+
+
 @needs_swipl
 @pytest.mark.slow
-@pytest.mark.parametrize("algo,method", [("qlearning", "average"), ("sarsa", "max"),
-                                         ("qlearning", "max"), ("sarsa", "average")])
-def test_paper_run_and_replica_are_bit_identical(tmp_path: Path, algo: str, method: str) -> None:
-    """Five robots in r1..r5, 600 iterations, a share every 100 (six shares)."""
-    cfg = paper_config(algo, method, iterations=600, respite=100, timeout_s=600)
+@pytest.mark.parametrize("key", [k for k, _ in paper_configs(SHORT, 1)])
+def test_paper_run_and_replica_are_bit_identical(tmp_path: Path, key: str) -> None:
+    """Every federated config of ``dfrl paper`` (Q-learning/SARSA x average/max, the
+    off-policy reference, the shuffled-reward control): five robots in r1..r5, 600
+    iterations, a share every 100 (six shares), seed 2."""
+    cfg = dict(paper_configs(SHORT, 2))[key].replace(timeout_s=600)
     driver, replica = run_both(cfg, tmp_path)
-    assert len(history_tables(driver)["r1"]) == 6
+    assert sorted(history_tables(driver)["r5"]) == [100, 200, 300, 400, 500, 600]
     assert differences(driver, replica) == []
 
 
@@ -115,3 +124,22 @@ def test_max_keeps_the_earlier_of_equal_values() -> None:
     w = [np.zeros((1, 2))] * 2
     got = AGGREGATIONS["max"]([np.array([[-0.0, 0.0]]), np.array([[0.0, -0.0]])], w)
     assert np.signbit(got).tolist() == [[True, False]]
+
+
+def test_replica_job_writes_what_the_paper_reads(tmp_path: Path) -> None:
+    """The pool job's folder holds what FederatedRuns and the report read: metrics.csv (every
+    robot, every iteration), the table history at every share, summary.md's wall time."""
+    cfg = paper_config("sarsa", "max", iterations=45, respite=20)
+    got = replica_job(cfg.to_dict(), str(tmp_path / "run"))
+    out = Path(got["out"])
+    assert got["shares"] == 3 and recorded_wall(out) == pytest.approx(got["wall_time_s"], abs=0.06)
+    curves = read_metrics(out / "metrics.csv")
+    assert sorted(curves) == ["r1", "r2", "r3", "r4", "r5"]
+    assert all(c["iteration"][:45].tolist() == list(range(1, 46)) for c in curves.values())
+    hist = history_tables(out)
+    assert {r: sorted(f) for r, f in hist.items()} == {f"r{i}": [20, 40, 45] for i in range(1, 6)}
+    final = np.load(out / "tables" / "r3.npy")
+    assert np.array_equal(final, np.load(hist["r3"][45]))
+    assert json.loads((out / "config.json").read_text())["method"] == "max"
+    with pytest.raises(FileExistsError):
+        run_replica(cfg, out)
