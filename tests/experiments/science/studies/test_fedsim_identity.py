@@ -74,13 +74,15 @@ SHORT = PaperOptions(iterations=600, respite=100)
 
 @needs_swipl
 @pytest.mark.slow
-@pytest.mark.parametrize("key", [k for k, _ in paper_configs(SHORT, 1)])
+@pytest.mark.parametrize("key", [k for k, _ in paper_configs(SHORT, 1)] + ["visit_average"])
 def test_paper_run_and_replica_are_bit_identical(tmp_path: Path, key: str) -> None:
     """Every federated config of ``dfrl paper`` (Q-learning/SARSA x average/max, the
-    off-policy reference, the shuffled-reward control): five robots in r1..r5, 600
-    iterations, a share every 100 (six shares), seed 2."""
-    cfg = dict(paper_configs(SHORT, 2))[key].replace(timeout_s=600)
-    driver, replica = run_both(cfg, tmp_path)
+    off-policy reference, the shuffled-reward control), and the third built-in method on
+    Q-learning: five robots in r1..r5, 600 iterations, a share every 100 (six shares), seed 2."""
+    configs = dict(paper_configs(SHORT, 2))
+    cfg = (configs[key] if key in configs else
+           configs["qlearning/average"].replace(method=key, name=f"qlearning_{key}"))
+    driver, replica = run_both(cfg.replace(timeout_s=600), tmp_path)
     assert sorted(history_tables(driver)["r5"]) == [100, 200, 300, 400, 500, 600]
     assert differences(driver, replica) == []
 
