@@ -10,6 +10,16 @@ The aggregation maths are pure functions over arrays, registered by name in
 :data:`AGGREGATIONS`; they mirror the agent's built-in methods (``average``, ``max``,
 ``visit_average``, platform_pl/dfrl_agent/dfrl_aggregation.pl) and the injectable ``max_visited``
 (platform_pl/dfrl_agent/examples/max_visited.pl); tests check them against hand-computed tables.
+
+The built-in three fold the tables as the agent's forward pass does, bit for bit: one table
+after the other in itinerary order (the config's robot order), each element the C library's
+operation (platform_pl/native/float_vectors.c): ``average`` adds ``((q1 + q2) + q3) ...`` and
+divides the sum by the count; ``max`` keeps the aggregate unless it is below the next value
+(``(p < q) ? q : p``, so of 0.0 and -0.0 the first one stays); ``visit_average`` folds
+``q * w``, ``w`` (visit counts as float64) and ``q`` the same way and takes ``qw / w`` where
+``w > 0``, else ``q / n``. With the same seeds a sync run of the agent (``dfrl run``) and
+:func:`federate` give the same tables, curves and table history
+(:mod:`dfrl.experiments.science.fed_replicas`, tested in ``test_fedsim_identity.py``).
 """
 from __future__ import annotations
 
@@ -18,12 +28,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dfrl.robots.training import Trainer, TrainerConfig
+from dfrl.robots.training import StepMetrics, Trainer, TrainerConfig
 
 Aggregation = Callable[[Sequence[np.ndarray], Sequence[np.ndarray]], np.ndarray]
 #: Called every ``observe_every`` iterations with the iteration (per robot) and the trainers
 #: (after any share at that iteration); returns True to stop the federation there.
 Observer = Callable[[int, Sequence[Trainer]], bool]
+#: Called after every step of every robot with the robot's index and the step's metrics.
+StepHook = Callable[[int, StepMetrics], None]
+#: Called after every share with the iteration (per robot) and the trainers, each holding the
+#: aggregate (what a robot process records at a share: its table history).
+ShareHook = Callable[[int, Sequence[Trainer]], None]
 
 
 def _check(tables: Sequence[np.ndarray], visits: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -38,26 +53,42 @@ def _check(tables: Sequence[np.ndarray], visits: Sequence[np.ndarray]) -> tuple[
     return q, w
 
 
+def _fold(arrays: np.ndarray, step: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> np.ndarray:
+    """``step(step(a0, a1), a2) ...``: the agent's fold over its forward pass, in order."""
+    acc = arrays[0].copy()
+    for a in arrays[1:]:
+        acc = step(acc, a)
+    return acc
+
+
+def _keep_unless_below(acc: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """``(acc < q) ? q : acc`` element-wise (the C library's max)."""
+    return np.where(acc < q, q, acc)
+
+
 def aggregate_average(tables: Sequence[np.ndarray], visits: Sequence[np.ndarray]) -> np.ndarray:
-    """Element-wise mean, shape (n_states, n_actions)."""
+    """Element-wise mean, shape (n_states, n_actions): the tables added in order, divided by
+    their count."""
     q, _ = _check(tables, visits)
-    return q.mean(axis=0)
+    return _fold(q, np.add) / float(len(q))
 
 
 def aggregate_max(tables: Sequence[np.ndarray], visits: Sequence[np.ndarray]) -> np.ndarray:
-    """Element-wise maximum."""
+    """Element-wise maximum (of equal values, 0.0 and -0.0, the earlier table's)."""
     q, _ = _check(tables, visits)
-    return q.max(axis=0)
+    return _fold(q, _keep_unless_below)
 
 
 def aggregate_visit_average(tables: Sequence[np.ndarray],
                             visits: Sequence[np.ndarray]) -> np.ndarray:
     """Mean weighted by visit counts; entries nobody visited get the plain mean."""
     q, w = _check(tables, visits)
-    tot = w.sum(axis=0)
+    qw = _fold(q * w, np.add)
+    tot = _fold(w, np.add)
+    plain = _fold(q, np.add) / float(len(q))
     with np.errstate(invalid="ignore", divide="ignore"):
-        weighted = (q * w).sum(axis=0) / tot
-    return np.where(tot > 0, weighted, q.mean(axis=0))
+        weighted = qw / tot
+    return np.where(tot > 0, weighted, plain)
 
 
 def aggregate_max_visited(tables: Sequence[np.ndarray],
@@ -111,7 +142,8 @@ class Federation:
 def federate(configs: Sequence[TrainerConfig], iterations: int, respite: int,
              method: str = "average", snapshot_every: int = 0,
              initial: np.ndarray | None = None, observe: Observer | None = None,
-             observe_every: int = 0, final_share: bool = True) -> Federation:
+             observe_every: int = 0, final_share: bool = True,
+             on_step: StepHook | None = None, on_share: ShareHook | None = None) -> Federation:
     """Train one robot per config for ``iterations`` steps each, aggregating every
     ``respite`` (a single config with ``method`` anything is a standalone run).
 
@@ -134,6 +166,9 @@ def federate(configs: Sequence[TrainerConfig], iterations: int, respite: int,
     final_share : bool
         Also share after the last iteration when it is not a multiple of ``respite`` (as the
         agent's last round does); False keeps every share on the ``respite`` schedule.
+    on_step, on_share : StepHook, ShareHook, optional
+        Record each step and each share as they happen (e.g. the files of a run folder:
+        :func:`dfrl.experiments.science.fed_replicas.run_replica`).
 
     Raises
     ------
@@ -162,10 +197,14 @@ def federate(configs: Sequence[TrainerConfig], iterations: int, respite: int,
             for k, t in enumerate(trainers):
                 m = t.step()
                 q_sum[k, i], reward[k, i] = m.q_sum, m.cumulative_reward
+                if on_step is not None:
+                    on_step(k, m)
             if (i + 1) % respite == 0 or (final_share and i + 1 == iterations):
                 table = agg([t.q_table for t in trainers], [t.visits for t in trainers])
                 for t in trainers:
                     t.set_q_table(table)
+                if on_share is not None:
+                    on_share(i + 1, trainers)
                 rounds += 1
                 if (snapshot_every and rounds % snapshot_every == 0) or i + 1 == iterations:
                     snaps[i + 1] = table.copy()
