@@ -55,7 +55,7 @@ from dfrl.experiments.driver.results.tables import table_sum
 from dfrl.experiments.provenance import describe, read_provenance, write_provenance
 from dfrl.experiments.robot_host.checkpoint import save_learnt_atomically
 from dfrl.experiments.robot_host.config import Mode, RobotConfig, boundaries
-from dfrl.experiments.robot_host.files import METRIC_FIELDS, CsvLog
+from dfrl.experiments.robot_host.files import METRIC_FIELDS, SHARE_FIELDS, CsvLog, share_row
 from dfrl.experiments.science.studies.fedsim import AGGREGATIONS, federate
 from dfrl.robots.learners import learner_kind
 from dfrl.robots.training import StepMetrics, Trainer, TrainerConfig
@@ -169,6 +169,7 @@ def run_replica(cfg: ExperimentConfig, out: str | Path, *, force: bool = False,
     history = out / "tables" / "history"
     history.mkdir(parents=True, exist_ok=True)
     logs = [CsvLog(out / f"metrics_{rid}.csv", METRIC_FIELDS) for rid in ids]
+    share_logs = [CsvLog(out / f"shares_{rid}.csv", SHARE_FIELDS) for rid in ids]
     planned = boundaries(cfg.iterations, cfg.respite)
     shares = 0
 
@@ -179,8 +180,10 @@ def run_replica(cfg: ExperimentConfig, out: str | Path, *, force: bool = False,
     def on_share(iteration: int, trainers: Sequence[Trainer]) -> None:
         nonlocal shares
         shares += 1
-        for rid, t in zip(ids, trainers):
+        for k, (rid, t) in enumerate(zip(ids, trainers)):
             _save_history(history, rid, iteration, t)
+            share_logs[k].row(share_row(rid, shares, iteration, t.q_table, {"round": shares},
+                                        float(t.q_table.sum())))
         if iteration == cfg.iterations:             # the robots' final save
             for rid, t in zip(ids, trainers):
                 save_learnt_atomically(t, out, rid)
@@ -192,7 +195,7 @@ def run_replica(cfg: ExperimentConfig, out: str | Path, *, force: bool = False,
         federate([c for _, c in robots], cfg.iterations, cfg.respite,
                  cfg.method_for(robots[0][0].algo), on_step=on_step, on_share=on_share)
     finally:
-        for log in logs:
+        for log in logs + share_logs:
             log.close()
     merge_metrics(out, ids)
     wall = time.monotonic() - t0
