@@ -140,6 +140,9 @@ def register_paper(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-control", action="store_true",
                    help="skip the untrained table and the learning controls (question L then "
                         "cannot be judged)")
+    p.add_argument("--driver", action="store_true",
+                   help="run every federated run through `dfrl run` (robot processes and the "
+                        "dFRL agent) instead of the bit-identical in-process replica")
     p.add_argument("--diagnostics", action="store_true",
                    help="also run the off-policy reference (Q-learning from random behaviour, "
                         "epsilon 1), a diagnostic")
@@ -199,6 +202,7 @@ def cmd_paper(args: argparse.Namespace) -> int:
                         respite=args.respite,
                         points=args.eval_points, eval_steps=args.eval_steps, jobs=args.jobs,
                         control=not args.no_control, diagnostics=args.diagnostics,
+                        driver=args.driver,
                         skip_existing=args.skip_existing, deltas=tuple(deltas.items()),
                         **({} if args.shuffle_buffer is None
                            else {"shuffle_buffer": args.shuffle_buffer}))

@@ -21,6 +21,8 @@ What it writes into ``out`` (the driver's names and formats):
 - ``metrics_<robot>.csv`` (a robot process's rows: iteration, ``repr`` of the sum of Q and of
   the cumulative reward, collisions) and ``metrics.csv`` merged from them
   (:func:`~dfrl.experiments.driver.results.metrics.merge_metrics`, the driver's own);
+- ``shares_<robot>.csv``: one row per share (its round, the table's digest and sum), from
+  which the merge marks ``metrics.csv``'s ``shared`` column;
 - ``tables/history/<robot>_it<N>.npy``: the table after every share (N: the robot's
   iteration), what :func:`~dfrl.experiments.science.studies.history.history_tables` reads;
 - ``tables/<robot>.npy`` + ``.json`` + ``.visits.npy``: the final table, as a robot saves it;
@@ -28,7 +30,7 @@ What it writes into ``out`` (the driver's names and formats):
   :func:`~dfrl.experiments.science.paper_runs.recorded_wall` reads) and a line saying the run
   was replicated in one process.
 
-No ``rounds.csv``, agent logs, shares files, checkpoints or plots: there is no agent.
+No ``rounds.csv``, agent logs, checkpoints or plots: there is no agent.
 
 Cost (``paper_qlearning_average``, 15,000 iterations, seed 1, this 2-core machine otherwise
 quiet): the driver 21.2 s wall, 37.4 s CPU over both cores; a replica 28.4 s wall on one core

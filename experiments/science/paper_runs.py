@@ -8,6 +8,7 @@ import re
 import signal
 import time
 from collections.abc import Sequence
+from concurrent.futures import Executor, Future, as_completed
 from pathlib import Path
 from typing import TextIO
 
@@ -15,6 +16,7 @@ import numpy as np
 
 from dfrl.experiments.driver.config import ExperimentConfig
 from dfrl.experiments.driver.launcher import run
+from dfrl.experiments.science.fed_replicas import replica_job
 from dfrl.experiments.science.cluster_runs import (ClusterOptions, Finished, run_on_cluster,
                                                     runs_at_once)
 from dfrl.experiments.science.studies.history import Evaluator, PendingRows, history_tables, pick
@@ -102,6 +104,34 @@ class FederatedRuns:
                 ok = ok and done.ok
                 self._queue(s, key, cfg, d)
         return ok
+
+    def in_pool(self, configs: SeedConfigs, pool: Executor) -> list[Future]:
+        """Submit every run as an in-process replica (:mod:`..fed_replicas`, bit-identical to
+        a sync ``dfrl run``) to ``pool``; return the futures, in order. :meth:`collect` waits
+        for them and queues their evaluations."""
+        self._submitted: list[tuple[int, str, ExperimentConfig, Path, Future]] = []
+        for s, cfgs in configs.items():
+            for key, cfg in cfgs:
+                d = self._folder(s, cfg)
+                if self._reuse(s, key, cfg, d):
+                    continue
+                fut = pool.submit(replica_job, cfg.to_dict(), str(d))
+                self._submitted.append((s, key, cfg, d, fut))
+        return [f for *_, f in self._submitted]
+
+    def collect(self, configs: SeedConfigs) -> bool:
+        """Wait for the replicas :meth:`in_pool` submitted, queue each one's evaluations as it
+        ends; True (a replica that fails raises)."""
+        by_future = {f: (s, key, cfg, d) for s, key, cfg, d, f in self._submitted}
+        for fut in as_completed(by_future):
+            s, key, cfg, d = by_future[fut]
+            self.walls[f"seed{s}/{key}"] = fut.result()["wall_time_s"]
+            self._say(f"== {d.parent.name}/{cfg.name}: replica done in "
+                      f"{self.walls[f'seed{s}/{key}']:.0f} s")
+            self._queue(s, key, cfg, d)
+        order = [(s, key) for s, cfgs in configs.items() for key, _ in cfgs]
+        self.pendings = {k: self.pendings[k] for k in order if k in self.pendings}
+        return True
 
     def on_cluster(self, configs: SeedConfigs, cluster: ClusterOptions) -> bool:
         """Run every one on ``cluster``, as many at once as it holds; False if any failed.

@@ -1,8 +1,8 @@
 """``dfrl paper``: the paper's experiment K times, greedy evaluations, the questions judged.
 
-For every seed (:func:`plan`): the federated conditions (Q-learning / SARSA x average / max and
-Q-learning / visit_average, five robots in R1..R5, ``experiments/configs/paper_*.json``, real
-robot processes and the dFRL agent), the standalone conditions (each arena alone, with the
+For every seed (:func:`paper_configs`, :func:`standalone_plan`): the federated conditions
+(Q-learning / SARSA x average / max and Q-learning / visit_average, five robots in R1..R5,
+``experiments/configs/paper_*.json``), the standalone conditions (each arena alone, with the
 seed its federated robot has), the learning controls, runs that cannot learn what question L
 asks, through the same pipeline (federated average and standalone of each algorithm trained
 with the control's rewards, the ``reward_shuffle`` trainer option), the untrained table, and
@@ -20,8 +20,13 @@ Layout of ``OUT``: ``seed<S>/<config name>/`` (a federated results folder),
 evaluations`), ``questions.csv`` and ``contrasts_by_seed.csv`` (every number a verdict uses),
 ``figures/``, ``report.md`` (:mod:`dfrl.experiments.science.report.paper`),
 ``provenance.json`` and ``tidy.csv`` (every curve and evaluation, one value per row).
-Federated runs go one after another (each uses both cores); standalone trainings and
-evaluations run meanwhile on a pool of ``jobs`` processes. SIGTERM or Ctrl-C stops the whole
+**Which runs use which.** Every federated run is by default an in-process replica
+(:mod:`.fed_replicas`: the same trainers, seeds, share boundaries and folds as a sync ``dfrl
+run``, bit-identical in tables, curves and history, which
+``tests/experiments/science/studies/test_fedsim_identity.py`` checks for every config this
+module makes), on the pool of ``jobs`` processes beside the standalone trainings and the
+evaluations; with ``driver`` (``--driver``) each goes through ``dfrl run`` (robot processes,
+the platform and the dFRL agent) one after another, and with ``cluster`` on a Dask cluster. SIGTERM or Ctrl-C stops the whole
 study (the current run stops cleanly, pending jobs are cancelled); ``--skip-existing`` then
 reuses what finished. :func:`rejudge` judges a study's folder again from its
 ``evaluations.csv`` without running anything (``dfrl paper --from``).
@@ -91,6 +96,7 @@ class PaperOptions:
     episode_steps: int = 200
     jobs: int = 2
     control: bool = True                # the learning controls and the untrained table
+    driver: bool = False                # federated runs through `dfrl run`, not replicas
     diagnostics: bool = False           # the off-policy reference (epsilon 1)
     skip_existing: bool = False
     shuffle_buffer: int = SHUFFLE_BUFFER
@@ -227,6 +233,13 @@ def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reprod
     try:
         n_states = Discretiser(TrainerConfig().discretisation).n_states
         zero = np.zeros((n_states, len(TrainerConfig().actions.names)))
+        runs = FederatedRuns(out, {s: Evaluator(pool, base_cfg, opts.eval_steps,
+                                                opts.episode_steps, EVAL_SEED + s)
+                                   for s in seeds},
+                             opts.points, HELD_OUT, opts.skip_existing, progress)
+        replicas = opts.cluster is None and not opts.driver
+        if replicas:        # the longest jobs first
+            runs.in_pool(fed_cfgs, pool)
         sa_jobs: dict[tuple[int, str, str], Future] = {}
         zero_jobs: dict[int, dict[str, Future]] = {}
         for s in seeds:
@@ -239,12 +252,12 @@ def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reprod
                 zero_jobs[s] = {a: pool.submit(eval_job, base_cfg, zero, a, opts.eval_steps,
                                                opts.episode_steps, EVAL_SEED + s)
                                 for a in arenas}
-        runs = FederatedRuns(out, {s: Evaluator(pool, base_cfg, opts.eval_steps,
-                                                opts.episode_steps, EVAL_SEED + s)
-                                   for s in seeds},
-                             opts.points, HELD_OUT, opts.skip_existing, progress)
-        ok = (runs.on_cluster(fed_cfgs, opts.cluster) if opts.cluster is not None
-              else runs.here(fed_cfgs))
+        if replicas:
+            ok = runs.collect(fed_cfgs)
+        elif opts.cluster is not None:
+            ok = runs.on_cluster(fed_cfgs, opts.cluster)
+        else:
+            ok = runs.here(fed_cfgs)
         for (s, key), (d, pending) in runs.pendings.items():
             pending.write(d / "evaluations.csv")
         for fut in sa_jobs.values():

@@ -74,7 +74,10 @@ def test_ambiguous_seeds_refused_by_every_study(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-def test_sigterm_stops_the_whole_paper(tmp_path: Path) -> None:
+@pytest.mark.parametrize("how, started", [("--driver", "nodes.json"), ("", "config.json")])
+def test_sigterm_stops_the_whole_paper(tmp_path: Path, how: str, started: str) -> None:
+    """Through the driver (robot processes up) and with in-process replicas (the first one
+    writing its folder): SIGTERM stops the study, not only the run."""
     import signal
     import time
 
@@ -86,11 +89,11 @@ def test_sigterm_stops_the_whole_paper(tmp_path: Path) -> None:
     out = tmp_path / "paper"
     proc = subprocess.Popen([sys.executable, "-m", "dfrl", "paper", "--out", str(out), "--seed",
                              "1", "--iterations", "3000", "--respite", "500", "--eval-points",
-                             "1", "--eval-steps", "50", "--jobs", "1"],
+                             "1", "--eval-steps", "50", "--jobs", "1"] + ([how] if how else []),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         # Execute: SIGTERM once the first federated run has its robots up
-        first = out / "seed1" / "paper_qlearning_average" / "nodes.json"
+        first = out / "seed1" / "paper_qlearning_average" / started
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline and proc.poll() is None and not first.is_file():
             time.sleep(0.2)
