@@ -136,7 +136,7 @@ def _shuffle_rng(seed: int) -> np.random.Generator:
 def make_trainer(candidate: str, cfg: TrainerConfig) -> Trainer:
     """A trainer whose update sees ``candidate``'s outcomes."""
     if candidate == "shuffle":
-        return Trainer(cfg.replace(reward_shuffle=BUFFER))
+        return Trainer(cfg.replace(reward_shuffle=BUFFER, reward_shuffle_mode="raw"))
     t = Trainer(cfg)
     rng = _shuffle_rng(cfg.seed)
     if candidate == "centred":
@@ -147,7 +147,7 @@ def make_trainer(candidate: str, cfg: TrainerConfig) -> Trainer:
         t.reward_shuffle = PermutedPairs(t, rng)            # type: ignore[assignment]
     elif candidate == "library":
         t.close()
-        return Trainer(cfg.replace(reward_shuffle=BUFFER, reward_control="centred"))
+        return Trainer(cfg.replace(reward_shuffle=BUFFER))
     elif candidate != "trained":
         t.close()
         raise ValueError(f"unknown candidate {candidate!r}")
