@@ -12,25 +12,29 @@ federate`) and evaluates the final table exactly as the paper does
 evaluated in every arena with the same seed. A seed's contrast is the mean over its robots'
 evaluations of (score - zero table's score in that arena), as ``greedy_gain`` computes it.
 
-Candidates (what the learner's update sees instead of the observed reward r and end flag):
+Candidates (what the learner's update sees instead of the observed reward r and end flag); the
+first three are the modes of ``reward_shuffle_mode`` (:mod:`dfrl.robots.reward_shuffle`; the
+classes here give bitwise the same tables as the library's modes):
 
 ``shuffle``
-    The shipped control before issue 34: (r, end) drawn from a seeded buffer of the last 1,000
-    observed outcomes (:class:`dfrl.robots.reward_shuffle.RewardShuffle`, uncentred).
+    ``raw``, the control before issue 34: (r, end) drawn from a seeded buffer of the last
+    1,000 observed outcomes, uncentred.
 ``centred``
     The same draw, its reward minus the mean reward of the buffer it was drawn from; the end
     flag travels with it.
+``no_bootstrap``
+    ``centred_no_bootstrap``, the default since issue 34: ``centred`` with every update
+    terminal (no bootstrap on the real next state).
 ``permuted``
     A fixed seeded permutation of the (state, action) pairs: the update of (s, a) learns the
     outcome last observed at the pair the permutation maps (s, a) to (a buffer draw until that
     pair has been seen), its reward centred by the buffer's mean: a consistent but relabelled
-    reward function.
-``no_bootstrap``
-    ``centred`` with every update terminal (no bootstrap): a diagnostic of what bootstrapping
-    on the real next state leaks.
+    reward function (not measured in issue 34, for want of compute).
+``library``
+    The trainer's own default control (``reward_shuffle=1000``).
 ``random_table``
-    No training: a table of seeded standard normal values (a deterministic policy that knows
-    nothing, the best a trained control can be).
+    No training: a table of seeded standard normal values (a fixed policy that knows nothing;
+    federated, one table for the five robots).
 ``trained``
     The ordinary learner (for scale).
 
@@ -59,7 +63,7 @@ import numpy as np
 
 from dfrl.experiments.science.statistics import interval
 from dfrl.experiments.science.studies import fedsim, history
-from dfrl.robots.reward_shuffle import RewardShuffle
+from dfrl.robots.state import Discretiser
 from dfrl.robots.training import Trainer, TrainerConfig
 
 ARENAS = ("r1", "r2", "r3", "r4", "r5")
@@ -164,6 +168,14 @@ def _describe(q: np.ndarray, visits: np.ndarray | None) -> dict[str, Any]:
     return out
 
 
+def _random_table(seed: int, k: int) -> np.ndarray:
+    """Seeded standard normal values, the shape of the default table (k: the robot, 5: the
+    federation's one table)."""
+    cfg = TrainerConfig()
+    return np.random.default_rng([seed, k, 34]).standard_normal(
+        (Discretiser(cfg.discretisation).n_states, len(cfg.actions.names)))
+
+
 def standalone_job(candidate: str, algo: str, arena: str, seed: int,
                    iterations: int) -> list[dict[str, Any]]:
     """Train one robot (the paper's seed for ``arena``) and evaluate its final table."""
@@ -171,11 +183,7 @@ def standalone_job(candidate: str, algo: str, arena: str, seed: int,
     cfg = TrainerConfig(arena=arena, algo=algo, seed=seed + k, iterations=iterations)
     t0 = time.process_time()
     if candidate == "random_table":
-        n = TrainerConfig().discretisation
-        from dfrl.robots.state import Discretiser
-        q = np.random.default_rng([seed, k, 34]).standard_normal(
-            (Discretiser(n).n_states, len(cfg.actions.names)))
-        visits = None
+        q, visits = _random_table(seed, k), None
     else:
         with make_trainer(candidate, cfg) as t:
             for _ in range(iterations):
@@ -195,16 +203,20 @@ def federated_job(candidate: str, algo: str, seed: int, iterations: int) -> list
     every robot's arena and the held-out ones (identical tables: once per arena)."""
     cfgs = [TrainerConfig(arena=a, algo=algo, seed=seed + k, iterations=iterations)
             for k, a in enumerate(ARENAS)]
-    original = fedsim.Trainer
-    fedsim.Trainer = lambda c: make_trainer(candidate, c)  # type: ignore[assignment,misc]
     t0 = time.process_time()
-    try:
-        fed = fedsim.federate(cfgs, iterations, RESPITE, "average")
-    finally:
-        fedsim.Trainer = original  # type: ignore[misc]
+    if candidate == "random_table":     # one table of random numbers for all five robots
+        table, visits = _random_table(seed, 5), None
+    else:
+        original = fedsim.Trainer
+        fedsim.Trainer = lambda c: make_trainer(candidate, c)  # type: ignore[assignment,misc]
+        try:
+            fed = fedsim.federate(cfgs, iterations, RESPITE, "average")
+        finally:
+            fedsim.Trainer = original  # type: ignore[misc]
+        table, visits = fed.table, fed.visits
     base = {"candidate": candidate, "algo": algo, "mode": "federated", "seed": seed,
-            "train_cpu": round(time.process_time() - t0, 2), **_describe(fed.table, fed.visits)}
-    scores = {a: history.eval_job(TrainerConfig().to_dict(), fed.table, a, EVAL_STEPS,
+            "train_cpu": round(time.process_time() - t0, 2), **_describe(table, visits)}
+    scores = {a: history.eval_job(TrainerConfig().to_dict(), table, a, EVAL_STEPS,
                                   EPISODE_STEPS, EVAL_SEED + seed) for a in ARENAS + HELD_OUT}
     rows = []
     for robot in ARENAS:           # one row per robot and arena, as the paper's evaluations
@@ -216,7 +228,6 @@ def federated_job(candidate: str, algo: str, seed: int, iterations: int) -> list
 
 def zero_job(seed: int) -> list[dict[str, Any]]:
     """The all-zero table in every arena with the seed's evaluation seed."""
-    from dfrl.robots.state import Discretiser
     cfg = TrainerConfig()
     q = np.zeros((Discretiser(cfg.discretisation).n_states, len(cfg.actions.names)))
     return [{"candidate": "zero", "seed": seed, "arena": a,
@@ -289,8 +300,9 @@ def contrasts(rows: list[dict[str, Any]]) -> dict[tuple, dict[str, Any]]:
                     "arena_own": {a: float(np.mean(v)) for a, v in sorted(arena.items())},
                     "fwd_share": float(np.mean(fwd)) if fwd else float("nan"),
                     "greedy0_forward": float(np.mean([g == 0 for g in g0])),
-                    "cpu": sum(r["train_cpu"] for rs in by_seed.values() for r in rs
-                               if r["arena"] == r["robot"])}
+                    "cpu": sum(rs[0]["train_cpu"] if key[2] == "federated" else
+                               sum(r["train_cpu"] for r in rs if r["arena"] == r["robot"])
+                               for rs in by_seed.values())}
     return out
 
 
