@@ -14,6 +14,7 @@ from dfrl.robots.env import EnvConfig, RewardConfig
 from dfrl.robots.epuck import EPuckConfig
 from dfrl.robots.learners import EpsilonSchedule, LearnerParams
 from dfrl.robots.linear import LinearConfig
+from dfrl.robots.reward_shuffle import DEFAULT_MODE, shuffle_mode
 from dfrl.robots.state import DiscretisationConfig
 from dfrl.robots.world import SimConfig
 
@@ -48,12 +49,19 @@ class TrainerConfig(EnvConfig):
     dqn : DQNConfig
         The ``dqn`` learner's network, replay and optimiser.
     reward_shuffle : int
-        0 (the default): the learner learns from the reward the robot earned. ``W > 0``: a
-        negative control, the learner learns from rewards (each with its end-of-episode flag)
-        shuffled through a buffer of ``W`` observed ones
+        0 (the default): the learner learns from the reward the robot earned. ``W > 0``: the
+        learning control, the learner learns from outcomes (reward and end-of-episode flag)
+        drawn through a shuffle buffer of ``W`` observed ones
         (:class:`dfrl.robots.reward_shuffle.RewardShuffle`, drawn from a third stream of
-        ``seed``), so that neither depends on the state and action; the metrics still record
-        the reward earned. Any learner.
+        ``seed``), so that nothing it learns depends on the state and action; the metrics still
+        record the reward earned. Any learner.
+    reward_shuffle_mode : str
+        What the control learns from the drawn outcome, a
+        :class:`dfrl.robots.reward_shuffle.ShuffleMode` value: ``"centred_no_bootstrap"`` (the
+        default: the reward minus the buffer's mean, every update terminal), ``"centred"``
+        (the end flag drawn with it, bootstrapping kept) or ``"raw"`` (the outcome as drawn:
+        the control before issue 34, which configurations written before it meant). Only
+        used with ``reward_shuffle > 0``.
     sim : SimConfig
         Control/physics rates, solver, robot.
     actions : ActionSet
@@ -71,6 +79,7 @@ class TrainerConfig(EnvConfig):
     linear: LinearConfig = field(default_factory=LinearConfig)
     dqn: DQNConfig = field(default_factory=DQNConfig)
     reward_shuffle: int = 0
+    reward_shuffle_mode: str = DEFAULT_MODE.value
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -79,6 +88,8 @@ class TrainerConfig(EnvConfig):
         if not isinstance(self.reward_shuffle, int) or self.reward_shuffle < 0:
             raise ValueError(f"reward_shuffle must be an int >= 0 (0: off), got "
                              f"{self.reward_shuffle!r}")
+        object.__setattr__(self, "reward_shuffle_mode",
+                           shuffle_mode(self.reward_shuffle_mode).value)
 
     def env_config(self) -> EnvConfig:
         """The environment part of the configuration."""
@@ -89,13 +100,15 @@ class TrainerConfig(EnvConfig):
     def to_dict(self, full: bool = False) -> dict[str, Any]:
         """JSON-ready nested dict (enums as their values).
 
-        ``reward_shuffle`` is left out while it is off (0) unless ``full``: the JSON of every
-        ordinary configuration, and every name hashed from it (reference tables), stays as it
-        was before the option existed; ``full`` lists every field (what a config checker
-        accepts)."""
+        ``reward_shuffle`` and ``reward_shuffle_mode`` are left out while the control is off
+        (``reward_shuffle`` 0) unless ``full``: the JSON of every ordinary configuration, and
+        every name hashed from it (reference tables), stays as it was before the options
+        existed; ``full`` lists every field (what a config checker accepts). With the control
+        on, both are written, so a run's ``config.json`` says which control it ran."""
         d = to_jsonable(self)
         if not full and not self.reward_shuffle:
             d.pop("reward_shuffle")
+            d.pop("reward_shuffle_mode")
         return d
 
     @classmethod

@@ -13,9 +13,10 @@ bootstrap), and the robot respawns at a random free pose. If the robot moves les
 ``stuck_distance`` in ``stuck_steps`` steps it also respawns (a truncation: the update still
 bootstraps). ``iteration`` keeps counting across respawns.
 
-With ``reward_shuffle`` (a negative control) the update learns from a shuffled reward and
-end-of-episode flag (:mod:`dfrl.robots.reward_shuffle`) while the robot still respawns after
-a collision and the metrics keep the reward earned.
+With ``reward_shuffle`` (the learning control) the update learns from a shuffled outcome,
+by default its reward centred and every update terminal (``reward_shuffle_mode``,
+:mod:`dfrl.robots.reward_shuffle`), while the robot still respawns after a collision and the
+metrics keep the reward earned.
 """
 from __future__ import annotations
 
@@ -74,7 +75,8 @@ class Trainer:
         env_seq, learner_seq, shuffle_seq = np.random.SeedSequence(c.seed).spawn(3)
         #: Negative control (``reward_shuffle``): what the learner learns from instead of the
         #: reward earned; None in an ordinary run.
-        self.reward_shuffle = (RewardShuffle(c.reward_shuffle, np.random.default_rng(shuffle_seq))
+        self.reward_shuffle = (RewardShuffle(c.reward_shuffle, np.random.default_rng(shuffle_seq),
+                                             c.reward_shuffle_mode)
                                if c.reward_shuffle else None)
         #: The reward and end-of-episode flag the last update learnt from (the ones observed
         #: unless shuffled).
