@@ -5,17 +5,19 @@ For every seed (:func:`paper_configs`, :func:`standalone_plan`): the federated c
 ``experiments/configs/paper_*.json``), the standalone conditions (each arena alone, with the
 seed its federated robot has), the learning controls, runs that cannot learn what question L
 asks, through the same pipeline (federated average and standalone of each algorithm trained
-with the control's rewards, the ``reward_shuffle`` trainer option), the untrained table, and
+with the control's rewards, the ``reward_shuffle`` trainer option), the untrained tables (seeded
+random values, never trained: :func:`untrained_table`), the all-zero table (a diagnostic), and
 with ``diagnostics`` the off-policy reference (Q-learning with random behaviour, epsilon 1,
 which Q-learning learns from as from any other behaviour: no control, a diagnostic). Each run's
 tables are evaluated at ``points`` evenly spaced iterations (federated: the table history the
 robot processes write at every share; standalone: snapshots) with the greedy policy in the
 robot's own arena and the held-out arenas h1 and h2, with the seed's evaluation episodes (the
-same for every condition of a seed); the untrained table once per seed and arena.
+same for every condition of a seed); the untrained and zero tables once per seed and arena.
 
 Layout of ``OUT``: ``seed<S>/<config name>/`` (a federated results folder),
 ``seed<S>/standalone/<algo>_<arena>/`` (``control_<algo>_<arena>``,
-``reference_qlearning_<arena>``), ``seed<S>/untrained/evaluations.csv``, ``evaluations.csv``
+``reference_qlearning_<arena>``), ``seed<S>/untrained/evaluations.csv`` (the untrained
+tables: :func:`untrained_table`), ``seed<S>/zero_table/evaluations.csv`` (a diagnostic), ``evaluations.csv``
 (every evaluation of the study, one row each: :mod:`dfrl.experiments.science.questions.
 evaluations`), ``questions.csv`` and ``contrasts_by_seed.csv`` (every number a verdict uses),
 ``figures/``, ``report.md`` (:mod:`dfrl.experiments.science.report.paper`),
@@ -37,6 +39,7 @@ import signal
 import sys
 import threading
 import time
+import zlib
 from collections.abc import Iterator, Mapping
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass, field
@@ -77,6 +80,10 @@ SHUFFLE_BUFFER = 1000
 PAPER_ITERATIONS = 15_000
 #: Evaluation seeds: this plus the study seed (the same for every condition of a seed).
 EVAL_SEED = 50_000
+#: The untrained tables' generator seed (with the study seed and the arena).
+UNTRAINED_SEED = 70_707
+#: The all-zero table's condition (a diagnostic: greedy with random ties, a random walk).
+ZERO_TABLE = "reference/zero_table"
 #: The algorithms, and the federated conditions (algo, method) of every seed.
 ALGOS = ("qlearning", "sarsa")
 FEDERATED = (("qlearning", "average"), ("qlearning", "max"), ("qlearning", "visit_average"),
@@ -232,7 +239,7 @@ def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reprod
     pool = study_pool(opts.jobs)
     try:
         n_states = Discretiser(TrainerConfig().discretisation).n_states
-        zero = np.zeros((n_states, len(TrainerConfig().actions.names)))
+        shape = (n_states, len(TrainerConfig().actions.names))
         runs = FederatedRuns(out, {s: Evaluator(pool, base_cfg, opts.eval_steps,
                                                 opts.episode_steps, EVAL_SEED + s)
                                    for s in seeds},
@@ -241,17 +248,19 @@ def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reprod
         if replicas:        # the longest jobs first
             runs.in_pool(fed_cfgs, pool)
         sa_jobs: dict[tuple[int, str, str], Future] = {}
-        zero_jobs: dict[int, dict[str, Future]] = {}
+        fixed_jobs: dict[tuple[int, str], dict[tuple[str, str], Future]] = {}
         for s in seeds:
             cfg0 = fed_cfgs[s][0][1]
             for run, name, tcfg in standalone_plan(opts, cfg0):
                 sa_jobs[(s, run, tcfg.arena)] = _standalone(
                     pool, out / f"seed{s}" / "standalone" / name, tcfg, opts, s)
             if opts.control:
-                arenas = dict.fromkeys([r.arena for r in cfg0.robots] + list(HELD_OUT))
-                zero_jobs[s] = {a: pool.submit(eval_job, base_cfg, zero, a, opts.eval_steps,
-                                               opts.episode_steps, EVAL_SEED + s)
-                                for a in arenas}
+                for run, table in ((UNTRAINED, untrained_table), (ZERO_TABLE, _zeros)):
+                    fixed_jobs[(s, run)] = {
+                        (a, b): pool.submit(eval_job, base_cfg, table(s, a, shape), b,
+                                            opts.eval_steps, opts.episode_steps, EVAL_SEED + s)
+                        for a in dict.fromkeys(r.arena for r in cfg0.robots)
+                        for b in (a,) + HELD_OUT}
         if replicas:
             ok = runs.collect(fed_cfgs)
         elif opts.cluster is not None:
@@ -262,8 +271,8 @@ def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reprod
             pending.write(d / "evaluations.csv")
         for fut in sa_jobs.values():
             fut.result()
-        for s, jobs in zero_jobs.items():
-            _write_untrained(out / f"seed{s}" / "untrained", fed_cfgs[s][0][1], jobs)
+        for (s, run), jobs in fixed_jobs.items():
+            _write_fixed(out / f"seed{s}" / run.split("/")[-1], fed_cfgs[s][0][1], jobs)
     except BaseException:
         stop_pool(pool)
         raise
@@ -286,11 +295,11 @@ def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reprod
                 run.evals += read_rows(d / "evaluations.csv")
             by_run.setdefault(name, []).append(run)
             evals += from_rows(name, s, run.evals)
-        if s in zero_jobs:
-            rows = read_rows(out / f"seed{s}" / "untrained" / "evaluations.csv")
-            by_run.setdefault(UNTRAINED, []).append(
+        for run in (r for (t, r) in fixed_jobs if t == s):
+            rows = read_rows(out / f"seed{s}" / run.split("/")[-1] / "evaluations.csv")
+            by_run.setdefault(run, []).append(
                 SeedRun({}, {r["robot"]: r["robot"] for r in rows}, rows))
-            evals += from_rows(UNTRAINED, s, rows)
+            evals += from_rows(run, s, rows)
     ans = _judge(out, evals, opts)
     rep = Reproduction(out / "report.md", by_run, ans, time.monotonic() - t0, ok,
                        runs.walls, seeds, runs.reused)
@@ -332,6 +341,8 @@ def rejudge(folder: Path, deltas: Mapping[str, float] | None = None,
 def condition_of(run: str) -> str:
     if run == UNTRAINED:
         return "untrained"
+    if run == ZERO_TABLE:
+        return "reference zero table"
     kind = "standalone" if "standalone/" in run else "federated"
     if run.startswith(CONTROL):
         return f"control {kind}"
@@ -348,15 +359,26 @@ def tidy_rows(rep: Reproduction) -> Iterator[tuple]:
             yield from evaluation_rows(name, seed, condition_of(name), r.evals)
 
 
-def _write_untrained(d: Path, cfg: ExperimentConfig, jobs: dict[str, Future]) -> None:
-    """``d/evaluations.csv`` of the untrained (all-zero) table: one robot per arena the
-    federated robots learn in (robot = arena), its own arena and the held-out ones, at the
-    budget's iteration (the table never changes)."""
-    rows = []
-    for arena in dict.fromkeys(r.arena for r in cfg.robots):
-        for a, role in [(arena, "own")] + [(h, "held_out") for h in HELD_OUT]:
-            rows.append({"robot": arena, "iteration": cfg.iterations, "arena": a, "role": role,
-                         **jobs[a].result()})
+def untrained_table(seed: int, arena: str, shape: tuple[int, int]) -> np.ndarray:
+    """The untrained table of ``arena`` in study seed ``seed``: uniform random values, never
+    trained, seeded by (:data:`UNTRAINED_SEED`, seed, the arena's CRC-32). Its greedy policy
+    is a fixed arbitrary one, as every trained or control table's is (the all-zero table breaks
+    its ties at random at every step instead: a random walk, which collides more than any
+    fixed policy; robots/README.md, "Controls")."""
+    return np.random.default_rng([UNTRAINED_SEED, seed, zlib.crc32(arena.encode())]).random(shape)
+
+
+def _zeros(seed: int, arena: str, shape: tuple[int, int]) -> np.ndarray:
+    return np.zeros(shape)
+
+
+def _write_fixed(d: Path, cfg: ExperimentConfig, jobs: Mapping[tuple[str, str], Future]) -> None:
+    """``d/evaluations.csv`` of a table that is never trained: one robot per arena the
+    federated robots learn in (robot = arena), in its own arena and the held-out ones, at the
+    budget's iteration."""
+    rows = [{"robot": a, "iteration": cfg.iterations, "arena": b,
+             "role": "own" if a == b else "held_out", **fut.result()}
+            for (a, b), fut in jobs.items()]
     d.mkdir(parents=True, exist_ok=True)
     write_rows(d / "evaluations.csv", rows)
 

@@ -144,11 +144,15 @@ class Contrast:
         :data:`MOST_SEEDS`."""
         if self.n < 2 or not math.isfinite(self.sd) or self.sd == 0:
             return None
+        import warnings
+
         from statsmodels.stats.power import TTestPower
         try:
-            guess = _scalar(TTestPower().solve_power(
-                effect_size=self.delta / self.sd, nobs=None, power=POWER,
-                alpha=ALPHA / self.family_size, alternative=self._alternative))
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # a failed root find gives nan: handled
+                guess = _scalar(TTestPower().solve_power(
+                    effect_size=self.delta / self.sd, nobs=None, power=POWER,
+                    alpha=ALPHA / self.family_size, alternative=self._alternative))
         except (ValueError, ArithmeticError):
             return None
         if not math.isfinite(guess) or guess > MOST_SEEDS:
@@ -165,10 +169,20 @@ class Contrast:
         return "two-sided" if self.side == "two-sided" else "larger"
 
     def _effect_size(self, n: int) -> float:
+        import warnings
+
         from statsmodels.stats.power import TTestPower
-        return _scalar(TTestPower().solve_power(effect_size=None, nobs=n, power=POWER,
-                                                alpha=ALPHA / self.family_size,
-                                                alternative=self._alternative))
+        alpha = ALPHA / self.family_size
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")      # the root finder's failure is handled below
+            d = _scalar(TTestPower().solve_power(effect_size=None, nobs=n, power=POWER,
+                                                 alpha=alpha, alternative=self._alternative))
+        if math.isfinite(d):
+            return d
+        # beyond the solver's bracket (tiny n at a strict level): the central-t approximation
+        from scipy import stats
+        tail = alpha / 2 if self.side == "two-sided" else alpha
+        return float((stats.t.ppf(1 - tail, n - 1) + stats.t.ppf(POWER, n - 1)) / math.sqrt(n))
 
 
 def _scalar(x: object) -> float:

@@ -55,11 +55,12 @@ def controls_words(rep: Any, opts: Any) -> str:
     if UNTRAINED not in rep.runs:
         return ("No control (`--no-control`): question L cannot be judged.")
     return (f"Controls, through the same pipeline (seeds, arenas, evaluation episodes): the "
-            f"**untrained table** (all zeros, greedy with random ties: a uniform random policy) "
-            f"and, per algorithm, standalone and federated, a **learning control** trained on "
-            f"the control rewards (`reward_shuffle`, buffer "
-            f"{getattr(opts, 'shuffle_buffer', '?')}: robots/README.md, \"Controls\", says "
-            f"what it is and shows it learns nothing).")
+            f"**untrained tables** (seeded random values, never trained: a fixed arbitrary "
+            f"greedy policy, like every trained table's) and, per algorithm, standalone and "
+            f"federated, a **learning control** trained on centred shuffled rewards with no "
+            f"bootstrapping (`reward_shuffle`, buffer {getattr(opts, 'shuffle_buffer', '?')}: "
+            f"robots/README.md, \"Controls\", says what it is and measures it). The all-zero "
+            f"table (random ties at every step: a random walk) is a diagnostic.")
 
 
 def _made_by(out: Path) -> str:

@@ -1,14 +1,16 @@
 """Question L on real training and real evaluations (pybullet, small budgets), judged through
 ``dfrl paper --from``: fed a clearly learnt run, L holds; fed non-learners as its "real" runs
-(the untrained table, a uniform random policy), no L contrast holds; the learning control's
-check includes 0.
+(the all-zero table, a uniform random policy, an untrained random table), no L contrast holds;
+the learning control's check includes 0.
 
-Budget chosen by measurement: standalone Q-learning, arenas R1 and R2, 6,000 iterations,
-seeds 1-4; greedy evaluations of 400 steps in episodes of 100 in the own arena and h1, the
-evaluation seed 50,000 + seed as ``dfrl paper`` evaluates.
+Budget chosen by measurement: standalone Q-learning, arenas R1 and R2, 10,000 iterations,
+seeds 1-5; greedy evaluations of 400 steps in episodes of 100 in the own arena and h1, the
+evaluation seed 50,000 + seed as ``dfrl paper`` evaluates. Own-arena scores measured (R1/R2):
+0.90/0.81, 0.82/0.28, 0.83/0.00, 0.78/0.73, 0.77/0.87: a standalone robot sometimes settles on
+turning in place (score 0; seed 6, not used, did in both arenas), which is why the learner is
+judged on the mean over arenas and seeds, not on one run. At 6,000 iterations seed 4 did in
+both arenas and L was "not significant at n = 4".
 """
-import subprocess
-import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -16,16 +18,17 @@ import numpy as np
 import pytest
 
 from dfrl.experiments.science.questions.evaluations import Evaluation, write_evaluations
-from dfrl.experiments.science.reproduce import EVAL_SEED, PaperOptions, control_trainer
+from dfrl.experiments.science.reproduce import (EVAL_SEED, PaperOptions, control_trainer,
+                                                untrained_table)
 from dfrl.experiments.science.studies.history import COLLISION_COST
 from dfrl.robots.evaluation import PolicyKind, evaluate_policy
 from dfrl.robots.training import TrainerConfig, train
 
-SEEDS = (1, 2, 3, 4)
+SEEDS = (1, 2, 3, 4, 5)
 ARENAS = ("r1", "r2")
-ITERATIONS = 6000
+ITERATIONS = 10_000
 STEPS, EPISODE = 400, 100
-KINDS = ("trained", "control", "zeros", "random")
+KINDS = ("trained", "control", "untrained", "zeros", "random", "untrained2")
 
 
 def _evaluations(kind: str, seed: int, arena: str) -> list[tuple]:
@@ -34,6 +37,10 @@ def _evaluations(kind: str, seed: int, arena: str) -> list[tuple]:
         q = train(cfg).q_table
     elif kind == "control":
         q = train(TrainerConfig.from_dict(control_trainer(cfg.to_dict(), PaperOptions()))).q_table
+    elif kind == "untrained":
+        q = untrained_table(seed, arena, (81, 3))
+    elif kind == "untrained2":          # another untrained table: a non-learner fed as real
+        q = untrained_table(seed + 100, arena, (81, 3))
     else:
         q = np.zeros((81, 3))
     out = []
@@ -60,7 +67,7 @@ def _folder(tmp: Path, as_real: str, measured: dict[str, list[tuple]]) -> Path:
     be both that and itself)."""
     evals = []
     for kind, run in ((as_real, "standalone/qlearning"), ("control", "control/standalone/qlearning"),
-                      ("zeros", "untrained")):
+                      ("untrained", "untrained")):
         evals += [Evaluation(run, seed, arena, arena, ITERATIONS, where, role, score, coll, prog)
                   for (_k, seed, arena, where, role, score, coll, prog) in measured[kind]]
     d = tmp / as_real
@@ -70,10 +77,15 @@ def _folder(tmp: Path, as_real: str, measured: dict[str, list[tuple]]) -> Path:
 
 
 def _judge(d: Path) -> str:
-    r = subprocess.run([sys.executable, "-m", "dfrl", "paper", "--from", str(d)],
-                       capture_output=True, text=True, timeout=120)
-    assert r.returncode == 0, r.stderr
-    return r.stdout
+    """``dfrl paper --from d``'s printed summary (in this process: the CLI's own function)."""
+    import contextlib
+    import io
+
+    from dfrl.experiments.cli import main
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert main(["paper", "--from", str(d)]) == 0
+    return buf.getvalue()
 
 
 def test_the_learning_control_learns_nothing(measured, tmp_path):
@@ -86,7 +98,7 @@ def test_a_clearly_learnt_run_holds(measured, tmp_path):
     assert "L  standalone/qlearning: holds" in out, out
 
 
-@pytest.mark.parametrize("as_real", ["zeros", "random"])
+@pytest.mark.parametrize("as_real", ["zeros", "random", "untrained", "untrained2"])
 def test_non_learners_as_real_runs_hold_no_l_contrast(measured, tmp_path, as_real):
     d = _folder(tmp_path, as_real, measured)
     out = _judge(d)

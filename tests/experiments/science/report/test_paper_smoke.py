@@ -12,7 +12,8 @@ FEDERATED = ["qlearning/average", "qlearning/max", "qlearning/visit_average", "s
              "sarsa/max"]
 CONDITIONS = FEDERATED + ["control/qlearning/average", "control/sarsa/average",
                           "standalone/qlearning", "control/standalone/qlearning",
-                          "standalone/sarsa", "control/standalone/sarsa", "untrained"]
+                          "standalone/sarsa", "control/standalone/sarsa", "untrained",
+                          "reference/zero_table"]
 
 
 @pytest.mark.slow
@@ -28,7 +29,8 @@ def test_tiny_paper(tmp_path):
     hist = sorted(p.name for p in (tmp_path / "seed1" / "paper_qlearning_average" / "tables"
                                    / "history").glob("r1_*.npy"))
     assert hist == ["r1_it200.npy", "r1_it400.npy"]
-    for run in ("control_sarsa_average", "paper_qlearning_visit_average", "untrained"):
+    for run in ("control_sarsa_average", "paper_qlearning_visit_average", "untrained",
+                "zero_table"):
         ev = (tmp_path / "seed2" / run / "evaluations.csv").read_text()
         assert ev.startswith("robot,iteration,arena,role") and ",h2,held_out," in ev
     # the study's evaluations: every condition, both seeds, own and held-out rows
@@ -65,6 +67,7 @@ def test_tiny_paper(tmp_path):
         tidy = list(csv.DictReader(fh))
     assert list(tidy[0]) == ["run", "seed", "condition", "robot", "iteration", "metric", "value"]
     assert {r["condition"] for r in tidy} == {
-        "federated", "standalone", "control federated", "control standalone", "untrained"}
+        "federated", "standalone", "control federated", "control standalone", "untrained",
+        "reference zero table"}
     assert {"q_sum", "score@h1"} <= {r["metric"] for r in tidy}
     assert max(int(r["iteration"]) for r in tidy) == 400
