@@ -191,9 +191,10 @@ class FederatedRuns:
         pending = PendingRows()
         arenas = {r.id: r.arena for r in cfg.robots}
         for robot, files in history_tables(d).items():
-            for it in pick(files, cfg.iterations, self.points):
+            its = pick(files, cfg.iterations, self.points)
+            for it in its:      # the held-out arenas at the last point only (what T reads)
                 pending.add(self.evaluators[seed], robot, it, np.load(files[it]), arenas[robot],
-                            self.held_out)
+                            self.held_out if it == its[-1] else ())
         self.pendings[(seed, key)] = (d, pending)
 
     def _say(self, line: str) -> None:

@@ -48,13 +48,15 @@ def run_jobs(jobs: list[tuple[TrainerConfig, Path]], workers: int,
 def evaluated_job(cfg_dict: dict[str, Any], out: str, points: int, held_out: list[str],
                   steps: int, episode_steps: int, eval_seed: int) -> str:
     """Train one standalone robot into ``out`` with ``points`` snapshots, then evaluate each
-    snapshot's greedy policy in its own and the held-out arenas (``out/evaluations.csv``,
+    snapshot's greedy policy in its own arena and the last one's in the held-out arenas too (``out/evaluations.csv``,
     :mod:`dfrl.experiments.science.studies.history`); a worker process job. Returns ``out``."""
     cfg = TrainerConfig.from_dict(cfg_dict)
     res = train(cfg, out, snapshot_every=max(1, cfg.iterations // max(1, points)))
     rows = []
+    last = max(res.snapshots, default=None)
     for it, q in sorted(res.snapshots.items()):
-        for arena, role in [(cfg.arena, "own")] + [(a, "held_out") for a in held_out]:
+        elsewhere = held_out if it == last else []     # held-out arenas at the end only
+        for arena, role in [(cfg.arena, "own")] + [(a, "held_out") for a in elsewhere]:
             rows.append({"robot": cfg.arena, "iteration": it, "arena": arena, "role": role,
                          **history.eval_job(cfg_dict, q, arena, steps, episode_steps, eval_seed)})
     history.write_rows(Path(out) / "evaluations.csv", rows)
