@@ -126,7 +126,8 @@ def register_paper(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--iterations", type=int, default=None,
                    help="iterations per robot (default: 10000, see --budget)")
     p.add_argument("--budget", choices=("paper", "long"), default="paper",
-                   help="paper: 10,000 iterations (five seeds of everything within 15 minutes on 2 cores); long: 150,000, where the sum of Q-values of "
+                   help="paper: 10,000 iterations (five seeds of everything within 15 minutes "
+                        "on 2 cores); long: 150,000, where the sum of Q-values of "
                         "one robot flattens (robots/README.md, 'Budget'); --iterations "
                         "overrides both (default: %(default)s)")
     p.add_argument("--respite", type=int, default=None,

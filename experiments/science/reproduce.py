@@ -4,34 +4,37 @@ For every seed (:func:`paper_configs`, :func:`standalone_plan`): the federated c
 (Q-learning / SARSA x average / max and Q-learning / visit_average, five robots in R1..R5,
 ``experiments/configs/paper_*.json``), the standalone conditions (each arena alone, with the
 seed its federated robot has), the learning controls, runs that cannot learn what question L
-asks, through the same pipeline (federated average and standalone of each algorithm trained
-with the control's rewards, the ``reward_shuffle`` trainer option), the untrained tables (seeded
+asks, through the same pipeline (federated average and standalone of each algorithm trained with
+the control's rewards, the ``reward_shuffle`` trainer option), the untrained tables (seeded
 random values, never trained: :func:`untrained_table`), the all-zero table (a diagnostic), and
 with ``diagnostics`` the off-policy reference (Q-learning with random behaviour, epsilon 1,
 which Q-learning learns from as from any other behaviour: no control, a diagnostic). Each run's
 tables are evaluated at ``points`` evenly spaced iterations (federated: the table history the
 robot processes write at every share; standalone: snapshots) with the greedy policy in the
 robot's own arena, and at the last one in the held-out arenas h1 and h2 too, with the seed's
-evaluation episodes (the same for every condition of a seed); the untrained and zero tables once per seed and arena.
+evaluation episodes (the same for every condition of a seed); the untrained and zero tables once
+per seed and arena.
 
 Layout of ``OUT``: ``seed<S>/<config name>/`` (a federated results folder),
 ``seed<S>/standalone/<algo>_<arena>/`` (``control_<algo>_<arena>``,
-``reference_qlearning_<arena>``), ``seed<S>/untrained/evaluations.csv`` (the untrained
-tables: :func:`untrained_table`), ``seed<S>/zero_table/evaluations.csv`` (a diagnostic), ``evaluations.csv``
-(every evaluation of the study, one row each: :mod:`dfrl.experiments.science.questions.
-evaluations`), ``questions.csv`` and ``contrasts_by_seed.csv`` (every number a verdict uses),
-``figures/``, ``report.md`` (:mod:`dfrl.experiments.science.report.paper`),
-``provenance.json`` and ``tidy.csv`` (every curve and evaluation, one value per row).
-**Which runs use which.** Every federated run is by default an in-process replica
-(:mod:`.fed_replicas`: the same trainers, seeds, share boundaries and folds as a sync ``dfrl
-run``, bit-identical in tables, curves and history, which
+``reference_qlearning_<arena>``), ``seed<S>/untrained/evaluations.csv`` (the untrained tables:
+:func:`untrained_table`), ``seed<S>/zero_table/evaluations.csv`` (a diagnostic),
+``evaluations.csv`` (every evaluation of the study, one row each:
+:mod:`dfrl.experiments.science.questions.evaluations`), ``questions.csv`` and
+``contrasts_by_seed.csv`` (every number a verdict uses), ``figures/``, ``report.md``
+(:mod:`dfrl.experiments.science.report.paper`), ``provenance.json`` and ``tidy.csv`` (every
+curve and evaluation, one value per row).
+
+**Which runs use which.** Every federated run is by
+default an in-process replica (:mod:`.fed_replicas`: the same trainers, seeds, share boundaries
+and folds as a sync ``dfrl run``, bit-identical in tables, curves and history, which
 ``tests/experiments/science/studies/test_fedsim_identity.py`` checks for every config this
 module makes), on the pool of ``jobs`` processes beside the standalone trainings and the
-evaluations; with ``driver`` (``--driver``) each goes through ``dfrl run`` (robot processes,
-the platform and the dFRL agent) one after another, and with ``cluster`` on a Dask cluster. SIGTERM or Ctrl-C stops the whole
-study (the current run stops cleanly, pending jobs are cancelled); ``--skip-existing`` then
-reuses what finished. :func:`rejudge` judges a study's folder again from its
-``evaluations.csv`` without running anything (``dfrl paper --from``).
+evaluations; with ``driver`` (``--driver``) each goes through ``dfrl run`` (robot processes, the
+platform and the dFRL agent) one after another, and with ``cluster`` on a Dask cluster. SIGTERM
+or Ctrl-C stops the whole study (the current run stops cleanly, pending jobs are cancelled);
+``--skip-existing`` then reuses what finished. :func:`rejudge` judges a study's folder again
+from its ``evaluations.csv`` without running anything (``dfrl paper --from``).
 """
 from __future__ import annotations
 
@@ -179,7 +182,8 @@ def paper_configs(opts: PaperOptions, seed: int) -> list[tuple[str, ExperimentCo
     return out
 
 
-def standalone_plan(opts: PaperOptions, cfg: ExperimentConfig) -> list[tuple[str, str, TrainerConfig]]:
+def standalone_plan(opts: PaperOptions, cfg: ExperimentConfig,
+                    ) -> list[tuple[str, str, TrainerConfig]]:
     """(condition, folder name, trainer config) of one seed's standalone runs: each arena of
     ``cfg``'s robots alone with its robot's training seed."""
     out = []

@@ -76,8 +76,9 @@ def read_evaluations(path: str | Path) -> list[Evaluation]:
     Raises
     ------
     EvaluationsError
-        A missing column, a value that is not a number where one is needed, an unknown role,
-        an own row whose arena is not the robot's, or a non-finite measure: the file and line.
+        No row, a missing column, a value that is not a number where one is needed, an
+        unknown role, an own row whose arena is not the robot's, or a non-finite measure: the
+        file and line.
     OSError
         The file cannot be read.
     """
@@ -91,6 +92,8 @@ def read_evaluations(path: str | Path) -> list[Evaluation]:
                                    f"expected {', '.join(COLUMNS)}")
         for line, rec in enumerate(reader, start=2):
             out.append(_parse(rec, f"{path}:{line}"))
+    if not out:
+        raise EvaluationsError(f"{path}:2: no evaluation rows: nothing to judge")
     return out
 
 
@@ -100,12 +103,13 @@ def _parse(rec: Mapping[str, str], where: str) -> Evaluation:
         try:
             value = kind(text) if kind is int else float(text)
         except ValueError:
-            raise EvaluationsError(f"{where}: {col} must be {'an integer' if kind is int else 'a number'}"
-                                   f", got {text!r}") from None
+            what = "an integer" if kind is int else "a number"
+            raise EvaluationsError(f"{where}: {col} must be {what}, got {text!r}") from None
         if kind is float and not math.isfinite(value):
             raise EvaluationsError(f"{where}: {col} is not finite ({text})")
         return value
-    texts = {c: (rec.get(c) or "").strip() for c in ("run", "robot", "robot_arena", "arena", "role")}
+    texts = {c: (rec.get(c) or "").strip()
+             for c in ("run", "robot", "robot_arena", "arena", "role")}
     for c, v in texts.items():
         if not v:
             raise EvaluationsError(f"{where}: {c} is empty")

@@ -120,5 +120,8 @@ def test_paper_from_refuses_bad_input_with_its_location(tmp_path: Path):
     assert r.returncode == 2 and "evaluations.csv:2: seed must be an integer" in r.stderr
     r = _dfrl("paper", "--from", str(tmp_path), "--delta", "Q=1")
     assert r.returncode == 2 and "--delta 'Q=1'" in r.stderr
+    (tmp_path / "evaluations.csv").write_text(",".join(COLUMNS) + "\n")
+    r = _dfrl("paper", "--from", str(tmp_path))
+    assert r.returncode == 2 and "no evaluation rows: nothing to judge" in r.stderr
     r = _dfrl("paper", "--from", str(tmp_path / "missing"))
     assert r.returncode == 2 and "No such file" in r.stderr

@@ -66,8 +66,8 @@ def _folder(tmp: Path, as_real: str, measured: dict[str, list[tuple]]) -> Path:
     """A study folder whose ``standalone/qlearning`` is ``as_real`` (the untrained table may
     be both that and itself)."""
     evals = []
-    for kind, run in ((as_real, "standalone/qlearning"), ("control", "control/standalone/qlearning"),
-                      ("untrained", "untrained")):
+    for kind, run in ((as_real, "standalone/qlearning"),
+                      ("control", "control/standalone/qlearning"), ("untrained", "untrained")):
         evals += [Evaluation(run, seed, arena, arena, ITERATIONS, where, role, score, coll, prog)
                   for (_k, seed, arena, where, role, score, coll, prog) in measured[kind]]
     d = tmp / as_real
