@@ -29,5 +29,5 @@ def test_evaluated_standalone_run_is_deterministic(tmp_path):
         rows.append(read_rows(tmp_path / str(k) / "evaluations.csv"))
     assert rows[0] == rows[1]
     assert [(r["iteration"], r["arena"], r["role"]) for r in rows[0]] == [
-        (150, "r1", "own"), (150, "h1", "held_out"), (300, "r1", "own"), (300, "h1", "held_out")]
+        (150, "r1", "own"), (300, "r1", "own"), (300, "h1", "held_out")]   # held-out: the last
     assert all(r["steps"] == 100 for r in rows[0])
