@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dfrl.experiments.science.questions.answers import Answered, Answers, CheckResult
-from dfrl.experiments.science.questions.catalogue import TITLES, UNTRAINED
+from dfrl.experiments.science.questions.answers import Answered, Answers
+from dfrl.experiments.science.questions.catalogue import TITLES
 from dfrl.experiments.science.questions.contrast import ALPHA, POWER, Contrast, MOST_SEEDS
 from dfrl.experiments.science.questions.measures import arena_matrix, runs_of
 
@@ -176,12 +176,3 @@ def write_files(out: Path, ans: Answers) -> tuple[Path, Path]:
         w.writerows(by_seed_rows(ans))
     return q_path, s_path
 
-
-def untrained_scores(ans: Answers) -> dict[str, float]:
-    """The untrained table's mean own-arena score per arena over seeds (for the summary)."""
-    acc: dict[str, list[float]] = {}
-    for (run, _seed, role, m), v in ans.values.items():
-        if run == UNTRAINED and role == "own" and m == "score":
-            for arena, x in v.items():
-                acc.setdefault(arena, []).append(x)
-    return {a: float(np.mean(v)) for a, v in sorted(acc.items())}
