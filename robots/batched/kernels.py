@@ -219,9 +219,12 @@ def move(i, action, pose, prev, dist, trail, trail_len, trail_head, arena, first
     a = arena[i]
     lo, hi = first[a], first[a] + count[a]
     x0, y0, yaw0 = pose[i, 0], pose[i, 1], pose[i, 2]
-    m = motion[prev[i], action]
+    m = motion[prev[i], action]     # mean (forward, left, turn), then their spread
+    fwd = m[0] + m[3] * rng.normal()
+    left = m[1] + m[4] * rng.normal()
+    dyaw = m[2] + m[5] * rng.normal()
     c, s = math.cos(yaw0), math.sin(yaw0)
-    dx, dy, dyaw = c * m[0] - s * m[1], s * m[0] + c * m[1], m[2]
+    dx, dy = c * fwd - s * left, s * fwd + c * left
     rim, contact = P[P_BODY_RADIUS], P[P_CONTACT]
     gap1 = clearance(x0 + dx, y0 + dy, boxes, lo, hi) - rim
     collision = gap1 <= contact

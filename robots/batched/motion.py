@@ -1,16 +1,25 @@
 """The e-puck's motion in one control step, measured in pybullet.
 
-On a flat floor the robot's motion over one 64 ms step depends only on the command and on how
-fast its wheels already turn, that is on the previous command (the velocity motors reach a new
-speed within a few milliseconds, but not instantly: turning left after driving ahead turns
-0.102 rad instead of 0.155, and moves 3 mm). :func:`measured_motion` drives the pybullet robot
-through every pair (previous command, command), from rest too, and records the body-frame
-displacement of the step; the batched simulator replays it. The table is measured once per
-simulation and action set in a process (a few hundred milliseconds) and cached.
+On a flat floor the robot's motion over one 64 ms step depends mostly on the command and on
+how fast its wheels already turn, that is on the previous command (the velocity motors reach a
+new speed within a few milliseconds, but not instantly: turning left after driving ahead turns
+0.102 rad instead of 0.155, and moves 3 mm). :func:`measured_motion` measures it in two parts:
+
+* ``mean``: the pybullet robot driven through every pair (previous command, command), and from
+  rest, on an empty floor; the body-frame displacement of the step after ``SETTLE_STEPS`` steps
+  of the previous command;
+* ``std``: the spread pybullet adds around it, the root mean square of the differences between
+  the steps of a seeded random walk (``WALK_STEPS`` steps, the previous command kept with
+  probability one half, else a uniform one) and ``mean`` for the same pair. It comes from what
+  one previous command does not capture (how long the previous command lasted, the contacts
+  of the wheels and casters); the batched simulator draws it as Gaussian noise.
+
+Measured once per simulation and action set in a process (about a second) and cached.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -21,9 +30,25 @@ from dfrl.robots.world import SimConfig
 
 #: Steps of the previous command before the measured one (the wheels' speed has settled).
 SETTLE_STEPS: int = 3
+#: Steps of the random walk that measures the spread.
+WALK_STEPS: int = 3000
+#: Seed of the random walk.
+WALK_SEED: int = 2026
 
-_OPEN_FLOOR = ArenaSpec(name="open", size=(2.0, 2.0), wall_height=0.1,
+_OPEN_FLOOR = ArenaSpec(name="open", size=(4.0, 4.0), wall_height=0.1,
                         description="an empty floor for measuring the robot's motion")
+
+
+@dataclass(frozen=True)
+class Motion:
+    """Body-frame motion of one control step, each of shape (n_actions + 1, n_actions, 3).
+
+    ``[0, a]`` is action ``a`` from rest, ``[p + 1, a]`` action ``a`` after action ``p``; the
+    last axis is ``(forward, left, turn)`` (m, m, rad).
+    """
+
+    mean: np.ndarray
+    std: np.ndarray
 
 
 def body_delta(before: tuple[float, float, float],
@@ -35,28 +60,52 @@ def body_delta(before: tuple[float, float, float],
     return (c * dx + s * dy, -s * dx + c * dy, math.remainder(after[2] - before[2], 2 * math.pi))
 
 
-@lru_cache(maxsize=8)
-def measured_motion(sim: SimConfig, actions: ActionSet) -> np.ndarray:
-    """Body-frame motion of one control step, shape (n_actions + 1, n_actions, 3).
+def _settled(env, n: int) -> np.ndarray:  # noqa: ANN001 - EPuckEnv
+    out = np.zeros((n + 1, n, 3))
+    for prev in range(-1, n):
+        for action in range(n):
+            env.reset(seed=0, options={"pose": (0.0, 0.0, 0.0)})
+            for _ in range(SETTLE_STEPS if prev >= 0 else 0):
+                env.step(prev)
+            before = env.robot.pose()
+            env.step(action)
+            out[prev + 1, action] = body_delta(before, env.robot.pose())
+    return out
 
-    ``[0, a]`` is action ``a`` from rest, ``[p + 1, a]`` action ``a`` after ``SETTLE_STEPS``
-    steps of action ``p``; the last axis is ``(forward, left, turn)`` (m, m, rad).
-    """
+
+def _spread(env, n: int, mean: np.ndarray) -> np.ndarray:  # noqa: ANN001 - EPuckEnv
+    rng = np.random.default_rng(WALK_SEED)
+    sq = np.zeros_like(mean)
+    count = np.zeros(mean.shape[:2])
+    env.reset(seed=0, options={"pose": (0.0, 0.0, 0.0)})
+    prev = -1
+    for _ in range(WALK_STEPS):
+        keep = prev >= 0 and rng.random() < 0.5
+        action = prev if keep else int(rng.integers(n))
+        before = env.robot.pose()
+        env.step(action)
+        after = env.robot.pose()
+        if max(abs(after[0]), abs(after[1])) > 1.5:      # far from the middle: start again
+            env.reset(seed=0, options={"pose": (0.0, 0.0, float(rng.uniform(-3, 3)))})
+            prev = -1
+            continue
+        sq[prev + 1, action] += (np.array(body_delta(before, after)) - mean[prev + 1, action]) ** 2
+        count[prev + 1, action] += 1
+        prev = action
+    return np.sqrt(sq / np.maximum(count, 1)[:, :, None])
+
+
+@lru_cache(maxsize=8)
+def measured_motion(sim: SimConfig, actions: ActionSet) -> Motion:
+    """The motion of one control step for ``sim`` and ``actions`` (see the module doc)."""
     from dfrl.robots.env import EnvConfig, EPuckEnv
 
     actions = ActionSet(actions)
     n = len(actions.actions)
-    out = np.zeros((n + 1, n, 3))
     env = EPuckEnv(arena=_OPEN_FLOOR, config=EnvConfig(sim=sim, actions=actions, stuck_steps=0))
     try:
-        for prev in range(-1, n):
-            for action in range(n):
-                env.reset(seed=0, options={"pose": (0.0, 0.0, 0.0)})
-                for _ in range(SETTLE_STEPS if prev >= 0 else 0):
-                    env.step(prev)
-                before = env.robot.pose()
-                env.step(action)
-                out[prev + 1, action] = body_delta(before, env.robot.pose())
+        mean = _settled(env, n)
+        std = _spread(env, n, mean)
     finally:
         env.close()
-    return out
+    return Motion(mean=mean, std=std)

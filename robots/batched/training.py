@@ -85,6 +85,8 @@ class BatchedTrainer:
     ----------
     configs : sequence of TrainerConfig
         One per robot (see :func:`shared_env` for what they must share).
+    motion_noise : bool
+        As :class:`~dfrl.robots.batched.world.BatchedWorld`'s.
 
     Attributes
     ----------
@@ -94,13 +96,13 @@ class BatchedTrainer:
         Iterations done by every robot.
     """
 
-    def __init__(self, configs: Sequence[TrainerConfig]) -> None:
+    def __init__(self, configs: Sequence[TrainerConfig], motion_noise: bool = True) -> None:
         env = shared_env(configs)
         self.configs = list(configs)
         streams = [np.random.SeedSequence(c.seed).spawn(3) for c in configs]
         env_rngs = [np.random.default_rng(int(s[0].generate_state(1)[0])) for s in streams]
         self.world = BatchedWorld(env, [c.arena for c in configs], env_rngs,
-                                  configs[0].discretisation)
+                                  configs[0].discretisation, motion_noise)
         self.learner_rngs = List([np.random.default_rng(s[1]) for s in streams])
         n, w = len(configs), self.world
         n_states = configs[0].discretisation.n_states

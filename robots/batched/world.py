@@ -92,11 +92,15 @@ class BatchedWorld:
         Each robot's environment generator (poses, noise).
     discretisation : DiscretisationConfig, optional
         For :meth:`states`.
+    motion_noise : bool
+        Draw each step's motion around its mean with pybullet's measured spread (default);
+        False replays the means (a deterministic robot, for the fidelity report's ablation).
     """
 
     def __init__(self, config: EnvConfig, arenas: Sequence[str | ArenaSpec],
                  rngs: Sequence[np.random.Generator],
-                 discretisation: DiscretisationConfig | None = None) -> None:
+                 discretisation: DiscretisationConfig | None = None,
+                 motion_noise: bool = True) -> None:
         if len(arenas) != len(rngs) or not arenas:
             raise ValueError(f"one generator per robot: {len(arenas)} arenas, {len(rngs)} "
                              f"generators")
@@ -115,7 +119,10 @@ class BatchedWorld:
         self.n = len(arenas)
         self.n_sensors = len(rc.sensor_angles)
         self.angles = np.asarray(rc.sensor_angles, dtype=np.float64)
-        self.motion = np.ascontiguousarray(measured_motion(config.sim, config.actions))
+        measured = measured_motion(config.sim, config.actions)
+        spread = measured.std if motion_noise else np.zeros_like(measured.std)
+        #: per (previous action + 1, action): mean (forward, left, turn), then their spread
+        self.motion = np.ascontiguousarray(np.concatenate([measured.mean, spread], axis=2))
         self.n_actions = self.motion.shape[1]
         self.P = float_params(config)
         self.discretisation = discretisation or DiscretisationConfig()
