@@ -12,7 +12,8 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from dfrl.experiments.cli import bench_faults, bench_hostile
+from dfrl.experiments.cli import bench_faults, bench_fidelity, bench_hostile
+from dfrl.experiments.science import fidelity
 from dfrl.experiments.tools.bench import (bridge, chaos, hop_timeline, hostile, migrate,
                                           round as round_bench)
 from dfrl.experiments.tools.bench import faults, fuzz, scale, sim
@@ -427,6 +428,7 @@ BENCHMARKS = {
     "hostile": (hostile, bench_hostile.add_arguments, bench_hostile.cmd),
     "faults": (faults, bench_faults.add_arguments, bench_faults.cmd),
     "fuzz": (fuzz, add_fuzz_arguments, cmd_fuzz),
+    "sim-fidelity": (fidelity, bench_fidelity.add_arguments, bench_fidelity.cmd),
 }
 
 

@@ -52,14 +52,14 @@ def _share(seen, j, free, grid):
 @njit(cache=True)
 def _evaluate(q, steps, episode_steps, out, seen, free, grids, pose, prev, dist, trail,
               trail_len, trail_head, arena, first, count, half, boxes, angles, motion, groups,
-              P, I, env_rngs, tie_rngs):
+              P, I, env_rngs, motion_rngs, tie_rngs):
     """Run evaluation ``j`` with table ``q[j]`` in its arena; ``out[j]`` gets the sums.
     Returns the first evaluation whose arena had no free pose left, or -1."""
     step_out = np.zeros(4)
     rng_ = P[K.P_SENSOR_RANGE]
     levels = I[K.I_LEVELS]
     for j in range(q.shape[0]):
-        er, tr = env_rngs[j], tie_rngs[j]
+        er, mr, tr = env_rngs[j], motion_rngs[j], tie_rngs[j]
         a_ = arena[j]
         fr, grid = free[a_], grids[a_]
         x, y = pose[j, 0], pose[j, 1]
@@ -77,7 +77,7 @@ def _evaluate(q, steps, episode_steps, out, seen, free, grids, pose, prev, dist,
             s = K.discretise(dist[j], rng_, groups, levels)
             action = greedy(q[j, s], tr)
             K.move(j, action, pose, prev, dist, trail, trail_len, trail_head, arena, first,
-                   count, boxes, angles, motion, P, I, er, step_out)
+                   count, boxes, angles, motion, P, I, er, mr, step_out)
             out[j, _REWARD] += step_out[0]
             out[j, _PROGRESS] += min(max(step_out[3], -1.0), 1.0)
             collided = step_out[1] > 0.0
@@ -142,7 +142,8 @@ def evaluate_greedy(config: TrainerConfig, tables: Sequence[np.ndarray],
     bad = _evaluate(q, steps, episode_steps or 0, out, seen, free, grids, world.pose,
                     world.prev, world.dist, world.trail, world.trail_len, world.trail_head,
                     world.arena, p.first, p.count, p.half, p.boxes, world.angles, world.motion,
-                    world.groups, world.P, world.I, world.rngs, ties)
+                    world.groups, world.P, world.I, world.rngs, world.motion_rngs,
+                    ties)
     if bad >= 0:
         raise ArenaError(f"{world.arenas[bad].source}: evaluation {bad} found no free pose")
     n = max(steps, 1)

@@ -211,18 +211,20 @@ def wrap(angle):
 
 @njit(cache=True)
 def move(i, action, pose, prev, dist, trail, trail_len, trail_head, arena, first, count,
-         boxes, angles, motion, P, I, rng, out):
+         boxes, angles, motion, P, I, rng, motion_rng, out):
     """One control step of robot ``i``: drive, stop at contact, sense, reward.
 
-    ``out`` receives ``(reward, collision, stuck, progress)`` (1.0/0.0 for the flags).
+    ``rng`` draws the sensor noise (as the environment's generator does in pybullet),
+    ``motion_rng`` the motion's spread. ``out`` receives ``(reward, collision, stuck,
+    progress)`` (1.0/0.0 for the flags).
     """
     a = arena[i]
     lo, hi = first[a], first[a] + count[a]
     x0, y0, yaw0 = pose[i, 0], pose[i, 1], pose[i, 2]
     m = motion[prev[i], action]     # mean (forward, left, turn), then their spread
-    fwd = m[0] + m[3] * rng.normal()
-    left = m[1] + m[4] * rng.normal()
-    dyaw = m[2] + m[5] * rng.normal()
+    fwd = m[0] + m[3] * motion_rng.normal()
+    left = m[1] + m[4] * motion_rng.normal()
+    dyaw = m[2] + m[5] * motion_rng.normal()
     c, s = math.cos(yaw0), math.sin(yaw0)
     dx, dy = c * fwd - s * left, s * fwd + c * left
     rim, contact = P[P_BODY_RADIUS], P[P_CONTACT]
@@ -263,8 +265,8 @@ def move(i, action, pose, prev, dist, trail, trail_len, trail_head, arena, first
 
 @njit(cache=True)
 def step_all(actions, pose, prev, dist, trail, trail_len, trail_head, arena, first, count,
-             boxes, angles, motion, P, I, rngs, out):
+             boxes, angles, motion, P, I, rngs, motion_rngs, out):
     """One control step of every robot; ``out[i]`` as :func:`move`'s."""
     for i in range(pose.shape[0]):
         move(i, actions[i], pose, prev, dist, trail, trail_len, trail_head, arena, first,
-             count, boxes, angles, motion, P, I, rngs[i], out[i])
+             count, boxes, angles, motion, P, I, rngs[i], motion_rngs[i], out[i])

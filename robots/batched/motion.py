@@ -5,14 +5,14 @@ how fast its wheels already turn, that is on the previous command (the velocity 
 new speed within a few milliseconds, but not instantly: turning left after driving ahead turns
 0.102 rad instead of 0.155, and moves 3 mm). :func:`measured_motion` measures it in two parts:
 
-* ``mean``: the pybullet robot driven through every pair (previous command, command), and from
-  rest, on an empty floor; the body-frame displacement of the step after ``SETTLE_STEPS`` steps
-  of the previous command;
-* ``std``: the spread pybullet adds around it, the root mean square of the differences between
-  the steps of a seeded random walk (``WALK_STEPS`` steps, the previous command kept with
-  probability one half, else a uniform one) and ``mean`` for the same pair. It comes from what
-  one previous command does not capture (how long the previous command lasted, the contacts
-  of the wheels and casters); the batched simulator draws it as Gaussian noise.
+* from rest: the pybullet robot placed at rest on an empty floor and given each command;
+* after each command: the mean and standard deviation of the body-frame displacements of the
+  steps with that (previous command, command) in a seeded random walk of ``WALK_STEPS`` steps
+  (the previous command kept with probability one half, else a uniform one). The spread comes
+  from what one previous command does not capture (how long it lasted, the contacts of the
+  wheels and casters); the batched simulator draws it as Gaussian noise. (The motion after
+  ``SETTLE_STEPS`` steps of the previous command, measured too, stands in for a pair the walk
+  never took.)
 
 Measured once per simulation and action set in a process (about a second) and cached.
 """
@@ -73,10 +73,11 @@ def _settled(env, n: int) -> np.ndarray:  # noqa: ANN001 - EPuckEnv
     return out
 
 
-def _spread(env, n: int, mean: np.ndarray) -> np.ndarray:  # noqa: ANN001 - EPuckEnv
+def _walk(env, n: int) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001 - EPuckEnv
+    """Mean and standard deviation of each (previous command, command)'s step in the walk."""
     rng = np.random.default_rng(WALK_SEED)
-    sq = np.zeros_like(mean)
-    count = np.zeros(mean.shape[:2])
+    steps: list[list[list[tuple[float, float, float]]]] = [[[] for _ in range(n)]
+                                                          for _ in range(n + 1)]
     env.reset(seed=0, options={"pose": (0.0, 0.0, 0.0)})
     prev = -1
     for _ in range(WALK_STEPS):
@@ -89,10 +90,16 @@ def _spread(env, n: int, mean: np.ndarray) -> np.ndarray:  # noqa: ANN001 - EPuc
             env.reset(seed=0, options={"pose": (0.0, 0.0, float(rng.uniform(-3, 3)))})
             prev = -1
             continue
-        sq[prev + 1, action] += (np.array(body_delta(before, after)) - mean[prev + 1, action]) ** 2
-        count[prev + 1, action] += 1
+        steps[prev + 1][action].append(body_delta(before, after))
         prev = action
-    return np.sqrt(sq / np.maximum(count, 1)[:, :, None])
+    mean = np.full((n + 1, n, 3), np.nan)
+    std = np.zeros((n + 1, n, 3))
+    for p in range(n + 1):
+        for a in range(n):
+            if len(steps[p][a]) >= 2:
+                arr = np.asarray(steps[p][a])
+                mean[p, a], std[p, a] = arr.mean(axis=0), arr.std(axis=0, ddof=1)
+    return mean, std
 
 
 @lru_cache(maxsize=8)
@@ -104,8 +111,12 @@ def measured_motion(sim: SimConfig, actions: ActionSet) -> Motion:
     n = len(actions.actions)
     env = EPuckEnv(arena=_OPEN_FLOOR, config=EnvConfig(sim=sim, actions=actions, stuck_steps=0))
     try:
-        mean = _settled(env, n)
-        std = _spread(env, n, mean)
+        settled = _settled(env, n)
+        walked, std = _walk(env, n)
     finally:
         env.close()
+    # from rest: the settled measurement (the walk starts from rest once); elsewhere the walk's
+    # mean, unless the walk never saw the pair
+    mean = np.where(np.isnan(walked), settled, walked)
+    mean[0] = settled[0]
     return Motion(mean=mean, std=std)

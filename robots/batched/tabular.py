@@ -100,7 +100,7 @@ def learn(i, algo, q, visits, t, stats, s, a, r, ns, terminal, alpha, gamma, eps
 @njit(cache=True)
 def train(steps, algo, alpha, gamma, eps, q, visits, t, state, action, stats, record,
           pose, prev, dist, trail, trail_len, trail_head, arena, first, count, half, boxes,
-          angles, motion, groups, P, I, env_rngs, learner_rngs):
+          angles, motion, groups, P, I, env_rngs, motion_rngs, learner_rngs):
     """``steps`` iterations of every robot: act, simulate, update, choose (a respawn after a
     collision or when stuck). ``record`` of shape (n, steps, N_RECORD) is filled when it has
     ``steps`` rows (pass shape (n, 0, N_RECORD) not to record). Returns the first robot whose
@@ -110,11 +110,11 @@ def train(steps, algo, alpha, gamma, eps, q, visits, t, state, action, stats, re
     levels = I[K.I_LEVELS]
     keep = record.shape[1] == steps
     for i in range(q.shape[0]):
-        er, lr = env_rngs[i], learner_rngs[i]
+        er, mr, lr = env_rngs[i], motion_rngs[i], learner_rngs[i]
         for k in range(steps):
             s, a = state[i], action[i]
             K.move(i, a, pose, prev, dist, trail, trail_len, trail_head, arena, first, count,
-                   boxes, angles, motion, P, I, er, out)
+                   boxes, angles, motion, P, I, er, mr, out)
             r, collided, stuck = out[0], out[1] > 0.0, out[2] > 0.0
             x, y = pose[i, 0], pose[i, 1]
             terminated = collided and I[K.I_RESPAWN] == 1

@@ -147,7 +147,7 @@ class BatchedTrainer:
                       self.t, self.state, self.action, self.stats, rec, w.pose, w.prev, w.dist,
                       w.trail, w.trail_len, w.trail_head, w.arena, p.first, p.count, p.half,
                       p.boxes, w.angles, w.motion, w.groups, w.P, w.I, w.rngs,
-                      self.learner_rngs)
+                      w.motion_rngs, self.learner_rngs)
         if bad >= 0:
             raise ArenaError(f"{w.arenas[bad].source}: robot {bad} found no free pose to "
                              f"respawn; the arena is too crowded")

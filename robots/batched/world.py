@@ -129,6 +129,9 @@ class BatchedWorld:
         self.I = int_params(config, self.discretisation)
         self.groups = group_table(self.discretisation)
         self.rngs = List(rngs)
+        #: the motion's spread draws from a child of each robot's generator, so that the
+        #: robot's own stream (start and respawn poses, sensor noise) is drawn as in pybullet
+        self.motion_rngs = List([r.spawn(1)[0] for r in rngs])
         self.pose = np.zeros((self.n, 3))
         self.prev = np.zeros(self.n, dtype=np.int64)
         self.dist = np.full((self.n, self.n_sensors), rc.sensor_range)
@@ -186,7 +189,7 @@ class BatchedWorld:
         p = self.packed
         K.step_all(acts, self.pose, self.prev, self.dist, self.trail, self.trail_len,
                    self.trail_head, self.arena, p.first, p.count, p.boxes, self.angles,
-                   self.motion, self.P, self.I, self.rngs, self._out)
+                   self.motion, self.P, self.I, self.rngs, self.motion_rngs, self._out)
         o = self._out
         return StepResult(reward=o[:, 0].copy(), collision=o[:, 1] > 0, stuck=o[:, 2] > 0,
                           progress=o[:, 3].copy())
