@@ -1,0 +1,130 @@
+"""The batched simulator against the pybullet reference (real pybullet, real numba kernels)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dfrl.arenas.spec import ArenaError, load_arena
+from dfrl.experiments.science.fidelity.policies import compare_policies
+from dfrl.experiments.science.fidelity.sensing import compare_sensing, compare_transitions
+from dfrl.robots.batched.evaluation import evaluate_greedy
+from dfrl.robots.batched.training import BatchedTrainer, BatchError
+from dfrl.robots.batched.world import BatchedWorld
+from dfrl.robots.env import EnvConfig, EPuckEnv
+from dfrl.robots.evaluation import PolicyKind, evaluate_policy
+from dfrl.robots.training import TrainerConfig
+from tests.robots.batched.made_arena import make_arena
+
+
+@pytest.fixture(scope="module")
+def made(tmp_path_factory: pytest.TempPathFactory) -> str:
+    return str(make_arena(tmp_path_factory.mktemp("arena") / "made.json", seed=11))
+
+
+@pytest.mark.parametrize("arena", ["r4", "h1", "made"])
+def test_ir_readings_match_pybullet_at_the_same_poses(arena: str, made: str) -> None:
+    name = made if arena == "made" else arena
+    r = compare_sensing(EnvConfig(arena=name), name, poses=300, seed=3)
+    assert r["p99_abs_mm"] < 1.0            # a grazing ray can differ by mm (pybullet's face tolerance)
+    assert r["mean_abs_mm"] < 0.2
+    assert r["state_agreement"] > 0.97
+
+
+def test_low_blocks_collide_but_are_not_seen(made: str) -> None:
+    spec = load_arena(made)
+    low = [b for b in spec.blocks if b.size[2] < 0.03]
+    assert low, "the made-up arena has a block below the rays"
+    b = low[0]
+    world = BatchedWorld(EnvConfig(arena=made), [made], [np.random.default_rng(0)])
+    # facing the block's centre from just beyond its footprint: nothing seen ahead
+    far = max(b.size[0], b.size[1]) / 2 + 0.045
+    for angle in np.linspace(-np.pi, np.pi, 16, endpoint=False):
+        x, y = b.center[0] + far * np.cos(angle), b.center[1] + far * np.sin(angle)
+        if spec.is_free(x, y, 0.038):
+            world.place(0, (x, y, angle + np.pi))
+            break
+    else:
+        pytest.skip("no free pose beside the low block")
+    env = EPuckEnv(arena=made)
+    try:
+        env.reset(seed=0)
+        env.world.place_robot(*world.pose[0])
+        assert np.allclose(env.robot.sense(), world.dist[0], atol=1e-3)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("arena", ["r1", "made"])
+def test_one_step_outcomes_match_pybullet(arena: str, made: str) -> None:
+    name = made if arena == "made" else arena
+    r = compare_transitions(EnvConfig(arena=name), name, steps=1500, seed=5)
+    assert r["agreement"] > 0.95
+    assert r["tv_distance"] < 0.05
+    assert r["tv_distance"] < r["tv_floor"] + 0.02    # no more than the motion noise explains
+
+
+def test_fixed_policies_collide_as_in_pybullet() -> None:
+    r = compare_policies(EnvConfig(arena="r4"), "r4", steps=4000, seed=2)
+    # driving ahead: each collision after the same number of steps from the same respawn poses
+    ahead = r["ahead"]
+    assert abs(ahead["batched"]["collisions_per_1000"] - ahead["pybullet"]["collisions_per_1000"]) < 2.0
+    assert abs(r["uniform"]["progress_difference"][0]) < 0.03
+
+
+def test_the_same_seed_learns_the_same_table_whatever_the_batch() -> None:
+    base = TrainerConfig(arena="r4")
+    alone = BatchedTrainer([base.replace(seed=7)])
+    alone.run(1500)
+    crowd = BatchedTrainer([base.replace(seed=s, arena=a) for s, a in [(3, "r1"), (7, "r4"), (9, "h2")]])
+    crowd.run(700)
+    crowd.run(800)
+    assert np.array_equal(alone.q[0], crowd.q[1])
+    assert alone.collisions[0] == crowd.collisions[1]
+    assert not np.array_equal(crowd.q[0], crowd.q[1])
+
+
+def test_learning_beats_the_untrained_table_in_pybullet() -> None:
+    base = TrainerConfig(arena="r1")
+    bt = BatchedTrainer([base.replace(seed=s) for s in range(4)])
+    bt.run(8000)
+    learnt = [evaluate_policy(base, PolicyKind.GREEDY, 600, 100 + k, q_table=bt.q[k],
+                              episode_steps=200) for k in range(4)]
+    zero = [evaluate_policy(base, PolicyKind.GREEDY, 600, 100 + k, q_table=np.zeros_like(bt.q[k]),
+                            episode_steps=200) for k in range(4)]
+    score = lambda r: r.progress - 0.05 * r.collisions_per_1000  # noqa: E731
+    assert np.mean([score(r) for r in learnt]) > np.mean([score(r) for r in zero]) + 0.2
+
+
+def test_batched_evaluation_measures_as_pybullet_does() -> None:
+    base = TrainerConfig(arena="r4")
+    ahead = np.zeros((81, 3))
+    ahead[:, 0] = 1.0                                    # always forward
+    b = evaluate_greedy(base, [ahead], ["r4"], 3000, [21], episode_steps=300)[0]
+    p = evaluate_policy(base, PolicyKind.GREEDY, 3000, 21, q_table=ahead, episode_steps=300)
+    assert b.episodes == p.episodes == 10
+    assert abs(b.collisions_per_1000 - p.collisions_per_1000) < 4.0
+    assert abs(b.progress - p.progress) < 0.02
+    assert abs(b.coverage - p.coverage) < 0.03
+
+
+def test_what_the_batch_cannot_run_is_refused() -> None:
+    base = TrainerConfig(arena="r4")
+    with pytest.raises(BatchError, match="robot 1: learner 'dqn'"):
+        BatchedTrainer([base, base.replace(algo="dqn")])
+    with pytest.raises(BatchError, match="reward_shuffle"):
+        BatchedTrainer([base.replace(reward_shuffle=100)])
+    with pytest.raises(BatchError, match="'stuck_steps' differs"):
+        BatchedTrainer([base, base.replace(stuck_steps=10)])
+    with pytest.raises(ValueError, match="3 tables, 2 arenas"):
+        evaluate_greedy(base, [np.zeros((81, 3))] * 3, ["r4", "r4"], 10, 1)
+
+
+def test_a_crowded_arena_is_a_located_error(tmp_path: Path) -> None:
+    path = tmp_path / "crowded.json"
+    path.write_text('{"name": "crowded", "size": [0.12, 0.12], "wall_height": 0.1, "blocks": [], '
+                    '"start": {"pose": [0, 0, 0]}}', encoding="utf-8")
+    world = BatchedWorld(EnvConfig(), [str(path)], [np.random.default_rng(0)])
+    with pytest.raises(ArenaError, match="crowded.json: no free pose"):
+        world.respawn(0)
