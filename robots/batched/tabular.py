@@ -13,6 +13,7 @@ import numpy as np
 from numba import njit
 
 from dfrl.robots.batched import kernels as K
+from dfrl.robots.batched.shuffle import M_CAPACITY, learnt_outcome
 
 #: Learner codes of :data:`ALGOS` in the ``algo`` array.
 QLEARNING, SARSA = 0, 1
@@ -100,11 +101,13 @@ def learn(i, algo, q, visits, t, stats, s, a, r, ns, terminal, alpha, gamma, eps
 @njit(cache=True)
 def train(steps, algo, alpha, gamma, eps, q, visits, t, state, action, stats, record,
           pose, prev, dist, trail, trail_len, trail_head, arena, first, count, half, boxes,
-          angles, motion, groups, P, I, env_rngs, motion_rngs, learner_rngs):
+          angles, motion, groups, P, I, env_rngs, motion_rngs, learner_rngs, sh_buffer, sh_meta,
+          sh_total, sh_rngs):
     """``steps`` iterations of every robot: act, simulate, update, choose (a respawn after a
     collision or when stuck). ``record`` of shape (n, steps, N_RECORD) is filled when it has
     ``steps`` rows (pass shape (n, 0, N_RECORD) not to record). Returns the first robot whose
-    arena had no free pose left, or -1."""
+    arena had no free pose left, or -1. Robots with ``sh_meta[i, M_CAPACITY] > 0`` learn from
+    the control's outcomes (:mod:`.shuffle`, drawn from ``sh_rngs[i]``)."""
     out = np.zeros(4)
     rng_ = P[K.P_SENSOR_RANGE]
     levels = I[K.I_LEVELS]
@@ -119,7 +122,11 @@ def train(steps, algo, alpha, gamma, eps, q, visits, t, state, action, stats, re
             x, y = pose[i, 0], pose[i, 1]
             terminated = collided and I[K.I_RESPAWN] == 1
             ns = K.discretise(dist[i], rng_, groups, levels)
-            na = learn(i, algo[i], q, visits, t, stats, s, a, r, ns, terminated, alpha[i],
+            lr_r, lr_end = r, terminated
+            if sh_meta[i, M_CAPACITY] > 0:
+                lr_r, lr_end = learnt_outcome(i, r, terminated, sh_buffer, sh_meta, sh_total,
+                                              sh_rngs[i])
+            na = learn(i, algo[i], q, visits, t, stats, s, a, lr_r, ns, lr_end, alpha[i],
                        gamma[i], eps[i], lr)
             if terminated or stuck:
                 if not K.respawn(i, pose, prev, dist, trail, trail_len, trail_head, arena,

@@ -17,9 +17,11 @@ from numba.typed import List
 
 from dfrl.arenas.spec import ArenaError
 from dfrl.robots.batched import tabular as T
+from dfrl.robots.batched.shuffle import M_CAPACITY, M_MODE, MODES
 from dfrl.robots.batched.world import BatchedWorld
 from dfrl.robots.env import EnvConfig
 from dfrl.robots.learners import validate_table
+from dfrl.robots.reward_shuffle import ShuffleMode
 from dfrl.robots.training import TrainerConfig
 
 #: Name of the batched simulator (results record it beside ``"pybullet"``).
@@ -36,8 +38,8 @@ def shared_env(configs: Sequence[TrainerConfig]) -> EnvConfig:
     Raises
     ------
     BatchError
-        No config, a learner without a table, a learning control, or configs that differ in
-        what the batch shares.
+        No config, a learner without a table, or configs that differ in what the batch
+        shares.
     """
     if not configs:
         raise BatchError("no robot to train")
@@ -46,9 +48,6 @@ def shared_env(configs: Sequence[TrainerConfig]) -> EnvConfig:
         if c.algo not in T.ALGOS:
             raise BatchError(f"robot {k}: learner '{c.algo}' is not batched (batched: "
                              f"{sorted(T.ALGOS)}); use --sim pybullet")
-        if c.reward_shuffle:
-            raise BatchError(f"robot {k}: the learning control (reward_shuffle) is not batched; "
-                             f"use --sim pybullet")
         for name in ("sim", "actions", "reward", "collision_response", "stuck_steps",
                      "stuck_distance", "discretisation"):
             if getattr(c, name) != getattr(first, name):
@@ -59,9 +58,7 @@ def shared_env(configs: Sequence[TrainerConfig]) -> EnvConfig:
 
 def env_part(config: TrainerConfig) -> EnvConfig:
     """The environment fields of a training configuration."""
-    return EnvConfig(arena=config.arena, sim=config.sim, actions=config.actions,
-                     reward=config.reward, collision_response=config.collision_response,
-                     stuck_steps=config.stuck_steps, stuck_distance=config.stuck_distance)
+    return config.env_config()
 
 
 @dataclass(frozen=True)
@@ -104,6 +101,14 @@ class BatchedTrainer:
         self.world = BatchedWorld(env, [c.arena for c in configs], env_rngs,
                                   configs[0].discretisation, motion_noise)
         self.learner_rngs = List([np.random.default_rng(s[1]) for s in streams])
+        # the learning control (reward_shuffle): a third stream, as Trainer's
+        self.shuffle_rngs = List([np.random.default_rng(s[2]) for s in streams])
+        width = max([c.reward_shuffle for c in configs] + [1])
+        self.shuffle_buffer = np.zeros((len(configs), width, 2))
+        self.shuffle_meta = np.zeros((len(configs), 4), dtype=np.int64)
+        self.shuffle_meta[:, M_CAPACITY] = [c.reward_shuffle for c in configs]
+        self.shuffle_meta[:, M_MODE] = [MODES[ShuffleMode(c.reward_shuffle_mode)] for c in configs]
+        self.shuffle_total = np.zeros(len(configs))
         n, w = len(configs), self.world
         n_states = configs[0].discretisation.n_states
         self.algo = np.array([T.ALGOS[c.algo] for c in configs], dtype=np.int64)
@@ -147,7 +152,8 @@ class BatchedTrainer:
                       self.t, self.state, self.action, self.stats, rec, w.pose, w.prev, w.dist,
                       w.trail, w.trail_len, w.trail_head, w.arena, p.first, p.count, p.half,
                       p.boxes, w.angles, w.motion, w.groups, w.P, w.I, w.rngs,
-                      w.motion_rngs, self.learner_rngs)
+                      w.motion_rngs, self.learner_rngs, self.shuffle_buffer, self.shuffle_meta,
+                      self.shuffle_total, self.shuffle_rngs)
         if bad >= 0:
             raise ArenaError(f"{w.arenas[bad].source}: robot {bad} found no free pose to "
                              f"respawn; the arena is too crowded")

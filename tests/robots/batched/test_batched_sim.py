@@ -113,8 +113,6 @@ def test_what_the_batch_cannot_run_is_refused() -> None:
     base = TrainerConfig(arena="r4")
     with pytest.raises(BatchError, match="robot 1: learner 'dqn'"):
         BatchedTrainer([base, base.replace(algo="dqn")])
-    with pytest.raises(BatchError, match="reward_shuffle"):
-        BatchedTrainer([base.replace(reward_shuffle=100)])
     with pytest.raises(BatchError, match="'stuck_steps' differs"):
         BatchedTrainer([base, base.replace(stuck_steps=10)])
     with pytest.raises(ValueError, match="3 tables, 2 arenas"):
@@ -128,3 +126,30 @@ def test_a_crowded_arena_is_a_located_error(tmp_path: Path) -> None:
     world = BatchedWorld(EnvConfig(), [str(path)], [np.random.default_rng(0)])
     with pytest.raises(ArenaError, match="crowded.json: no free pose"):
         world.respawn(0)
+
+
+@pytest.mark.parametrize("mode", ["centred_no_bootstrap", "centred", "raw"])
+def test_the_learning_control_draws_as_the_reference_does(mode: str) -> None:
+    from dfrl.robots.batched.shuffle import MODES, learnt_outcome
+    from dfrl.robots.reward_shuffle import RewardShuffle, ShuffleMode
+
+    cap, rng = 7, np.random.default_rng(4)
+    outcomes = [(float(rng.normal()), bool(rng.random() < 0.2)) for _ in range(40)]
+    reference = RewardShuffle(cap, np.random.default_rng(99), mode)
+    buffer, total = np.zeros((1, cap, 2)), np.zeros(1)
+    meta = np.array([[cap, MODES[ShuffleMode(mode)], 0, 0]], dtype=np.int64)
+    draws = np.random.default_rng(99)
+    for r, end in outcomes:
+        want = reference(r, end)
+        got = learnt_outcome(0, r, end, buffer, meta, total, draws)
+        assert got[1] == want[1] and got[0] == pytest.approx(want[0], abs=1e-12)
+
+
+def test_a_control_robot_learns_nothing_of_the_task() -> None:
+    base = TrainerConfig(arena="r1")
+    bt = BatchedTrainer([base.replace(seed=s) for s in range(3)]
+                        + [base.replace(seed=s, reward_shuffle=500) for s in range(3)])
+    bt.run(6000)
+    trained, control = bt.q[:3], bt.q[3:]
+    assert np.abs(control).max() < np.abs(trained).max() / 2   # values stay near 0
+    assert np.array_equal(bt.collisions[:3] > 0, [True] * 3)
