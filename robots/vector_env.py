@@ -11,8 +11,9 @@ in the registered ``TimeLimit``):
 * ``reset(seed=s)`` seeds sub-environment ``i`` with ``s + i`` (a list gives each its seed) and
   puts it at its arena's start pose, or at a random free pose drawn from the fresh generator
   when the start is random; without a seed, at a random free pose. Each sub-environment draws
-  from its own generator, ``np.random.default_rng(seed_i)``, which is what ``EPuckEnv``'s
-  ``np_random`` is after ``reset(seed=seed_i)``.
+  poses and sensor noise from its own generator, ``np.random.default_rng(seed_i)``, which is
+  what ``EPuckEnv``'s ``np_random`` is after ``reset(seed=seed_i)``, and its motion's spread
+  from that generator's first child (as :class:`BatchedWorld` spawns it).
 * ``step(actions)``: termination = collision when ``collision_response`` is RESPAWN;
   truncation = stuck and not terminated, or ``max_episode_steps`` reached (as ``TimeLimit``).
 * Autoreset ``NEXT_STEP`` (Gymnasium's default): the step after a sub-environment's episode
@@ -160,8 +161,7 @@ class EPuckVectorEnv(VectorEnv):
         for i in np.flatnonzero(mask):
             i = int(i)
             if seeds[i] is not None:
-                self._rngs[i].bit_generator.state = \
-                    np.random.default_rng(seeds[i]).bit_generator.state
+                self._seed(i, seeds[i])
             if poses is not None:
                 self.world.place(i, (poses[i, 0], poses[i, 1], poses[i, 2]))
             elif seeds[i] is not None:
@@ -204,8 +204,9 @@ class EPuckVectorEnv(VectorEnv):
                              f"0..{self.world.n_actions - 1}, got {actions!r}")
         resetting = np.flatnonzero(self._autoreset)
         # the kernel steps every robot: a robot being reset is stepped too and its step thrown
-        # away; its generator is put back first, so the reset draws what EPuckEnv.reset() would
-        saved = [self._rngs[i].bit_generator.state for i in resetting]
+        # away; its generators are put back first, so the reset draws what EPuckEnv.reset()
+        # would and the step leaves no trace
+        saved = [self._states(i) for i in resetting]
         result = self.world.step(acts)
         rewards = result.reward
         collision, stuck, progress = result.collision, result.stuck, result.progress
@@ -214,8 +215,8 @@ class EPuckVectorEnv(VectorEnv):
         truncated = stuck & ~terminated
         if self.max_episode_steps is not None:
             truncated |= self._elapsed >= self.max_episode_steps
-        for i, state in zip(resetting, saved):
-            self._rngs[i].bit_generator.state = state
+        for i, states in zip(resetting, saved):
+            self._set_states(i, states)
             self.world.respawn(int(i))
         if resetting.size:
             for a in (rewards, progress):
@@ -232,6 +233,24 @@ class EPuckVectorEnv(VectorEnv):
         return None
 
     # -- helpers ---------------------------------------------------------------------------
+    def _generators(self, i: int) -> tuple[np.random.Generator, np.random.Generator]:
+        """Robot ``i``'s generator (poses, sensor noise) and its motion's (the world's child of
+        it)."""
+        return self._rngs[i], self.world.motion_rngs[i]
+
+    def _seed(self, i: int, seed: int) -> None:
+        """Robot ``i``'s generators as a world built with ``default_rng(seed)`` has them."""
+        fresh = np.random.default_rng(seed)
+        motion = fresh.spawn(1)[0]          # as BatchedWorld spawns it, before any draw
+        self._set_states(i, (fresh.bit_generator.state, motion.bit_generator.state))
+
+    def _states(self, i: int) -> tuple[dict[str, Any], ...]:
+        return tuple(g.bit_generator.state for g in self._generators(i))
+
+    def _set_states(self, i: int, states: tuple[dict[str, Any], ...]) -> None:
+        for g, state in zip(self._generators(i), states):
+            g.bit_generator.state = state
+
     def _seeds(self, seed: int | Sequence[int | None] | None) -> list[int | None]:
         n = self.num_envs
         if seed is None:

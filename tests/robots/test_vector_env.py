@@ -26,6 +26,7 @@ from gymnasium.wrappers.vector import DictInfoToList, RecordEpisodeStatistics
 
 import dfrl.robots  # noqa: F401 - registers dfrl/EPuck-v0
 from dfrl.arenas import load_arena
+from dfrl.robots.batched.world import BatchedWorld
 from dfrl.robots.env import EnvConfig, EPuckEnv
 from dfrl.robots.epuck import EPuckConfig
 from dfrl.robots.registration import ENV_ID
@@ -233,6 +234,30 @@ def test_an_autoreset_draws_only_what_the_reset_draws() -> None:
     rng.normal(0.0, std, size=(k + 1, 8))           # the reset's and the k steps' readings
     expected = load_arena("r5").sample_free_pose(rng, rim + 0.03)
     np.testing.assert_allclose(infos["pose"][0], expected, rtol=0, atol=1e-12)
+
+
+def test_an_autoreset_leaves_no_trace_of_the_step_it_throws_away() -> None:
+    """The vector env against a world built with the same seed and driven by hand, which
+    respawns a robot instead of stepping it: the same poses and observations throughout (the
+    motion's spread draws 3 normals a step from its own generator)."""
+    env = make(1, arena="r4", stuck_steps=10)
+    world = BatchedWorld(EnvConfig(stuck_steps=10), ["r4"], [np.random.default_rng(5)])
+    env.reset(seed=5)
+    world.start(0)
+    rng = np.random.default_rng(0)
+    ended, resets = False, 0
+    for _ in range(300):
+        actions = rng.integers(3, size=1)
+        obs, _, terminated, truncated, infos = env.step(actions)
+        if ended:
+            world.respawn(0)
+            resets += 1
+        else:
+            world.step(actions)
+        ended = bool(terminated[0] or truncated[0])
+        assert np.array_equal(infos["pose"][0], world.pose[0])
+        assert np.array_equal(obs, world.observations())
+    assert resets >= 3
 
 
 def test_stuck_and_time_limit_truncate() -> None:
