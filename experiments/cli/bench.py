@@ -151,23 +151,35 @@ def add_sim_arguments(parser: argparse.ArgumentParser) -> None:
     from dfrl.robots.learners import LEARNERS
     from dfrl.robots.world import SimConfig
 
-    parser.add_argument("--steps", type=int, default=5000, help="timed control steps per robot")
-    parser.add_argument("--robots", type=int, nargs="+", default=[1, 2, 4],
-                        help="robots per process to measure (the first is the headline figure)")
+    parser.add_argument("--steps", type=int, default=5000,
+                        help="timed control steps per robot (pybullet: fewer, see "
+                             "--pybullet-budget)")
+    parser.add_argument("--robots", type=int, nargs="+", default=[1, 64, 1024],
+                        help="robot counts to measure")
+    parser.add_argument("--sims", nargs="+", choices=list(sim.SIMS), default=list(sim.SIMS),
+                        help="simulators to measure, alternating point by point")
     parser.add_argument("--arena", default="r4", help="arena of every robot")
-    parser.add_argument("--algo", choices=sorted(LEARNERS), default="qlearning", help="learner")
+    parser.add_argument("--algo", choices=sorted(LEARNERS), default="qlearning",
+                        help="learner (batched: qlearning or sarsa)")
     parser.add_argument("--physics-dt", type=float, default=SimConfig().physics_dt,
                         help="physics step (s)")
     parser.add_argument("--control-dt", type=float, default=SimConfig().control_dt,
                         help="control step (s)")
     parser.add_argument("--warmup", type=int, default=200, help="untimed steps per robot first")
+    parser.add_argument("--pybullet-budget", type=int, default=sim.PYBULLET_BUDGET,
+                        help="timed robot-steps of a pybullet point at most: steps (and "
+                             "warm-up, a tenth) per robot scaled down to fit")
+    parser.add_argument("--pybullet-live", type=int, default=sim.PYBULLET_LIVE,
+                        help="pybullet clients alive at once at most (about 28 MB each); more "
+                             "robots are measured group after group")
     parser.add_argument("--json", action="store_true", help="print JSON")
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
     try:
         out = sim.bench(args.arena, args.algo, args.steps, args.robots, args.physics_dt,
-                        args.control_dt, args.warmup)
+                        args.control_dt, args.warmup, args.sims, args.pybullet_budget,
+                        args.pybullet_live)
     except ValueError as exc:
         print(f"dfrl bench sim: error: {exc}", file=sys.stderr)
         return 2
@@ -175,12 +187,26 @@ def cmd_sim(args: argparse.Namespace) -> int:
         print(json.dumps(out, indent=2))
         return 0
     print(f"sim bench: {args.algo} in {args.arena}, control {out['control_dt'] * 1000:g} ms, "
-          f"physics {out['physics_dt'] * 1000:g} ms ({out['substeps']} substeps), "
-          f"{args.steps} steps")
-    print(f"{'robots':>6} {'steps/s':>9} {'per robot':>10} {'x real time':>12} {'per robot':>10}")
-    for r in out["scaling"]:
-        print(f"{r['robots']:>6} {r['steps_per_s']:>9.0f} {r['steps_per_s_per_robot']:>10.0f} "
-              f"{r['realtime_factor']:>12.0f} {r['realtime_factor_per_robot']:>10.0f}")
+          f"physics {out['physics_dt'] * 1000:g} ms ({out['substeps']} substeps); one process "
+          f"on one core: steps/s per core = robot-steps / wall s")
+    if "pybullet" in out["sims"]:
+        print(f"pybullet: at most {out['pybullet_budget']:,} timed robot-steps per point (steps "
+              f"per robot scaled down), at most {out['pybullet_live']} robots alive at once")
+    if "batched" in out["sims"]:
+        print("batched: timed after its first call (compile s: numba compiles or loads its "
+              "cache) and the warm-up")
+    print(f"{'sim':<9} {'robots':>6} {'learning':>8} {'steps':>6} {'robot-steps':>11} "
+          f"{'wall s':>8} {'steps/s/core':>12} {'per CPU s':>10} {'x real time':>11} "
+          f"{'compile s':>9}")
+    for p in out["points"]:
+        compile_s = f"{p['compile_s']:>9.2f}" if "compile_s" in p else f"{'':>9}"
+        print(f"{p['sim']:<9} {p['robots']:>6} {'yes' if p['learning'] else 'no':>8} "
+              f"{p['steps']:>6} {p['robot_steps']:>11} {p['wall_s']:>8.2f} "
+              f"{p['steps_per_s_per_core']:>12.0f} {p['steps_per_cpu_s']:>10.0f} "
+              f"{p['realtime_factor_per_core']:>11.0f} {compile_s}")
+    for r in out["ratios"]:
+        print(f"batched / pybullet, {r['robots']} robots, "
+              f"{'learning' if r['learning'] else 'no learning'}: {r['batched_over_pybullet']:g}")
     return 0
 
 
