@@ -21,6 +21,10 @@ TINY = HeteroOptions(seeds=(1, 2), iterations=60, respite=30, eval_at=(30, 60), 
 def test_batched_study_on_a_tiny_budget(tmp_path: Path) -> None:
     res = run(TINY, tmp_path / "out")
     assert len(res.rows) == 2 * 6 * 2
+    assert {(r["algo"], r["sim"]) for r in res.rows} == {("qlearning", "batched"),
+                                                         ("dqn", "pybullet")}
+    head = (tmp_path / "out" / "rows.csv").read_text().splitlines()[0]
+    assert head.startswith("seed,run,role,algo,sim,iteration,score")
     assert res.sim == "batched" and res.simulators == {"qlearning": "batched", "dqn": "pybullet"}
     saved = json.loads((tmp_path / "out" / "results.json").read_text())
     assert saved["sim"] == "batched" and saved["simulators"]["dqn"] == "pybullet"
@@ -41,6 +45,7 @@ def test_each_robot_is_its_simulators_robot() -> None:
     pyb = HeteroOptions(**{**TINY.__dict__, "sim": "pybullet"})
     batched, plain = run_one_batched("dqn_alone", 1, TINY), run_one("dqn_alone", 1, pyb)
     assert batched["rows"] == plain["rows"] and batched["digests"] == plain["digests"]
+    assert {r["sim"] for r in plain["rows"]} == {"pybullet"}
     # the Q-learning robot alone is the batched trainer's robot of its seed
     bt = BatchedTrainer([trainer_config("qlearning", 1001, TINY)])
     bt.run(60)

@@ -139,7 +139,7 @@ def run_one(run: str, seed: int, options: HeteroOptions) -> dict[str, Any]:
                                      None if function else t.q_table.copy(),
                                      t.params if function else None)
                     rows.append({"seed": seed, "run": run, "role": role, "algo": algo,
-                                 "iteration": i, **m})
+                                 "sim": PYBULLET, "iteration": i, **m})
         digests = {role: hashlib.sha256(t.params.tobytes()).hexdigest()
                    for (role, _, _), t in zip(roster, trainers)}
     finally:
@@ -174,8 +174,8 @@ class HeteroResults:
     Attributes
     ----------
     rows : list of dict
-        One per (seed, run, robot role, evaluation iteration): ``score``,
-        ``collisions_per_1000``, ``progress``.
+        One per (seed, run, robot role, evaluation iteration): the robot's ``sim``,
+        ``score``, ``collisions_per_1000``, ``progress``.
     comparisons : list of dict
         Per comparison of :data:`COMPARISONS` and evaluation iteration: ``role``, ``run``,
         ``baseline``, ``iteration``, the paired ``score`` and ``collisions`` differences

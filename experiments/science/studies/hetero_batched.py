@@ -98,5 +98,5 @@ def _evaluate(run: str, seed: int, options: HeteroOptions, roster: tuple, views:
         measured[k] = score_policy(t.config, seed, options,
                                    None if function else t.q_table.copy(),
                                    t.params if function else None)
-    return [{"seed": seed, "run": run, "role": role, "algo": algo, "iteration": iteration,
-             **measured[k]} for k, (role, algo, _) in enumerate(roster)]
+    return [{"seed": seed, "run": run, "role": role, "algo": algo, "sim": SIMULATORS[algo],
+             "iteration": iteration, **measured[k]} for k, (role, algo, _) in enumerate(roster)]

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from dfrl.arenas import load_arena
 from dfrl.experiments.science.studies.simulators import PYBULLET, check_sim
 from dfrl.experiments.science.studies.sweep import COLLISION_COST
 from dfrl.robots.evaluation import EvalResult, PolicyKind, evaluate_policy
@@ -103,8 +104,10 @@ def eval_many(cfg_dict: dict[str, Any], tables: Sequence[np.ndarray], arenas: Se
     from dfrl.robots.batched.evaluation import evaluate_greedy
 
     cfg = TrainerConfig.from_dict(cfg_dict)
-    return [measured(r) for r in evaluate_greedy(cfg, tables, arenas, steps, seed_list,
-                                                 episode_steps)]
+    # each arena parsed once: the batched world would parse a name once per evaluation
+    specs = {a: load_arena(a) for a in dict.fromkeys(arenas)}
+    return [measured(r) for r in evaluate_greedy(cfg, tables, [specs[a] for a in arenas],
+                                                 steps, seed_list, episode_steps)]
 
 
 class Evaluator:
