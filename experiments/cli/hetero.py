@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 from dfrl.experiments.cli.seeds import add_seed_arguments, chosen_seeds
+from dfrl.experiments.cli.sim_option import add_sim_argument, chosen_sim
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -39,6 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--eval-steps", type=int, default=1000,
                    help="greedy steps per evaluation (default: %(default)s)")
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default: %(default)s)")
+    add_sim_argument(p, "; batched runs the Q-learning robots batched, the dqn on pybullet")
     p.add_argument("--out", type=Path, default=None,
                    help="write options.json, rows.csv, results.json here")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
@@ -58,7 +60,8 @@ def cmd_hetero(args: argparse.Namespace) -> int:
         options = HeteroOptions(seeds=chosen_seeds(args), arena=args.arena,
                                 iterations=args.iterations, respite=args.respite,
                                 method=args.method, eval_at=tuple(args.eval_at),
-                                eval_steps=args.eval_steps, jobs=args.jobs)
+                                eval_steps=args.eval_steps, jobs=args.jobs,
+                                sim=chosen_sim(args))
         results = run(options, args.out)
     except ValueError as exc:
         print(f"dfrl hetero: {exc}", file=sys.stderr)
@@ -68,7 +71,8 @@ def cmd_hetero(args: argparse.Namespace) -> int:
         return 0
     print(f"hetero: {len(options.seeds)} seeds, {options.iterations} iterations in "
           f"{options.arena}, share every {options.respite} ({options.method}), "
-          f"{results.seconds:.0f} s")
+          f"{results.seconds:.0f} s; simulator: "
+          f"{', '.join(f'{a} {s}' for a, s in results.simulators.items())}")
     print("robot  run      vs baseline  iteration  score (run, base, difference)      "
           "collisions/1000 (difference)")
     for c in results.comparisons:

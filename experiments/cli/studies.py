@@ -12,6 +12,7 @@ from typing import Any
 from dfrl.experiments.cli.cluster import add_study_cluster_arguments, study_cluster
 from dfrl.experiments.cli.figures import add_figure_arguments, redraw_paper
 from dfrl.experiments.cli.seeds import add_seed_arguments, chosen_seeds
+from dfrl.experiments.cli.sim_option import add_sim_argument, chosen_sim
 from dfrl.experiments.provenance import write_provenance
 
 
@@ -65,7 +66,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="evaluation steps per snapshot and arena (default: %(default)s)")
     p.add_argument("--held-out", nargs="*", default=["h1", "h2"],
                    help="held-out evaluation arenas (default: %(default)s)")
-    p.add_argument("--jobs", type=int, default=2, help="processes (default: %(default)s)")
+    p.add_argument("--jobs", type=int, default=2,
+                   help="processes of --sim pybullet (default: %(default)s)")
+    add_sim_argument(p)
     p.add_argument("--out", type=Path, default=None,
                    help="also write sweep.md and sweep.json into this folder")
     p.add_argument("--json", action="store_true", help="print JSON instead of the table")
@@ -84,14 +87,15 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         seeds = chosen_seeds(args)
         base = TrainerConfig(arena=args.arena, algo=args.algo,
                              iterations=args.iterations).to_dict()
+        sim = chosen_sim(args)
         results = sweep(base, factors, list(seeds), args.mode, tuple(args.held_out),
-                        args.eval_steps, jobs=args.jobs)
+                        args.eval_steps, jobs=args.jobs, sim=sim)
     except (KeyError, ValueError, TypeError) as exc:
         print(f"dfrl sweep: {exc}", file=sys.stderr)
         return 2
     data = [{"setting": r.setting.name, "changes": [list(c) for c in r.setting.changes],
-             "runs": r.runs} for r in results]
-    table = markdown_table(results)
+             "sim": sim, "runs": r.runs} for r in results]
+    table = markdown_table(results) + f"\n\nSimulator: {sim}."
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
         write_provenance(args.out)
@@ -283,6 +287,7 @@ def register_speedup(subparsers: argparse._SubParsersAction) -> None:
             ("--resamples", int, "bootstrap resamples"), ("--jobs", int, "processes")):
         p.add_argument(flag, type=kind, default=getattr(d, flag[2:].replace("-", "_")),
                        help=f"{hint} (default: %(default)s)")
+    add_sim_argument(p, "; --resume and --from-runs refuse federations of the other one")
     p.add_argument("--out", type=Path, default=None, help="also write speedup.md, "
                    "speedup.json, tidy.csv, provenance.json there, and each federation to "
                    "speedup_runs.jsonl as it ends")
@@ -314,7 +319,8 @@ def cmd_speedup(args: argparse.Namespace) -> int:
             share_every=args.share_every, grid=args.grid, targets=tuple(args.targets),
             score_threshold=args.score_threshold, score_every=args.score_every,
             eval_steps=args.eval_steps, alpha=args.alpha, method=args.method,
-            linear_fraction=args.linear_fraction, resamples=args.resamples, jobs=args.jobs)
+            linear_fraction=args.linear_fraction, resamples=args.resamples, jobs=args.jobs,
+            sim=chosen_sim(args))
         opts.check()
         ref = reference_table(**REFERENCE)
     except (ValueError, KeyError, ReferenceError) as exc:

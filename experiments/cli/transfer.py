@@ -12,6 +12,7 @@ from pathlib import Path
 
 from dfrl.experiments.cli.figures import add_figure_arguments, wants_redraw
 from dfrl.experiments.cli.seeds import add_seed_arguments, chosen_seeds
+from dfrl.experiments.cli.sim_option import add_sim_argument, chosen_sim
 from dfrl.experiments.provenance import write_provenance
 from dfrl.robots.learners import LEARNERS
 from dfrl.robots.state import SensorGrouping
@@ -181,7 +182,9 @@ def register_study(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--resamples", type=int, default=4000,
                    help="bootstrap resamples of a censored difference of times "
                         "(default: %(default)s)")
-    p.add_argument("--jobs", type=int, default=2, help="processes (default: %(default)s)")
+    p.add_argument("--jobs", type=int, default=2,
+                   help="processes of --sim pybullet (default: %(default)s)")
+    add_sim_argument(p, "; --from-json takes the file's and refuses another")
     p.add_argument("--out", type=Path, default=None,
                    help="write transfer_study.md, transfer_study.json, tidy.csv and "
                         "provenance.json there")
@@ -220,6 +223,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     """``dfrl transfer-study``: exit 0 with a report, 2 on a bad option."""
     import time
 
+    from dfrl.experiments.science.studies.simulators import LEGACY_SIM, check_same
     from dfrl.experiments.science.transfer.claims import claims, markdown, write_study
     from dfrl.experiments.science.transfer.study import StudyOptions, transfer_study
 
@@ -227,8 +231,12 @@ def cmd_study(args: argparse.Namespace) -> int:
     if args.from_json is not None:
         try:
             doc = json.loads(args.from_json.read_text(encoding="utf-8"))
+            # a study written before --sim ran on pybullet
+            options = {"sim": LEGACY_SIM, **doc["options"]}
+            if args.sim is not None:
+                check_same(options["sim"], args.sim, str(args.from_json))
             opts = StudyOptions(**{k: tuple(v) if isinstance(v, list) else v
-                                   for k, v in doc["options"].items()})
+                                   for k, v in options.items()})
             rows, wall = doc["rows"], float(doc["wall_time"])
             found = claims(rows, opts, args.resamples)
         except (OSError, ValueError, KeyError, TypeError) as exc:
@@ -252,7 +260,7 @@ def cmd_study(args: argparse.Namespace) -> int:
                             threshold_iterations=args.threshold_iterations,
                             threshold_runs=args.threshold_runs, confirm=args.confirm,
                             unpaired=args.unpaired, extra=tuple(args.extra),
-                            jobs=args.jobs)
+                            jobs=args.jobs, sim=chosen_sim(args))
         if args.out is not None:
             args.out.mkdir(parents=True, exist_ok=True)
             write_provenance(args.out)

@@ -1,6 +1,6 @@
-"""``dfrl hetero`` on a tiny budget: the runs, the rows, the paired comparisons and the files;
-a run is the same with the same seed, and federating changes the robots (the control: the
-same robots alone end elsewhere)."""
+"""``dfrl hetero`` on a tiny budget on pybullet: the runs, the rows, the paired comparisons and
+the files; a run is the same with the same seed, and federating changes the robots (the
+control: the same robots alone end elsewhere)."""
 from __future__ import annotations
 
 import json
@@ -12,7 +12,7 @@ from dfrl.experiments.cli import main
 from dfrl.experiments.science.studies.hetero import HeteroOptions, run, run_one
 
 TINY = HeteroOptions(seeds=(1, 2), iterations=60, respite=30, eval_at=(30, 60), eval_steps=20,
-                     episode_steps=20, jobs=1)
+                     episode_steps=20, jobs=1, sim="pybullet")
 
 
 def test_study_on_a_tiny_budget(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

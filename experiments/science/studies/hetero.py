@@ -25,6 +25,11 @@ every run of a seed). **Comparisons**, paired by seed (:func:`..statistics.paire
 intervals): dqn ``mixed - dqn_alone``, Q-learning ``mixed - ql_alone``, and the control
 Q-learning ``ql_pair - ql_alone``. The dqn's distillation residuals (RMS, per share) are
 reported too.
+
+**Simulator** (``sim``): on pybullet every robot is a :class:`~dfrl.robots.training.Trainer`
+(:func:`run_one`); on the batched simulator (the default) the Q-learning robots are batched
+and the dqn robot stays on pybullet, the batched simulator having no dqn
+(:mod:`.hetero_batched`); ``results.json`` records both (``sim``, ``simulators``).
 """
 from __future__ import annotations
 
@@ -32,7 +37,7 @@ import hashlib
 import json
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +45,7 @@ import numpy as np
 
 from dfrl.experiments.science.statistics import Interval, paired
 from dfrl.experiments.science.studies.fedsim import AGGREGATIONS
+from dfrl.experiments.science.studies.simulators import BATCHED, DEFAULT_SIM, PYBULLET, check_sim
 
 RUNS = ("dqn_alone", "ql_alone", "mixed", "ql_pair")
 #: (role, algorithm, seed offset) of the robots of each run.
@@ -68,9 +74,11 @@ class HeteroOptions:
     eval_steps: int = 1000
     episode_steps: int = 250
     jobs: int = 2
+    sim: str = DEFAULT_SIM
 
     def check(self) -> None:
         """Raises ValueError naming the first bad option."""
+        check_sim(self.sim)
         if len(self.seeds) < 2 or len(set(self.seeds)) != len(self.seeds) or min(self.seeds) < 0:
             raise ValueError(f"seeds: at least two distinct seeds >= 0, got {self.seeds}")
         if self.method not in AGGREGATIONS:
@@ -83,14 +91,14 @@ class HeteroOptions:
             raise ValueError("eval_steps and episode_steps are >= 1")
 
 
-def _trainer_config(algo: str, seed: int, options: HeteroOptions) -> Any:
+def trainer_config(algo: str, seed: int, options: HeteroOptions) -> Any:
     from dfrl.robots.training import TrainerConfig
 
     return TrainerConfig(arena=options.arena, algo=algo, seed=seed,
                          iterations=options.iterations)
 
 
-def _score(config: Any, seed: int, options: HeteroOptions, q_table: np.ndarray | None,
+def score_policy(config: Any, seed: int, options: HeteroOptions, q_table: np.ndarray | None,
            params: np.ndarray | None) -> dict[str, float]:
     from dfrl.robots.evaluation import evaluate_policy
 
@@ -108,7 +116,7 @@ def run_one(run: str, seed: int, options: HeteroOptions) -> dict[str, Any]:
 
     t0 = time.perf_counter()
     roster = ROSTER[run]
-    trainers = [Trainer(_trainer_config(algo, 1000 * seed + off, options))
+    trainers = [Trainer(trainer_config(algo, 1000 * seed + off, options))
                 for _, algo, off in roster]
     views = [GridView(t) if t.learner_kind == "function" else t for t in trainers]
     rows: list[dict[str, Any]] = []
@@ -127,10 +135,11 @@ def run_one(run: str, seed: int, options: HeteroOptions) -> dict[str, Any]:
             if i in options.eval_at:
                 for (role, algo, _), t in zip(roster, trainers):
                     function = t.learner_kind == "function"
-                    m = _score(t.config, seed, options, None if function else t.q_table.copy(),
-                               t.params if function else None)
+                    m = score_policy(t.config, seed, options,
+                                     None if function else t.q_table.copy(),
+                                     t.params if function else None)
                     rows.append({"seed": seed, "run": run, "role": role, "algo": algo,
-                                 "iteration": i, **m})
+                                 "sim": PYBULLET, "iteration": i, **m})
         digests = {role: hashlib.sha256(t.params.tobytes()).hexdigest()
                    for (role, _, _), t in zip(roster, trainers)}
     finally:
@@ -142,7 +151,20 @@ def run_one(run: str, seed: int, options: HeteroOptions) -> dict[str, Any]:
 
 def _job(args: tuple[str, int, HeteroOptions]) -> tuple[str, int, dict[str, Any]]:
     run, seed, options = args
+    if options.sim == BATCHED:
+        from dfrl.experiments.science.studies.hetero_batched import run_one_batched
+        return run, seed, run_one_batched(run, seed, options)
     return run, seed, run_one(run, seed, options)
+
+
+def simulators(sim: str) -> dict[str, str]:
+    """The simulator of each learner of the study when it runs on ``sim`` (the batched one has
+    no dqn: :mod:`.hetero_batched`)."""
+    check_sim(sim)
+    if sim == PYBULLET:
+        return {"qlearning": PYBULLET, "dqn": PYBULLET}
+    from dfrl.experiments.science.studies.hetero_batched import SIMULATORS
+    return dict(SIMULATORS)
 
 
 @dataclass(frozen=True)
@@ -152,8 +174,8 @@ class HeteroResults:
     Attributes
     ----------
     rows : list of dict
-        One per (seed, run, robot role, evaluation iteration): ``score``,
-        ``collisions_per_1000``, ``progress``.
+        One per (seed, run, robot role, evaluation iteration): the robot's ``sim``,
+        ``score``, ``collisions_per_1000``, ``progress``.
     comparisons : list of dict
         Per comparison of :data:`COMPARISONS` and evaluation iteration: ``role``, ``run``,
         ``baseline``, ``iteration``, the paired ``score`` and ``collisions`` differences
@@ -164,6 +186,11 @@ class HeteroResults:
     digests : dict
         ``"RUN/SEED"`` -> role -> sha256 of that robot's final parameters.
     seconds : float
+    sim : str
+        The study's ``--sim``.
+    simulators : dict
+        Learner -> the simulator its robots ran on (with ``sim`` batched, the dqn's is
+        pybullet).
     """
 
     rows: list[dict[str, Any]]
@@ -171,6 +198,8 @@ class HeteroResults:
     residuals: dict[str, float]
     digests: dict[str, dict[str, str]]
     seconds: float
+    sim: str = PYBULLET
+    simulators: dict[str, str] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -190,8 +219,8 @@ def compare(rows: list[dict[str, Any]], seeds: tuple[int, ...],
             a = [by[(s, run, role, it)] for s in seeds]
             b = [by[(s, base, role, it)] for s in seeds]
             entry: dict[str, Any] = {"role": role, "run": run, "baseline": base, "iteration": it}
-            for key, field in (("score", "score"), ("collisions", "collisions_per_1000")):
-                xa, xb = [r[field] for r in a], [r[field] for r in b]
+            for key, name in (("score", "score"), ("collisions", "collisions_per_1000")):
+                xa, xb = [r[name] for r in a], [r[name] for r in b]
                 entry[key] = _interval(paired(xa, xb))
                 entry[f"{key}_{run}"] = float(np.mean(xa))
                 entry[f"{key}_{base}"] = float(np.mean(xb))
@@ -227,7 +256,8 @@ def run(options: HeteroOptions, output_dir: str | Path | None = None) -> HeteroR
                    "max": float(np.max(res_rms)) if res_rms else float("nan"),
                    "shares": len(res_rms)},
         digests={f"{r}/{s}": res["digests"] for r, s, res in done},
-        seconds=time.perf_counter() - t0)
+        seconds=time.perf_counter() - t0, sim=options.sim,
+        simulators=simulators(options.sim))
     if output_dir is not None:
         out = Path(output_dir)
         out.mkdir(parents=True, exist_ok=True)

@@ -6,6 +6,7 @@ greedy policy of chosen tables in the robot's own arena and in held-out arenas
 (:func:`dfrl.robots.evaluation.evaluate_policy`, many short seeded episodes, the same seed for
 every table so that the curves compare tables, not start poses). Identical tables (after an
 ``average`` share every robot holds the same one) are evaluated once per arena.
+:func:`eval_many` measures many tables at once, on the batched simulator in one compiled call.
 
 Score of one evaluation: ``progress - COLLISION_COST * collisions_per_1000``
 (:mod:`dfrl.experiments.science.studies.sweep`): driving ahead without colliding scores near 1,
@@ -23,8 +24,10 @@ from typing import Any
 
 import numpy as np
 
+from dfrl.arenas import load_arena
+from dfrl.experiments.science.studies.simulators import PYBULLET, check_sim
 from dfrl.experiments.science.studies.sweep import COLLISION_COST
-from dfrl.robots.evaluation import PolicyKind, evaluate_policy
+from dfrl.robots.evaluation import EvalResult, PolicyKind, evaluate_policy
 from dfrl.robots.training import TrainerConfig
 
 #: Columns of ``evaluations.csv``.
@@ -61,15 +64,50 @@ def digest(q: np.ndarray) -> str:
     return hashlib.sha256(np.ascontiguousarray(q, dtype=np.float64).tobytes()).hexdigest()
 
 
-def eval_job(cfg_dict: dict[str, Any], q: np.ndarray, arena: str, steps: int,
-             episode_steps: int, seed: int) -> dict[str, float]:
-    """One greedy evaluation (a process-pool job)."""
-    cfg = TrainerConfig.from_dict(cfg_dict).replace(arena=arena)
-    r = evaluate_policy(cfg, PolicyKind.GREEDY, steps, seed, q_table=q,
-                        episode_steps=episode_steps)
+def measured(r: EvalResult) -> dict[str, float]:
+    """An evaluation's numbers as the rows keep them, with its score."""
     return {"steps": r.steps, "collisions_per_1000": r.collisions_per_1000,
             "progress": r.progress, "coverage": r.coverage, "mean_reward": r.mean_reward,
             "score": r.progress - COLLISION_COST * r.collisions_per_1000}
+
+
+def eval_job(cfg_dict: dict[str, Any], q: np.ndarray, arena: str, steps: int,
+             episode_steps: int, seed: int) -> dict[str, float]:
+    """One greedy evaluation in pybullet (a process-pool job)."""
+    cfg = TrainerConfig.from_dict(cfg_dict).replace(arena=arena)
+    r = evaluate_policy(cfg, PolicyKind.GREEDY, steps, seed, q_table=q,
+                        episode_steps=episode_steps)
+    return measured(r)
+
+
+def eval_many(cfg_dict: dict[str, Any], tables: Sequence[np.ndarray], arenas: Sequence[str],
+              steps: int, episode_steps: int, seeds: Sequence[int] | int,
+              sim: str = PYBULLET) -> list[dict[str, float]]:
+    """The greedy evaluation of ``tables[j]`` in ``arenas[j]`` with seed ``seeds[j]`` (or one
+    seed for all), for every ``j``, as :func:`eval_job` measures it: on the batched simulator
+    in one compiled call (:func:`dfrl.robots.batched.evaluation.evaluate_greedy`), on pybullet
+    one after the other.
+
+    Raises
+    ------
+    ValueError
+        Lengths that differ, a table of the wrong shape or an unknown simulator.
+    """
+    check_sim(sim)
+    seed_list = [seeds] * len(tables) if isinstance(seeds, (int, np.integer)) else list(seeds)
+    if not len(tables) == len(arenas) == len(seed_list):
+        raise ValueError(f"{len(tables)} tables, {len(arenas)} arenas and {len(seed_list)} "
+                         f"seeds: one of each per evaluation")
+    if sim == PYBULLET:
+        return [eval_job(cfg_dict, q, a, steps, episode_steps, int(s))
+                for q, a, s in zip(tables, arenas, seed_list)]
+    from dfrl.robots.batched.evaluation import evaluate_greedy
+
+    cfg = TrainerConfig.from_dict(cfg_dict)
+    # each arena parsed once: the batched world would parse a name once per evaluation
+    specs = {a: load_arena(a) for a in dict.fromkeys(arenas)}
+    return [measured(r) for r in evaluate_greedy(cfg, tables, [specs[a] for a in arenas],
+                                                 steps, seed_list, episode_steps)]
 
 
 class Evaluator:

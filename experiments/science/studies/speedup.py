@@ -2,7 +2,8 @@
 number of robots N, in a homogeneous and a heterogeneous federation, compared with the linear
 speed-up of the theory (Khodadadian et al. 2022; Woo, Joshi and Chi 2023).
 
-**Design.** Every run is one in-process federation (:func:`.fedsim.federate`): N robots learn
+**Design.** Every run is one in-process federation (:func:`.fedsim.federate`, or on the batched
+simulator, the default ``sim``, :func:`.fedsim_batched.federate_batched`): N robots learn
 Q-learning and share (``method``, default ``average``) every ``share_every`` iterations. The
 *target arena* is R1, the arena of the shipped reference table (:mod:`..reference`):
 
@@ -39,9 +40,10 @@ import numpy as np
 from dfrl.experiments.science.curves import first_reach
 from dfrl.experiments.science.pool import stop_pool, study_pool
 from dfrl.experiments.science.reference import Reference, table_error
-from dfrl.experiments.science.studies.fedsim import federate
-from dfrl.experiments.science.studies.history import eval_job
-from dfrl.robots.training import Trainer, TrainerConfig
+from dfrl.experiments.science.studies.history import eval_many
+from dfrl.experiments.science.studies.simulators import (DEFAULT_SIM, LEGACY_SIM, check_same,
+                                                         check_sim, federator)
+from dfrl.robots.training import TrainerConfig
 
 PAPER_ARENAS = ("r1", "r2", "r3", "r4", "r5")
 TARGET_ARENA = "r1"
@@ -75,9 +77,11 @@ class SpeedupOptions:
     linear_fraction: float = 0.5
     resamples: int = 4000
     jobs: int = 2
+    sim: str = DEFAULT_SIM
 
     def check(self) -> None:
         """Raises ValueError naming the first bad option."""
+        check_sim(self.sim)
         bad = [c for c in self.conditions if c not in CONDITIONS]
         if bad or not self.conditions:
             raise ValueError(f"conditions: some of {', '.join(CONDITIONS)}, got {bad}")
@@ -169,19 +173,20 @@ def run_one(arena_list: tuple[str, ...], seed: int, opts: SpeedupOptions,
                 and score_time(score_its, scores, opts.score_threshold, opts.score_hold)
                 is not None)
 
-    def observe(it: int, trainers: Sequence[Trainer]) -> bool:
+    def observe(it: int, trainers: Sequence[Any]) -> bool:
         grid.append(it)
         error.append(float(np.mean([table_error(trainers[k].q_table, reference).relative
                                     for k in in_target])))
         if it % opts.score_every == 0:
             score_its.append(it)
-            scores.append(eval_job(base_dict, trainers[0].q_table, TARGET_ARENA,
-                                   opts.eval_steps, opts.episode_steps, EVAL_SEED)["score"])
+            scores.append(eval_many(base_dict, [trainers[0].q_table], [TARGET_ARENA],
+                                    opts.eval_steps, opts.episode_steps, EVAL_SEED,
+                                    opts.sim)[0]["score"])
         return reached_all()
 
     t0 = time.perf_counter()
-    fed = federate(cfgs, budget(opts, len(cfgs)), opts.share_every, opts.method,
-                   observe=observe, observe_every=opts.grid, final_share=False)
+    fed = federator(opts.sim)(cfgs, budget(opts, len(cfgs)), opts.share_every, opts.method,
+                              observe=observe, observe_every=opts.grid, final_share=False)
     times: dict[str, int | None] = {}
     for t in opts.targets:
         hit = first_reach(grid, error, t, "below") if len(grid) > 1 else (
@@ -198,7 +203,8 @@ def run_one(arena_list: tuple[str, ...], seed: int, opts: SpeedupOptions,
 
 #: The options a federation's result depends on (the rest only change the analysis).
 RUN_OPTIONS = ("iterations", "share_every", "grid", "targets", "score_threshold",
-               "score_every", "score_hold", "eval_steps", "episode_steps", "alpha", "method")
+               "score_every", "score_hold", "eval_steps", "episode_steps", "alpha", "method",
+               "sim")
 #: One finished federation per line, appended as each ends (``--out``).
 RUNS_FILE = "speedup_runs.jsonl"
 
@@ -269,6 +275,9 @@ def load_runs(path: str | Path, opts: SpeedupOptions, complete: bool = True
 
     Raises
     ------
+    SimulatorMismatch
+        A federation of the file ran on another simulator than ``opts.sim`` (a line without
+        one ran on pybullet); the message names the line.
     ValueError
         ``complete`` and a federation the options need is missing (or was run with other
         options), or a line is not JSON (the message names the line).
@@ -284,8 +293,10 @@ def load_runs(path: str | Path, opts: SpeedupOptions, complete: bool = True
             r = json.loads(line)
         except ValueError as exc:
             raise ValueError(f"{path}:{no}: not a JSON line ({exc})") from exc
+        ran = {"sim": LEGACY_SIM, **(r.get("recipe") or {})}
+        check_same(ran["sim"], opts.sim, f"{path}:{no}")
         key = (tuple(r["arenas"]), int(r["seed"]))
-        if key in needed and r.get("recipe") == recipe(opts, len(key[0])):
+        if key in needed and ran == recipe(opts, len(key[0])):
             out[key] = {k: v for k, v in r.items() if k != "recipe"}
     missing = [k for k in runs_needed(opts) if k not in out]
     if complete and missing:
@@ -301,12 +312,14 @@ def study_runs(opts: SpeedupOptions, reference: Reference, out: Path | None, res
                ) -> dict[tuple[tuple[str, ...], int], dict[str, Any]]:
     """The federations of ``dfrl speedup``: read from ``from_runs`` alone, or run, each
     appended to ``out/``:data:`RUNS_FILE` when ``out`` is given, reusing those already there
-    with ``resume``."""
+    with ``resume``. A file of federations of another simulator is refused
+    (:class:`~.simulators.SimulatorMismatch`), resumed or appended to."""
     if from_runs is not None:
         return load_runs(from_runs, opts)
     record = None if out is None else Path(out) / RUNS_FILE
-    done = (load_runs(record, opts, complete=False)
-            if resume and record is not None and record.is_file() else {})
+    found = (load_runs(record, opts, complete=False)
+             if record is not None and record.is_file() else {})
+    done = found if resume else {}
     if record is not None:
         record.parent.mkdir(parents=True, exist_ok=True)
     return run_all(opts, reference, progress, done, record)

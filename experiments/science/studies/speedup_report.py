@@ -138,7 +138,8 @@ def markdown(rows: Sequence[SpeedupRow], opts: SpeedupOptions, wall_s: float,
 
     cfg = base_config(opts)
     eps = cfg.learner.epsilon
-    L = [f"Speed-up against the number of robots: {len(opts.seeds)} seeds per N "
+    L = [f"Speed-up against the number of robots ({opts.sim} simulator): {len(opts.seeds)} "
+         f"seeds per N "
          f"({', '.join(map(str, opts.seeds))}), budget {opts.iterations:,} iterations per "
          f"robot{''.join(f' ({b:,} at N = {n})' for n, b in opts.budgets)}, share "
          f"({opts.method}) every {opts.share_every}, table error against "

@@ -31,6 +31,7 @@ import numpy as np
 
 from dfrl.experiments.science.curves import late_growth
 from dfrl.experiments.science.statistics import Interval, interval
+from dfrl.experiments.science.studies.simulators import BATCHED, DEFAULT_SIM, check_sim
 from dfrl.robots.evaluation import evaluate_snapshots
 from dfrl.robots.training import TrainerConfig, train
 
@@ -91,17 +92,34 @@ def _label(v: Any) -> str:
     return str(v)
 
 
-def run_one(base: dict[str, Any], changes: tuple[tuple[str, Any], ...], seed: int,
-            arenas: tuple[str, ...], eval_steps: int, stable_last: int) -> dict[str, Any]:
-    """Train one setting with one seed and evaluate it (a process-pool job)."""
+def setting_config(base: dict[str, Any], changes: tuple[tuple[str, Any], ...],
+                   seed: int) -> TrainerConfig:
+    """The configuration of one setting and seed."""
     d = copy.deepcopy(base)
     for path, value in changes:
         set_path(d, path, value)
     d["seed"] = seed
-    cfg = TrainerConfig.from_dict(d)
+    return TrainerConfig.from_dict(d)
+
+
+def run_one(base: dict[str, Any], changes: tuple[tuple[str, Any], ...], seed: int,
+            arenas: tuple[str, ...], eval_steps: int, stable_last: int) -> dict[str, Any]:
+    """Train one setting with one seed on pybullet and evaluate it (a process-pool job)."""
+    cfg = setting_config(base, changes, seed)
     res = train(cfg, snapshot_every=max(1, cfg.iterations // 4))
+    assert res.visits is not None and res.q_table is not None, "a tabular learner"
     last = dict(sorted(res.snapshots.items())[-stable_last:])
     rows = evaluate_snapshots(cfg, last, [cfg.arena, *arenas], eval_steps, EVAL_SEED + seed)
+    return run_summary(cfg, rows, res.metrics["q_sum"], res.visits)
+
+
+def run_summary(cfg: TrainerConfig, rows: Sequence[dict[str, Any]], q_sum: np.ndarray,
+                visits: np.ndarray) -> dict[str, Any]:
+    """One run's measures from the evaluations of its last snapshots (``rows``: iteration,
+    arena, progress, coverage, collisions_per_1000), its sum of Q-values per iteration and
+    its visit counts (shape (n_states, n_actions))."""
+    seed = cfg.seed
+    last = sorted({int(r["iteration"]) for r in rows})
     final_it = max(last)
     score_by_it = {}
     for it in last:
@@ -111,7 +129,7 @@ def run_one(base: dict[str, Any], changes: tuple[tuple[str, Any], ...], seed: in
     final = [r for r in rows if r["iteration"] == final_it]
     own = next(r for r in final if r["arena"] == cfg.arena)
     held = [r for r in final if r["arena"] != cfg.arena] or [own]
-    visited = int((res.visits.sum(axis=1) > 0).sum())
+    visited = int((visits.sum(axis=1) > 0).sum())
     return {
         "seed": seed, "score": score_by_it[final_it],
         "score_spread": float(max(score_by_it.values()) - min(score_by_it.values())),
@@ -119,8 +137,8 @@ def run_one(base: dict[str, Any], changes: tuple[tuple[str, Any], ...], seed: in
         "own_collisions_per_1000": own["collisions_per_1000"],
         "held_progress": float(np.mean([r["progress"] for r in held])),
         "held_collisions_per_1000": float(np.mean([r["collisions_per_1000"] for r in held])),
-        "late_growth": late_growth(res.metrics["q_sum"]),
-        "states_visited": visited, "states": int(res.q_table.shape[0]),
+        "late_growth": late_growth(q_sum),
+        "states_visited": visited, "states": int(visits.shape[0]),
     }
 
 
@@ -144,19 +162,30 @@ class SettingResult:
 
 def sweep(base: dict[str, Any], factors: dict[str, Sequence[Any]], seeds: Sequence[int],
           mode: str = "ofat", arenas: tuple[str, ...] = ("h1", "h2"), eval_steps: int = 2000,
-          stable_last: int = 3, jobs: int = 2) -> list[SettingResult]:
-    """Run every setting with every seed (on ``jobs`` processes); results in setting order.
+          stable_last: int = 3, jobs: int = 2, sim: str = DEFAULT_SIM) -> list[SettingResult]:
+    """Run every setting with every seed; results in setting order. On pybullet each run is
+    a job of ``jobs`` processes; on the batched simulator (``sim``) the seeds of a setting
+    train in one batch and its snapshots are evaluated in one call (:mod:`.sweep_batched`).
 
     Raises
     ------
     KeyError
         A factor names a configuration field that does not exist (checked before any run).
+    ValueError
+        An unknown simulator, or a setting the batched simulator cannot run (a learner
+        without a table), checked before any run.
     """
+    check_sim(sim)
     todo = settings(factors, mode)
     for s in todo:                      # fail before the first run, not after an hour
         probe = copy.deepcopy(base)
         for path, value in s.changes:
             set_path(probe, path, value)
+    if sim == BATCHED:
+        from dfrl.experiments.science.studies.sweep_batched import sweep_batched
+        runs = sweep_batched(base, [s.changes for s in todo], seeds, arenas, eval_steps,
+                             stable_last)
+        return [SettingResult(s, r) for s, r in zip(todo, runs)]
     args = [(base, s.changes, seed, tuple(arenas), eval_steps, stable_last)
             for s in todo for seed in seeds]
     if jobs <= 1:

@@ -399,7 +399,8 @@ def markdown(rows: Sequence[dict[str, Any]], opts: StudyOptions, found: Sequence
     verdict."""
     n = len(opts.source_seeds)
     L = [f"# Transfer to unseen arenas ({', '.join(opts.targets)})", "",
-         f"Sources: {n} source seeds, {opts.iterations} iterations per robot (the federation "
+         f"Simulator: {opts.sim}. Sources: {n} source seeds, {opts.iterations} iterations "
+         f"per robot (the federation "
          f"shares every {opts.respite}, method {opts.method}). Learning phase: {opts.learn} "
          f"steps from the source table in each unseen arena x {len(opts.target_seeds)} target "
          f"seed(s), seeded per source seed (the sources of a seed share the phase's seeds, no "

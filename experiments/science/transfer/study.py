@@ -31,6 +31,11 @@ crossing is not learning); a phase that never reaches it is censored at ``learn`
 With ``unpaired`` the controls are trained, and learn, with other seeds (source seed
 s + 10,000): the comparisons are then Welch's, not paired
 (:mod:`dfrl.experiments.science.transfer.claims`).
+
+``sim`` chooses the simulator (:mod:`dfrl.experiments.science.studies.simulators`): pybullet
+runs every reference run, source and learning phase as a job of a process pool of ``jobs``
+workers; batched (the default) runs the study in this process, each stage in a few compiled
+calls (:mod:`.batched`).
 """
 from __future__ import annotations
 
@@ -45,6 +50,7 @@ from dfrl.arenas import load_arena
 from dfrl.experiments.science.curves import auc
 from dfrl.experiments.science.studies.fedsim import AGGREGATIONS, federate, in_turn
 from dfrl.experiments.science.studies.history import eval_job
+from dfrl.experiments.science.studies.simulators import BATCHED, DEFAULT_SIM, check_sim
 from dfrl.experiments.science.transfer.thresholds import (Threshold, lift, thresholds_for,
                                                           time_to_threshold)
 from dfrl.robots.training import Trainer, TrainerConfig
@@ -85,8 +91,10 @@ class StudyOptions:
     unpaired: bool = False
     extra: tuple[str, ...] = ()
     jobs: int = 2
+    sim: str = DEFAULT_SIM
 
     def __post_init__(self) -> None:
+        check_sim(self.sim)
         object.__setattr__(self, "arena_thresholds",
                            tuple((str(a), float(v)) for a, v in self.arena_thresholds))
         for name in ("iterations", "respite", "learn", "eval_every", "eval_steps",
@@ -160,7 +168,10 @@ def phase_seeds(pair: int, target_seed: int) -> tuple[int, int]:
     return train, train + PHASE_EVAL_OFFSET
 
 
-def _alone(c: TrainerConfig) -> np.ndarray:
+def _alone(c: TrainerConfig, sim: str) -> np.ndarray:
+    if sim == BATCHED:
+        from dfrl.experiments.science.transfer.batched import alone
+        return alone(c)
     with Trainer(c) as t:
         for _ in range(c.iterations):
             t.step()
@@ -168,37 +179,59 @@ def _alone(c: TrainerConfig) -> np.ndarray:
 
 
 def source_job(condition: str, seed: int, opts: StudyOptions) -> tuple[str, int, np.ndarray]:
-    """The source table of one condition and source seed (a worker job)."""
+    """The source table of one condition and source seed (a worker job), trained on
+    ``opts.sim``."""
     s = pair_seed(condition, seed, opts)
+    if opts.sim == BATCHED:
+        from dfrl.experiments.science.studies.fedsim_batched import (federate_batched,
+                                                                     in_turn_batched)
+        fed, turn = federate_batched, in_turn_batched
+    else:
+        fed, turn = federate, in_turn
 
     def cfg(arena: str, k: int) -> TrainerConfig:
         return TrainerConfig(arena=arena, seed=1000 * s + k, iterations=opts.iterations)
 
     if condition == "zeros":
-        with Trainer(cfg("r1", 0)) as t:
-            q = np.zeros_like(t.q_table)
+        c = cfg("r1", 0)
+        q = np.zeros((c.discretisation.n_states, len(c.actions.names)))
     elif condition == "standalone_same_experience":
-        q = _alone(cfg("r1", 0).replace(iterations=opts.iterations * len(ARENAS)))
+        q = _alone(cfg("r1", 0).replace(iterations=opts.iterations * len(ARENAS)), opts.sim)
     elif condition == "in_turn":
-        q = in_turn(cfg("r1", 0), ARENAS, opts.iterations)
+        q = turn(cfg("r1", 0), ARENAS, opts.iterations)
     elif condition == "one_shot_average":
-        q = np.mean([_alone(cfg(a, k)) for k, a in enumerate(ARENAS)], axis=0)
+        q = np.mean([_alone(cfg(a, k), opts.sim) for k, a in enumerate(ARENAS)], axis=0)
     elif condition.startswith("standalone_"):
         arena = condition.removeprefix("standalone_")
-        q = _alone(cfg(arena, ARENAS.index(arena)))
+        q = _alone(cfg(arena, ARENAS.index(arena)), opts.sim)
     elif condition == opts.federated:
-        q = federate([cfg(a, k) for k, a in enumerate(ARENAS)], opts.iterations, opts.respite,
-                     opts.method).table
+        q = fed([cfg(a, k) for k, a in enumerate(ARENAS)], opts.iterations, opts.respite,
+                opts.method).table
     else:
         raise ValueError(f"unknown condition {condition!r}")
     return condition, seed, q
 
 
+def phase_row(condition: str, seed: int, arena: str, tseed: int, opts: StudyOptions,
+              scores: list[tuple[int, float]], collisions: list[tuple[int, int]]
+              ) -> dict[str, Any]:
+    """A learning phase's row from its greedy scores and cumulative collisions on the grid."""
+    pair = pair_seed(condition, seed, opts)
+    train_seed, ev_seed = phase_seeds(pair, tseed)
+    return {"condition": condition, "source_seed": seed, "pair_seed": pair, "arena": arena,
+            "target_seed": tseed, "phase_seed": train_seed, "eval_seed": ev_seed,
+            "collisions_per_1000": 1000.0 * collisions[-1][1] / opts.learn,
+            "score_auc": auc([g for g, _ in scores], [v for _, v in scores]),
+            "start_score": scores[0][1], "scores": scores, "collisions": collisions}
+
+
 def target_job(condition: str, seed: int, q: np.ndarray, arena: str, tseed: int,
                opts: StudyOptions) -> dict[str, Any]:
-    """One learning phase from table ``q`` in ``arena`` (a worker job): collisions while
-    learning and the greedy score on the whole grid (:meth:`StudyOptions.grid`), its mean
-    level over the phase (``score_auc``) and its iteration-0 value (``start_score``)."""
+    """One learning phase from table ``q`` in ``arena`` on pybullet (a worker job):
+    collisions while learning and the greedy score on the whole grid
+    (:meth:`StudyOptions.grid`), its mean level over the phase (``score_auc``) and its
+    iteration-0 value (``start_score``). (The batched simulator runs every phase at once:
+    :func:`.batched.learning_phases`.)"""
     pair = pair_seed(condition, seed, opts)
     train_seed, ev_seed = phase_seeds(pair, tseed)
     ev_cfg = TrainerConfig().to_dict()
@@ -215,11 +248,7 @@ def target_job(condition: str, seed: int, q: np.ndarray, arena: str, tseed: int,
             ev = eval_job(ev_cfg, t.q_table.copy(), arena, opts.eval_steps,
                           opts.episode_steps, ev_seed)
             scores.append((g, float(ev["score"])))
-    return {"condition": condition, "source_seed": seed, "pair_seed": pair, "arena": arena,
-            "target_seed": tseed, "phase_seed": train_seed, "eval_seed": ev_seed,
-            "collisions_per_1000": 1000.0 * collisions[-1][1] / opts.learn,
-            "score_auc": auc([g for g, _ in scores], [v for _, v in scores]),
-            "start_score": scores[0][1], "scores": scores, "collisions": collisions}
+    return phase_row(condition, seed, arena, tseed, opts, scores, collisions)
 
 
 def with_times(rows: list[dict[str, Any]], thresholds: dict[str, Threshold],
@@ -254,6 +283,19 @@ def transfer_study(opts: StudyOptions,
     say = progress or (lambda _msg: None)
     for arena in opts.targets:          # an unknown arena fails here, before any training
         load_arena(arena)
+    if opts.sim == BATCHED:
+        rows, thresholds = _batched_study(opts, say)
+    else:
+        rows, thresholds = _pybullet_study(opts, say)
+    rows, lifted = with_times(rows, thresholds, opts.confirm, opts.learn)
+    for th in lifted.values():
+        say(f"threshold in {th.arena}: {th.value:.4g} ({th.origin()})")
+    return rows
+
+
+def _pybullet_study(opts: StudyOptions, say: Callable[[str], None]
+                    ) -> tuple[list[dict[str, Any]], dict[str, Threshold]]:
+    """Thresholds, sources and learning phases on ``opts.jobs`` processes."""
     with ProcessPoolExecutor(max_workers=opts.jobs) as pool:
         thresholds = thresholds_for(opts.targets, opts.given_thresholds(),
                                     opts.threshold_fraction, opts.threshold_iterations,
@@ -273,7 +315,26 @@ def transfer_study(opts: StudyOptions,
             rows.append(row)
             say(f"learning phase {i}/{len(args)}: {row['condition']} seed {row['source_seed']} "
                 f"in {row['arena']}")
-    rows, lifted = with_times(rows, thresholds, opts.confirm, opts.learn)
-    for th in lifted.values():
-        say(f"threshold in {th.arena}: {th.value:.4g} ({th.origin()})")
-    return rows
+    return rows, thresholds
+
+
+def _batched_study(opts: StudyOptions, say: Callable[[str], None]
+                   ) -> tuple[list[dict[str, Any]], dict[str, Threshold]]:
+    """Thresholds, sources and learning phases on the batched simulator, in this process:
+    the reference runs in one batch, the sources one after the other (milliseconds each),
+    every learning phase in one batch (:mod:`.batched`)."""
+    from dfrl.experiments.science.transfer.batched import learning_phases
+
+    thresholds = thresholds_for(opts.targets, opts.given_thresholds(), opts.threshold_fraction,
+                                opts.threshold_iterations, opts.threshold_runs,
+                                opts.eval_steps, opts.episode_steps, None, BATCHED)
+    for th in thresholds.values():
+        say(f"threshold in {th.arena} before the lift: {th.value:.3g} ({th.origin()})")
+    jobs = [(c, s) for c in opts.conditions for s in opts.source_seeds]
+    srcs = []
+    for i, (c, s) in enumerate(jobs, 1):
+        srcs.append(source_job(c, s, opts))
+        say(f"source {i}/{len(jobs)}: {c} seed {s}")
+    rows = learning_phases(srcs, opts)
+    say(f"learning phases: {len(rows)} in one batch")
+    return rows, thresholds

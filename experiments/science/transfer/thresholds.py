@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from dfrl.experiments.science.studies.history import eval_job
+from dfrl.experiments.science.studies.simulators import BATCHED, PYBULLET
 from dfrl.robots.training import Trainer, TrainerConfig
 
 #: Training seed of reference run k: REFERENCE_SEED_BASE + k; its evaluations: + 5,000.
@@ -209,16 +210,23 @@ def reference_job(arena: str, k: int, iterations: int, eval_steps: int,
 
 
 def thresholds_for(targets: Sequence[str], given: dict[str, float], fraction: float,
-                     iterations: int, runs: int, eval_steps: int, episode_steps: int,
-                     pool: Executor) -> dict[str, Threshold]:
+                   iterations: int, runs: int, eval_steps: int, episode_steps: int,
+                   pool: Executor | None, sim: str = PYBULLET) -> dict[str, Threshold]:
     """Every target arena's threshold: ``given[arena]`` when set, else derived from
-    ``runs`` reference runs of ``iterations`` steps run on ``pool``."""
+    ``runs`` reference runs of ``iterations`` steps, run on ``pool`` (pybullet) or in one
+    batch (``sim`` batched: :func:`.batched.reference_levels`; ``pool`` unused)."""
     out = {a: Threshold(a, float(given[a]), True) for a in targets if a in given}
     todo = [a for a in targets if a not in given]
     jobs = [(a, k) for a in todo for k in range(1, runs + 1)]
-    levels = list(pool.map(reference_job, [a for a, _ in jobs], [k for _, k in jobs],
-                           [iterations] * len(jobs), [eval_steps] * len(jobs),
-                           [episode_steps] * len(jobs)))
+    if sim == BATCHED:
+        from dfrl.experiments.science.transfer.batched import reference_levels
+        levels = reference_levels(jobs, iterations, eval_steps, episode_steps)
+    else:
+        if pool is None:
+            raise ValueError("pybullet reference runs need a process pool")
+        levels = list(pool.map(reference_job, [a for a, _ in jobs], [k for _, k in jobs],
+                               [iterations] * len(jobs), [eval_steps] * len(jobs),
+                               [episode_steps] * len(jobs)))
     for a in todo:
         mine = [lv for (arena, _), lv in zip(jobs, levels) if arena == a]
         out[a] = threshold_from(a, mine, fraction, iterations)

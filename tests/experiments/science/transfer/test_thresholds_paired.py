@@ -115,14 +115,14 @@ def test_threshold_options():
 
 
 def test_study_uses_each_arenas_threshold(tmp_path, capsys):
-    """A tiny study: h1's threshold derived (reference runs of 40 steps), h2's given; each
-    is lifted above every iteration-0 score in its arena when one starts there; every
-    learning phase records its arena's, its time is the first of two evaluations in a row at
-    or above it, and the report lists both."""
+    """A tiny study on pybullet: h1's threshold derived (reference runs of 40 steps), h2's
+    given; each is lifted above every iteration-0 score in its arena when one starts there;
+    every learning phase records its arena's, its time is the first of two evaluations in a
+    row at or above it, and the report lists both."""
     out = tmp_path / "study"
     assert main(["transfer-study", "--seeds", "1", "2", "3", "--targets", "h1", "h2",
                  "--iterations", "40", "--respite", "20", "--learn", "60", "--eval-every", "20",
-                 "--eval-steps", "20", "--resamples", "200", "--jobs", "2",
+                 "--eval-steps", "20", "--resamples", "200", "--jobs", "2", "--sim", "pybullet",
                  "--threshold", "h2=0.05", "--threshold-iterations", "40",
                  "--threshold-runs", "2", "--threshold-fraction", "0.5",
                  "--out", str(out)]) == 0
