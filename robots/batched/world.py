@@ -106,9 +106,15 @@ class BatchedWorld:
                              f"generators")
         self.config = config
         specs: dict[str, ArenaSpec] = {}
+        parsed: dict[str, ArenaSpec] = {}       # each name or path read once
         index: list[int] = []
         for a in arenas:
-            spec = a if isinstance(a, ArenaSpec) else load_arena(a)
+            if isinstance(a, ArenaSpec):
+                spec = a
+            else:
+                if str(a) not in parsed:
+                    parsed[str(a)] = load_arena(a)
+                spec = parsed[str(a)]
             key = f"{spec.source}|{spec.name}"
             if key not in specs:
                 specs[key] = spec
