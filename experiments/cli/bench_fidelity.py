@@ -29,7 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="steps of the pybullet random walk replayed in batched")
     parser.add_argument("--policy-steps", type=int, default=d.policy_steps,
                         help="steps of each fixed policy in each simulator")
-    parser.add_argument("--seeds", type=int, default=le.seeds,
+    parser.add_argument("--n-seeds", type=int, default=le.seeds,
                         help="paired seeds of the learning check")
     parser.add_argument("--tables", type=int, default=le.tables,
                         help="tables learnt per seed in each simulator")
@@ -52,7 +52,7 @@ def cmd(args: argparse.Namespace) -> int:
     try:
         for arena in args.arenas:
             load_arena(arena)
-        budget = LearningCheck(seeds=args.seeds, tables=args.tables, iterations=args.iterations,
+        budget = LearningCheck(seeds=args.n_seeds, tables=args.tables, iterations=args.iterations,
                                eval_steps=args.eval_steps, margin=args.margin)
         budget.check()
         if min(args.poses, args.transitions, args.workers) < 1:

@@ -17,7 +17,7 @@ def _bench(*args: str) -> subprocess.CompletedProcess[str]:
 def test_the_report_says_each_check_and_its_verdict(tmp_path: Path) -> None:
     arena = str(make_arena(tmp_path / "made.json", seed=4))
     r = _bench("--arenas", arena, "--poses", "100", "--transitions", "400",
-               "--policy-steps", "2000", "--seeds", "2", "--tables", "1", "--iterations", "300",
+               "--policy-steps", "2000", "--n-seeds", "2", "--tables", "1", "--iterations", "300",
                "--eval-steps", "200", "--workers", "1", "--json", "--out", str(tmp_path / "out"))
     assert r.returncode in (0, 1), r.stderr
     out = json.loads(r.stdout)
@@ -37,5 +37,5 @@ def test_the_report_says_each_check_and_its_verdict(tmp_path: Path) -> None:
 def test_a_bad_arena_or_budget_is_a_clear_error() -> None:
     r = _bench("--arenas", "nowhere.json")
     assert r.returncode == 2 and "nowhere.json: cannot read arena file" in r.stderr
-    r = _bench("--seeds", "1")
+    r = _bench("--n-seeds", "1")
     assert r.returncode == 2 and "seeds >= 2" in r.stderr
