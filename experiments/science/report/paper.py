@@ -163,13 +163,19 @@ def write_report(out: Path, rep: Any, opts: Any, seeds: list[int]) -> Path:
     return path
 
 
-def write_questions_report(out: Path, ans: Answers, source: Path) -> Path:
-    """``OUT/questions.md``: the questions judged from ``source/evaluations.csv`` alone."""
-    L = ["# dFRL: the questions, judged again from the evaluations", "",
-         f"From `{Path(source) / 'evaluations.csv'}`; nothing was run. Smallest effects of "
-         "interest: " + ", ".join(f"{q} {d:g}" for q, d in ans.deltas.items()) + ".", ""]
+def write_questions_report(out: Path, ans: Answers, source: Path,
+                           intro: Sequence[str] | None = None, name: str = "questions.md") -> Path:
+    """``OUT/questions.md``: the questions judged from ``source/evaluations.csv`` alone (or,
+    with ``intro``, those lines first: a study that ran and judged in one go)."""
+    deltas = ("Smallest effects of interest: "
+              + ", ".join(f"{q} {d:g}" for q, d in ans.deltas.items()) + ".")
+    if intro is None:
+        L = ["# dFRL: the questions, judged again from the evaluations", "",
+             f"From `{Path(source) / 'evaluations.csv'}`; nothing was run. " + deltas, ""]
+    else:
+        L = list(intro) + ["", deltas, ""]
     L += _summary(ans) + markdown(ans) + aggregates_markdown(ans)
-    path = Path(out) / "questions.md"
+    path = Path(out) / name
     path.write_text("\n".join(L) + "\n", encoding="utf-8")
     return path
 
