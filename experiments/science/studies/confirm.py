@@ -221,7 +221,7 @@ def markdown(found: Sequence[Confirmation], design: str, wall_s: float, heading:
     off = disagreeing(found)
     said = (f"**{len(off)} of {len(found)} contrasts disagree**: "
             f"{'; '.join(c.contrast for c in off)}." if off
-            else f"All {len(found)} contrasts agree.")
+            else f"{len(found)} of {len(found)} contrasts agree.")
     L = [f"{heading} Confirmation in pybullet", "",
          f"{design} Wall time {wall_s:.0f} s. Each side's own analysis (its intervals, its "
          f"Holm family); {RULE}. {said}", "",
