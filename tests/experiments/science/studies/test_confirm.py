@@ -14,9 +14,10 @@ import pytest
 from dfrl.experiments.cli import main
 from dfrl.experiments.science.studies.confirm import Confirmation, Estimate, markdown
 
-SPEEDUP = ["speedup", "--robots", "1", "2", "--n-seeds", "3", "--iterations", "200",
-           "--budget", "1=200", "--share-every", "100", "--grid", "100", "--score-every",
-           "200", "--eval-steps", "50", "--targets", "0.999", "0.2", "--resamples", "200",
+#: On pybullet, one robot of seed 3 reaches 0.96 at 100 iterations, of seeds 1 and 2 at 200.
+SPEEDUP = ["speedup", "--robots", "1", "2", "--n-seeds", "3", "--iterations", "600",
+           "--budget", "1=600", "--share-every", "100", "--grid", "100", "--score-every",
+           "200", "--eval-steps", "50", "--targets", "0.999", "0.96", "--resamples", "200",
            "--jobs", "1"]
 TRANSFER = ["transfer-study", "--targets", "h1", "--iterations", "40", "--respite", "20",
             "--learn", "40", "--eval-every", "20", "--eval-steps", "20", "--resamples", "200",
@@ -35,7 +36,7 @@ def test_speedup_confirms_its_headline_with_pybullets_own_numbers(
     data = json.loads((out / "speedup.json").read_text())
     found = data["confirmation"]
     assert [c["contrast"] for c in found] == [
-        "homogeneous T(1)/T(2), error<=0.999", "homogeneous T(1)/T(2), error<=0.2",
+        "homogeneous T(1)/T(2), error<=0.999", "homogeneous T(1)/T(2), error<=0.96",
         "homogeneous T(1)/T(2), score>=0.7"]
     # the batched side is the study's row; the pybullet side the same analysis of a pybullet
     # study of seeds 1 and 2 (N = 1 and 2, homogeneous), run on its own here
@@ -70,6 +71,8 @@ def test_speedup_without_confirmation_is_unchanged(tmp_path: Path) -> None:
         assert main([*SPEEDUP, *extra, "--out", str(out)]) == 0
         data = json.loads((out / "speedup.json").read_text())
         data.pop("wall_s")
+        for run in data["runs"]:            # each federation's own wall time
+            run.pop("seconds")
         docs.append((data, _no_wall((out / "speedup.md").read_text())))
     assert docs[0] == docs[1]
     assert "confirmation" not in docs[0][0] and "pybullet" not in docs[0][1]
