@@ -7,13 +7,20 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from dfrl.experiments.cli.cluster import add_study_cluster_arguments, study_cluster
 from dfrl.experiments.cli.figures import add_figure_arguments, redraw_paper
 from dfrl.experiments.cli.seeds import add_seed_arguments, chosen_seeds
 from dfrl.experiments.cli.sim_option import add_sim_argument, chosen_sim
 from dfrl.experiments.provenance import write_provenance
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Sequence
+
+    from dfrl.experiments.science.reference import Reference
+    from dfrl.experiments.science.studies.speedup import SpeedupOptions
+    from dfrl.experiments.science.studies.speedup_report import SpeedupRow
 
 
 def parse_factor(text: str) -> tuple[str, list[Any]]:
@@ -318,6 +325,11 @@ def register_speedup(subparsers: argparse._SubParsersAction) -> None:
                    "speedup_runs.jsonl run with the same options")
     p.add_argument("--from-runs", type=Path, default=None, metavar="FILE",
                    help="only analyse a speedup_runs.jsonl (the options it ran with)")
+    p.add_argument("--confirm-seeds", type=int, default=0, metavar="K",
+                   help="then run the headline, T(1)/T(N) at the largest N, homogeneous, "
+                        "again on pybullet with the first K seeds (N = 1 and that N only) "
+                        "and report whether it agrees; with --sim batched only; e.g. 5 "
+                        "(minutes per seed at the defaults) (default: 0, off)")
     p.set_defaults(func=cmd_speedup)
 
 
@@ -328,6 +340,7 @@ def cmd_speedup(args: argparse.Namespace) -> int:
 
     from dfrl.experiments.science.reference import ReferenceError
     from dfrl.experiments.science.reference_store import reference_table
+    from dfrl.experiments.science.studies.confirm import check_confirm
     from dfrl.experiments.science.studies.speedup import REFERENCE, SpeedupOptions, study_runs
     from dfrl.experiments.science.studies.speedup_report import (analyse, markdown,
                                                                  progress_line, tidy_rows,
@@ -345,6 +358,7 @@ def cmd_speedup(args: argparse.Namespace) -> int:
             linear_fraction=args.linear_fraction, resamples=args.resamples, jobs=args.jobs,
             sim=chosen_sim(args))
         opts.check()
+        check_confirm(opts.sim, args.confirm_seeds, len(opts.seeds))
         ref = reference_table(**REFERENCE)
     except (ValueError, KeyError, ReferenceError) as exc:
         print(f"dfrl speedup: {exc}", file=sys.stderr)
@@ -371,15 +385,52 @@ def cmd_speedup(args: argparse.Namespace) -> int:
     wall = time.monotonic() - t0
     rows = analyse(opts, results)
     text = markdown(rows, opts, wall, ref.name)
+    extra: dict[str, Any] = {"reference": ref.name, "wall_s": wall}
+    if args.confirm_seeds:
+        found = _confirm_speedup(opts, rows, ref, args.confirm_seeds, progress, stop)
+        if found is None:
+            return 130
+        extra["confirmation"], section = found
+        text += "\n\n" + section
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
         write_provenance(args.out)
         write_tidy(args.out / TIDY_FILE, tidy_rows(opts, results))
         (args.out / "speedup.md").write_text(text + "\n", encoding="utf-8")
-        data = to_json(rows, opts, results, {"reference": ref.name, "wall_s": wall})
+        data = to_json(rows, opts, results, extra)
         (args.out / "speedup.json").write_text(json.dumps(data, indent=1), encoding="utf-8")
     print(text)
     return 0
+
+
+def _confirm_speedup(opts: SpeedupOptions, rows: Sequence[SpeedupRow], ref: Reference,
+                     seeds: int, progress: Callable[[int, int, dict[str, Any]], None],
+                     stop: Callable[[int, Any], None]
+                     ) -> tuple[list[dict[str, Any]], str] | None:
+    """``--confirm-seeds``: the confirmation's JSON and report section (None: stopped by a
+    signal); a disagreement is said on stderr, the exit status stays 0 (the study has no
+    failed checks)."""
+    import signal
+    import time
+
+    from dfrl.experiments.science.studies import confirm
+
+    print(f"dfrl speedup: confirming on pybullet with {seeds} seeds", file=sys.stderr)
+    old = signal.signal(signal.SIGTERM, stop)
+    t0 = time.monotonic()
+    try:
+        found = confirm.confirm_speedup(opts, rows, ref, seeds, progress)
+    except KeyboardInterrupt as exc:
+        print(f"dfrl speedup: confirmation stopped ({exc or 'interrupted'})", file=sys.stderr)
+        return None
+    finally:
+        signal.signal(signal.SIGTERM, old)
+    for c in confirm.disagreeing(found):
+        print(f"dfrl speedup: confirmation: {c.contrast}: pybullet disagrees with batched",
+              file=sys.stderr)
+    section = confirm.markdown(found, confirm.speedup_design(opts, seeds),
+                               time.monotonic() - t0, "###")
+    return [c.to_dict() for c in found], section
 
 
 def register_reference(subparsers: argparse._SubParsersAction) -> None:

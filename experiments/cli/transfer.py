@@ -9,6 +9,7 @@ import json
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from dfrl.experiments.cli.figures import add_figure_arguments, wants_redraw
 from dfrl.experiments.cli.seeds import add_seed_arguments, chosen_seeds
@@ -16,6 +17,10 @@ from dfrl.experiments.cli.sim_option import add_sim_argument, chosen_sim
 from dfrl.experiments.provenance import write_provenance
 from dfrl.robots.learners import LEARNERS
 from dfrl.robots.state import SensorGrouping
+
+if TYPE_CHECKING:
+    from dfrl.experiments.science.transfer.claims import Claim
+    from dfrl.experiments.science.transfer.study import StudyOptions
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -191,6 +196,11 @@ def register_study(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--from-json", type=Path, default=None, metavar="FILE",
                    help="judge the learning phases of a transfer_study.json again (its "
                         "options; nothing is trained)")
+    p.add_argument("--confirm-seeds", type=int, default=0, metavar="K",
+                   help="then run the headline (the primary claims against the standalone "
+                        "and zeros controls) again on pybullet with the first K source seeds "
+                        "and report whether it agrees; a study of the batched simulator "
+                        "only; e.g. 10 (several minutes) (default: 0, off)")
     p.set_defaults(func=cmd_study)
 
 
@@ -223,6 +233,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     """``dfrl transfer-study``: exit 0 with a report, 2 on a bad option."""
     import time
 
+    from dfrl.experiments.science.studies.confirm import check_confirm
     from dfrl.experiments.science.studies.simulators import LEGACY_SIM, check_same
     from dfrl.experiments.science.transfer.claims import claims, markdown, write_study
     from dfrl.experiments.science.transfer.study import StudyOptions, transfer_study
@@ -239,14 +250,19 @@ def cmd_study(args: argparse.Namespace) -> int:
                                    for k, v in options.items()})
             rows, wall = doc["rows"], float(doc["wall_time"])
             found = claims(rows, opts, args.resamples)
+            check_confirm(opts.sim, args.confirm_seeds, len(opts.source_seeds))
         except (OSError, ValueError, KeyError, TypeError) as exc:
             said = str(exc) if type(exc) is ValueError else repr(exc)
             print(f"dfrl transfer-study: error: {args.from_json}: {said}", file=sys.stderr)
             return 2
         text = markdown(rows, opts, found, wall)
+        confirmation = _confirm(args, opts, rows, found)
+        if confirmation is not None:
+            text += "\n\n" + confirmation[1]
         if args.out is not None:
             write_provenance(args.out)
-            write_study(args.out, rows, opts, found, text, wall)
+            write_study(args.out, rows, opts, found, text, wall,
+                        None if confirmation is None else confirmation[0])
         print(text)
         return 0
     try:
@@ -261,6 +277,7 @@ def cmd_study(args: argparse.Namespace) -> int:
                             threshold_runs=args.threshold_runs, confirm=args.confirm,
                             unpaired=args.unpaired, extra=tuple(args.extra),
                             jobs=args.jobs, sim=chosen_sim(args))
+        check_confirm(opts.sim, args.confirm_seeds, len(opts.source_seeds))
         if args.out is not None:
             args.out.mkdir(parents=True, exist_ok=True)
             write_provenance(args.out)
@@ -271,7 +288,35 @@ def cmd_study(args: argparse.Namespace) -> int:
     found = claims(rows, opts, args.resamples)
     wall = time.perf_counter() - t0
     text = markdown(rows, opts, found, wall)
+    confirmation = _confirm(args, opts, rows, found)
+    if confirmation is not None:
+        text += "\n\n" + confirmation[1]
     if args.out is not None:
-        write_study(args.out, rows, opts, found, text, wall)
+        write_study(args.out, rows, opts, found, text, wall,
+                    None if confirmation is None else confirmation[0])
     print(text)
     return 0
+
+
+def _confirm(args: argparse.Namespace, opts: StudyOptions, rows: list[dict[str, Any]],
+             found: list[Claim]) -> tuple[list[dict[str, Any]], str] | None:
+    """``--confirm-seeds``: the confirmation's JSON and report section (None: off). A
+    disagreement is said on stderr; the exit status stays 0 (the study has no failed
+    checks)."""
+    import time
+
+    from dfrl.experiments.science.studies import confirm
+
+    if not args.confirm_seeds:
+        return None
+    print(f"dfrl transfer-study: confirming on pybullet with {args.confirm_seeds} source "
+          f"seeds", file=sys.stderr)
+    t0 = time.perf_counter()
+    confirmed = confirm.confirm_transfer(opts, rows, found, args.confirm_seeds, args.resamples,
+                                         lambda msg: print(msg, file=sys.stderr, flush=True))
+    for c in confirm.disagreeing(confirmed):
+        print(f"dfrl transfer-study: confirmation: {c.contrast}: pybullet disagrees with "
+              f"batched", file=sys.stderr)
+    section = confirm.markdown(confirmed, confirm.transfer_design(opts, args.confirm_seeds),
+                               time.perf_counter() - t0)
+    return [c.to_dict() for c in confirmed], section

@@ -507,12 +507,16 @@ def tidy_rows(rows: Sequence[dict[str, Any]]) -> Iterator[Row]:
 
 
 def write_study(out: Path, rows: Sequence[dict[str, Any]], opts: StudyOptions,
-                found: Sequence[Claim], text: str, wall_time: float) -> None:
-    """``transfer_study.md``, ``transfer_study.json`` (options, claims, rows) and
-    ``tidy.csv`` (provenance.json is written when the study starts)."""
+                found: Sequence[Claim], text: str, wall_time: float,
+                confirmation: Sequence[dict[str, Any]] | None = None) -> None:
+    """``transfer_study.md``, ``transfer_study.json`` (options, claims, the
+    ``confirmation`` in pybullet when given, rows) and ``tidy.csv`` (provenance.json is
+    written when the study starts)."""
     out.mkdir(parents=True, exist_ok=True)
     (out / "transfer_study.md").write_text(text + "\n", encoding="utf-8")
     doc = {"options": opts.to_dict(), "wall_time": round(wall_time, 3),
-           "claims": [c.to_dict() for c in found], "rows": json_safe(list(rows))}
+           "claims": [c.to_dict() for c in found],
+           **({} if confirmation is None else {"confirmation": list(confirmation)}),
+           "rows": json_safe(list(rows))}
     (out / "transfer_study.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
     write_tidy(out / TIDY_FILE, tidy_rows(rows))
