@@ -9,7 +9,7 @@ learner's), the tables of all robots in one array ``q`` of shape (n, n_states, n
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,7 +32,8 @@ class BatchError(ValueError):
     """Configurations the batched simulator cannot run together (the message says which)."""
 
 
-def shared_env(configs: Sequence[TrainerConfig]) -> EnvConfig:
+def shared_env(configs: Sequence[TrainerConfig],
+               learners: Mapping[str, int] | None = None) -> EnvConfig:
     """The environment every config shares (arena aside).
 
     Raises
@@ -44,10 +45,11 @@ def shared_env(configs: Sequence[TrainerConfig]) -> EnvConfig:
     if not configs:
         raise BatchError("no robot to train")
     first = configs[0]
+    accepted = T.ALGOS if learners is None else learners
     for k, c in enumerate(configs):
-        if c.algo not in T.ALGOS:
-            raise BatchError(f"robot {k}: learner '{c.algo}' is not batched (batched: "
-                             f"{sorted(T.ALGOS)}); use --sim pybullet")
+        if c.algo not in accepted:
+            raise BatchError(f"robot {k}: learner '{c.algo}' is not batched here (batched "
+                             f"together: {sorted(accepted)}); use --sim pybullet")
         for name in ("sim", "actions", "reward", "collision_response", "stuck_steps",
                      "stuck_distance", "discretisation"):
             if getattr(c, name) != getattr(first, name):
@@ -75,8 +77,11 @@ class Record:
     y: np.ndarray
 
 
-class BatchedTrainer:
-    """``n`` robots learning, each as a :class:`~dfrl.robots.training.Trainer` would.
+class RobotBatch:
+    """What every batch of learning robots holds: the world, each robot's generators (the
+    environment's, the learner's and the learning control's streams of its seed, as
+    :class:`~dfrl.robots.training.Trainer` spawns them), the exploration schedules, discounts,
+    update counts and running statistics.
 
     Parameters
     ----------
@@ -84,17 +89,13 @@ class BatchedTrainer:
         One per robot (see :func:`shared_env` for what they must share).
     motion_noise : bool
         As :class:`~dfrl.robots.batched.world.BatchedWorld`'s.
-
-    Attributes
-    ----------
-    q, visits : np.ndarray, shape (n, n_states, n_actions)
-        Every robot's live table and update counts (writes go straight in).
-    iteration : int
-        Iterations done by every robot.
+    learners : mapping of str to int
+        The learners this batch accepts (name -> code).
     """
 
-    def __init__(self, configs: Sequence[TrainerConfig], motion_noise: bool = True) -> None:
-        env = shared_env(configs)
+    def __init__(self, configs: Sequence[TrainerConfig], motion_noise: bool,
+                 learners: Mapping[str, int]) -> None:
+        env = shared_env(configs, learners)
         self.configs = list(configs)
         streams = [np.random.SeedSequence(c.seed).spawn(3) for c in configs]
         env_rngs = [np.random.default_rng(int(s[0].generate_state(1)[0])) for s in streams]
@@ -109,19 +110,67 @@ class BatchedTrainer:
         self.shuffle_meta[:, M_CAPACITY] = [c.reward_shuffle for c in configs]
         self.shuffle_meta[:, M_MODE] = [MODES[ShuffleMode(c.reward_shuffle_mode)] for c in configs]
         self.shuffle_total = np.zeros(len(configs))
-        n, w = len(configs), self.world
-        n_states = configs[0].discretisation.n_states
-        self.algo = np.array([T.ALGOS[c.algo] for c in configs], dtype=np.int64)
-        self.alpha = np.array([c.learner.alpha for c in configs])
+        self.algo = np.array([learners[c.algo] for c in configs], dtype=np.int64)
         self.gamma = np.array([c.learner.gamma for c in configs])
         self.eps = np.array([(T.SCHEDULES[c.learner.epsilon.kind.value], c.learner.epsilon.start,
                               c.learner.epsilon.end, c.learner.epsilon.decay_steps)
                              for c in configs], dtype=np.float64)
+        self.t = np.zeros(len(configs), dtype=np.int64)
+        self.stats = np.zeros((len(configs), T.N_STATS))
+        self.iteration = 0
+
+    @property
+    def n(self) -> int:
+        """Number of robots."""
+        return len(self.configs)
+
+    def _arena_full(self, bad: int) -> None:
+        if bad >= 0:
+            raise ArenaError(f"{self.world.arenas[bad].source}: robot {bad} found no free pose "
+                             f"to respawn; the arena is too crowded")
+
+    @property
+    def collisions(self) -> np.ndarray:
+        """Collisions so far, per robot (int64)."""
+        return self.stats[:, T.S_COLLISIONS].astype(np.int64)
+
+    @property
+    def respawns(self) -> np.ndarray:
+        """Respawns so far, per robot (int64)."""
+        return self.stats[:, T.S_RESPAWNS].astype(np.int64)
+
+    @property
+    def cumulative_reward(self) -> np.ndarray:
+        """Reward earned so far, per robot."""
+        return self.stats[:, T.S_REWARD].copy()
+
+
+class BatchedTrainer(RobotBatch):
+    """``n`` tabular robots learning, each as a :class:`~dfrl.robots.training.Trainer` would.
+
+    Parameters
+    ----------
+    configs : sequence of TrainerConfig
+        One per robot, Q-learning or SARSA (see :func:`shared_env` for what they must share).
+    motion_noise : bool
+        As :class:`~dfrl.robots.batched.world.BatchedWorld`'s.
+
+    Attributes
+    ----------
+    q, visits : np.ndarray, shape (n, n_states, n_actions)
+        Every robot's live table and update counts (writes go straight in).
+    iteration : int
+        Iterations done by every robot.
+    """
+
+    def __init__(self, configs: Sequence[TrainerConfig], motion_noise: bool = True) -> None:
+        super().__init__(configs, motion_noise, T.ALGOS)
+        n, w = len(configs), self.world
+        n_states = configs[0].discretisation.n_states
+        self.alpha = np.array([c.learner.alpha for c in configs])
         self.q = np.stack([np.full((n_states, w.n_actions), c.learner.initial_q)
                            for c in configs])
         self.visits = np.zeros(self.q.shape, dtype=np.int64)
-        self.t = np.zeros(n, dtype=np.int64)
-        self.stats = np.zeros((n, T.N_STATS))
         self.stats[:, T.S_QSUM] = self.q.sum(axis=(1, 2))
         for i in range(n):
             w.start(i)
@@ -129,12 +178,6 @@ class BatchedTrainer:
         self.action = np.array([T.choose(self.q[i, self.state[i]],
                                          T.epsilon(self.eps[i], 0), self.learner_rngs[i])
                                 for i in range(n)], dtype=np.int64)
-        self.iteration = 0
-
-    @property
-    def n(self) -> int:
-        """Number of robots."""
-        return len(self.configs)
 
     def run(self, steps: int, record: bool = False) -> Record | None:
         """Advance every robot by ``steps`` iterations; with ``record``, their per-step values.
@@ -154,9 +197,7 @@ class BatchedTrainer:
                       p.boxes, w.angles, w.motion, w.groups, w.P, w.I, w.rngs,
                       w.motion_rngs, self.learner_rngs, self.shuffle_buffer, self.shuffle_meta,
                       self.shuffle_total, self.shuffle_rngs)
-        if bad >= 0:
-            raise ArenaError(f"{w.arenas[bad].source}: robot {bad} found no free pose to "
-                             f"respawn; the arena is too crowded")
+        self._arena_full(bad)
         self.iteration += steps
         if not record:
             return None
@@ -177,18 +218,3 @@ class BatchedTrainer:
         checked = validate_table(table, self.q.shape[1:])
         self.q[:] = checked
         self.stats[:, T.S_QSUM] = float(checked.sum())
-
-    @property
-    def collisions(self) -> np.ndarray:
-        """Collisions so far, per robot (int64)."""
-        return self.stats[:, T.S_COLLISIONS].astype(np.int64)
-
-    @property
-    def respawns(self) -> np.ndarray:
-        """Respawns so far, per robot (int64)."""
-        return self.stats[:, T.S_RESPAWNS].astype(np.int64)
-
-    @property
-    def cumulative_reward(self) -> np.ndarray:
-        """Reward earned so far, per robot."""
-        return self.stats[:, T.S_REWARD].copy()

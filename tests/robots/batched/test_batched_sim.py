@@ -153,3 +153,40 @@ def test_a_control_robot_learns_nothing_of_the_task() -> None:
     trained, control = bt.q[:3], bt.q[3:]
     assert np.abs(control).max() < np.abs(trained).max() / 2   # values stay near 0
     assert np.array_equal(bt.collisions[:3] > 0, [True] * 3)
+
+
+def test_linear_features_are_the_reference_feature_map() -> None:
+    from dfrl.robots.batched.linear import active_features as batched_features
+    from dfrl.robots.features import TileCoding, active_features
+
+    rng = np.random.default_rng(8)
+    coding = TileCoding(tilings=4, tiles=8)
+    out = np.zeros(coding.n_active(8), dtype=np.int64)
+    for dist in [np.full(8, 0.06), np.zeros(8)] + [rng.uniform(0, 0.06, 8) for _ in range(200)]:
+        batched_features(dist, 0.06, 4, 8, out)
+        obs = (1.0 - dist / 0.06).astype(np.float32).astype(np.float64)
+        assert np.array_equal(out, active_features(obs, coding))
+
+
+def test_linear_robots_learn_in_batch_and_act_well_in_pybullet() -> None:
+    from dfrl.robots.batched.linear import BatchedLinearTrainer
+
+    base = TrainerConfig(arena="r1", algo="linear")
+    bt = BatchedLinearTrainer([base.replace(seed=s) for s in range(3)])
+    bt.run(3000)
+    again = BatchedLinearTrainer([base.replace(seed=1)])
+    again.run(3000)
+    assert np.array_equal(bt.weights[1], again.weights[0])        # the seed, not the batch
+    score = lambda r: r.progress - 0.05 * r.collisions_per_1000  # noqa: E731
+    learnt = [score(evaluate_policy(base, PolicyKind.GREEDY, 600, 40 + k, params=bt.params(k),
+                                    episode_steps=200)) for k in range(3)]
+    untrained = BatchedLinearTrainer([base.replace(seed=9)]).params(0)
+    flat = [score(evaluate_policy(base, PolicyKind.GREEDY, 600, 40 + k, params=untrained,
+                                  episode_steps=200)) for k in range(3)]
+    assert np.mean(learnt) > np.mean(flat) + 0.2
+    bt.set_params(0, bt.params(2))
+    assert np.array_equal(bt.weights[0], bt.weights[2])
+    with pytest.raises(ValueError):
+        bt.set_params(0, np.zeros(5))
+    with pytest.raises(BatchError, match="'qlearning' is not batched here"):
+        BatchedLinearTrainer([base.replace(algo="qlearning")])
