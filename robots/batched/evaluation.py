@@ -148,7 +148,8 @@ def evaluate_greedy(config: TrainerConfig, tables: Sequence[np.ndarray],
         raise ArenaError(f"{world.arenas[bad].source}: evaluation {bad} found no free pose")
     n = max(steps, 1)
     return [EvalResult(policy="greedy", steps=steps, collisions=int(r[_COLLISIONS]),
-                       collisions_per_1000=1000.0 * r[_COLLISIONS] / n, distance=float(r[_DISTANCE]),
+                       collisions_per_1000=1000.0 * r[_COLLISIONS] / n,
+                       distance=float(r[_DISTANCE]),
                        mean_reward=float(r[_REWARD]) / n, progress=float(r[_PROGRESS]) / n,
                        coverage=float(r[_COVERED]) / r[_EPISODES], episodes=int(r[_EPISODES]))
             for r in out]

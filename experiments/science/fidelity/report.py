@@ -117,15 +117,17 @@ def render(result: dict[str, Any]) -> str:
                          f"state at {s['state_agreement']:.1%} of poses ({_mark(ok['sensing'])})")
         if "transitions" in a:
             t = a["transitions"]
-            lines.append(f"- transitions ({t['transitions']}): same next state {t['agreement']:.1%};"
-                         f" total variation {t['tv_distance']:.3f} (floor between two batched "
-                         f"replays {t['tv_floor']:.3f}) ({_mark(ok['transitions'])})")
+            lines.append(f"- transitions ({t['transitions']}): same next state "
+                         f"{t['agreement']:.1%}; total variation {t['tv_distance']:.3f} (floor "
+                         f"between two batched replays {t['tv_floor']:.3f}) "
+                         f"({_mark(ok['transitions'])})")
         for pol, p in a.get("policies", {}).items():
             c, g = p["collisions_difference"], p["progress_difference"]
             lines.append(f"- policy {pol}: collisions/1000 pybullet "
                          f"{p['pybullet']['collisions_per_1000']:.2f}, batched "
-                         f"{p['batched']['collisions_per_1000']:.2f} (diff {c[0]:+.2f} ± {c[1]:.2f}); "
-                         f"progress {p['pybullet']['progress']:.3f} vs {p['batched']['progress']:.3f} "
+                         f"{p['batched']['collisions_per_1000']:.2f} "
+                         f"(diff {c[0]:+.2f} ± {c[1]:.2f}); progress "
+                         f"{p['pybullet']['progress']:.3f} vs {p['batched']['progress']:.3f} "
                          f"(diff {g[0]:+.3f} ± {g[1]:.3f})")
         if "learning" in a:
             le = a["learning"]

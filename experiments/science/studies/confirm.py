@@ -33,7 +33,7 @@ from dfrl.experiments.science.reference import Reference
 from dfrl.experiments.science.studies.simulators import BATCHED, PYBULLET
 from dfrl.experiments.science.studies.speedup import SpeedupOptions, measures, run_all
 from dfrl.experiments.science.studies.speedup_report import SpeedupRow, analyse, verdict
-from dfrl.experiments.science.transfer.claims import PRIMARY, Claim, claims
+from dfrl.experiments.science.transfer.claims import PRIMARY, Claim, cell_text, claims
 from dfrl.experiments.science.transfer.study import StudyOptions, transfer_study
 
 #: The ``--confirm-seeds`` the help suggests: enough for a verdict (3 seeds at least) at a
@@ -202,16 +202,8 @@ def _finite(x: float) -> float | str:
     return x if math.isfinite(x) else str(x)
 
 
-def _cell(x: float) -> str:
-    if math.isnan(x):
-        return "-"
-    if math.isinf(x):
-        return "inf" if x > 0 else "-inf"
-    return f"{x:,.0f}" if abs(x) >= 1000 else f"{x:.3g}"
-
-
 def _shown(e: Estimate) -> str:
-    return f"{_cell(e.estimate)} [{_cell(e.low)}, {_cell(e.high)}] (n = {e.n})"
+    return f"{cell_text(e.estimate)} [{cell_text(e.low)}, {cell_text(e.high)}] (n = {e.n})"
 
 
 def markdown(found: Sequence[Confirmation], design: str, wall_s: float, heading: str = "##"

@@ -108,6 +108,18 @@ def score_policy(config: Any, seed: int, options: HeteroOptions, q_table: np.nda
             "collisions_per_1000": r.collisions_per_1000, "progress": r.progress}
 
 
+def share(views: list[Any], aggregate: Any, residuals: list[float]) -> None:
+    """One share: every robot's table (a dqn's through its grid view) folded by ``aggregate``
+    and written back; each grid view's distillation residual appended to ``residuals``."""
+    from dfrl.robots.grid_view import GridView
+
+    table = aggregate([v.q_table for v in views], [v.visits for v in views])
+    for v in views:
+        v.set_q_table(table)
+        if isinstance(v, GridView):
+            residuals.append(v.last_distillation.rms_after)
+
+
 def run_one(run: str, seed: int, options: HeteroOptions) -> dict[str, Any]:
     """One run of one seed (see the module doc): its evaluation rows, the dqn's distillation
     residuals, the sha256 of each robot's final parameters (by role) and its wall time."""
@@ -127,11 +139,7 @@ def run_one(run: str, seed: int, options: HeteroOptions) -> dict[str, Any]:
             for t in trainers:
                 t.step()
             if len(trainers) > 1 and (i % options.respite == 0 or i == options.iterations):
-                table = aggregate([v.q_table for v in views], [v.visits for v in views])
-                for v in views:
-                    v.set_q_table(table)
-                    if isinstance(v, GridView):
-                        residuals.append(v.last_distillation.rms_after)
+                share(views, aggregate, residuals)
             if i in options.eval_at:
                 for (role, algo, _), t in zip(roster, trainers):
                     function = t.learner_kind == "function"

@@ -19,7 +19,7 @@ from typing import Any
 from dfrl.experiments.science.studies.fedsim import AGGREGATIONS
 from dfrl.experiments.science.studies.fedsim_batched import BatchedRobot, next_stop
 from dfrl.experiments.science.studies.hetero import (EVAL_SEED, ROSTER, HeteroOptions,
-                                                     score_policy, trainer_config)
+                                                     score_policy, share, trainer_config)
 from dfrl.experiments.science.studies.history import eval_many
 from dfrl.experiments.science.studies.simulators import BATCHED, PYBULLET
 
@@ -64,11 +64,7 @@ def run_one_batched(run: str, seed: int, options: HeteroOptions) -> dict[str, An
                 bt.run(stop - i)
             i = stop
             if len(roster) > 1 and (i % options.respite == 0 or i == options.iterations):
-                table = aggregate([v.q_table for v in views], [v.visits for v in views])
-                for v in views:
-                    v.set_q_table(table)
-                    if isinstance(v, GridView):
-                        residuals.append(v.last_distillation.rms_after)
+                share(views, aggregate, residuals)
             if i in options.eval_at:
                 rows += _evaluate(run, seed, options, roster, views, pyb, i)
         digests = {role: hashlib.sha256((pyb[k].params if k in pyb

@@ -117,7 +117,8 @@ class CensoredDifference:
 
     def __str__(self) -> str:
         sign = {"at least": ">= ", "at most": "<= "}.get(self.known, "")
-        return f"{sign}{_cell(self.estimate)} [{_cell(self.low)}, {_cell(self.high)}]"
+        return (f"{sign}{cell_text(self.estimate)} [{cell_text(self.low)}, "
+                f"{cell_text(self.high)}]")
 
 
 def _median_bounds(t: np.ndarray, ok: np.ndarray) -> tuple[float, float]:
@@ -206,16 +207,16 @@ def degenerate(estimate: Interval | CensoredDifference) -> str | None:
         d = estimate.draws
         if len(d) and bool((d == d[0]).all()):
             lo, hi = float(d[0, 0]), float(d[0, 1])
-            said = _cell(lo) if lo == hi else f"[{_cell(lo)}, {_cell(hi)}]"
+            said = cell_text(lo) if lo == hi else f"[{cell_text(lo)}, {cell_text(hi)}]"
             return f"every resample gives the same difference, {said}"
         if estimate.low == estimate.high:
-            return f"zero width: every resample's difference is {_cell(estimate.low)}"
+            return f"zero width: every resample's difference is {cell_text(estimate.low)}"
         if math.isinf(estimate.low) and math.isinf(estimate.high):
             return ("open at both ends: in most resamples a source never reached the "
                     "threshold, the difference is unbounded")
         return None
     if estimate.half == 0.0:
-        return f"zero width: the difference is {_cell(estimate.mean)} in every seed"
+        return f"zero width: the difference is {cell_text(estimate.mean)} in every seed"
     return None
 
 
@@ -355,7 +356,8 @@ def claims(rows: Sequence[dict[str, Any]], opts: StudyOptions,
 
 
 # -- report ----------------------------------------------------------------------------------
-def _cell(x: float) -> str:
+def cell_text(x: float) -> str:
+    """A number as the reports show it: '-' for NaN, 'inf', thousands grouped from 1,000."""
     if math.isnan(x):
         return "-"
     if math.isinf(x):
@@ -367,7 +369,7 @@ def _estimate(c: Claim) -> str:
     e = c.estimate
     if isinstance(e, CensoredDifference):
         return str(e)
-    return f"{_cell(e.mean)} [{_cell(e.low)}, {_cell(e.high)}]"
+    return f"{cell_text(e.mean)} [{cell_text(e.low)}, {cell_text(e.high)}]"
 
 
 def _level(rows: Sequence[dict[str, Any]], condition: str, measure: str) -> str:
@@ -441,7 +443,7 @@ def markdown(rows: Sequence[dict[str, Any]], opts: StudyOptions, found: Sequence
         cens = (f"{c.censored[0]}/{c.phases[0]}, {c.censored[1]}/{c.phases[1]}"
                 if c.measure == "time_to_threshold" else "-")
         L.append(f"| {c.family} | {c.measure} | {c.control} | {c.method} | {_estimate(c)} | "
-                 f"{cens} | {_cell(c.judgement.p_adjusted)} | {c.words()} |")
+                 f"{cens} | {cell_text(c.judgement.p_adjusted)} | {c.words()} |")
     L += ["", headline(found, opts)]
     return "\n".join(L)
 
@@ -474,8 +476,8 @@ def headline(found: Sequence[Claim], opts: StudyOptions) -> str:
             s += f"; refuted against {', '.join(refuted)}"
         if unsure:
             ds = [c.estimate.detectable() for c in unsure]
-            s += (f"; not significant against {len(unsure)} (D {_cell(min(ds))}"
-                  + (f" to {_cell(max(ds))}" if max(ds) != min(ds) else "") + ")")
+            s += (f"; not significant against {len(unsure)} (D {cell_text(min(ds))}"
+                  + (f" to {cell_text(max(ds))}" if max(ds) != min(ds) else "") + ")")
         if blind:
             s += f"; cannot judge against {', '.join(blind)}"
         zero = [c for c in found if c.measure == m and c.control == "zeros"]

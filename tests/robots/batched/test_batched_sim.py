@@ -27,7 +27,8 @@ def made(tmp_path_factory: pytest.TempPathFactory) -> str:
 def test_ir_readings_match_pybullet_at_the_same_poses(arena: str, made: str) -> None:
     name = made if arena == "made" else arena
     r = compare_sensing(EnvConfig(arena=name), name, poses=300, seed=3)
-    assert r["p99_abs_mm"] < 1.0            # a grazing ray can differ by mm (pybullet's face tolerance)
+    # a grazing ray can differ by mm (pybullet's face tolerance), 99% of readings do not
+    assert r["p99_abs_mm"] < 1.0
     assert r["mean_abs_mm"] < 0.2
     assert r["state_agreement"] > 0.97
 
@@ -69,7 +70,8 @@ def test_fixed_policies_collide_as_in_pybullet() -> None:
     r = compare_policies(EnvConfig(arena="r4"), "r4", steps=4000, seed=2)
     # driving ahead: each collision after the same number of steps from the same respawn poses
     ahead = r["ahead"]
-    assert abs(ahead["batched"]["collisions_per_1000"] - ahead["pybullet"]["collisions_per_1000"]) < 2.0
+    gap = ahead["batched"]["collisions_per_1000"] - ahead["pybullet"]["collisions_per_1000"]
+    assert abs(gap) < 2.0
     assert abs(r["uniform"]["progress_difference"][0]) < 0.03
 
 
@@ -77,7 +79,8 @@ def test_the_same_seed_learns_the_same_table_whatever_the_batch() -> None:
     base = TrainerConfig(arena="r4")
     alone = BatchedTrainer([base.replace(seed=7)])
     alone.run(1500)
-    crowd = BatchedTrainer([base.replace(seed=s, arena=a) for s, a in [(3, "r1"), (7, "r4"), (9, "h2")]])
+    mixed = [(3, "r1"), (7, "r4"), (9, "h2")]
+    crowd = BatchedTrainer([base.replace(seed=s, arena=a) for s, a in mixed])
     crowd.run(700)
     crowd.run(800)
     assert np.array_equal(alone.q[0], crowd.q[1])
