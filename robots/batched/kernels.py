@@ -270,3 +270,22 @@ def step_all(actions, pose, prev, dist, trail, trail_len, trail_head, arena, fir
     for i in range(pose.shape[0]):
         move(i, actions[i], pose, prev, dist, trail, trail_len, trail_head, arena, first,
              count, boxes, angles, motion, P, I, rngs[i], motion_rngs[i], out[i])
+
+
+@njit(cache=True)
+def wander(steps, n_actions, pose, prev, dist, trail, trail_len, trail_head, arena, first,
+           count, half, boxes, angles, motion, P, I, rngs, motion_rngs, policy_rngs):
+    """``steps`` control steps of every robot with uniform random actions drawn from
+    ``policy_rngs[i]``, respawning a robot whose episode ends (no learning). Returns the first
+    robot whose arena had no free pose left, or -1."""
+    out = np.zeros(4)
+    for i in range(pose.shape[0]):
+        for _ in range(steps):
+            a = policy_rngs[i].integers(0, n_actions)
+            move(i, a, pose, prev, dist, trail, trail_len, trail_head, arena, first, count,
+                 boxes, angles, motion, P, I, rngs[i], motion_rngs[i], out)
+            if (out[1] > 0.0 and I[I_RESPAWN] == 1) or out[2] > 0.0:
+                if not respawn(i, pose, prev, dist, trail, trail_len, trail_head, arena, first,
+                               count, half, boxes, angles, P, rngs[i]):
+                    return i
+    return -1

@@ -200,6 +200,26 @@ class BatchedWorld:
         return StepResult(reward=o[:, 0].copy(), collision=o[:, 1] > 0, stuck=o[:, 2] > 0,
                           progress=o[:, 3].copy())
 
+    def wander(self, steps: int, policy_rngs: Sequence[np.random.Generator]) -> None:
+        """``steps`` steps of every robot with uniform random actions (robot ``i``'s drawn
+        from ``policy_rngs[i]``), in one compiled loop; a robot whose episode ends respawns.
+
+        Raises
+        ------
+        ArenaError
+            A robot's arena has no free pose left.
+        """
+        if len(policy_rngs) != self.n:
+            raise ValueError(f"one policy generator per robot: {self.n} robots, "
+                             f"{len(policy_rngs)} generators")
+        p = self.packed
+        bad = K.wander(steps, self.n_actions, self.pose, self.prev, self.dist, self.trail,
+                       self.trail_len, self.trail_head, self.arena, p.first, p.count, p.half,
+                       p.boxes, self.angles, self.motion, self.P, self.I, self.rngs,
+                       self.motion_rngs, List(policy_rngs))
+        if bad >= 0:
+            raise ArenaError(f"{self.arenas[bad].source}: robot {bad} found no free pose")
+
     def observations(self) -> np.ndarray:
         """The IR proximities of every robot, shape (n, n_sensors), float32."""
         return (1.0 - self.dist / self.P[K.P_SENSOR_RANGE]).astype(np.float32)

@@ -15,8 +15,8 @@ both see the same machine.
   ``pybullet_live`` clients are alive at once (about 28 MB each: 1,024 would not fit in memory):
   more robots are built, warmed up, timed and closed group after group.
 * **batched**, learning: :meth:`dfrl.robots.batched.training.BatchedTrainer.run`; without
-  learning: :meth:`dfrl.robots.batched.world.BatchedWorld.step` with uniform random actions
-  (robots whose episode ends respawn). The first call (numba compiles, or loads its on-disk
+  learning: :meth:`dfrl.robots.batched.world.BatchedWorld.wander`, uniform random actions drawn
+  inside the compiled loop (robots whose episode ends respawn). The first call (numba compiles, or loads its on-disk
   cache) is timed apart as ``compile_s``; then the warm-up, then the timed steps.
 """
 from __future__ import annotations
@@ -67,25 +67,20 @@ class _RandomEPuck:
 
 
 class _RandomBatch:
-    """A :class:`BatchedWorld` whose robots take uniform random actions; a robot whose episode
-    ends respawns."""
+    """A :class:`BatchedWorld` whose robots take uniform random actions drawn inside the
+    compiled loop (:meth:`BatchedWorld.wander`); a robot whose episode ends respawns."""
 
     def __init__(self, configs: Sequence[TrainerConfig]) -> None:
         from dfrl.robots.batched.world import BatchedWorld
 
         rngs = [np.random.default_rng(c.seed) for c in configs]
         self.world = BatchedWorld(configs[0].env_config(), [c.arena for c in configs], rngs)
-        self.rng = np.random.default_rng(configs[0].seed)
+        self.policy = [np.random.default_rng([c.seed, 1]) for c in configs]
         for i in range(self.world.n):
             self.world.start(i)
 
     def run(self, steps: int) -> None:
-        w = self.world
-        for _ in range(steps):
-            result = w.step(self.rng.integers(w.n_actions, size=w.n))
-            ended = result.stuck | (result.collision & w.respawn_on_collision)
-            for i in np.flatnonzero(ended):
-                w.respawn(int(i))
+        self.world.wander(steps, self.policy)     # actions drawn in the compiled loop
 
 
 def _point(sim: str, robots: int, learning: bool, steps: int, warmup: int, wall: float,

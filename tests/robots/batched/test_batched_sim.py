@@ -193,3 +193,20 @@ def test_linear_robots_learn_in_batch_and_act_well_in_pybullet() -> None:
         bt.set_params(0, np.zeros(5))
     with pytest.raises(BatchError, match="'qlearning' is not batched here"):
         BatchedLinearTrainer([base.replace(algo="qlearning")])
+
+
+def test_wandering_robots_respawn_and_repeat_with_their_seeds() -> None:
+    def walk(seeds: list[int]) -> BatchedWorld:
+        world = BatchedWorld(EnvConfig(arena="r4"), ["r4"] * len(seeds),
+                             [np.random.default_rng(s) for s in seeds])
+        for i in range(world.n):
+            world.start(i)
+        world.wander(3000, [np.random.default_rng([s, 1]) for s in seeds])
+        return world
+
+    a, b = walk([1, 2]), walk([2])
+    assert np.array_equal(a.pose[1], b.pose[0])
+    assert not np.array_equal(a.pose[0], a.pose[1])
+    # 3,000 random steps in R4 collide (about 10 per 1,000): every robot is still on the floor
+    assert np.all(np.abs(a.pose[:, :2]) < 0.5)
+    assert np.all([a.arenas[0].is_free(x, y, 0.036) for x, y in a.pose[:, :2]])
