@@ -168,6 +168,10 @@ def register_paper(subparsers: argparse._SubParsersAction) -> None:
                         "of every seed in one batch on the batched simulator (a minute for 40 "
                         "seeds), evaluations.csv and the questions only, no --driver or "
                         "--cluster (default: %(default)s)")
+    p.add_argument("--confirm-seeds", type=int, default=0, metavar="K",
+                   help="with --sim batched: run questions F and T again on pybullet with the "
+                        "first K seeds and say, row by row, whether the two agree (about 3 "
+                        "minutes of pybullet per seed; 0: off) (default: 0)")
     add_study_cluster_arguments(p)
     add_figure_arguments(p)
     p.set_defaults(func=cmd_paper)
@@ -225,7 +229,11 @@ def cmd_paper(args: argparse.Namespace) -> int:
                         **({} if args.shuffle_buffer is None
                            else {"shuffle_buffer": args.shuffle_buffer}))
     if args.sim == "batched":
-        return _batched_paper(args.out, opts)
+        return _batched_paper(args.out, opts, args.confirm_seeds)
+    if args.confirm_seeds:
+        print("dfrl paper: --confirm-seeds confirms a --sim batched study on pybullet",
+              file=sys.stderr)
+        return 2
     try:
         done = reproduce_paper(args.out, opts)
     except (ExperimentError, FileNotFoundError, ValueError) as exc:
@@ -241,18 +249,22 @@ def cmd_paper(args: argparse.Namespace) -> int:
     return 0 if done.ok else 1
 
 
-def _batched_paper(out: Path, opts: Any) -> int:
+def _batched_paper(out: Path, opts: Any, confirm_seeds: int) -> int:
     """``dfrl paper --sim batched``: run, print the report's path; 2 for options it cannot
     run."""
     from dfrl.experiments.science.paper_batched import batched_paper
+    from dfrl.experiments.science.studies.confirm import disagreeing
 
     try:
-        done = batched_paper(out, opts, sys.stderr)
+        done = batched_paper(out, opts, sys.stderr, confirm_seeds)
     except ValueError as exc:
         print(f"dfrl paper: {exc}", file=sys.stderr)
         return 2
     print(f"dfrl paper (batched) done in {done.total_s:.0f} s, {done.robots} robots",
           file=sys.stderr)
+    for c in disagreeing(done.confirmation):
+        print(f"dfrl paper: {c.contrast}: pybullet disagrees with the batched simulator",
+              file=sys.stderr)
     print(done.report)
     return 0
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -25,6 +25,7 @@ import numpy as np
 
 from dfrl.experiments.provenance import write_provenance
 from dfrl.experiments.science.fed_replicas import replica_trainer_configs
+from dfrl.experiments.science.paper_confirm import confirm_paper, markdown
 from dfrl.experiments.science.questions.answers import Answers
 from dfrl.experiments.science.questions.catalogue import UNTRAINED
 from dfrl.experiments.science.questions.evaluations import Evaluation
@@ -32,6 +33,7 @@ from dfrl.experiments.science.report.paper import write_questions_report
 from dfrl.experiments.science.reproduce import (EVAL_SEED, HELD_OUT, ZERO_TABLE, PaperOptions,
                                                 _judge, _seeds, _zeros, paper_configs,
                                                 standalone_plan, untrained_table)
+from dfrl.experiments.science.studies.confirm import Confirmation
 from dfrl.experiments.science.studies.fedsim import AGGREGATIONS
 from dfrl.experiments.science.studies.history import eval_many
 from dfrl.experiments.science.studies.simulators import BATCHED
@@ -60,6 +62,7 @@ class BatchedPaper:
     answers: Answers
     total_s: float
     robots: int
+    confirmation: list[Confirmation] = field(default_factory=list)
 
 
 def _plan(opts: PaperOptions) -> tuple[list[Group], list[TrainerConfig]]:
@@ -128,9 +131,11 @@ def _evaluations(opts: PaperOptions, groups: list[Group], bt: BatchedTrainer
             for (run, s, robot, arena, its, where, _), m in zip(jobs, scores)]
 
 
-def batched_paper(out: Path, opts: PaperOptions, progress: TextIO | None = None
-                  ) -> BatchedPaper:
-    """Run the paper's conditions on the batched simulator and judge the questions.
+def batched_paper(out: Path, opts: PaperOptions, progress: TextIO | None = None,
+                  confirm_seeds: int = 0) -> BatchedPaper:
+    """Run the paper's conditions on the batched simulator and judge the questions; with
+    ``confirm_seeds`` K, confirm F and T on pybullet with the first K seeds
+    (:mod:`.paper_confirm`).
 
     Raises
     ------
@@ -138,6 +143,9 @@ def batched_paper(out: Path, opts: PaperOptions, progress: TextIO | None = None
         Options the batched paper cannot run (``driver``, ``cluster``), or runs of different
         budgets.
     """
+    if not 0 <= confirm_seeds <= len(_seeds(opts)):
+        raise ValueError(f"--confirm-seeds {confirm_seeds}: between 0 and the study's "
+                         f"{len(_seeds(opts))} seeds")
     if opts.driver or opts.cluster is not None:
         raise ValueError("--sim batched runs every robot in one process: no --driver, no "
                          "--cluster")
@@ -164,4 +172,9 @@ def batched_paper(out: Path, opts: PaperOptions, progress: TextIO | None = None
              f"{len(configs)} robots in one batch, final tables evaluated {opts.eval_steps} "
              f"steps per arena; {total:.0f} s."]
     report = write_questions_report(out, ans, out, intro=intro, name="report.md")
-    return BatchedPaper(report, ans, total, len(configs))
+    confirmed: list[Confirmation] = []
+    if confirm_seeds:
+        confirmed = confirm_paper(out, opts, ans, confirm_seeds, progress)
+        with open(report, "a", encoding="utf-8") as fh:
+            fh.write("\n".join(markdown(confirmed, confirm_seeds)) + "\n")
+    return BatchedPaper(report, ans, total, len(configs), confirmed)

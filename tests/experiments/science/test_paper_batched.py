@@ -49,3 +49,22 @@ def test_the_same_seed_gives_the_same_evaluations(tmp_path: Path) -> None:
 def test_what_the_batch_cannot_run_is_refused(tmp_path: Path) -> None:
     r = _paper("--sim", "batched", "--driver", "--n-seeds", "1", "--out", str(tmp_path))
     assert r.returncode == 2 and "no --driver" in r.stderr
+
+
+def test_f_and_t_are_confirmed_on_pybullet(tmp_path: Path) -> None:
+    out = tmp_path / "paper"
+    r = _paper("--sim", "batched", "--n-seeds", "2", "--iterations", "200", "--respite", "100",
+               "--eval-steps", "30", "--no-control", "--confirm-seeds", "1", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    found = json.loads((out / "confirmation.json").read_text())
+    assert found["seeds"] == [1]
+    names = [c["contrast"] for c in found["contrasts"]]
+    assert len(names) == 10 and all(n.startswith(("F: ", "T: ")) for n in names)
+    assert all(c["pybullet"]["n"] == 1 and c["batched"]["n"] == 2 for c in found["contrasts"])
+    assert (out / "confirm_pybullet" / "evaluations.csv").is_file()
+    assert "## Confirmation in pybullet" in (out / "report.md").read_text(encoding="utf-8")
+    r = _paper("--confirm-seeds", "1", "--n-seeds", "1", "--out", str(tmp_path / "x"))
+    assert r.returncode == 2 and "confirms a --sim batched study" in r.stderr
+    r = _paper("--sim", "batched", "--confirm-seeds", "3", "--n-seeds", "2",
+               "--out", str(tmp_path / "y"))
+    assert r.returncode == 2 and "between 0 and the study's 2 seeds" in r.stderr
