@@ -39,9 +39,10 @@ if [ ! -x "$VENV/bin/python" ]; then
     fi
 fi
 
-# Reinstall only when the project's metadata changed since the last install.
+# Reinstall only when the project's metadata (pyproject.toml, setup.py) changed since the last
+# install.
 stamp="$VENV/.dfrl-installed"
-want="$(sha256sum "$DFRL_ROOT/pyproject.toml" | cut -d' ' -f1)"
+want="$(cat "$DFRL_ROOT/pyproject.toml" "$DFRL_ROOT/setup.py" | sha256sum | cut -d' ' -f1)"
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ] \
         || ! "$VENV/bin/python" -c 'import pybullet, pyswip, gymnasium, matplotlib, pytest, autograd, statsmodels, rliable' 2>/dev/null; then
     say "installing the dfrl package and its dependencies into $VENV"
