@@ -203,9 +203,12 @@ def _close(a: str, b: str) -> bool:
 
 # -- rules both configs share ------------------------------------------------------------------
 def known_algorithms() -> list[str]:
+    """The built-in learners and the plug-ins known in this process (registered by a config's
+    ``learners`` section, or installed: dfrl.robots.plugins)."""
     from dfrl.robots.learners import LEARNERS
+    from dfrl.robots.plugins import plugin_names
 
-    return sorted(LEARNERS)
+    return sorted({*LEARNERS, *plugin_names()})
 
 
 def _token_problem(value: Any) -> str | None:

@@ -22,6 +22,7 @@ New learners subclass :class:`FunctionLearner` and register in
 """
 from __future__ import annotations
 
+import dataclasses
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -153,6 +154,23 @@ class FunctionLearner(ABC):
         """Epsilon-greedy action for ``obs``."""
         return epsilon_greedy(self.q_values(obs), self.epsilon, self.rng)
 
+    def act(self, obs: np.ndarray) -> int:
+        """The learner interface's name for :meth:`select_action` (override that one)."""
+        return self.select_action(obs)
+
+    def describe(self) -> dict[str, Any]:
+        """What the learner is and its settings, for results and summaries (a plug-in may add
+        its own hyper-parameters: extend this dict)."""
+        size = int(sum(int(np.prod(shape)) for _, shape in self.param_layout))
+        return {"name": self.name, "kind": self.kind, "gamma": self.params.gamma,
+                "epsilon": self.params.epsilon.describe(), "parameters": size,
+                "layout": [[n, list(shape)] for n, shape in self.param_layout],
+                "grid": self.distillable, **self._own_settings()}
+
+    def _own_settings(self) -> dict[str, Any]:
+        own = getattr(self, "config", None)
+        return dataclasses.asdict(own) if dataclasses.is_dataclass(own) else {}
+
     def greedy_action(self, obs: np.ndarray) -> int:
         """A greedy action for ``obs`` (lowest index on ties), no randomness used."""
         return greedy_action(self.q_values(obs))
@@ -167,10 +185,23 @@ class FunctionLearner(ABC):
         for watch in self.watchers:
             watch(obs, action)
 
-    @abstractmethod
     def q_model(self) -> tuple[list[np.ndarray], QModel]:
         """The live arrays the model's values depend on (moved in place by a distillation) and
-        the model as a :data:`QModel` of them."""
+        the model as a :data:`QModel` of them. Needed to join a grid federation only; a learner
+        without it (this default) is refused there with a clear message.
+
+        Raises
+        ------
+        NotImplementedError
+            The learner does not offer its model.
+        """
+        raise NotImplementedError(f"learner {self.name!r} has no q_model(): it cannot join a "
+                                  "grid federation (robots/README.md, 'Bring your own learner')")
+
+    @property
+    def distillable(self) -> bool:
+        """True when the learner offers :meth:`q_model` (can join a grid federation)."""
+        return type(self).q_model is not FunctionLearner.q_model
 
     def q_batch(self, obs: np.ndarray) -> np.ndarray:
         """Action values of a batch of observations.
@@ -183,8 +214,10 @@ class FunctionLearner(ABC):
         -------
         np.ndarray, float64, shape (B, n_actions)
         """
-        arrays, model = self.q_model()
         x = np.asarray(obs, dtype=np.float64).reshape(-1, self.obs_dim)
+        if not self.distillable:
+            return np.array([self.q_values(row) for row in x], dtype=np.float64)
+        arrays, model = self.q_model()
         return np.asarray(model(arrays, x, np), dtype=np.float64)
 
     def after_distil(self) -> None:

@@ -84,9 +84,41 @@ class TabularLearner(ABC):
         """Epsilon-greedy action in ``state``."""
         return epsilon_greedy(self.q[state], self.epsilon, self.rng)
 
+    def act(self, state: int) -> int:
+        """The learner interface's name for :meth:`select_action`."""
+        return self.select_action(state)
+
     def set_table(self, table: np.ndarray) -> None:
         """Replace the table in place after validation (shape, finiteness)."""
         self.q[...] = validate_table(table, self.q.shape)
+
+    @property
+    def param_layout(self) -> list[tuple[str, tuple[int, ...]]]:
+        """The table as the learner interface's one array: ``[("q", (n_states, n_actions))]``."""
+        return [("q", tuple(self.q.shape))]
+
+    def get_params(self) -> np.ndarray:
+        """The table as a new flat float64 vector (C order)."""
+        return self.q.ravel().copy()
+
+    def set_params(self, vec: np.ndarray) -> None:
+        """Replace the table from a flat vector (:meth:`get_params` order).
+
+        Raises
+        ------
+        ValueError
+            Wrong length or a non-finite entry.
+        """
+        arr = np.asarray(vec, dtype=np.float64)
+        if arr.ndim != 1 or arr.size != self.q.size:
+            raise ValueError(f"expected {self.q.size} parameters, got shape {arr.shape}")
+        self.set_table(arr.reshape(self.q.shape))
+
+    def describe(self) -> dict[str, Any]:
+        """What the learner is and its settings, for results and summaries."""
+        return {"name": self.name, "kind": self.kind, "alpha": self.params.alpha,
+                "gamma": self.params.gamma, "epsilon": self.params.epsilon.describe(),
+                "initial_q": self.params.initial_q, "shape": list(self.q.shape)}
 
     @abstractmethod
     def learn(self, state: int, action: int, reward: float, next_state: int, terminal: bool) -> int:
@@ -142,12 +174,19 @@ def learner_class(name: str) -> type[TabularLearner] | type[FunctionLearner]:
     Raises
     ------
     KeyError
-        Unknown learner name (the message lists the registered ones).
+        Unknown learner name (the message lists the built-in and plug-in ones).
+    dfrl.robots.plugins.PluginError
+        An installed plug-in of that name that does not load.
     """
-    try:
-        return LEARNERS[name]
-    except KeyError:
-        raise KeyError(f"unknown learner '{name}'; registered: {sorted(LEARNERS)}") from None
+    cls = LEARNERS.get(name)
+    if cls is None:
+        from dfrl.robots.plugins import find, plugin_names
+        cls = find(name)
+        if cls is None:
+            raise KeyError(f"unknown learner '{name}'; built in: {sorted(LEARNERS)}; plug-ins: "
+                           f"{plugin_names() or 'none'} (robots/README.md, 'Bring your own "
+                           "learner')")
+    return cls
 
 
 def learner_kind(name: str) -> str:

@@ -107,6 +107,11 @@ class EpsilonSchedule:
             return self.start + frac * (self.end - self.start)
         return self.end + (self.start - self.end) * float(np.exp(-t / self.decay_steps))
 
+    def describe(self) -> dict[str, object]:
+        """The schedule as plain values (for results and summaries)."""
+        return {"kind": self.kind.value, "start": self.start, "end": self.end,
+                "decay_steps": self.decay_steps}
+
 
 @dataclass(frozen=True)
 class LearnerParams:

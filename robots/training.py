@@ -31,6 +31,7 @@ import numpy as np
 from dfrl.robots.approx import FunctionLearner, Layout, validate_params
 from dfrl.robots.env import EPuckEnv
 from dfrl.robots.learners import TabularLearner, learner_class, make_learner
+from dfrl.robots.plugins import options as plugin_options
 from dfrl.robots.reward_shuffle import RewardShuffle
 from dfrl.robots.metrics import (METRIC_DTYPE, StepMetrics, read_metrics_csv,  # noqa: F401
                                  write_metrics_csv)
@@ -50,7 +51,8 @@ def build_learner(config: TrainerConfig, n_states: int, obs_dim: int, n_actions:
     cls = learner_class(config.algo)
     if issubclass(cls, TabularLearner):
         return make_learner(config.algo, n_states, n_actions, config.learner, rng)
-    options = {"config": getattr(config, cls.config_field)} if cls.config_field else {}
+    options = ({"config": getattr(config, cls.config_field)} if cls.config_field
+               else plugin_options(config.algo))
     return make_learner(config.algo, obs_dim, n_actions, config.learner, rng, **options)
 
 

@@ -168,6 +168,10 @@ class ExperimentConfig(JsonDicts):
         ``fanout`` children per stop; every robot still ends the round with the same table).
     fanout : int
         Children of each stop in a ``tree`` itinerary (>= 2, default 2).
+    learners : dict
+        Plug-in learners the robots may name in ``algo``: ``name -> "module:Class"``,
+        ``"file.py:Class"`` (relative to the config file) or ``{"class": ..., "options":
+        {...}}`` (:mod:`dfrl.robots.plugins`; robots/README.md, "Bring your own learner").
     """
 
     name: str = "experiment"
@@ -196,6 +200,7 @@ class ExperimentConfig(JsonDicts):
     federation: str = "per_algorithm"
     itinerary: str = "chain"
     fanout: int = 2
+    learners: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not is_checked():
@@ -299,6 +304,10 @@ class ExperimentConfig(JsonDicts):
             raise ConfigError([f"cannot read it: {exc.strerror}"], str(path)) from None
         if isinstance(data, dict) and overrides:
             data = {**data, **overrides}
+        if isinstance(data, dict) and "learners" in data:   # files beside the config
+            from dfrl.robots.plugins import absolute_section
+            data = {**data, "learners": absolute_section(data["learners"],
+                                                         Path(path).resolve().parent)}
         try:
             return cls.from_dict(data, resources=resources)
         except ConfigError as exc:

@@ -77,6 +77,7 @@ EXPERIMENT_RULES: dict[str, Rule] = {
     "federation": Rule(str, choices=lambda: list(FEDERATIONS), what="federation"),
     "itinerary": Rule(str, choices=lambda: list(ITINERARIES), what="itinerary"),
     "fanout": Rule(int, low=2, hint="children of each stop in a tree itinerary"),
+    "learners": Rule(dict, hint="plug-in learners: name -> 'module:Class' or 'file.py:Class'"),
 }
 
 
@@ -116,6 +117,9 @@ def check_experiment(data: Any, resources: bool = True) -> list[str]:
     out = check_keys("", data, EXPERIMENT_RULES, extra=COMMENT_KEYS)
     if not isinstance(data, dict):
         return out
+    if isinstance(data.get("learners"), dict):      # before the robots name them
+        from dfrl.robots.plugins import section_problems
+        out += section_problems(data["learners"])
     robots = data.get("robots", [])
     entries: list[tuple[str, Any]] = []
     if isinstance(robots, list):
@@ -223,7 +227,22 @@ def check_federation(data: dict[str, Any]) -> list[str]:
     if isinstance(joins, list) and joins:
         out.append("joins: a robot cannot join a grid federation (a joiner is handed to the "
                    "agent of its algorithm); list it in robots")
+    robots = data.get("robots") if isinstance(data.get("robots"), list) else []
+    for i, robot in enumerate(robots):
+        algo = robot.get("algo") if isinstance(robot, dict) else None
+        if isinstance(algo, str) and algo in known_algorithms() and not _distillable(algo):
+            out.append(f"robots[{i}].algo: {algo} has no q_model(), so its Q-function cannot be "
+                       "read on the grid nor distilled back: it cannot join a grid federation "
+                       "(robots/README.md, 'Bring your own learner')")
     return out
+
+
+def _distillable(algo: str) -> bool:
+    from dfrl.robots.approx import FunctionLearner
+    from dfrl.robots.learners import learner_class
+
+    cls = learner_class(algo)
+    return not issubclass(cls, FunctionLearner) or cls.q_model is not FunctionLearner.q_model
 
 
 def check_eval_every(data: dict[str, Any]) -> list[str]:

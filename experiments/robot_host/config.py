@@ -90,6 +90,9 @@ class RobotConfig(JsonDicts):
     clone_limit : int or None
         Clones that may arrive at the robot's node per minute (the node's ``clone_limit``;
         None: the platform's default, 60). A tree itinerary's copies are clones.
+    learners : dict
+        The run's plug-in learners (``name -> {"class": spec, "options": {...}}``, the
+        experiment's ``learners``), registered by the process before it builds its learner.
     """
 
     robot: str
@@ -114,6 +117,7 @@ class RobotConfig(JsonDicts):
     eval_every: int = 0
     eval_steps: int = 500
     clone_limit: int | None = None
+    learners: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not is_checked():
@@ -123,10 +127,12 @@ class RobotConfig(JsonDicts):
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (the token included); ``clone_limit`` only when set, so that a
         ``dfrl robot`` host of an earlier version, which refuses keys it does not know, still
-        takes a chain run's config."""
+        takes a chain run's config (``learners`` likewise, only when the run has plug-ins)."""
         data = super().to_dict()
         if data.get("clone_limit") is None:
             data.pop("clone_limit", None)
+        if not data.get("learners"):
+            data.pop("learners", None)
         return data
 
     @classmethod
@@ -166,12 +172,17 @@ RULES: dict[str, Rule] = {
     "tls": Rule(str, nullable=True),
     "eval_every": Rule(int, low=0, hint=_NO_EVAL), "eval_steps": Rule(int, low=1),
     "clone_limit": Rule(int, nullable=True, low=1),
+    "learners": Rule(dict, hint="plug-in learners: name -> {\"class\": spec, \"options\": {}}"),
 }
 
 
 def check_robot_config(data: Any) -> list[str]:
     """Every problem of a robot process config in its JSON form (empty: it can run)."""
-    out = check_keys("", data, RULES, required=("robot", "out_dir"))
+    out: list[str] = []
+    if isinstance(data, dict) and isinstance(data.get("learners"), dict):  # before algo
+        from dfrl.robots.plugins import section_problems
+        out += section_problems(data["learners"])
+    out += check_keys("", data, RULES, required=("robot", "out_dir"))
     if not isinstance(data, dict):
         return out
     out += check_robot_id("robot", data.get("robot"))

@@ -93,7 +93,7 @@ def robot_config(site: Site, robot: RobotSpec, iterations: int, joins: int = 0) 
                        trainer=dict(c.trainer), grace_s=grace,
                        sync_timeout_s=max(60.0, c.timeout_s), host=site.console_host,
                        eval_every=c.eval_every, eval_steps=c.eval_steps,
-                       clone_limit=clone_limit(c),
+                       clone_limit=clone_limit(c), learners=dict(c.learners),
                        # a remote robot has its own TLS folder (dfrl robot --tls): not ours
                        tls=None if site.tls is None or robot.robot_host is not None
                        else str(site.tls))
