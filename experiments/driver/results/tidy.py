@@ -69,19 +69,24 @@ class RobotFacts:
     agent: str = ""
 
 
-def _rows(path: Path) -> list[dict[str, str]]:
-    """The rows of a CSV file as text, a torn last line (one without its line end) left out;
-    no file: none."""
+#: A row of a table and where it comes from (``shares_r1.csv:4``: file and line).
+Sourced = tuple[dict[str, str], str]
+
+
+def _rows(path: Path) -> list[Sourced]:
+    """The rows of a CSV file as text with their places, a torn last line (one without its
+    line end) left out; no file: none."""
     if not path.is_file():
         return []
     text = path.read_text(encoding="utf-8")
     if text and not text.endswith("\n"):
         text = text[:text.rfind("\n") + 1]
-    return list(csv.DictReader(io.StringIO(text)))
+    reader = csv.DictReader(io.StringIO(text))
+    return [(row, f"{path.name}:{reader.line_num}") for row in reader]
 
 
 def robot_facts(out: Path, config: ExperimentConfig, robots: Sequence[str],
-                shares: dict[str, list[dict[str, str]]]) -> dict[str, RobotFacts]:
+                shares: dict[str, list[Sourced]]) -> dict[str, RobotFacts]:
     """robot -> its facts: algorithm and arena from the config's robots and joins, else
     ``nodes.json`` (a robot that joined by ``dfrl join``), else its node config
     (``nodes/<robot>.json``); its agent from the agents' itineraries in ``nodes.json``, else
@@ -110,25 +115,26 @@ def robot_facts(out: Path, config: ExperimentConfig, robots: Sequence[str],
                 pass
         agent = agents.get(rid, "")
         if not agent:
-            named = [r["agent"] for r in shares.get(rid, []) if r.get("agent")]
+            named = [r["agent"] for r, _ in shares.get(rid, []) if r.get("agent")]
             agent = max(set(named), key=named.count) if named else ""
         facts[rid] = RobotFacts(algo, arena, agent)
     return facts
 
 
-def _check_unique(rows: Iterable[dict[str, str]], key: tuple[str, ...], path: Path) -> None:
-    """Raise :class:`TidyError` at the first row whose ``key`` repeats (row 2 = the first
-    after the header)."""
-    seen: dict[tuple[str, ...], int] = {}
-    for n, row in enumerate(rows, start=2):
+def _check_unique(rows: Iterable[Sourced], key: tuple[str, ...], path: Path) -> None:
+    """Raise :class:`TidyError` at the first row whose ``key`` repeats, naming both rows'
+    places in the files they come from."""
+    seen: dict[tuple[str, ...], str] = {}
+    for row, where in rows:
         k = tuple(row[c] for c in key)
         if k in seen:
-            raise TidyError(f"{path}:{n}: {', '.join(f'{c} {v}' for c, v in zip(key, k))} "
-                            f"repeats row {seen[k]}; the key ({', '.join(key)}) must be unique")
-        seen[k] = n
+            raise TidyError(f"{path.parent.name}/{path.name}: {where}: "
+                            f"{', '.join(f'{c} {v}' for c, v in zip(key, k))} as in "
+                            f"{seen[k]}; the key ({', '.join(key)}) must be unique")
+        seen[k] = where
 
 
-def _write(path: Path, fields: tuple[str, ...], rows: list[dict[str, str]],
+def _write(path: Path, fields: tuple[str, ...], rows: list[Sourced],
            key: tuple[str, ...]) -> Path:
     """Write ``rows`` (keys unique, else :class:`TidyError` and no file) to ``path``."""
     _check_unique(rows, key, path)
@@ -137,7 +143,7 @@ def _write(path: Path, fields: tuple[str, ...], rows: list[dict[str, str]],
     with open(tmp, "w", newline="", encoding="utf-8") as fh:
         w = csv.DictWriter(fh, fieldnames=fields, lineterminator="\n")
         w.writeheader()
-        w.writerows(rows)
+        w.writerows(row for row, _ in rows)
     tmp.replace(path)
     return path
 
@@ -154,16 +160,20 @@ def _who(rid: str, f: RobotFacts) -> dict[str, str]:
 
 
 def step_rows(out: Path, facts: dict[str, RobotFacts],
-              shares: dict[str, list[dict[str, str]]]) -> list[dict[str, str]]:
+              shares: dict[str, list[Sourced]]) -> list[Sourced]:
     """The rows of ``steps.csv`` from ``metrics.csv`` and the robots' writes (``shares``)."""
     rounds: dict[str, list[tuple[int, int]]] = {}     # robot -> (iteration, round) of writes
     for rid, rows in shares.items():
-        writes = [(_int(r.get("iteration")), _int(r.get("round"))) for r in rows]
-        rounds[rid] = sorted((i, n) for i, n in writes if i is not None and n is not None)
-    out_rows: list[dict[str, str]] = []
+        writes = [(_int(r.get("iteration")), _int(r.get("round"))) for r, _ in rows]
+        # by iteration, the writes of one iteration in the order applied (the file's)
+        rounds[rid] = sorted(((i, n) for i, n in writes if i is not None and n is not None),
+                             key=lambda w: w[0])
+    out_rows: list[Sourced] = []
     current: dict[str, tuple[int, int]] = {}          # robot -> (next write, its round)
-    for row in _rows(out / "metrics.csv"):
-        rid, it = row["robot"], int(row["iteration"])
+    for row, where in _rows(out / "metrics.csv"):
+        rid, it = row["robot"], _int(row["iteration"])
+        if it is None:
+            raise TidyError(f"{where}: iteration {row['iteration']!r} is not an integer")
         pos, rnd = current.get(rid, (0, 0))
         writes = rounds.get(rid, [])
         while pos < len(writes) and writes[pos][0] <= it:
@@ -171,23 +181,24 @@ def step_rows(out: Path, facts: dict[str, RobotFacts],
             pos += 1
         current[rid] = (pos, rnd)
         shared = row.get("shared") or "0"
-        out_rows.append({**_who(rid, facts.get(rid, RobotFacts())), "iteration": row["iteration"],
-                         "round": str(rnd), "phase": "learn" if shared == "0" else "share",
-                         "q_sum": row["q_sum"],
-                         "q_sum_before_share": row.get("q_sum_before_share") or row["q_sum"],
-                         "cumulative_reward": row["cumulative_reward"],
-                         "collisions": row["collisions"], "shared": shared})
+        cells = {"iteration": row["iteration"], "round": str(rnd),
+                 "phase": "learn" if shared == "0" else "share", "q_sum": row["q_sum"],
+                 "q_sum_before_share": row.get("q_sum_before_share") or row["q_sum"],
+                 "cumulative_reward": row["cumulative_reward"],
+                 "collisions": row["collisions"], "shared": shared}
+        out_rows.append(({**_who(rid, facts.get(rid, RobotFacts())), **cells}, where))
     return out_rows
 
 
 def share_rows(facts: dict[str, RobotFacts],
-               shares: dict[str, list[dict[str, str]]]) -> list[dict[str, str]]:
+               shares: dict[str, list[Sourced]]) -> list[Sourced]:
     """The rows of ``shares.csv``: every write the robots recorded, robot by robot."""
     rows = []
     for rid, writes in shares.items():
-        for w in writes:
-            rows.append({**_who(rid, facts.get(rid, RobotFacts())), "agent": w.get("agent") or "",
-                         **{k: w.get(k) or "" for k in SHARE_FIELDS[4:]}})
+        for w, where in writes:
+            rows.append(({**_who(rid, facts.get(rid, RobotFacts())),
+                          "agent": w.get("agent") or "",
+                          **{k: w.get(k) or "" for k in SHARE_FIELDS[4:]}}, where))
     return rows
 
 
@@ -207,11 +218,11 @@ def _skips(text: str, robots: set[str]) -> dict[str, str]:
 
 
 def round_rows(out: Path, robots: Sequence[str],
-               facts: dict[str, RobotFacts]) -> list[dict[str, str]]:
+               facts: dict[str, RobotFacts]) -> list[Sourced]:
     """The rows of the tidy ``rounds.csv`` from the wide one: per round, its robots in the
     run's order (then any others, sorted)."""
     rows = []
-    for r in _rows(out / "rounds.csv"):
+    for r, where in _rows(out / "rounds.csv"):
         cells = {k.removeprefix("digest_"): v for k, v in r.items()
                  if k.startswith("digest_") and v}
         written = set((r.get("written") or "").split())
@@ -224,14 +235,14 @@ def round_rows(out: Path, robots: Sequence[str],
                        else "missing")
             f = facts.get(rid, RobotFacts())
             digest = cells.get(rid, "")
-            rows.append({"agent": r["agent"], "round": r["round"], "robot": rid,
-                         "algo": f.algo, "arena": f.arena, "epoch": r.get("epoch") or "",
-                         "method": r.get("method") or "", "outcome": outcome,
-                         "digest": "" if digest == "missing" else digest,
-                         "reason": skips.get(rid, ""), "all_equal": r.get("all_equal") or "",
-                         "reconstructed": r.get("reconstructed") or "",
-                         "start": r.get("start") or "", "end": r.get("end") or "",
-                         "duration_ms": r.get("duration_ms") or ""})
+            rows.append(({"agent": r["agent"], "round": r["round"], "robot": rid,
+                          "algo": f.algo, "arena": f.arena, "epoch": r.get("epoch") or "",
+                          "method": r.get("method") or "", "outcome": outcome,
+                          "digest": "" if digest == "missing" else digest,
+                          "reason": skips.get(rid, ""), "all_equal": r.get("all_equal") or "",
+                          "reconstructed": r.get("reconstructed") or "",
+                          "start": r.get("start") or "", "end": r.get("end") or "",
+                          "duration_ms": r.get("duration_ms") or ""}, where))
     return rows
 
 
@@ -243,7 +254,7 @@ def write_tidy_tables(out: str | Path, config: ExperimentConfig,
     A table whose key would repeat is not written."""
     out = Path(out)
     shares = {rid: _rows(out / f"shares_{rid}.csv") for rid in robots}
-    shares = {rid: [r for r in rows if r.get("digest") and _int(r.get("share_index"))
+    shares = {rid: [(r, w) for r, w in rows if r.get("digest") and _int(r.get("share_index"))
                     is not None] for rid, rows in shares.items()}
     facts = robot_facts(out, config, robots, shares)
     folder = out / TIDY_DIR
