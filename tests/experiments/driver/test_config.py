@@ -204,3 +204,18 @@ def test_resolved_config_writes_out_every_seed_and_trainer_setting() -> None:
     back = ExperimentConfig.from_dict(json.loads(json.dumps(res.public_dict())))
     assert back == res and back.resolved() == res
     assert cfg.resolved() != cfg                 # control: the unresolved config differs
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in config_module.CONFIGS_DIR.glob("*.json")))
+def test_every_shipped_config_resolves_to_one_the_loader_takes(name: str,
+                                                               tmp_path: Path) -> None:
+    # Prepare: a shipped config, resolved and written as a run writes it
+    cfg = ExperimentConfig.load(config_module.resolve_config(name))
+    path = tmp_path / "config.json"
+    path.write_text(json.dumps(cfg.resolved().public_dict(), indent=2))
+    # Execute: read back as dfrl run reads a config file (arenas included)
+    back = ExperimentConfig.load(path)
+    # Assert: nothing refused, the same experiment, every robot seeded
+    assert back == cfg.resolved() and back.resolved() == back
+    assert all(r.seed is not None for r in back.robots)
+    assert [back.robot_seed(r) for r in back.robots] == [cfg.robot_seed(r) for r in cfg.robots]
