@@ -116,7 +116,7 @@ def robot_facts(out: Path, config: ExperimentConfig, robots: Sequence[str],
         agent = agents.get(rid, "")
         if not agent:
             named = [r["agent"] for r, _ in shares.get(rid, []) if r.get("agent")]
-            agent = max(set(named), key=named.count) if named else ""
+            agent = max(dict.fromkeys(named), key=named.count) if named else ""  # ties: first
         facts[rid] = RobotFacts(algo, arena, agent)
     return facts
 
