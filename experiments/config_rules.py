@@ -25,9 +25,9 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import Any
 
-__all__ = ["ConfigError", "Rule", "check_keys", "check_robot_id", "check_trainer",
-           "check_value", "checked", "is_checked", "json_form", "known_algorithms",
-           "raise_problems", "to_json_dict", "token_rule"]
+__all__ = ["ConfigError", "Rule", "TRAINER_OWNED", "check_keys", "check_robot_id",
+           "check_trainer", "check_value", "checked", "is_checked", "json_form",
+           "known_algorithms", "raise_problems", "resolve_trainer", "to_json_dict", "token_rule"]
 
 _ROBOT_ID = re.compile(r"[a-z][a-z0-9_]*\Z")
 
@@ -231,6 +231,25 @@ def check_robot_id(path: str, rid: Any) -> list[str]:
     return []
 
 
+#: :class:`dfrl.robots.training.TrainerConfig` fields a ``trainer`` dict may not hold: the
+#: experiment (or the robot process's config) sets them.
+TRAINER_OWNED: frozenset[str] = frozenset({"arena", "algo", "seed", "iterations"})
+
+
+def resolve_trainer(trainer: dict[str, Any]) -> dict[str, Any]:
+    """``trainer`` (checked by :func:`check_trainer`) with every other
+    :class:`~dfrl.robots.training.TrainerConfig` field at its default, nested fields included
+    (the learner's ``alpha``, ``gamma``, ``epsilon`` schedule ...), as the robots build it
+    (their defaults, updated with ``trainer``), without :data:`TRAINER_OWNED`: the same
+    robots, and :func:`check_trainer` accepts it."""
+    from dfrl.robots.training import TrainerConfig
+
+    base = TrainerConfig().to_dict()
+    base.update(trainer)
+    full = TrainerConfig.from_dict(base).to_dict(full=True)
+    return {k: v for k, v in full.items() if k not in TRAINER_OWNED}
+
+
 def check_trainer(path: str, trainer: Any) -> list[str]:
     """``trainer`` holds known :class:`dfrl.robots.training.TrainerConfig` fields of the right
     types, and the result builds."""
@@ -240,7 +259,7 @@ def check_trainer(path: str, trainer: Any) -> list[str]:
 
     defaults = TrainerConfig().to_dict(full=True)
     problems = _check_like(path, trainer, defaults)
-    owned = {"arena", "algo", "seed", "iterations"} & set(trainer)
+    owned = TRAINER_OWNED & set(trainer)
     problems += [f"{path}.{k}: set by the experiment (robots[..].{k} or {k}), not in trainer"
                  for k in sorted(owned)]
     if not problems:

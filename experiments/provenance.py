@@ -3,18 +3,24 @@
 Every results folder of ``dfrl run`` / ``dfrl demo`` (written at the start of the run by
 :mod:`dfrl.experiments.driver.launcher.experiment`) and of every study records the dfrl
 version, the git commit when run from a checkout (and whether the checkout had changes), the
-versions of Python, SWI-Prolog, pybullet and numpy, the host, the command line and the time::
+versions of Python, SWI-Prolog and of every package that shapes a result
+(:data:`PACKAGES`: numpy, scipy, pybullet, gymnasium, pyswip, autograd, numba), the host, the
+command line and the time::
 
     {"dfrl": "0.2.0",
      "git": {"commit": "4d1f3ae...", "dirty": true},
      "python": "3.11.7 (CPython)", "swipl": "9.2.9", "pybullet": "3.2.7", "numpy": "2.4.6",
+     "scipy": "1.17.1", "gymnasium": "1.4.0", "pyswip": "0.3.3", "autograd": "1.9.1",
+     "numba": "0.62.1",
      "host": {"name": "lab-3", "platform": "Linux-6.8.0-x86_64-with-glibc2.39", "cpus": 2},
      "command": ["dfrl", "paper", "--n-seeds", "5"], "cwd": "/work/main",
      "started": "2025-01-31T12:00:00Z"}
 
-A value that cannot be found is ``null`` (no checkout, no ``swipl`` on the PATH); finding it
-never fails the run. The token never lands here: the value after ``--token`` on the command
-line is replaced by ``<hidden>``.
+``git`` says why there is no commit when there is none: ``{"commit": null, "dirty": null,
+"note": "not a checkout"}`` (an installed package), or ``"note": "git failed: ..."`` (a
+checkout git could not read). A package that is not installed is ``null``, as is ``swipl``
+without ``swipl`` on the PATH; finding a value never fails the run. The token never lands
+here: the value after ``--token`` on the command line is replaced by ``<hidden>``.
 """
 from __future__ import annotations
 
@@ -38,6 +44,12 @@ PROVENANCE_FILE = "provenance.json"
 SECRET_OPTIONS = ("--token",)
 #: Longest wait for ``git`` or ``swipl --version``.
 TIMEOUT_S = 5.0
+#: The distributions whose versions are recorded (besides dfrl, Python and SWI-Prolog): what
+#: the simulation, the learners and the bridge to Prolog run on.
+PACKAGES: tuple[str, ...] = ("pybullet", "numpy", "scipy", "gymnasium", "pyswip", "autograd",
+                             "numba")
+#: ``git``'s note when the package does not run from a git checkout.
+NOT_A_CHECKOUT = "not a checkout"
 
 
 def _output(argv: list[str], cwd: Path | None = None) -> str | None:
@@ -61,15 +73,21 @@ def _checkout() -> Path | None:
 
 
 @lru_cache(maxsize=1)
-def git_state() -> dict[str, Any] | None:
-    """``{"commit": sha, "dirty": bool}`` of the checkout this package runs from; None when
-    it is installed (not a checkout) or git is missing."""
-    root = _checkout()
+def git_state() -> dict[str, Any]:
+    """:func:`checkout_state` of the checkout this package runs from (if any)."""
+    return checkout_state(_checkout())
+
+
+def checkout_state(root: Path | None) -> dict[str, Any]:
+    """``{"commit": sha, "dirty": bool}`` of the git checkout at ``root``; when there is no
+    commit to give, ``commit`` and ``dirty`` are None and ``note`` says why (``root`` None:
+    :data:`NOT_A_CHECKOUT`; else git failed there)."""
     if root is None:
-        return None
+        return {"commit": None, "dirty": None, "note": NOT_A_CHECKOUT}
     commit = _output(["git", "rev-parse", "HEAD"], root)
     if commit is None:
-        return None
+        return {"commit": None, "dirty": None,
+                "note": f"git failed: no commit from git rev-parse HEAD in {root}"}
     status = _output(["git", "status", "--porcelain", "--untracked-files=no"], root)
     return {"commit": commit, "dirty": None if status is None else bool(status)}
 
@@ -118,15 +136,13 @@ def provenance(argv: list[str] | None = None) -> dict[str, Any]:
     """What is producing results now: versions, commit, host, command line (see the module's
     docs for the fields)."""
     import dfrl
-    import numpy
 
     return {
         "dfrl": dfrl.__version__,
-        "git": git_state(),
+        "git": dict(git_state()),
         "python": f"{platform.python_version()} ({platform.python_implementation()})",
         "swipl": swipl_version(),
-        "pybullet": _version("pybullet"),
-        "numpy": numpy.__version__,
+        **{dist: _version(dist) for dist in PACKAGES},
         "host": {"name": socket.gethostname(), "platform": platform.platform(),
                  "cpus": os.cpu_count()},
         "command": command_line(argv),
@@ -156,7 +172,7 @@ def describe(p: dict[str, Any]) -> str:
     """One line for a summary: ``dfrl 0.2.0 (commit 4d1f3ae, with changes), Python 3.11.7,
     SWI-Prolog 9.2.9, pybullet 3.2.7, numpy 2.4.6 on lab-3``."""
     git = p.get("git") or {}
-    where = "not a checkout"
+    where = str(git.get("note") or NOT_A_CHECKOUT)
     if git.get("commit"):
         where = f"commit {str(git['commit'])[:10]}" + (", with changes" if git.get("dirty")
                                                        else "")

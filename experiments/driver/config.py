@@ -18,7 +18,8 @@ from pathlib import Path
 from typing import Any
 
 from dfrl.experiments.config_rules import (JsonDicts, ConfigError, check_value, checked, is_checked,
-                                           json_form, raise_problems, token_rule)
+                                           json_form, raise_problems, resolve_trainer,
+                                           token_rule)
 from dfrl.experiments.driver.config_check import (BUILTIN_METHODS, COMMENT_KEYS, GRID,
                                                   check_experiment, host_port_problem)
 from dfrl.experiments.robot_host.config import DEFAULT_ITERATIONS, Mode, boundaries
@@ -123,7 +124,9 @@ class ExperimentConfig(JsonDicts):
         ``secret.token`` (mode 0600). A weak token (``1111``) serves on loopback only; robots
         on other hosts need the strong token their ``dfrl robot`` was started with.
     trainer : dict
-        Extra :class:`dfrl.robots.training.TrainerConfig` fields shared by all robots.
+        Extra :class:`dfrl.robots.training.TrainerConfig` fields shared by all robots (nested
+        ones as objects; a field not given keeps its default). ``config.json`` of a results
+        folder lists them all (:meth:`resolved`).
     joins : tuple of JoinSpec
     timeout_s : float
         Whole-experiment limit (children are killed after it). The default, 3600 s, is a safety
@@ -260,6 +263,22 @@ class ExperimentConfig(JsonDicts):
             return robot.seed
         ids = [r.id for r in self.robots] + [j.robot.id for j in self.joins]
         return self.seed + ids.index(robot.id)
+
+    def resolved(self) -> "ExperimentConfig":
+        """This config with what a run fills in written out (what ``config.json`` of a
+        results folder holds): every robot's and joiner's ``seed`` as the run uses it
+        (:meth:`robot_seed`) and ``trainer`` with every
+        :class:`~dfrl.robots.training.TrainerConfig` field, defaults included
+        (:func:`~dfrl.experiments.config_rules.resolve_trainer`). It runs exactly as this
+        one (the same seeds, the same trainers) and resolves to itself."""
+        with checked():             # seeds >= 0 and a trainer the checks accept
+            robots = tuple(dataclasses.replace(r, seed=self.robot_seed(r)) for r in self.robots)
+            joins = tuple(dataclasses.replace(j, robot=dataclasses.replace(
+                j.robot, seed=self.robot_seed(j.robot))) for j in self.joins)
+            cfg = dataclasses.replace(self, robots=robots, joins=joins,
+                                      trainer=resolve_trainer(self.trainer))
+        object.__setattr__(cfg, "_arenas_checked", getattr(self, "_arenas_checked", False))
+        return cfg
 
     def default_title(self) -> str:
         if self.title:

@@ -17,7 +17,8 @@ them byte for byte).
 
 What it writes into ``out`` (the driver's names and formats):
 
-- ``config.json`` (the config without its token) and ``provenance.json``;
+- ``config.json`` (the config resolved, without its token, as the driver writes it) and
+  ``provenance.json``;
 - ``metrics_<robot>.csv`` (a robot process's rows: iteration, ``repr`` of the sum of Q and of
   the cumulative reward, collisions) and ``metrics.csv`` merged from them
   (:func:`~dfrl.experiments.driver.results.metrics.merge_metrics`, the driver's own);
@@ -163,7 +164,7 @@ def run_replica(cfg: ExperimentConfig, out: str | Path, *, force: bool = False,
     cfg.check()
     t0 = time.monotonic()
     out = claim_output(Path(out).resolve(), force)
-    (out / "config.json").write_text(json.dumps(cfg.public_dict(), indent=2) + "\n",
+    (out / "config.json").write_text(json.dumps(cfg.resolved().public_dict(), indent=2) + "\n",
                                      encoding="utf-8")
     write_provenance(out)
     robots = replica_trainer_configs(cfg, out)

@@ -94,9 +94,12 @@ class Launcher:
     def _prepare(self) -> ExperimentConfig:
         """Check everything that can be checked before anything starts, claim the results
         folder (unless the caller did) and write the token and the config into it; return the
-        config with its token."""
+        config with its token. The config run and written (``config.json``) is the resolved
+        one (:meth:`ExperimentConfig.resolved`: every seed and trainer setting written out),
+        so that ``dfrl run RESULTS/config.json`` runs the same experiment again."""
         c = self._config
         c.check()
+        c = c.resolved()
         if c.token is None and c.remote_robots():
             where = c.remote_robots()[0].robot_host
             raise ConfigError([f"token: robots on other hosts ({where}) "

@@ -2,7 +2,8 @@
 
 Layout (see ``experiments/README.md``)::
 
-    config.json            the experiment config (ExperimentConfig.to_dict)
+    config.json            the experiment config, resolved (ExperimentConfig.resolved)
+    provenance.json        versions, commit, host, command line (experiments/provenance.py)
     nodes.json             robots' addresses, the agents and their itineraries
     metrics.csv            robot, iteration, q_sum, cumulative_reward, collisions, shared,
                            q_sum_before_share: one row per robot and iteration (:mod:`.metrics`)
@@ -24,14 +25,16 @@ Layout (see ``experiments/README.md``)::
                            (+ .json, format dfrl-params/1)
     checkpoint/<robot>.npy each robot's last checkpoint (table or parameters)
     tensorboard/           with ``--tensorboard``: event files from the CSVs (:mod:`.tensorboard`)
+    tidy/                  steps.csv, shares.csv, rounds.csv: long tables, unique keys
+                           (:mod:`.tidy`)
 
 Modules: :mod:`.agent_log` (the agent's JSON-lines log), :mod:`.rounds` (shares, their
 matching to rounds, ``rounds.csv``), :mod:`.metrics` (``metrics.csv``), :mod:`.evaluations`
 (``live_evaluations.csv``), :mod:`.files` (JSON files), :mod:`.summary` (:class:`Results` and
 ``summary.md``), :mod:`.history` (the history checker: did the writes the robots recorded
 keep the rules: no doubled write, no epoch regressed, no stale epoch, no split round),
-:mod:`.ending` (all the end-of-run files at once: what the driver writes when a
-run ends and ``dfrl collect`` when the driver did not).
+:mod:`.tidy` (the long tables of ``tidy/``), :mod:`.ending` (all the end-of-run files at
+once: what the driver writes when a run ends and ``dfrl collect`` when the driver did not).
 """
 from __future__ import annotations
 

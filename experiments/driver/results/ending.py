@@ -2,7 +2,8 @@
 the run: :func:`write_end_files`. The driver calls it when a run ends
 (``Launcher._collect``), ``dfrl collect`` when the driver did not get there (a driver that
 was killed); both write the same files: ``tables/`` (``params/``) made whole from the last
-checkpoints, ``metrics.csv``, ``live_evaluations.csv``, ``rounds.csv``, the plots and
+checkpoints, ``metrics.csv``, ``live_evaluations.csv``, ``rounds.csv``, the tidy tables
+(``tidy/``, :mod:`.tidy`), the plots and
 ``summary.md`` with its verdict, which includes the history checker's (:mod:`.history`).
 """
 from __future__ import annotations
@@ -24,6 +25,7 @@ from dfrl.experiments.driver.results.plots import plot_experiment
 from dfrl.experiments.driver.results.rounds import Share, read_shares, write_rounds_csv
 from dfrl.experiments.driver.results.summary import Results, write_summary
 from dfrl.experiments.driver.results.tables import final_tables, learnt_path
+from dfrl.experiments.driver.results.tidy import write_tidy_tables
 
 
 @dataclass
@@ -109,6 +111,8 @@ def write_end_files(out: Path, config: ExperimentConfig, robots: list[str],
     shares, history, history_lines = _check_history(out, robots)
     say(history.text() if history is not None else history_lines[0])
     rows = write_rounds_csv(out / "rounds.csv", logs.values(), robots, shares)
+    for line in write_tidy_tables(out, config, robots)[1]:
+        say(line)
     plots: list[Path] = []
     plot_error = None
     try:

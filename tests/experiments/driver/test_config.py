@@ -164,3 +164,58 @@ def test_function_learner_method_must_apply_to_params() -> None:
     assert len(only_dqn) == 1 and "tabular" not in only_dqn[0]     # no hint about others
     with pytest.raises(ConfigError, match="max does not apply"):
         ExperimentConfig(robots=(RobotSpec("r1", "r1", "dqn"),), method="max")
+
+
+def test_resolved_config_writes_out_every_seed_and_trainer_setting() -> None:
+    # Prepare: a config with one robot seed given, one left to the run, a joiner, and one
+    # learner setting given (the rest of the learner's left to defaults)
+    from dfrl.experiments.config_rules import check_trainer
+    from dfrl.experiments.driver.config import JoinSpec
+    from dfrl.robots.training import TrainerConfig
+
+    cfg = ExperimentConfig(robots=(RobotSpec("r1", "r1"), RobotSpec("r2", "r4", seed=40)),
+                           joins=(JoinSpec(RobotSpec("r3", "r2")),), seed=7,
+                           trainer={"learner": {"alpha": 0.1}})
+    # Execute
+    res = cfg.resolved()
+    # Assert: the seeds the run uses, written out
+    assert [r.seed for r in res.robots] == [7, 40] and res.joins[0].robot.seed == 9
+    assert [res.robot_seed(r) for r in res.robots] == [cfg.robot_seed(r) for r in cfg.robots]
+    # every trainer setting: the one given, the learner's others at their defaults
+    d = TrainerConfig()
+    learner = res.trainer["learner"]
+    assert learner["alpha"] == 0.1 and learner["gamma"] == d.learner.gamma
+    assert learner["epsilon"] == {"kind": d.learner.epsilon.kind.value,
+                                  "start": d.learner.epsilon.start,
+                                  "end": d.learner.epsilon.end,
+                                  "decay_steps": d.learner.epsilon.decay_steps}
+    assert set(res.trainer) == set(d.to_dict(full=True)) - {"arena", "algo", "seed",
+                                                             "iterations"}
+    assert check_trainer("trainer", res.trainer) == []
+    # the robots train exactly as before: the same TrainerConfig from either trainer dict
+    for a, b in ((cfg, cfg.trainer), (res, res.trainer)):
+        node = RobotConfig(robot="r1", out_dir="/tmp/x", seed=a.robot_seed(a.robots[0]),
+                           trainer=b)
+        assert node.trainer_config() == RobotConfig(
+            robot="r1", out_dir="/tmp/x", seed=7, trainer={"learner": {"alpha": 0.1}}
+        ).trainer_config()
+    # it loads back through the same checks (as config.json, without the token), unchanged,
+    # and resolves to itself
+    back = ExperimentConfig.from_dict(json.loads(json.dumps(res.public_dict())))
+    assert back == res and back.resolved() == res
+    assert cfg.resolved() != cfg                 # control: the unresolved config differs
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in config_module.CONFIGS_DIR.glob("*.json")))
+def test_every_shipped_config_resolves_to_one_the_loader_takes(name: str,
+                                                               tmp_path: Path) -> None:
+    # Prepare: a shipped config, resolved and written as a run writes it
+    cfg = ExperimentConfig.load(config_module.resolve_config(name))
+    path = tmp_path / "config.json"
+    path.write_text(json.dumps(cfg.resolved().public_dict(), indent=2))
+    # Execute: read back as dfrl run reads a config file (arenas included)
+    back = ExperimentConfig.load(path)
+    # Assert: nothing refused, the same experiment, every robot seeded
+    assert back == cfg.resolved() and back.resolved() == back
+    assert all(r.seed is not None for r in back.robots)
+    assert [back.robot_seed(r) for r in back.robots] == [cfg.robot_seed(r) for r in cfg.robots]

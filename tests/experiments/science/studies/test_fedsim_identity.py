@@ -96,6 +96,8 @@ def test_small_run_and_replica_are_bit_identical(tmp_path: Path) -> None:
     driver, replica = run_both(cfg, tmp_path)
     assert sorted(history_tables(replica)["r2"]) == [50, 100, 130]
     assert differences(driver, replica) == []
+    # both record the resolved config (every seed and trainer setting), the same one
+    assert (driver / "config.json").read_text() == (replica / "config.json").read_text()
     summary = (replica / "summary.md").read_text()
     assert REPLICA_LINE in summary and recorded_wall(replica) >= 0
 
