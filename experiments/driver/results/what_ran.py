@@ -91,15 +91,17 @@ def run_status(r: "Results") -> tuple[str, list[str]]:
     done = _rounds_done(r)
     faults = r.faults
     reasons: list[str] = []
+    counts: list[str] = []          # agent: done of planned rounds
     names = list(dict.fromkeys([a for a, _, _ in planned] + list(launched) + list(done)))
     for agent in names:
         missing = faults.missing_rounds.get(agent, []) if faults is not None else []
         if agent not in launched and not done.get(agent):
             reasons.append(f"{agent} was never launched: none of its {c.rounds} rounds ran")
-        elif missing:
+        else:
             n = len(done.get(agent, ()))
-            reasons.append(f"{agent}: {n} of {n + len(missing)} planned rounds done; "
-                           f"missing: {_shown(missing)}")
+            counts.append(f"{agent}: {n} of {n + len(missing)} planned rounds")
+            reasons.append(f"{counts[-1]} done"
+                           + (f"; missing: {_shown(missing)}" if missing else ""))
     if faults is not None:
         reasons += [f"LOST {rid}: {why}" for rid, why in faults.lost.items()]
         reasons += [f"{rid} {what}" for rid, what in faults.missed.items()]
@@ -117,8 +119,7 @@ def run_status(r: "Results") -> tuple[str, list[str]]:
     if r.interrupted:
         reasons.append(f"interrupted ({r.interrupted})")
     if r.complete and r.ok:
-        rounds = ", ".join(f"{agent}: {len(done.get(agent, ()))} of {c.rounds} rounds"
-                           for agent in names)
+        rounds = ", ".join(counts)
         tolerated = " (faults within what the config tolerates: see Faults)" \
             if faults is not None and faults.lines() else ""
         return "complete", [f"every planned round ran, every robot took part in every round "
