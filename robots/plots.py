@@ -27,9 +27,10 @@ def _pyplot():  # noqa: ANN202 - matplotlib module
 
 def plot_learning_curves(
     curves: Mapping[str, np.ndarray | Sequence[np.ndarray]], path: str | Path, title: str,
-    formats: Sequence[str] = ("png",), dpi: float | None = None,
+    formats: Sequence[str] = ("png",), dpi: float | None = None, summed: str = "Q-values",
 ) -> Path:
-    """Sum of Q-values and cumulative reward against iterations, one line per label.
+    """Sum of Q-values (or of what ``summed`` names) and cumulative reward against
+    iterations, one line per label.
 
     Parameters
     ----------
@@ -44,6 +45,9 @@ def plot_learning_curves(
         Figure title.
     formats, dpi
         File formats (``png``, ``pdf``, ``svg``) and resolution (default 110 dpi).
+    summed : str
+        What the ``q_sum`` column sums, for the left panel's title and axis: ``Q-values``
+        (a tabular learner's table) or ``parameters`` (a function learner's).
 
     Returns
     -------
@@ -62,8 +66,8 @@ def plot_learning_curves(
             if len(runs) > 1:
                 ax.fill_between(it, ys.min(axis=0), ys.max(axis=0), color=colour, alpha=0.18, lw=0)
     ax_q.set_xlabel("iterations")
-    ax_q.set_ylabel("sum of Q-values")
-    ax_q.set_title("Sum of Q-values")
+    ax_q.set_ylabel(f"sum of {summed}")
+    ax_q.set_title(f"Sum of {summed}")
     ax_r.set_xlabel("iterations")
     ax_r.set_ylabel("cumulative reward")
     ax_r.set_title("Cumulative reward")

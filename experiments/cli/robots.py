@@ -14,6 +14,7 @@ from typing import Any
 
 from dfrl.experiments.cli.figures import add_figure_arguments
 from dfrl.experiments.cli.tensorboard_option import add_tensorboard_argument, write_train_tensorboard
+from dfrl.experiments.science.learning_check import DEFAULT_EPISODES, DEFAULT_STEPS
 from dfrl.robots.learners import LEARNERS, EpsilonSchedule, LearnerParams, ScheduleKind
 from dfrl.robots.training import DEMO_ITERATIONS, TrainerConfig
 
@@ -29,6 +30,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-plot", action="store_true", help="do not draw the learning curves")
     p.add_argument("--gui", action="store_true",
                    help="watch in a pybullet window (needs a display; not paced to real time)")
+    p.add_argument("--eval-episodes", type=int, default=DEFAULT_EPISODES,
+                   help="at the end, judge whether the robot learnt: its greedy policy, the "
+                        "untrained learner's and random actions each drive this many episodes "
+                        "(default: %(default)s; 0: no verdict)")
+    p.add_argument("--eval-steps", type=int, default=DEFAULT_STEPS,
+                   help="control steps per evaluation episode (default: %(default)s)")
     add_figure_arguments(p)
     add_tensorboard_argument(p)
     p.set_defaults(func=cmd_train)
@@ -196,15 +203,23 @@ def _fail(message: str) -> int:
 
 # -- train -----------------------------------------------------------------------------------
 def cmd_train(args: argparse.Namespace) -> int:
-    """``dfrl train``: one run, writing table, config, metrics and the learning curves."""
+    """``dfrl train``: one run, writing table, config, metrics and the learning curves, then
+    the verdict on whether the robot learnt (``learning_check.json``; not with
+    ``--eval-episodes 0``)."""
     from tqdm import tqdm
 
+    from dfrl.robots.learners import is_tabular
     from dfrl.robots.training import train
 
     try:
         cfg = config_from_args(args)
     except (ValueError, KeyError) as exc:
         return _fail(str(exc))
+    if args.eval_episodes == 1 or args.eval_episodes < 0:
+        return _fail(f"--eval-episodes: 0 (no verdict) or at least 2 (an interval needs two), "
+                     f"got {args.eval_episodes}")
+    if args.eval_steps < 1:
+        return _fail(f"--eval-steps: at least 1, got {args.eval_steps}")
     from dfrl.arenas.spec import ArenaError, load_arena
 
     try:                     # a bad arena is said before a progress bar is drawn
@@ -219,12 +234,13 @@ def cmd_train(args: argparse.Namespace) -> int:
         except ValueError as exc:
             return _fail(str(exc))
     m = result.metrics
+    summed = "Q-values" if is_tabular(cfg.algo) else "parameters"
     if not args.no_plot and len(m):
         from dfrl.robots.plots import plot_learning_curves
 
         plot_learning_curves({f"{cfg.arena} {cfg.algo}": m}, out / "learning_curves.png",
                              f"{cfg.algo} in {cfg.arena}, seed {cfg.seed}",
-                             args.figure_format, args.dpi)
+                             args.figure_format, args.dpi, summed=summed)
     if args.tensorboard:
         write_train_tensorboard(out, m, "dfrl train")
     rate = cfg.iterations / result.wall_time if result.wall_time > 0 else float("nan")
@@ -233,11 +249,18 @@ def cmd_train(args: argparse.Namespace) -> int:
           f"{result.wall_time:.1f} s ({rate:.0f} it/s, "
           f"{rate * cfg.sim.control_dt:.0f}x real time)")
     if last is not None:
-        from dfrl.robots.learners import is_tabular
-
-        what = "sum of Q" if is_tabular(cfg.algo) else "sum of parameters"
         print(f"collisions {int(last['collisions'])}, cumulative reward "
-              f"{float(last['cumulative_reward']):.1f}, {what} {float(last['q_sum']):.2f}")
+              f"{float(last['cumulative_reward']):.1f}, sum of {summed} "
+              f"{float(last['q_sum']):.2f}")
+    if args.eval_episodes:
+        from dfrl.experiments.science.learning_check import check_learning
+
+        check = check_learning(cfg, result.q_table, result.params, args.eval_episodes,
+                               args.eval_steps)
+        (out / "learning_check.json").write_text(json.dumps(check.to_dict(), indent=2) + "\n",
+                                                 encoding="utf-8")
+        for line in check.lines():
+            print(line)
     print(f"results in {out}")
     return 0
 

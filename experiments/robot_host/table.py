@@ -17,6 +17,7 @@ import numpy as np
 
 from dfrl.experiments.robot_host.files import CsvLog, share_row
 from dfrl.experiments.robot_host.lines import ProtocolLines
+from dfrl.experiments.robot_host.share_notes import ShareNotes
 from dfrl.pybridge.providers import TableProvider
 
 __all__ = ["SharedTable", "SharedLearner", "shared_provider"]
@@ -44,6 +45,9 @@ class SharedTable:
         Called after every applied share (no arguments).
     shares : int
         Shares applied before (a resumed run).
+    notes : ShareNotes, optional
+        Where a write absorbed by distillation (a base with ``last_distillation``, a grid
+        view) and a read of the parameters (their samples: the FedAvg weight) are recorded.
 
     Attributes
     ----------
@@ -55,8 +59,9 @@ class SharedTable:
 
     def __init__(self, base: TableProvider, robot: str, shares_log: CsvLog,
                  lines: ProtocolLines, on_share: Callable[[], None] | None = None,
-                 shares: int = 0) -> None:
+                 shares: int = 0, notes: ShareNotes | None = None) -> None:
         self.base = base
+        self.notes = notes
         self.robot = robot
         self.shares_log = shares_log
         self.lines = lines
@@ -91,6 +96,9 @@ class SharedTable:
         self.shares += 1
         self.shares_log.row(share_row(self.robot, self.shares, self.iteration, self.base.q_table,
                                       origin, self.q_sum), flush=True)
+        report = getattr(self.base, "last_distillation", None)
+        if report is not None and self.notes is not None:      # this write's (a grid view)
+            self.notes.write_distillation(self.iteration, origin, report)
         self.lines.event("set", self.iteration)
         if self.on_share is not None:
             self.on_share()
@@ -129,8 +137,11 @@ class SharedLearner(SharedTable):
         return self.base.learner_kind
 
     def params_read(self) -> None:
-        """An agent read the parameters (the bridge calls it after serving the read)."""
+        """An agent read the parameters (the bridge calls it after serving the read); their
+        samples (the FedAvg weight) are noted."""
         self.lines.event("get", self.iteration)
+        if self.notes is not None:
+            self.notes.write_weight(self.iteration, self.base.samples)
 
     def set_params(self, vec: np.ndarray) -> None:
         self.set_params_from(vec, {})
@@ -149,10 +160,10 @@ class SharedLearner(SharedTable):
 
 def shared_provider(base: Any, robot: str, shares_log: CsvLog, lines: ProtocolLines,
                     on_share: Callable[[], None] | None = None,
-                    shares: int = 0) -> SharedTable:
+                    shares: int = 0, notes: ShareNotes | None = None) -> SharedTable:
     """A :class:`SharedLearner` over a base that offers parameters, else a :class:`SharedTable`
     (arguments as :class:`SharedTable`'s)."""
     offers = all(name in dir(base) for name in ("params", "param_layout", "set_params", "samples",
                                                 "learner_kind"))
     cls = SharedLearner if offers else SharedTable
-    return cls(base, robot, shares_log, lines, on_share, shares)
+    return cls(base, robot, shares_log, lines, on_share, shares, notes)

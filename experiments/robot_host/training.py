@@ -29,6 +29,7 @@ from dfrl.experiments.robot_host.checkpoint import (
 from dfrl.experiments.robot_host.evaluate import LiveEvaluator
 from dfrl.experiments.robot_host.files import METRIC_FIELDS, SHARE_FIELDS, CsvLog
 from dfrl.experiments.robot_host.lines import ProtocolLines
+from dfrl.experiments.robot_host.share_notes import ShareNotes
 from dfrl.experiments.robot_host.table import SharedTable, shared_provider
 
 __all__ = ["Training", "TrainingHost", "SleepHost", "SAMPLE_S", "network_layout"]
@@ -134,6 +135,7 @@ class Training:
         self._metrics: CsvLog | None = None
         self._shares: CsvLog | None = None
         self._evals: LiveEvaluator | None = None
+        self._notes: ShareNotes | None = None
         self._registered = False
         self._sampled_at = -SAMPLE_S
 
@@ -215,7 +217,10 @@ class Training:
             from dfrl.robots.grid_view import GridView
             base = GridView(self.trainer)
         on_share = self.on_share if self.trainer is not None else None
-        self.table = shared_provider(base, c.robot, self._shares, self.lines, on_share, shares)
+        # distillation residuals and FedAvg weights (a learning robot's, not a benchmark's)
+        self._notes = ShareNotes(self.out_dir, c.robot) if self.trainer is not None else None
+        self.table = shared_provider(base, c.robot, self._shares, self.lines, on_share, shares,
+                                     self._notes)
         if self.trainer is not None:
             self.table.iteration = self.trainer.iteration
         # what the robot offers agents: its Q-table (a function learner: the grid view of its
@@ -379,7 +384,7 @@ class Training:
                 self.bridge.unregister_robot(self.config.robot)
             except Exception as exc:  # noqa: BLE001 - a closing node must still close files
                 self.warn(f"robot {self.config.robot}: unregistering failed: {exc}")
-        for log in (self._metrics, self._shares, self._evals):
+        for log in (self._metrics, self._shares, self._evals, self._notes):
             if log is not None:
                 log.close()
         if self.trainer is not None:

@@ -55,6 +55,10 @@ class Launcher:
         self._robots = RobotRoster(self._out, self._reporter, config.partition_wait_s)
         self._agents = AgentRoster(self._reporter)
         self._interrupted: str | None = None
+        #: what the launcher is doing until the agents are launched (None afterwards): an
+        #: error on the way is why the run never started
+        self._stage: str | None = "starting the console node"
+        self._start_error: str | None = None
 
     def robots(self) -> dict[str, Robot]:
         """The robots of the run so far, by id (callable from any thread)."""
@@ -131,14 +135,19 @@ class Launcher:
             poller = StatusPoller().start()
             site = Site(c, self._out, console, host, self._tls, experiment_id, poller)
             for spec in c.robots:
+                self._stage = f"starting robot {spec.id}" + (
+                    f" on its robot host {spec.robot_host}" if spec.robot_host else "")
                 self._robots.add(start_robot(site, spec, c.iterations, self._agents))
             robots = self._robots.robots()
+            self._stage = "waiting for the robots to come up"
             await_ready(list(robots.values()))
             write_nodes(site, self._robots, self._agents)
             say(f"{len(robots)} robot processes up: " + ", ".join(
                 f"{rid}@{s.address[1]}" for rid, s in self._robots.statuses().items()
                 if s.address is not None))
+            self._stage = "launching the agents"
             launch_agents(site, self._robots, self._agents, self._reporter)
+            self._stage = None
             monitor(c, self._robots, self._agents, Joins(site, self._robots, self._agents,
                                                          self._reporter, self._placer),
                     self._reporter)
@@ -149,6 +158,11 @@ class Launcher:
         except BaseException as exc:
             ok = False
             self._interrupted = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+            if self._stage is not None:
+                why = " ".join(str(exc).split())
+                refused = "permission" in why.lower() and "token" in why.lower()
+                self._start_error = f"{self._stage} failed" + (
+                    ": the robot host refused the run's token" if refused else "") + f": {why}"
             self._robots.kill_all()
             raise
         finally:
@@ -175,7 +189,8 @@ class Launcher:
         r = self._robots
         facts = RunFacts(wall, ok, self._interrupted, r.crashed(), r.iterations(), r.lost(),
                          r.stalls(), r.gather_errors(), r.gathered(), r.failed_joins(),
-                         resumed=r.resumed(), finished=r.finished())
+                         resumed=r.resumed(), finished=r.finished(),
+                         start_error=self._start_error)
         return write_end_files(self._out, self._config, list(r.robots()), self._agents.logs(),
                                {a.name: a.rounds for a in self._agents.infos()}, facts,
                                self._reporter.say)

@@ -27,14 +27,20 @@ Layout (see ``experiments/README.md``)::
     tensorboard/           with ``--tensorboard``: event files from the CSVs (:mod:`.tensorboard`)
     tidy/                  steps.csv, shares.csv, rounds.csv: long tables, unique keys
                            (:mod:`.tidy`)
+    distillation.csv       a grid federation's distillation residual per robot and round
+    fedavg_weights.csv     each robot's weight (samples) per round of a FedAvg of parameters
+                           (both from the robots' ``distillation_<robot>.csv`` and
+                           ``weights_<robot>.csv``: :mod:`.carried`)
 
 Modules: :mod:`.agent_log` (the agent's JSON-lines log), :mod:`.rounds` (shares, their
 matching to rounds, ``rounds.csv``), :mod:`.metrics` (``metrics.csv``), :mod:`.evaluations`
 (``live_evaluations.csv``), :mod:`.files` (JSON files), :mod:`.summary` (:class:`Results` and
 ``summary.md``), :mod:`.history` (the history checker: did the writes the robots recorded
 keep the rules: no doubled write, no epoch regressed, no stale epoch, no split round),
-:mod:`.tidy` (the long tables of ``tidy/``), :mod:`.ending` (all the end-of-run files at
-once: what the driver writes when a run ends and ``dfrl collect`` when the driver did not).
+:mod:`.tidy` (the long tables of ``tidy/``), :mod:`.what_ran` (the summary's first lines:
+status, itinerary, what the agents carried, the learners), :mod:`.carried` (distillation
+residuals and FedAvg weights), :mod:`.ending` (all the end-of-run files at once: what the
+driver writes when a run ends and ``dfrl collect`` when the driver did not).
 """
 from __future__ import annotations
 

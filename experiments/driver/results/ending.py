@@ -12,8 +12,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from dfrl.experiments.driver.config import ExperimentConfig
+from dfrl.experiments.driver.config import GRID, ExperimentConfig
 from dfrl.experiments.driver.results.agent_log import AgentLog
+from dfrl.experiments.driver.results.carried import (Distilled, Weight, fedavg_weights,
+                                                     read_distillations, write_distillation_csv,
+                                                     write_weights_csv)
 from dfrl.experiments.driver.results.evaluations import merge_evaluations
 from dfrl.experiments.driver.results.faults import assess
 from dfrl.experiments.driver.results.files import read_json
@@ -26,6 +29,7 @@ from dfrl.experiments.driver.results.rounds import Share, read_shares, write_rou
 from dfrl.experiments.driver.results.summary import Results, write_summary
 from dfrl.experiments.driver.results.tables import final_tables, learnt_path
 from dfrl.experiments.driver.results.tidy import write_tidy_tables
+from dfrl.experiments.driver.results.what_ran import planned_agents
 
 
 @dataclass
@@ -60,6 +64,9 @@ class RunFacts:
     finished : list of str
         Robots that ran all their iterations (an agent that skips one afterwards missed
         nothing of it).
+    start_error : str or None
+        Why the run never got going: the launcher's step that failed before the agents were
+        launched, and its error (the summary's status says it).
     """
 
     wall_time_s: float
@@ -75,6 +82,7 @@ class RunFacts:
     collected: list[str] | None = None
     resumed: dict[str, list[int]] = field(default_factory=dict)
     finished: list[str] = field(default_factory=list)
+    start_error: str | None = None
 
 
 def write_end_files(out: Path, config: ExperimentConfig, robots: list[str],
@@ -110,6 +118,10 @@ def write_end_files(out: Path, config: ExperimentConfig, robots: list[str],
     merge_evaluations(out, robots)
     shares, history, history_lines = _check_history(out, robots)
     say(history.text() if history is not None else history_lines[0])
+    logs, budgets = _with_unlaunched(config, logs, budgets)
+    distilled, weights, record_problems = _write_carried(out, config, robots, shares)
+    for line in record_problems:
+        say(line)
     rows = write_rounds_csv(out / "rounds.csv", logs.values(), robots, shares)
     for line in write_tidy_tables(out, config, robots)[1]:
         say(line)
@@ -138,9 +150,47 @@ def write_end_files(out: Path, config: ExperimentConfig, robots: list[str],
     result = Results(out, config, facts.wall_time_s, rows, facts.crashed, finished,
                      facts.iterations, plots, ok, facts.interrupted, problems, plot_error,
                      faults, facts.gathered, list(from_checkpoint), torn, facts.failed_joins,
-                     facts.collected, history)
+                     facts.collected, history, facts.start_error, distilled, weights,
+                     record_problems)
     write_summary(result)
     return result
+
+
+def _with_unlaunched(config: ExperimentConfig, logs: dict[str, AgentLog],
+                     budgets: dict[str, int]) -> tuple[dict[str, AgentLog], dict[str, int]]:
+    """The logs and budgets with an empty log for every agent the config plans that was
+    never launched (e.g. a robot host refused the token first): its rounds count as missing,
+    so such a run is never called complete."""
+    logs, budgets = dict(logs), dict(budgets)
+    for agent, _, _ in planned_agents(config):
+        if agent not in logs:
+            logs[agent] = AgentLog(agent)
+            budgets.setdefault(agent, config.rounds)
+    return logs, budgets
+
+
+def _write_carried(out: Path, config: ExperimentConfig, robots: list[str],
+                   shares: dict[str, list[Share]]
+                   ) -> tuple[list[Distilled], list[Weight], list[str]]:
+    """Write ``distillation.csv`` (a grid federation, or any distilled write recorded) and
+    ``fedavg_weights.csv`` (any FedAvg weight recorded) from the robots' records
+    (:mod:`.carried`); return their rows and, for records that cannot be read, why."""
+    problems = []
+    distilled: list[Distilled] = []
+    weights: list[Weight] = []
+    try:
+        distilled = read_distillations(out, robots)
+        if distilled or config.federation == GRID:
+            write_distillation_csv(out / "distillation.csv", distilled)
+    except (ValueError, OSError) as exc:
+        problems.append(f"distillation residuals not written: {exc}")
+    try:
+        weights = fedavg_weights(out, shares)
+        if weights:
+            write_weights_csv(out / "fedavg_weights.csv", weights)
+    except (ValueError, OSError) as exc:
+        problems.append(f"FedAvg weights not written: {exc}")
+    return distilled, weights, problems
 
 
 def _check_history(out: Path, robots: list[str]) -> tuple[dict[str, list[Share]],

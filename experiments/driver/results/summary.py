@@ -5,7 +5,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from dfrl.experiments.driver.config import ExperimentConfig
+from dfrl.experiments.driver.config import GRID, ExperimentConfig
+from dfrl.experiments.driver.results.carried import Distilled, Weight
 from dfrl.experiments.driver.results.evaluations import last_evaluations
 from dfrl.experiments.driver.results.faults import Faults
 from dfrl.experiments.driver.results.files import read_json
@@ -13,6 +14,7 @@ from dfrl.experiments.driver.results.history import HistoryVerdict
 from dfrl.experiments.driver.results.metrics import read_metrics
 from dfrl.experiments.driver.results.rounds import count_equal, count_unverified
 from dfrl.experiments.driver.results.tables import params_path, table_sum
+from dfrl.experiments.driver.results.what_ran import what_ran_lines
 from dfrl.experiments.provenance import describe, read_provenance
 
 
@@ -43,6 +45,15 @@ class Results:
     #: the history checker's verdict on the robots' shares (None: not checked, see
     #: ``faults.history``)
     history: HistoryVerdict | None = None
+    #: why the run never got going (the launcher's step that failed and its error), when an
+    #: error stopped it before its agents were launched
+    start_error: str | None = None
+    #: the distilled writes of a grid federation (``distillation.csv``)
+    distilled: list[Distilled] | None = None
+    #: every robot's weight per round of a FedAvg of parameters (``fedavg_weights.csv``)
+    weights: list[Weight] | None = None
+    #: robots' records of the shares that could not be read (lines of the summary)
+    record_problems: list[str] | None = None
 
     @property
     def complete(self) -> bool:
@@ -94,9 +105,11 @@ def robot_kinds(out_dir: Path, config: ExperimentConfig) -> dict[str, tuple[str,
 
 
 def write_summary(r: Results) -> Path:
-    """``summary.md``: what ran, what came out."""
+    """``summary.md``: first whether the federation ran and what ran
+    (:func:`~.what_ran.what_ran_lines`), then what came out."""
     c = r.config
-    lines = [f"# {c.name}", "", c.default_title(), "",
+    lines = [f"# {c.name}", "", c.default_title(), ""] + what_ran_lines(r) + [
+             "", "## The run", "",
              f"- wall time: {r.wall_time_s:.1f} s",
              f"- mode: {c.mode.value}, real-time factor: {c.rtf or 'none (flat out)'}",
              f"- seed: {c.seed}; iterations {c.iterations}, respite {c.respite}, "
@@ -135,8 +148,13 @@ def write_summary(r: Results) -> Path:
     redone = [row for row in failed if row.get("failed_method")]
     partial = [row for row in r.rounds if row.get("skipped") and not row.get("error")]
     n_rounds = len(r.rounds)
-    durations = sorted(float(row["duration_ms"]) for row in r.rounds if row["duration_ms"] != "")
-    med = durations[len(durations) // 2] if durations else float("nan")
+    durations = sorted(float(row["duration_ms"]) for row in r.rounds
+                       if row.get("duration_ms") not in (None, ""))
+    median = (f"{durations[len(durations) // 2]:.1f} ms" if durations else
+              "no round completed")
+    grid = (" (a grid federation: a function learner's grid view holds the aggregate only "
+            "within its distillation residual, so rounds that write one count as unequal)"
+            if c.federation == GRID else "")
     rebuilt = sum(1 for row in r.rounds if row.get("reconstructed"))
     unverified = count_unverified(r.rounds)
     also = (f" ({unverified} more not verifiable: a visited robot's share record is missing, "
@@ -144,11 +162,12 @@ def write_summary(r: Results) -> Path:
     lines += [f"- agent rounds logged: {n_rounds - rebuilt}"
               + (f" (and {rebuilt} only in the robots' shares, rebuilt)" if rebuilt else "")
               + f"; rounds after which every visited robot held "
-              f"the same table: {r.equal_rounds}/{n_rounds}{also}; rounds that skipped robots: "
+              f"the same table: {r.equal_rounds}/{n_rounds}{also}{grid}; rounds that skipped "
+              f"robots: "
               f"{len(partial)}; rounds whose method FAILED: {len(failed)} ({len(redone)} done "
               f"again with a fallback method, every table written; {len(failed) - len(redone)} "
               f"aborted, no table written)",
-              f"- median round time: {med:.1f} ms",
+              f"- median round time: {median}",
               f"- methods used: "
               f"{', '.join(sorted({row['method'] for row in r.rounds} - {''})) or '-'}"
               + (f" (and failed: {', '.join(sorted({row['failed_method'] for row in redone}))})"
@@ -178,6 +197,8 @@ def write_summary(r: Results) -> Path:
     for rid, why in (r.failed_joins or {}).items():
         lines.append(f"- join of {rid} FAILED (the robot did not start; not a fault of the "
                      f"federation): {why[:300]}")
+    for problem in r.record_problems or []:
+        lines.append(f"- RECORDS UNREADABLE: {problem}")
     for rid, problem in (r.table_problems or {}).items():
         lines.append(f"- TORN TABLE {rid}: {problem}")
     if r.faults is not None:
