@@ -231,8 +231,9 @@ def _distillation_lines(rows: list[Distilled]) -> list[str]:
     return lines
 
 
-def _learner_text(cfg: Any, algo: str) -> str:
-    """One robot's learner settings in words (``cfg``: its TrainerConfig)."""
+def _learner_text(cfg: Any, algo: str, plugins: dict[str, Any]) -> str:
+    """One robot's learner settings in words (``cfg``: its TrainerConfig; ``plugins``: the
+    config's plug-in learners)."""
     lp = cfg.learner
     eps = lp.epsilon
     kind = getattr(eps.kind, "value", eps.kind)
@@ -246,6 +247,12 @@ def _learner_text(cfg: Any, algo: str) -> str:
         own = (f"network {'x'.join(map(str, d.hidden))}, Adam lr {d.lr:g}, batch "
                f"{d.batch_size}, replay {d.buffer_size:,}, learning starts {d.learning_starts}, "
                f"target copied every {d.target_update} steps")
+    elif algo in plugins:
+        spec = plugins[algo]
+        spec = spec if isinstance(spec, dict) else {"class": spec}
+        options = ", ".join(f"{k} {v}" for k, v in spec.get("options", {}).items())
+        own = f"plug-in {spec.get('class')}" + (f" with {options}" if options else "") \
+            + f", initial Q {lp.initial_q:g}"
     else:
         own = f"alpha {lp.alpha:g}, initial Q {lp.initial_q:g}"
     return f"{own}, gamma {lp.gamma:g}, {schedule}"
@@ -268,7 +275,7 @@ def _learner_lines(r: "Results") -> list[str]:
             base = TrainerConfig().to_dict()
             base.update(trainer)
             base.update(algo=spec.algo)
-            text = _learner_text(TrainerConfig.from_dict(base), spec.algo)
+            text = _learner_text(TrainerConfig.from_dict(base), spec.algo, c.learners)
         except (ValueError, TypeError, KeyError) as exc:
             text = f"settings unreadable: {exc}"
         texts.setdefault(f"({spec.algo}): {text}", []).append(spec.id)

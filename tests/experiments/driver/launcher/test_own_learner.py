@@ -57,6 +57,10 @@ def test_an_outside_learner_federates_with_equal_parameters_after_every_share(
     saved = json.loads((tmp_path / "out" / "config.json").read_text())
     spec = saved["learners"]["rbf_sarsa"]["class"]
     assert Path(spec.rpartition(":")[0]).is_absolute(), spec
+    # the summary says what ran: the plug-in, its options, FedAvg
+    summary = (tmp_path / "out" / "summary.md").read_text()
+    assert "(rbf_sarsa): plug-in " in summary and "with alpha 0.1, lam 0.8" in summary
+    assert "averaged by FedAvg" in summary
 
 
 def test_an_outside_learner_joins_a_grid_federation_with_a_qlearning_robot(
