@@ -88,8 +88,8 @@ def _point(sim: str, robots: int, learning: bool, steps: int, warmup: int, wall:
     rate = steps * robots / wall if wall > 0 else float("inf")
     per_cpu = steps * robots / cpu if cpu > 0 else float("inf")
     return {"sim": sim, "robots": robots, "learning": learning, "steps": steps,
-            "warmup": warmup, "robot_steps": steps * robots, "wall_s": round(wall, 6),
-            "cpu_s": round(cpu, 6), "steps_per_s_per_core": round(rate, 1),
+            "warmup": warmup, "robot_steps": steps * robots, "wall_s": round(wall, 9),
+            "cpu_s": round(cpu, 9), "steps_per_s_per_core": round(rate, 1),
             "steps_per_cpu_s": round(per_cpu, 1),
             "realtime_factor_per_core": round(rate * control_dt, 1), **extra}
 
