@@ -40,7 +40,7 @@ stubborn(guid, _, main) :-
 good(guid, _, main) :- assertz(user:ran(guid)).
 sleeper(guid, _, main) :- sleep(1.0), assertz(user:ran(slept(guid))).
 
-wait_for(G) :- wait_for(G, 300).
+wait_for(G) :- wait_for(G, 1000).
 wait_for(G, N) :- ( call(G) -> true ; N > 0 -> sleep(0.02), N1 is N-1, wait_for(G, N1) ; fail ).
 
 node(Options, N) :-
