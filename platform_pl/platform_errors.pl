@@ -192,6 +192,9 @@ dfrl_message(token_on_command_line) -->
 dfrl_message(insecure_node(Address, Bits)) -->
     [ 'dfrl platform ~w is INSECURE: reachable from the network '-[Address],
       'with a token of ~d bits (128 needed) and no TLS'-[Bits] ].
+dfrl_message(address_in_use(Host:Port)) -->
+    [ 'port ~w on ~w is in use (another dfrl node or robot?); '-[Port, Host],
+      'pick another --port (0: the OS chooses one) or stop what holds it' ].
 dfrl_message(node_started(Node)) -->
     [ 'dfrl platform listening on ~w'-[Node] ].
 dfrl_message(node_stopped(Node)) -->
