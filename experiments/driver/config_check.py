@@ -4,8 +4,8 @@ key path (the rules and the shared checks are in :mod:`dfrl.experiments.config_r
 :func:`check_experiment` takes the JSON form (a dict, as read from a file) and returns the
 list of problems, each a line such as
 ``robots[1].algo: unknown algorithm 'ppo'; known: dqn, linear, qlearning, sarsa``. What is
-checked: unknown keys and values (with the nearest known name), types (``"2000"`` is not an integer, a bool is not a number), ranges,
-robot ids, ``HOST:PORT`` robot hosts, unique ids and robot hosts, known algorithms and
+checked: unknown keys and values (with the nearest known name), types (``"2000"`` is not an
+integer, a bool is not a number), ranges, robot ids, ``HOST:PORT`` robot hosts, unique ids and robot hosts, known algorithms and
 aggregation methods (and that a function learner's method applies to parameter vectors), a
 grid federation's rules (:func:`check_federation`), the ``trainer`` fields, and
 (``resources=True``) that every arena exists and parses
