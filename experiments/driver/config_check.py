@@ -6,9 +6,9 @@ list of problems, each a line such as
 ``robots[1].algo: unknown algorithm 'ppo'; known: dqn, linear, qlearning, sarsa``. What is
 checked: unknown keys and values (with the nearest known name), types (``"2000"`` is not an
 integer, a bool is not a number), ranges, robot ids, ``HOST:PORT`` robot hosts, unique ids
-and robot hosts, known algorithms and aggregation methods (and that a function learner's method applies to parameter vectors), a
-grid federation's rules (:func:`check_federation`), the ``trainer`` fields, and
-(``resources=True``) that every arena exists and parses
+and robot hosts, known algorithms and aggregation methods (and that a function learner's
+method applies to parameter vectors), a grid federation's rules (:func:`check_federation`),
+the ``trainer`` fields, and (``resources=True``) that every arena exists and parses
 (:func:`dfrl.arenas.load_arena`, whose errors name file and place).
 """
 from __future__ import annotations
