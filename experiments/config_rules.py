@@ -5,8 +5,9 @@ A config is a frozen dataclass and its JSON form (:func:`json_form`); a checker 
 form (a dict, as read from a file) and returns its problems, each a line such as
 ``robots[1].algo: unknown algorithm 'dqn'; known: qlearning, sarsa``; :class:`ConfigError`
 carries such a list. :func:`check_keys` checks an object against a table of :class:`Rule`:
-unknown keys (with a "did you mean"), renamed keys, missing keys, types (``"2000"`` is not an
-integer, a bool is not a number), ranges and known values.
+unknown keys and values (with a "did you mean": :mod:`dfrl.experiments.suggestions`), renamed
+keys, missing keys, types (``"2000"`` is not an integer, a bool is not a number), ranges and
+known values.
 
 A config is checked once: ``from_dict`` checks the JSON form, then builds the dataclass inside
 :func:`checked` so that ``__post_init__`` (the check of a config built in Python) is skipped
@@ -25,9 +26,12 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import Any
 
+from dfrl.experiments.suggestions import did_you_mean
+
 __all__ = ["ConfigError", "Rule", "TRAINER_OWNED", "check_keys", "check_robot_id",
            "check_trainer", "check_value", "checked", "is_checked", "json_form",
-           "known_algorithms", "raise_problems", "resolve_trainer", "to_json_dict", "token_rule"]
+           "known_algorithms", "raise_problems", "resolve_trainer", "to_json_dict", "token_rule",
+           "unknown_value"]
 
 _ROBOT_ID = re.compile(r"[a-z][a-z0-9_]*\Z")
 
@@ -163,8 +167,17 @@ def check_value(path: str, value: Any, rule: Rule) -> list[str]:
     if rule.choices is not None:
         known = list(rule.choices())
         if value not in known:
-            return [f"{path}: unknown {rule.what} {value!r}; known: {', '.join(known)}{hint}"]
+            return [unknown_value(path, rule.what, value, known) + hint]
     return []
+
+
+def unknown_value(path: str, what: str, value: Any, known: Sequence[str]) -> str:
+    """The problem of a ``value`` at ``path`` that is none of the ``known`` names, with the
+    nearest of them when one is near (:func:`dfrl.experiments.suggestions.did_you_mean`):
+    ``robots[0].algo: unknown algorithm 'qlearing' (did you mean 'qlearning'?); known: ...``."""
+    near = did_you_mean(value, known)
+    return (f"{path}: unknown {what} {value!r}{f' ({near})' if near else ''}; "
+            f"known: {', '.join(known)}")
 
 
 def check_keys(path: str, data: Any, rules: Mapping[str, Rule], required: Sequence[str] = (),
@@ -181,24 +194,14 @@ def check_keys(path: str, data: Any, rules: Mapping[str, Rule], required: Sequen
         if key in renamed:
             out.append(f"{dot}{key}: {renamed[key]}")
         elif key not in rules and key not in extra:
-            near = [k for k in rules if _close(str(key), k)]
-            also = f"; did you mean {near[0]!r}?" if near else ""
+            near = did_you_mean(key, rules)
+            also = f"; {near}" if near else ""
             out.append(f"{dot}{key}: unknown key{also} (known: {', '.join(sorted(rules))})")
     out += [f"{dot}{key}: missing (required)" for key in required if key not in data]
     for key, rule in rules.items():
         if key in data:
             out += check_value(f"{dot}{key}", data[key], rule)
     return out
-
-
-def _close(a: str, b: str) -> bool:
-    """``a`` looks like a misspelling of ``b`` (prefix of one another, or one edit apart)."""
-    a, b = a.lower(), b.lower()
-    if a == b or (len(a) > 2 and (a.startswith(b) or b.startswith(a))):
-        return True
-    if abs(len(a) - len(b)) > 1:
-        return False
-    return sum(x != y for x, y in zip(a, b)) + abs(len(a) - len(b)) <= 1
 
 
 # -- rules both configs share ------------------------------------------------------------------
@@ -258,7 +261,7 @@ def check_trainer(path: str, trainer: Any) -> list[str]:
     from dfrl.robots.training import TrainerConfig
 
     defaults = TrainerConfig().to_dict(full=True)
-    problems = _check_like(path, trainer, defaults)
+    problems = _check_like(path, trainer, defaults, trainer_choices())
     owned = TRAINER_OWNED & set(trainer)
     problems += [f"{path}.{k}: set by the experiment (robots[..].{k} or {k}), not in trainer"
                  for k in sorted(owned)]
@@ -270,19 +273,48 @@ def check_trainer(path: str, trainer: Any) -> list[str]:
     return problems
 
 
-def _check_like(path: str, data: dict[str, Any], model: dict[str, Any]) -> list[str]:
-    """Keys and value kinds of ``data`` against the defaults ``model`` (nested)."""
+def trainer_choices() -> dict[str, list[str]]:
+    """The known values of every enumerated ``trainer`` field, by its dotted key
+    (``collision_response``, ``learner.epsilon.kind``, ``reward_shuffle_mode``, ...): the
+    fields whose default is an :class:`~enum.Enum`, read from
+    :class:`dfrl.robots.training.TrainerConfig` itself."""
+    from dfrl.robots.reward_shuffle import ShuffleMode
+    from dfrl.robots.training import TrainerConfig
+
+    out = {"reward_shuffle_mode": [m.value for m in ShuffleMode]}
+
+    def walk(obj: Any, prefix: str) -> None:
+        for f in dataclasses.fields(obj):
+            value = getattr(obj, f.name)
+            if isinstance(value, Enum):
+                out[prefix + f.name] = [str(m.value) for m in type(value)]
+            elif dataclasses.is_dataclass(value):
+                walk(value, f"{prefix}{f.name}.")
+
+    walk(TrainerConfig(), "")
+    return out
+
+
+def _check_like(path: str, data: dict[str, Any], model: dict[str, Any],
+                choices: Mapping[str, Sequence[str]], rel: str = "") -> list[str]:
+    """Keys and value kinds of ``data`` against the defaults ``model`` (nested), and the
+    values of enumerated fields against ``choices`` (by key relative to the top, ``rel``)."""
     out = []
     for key, value in data.items():
         here = f"{path}.{key}"
         if key not in model:
-            out.append(f"{here}: unknown key (known: {', '.join(sorted(model))})")
+            near = did_you_mean(key, model)
+            out.append(f"{here}: unknown key{'; ' + near if near else ''} "
+                       f"(known: {', '.join(sorted(model))})")
             continue
         ref = model[key]
         if isinstance(ref, dict):
-            out += (_check_like(here, value, ref) if isinstance(value, dict)
+            out += (_check_like(here, value, ref, choices, f"{rel}{key}.")
+                    if isinstance(value, dict)
                     else [f"{here}: expected an object, got {value!r}"])
         elif ref is not None:
             kind = float if isinstance(ref, float) else type(ref)
-            out += check_value(here, value, Rule(kind))
+            known = choices.get(f"{rel}{key}")
+            out += check_value(here, value, Rule(kind, choices=None if known is None else
+                                                 (lambda k=known: k)))
     return out

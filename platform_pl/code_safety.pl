@@ -541,7 +541,7 @@ program_clause(Clause, Where-H-B) :-
     ;   mobile_hook(M:F/A)
     ->  Where = M
     ;   moved_hook(M:F/A, To)
-    ->  refuse(clause_head(M:H), To)
+    ->  refuse_moved(M:F/A, To)
     ;   qualified_hook(M, F/A, Q, Why)
     ->  refuse(hook(Q:F/A), Why)
     ;   refuse(clause_head(M:H), 'a clause for another module')
@@ -612,19 +612,23 @@ check_declared(D, PI0) :-
     ;   mobile_hook(M:F/A)
     ->  true
     ;   moved_hook(M:F/A, To)
-    ->  refuse(directive(D), To)
+    ->  refuse_moved(M:F/A, To)
     ;   qualified_hook(M, F/A, Q, Why)
     ->  refuse(hook(Q:F/A), Why)
     ;   refuse(directive(D), 'declares a predicate of another module')
     ).
 
-%   The aggregation hooks were dfrl_agent's before they moved to the module
-%   named for them: a method written for the old module is told where.
-moved_hook(dfrl_agent:F/A,
-           'the aggregation hooks are in dfrl_aggregation now: write \c
-            dfrl_aggregation:aggregate_init/3, aggregate_step/4, \c
-            aggregate_final/3, method_uses_visits/1') :-
+%   moved_hook(+Old, -New): the aggregation hooks were dfrl_agent's before
+%   they moved to the module named for them. A method written for the old
+%   module, whether it defines a hook, declares one or calls one, is
+%   refused with the culprit moved_hook(Old, New), which names the new
+%   predicate: the culprit (unlike the context) reaches the node that sent
+%   the program (dfrl inject), so its message points there too.
+moved_hook(dfrl_agent:F/A, dfrl_aggregation:F/A) :-
     mobile_hook(dfrl_aggregation:F/A).
+
+refuse_moved(Old, New) :-
+    refuse(moved_hook(Old, New), _).             % the culprit says it all
 
 declared(D, F/A) :-
     declaration(D, Specs),
@@ -908,7 +912,10 @@ sandbox:safe_meta(M:G, Calls) :-
         call(Condition)
     ->  Calls = []
     ;   functor(G, F, A),
-        refuse(M:F/A, 'not part of the agent API')
+        (   moved_hook(M:F/A, To)
+        ->  refuse_moved(M:F/A, To)
+        ;   refuse(M:F/A, 'not part of the agent API')
+        )
     ).
 
 %   The platform's own modules: platform_pl/ and pybridge/. Nothing in

@@ -96,7 +96,7 @@ main(Argv) :-
     ;   NodeOptions = [tokens(Tokens), default(true)|Extra2]
     ),
     catch(node_start(Host:Port, Node, NodeOptions), E,
-          ( print_message(error, E), halt(1) )),
+          ( start_failed(Host:Port, E), halt(1) )),
     (   node:loopback_host(Host), \+ memberchk(tls(_), Options)
     ->  warn_weak_tokens(Tokens)
     ;   true
@@ -117,6 +117,14 @@ warn_weak_tokens(Tokens) :-
            format(user_error,
                   "Warning: a token of ~d bits serves on loopback only \c
                    (128 needed elsewhere; `dfrl secret` prints one)~n", [Bits])).
+
+%   start_failed(+Address, +Error): say why the node did not start; a port
+%   another process holds is named, with what to do about it.
+start_failed(Address, error(socket_error(eaddrinuse, _), _)) :-
+    !,
+    print_message(error, dfrl(address_in_use(Address))).
+start_failed(_, E) :-
+    print_message(error, E).
 
 usage(Why) :-
     format(user_error, "~w~n", [Why]),

@@ -23,7 +23,9 @@ and two permission errors with messages of their own:
     Code from a peer was refused by the sandbox (code_safety.pl).
     Culprit is the offending goal, undefined(PI, Goal),
     unknown_call(Goal), clause_head(Head), directive(D), handler(H),
-    data or M:Name/Arity (a platform predicate outside the agent API).
+    data, M:Name/Arity (a platform predicate outside the agent API) or
+    moved_hook(Old, New) (a hook of dfrl_agent that is in dfrl_aggregation
+    now).
   - permission_error(post, event, Handler/Arity)
     A post named no event the agent declares.
 
@@ -192,6 +194,9 @@ dfrl_message(token_on_command_line) -->
 dfrl_message(insecure_node(Address, Bits)) -->
     [ 'dfrl platform ~w is INSECURE: reachable from the network '-[Address],
       'with a token of ~d bits (128 needed) and no TLS'-[Bits] ].
+dfrl_message(address_in_use(Host:Port)) -->
+    [ 'port ~w on ~w is in use (another dfrl node or robot?); '-[Port, Host],
+      'pick another --port (0: the OS chooses one) or stop what holds it' ].
 dfrl_message(node_started(Node)) -->
     [ 'dfrl platform listening on ~w'-[Node] ].
 dfrl_message(node_stopped(Node)) -->
@@ -218,6 +223,11 @@ prolog:error_message(permission_error(post, event, Handler/Arity)) -->
     [ 'No such event: ~q is not an event the agent declares '-[Handler/Arity],
       '(its events(List), or its own handler clauses)' ].
 
+code_culprit(moved_hook(Old, New)) -->
+    { ground(Old-New) },
+    !, [ 'it uses ~q, which is ~q now: the aggregation hooks moved to '-[Old, New],
+         'dfrl_aggregation (aggregate_init/3, aggregate_step/4, aggregate_final/3, ',
+         'method_uses_visits/1, method_applies/2)' ].
 code_culprit(undefined(PI, G)) -->
     !, [ '~q calls ~q, which this node does not define'-[G, PI] ].
 code_culprit(unknown_call(G)) -->

@@ -58,8 +58,11 @@ def add_output_arguments(p: argparse.ArgumentParser, name: str) -> None:
     p.add_argument("--view-port", type=int, default=0,
                    help="port of the view (default: 0, the OS chooses)")
     p.add_argument("--view-host", default="127.0.0.1",
-                   help="address the view binds; another than loopback exposes it "
-                        "(default: 127.0.0.1)")
+                   help="address the view binds; another than loopback exposes it and "
+                        "needs --view-insecure (default: 127.0.0.1)")
+    p.add_argument("--view-insecure", action="store_true",
+                   help="let --view-host be an address other than loopback although the "
+                        "page has no authentication (a warning is printed)")
     from dfrl.experiments.cli.figures import add_figure_arguments
 
     add_figure_arguments(p)
@@ -156,6 +159,15 @@ def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
     from dfrl.experiments.tls_folder import CertError, check_node_dir
 
     tls = getattr(args, "tls", None)
+    view_warning = None
+    if getattr(args, "view", False):
+        from dfrl.experiments.cli.view import view_exposure
+
+        refusal, view_warning = view_exposure(args.view_host, args.view_insecure,
+                                              "--view-host", "--view-insecure")
+        if refusal:
+            print(f"{prog}: {refusal}; nothing was started", file=sys.stderr)
+            return 2
     try:
         cluster_access_of(args)         # a plaintext cluster off loopback: refused first
     except ExperimentError as exc:
@@ -184,7 +196,18 @@ def run_and_report(cfg: ExperimentConfig, args: argparse.Namespace, prog: str,
     if getattr(args, "view", False):
         from dfrl.experiments.tools.view import start_view
 
-        view = start_view(out, args.view_host, args.view_port, fresh=True)
+        from dfrl.experiments.cli.ports import is_address_in_use, port_in_use_text
+
+        try:
+            view = start_view(out, args.view_host, args.view_port, fresh=True)
+        except OSError as exc:
+            why = (port_in_use_text(args.view_host, args.view_port, "another dfrl view",
+                                    "--view-port") if is_address_in_use(exc) else
+                   f"the view cannot serve on {args.view_host}:{args.view_port}: {exc}")
+            print(f"{prog}: {why}; nothing was started", file=sys.stderr)
+            return 2
+        if view_warning:
+            print(f"{prog}: {view_warning}", file=sys.stderr, flush=True)
         print(f"{prog}: live view at {view.url}", file=sys.stderr, flush=True)
     try:
         results = run_experiment_for(args, cfg, claimed, tls)

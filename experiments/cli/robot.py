@@ -8,6 +8,7 @@ from pathlib import Path
 from dfrl.experiments.cli.node import (add_bound_arguments, add_token_arguments,
                                        add_trust_argument, bounds_of_args, check_trust_names,
                                        tokens_of_args)
+from dfrl.experiments.cli.ports import port_in_use_text
 from dfrl.experiments.robot_host.process import NodeStartError
 from dfrl.experiments.robot_host.service import RobotService
 from dfrl.experiments.tls_folder import CertError, check_node_dir
@@ -48,6 +49,12 @@ def _run(args: argparse.Namespace) -> int:
     try:
         service.start()
     except NodeStartError as exc:
+        if exc.address_in_use:
+            print("dfrl robot: " + port_in_use_text(args.host, args.port,
+                                                    "another dfrl robot or node", "--port"),
+                  file=sys.stderr)
+            service.close()
+            return 1
         hint = ""
         if exc.weak_token and args.host not in ("127.0.0.1", "localhost", "::1"):
             hint = (f"; --host {args.host} serves every interface, "

@@ -366,5 +366,9 @@ def resolve_config(name: str) -> Path:
     for cand in (CONFIGS_DIR / name, CONFIGS_DIR / f"{name}.json"):
         if cand.is_file():
             return cand
-    raise FileNotFoundError(f"no config {name!r} (neither a file nor one of "
-                            f"{sorted(q.stem for q in CONFIGS_DIR.glob('*.json'))})")
+    from dfrl.experiments.suggestions import did_you_mean
+
+    known = sorted(q.stem for q in CONFIGS_DIR.glob("*.json"))
+    near = did_you_mean(name.removesuffix(".json"), known)
+    raise FileNotFoundError(f"no config {name!r} (neither a file nor one of {known})"
+                            + (f"; {near}" if near else ""))

@@ -4,11 +4,11 @@ key path (the rules and the shared checks are in :mod:`dfrl.experiments.config_r
 :func:`check_experiment` takes the JSON form (a dict, as read from a file) and returns the
 list of problems, each a line such as
 ``robots[1].algo: unknown algorithm 'ppo'; known: dqn, linear, qlearning, sarsa``. What is
-checked: unknown keys, types (``"2000"`` is not an integer, a bool is not a number), ranges,
-robot ids, ``HOST:PORT`` robot hosts, unique ids and robot hosts, known algorithms and
-aggregation methods (and that a function learner's method applies to parameter vectors), a
-grid federation's rules (:func:`check_federation`), the ``trainer`` fields, and
-(``resources=True``) that every arena exists and parses
+checked: unknown keys and values (with the nearest known name), types (``"2000"`` is not an
+integer, a bool is not a number), ranges, robot ids, ``HOST:PORT`` robot hosts, unique ids
+and robot hosts, known algorithms and aggregation methods (and that a function learner's
+method applies to parameter vectors), a grid federation's rules (:func:`check_federation`),
+the ``trainer`` fields, and (``resources=True``) that every arena exists and parses
 (:func:`dfrl.arenas.load_arena`, whose errors name file and place).
 """
 from __future__ import annotations
@@ -16,7 +16,9 @@ from __future__ import annotations
 from typing import Any
 
 from dfrl.experiments.config_rules import (Rule, check_keys, check_robot_id, check_trainer,
-                                           check_value, known_algorithms, token_rule)
+                                           check_value, known_algorithms, token_rule,
+                                           unknown_value)
+from dfrl.experiments.suggestions import did_you_mean
 from dfrl.experiments.robot_host.config import DEFAULT_ITERATIONS, modes
 
 __all__ = ["BUILTIN_METHODS", "COMMENT_KEYS", "FEDERATIONS", "GRID", "ITINERARIES", "PARAMS_REFUSED",
@@ -94,13 +96,14 @@ def check_arena(path: str, arena: Any, cache: dict[str, str | None]) -> list[str
     if not isinstance(arena, str):
         return []
     if arena not in cache:
-        from dfrl.arenas.spec import ArenaError, load_arena
+        from dfrl.arenas.spec import ArenaError, builtin_arena_names, load_arena
 
         try:
             load_arena(arena)
             cache[arena] = None
         except (ArenaError, OSError, ValueError) as exc:
-            cache[arena] = " ".join(str(exc).split())
+            near = did_you_mean(arena, builtin_arena_names()) if "/" not in arena else ""
+            cache[arena] = " ".join(str(exc).split()) + (f" ({near})" if near else "")
     return [f"{path}: {cache[arena]}"] if cache[arena] else []
 
 
@@ -140,8 +143,7 @@ def check_experiment(data: Any, resources: bool = True) -> list[str]:
         algos = known_algorithms()
         for algo, method in methods.items():
             if algo not in algos:
-                out.append(f"methods.{algo}: unknown algorithm {algo!r}; known: "
-                           f"{', '.join(algos)}")
+                out.append(unknown_value(f"methods.{algo}", "algorithm", algo, algos))
             out += check_value(f"methods.{algo}", method, _METHOD)
     if "trainer" in data:
         out += check_trainer("trainer", data["trainer"])

@@ -31,6 +31,13 @@ class NodeStartError(ExperimentError):
         self.term = term
 
     @property
+    def address_in_use(self) -> bool:
+        """The node's port is held by another socket (``socket_error(eaddrinuse, _)``)."""
+        formal = getattr(self.term, "args", (None,))[0]
+        return (getattr(formal, "name", None) == "socket_error"
+                and str(getattr(formal, "args", ("",))[0]) == "eaddrinuse")
+
+    @property
     def weak_token(self) -> bool:
         context = getattr(self.term, "args", (None, None))[-1]
         reason = getattr(context, "args", (None, None))[-1]

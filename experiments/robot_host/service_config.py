@@ -9,6 +9,7 @@ from pathlib import Path
 
 from dfrl.arenas import ArenaError, builtin_arena_names, parse_arena
 from dfrl.experiments.robot_host.config import RobotConfig
+from dfrl.experiments.suggestions import did_you_mean
 from dfrl.experiments.tokens import Token
 from dfrl.pybridge.serving import RequestError
 from dfrl.pybridge.terms import Term
@@ -97,11 +98,12 @@ def service_arena(name: object, workdir: Path) -> str:
             return name.lower()
         if name in own:
             return str(own[name])
-    offered = ", ".join([*builtin, *sorted(own)])
-    raise config_error(f"unknown arena {str(name)[:64]!r}: this robot host offers the arenas "
-                       f"{offered} (its built-in arenas and the files of its "
-                       f"{ARENA_FOLDER}/ folder); a driver sends any other arena as its "
-                       "JSON object")
+    offered = [*builtin, *sorted(own)]
+    near = did_you_mean(name, offered) if isinstance(name, str) and len(name) <= 64 else ""
+    raise config_error(f"unknown arena {str(name)[:64]!r}{f' ({near})' if near else ''}: this "
+                       f"robot host offers the arenas {', '.join(offered)} (its built-in "
+                       f"arenas and the files of its {ARENA_FOLDER}/ folder); a driver sends "
+                       "any other arena as its JSON object")
 
 
 def _own_arenas(workdir: Path) -> dict[str, Path]:

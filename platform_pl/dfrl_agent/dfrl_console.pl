@@ -43,8 +43,9 @@ node`): the node then speaks mutual TLS on every connection, in and out
 
 and then serves requests, one at a time in the order they arrive. Every
 request carries an `id` and gets one reply, `{"id":N,"ok":true,...}` or
-`{"id":N,"ok":false,"error":"<printable text>"}`; an error inside a
-request never stops the node. Requests:
+`{"id":N,"ok":false,"error":"<printable text>"}` (and, for an
+error(Formal, _) term, `"formal":{"name":N,"args":[...]}`, its formal as
+data); an error inside a request never stops the node. Requests:
 
   - `{"id":1,"op":"launch","plan":Plan}`: create the dFRL agent of the
     launch plan (dfrl_launch_plan/4) on this node and move it to its
@@ -611,7 +612,22 @@ reply(Id, ok(Result)) :-
     emit(Reply).
 reply(Id, error(E)) :-
     error_text(E, Text),
-    emit(_{id:Id, ok:false, error:Text}).
+    (   formal_data(E, Formal)
+    ->  emit(_{id:Id, ok:false, error:Text, formal:Formal})
+    ;   emit(_{id:Id, ok:false, error:Text})
+    ).
+
+%   formal_data(+Error, -Dict): the formal term of error(Formal, _) as
+%   data for the driver, {"name": N, "args": [A, ...]} (atomic arguments
+%   as text, compound ones written with ~q), so it can tell e.g. a
+%   refused token (permission_error, platform) without reading the text.
+formal_data(error(Formal, _), _{name:Name, args:Args}) :-
+    compound(Formal),
+    compound_name_arguments(Formal, Name, Args0),
+    maplist(arg_text, Args0, Args).
+
+arg_text(A, T) :-
+    (   atomic(A) -> atom_string(A, T) ; format(string(T), '~q', [A]) ).
 
 error_text(failed(_), "the request failed") :- !.
 error_text(E, Text) :-

@@ -33,6 +33,27 @@ Address = tuple[str, int]
 _STDERR_LINES = 200
 
 
+class ConsoleRequestError(ExperimentError):
+    """The console node answered a request with an error: ``str()`` is its text;
+    :attr:`formal_name` and :attr:`formal_args` the formal of the Prolog error term as the
+    node sent it (``permission_error``, ``["access", "platform", "'10.0.0.7':7001"]``), empty
+    when it sent none."""
+
+    def __init__(self, text: str, formal: Any = None) -> None:
+        super().__init__(text)
+        formal = formal if isinstance(formal, dict) else {}
+        self.formal_name = str(formal.get("name", ""))
+        args = formal.get("args")
+        self.formal_args = [str(a) for a in args] if isinstance(args, list) else []
+
+    @property
+    def token_refused(self) -> bool:
+        """A platform accepted none of the tokens the console node proved
+        (``permission_error(_, platform, Address)``, platform_pl/transport.pl)."""
+        return (self.formal_name == "permission_error" and len(self.formal_args) == 3
+                and self.formal_args[1] == "platform")
+
+
 class ConsoleChannel:
     """A ``swipl`` console process driven in JSON lines.
 
@@ -175,7 +196,8 @@ class ConsoleChannel:
             raise ExperimentError(f"the console node exited during {op} "
                                   f"({self._exit_text()})")
         if not reply.get("ok"):
-            raise ExperimentError(f"{op} failed: {reply.get('error', reply)}")
+            raise ConsoleRequestError(f"{op} failed: {reply.get('error', reply)}",
+                                      reply.get("formal"))
         return {k: v for k, v in reply.items() if k not in ("id", "ok")}
 
     def _send(self, line: str, op: str) -> None:

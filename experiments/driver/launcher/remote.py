@@ -2,12 +2,14 @@
 from __future__ import annotations
 
 import time
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
 from dfrl.experiments.config_rules import raise_problems
 from dfrl.experiments.driver.config import RobotSpec
 from dfrl.experiments.errors import ExperimentError
+from dfrl.experiments.driver.console.channel import ConsoleRequestError
 from dfrl.experiments.driver.launcher.agents import open_console, send_control
 from dfrl.experiments.driver.launcher.joins import check_join
 from dfrl.experiments.driver.launcher.remote_hosts import route_source
@@ -29,6 +31,46 @@ def nodes_of(results_dir: str | Path) -> dict[str, Any]:
     if not path.is_file():
         raise ExperimentError(f"{path} not found: is an experiment running there?")
     return read_json(path)
+
+
+def finished_at(results_dir: str | Path) -> str | None:
+    """When the run of ``results_dir`` ended, as ``2026-12-04 13:47:36 UTC``, or None while it
+    has not: a run that ended (done, interrupted, or collected by ``dfrl collect`` after its
+    driver stopped) has a ``summary.md``, which nothing writes before its end; the time is
+    that file's."""
+    summary = Path(results_dir) / "summary.md"
+    try:
+        mtime = summary.stat().st_mtime
+    except OSError:
+        return None
+    return datetime.fromtimestamp(mtime, tz=timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+
+
+def require_running(results_dir: str | Path, what: str) -> None:
+    """Refuse to act on a run that ended: ``what`` (``"inject into"``) says what was asked.
+
+    Raises
+    ------
+    ExperimentError
+        ``run NAME (DIR) finished at TIME; nothing to inject into ...``.
+    """
+    when = finished_at(results_dir)
+    if when is None:
+        return
+    try:
+        name = read_json(Path(results_dir) / "config.json").get("name")
+    except (OSError, ValueError, AttributeError):
+        name = None
+    raise ExperimentError(f"run {name or Path(results_dir).name} ({results_dir}) finished at "
+                          f"{when} (its summary.md); nothing to {what} (dfrl inject and dfrl "
+                          f"join act on a run that is still going)")
+
+
+def unreachable(exc: BaseException) -> bool:
+    """``exc`` is the console node failing to connect to a node (nobody listens there):
+    ``transport_error(Address, connect(Detail))``."""
+    return (isinstance(exc, ConsoleRequestError) and exc.formal_name == "transport_error"
+            and len(exc.formal_args) == 2 and exc.formal_args[1].startswith("connect("))
 
 
 def tokens_of(results_dir: str | Path) -> list[Token]:
@@ -97,12 +139,14 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
     Raises
     ------
     ExperimentError
-        No such program or agent, no usable TLS folder (:func:`driver_tls`) or token file
+        The run finished (:func:`require_running`), no such program or agent, no usable
+        TLS folder (:func:`driver_tls`) or token file
         (:func:`tokens_of`), a node refused the program (the message says why), a control
         command failed, or an agent ignored the command (the message says why, e.g. the
         method is unknown on its node).
     """
     info = nodes_of(results_dir)
+    require_running(results_dir, "inject into")
     tls_dir = driver_tls(results_dir, info, tls)
     prog = Path(program).resolve()
     if not prog.is_file():
@@ -123,6 +167,11 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
                 console.load_program(prog, nodes)
             except ExperimentError as exc:
                 why = str(exc).removeprefix("load_program failed: ")
+                if unreachable(exc):
+                    raise ExperimentError(
+                        f"nothing injected: {why}; the run's nodes do not answer, yet it has "
+                        f"no summary.md: its driver may have stopped (dfrl collect "
+                        f"{results_dir} writes its end-of-run files)") from None
                 raise ExperimentError(f"program {prog.name} refused, nothing injected (the "
                                       f"agents keep their method): {why}") from None
         if info.get("console"):      # the driver gives the program to robots that join later
@@ -173,11 +222,12 @@ def join_robot(results_dir: str | Path, robot: str, arena: str, algo: str = "qle
         algorithm or one no agent of the experiment learns with, a robot id taken or
         malformed, a malformed robot host; every problem at once.
     ExperimentError
-        No usable TLS folder (:func:`driver_tls`) or token file
-        (:func:`tokens_of`), the launcher
+        The run finished (:func:`require_running`), no usable TLS folder (:func:`driver_tls`)
+        or token file (:func:`tokens_of`), the launcher
         refused, or no answer came in ``timeout_s``.
     """
     info = nodes_of(results_dir)
+    require_running(results_dir, "join")
     entry: dict[str, Any] = {"id": robot, "arena": arena, "algo": algo}
     if seed is not None:
         entry["seed"] = seed

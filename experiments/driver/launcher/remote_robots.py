@@ -27,6 +27,7 @@ from typing import Any
 
 from dfrl.experiments.driver.config import RobotSpec
 from dfrl.experiments.robot_host.config import RobotConfig
+from dfrl.experiments.driver.console.channel import ConsoleRequestError
 from dfrl.experiments.driver.console.node import ConsoleNode
 from dfrl.experiments.driver.launcher.remote_hosts import (arena_payload, safe_relative,
                                                            short_of_clones)
@@ -158,7 +159,17 @@ class RemoteRobot:
             Unreachable, busy with another experiment, or the configuration was refused.
         """
         where = f"{self._service[0]}:{self._service[1]}"
-        status = self._ask("status")
+        try:
+            status = self._ask("status")
+        except ConsoleRequestError as exc:
+            if not exc.token_refused:
+                raise ExperimentError(f"robot {self._spec.id} (robot host {where}): "
+                                      f"{exc}") from exc
+            raise ExperimentError(
+                f"robot {self._spec.id}: its robot host {where} accepts none of this run's "
+                f"tokens; run with the token that dfrl robot was started with there "
+                f"(--token-file FILE, DFRL_TOKEN or the config's token), or restart that "
+                f"dfrl robot with this run's token (its --token-file or DFRL_TOKEN)") from exc
         if status.get("state") in ACTIVE:
             raise ExperimentError(f"robot host {where} is busy with experiment "
                                   f"{status.get('experiment')!r} (state {status.get('state')})")

@@ -98,8 +98,8 @@ def test_the_options_are_checked_and_old_configurations_still_load():
     assert check_trainer("trainer", {"reward_shuffle": 1000}) == []
     assert check_trainer("trainer", {"reward_shuffle": 1000, "reward_shuffle_mode": "raw"}) == []
     assert "unknown key" in check_trainer("trainer", {"reward_shufle": 1000})[0]
-    assert "reward_shuffle_mode must be" in check_trainer(
-        "trainer", {"reward_shuffle": 1000, "reward_shuffle_mode": "centered"})[0]
+    assert "trainer.reward_shuffle_mode: unknown value 'centered' (did you mean 'centred'?)" \
+        in check_trainer("trainer", {"reward_shuffle": 1000, "reward_shuffle_mode": "centered"})[0]
 
 
 def _run(algo: str, shuffle: int, steps: int, seed: int = 3, mode: str = "centred_no_bootstrap"):
