@@ -160,7 +160,8 @@ class Launcher:
             self._interrupted = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
             if self._stage is not None:
                 why = " ".join(str(exc).split())
-                refused = "permission" in why.lower() and "token" in why.lower()
+                said = "accepts none of this run's tokens" in why     # the console's words
+                refused = not said and "permission" in why.lower() and "token" in why.lower()
                 self._start_error = f"{self._stage} failed" + (
                     ": the robot host refused the run's token" if refused else "") + f": {why}"
             self._robots.kill_all()

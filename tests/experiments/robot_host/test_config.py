@@ -16,7 +16,7 @@ def test_every_problem_with_its_key() -> None:
                                "rtf": float("inf"), "bench_table": [4, 0]})
     assert info.value.problems == [
         "colur: unknown key (known: algo, arena, bench_params, bench_table, clone_limit, "
-        "eval_every, eval_steps, events, grace_s, host, iterations, mode, out_dir, "
+        "eval_every, eval_steps, events, grace_s, host, iterations, learners, mode, out_dir, "
         "progress_every, respite, robot, rtf, seed, sync_timeout_s, tls, token, trainer)",
         "out_dir: expected a string, got 3 (an integer)",
         "mode: unknown mode 'fast'; known: async, sync",

@@ -71,8 +71,9 @@ def test_a_run_refused_by_a_robot_host_never_started(tmp_path: Path) -> None:
     head = _head(out, 3)
     assert head[0] == "**Status: NEVER STARTED**", head
     assert head[2].startswith(f"- no agent was launched and no round ran: starting robot r2 on "
-                              f"its robot host 127.0.0.1:{port} failed: the robot host "
-                              f"refused the run's token"), head
+                              f"its robot host 127.0.0.1:{port} failed: robot r2: its robot "
+                              f"host 127.0.0.1:{port} accepts none of this run's tokens"), head
+    assert "--token-file" in head[2], head
     summary = (out / "summary.md").read_text(encoding="utf-8")
     assert "federation complete" not in summary and "## Faults: federation INCOMPLETE" in summary
     assert "- MISSING rounds of fed_qlearning (2): 1, 2" in summary
