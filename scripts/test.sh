@@ -13,7 +13,9 @@ python -c 'import distributed, tensorboardX, xdist' 2>/dev/null \
 # the live view's browser test: Chromium and its driver from Debian's packages (if missing)
 bash scripts/browser-setup.sh >/dev/null \
     || echo "[test] could not install chromium; the browser test will say why it skips" >&2
-# Two workers (DFRL_TEST_WORKERS; 0 runs the suite in this process), each taking whole test
-# files (--dist loadfile: a file's module fixtures and its order stay together). The 25
-# slowest tests are listed at the end, so the suite's time can be kept in view.
+# Two workers (DFRL_TEST_WORKERS; 0 runs the suite in this process; README.md, Tests, says
+# what more workers measured).
+# Each worker takes whole test files (--dist loadfile: a file's module fixtures and its order
+# stay together). The 25 slowest tests are listed at the end, so the suite's time stays in view,
+# and the tests the marker expression left out (the slow ones) are named.
 exec python -m pytest -q -n "${DFRL_TEST_WORKERS:-2}" --dist loadfile --durations=25 "$@"
