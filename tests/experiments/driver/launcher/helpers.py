@@ -2,6 +2,9 @@
 from __future__ import annotations
 
 import csv
+import socket
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -10,6 +13,7 @@ from typing import Any
 from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec
 from dfrl.experiments.driver.launcher import Launcher, run
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
+from dfrl.experiments.tokens import env_with_tokens
 
 
 def rounds_csv(out: Path) -> list[dict[str, str]]:
@@ -97,3 +101,29 @@ def stop_agents(out: Path, tls: Path | None = None) -> None:
             first = a["itinerary"][0]
             send_control(console, (first["host"], int(first["port"])), a["name"],
                          {"stop": True})
+
+
+def robot_service(workdir: Path, *flags: str,
+                  token: int = 1111) -> tuple[subprocess.Popen, int]:
+    """A ``dfrl robot`` service on a free loopback port with ``token`` and ``flags``, up
+    (its "listening on" line read); the caller terminates it."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    workdir.mkdir()
+    svc = subprocess.Popen(
+        [sys.executable, "-m", "dfrl.experiments", "robot", "--host", "127.0.0.1",
+         "--port", str(port), "--workdir", str(workdir), *flags],
+        stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env=env_with_tokens([token]))
+    assert svc.stdout is not None and svc.stderr is not None
+    line = svc.stdout.readline()
+    assert "listening on" in line, line + svc.stderr.read()
+    return svc, port
+
+
+def dfrl_inject(out: Path, program: Path, method: str) -> subprocess.CompletedProcess[str]:
+    """``dfrl inject OUT --program PROGRAM --method METHOD`` (waiting up to 60 s)."""
+    return subprocess.run([sys.executable, "-m", "dfrl", "inject", str(out), "--program",
+                           str(program), "--method", method, "--wait", "60"],
+                          capture_output=True, text=True, timeout=120)

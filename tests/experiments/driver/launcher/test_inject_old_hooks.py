@@ -6,8 +6,6 @@ dfrl_agent:aggregate_step/4, which is not part of the agent API". A real run, re
 applied."""
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -15,7 +13,7 @@ import pytest
 from dfrl.experiments.driver.launcher import Results
 from dfrl.experiments.processes import find_swipl
 
-from .helpers import run_in_thread, small_config, stop_agents, wait_rounds
+from .helpers import dfrl_inject, run_in_thread, small_config, stop_agents, wait_rounds
 
 pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
@@ -32,11 +30,6 @@ OLD_CALL = ("dfrl_aggregation:aggregate_init(oldcall, T, A) :- "
 NEW_CALL = OLD_CALL.replace("dfrl_agent:", "dfrl_aggregation:").replace("oldcall", "newcall")
 
 
-def _inject(out: Path, program: Path, method: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "dfrl", "inject", str(out), "--program",
-                           str(program), "--method", method, "--wait", "60"],
-                          capture_output=True, text=True, timeout=120)
-
 
 def test_an_old_hook_is_pointed_to_its_new_module(tmp_path: Path) -> None:
     out = tmp_path / "run"
@@ -49,15 +42,15 @@ def test_an_old_hook_is_pointed_to_its_new_module(tmp_path: Path) -> None:
     t, box = run_in_thread(cfg, out)
     try:
         wait_rounds(out, "fed_qlearning", 1)
-        head = _inject(out, programs["old_head"], "oldhead")
+        head = dfrl_inject(out, programs["old_head"], "oldhead")
         assert head.returncode == 1, head.stderr
         assert ("it uses dfrl_agent:aggregate_init/3, which is "
                 "dfrl_aggregation:aggregate_init/3 now") in head.stderr, head.stderr
-        call = _inject(out, programs["old_call"], "oldcall")
+        call = dfrl_inject(out, programs["old_call"], "oldcall")
         assert call.returncode == 1, call.stderr
         assert ("it uses dfrl_agent:aggregate_step/4, which is "
                 "dfrl_aggregation:aggregate_step/4 now") in call.stderr, call.stderr
-        new = _inject(out, programs["new_call"], "newcall")
+        new = dfrl_inject(out, programs["new_call"], "newcall")
         assert new.returncode == 0, new.stderr
         assert "method newcall applied by fed_qlearning" in new.stdout
     finally:

@@ -5,8 +5,6 @@ later join is not refused because of it. Real run, real ``dfrl inject`` processe
 """
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -15,17 +13,12 @@ from dfrl.experiments.driver.launcher import Results, inject_method, join_robot
 from dfrl.experiments.processes import find_swipl
 from dfrl.platform_pl import DFRL_AGENT_DIR
 
-from .helpers import run_in_thread, small_config, stop_agents, wait_rounds
+from .helpers import dfrl_inject, run_in_thread, small_config, stop_agents, wait_rounds
 
 pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
 MEDIAN = DFRL_AGENT_DIR / "examples" / "median_method.pl"
 
-
-def _inject(out: Path, program: Path, method: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "dfrl", "inject", str(out), "--program",
-                           str(program), "--method", method, "--wait", "60"],
-                          capture_output=True, text=True, timeout=120)
 
 
 def test_refused_programs_are_not_injected(tmp_path: Path) -> None:
@@ -40,11 +33,11 @@ def test_refused_programs_are_not_injected(tmp_path: Path) -> None:
     t, box = run_in_thread(cfg, out)
     wait_rounds(out, "fed_qlearning", 2)
 
-    bad = _inject(out, broken, "broken")
+    bad = dfrl_inject(out, broken, "broken")
     assert bad.returncode == 1, bad.stderr
     assert "refused" in bad.stderr and "broken_method.pl:2:" in bad.stderr, bad.stderr
     assert "Syntax error" in bad.stderr, bad.stderr
-    refused = _inject(out, unsafe, "unsafe")
+    refused = dfrl_inject(out, unsafe, "unsafe")
     assert refused.returncode == 1, refused.stderr
     assert "refused" in refused.stderr and "Refused mobile code" in refused.stderr, \
         refused.stderr

@@ -4,9 +4,6 @@ driver now reads the host's limit from its status and refuses it before anything
 naming the option; the control is the same run on a host started with enough."""
 from __future__ import annotations
 
-import socket
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -16,26 +13,11 @@ from dfrl.experiments.driver.launcher import run
 from dfrl.experiments.driver.launcher.spawn import clone_limit
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.processes import find_swipl
-from dfrl.experiments.tokens import env_with_tokens
 
-from .helpers import diagnose, small_config
+from .helpers import diagnose, robot_service, small_config
 
 pytestmark = pytest.mark.skipif(find_swipl() is None, reason="swipl not installed")
 
-
-def _service(workdir: Path, *flags: str) -> tuple[subprocess.Popen, int]:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    workdir.mkdir()
-    svc = subprocess.Popen(
-        [sys.executable, "-m", "dfrl.experiments", "robot", "--host", "127.0.0.1",
-         "--port", str(port), "--workdir", str(workdir), *flags],
-        stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        env=env_with_tokens([1111]))
-    line = svc.stdout.readline()
-    assert "listening on" in line, line + svc.stderr.read()
-    return svc, port
 
 
 def _tree_config(port: int):
@@ -46,7 +28,7 @@ def _tree_config(port: int):
 
 
 def test_a_host_short_of_clones_is_refused_before_the_run(tmp_path: Path) -> None:
-    svc, port = _service(tmp_path / "svc")
+    svc, port = robot_service(tmp_path / "svc")
     try:
         cfg = _tree_config(port)
         needs = clone_limit(cfg)
@@ -61,7 +43,7 @@ def test_a_host_short_of_clones_is_refused_before_the_run(tmp_path: Path) -> Non
 
 def test_a_host_with_enough_clones_runs_the_tree(tmp_path: Path) -> None:
     cfg0 = _tree_config(1)
-    svc, port = _service(tmp_path / "svc", "--clone-limit", str(clone_limit(cfg0)))
+    svc, port = robot_service(tmp_path / "svc", "--clone-limit", str(clone_limit(cfg0)))
     try:
         res = run(_tree_config(port), tmp_path / "out", progress=None)
         assert res.ok, diagnose(tmp_path / "out")

@@ -10,9 +10,6 @@ import csv
 import json
 import os
 import signal
-import socket
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -23,9 +20,9 @@ from dfrl.experiments.driver.results.carried import fedavg_weights
 from dfrl.experiments.driver.results.rounds import Share
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.processes import find_swipl
-from dfrl.experiments.tokens import env_with_tokens
 
-from ..launcher.helpers import diagnose, run_in_thread, small_config, wait_rounds
+from ..launcher.helpers import (diagnose, robot_service, run_in_thread, small_config,
+                                wait_rounds)
 
 needs_swipl = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
@@ -40,24 +37,10 @@ def _csv(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(fh))
 
 
-def _robot_service(workdir: Path, token: int) -> tuple[subprocess.Popen, int]:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    workdir.mkdir()
-    svc = subprocess.Popen(
-        [sys.executable, "-m", "dfrl.experiments", "robot", "--host", "127.0.0.1",
-         "--port", str(port), "--workdir", str(workdir)],
-        stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        env=env_with_tokens([token]))
-    line = svc.stdout.readline()
-    assert "listening on" in line, line + svc.stderr.read()
-    return svc, port
-
 
 @needs_swipl
 def test_a_run_refused_by_a_robot_host_never_started(tmp_path: Path) -> None:
-    svc, port = _robot_service(tmp_path / "svc", 1111)
+    svc, port = robot_service(tmp_path / "svc", token=1111)
     try:
         cfg = small_config(2, iterations=200, respite=100, token=2222)    # not the host's
         cfg = cfg.replace(robots=(cfg.robots[0],
