@@ -47,8 +47,9 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int,
     shutil.rmtree(folder, ignore_errors=True)
     if not names:
         return
-    marks = config.getoption("markexpr") or ""
-    terminalreporter.write_sep("-", f"{len(names)} tests deselected by -m {marks!r} "
-                                    "(the slow ones: scripts/test.sh -m slow runs them)")
+    marks, words = config.getoption("markexpr") or "", config.getoption("keyword") or ""
+    how = ", ".join([f"-m {marks!r}"] * bool(marks) + [f"-k {words!r}"] * bool(words))
+    terminalreporter.write_sep("-", f"{len(names)} tests deselected ({how or 'by a plugin'}; "
+                                    "the slow ones: scripts/test.sh -m slow runs them)")
     for name in sorted(names):
         terminalreporter.write_line(f"deselected: {name}")
