@@ -147,11 +147,6 @@ def options(name: str) -> dict[str, Any]:
     return dict(known.options) if known is not None else {}
 
 
-def registered() -> dict[str, str]:
-    """Name -> spec of every learner registered in this process."""
-    return {name: plugin.spec for name, plugin in _REGISTERED.items()}
-
-
 @functools.lru_cache(maxsize=1)
 def _installed() -> tuple[tuple[str, str], ...]:
     return tuple((ep.name, ep.value) for ep in entry_points(group=GROUP))
@@ -183,39 +178,21 @@ def plugin_names() -> list[str]:
     return sorted({*_REGISTERED, *installed()})
 
 
-def register_section(section: Any, base: Path | None) -> dict[str, dict[str, Any]]:
-    """Register the learners of a config's ``"learners"`` section and return it normalised
-    (every entry ``{"class": spec, "options": {...}}``, a file's path absolute).
-
-    Parameters
-    ----------
-    section : dict
-        ``name -> "module:Class" | "file.py:Class" | {"class": ..., "options": {...}}``.
-    base : Path or None
-        The folder a relative file path is resolved against (the config's); None: it must be
-        absolute.
-
-    Raises
-    ------
-    PluginError
-        Every problem, each located (``learners.NAME: ...``), at once.
-    """
+def section_problems(section: Any) -> list[str]:
+    """Register the learners of a config's ``learners`` section (``name -> "module:Class" |
+    "file.py:Class" | {"class": ..., "options": {...}}``, a file's path absolute: see
+    :func:`absolute_section`); every problem, located (``learners.NAME: ...``)."""
     if not isinstance(section, dict):
-        raise PluginError("learners: expected an object of name -> 'module:Class' or "
-                          "{\"class\": ..., \"options\": {...}}")
-    out: dict[str, dict[str, Any]] = {}
+        return ["learners: expected an object of name -> 'module:Class' or "
+                "{\"class\": ..., \"options\": {...}}"]
     problems: list[str] = []
     for name, entry in section.items():
         try:
             spec, opts = _entry(entry)
-            spec = _absolute(spec, base)
             register_learner(str(name), spec, opts)
-            out[str(name)] = {"class": spec, "options": opts}
         except PluginError as e:
             problems.append(f"learners.{name}: {e}")
-    if problems:
-        raise PluginError("; ".join(problems))
-    return out
+    return problems
 
 
 def _entry(entry: Any) -> tuple[str, dict[str, Any]]:
@@ -229,9 +206,9 @@ def _entry(entry: Any) -> tuple[str, dict[str, Any]]:
                       "{\"class\": ..., \"options\": {...}}")
 
 
-def _absolute(spec: str, base: Path | None) -> str:
+def _absolute(spec: str, base: Path) -> str:
     where, sep, attr = spec.rpartition(":")
-    if sep and where.endswith(".py") and not Path(where).is_absolute() and base is not None:
+    if sep and where.endswith(".py") and not Path(where).is_absolute():
         return f"{(base / where).resolve()}:{attr}"
     return spec
 
@@ -251,11 +228,3 @@ def absolute_section(section: Any, base: Path) -> Any:
             out[name] = entry
     return out
 
-
-def section_problems(section: Any) -> list[str]:
-    """Register a config's ``learners`` section (absolute paths); its problems, located."""
-    try:
-        register_section(section, None)
-    except PluginError as e:
-        return str(e).split("; ") if str(e).startswith("learners.") else [str(e)]
-    return []
