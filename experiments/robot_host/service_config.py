@@ -58,6 +58,13 @@ def parse_configure(text: str, tokens: Sequence[Token], workdir: Path
     if "token" in node and str(node["token"]) not in {str(t) for t in tokens}:
         raise config_error("the experiment's token differs from this robot's token")
     node.pop("token", None)
+    if node.get("learners"):
+        # a spec would make this host import a module or file a token holder names: code its
+        # owner did not choose. The owner installs a learner here (an entry point) instead.
+        raise config_error(
+            f"learners {sorted(node['learners'])}: a robot host loads no learner a driver names; "
+            "install it on this host as a dfrl.learners entry point (robots/README.md, 'Bring "
+            "your own learner') and the robot can name it in algo")
     out = workdir / experiment
     arena = data.get("arena")
     if arena is not None:

@@ -120,6 +120,23 @@ def _rss_kib(pid: int) -> int:
     raise AssertionError("no VmRSS")
 
 
+def test_a_driver_cannot_make_the_host_load_a_learner(service: Service, tmp_path: Path) -> None:
+    """A token holder's config naming a plug-in learner (a module to import, a file of the
+    host's to execute) is refused before anything is imported (the file would leave a mark).
+    The controls, configs without it that the service accepts, are the other tests'."""
+    marker = tmp_path / "ran"
+    evil = tmp_path / "evil.py"
+    evil.write_text(f"open({str(marker)!r}, 'w').write('imported')\n")
+    specs = {"a": f"{evil}:X", "b": "antigravity:X", "c": {"class": f"{evil}:X"}}
+    answers = service.ask(*[configure(f"l{k}", algo="a", learners={"a": s})
+                            for k, s in specs.items()])
+    for answer in answers:
+        assert "error" in answer and "a robot host loads no learner a driver names" in \
+            answer["message"], answer
+    assert not marker.exists(), "the host imported a file a token holder named"
+    assert service.proc.poll() is None
+
+
 def test_arenas_are_names_of_its_own_never_paths(service: Service, tmp_path: Path) -> None:
     """A token holder names arenas, never files of the host: /etc/passwd, /dev/zero, ``../``,
     a missing path and a link out of the service's arena folder get one message that does not
