@@ -71,11 +71,9 @@ class Federation(Tour):
         self.nodes: list[Proc] = [self.start(i) for i in range(len(delays))]
 
     def start(self, i: int) -> Proc:
-        p = Proc([SWIPL, "-q", "-g", "main", str(self.tmp / "node.pl"),
-                  str(self.ports[i]), f"r{i}", str(self.delays[i])])
-        self.procs.append(p)
-        p.wait_for("LISTENING")
-        return p
+        return self.listening(i, lambda port: Proc([SWIPL, "-q", "-g", "main",
+                                                    str(self.tmp / "node.pl"), str(port),
+                                                    f"r{i}", str(self.delays[i])]))
 
     def launch(self, rounds: int, rest: float, via: dict[int, int] | None = None) -> None:
         """Start agent ``fx``; ``via`` maps a stop to another port (a proxy) in the plan."""

@@ -20,9 +20,28 @@ class Tour:
         self.tmp, self.procs, self.token = tmp_path, procs, token
         self.log = tmp_path / "rounds.jsonl"
         self.ports = [free_port() for _ in range(n)]
+        self.launched = False
+
+    def listening(self, i: int, make: Callable[[int], Proc], tries: int = 3) -> Proc:
+        """Start stop ``i`` with ``make(port)`` and wait for its ``LISTENING`` line. Before the
+        plan is launched, a port another process took since it was chosen (free_port() only
+        finds one free at that moment) is replaced by a new one, at most ``tries`` times."""
+        for attempt in range(tries):
+            p = make(self.ports[i])
+            self.procs.append(p)
+            try:
+                p.wait_for("LISTENING")
+                return p
+            except AssertionError:
+                if self.launched or attempt == tries - 1 \
+                        or "Address already in use" not in p.output():
+                    raise
+                self.ports[i] = free_port()
+        raise AssertionError("unreachable")
 
     def launch_plan(self, plan_term: str) -> None:
         """Write ``plan_term`` (a ``plan(...)`` term) to a file and run the console on it."""
+        self.launched = True
         plan = self.tmp / "plan.txt"
         plan.write_text(plan_term + ".\n")
         c = Proc([SWIPL, "-q", "-g", "main", "-t", "halt", str(self.tmp / "console.pl"), str(plan)])

@@ -71,7 +71,9 @@ def test_inject_and_join_with_tls_from_a_copied_results_folder(tmp_path: Path) -
     bad.mkdir()
     shutil.copy(node_dir / "ca.crt", bad)
     inject = ["inject", str(copied), "--program", str(MEDIAN), "--method", "median"]
-    join = ["join", str(copied), "--robot", "r3", "--arena", "r5", "--iterations", "600"]
+    # r3 lives 6,000 iterations (~30 s at rtf 12): with 600 it could end (3 s) before the
+    # inject below reached its node, which then refused the connection (2 loaded suite runs)
+    join = ["join", str(copied), "--robot", "r3", "--arena", "r5", "--iterations", "6000"]
     # Execute (the four refusals at once, the run goes on meanwhile)
     refusals = {}
     for command in (inject, join):
