@@ -148,6 +148,9 @@ def register_paper(subparsers: argparse._SubParsersAction) -> None:
                         "held-out arenas (default: %(default)s)")
     p.add_argument("--eval-steps", type=int, default=1000,
                    help="evaluation steps per table and arena (default: %(default)s)")
+    p.add_argument("--resamples", type=int, default=2000,
+                   help="bootstrap resamples of the report's rliable intervals (default: "
+                        "%(default)s)")
     p.add_argument("--jobs", type=int, default=2,
                    help="processes for standalone runs and evaluations (default: %(default)s)")
     p.add_argument("--no-control", action="store_true",
@@ -209,6 +212,9 @@ def cmd_paper(args: argparse.Namespace) -> int:
 
     try:
         deltas = parse_deltas(args.delta)
+        if args.resamples < 100:
+            raise ValueError(f"--resamples {args.resamples}: at least 100 (an interval's ends "
+                             "from fewer resamples move from seed to seed)")
         if args.source is not None:
             return _rejudge(args, deltas)
         seeds = chosen_seeds(args)
@@ -224,7 +230,7 @@ def cmd_paper(args: argparse.Namespace) -> int:
                         respite=args.respite,
                         points=args.eval_points, eval_steps=args.eval_steps, jobs=args.jobs,
                         control=not args.no_control, diagnostics=args.diagnostics,
-                        driver=args.driver,
+                        driver=args.driver, resamples=args.resamples,
                         skip_existing=args.skip_existing, deltas=tuple(deltas.items()),
                         **({} if args.shuffle_buffer is None
                            else {"shuffle_buffer": args.shuffle_buffer}))
@@ -276,7 +282,7 @@ def _rejudge(args: argparse.Namespace, deltas: dict[str, float]) -> int:
 
     out = args.out if args.out is not None else args.source
     try:
-        ans, path = rejudge(args.source, deltas, out)
+        ans, path = rejudge(args.source, deltas, out, resamples=args.resamples)
     except (EvaluationsError, OSError) as exc:
         print(f"dfrl paper --from: {exc}", file=sys.stderr)
         return 2

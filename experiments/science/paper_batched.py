@@ -171,7 +171,8 @@ def batched_paper(out: Path, opts: PaperOptions, progress: TextIO | None = None,
              f"{len(groups)} runs of {configs[0].iterations:,} iterations per robot, "
              f"{len(configs)} robots in one batch, final tables evaluated {opts.eval_steps} "
              f"steps per arena; {total:.0f} s."]
-    report = write_questions_report(out, ans, out, intro=intro, name="report.md")
+    report = write_questions_report(out, ans, out, intro=intro, name="report.md",
+                                    resamples=opts.resamples)
     confirmed: list[Confirmation] = []
     if confirm_seeds:
         confirmed = confirm_paper(out, opts, ans, confirm_seeds, progress)

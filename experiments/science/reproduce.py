@@ -114,6 +114,7 @@ class PaperOptions:
     shuffle_buffer: int = SHUFFLE_BUFFER
     deltas: tuple[tuple[str, float], ...] = ()   # question -> smallest effect of interest
     cluster: ClusterOptions | None = None   # federated runs' robots on a Dask cluster
+    resamples: int = 2000               # of the rliable intervals in the report's aggregates
 
 
 @dataclass
@@ -323,7 +324,7 @@ def _judge(out: Path, evals: list[Evaluation], opts: PaperOptions) -> Answers:
 
 
 def rejudge(folder: Path, deltas: Mapping[str, float] | None = None,
-            out: Path | None = None) -> tuple[Answers, Path]:
+            out: Path | None = None, resamples: int = 2000) -> tuple[Answers, Path]:
     """Judge a study's questions again from ``folder/evaluations.csv``, running nothing;
     write ``questions.csv``, ``contrasts_by_seed.csv`` and ``questions.md`` into ``out``
     (default: ``folder``). Returns the answers and the report's path.
@@ -340,7 +341,7 @@ def rejudge(folder: Path, deltas: Mapping[str, float] | None = None,
     dest = Path(out) if out is not None else Path(folder)
     dest.mkdir(parents=True, exist_ok=True)
     write_files(dest, ans)
-    return ans, write_questions_report(dest, ans, Path(folder))
+    return ans, write_questions_report(dest, ans, Path(folder), resamples=resamples)
 
 
 #: The condition column of ``tidy.csv`` for a run name.

@@ -149,7 +149,7 @@ def write_report(out: Path, rep: Any, opts: Any, seeds: list[int]) -> Path:
          f"and evaluation, one value per row).", ""]
     L += _summary(rep.answers)
     L += markdown(rep.answers)
-    L += aggregates_markdown(rep.answers)
+    L += aggregates_markdown(rep.answers, resamples=opts.resamples)
     names = figures(out, rep)
     L += ["## Figures", ""]
     L += [f"* figures/{n}" for n in names] or ["* (no figures: matplotlib is not installed)"]
@@ -164,7 +164,8 @@ def write_report(out: Path, rep: Any, opts: Any, seeds: list[int]) -> Path:
 
 
 def write_questions_report(out: Path, ans: Answers, source: Path,
-                           intro: Sequence[str] | None = None, name: str = "questions.md") -> Path:
+                           intro: Sequence[str] | None = None, name: str = "questions.md",
+                           resamples: int = 2000) -> Path:
     """``OUT/questions.md``: the questions judged from ``source/evaluations.csv`` alone (or,
     with ``intro``, those lines first: a study that ran and judged in one go)."""
     deltas = ("Smallest effects of interest: "
@@ -174,7 +175,7 @@ def write_questions_report(out: Path, ans: Answers, source: Path,
              f"From `{Path(source) / 'evaluations.csv'}`; nothing was run. " + deltas, ""]
     else:
         L = list(intro) + ["", deltas, ""]
-    L += _summary(ans) + markdown(ans) + aggregates_markdown(ans)
+    L += _summary(ans) + markdown(ans) + aggregates_markdown(ans, resamples=resamples)
     path = Path(out) / name
     path.write_text("\n".join(L) + "\n", encoding="utf-8")
     return path

@@ -18,7 +18,8 @@ def _paper(*args: str) -> subprocess.CompletedProcess[str]:
 def test_every_condition_is_evaluated_judged_and_the_same_with_the_same_seed(
         tmp_path: Path) -> None:
     args = ("--sim", "batched", "--n-seeds", "3", "--iterations", "600", "--respite", "200",
-            "--eval-steps", "100")
+            "--eval-steps", "100",
+            "--resamples", "200")
     out = tmp_path / "paper"
     r = _paper(*args, "--out", str(out))
     assert r.returncode == 0, r.stderr
@@ -51,7 +52,8 @@ def test_what_the_batch_cannot_run_is_refused(tmp_path: Path) -> None:
 def test_f_and_t_are_confirmed_on_pybullet(tmp_path: Path) -> None:
     out = tmp_path / "paper"
     r = _paper("--sim", "batched", "--n-seeds", "2", "--iterations", "200", "--respite", "100",
-               "--eval-steps", "30", "--no-control", "--confirm-seeds", "1", "--out", str(out))
+               "--eval-steps", "30", "--resamples", "200", "--no-control", "--confirm-seeds", "1",
+               "--out", str(out))
     assert r.returncode == 0, r.stderr
     found = json.loads((out / "confirmation.json").read_text())
     assert found["seeds"] == [1]

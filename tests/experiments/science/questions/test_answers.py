@@ -100,7 +100,7 @@ def _dfrl(*args: str) -> subprocess.CompletedProcess:
 
 def test_paper_from_rejudges_a_folder_and_runs_nothing(tmp_path: Path):
     write_evaluations(tmp_path / "evaluations.csv", _study(LEARNT))
-    r = _dfrl("paper", "--from", str(tmp_path), "--delta", "F=0.2")
+    r = _dfrl("paper", "--from", str(tmp_path), "--delta", "F=0.2", "--resamples", "200")
     assert r.returncode == 0, r.stderr
     assert "L  standalone/qlearning: holds" in r.stdout
     text = (tmp_path / "questions.md").read_text()
@@ -120,6 +120,8 @@ def test_paper_from_refuses_bad_input_with_its_location(tmp_path: Path):
     assert r.returncode == 2 and "evaluations.csv:2: seed must be an integer" in r.stderr
     r = _dfrl("paper", "--from", str(tmp_path), "--delta", "Q=1")
     assert r.returncode == 2 and "--delta 'Q=1'" in r.stderr
+    r = _dfrl("paper", "--from", str(tmp_path), "--resamples", "20")
+    assert r.returncode == 2 and "--resamples 20: at least 100" in r.stderr
     (tmp_path / "evaluations.csv").write_text(",".join(COLUMNS) + "\n")
     r = _dfrl("paper", "--from", str(tmp_path))
     assert r.returncode == 2 and "no evaluation rows: nothing to judge" in r.stderr

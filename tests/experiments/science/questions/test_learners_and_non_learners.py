@@ -101,7 +101,7 @@ def _judge(d: Path) -> str:
     from dfrl.experiments.cli import main
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
-        assert main(["paper", "--from", str(d)]) == 0
+        assert main(["paper", "--from", str(d), "--resamples", "200"]) == 0
     return buf.getvalue()
 
 

@@ -48,7 +48,9 @@ def test_a_robot_host_killed_mid_hop_is_measured_and_judged(tmp_path: Path) -> N
     assert r["verdict"] == "INCOMPLETE" and r["exit_status"] == 1, detail
     assert any(s.startswith(("- MISSED rounds: r2", "- LOST robot r2")) for s in
                r["summary_says"]), detail
-    assert 0 < r["recovery_s"] <= QUICK.expect.recovery_bound_s, detail
+    assert r["recovery_s"] is not None, detail
+    # 0 when the kill lands as a round completes (the round logged within 5 ms of it)
+    assert 0 <= r["recovery_s"] <= QUICK.expect.recovery_bound_s, detail
     assert [a["what"].split(" of ")[0] for a in r["actions"][:2]] == ["driver started",
                                                                      "kill -9"], detail
     assert f["median"]["recovery_s"] == r["recovery_s"]
