@@ -38,6 +38,7 @@ from dfrl.experiments.driver.launcher.robots import await_ready
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
 from dfrl.experiments.driver.results.rounds import count_equal, read_shares, write_rounds_csv
 from dfrl.experiments.tools.bench.step_trace import ENV as STEP_TRACE_ENV, step_summary
+from dfrl.experiments.tools.bench.traced_robot import MODULE as TRACED_ROBOT
 
 TARGET_MS = 50.0
 
@@ -101,7 +102,8 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
                               if params else {"bench_table": [states, actions]})
             cfg = RobotConfig(robot=spec.id, out_dir=str(out), seed=i, events=False,
                               progress_every=0, **bench_of)
-            children.append(RobotChild(spec, cfg, out))
+            module = TRACED_ROBOT if trace_dir is not None else "dfrl.experiments.robot_host"
+            children.append(RobotChild(spec, cfg, out, module=module))
             with trace_env:
                 children[-1].start()
         await_ready(children, 120.0)
