@@ -220,7 +220,7 @@ class FunctionLearner(ABC):
         arrays, model = self.q_model()
         return np.asarray(model(arrays, x, np), dtype=np.float64)
 
-    def after_distil(self) -> None:
+    def after_distil(self) -> None:  # noqa: B027 - an optional hook, doing nothing by default
         """Called after a distillation moved the arrays of :meth:`q_model` (default: nothing;
         ``dqn`` copies its online network into its target network)."""
 

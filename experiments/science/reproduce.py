@@ -273,7 +273,7 @@ def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reprod
             ok = runs.on_cluster(fed_cfgs, opts.cluster)
         else:
             ok = runs.here(fed_cfgs)
-        for (s, key), (d, pending) in runs.pendings.items():
+        for d, pending in runs.pendings.values():
             pending.write(d / "evaluations.csv")
         for fut in sa_jobs.values():
             fut.result()
