@@ -169,7 +169,9 @@ class FunctionLearner(ABC):
 
     def _own_settings(self) -> dict[str, Any]:
         own = getattr(self, "config", None)
-        return dataclasses.asdict(own) if dataclasses.is_dataclass(own) else {}
+        if dataclasses.is_dataclass(own) and not isinstance(own, type):
+            return dataclasses.asdict(own)
+        return {}
 
     def greedy_action(self, obs: np.ndarray) -> int:
         """A greedy action for ``obs`` (lowest index on ties), no randomness used."""

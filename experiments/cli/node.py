@@ -35,7 +35,7 @@ class BoundFlag:
         if self.infinite and text == "infinite":
             return "infinite"
         try:
-            value: Bound = int(text) if self.integer else float(text)
+            value: int | float = int(text) if self.integer else float(text)
         except ValueError:
             value = -1
         if value <= 0:

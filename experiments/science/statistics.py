@@ -14,6 +14,8 @@ power); ``cannot judge (n = K < M)`` (too few values).
 """
 from __future__ import annotations
 
+from typing import Protocol
+
 import math
 import warnings
 from collections.abc import Callable, Sequence
@@ -258,7 +260,7 @@ class Judgement:
     one once :func:`adjust` put it in a family (else equal to ``p``)."""
 
     outcome: Outcome
-    measure: Interval
+    measure: Measured
     bound: float
     side: str
     p: float
@@ -284,7 +286,28 @@ class Judgement:
         return self.words()
 
 
-def judge(measure: Interval | BootstrapInterval, bound: float = 0.0, side: str = "above",
+class Measured(Protocol):
+    """What :func:`judge` and a :class:`Judgement` read of an interval: an :class:`Interval`,
+    or another estimate with the same reading (a transfer claim's censored difference)."""
+
+    @property
+    def half(self) -> float: ...
+
+    @property
+    def n(self) -> int: ...
+
+    @property
+    def low(self) -> float: ...
+
+    @property
+    def high(self) -> float: ...
+
+    def p_value(self, null: float = 0.0) -> float: ...
+
+    def detectable(self, power: float = POWER) -> float: ...
+
+
+def judge(measure: Measured, bound: float = 0.0, side: str = "above",
           min_n: int = MIN_N) -> Judgement:
     """The verdict on "the mean is above (``side="above"``) or below ``bound``", from the 95%
     interval ``measure`` (see the module's docs for the words)."""
