@@ -23,6 +23,7 @@ from enum import Enum
 
 import numpy as np
 
+from dfrl.robots.approx import FunctionLearner
 from dfrl.robots.learners import greedy_action, is_tabular
 from dfrl.robots.state import Discretiser
 from dfrl.robots.training import TrainerConfig, build_learner
@@ -98,6 +99,8 @@ def greedy_policy(config: TrainerConfig, params: np.ndarray, obs_dim: int = 8,
     n = len(config.actions.names) if n_actions is None else n_actions
     learner = build_learner(config, 1, obs_dim, n, np.random.default_rng(0))
     learner.set_params(params)
+
+    assert isinstance(learner, FunctionLearner), learner       # tabular ones refused above
 
     def greedy(obs: np.ndarray) -> int:
         return learner.greedy_action(np.asarray(obs, dtype=np.float64))
@@ -210,6 +213,7 @@ def evaluate_policy(
             if fn is not None:
                 action = int(fn(obs))
             elif kind is PolicyKind.GREEDY:
+                assert q_table is not None          # checked above: no policy, so a table
                 action = greedy_action(q_table[disc(obs)], rng)
             else:
                 action = int(rng.integers(n_actions))
