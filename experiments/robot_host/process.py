@@ -154,6 +154,8 @@ class RobotProcess:
     def run(self) -> int:
         """The control loop; returns the exit code."""
         run = self.run_
+        if run is None:
+            raise RuntimeError(f"robot {self.config.robot}: run() before start()")
         if not run.simulated:
             while not self.stdin.poll():
                 self.bridge.serve_pending(timeout=0.05)
