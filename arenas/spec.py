@@ -199,7 +199,7 @@ class ArenaSpec:
                 {"center": list(b.center), "size": list(b.size), "yaw": b.yaw}
                 for b in self.blocks
             ],
-            "start": {"random": True} if self.start.random else {"pose": list(self.start.pose)},
+            "start": {"random": True} if self.start.random else {"pose": list(self.start.pose or ())},
         }
         if self.description:
             out["description"] = self.description

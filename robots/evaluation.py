@@ -20,6 +20,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
+from typing import Any
 
 import numpy as np
 
@@ -283,7 +284,7 @@ def evaluate_snapshots(
 
 
 def learnt_vs_random(config: TrainerConfig, seed: int, steps: int, eval_seed: int,
-                     params: np.ndarray | None = None) -> dict[str, object]:
+                     params: np.ndarray | None = None) -> dict[str, Any]:
     """Train ``config`` with ``seed`` (unless ``params`` are given), then measure its greedy
     policy and a uniform random one from the same start and respawn poses.
 

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec
+from dfrl.experiments.robot_host.config import Mode
 from dfrl.experiments.tools.bench.fault_proxy import FaultProxy
 
 ARENAS = ("r1", "r2", "r3", "r4", "r5")
@@ -69,7 +70,7 @@ def config_for(n: int, iterations: int, respite: int, seed: int = 1,
     """The experiment of one point: ``n`` robots over the five arenas in turn."""
     robots = tuple(RobotSpec(f"r{i + 1}", ARENAS[i % len(ARENAS)]) for i in range(n))
     return ExperimentConfig(name=f"scale{n}", robots=robots, iterations=iterations,
-                            respite=respite, seed=seed, mode="sync",
+                            respite=respite, seed=seed, mode=Mode.SYNC,
                             timeout_s=max(600.0, 30.0 * n), itinerary=itinerary, fanout=fanout)
 
 
