@@ -59,7 +59,8 @@ def flatten(arrays: list[np.ndarray]) -> np.ndarray:
 
 
 def unflatten(vec: np.ndarray, layout: Layout) -> list[np.ndarray]:
-    """Split a flat vector into new float64 arrays of the layout's shapes (inverse of :func:`flatten`).
+    """Split a flat vector into new float64 arrays of the layout's shapes (inverse of
+    :func:`flatten`).
 
     Raises
     ------

@@ -181,7 +181,8 @@ class EPuckEnv(gym.Env):
         self._v_max = rc.max_linear_speed
         self._clearance = rc.body_radius + 0.03
         self.action_space = spaces.Discrete(len(self._actions))
-        self.observation_space = spaces.Box(0.0, 1.0, shape=(self.robot.n_sensors,), dtype=np.float32)
+        self.observation_space = spaces.Box(0.0, 1.0, shape=(self.robot.n_sensors,),
+                                            dtype=np.float32)
         self._pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._trail: deque[tuple[float, float]] = deque(maxlen=max(1, config.stuck_steps + 1))
         self._distances = np.full(self.robot.n_sensors, rc.sensor_range)
@@ -241,7 +242,8 @@ class EPuckEnv(gym.Env):
         stuck = self._stuck(pose)
         reward = self._reward(obs, progress, collision)
         terminated = self._terminated(collision)
-        return obs, reward, terminated, stuck and not terminated, self._info(collision, stuck, progress)
+        return (obs, reward, terminated, stuck and not terminated,
+                self._info(collision, stuck, progress))
 
     def render(self) -> np.ndarray | None:
         """Top view as an RGB array, shape (480, 480, 3), uint8 (``rgb_array`` mode)."""

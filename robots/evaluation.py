@@ -114,7 +114,8 @@ class _Coverage:
 
     def __init__(self, arena, clearance: float) -> None:  # noqa: ANN001 - ArenaSpec
         w, d = arena.size
-        self.nx, self.ny = max(1, int(round(w / COVERAGE_CELL))), max(1, int(round(d / COVERAGE_CELL)))
+        self.nx = max(1, int(round(w / COVERAGE_CELL)))
+        self.ny = max(1, int(round(d / COVERAGE_CELL)))
         self.x0, self.y0 = -w / 2, -d / 2
         xs = self.x0 + (np.arange(self.nx) + 0.5) * (w / self.nx)
         ys = self.y0 + (np.arange(self.ny) + 0.5) * (d / self.ny)

@@ -45,7 +45,8 @@ def validate_table(table: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
         raise ValueError(f"Q-table shape {arr.shape} does not match the expected {tuple(shape)}")
     if not np.all(np.isfinite(arr)):
         bad = np.argwhere(~np.isfinite(arr))[0]
-        raise ValueError(f"Q-table has a non-finite entry at (state, action) = {tuple(int(i) for i in bad)}")
+        where = tuple(int(i) for i in bad)
+        raise ValueError(f"Q-table has a non-finite entry at (state, action) = {where}")
     return arr
 
 

@@ -154,7 +154,8 @@ def node_command(
     """
     if not 0 <= port <= 65535:
         raise ValueError(f"port {port} is outside 0..65535")
-    cmd = [processes.swipl(), "-q", str(PLATFORM_DIR / "node_main.pl"), "--host", host, "--port", str(port)]
+    cmd = [processes.swipl(), "-q", str(PLATFORM_DIR / "node_main.pl"), "--host", host, "--port",
+           str(port)]
     for path in consult or []:
         cmd += ["--consult", os.path.abspath(path)]
     if advertise:

@@ -43,7 +43,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="learner (default: the table's algorithm)")
     p.add_argument("--grouping", choices=[s.value for s in SensorGrouping], default=None,
                    help="sensor groups (default: the table's)")
-    p.add_argument("--levels", type=int, default=None, help="levels per group (default: the table's)")
+    p.add_argument("--levels", type=int, default=None,
+                   help="levels per group (default: the table's)")
     p.add_argument("--eval-steps", type=int, default=2000,
                    help="greedy evaluation steps per table, 0 to skip (default: %(default)s)")
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default: %(default)s)")

@@ -21,8 +21,8 @@ from dfrl.experiments.config_rules import (Rule, check_keys, check_robot_id, che
 from dfrl.experiments.suggestions import did_you_mean
 from dfrl.experiments.robot_host.config import DEFAULT_ITERATIONS, modes
 
-__all__ = ["BUILTIN_METHODS", "COMMENT_KEYS", "FEDERATIONS", "GRID", "ITINERARIES", "PARAMS_REFUSED",
-           "check_experiment", "host_port_problem"]
+__all__ = ["BUILTIN_METHODS", "COMMENT_KEYS", "FEDERATIONS", "GRID", "ITINERARIES",
+           "PARAMS_REFUSED", "check_experiment", "host_port_problem"]
 
 #: Aggregation methods built into the agent; others are injected into a running experiment
 #: with ``dfrl inject`` (an experiment config can only name these).

@@ -95,7 +95,8 @@ class LiveEvaluator:
         else:
             r = evaluate_policy(self.config, PolicyKind.GREEDY, self.steps,
                                 eval_seed(self.seed, iteration), q_table=np.array(q_table))
-        row: dict[str, Any] = {"robot": self.robot, "iteration": iteration, "arena": str(self.config.arena),
+        row: dict[str, Any] = {"robot": self.robot, "iteration": iteration,
+                               "arena": str(self.config.arena),
                "steps": r.steps, "collisions_per_1000": r.collisions_per_1000,
                "distance": r.distance, "progress": r.progress, "coverage": r.coverage,
                "mean_reward": r.mean_reward}

@@ -54,7 +54,8 @@ class State(str, Enum):
 
 
 def _state_error(action: str, state: State) -> RequestError:
-    return RequestError(Term("permission_error", Atom(action), Atom("robot_state"), Atom(state.value)))
+    return RequestError(Term("permission_error", Atom(action), Atom("robot_state"),
+                             Atom(state.value)))
 
 
 class RobotService:
@@ -212,7 +213,7 @@ class RobotService:
         self.out.write(line + "\n")
         self.out.flush()
 
-    # -- TrainingHost -------------------------------------------------------------------------------
+    # -- TrainingHost -----------------------------------------------------------------------
     def wait(self, seconds: float) -> None:
         """While a run waits: answer service requests (at most ``seconds``)."""
         self.bridge.serve_service(self.handle, timeout=max(0.0, seconds))
@@ -336,7 +337,8 @@ class RobotService:
         self.run, self.state = run, State.CONFIGURED
         self._forget_leases(warn)
         self.say(f"dfrl robot: experiment {experiment} configured (robot {config.robot}, "
-                 f"{config.iterations} iterations{', resumed at ' + str(run.iteration) if resume else ''})")
+                 f"{config.iterations} iterations"
+                 f"{', resumed at ' + str(run.iteration) if resume else ''})")
         return Term("ok", Atom("true"))
 
     def _forget_leases(self, warn: Any) -> None:

@@ -1,9 +1,10 @@
 """The statistics of the reports and the studies, done once: Student-t intervals (one sample,
 paired, Welch), bootstrap intervals, times to a target that some runs never reach
-(Kaplan-Meier medians and their ratio: :mod:`.censored`), Holm's correction, the smallest detectable effect and
-the verdict words every report uses. Pure functions of numbers; :mod:`.report` and
-:mod:`.studies` both use them. Student's t, the normal distribution and the bootstrap come
-from ``scipy.stats`` (``science/README.md``, "Dependencies"); how they combine is ours.
+(Kaplan-Meier medians and their ratio: :mod:`.censored`), Holm's correction, the smallest
+detectable effect and the verdict words every report uses. Pure functions of numbers;
+:mod:`.report` and :mod:`.studies` both use them. Student's t, the normal distribution and
+the bootstrap come from ``scipy.stats`` (``science/README.md``, "Dependencies"); how they
+combine is ours.
 
 The verdict of a claim "the mean is above (below) a bound" (:func:`judge`): ``holds`` (the 95%
 interval lies wholly on the claimed side and, in a family, the Holm-adjusted p-value is below

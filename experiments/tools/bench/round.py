@@ -3,10 +3,11 @@
 Starts N robot processes on loopback (:mod:`dfrl.experiments.robot_host` in benchmark mode:
 each holds a random table of ``--entries`` values and serves the agent's requests as soon as
 they arrive, no simulation), launches the real itinerary agent
-(through a console node, :mod:`dfrl.experiments.driver.console`) for ``--warmup + --rounds`` rounds without rest and
-reads the round times from its log (the agent stamps a round's start when it reads the first
-robot and its end after writing the first robot back). Checks that every robot holds the
-same table after each round. Target: median under 50 ms for 5 nodes and 20,000 entries.
+(through a console node, :mod:`dfrl.experiments.driver.console`) for ``--warmup + --rounds``
+rounds without rest and reads the round times from its log (the agent stamps a round's start
+when it reads the first robot and its end after writing the first robot back). Checks that
+every robot holds the same table after each round. Target: median under 50 ms for 5 nodes
+and 20,000 entries.
 
 Beside the round, in the same run, it times the hops a round is made of: ``dfrl bench migrate``'s
 hop with a payload of as many floats as the table has entries (``hop_median_ms``), so that

@@ -149,7 +149,8 @@ def measure(n: int, iterations: int = 2000, respite: int = 500,
     if "exc" in box:
         raise RuntimeError(f"{n} robots: {box['exc']!r}")
     res = box["res"]
-    durations = [float(r["duration_ms"]) for r in res.rounds if r.get("duration_ms") not in ("", None)]
+    durations = [float(r["duration_ms"]) for r in res.rounds
+                 if r.get("duration_ms") not in ("", None)]
     rss = sorted(peak.values())
     return ScalePoint(
         robots=n, itinerary=itinerary, fanout=fanout, delay_ms=delay_ms,
