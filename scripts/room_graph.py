@@ -4,14 +4,20 @@ A room is a folder of ``experiments/`` (``cli``, ``science``, ``tools``, ``drive
 ``robot_host``), the shared modules at ``experiments/``'s top (``experiments.<top>``), or one of
 the packages below (``robots``, ``pybridge``, ``arenas``, ``platform_pl``). Every import counts,
 those inside functions and under ``TYPE_CHECKING`` too (grimp, the graph import-linter checks).
-Run it after ``scripts/link_tree.py``: ``PYTHONPATH=build/typecheck python scripts/room_graph.py``.
+``python scripts/room_graph.py`` builds the checkout's link tree first (:mod:`link_tree`);
+``--tree DIR`` reads a tree built elsewhere (``python scripts/link_tree.py OTHER_CHECKOUT DIR``).
 """
 from __future__ import annotations
 
+import argparse
 import sys
 from collections import Counter
+from pathlib import Path
 
 import grimp
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import link_tree  # noqa: E402
 
 ROOMS = ("cli", "science", "tools", "driver", "robot_host")
 
@@ -23,6 +29,8 @@ def room(module: str) -> str:
         return "dfrl"
     if parts[1] != "experiments" or len(parts) < 3:
         return parts[1]
+    if parts[2] == "__main__":
+        return "experiments.__main__"
     return f"experiments.{parts[2] if parts[2] in ROOMS else '<top>'}"
 
 
@@ -40,7 +48,15 @@ def edges(package: str = "dfrl") -> Counter[tuple[str, str]]:
     return found
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description="imports between dfrl's rooms")
+    parser.add_argument("--tree", type=Path, help="a link tree (default: build the checkout's)")
+    args = parser.parse_args(argv)
+    tree = args.tree
+    if tree is None:
+        root = Path(__file__).resolve().parent.parent
+        tree = link_tree.build(root, root / "build" / "typecheck").parent
+    sys.path.insert(0, str(tree.resolve()))
     found = edges()
     for (source, target), count in sorted(found.items()):
         back = " (cycle)" if (target, source) in found else ""
