@@ -35,7 +35,8 @@ __all__ = [
 
 
 def build_arena(spec: ArenaSpec, client: int):  # noqa: ANN201 - re-export without importing pybullet eagerly
-    """Create ``spec`` in pybullet client ``client``; see :func:`dfrl.arenas.builder.build_arena`."""
+    """Create ``spec`` in pybullet client ``client``; see
+    :func:`dfrl.arenas.builder.build_arena`."""
     from dfrl.arenas.builder import build_arena as _build
 
     return _build(spec, client)

@@ -11,9 +11,14 @@ import numpy as np
 class Footprint(Protocol):
     """What the geometry needs of a block (:class:`dfrl.arenas.spec.Block` has it)."""
 
-    center: Sequence[float]
-    size: Sequence[float]
-    yaw: float
+    @property
+    def center(self) -> Sequence[float]: ...
+
+    @property
+    def size(self) -> Sequence[float]: ...
+
+    @property
+    def yaw(self) -> float: ...
 
 
 def corners(block: Footprint) -> np.ndarray:

@@ -199,7 +199,8 @@ class ArenaSpec:
                 {"center": list(b.center), "size": list(b.size), "yaw": b.yaw}
                 for b in self.blocks
             ],
-            "start": {"random": True} if self.start.random else {"pose": list(self.start.pose)},
+            "start": ({"random": True} if self.start.random
+                      else {"pose": list(self.start.pose or ())}),
         }
         if self.description:
             out["description"] = self.description
@@ -222,7 +223,8 @@ def _number(value: Any, source: str, where: str, positive: bool = False) -> floa
     return float(value)
 
 
-def _vector(value: Any, n: int, source: str, where: str, positive: bool = False) -> tuple[float, ...]:
+def _vector(value: Any, n: int, source: str, where: str,
+            positive: bool = False) -> tuple[float, ...]:
     if not isinstance(value, list) or len(value) != n:
         raise _fail(source, where, f"expected a list of {n} numbers, got {json.dumps(value)}")
     return tuple(_number(v, source, f"{where}[{i}]", positive) for i, v in enumerate(value))
@@ -251,7 +253,8 @@ def parse_arena(data: Any, source: str = "<dict>") -> ArenaSpec:
         raise _fail(source, "top level", f"expected a JSON object, got {type(data).__name__}")
     unknown = sorted(set(data) - _TOP_LEVEL_KEYS)
     if unknown:
-        raise _fail(source, "top level", f"unknown key(s) {unknown}; allowed: {sorted(_TOP_LEVEL_KEYS)}")
+        raise _fail(source, "top level",
+                    f"unknown key(s) {unknown}; allowed: {sorted(_TOP_LEVEL_KEYS)}")
     for key in ("name", "size", "wall_height", "blocks", "start"):
         if key not in data:
             raise _fail(source, "top level", f"missing required key '{key}'")
@@ -287,11 +290,13 @@ def parse_arena(data: Any, source: str = "<dict>") -> ArenaSpec:
                 source, f"{where}.center",
                 f"{list(center)} lies outside the floor x in ({-hw}, {hw}), y in ({-hd}, {hd})",
             )
-        blocks.append(Block(center=(center[0], center[1]), size=(bsize[0], bsize[1], bsize[2]), yaw=yaw))
+        blocks.append(Block(center=(center[0], center[1]), size=(bsize[0], bsize[1], bsize[2]),
+                            yaw=yaw))
 
     allow_overlap = data.get("allow_overlap", False)
     if not isinstance(allow_overlap, bool):
-        raise _fail(source, "allow_overlap", f"expected true or false, got {json.dumps(allow_overlap)}")
+        raise _fail(source, "allow_overlap",
+                    f"expected true or false, got {json.dumps(allow_overlap)}")
     if not allow_overlap:
         for i in range(len(blocks)):
             for j in range(i + 1, len(blocks)):

@@ -18,18 +18,34 @@ cheap: :class:`TrainerConfig`, :func:`train`, :func:`load_arena`, :class:`Experi
 from __future__ import annotations
 
 import importlib
+import re
 from pathlib import Path
 from typing import Any
-
-__version__ = "0.2.0"
 
 # In a source checkout the subpackages are the folders beside this one (pyproject.toml maps
 # them, e.g. ``dfrl.robots`` -> ``robots/``); an installed wheel has them inside this folder.
 # Extending __path__ makes both layouts import the same files, including when the checkout's
 # root is on sys.path (``python -m`` from the root, pytest) and shadows the installed mapping.
 _here = Path(__file__).resolve().parent
-if not (_here / "robots").is_dir() and (_here.parent / "pyproject.toml").is_file():
-    __path__.append(str(_here.parent))  # type: ignore[name-defined]  # noqa: F821
+_checkout = not (_here / "robots").is_dir() and (_here.parent / "pyproject.toml").is_file()
+if _checkout:
+    __path__.append(str(_here.parent))
+
+
+def _version() -> str:
+    """The version pyproject.toml states, its one home: read from the file in a checkout (so
+    that an edit shows without a reinstall), from the installed metadata otherwise."""
+    if _checkout:
+        text = (_here.parent / "pyproject.toml").read_text(encoding="utf-8")
+        found = re.search(r'^version\s*=\s*"([^"]+)"', text, re.MULTILINE)
+        if found:
+            return found.group(1)
+    from importlib.metadata import version
+
+    return version("dfrl")
+
+
+__version__ = _version()
 
 from dfrl.robots.registration import ENV_ID, register_envs  # noqa: E402
 
@@ -46,7 +62,8 @@ _API: dict[str, str] = {
     "run_experiment": "dfrl.experiments.driver.launcher",
 }
 
-__all__ = ["ENV_ID", "__version__", *_API]
+__all__ = ["ENV_ID", "__version__", "TrainerConfig", "Trainer", "train", "load_arena",
+           "ExperimentConfig", "RobotSpec", "run_experiment"]
 
 
 def __getattr__(name: str) -> Any:

@@ -295,6 +295,13 @@ def trainer_choices() -> dict[str, list[str]]:
     return out
 
 
+def _known(values: Sequence[str] | None) -> Callable[[], Sequence[str]] | None:
+    """A :class:`Rule`'s ``choices`` that always answers ``values`` (None: no choices)."""
+    if values is None:
+        return None
+    return lambda: values
+
+
 def _check_like(path: str, data: dict[str, Any], model: dict[str, Any],
                 choices: Mapping[str, Sequence[str]], rel: str = "") -> list[str]:
     """Keys and value kinds of ``data`` against the defaults ``model`` (nested), and the
@@ -315,6 +322,5 @@ def _check_like(path: str, data: dict[str, Any], model: dict[str, Any],
         elif ref is not None:
             kind = float if isinstance(ref, float) else type(ref)
             known = choices.get(f"{rel}{key}")
-            out += check_value(here, value, Rule(kind, choices=None if known is None else
-                                                 (lambda k=known: k)))
+            out += check_value(here, value, Rule(kind, choices=_known(known)))
     return out

@@ -134,7 +134,8 @@ def decode_fts(data: bytes | bytearray, expected: int | None = None) -> np.ndarr
             raise CodecError(f"not an fts float list (size field {size})")
         n = (size - 1) // 10
         if cells != 6 * n or len(data) != pos + 10 * n + 1:
-            raise CodecError("not an fts float list (length mismatch: not all elements are floats?)")
+            raise CodecError("not an fts float list "
+                             "(length mismatch: not all elements are floats?)")
         body = np.frombuffer(data, dtype=_ELEMENT, count=n, offset=pos)
         if not np.all(body["tag"] == _TAG_WORD):
             raise CodecError("not an fts float list (an element is not a float)")

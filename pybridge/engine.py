@@ -69,18 +69,22 @@ class _Lib:
         self.put_nil = fn("PL_put_nil", c_int, term_t)
         self.cons_list = fn("PL_cons_list", c_int, term_t, term_t, term_t)
         self.cons_functor_v = fn("PL_cons_functor_v", c_int, term_t, functor_t, term_t)
-        self.put_term_from_chars = fn("PL_put_term_from_chars", c_int, term_t, c_int, c_size_t, c_char_p)
+        self.put_term_from_chars = fn("PL_put_term_from_chars", c_int, term_t, c_int, c_size_t,
+                                      c_char_p)
         self.new_atom_mbchars = fn("PL_new_atom_mbchars", atom_t, c_int, c_size_t, c_char_p)
         self.unregister_atom = fn("PL_unregister_atom", None, atom_t)
         self.new_functor_sz = fn("PL_new_functor_sz", functor_t, atom_t, c_size_t)
         self.term_type = fn("PL_term_type", c_int, term_t)
         self.is_acyclic = fn("PL_is_acyclic", c_int, term_t)
-        self.get_nchars = fn("PL_get_nchars", c_int, term_t, POINTER(c_size_t), POINTER(c_void_p), c_uint)
+        self.get_nchars = fn("PL_get_nchars", c_int, term_t, POINTER(c_size_t), POINTER(c_void_p),
+                             c_uint)
         self.get_int64 = fn("PL_get_int64", c_int, term_t, POINTER(c_int64))
         self.get_float = fn("PL_get_float", c_int, term_t, POINTER(c_double))
-        self.get_name_arity_sz = fn("PL_get_name_arity_sz", c_int, term_t, POINTER(atom_t), POINTER(c_size_t))
+        self.get_name_arity_sz = fn("PL_get_name_arity_sz", c_int, term_t, POINTER(atom_t),
+                                    POINTER(c_size_t))
         self.get_arg_sz = fn("PL_get_arg_sz", c_int, c_size_t, term_t, term_t)
-        self.atom_mbchars = fn("PL_atom_mbchars", c_int, atom_t, POINTER(c_size_t), POINTER(c_void_p), c_uint)
+        self.atom_mbchars = fn("PL_atom_mbchars", c_int, atom_t, POINTER(c_size_t),
+                               POINTER(c_void_p), c_uint)
         self.get_list = fn("PL_get_list", c_int, term_t, term_t, term_t)
         self.get_nil = fn("PL_get_nil", c_int, term_t)
         self.predicate = fn("PL_predicate", c_void_p, c_char_p, c_int, c_char_p)
@@ -91,7 +95,8 @@ class _Lib:
         self.open_foreign_frame = fn("PL_open_foreign_frame", fid_t)
         self.discard_foreign_frame = fn("PL_discard_foreign_frame", None, fid_t)
         self.mark_string_buffers = fn("PL_mark_string_buffers", None, POINTER(buf_mark_t))
-        self.release_string_buffers_from_mark = fn("PL_release_string_buffers_from_mark", None, buf_mark_t)
+        self.release_string_buffers_from_mark = fn("PL_release_string_buffers_from_mark", None,
+                                                   buf_mark_t)
         self.thread_self = fn("PL_thread_self", c_int)
         self.thread_attach_engine = fn("PL_thread_attach_engine", c_int, c_void_p)
 
@@ -211,7 +216,8 @@ class Prolog:
                 lib.discard_foreign_frame(fid)
 
     # -- Python -> Prolog ---------------------------------------------------------------------
-    def _put(self, t: int, value: Any, names: dict[str, int], vars_: dict[int, int] | None = None) -> None:
+    def _put(self, t: int, value: Any, names: dict[str, int],
+             vars_: dict[int, int] | None = None) -> None:
         lib = self._lib
         if vars_ is None:
             vars_ = {}
@@ -255,7 +261,8 @@ class Prolog:
             ok = self._put_list(t, value, names, vars_)
         elif isinstance(value, tuple):
             if len(value) < 2:
-                raise TermConversionError("only tuples of 2 or more items map to Prolog (comma terms)")
+                raise TermConversionError("only tuples of 2 or more items map to Prolog "
+                                          "(comma terms)")
             rest = value[1] if len(value) == 2 else value[1:]
             self._put(t, Term(",", value[0], rest), names, vars_)
             ok = None
@@ -266,11 +273,14 @@ class Prolog:
                 self._put(argv + i, a, names, vars_)
             ok = lib.cons_functor_v(t, self._functor(value.name, n), argv)
         else:
-            raise TermConversionError(f"no Prolog term for a Python {type(value).__name__}: {value!r}")
+            raise TermConversionError(
+                f"no Prolog term for a Python {type(value).__name__}: {value!r}")
         if ok is not None and not ok:
-            raise BridgeError(f"Prolog could not build a term for {type(value).__name__} (out of stack?)")
+            raise BridgeError(f"Prolog could not build a term for {type(value).__name__} "
+                              f"(out of stack?)")
 
-    def _put_list(self, t: int, items: list[Any], names: dict[str, int], vars_: dict[int, int]) -> int:
+    def _put_list(self, t: int, items: list[Any], names: dict[str, int],
+                  vars_: dict[int, int]) -> int:
         lib = self._lib
         lib.put_nil(t)
         head = lib.new_term_ref()

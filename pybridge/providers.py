@@ -71,6 +71,11 @@ class ParamsProvider(Protocol):
     def learner_kind(self) -> str: ...
 
 
+class LearnerProvider(TableProvider, ParamsProvider, Protocol):
+    """A robot that offers both its Q-table (a function learner: its grid view) and its
+    parameters: a :class:`dfrl.robots.training.Trainer`, :class:`StaticParams`."""
+
+
 def check_layout(layout: Sequence[tuple[str, Sequence[int]]]) -> Layout:
     """``layout`` as a :data:`Layout` of plain ``str`` and ``int``, checked.
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -27,7 +27,7 @@ from dfrl.pybridge import codec as _codec
 from dfrl.pybridge.codec import Codec
 from dfrl.pybridge.engine import Prolog
 from dfrl.pybridge.errors import BridgeError, CodecError
-from dfrl.pybridge.providers import Layout, TableProvider, layout_size
+from dfrl.pybridge.providers import Layout, ParamsProvider, TableProvider, layout_size
 from dfrl.pybridge.terms import Atom, Term, Var
 
 __all__ = ["RequestError", "RegisteredRobot", "RequestServer", "ServiceHandler", "validate_write",
@@ -78,11 +78,22 @@ class RegisteredRobot:
     """
 
     robot_id: Any
-    provider: TableProvider
+    provider: TableProvider | ParamsProvider
     shape: tuple[int, int] | None
     algorithm: str
     layout: Layout | None = None
     learner: str = "tabular"
+
+    @property
+    def table_provider(self) -> TableProvider:
+        """The provider's table side (``register_robot`` checked it has one if ``shape`` is
+        set; :meth:`RequestServer._robot` asks for a shape first)."""
+        return cast(TableProvider, self.provider)
+
+    @property
+    def params_provider(self) -> ParamsProvider:
+        """The provider's parameter side (checked at registration if ``layout`` is set)."""
+        return cast(ParamsProvider, self.provider)
 
     @property
     def layout_term(self) -> list[Term] | None:
@@ -243,30 +254,30 @@ class RequestServer:
         if not isinstance(op, Term):
             raise BridgeError(f"unknown request {op!r}")
         if op.name == "get_params" and op.arity == 1:
-            return self._params_reply(self._params_robot(op.args[0]))
+            return self._params_reply(*self._params_robot(op.args[0]))
         if op.name == "set_params" and op.arity == 4:
             rid, layout, data, origin = op.args
-            robot = self._params_robot(rid)
-            vec = validate_params(robot.layout, layout, data)
+            robot, robot_layout = self._params_robot(rid)
+            vec = validate_params(robot_layout, layout, data)
             _write(robot.provider, "set_params", vec, origin)
             return Atom("ok")
         if op.name == "get_qtable" and op.arity == 1:
-            provider = self._robot(op.args[0]).provider
+            provider = self._robot(op.args[0])[0].table_provider
             reply = self._table_reply(provider.q_table)
             _note_read(provider)
             return reply
         if op.name == "get_visits" and op.arity == 1:
-            return self._table_reply(self._robot(op.args[0]).provider.visits)
+            return self._table_reply(self._robot(op.args[0])[0].table_provider.visits)
         if op.name == "get_qtable_and_visits" and op.arity == 1:
-            provider = self._robot(op.args[0]).provider
+            provider = self._robot(op.args[0])[0].table_provider
             reply = Term("tables", self._table_reply(provider.q_table),
                          self._table_reply(provider.visits))
             _note_read(provider)
             return reply
         if op.name == "set_qtable" and op.arity == 4:
             rid, shape, data, origin = op.args
-            robot = self._robot(rid)
-            table = validate_write(robot.shape, shape, data)
+            robot, robot_shape = self._robot(rid)
+            table = validate_write(robot_shape, shape, data)
             _write(robot.provider, "set_q_table", table, origin)
             return Atom("ok")
         raise BridgeError(f"unknown request {op!r}")
@@ -277,24 +288,24 @@ class RequestServer:
             raise RequestError(Term("existence_error", Atom("robot"), rid))
         return robot
 
-    def _robot(self, rid: Any) -> RegisteredRobot:
-        """A registered robot with a Q-table."""
+    def _robot(self, rid: Any) -> tuple[RegisteredRobot, tuple[int, int]]:
+        """A registered robot with a Q-table, and the table's shape."""
         robot = self._registered(rid)
         if robot.shape is None:
             raise RequestError(Term("existence_error", Atom("qtable"), rid))
-        return robot
+        return robot, robot.shape
 
-    def _params_robot(self, rid: Any) -> RegisteredRobot:
-        """A registered robot that offers parameters."""
+    def _params_robot(self, rid: Any) -> tuple[RegisteredRobot, Layout]:
+        """A registered robot that offers parameters, and their layout."""
         robot = self._registered(rid)
         if robot.layout is None:
             raise RequestError(Term("existence_error", Atom("params"), rid))
-        return robot
+        return robot, robot.layout
 
-    def _params_reply(self, robot: RegisteredRobot) -> Term:
-        provider = robot.provider
+    def _params_reply(self, robot: RegisteredRobot, layout: Layout) -> Term:
+        provider = robot.params_provider
         vec = np.asarray(provider.params)
-        n = layout_size(robot.layout)
+        n = layout_size(layout)
         if vec.shape != (n,):
             raise BridgeError(f"robot {robot.robot_id}'s parameters have shape {vec.shape}, "
                               f"its layout says ({n},)")

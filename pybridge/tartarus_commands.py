@@ -33,7 +33,8 @@ class TartarusCommands:
         """``create_mobile_agent(?Name, (Ip,Port), Handler, Tokens)``; returns the agent name."""
         self._check_open()
         name_arg: Any = Var("Name") if name is None else Atom(name)
-        sol = self._must("create_mobile_agent", name_arg, self._link(link), Atom(handler), list(tokens))
+        sol = self._must("create_mobile_agent", name_arg, self._link(link), Atom(handler),
+                         list(tokens))
         return Atom(sol["Name"]) if name is None else Atom(name)
 
     def create_static_agent(self, name: str | None, link: Sequence[Any], handler: str,
@@ -41,17 +42,20 @@ class TartarusCommands:
         """``create_static_agent(?Name, (Ip,Port), Handler, Tokens)``: an agent that never moves."""
         self._check_open()
         name_arg: Any = Var("Name") if name is None else Atom(name)
-        sol = self._must("create_static_agent", name_arg, self._link(link), Atom(handler), list(tokens))
+        sol = self._must("create_static_agent", name_arg, self._link(link), Atom(handler),
+                         list(tokens))
         return Atom(sol["Name"]) if name is None else Atom(name)
 
-    def execute_agent(self, name: str, link: Sequence[Any], handler: str, event: Any = None) -> None:
+    def execute_agent(self, name: str, link: Sequence[Any], handler: str,
+                      event: Any = None) -> None:
         """``execute_agent(Name, (Ip,Port), Handler)``, or ``execute_agent/4`` with a start
         ``event`` other than ``main``."""
         self._check_open()
         if event is None:
             self._must("execute_agent", Atom(name), self._link(link), Atom(handler))
         else:
-            self._must("execute_agent", Atom(name), self._link(link), Atom(handler), atom_or_self(event))
+            self._must("execute_agent", Atom(name), self._link(link), Atom(handler),
+                       atom_or_self(event))
 
     def move_agent(self, name: str, link: Sequence[Any]) -> None:
         """``move_agent(Name, (Ip,Port))``."""

@@ -59,7 +59,8 @@ def flatten(arrays: list[np.ndarray]) -> np.ndarray:
 
 
 def unflatten(vec: np.ndarray, layout: Layout) -> list[np.ndarray]:
-    """Split a flat vector into new float64 arrays of the layout's shapes (inverse of :func:`flatten`).
+    """Split a flat vector into new float64 arrays of the layout's shapes (inverse of
+    :func:`flatten`).
 
     Raises
     ------
@@ -169,7 +170,9 @@ class FunctionLearner(ABC):
 
     def _own_settings(self) -> dict[str, Any]:
         own = getattr(self, "config", None)
-        return dataclasses.asdict(own) if dataclasses.is_dataclass(own) else {}
+        if dataclasses.is_dataclass(own) and not isinstance(own, type):
+            return dataclasses.asdict(own)
+        return {}
 
     def greedy_action(self, obs: np.ndarray) -> int:
         """A greedy action for ``obs`` (lowest index on ties), no randomness used."""
@@ -220,7 +223,7 @@ class FunctionLearner(ABC):
         arrays, model = self.q_model()
         return np.asarray(model(arrays, x, np), dtype=np.float64)
 
-    def after_distil(self) -> None:
+    def after_distil(self) -> None:  # noqa: B027 - an optional hook, doing nothing by default
         """Called after a distillation moved the arrays of :meth:`q_model` (default: nothing;
         ``dqn`` copies its online network into its target network)."""
 

@@ -136,7 +136,8 @@ def mlp_forward(weights: list[Any], x: Any, xp: Any = np) -> Any:
 
 
 def huber(d: Any, delta: float, xp: Any = np) -> Any:
-    """Elementwise Huber loss: ``d**2 / 2`` for ``|d| <= delta``, else ``delta * (|d| - delta/2)``."""
+    """Elementwise Huber loss: ``d**2 / 2`` for ``|d| <= delta``, else
+    ``delta * (|d| - delta/2)``."""
     a = xp.abs(d)
     return xp.where(a <= delta, 0.5 * d * d, delta * (a - 0.5 * delta))
 
@@ -170,7 +171,8 @@ class Adam:
 
     @classmethod
     def for_arrays(cls, arrays: list[np.ndarray], lr: float) -> "Adam":
-        return cls(lr=lr, m=[np.zeros_like(a) for a in arrays], v=[np.zeros_like(a) for a in arrays])
+        return cls(lr=lr, m=[np.zeros_like(a) for a in arrays],
+                   v=[np.zeros_like(a) for a in arrays])
 
     def step(self, arrays: list[np.ndarray], grads: list[np.ndarray]) -> None:
         """Update ``arrays`` in place from their gradients."""

@@ -145,6 +145,9 @@ class EPuckEnv(gym.Env):
         Fields of :class:`EnvConfig` (e.g. ``stuck_steps=0``), for ``gym.make`` convenience.
     """
 
+    action_space: spaces.Discrete
+    observation_space: spaces.Box
+
     #: "rgb_array" renders a top view headless. The pybullet GUI window is opened with
     #: ``sim=SimConfig(connection="gui")`` rather than a "human" render mode, so that headless
     #: machines (and ``check_env``, which tries every listed mode) never need a display.
@@ -178,8 +181,9 @@ class EPuckEnv(gym.Env):
         self._v_max = rc.max_linear_speed
         self._clearance = rc.body_radius + 0.03
         self.action_space = spaces.Discrete(len(self._actions))
-        self.observation_space = spaces.Box(0.0, 1.0, shape=(self.robot.n_sensors,), dtype=np.float32)
-        self._pose = (0.0, 0.0, 0.0)
+        self.observation_space = spaces.Box(0.0, 1.0, shape=(self.robot.n_sensors,),
+                                            dtype=np.float32)
+        self._pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._trail: deque[tuple[float, float]] = deque(maxlen=max(1, config.stuck_steps + 1))
         self._distances = np.full(self.robot.n_sensors, rc.sensor_range)
         self.sim_steps = 0
@@ -206,9 +210,12 @@ class EPuckEnv(gym.Env):
             # same seed, same world: a rebuilt client holds no contact state from before
             self.world.rebuild()
             self.robot = self.world.robot
+        pose: tuple[float, float, float]
         if "pose" in options:
-            pose = tuple(float(v) for v in options["pose"])
+            x, y, yaw = (float(v) for v in options["pose"])
+            pose = (x, y, yaw)
         elif seed is not None and not self.arena.start.random:
+            assert self.arena.start.pose is not None, "a start that is not random has a pose"
             pose = self.arena.start.pose
         else:
             pose = self.arena.sample_free_pose(self.np_random, self._clearance)
@@ -235,7 +242,8 @@ class EPuckEnv(gym.Env):
         stuck = self._stuck(pose)
         reward = self._reward(obs, progress, collision)
         terminated = self._terminated(collision)
-        return obs, reward, terminated, stuck and not terminated, self._info(collision, stuck, progress)
+        return (obs, reward, terminated, stuck and not terminated,
+                self._info(collision, stuck, progress))
 
     def render(self) -> np.ndarray | None:
         """Top view as an RGB array, shape (480, 480, 3), uint8 (``rgb_array`` mode)."""

@@ -160,7 +160,8 @@ class EPuck:
             shapeTypes=[p.GEOM_CYLINDER, p.GEOM_SPHERE, p.GEOM_SPHERE],
             radii=[c.body_radius, caster_r, caster_r],
             lengths=[c.body_height, 0.0, 0.0],
-            collisionFramePositions=[(0, 0, body_z), (caster_x, 0, caster_z), (-caster_x, 0, caster_z)],
+            collisionFramePositions=[(0, 0, body_z), (caster_x, 0, caster_z),
+                                     (-caster_x, 0, caster_z)],
             physicsClientId=cid,
         )
         base_vis = p.createVisualShape(

@@ -20,9 +20,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
+from typing import Any
 
 import numpy as np
 
+from dfrl.robots.approx import FunctionLearner
 from dfrl.robots.learners import greedy_action, is_tabular
 from dfrl.robots.state import Discretiser
 from dfrl.robots.training import TrainerConfig, build_learner
@@ -99,6 +101,8 @@ def greedy_policy(config: TrainerConfig, params: np.ndarray, obs_dim: int = 8,
     learner = build_learner(config, 1, obs_dim, n, np.random.default_rng(0))
     learner.set_params(params)
 
+    assert isinstance(learner, FunctionLearner), learner       # tabular ones refused above
+
     def greedy(obs: np.ndarray) -> int:
         return learner.greedy_action(np.asarray(obs, dtype=np.float64))
 
@@ -110,7 +114,8 @@ class _Coverage:
 
     def __init__(self, arena, clearance: float) -> None:  # noqa: ANN001 - ArenaSpec
         w, d = arena.size
-        self.nx, self.ny = max(1, int(round(w / COVERAGE_CELL))), max(1, int(round(d / COVERAGE_CELL)))
+        self.nx = max(1, int(round(w / COVERAGE_CELL)))
+        self.ny = max(1, int(round(d / COVERAGE_CELL)))
         self.x0, self.y0 = -w / 2, -d / 2
         xs = self.x0 + (np.arange(self.nx) + 0.5) * (w / self.nx)
         ys = self.y0 + (np.arange(self.ny) + 0.5) * (d / self.ny)
@@ -210,6 +215,7 @@ def evaluate_policy(
             if fn is not None:
                 action = int(fn(obs))
             elif kind is PolicyKind.GREEDY:
+                assert q_table is not None          # checked above: no policy, so a table
                 action = greedy_action(q_table[disc(obs)], rng)
             else:
                 action = int(rng.integers(n_actions))
@@ -279,7 +285,7 @@ def evaluate_snapshots(
 
 
 def learnt_vs_random(config: TrainerConfig, seed: int, steps: int, eval_seed: int,
-                     params: np.ndarray | None = None) -> dict[str, object]:
+                     params: np.ndarray | None = None) -> dict[str, Any]:
     """Train ``config`` with ``seed`` (unless ``params`` are given), then measure its greedy
     policy and a uniform random one from the same start and respawn poses.
 

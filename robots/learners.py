@@ -27,8 +27,9 @@ from dfrl.robots.linear import LinearQ
 
 # The pure maths live in dfrl.robots.td (shared with the function-approximation learners);
 # they are imported here under their old home, where callers and tests find them.
-from dfrl.robots.td import (EpsilonSchedule, LearnerParams, ScheduleKind, epsilon_greedy,
-                            greedy_action, q_learning_target, sarsa_target, td_update)
+from dfrl.robots.td import (EpsilonSchedule, LearnerParams, ScheduleKind,  # noqa: F401
+                            epsilon_greedy, greedy_action,  # noqa: F401 - re-exported, see above
+                            q_learning_target, sarsa_target, td_update)
 
 
 def validate_table(table: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
@@ -44,7 +45,8 @@ def validate_table(table: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
         raise ValueError(f"Q-table shape {arr.shape} does not match the expected {tuple(shape)}")
     if not np.all(np.isfinite(arr)):
         bad = np.argwhere(~np.isfinite(arr))[0]
-        raise ValueError(f"Q-table has a non-finite entry at (state, action) = {tuple(int(i) for i in bad)}")
+        where = tuple(int(i) for i in bad)
+        raise ValueError(f"Q-table has a non-finite entry at (state, action) = {where}")
     return arr
 
 

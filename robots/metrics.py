@@ -74,7 +74,7 @@ METRIC_DTYPE = np.dtype([
 
 def write_metrics_csv(path: str | Path, metrics: np.ndarray) -> None:
     """Write a metrics record array as CSV with a header row."""
-    names = metrics.dtype.names
+    names = metrics.dtype.names or ()
     with open(path, "w", newline="", encoding="utf-8") as fh:
         writer = csv.writer(fh)
         writer.writerow(names)

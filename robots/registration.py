@@ -22,8 +22,8 @@ def register_envs() -> None:
 
     if ENV_ID in gym.registry:
         return
-    vector = {}
     if hasattr(gym.vector, "AutoresetMode"):   # Gymnasium >= 1.1, whose VectorEnv it implements
-        vector["vector_entry_point"] = "dfrl.robots.vector_env:EPuckVectorEnv"
-    gym.register(id=ENV_ID, entry_point="dfrl.robots.env:EPuckEnv", max_episode_steps=1000,
-                 **vector)
+        gym.register(id=ENV_ID, entry_point="dfrl.robots.env:EPuckEnv", max_episode_steps=1000,
+                     vector_entry_point="dfrl.robots.vector_env:EPuckVectorEnv")
+    else:
+        gym.register(id=ENV_ID, entry_point="dfrl.robots.env:EPuckEnv", max_episode_steps=1000)

@@ -125,7 +125,8 @@ def load_table(path: str | Path) -> LoadedTable:
         raise ValueError(f"{npy}: missing sidecar {js.name} describing the table")
     doc = json.loads(js.read_text(encoding="utf-8"))
     if doc.get("format") != TABLE_FORMAT:
-        raise ValueError(f"{js}: unknown table format {doc.get('format')!r}, expected {TABLE_FORMAT!r}")
+        raise ValueError(f"{js}: unknown table format {doc.get('format')!r}, "
+                         f"expected {TABLE_FORMAT!r}")
     q = validate_table(np.load(npy, allow_pickle=False), tuple(doc["shape"]))
     meta = TableMeta(**{k: doc[k] for k in ("algorithm", "arena", "seed", "iterations",
                                             "actions", "state")}, extra=doc.get("extra", {}))

@@ -93,7 +93,9 @@ class Trainer:
         obs, _ = self.env.reset(seed=int(env_seq.generate_state(1)[0]))
         self._state = self.discretiser(obs)
         self._obs = np.array(obs, dtype=np.float64)
-        self._action = self.learner.select_action(self._state if self._tabular else self._obs)
+        self._action = (self.learner.select_action(self._state)
+                        if isinstance(self.learner, TabularLearner)
+                        else self.learner.select_action(self._obs))
         self.iteration = 0
         self.cumulative_reward = 0.0
         self.collisions = 0
@@ -113,14 +115,14 @@ class Trainer:
         Tabular: the Q-table in C order (layout ``[("q", (n_states, n_actions))]``);
         function learners: their arrays in :attr:`param_layout` order.
         """
-        if self._tabular:
+        if isinstance(self.learner, TabularLearner):
             return self.learner.q.ravel().copy()
         return self.learner.get_params()
 
     @property
     def param_layout(self) -> Layout:
         """Names and shapes of the arrays :attr:`params` concatenates, in order (C order each)."""
-        if self._tabular:
+        if isinstance(self.learner, TabularLearner):
             return [("q", tuple(self.learner.q.shape))]
         return self.learner.param_layout
 
@@ -135,7 +137,7 @@ class Trainer:
         ValueError
             Not 1-D, wrong length, or a non-finite entry.
         """
-        if self._tabular:
+        if isinstance(self.learner, TabularLearner):
             q = validate_params(vec, self.param_layout)
             self.learner.set_table(q.reshape(self.learner.q.shape))
         else:
@@ -148,10 +150,10 @@ class Trainer:
         return int(self.learner.t)
 
     def _tabular_only(self, what: str) -> TabularLearner:
-        if not self._tabular:
+        if not isinstance(self.learner, TabularLearner):
             raise TypeError(f"{what}: learner '{self.config.algo}' is a function-approximation "
                             f"learner without a Q-table; use params / set_params")
-        return self.learner  # type: ignore[return-value]
+        return self.learner
 
     @property
     def q_table(self) -> np.ndarray:
@@ -221,7 +223,7 @@ class Trainer:
         learnt, end = ((reward, terminated) if self.reward_shuffle is None
                        else self.reward_shuffle(reward, terminated))
         self.learned_reward, self.learned_terminal = learnt, end
-        if self._tabular:
+        if isinstance(self.learner, TabularLearner):
             next_action = self.learner.learn(state, action, learnt, next_state, end)
         else:
             next_obs = np.array(obs, dtype=np.float64)
@@ -229,8 +231,9 @@ class Trainer:
         if terminated or truncated:
             obs, _ = env.reset()
             next_state = self.discretiser(obs)
-            next_action = self.learner.select_action(
-                next_state if self._tabular else np.array(obs, dtype=np.float64))
+            next_action = (self.learner.select_action(next_state)
+                           if isinstance(self.learner, TabularLearner)
+                           else self.learner.select_action(np.array(obs, dtype=np.float64)))
             self.respawns += 1
         self._state, self._action = next_state, next_action
         if not self._tabular:
@@ -248,13 +251,13 @@ class Trainer:
         )
 
     def _q_sum(self) -> float:
-        if self._tabular:
+        if isinstance(self.learner, TabularLearner):
             return float(self.learner.q.sum())
         return float(self.learner.get_params().sum())
 
     def greedy_action(self, obs: np.ndarray) -> int:
         """The learnt greedy action for an observation (ties: lowest index), no exploration."""
-        if self._tabular:
+        if isinstance(self.learner, TabularLearner):
             from dfrl.robots.td import greedy_action
             return greedy_action(self.learner.q[self.discretiser(obs)])
         return self.learner.greedy_action(np.asarray(obs, dtype=np.float64))
@@ -384,5 +387,7 @@ def train(
             else:
                 trainer.save_params(out / "params", wall_time_s=round(wall, 3))
             if snapshots:
-                np.savez(out / "snapshots.npz", **{f"it{k}": v for k, v in snapshots.items()})
+                # numpy's stubs match a **dict of arrays against savez's allow_pickle: bool too
+                np.savez(out / "snapshots.npz",
+                         **{f"it{k}": v for k, v in snapshots.items()})  # type: ignore[arg-type]
     return result

@@ -23,7 +23,7 @@ in the registered ``TimeLimit``):
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -158,10 +158,11 @@ class EPuckVectorEnv(VectorEnv):
         if options:
             raise ValueError(f"EPuckVectorEnv.reset: unknown options {sorted(options)} (known: "
                              f"reset_mask, pose)")
-        for i in np.flatnonzero(mask):
-            i = int(i)
-            if seeds[i] is not None:
-                self._seed(i, seeds[i])
+        for index in np.flatnonzero(mask):
+            i = int(index)
+            seed_i = seeds[i]
+            if seed_i is not None:
+                self._seed(i, seed_i)
             if poses is not None:
                 self.world.place(i, (poses[i, 0], poses[i, 1], poses[i, 2]))
             elif seeds[i] is not None:
@@ -206,7 +207,7 @@ class EPuckVectorEnv(VectorEnv):
         # the kernel steps every robot: a robot being reset is stepped too and its step thrown
         # away; its generators are put back first, so the reset draws what EPuckEnv.reset()
         # would and the step leaves no trace
-        saved = [self._states(i) for i in resetting]
+        saved = [self._states(int(i)) for i in resetting]
         result = self.world.step(acts)
         rewards = result.reward
         collision, stuck, progress = result.collision, result.stuck, result.progress
@@ -216,7 +217,7 @@ class EPuckVectorEnv(VectorEnv):
         if self.max_episode_steps is not None:
             truncated |= self._elapsed >= self.max_episode_steps
         for i, states in zip(resetting, saved):
-            self._set_states(i, states)
+            self._set_states(int(i), states)
             self.world.respawn(int(i))
         if resetting.size:
             for a in (rewards, progress):
@@ -244,10 +245,10 @@ class EPuckVectorEnv(VectorEnv):
         motion = fresh.spawn(1)[0]          # as BatchedWorld spawns it, before any draw
         self._set_states(i, (fresh.bit_generator.state, motion.bit_generator.state))
 
-    def _states(self, i: int) -> tuple[dict[str, Any], ...]:
+    def _states(self, i: int) -> tuple[Mapping[str, Any], ...]:
         return tuple(g.bit_generator.state for g in self._generators(i))
 
-    def _set_states(self, i: int, states: tuple[dict[str, Any], ...]) -> None:
+    def _set_states(self, i: int, states: tuple[Mapping[str, Any], ...]) -> None:
         for g, state in zip(self._generators(i), states):
             g.bit_generator.state = state
 
@@ -257,6 +258,8 @@ class EPuckVectorEnv(VectorEnv):
             return [None] * n
         if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
             return [int(seed) + i for i in range(n)]
+        if isinstance(seed, bool):
+            raise TypeError(f"EPuckVectorEnv.reset: a seed is an int, got {seed!r}")
         seeds = list(seed)
         if len(seeds) != n:
             raise ValueError(f"EPuckVectorEnv.reset: {len(seeds)} seeds for {n} "

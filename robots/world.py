@@ -50,7 +50,8 @@ class SimConfig:
         object.__setattr__(self, "connection", ConnectionMode(self.connection))
         if not (self.control_dt > 0 and self.physics_dt > 0):
             raise ValueError(
-                f"control_dt and physics_dt must be positive, got {self.control_dt}, {self.physics_dt}"
+                f"control_dt and physics_dt must be positive, "
+                f"got {self.control_dt}, {self.physics_dt}"
             )
         if self.solver_iterations < 1:
             raise ValueError("solver_iterations must be >= 1")

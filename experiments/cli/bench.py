@@ -212,7 +212,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 def add_table_shape_arguments(parser: argparse.ArgumentParser) -> None:
     """``--entries`` and ``--actions``: the shape of the benchmark's Q-tables."""
-    parser.add_argument("--entries", type=int, default=20000, help="Q-table entries (default 20000)")
+    parser.add_argument("--entries", type=int, default=20000,
+                        help="Q-table entries (default 20000)")
     parser.add_argument("--actions", type=int, default=4, help="actions per state (default 4)")
 
 
@@ -303,9 +304,11 @@ def add_bridge_arguments(parser: argparse.ArgumentParser) -> None:
                         help="what the main loop steps between two serve_pending calls: a pybullet "
                              "world of falling boxes, a training e-puck (robots.training.Trainer: "
                              "one 64 ms control step of sense, learn, act), or nothing")
-    parser.add_argument("--bodies", type=int, default=30, help="falling boxes in the pybullet world")
+    parser.add_argument("--bodies", type=int, default=30,
+                        help="falling boxes in the pybullet world")
     parser.add_argument("--physics-steps", type=int, default=1,
-                        help="pybullet steps per control step (serve_pending once per control step)")
+                        help="pybullet steps per control step "
+                             "(serve_pending once per control step)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the tables and the world")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 

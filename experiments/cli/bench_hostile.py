@@ -18,7 +18,8 @@ D = hostile.HostileConfig()
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``dfrl bench hostile``, each help stating its default."""
     parser.add_argument("--slowloris", type=int, default=D.slowloris,
-                        help=f"slowloris connections, one byte a second each (default {D.slowloris})")
+                        help=f"slowloris connections, one byte a second each "
+                             f"(default {D.slowloris})")
     parser.add_argument("--flood", type=int, default=D.flood,
                         help=f"flood connections opened and held (default {D.flood})")
     parser.add_argument("--frames", type=int, default=D.frames,
@@ -28,7 +29,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, default=D.duration_s,
                         help=f"seconds of each phase, quiet included (default {D.duration_s:g})")
     parser.add_argument("--settle", type=float, default=D.settle_s,
-                        help=f"seconds after each attack before RSS is read (default {D.settle_s:g})")
+                        help=f"seconds after each attack before RSS is read "
+                             f"(default {D.settle_s:g})")
     parser.add_argument("--sources", type=int, default=D.sources,
                         help=f"loopback source addresses of the attackers, from 127.0.0.2 "
                              f"(default {D.sources})")

@@ -124,9 +124,9 @@ def print_results(results: Results) -> None:
     """Rounds, crashes on stderr; the results folder on stdout."""
     failed = [r for r in results.rounds if r.get("error")]
     partial = [r for r in results.rounds if r.get("skipped") and not r.get("error")]
-    print(f"{len(results.rounds)} rounds, {results.equal_rounds} with every robot holding the same table "
-          f"after the share, {len(partial)} that skipped robots, {len(failed)} whose method "
-          f"FAILED; wall time {results.wall_time_s:.1f} s", file=sys.stderr)
+    print(f"{len(results.rounds)} rounds, {results.equal_rounds} with every robot holding the "
+          f"same table after the share, {len(partial)} that skipped robots, {len(failed)} "
+          f"whose method FAILED; wall time {results.wall_time_s:.1f} s", file=sys.stderr)
     if results.crashed:
         print(f"crashed robots: {results.crashed}", file=sys.stderr)
     if results.faults is not None:
@@ -255,7 +255,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         cfg = ExperimentConfig.load(resolve_config("demo"), over)
     except ConfigError as exc:
         return config_error("dfrl demo", exc)
-    print(f"dfrl demo: {len(cfg.robots)} robots ({', '.join(r.arena.upper() for r in cfg.robots)}), "
+    arenas = ", ".join(r.arena.upper() for r in cfg.robots)
+    print(f"dfrl demo: {len(cfg.robots)} robots ({arenas}), "
           f"{cfg.method}, {cfg.iterations} iterations, a share every {cfg.respite} "
           f"({cfg.rounds} rounds), {cfg.mode.value} mode, seed {cfg.seed}", file=sys.stderr)
     return run_and_report(cfg, args, "dfrl demo", show_summary=True)

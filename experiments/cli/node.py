@@ -35,7 +35,7 @@ class BoundFlag:
         if self.infinite and text == "infinite":
             return "infinite"
         try:
-            value: Bound = int(text) if self.integer else float(text)
+            value: int | float = int(text) if self.integer else float(text)
         except ValueError:
             value = -1
         if value <= 0:
@@ -154,7 +154,8 @@ def node_command(
     """
     if not 0 <= port <= 65535:
         raise ValueError(f"port {port} is outside 0..65535")
-    cmd = [processes.swipl(), "-q", str(PLATFORM_DIR / "node_main.pl"), "--host", host, "--port", str(port)]
+    cmd = [processes.swipl(), "-q", str(PLATFORM_DIR / "node_main.pl"), "--host", host, "--port",
+           str(port)]
     for path in consult or []:
         cmd += ["--consult", os.path.abspath(path)]
     if advertise:

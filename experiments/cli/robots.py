@@ -1,4 +1,5 @@
-"""Standalone robot commands: ``dfrl train``, ``dfrl eval``, ``dfrl baselines``, ``dfrl render-arenas``.
+"""Standalone robot commands: ``dfrl train``, ``dfrl eval``, ``dfrl baselines``,
+``dfrl render-arenas``.
 
 Thin CLI over :mod:`dfrl.robots.training`, :mod:`dfrl.experiments.science.standalone` and
 :mod:`dfrl.robots.plots`.
@@ -13,7 +14,8 @@ from pathlib import Path
 from typing import Any
 
 from dfrl.experiments.cli.figures import add_figure_arguments
-from dfrl.experiments.cli.tensorboard_option import add_tensorboard_argument, write_train_tensorboard
+from dfrl.experiments.cli.tensorboard_option import (add_tensorboard_argument,
+                                                     write_train_tensorboard)
 from dfrl.experiments.science.learning_check import DEFAULT_EPISODES, DEFAULT_STEPS
 from dfrl.robots.learners import LEARNERS, EpsilonSchedule, LearnerParams, ScheduleKind
 from dfrl.robots.training import DEMO_ITERATIONS, TrainerConfig
@@ -55,7 +57,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_eval)
 
     p = subparsers.add_parser(
-        "baselines", help="standalone Q-learning and SARSA in R1 and R4 (the paper's baseline figures)")
+        "baselines",
+        help="standalone Q-learning and SARSA in R1 and R4 (the paper's baseline figures)")
     p.add_argument("--out", type=Path, default=Path("results/baselines"),
                    help="output folder (default: %(default)s)")
     p.add_argument("--iterations", type=int, default=20_000,
@@ -93,8 +96,10 @@ def _add_config_arguments(p: argparse.ArgumentParser, seed: bool = True) -> None
     g = p.add_argument_group("run")
     g.add_argument("--config", type=Path, default=None,
                    help="a config.json written by a previous run (flags below override it)")
-    g.add_argument("--arena", default=None, help=f"arena name (r1..r5) or JSON file (default {d.arena})")
-    g.add_argument("--algo", choices=sorted(LEARNERS), default=None, help=f"learner (default {d.algo})")
+    g.add_argument("--arena", default=None,
+                   help=f"arena name (r1..r5) or JSON file (default {d.arena})")
+    g.add_argument("--algo", choices=sorted(LEARNERS), default=None,
+                   help=f"learner (default {d.algo})")
     g.add_argument("--iterations", type=int, default=None,
                    help=f"control steps of 64 ms (default {DEMO_ITERATIONS})")
     if seed:
@@ -123,7 +128,8 @@ def _add_config_arguments(p: argparse.ArgumentParser, seed: bool = True) -> None
                              ("buffer_size", int, "replay capacity"),
                              ("learning_starts", int, "transitions before the first gradient step"),
                              ("train_every", int, "environment steps per gradient step"),
-                             ("target_update", int, "gradient steps between target network copies")):
+                             ("target_update", int,
+                              "gradient steps between target network copies")):
         g.add_argument("--" + flag.replace("_", "-"), type=kind, default=None,
                        help=f"dqn: {what} ({getattr(d.dqn, flag)})")
     g = p.add_argument_group("state, actions, simulation")
@@ -134,7 +140,8 @@ def _add_config_arguments(p: argparse.ArgumentParser, seed: bool = True) -> None
     g.add_argument("--actions", choices=[a.value for a in ActionSet], default=None,
                    help=f"action set (default {_value(d.actions)})")
     g.add_argument("--collision-response", choices=[c.value for c in CollisionResponse],
-                   default=None, help=f"what a collision does (default {_value(d.collision_response)})")
+                   default=None,
+                   help=f"what a collision does (default {_value(d.collision_response)})")
     g.add_argument("--control-dt", type=float, default=None, help=f"s ({d.sim.control_dt})")
     g.add_argument("--physics-dt", type=float, default=None, help=f"s ({d.sim.physics_dt})")
     g.add_argument("--sensor-noise", type=float, default=None,
@@ -162,11 +169,12 @@ def config_from_args(args: argparse.Namespace) -> TrainerConfig:
         if value is not None:
             top[name] = value
     eps = cfg.learner.epsilon
-    eps_changes = {k: v for k, v in (("kind", args.epsilon_schedule), ("start", args.epsilon_start),
-                                      ("end", args.epsilon_end), ("decay_steps", args.epsilon_decay))
+    eps_changes = {k: v for k, v in (("kind", args.epsilon_schedule),
+                                     ("start", args.epsilon_start), ("end", args.epsilon_end),
+                                     ("decay_steps", args.epsilon_decay))
                    if v is not None}
-    learner_changes: dict[str, Any] = {k: v for k, v in (("alpha", args.alpha), ("gamma", args.gamma))
-                                       if v is not None}
+    learner_changes: dict[str, Any] = {
+        k: v for k, v in (("alpha", args.alpha), ("gamma", args.gamma)) if v is not None}
     if eps_changes:
         learner_changes["epsilon"] = EpsilonSchedule(**{**eps.__dict__, **eps_changes})
     if learner_changes:
@@ -182,13 +190,15 @@ def config_from_args(args: argparse.Namespace) -> TrainerConfig:
         net["hidden"] = tuple(args.hidden)
     if net:
         top["dqn"] = dataclasses.replace(cfg.dqn, **net)
-    disc = {k: v for k, v in (("grouping", args.grouping), ("levels", args.levels)) if v is not None}
+    disc = {k: v for k, v in (("grouping", args.grouping), ("levels", args.levels))
+            if v is not None}
     if disc:
         top["discretisation"] = DiscretisationConfig(**{**cfg.discretisation.__dict__, **disc})
     sim = {k: v for k, v in (("control_dt", args.control_dt), ("physics_dt", args.physics_dt))
            if v is not None}
     if args.sensor_noise is not None:
-        sim["robot"] = EPuckConfig(**{**cfg.sim.robot.__dict__, "sensor_noise_std": args.sensor_noise})
+        sim["robot"] = EPuckConfig(**{**cfg.sim.robot.__dict__,
+                                      "sensor_noise_std": args.sensor_noise})
     if getattr(args, "gui", False):
         sim["connection"] = "gui"
     if sim:
@@ -294,7 +304,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     return _print_eval(args, cfg, summary, table)
 
 
-def _print_eval(args: argparse.Namespace, cfg: TrainerConfig, summary: Any, table: str | None) -> int:
+def _print_eval(args: argparse.Namespace, cfg: TrainerConfig, summary: Any,
+                table: str | None) -> int:
     """Print a ``dfrl eval`` summary (JSON with ``--json``); 0."""
     if args.json:
         print(json.dumps(summary.to_dict(), indent=2))
@@ -314,7 +325,8 @@ def _print_eval(args: argparse.Namespace, cfg: TrainerConfig, summary: Any, tabl
     return 0
 
 
-def _eval_function_learner(args: argparse.Namespace, cfg: TrainerConfig, params_file: Path | None) -> int:
+def _eval_function_learner(args: argparse.Namespace, cfg: TrainerConfig,
+                           params_file: Path | None) -> int:
     """``dfrl eval`` for ``linear`` and ``dqn``: train per seed (or load ``params_file``), then
     greedy vs random, reported as for the tables (one process: ``--jobs`` is not used)."""
     from dfrl.experiments.science.standalone import EVAL_SEED_OFFSET, EvalSummary

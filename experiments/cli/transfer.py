@@ -43,7 +43,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="learner (default: the table's algorithm)")
     p.add_argument("--grouping", choices=[s.value for s in SensorGrouping], default=None,
                    help="sensor groups (default: the table's)")
-    p.add_argument("--levels", type=int, default=None, help="levels per group (default: the table's)")
+    p.add_argument("--levels", type=int, default=None,
+                   help="levels per group (default: the table's)")
     p.add_argument("--eval-steps", type=int, default=2000,
                    help="greedy evaluation steps per table, 0 to skip (default: %(default)s)")
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default: %(default)s)")
@@ -204,7 +205,7 @@ def register_study(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_study)
 
 
-def thresholds_arg(words: list[str]) -> dict[str, object]:
+def thresholds_arg(words: list[str]) -> dict[str, Any]:
     """``--threshold`` words -> ``threshold`` (a bare SCORE) and ``arena_thresholds``
     (ARENA=SCORE).
 
@@ -246,8 +247,9 @@ def cmd_study(args: argparse.Namespace) -> int:
             options = {"sim": LEGACY_SIM, **doc["options"]}
             if args.sim is not None:
                 check_same(options["sim"], args.sim, str(args.from_json))
-            opts = StudyOptions(**{k: tuple(v) if isinstance(v, list) else v
-                                   for k, v in options.items()})
+            fields: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v
+                                      for k, v in options.items()}
+            opts = StudyOptions(**fields)
             rows, wall = doc["rows"], float(doc["wall_time"])
             found = claims(rows, opts, args.resamples)
             check_confirm(opts.sim, args.confirm_seeds, len(opts.source_seeds))

@@ -9,10 +9,11 @@ for the robot processes of this host their ``metrics_<robot>.csv``, ``shares_<ro
 ``agent_logs/<robot>/rounds_<agent>.log``) and on the robot hosts (each ``dfrl robot`` keeps
 the files of the experiment it holds, its ``agent_logs/`` included). The agents' lines are
 read from ``rounds_<agent>.log`` and every kept log, each line once: a round the console never
-got (its driver was dead, its host cut off) is still counted. :func:`collect` fetches the remote robots' files as the driver
-does at the end of a run (:func:`~.launcher.remote_robots.fetch_files`, through a console
-node of its own with the run's ``secret.token``), then writes the same files with the same
-code (:func:`~.results.ending.write_end_files`). The verdict follows the same criteria, judged
+got (its driver was dead, its host cut off) is still counted. :func:`collect` fetches the
+remote robots' files as the driver does at the end of a run
+(:func:`~.launcher.remote_robots.fetch_files`, through a console node of its own with the
+run's ``secret.token``), then writes the same files with the same code
+(:func:`~.results.ending.write_end_files`). The verdict follows the same criteria, judged
 from the files: a robot that did not run all its iterations counts as lost, a round never
 logged as missing; ``summary.md`` says it was collected after the driver stopped and what
 could not be fetched.

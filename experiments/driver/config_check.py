@@ -21,8 +21,8 @@ from dfrl.experiments.config_rules import (Rule, check_keys, check_robot_id, che
 from dfrl.experiments.suggestions import did_you_mean
 from dfrl.experiments.robot_host.config import DEFAULT_ITERATIONS, modes
 
-__all__ = ["BUILTIN_METHODS", "COMMENT_KEYS", "FEDERATIONS", "GRID", "ITINERARIES", "PARAMS_REFUSED",
-           "check_experiment", "host_port_problem"]
+__all__ = ["BUILTIN_METHODS", "COMMENT_KEYS", "FEDERATIONS", "GRID", "ITINERARIES",
+           "PARAMS_REFUSED", "check_experiment", "host_port_problem"]
 
 #: Aggregation methods built into the agent; others are injected into a running experiment
 #: with ``dfrl inject`` (an experiment config can only name these).
@@ -194,7 +194,8 @@ def check_params_methods(data: dict[str, Any], entries: list[tuple[str, Any]]) -
     do not."""
     from dfrl.robots.learners import is_tabular
 
-    methods = data.get("methods") if isinstance(data.get("methods"), dict) else {}
+    given = data.get("methods")
+    methods: dict[str, Any] = given if isinstance(given, dict) else {}
     algos = [r.get("algo", "qlearning") for _, r in entries if isinstance(r, dict)]
     algos = list(dict.fromkeys(a for a in algos if isinstance(a, str) and a in known_algorithms()))
     tabular = any(is_tabular(a) for a in algos)
@@ -229,7 +230,8 @@ def check_federation(data: dict[str, Any]) -> list[str]:
     if isinstance(joins, list) and joins:
         out.append("joins: a robot cannot join a grid federation (a joiner is handed to the "
                    "agent of its algorithm); list it in robots")
-    robots = data.get("robots") if isinstance(data.get("robots"), list) else []
+    listed = data.get("robots")
+    robots: list[Any] = listed if isinstance(listed, list) else []
     for i, robot in enumerate(robots):
         algo = robot.get("algo") if isinstance(robot, dict) else None
         if isinstance(algo, str) and algo in known_algorithms() and not _distillable(algo):

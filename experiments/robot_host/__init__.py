@@ -46,8 +46,9 @@ share bookkeeping with each write's round, agent and epoch), :mod:`.files` (the 
 learning).
 
 The node stops early when stdin reaches end of file or reads a line ``stop`` (the launcher
-closes it when the experiment ends), unless stdin was at end of file from the start; after the last iteration it keeps its platform up until
-no agent is left on it (sync) or until stdin closes (async), at most ``grace_s`` seconds.
+closes it when the experiment ends), unless stdin was at end of file from the start; after
+the last iteration it keeps its platform up until no agent is left on it (sync) or until
+stdin closes (async), at most ``grace_s`` seconds.
 """
 from __future__ import annotations
 

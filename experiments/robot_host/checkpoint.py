@@ -246,9 +246,11 @@ def restore_trainer(trainer: Any, cp: Checkpoint) -> None:
         held = "parameters" if cp.params is not None else "a Q-table"
         raise ValueError(f"the checkpoint holds {held}, this robot's learner "
                          f"({trainer.config.algo}) {'has parameters' if function else 'a table'}")
-    if function:
+    if cp.params is not None:                   # a function learner's (checked just above)
         trainer.set_params(cp.params)
     else:
+        if cp.q is None:
+            raise ValueError("the checkpoint holds neither a table nor parameters")
         if cp.q.shape != trainer.q_table.shape:
             raise ValueError(f"the checkpoint's table has shape {cp.q.shape}, this robot's "
                              f"{trainer.q_table.shape}")

@@ -8,8 +8,8 @@ process of the worker, on the worker's host::
         --token-file dfrl.token --workdir dfrl-robot/ROBOT
 
 (``dfrl.token`` in the worker's working folder, as on every robot host: the token never
-travels through the cluster engine), waits for its ``dfrl robot listening on A:P`` line (at most as many services of a worker
-start at once as its host has cores: :data:`STARTING`),
+travels through the cluster engine), waits for its ``dfrl robot listening on A:P`` line (at
+most as many services of a worker start at once as its host has cores: :data:`STARTING`),
 reports ``A:P`` to the driver in the run's variable ``dfrl-<run>-<robot>-address`` (and sets
 the event ``dfrl-<run>-<robot>-listening``), and then
 holds the cluster resources it was placed with until one of:
@@ -89,7 +89,8 @@ def _await_listening(proc: subprocess.Popen, out: Path, where: str) -> tuple[str
             return m.group(1), int(m.group(2))
         if proc.poll() is not None:
             err = out.with_suffix(".err")
-            tail = err.read_text(encoding="utf-8", errors="replace")[-1500:] if err.is_file() else ""
+            tail = (err.read_text(encoding="utf-8", errors="replace")[-1500:]
+                    if err.is_file() else "")
             raise ClusterTaskError(f"{where}: dfrl robot exited with status {proc.returncode} "
                                    f"before it listened: {tail.strip()}")
         time.sleep(0.1)
@@ -175,7 +176,8 @@ def serve_robot(run_key: str, robot: str, token_file: str = "dfrl.token",
                 open(out.with_suffix(".err"), "w", encoding="utf-8") as err_fh:
             proc = subprocess.Popen(service_argv(host, token, folder, tls_dir),
                                     stdin=subprocess.DEVNULL, stdout=out_fh, stderr=err_fh,
-                                    cwd=folder, preexec_fn=_die_with_parent if os.name == "posix" else None)
+                                    cwd=folder,
+                                    preexec_fn=_die_with_parent if os.name == "posix" else None)
         try:
             address = _await_listening(proc, out, where)
         except BaseException:

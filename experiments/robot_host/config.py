@@ -10,9 +10,9 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any
 
-from dfrl.experiments.config_rules import (JsonDicts, Rule, check_keys, check_robot_id, check_trainer,
-                                           checked, is_checked, json_form, known_algorithms,
-                                           raise_problems, token_rule)
+from dfrl.experiments.config_rules import (JsonDicts, Rule, check_keys, check_robot_id,
+                                           check_trainer, checked, is_checked, json_form,
+                                           known_algorithms, raise_problems, token_rule)
 
 __all__ = ["DEFAULT_ITERATIONS", "Mode", "RobotConfig", "boundaries", "check_robot_config"]
 

@@ -89,11 +89,14 @@ class LiveEvaluator:
         """
         from dfrl.robots.evaluation import PolicyKind, evaluate_policy
 
-        learnt = ({"params": np.array(params)} if params is not None
-                  else {"q_table": np.array(q_table)})
-        r = evaluate_policy(self.config, PolicyKind.GREEDY, self.steps,
-                            eval_seed(self.seed, iteration), **learnt)
-        row = {"robot": self.robot, "iteration": iteration, "arena": str(self.config.arena),
+        if params is not None:
+            r = evaluate_policy(self.config, PolicyKind.GREEDY, self.steps,
+                                eval_seed(self.seed, iteration), params=np.array(params))
+        else:
+            r = evaluate_policy(self.config, PolicyKind.GREEDY, self.steps,
+                                eval_seed(self.seed, iteration), q_table=np.array(q_table))
+        row: dict[str, Any] = {"robot": self.robot, "iteration": iteration,
+                               "arena": str(self.config.arena),
                "steps": r.steps, "collisions_per_1000": r.collisions_per_1000,
                "distance": r.distance, "progress": r.progress, "coverage": r.coverage,
                "mean_reward": r.mean_reward}

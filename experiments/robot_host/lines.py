@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 import os
 import select
-from typing import NamedTuple, TextIO
+from typing import NamedTuple, TextIO, TypeVar
 
 __all__ = ["Evaluation", "ProtocolLines", "Sample", "StdinWatch", "parse_eval", "parse_sample"]
 
@@ -19,6 +19,9 @@ class Sample(NamedTuple):
     yaw: float
     q_sum: float
     cumulative_reward: float
+
+
+_Measures = TypeVar("_Measures", "Sample", "Evaluation")
 
 
 def parse_sample(line: str) -> Sample | None:
@@ -36,7 +39,7 @@ def parse_event(line: str) -> tuple[str, int] | None:
     return parts[2], int(parts[3])
 
 
-def _parse_measures(line: str, tag: str, kind: type) -> tuple | None:
+def _parse_measures(line: str, tag: str, kind: type[_Measures]) -> _Measures | None:
     """``<tag> <robot> <iteration> <float> ...`` as ``kind(robot, iteration, *floats)``, with
     as many floats as ``kind`` has fields after the first two; None if the line is another
     one, malformed, or carries a value that is not finite."""
@@ -170,7 +173,7 @@ class StdinWatch:
 
     def poll(self) -> bool:
         """True once stdin reached EOF or a ``stop`` line arrived (never when detached)."""
-        if self.detached:
+        if self.detached or self.fd is None:            # detached: no descriptor
             return False
         if self.closed:
             return True

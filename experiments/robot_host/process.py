@@ -5,8 +5,9 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, Protocol, TextIO
 
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.robot_host.config import Mode, RobotConfig
@@ -14,8 +15,22 @@ from dfrl.experiments.robot_host.lines import ProtocolLines, StdinWatch
 from dfrl.experiments.robot_host.training import Training
 from dfrl.experiments.tokens import TOKEN_ENV, pop_env_tokens
 
-__all__ = ["RobotProcess", "main", "load_agent_program", "NodeStartError", "start_node",
-           "keep_agent_logs"]
+__all__ = ["RobotProcess", "ProcessProbe", "main", "load_agent_program", "NodeStartError",
+           "start_node", "keep_agent_logs"]
+
+
+class ProcessProbe(Protocol):
+    """A measurement a tool installs in a robot process it starts (``dfrl bench round --trace``
+    runs :mod:`dfrl.experiments.tools.bench.traced_robot`, which passes one to :func:`main`).
+
+    The robot process knows no benchmark: it calls :meth:`started` once its platform and the
+    agent program are loaded (before the robot is built and the node listens), and
+    :meth:`closing` before its bridge closes.
+    """
+
+    def started(self, bridge: Any, config: RobotConfig) -> None: ...
+
+    def closing(self, bridge: Any, config: RobotConfig) -> None: ...
 
 
 class NodeStartError(ExperimentError):
@@ -84,10 +99,12 @@ class RobotProcess:
         Where the protocol lines go.
     stdin : TextIO or None
         Watched for EOF / ``stop`` (not when it is at end of file from the start).
+    probes : sequence of ProcessProbe
+        Measurements a tool installs (none in a run).
     """
 
     def __init__(self, config: RobotConfig, stdout: TextIO = sys.stdout,
-                 stdin: TextIO | None = sys.stdin) -> None:
+                 stdin: TextIO | None = sys.stdin, probes: Sequence[ProcessProbe] = ()) -> None:
         self.config = config
         self.lines = ProtocolLines(stdout, config.robot, config.events)
         self.stdin = StdinWatch(stdin)
@@ -95,8 +112,7 @@ class RobotProcess:
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.bridge: Any = None
         self.run_: Training | None = None
-        self.traced = False
-        """Whether this process times the platform's steps (``DFRL_STEP_TRACE``)."""
+        self.probes = tuple(probes)
 
     @property
     def iteration(self) -> int:
@@ -118,7 +134,8 @@ class RobotProcess:
         self.bridge = Bridge()
         self.bridge.load_platform()
         load_agent_program(self.bridge, f"robot {c.robot}")
-        self.traced = start_step_trace(self.bridge)
+        for probe in self.probes:
+            probe.started(self.bridge, c)
         self.run_ = Training(c, self.bridge, self.lines, host=_StdinHost(self.stdin), poll_every=50)
         self.run_.open()
         options: dict[str, Any] = {"idle_timeout": 5.0}
@@ -137,6 +154,8 @@ class RobotProcess:
     def run(self) -> int:
         """The control loop; returns the exit code."""
         run = self.run_
+        if run is None:
+            raise RuntimeError(f"robot {self.config.robot}: run() before start()")
         if not run.simulated:
             while not self.stdin.poll():
                 self.bridge.serve_pending(timeout=0.05)
@@ -172,27 +191,9 @@ class RobotProcess:
         if self.run_ is not None:
             self.run_.close()
         if self.bridge is not None:
-            if self.traced:
-                self.bridge.call("step_trace_write", f"robot-{self.config.robot}",
-                                 module="step_trace")
+            for probe in self.probes:
+                probe.closing(self.bridge, self.config)
             self.bridge.close()
-
-
-def start_step_trace(node: Any) -> bool:
-    """With ``DFRL_STEP_TRACE=DIR`` in the environment (``dfrl bench round --trace DIR``), time
-    the platform's steps in this process (``experiments/tools/bench/step_trace.pl``; written
-    to ``DIR/robot-<id>.jsonl`` at :meth:`RobotProcess.close`). Returns whether it does."""
-    import os
-
-    from dfrl.experiments.tools.bench.step_trace import ENV, PROLOG_FILE
-
-    if not os.environ.get(ENV):
-        return False
-    from dfrl.pybridge import Atom
-
-    node.call("use_module", Atom(str(PROLOG_FILE)))
-    node.call("step_trace_start", module="step_trace")
-    return True
 
 
 def load_agent_program(node: Any, who: str) -> None:
@@ -218,8 +219,9 @@ def keep_agent_logs(bridge: Any, node: Any, folder: Path) -> Path:
     return folder
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point: ``python -m dfrl.experiments.robot_host --config NODE.json``.
+def main(argv: list[str] | None = None, probes: Sequence[ProcessProbe] = ()) -> int:
+    """Entry point: ``python -m dfrl.experiments.robot_host --config NODE.json``; ``probes``
+    are the measurements of a tool that runs the robot process its own way.
 
     The node's token comes from the environment (``DFRL_TOKEN``, deleted from it once read so
     that no child inherits it; :mod:`dfrl.experiments.tokens`), or else from the config file;
@@ -239,7 +241,7 @@ def main(argv: list[str] | None = None) -> int:
     except (OSError, ValueError, TypeError) as exc:
         print(f"robot process: bad config {args.config}: {exc}", file=sys.stderr)
         return 2
-    proc = RobotProcess(config)
+    proc = RobotProcess(config, probes=probes)
     try:
         proc.start()
         return proc.run()

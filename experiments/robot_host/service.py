@@ -54,7 +54,8 @@ class State(str, Enum):
 
 
 def _state_error(action: str, state: State) -> RequestError:
-    return RequestError(Term("permission_error", Atom(action), Atom("robot_state"), Atom(state.value)))
+    return RequestError(Term("permission_error", Atom(action), Atom("robot_state"),
+                             Atom(state.value)))
 
 
 class RobotService:
@@ -166,7 +167,7 @@ class RobotService:
         while not self._signalled:
             if self.state is State.RUNNING:
                 try:
-                    more = self.run.step()
+                    more = self.training.step()
                 except Exception as exc:  # noqa: BLE001 - a failed run is reported, not fatal
                     self._fail(exc)
                     continue
@@ -184,7 +185,7 @@ class RobotService:
         """A step that returned because of a signal ended the run by that signal."""
         if self._signalled:
             return "stopped by a signal"
-        return "stopped" if self.run.stopped else "finished"
+        return "stopped" if self.training.stopped else "finished"
 
     def _serves_tables(self) -> bool:
         if self.run is None:
@@ -200,12 +201,19 @@ class RobotService:
             self.bridge.close()
             self.bridge = None
 
+    @property
+    def training(self) -> Training:
+        """The run of the configured experiment (there is one from CONFIGURED on)."""
+        if self.run is None:
+            raise RuntimeError(f"dfrl robot: no experiment configured (state {self.state})")
+        return self.run
+
     def say(self, line: str) -> None:
         """Print one line on the service's output."""
         self.out.write(line + "\n")
         self.out.flush()
 
-    # -- TrainingHost -------------------------------------------------------------------------------
+    # -- TrainingHost -----------------------------------------------------------------------
     def wait(self, seconds: float) -> None:
         """While a run waits: answer service requests (at most ``seconds``)."""
         self.bridge.serve_service(self.handle, timeout=max(0.0, seconds))
@@ -264,26 +272,26 @@ class RobotService:
         if self.state is not State.CONFIGURED:
             raise _state_error("start", self.state)
         self.state = State.RUNNING
-        self.run.begin()
+        self.training.begin()
         self.say(f"dfrl robot: experiment {self.experiment} running")
         return Term("ok", Atom("true"))
 
     def _stop(self) -> Any:
         if self.state in (State.RUNNING, State.CONFIGURED):
-            self.run.stopped = True
+            self.training.stopped = True
             self._end_run("stopped")
         return Term("ok", Atom("true"))
 
     def _end_run(self, how: str) -> None:
         try:
-            self.run.finish()
+            self.training.finish()
         except Exception as exc:  # noqa: BLE001 - reported as the run's failure
             self._fail(exc)
             return
         self.state = State.FINISHED
-        self.run.lines.done(self.run.iteration, self.run.shares)
+        self.training.lines.done(self.training.iteration, self.training.shares)
         self.say(f"dfrl robot: experiment {self.experiment} {how} at iteration "
-                 f"{self.run.iteration} ({self.run.shares} shares)")
+                 f"{self.training.iteration} ({self.training.shares} shares)")
 
     def _fail(self, exc: BaseException) -> None:
         self.state = State.FAILED
@@ -329,7 +337,8 @@ class RobotService:
         self.run, self.state = run, State.CONFIGURED
         self._forget_leases(warn)
         self.say(f"dfrl robot: experiment {experiment} configured (robot {config.robot}, "
-                 f"{config.iterations} iterations{', resumed at ' + str(run.iteration) if resume else ''})")
+                 f"{config.iterations} iterations"
+                 f"{', resumed at ' + str(run.iteration) if resume else ''})")
         return Term("ok", Atom("true"))
 
     def _forget_leases(self, warn: Any) -> None:
@@ -362,7 +371,7 @@ class RobotService:
         """At most ``size`` bytes of result file ``name`` from ``offset``; and whether they
         reach its end."""
         listed = dict(self.files())
-        if name not in listed:
+        if name not in listed or self.experiment is None:
             raise RequestError(Term("existence_error", Atom("result_file"), name))
         with open(self.workdir / self.experiment / name, "rb") as fh:
             fh.seek(offset)

@@ -18,7 +18,7 @@ import numpy as np
 from dfrl.experiments.robot_host.files import CsvLog, share_row
 from dfrl.experiments.robot_host.lines import ProtocolLines
 from dfrl.experiments.robot_host.share_notes import ShareNotes
-from dfrl.pybridge.providers import TableProvider
+from dfrl.pybridge.providers import LearnerProvider, TableProvider
 
 __all__ = ["SharedTable", "SharedLearner", "shared_provider"]
 
@@ -111,6 +111,8 @@ class SharedLearner(SharedTable):
     Its ``q_table``, ``visits`` and ``set_q_table`` are the base's (a function learner's raise:
     the bridge never asks, it registers such a robot without a table).
     """
+
+    base: LearnerProvider
 
     @property
     def params(self) -> np.ndarray:

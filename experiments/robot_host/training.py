@@ -30,7 +30,7 @@ from dfrl.experiments.robot_host.evaluate import LiveEvaluator
 from dfrl.experiments.robot_host.files import METRIC_FIELDS, SHARE_FIELDS, CsvLog
 from dfrl.experiments.robot_host.lines import ProtocolLines
 from dfrl.experiments.robot_host.share_notes import ShareNotes
-from dfrl.experiments.robot_host.table import SharedTable, shared_provider
+from dfrl.experiments.robot_host.table import SharedLearner, SharedTable, shared_provider
 
 __all__ = ["Training", "TrainingHost", "SleepHost", "SAMPLE_S", "network_layout"]
 
@@ -230,6 +230,12 @@ class Training:
         self._next_tick = time.perf_counter()
         return shape
 
+    def _opened(self) -> tuple[SharedTable, CsvLog]:
+        """The table and the metrics file of a learning robot, made by :meth:`open`."""
+        if self.table is None or self._metrics is None:
+            raise RuntimeError(f"robot {self.config.robot}: Training.open() first")
+        return self.table, self._metrics
+
     def begin(self) -> None:
         """Restart the pacing clock (call when the first iteration is about to run)."""
         self._next_tick = time.perf_counter()
@@ -248,14 +254,15 @@ class Training:
         c = self.config
         m = self.trainer.step()
         it = m.iteration
-        self.table.iteration = it
-        self._metrics.row((c.robot, it, repr(m.q_sum), repr(m.cumulative_reward), m.collisions))
+        table, metrics = self._opened()
+        table.iteration = it
+        metrics.row((c.robot, it, repr(m.q_sum), repr(m.cumulative_reward), m.collisions))
         if c.progress_every and it % c.progress_every == 0:
             self.lines.progress(it)
             if time.monotonic() - self._sampled_at >= SAMPLE_S:
                 self.sample(m.q_sum, m.cumulative_reward)
         if it in self._stops:
-            self._metrics.flush()
+            metrics.flush()
             if not self._wait_for_share():
                 self.stopped = True
         elif c.mode is Mode.ASYNC:
@@ -357,9 +364,10 @@ class Training:
             self.finished = True
             return
         self.finished = True
-        self._metrics.flush()
+        table, metrics = self._opened()
+        metrics.flush()
         self.save_tables()
-        self.table.on_share = self.save_tables     # a late share updates the saved tables
+        table.on_share = self.save_tables     # a late share updates the saved tables
         self.lines.progress(self.iteration)
         self.sample()
 
@@ -374,7 +382,8 @@ class Training:
         """Unregister the robot, close the files and the simulation (idempotent). A benchmark
         robot's static parameters are saved first, as ``params/<robot>.npy`` (what the agents
         left it)."""
-        if self.config.bench_params is not None and self.table is not None and self._registered:
+        if isinstance(self.table, SharedLearner) and self.config.bench_params is not None \
+                and self._registered:
             d = self.out_dir / "params"
             d.mkdir(parents=True, exist_ok=True)
             np.save(d / f"{self.config.robot}.npy", self.table.params)

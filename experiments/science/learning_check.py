@@ -33,7 +33,8 @@ from typing import Any
 import numpy as np
 
 from dfrl.experiments.science.standalone import EVAL_SEED_OFFSET
-from dfrl.experiments.science.statistics import Interval, Judgement, Outcome, judge, paired
+from dfrl.experiments.science.statistics import (Interval, Judgement, Measured, Outcome, judge,
+                                               paired)
 
 __all__ = ["DEFAULT_EPISODES", "DEFAULT_STEPS", "LearningCheck", "PolicyScores",
            "check_learning"]
@@ -88,7 +89,7 @@ class LearningCheck:
                      0.0, "above")
         if not more.holds:
             return ""
-        m = more.measure
+        m = _interval(more)
         return (f"; {'but' if self.vs_random.holds else 'and'} it collides more often than "
                 f"random: +{m.mean:.1f} collisions per 1,000 steps {_span(m, 1)}")
 
@@ -110,7 +111,7 @@ class LearningCheck:
     def to_dict(self) -> dict[str, Any]:
         """The check as JSON data (``learning_check.json``)."""
         def judged(j: Judgement) -> dict[str, Any]:
-            m = j.measure
+            m = _interval(j)
             return {"difference": m.mean, "low": m.low, "high": m.high, "n": m.n,
                     "p": j.p, "outcome": j.outcome.value}
 
@@ -126,13 +127,19 @@ class LearningCheck:
                 "lines": self.lines()}
 
 
-def _span(m: Interval, digits: int = 3) -> str:
+def _interval(j: Judgement) -> Interval:
+    """The measure of one of this check's judgements: a paired t interval (:func:`paired`)."""
+    assert isinstance(j.measure, Interval), j.measure
+    return j.measure
+
+
+def _span(m: Measured, digits: int = 3) -> str:
     return f"[{m.low:.{digits}f}, {m.high:.{digits}f}]"
 
 
 def _compared(j: Judgement, other: str, unit: str = "reward per step") -> str:
     """A paired difference against ``other`` in words, without a verdict."""
-    m = j.measure
+    m = _interval(j)
     if j.outcome is Outcome.HOLDS:
         return f"better than {other} by {m.mean:.3f} {unit} {_span(m)}"
     if j.outcome is Outcome.REFUTED:

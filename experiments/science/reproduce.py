@@ -274,7 +274,7 @@ def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reprod
             ok = runs.on_cluster(fed_cfgs, opts.cluster)
         else:
             ok = runs.here(fed_cfgs)
-        for (s, key), (d, pending) in runs.pendings.items():
+        for d, pending in runs.pendings.values():
             pending.write(d / "evaluations.csv")
         for fut in sa_jobs.values():
             fut.result()
@@ -289,19 +289,19 @@ def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reprod
     for (s, key), (d, _) in runs.pendings.items():
         cfg = dict(fed_cfgs[s])[key]
         arenas = {r.id: r.arena for r in cfg.robots}
-        run = SeedRun(read_metrics(d / "metrics.csv"), arenas, read_rows(d / "evaluations.csv"))
-        by_run.setdefault(key, []).append(run)
-        evals += from_rows(key, s, run.evals, arenas)
+        got = SeedRun(read_metrics(d / "metrics.csv"), arenas, read_rows(d / "evaluations.csv"))
+        by_run.setdefault(key, []).append(got)
+        evals += from_rows(key, s, got.evals, arenas)
     for s in seeds:
         for name in dict.fromkeys(k[1] for k in sa_jobs if k[0] == s):
-            run = SeedRun({}, {}, [])
+            got = SeedRun({}, {}, [])
             for k in (k for k in sa_jobs if k[0] == s and k[1] == name):
                 d = Path(sa_jobs[k].result())
-                run.curves[k[2]] = read_metrics_csv(d / "metrics.csv")
-                run.arenas[k[2]] = k[2]
-                run.evals += read_rows(d / "evaluations.csv")
-            by_run.setdefault(name, []).append(run)
-            evals += from_rows(name, s, run.evals)
+                got.curves[k[2]] = read_metrics_csv(d / "metrics.csv")
+                got.arenas[k[2]] = k[2]
+                got.evals += read_rows(d / "evaluations.csv")
+            by_run.setdefault(name, []).append(got)
+            evals += from_rows(name, s, got.evals)
         for run in (r for (t, r) in fixed_jobs if t == s):
             rows = read_rows(out / f"seed{s}" / run.split("/")[-1] / "evaluations.csv")
             by_run.setdefault(run, []).append(

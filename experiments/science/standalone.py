@@ -48,8 +48,9 @@ def run_jobs(jobs: list[tuple[TrainerConfig, Path]], workers: int,
 def evaluated_job(cfg_dict: dict[str, Any], out: str, points: int, held_out: list[str],
                   steps: int, episode_steps: int, eval_seed: int) -> str:
     """Train one standalone robot into ``out`` with ``points`` snapshots, then evaluate each
-    snapshot's greedy policy in its own arena and the last one's in the held-out arenas too (``out/evaluations.csv``,
-    :mod:`dfrl.experiments.science.studies.history`); a worker process job. Returns ``out``."""
+    snapshot's greedy policy in its own arena and the last one's in the held-out arenas too
+    (``out/evaluations.csv``, :mod:`dfrl.experiments.science.studies.history`); a worker
+    process job. Returns ``out``."""
     cfg = TrainerConfig.from_dict(cfg_dict)
     res = train(cfg, out, snapshot_every=max(1, cfg.iterations // max(1, points)))
     rows = []

@@ -1,9 +1,10 @@
 """The statistics of the reports and the studies, done once: Student-t intervals (one sample,
 paired, Welch), bootstrap intervals, times to a target that some runs never reach
-(Kaplan-Meier medians and their ratio: :mod:`.censored`), Holm's correction, the smallest detectable effect and
-the verdict words every report uses. Pure functions of numbers; :mod:`.report` and
-:mod:`.studies` both use them. Student's t, the normal distribution and the bootstrap come
-from ``scipy.stats`` (``science/README.md``, "Dependencies"); how they combine is ours.
+(Kaplan-Meier medians and their ratio: :mod:`.censored`), Holm's correction, the smallest
+detectable effect and the verdict words every report uses. Pure functions of numbers;
+:mod:`.report` and :mod:`.studies` both use them. Student's t, the normal distribution and
+the bootstrap come from ``scipy.stats`` (``science/README.md``, "Dependencies"); how they
+combine is ours.
 
 The verdict of a claim "the mean is above (below) a bound" (:func:`judge`): ``holds`` (the 95%
 interval lies wholly on the claimed side and, in a family, the Holm-adjusted p-value is below
@@ -13,6 +14,8 @@ touches the bound from there); ``not significant at n = K (smallest detectable e
 power); ``cannot judge (n = K < M)`` (too few values).
 """
 from __future__ import annotations
+
+from typing import Protocol
 
 import math
 import warnings
@@ -258,7 +261,7 @@ class Judgement:
     one once :func:`adjust` put it in a family (else equal to ``p``)."""
 
     outcome: Outcome
-    measure: Interval
+    measure: Measured
     bound: float
     side: str
     p: float
@@ -284,7 +287,28 @@ class Judgement:
         return self.words()
 
 
-def judge(measure: Interval | BootstrapInterval, bound: float = 0.0, side: str = "above",
+class Measured(Protocol):
+    """What :func:`judge` and a :class:`Judgement` read of an interval: an :class:`Interval`,
+    or another estimate with the same reading (a transfer claim's censored difference)."""
+
+    @property
+    def half(self) -> float: ...
+
+    @property
+    def n(self) -> int: ...
+
+    @property
+    def low(self) -> float: ...
+
+    @property
+    def high(self) -> float: ...
+
+    def p_value(self, null: float = 0.0) -> float: ...
+
+    def detectable(self, power: float = POWER) -> float: ...
+
+
+def judge(measure: Measured, bound: float = 0.0, side: str = "above",
           min_n: int = MIN_N) -> Judgement:
     """The verdict on "the mean is above (``side="above"``) or below ``bound``", from the 95%
     interval ``measure`` (see the module's docs for the words)."""

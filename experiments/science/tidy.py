@@ -37,12 +37,13 @@ def curve_rows(run: str, seed: int, condition: str, curves: dict[str, np.ndarray
         if len(c) == 0:
             continue
         its = c["iteration"]
+        fields = c.dtype.names or ()
         keep = np.nonzero(its % step == 0)[0].tolist()
         if not keep or keep[-1] != len(c) - 1:
             keep.append(len(c) - 1)
         for i in keep:
             for m in CURVE_METRICS:
-                if m in c.dtype.names:
+                if m in fields:
                     yield (run, seed, condition, robot, int(its[i]), m, float(c[m][i]))
 
 

@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 from numba.typed import List
 
-from dfrl.arenas.spec import ArenaError
+from dfrl.arenas.spec import ArenaError, ArenaSpec
 from dfrl.robots.batched import kernels as K
 from dfrl.robots.batched.tabular import greedy
 from dfrl.robots.batched.training import env_part
@@ -97,7 +97,7 @@ def _evaluate(q, steps, episode_steps, out, seen, free, grids, pose, prev, dist,
 
 
 def evaluate_greedy(config: TrainerConfig, tables: Sequence[np.ndarray],
-                    arenas: Sequence[str], steps: int, seeds: Sequence[int] | int,
+                    arenas: Sequence[str | ArenaSpec], steps: int, seeds: Sequence[int] | int,
                     episode_steps: int | None = None) -> list[EvalResult]:
     """The greedy policy of ``tables[j]`` in ``arenas[j]`` with seed ``seeds[j]``, for every
     ``j`` (as :func:`dfrl.robots.evaluation.evaluate_policy` with ``PolicyKind.GREEDY``).

@@ -77,7 +77,7 @@ def pack_arenas(arenas: Sequence[ArenaSpec], sensor_height: float) -> PackedAren
     count = np.array([len(t) for t in tables], dtype=np.int64)
     first = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int64)
     half = np.array([[a.size[0] / 2.0, a.size[1] / 2.0] for a in arenas], dtype=np.float64)
-    start = np.array([(1.0, 0.0, 0.0, 0.0) if a.start.random else (0.0, *a.start.pose)
+    start = np.array([(1.0, 0.0, 0.0, 0.0) if a.start.random else (0.0, *(a.start.pose or ()))
                       for a in arenas], dtype=np.float64)
     return PackedArenas(arenas=tuple(arenas), boxes=np.concatenate(tables), first=first,
                         count=count, half=half, start=start)

@@ -201,7 +201,8 @@ class BatchedTrainer(RobotBatch):
         self.iteration += steps
         if not record:
             return None
-        fields = {name: rec[:, :, k] for k, name in enumerate(T.RECORD_FIELDS)}
+        fields: dict[str, np.ndarray] = {name: rec[:, :, k]
+                                         for k, name in enumerate(T.RECORD_FIELDS)}
         for name in ("state", "action"):
             fields[name] = fields[name].astype(np.int64)
         fields["collided"] = fields["collided"] > 0

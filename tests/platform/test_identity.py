@@ -115,7 +115,7 @@ def test_hello_carries_id_and_idle_limits(procs: list[Proc]) -> None:
         s.sendall(frame(b"ping .\n"))
         assert read_frame(s) is not None
     hello = _hello(port)
-    assert hello.startswith(f"hello(1,") and f"node('127.0.0.1',{port},[id(" in hello
+    assert hello.startswith("hello(1,") and f"node('127.0.0.1',{port},[id(" in hello
     assert "idle(10)" in hello and "auth_idle(60)" in hello
 
 

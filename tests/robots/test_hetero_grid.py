@@ -44,7 +44,7 @@ def test_distil_moves_the_values_towards_the_targets_deterministically() -> None
     a, b = _dqn(1), _dqn(1)
     before = a.q_batch(x)
     ra = distil(a, x, targets, config=DistilConfig(steps=200))
-    rb = distil(b, x, targets, config=DistilConfig(steps=200))
+    distil(b, x, targets, config=DistilConfig(steps=200))
     assert ra.steps == 200
     assert ra.rms_before == pytest.approx(np.sqrt(np.mean((before - targets) ** 2)))
     after = a.q_batch(x)

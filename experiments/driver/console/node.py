@@ -173,8 +173,8 @@ class ConsoleNode:
             The request could not be posted, no answer came within ``timeout_s``, or the
             answer carries an ``error``.
         """
-        spec = dataclasses.asdict(robot_spec) if dataclasses.is_dataclass(robot_spec) \
-            else dict(robot_spec)
+        spec = dict(robot_spec) if isinstance(robot_spec, Mapping) \
+            else dataclasses.asdict(robot_spec)
         request = uuid.uuid4().hex
         deadline = time.monotonic() + timeout_s
         with self._channel.expect(request) as waiter:

@@ -56,11 +56,16 @@ class RobotChild:
         Results folder (absolute); stderr goes to ``OUT/logs/<robot>.err``.
     on_event : EventHandler, optional
         Called from the reader thread for every ``DFRL_EVENT`` line.
+    module : str
+        The module the child runs with ``python -m``: the robot process, or a tool's robot
+        process with its probes installed (``dfrl bench round --trace``).
     """
 
     def __init__(self, robot: RobotSpec, cfg: RobotConfig, out_dir: Path,
-                 on_event: EventHandler | None = None) -> None:
+                 on_event: EventHandler | None = None,
+                 module: str = "dfrl.experiments.robot_host") -> None:
         self._spec = robot
+        self._module = module
         self._cfg = cfg
         self._out = out_dir
         self._on_event = on_event
@@ -98,7 +103,7 @@ class RobotChild:
         self.err_path.parent.mkdir(exist_ok=True)
         with open(self.err_path, "w", encoding="utf-8") as err:    # the child keeps its copy
             self._proc = processes.start(
-                [sys.executable, "-m", "dfrl.experiments.robot_host", "--config", str(cfg_path)],
+                [sys.executable, "-m", self._module, "--config", str(cfg_path)],
                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=err, cwd=self._out,
                 env=child_env(() if self._cfg.token is None else [self._cfg.token]), bufsize=1)
         self._reader = threading.Thread(target=self._read, name=f"read-{self._spec.id}",

@@ -273,7 +273,8 @@ class ClusterPlacement:
             raise ExperimentError(
                 f"cluster {self.address}: {len(robots)} robots need {self.cpus:g} {RESOURCE} "
                 f"each, but its {len(offered)} workers fit only {fits} more at once "
-                f"({RESOURCE} offered: {', '.join(f'{w} {a:g}' for w, a in offered.items()) or 'none'}); "
+                f"({RESOURCE} offered: "
+                f"{', '.join(f'{w} {a:g}' for w, a in offered.items()) or 'none'}); "
                 f"start workers with --resources {RESOURCE}=N")
         if self._lease is None:
             self._lease = Variable(f"dfrl-{self.run_key}-lease", client=self._client)

@@ -113,10 +113,12 @@ class Launcher:
             check_node_dir(self._tls)
         if not self._claimed:
             claim_output(self._out, self._force)
-        if c.token is None:                 # a strong token of this run only
-            c = c.with_token(new_secret())
+        token = c.token
+        if token is None:                   # a strong token of this run only
+            token = new_secret()
+            c = c.with_token(token)
         # the one file of the folder that holds the token (mode 0600): for dfrl join/inject
-        write_secret_file(self._out / SECRET_FILE, [c.token])
+        write_secret_file(self._out / SECRET_FILE, [token])
         write_json(self._out / "config.json", c.public_dict())
         write_provenance(self._out)         # versions, commit, host, command line
         return c
@@ -130,6 +132,7 @@ class Launcher:
         say = self._reporter.say
         try:
             host = console_host(c)
+            assert c.token is not None, "_prepare() gave the run a token"
             console = open_console(c.token, self._out / "logs" / "console.err", host=host,
                                    tls=self._tls)
             poller = StatusPoller().start()

@@ -134,7 +134,8 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
     the command sent. A program a node refuses (syntax error, with its file and line; the
     sandbox) is stored nowhere and changes no agent's method.
     Returns agent -> ``"applied"``, or ``"sent"`` for an agent that did not answer within
-    ``wait_s`` (0: do not wait). ``tls``: the driver's TLS folder, instead of the one ``nodes.json`` records.
+    ``wait_s`` (0: do not wait). ``tls``: the driver's TLS folder, instead of the one
+    ``nodes.json`` records.
 
     Raises
     ------

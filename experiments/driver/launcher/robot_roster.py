@@ -218,7 +218,7 @@ class RobotRoster:
         with self._lock:
             new = why is not None and rid not in self._lost and rid not in self._killed
             back = why is None and rid in self._lost
-            if new:
+            if new and why is not None:         # new: lost just now (why is not None)
                 self._lost[rid] = why
                 if code is not None:
                     self._crashed[rid] = code

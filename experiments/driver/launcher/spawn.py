@@ -7,6 +7,7 @@ from collections.abc import Callable
 from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from dfrl.experiments.driver.config import GRID, ExperimentConfig, RobotSpec
 from dfrl.experiments.driver.console import ConsoleNode
@@ -194,11 +195,12 @@ def launch_agents(site: Site, robots: RobotRoster, agents: AgentRoster,
     c = site.config
     route = STOP_ROUTE.get()
     for algo, algos in c.agent_groups():
-        stops = []
+        stops: list[dict[str, Any]] = []
         for rid, robot in robots.robots().items():
             address = robot.status().address
             if robot.spec.algo in algos and address is not None:
-                host, port = route(rid, tuple(address)) if route is not None else address
+                host, port = (route(rid, (str(address[0]), int(address[1])))
+                              if route is not None else address)
                 stops.append({"host": host, "port": port, "robot": rid})
         if not stops:
             continue      # only joiners use it: nobody to start with

@@ -129,6 +129,7 @@ def keep_checkpoints(out_dir: str | Path, robots: list[str]) -> list[str]:
             atomic_write(target, _npy_bytes(cp.params))
         else:
             target = table_path(out, rid)
+            assert cp.q is not None and cp.visits is not None, "a table's checkpoint has both"
             for path, array in ((target.with_suffix(".visits.npy"), cp.visits), (target, cp.q)):
                 atomic_write(path, _npy_bytes(array))
         what = "parameters" if cp.params is not None else "table"

@@ -175,9 +175,9 @@ def step_rows(out: Path, facts: dict[str, RobotFacts],
         if it is None:
             raise TidyError(f"{where}: iteration {row['iteration']!r} is not an integer")
         pos, rnd = current.get(rid, (0, 0))
-        writes = rounds.get(rid, [])
-        while pos < len(writes) and writes[pos][0] <= it:
-            rnd = writes[pos][1]
+        applied = rounds.get(rid, [])
+        while pos < len(applied) and applied[pos][0] <= it:
+            rnd = applied[pos][1]
             pos += 1
         current[rid] = (pos, rnd)
         shared = row.get("shared") or "0"

@@ -65,9 +65,9 @@ def markdown(ans: Answers) -> list[str]:
          f"`contrasts_by_seed.csv`.", ""]
     L += [f"### {TITLES['C']}", "",
           "| control - untrained | n | difference [95%] | D | check |", "|---|---|---|---|---|"]
-    for c in ans.checks:
-        L.append(f"| {c.row.a} | {c.contrast.n} | {_ci(c.contrast)} | "
-                 f"{c.contrast.detectable():.3g} | {c.words()} |")
+    for check in ans.checks:
+        L.append(f"| {check.row.a} | {check.contrast.n} | {_ci(check.contrast)} | "
+                 f"{check.contrast.detectable():.3g} | {check.words()} |")
     if not ans.checks:
         L.append("| (no learning control in the study) | | | | no L row can be judged |")
     L.append("")

@@ -11,7 +11,7 @@ from dfrl.experiments.driver.results.plots import COLOURS, new_figure, save_figu
 from dfrl.experiments.science.statistics import t975
 
 
-def band(curves: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+def band(curves: Sequence[np.ndarray] | Sequence[Sequence[float]]) -> tuple[np.ndarray, np.ndarray]:
     """Mean and 95% t half width over curves (rows) of equal length, shape (n,) each."""
     a = np.asarray(curves, dtype=np.float64)
     mean = a.mean(axis=0)

@@ -41,7 +41,8 @@ StepHook = Callable[[int, StepMetrics], None]
 ShareHook = Callable[[int, Sequence[Trainer]], None]
 
 
-def _check(tables: Sequence[np.ndarray], visits: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+def _check(tables: Sequence[np.ndarray],
+           visits: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     if not tables:
         raise ValueError("nothing to aggregate")
     q = np.stack([np.asarray(t, dtype=np.float64) for t in tables])

@@ -117,7 +117,9 @@ def share(views: list[Any], aggregate: Any, residuals: list[float]) -> None:
     for v in views:
         v.set_q_table(table)
         if isinstance(v, GridView):
-            residuals.append(v.last_distillation.rms_after)
+            report = v.last_distillation
+            assert report is not None, "a grid view's write distils"
+            residuals.append(report.rms_after)
 
 
 def run_one(run: str, seed: int, options: HeteroOptions) -> dict[str, Any]:

@@ -49,7 +49,7 @@ PAPER_ARENAS = ("r1", "r2", "r3", "r4", "r5")
 TARGET_ARENA = "r1"
 CONDITIONS = ("homogeneous", "heterogeneous")
 #: The reference the error is measured against (shipped: science/references/).
-REFERENCE = {"arena": TARGET_ARENA, "algo": "qlearning", "iterations": 50_000,
+REFERENCE: dict[str, Any] = {"arena": TARGET_ARENA, "algo": "qlearning", "iterations": 50_000,
              "seeds": (1, 2, 3, 4, 5)}
 #: Seed of the greedy evaluations' episodes (the same for every run).
 EVAL_SEED = 70_000

@@ -31,8 +31,9 @@ paired intervals, Holm, verdicts, no verdict from a degenerate interval) is
 """
 from __future__ import annotations
 
-from dfrl.experiments.science.transfer.model import (HEAD_STEPS, METRICS, Condition, RunResult, Stat,
-                                             TableInfo, TransferConfig, TransferResult)
+from dfrl.experiments.science.transfer.model import (HEAD_STEPS, METRICS, Condition, RunResult,
+                                                     Stat, TableInfo, TransferConfig,
+                                                     TransferResult)
 from dfrl.experiments.science.transfer.outputs import plot_transfer, write_outputs
 from dfrl.experiments.science.transfer.runs import aggregate, run, run_one, summarise
 from dfrl.experiments.science.transfer.table import load_initial_table, trainer_config_for

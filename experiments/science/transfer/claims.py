@@ -183,7 +183,7 @@ def paired_censored_difference(a: Sequence[Phases], b: Sequence[Phases], resampl
     sa = [(np.asarray(t, dtype=float), np.asarray(r, dtype=bool)) for t, r in a]
     sb = [(np.asarray(t, dtype=float), np.asarray(r, dtype=bool)) for t, r in b]
 
-    def pool(groups: list[tuple[np.ndarray, np.ndarray]], idx: Sequence[int]
+    def pool(groups: list[tuple[np.ndarray, np.ndarray]], idx: Sequence[int] | np.ndarray
              ) -> tuple[np.ndarray, np.ndarray]:
         return (np.concatenate([groups[i][0] for i in idx]),
                 np.concatenate([groups[i][1] for i in idx]))
@@ -439,11 +439,11 @@ def markdown(rows: Sequence[dict[str, Any]], opts: StudyOptions, found: Sequence
           "se = width / 3.92).", "",
           "| family | measure | control | method | estimate [95%] | censored (fed, control) "
           "| p (Holm) | verdict |", "|---|---|---|---|---|---|---|---|"]
-    for c in found:
-        cens = (f"{c.censored[0]}/{c.phases[0]}, {c.censored[1]}/{c.phases[1]}"
-                if c.measure == "time_to_threshold" else "-")
-        L.append(f"| {c.family} | {c.measure} | {c.control} | {c.method} | {_estimate(c)} | "
-                 f"{cens} | {cell_text(c.judgement.p_adjusted)} | {c.words()} |")
+    for cl in found:
+        cens = (f"{cl.censored[0]}/{cl.phases[0]}, {cl.censored[1]}/{cl.phases[1]}"
+                if cl.measure == "time_to_threshold" else "-")
+        L.append(f"| {cl.family} | {cl.measure} | {cl.control} | {cl.method} | {_estimate(cl)} | "
+                 f"{cens} | {cell_text(cl.judgement.p_adjusted)} | {cl.words()} |")
     L += ["", headline(found, opts)]
     return "\n".join(L)
 

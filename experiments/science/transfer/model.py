@@ -250,7 +250,8 @@ class TransferResult:
             "arena": self.arena_name,
             "same_arena": self.same_arena,
             "runs": [r.scalars() for r in self.runs],
-            "summary": {c: {m: asdict(s) for m, s in per.items()} for c, per in self.summary.items()},
+            "summary": {c: {m: asdict(s) for m, s in per.items()}
+                        for c, per in self.summary.items()},
             "ratio": self.ratio,
             "wall_time": round(self.wall_time, 3),
             "output_dir": str(self.output_dir) if self.output_dir is not None else None,

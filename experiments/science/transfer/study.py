@@ -182,6 +182,9 @@ def source_job(condition: str, seed: int, opts: StudyOptions) -> tuple[str, int,
     """The source table of one condition and source seed (a worker job), trained on
     ``opts.sim``."""
     s = pair_seed(condition, seed, opts)
+    # the two simulators' functions take the same arguments (their annotations differ a little)
+    fed: Callable[..., Any]
+    turn: Callable[..., Any]
     if opts.sim == BATCHED:
         from dfrl.experiments.science.studies.fedsim_batched import (federate_batched,
                                                                      in_turn_batched)

@@ -9,7 +9,7 @@ import numpy as np
 from dfrl.experiments.science.transfer.model import TableInfo, TransferConfig
 from dfrl.robots.env import ActionSet
 from dfrl.robots.learners import LEARNERS, validate_table
-from dfrl.robots.state import DiscretisationConfig
+from dfrl.robots.state import DiscretisationConfig, SensorGrouping
 from dfrl.robots.tables import load_table
 from dfrl.robots.training import TrainerConfig
 
@@ -39,9 +39,9 @@ def load_initial_table(path: str | Path) -> tuple[np.ndarray, TableInfo, dict[st
         info = TableInfo(path=str(npy), shape=tuple(q.shape), algorithm=meta.algorithm,
                          arena=meta.arena, iterations=meta.iterations, sidecar=True,
                          extra=dict(meta.extra))
-        state: dict[str, Any] | None = dict(meta.state)
-        state["actions"] = list(meta.actions)
-        return q, info, state
+        found: dict[str, Any] = dict(meta.state)
+        found["actions"] = list(meta.actions)
+        return q, info, found
     try:
         raw = np.load(npy, allow_pickle=False)
     except (OSError, ValueError) as exc:
@@ -74,7 +74,7 @@ def trainer_config_for(config: TransferConfig, q: np.ndarray, info: TableInfo,
         raise ValueError(f"unknown learner '{algo}'; registered: {sorted(LEARNERS)}")
     grouping = config.grouping or (state or {}).get("grouping") or base.discretisation.grouping
     levels = config.levels or (state or {}).get("levels") or base.discretisation.levels
-    disc = DiscretisationConfig(grouping, int(levels))
+    disc = DiscretisationConfig(SensorGrouping(grouping), int(levels))
     actions = base.actions
     if state is not None and "actions" in state:
         names = list(state["actions"])

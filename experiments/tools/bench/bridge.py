@@ -47,7 +47,8 @@ class BenchSim:
 
             self.p = pybullet
             self.client = pybullet.connect(pybullet.DIRECT)
-            pybullet.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=self.client)
+            pybullet.setAdditionalSearchPath(pybullet_data.getDataPath(),
+                                             physicsClientId=self.client)
             pybullet.setGravity(0, 0, -9.81, physicsClientId=self.client)
             pybullet.loadURDF("plane.urdf", physicsClientId=self.client)
             rng = np.random.default_rng(seed)
@@ -75,7 +76,8 @@ def _stats(values: list[float]) -> dict[str, float]:
     arr = np.asarray(values, dtype=np.float64)
     if arr.size == 0:
         return {"median_ms": float("nan"), "p90_ms": float("nan")}
-    return {"median_ms": round(float(np.median(arr)), 4), "p90_ms": round(float(np.percentile(arr, 90)), 4)}
+    return {"median_ms": round(float(np.median(arr)), 4),
+            "p90_ms": round(float(np.percentile(arr, 90)), 4)}
 
 
 def run_codec(node: Any, robot: StaticTable, sim: BenchSim, codec: str, warmup: int,

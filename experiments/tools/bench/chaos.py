@@ -193,7 +193,11 @@ class _Chaos:
         i, j = self.rng.sample(range(len(self.nodes)), 2)
         proxy = self.proxies[(i, j)]
         dead: list[NodeProcess] = []
-        kill = lambda node: (node.kill(), dead.append(node))  # noqa: E731
+
+        def kill(node: NodeProcess) -> None:
+            node.kill()
+            dead.append(node)
+
         points = {"kill_dest_after_staged": ("staged", PASS, lambda: kill(self.nodes[j])),
                   "kill_dest_during_transfer": ("transfer", PASS, lambda: kill(self.nodes[j])),
                   "kill_source_before_decision": ("staged", PASS, lambda: kill(self.nodes[i])),

@@ -16,7 +16,8 @@ import threading
 
 from dfrl.experiments.tools.bench.fault_proxy import FaultProxy
 
-USAGE = "usage: python -m dfrl.experiments.tools.bench.delay_link LISTEN_HOST:PORT TARGET_HOST:PORT MS"
+USAGE = ("usage: python -m dfrl.experiments.tools.bench.delay_link "
+         "LISTEN_HOST:PORT TARGET_HOST:PORT MS")
 
 
 def _address(text: str) -> tuple[str, int]:

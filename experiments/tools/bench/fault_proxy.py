@@ -70,7 +70,8 @@ def _abort(sock: socket.socket) -> None:
 class _FrameReader:
     """Splits one direction's byte stream at frame headers and asks the rule about each."""
 
-    def __init__(self, direction: str, conn: int, decide: Callable[[str, int, int, str, int], Action]):
+    def __init__(self, direction: str, conn: int,
+                 decide: Callable[[str, int, int, str, int], Action]):
         self.direction = direction
         self.conn = conn
         self.decide = decide
@@ -116,7 +117,8 @@ class _FrameReader:
 class _Link:
     """One proxied connection: client and upstream sockets, two readers and two senders."""
 
-    def __init__(self, proxy: FaultProxy, conn: int, client: socket.socket, upstream: socket.socket):
+    def __init__(self, proxy: FaultProxy, conn: int, client: socket.socket,
+                 upstream: socket.socket):
         self.proxy = proxy
         self.conn = conn
         self.client = client
@@ -358,6 +360,7 @@ class FaultProxy:
 
     def _reap(self) -> None:
         with self._lock:
-            done = [c for c, link in self._links.items() if link.closed.is_set() and link.finished()]
+            done = [c for c, link in self._links.items()
+                    if link.closed.is_set() and link.finished()]
             for c in done:
                 del self._links[c]

@@ -223,7 +223,7 @@ def _cut_for(seconds: float, which: str) -> Callable[[Federation], Acted]:
         located = (f"round {last.round} (epoch {last.epoch}) visited {' '.join(visited)}: the "
                    f"agent rests on {visited[0]}, its lease holder is {holder_of(visited)}")
         time.sleep(max(0.0, t + seconds - time.time()))
-        if which == "driver":
+        if victim is None:                  # which == "driver"
             fed.mend_host("driver")
         else:
             fed.mend(victim)

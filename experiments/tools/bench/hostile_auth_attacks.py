@@ -53,8 +53,9 @@ class AuthAttacker:
         if attack not in ("escapes", *AGENT_ATTACKS):
             raise ValueError(f"unknown authenticated attack {attack!r}")
         self.attack = attack
-        self.argv = ["nice", "-n", "19", processes.swipl(), "-q", str(AUTH_SCRIPT), attack, str(token),
-                     str(port)] + [f"--{k.replace('_', '-')}={v}" for k, v in options.items()]
+        self.argv = ["nice", "-n", "19", processes.swipl(), "-q", str(AUTH_SCRIPT), attack,
+                     str(token), str(port)]
+        self.argv += [f"--{k.replace('_', '-')}={v}" for k, v in options.items()]
         self.records: list[dict[str, Any]] = []
         self.stderr: list[str] = []
         self.proc: subprocess.Popen[str] | None = None

@@ -3,10 +3,11 @@
 Starts N robot processes on loopback (:mod:`dfrl.experiments.robot_host` in benchmark mode:
 each holds a random table of ``--entries`` values and serves the agent's requests as soon as
 they arrive, no simulation), launches the real itinerary agent
-(through a console node, :mod:`dfrl.experiments.driver.console`) for ``--warmup + --rounds`` rounds without rest and
-reads the round times from its log (the agent stamps a round's start when it reads the first
-robot and its end after writing the first robot back). Checks that every robot holds the
-same table after each round. Target: median under 50 ms for 5 nodes and 20,000 entries.
+(through a console node, :mod:`dfrl.experiments.driver.console`) for ``--warmup + --rounds``
+rounds without rest and reads the round times from its log (the agent stamps a round's start
+when it reads the first robot and its end after writing the first robot back). Checks that
+every robot holds the same table after each round. Target: median under 50 ms for 5 nodes
+and 20,000 entries.
 
 Beside the round, in the same run, it times the hops a round is made of: ``dfrl bench migrate``'s
 hop with a payload of as many floats as the table has entries (``hop_median_ms``), so that
@@ -38,6 +39,7 @@ from dfrl.experiments.driver.launcher.robots import await_ready
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
 from dfrl.experiments.driver.results.rounds import count_equal, read_shares, write_rounds_csv
 from dfrl.experiments.tools.bench.step_trace import ENV as STEP_TRACE_ENV, step_summary
+from dfrl.experiments.tools.bench.traced_robot import MODULE as TRACED_ROBOT
 
 TARGET_MS = 50.0
 
@@ -101,7 +103,8 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
                               if params else {"bench_table": [states, actions]})
             cfg = RobotConfig(robot=spec.id, out_dir=str(out), seed=i, events=False,
                               progress_every=0, **bench_of)
-            children.append(RobotChild(spec, cfg, out))
+            module = TRACED_ROBOT if trace_dir is not None else "dfrl.experiments.robot_host"
+            children.append(RobotChild(spec, cfg, out, module=module))
             with trace_env:
                 children[-1].start()
         await_ready(children, 120.0)

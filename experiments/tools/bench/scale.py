@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec
+from dfrl.experiments.robot_host.config import Mode
 from dfrl.experiments.tools.bench.fault_proxy import FaultProxy
 
 ARENAS = ("r1", "r2", "r3", "r4", "r5")
@@ -69,7 +70,7 @@ def config_for(n: int, iterations: int, respite: int, seed: int = 1,
     """The experiment of one point: ``n`` robots over the five arenas in turn."""
     robots = tuple(RobotSpec(f"r{i + 1}", ARENAS[i % len(ARENAS)]) for i in range(n))
     return ExperimentConfig(name=f"scale{n}", robots=robots, iterations=iterations,
-                            respite=respite, seed=seed, mode="sync",
+                            respite=respite, seed=seed, mode=Mode.SYNC,
                             timeout_s=max(600.0, 30.0 * n), itinerary=itinerary, fanout=fanout)
 
 
@@ -148,7 +149,8 @@ def measure(n: int, iterations: int = 2000, respite: int = 500,
     if "exc" in box:
         raise RuntimeError(f"{n} robots: {box['exc']!r}")
     res = box["res"]
-    durations = [float(r["duration_ms"]) for r in res.rounds if r.get("duration_ms") not in ("", None)]
+    durations = [float(r["duration_ms"]) for r in res.rounds
+                 if r.get("duration_ms") not in ("", None)]
     rss = sorted(peak.values())
     return ScalePoint(
         robots=n, itinerary=itinerary, fanout=fanout, delay_ms=delay_ms,

@@ -16,8 +16,9 @@ both see the same machine.
   more robots are built, warmed up, timed and closed group after group.
 * **batched**, learning: :meth:`dfrl.robots.batched.training.BatchedTrainer.run`; without
   learning: :meth:`dfrl.robots.batched.world.BatchedWorld.wander`, uniform random actions drawn
-  inside the compiled loop (robots whose episode ends respawn). The first call (numba compiles, or loads its on-disk
-  cache) is timed apart as ``compile_s``; then the warm-up, then the timed steps.
+  inside the compiled loop (robots whose episode ends respawn). The first call (numba compiles,
+  or loads its on-disk cache) is timed apart as ``compile_s``; then the warm-up, then the
+  timed steps.
 """
 from __future__ import annotations
 

@@ -73,7 +73,7 @@ class ViewServer:
         self._since = time.time() if fresh else None
         self._httpd = ThreadingHTTPServer((host, port), _handler(self))
         self._httpd.daemon_threads = True
-        bound_host, bound_port = self._httpd.server_address[:2]
+        bound_host, bound_port = self._httpd.socket.getsockname()[:2]
         shown = f"[{bound_host}]" if ":" in str(bound_host) else bound_host
         self.url = f"http://{shown}:{bound_port}/"
         self._poller = threading.Thread(target=self._poll_loop, name="view-poll", daemon=True)

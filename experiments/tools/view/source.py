@@ -357,9 +357,9 @@ class EventSource:
             out.append({"t": start, "kind": "method", "agent": agent, "round": rnd,
                         "method": method, "previous": self._methods.get(agent)})
             self._methods[agent] = method
-        for s in skipped:
-            out.append({"t": end, "kind": "skip", "agent": agent, "round": rnd, **s})
-        self._skipped[agent] = {s["robot"] for s in skipped}
+        for skip in skipped:
+            out.append({"t": end, "kind": "skip", "agent": agent, "round": rnd, **skip})
+        self._skipped[agent] = {skip["robot"] for skip in skipped}
         for rid, track in self.robots.items():
             if rid in visited or rid in self._skipped[agent]:
                 track.skipped = rid in self._skipped[agent]

@@ -25,7 +25,7 @@ def test_evaluated_standalone_run_is_deterministic(tmp_path):
     cfg = TrainerConfig(arena="r1", seed=3, iterations=300).to_dict()
     rows = []
     for k in range(2):
-        out = evaluated_job(cfg, str(tmp_path / str(k)), 2, ["h1"], 100, 50, 7)
+        evaluated_job(cfg, str(tmp_path / str(k)), 2, ["h1"], 100, 50, 7)
         rows.append(read_rows(tmp_path / str(k) / "evaluations.csv"))
     assert rows[0] == rows[1]
     assert [(r["iteration"], r["arena"], r["role"]) for r in rows[0]] == [
