@@ -18,7 +18,7 @@
 :- use_module(dfrl_round_state,
               [ new_round/3, get_state/3, put_state/3, pack_state/2,
                 unpack_state/2, replace_fact/2, skip_robot/4, add_retries/3,
-                advance_to/3 ]).
+                advance_to/3, print_capped_warning/1 ]).
 :- use_module(dfrl_round_log,                   % log_path_ok/1: also as
               [ log_round/6, log_control/5, log_event/2, check_log/1,
                 log_path_ok/1, log_text/2 ]).   % dfrl_agent:log_path_ok/1
@@ -662,7 +662,7 @@ forward(Carried-Method, Robot, Options, S0, S) :-
                 put_dict(_{acc:Acc1, visited:V}, S0, S)
             ;   method_failed(Result, S0, S)
             )
-        ;   print_message(warning, E),
+        ;   print_capped_warning(E),
             skip_robot(Robot, E, S0, S)
         )
     ;   skip_robot(Robot, failed(read_robot(Robot)), S0, S)
@@ -685,7 +685,7 @@ write_back(Robot, Options, S0, S) :-
     ;   catch(write_robot(Table, Robot, Options), E, true),
         (   var(E)
         ->  S = S0
-        ;   print_message(warning, E),
+        ;   print_capped_warning(E),
             skip_robot(Robot, E, S0, S)
         )
     ).

@@ -6,6 +6,8 @@
             unpack_state/2,             % +Packed, -State
             replace_fact/2,             % +Module, +Fact
             skip_robot/4,               % +Robot, +Error, +State0, -State
+            capped_text/2,              % +Text, -Capped
+            print_capped_warning/1,     % +Error
             add_retries/3,              % +Retries, +State0, -State
             advance_to/3                % +Index, +State0, -State
           ]).
@@ -146,12 +148,36 @@ skip_robot(Robot, Error, S0, S) :-
     (   memberchk(skip(Robot, _), Skipped0)
     ->  S = S0
     ;   (   Error = reason(Text0)
-        ->  log_text(Text0, Text)
-        ;   message_text(Error, Text)
+        ->  log_text(Text0, Text1)
+        ;   message_text(Error, Text1)
         ),
+        capped_text(Text1, Text),
         append(Skipped0, [skip(Robot, Text)], Skipped),
         put_dict(skipped, S0, Skipped, S)
     ).
+
+%!  capped_text(+Text, -Capped) is det.
+%
+%   Capped is Text cut to its first 300 characters (and "..." said),
+%   so that a refusal whose message holds a whole table (a robot's
+%   type error on the values it was sent, say) does not carry it into
+%   the round log, rounds.csv and the node's warnings.
+
+capped_text(Text, Capped) :-
+    (   string_length(Text, L), L > 300
+    ->  sub_string(Text, 0, 300, _, Head),
+        string_concat(Head, "... (cut)", Capped)
+    ;   Capped = Text
+    ).
+
+%!  print_capped_warning(+Error) is det.
+%
+%   Print Error as a warning, its text capped as capped_text/2 does.
+
+print_capped_warning(Error) :-
+    message_text(Error, Text0),
+    capped_text(Text0, Text),
+    print_message(warning, format("~w", [Text])).
 
 %!  add_retries(+Retries, +State0, -State) is det.
 %

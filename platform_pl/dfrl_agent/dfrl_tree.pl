@@ -12,7 +12,7 @@
               [ tree_children/4, tree_subtree/4, tree_spawn/11, tree_go_to_stop/3,
                 add_stats/3 ]).
 :- use_module(dfrl_lease, [lease_custody/3, lease_write_gate/2]).
-:- use_module(dfrl_round_state, [skip_robot/4, add_retries/3]).
+:- use_module(dfrl_round_state, [skip_robot/4, add_retries/3, print_capped_warning/1]).
 :- use_module(dfrl_robot_io, [read_robot/5, write_robot/3, item_bytes/2]).
 :- use_module(dfrl_aggregation,
               [ aggregate_fold/5, aggregate_finish/3, aggregate_fits/2,
@@ -177,7 +177,7 @@ fold_items([_-Robot-Item|Items], Method, S0, S) :-
     ;   get_dict(acc, S0, Acc0),
         catch(( item_shape(Item, Shape), aggregate_fits(Acc0, Shape) ), E, true),
         (   nonvar(E)
-        ->  print_message(warning, E),
+        ->  print_capped_warning(E),
             skip_robot(Robot, E, S0, S1)
         ;   fold_hook(Acc0, Method, Hook),
             method_call(aggregate_fold(Method, Acc0, Shape, Item, Acc1), Hook, Result),
@@ -288,7 +288,7 @@ out_pass(M, Self, Ctx, P, out(Items, Skips, Stats, Kids)) :-
               error(F, C), E = error(F, C))                         % a purge ends it
     ->  (   var(E)
         ->  Own = [I-Robot-Item], OwnSkips = []
-        ;   print_message(warning, E),
+        ;   print_capped_warning(E),
             message_text(E, Text), Own = [], OwnSkips = [skip(Robot, Text)]
         )
     ;   Own = [], OwnSkips = [skip(Robot, "the robot could not be read")]
@@ -327,7 +327,7 @@ write_own(ctx(_, _, _, Info), Robot, Final, Skips) :-
           error(F, C), E = error(F, C)),
     (   var(E)
     ->  Skips = []
-    ;   print_message(warning, E),
+    ;   print_capped_warning(E),
         message_text(E, Text),
         Skips = [skip(Robot, Text)]
     ).
