@@ -7,6 +7,7 @@
             replace_fact/2,             % +Module, +Fact
             skip_robot/4,               % +Robot, +Error, +State0, -State
             capped_text/2,              % +Text, -Capped
+            method_failed/3,            % +Result, +State0, -State
             print_capped_warning/1,     % +Error
             add_retries/3,              % +Retries, +State0, -State
             advance_to/3                % +Index, +State0, -State
@@ -169,6 +170,18 @@ capped_text(Text, Capped) :-
         string_concat(Head, "... (cut)", Capped)
     ;   Capped = Text
     ).
+
+%!  method_failed(+Result, +State0, -State) is det.
+%
+%   The aggregation method failed with Result = error(Text) (see
+%   dfrl_aggregation:method_call/3): say so, keep the error in the state
+%   (logged with the round) and drop the aggregate, so that no robot is
+%   written this round.
+
+method_failed(error(Error), S0, S) :-
+    print_message(error, format("dfrl: aggregation method: ~w; round aborted, \c
+                                 no table is written", [Error])),
+    put_dict(_{error:Error, acc:none}, S0, S).
 
 %!  print_capped_warning(+Error) is det.
 %

@@ -160,7 +160,7 @@ test(join_and_injected_method, [cleanup(cleanup([C,A,B,D], Log))]) :-
     assertion(memory_robot_table(r1, [2.0,7.0])),
     % the command for another agent is still queued, untouched
     assertion(dfrl_pending(A, other, stop)),
-    retractall(dfrl_agent:pending(_, other, _)).
+    retractall(dfrl_commands:pending(_, other, _)).
 
 test(unknown_method_ignored_and_stop, [cleanup(cleanup([C,A,B], Log))]) :-
     tmp_log(Log),
