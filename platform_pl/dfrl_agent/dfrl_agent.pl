@@ -86,8 +86,8 @@ The agent's handler runs in the agent's own module (see agents.pl), so
 the updates of these facts are the agent writing its own state.
 
 Robots are reached through the resource hook of the host process
-(robot_resources.pl: get_robot_table/3, get_robot_tables/4,
-set_robot_table/3, get_robot_params/3, set_robot_params/3), which a
+(robot_resources.pl: read_robot_table/3, read_robot_tables/4,
+write_robot_table/3, read_robot_params/3, write_robot_params/3), which a
 robot process implements. Tables are qtable(Shape, Values) with Values a
 flat row-major list of floats.
 
@@ -98,9 +98,9 @@ are tabular learners) or parameter vectors (`carries(params)`: function
 learners, e.g. DQN; one agent per algorithm, so all its robots are of
 one kind), chosen when it is created. In params mode the forward pass
 reads each robot's params(Layout, Samples, Values) with
-get_robot_params/3 and folds it in (every robot must have the layout of
+read_robot_params/3 and folds it in (every robot must have the layout of
 the first), the backward pass writes params(Layout, Values) with
-set_robot_params/3; everything else (itinerary, faults, log, lease) is
+write_robot_params/3; everything else (itinerary, faults, log, lease) is
 the same. A method that does not apply to what the agent carries
 (dfrl_aggregation:method_applies/2; of the built-ins only `average`,
 as FedAvg, applies to parameters) is refused by dfrl_create/4 with

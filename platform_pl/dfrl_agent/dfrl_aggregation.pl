@@ -333,16 +333,19 @@ dims_size(Dims, N) :-
 
 %!  abbreviated(+Term, -Short) is det.
 %
-%   Short is Term written with at most 10 elements of a list and 2 levels
-%   of nesting shown, as text: what a message about a term that may hold
-%   a whole table says of it.
+%   Short is Term itself if it is small (64 cells), else its text with
+%   at most 10 elements of a list and 200 characters shown: what a
+%   message about a term that may hold a whole table says of it.
 
 abbreviated(Term, Short) :-
-    format(string(Text), "~W", [Term, [max_depth(10), quoted(true), portray(false)]]),
-    (   string_length(Text, L), L > 200
-    ->  sub_string(Text, 0, 200, _, Head),
-        string_concat(Head, "...", Short)
-    ;   Short = Text
+    (   term_size(Term, Cells), Cells =< 64
+    ->  Short = Term                    % small: the term itself
+    ;   format(string(Text), "~W", [Term, [max_depth(10), quoted(true), portray(false)]]),
+        (   string_length(Text, L), L > 200
+        ->  sub_string(Text, 0, 200, _, Head),
+            string_concat(Head, "...", Short)
+        ;   Short = Text
+        )
     ).
 
 %!  aggregate_fits(+Acc, +Shape) is det.
