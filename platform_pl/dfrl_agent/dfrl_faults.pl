@@ -116,8 +116,8 @@ ensure_holder(M, Agent, S) :-
             lease_adopt(Node, Agent, H:P, Offers, Holder),
             (   Holder == none, Offers \== []
             ->  print_message(warning,
-                              format("dfrl: ~w has no holder at ~w: no other stop took its checkpoint",
-                                     [Agent, H:P]))
+                              format("dfrl: ~w has no holder at ~w: no other stop \c
+                                      took its checkpoint", [Agent, H:P]))
             ;   true
             )
         ;   true

@@ -264,6 +264,7 @@ tree_clone_run(M, Agent, role(Ctx, P, Parent, ParentName)) :-
                  ( tree_forget(Node, Key),
                    catch(purge_agent(Agent), _, true) )).
 
+%   (8 arguments: a clone's place in the tree (context, position, parent) and its limits)
 clone_part(M, Agent, Ctx, P, Parent, ParentName, SkipAfter, Node) :-
     Ctx = ctx(Key, _, _, _),
     out_pass(M, Agent, Ctx, P, out(Items, Skips, Stats0, Kids)),
