@@ -68,7 +68,7 @@ traced(dfrl_round_state:get_state(_, _, _), get_state).
 traced(dfrl_round_state:put_state(_, _, _), put_state).
 traced(dfrl_robot_io:read_robot(_, _, _, _, _), read_robot).
 traced(dfrl_robot_io:write_robot(_, _, _), write_robot).
-traced(robot_bridge:bridge_call(_, _, _, _, _), bridge_call).
+traced(bridge_queue:bridge_call(_, _, _, _, _), bridge_call).
 traced(dfrl_aggregation:aggregate_fold(_, _, _, _, _), fold).
 traced(dfrl_lease:lease_depart(_, _, _, _, _, _), lease_depart).
 traced(dfrl_lease:lease_departed(_), lease_departed).
