@@ -348,7 +348,9 @@ def _table_attrs(names: list[str]) -> tuple[str, ...]:
 def _table_shape(provider: Any, shape: Sequence[int] | None) -> tuple[int, int]:
     if shape is None:                       # q_table: a plain getter, where it has one
         table = provider.q_table if "q_table" in dir(provider) else provider.read_table()
-    dims = tuple(np.shape(table) if shape is None else shape)
+        dims = tuple(np.shape(table))
+    else:
+        dims = tuple(shape)
     if len(dims) != 2 or not all(isinstance(d, (int, np.integer)) and d > 0 for d in dims):
         raise ValueError(f"a table shape is two positive integers, got {dims}")
     return (int(dims[0]), int(dims[1]))
