@@ -982,6 +982,11 @@ agent_api(robot_resources:get_robot_tables(_, _, _, _), true).
 agent_api(robot_resources:set_robot_table(_, _, _), true).
 agent_api(robot_resources:get_robot_params(_, _, _), true).
 agent_api(robot_resources:set_robot_params(_, _, _), true).
+agent_api(robot_resources:read_robot_table(_, _, _), true).
+agent_api(robot_resources:read_robot_tables(_, _, _, _), true).
+agent_api(robot_resources:write_robot_table(_, _, _), true).
+agent_api(robot_resources:read_robot_params(_, _, _), true).
+agent_api(robot_resources:write_robot_params(_, _, _), true).
 agent_api(robot_resources:hosted_robot(_, _), true).
 agent_api(dfrl_agent:dfrl_tour_event(A, _, _), self(A)).
 agent_api(dfrl_agent:dfrl_tour_main(A, _), self(A)).

@@ -3,13 +3,13 @@
             bench_params_round_trips/4, % +Robot, +Warmup, +Count, +Options
             bench_result/1              % -Result
           ]).
-:- use_module(robot_bridge, [get_qtable/3, set_qtable/3, get_params/3, set_params/3]).
+:- use_module(robot_bridge, [read_table/3, write_table/3, read_params/3, write_params/3]).
 :- autoload(library(error), [must_be/2]).
 
 /** <module> Agent side of `dfrl bench bridge`
 
-An agent-like thread times get_qtable/3 followed by set_qtable/3 (of the
-table it just read), or get_params/3 followed by set_params/3, while the
+An agent-like thread times read_table/3 followed by write_table/3 (of the
+table it just read), or read_params/3 followed by write_params/3, while the
 host's control loop serves it.
 */
 
@@ -19,7 +19,7 @@ host's control loop serves it.
 %
 %   Run Warmup untimed, then Count timed read+write pairs on Robot, and
 %   record bench(Total, Get, Set), three lists of milliseconds, for
-%   bench_result/1. Options are passed to get_qtable/3 and set_qtable/3.
+%   bench_result/1. Options are passed to read_table/3 and write_table/3.
 %   An exception is recorded as error(E).
 
 bench_table_round_trips(Robot, Warmup, Count, Options) :-
@@ -27,7 +27,7 @@ bench_table_round_trips(Robot, Warmup, Count, Options) :-
 
 %!  bench_params_round_trips(+Robot, +Warmup, +Count, +Options) is det.
 %
-%   As bench_table_round_trips/4 with get_params/3 and set_params/3 (of
+%   As bench_table_round_trips/4 with read_params/3 and write_params/3 (of
 %   the parameters just read).
 
 bench_params_round_trips(Robot, Warmup, Count, Options) :-
@@ -57,14 +57,14 @@ pair(What, Robot, Options, GetMs, SetMs) :-
     SetMs is (T2 - T1) * 1000.
 
 get(table, Robot, Table, Options) :-
-    get_qtable(Robot, Table, Options).
+    read_table(Robot, Table, Options).
 get(params, Robot, Params, Options) :-
-    get_params(Robot, Params, Options).
+    read_params(Robot, Params, Options).
 
 set(table, Robot, Table, Options) :-
-    set_qtable(Robot, Table, Options).
+    write_table(Robot, Table, Options).
 set(params, Robot, params(Layout, _, Values), Options) :-
-    set_params(Robot, params(Layout, Values), Options).
+    write_params(Robot, params(Layout, Values), Options).
 
 pairs([], [], [], []).
 pairs([T-G-S|R], [T|Ts], [G|Gs], [S|Ss]) :-

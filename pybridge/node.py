@@ -1,7 +1,7 @@
 """A robot process: this Python process hosts a platform node and serves its robots' tables.
 
 Threading model (see README.md): Prolog threads (agents, platform workers) never call
-Python. ``get_qtable/2`` and friends post a request on a Prolog message queue; the robot's
+Python. ``read_table/3`` and friends post a request on a Prolog message queue; the robot's
 control loop calls :meth:`Bridge.serve_pending` once per control step, in the Python main
 thread, which answers the queued requests from the robot's numpy tables. So an agent sees a
 consistent snapshot between two learning steps and no thread fights for the GIL.

@@ -5,20 +5,28 @@ parameters as one flat float vector with a layout (:class:`ParamsProvider`: func
 learners, and tabular ones that also expose their table that way), or both.
 
 The bridge validates a write once, where it enters Python (shape or layout, size, finite
-values; see :mod:`dfrl.pybridge.serving`), so a provider's ``set_q_table`` always receives a
+values; see :mod:`dfrl.pybridge.serving`), so a provider's ``write_table`` always receives a
 float64 array of the registered shape with finite entries, and ``set_params`` a float64
 vector of the registered layout's size with finite entries.
+
+A Q-table is read and written with one verb pair along its whole path (README, "Words"):
+``read_table()`` / ``write_table(table, origin)`` here, the bridge's ``read_table`` /
+``write_table`` requests, ``robot_bridge:read_table/3`` / ``write_table/3`` in Prolog.
+:func:`read_table` and :func:`write_table` are the one place a provider is read and written;
+they still serve a provider written before the verb pair (deprecated: a ``q_table``
+property, ``set_q_table(table)`` or ``set_q_table_from(table, origin)``, and an optional
+``table_read()`` note).
 """
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
 __all__ = ["TableProvider", "ParamsProvider", "StaticTable", "StaticParams", "Layout",
-           "check_layout", "layout_size"]
+           "check_layout", "layout_size", "read_table", "write_table"]
 
 #: A parameter layout: (name, shape) per block of the flat vector, in order; the vector is
 #: the blocks' row-major values one after the other.
@@ -29,19 +37,54 @@ Layout = list[tuple[str, tuple[int, ...]]]
 class TableProvider(Protocol):
     """What a robot offers to the bridge.
 
-    ``q_table`` : float64 ndarray, shape (n_states, n_actions)
+    ``read_table()`` : an agent's read: float64 ndarray, shape (n_states, n_actions)
     ``visits`` : int64 ndarray, shape (n_states, n_actions)
-    ``set_q_table(table)`` : replace the table with a float64 array of the same shape
-    (already validated by the bridge: registered shape, finite entries)
+    ``write_table(table, origin)`` : an agent's write: replace the table with a float64 array
+    of the same shape (already validated by the bridge: registered shape, finite entries);
+    ``origin`` holds the write's origin options (``round``, ``agent``, ``epoch``, ...)
     """
 
-    @property
-    def q_table(self) -> np.ndarray: ...
+    def read_table(self) -> np.ndarray: ...
 
     @property
     def visits(self) -> np.ndarray: ...
 
-    def set_q_table(self, table: np.ndarray) -> None: ...
+    def write_table(self, table: np.ndarray, origin: Mapping[str, Any]) -> None: ...
+
+
+def read_table(provider: Any) -> np.ndarray:
+    """An agent's read of ``provider``'s Q-table: ``provider.read_table()``; of a provider
+    written before the verb pair (deprecated), its ``q_table``, after which its ``table_read()``
+    note, if it has one, is called. Of a class that defines both, the name its most derived
+    class defines is used (a subclass of before overriding ``q_table`` keeps its meaning)."""
+    if _newest(provider, ("read_table", "q_table")) == "read_table":
+        return np.asarray(provider.read_table())
+    table = np.asarray(provider.q_table)
+    if getattr(type(provider), "table_read", None) is not None:
+        provider.table_read()
+    return table
+
+
+def write_table(provider: Any, table: np.ndarray, origin: Mapping[str, Any]) -> None:
+    """An agent's write of a validated ``table`` into ``provider``:
+    ``provider.write_table(table, origin)``; of a provider written before the verb pair
+    (deprecated), ``set_q_table_from(table, origin)``, else ``set_q_table(table)``; the name its
+    most derived class defines is used, as in :func:`read_table`."""
+    name = _newest(provider, ("write_table", "set_q_table_from", "set_q_table"))
+    if name == "set_q_table":
+        provider.set_q_table(table)
+    else:
+        getattr(provider, name)(table, origin)
+
+
+def _newest(provider: Any, names: tuple[str, ...]) -> str:
+    """Of ``names`` (in order of preference), the one defined by the most derived class of
+    ``provider`` that defines any; the last name if none does."""
+    for cls in type(provider).__mro__:
+        for name in names:
+            if name in vars(cls):
+                return name
+    return names[-1]
 
 
 @runtime_checkable
@@ -129,7 +172,7 @@ class StaticTable:
     Attributes
     ----------
     sets : int
-        How many times :meth:`set_q_table` replaced the table.
+        How many times :meth:`write_table` replaced the table.
     """
 
     def __init__(self, shape: tuple[int, int], seed: int = 0) -> None:
@@ -156,10 +199,18 @@ class StaticTable:
         """A copy of the visit counts, int64, shape (n_states, n_actions)."""
         return self._visits.copy()
 
-    def set_q_table(self, table: np.ndarray) -> None:
+    def read_table(self) -> np.ndarray:
+        """A copy of the Q-table (an agent's read)."""
+        return self.q_table
+
+    def write_table(self, table: np.ndarray, origin: Mapping[str, Any] | None = None) -> None:
         """Replace the Q-table with a float64 copy of ``table`` (shape (n_states, n_actions))."""
         self._q = np.array(table, dtype=np.float64)
         self.sets += 1
+
+    def set_q_table(self, table: np.ndarray) -> None:
+        """Deprecated name of :meth:`write_table`."""
+        self.write_table(table)
 
     def __repr__(self) -> str:
         return f"<StaticTable shape={self.shape} sets={self.sets}>"
@@ -250,8 +301,9 @@ def provider_offer(provider: Any, shape: Sequence[int] | None = None,
     """What ``provider`` offers agents: ``(learner, table_shape, layout)``, checked.
 
     ``learner`` defaults to the provider's ``learner_kind``, else ``"tabular"``. A tabular
-    learner needs ``q_table``, ``visits`` and ``set_q_table`` and has a table shape (``shape``,
-    or read once from ``q_table``); a function learner needs the parameter attributes and has
+    learner needs ``read_table``, ``visits`` and ``write_table`` (or, deprecated, ``q_table``
+    and ``set_q_table`` for the first and last) and has a table shape (``shape``, or read once
+    from ``q_table``, else ``read_table()``); a function learner needs the parameter attributes and has
     a table shape only when one is given, for a table view of its Q-function
     (:class:`dfrl.robots.grid_view.GridView`: a heterogeneous federation), which then needs
     the table attributes too. ``layout`` is the checked parameter layout when the provider
@@ -271,7 +323,7 @@ def provider_offer(provider: Any, shape: Sequence[int] | None = None,
         raise ValueError(f"learner is 'tabular' or 'function', got {learner!r}")
     table_shape: tuple[int, int] | None = None
     if learner == "tabular":
-        for attr in ("q_table", "visits", "set_q_table"):
+        for attr in _table_attrs(names):
             if attr not in names:
                 raise TypeError(f"provider has no {attr!r}")
         table_shape = _table_shape(provider, shape)
@@ -280,7 +332,7 @@ def provider_offer(provider: Any, shape: Sequence[int] | None = None,
             if attr not in names:
                 raise TypeError(f"provider of a function learner has no {attr!r}")
         if shape is not None:            # a table view of its Q-function (robots/grid_view.py)
-            for attr in ("q_table", "visits", "set_q_table"):
+            for attr in _table_attrs(names):
                 if attr not in names:
                     raise ValueError(f"a function learner registered with a table shape offers "
                                      f"a table view (q_table, visits, set_q_table); no {attr!r}")
@@ -291,8 +343,19 @@ def provider_offer(provider: Any, shape: Sequence[int] | None = None,
 
 
 
+def _table_attrs(names: list[str]) -> tuple[str, ...]:
+    """What a table provider needs: the verb pair, or (deprecated) the names of before."""
+    if "read_table" in names or "write_table" in names:
+        return ("read_table", "visits", "write_table")
+    return ("q_table", "visits", "set_q_table")
+
+
 def _table_shape(provider: Any, shape: Sequence[int] | None) -> tuple[int, int]:
-    dims = tuple(np.shape(provider.q_table) if shape is None else shape)
+    if shape is None:                       # q_table: a plain getter, where it has one
+        table = provider.q_table if "q_table" in dir(provider) else provider.read_table()
+        dims = tuple(np.shape(table))
+    else:
+        dims = tuple(shape)
     if len(dims) != 2 or not all(isinstance(d, (int, np.integer)) and d > 0 for d in dims):
         raise ValueError(f"a table shape is two positive integers, got {dims}")
     return (int(dims[0]), int(dims[1]))

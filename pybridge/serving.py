@@ -6,10 +6,12 @@ thread).
 ``bridge_reply/2``. A table write is validated here, once, where it enters Python
 (:func:`validate_write`): registered shape, number of values, float values, finite values.
 A parameter write likewise (:func:`validate_params`): registered layout, number of values,
-float values, finite values. Providers receive only valid tables and vectors. A write's
-origin (the agent's options ``round``, ``agent``, ``epoch``, ...; contract K4) goes to a
-provider that defines ``set_q_table_from(table, origin)`` (``set_params_from(vec, origin)``),
-otherwise it is dropped and ``set_q_table(table)`` (``set_params(vec)``) called.
+float values, finite values. Providers receive only valid tables and vectors. A table is
+read with the provider's ``read_table()`` and written with ``write_table(table, origin)``
+(:func:`dfrl.pybridge.providers.read_table` and ``write_table``, which also serve providers
+with the names of before); ``origin`` holds the write's origin (the agent's options
+``round``, ``agent``, ``epoch``, ...; contract K4). A parameter write goes to a provider's
+``set_params_from(vec, origin)``, else ``set_params(vec)`` (the origin dropped).
 
 :meth:`RequestServer.serve_service` serves the host's own service queue the same way, with a
 handler the host gives (``dfrl robot``'s ``dfrl_robot(...)`` requests, robot_service.pl).
@@ -27,7 +29,8 @@ from dfrl.pybridge import codec as _codec
 from dfrl.pybridge.codec import Codec
 from dfrl.pybridge.engine import Prolog
 from dfrl.pybridge.errors import BridgeError, CodecError
-from dfrl.pybridge.providers import Layout, ParamsProvider, TableProvider, layout_size
+from dfrl.pybridge.providers import (Layout, ParamsProvider, TableProvider, layout_size,
+                                      read_table, write_table)
 from dfrl.pybridge.terms import Atom, Term, Var
 
 __all__ = ["RequestError", "RegisteredRobot", "RequestServer", "ServiceHandler", "validate_write",
@@ -60,9 +63,9 @@ def _write(provider: Any, setter: str, value: np.ndarray, origin: Any) -> None:
         getattr(provider, setter)(value)
 
 
-def _note_read(provider: Any, what: str = "table_read") -> None:
-    """Tell a provider that has ``table_read()`` (``params_read()``) that an agent read its
-    Q-table (parameters); its ``q_table`` (``params``) property is a plain getter."""
+def _note_read(provider: Any, what: str = "params_read") -> None:
+    """Tell a provider that has ``params_read()`` that an agent read its parameters (its
+    ``params`` property is a plain getter)."""
     note = getattr(type(provider), what, None)
     if note is not None:
         getattr(provider, what)()
@@ -125,7 +128,7 @@ def _check_finite(values: np.ndarray) -> None:
 
 
 def validate_write(shape: tuple[int, int], request_shape: Any, data: Any) -> np.ndarray:
-    """Check a ``set_qtable`` request against the registered shape; return the table.
+    """Check a ``write_table`` request against the registered shape; return the table.
 
     Parameters
     ----------
@@ -253,32 +256,28 @@ class RequestServer:
         """The reply to one request ``op`` (see the bridge's request protocol)."""
         if not isinstance(op, Term):
             raise BridgeError(f"unknown request {op!r}")
-        if op.name == "get_params" and op.arity == 1:
+        if op.name == "read_params" and op.arity == 1:
             return self._params_reply(*self._params_robot(op.args[0]))
-        if op.name == "set_params" and op.arity == 4:
+        if op.name == "write_params" and op.arity == 4:
             rid, layout, data, origin = op.args
             robot, robot_layout = self._params_robot(rid)
             vec = validate_params(robot_layout, layout, data)
             _write(robot.provider, "set_params", vec, origin)
             return Atom("ok")
-        if op.name == "get_qtable" and op.arity == 1:
-            provider = self._robot(op.args[0])[0].table_provider
-            reply = self._table_reply(provider.q_table)
-            _note_read(provider)
-            return reply
-        if op.name == "get_visits" and op.arity == 1:
+        if op.name == "read_table" and op.arity == 1:
+            return self._table_reply(read_table(self._robot(op.args[0])[0].table_provider))
+        if op.name == "read_visits" and op.arity == 1:
             return self._table_reply(self._robot(op.args[0])[0].table_provider.visits)
-        if op.name == "get_qtable_and_visits" and op.arity == 1:
+        if op.name == "read_table_and_visits" and op.arity == 1:
             provider = self._robot(op.args[0])[0].table_provider
-            reply = Term("tables", self._table_reply(provider.q_table),
-                         self._table_reply(provider.visits))
-            _note_read(provider)
-            return reply
-        if op.name == "set_qtable" and op.arity == 4:
+            visits = provider.visits
+            return Term("tables", self._table_reply(read_table(provider)),
+                        self._table_reply(visits))
+        if op.name == "write_table" and op.arity == 4:
             rid, shape, data, origin = op.args
             robot, robot_shape = self._robot(rid)
             table = validate_write(robot_shape, shape, data)
-            _write(robot.provider, "set_q_table", table, origin)
+            write_table(robot.table_provider, table, write_origin(origin))
             return Atom("ok")
         raise BridgeError(f"unknown request {op!r}")
 

@@ -143,6 +143,14 @@ class GridView:
             raise ValueError("Q-table has a non-finite entry")
         self.last_distillation = distil(self.learner, self.points, arr, config=self.config)
 
+    def read_table(self) -> np.ndarray:
+        """An agent's read of the table view (the bridge's verb pair; README, "Words")."""
+        return self.q_table
+
+    def write_table(self, table: np.ndarray, origin: Any = None) -> None:
+        """An agent's write of the table view: :meth:`set_q_table` (distilled)."""
+        self.set_q_table(table)
+
     # -- the parameters, passed through --------------------------------------------------------
     @property
     def params(self) -> np.ndarray:

@@ -182,6 +182,16 @@ class Trainer:
         """
         self._tabular_only("set_q_table").set_table(table)
 
+    def read_table(self) -> np.ndarray:
+        """An agent's read of the Q-table (the bridge's verb pair; README, "Words"): a copy of
+        :attr:`q_table`."""
+        return np.array(self.q_table)
+
+    def write_table(self, table: np.ndarray, origin: Any = None) -> None:
+        """An agent's write of the Q-table (the bridge's verb pair): :meth:`set_q_table`;
+        ``origin``, where the write came from, is recorded by the caller."""
+        self.set_q_table(table)
+
     @property
     def visits(self) -> np.ndarray:
         """Update counts per state-action pair, int64, shape (n_states, n_actions).

@@ -18,7 +18,7 @@ import numpy as np
 from dfrl.experiments.robot_host.files import CsvLog, share_row
 from dfrl.experiments.robot_host.lines import ProtocolLines
 from dfrl.experiments.robot_host.share_notes import ShareNotes
-from dfrl.pybridge.providers import LearnerProvider, TableProvider
+from dfrl.pybridge.providers import LearnerProvider, TableProvider, read_table, write_table
 
 __all__ = ["SharedTable", "SharedLearner", "shared_provider"]
 
@@ -26,12 +26,14 @@ __all__ = ["SharedTable", "SharedLearner", "shared_provider"]
 class SharedTable:
     """A :class:`dfrl.pybridge.TableProvider` over ``base`` that records shares.
 
-    Every read of the Q-table by an agent (the bridge calls :meth:`table_read`) writes a
-    ``DFRL_EVENT get`` line; every applied
-    ``set_q_table`` (already validated by the bridge) counts a share, appends a row to the
-    shares file (with the write's origin: round, agent, epoch, and the sum it left,
-    :attr:`q_sum`), writes a ``DFRL_EVENT set``
-    line and calls ``on_share`` (the robot's checkpoint).
+    Every read of the Q-table by an agent (:meth:`read_table`) writes a ``DFRL_EVENT get``
+    line; every applied :meth:`write_table` (already validated by the bridge) counts a share,
+    appends a row to the shares file (with the write's origin: round, agent, epoch, and the
+    sum it left, :attr:`q_sum`), writes a ``DFRL_EVENT set`` line and calls ``on_share`` (the
+    robot's checkpoint). The base is read and written through the same verb pair
+    (:func:`dfrl.pybridge.providers.read_table` and ``write_table``). ``q_table`` is a plain
+    getter, for the robot's own use; ``set_q_table``, ``set_q_table_from`` and
+    ``table_read`` are deprecated names of before the verb pair.
 
     Parameters
     ----------
@@ -71,6 +73,7 @@ class SharedTable:
 
     @property
     def q_table(self) -> np.ndarray:
+        """The base's table, a plain getter (no agent's read is recorded)."""
         return self.base.q_table
 
     @property
@@ -78,21 +81,20 @@ class SharedTable:
         """The sum the robot's metrics call ``q_sum``: its table's (recorded with each share)."""
         return float(self.base.q_table.sum())
 
-    def table_read(self) -> None:
-        """An agent read the Q-table (the bridge calls it after serving the read)."""
+    def read_table(self) -> np.ndarray:
+        """An agent's read of the Q-table: the base's, the read recorded."""
+        table = read_table(self.base)
         self.lines.event("get", self.iteration)
+        return table
 
     @property
     def visits(self) -> np.ndarray:
         return self.base.visits
 
-    def set_q_table(self, table: np.ndarray) -> None:
-        self.set_q_table_from(table, {})
-
-    def set_q_table_from(self, table: np.ndarray, origin: Mapping[str, Any]) -> None:
+    def write_table(self, table: np.ndarray, origin: Mapping[str, Any]) -> None:
         """Apply a share written by an agent; ``origin`` holds the options of its write
         (``round``, ``agent``, ``epoch``; see :mod:`dfrl.pybridge.serving`)."""
-        self.base.set_q_table(table)
+        write_table(self.base, table, {})
         self.shares += 1
         self.shares_log.row(share_row(self.robot, self.shares, self.iteration, self.base.q_table,
                                       origin, self.q_sum), flush=True)
@@ -103,13 +105,25 @@ class SharedTable:
         if self.on_share is not None:
             self.on_share()
 
+    def table_read(self) -> None:
+        """Deprecated: an agent's read is recorded by :meth:`read_table`."""
+        self.lines.event("get", self.iteration)
+
+    def set_q_table(self, table: np.ndarray) -> None:
+        """Deprecated name of :meth:`write_table` (no origin)."""
+        self.write_table(table, {})
+
+    def set_q_table_from(self, table: np.ndarray, origin: Mapping[str, Any]) -> None:
+        """Deprecated name of :meth:`write_table`."""
+        self.write_table(table, origin)
+
 
 class SharedLearner(SharedTable):
     """A :class:`SharedTable` whose base also offers its parameters (a
     :class:`dfrl.pybridge.ParamsProvider`); a parameter write is a share like a table write.
 
-    Its ``q_table``, ``visits`` and ``set_q_table`` are the base's (a function learner's raise:
-    the bridge never asks, it registers such a robot without a table).
+    Its ``read_table``, ``visits`` and ``write_table`` are the base's (a function learner's
+    raise: the bridge never asks, it registers such a robot without a table).
     """
 
     base: LearnerProvider

@@ -10,7 +10,8 @@
             fold_hook/3,                % +Acc, +Method, -Hook
             method_call/3,              % :Goal, +Hook, -Result
             same_shape/2,               % +Shape0, +Shape
-            item_floats/2               % +Item, -ListItem
+            item_floats/2,              % +Item, -ListItem
+            abbreviated/2               % +Term, -Short
           ]).
 :- use_module('../platform_errors', [message_text/2]).
 %   The element-wise list maths were defined here first; they are
@@ -21,7 +22,7 @@
 :- use_module('../float_vectors',
               [ vector_add/3, vector_mul/3, vector_max/3, vector_divide/3,
                 vector_times/3, vector_add_scaled/4, vector_weighted_mean/5,
-                vector_floats/2 ]).
+                vector_floats/2, vector_length/2, packed_vector/1 ]).
 :- autoload(library(apply), [foldl/4]).
 :- autoload(library(lists), [member/2]).
 :- autoload(library(error), [must_be/2]).
@@ -279,13 +280,73 @@ item_floats(Item, Item).
 %   Table is qtable(Shape, Values), the aggregate Acc finished by
 %   Method's aggregate_final/3 (params(Layout, Values) for an aggregate of
 %   parameters, shape layout(Layout)); `none` if nothing was aggregated.
+%   Fails if aggregate_final/3 fails.
+%
+%   @error type_error(float_vector, Culprit) if Values is not a vector
+%   (a list of numbers, or packed); Culprit is Values abbreviated.
+%   @error domain_error(aggregate_size(N), Len) if Values has Len
+%   elements where Shape (or Layout) holds N.
 
 aggregate_finish(_, none, none) :- !.
 aggregate_finish(Method, acc(layout(Layout), A), params(Layout, Values)) :-
     !,
-    aggregate_final(Method, A, Values).
+    aggregate_final(Method, A, Values),
+    check_finished(layout(Layout), Values).
 aggregate_finish(Method, acc(Shape, A), qtable(Shape, Values)) :-
-    aggregate_final(Method, A, Values).
+    aggregate_final(Method, A, Values),
+    check_finished(Shape, Values).
+
+%   check_finished(+Shape, +Values): Values is a vector of the number of
+%   elements Shape holds (a shape not of integers or blocks is not sized).
+check_finished(Shape, Values) :-
+    (   is_vector(Values)
+    ->  true
+    ;   abbreviated(Values, Culprit),
+        throw(error(type_error(float_vector, Culprit), _))
+    ),
+    (   shape_size(Shape, N)
+    ->  vector_length(Values, Len),
+        (   Len =:= N
+        ->  true
+        ;   throw(error(domain_error(aggregate_size(N), Len), _))
+        )
+    ;   true
+    ).
+
+is_vector(V) :-
+    (   packed_vector(V)
+    ->  true
+    ;   is_list(V),
+        forall(member(X, V), number(X))
+    ).
+
+shape_size(layout(Layout), N) :-
+    !,
+    is_list(Layout),
+    foldl([_-Dims, N0, N1]>>(dims_size(Dims, P), N1 is N0 + P), Layout, 0, N).
+shape_size(Dims, N) :-
+    dims_size(Dims, N).
+
+dims_size(Dims, N) :-
+    is_list(Dims),
+    foldl([D, P0, P]>>(integer(D), D >= 0, P is P0*D), Dims, 1, N).
+
+%!  abbreviated(+Term, -Short) is det.
+%
+%   Short is Term itself if it is small (64 cells), else its text with
+%   at most 10 elements of a list and 200 characters shown: what a
+%   message about a term that may hold a whole table says of it.
+
+abbreviated(Term, Short) :-
+    (   term_size(Term, Cells), Cells =< 64
+    ->  Short = Term                    % small: the term itself
+    ;   format(string(Text), "~W", [Term, [max_depth(10), quoted(true), portray(false)]]),
+        (   string_length(Text, L), L > 200
+        ->  sub_string(Text, 0, 200, _, Head),
+            string_concat(Head, "...", Short)
+        ;   Short = Text
+        )
+    ).
 
 %!  aggregate_fits(+Acc, +Shape) is det.
 %

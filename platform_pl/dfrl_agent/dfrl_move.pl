@@ -54,6 +54,8 @@ is tried once more at once if it did.
 %   how many times the move was tried again; after a failed move the
 %   agent's state is State0 again and the checkpoint is dropped.
 
+%   (8 arguments: the state the agent leaves, its checkpoint, and the one
+%   it arrives with are both needed)
 move_to_stop(M, Agent, S0, S1, stop(H, P, _), Next, Tries, Result) :-
     current_node(Node),
     here_address(M, Agent, S0, Here),

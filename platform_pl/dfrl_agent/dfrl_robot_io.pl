@@ -4,8 +4,8 @@
             item_bytes/2                % +Item, -Bytes
           ]).
 :- use_module('../robot_resources',
-              [ get_robot_table/3, get_robot_tables/4, set_robot_table/3,
-                get_robot_params/3, set_robot_params/3 ]).
+              [ read_robot_table/3, read_robot_tables/4, write_robot_table/3,
+                read_robot_params/3, write_robot_params/3 ]).
 :- use_module('../agent_bounds', [bounds_park/1]).
 :- use_module('../tartarus', [current_node/1]).
 :- use_module(dfrl_lease, [lease_fenced/4, lease_note_write/3]).
@@ -37,13 +37,13 @@ time counts against agent_idle_limit, not agent_wall_limit.
 read_robot(params, _, Robot, Options0, Params) :-
     !,
     read_options(Options0, Options),
-    bounds_park(get_robot_params(Robot, Params, Options)).
+    bounds_park(read_robot_params(Robot, Params, Options)).
 read_robot(tables, Method, Robot, Options0, Table) :-
     read_options(Options0, Options),
     (   dfrl_aggregation:method_uses_visits(Method)
-    ->  bounds_park(get_robot_tables(Robot, qtable(S, V), qtable(S, W), Options)),
+    ->  bounds_park(read_robot_tables(Robot, qtable(S, V), qtable(S, W), Options)),
         Table = qtable_visits(S, V, W)
-    ;   bounds_park(get_robot_table(Robot, Table, Options))
+    ;   bounds_park(read_robot_table(Robot, Table, Options))
     ).
 
 %   Values are asked for packed where packed maths runs in C: without the
@@ -77,9 +77,9 @@ write_robot(Table, Robot, Options) :-
 
 write_robot_(params(L, V), Robot, Options) :-
     !,
-    bounds_park(set_robot_params(Robot, params(L, V), Options)).
+    bounds_park(write_robot_params(Robot, params(L, V), Options)).
 write_robot_(Table, Robot, Options) :-
-    bounds_park(set_robot_table(Robot, Table, Options)).
+    bounds_park(write_robot_table(Robot, Table, Options)).
 
 %!  item_bytes(+Item, -Bytes) is det.
 %

@@ -6,6 +6,9 @@
             unpack_state/2,             % +Packed, -State
             replace_fact/2,             % +Module, +Fact
             skip_robot/4,               % +Robot, +Error, +State0, -State
+            capped_text/2,              % +Text, -Capped
+            method_failed/3,            % +Result, +State0, -State
+            print_capped_warning/1,     % +Error
             add_retries/3,              % +Retries, +State0, -State
             advance_to/3                % +Index, +State0, -State
           ]).
@@ -146,12 +149,48 @@ skip_robot(Robot, Error, S0, S) :-
     (   memberchk(skip(Robot, _), Skipped0)
     ->  S = S0
     ;   (   Error = reason(Text0)
-        ->  log_text(Text0, Text)
-        ;   message_text(Error, Text)
+        ->  log_text(Text0, Text1)
+        ;   message_text(Error, Text1)
         ),
+        capped_text(Text1, Text),
         append(Skipped0, [skip(Robot, Text)], Skipped),
         put_dict(skipped, S0, Skipped, S)
     ).
+
+%!  capped_text(+Text, -Capped) is det.
+%
+%   Capped is Text cut to its first 300 characters (and "..." said),
+%   so that a refusal whose message holds a whole table (a robot's
+%   type error on the values it was sent, say) does not carry it into
+%   the round log, rounds.csv and the node's warnings.
+
+capped_text(Text, Capped) :-
+    (   string_length(Text, L), L > 300
+    ->  sub_string(Text, 0, 300, _, Head),
+        string_concat(Head, "... (cut)", Capped)
+    ;   Capped = Text
+    ).
+
+%!  method_failed(+Result, +State0, -State) is det.
+%
+%   The aggregation method failed with Result = error(Text) (see
+%   dfrl_aggregation:method_call/3): say so, keep the error in the state
+%   (logged with the round) and drop the aggregate, so that no robot is
+%   written this round.
+
+method_failed(error(Error), S0, S) :-
+    print_message(error, format("dfrl: aggregation method: ~w; round aborted, \c
+                                 no table is written", [Error])),
+    put_dict(_{error:Error, acc:none}, S0, S).
+
+%!  print_capped_warning(+Error) is det.
+%
+%   Print Error as a warning, its text capped as capped_text/2 does.
+
+print_capped_warning(Error) :-
+    message_text(Error, Text0),
+    capped_text(Text0, Text),
+    print_message(warning, format("~w", [Text])).
 
 %!  add_retries(+Retries, +State0, -State) is det.
 %

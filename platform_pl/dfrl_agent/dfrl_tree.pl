@@ -1,5 +1,6 @@
 :- module(dfrl_tree,
           [ tree_round/5,               % +Module, +Agent, +Fanout, +State0, -State
+            tree_fallback/6,            % +Module, +Agent, +Method, +Start, +Failed, -State
             tree_clone_role/3,          % +Module, +Agent, -Role
             tree_clone_run/3,           % +Module, +Agent, +Role
             tree_children/4,            % +Position, +Fanout, +Size, -Children
@@ -12,7 +13,11 @@
               [ tree_children/4, tree_subtree/4, tree_spawn/11, tree_go_to_stop/3,
                 add_stats/3 ]).
 :- use_module(dfrl_lease, [lease_custody/3, lease_write_gate/2]).
-:- use_module(dfrl_round_state, [skip_robot/4, add_retries/3]).
+:- use_module(dfrl_round_state,
+              [ skip_robot/4, add_retries/3, print_capped_warning/1, method_failed/3,
+                replace_fact/2 ]).
+:- use_module(dfrl_payload, [next_method/5, carried/3, itinerary_kind/3]).
+:- use_module(dfrl_round_log, [log_control/5]).
 :- use_module(dfrl_robot_io, [read_robot/5, write_robot/3, item_bytes/2]).
 :- use_module(dfrl_aggregation,
               [ aggregate_fold/5, aggregate_finish/3, aggregate_fits/2,
@@ -177,7 +182,7 @@ fold_items([_-Robot-Item|Items], Method, S0, S) :-
     ;   get_dict(acc, S0, Acc0),
         catch(( item_shape(Item, Shape), aggregate_fits(Acc0, Shape) ), E, true),
         (   nonvar(E)
-        ->  print_message(warning, E),
+        ->  print_capped_warning(E),
             skip_robot(Robot, E, S0, S1)
         ;   fold_hook(Acc0, Method, Hook),
             method_call(aggregate_fold(Method, Acc0, Shape, Item, Acc1), Hook, Result),
@@ -191,10 +196,39 @@ fold_items([_-Robot-Item|Items], Method, S0, S) :-
         fold_items(Items, Method, S1, S)
     ).
 
-method_failed(error(Error), S0, S) :-
-    print_message(error, format("dfrl: aggregation method: ~w; round aborted, \c
-                                 no table is written", [Error])),
-    put_dict(_{error:Error, acc:none}, S0, S).
+%!  tree_fallback(+Module, +Agent, +Method, +Start, +Failed, -State) is semidet.
+%
+%   A tree round whose method failed (the round began in state Start and
+%   ended in Failed, which has an error) is run again at once with the
+%   method it falls back to (as a chain round, dfrl_rounds.pl): its
+%   copies read and write every robot again; the hops of both count.
+%   Fails if the round did not fail, was a fallback already, or there is
+%   no other method to fall back to.
+
+tree_fallback(M, Agent, Method, S1, S2, S) :-
+    get_dict(error, S2, Error),
+    \+ get_dict(fallback, S1, _),
+    carried(M, Agent, Carried),
+    next_method(Method, Carried, S2, Next, _),
+    Next \== Method,
+    itinerary_kind(M, Agent, tree(K)),
+    get_dict(round, S1, Round),
+    print_message(warning,
+                  format("dfrl: ~w round ~w: method ~w failed (~w); the tree round runs \c
+                          again with ~w", [Agent, Round, Method, Error, Next])),
+    replace_fact(M, dfrl_method_of(Agent, Next)),
+    M:dfrl_plan(Agent, plan(_, _, _, Log, _)),
+    log_control(Log, Agent, Round, fallback(Method, Next), applied),
+    get_dict(hops, S2, Hops),
+    get_dict(bytes, S2, Bytes),
+    get_dict(retries, S2, Retries),
+    (   del_dict(error, S1, _, S1a)         % the method did not apply at all
+    ->  true
+    ;   S1a = S1
+    ),
+    put_dict(_{hops:Hops, bytes:Bytes, retries:Retries,
+               fallback:failed(Method, Error)}, S1a, S1b),
+    tree_round(M, Agent, K, S1b, S).
 
 		 /*******************************
 		 *            CLONES		*
@@ -230,6 +264,7 @@ tree_clone_run(M, Agent, role(Ctx, P, Parent, ParentName)) :-
                  ( tree_forget(Node, Key),
                    catch(purge_agent(Agent), _, true) )).
 
+%   (8 arguments: a clone's place in the tree (context, position, parent) and its limits)
 clone_part(M, Agent, Ctx, P, Parent, ParentName, SkipAfter, Node) :-
     Ctx = ctx(Key, _, _, _),
     out_pass(M, Agent, Ctx, P, out(Items, Skips, Stats0, Kids)),
@@ -288,7 +323,7 @@ out_pass(M, Self, Ctx, P, out(Items, Skips, Stats, Kids)) :-
               error(F, C), E = error(F, C))                         % a purge ends it
     ->  (   var(E)
         ->  Own = [I-Robot-Item], OwnSkips = []
-        ;   print_message(warning, E),
+        ;   print_capped_warning(E),
             message_text(E, Text), Own = [], OwnSkips = [skip(Robot, Text)]
         )
     ;   Own = [], OwnSkips = [skip(Robot, "the robot could not be read")]
@@ -327,7 +362,7 @@ write_own(ctx(_, _, _, Info), Robot, Final, Skips) :-
           error(F, C), E = error(F, C)),
     (   var(E)
     ->  Skips = []
-    ;   print_message(warning, E),
+    ;   print_capped_warning(E),
         message_text(E, Text),
         Skips = [skip(Robot, Text)]
     ).
@@ -372,9 +407,6 @@ send_down(Node, Key, Final, SkipAfter, Kid, Kid-Sent) :-
 		 /*******************************
 		 *            HELPERS		*
 		 *******************************/
-
-carried(M, Agent, Carried) :-
-    (   catch(M:dfrl_carries_of(Agent, C), _, fail) -> Carried = C ; Carried = tables ).
 
 retry_of(M, Agent, retry(R, B)) :-
     (   catch(M:dfrl_retry_of(Agent, retry(R, B)), _, fail) -> true ; R = 2, B = 0.2 ).

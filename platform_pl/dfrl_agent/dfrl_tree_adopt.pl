@@ -40,6 +40,7 @@ when its children are alive.
 %   reports). Msgs are the messages of the adopted (up/5 or done/3),
 %   Skips the robots skipped, Stats what new copies cost.
 
+%   (10 arguments: a fold over the lost copies with three accumulator pairs)
 adopt_lost(_, _, _, _, _, _, [], [], [], stats(0, 0, 0)) :- !.
 adopt_lost(Node, Ctx, M, Self, P, Phase, Lost, Msgs, Skips, Stats) :-
     Ctx = ctx(_, Order, K, info(_, _, _, _, _, _, SkipAfter, _)),
@@ -69,6 +70,7 @@ lost_one(Order, K, N, kid(X, Address, Name), S0-O0, S-O) :-
 %   without one gets a new copy while the items go up (afterwards its
 %   subtree is skipped); a stop that does not answer is skipped and its
 %   children are offered instead.
+%   (9 arguments: one step of adopt_lost/10's fold (an accumulator pair of o/3))
 offer(Ctx, parent(To, Name), Phase, SkipAfter, K, N, C-Prefix, o(P0, S0, F0), o(P, S, F)) :-
     Ctx = ctx(Key, Order, _, _),
     nth0(C, Order, _-stop(H, Port, Robot)),

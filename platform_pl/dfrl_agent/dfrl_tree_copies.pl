@@ -64,6 +64,7 @@ subtrees([C|Cs], K, N, Positions) :-
 %   itself there in its own thread; each says here whether it got there
 %   (moved/failed). A child that cannot be reached is skipped and its
 %   children are sent copies instead.
+%   (11 arguments: a fold over the children with three accumulator pairs)
 tree_spawn([], _, _, _, _, Kids, Kids, Skips, Skips, St, St) :- !.
 tree_spawn(Cs, M, Self, Ctx, P, Kids0, Kids, Skips0, Skips, St0, St) :-
     Ctx = ctx(Key, Order, K, info(_, _, _, _, _, _, SkipAfter, _)),
@@ -86,6 +87,7 @@ waiting(C-_, kid(C, none, none)).
 %   A copy of Self on this node with the role of child C (go(Address):
 %   it moves itself to C's stop first); failed(C, Text, 0) if it cannot
 %   even be made.
+%   (9 arguments: a copy's place in the tree and an accumulator pair)
 local_copy(M, Self, Ctx, Here, Parent, SelfName, C, Copies0, Copies) :-
     Ctx = ctx(Key, Order, _, _),
     nth0(C, Order, _-stop(H, Port, _)),

@@ -108,6 +108,7 @@ tree_wait(Node, Ctx, Kind, Peers, Msgs, Lost) :-
 tree_await(Node, Key, Kind, Peers, Probe, Msgs, Lost) :-
     await_loop(Node, Key, Kind, Peers, Probe, [], Msgs, [], Lost).
 
+%   (9 arguments: a wait loop with two accumulator pairs)
 await_loop(_, _, _, [], _, Msgs0, Msgs, Lost0, Lost) :-
     !,
     Msgs = Msgs0,

@@ -1,8 +1,9 @@
 :- module(lease_watch,
           [ ensure_watchdog/0,
-            note_beat/2,                % +Node, +Agent
-            beat_answer/6,              % +Answer, +Node, +Agent, +Epoch, +Seq, +Sent
-            lease_broadcast_epoch/5     % +Node, +Tokens, +Agent, +Epoch, +Stops
+            lease_broadcast_epoch/5,    % +Node, +Tokens, +Agent, +Epoch, +Stops
+            ensure_thread/1,            % +Role
+            has_work/2,                 % +Role, :Work
+            refused/1                   % +Why
           ]).
 :- use_module('../node', [node_property/2, local_node/1]).
 :- use_module('../agents',
@@ -25,7 +26,8 @@ and 5 of the protocol in dfrl_lease.pl):
     that one does not know it, and resurrects the agent with a new epoch
     when none knows of a later hop;
   - the *heartbeat*, while agents are on nodes of this process: every
-    third of the lease it renews each one's holder (progress(alive)).
+    third of the lease it renews each one's holder (progress(alive));
+    its work is lease_beat.pl's.
 
 Both are stopped and joined at halt.
 */
@@ -35,6 +37,8 @@ Both are stopped and joined at halt.
     exited_/2,                  % Role, ThreadId: ended, to be joined
     tried_/3.                   % Node, Agent, Epoch: a resurrection that found no majority
 
+%!  ensure_thread(+Role) is det.
+%
 %   Start the thread of Role (watchdog or heart) unless it runs; one that
 %   ended is joined first. Called holding the lock: a thread ends, when
 %   it finds no more work, under the same lock.
@@ -58,8 +62,10 @@ run_thread(Role) :-
     (   var(E) -> true ; E == stop -> true ; print_message(warning, E) ).
 
 thread_loop(watchdog, watch_loop).
-thread_loop(heart, heart_loop).
+thread_loop(heart, lease_beat:heart_loop).   % (loaded by dfrl_lease.pl)
 
+%!  has_work(+Role, :Work) is semidet.
+%
 %   The loop of Role goes on while Work (a goal) finds some; when it
 %   finds none, the thread is no longer Role's (the next to need it
 %   starts a new one).
@@ -120,6 +126,7 @@ expired(ckpt(Node, Agent, E, K)) :-
     ;   true
     ).
 
+%   (9 arguments: the fields of one checkpoint (ckpt/9, lease_book.pl) as the watchdog took it)
 judge(here(E1, K1), _, Node, Agent, E, K, _, _, _) :-
     E1 =< E,
     !,
@@ -162,6 +169,7 @@ drop(Node, Agent, E, K, Why) :-
            )),
     prune_gone(Node, Agent).
 
+%   (8 arguments: a checkpoint's fields (ckpt/9) that a probe needs, and the tries)
 probe(Node, Record, Dest, Agent, E, K, Tries, Answer) :-
     record_tokens(Record, Node, Tokens),
     quick_call(Node, Tokens, Dest, probe(Agent, E, K), A0),
@@ -181,6 +189,7 @@ probe(Node, Record, Dest, Agent, E, K, Tries, Answer) :-
 %   minority never resurrects (the majority's side may have the agent).
 %   Without a majority the checkpoint is kept and asked about again half
 %   a lease later.
+%   (10 arguments: the fields of one checkpoint (ckpt/9) and the verdict)
 lost(Node, Agent, E, K, Here, Dest, Record, Resume, Dest_, Why) :-
     others_know(Node, Dest, Dest_, Here, Record, Agent, E, K, Known, Answered),
     record_stops(Record, Agent, Stops),
@@ -219,6 +228,7 @@ wait_again(Node, Agent, E, K) :-
 %   its holder was cut off, not the agent (it may not have found another
 %   holder yet); asked again later. Where the lost stop is gone, its copy
 %   writes nothing more and such writes are no news.
+%   (10 arguments: a checkpoint's fields (ckpt/9) and what the stops answered)
 others_know(Node, Dest, Dest_, Here, Record, Agent, E, K, Known, Answered) :-
     record_stops(Record, Agent, Stops0),
     exclude([S]>>( same_address(S, Dest) ; same_address(S, Here) ), Stops0, Stops),
@@ -226,6 +236,7 @@ others_know(Node, Dest, Dest_, Here, Record, Agent, E, K, Known, Answered) :-
     (   tried_(Node, Agent, Tried) -> true ; Tried = E ),
     others_know_(Stops, Node, Tokens, Agent, E, K, Tried-Dest_, E, Known, 0, Answered).
 
+%   (11 arguments: others_know/10's loop, with its accumulators)
 others_know_([], _, _, _, _, _, _, Max, max_epoch(Max), N, N).
 others_know_([S|Ss], Node, Tokens, Agent, E, K, Tried-Dest_, Max0, Known, N0, N) :-
     quick_call(Node, Tokens, S, probe(Agent, E, K), Answer),
@@ -245,6 +256,8 @@ others_know_([S|Ss], Node, Tokens, Agent, E, K, Tried-Dest_, Max0, Known, N0, N)
         others_know_(Ss, Node, Tokens, Agent, E, K, Tried-Dest_, Max1, Known, N1, N)
     ).
 
+%!  refused(+Why) is semidet.
+%
 %   A connection refused: the node's process is gone (killed, crashed,
 %   stopped), nothing of it runs; a timeout or an unreachable network is
 %   no such proof.
@@ -293,6 +306,7 @@ loopback('127.0.0.1').
 %   old copy may still run (Dest silent), the resurrected one starts a
 %   new round (its round number is one the old copy cannot have
 %   entered: see resume_point/6): a round is never written by two copies.
+%   (11 arguments: the fields of one checkpoint (ckpt/9), the epoch seen and the verdict)
 resurrect(Node, Agent, E, K, MaxSeen, Here, Dest, Record0, Resume0, Dest_, Why) :-
     (   seen(Node, Agent, Seen) -> true ; Seen = E ),
     (   tried_(Node, Agent, Tried) -> true ; Tried = E ),
@@ -324,6 +338,7 @@ resurrect(Node, Agent, E, K, MaxSeen, Here, Dest, Record0, Resume0, Dest_, Why) 
 %   Acc is Promised-Written: how many of Stops promised Epoch, and the
 %   last round the agent wrote at any of them (a stop answers noted(W);
 %   one of before issue 33 answers noted: 0).
+%   (8 arguments: a loop over the stops with a pair of accumulators)
 promise([], _, _, _, _, Acc, Acc, none).
 promise([S|Ss], Node, Tokens, Agent, E1, N0-W0, Acc, Refused) :-
     quick_call(Node, Tokens, S, epoch(Agent, E1), Answer),
@@ -370,6 +385,7 @@ record_itinerary(agent(_, _, _, _, _, _, Clauses, _), Agent, Kind) :-
     ;   Kind = chain
     ).
 
+%   (11 arguments: resurrect/11 once the epoch is promised)
 resurrect_(Node, Agent, E1, K, Here, Dest, Record0, Resume0, Dest_, Written, Why) :-
     record_itinerary(Record0, Agent, Itinerary),
     (   entered(Node, Agent, E0, K, Entered), E0 < E1 -> true ; Entered = none ),
@@ -403,113 +419,9 @@ lease_broadcast_epoch(Node, Tokens, Agent, Epoch, Stops) :-
     forall(member(S, Stops),
            custody_call(Node, Tokens, S, epoch(Agent, Epoch), _)).
 
-		 /*******************************
-		 *           HEARTBEAT		*
-		 *******************************/
-
-%   Every agent that started on a node of this process (lease_arrived/3)
-%   renews its holder's lease from here, in a thread of its own, every
-%   third of the lease: progress(alive) to the holder. So the lease of a
-%   checkpoint runs out only when the node the agent is on has not
-%   answered for a whole lease (killed, stopped, cut off), whatever the
-%   agent does meanwhile (rests, waits for a robot). The thread runs while
-%   there are such agents; an agent that left or ended is dropped.
-note_beat(Node, Agent) :-
-    (   beat(Node, Agent, _)
-    ->  true
-    ;   current_prolog_flag(dfrl_resting_holder, false)
-    ->  true
-    ;   locked(( beat(Node, Agent, _)
-               ->  true
-               ;   assertz(beat(Node, Agent, 0)),
-                   ensure_thread(heart)
-               ))
-    ).
-
-heart_loop :-
-    (   has_work(heart, beat(_, _, _))
-    ->  beat_tick(T),
-        thread_self(Me),
-        (   thread_get_message(Me, stop, [timeout(T)])
-        ->  throw(stop)
-        ;   true
-        ),
-        findall(N-A, beat(N, A, _), Beats),
-        forall(member(N-A, Beats),
-               catch(beat_once(N, A), Err, print_message(warning, Err))),
-        heart_loop
-    ;   true
-    ).
-
-beat_tick(T) :-
-    findall(L, ( beat(N, _, _), lease_s(N, L) ), Ls),
-    (   Ls == [] -> T = 0.1 ; min_list(Ls, Min), T is max(0.02, min(1.0, Min/8)) ).
-
-beat_once(Node, Agent) :-
-    (   \+ local_node(Node)
-    ->  locked(retractall(beat(Node, Agent, _)))
-    ;   \+ agent_exists(Node, Agent)
-    ->  locked(retractall(beat(Node, Agent, _)))
-    ;   beat(Node, Agent, Last),
-        lease_s(Node, L),
-        get_time(Now),
-        Now - Last >= L/3,
-        agent_status(Node, Agent, Status),
-        \+ Status = staged(_),
-        \+ Status = in_doubt(_, _),
-        \+ Status = departing(_),
-        lease_custody(Node, Agent, custody(E, K, Holder)),
-        Holder \== none,
-        \+ ckpt(Node, Agent, E, K, _, _, _, _, _)    % held here: it is leaving
-    ->  agent_tokens(Node, Agent, Tokens),
-        quick_call(Node, Tokens, Holder, progress(Agent, E, K, alive), Answer),
-        (   Answer = error(_)
-        ->  true                    % tried again at the next tick
-        ;   locked(( retract(beat(Node, Agent, _))
-                   ->  assertz(beat(Node, Agent, Now))
-                   ;   true
-                   ))
-        ),
-        beat_answer(Answer, Node, Agent, E, K, Now)
-    ;   true
-    ).
-
-%   renewed: the copy may write until lease_s after Sent (note_valid/3);
-%   superseded: the agent retires at its next check (it looks at the
-%   epochs this node has seen); unknown: its holder has no checkpoint of
-%   it (restarted, or dropped it), so the agent finds another one at its
-%   next round start (lease_needs_holder/2), as when its lease ran out.
-beat_answer(renewed, Node, Agent, _, _, Sent) :-
-    !,
-    locked(retractall(holder_silent(Node, Agent, _, _))),
-    note_valid(Node, Agent, Sent).
-beat_answer(superseded(E2), Node, Agent, _, _, _) :-
-    !,
-    note_epoch(Node, Agent, E2).
-beat_answer(error(Why), Node, Agent, E, K, Sent) :-
-    refused(Why),                       % its process is gone, its checkpoints too
-    !,
-    beat_answer(unknown, Node, Agent, E, K, Sent).
-beat_answer(error(Why), Node, Agent, E, K, _) :-
-    sub_term(timeout(_), Why),          % cut off or frozen: it may still hold one
-    !,
-    locked(( holder_silent(Node, Agent, E, K)
-           ->  true
-           ;   retractall(holder_silent(Node, Agent, _, _)),
-               assertz(holder_silent(Node, Agent, E, K))
-           )).
-beat_answer(unknown, Node, Agent, E, K, _) :-
-    !,
-    locked(( holder_lost(Node, Agent, E, K)
-           ->  true
-           ;   retractall(holder_lost(Node, Agent, _, _)),
-               assertz(holder_lost(Node, Agent, E, K))
-           )).
-beat_answer(_, _, _, _, _, _).
-
-:- at_halt(stop_threads).
-
 stop_threads :-
     forall(running_(_, T), catch(thread_send_message(T, stop), _, true)),
     forall(running_(_, T), catch(thread_join(T, _), _, true)),
     forall(retract(exited_(_, T)), catch(thread_join(T, _), _, true)).
+
+:- at_halt(stop_threads).

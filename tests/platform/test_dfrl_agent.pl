@@ -29,6 +29,13 @@ dfrl_aggregation:aggregate_init(throwing_final, qtable(_, V), V).
 dfrl_aggregation:aggregate_step(throwing_final, A, _, A).
 dfrl_aggregation:aggregate_final(throwing_final, _, _) :-
     type_error(integer, not_a_number).
+% methods whose finished aggregate is no table of the carried shape
+dfrl_aggregation:aggregate_init(short_final, qtable(_, V), V).
+dfrl_aggregation:aggregate_step(short_final, A, _, A).
+dfrl_aggregation:aggregate_final(short_final, _, [0.0]).
+dfrl_aggregation:aggregate_init(wrapped_final, qtable(_, V), V).
+dfrl_aggregation:aggregate_step(wrapped_final, A, _, A).
+dfrl_aggregation:aggregate_final(wrapped_final, A, wrapped(A)).
 
 wait_for(G) :- wait_for(G, 250).
 wait_for(G, N) :- ( call(G) -> true ; N > 0 -> sleep(0.02), N1 is N-1, wait_for(G, N1) ; fail ).
@@ -153,7 +160,7 @@ test(join_and_injected_method, [cleanup(cleanup([C,A,B,D], Log))]) :-
     assertion(memory_robot_table(r1, [2.0,7.0])),
     % the command for another agent is still queued, untouched
     assertion(dfrl_pending(A, other, stop)),
-    retractall(dfrl_agent:pending(_, other, _)).
+    retractall(dfrl_commands:pending(_, other, _)).
 
 test(unknown_method_ignored_and_stop, [cleanup(cleanup([C,A,B], Log))]) :-
     tmp_log(Log),
@@ -249,6 +256,35 @@ test(throwing_final_falls_back_within_its_round,
     assertion(R.hops >= 4),
     forall(member(Rb, [r1,r2]), assertion(memory_robot_sets(Rb, 1))),
     forall(member(Rb, [r1,r2]), assertion(memory_robot_table(Rb, [2.0,3.0]))).
+
+%   A finished aggregate of the wrong length, or no vector at all, is the
+%   method's failure, found before anything is written: the round is done
+%   again with the fallback, and the error does not carry the values.
+test(misshapen_final_falls_back_within_its_round,
+     [setup(assertz(user:quiet)),
+      cleanup((retractall(user:quiet), cleanup([C,A,B], Log))),
+      forall(member(Method-Says, [short_final-'aggregate_size(400)',
+                                  wrapped_final-'float_vector']))]) :-
+    tmp_log(Log),
+    numlist(1, 400, Ns),
+    maplist([N, X]>>(X is float(N)), Ns, V1),
+    maplist([N, X]>>(X is float(N + 2)), Ns, V2),
+    maplist([N, X]>>(X is float(N + 1)), Ns, Mean),
+    memory_robots_start([r1-V1, r2-V2]),
+    nodes(3, [C,A,B]),
+    maplist(stop_of, [A,B], [r1,r2], Stops),
+    launch(C, fm, Stops, Method, 1, Log),
+    assertion(wait_for(finished(Log))),
+    events(Log, round, [R]),
+    assertion(sub_atom(R.error, 0, _, _, 'aggregate_final(')),
+    assertion(sub_atom(R.error, _, _, _, Says)),
+    get_dict(error, R, Error), atom_length(Error, L),
+    assertion(L < 400),
+    assertion(R.failed_method == Method),
+    assertion(R.method == average),
+    assertion(R.skipped == []),
+    forall(member(Rb, [r1,r2]), assertion(memory_robot_sets(Rb, 1))),
+    forall(member(Rb, [r1,r2]), assertion(memory_robot_table(Rb, Mean))).
 
 test(unreachable_stop_is_skipped, [setup(assertz(user:quiet)),
                                    cleanup((retractall(user:quiet), cleanup([C,A,B], Log)))]) :-

@@ -29,6 +29,10 @@ dfrl_aggregation:aggregate_final(first_table, A, A).
 dfrl_aggregation:aggregate_init(failing_fold, qtable(_, V), V).
 dfrl_aggregation:aggregate_step(failing_fold, _, _, _) :- fail.
 dfrl_aggregation:aggregate_final(failing_fold, A, A).
+% a method whose finished aggregate is one value short
+dfrl_aggregation:aggregate_init(short_fold, qtable(_, V), V).
+dfrl_aggregation:aggregate_step(short_fold, A, _, A).
+dfrl_aggregation:aggregate_final(short_fold, [_|A], A).
 
 wait_for(G) :- wait_for(G, 500).
 wait_for(G, N) :- ( call(G) -> true ; N > 0 -> sleep(0.02), N1 is N-1, wait_for(G, N1) ; fail ).
@@ -170,6 +174,23 @@ test(failing_method_falls_back_within_the_tree_round,
     % round 2 averages equal tables: the same values again
     forall(member(R, Ids), assertion(memory_robot_table(R, Expected0))),
     forall(member(R, Ids), assertion(memory_robot_sets(R, 2))).
+
+test(misshapen_final_falls_back_within_the_tree_round,
+     [setup(assertz(user:quiet)), cleanup((retractall(user:quiet), cleanup_all(Log)))]) :-
+    tmp_log(Log),
+    robots(7, Robots0),
+    Robots0 = [_|Robots],
+    run_tree(Robots, fs, short_fold, 1, Log, Ids),
+    events(Log, round, [R1]),
+    % the root found the short aggregate before any write: done again with average
+    assertion(R1.method == average),
+    assertion(R1.failed_method == short_fold),
+    assertion(sub_atom(R1.error, _, _, _, 'aggregate_size(4)')),
+    assertion(length(R1.visited, 6)),
+    assertion(R1.skipped == []),
+    chain_result(average, Robots, Expected),
+    forall(member(R, Ids), assertion(memory_robot_table(R, Expected))),
+    forall(member(R, Ids), assertion(memory_robot_sets(R, 1))).
 
 test(dead_stop_skipped_its_children_kept, [setup(assertz(user:quiet)),
                                            cleanup((retractall(user:quiet),

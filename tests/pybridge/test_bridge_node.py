@@ -192,7 +192,7 @@ def test_validation_happens_in_python_only(node) -> None:
         sol = node.call("bridge_next_request", Var("R"), 0.05, module="robot_bridge")
         request = sol and sol["R"]
     req_id, op = request.args
-    assert op.name == "set_qtable" and op.args[1] == [4, 1]
+    assert op.name == "write_table" and op.args[1] == [4, 1]
     from dfrl.pybridge.serving import RequestError, validate_write
 
     with pytest.raises(RequestError) as info:

@@ -12,7 +12,7 @@
 %   the host would, in this thread.
 serve_one(qtable(Shape, Values), Op) :-
     bridge_next_request(request(Id, Op), 5),
-    (   Op = set_qtable(_, _, _, _)
+    (   Op = write_table(_, _, _, _)
     ->  bridge_reply(Id, ok)
     ;   bridge_codec(Codec),
         encode_values(Codec, Values, Data),
@@ -49,13 +49,13 @@ test(bad_props, [setup(reset), error(domain_error(robot_props, [algorithm(q)]))]
 test(bad_shape, [setup(reset), error(domain_error(_, [2]))]) :-
     bridge_register_robot(r2, [shape([2])]).
 
-test(round_trip_text, [setup(reset), Got-Ops == qtable([2,2], [1.0,-0.0,5.0e-324,0.1])-[get_qtable(r1), set_qtable(r1, [2,2], text("1.0,-0.0,5.0e-324,0.1"), [])]]) :-
+test(round_trip_text, [setup(reset), Got-Ops == qtable([2,2], [1.0,-0.0,5.0e-324,0.1])-[read_table(r1), write_table(r1, [2,2], text("1.0,-0.0,5.0e-324,0.1"), [])]]) :-
     T = qtable([2,2], [1.0,-0.0,5.0e-324,0.1]),
     with_host(T, (get_qtable(r1, Got), set_qtable(r1, Got)), Ops).
 test(round_trip_fts, [setup(reset), Got == T]) :-
     bridge_set_codec(fts),
     T = qtable([2,2], [1.0,-0.0,5.0e-324,0.1]),
-    with_host(T, (get_qtable(r1, Got), set_qtable(r1, Got)), [_, set_qtable(r1, [2,2], fts(S), [])]),
+    with_host(T, (get_qtable(r1, Got), set_qtable(r1, Got)), [_, write_table(r1, [2,2], fts(S), [])]),
     fast_term_serialized(Values, S),
     assertion(Values == [1.0,-0.0,5.0e-324,0.1]).
 
@@ -63,7 +63,7 @@ test(steadfast_get, [setup(reset), fail]) :-
     with_host(qtable([2,2], [1.0,2.0,3.0,4.0]), get_qtable(r1, qtable([4,1], _)), _, 1).
 
 test(qtable_and_visits, [setup(reset), T-V == qtable([2,2],[1.0,2.0,3.0,4.0])-qtable([2,2],[0.0,1.0,0.0,5.0])]) :-
-    thread_create(( bridge_next_request(request(Id, get_qtable_and_visits(r1)), 5),
+    thread_create(( bridge_next_request(request(Id, read_table_and_visits(r1)), 5),
                     bridge_reply(Id, tables(table([2,2], text("1.0,2.0,3.0,4.0")),
                                             table([2,2], text("0,1,0,5")))) ), H, []),
     call_cleanup(get_qtable_and_visits(r1, T, V), thread_join(H, _)).
@@ -73,7 +73,7 @@ test(unknown_robot, [setup(reset), error(existence_error(robot, nobody))]) :-
 %   The table a set sends is validated by the host (in Python, tests in
 %   test_bridge_node.py); here it is only encoded and sent as it is.
 test(set_sends_shape_and_values_as_given, [setup(reset),
-        Ops == [set_qtable(r1, [4,1], text("1.0,2.0,3.0"), [])]]) :-
+        Ops == [write_table(r1, [4,1], text("1.0,2.0,3.0"), [])]]) :-
     with_host(qtable([2,2], []), set_qtable(r1, qtable([4,1], [1,2.0,3])), Ops, 1).
 test(not_a_number, [setup(reset), error(type_error(number, x))]) :-
     set_qtable(r1, qtable([2,2], [1.0,2.0,3.0,x])).
@@ -90,13 +90,13 @@ test(reply_of_wrong_size, [setup(reset), error(domain_error(qtable_size(4), 3))]
 test(resource_hook_lists_robots, [setup(reset), Props == [algorithm(qlearning), shape([2, 2])]]) :-
     hosted_robot(r1, Props).
 test(resource_hook_reads_and_writes, [setup(reset),
-        Got-Ops == qtable([2,2], [1.0,2.0,3.0,4.0])-[get_qtable(r1), set_qtable(r1, [2,2], text("1.0,2.0,3.0,4.0"), [round(3), agent(dfrl_q), epoch(2)])]]) :-
+        Got-Ops == qtable([2,2], [1.0,2.0,3.0,4.0])-[read_table(r1), write_table(r1, [2,2], text("1.0,2.0,3.0,4.0"), [round(3), agent(dfrl_q), epoch(2)])]]) :-
     T = qtable([2,2], [1.0,2.0,3.0,4.0]),
     with_host(T, ( get_robot_table(r1, Got, [timeout(5)]),
                    set_robot_table(r1, Got, [timeout(5), round(3), agent(dfrl_q), epoch(2),
                                              note(f(x))]) ), Ops).
 test(resource_hook_tables, [setup(reset), T-V == qtable([2,2],[1.0,2.0,3.0,4.0])-qtable([2,2],[0.0,1.0,0.0,5.0])]) :-
-    thread_create(( bridge_next_request(request(Id, get_qtable_and_visits(r1)), 5),
+    thread_create(( bridge_next_request(request(Id, read_table_and_visits(r1)), 5),
                     bridge_reply(Id, tables(table([2,2], text("1.0,2.0,3.0,4.0")),
                                             table([2,2], text("0,1,0,5")))) ), H, []),
     call_cleanup(get_robot_tables(r1, T, V, [timeout(5)]), thread_join(H, _)).
@@ -188,7 +188,7 @@ preset :-
 %   serve_params(-Op): answer one request with the 3 values below
 serve_params(Op) :-
     bridge_next_request(request(Id, Op), 5),
-    (   Op = set_params(_, _, _, _)
+    (   Op = write_params(_, _, _, _)
     ->  bridge_reply(Id, ok)
     ;   bridge_reply(Id, params([w-[1,2], b-[1]], 7, text("0.5,-1.0,2.0")))
     ).
@@ -211,8 +211,8 @@ test(empty_layout, [setup(preset), error(domain_error(param_layout, [w-[0]]))]) 
 
 test(params_round_trip, [setup(preset),
         Got-Ops == params([w-[1,2], b-[1]], 7, [0.5,-1.0,2.0])-
-                   [ get_params(f1),
-                     set_params(f1, [w-[1,2], b-[1]], text("0.5,-1.0,2.0"),
+                   [ read_params(f1),
+                     write_params(f1, [w-[1,2], b-[1]], text("0.5,-1.0,2.0"),
                                 [round(2), agent(fed_dqn)]) ]]) :-
     with_params_host(( get_robot_params(f1, Got, [timeout(5)]),
                        Got = params(L, _, V),
@@ -222,7 +222,7 @@ test(params_round_trip, [setup(preset),
 test(params_fts, [setup(preset)]) :-
     bridge_set_codec(fts),
     with_params_host(set_params(f1, params([w-[1,2], b-[1]], [1, 2.5, -0.0])), [Op], 1),
-    Op = set_params(f1, _, fts(S), []),
+    Op = write_params(f1, _, fts(S), []),
     fast_term_serialized(Values, S),
     assertion(Values == [1.0, 2.5, -0.0]).
 

@@ -1,7 +1,7 @@
 """Agent table read+write through the bridge while the simulation runs (ms, median/p90).
 
-An agent-like Prolog thread repeatedly reads a robot's Q-table with ``get_qtable/3`` and
-writes it back with ``set_qtable/3``; the Python main thread steps a pybullet world flat out
+An agent-like Prolog thread repeatedly reads a robot's Q-table with ``read_table/3`` and
+writes it back with ``write_table/3``; the Python main thread steps a pybullet world flat out
 and calls :meth:`pybridge.Bridge.serve_pending` after every control step, as a robot
 node does. Each codec (``fts``: fast_term_serialized bytes, ``text``: float text) is timed
 in turn. The table must come back bit for bit. Target: read+write under 5 ms for 20,000

@@ -62,13 +62,13 @@ traced(custody:custody_activated(_, _, _), custody_activated).
 traced(agents:agent_record_hop(_, _, _), record_hop).
 %   A stop of the dFRL agent (in a robot process): its step, the robot's
 %   table through the bridge, the aggregate, the round state, the lease.
-traced(dfrl_agent:step(_, _), step).
-traced(dfrl_agent:go(_, _, _, _), go).
+traced(dfrl_rounds:step(_, _), step).
+traced(dfrl_rounds:go(_, _, _, _), go).
 traced(dfrl_round_state:get_state(_, _, _), get_state).
 traced(dfrl_round_state:put_state(_, _, _), put_state).
 traced(dfrl_robot_io:read_robot(_, _, _, _, _), read_robot).
 traced(dfrl_robot_io:write_robot(_, _, _), write_robot).
-traced(robot_bridge:bridge_call(_, _, _, _, _), bridge_call).
+traced(bridge_queue:bridge_call(_, _, _, _, _), bridge_call).
 traced(dfrl_aggregation:aggregate_fold(_, _, _, _, _), fold).
 traced(dfrl_lease:lease_depart(_, _, _, _, _, _), lease_depart).
 traced(dfrl_lease:lease_departed(_), lease_departed).
