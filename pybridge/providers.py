@@ -303,8 +303,8 @@ def provider_offer(provider: Any, shape: Sequence[int] | None = None,
     ``learner`` defaults to the provider's ``learner_kind``, else ``"tabular"``. A tabular
     learner needs ``read_table``, ``visits`` and ``write_table`` (or, deprecated, ``q_table``
     and ``set_q_table`` for the first and last) and has a table shape (``shape``, or read once
-    from ``q_table``, else ``read_table()``); a function learner needs the parameter attributes and has
-    a table shape only when one is given, for a table view of its Q-function
+    from ``q_table``, else ``read_table()``); a function learner needs the parameter
+    attributes and has a table shape only when one is given, for a table view of its Q-function
     (:class:`dfrl.robots.grid_view.GridView`: a heterogeneous federation), which then needs
     the table attributes too. ``layout`` is the checked parameter layout when the provider
     offers parameters, else None.

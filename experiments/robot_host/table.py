@@ -11,16 +11,28 @@ is wrapped in :class:`SharedLearner`, which offers them too (:func:`shared_provi
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from dfrl.experiments.robot_host.files import CsvLog, share_row
 from dfrl.experiments.robot_host.lines import ProtocolLines
 from dfrl.experiments.robot_host.share_notes import ShareNotes
-from dfrl.pybridge.providers import LearnerProvider, TableProvider, read_table, write_table
+from dfrl.pybridge.providers import ParamsProvider, TableProvider, read_table, write_table
 
 __all__ = ["SharedTable", "SharedLearner", "shared_provider"]
+
+
+class LiveTable(TableProvider, Protocol):
+    """A base whose live table may be looked at without that counting as an agent's read (a
+    :class:`dfrl.robots.training.Trainer`, a grid view)."""
+
+    @property
+    def q_table(self) -> np.ndarray: ...
+
+
+class LiveLearner(LiveTable, ParamsProvider, Protocol):
+    """A :class:`LiveTable` that offers its parameters too."""
 
 
 class SharedTable:
@@ -37,7 +49,7 @@ class SharedTable:
 
     Parameters
     ----------
-    base : TableProvider
+    base : LiveTable
         Where the table lives.
     robot : str
     shares_log : CsvLog
@@ -59,7 +71,7 @@ class SharedTable:
         Shares applied so far.
     """
 
-    def __init__(self, base: TableProvider, robot: str, shares_log: CsvLog,
+    def __init__(self, base: LiveTable, robot: str, shares_log: CsvLog,
                  lines: ProtocolLines, on_share: Callable[[], None] | None = None,
                  shares: int = 0, notes: ShareNotes | None = None) -> None:
         self.base = base
@@ -126,7 +138,7 @@ class SharedLearner(SharedTable):
     raise: the bridge never asks, it registers such a robot without a table).
     """
 
-    base: LearnerProvider
+    base: LiveLearner
 
     @property
     def params(self) -> np.ndarray:
