@@ -10,11 +10,12 @@ ours and are left out). Two findings, each naming its files:
 * a module of the platform (a ``.pl`` with ``:- module`` under ``platform_pl/``, outside
   ``platform_pl/dfrl_agent/``) that names the dFRL application: it loads a file of
   ``dfrl_agent/``, or qualifies a goal or a predicate indicator with one of its modules
-  (``dfrl_aggregation:aggregate_init/3``). Comments and quoted text do not count.
+  (``dfrl_aggregation:aggregate_init/3``). Comments and quoted text do not count;
+* a module longer than ``--max-lines`` lines (default 500: split it by responsibility).
 
-Exits 1 if there is a finding, 0 if not (``--warn``: 0 either way, the findings printed all
+Each finding is one line, naming its file(s). Exits 1 if there is a finding, 0 if not (``--warn``: 0 either way, the findings printed all
 the same). Usage: ``python scripts/prolog_graph.py [--root DIR] [--edges] [--warn]
-[FOLDER ...]`` (``--edges`` also prints every load edge).
+[--max-lines N] [FOLDER ...]`` (``--edges`` also prints every load edge).
 """
 from __future__ import annotations
 
@@ -148,13 +149,14 @@ class PlFile:
     module: str | None
     loads: list[Path] = field(default_factory=list)
     qualifiers: set[str] = field(default_factory=set)
+    lines: int = 0
 
 
 def read_file(path: Path) -> PlFile:
     """A source's module name, the files it loads and the module qualifiers it uses."""
     text = path.read_text(encoding="utf-8", errors="replace")
     module = None
-    item = PlFile(path.resolve(), None)
+    item = PlFile(path.resolve(), None, lines=len(text.splitlines()))
     for kept, blank in clauses(text):
         m = re.match(r":-\s*module\(\s*([a-z][A-Za-z0-9_]*)", kept)
         if m and module is None:
@@ -246,6 +248,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--edges", action="store_true", help="print every load edge too")
     parser.add_argument("--warn", action="store_true",
                         help="report the findings without failing (exit 0)")
+    parser.add_argument("--max-lines", type=int, default=500,
+                        help="the longest a module may be (default: %(default)s)")
     parser.add_argument("folders", nargs="*", default=["platform_pl", "pybridge"])
     args = parser.parse_args(argv)
     root = args.root.resolve()
@@ -258,6 +262,9 @@ def main(argv: list[str] | None = None) -> int:
     findings = [f"load cycle: {', '.join(_rel(p, root) for p in comp)} load each other"
                 for comp in cycles(files)]
     findings += app_names(files, root)
+    findings += [f"{_rel(f.path, root)}: module {f.module} has {f.lines} lines, over "
+                 f"{args.max_lines}" for f in sorted(files.values(), key=lambda f: f.path)
+                 if f.module is not None and f.lines > args.max_lines]
     for line in findings:
         print(line)
     print(f"prolog_graph: {len(files)} files, "

@@ -119,6 +119,10 @@ def test_prolog_graph_fails_on_a_load_cycle_and_on_a_platform_module_naming_dfrl
         (root / "platform_pl" / name).unlink()
     done = _run(sys.executable, SCRIPTS / "prolog_graph.py", "--root", root)
     assert done.returncode == 0 and done.stdout == ""
+    (root / "platform_pl/clean.pl").write_text(":- module(clean, []).\n" + "c.\n" * 500)
+    done = _run(sys.executable, SCRIPTS / "prolog_graph.py", "--root", root)
+    assert done.returncode == 1
+    assert done.stdout == "platform_pl/clean.pl: module clean has 501 lines, over 500\n"
 
 
 @pytest.mark.parametrize("gate", ["ruff", "mypy", "import-contracts"])
