@@ -39,7 +39,7 @@ traced(code_safety:record_sealed(_, _, _), sealed).
 traced(agents:agent_install(_, _, _, _), install).
 traced(agents:agent_install(_, _, _, _, _), install).
 traced(agent_bounds:bounds_install(_, _, _, _), bounds_install).
-traced(agent_bounds:module_size(_, _), module_size).
+traced(bounds_limits:module_size(_, _), module_size).
 traced(custody:custody_stage(_, _, _, _, _, _), custody_stage).
 traced(custody:custody_commit(_, _, _, _, _), custody_commit).
 traced(agents:agent_remove(_, _), remove).
