@@ -97,8 +97,10 @@ code_safety:agent_api(agents:agent_add_facts(_, A, _), self(A)).
 code_safety:agent_api(agents:agent_exists(_, _), true).
 code_safety:agent_api(agents:agent_list(_, _), true).
 code_safety:agent_api(agents:agent_hop_times(_, _, _), true).
-code_safety:agent_api(node:current_node(_), true).
-code_safety:agent_api(node:node_property(_, P), ( nonvar(P), public_node_property(P) )).
+%   node.pl re-exports these (node_registry.pl defines them): the
+%   sandbox finds a predicate where it is defined.
+code_safety:agent_api(node_registry:current_node(_), true).
+code_safety:agent_api(node_registry:node_property(_, P), ( nonvar(P), public_node_property(P) )).
 code_safety:agent_api(robot_resources:get_robot_table(_, _, _), true).
 code_safety:agent_api(robot_resources:get_robot_tables(_, _, _, _), true).
 code_safety:agent_api(robot_resources:set_robot_table(_, _, _), true).
