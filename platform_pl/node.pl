@@ -36,7 +36,8 @@
                 registry_add/2, registry_remove/1, registry_release_default/1,
                 registry_bound/3 ]).
 :- use_module(node_identity,
-              [node_for_address/2, node_listens_at/2, node_is_self/2, wildcard_host/1]).
+              [ node_for_address/2, node_listens_at/2, node_is_self/2, wildcard_host/1,
+                advertised_address/4 ]).
 :- use_module(node_acceptor, [acceptor_run/2, acceptor_stopping/1, acceptor_stopped/1]).
 :- reexport(node_ctx,
             [ ctx_node/2, ctx_peer/2, ctx_input/2, ctx_authenticated/1, ctx_peer_name/2 ]).
@@ -315,7 +316,7 @@ node_start(Address0, Node, Options) :-
           E,
           ( tcp_close_socket(Socket), throw(E) )),
     format(atom(Node), '~w:~w', [Host, Bound]),
-    advertised(Options, Host, Bound, Advertised),
+    advertised_address(Options, Host, Bound, Advertised),
     get_time(Now),
     registry_add(Node, node(Host:Bound, Socket, Id, Advertised, Now, Tokens, Options)),
     (   option(default(true), Options)
@@ -380,19 +381,6 @@ check_options(Options) :-
                (   V > 0 -> true ; must_be(positive_integer, V) )
            ;   must_be(positive_integer, V)
            )).
-
-advertised(Options, Host, Bound, Advertised) :-
-    (   option(advertise(A), Options)
-    ->  (   atomic(A)
-        ->  Advertised = A:Bound
-        ;   address_normalize(A, AH:AP),
-            (   AP =:= 0 -> Advertised = AH:Bound ; Advertised = AH:AP )
-        )
-    ;   wildcard_host(Host)
-    ->  gethostname(Name),
-        Advertised = Name:Bound
-    ;   Advertised = Host:Bound
-    ).
 
 bind_port(Socket, Host, 0, Bound) :-
     !,

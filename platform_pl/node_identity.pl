@@ -2,7 +2,8 @@
           [ node_for_address/2,         % +Address, -Node
             node_listens_at/2,          % +Node, +Address
             node_is_self/2,             % +Node, +Address
-            wildcard_host/1             % +Host
+            wildcard_host/1,            % +Host
+            advertised_address/4        % +Options, +Host, +Bound, -Advertised
           ]).
 :- use_module(transport, [address_normalize/2, transport_identify/3]).
 :- use_module(node_registry,
@@ -151,3 +152,22 @@ wildcard_host(H) :-
     atomic(H),
     atom_string(A, H),
     memberchk(A, ['0.0.0.0', '::', '']).
+
+%!  advertised_address(+Options, +Host, +Bound, -Advertised) is det.
+%
+%   The address a node bound to Host:Bound advertises: its option
+%   advertise(A) (a host, or Host:Port with 0 for the bound port), else
+%   the host name for a wildcard host, else Host:Bound.
+
+advertised_address(Options, Host, Bound, Advertised) :-
+    (   option(advertise(A), Options)
+    ->  (   atomic(A)
+        ->  Advertised = A:Bound
+        ;   address_normalize(A, AH:AP),
+            (   AP =:= 0 -> Advertised = AH:Bound ; Advertised = AH:AP )
+        )
+    ;   wildcard_host(Host)
+    ->  gethostname(Name),
+        Advertised = Name:Bound
+    ;   Advertised = Host:Bound
+    ).
