@@ -43,16 +43,16 @@ traced(bounds_limits:module_size(_, _), module_size).
 traced(custody:custody_stage(_, _, _, _, _, _), custody_stage).
 traced(custody:custody_commit(_, _, _, _, _), custody_commit).
 traced(agents:agent_remove(_, _), remove).
-traced(migration:receive_transfer(_, _, _, _, _, _, _, _, _), receive_transfer).
-traced(migration:activate(_, _, _), activate).
+traced(migration_arrival:receive_transfer(_, _, _, _), receive_transfer).
+traced(migration_arrival:activate(_, _, _), activate).
 traced(agents:agent_run(_, _, _, _), agent_run).
 traced(tartarus:move_agent(_, _), move_agent).
 traced(migration:agent_move(_, _, _), agent_move).
 traced(migration:local_node_at(_, _), local_node_at).
 traced(migration:begin_departure(_, _, _, _), begin_departure).
-traced(node:node_for_address(_, _), node_for_address).
-traced(migration:prepare(_, _, _, _, _, _, _, _, _, _), prepare).
-traced(migration:hand_over(_, _, _, _, _, _, _, _, _, _), hand_over).
+traced(node_identity:node_for_address(_, _), node_for_address).
+traced(migration:prepare(_, _, _, _, _, _), prepare).
+traced(migration:hand_over(_, _, _, _, _, _), hand_over).
 traced(migration:send_commit(_, _, _, _), send_commit).
 traced(transport:transport_release(_), release).
 traced(node_connection:serve_term(T, _, _), serve(F)) :- term_functor(T, F).
