@@ -30,7 +30,7 @@ round's time.
 %   run in this module.
 %   The hop: leaving, the hand-over, arriving.
 traced(agents:agent_export(_, _, _), export).
-traced(transport:transport_acquire(_, _, _, _), acquire).
+traced(transport_pool:transport_acquire(_, _, _, _), acquire).
 traced(wire:frame_write(_, _, T), write(F)) :- term_functor(T, F).
 traced(wire:frame_read(_, Fr, _), read(F)) :- ( Fr = frame(_, T) -> term_functor(T, F) ; F = eof ).
 traced(wire:body_bytes(_, T, _), serialise(F)) :- term_functor(T, F).
@@ -54,7 +54,7 @@ traced(node_identity:node_for_address(_, _), node_for_address).
 traced(migration:prepare(_, _, _, _, _, _), prepare).
 traced(migration:hand_over(_, _, _, _, _, _), hand_over).
 traced(migration:send_commit(_, _, _, _), send_commit).
-traced(transport:transport_release(_), release).
+traced(transport_pool:transport_release(_), release).
 traced(node_connection:serve_term(T, _, _), serve(F)) :- term_functor(T, F).
 traced(agents:agent_execute(_, _, _, _), agent_execute).
 traced(agents:run_handler(_, _, _), handler).
