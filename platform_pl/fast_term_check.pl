@@ -245,6 +245,11 @@ dict_key(_, _, _, _) :-
 %   opcode(+Op, +Codes, -Rest, +Cells0, -Cells, +NVars, +Seen0, -Seen,
 %          -Opens): one term's opcode and operands; Opens is
 %   opens(Arity, IsCons) for a compound with arguments, else `none`.
+%   Nine arguments, on purpose: three accumulator pairs (codes, cells,
+%   variables seen) threaded through the walk's inner loop, once per
+%   opcode of a peer's frame; a record would be built and taken apart
+%   for every opcode (the C walk in native/fast_term_check.c has them as
+%   locals).
 opcode(1, C0, C, Cells, Cells, NVars, Seen0, Seen, none) :-
     !,
     ( varint(C0, N, C) -> true ; fault(bad_varint) ),

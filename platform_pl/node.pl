@@ -23,17 +23,22 @@
             ctx_peer_name/2,            % +Ctx, -Name
             platform_shutdown/0
           ]).
-:- use_module(wire, [frame_write/3]).
-:- use_module(transport,
-              [ address_normalize/2, token_proof/3, open_key/1,
-                transport_drop_pool/0, transport_identify/3 ]).
-:- use_module(worker_pool, [pool_run/3, pool_drain/0]).
+:- use_module(transport, [address_normalize/2, transport_drop_pool/0]).
+:- use_module(worker_pool, [pool_drain/0]).
 :- use_module(tls, [tls_check_dir/1]).
 :- use_module(node_id, [node_id_new/1, node_id_stored/2]).
-:- use_module(node_admission, [admission_admit/5, admission_forget/2, admission_forget_node/1]).
-:- use_module(node_connection,
-              [ connection_serve/4, connection_evict/2, connection_stop_all/1,
-                connection_forget_node/1 ]).
+:- use_module(node_admission, [admission_forget_node/1]).
+:- use_module(node_connection, [connection_stop_all/1, connection_forget_node/1]).
+:- use_module(node_registry,
+              [ node_property/2, node_option/3, local_node/1, current_node/1,
+                node_set_current/1, node_clear_current/0, node_set_default/1, with_node/2,
+                registry_set_tokens/2, node_accepts/2, ctx_authorized/1,
+                registry_add/2, registry_remove/1, registry_release_default/1,
+                registry_bound/3 ]).
+:- use_module(node_identity,
+              [ node_for_address/2, node_listens_at/2, node_is_self/2, wildcard_host/1,
+                advertised_address/4 ]).
+:- use_module(node_acceptor, [acceptor_run/2, acceptor_stopping/1, acceptor_stopped/1]).
 :- reexport(node_ctx,
             [ ctx_node/2, ctx_peer/2, ctx_input/2, ctx_authenticated/1, ctx_peer_name/2 ]).
 :- use_module(secrets, [check_secrets/3, loopback_host/1, token_entropy_bits/2]).
@@ -47,8 +52,6 @@
 :- autoload(library(lists), [member/2, max_list/2]).
 :- autoload(library(aggregate), [aggregate_all/3]).
 
-:- meta_predicate with_node(+, 0).
-
 /** <module> A platform node: listening socket, acceptor, connection workers
 
 This module starts and stops nodes, keeps their identity and options,
@@ -56,7 +59,10 @@ and runs the acceptor. The rest of a node lives beside it: admission
 and eviction of connections in node_admission.pl, the connection worker
 (hello, frames, authentication) in node_connection.pl, request policy
 and replies in node_request.pl, the connection context in node_ctx.pl
-(its accessors re-exported here) and ids in node_id.pl.
+(its accessors re-exported here), ids in node_id.pl, the nodes' records,
+options and current node in node_registry.pl, "is this address me?" in
+node_identity.pl and the acceptor thread in node_acceptor.pl (their
+public predicates re-exported here). None of them loads this module.
 
 A node listens on the address it is given (and only there). An acceptor
 thread takes connections and gives each to a worker thread, at most
@@ -90,17 +96,7 @@ by default the bind address, or the host name when it binds 0.0.0.0).
 */
 
 :- dynamic
-    node_info/3,                % Node, Host:Port, ServerSocket
-    node_ident/4,               % Node, Id, Advertised, StartedAt
-    node_acceptor/2,            % Node, ThreadId
-    node_tokens/2,              % Node, Tokens
-    node_opt/2,                 % Node, Option
-    default_node/1,             % Node
-    stopping/1,                 % Node
-    local_host_seen/3.          % Host, Local (true/false), Time: host_is_local/1
-
-:- thread_local
-    current_node_tl/1.
+    node_acceptor/2.            % Node, ThreadId
 
 :- multifile
     platform_request/4,         % +Request, +Ctx, -Reply, -After
@@ -320,24 +316,21 @@ node_start(Address0, Node, Options) :-
           E,
           ( tcp_close_socket(Socket), throw(E) )),
     format(atom(Node), '~w:~w', [Host, Bound]),
-    advertised(Options, Host, Bound, Advertised),
+    advertised_address(Options, Host, Bound, Advertised),
     get_time(Now),
-    assertz(node_info(Node, Host:Bound, Socket)),
-    assertz(node_ident(Node, Id, Advertised, Now)),
-    assertz(node_tokens(Node, Tokens)),
-    forall(member(O, Options), assertz(node_opt(Node, O))),
+    registry_add(Node, node(Host:Bound, Socket, Id, Advertised, Now, Tokens, Options)),
     (   option(default(true), Options)
     ->  node_set_default(Node)
     ;   option(default(false), Options)
     ->  true
-    ;   default_node(_)
+    ;   node_property(_, default)
     ->  true
     ;   node_set_default(Node)
     ),
     catch(with_node(Node, forall(node_started(Node), true)), E2,
           ( catch(node_stop(Node), _, true), throw(E2) )),
     atom_concat('dfrl_acceptor@', Node, Alias),
-    thread_create(accept_loop(Node, Socket), Tid, [alias(Alias)]),
+    thread_create(acceptor_run(Node, Socket), Tid, [alias(Alias)]),
     assertz(node_acceptor(Node, Tid)),
     debug(dfrl(node), 'Node ~w started (id ~w, advertised as ~w)',
           [Node, Id, Advertised]).
@@ -389,24 +382,6 @@ check_options(Options) :-
            ;   must_be(positive_integer, V)
            )).
 
-advertised(Options, Host, Bound, Advertised) :-
-    (   option(advertise(A), Options)
-    ->  (   atomic(A)
-        ->  Advertised = A:Bound
-        ;   address_normalize(A, AH:AP),
-            (   AP =:= 0 -> Advertised = AH:Bound ; Advertised = AH:AP )
-        )
-    ;   wildcard_host(Host)
-    ->  gethostname(Name),
-        Advertised = Name:Bound
-    ;   Advertised = Host:Bound
-    ).
-
-wildcard_host(H) :-
-    atomic(H),
-    atom_string(A, H),
-    memberchk(A, ['0.0.0.0', '::', '']).
-
 bind_port(Socket, Host, 0, Bound) :-
     !,
     tcp_bind(Socket, Host:Bound).
@@ -433,11 +408,11 @@ tokens_option(Options, Tokens) :-
 
 node_stop(Node) :-
     must_be(atom, Node),
-    (   node_info(Node, Address, Socket)
+    (   registry_bound(Node, Address, Socket)
     ->  true
     ;   existence_error(platform, Node)
     ),
-    assertz(stopping(Node)),
+    acceptor_stopping(Node),
     forall(node_stopping(Node), true),
     connection_stop_all(Node),
     (   node_acceptor(Node, _)
@@ -449,21 +424,11 @@ node_stop(Node) :-
     ;   true
     ),
     catch(tcp_close_socket(Socket), _, true),
-    retractall(node_info(Node, _, _)),
-    retractall(node_ident(Node, _, _, _)),
-    retractall(node_tokens(Node, _)),
-    retractall(node_opt(Node, _)),
-    retractall(stopping(Node)),
+    registry_remove(Node),
+    acceptor_stopped(Node),
     connection_forget_node(Node),
     admission_forget_node(Node),
-    (   retract(default_node(Node))
-    ->  (   node_info(Other, _, _)
-        ->  assertz(default_node(Other))
-        ;   true
-        )
-    ;   true
-    ),
-    retractall(current_node_tl(Node)),
+    registry_release_default(Node),
     debug(dfrl(node), 'Node ~w stopped', [Node]).
 
 wake_acceptor(Host0:Port) :-
@@ -474,395 +439,10 @@ wake_acceptor(Host0:Port) :-
               close(Pair, [force(true)])),
           _, true).
 
-%!  node_property(?Node, ?Property) is nondet.
-%
-%   Properties: id(Id) (32 hex digits), address(Host:Port) (the
-%   advertised address), link((Host,Port)) (the same as a Tartarus link),
-%   bind(Host:Port) (the bound address), tokens(List), default (if it is
-%   the process's default node), option(Option).
-
-node_property(Node, Property) :-
-    node_ident(Node, _, Address, _),
-    node_property_(Property, Node, Address).
-
-node_property_(id(Id), Node, _) :-
-    node_ident(Node, Id, _, _).
-node_property_(address(Address), _, Address).
-node_property_(link((H,P)), _, H:P).
-node_property_(bind(Bound), Node, _) :-
-    node_info(Node, Bound, _).
-node_property_(tokens(Tokens), Node, _) :-
-    node_tokens(Node, Tokens).
-node_property_(default, Node, _) :-
-    default_node(Node).
-node_property_(option(O), Node, _) :-
-    node_opt(Node, O).
-
-%!  node_option(+Node, +Name, -Value) is det.
-%
-%   Value of option Name of Node, or its default.
-
-node_option(Node, Name, Value) :-
-    Opt =.. [Name, V0],
-    (   node_opt(Node, Opt)
-    ->  Value = V0
-    ;   Name == max_unauth_connections
-    ->  node_option(Node, max_connections, Max),
-        Value is max(1, Max // 2)
-    ;   option_default(Name, Value)
-    ).
-
-option_default(max_connections, 64).
-option_default(idle_timeout, 10).
-option_default(auth_idle_timeout, 60).
-option_default(store, none).
-option_default(settle_period, 2).
-option_default(lease_s, 10).
-option_default(max_frame_size, 33554432).
-option_default(max_text_frame_size, 4096).
-option_default(frame_deadline, 5).
-option_default(max_term_depth, 64).
-option_default(max_unauth_per_peer, 16).
-option_default(reply_timeout, 30).
-option_default(connect_timeout, 5).
-option_default(commit_timeout, 10).
-option_default(tls, none).
-option_default(tls_peers, any).
-option_default(agent_cpu_limit, 2).
-option_default(agent_stack_limit, 268435456).
-option_default(agent_module_limit, 67108864).
-option_default(agent_post_limit, 600).
-option_default(agent_log_limit, 200).
-option_default(max_agents, 100).
-option_default(clone_limit, 60).
-option_default(agent_memory_budget, 1073741824).
-option_default(max_running_agents, 8).
-option_default(agent_slot_wait, 60).
-option_default(agent_wall_limit, 60).
-option_default(agent_idle_limit, 600).
-option_default(max_agents_per_peer, 50).
-option_default(max_running_per_peer, 4).
-option_default(peer_post_limit, 6000).
-
-%!  local_node(?Node) is nondet.
-%
-%   Node is a platform running in this process.
-
-local_node(Node) :-
-    node_info(Node, _, _).
-
-%!  node_for_address(+Address, -Node) is semidet.
-%
-%   Node is the platform of this process that answers at Address, by
-%   identity (see node_is_self/2). With Node unbound, at most one
-%   connection is made to learn the id at Address.
-
-node_for_address(Address, Node) :-
-    nonvar(Node),
-    !,
-    node_is_self(Node, Address).
-node_for_address(Address0, Node) :-
-    address_normalize(Address0, Address),
-    (   node_info(N, _, _),
-        literal_self(N, Address)
-    ->  Node = N
-    ;   findall(T, node_ident(_, _, _, T), Starts),
-        Starts \== [],
-        max_list(Starts, Since),
-        identify(Address, Since, Id),
-        node_ident(N, Id, _, _)
-    ->  Node = N
-    ).
-
-%!  node_listens_at(+Node, +Address) is semidet.
-%
-%   The same as node_is_self/2 (the name its callers know).
-
-node_listens_at(Node, Address) :-
-    node_is_self(Node, Address).
-
-%!  node_is_self(+Node, +Address) is semidet.
-%
-%   True if Address (Host:Port, (Host,Port) or a port) reaches the
-%   platform Node of this process. Decided by identity: the id in the
-%   hello of the platform that answers at Address (from a pooled
-%   connection, a hello seen there since Node started, or a new
-%   connection, which stays pooled for the request that usually follows)
-%   is Node's. Without a connection when Address is literally one Node
-%   binds or advertises: the advertised address, or the bound port with
-%   the bound host, another name of the loopback interface (`localhost`,
-%   `127.0.0.1`), or, for a node bound to 0.0.0.0, a loopback name or the
-%   host name. An address that cannot be reached is not Node, and one
-%   that is not this host's is not asked (no socket binds to it).
-
-node_is_self(Node, Address0) :-
-    address_normalize(Address0, Address),
-    node_ident(Node, Id, _, Started),
-    (   literal_self(Node, Address)
-    ->  true
-    ;   identify(Address, Started, Id)
-    ).
-
-identify(Address, Since, Id) :-
-    host_is_local(Address),
-    (   catch(current_node(Here), _, fail)
-    ->  node_option(Here, connect_timeout, CT)
-    ;   CT = 5
-    ),
-    catch(transport_identify(Address, Id0,
-                             [since(Since), connect_timeout(CT),
-                              reply_timeout(CT)]),
-          E, ( debug(dfrl(node), 'identify ~w: ~p', [Address, E]), fail )),
-    Id = Id0.
-
-%   Only an address of this host can reach a node of this process: the
-%   kernel says so when a socket binds to it (EADDRNOTAVAIL otherwise),
-%   without a packet sent. A remote address is thus never connected to
-%   for its id, so asking "is this me?" of a stop that is cut off or
-%   down costs microseconds, not a connect timeout (a mover asks it
-%   once a hop). The kernel's answer (a socket, a bind, a close: about
-%   30 us) is kept for 10 s per host name, so a hop pays a lookup.
-host_is_local(Host:_) :-
-    get_time(Now),
-    (   local_host_seen(Host, Local, T),
-        Now - T < 10
-    ->  true
-    ;   (   setup_call_cleanup(
-                tcp_socket(Socket),
-                catch(tcp_bind(Socket, Host:0), _, fail),
-                tcp_close_socket(Socket))
-        ->  Local = true
-        ;   Local = false
-        ),
-        with_mutex(dfrl_node_local_hosts,
-                   ( retractall(local_host_seen(Host, _, _)),
-                     assertz(local_host_seen(Host, Local, Now)) ))
-    ),
-    Local == true.
-
-literal_self(Node, Host:Port) :-
-    (   node_ident(Node, _, AH:AP, _),
-        AP =:= Port,
-        same_host(Host, AH)
-    ->  true
-    ;   node_info(Node, BH:BP, _),
-        BP =:= Port,
-        (   same_host(Host, BH)
-        ->  true
-        ;   wildcard_host(BH),
-            (   loopback(Host)
-            ->  true
-            ;   gethostname(Name),
-                same_host(Host, Name)
-            )
-        )
-    ).
-
-same_host(A, B) :-
-    atomic(A), atomic(B),
-    atom_string(A, S),
-    atom_string(B, S),
-    !.
-same_host(A, B) :-
-    loopback(A),
-    loopback(B).
-
-loopback(localhost).
-loopback('127.0.0.1').
-loopback("localhost").
-loopback("127.0.0.1").
-
-%!  current_node(-Node) is det.
-%
-%   The node of the calling thread: the one set with node_set_current/1
-%   (agent and worker threads have theirs), else the default node.
-%
-%   @error existence_error(platform, current) if no node runs.
-
-current_node(Node) :-
-    (   current_node_tl(N)
-    ->  Node = N
-    ;   default_node(N)
-    ->  Node = N
-    ;   existence_error(platform, current)
-    ).
-
-%!  node_set_current(+Node) is det.
-%
-%   Make Node the current node of the calling thread.
-
-node_set_current(Node) :-
-    must_be(atom, Node),
-    (   node_info(Node, _, _)
-    ->  true
-    ;   existence_error(platform, Node)
-    ),
-    retractall(current_node_tl(_)),
-    assertz(current_node_tl(Node)).
-
-%!  node_clear_current is det.
-%
-%   Forget the current node of the calling thread: it falls back to the
-%   process's default node. For threads that leave a node's work (agent
-%   threads of the pool).
-
-node_clear_current :-
-    retractall(current_node_tl(_)).
-
-%!  node_set_default(+Node) is det.
-%
-%   Make Node the process's default node.
-
-node_set_default(Node) :-
-    retractall(default_node(_)),
-    assertz(default_node(Node)).
-
-%!  with_node(+Node, :Goal)
-%
-%   Run Goal with Node as the current node of this thread.
-
-with_node(Node, Goal) :-
-    must_be(atom, Node),
-    (   current_node_tl(Old)
-    ->  true
-    ;   Old = none
-    ),
-    setup_call_cleanup(
-        node_set_current(Node),
-        Goal,
-        restore_current(Old)).
-
-restore_current(none) :-
-    !,
-    retractall(current_node_tl(_)).
-restore_current(Node) :-
-    retractall(current_node_tl(_)),
-    assertz(current_node_tl(Node)).
-
-%!  node_set_tokens(+Node, +Tokens) is det.
-%
-%   Replace the tokens of Node.
-
-node_set_tokens(Node, Tokens) :-
-    must_be(list, Tokens),
-    maplist(must_be(ground), Tokens),
-    retractall(node_tokens(Node, _)),
-    assertz(node_tokens(Node, Tokens)).
-
-%!  node_accepts(+Node, +ProofsNonce) is semidet.
-%
-%   True if one of Proofs (for Nonce) was made with one of Node's tokens,
-%   or Node is open and the open key was proved.
-
-node_accepts(Node, Proofs/Nonce) :-
-    node_tokens(Node, Tokens0),
-    (   Tokens0 == []
-    ->  open_key(K),
-        Tokens = [K]
-    ;   Tokens = Tokens0
-    ),
-    member(T, Tokens),
-    token_proof(T, Nonce, P),
-    memberchk(P, Proofs),
-    !.
-
 :- at_halt(stop_all_nodes).
 
 stop_all_nodes :-
-    forall(node_info(Node, _, _), catch(node_stop(Node), _, true)).
-
-		 /*******************************
-		 *           ACCEPTOR		*
-		 *******************************/
-
-accept_loop(Node, Socket) :-
-    catch(tcp_accept(Socket, Client, Peer), E, true),
-    (   stopping(Node)
-    ->  (   var(E) -> tcp_close_socket(Client) ; true )
-    ;   nonvar(E)
-    ->  print_message(warning, E),
-        (   node_info(Node, _, _) -> accept_loop(Node, Socket) ; true )
-    ;   dispatch(Node, Client, Peer),
-        accept_loop(Node, Socket)
-    ).
-
-%   Admission (node_admission.pl) keeps slots for authenticated peers:
-%   an unauthenticated newcomer at a cap evicts the oldest
-%   unauthenticated connection of the peer holding the most; only when
-%   every slot is authenticated is a connection refused.
-dispatch(Node, Client, Peer) :-
-    peer_key(Peer, Key),
-    flag(dfrl_conn_ids, CId, CId+1),
-    node_option(Node, max_connections, Max),
-    node_option(Node, max_unauth_connections, MaxU),
-    node_option(Node, max_unauth_per_peer, MaxP),
-    admission_admit(Node, CId, Key, limits(Max, MaxU, MaxP), Verdict),
-    (   Verdict = refuse
-    ->  refuse_busy(Node, Client)
-    ;   Verdict = evict(Victim)
-    ->  connection_evict(Node, Victim)
-    ;   true
-    ),
-    (   Verdict == refuse
-    ->  true
-    ;   connection_workers_max(MaxWorkers),
-        catch(pool_run(connections, connection_serve(Node, CId, Client, Peer),
-                       [max(MaxWorkers)]),
-              E, ( print_message(warning, E),
-                   admission_forget(Node, CId),
-                   refuse_busy(Node, Client) ))
-    ->  true
-    ;   true
-    ).
-
-%   The connection pool (shared by the nodes of the process) holds twice
-%   their connections: room for evicted workers that are still ending,
-%   but not for a flood to grow it without bound.
-connection_workers_max(Max) :-
-    aggregate_all(sum(M), ( node_info(N, _, _), node_option(N, max_connections, M) ),
-                  Sum),
-    Max is max(16, 2 * Sum).
-
-peer_key(ip(A,B,C,D), ip(A,B,C,D)) :- !.
-peer_key(Peer, Peer).
-
-%   A TLS node cannot say it in plaintext: it closes the connection.
-refuse_busy(Node, Client) :-
-    node_option(Node, tls, Dir),
-    Dir \== none,
-    !,
-    catch(tcp_close_socket(Client), _, true).
-refuse_busy(_, Client) :-
-    catch(setup_call_cleanup(
-              tcp_open_socket(Client, Pair),
-              ( stream_pair(Pair, _, Out),
-                set_stream(Out, type(binary)),
-                frame_write(Out, text,
-                            error(error(resource_error(connections), _)))
-              ),
-              close(Pair, [force(true)])),
-          _, true).
-
-		 /*******************************
-		 *       CONNECTION CONTEXT	*
-		 *******************************/
-
-%   The context of a served connection is node_ctx.pl's (made by the
-%   connection worker, node_connection.pl); its accessors are
-%   re-exported from here.
-
-%!  ctx_authorized(+Ctx) is semidet.
-%
-%   True if the peer may make requests that need authentication: it
-%   proved a token, or the node is open (has no tokens: it accepts
-%   anyone, see node_start/3).
-
-ctx_authorized(Ctx) :-
-    (   ctx_authenticated(Ctx)
-    ->  true
-    ;   ctx_node(Ctx, Node),
-        node_tokens(Node, [])
-    ).
+    forall(registry_bound(Node, _, _), catch(node_stop(Node), _, true)).
 
 		 /*******************************
 		 *          BUILT-IN		*
@@ -890,6 +470,15 @@ requires_authentication(custody_agents).
 requires_authentication(load_code(_, _)).
 requires_authentication(execute(_, _)).
 requires_authentication(commit(_)).
+
+%!  node_set_tokens(+Node, +Tokens) is det.
+%
+%   Replace the tokens of Node.
+
+node_set_tokens(Node, Tokens) :-
+    must_be(list, Tokens),
+    maplist(must_be(ground), Tokens),
+    registry_set_tokens(Node, Tokens).
 
 %!  platform_shutdown is det.
 %

@@ -14,7 +14,7 @@
 :- use_module(node_admission,
               [ admission_holds/2, admission_authenticated/2, admission_forget/2 ]).
 :- use_module(node_request, [request_handle/4, request_reply/2]).
-:- use_module(node,
+:- use_module(node_registry,
               [ node_option/3, node_property/2, node_accepts/2, local_node/1,
                 node_set_current/1, node_clear_current/0 ]).
 %   Libraries are imported eagerly here (use_module/2, not autoload/2),

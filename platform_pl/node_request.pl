@@ -4,7 +4,7 @@
           ]).
 :- use_module(wire, [frame_write/3]).
 :- use_module(node_ctx, [ctx_node/2, ctx_peer_name/2]).
-:- use_module(node, [node_property/2, node_option/3, ctx_authorized/1]).
+:- use_module(node_registry, [node_property/2, node_option/3, ctx_authorized/1]).
 
 /** <module> Serving one request on a node's connection
 

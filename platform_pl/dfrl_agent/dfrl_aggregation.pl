@@ -14,6 +14,7 @@
             abbreviated/2               % +Term, -Short
           ]).
 :- use_module('../platform_errors', [message_text/2]).
+:- use_module(dfrl_safety, []).           % its entries in the platform's sandbox
 %   The element-wise list maths were defined here first; they are
 %   float_vectors.pl's now, and still exported from here.
 :- reexport('../float_vectors',

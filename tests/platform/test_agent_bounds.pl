@@ -279,9 +279,9 @@ test(notices_wait_for_a_sender, [cleanup(( cleanup([A]), slow_peer_stop(Peer) ))
     slow_peer(0.3, Peer, Port),
     forall(between(1, 8, I),
            ( atom_concat(n, I, Agent),
-             agent_bounds:notify(A, Agent, cpu(1), localhost:Port) )),
+             bounds_notices:notify(A, Agent, cpu(1), localhost:Port) )),
     assertion(wait_for(slow_peer_seen(Peer, 8), 500)),
-    assertion(wait_for(agent_bounds:notice_senders_(0), 500)),
-    assertion(\+ agent_bounds:notice_(A, _, _, _)).
+    assertion(wait_for(bounds_notices:notice_senders_(0), 500)),
+    assertion(\+ bounds_notices:notice_(A, _, _, _)).
 
 :- end_tests(agent_bounds).

@@ -165,7 +165,7 @@ test(hooks_derived_from_the_installed_sources) :-
     length(Hooks, N),
     assertion(N > 100),
     forall(member(_:F/A, Hooks),
-           assertion(code_safety:hook_refusal(F/A, _, _))).
+           assertion(code_hooks:hook_refusal(F/A, _, _))).
 
 swi_hooks(Hooks) :-
     current_prolog_flag(home, Home),

@@ -77,6 +77,11 @@ test(agent_api_and_output) :-
                                    move_agent(a1, L)),
                (h(Me, L, stop) :- clone_agent(Me, L, _), purge_agent(Me)),
                count(a1, 0) ]).
+%   node.pl re-exports them from node_registry.pl: the API names where
+%   they are defined.
+test(node_api) :-
+    accepted([ (h(a1, _, main) :- current_node(N), node_property(N, address(A)), writeln(A)),
+               count(a1, 0) ]).
 test(robot_params_api) :-
     accepted([ (h(a1, _, main) :- robot_resources:hosted_robot(r1, _),
                                    robot_resources:get_robot_params(r1, params(L, _, V), []),

@@ -137,7 +137,7 @@ command(probe, Node) :-
     current_prolog_flag(double_quotes, DQ),
     maplist(node_option(Node), [max_frame_size, max_connections, max_agents],
             [Max, MaxConn, MaxAgents]),
-    (   catch(node:connection_workers_max(ConnWorkers), _, fail)
+    (   catch(node_acceptor:connection_workers_max(ConnWorkers), _, fail)
     ->  true
     ;   ConnWorkers is max(16, 2 * MaxConn)     % node.pl's formula when this was written
     ),

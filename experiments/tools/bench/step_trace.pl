@@ -30,7 +30,7 @@ round's time.
 %   run in this module.
 %   The hop: leaving, the hand-over, arriving.
 traced(agents:agent_export(_, _, _), export).
-traced(transport:transport_acquire(_, _, _, _), acquire).
+traced(transport_pool:transport_acquire(_, _, _, _), acquire).
 traced(wire:frame_write(_, _, T), write(F)) :- term_functor(T, F).
 traced(wire:frame_read(_, Fr, _), read(F)) :- ( Fr = frame(_, T) -> term_functor(T, F) ; F = eof ).
 traced(wire:body_bytes(_, T, _), serialise(F)) :- term_functor(T, F).
@@ -39,22 +39,22 @@ traced(code_safety:record_sealed(_, _, _), sealed).
 traced(agents:agent_install(_, _, _, _), install).
 traced(agents:agent_install(_, _, _, _, _), install).
 traced(agent_bounds:bounds_install(_, _, _, _), bounds_install).
-traced(agent_bounds:module_size(_, _), module_size).
+traced(bounds_limits:module_size(_, _), module_size).
 traced(custody:custody_stage(_, _, _, _, _, _), custody_stage).
 traced(custody:custody_commit(_, _, _, _, _), custody_commit).
 traced(agents:agent_remove(_, _), remove).
-traced(migration:receive_transfer(_, _, _, _, _, _, _, _, _), receive_transfer).
-traced(migration:activate(_, _, _), activate).
+traced(migration_arrival:receive_transfer(_, _, _, _), receive_transfer).
+traced(migration_arrival:activate(_, _, _), activate).
 traced(agents:agent_run(_, _, _, _), agent_run).
 traced(tartarus:move_agent(_, _), move_agent).
 traced(migration:agent_move(_, _, _), agent_move).
 traced(migration:local_node_at(_, _), local_node_at).
 traced(migration:begin_departure(_, _, _, _), begin_departure).
-traced(node:node_for_address(_, _), node_for_address).
-traced(migration:prepare(_, _, _, _, _, _, _, _, _, _), prepare).
-traced(migration:hand_over(_, _, _, _, _, _, _, _, _, _), hand_over).
+traced(node_identity:node_for_address(_, _), node_for_address).
+traced(migration:prepare(_, _, _, _, _, _), prepare).
+traced(migration:hand_over(_, _, _, _, _, _), hand_over).
 traced(migration:send_commit(_, _, _, _), send_commit).
-traced(transport:transport_release(_), release).
+traced(transport_pool:transport_release(_), release).
 traced(node_connection:serve_term(T, _, _), serve(F)) :- term_functor(T, F).
 traced(agents:agent_execute(_, _, _, _), agent_execute).
 traced(agents:run_handler(_, _, _), handler).

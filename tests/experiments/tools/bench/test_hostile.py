@@ -41,7 +41,7 @@ def test_hostile_frames_have_their_stated_size() -> None:
 
 def test_frames_just_under_the_limit_follow_the_nodes_limit() -> None:
     out = subprocess.run(["swipl", "-q", "-g", f"use_module('{PLATFORM_DIR / 'node.pl'}')",
-                          "-g", "node:option_default(max_text_frame_size, B), write(B)",
+                          "-g", "node_registry:option_default(max_text_frame_size, B), write(B)",
                           "-t", "halt"], capture_output=True, text=True, timeout=30)
     assert out.stdout.strip() == str(PRE_AUTH_LIMIT), out.stderr
 
