@@ -15,7 +15,8 @@ ours and are left out). Two findings, each naming its files:
 
 Each finding is one line, naming its file(s). Exits 1 if there is a finding, 0 if not
 (``--warn``: 0 either way, the findings printed all the same). Usage:
-``python scripts/prolog_graph.py [--root DIR] [--edges] [--warn] [--max-lines N] [FOLDER ...]`` (``--edges`` also prints every load edge).
+``python scripts/prolog_graph.py [--root DIR] [--edges] [--warn] [--max-lines N] [FOLDER ...]``
+(``--edges`` also prints every load edge).
 """
 from __future__ import annotations
 
