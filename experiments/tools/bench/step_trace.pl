@@ -53,7 +53,7 @@ traced(migration:begin_departure(_, _, _, _), begin_departure).
 traced(node_identity:node_for_address(_, _), node_for_address).
 traced(migration:prepare(_, _, _, _, _, _), prepare).
 traced(migration:hand_over(_, _, _, _, _, _), hand_over).
-traced(migration:send_commit(_, _, _, _), send_commit).
+traced(migration:send_commit(_, _, _, _, _), send_commit).
 traced(transport_pool:transport_release(_), release).
 traced(node_connection:serve_term(T, _, _), serve(F)) :- term_functor(T, F).
 traced(agent_execution:agent_execute(_, _, _, _), agent_execute).
