@@ -6,7 +6,7 @@
 /** <module> Time stamps along a hop, compiled in only for the benchmark
 
 The platform's modules on the path of a hop (migration.pl,
-node_connection.pl, agents.pl) mark points of it with the goal
+node_connection.pl, agent_execution.pl) mark points of it with the goal
 hop_probe(Point). When the process that loads the platform has the
 environment variable DFRL_HOP_PROBE set (to anything but `0`), each
 such goal is compiled to a call that records Point and the time
@@ -32,7 +32,7 @@ probing :-
 
 probed_module(migration).
 probed_module(node_connection).
-probed_module(agents).
+probed_module(agent_execution).
 
 :- multifile system:goal_expansion/2.
 

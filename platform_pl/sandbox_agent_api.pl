@@ -89,14 +89,18 @@ code_safety:agent_api(migration:agent_clone(A, _, _, _), self(A)).
 code_safety:agent_api(messages:agent_post(_, _, _, _, _), true).
 code_safety:agent_api(messages:agent_post(_, _, _, _, _, _), true).
 code_safety:agent_api(messages:remote_agents(_, _, _), true).
-code_safety:agent_api(agents:current_agent(_), true).
-code_safety:agent_api(agents:agent_property(_, A, P), ( nonvar(P), agent_may_see(A, P) )).
-code_safety:agent_api(agents:agent_add_payload(_, A, _), self(A)).
-code_safety:agent_api(agents:agent_remove_payload(_, A, _), self(A)).
-code_safety:agent_api(agents:agent_add_facts(_, A, _), self(A)).
-code_safety:agent_api(agents:agent_exists(_, _), true).
-code_safety:agent_api(agents:agent_list(_, _), true).
-code_safety:agent_api(agents:agent_hop_times(_, _, _), true).
+%   agents.pl re-exports these (agent_execution.pl, agent_registry.pl and
+%   agent_code.pl define them): the sandbox finds a predicate where it is
+%   defined.
+code_safety:agent_api(agent_execution:current_agent(_), true).
+code_safety:agent_api(agent_registry:agent_property(_, A, P),
+                      ( nonvar(P), agent_may_see(A, P) )).
+code_safety:agent_api(agent_code:agent_add_payload(_, A, _), self(A)).
+code_safety:agent_api(agent_code:agent_remove_payload(_, A, _), self(A)).
+code_safety:agent_api(agent_code:agent_add_facts(_, A, _), self(A)).
+code_safety:agent_api(agent_registry:agent_exists(_, _), true).
+code_safety:agent_api(agent_registry:agent_list(_, _), true).
+code_safety:agent_api(agent_registry:agent_hop_times(_, _, _), true).
 %   node.pl re-exports these (node_registry.pl defines them): the
 %   sandbox finds a predicate where it is defined.
 code_safety:agent_api(node_registry:current_node(_), true).

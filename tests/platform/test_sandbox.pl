@@ -60,7 +60,7 @@ test(call_bound_in_conjunction) :- refused([(h(a1, _, main) :- X = shell(ls), ca
 test(helper_calls_shell) :- refused([(h(a1, _, main) :- helper), (helper :- shell(ls))], shell(_, _)).
 test(undefined) :- refused([(h(a1, _, main) :- no_such_predicate(3))], undefined(_, _)).
 test(read_tokens) :-
-    refused([(h(a1, _, main) :- agent_property(_, a1, tokens(T)), writeln(T))], agents:agent_property/3).
+    refused([(h(a1, _, main) :- agent_property(_, a1, tokens(T)), writeln(T))], agent_registry:agent_property/3).
 test(move_another_agent) :- refused([(h(a1, L, main) :- move_agent(fed_q, L))], tartarus:move_agent/2).
 test(handler_not_its_own) :- refused([foo(1)], handler(h)).
 test(control_construct_head) :-
@@ -81,6 +81,17 @@ test(agent_api_and_output) :-
 %   they are defined.
 test(node_api) :-
     accepted([ (h(a1, _, main) :- current_node(N), node_property(N, address(A)), writeln(A)),
+               count(a1, 0) ]).
+%   agents.pl re-exports them from agent_registry.pl, agent_code.pl and
+%   agent_execution.pl: the API names where they are defined.
+test(agents_api) :-
+    accepted([ (h(a1, _, main) :- agents:current_agent(Me),
+                                   agents:agent_property(_, Me, status(_)),
+                                   agents:agent_exists(_, a1), agents:agent_list(_, _),
+                                   agents:agent_hop_times(_, a1, _),
+                                   agents:agent_add_payload(_, a1, [count/2]),
+                                   agents:agent_add_facts(_, a1, [seen(1)]),
+                                   agents:agent_remove_payload(_, a1, [seen/1])),
                count(a1, 0) ]).
 test(robot_params_api) :-
     accepted([ (h(a1, _, main) :- robot_resources:hosted_robot(r1, _),

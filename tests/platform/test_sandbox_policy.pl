@@ -107,9 +107,9 @@ test(throw_control) :-
 test(clause_of_anything) :-
     refused(clause(_, _), clause(_, _)).
 test(other_agents) :-
-    refused(agent_property(_, other, payload(_)), agents:agent_property/3),
-    refused(agent_property(_, other, module(_)), agents:agent_property/3),
-    refused(agent_property(_, _, payload(_)), agents:agent_property/3),
+    refused(agent_property(_, other, payload(_)), agent_registry:agent_property/3),
+    refused(agent_property(_, other, module(_)), agent_registry:agent_property/3),
+    refused(agent_property(_, _, payload(_)), agent_registry:agent_property/3),
     accepted(agent_property(_, a1, payload(_))),
     accepted(agent_property(_, other, status(_))).
 test(global_tables_and_records) :-

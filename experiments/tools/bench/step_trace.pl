@@ -29,23 +29,23 @@ round's time.
 %   arguments (bound after the call). No meta-predicate: its goal would
 %   run in this module.
 %   The hop: leaving, the hand-over, arriving.
-traced(agents:agent_export(_, _, _), export).
+traced(agent_records:agent_export(_, _, _), export).
 traced(transport_pool:transport_acquire(_, _, _, _), acquire).
 traced(wire:frame_write(_, _, T), write(F)) :- term_functor(T, F).
 traced(wire:frame_read(_, Fr, _), read(F)) :- ( Fr = frame(_, T) -> term_functor(T, F) ; F = eof ).
 traced(wire:body_bytes(_, T, _), serialise(F)) :- term_functor(T, F).
 traced(code_safety:check_agent_record(_), check).
 traced(code_safety:record_sealed(_, _, _), sealed).
-traced(agents:agent_install(_, _, _, _), install).
-traced(agents:agent_install(_, _, _, _, _), install).
+traced(agent_records:agent_install(_, _, _, _), install).
+traced(agent_records:agent_install(_, _, _, _, _), install).
 traced(agent_bounds:bounds_install(_, _, _, _), bounds_install).
 traced(bounds_limits:module_size(_, _), module_size).
 traced(custody:custody_stage(_, _, _, _, _, _), custody_stage).
 traced(custody:custody_commit(_, _, _, _, _), custody_commit).
-traced(agents:agent_remove(_, _), remove).
+traced(agent_execution:agent_remove(_, _), remove).
 traced(migration_arrival:receive_transfer(_, _, _, _), receive_transfer).
 traced(migration_arrival:activate(_, _, _), activate).
-traced(agents:agent_run(_, _, _, _), agent_run).
+traced(agent_execution:agent_run(_, _, _, _), agent_run).
 traced(tartarus:move_agent(_, _), move_agent).
 traced(migration:agent_move(_, _, _), agent_move).
 traced(migration:local_node_at(_, _), local_node_at).
@@ -53,13 +53,13 @@ traced(migration:begin_departure(_, _, _, _), begin_departure).
 traced(node_identity:node_for_address(_, _), node_for_address).
 traced(migration:prepare(_, _, _, _, _, _), prepare).
 traced(migration:hand_over(_, _, _, _, _, _), hand_over).
-traced(migration:send_commit(_, _, _, _), send_commit).
+traced(migration:send_commit(_, _, _, _, _), send_commit).
 traced(transport_pool:transport_release(_), release).
 traced(node_connection:serve_term(T, _, _), serve(F)) :- term_functor(T, F).
-traced(agents:agent_execute(_, _, _, _), agent_execute).
-traced(agents:run_handler(_, _, _), handler).
+traced(agent_execution:agent_execute(_, _, _, _), agent_execute).
+traced(agent_execution:run_handler(_, _, _), handler).
 traced(custody:custody_activated(_, _, _), custody_activated).
-traced(agents:agent_record_hop(_, _, _), record_hop).
+traced(agent_registry:agent_record_hop(_, _, _), record_hop).
 %   A stop of the dFRL agent (in a robot process): its step, the robot's
 %   table through the bridge, the aggregate, the round state, the lease.
 traced(dfrl_rounds:step(_, _), step).
