@@ -4,13 +4,11 @@
 # extra "dev" holds the tools), runs every gate even after one failed, and exits 1 if any
 # found something. Settings: pyproject.toml ([tool.ruff], [tool.mypy], [tool.importlinter]).
 #
-# The Prolog gate (scripts/prolog_graph.py: load cycles, platform modules naming the dFRL
-# application) reports without failing until the platform's split lands (its --warn flag): set
-# DFRL_PROLOG_GATE=enforce (or change the default below) to make its findings fail the run.
+# The Prolog gate (scripts/prolog_graph.py): load cycles, platform modules naming the dFRL
+# application, modules over 500 lines.
 set -euo pipefail
 . "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
 cd "$DFRL_ROOT"
-PROLOG_GATE="${DFRL_PROLOG_GATE:-report}"
 
 python -c 'import mypy, importlinter, ruff' 2>/dev/null \
     || python -m pip install -q -e "$DFRL_ROOT[dev]"
@@ -30,21 +28,10 @@ gate() {   # gate NAME COMMAND...: run one gate, say its verdict, remember a fai
     fi
 }
 
-prolog_graph() {
-    if [ "$PROLOG_GATE" = enforce ]; then
-        python scripts/prolog_graph.py
-    elif ! python scripts/prolog_graph.py --warn | grep . ; then
-        return 0
-    else
-        echo "[gates] prolog-graph: the findings above do not fail the run yet" \
-             "(DFRL_PROLOG_GATE=$PROLOG_GATE; enforce once the platform's split lands)" >&2
-    fi
-}
-
 gate ruff ruff check --no-cache "${PACKAGES[@]}"
 gate mypy python scripts/typecheck.py
 gate import-linter python scripts/import_contracts.py
-gate prolog-graph prolog_graph
+gate prolog-graph python scripts/prolog_graph.py
 
 if [ ${#failed[@]} -gt 0 ]; then
     echo "[gates] failed: ${failed[*]}" >&2
