@@ -82,10 +82,14 @@ agent_run(Node, Name, Link, Event) :-
     (   Run == true
     ->  catch(agent_notify(run(run), Node, Name), E0,
               print_message(warning, E0)),
-        setup_call_cleanup(
-            enter_agent(Node, Name),
-            run_agent(Node, Name, Link, Event),
-            leave_agent),
+        %   a purge signalled while the handler's own catch is not yet
+        %   (or no longer) active ends the run here, quietly: the agent
+        %   is gone, as when the signal lands inside the handler
+        catch(setup_call_cleanup(
+                  enter_agent(Node, Name),
+                  run_agent(Node, Name, Link, Event),
+                  leave_agent),
+              '$dfrl_purged', true),
         with_agents_locked(
             (   agent_property(Node, Name, status(running(Me)))
             ->  agent_set_status(Node, Name, idle),
