@@ -2,7 +2,8 @@
           [ transport_error/2,          % +Address, +Reason
             wire_error/1,               % +Reason
             message_text/2,             % +Message, -String
-            inert_error/2               % +Error0, -Error
+            inert_error/2,              % +Error0, -Error
+            abbreviated/2               % +Term, -Short
           ]).
 /** <module> Error terms of the agent platform and their messages
 
@@ -86,6 +87,23 @@ message_text(Message0, Text) :-
     ;   format(string(Text), '~p', [Message])
     ),
     !.
+
+%!  abbreviated(+Term, -Short) is det.
+%
+%   Short is Term itself if it is small (64 cells), else its text with
+%   at most 10 elements of a list and 200 characters shown: what a
+%   message about a term that may hold a whole table says of it.
+
+abbreviated(Term, Short) :-
+    (   term_size(Term, Cells), Cells =< 64
+    ->  Short = Term                    % small: the term itself
+    ;   format(string(Text), "~W", [Term, [max_depth(10), quoted(true), portray(false)]]),
+        (   string_length(Text, L), L > 200
+        ->  sub_string(Text, 0, 200, _, Head),
+            string_concat(Head, "...", Short)
+        ;   Short = Text
+        )
+    ).
 
 %!  inert_error(+Error0, -Error) is det.
 %

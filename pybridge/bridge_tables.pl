@@ -17,6 +17,7 @@
               [ registered/1, offers/2, check_shape/1, layout_size/2, bridge_codec/1 ]).
 :- use_module(table_codec,
               [ encode_values/3, decode_values/2, fts_encoded/2, float_list/2 ]).
+:- use_module('../platform_pl/platform_errors', [abbreviated/2]).
 :- use_module('../platform_pl/float_vectors',
               [ packed_vector/1, vector_length/2, vector_floats/2 ]).
 :- autoload(library(error),
@@ -244,20 +245,6 @@ must_be_values(Values) :-
     ->  instantiation_error(Values)
     ;   abbreviated(Values, Culprit),
         type_error(list, Culprit)
-    ).
-
-%   abbreviated(+Term, -Short): Term itself if it is small (64 cells),
-%   else its text with at most 10 elements of a list and 200 characters
-%   shown: the culprit of an error about a term that may hold a table.
-abbreviated(Term, Short) :-
-    (   term_size(Term, Cells), Cells =< 64
-    ->  Short = Term                    % small: the term itself
-    ;   format(string(Text), "~W", [Term, [max_depth(10), quoted(true), portray(false)]]),
-        (   string_length(Text, L), L > 200
-        ->  sub_string(Text, 0, 200, _, Head),
-            string_concat(Head, "...", Short)
-        ;   Short = Text
-        )
     ).
 
 %   write_values(+Robot, +Op0, +Values0, +PI, +Options)

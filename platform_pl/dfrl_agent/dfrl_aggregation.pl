@@ -10,10 +10,9 @@
             fold_hook/3,                % +Acc, +Method, -Hook
             method_call/3,              % :Goal, +Hook, -Result
             same_shape/2,               % +Shape0, +Shape
-            item_floats/2,              % +Item, -ListItem
-            abbreviated/2               % +Term, -Short
+            item_floats/2               % +Item, -ListItem
           ]).
-:- use_module('../platform_errors', [message_text/2]).
+:- use_module('../platform_errors', [message_text/2, abbreviated/2]).
 :- use_module(dfrl_safety, []).           % its entries in the platform's sandbox
 %   The element-wise list maths were defined here first; they are
 %   float_vectors.pl's now, and still exported from here.
@@ -331,23 +330,6 @@ shape_size(Dims, N) :-
 dims_size(Dims, N) :-
     is_list(Dims),
     foldl([D, P0, P]>>(integer(D), D >= 0, P is P0*D), Dims, 1, N).
-
-%!  abbreviated(+Term, -Short) is det.
-%
-%   Short is Term itself if it is small (64 cells), else its text with
-%   at most 10 elements of a list and 200 characters shown: what a
-%   message about a term that may hold a whole table says of it.
-
-abbreviated(Term, Short) :-
-    (   term_size(Term, Cells), Cells =< 64
-    ->  Short = Term                    % small: the term itself
-    ;   format(string(Text), "~W", [Term, [max_depth(10), quoted(true), portray(false)]]),
-        (   string_length(Text, L), L > 200
-        ->  sub_string(Text, 0, 200, _, Head),
-            string_concat(Head, "...", Short)
-        ;   Short = Text
-        )
-    ).
 
 %!  aggregate_fits(+Acc, +Shape) is det.
 %
