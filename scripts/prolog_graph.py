@@ -254,7 +254,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("folders", nargs="*", default=["platform_pl", "pybridge"])
     args = parser.parse_args(argv)
     root = args.root.resolve()
+    missing = [d for d in args.folders if not (root / d).is_dir()]
     paths = sorted(p for d in args.folders for p in (root / d).rglob("*.pl"))
+    if missing or not paths:        # a check that read nothing must not pass
+        print(f"prolog_graph: no Prolog sources read under {root} "
+              f"(missing folders: {', '.join(missing) or 'none'})", file=sys.stderr)
+        return 2
     files = {f.path: f for f in map(read_file, paths)}
     if args.edges:
         for f in sorted(files.values(), key=lambda f: f.path):

@@ -133,3 +133,11 @@ def test_the_real_tree_passes(gate: str) -> None:
            "import-contracts": [sys.executable, SCRIPTS / "import_contracts.py"]}[gate]
     done = _run(*cmd)
     assert done.returncode == 0, done.stdout + done.stderr
+
+
+def test_prolog_graph_that_reads_nothing_fails(tmp_path: Path) -> None:
+    done = _run(sys.executable, SCRIPTS / "prolog_graph.py", "--root", tmp_path)
+    assert done.returncode == 2 and "no Prolog sources read" in done.stderr, done.stderr
+    (tmp_path / "platform_pl").mkdir()
+    done = _run(sys.executable, SCRIPTS / "prolog_graph.py", "--root", tmp_path, "--warn")
+    assert done.returncode == 2 and "missing folders: pybridge" in done.stderr, done.stderr
