@@ -15,7 +15,7 @@
             lease_note_write/3,         % +Node, +Robot, +Options
             lease_supersede/5           % +Node, +Agent, +Address, +Tokens, -Answer
           ]).
-:- use_module('../agents', [agent_export/3]).
+:- use_module('../agents', [agent_export/3, agent_property/3]).
 :- use_module(lease_book).
 :- reexport(lease_book,                         % +Node, +Agent, -Custody;
             [lease_custody/3, lease_valid/2, copy_owned/2]). % +Node, +Agent (both)

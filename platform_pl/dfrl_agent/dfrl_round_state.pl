@@ -8,11 +8,13 @@
             skip_robot/4,               % +Robot, +Error, +State0, -State
             capped_text/2,              % +Text, -Capped
             method_failed/3,            % +Result, +State0, -State
+            fold_item/6,                % +Method, +Robot, +Shape, +Item, +State0, -State
             print_capped_warning/1,     % +Error
             add_retries/3,              % +Retries, +State0, -State
             advance_to/3                % +Index, +State0, -State
           ]).
 :- use_module('../platform_errors', [message_text/2]).
+:- use_module(dfrl_aggregation, [aggregate_fold/5, fold_hook/3, method_call/3]).
 :- use_module(dfrl_round_log, [log_text/2]).
 :- autoload(library(lists), [append/3, memberchk/2, sum_list/2]).
 :- autoload(library(apply), [maplist/2]).
@@ -182,6 +184,24 @@ method_failed(error(Error), S0, S) :-
     print_message(error, format("dfrl: aggregation method: ~w; round aborted, \c
                                  no table is written", [Error])),
     put_dict(_{error:Error, acc:none}, S0, S).
+
+%!  fold_item(+Method, +Robot, +Shape, +Item, +State0, -State) is det.
+%
+%   Fold Item, the table or parameters of Robot (of Shape, checked to fit
+%   the aggregate), into the aggregate of State0 with Method, and count
+%   Robot visited; a failure of the method is method_failed/3's (chain
+%   and tree pass alike).
+
+fold_item(Method, Robot, Shape, Item, S0, S) :-
+    get_dict(acc, S0, Acc0),
+    fold_hook(Acc0, Method, Hook),
+    method_call(aggregate_fold(Method, Acc0, Shape, Item, Acc1), Hook, Result),
+    (   Result == ok
+    ->  get_dict(visited, S0, V0),
+        append(V0, [Robot], V),
+        put_dict(_{acc:Acc1, visited:V}, S0, S)
+    ;   method_failed(Result, S0, S)
+    ).
 
 %!  print_capped_warning(+Error) is det.
 %

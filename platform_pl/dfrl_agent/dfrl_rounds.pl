@@ -10,7 +10,8 @@
                            lease_write_gate/2]).
 :- use_module(dfrl_round_state,
               [ new_round/3, get_state/3, put_state/3, replace_fact/2, skip_robot/4,
-                add_retries/3, advance_to/3, method_failed/3, print_capped_warning/1 ]).
+                add_retries/3, advance_to/3, method_failed/3, print_capped_warning/1,
+                fold_item/6 ]).
 :- use_module(dfrl_round_log, [log_round/6, log_control/5, log_event/2]).
 :- use_module(dfrl_commands, [take_commands/2, take_stop/1, apply_command/5]).
 :- use_module(dfrl_payload,
@@ -224,14 +225,7 @@ forward(Carried-Method, Robot, Options, S0, S) :-
               ),
               E, true)
     ->  (   var(E)
-        ->  fold_hook(Acc0, Method, Hook),
-            method_call(aggregate_fold(Method, Acc0, Shape, Table, Acc1), Hook, Result),
-            (   Result == ok
-            ->  get_dict(visited, S0, V0),
-                append(V0, [Robot], V),
-                put_dict(_{acc:Acc1, visited:V}, S0, S)
-            ;   method_failed(Result, S0, S)
-            )
+        ->  fold_item(Method, Robot, Shape, Table, S0, S)
         ;   print_capped_warning(E),
             skip_robot(Robot, E, S0, S)
         )

@@ -15,7 +15,7 @@
 :- use_module(dfrl_lease, [lease_custody/3, lease_write_gate/2]).
 :- use_module(dfrl_round_state,
               [ skip_robot/4, add_retries/3, print_capped_warning/1, method_failed/3,
-                replace_fact/2 ]).
+                replace_fact/2, fold_item/6 ]).
 :- use_module(dfrl_payload, [next_method/5, carried/3, itinerary_kind/3]).
 :- use_module(dfrl_round_log, [log_control/5]).
 :- use_module(dfrl_robot_io, [read_robot/5, write_robot/3, item_bytes/2]).
@@ -184,14 +184,7 @@ fold_items([_-Robot-Item|Items], Method, S0, S) :-
         (   nonvar(E)
         ->  print_capped_warning(E),
             skip_robot(Robot, E, S0, S1)
-        ;   fold_hook(Acc0, Method, Hook),
-            method_call(aggregate_fold(Method, Acc0, Shape, Item, Acc1), Hook, Result),
-            (   Result == ok
-            ->  get_dict(visited, S0, V0),
-                append(V0, [Robot], V),
-                put_dict(_{acc:Acc1, visited:V}, S0, S1)
-            ;   method_failed(Result, S0, S1)
-            )
+        ;   fold_item(Method, Robot, Shape, Item, S0, S1)
         ),
         fold_items(Items, Method, S1, S)
     ).
