@@ -16,7 +16,7 @@ from collections.abc import Sequence
 from dfrl import __version__
 
 #: Modules (of this package) that add subcommands, in the order of ``dfrl --help``.
-COMMAND_MODULES = ("node", "federated", "running", "history", "bench", "robots", "transfer",
+COMMAND_MODULES = ("node", "federated", "running", "history", "bench", "standalone", "transfer",
                    "studies", "hetero", "robot", "view", "secret", "certs")
 
 
