@@ -26,7 +26,7 @@ Hooks, defined as clauses in this module:
 
   - robot_resources:robot(?Robot, ?Props) is nondet.
     The robots this process hosts, with the properties given when the
-    robot was registered, e.g. `[algorithm(qlearning), shape([81,3])]`.
+    robot was registered, e.g. `[algo(qlearning), shape([81,3])]`.
   - robot_resources:host_read_table(+Robot, -QTable, +Options) is det.
   - robot_resources:host_read_tables(+Robot, -QTable, -Visits, +Options) is det.
     The table and the visit counts, taken together (one snapshot).

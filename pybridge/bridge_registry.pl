@@ -37,9 +37,9 @@ codec_(text).
 %   registration of the same robot. Robot is an atom or an integer. Props
 %   is a list that says what the robot offers: shape([NStates, NActions])
 %   for a Q-table, layout(Layout) for a parameter vector (at least one of
-%   them), and usually algorithm(Name) and learner(tabular|function), e.g.
-%   `[algorithm(qlearning), shape([64, 4]), learner(tabular)]` or
-%   `[algorithm(dqn), learner(function), layout([w1-[4,16], b1-[16]])]`.
+%   them), and usually algo(Name) and learner(tabular|function), e.g.
+%   `[algo(qlearning), shape([64, 4]), learner(tabular)]` or
+%   `[algo(dqn), learner(function), layout([w1-[4,16], b1-[16]])]`.
 %
 %   @error type_error(list, Props)
 %   @error domain_error(robot_props, Props) without shape/1 or layout/1.

@@ -14,6 +14,7 @@ import math
 import os
 import re
 import threading
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, ClassVar
@@ -256,8 +257,8 @@ class Bridge(TartarusCommands):
 
     # -- robots -------------------------------------------------------------------------------
     def register_robot(self, robot_id: str | int, provider: Any, *,
-                       shape: Sequence[int] | None = None, algorithm: str = "qlearning",
-                       learner: str | None = None) -> None:
+                       shape: Sequence[int] | None = None, algo: str | None = None,
+                       learner: str | None = None, algorithm: str | None = None) -> None:
         """Register a robot whose table or parameters agents on this node may read and write.
 
         What the robot offers is fixed here and told to agents in its props:
@@ -281,29 +282,34 @@ class Bridge(TartarusCommands):
             ``q_table`` is read once to learn it. A function learner has a table only as a
             view of its Q-function on a state grid (:class:`dfrl.robots.grid_view.GridView`),
             whose shape is given here.
-        algorithm : str
-            Learning algorithm name, given to agents in the robot's props.
+        algo : str, optional
+            The learner's registered name (``"qlearning"``, the default, ``"sarsa"``,
+            ``"dqn"``, ...), given to agents in the robot's props as ``algo(Name)``.
         learner : {"tabular", "function"}, optional
             Default: the provider's ``learner_kind`` if it has one, else ``"tabular"``.
+        algorithm : str, optional
+            Deprecated name of ``algo`` (a :class:`DeprecationWarning`); still accepted.
 
         Raises
         ------
         TypeError
-            The provider lacks what its learner kind must offer.
+            The provider lacks what its learner kind must offer, or both ``algo`` and
+            ``algorithm`` are given.
         ValueError
             A bad shape, layout or learner kind.
         """
         self._check_open()
+        algo = _algo_keyword(algo, algorithm)
         rid = robot_term(robot_id)
         learner, table_shape, layout = provider_offer(provider, shape, learner)
-        props = [Term("algorithm", Atom(algorithm))]
+        props = [Term("algo", Atom(algo))]
         if table_shape is not None:
             props.append(Term("shape", list(table_shape)))
         props.append(Term("learner", Atom(learner)))
         if layout is not None:
             props.append(Term("layout", layout_term(layout)))
         self._must("bridge_register_robot", rid, props, module=_MODULE)
-        self._robots[rid] = RegisteredRobot(rid, provider, table_shape, algorithm, layout,
+        self._robots[rid] = RegisteredRobot(rid, provider, table_shape, algo, layout,
                                             learner)
 
     def unregister_robot(self, robot_id: str | int) -> None:
@@ -411,3 +417,15 @@ class Bridge(TartarusCommands):
     def __repr__(self) -> str:
         state = "closed" if self._closed else "open"
         return f"<Bridge {state} codec={self._codec.value} robots={list(self._robots)}>"
+
+
+def _algo_keyword(algo: str | None, algorithm: str | None) -> str:
+    """The learner's name given to :meth:`Bridge.register_robot`: ``algo``, else the deprecated
+    keyword ``algorithm`` (with a :class:`DeprecationWarning`), else ``"qlearning"``."""
+    if algorithm is None:
+        return "qlearning" if algo is None else algo
+    if algo is not None:
+        raise TypeError("register_robot: give algo only (algorithm is its deprecated name)")
+    warnings.warn("register_robot(algorithm=...) is deprecated; use algo=...",
+                  DeprecationWarning, stacklevel=3)
+    return algorithm

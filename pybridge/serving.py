@@ -77,13 +77,14 @@ class RegisteredRobot:
 
     ``shape`` is the Q-table's (S, A), ``None`` for a robot without a table (a function
     learner); ``layout`` its parameter layout, ``None`` for a robot that offers no
-    parameters; ``learner`` is ``"tabular"`` or ``"function"``.
+    parameters; ``algo`` the learner's registered name (``"qlearning"``, ...); ``learner`` is
+    ``"tabular"`` or ``"function"``.
     """
 
     robot_id: Any
     provider: TableProvider | ParamsProvider
     shape: tuple[int, int] | None
-    algorithm: str
+    algo: str
     layout: Layout | None = None
     learner: str = "tabular"
 

@@ -1,10 +1,11 @@
 """Q-table files: ``NAME.npy`` (the array) + ``NAME.json`` (what it means) [+ ``NAME.visits.npy``].
 
 The ``.npy`` holds the float64 array of shape ``(n_states, n_actions)``. The JSON sidecar holds
-``format`` (``"dfrl-qtable/1"``), ``shape``, ``dtype``, ``algorithm``, ``arena``, ``seed``,
+``format`` (``"dfrl-qtable/1"``), ``shape``, ``dtype``, ``algo``, ``arena``, ``seed``,
 ``iterations``, ``actions`` (names by column index), ``state`` (the discretisation, see
 :meth:`dfrl.robots.state.Discretiser.describe`) and free ``extra`` fields. The optional
-``NAME.visits.npy`` holds the int64 update counts of each entry.
+``NAME.visits.npy`` holds the int64 update counts of each entry. A sidecar written before the
+learner's name was called ``algo`` everywhere names it ``algorithm``; it still loads.
 """
 from __future__ import annotations
 
@@ -26,8 +27,8 @@ class TableMeta:
 
     Attributes
     ----------
-    algorithm : str
-        Learner name (``"qlearning"``, ``"sarsa"``).
+    algo : str
+        The learner's registered name (``"qlearning"``, ``"sarsa"``).
     arena : str
         Arena name.
     seed : int
@@ -41,7 +42,7 @@ class TableMeta:
         Anything else worth keeping (JSON-serialisable).
     """
 
-    algorithm: str
+    algo: str
     arena: str
     seed: int
     iterations: int
@@ -128,8 +129,9 @@ def load_table(path: str | Path) -> LoadedTable:
         raise ValueError(f"{js}: unknown table format {doc.get('format')!r}, "
                          f"expected {TABLE_FORMAT!r}")
     q = validate_table(np.load(npy, allow_pickle=False), tuple(doc["shape"]))
-    meta = TableMeta(**{k: doc[k] for k in ("algorithm", "arena", "seed", "iterations",
-                                            "actions", "state")}, extra=doc.get("extra", {}))
+    meta = TableMeta(algo=_algo(doc), **{k: doc[k] for k in ("arena", "seed", "iterations",
+                                                             "actions", "state")},
+                     extra=doc.get("extra", {}))
     visits = None
     if doc.get("visits_file"):
         visits = np.load(vis, allow_pickle=False).astype(np.int64)
@@ -148,8 +150,8 @@ class ParamsMeta:
 
     Attributes
     ----------
-    algorithm : str
-        Learner name.
+    algo : str
+        The learner's registered name.
     arena : str
     seed : int
     iterations : int
@@ -163,7 +165,7 @@ class ParamsMeta:
     extra : dict
     """
 
-    algorithm: str
+    algo: str
     arena: str
     seed: int
     iterations: int
@@ -218,10 +220,15 @@ def load_params(path: str | Path) -> LoadedParams:
         raise ValueError(f"{js}: format {doc.get('format')!r}, expected {PARAMS_FORMAT!r}")
     layout = [(str(n), tuple(int(d) for d in s)) for n, s in doc["layout"]]
     vec = validate_params(np.load(npy, allow_pickle=False), layout)
-    meta = ParamsMeta(algorithm=doc["algorithm"], arena=doc["arena"], seed=doc["seed"],
+    meta = ParamsMeta(algo=_algo(doc), arena=doc["arena"], seed=doc["seed"],
                       iterations=doc["iterations"], actions=list(doc["actions"]), layout=layout,
                       model=dict(doc.get("model", {})), extra=dict(doc.get("extra", {})))
     return LoadedParams(params=vec, meta=meta)
+
+
+def _algo(doc: dict[str, Any]) -> str:
+    """The learner's name in a sidecar: key ``algo``, or ``algorithm`` in one written before."""
+    return doc["algo"] if "algo" in doc else doc["algorithm"]
 
 
 def sidecar_format(path: str | Path) -> str | None:

@@ -163,8 +163,8 @@ def with_params_meta(config: TrainerConfig, meta: Any) -> TrainerConfig:
     """
     from dfrl.robots.learners import learner_class
 
-    field_name = getattr(learner_class(meta.algorithm), "config_field", None)
-    changes: dict[str, Any] = {"algo": meta.algorithm}
+    field_name = getattr(learner_class(meta.algo), "config_field", None)
+    changes: dict[str, Any] = {"algo": meta.algo}
     if field_name:
         changes[field_name] = type(getattr(config, field_name))(**meta.model)
     return config.replace(**changes)

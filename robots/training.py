@@ -277,7 +277,7 @@ class Trainer:
         c = self.config
         field_name = getattr(self.learner, "config_field", None)
         model = to_jsonable(getattr(c, field_name)) if field_name else {}
-        return ParamsMeta(algorithm=c.algo, arena=self.env.arena.name, seed=c.seed,
+        return ParamsMeta(algo=c.algo, arena=self.env.arena.name, seed=c.seed,
                           iterations=self.iteration, actions=self.action_names,
                           layout=self.param_layout, model=model, extra=dict(extra))
 
@@ -285,7 +285,7 @@ class Trainer:
         """Sidecar description of the current table."""
         c = self.config
         return TableMeta(
-            algorithm=c.algo, arena=self.env.arena.name, seed=c.seed, iterations=self.iteration,
+            algo=c.algo, arena=self.env.arena.name, seed=c.seed, iterations=self.iteration,
             actions=self.action_names, state=self.discretiser.describe(), extra=dict(extra),
         )
 

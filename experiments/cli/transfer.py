@@ -102,7 +102,7 @@ def cmd_transfer(args: argparse.Namespace) -> int:
         print(json.dumps(result.to_dict(), indent=2))
         return 0
     t, tc = result.table, result.trainer_config
-    origin = (f"{t.algorithm}, trained in {t.arena} for {t.iterations} iterations" if t.sidecar
+    origin = (f"{t.algo}, trained in {t.arena} for {t.iterations} iterations" if t.sidecar
               else "no sidecar")
     print(f"transfer of {t.path} ({origin}) into {result.arena_name}: {tc.algo}, "
           f"{cfg.iterations} iterations x {len(cfg.seeds)} seeds "

@@ -225,7 +225,7 @@ class Training:
             self.table.iteration = self.trainer.iteration
         # what the robot offers agents: its Q-table (a function learner: the grid view of its
         # Q-function, for an agent of a grid federation) and its parameters, if its base has them
-        self.bridge.register_robot(c.robot, self.table, shape=shape, algorithm=c.algo)
+        self.bridge.register_robot(c.robot, self.table, shape=shape, algo=c.algo)
         self._registered = True
         self._next_tick = time.perf_counter()
         return shape

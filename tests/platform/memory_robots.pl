@@ -120,7 +120,7 @@ shape(V, [A, 2]) :-
     length(V, N),
     A is N // 2.
 
-robot_resources:robot(R, [algorithm(test), shape(S)]) :-
+robot_resources:robot(R, [algo(test), shape(S)]) :-
     table_(R, V),
     shape(V, S).
 robot_resources:table_get(R, qtable(S, V), O) :-

@@ -455,7 +455,7 @@ test(only_round_logs_in_existing_directories) :-
 :- multifile robot_resources:robot/2, robot_resources:params_get/3,
              robot_resources:params_set/3.
 
-robot_resources:robot(R, [algorithm(test), learner(function), layout(L)]) :-
+robot_resources:robot(R, [algo(test), learner(function), layout(L)]) :-
     mparams(R, L, _, _).
 robot_resources:params_get(R, params(L, W, V), _) :-
     mparams(R, L, W, V).

@@ -497,7 +497,7 @@ test(read_write, [ setup(memory_robots_start([r1-[1.0, 2.0]])),
     assertion(V == qtable([1, 2], [1.0, 1.0])),
     set_robot_table(r1, qtable([1, 2], [5.0, 6.0]), []),
     assertion(memory_robot_table(r1, [5.0, 6.0])),
-    assertion(hosted_robot(r1, [algorithm(test), shape([1, 2])])).
+    assertion(hosted_robot(r1, [algo(test), shape([1, 2])])).
 
 test(bad_arguments, [ setup(memory_robots_start([r1-[1.0, 2.0]])),
                       cleanup(memory_robots_stop) ]) :-

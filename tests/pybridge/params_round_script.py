@@ -49,7 +49,7 @@ def main() -> int:
     robots = {"r1": StaticParams(LAYOUT, seed=1, samples=SAMPLES["r1"]),
               "r2": StaticParams(LAYOUT, seed=2, samples=SAMPLES["r2"])}
     for rid, robot in robots.items():
-        node.register_robot(rid, robot, algorithm="dqn")
+        node.register_robot(rid, robot, algo="dqn")
     expected = {rid: r.params for rid, r in robots.items()}
     for _ in range(ROUNDS):
         mean = fedavg(expected["r1"], SAMPLES["r1"], expected["r2"], SAMPLES["r2"])

@@ -38,14 +38,22 @@ def test_self_test_selects_fts(node) -> None:
 
 
 def test_register_and_list_robots(node) -> None:
-    node.register_robot("r1", ArrayRobot(3, 2), algorithm="sarsa")
+    node.register_robot("r1", ArrayRobot(3, 2), algo="sarsa")
     node.register_robot(7, ArrayRobot(2, 2))
     robots = dict(node.robots())
-    assert robots[Atom("r1")] == [Term("algorithm", Atom("sarsa")), Term("shape", [3, 2]),
+    assert robots[Atom("r1")] == [Term("algo", Atom("sarsa")), Term("shape", [3, 2]),
                                   Term("learner", Atom("tabular"))]
     assert robots[7][1] == Term("shape", [2, 2])
     node.unregister_robot(7)
     assert [r for r, _ in node.robots()] == [Atom("r1")]
+
+
+def test_register_robot_algorithm_keyword_is_deprecated(node) -> None:
+    with pytest.warns(DeprecationWarning, match=r"algorithm=\.\.\.\) is deprecated; use algo"):
+        node.register_robot("r1", ArrayRobot(2, 2), algorithm="sarsa")
+    assert dict(node.robots())[Atom("r1")][0] == Term("algo", Atom("sarsa"))
+    with pytest.raises(TypeError, match="give algo only"):
+        node.register_robot("r2", ArrayRobot(2, 2), algo="sarsa", algorithm="sarsa")
 
 
 @pytest.mark.parametrize("codec", ["fts", "text"])

@@ -57,9 +57,9 @@ def test_bad_layouts_are_refused(bad) -> None:
 
 # -- through the bridge -----------------------------------------------------------------------
 def test_function_learner_offers_params_only(node) -> None:
-    node.register_robot("f1", StaticParams(LAYOUT, seed=1, samples=5), algorithm="dqn")
+    node.register_robot("f1", StaticParams(LAYOUT, seed=1, samples=5), algo="dqn")
     (_, props), = [rp for rp in node.robots() if rp[0] == Atom("f1")]
-    assert props == [Term("algorithm", Atom("dqn")), Term("learner", Atom("function")),
+    assert props == [Term("algo", Atom("dqn")), Term("learner", Atom("function")),
                      Term("layout", LAYOUT_TERM)]
     table = run_agent(node, Term(":", Atom(RR), Term("get_robot_table", Atom("f1"), Var(), [])))
     assert _formal(table) == Term("existence_error", Atom("qtable"), Atom("f1"))
@@ -68,7 +68,7 @@ def test_function_learner_offers_params_only(node) -> None:
 def test_tabular_robot_says_so(node) -> None:
     node.register_robot("r1", ArrayRobot(4, 2), shape=(4, 2))
     (_, props), = node.robots()
-    assert props == [Term("algorithm", Atom("qlearning")), Term("shape", [4, 2]),
+    assert props == [Term("algo", Atom("qlearning")), Term("shape", [4, 2]),
                      Term("learner", Atom("tabular"))]
     got = run_agent(node, _get("r1"))
     assert _formal(got) == Term("existence_error", Atom("params"), Atom("r1"))

@@ -17,7 +17,7 @@ def test_agent_reads_and_writes_a_training_robot(node) -> None:
     try:
         for _ in range(20):
             trainer.step()
-        node.register_robot("epuck1", trainer, algorithm=trainer.config.algo)
+        node.register_robot("epuck1", trainer, algo=trainer.config.algo)
         # the agent reads the table, then writes it back halved
         half = Term(">>", [Var("X"), Var("Y")], Term("is", Var("Y"), Term("/", Var("X"), 2)))
         goal = Term(",", Term("get_qtable", Atom("epuck1"), Term("qtable", Var("S"), Var("V"))),

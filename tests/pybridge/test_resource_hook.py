@@ -14,7 +14,7 @@ def _half(x: str, y: str) -> Term:
 
 def test_agent_reads_and_writes_through_robot_resources(node) -> None:
     robot = ArrayRobot(81, 3, seed=9)
-    node.register_robot("r1", robot, shape=(81, 3), algorithm="sarsa")
+    node.register_robot("r1", robot, shape=(81, 3), algo="sarsa")
     before = robot.q_table
     opts = [Term("timeout", 5.0)]
     rr = "robot_resources"
@@ -27,7 +27,7 @@ def test_agent_reads_and_writes_through_robot_resources(node) -> None:
     result = run_agent(node, goal)
     assert result.name == "true", result
     props = result.args[0][0].args[1].args[1]      # the conjunction comes back as a tuple
-    assert props == [Term("algorithm", Atom("sarsa")), Term("shape", [81, 3]),
+    assert props == [Term("algo", Atom("sarsa")), Term("shape", [81, 3]),
                      Term("learner", Atom("tabular"))]
     assert robot.sets == 1
     assert np.array_equal(robot.q_table, before / 2)

@@ -37,15 +37,15 @@ with_host(Table, Goal, Ops, Count) :-
 reset :-
     bridge_shutdown,
     bridge_set_codec(text),
-    bridge_register_robot(r1, [algorithm(qlearning), shape([2, 2])]).
+    bridge_register_robot(r1, [algo(qlearning), shape([2, 2])]).
 
-test(register, [setup(reset), Props == [algorithm(qlearning), shape([2, 2])]]) :-
+test(register, [setup(reset), Props == [algo(qlearning), shape([2, 2])]]) :-
     bridge_robot(r1, Props).
 test(unregister, [setup(reset), fail]) :-
     bridge_unregister_robot(r1),
     bridge_robot(r1, _).
-test(bad_props, [setup(reset), error(domain_error(robot_props, [algorithm(q)]))]) :-
-    bridge_register_robot(r2, [algorithm(q)]).
+test(bad_props, [setup(reset), error(domain_error(robot_props, [algo(q)]))]) :-
+    bridge_register_robot(r2, [algo(q)]).
 test(bad_shape, [setup(reset), error(domain_error(_, [2]))]) :-
     bridge_register_robot(r2, [shape([2])]).
 
@@ -87,7 +87,7 @@ test(not_a_qtable, [setup(reset), error(type_error(qtable, foo(1)))]) :-
 test(reply_of_wrong_size, [setup(reset), error(domain_error(qtable_size(4), 3))]) :-
     with_host(qtable([2,2], [1.0,2.0,3.0]), get_qtable(r1, _), _, 1).
 
-test(resource_hook_lists_robots, [setup(reset), Props == [algorithm(qlearning), shape([2, 2])]]) :-
+test(resource_hook_lists_robots, [setup(reset), Props == [algo(qlearning), shape([2, 2])]]) :-
     hosted_robot(r1, Props).
 test(resource_hook_reads_and_writes, [setup(reset),
         Got-Ops == qtable([2,2], [1.0,2.0,3.0,4.0])-[read_table(r1), write_table(r1, [2,2], text("1.0,2.0,3.0,4.0"), [round(3), agent(dfrl_q), epoch(2)])]]) :-
@@ -182,7 +182,7 @@ wait_queued :-
 preset :-
     bridge_shutdown,
     bridge_set_codec(text),
-    bridge_register_robot(f1, [algorithm(dqn), learner(function),
+    bridge_register_robot(f1, [algo(dqn), learner(function),
                                layout([w-[1,2], b-[1]])]).
 
 %   serve_params(-Op): answer one request with the 3 values below
@@ -202,7 +202,7 @@ with_params_host(Goal, Ops, Count) :-
                    thread_join(Id, _) )).
 
 test(register_layout_only, [setup(preset),
-        Props == [algorithm(dqn), learner(function), layout([w-[1,2], b-[1]])]]) :-
+        Props == [algo(dqn), learner(function), layout([w-[1,2], b-[1]])]]) :-
     hosted_robot(f1, Props).
 test(bad_layout, [setup(preset), error(domain_error(param_layout, [w-[x]]))]) :-
     bridge_register_robot(f2, [layout([w-[x]])]).
@@ -231,7 +231,7 @@ test(no_table_on_a_function_learner, [setup(preset), error(existence_error(qtabl
 test(no_table_write_either, [setup(preset), error(existence_error(qtable, f1))]) :-
     set_robot_table(f1, qtable([1,1], [1.0]), []).
 test(no_params_on_a_table_robot, [setup(( preset,
-        bridge_register_robot(r1, [algorithm(q), shape([2, 2]), learner(tabular)]) )),
+        bridge_register_robot(r1, [algo(q), shape([2, 2]), learner(tabular)]) )),
         error(existence_error(params, r1))]) :-
     get_robot_params(r1, _, []).
 test(params_unknown_robot, [setup(preset), error(existence_error(robot, nobody))]) :-

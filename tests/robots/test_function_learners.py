@@ -99,7 +99,7 @@ def test_train_writes_a_parameter_file(tmp_path: Path) -> None:
     assert sorted(res.snapshots) == [25, 50] and np.array_equal(res.snapshots[50], res.params)
     loaded = load_params(tmp_path / "params.npy")
     assert np.array_equal(loaded.params, res.params)
-    assert loaded.meta.algorithm == "linear" and loaded.meta.layout == [("w", (3, 257))]
+    assert loaded.meta.algo == "linear" and loaded.meta.layout == [("w", (3, 257))]
     assert loaded.meta.model == {"alpha": 0.05, "tilings": 4, "tiles": 8} and loaded.meta.iterations == 50
     cfg = json.loads((tmp_path / "config.json").read_text())
     assert TrainerConfig.from_dict(cfg) == _config("linear").replace(iterations=50)

@@ -1,6 +1,7 @@
 """Learner maths on hand-computed values, the registry, schedules, table files."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -9,7 +10,7 @@ import pytest
 from dfrl.robots.learners import (LEARNERS, EpsilonSchedule, LearnerParams, QLearning, Sarsa,
                              epsilon_greedy, greedy_action, make_learner, q_learning_target,
                              sarsa_target, td_update, validate_table)
-from dfrl.robots.tables import TableMeta, load_table, save_table
+from dfrl.robots.tables import TableMeta, load_params, load_table, save_table
 
 
 def test_registry_has_the_tabular_and_the_function_learners() -> None:
@@ -87,7 +88,7 @@ def test_validate_table() -> None:
 def test_table_file_round_trip(tmp_path: Path) -> None:
     q = np.arange(12, dtype=float).reshape(4, 3)
     visits = np.arange(12, dtype=np.int64).reshape(4, 3)
-    meta = TableMeta(algorithm="sarsa", arena="r4", seed=3, iterations=100,
+    meta = TableMeta(algo="sarsa", arena="r4", seed=3, iterations=100,
                      actions=["forward", "left", "right"], state={"n_states": 4})
     path = save_table(tmp_path / "t", q, meta, visits=visits)
     assert path.name == "t.npy" and (tmp_path / "t.json").exists()
@@ -97,3 +98,31 @@ def test_table_file_round_trip(tmp_path: Path) -> None:
     assert loaded.meta == meta
     with pytest.raises(ValueError, match="action names"):
         save_table(tmp_path / "u", q, TableMeta("sarsa", "r4", 0, 0, ["a"], {}))
+
+
+def test_sidecar_names_the_learner_algo_and_one_saying_algorithm_still_loads(
+        tmp_path: Path) -> None:
+    q = np.array([[0.0, 1.0], [2.0, 3.0]])
+    save_table(tmp_path / "new", q, TableMeta("sarsa", "r4", 3, 100, ["a", "b"], {}))
+    doc = json.loads((tmp_path / "new.json").read_text())
+    assert doc["algo"] == "sarsa" and "algorithm" not in doc
+    # a sidecar written by hand the way dfrl wrote them before (key "algorithm")
+    np.save(tmp_path / "old.npy", q)
+    (tmp_path / "old.json").write_text(json.dumps({
+        "format": "dfrl-qtable/1", "shape": [2, 2], "dtype": "float64",
+        "algorithm": "qlearning", "arena": "r1", "seed": 7, "iterations": 50,
+        "actions": ["a", "b"], "state": {"n_states": 2}, "extra": {}}))
+    old = load_table(tmp_path / "old.npy")
+    assert old.meta == TableMeta("qlearning", "r1", 7, 50, ["a", "b"], {"n_states": 2})
+    np.testing.assert_array_equal(old.q, q)
+
+
+def test_params_sidecar_saying_algorithm_still_loads(tmp_path: Path) -> None:
+    np.save(tmp_path / "old.npy", np.array([0.5, -1.0, 2.0]))
+    (tmp_path / "old.json").write_text(json.dumps({
+        "format": "dfrl-params/1", "size": 3, "dtype": "float64", "algorithm": "linear",
+        "arena": "r2", "seed": 1, "iterations": 10, "actions": ["a"],
+        "layout": [["w", [1, 3]]], "model": {"alpha": 0.1}, "extra": {}}))
+    meta = load_params(tmp_path / "old.npy").meta
+    assert (meta.algo, meta.arena, meta.layout, meta.model) == (
+        "linear", "r2", [("w", (1, 3))], {"alpha": 0.1})

@@ -88,7 +88,7 @@ def test_train_writes_outputs(tmp_path: Path) -> None:
     for field in ("iteration", "q_sum", "cumulative_reward", "collisions"):
         np.testing.assert_allclose(m[field], result.metrics[field])
     table = load_table(tmp_path / "q_table.npy")
-    assert table.q.shape == (243, 3) and table.meta.algorithm == "sarsa"
+    assert table.q.shape == (243, 3) and table.meta.algo == "sarsa"
     assert table.meta.state["n_states"] == 243 and table.meta.iterations == 400
     assert TrainerConfig.from_dict(json.loads((tmp_path / "config.json").read_text())) == cfg
 

@@ -107,8 +107,9 @@ class TableInfo:
     ----------
     path : str
     shape : tuple[int, int]
-    algorithm, arena : str or None
-        From the sidecar (``None`` for a bare ``.npy``).
+    algo, arena : str or None
+        The learner's registered name and the arena, from the sidecar (``None`` for a bare
+        ``.npy``).
     iterations : int or None
     sidecar : bool
         Whether a sidecar described the table.
@@ -118,7 +119,7 @@ class TableInfo:
 
     path: str
     shape: tuple[int, int]
-    algorithm: str | None
+    algo: str | None
     arena: str | None
     iterations: int | None
     sidecar: bool

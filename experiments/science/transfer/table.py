@@ -36,7 +36,7 @@ def load_initial_table(path: str | Path) -> tuple[np.ndarray, TableInfo, dict[st
     if npy.with_suffix(".json").exists():
         loaded = load_table(npy)
         q, meta = loaded.q, loaded.meta
-        info = TableInfo(path=str(npy), shape=tuple(q.shape), algorithm=meta.algorithm,
+        info = TableInfo(path=str(npy), shape=tuple(q.shape), algo=meta.algo,
                          arena=meta.arena, iterations=meta.iterations, sidecar=True,
                          extra=dict(meta.extra))
         found: dict[str, Any] = dict(meta.state)
@@ -49,7 +49,7 @@ def load_initial_table(path: str | Path) -> tuple[np.ndarray, TableInfo, dict[st
     if raw.ndim != 2:
         raise ValueError(f"{npy}: a Q-table is 2-D (n_states, n_actions), got shape {raw.shape}")
     q = validate_table(raw, raw.shape)
-    info = TableInfo(path=str(npy), shape=tuple(q.shape), algorithm=None, arena=None,
+    info = TableInfo(path=str(npy), shape=tuple(q.shape), algo=None, arena=None,
                      iterations=None, sidecar=False)
     return q, info, None
 
@@ -69,7 +69,7 @@ def trainer_config_for(config: TransferConfig, q: np.ndarray, info: TableInfo,
         action names match no :class:`dfrl.robots.env.ActionSet`.
     """
     base = TrainerConfig()
-    algo = config.algo or info.algorithm or base.algo
+    algo = config.algo or info.algo or base.algo
     if algo not in LEARNERS:
         raise ValueError(f"unknown learner '{algo}'; registered: {sorted(LEARNERS)}")
     grouping = config.grouping or (state or {}).get("grouping") or base.discretisation.grouping

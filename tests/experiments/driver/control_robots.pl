@@ -12,7 +12,7 @@ control_table(r2, qtable([2, 2], [2.0, 2.0, 2.0, 2.0])).
 control_table(r3, qtable([2, 2], [3.0, 3.0, 3.0, 3.0])).
 control_table(r4, qtable([2, 2], [4.0, 4.0, 4.0, 4.0])).
 
-robot_resources:robot(R, [algorithm(qlearning), shape(S)]) :-
+robot_resources:robot(R, [algo(qlearning), shape(S)]) :-
     control_table(R, qtable(S, _)).
 robot_resources:table_get(R, T, _) :-
     control_table(R, T).

@@ -68,5 +68,5 @@ def test_final_params_saved_atomically(tmp_path: Path) -> None:
         assert sorted(p.name for p in (tmp_path / "params").iterdir()) == ["r1.json", "r1.npy"]
         loaded = load_params(npy)
         assert np.array_equal(loaded.params, trainer.params)
-        assert loaded.meta.algorithm == "linear" and loaded.meta.iterations == 10
+        assert loaded.meta.algo == "linear" and loaded.meta.iterations == 10
     assert not (tmp_path / "tables").exists()

@@ -62,7 +62,7 @@ def test_command_json_output_and_files(setup: tuple[Path, Path], tmp_path: Path,
     assert rc == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["arena"] == "l6_test" and doc["same_arena"] is False
-    assert doc["table"]["algorithm"] == "qlearning" and doc["table"]["arena"] == "r1"
+    assert doc["table"]["algo"] == "qlearning" and doc["table"]["arena"] == "r1"
     assert doc["trainer_config"]["arena"] == str(arena)
     assert doc["trainer_config"]["iterations"] == 150
     assert [(r["seed"], r["condition"]) for r in doc["runs"]] == [
