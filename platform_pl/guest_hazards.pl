@@ -55,6 +55,7 @@ guest_hazard(term_to_atom/2).
 guest_hazard(term_string/2).
 guest_hazard(term_string/3).
 guest_hazard(write_length/3).
+guest_hazard(with_output_to/2).
 guest_hazard(text_concat/3).
 guest_hazard(atom_number/2).
 guest_hazard(number_codes/2).

@@ -19,7 +19,7 @@
             atom_concat/3, atomic_list_concat/2, atomic_list_concat/3,
             string_concat/3, upcase_atom/2, downcase_atom/2, string_upper/2,
             string_lower/2, term_to_atom/2, term_string/2, term_string/3,
-            write_length/3, text_concat/3,
+            write_length/3, text_concat/3, with_output_to/2,
             atom_number/2, number_codes/2, number_chars/2, atom_length/2,
             atom_string/2, number_string/2, atom_codes/2, atom_chars/2,
             string_codes/2, string_chars/2, string_to_atom/2,
@@ -30,8 +30,8 @@
 :- use_module(library(prolog_format), [format_spec/2]).
 :- use_module(guest_hazards, [guest_hazard/1, library_hazard/1]).
 :- use_module(guest_sizes,
-              [ text_limit/1, check_text/2, check_terms/3, list_text/4, format_size/3,
-                guest_text_size/4 ]).
+              [ text_limit/1, check_text/2, check_terms/3, check_terms/4, list_text/4,
+                format_size/3, format_size/4, sink_room/3, guest_text_size/4 ]).
 :- use_module(guest_arith, [guest_eval/2, cheap/3, int_operands/2]).
 :- use_module(guest_rewrite,
               [ guest_goal/1, guest_closure/3, guest_closure/4, guest_closure/5,
@@ -129,6 +129,7 @@ them); this module holds the checked versions themselves.
 :- redefine_system_predicate(term_string(_,_)).
 :- redefine_system_predicate(term_string(_,_,_)).
 :- redefine_system_predicate(write_length(_,_,_)).
+:- redefine_system_predicate(with_output_to(_,_)).
 :- redefine_system_predicate(text_concat(_,_,_)).
 :- redefine_system_predicate(atom_number(_,_)).
 :- redefine_system_predicate(number_codes(_,_)).
@@ -149,6 +150,7 @@ them); this module holds the checked versions themselves.
     format(+, +, :),
     write_term(?, :),
     write_term(+, ?, :),
+    with_output_to(?, 0),
     aggregate_all(?, 0, -).
 
 %   Importing a predicate a module does not export is what
@@ -428,35 +430,66 @@ write_length(T, L, Opts) :-
 		 *            OUTPUT		*
 		 *******************************/
 
-write(T) :- check_terms(write/1, false, [T]), system:write(T).
-print(T) :- check_terms(print/1, true, [T]), system:print(T).
-writeln(T) :- check_terms(writeln/1, false, [T]), system:writeln(T).
-writeq(T) :- check_terms(writeq/1, true, [T]), system:writeq(T).
-write_canonical(T) :- check_terms(write_canonical/1, true, [T]), system:write_canonical(T).
-write_term(T, Opts) :- check_terms(write_term/2, true, [T]), system:write_term(T, Opts).
-write(S, T) :- check_terms(write/2, false, [T]), system:write(S, T).
-writeq(S, T) :- check_terms(writeq/2, true, [T]), system:writeq(S, T).
-print(S, T) :- check_terms(print/2, true, [T]), system:print(S, T).
-writeln(S, T) :- check_terms(writeln/2, false, [T]), system:writeln(S, T).
-write_canonical(S, T) :- check_terms(write_canonical/2, true, [T]), system:write_canonical(S, T).
-write_term(S, T, Opts) :- check_terms(write_term/3, true, [T]), system:write_term(S, T, Opts).
+%   Each write is checked alone and, into a with_output_to/2 sink, with
+%   what the sink already holds (guest_sizes:sink_room/3).
+write(T) :- out(write/1, false, current, T), system:write(T).
+print(T) :- out(print/1, true, current, T), system:print(T).
+writeln(T) :- out(writeln/1, false, current, T), system:writeln(T).
+writeq(T) :- out(writeq/1, true, current, T), system:writeq(T).
+write_canonical(T) :- out(write_canonical/1, true, current, T), system:write_canonical(T).
+write_term(T, Opts) :- out(write_term/2, true, current, T), system:write_term(T, Opts).
+write(S, T) :- out(write/2, false, S, T), system:write(S, T).
+writeq(S, T) :- out(writeq/2, true, S, T), system:writeq(S, T).
+print(S, T) :- out(print/2, true, S, T), system:print(S, T).
+writeln(S, T) :- out(writeln/2, false, S, T), system:writeln(S, T).
+write_canonical(S, T) :- out(write_canonical/2, true, S, T), system:write_canonical(S, T).
+write_term(S, T, Opts) :- out(write_term/3, true, S, T), system:write_term(S, T, Opts).
+
+out(Culprit, Quoted, Out, T) :-
+    check_terms(Culprit, Quoted, [T], Size),
+    sink_room(Culprit, Out, Size).
 
 tab(N) :-
     guest_eval(V, N),
     check_text(tab/1, V),
+    sink_room(tab/1, current, V),
     system:tab(V).
 tab(S, N) :-
     guest_eval(V, N),
     check_text(tab/2, V),
+    sink_room(tab/2, S, V),
     system:tab(S, V).
 
 format(F) :-
-    format_size(format/1, F, []),
+    format_size(format/1, F, [], Size),
+    sink_room(format/1, current, Size),
     system:format(F).
 format(F, M:Args) :-
-    format_size(format/2, F, Args),
+    format_size(format/2, F, Args, Size),
+    sink_room(format/2, current, Size),
     system:format(F, M:Args).
 format(Out, F, M:Args) :-
-    format_size(format/3, F, Args),
+    format_size(format/3, F, Args, Size),
+    sink_room(format/3, Out, Size),
     system:format(Out, F, M:Args).
+
+%!  with_output_to(+Sink, :Goal) is semidet.
+%
+%   The built-in, with its memory stream recorded as a sink for the
+%   goal's checked writes (closed sinks are dropped as new ones come).
+
+with_output_to(Spec, G) :-
+    (   nb_current('$dfrl_guest_sinks', Sinks0) -> true ; Sinks0 = [] ),
+    open_sinks(Sinks0, Sinks),
+    system:with_output_to(Spec, guest_limits:sink_goal(Sinks, G)).
+
+open_sinks([], []).
+open_sinks([S|Ss0], Ss) :-
+    (   is_stream(S) -> Ss = [S|Ss1] ; Ss = Ss1 ),
+    open_sinks(Ss0, Ss1).
+
+sink_goal(Sinks, G) :-
+    current_output(S),
+    b_setval('$dfrl_guest_sinks', [S|Sinks]),
+    call(G).
 

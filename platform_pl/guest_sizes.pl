@@ -4,8 +4,11 @@
             over_bits/3,                % +Culprit, +Bits, +Max
             check_text/2,               % +Culprit, +Chars
             check_terms/3,              % +Culprit, +Quoted, +Terms
+            check_terms/4,              % +Culprit, +Quoted, +Terms, -Chars
+            sink_room/3,                % +Culprit, +Out, +Chars
             list_text/4,                % +Culprit, +List, +Sep, -Mode
             format_size/3,              % +Culprit, +Format, +Args
+            format_size/4,              % +Culprit, +Format, +Args, -Chars
             guest_text_size/4,          % +Term, +Quoted, +Max, -Chars
             bits/2                      % +Number, -Bits
           ]).
@@ -112,9 +115,34 @@ text_size(T, Q, S) :-
     guest_text_size(T, Q, Max, S).
 
 check_terms(Culprit, Q, Terms) :-
+    check_terms(Culprit, Q, Terms, _).
+
+check_terms(Culprit, Q, Terms, S) :-
     text_limit(Max),
     terms_size(Terms, Q, Max, 0, S),
     (   S > Max -> over_text(Culprit, S, Max) ; true ).
+
+%!  sink_room(+Culprit, +Out, +Chars) is det.
+%
+%   Writing Chars more characters to Out keeps the text a sink is making
+%   within dfrl_guest_text_limit. A sink is the memory stream of a
+%   guest's with_output_to/2 (guest_limits.pl keeps them in the global
+%   variable '$dfrl_guest_sinks'): all that its goal writes becomes one
+%   string, built in C one write at a time, so what the sink already
+%   holds counts with each write. Out is `current` (the current output)
+%   or a stream; any other output is not a sink.
+
+sink_room(Culprit, Out, Chars) :-
+    (   nb_current('$dfrl_guest_sinks', Sinks),
+        Sinks \== [],
+        (   Out == current -> current_output(S) ; S = Out ),
+        memberchk(S, Sinks)
+    ->  character_count(S, Held),
+        text_limit(Max),
+        Total is Held + Chars,
+        (   Total > Max -> over_text(Culprit, Total, Max) ; true )
+    ;   true
+    ).
 
 terms_size([], _, _, S, S).
 terms_size([T|Ts], Q, Max, S0, S) :-
@@ -153,12 +181,15 @@ join_size([X|Xs], SL, Max, S0, S) :-
 %   arguments, within dfrl_guest_text_limit. A format that does not
 %   parse is left to the built-in (which raises).
 format_size(Culprit, F, Args0) :-
+    format_size(Culprit, F, Args0, _).
+
+format_size(Culprit, F, Args0, Size) :-
     (   is_list(Args0) -> Args = Args0 ; Args = [Args0] ),
     (   parsed_format(F, Spec)
     ->  text_limit(Max),
         catch(spec_size(Spec, Args, Max, 0, 0, Size), over(Size), true),
         (   Size > Max -> over_text(Culprit, Size, Max) ; true )
-    ;   true
+    ;   Size = 0
     ).
 
 %   parsed_format(+Format, -Spec): format_spec/2 (a parser in Prolog,

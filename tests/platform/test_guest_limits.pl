@@ -103,6 +103,38 @@ test(control_text) :-
                                write_length(S0, L4, []), S = S0-L4), R),
     assertion(R == t([20, 1000, 1024, 'f(x,"y")'-8])).
 
+%   A with_output_to/2 sink filled write by write: each write is small,
+%   the text they make together is not (checked before each write, not
+%   by the RSS monitor's tick). Nested sinks, explicit streams, format
+%   and tab alike; the control writes the same way within the limit.
+test(sink_write_by_write, [forall(member(B-W, [ B-write(B), B-print(B), B-writeln(B),
+                                                B-format("~w", [B]),
+                                                _-format("~*c", [1000000, 0'z]),
+                                                B-(current_output(O), write(O, B)),
+                                                B-(current_output(O), format(O, "~a", [B])),
+                                                _-tab(1000000),
+                                                B-(with_output_to(string(_), write(x)), write(B))
+                                              ]))]) :-
+    run((t(L) :- format(atom(B), "~*c", [1000000, 0'z]),
+                 with_output_to(string(S), forall(between(1, 20, _), W)),
+                 string_length(S, L)), R),
+    assertion(too_big(R)).
+test(sink_nested_outer_counts) :-
+    run((t(L) :- format(atom(B), "~*c", [1000000, 0'z]),
+                 with_output_to(string(S),
+                                ( forall(between(1, 5, _), write(B)),
+                                  with_output_to(string(_), write(x)),
+                                  forall(between(1, 5, _), write(B)) )),
+                 string_length(S, L)), R),
+    assertion(too_big(R)).
+test(sink_control) :-
+    run((t([L, L2]) :- format(atom(B), "~*c", [1000000, 0'z]),
+                       with_output_to(string(S), forall(between(1, 8, _), write(B))),
+                       string_length(S, L),
+                       with_output_to(string(S2), forall(between(1, 8, _), write(B))),
+                       string_length(S2, L2)), R),
+    assertion(R == t([8000000, 8000000])).
+
 :- end_tests(text).
 
 :- begin_tests(install).
@@ -147,6 +179,8 @@ gl_p2(X) :- C = is, call(C, X, 7^400000000).
 gl_p3(X) :- foldl([E,A0,A]>>(A is A0*E), [7^400000000], 1, X).
 gl_p4(X) :- G = (Y = 7^400000000, X is Y), forall(G, true).
 gl_p5(A) :- N = 400000000, format(atom(A), \"~*c\", [N, 0'x]).
+gl_p6(L) :- format(atom(B), \"~*c\", [1000000, 0'z]),
+    with_output_to(string(S), forall(between(1, 20, _), write(B))), string_length(S, L).
 gl_ok(X) :- G = (Y is 2+3), findall(Y, G, [Z]), maplist([A,B]>>(B is A*2), [Z], [X]).
 ").
 
@@ -157,7 +191,8 @@ program_loaded(M) :-
     codeload:program_module(gl, M),
     (   current_predicate(M:gl_ok/1) -> true ; program(T), codeload:load_text(none, gl, T) ).
 
-test(program_goals_checked, [forall(member(G, [gl_p1(_), gl_p2(_), gl_p3(_), gl_p4(_), gl_p5(_)]))]) :-
+test(program_goals_checked, [forall(member(G, [gl_p1(_), gl_p2(_), gl_p3(_), gl_p4(_), gl_p5(_),
+                                                   gl_p6(_)]))]) :-
     program_loaded(M),
     catch(M:G, E, true),
     assertion(too_big(E)).

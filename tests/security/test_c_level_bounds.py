@@ -2,8 +2,9 @@
 into C would build a 400 MB atom or string (format ``~*c``, atomic_list_concat/2, doubling
 atom_concat/3) or a 1.1 Gbit integer (``7^400000000``), or that fill a memory stream write by
 write (``with_output_to/2``). SWI-Prolog 9.0.4 handles no signal inside C, so the CPU and stack
-bounds cannot stop them once started: guest_limits.pl checks the sizes before the call and
-node_memory.pl holds the process's RSS to its baseline plus agent_memory_budget. Real
+bounds cannot stop them once started: guest_limits.pl checks the sizes before the call (a
+memory stream's before each write, with what it holds) and node_memory.pl holds the process's RSS
+to its baseline plus agent_memory_budget. Real
 processes; RSS peak from /proc (VmHWM). Each attack has a control: the same code with small
 sizes runs on the same node and prints the right result.
 """
@@ -82,9 +83,11 @@ def test_c_level_bombs_within_budget(tmp_path: Path, procs: list[Proc]) -> None:
     # stopped at run time by a bound, the sender told
     kinds = dict(re.findall(r"REPORT (b_\w+) (\w+)\(", out))
     assert set(kinds) == {"b_fmt", "b_alc", "b_dbl", "b_wot", "b_pow"}, out
-    assert kinds["b_fmt"] == kinds["b_alc"] == kinds["b_dbl"] == "text_size", kinds
+    # the memory stream filled write by write: its writes checked together (a sink), before each
+    # write, not by the RSS monitor's tick, which a busy machine delays
+    assert kinds["b_fmt"] == kinds["b_alc"] == kinds["b_dbl"] == kinds["b_wot"] == "text_size", \
+        kinds
     assert kinds["b_pow"] == "integer_size", kinds
-    assert kinds["b_wot"] in {"memory_budget", "memory"}, kinds    # write by write: RSS or stacks
     print(f"C-level bombs: {a.wait_for('ALL STOPPED')}, stopped by {kinds}; RSS before "
           f"{base // 1024} MiB, peak +{(hwm - base) // 1024} MiB; good agent served in {served:.2f} s")
     # the stated bound (README "Bounds on agents"): baseline + agent_memory_budget + 256 MiB
