@@ -122,10 +122,12 @@ def test_pooled_hop_after_long_rest_costs_one_and_a_half_rtt(tmp_path: Path,
         pooled = _move(source, dest, "a2", proxy.address[1])
         print(f"\nhop over 50 ms one-way: new connection {first * 1000:.0f} ms, "
               f"pooled after 12 s rest {pooled * 1000:.0f} ms (RTT {RTT_S * 1000:.0f} ms)")
-        # Assert: one connection served both moves; the pooled one costs 1.5 RTT.
+        # Assert: one connection served both moves; the pooled one costs 1.5 RTT where a new
+        # connection costs 2.5 or more: under 2 RTT, and at least half an RTT less than the new
+        # one (a busy machine adds to both; 1.5 RTT + 30 ms failed at 180 ms once, load 6).
         assert proxy.connections == 1
-        assert pooled < 1.5 * RTT_S + 0.030
         assert first >= 2.5 * RTT_S
+        assert pooled < 2.0 * RTT_S and first - pooled > 0.5 * RTT_S, (first, pooled)
 
 
 def test_keepalive_outlives_the_servers_idle_timeout(tmp_path: Path, procs: list[Proc]) -> None:
