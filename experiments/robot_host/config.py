@@ -13,6 +13,7 @@ from typing import Any
 from dfrl.experiments.config_rules import (JsonDicts, Rule, check_keys, check_robot_id,
                                            check_trainer, checked, is_checked, json_form,
                                            known_algorithms, raise_problems, token_rule)
+from dfrl.experiments.robot_host.static_robot import static_problems
 
 __all__ = ["DEFAULT_ITERATIONS", "Mode", "RobotConfig", "boundaries", "check_robot_config"]
 
@@ -76,12 +77,13 @@ class RobotConfig(JsonDicts):
     events : bool
         Print ``DFRL_EVENT`` lines.
     bench_table : list of int or None
-        ``[S, A]``: no simulation; serve a random table of that shape until stdin closes.
+        ``[S, A]``: a static robot (:mod:`.static_robot`), no simulation; serve a random table
+        of that shape until stdin closes.
     bench_params : dict or None
-        ``{"samples": N}``: no simulation; serve a random parameter vector with the layout of
-        the network of ``algo`` (a function learner: ``linear``, ``dqn``; its size from the
-        ``trainer`` config), learnt from ``N`` samples (its FedAvg weight), until stdin
-        closes. A robot has a bench table or bench params, not both.
+        ``{"samples": N}``: a static robot, no simulation; serve a random parameter vector
+        with the layout of the network of ``algo`` (a function learner: ``linear``, ``dqn``;
+        its size from the ``trainer`` config), learnt from ``N`` samples (its FedAvg weight),
+        until stdin closes. A robot has a bench table or bench params, not both.
     host, tls : str, str or None
         Address to bind; a node's TLS folder (``dfrl certs node``; None: plaintext).
     eval_every, eval_steps : int
@@ -186,35 +188,8 @@ def check_robot_config(data: Any) -> list[str]:
     if not isinstance(data, dict):
         return out
     out += check_robot_id("robot", data.get("robot"))
-    table = data.get("bench_table")
-    if isinstance(table, list) and (len(table) != 2 or not all(
-            isinstance(n, int) and not isinstance(n, bool) and n > 0 for n in table)):
-        out.append(f"bench_table: expected [STATES, ACTIONS], two positive integers, got {table!r}")
-    out += _check_bench_params(data)
+    out += static_problems(data)
     if "trainer" in data:
         out += check_trainer("trainer", data["trainer"])
     return out
 
-
-def _check_bench_params(data: dict[str, Any]) -> list[str]:
-    """The problems of ``bench_params``: its form, its learner, and not beside ``bench_table``."""
-    params = data.get("bench_params")
-    if not isinstance(params, dict):
-        return []
-    out = []
-    samples = params.get("samples")
-    if set(params) != {"samples"} or isinstance(samples, bool) or not isinstance(samples, int) \
-            or samples < 0:
-        out.append(f"bench_params: expected {{\"samples\": N}}, N an integer >= 0, "
-                   f"got {params!r}")
-    if data.get("bench_table") is not None:
-        out.append("bench_params: a benchmark robot holds a bench table or bench params, "
-                   "not both (drop bench_table or bench_params)")
-    algo = data.get("algo", "qlearning")
-    if isinstance(algo, str) and algo in known_algorithms():
-        from dfrl.robots.learners import learner_kind
-
-        if learner_kind(algo) != "function":
-            out.append(f"bench_params: algo {algo!r} is a tabular learner, it has no network; "
-                       f"bench params need a function learner (linear, dqn)")
-    return out
