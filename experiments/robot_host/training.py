@@ -68,7 +68,7 @@ class Training:
     config : RobotConfig
         Its ``out_dir`` is the experiment's folder.
     bridge : Bridge
-        The process's bridge; :meth:`open` registers the robot with it.
+        The process's bridge; :meth:`register` registers the robot with it.
     lines : ProtocolLines
     host : TrainingHost
     resume : bool
@@ -153,8 +153,8 @@ class Training:
     # -- life cycle ----------------------------------------------------------------------------
     def open(self) -> tuple[int, int] | None:
         """Build the robot (a learning robot, or the static robot its config asks for), open
-        its files, register the robot with its shape; return the shape (None: parameters only,
-        no table).
+        its files and wrap what it serves in a :class:`SharedTable`; return the table's shape
+        (None: parameters only, no table). Agents reach it once :meth:`register` offered it.
 
         Raises
         ------
@@ -181,10 +181,6 @@ class Training:
         if self.trainer is not None:
             self.table.iteration = self.trainer.iteration
         self.shape = shape
-        # what the robot offers agents: its Q-table (a function learner: the grid view of its
-        # Q-function, for an agent of a grid federation) and its parameters, if its base has them
-        self.bridge.register_robot(c.robot, self.table, shape=shape, algorithm=c.algo)
-        self._registered = True
         self._next_tick = time.perf_counter()
         return shape
 
@@ -221,6 +217,17 @@ class Training:
             from dfrl.robots.grid_view import GridView
             base = GridView(self.trainer)
         return base, shape, shares, shares_log
+
+    def register(self) -> None:
+        """Offer the robot to agents: register what :meth:`open` built with the bridge (its
+        Q-table, of a function learner the grid view of its Q-function, for an agent of a grid
+        federation; and its parameters, if its base has them); once, after :meth:`open`.
+        :meth:`close` unregisters it."""
+        if self.table is None:
+            raise RuntimeError(f"robot {self.config.robot}: Training.open() first")
+        self.bridge.register_robot(self.config.robot, self.table, shape=self.shape,
+                                   algorithm=self.config.algo)
+        self._registered = True
 
     def _opened(self) -> tuple[SharedTable, CsvLog]:
         """The table and the metrics file of a learning robot, made by :meth:`open`."""

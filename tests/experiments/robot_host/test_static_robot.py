@@ -58,6 +58,8 @@ def test_training_serves_what_its_static_source_gives(tmp_path: Path) -> None:
                    static_source=lambda c: StaticRobot(base, None))
     # Execute
     assert run.open() is None
+    assert bridge.registered == {}              # opening offers nothing yet
+    run.register()
     table, shape, algorithm = bridge.registered["r1"]
     table.set_params(np.ones(6))               # an agent's write
     run.close()
