@@ -6,13 +6,13 @@ with its key path), so a robot host needs nothing of the driver.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, InitVar, dataclass, field
 from enum import Enum
 from typing import Any
 
 from dfrl.experiments.config_rules import (JsonDicts, Rule, check_keys, check_robot_id,
-                                           check_trainer, checked, is_checked, json_form,
-                                           known_algorithms, raise_problems, token_rule)
+                                           check_trainer, json_form, known_algorithms,
+                                           raise_problems, token_rule)
 from dfrl.experiments.robot_host.static_robot import static_problems
 
 __all__ = ["DEFAULT_ITERATIONS", "Mode", "RobotConfig", "boundaries", "check_robot_config"]
@@ -95,6 +95,10 @@ class RobotConfig(JsonDicts):
     learners : dict
         The run's plug-in learners (``name -> {"class": spec, "options": {...}}``, the
         experiment's ``learners``), registered by the process before it builds its learner.
+
+    Built in Python, a config checks itself (every problem at once); :meth:`from_dict` checks
+    the JSON form and builds it with ``_checked=True`` (keyword only, not a field), so that it
+    is checked once.
     """
 
     robot: str
@@ -120,9 +124,11 @@ class RobotConfig(JsonDicts):
     eval_steps: int = 500
     clone_limit: int | None = None
     learners: dict[str, Any] = field(default_factory=dict)
+    _: KW_ONLY
+    _checked: InitVar[bool] = False
 
-    def __post_init__(self) -> None:
-        if not is_checked():
+    def __post_init__(self, _checked: bool) -> None:
+        if not _checked:
             raise_problems(check_robot_config(json_form(self)))
         object.__setattr__(self, "mode", Mode(self.mode))
 
@@ -146,8 +152,7 @@ class RobotConfig(JsonDicts):
         ConfigError
         """
         raise_problems(check_robot_config(data))
-        with checked():
-            return cls(**data)
+        return cls(**data, _checked=True)
 
     def trainer_config(self):  # noqa: ANN201 - TrainerConfig (imported lazily)
         """The :class:`dfrl.robots.training.TrainerConfig` of this robot."""
