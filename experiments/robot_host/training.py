@@ -81,8 +81,8 @@ class Training:
     static_source : callable
         The seam :meth:`open` takes a static robot from: given the config, the static robot
         it asks for, or None for a learning robot (default:
-        :func:`~dfrl.experiments.robot_host.static_robot.static_robot`, the config's
-        ``bench_table`` or ``bench_params``).
+        :func:`~dfrl.experiments.robot_host.static_robot.static_robot`, which reads the keys
+        a benchmark sets).
 
     Attributes
     ----------
