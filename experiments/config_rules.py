@@ -9,19 +9,18 @@ unknown keys and values (with a "did you mean": :mod:`dfrl.experiments.suggestio
 keys, missing keys, types (``"2000"`` is not an integer, a bool is not a number), ranges and
 known values.
 
-A config is checked once: ``from_dict`` checks the JSON form, then builds the dataclass inside
-:func:`checked` so that ``__post_init__`` (the check of a config built in Python) is skipped
-for it and for the entries it builds.
+A config is checked once, where it is parsed: ``from_dict`` checks the JSON form as a whole,
+then builds the dataclass with ``_checked=True`` (a keyword-only init-only field), which tells
+its ``__post_init__`` -- the check of a config built in Python -- that the whole was checked,
+for it and for the entries it builds; a config built in Python without it checks itself.
 """
 from __future__ import annotations
 
-import contextlib
-import contextvars
 import dataclasses
 import json
 import math
 import re
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from enum import Enum
 from typing import Any
@@ -29,7 +28,7 @@ from typing import Any
 from dfrl.experiments.suggestions import did_you_mean
 
 __all__ = ["ConfigError", "Rule", "TRAINER_OWNED", "check_keys", "check_robot_id",
-           "check_trainer", "check_value", "checked", "is_checked", "json_form",
+           "check_trainer", "check_value", "json_form",
            "known_algorithms", "raise_problems", "resolve_trainer", "to_json_dict", "token_rule",
            "unknown_value"]
 
@@ -54,27 +53,6 @@ def raise_problems(problems: Sequence[str]) -> None:
     """Raise :class:`ConfigError` with ``problems`` unless there are none."""
     if problems:
         raise ConfigError(problems)
-
-
-# -- checked once ------------------------------------------------------------------------------
-_CHECKED: contextvars.ContextVar[bool] = contextvars.ContextVar("dfrl_config_checked",
-                                                                default=False)
-
-
-@contextlib.contextmanager
-def checked() -> Iterator[None]:
-    """Build configs whose JSON form was just checked as a whole: their ``__post_init__`` does
-    not check again (:func:`is_checked`; per thread)."""
-    token = _CHECKED.set(True)
-    try:
-        yield
-    finally:
-        _CHECKED.reset(token)
-
-
-def is_checked() -> bool:
-    """True inside :func:`checked` (in this thread)."""
-    return _CHECKED.get()
 
 
 def json_form(value: Any) -> Any:

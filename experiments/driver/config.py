@@ -5,21 +5,22 @@ its results; :func:`resolve_config` finds a config file by path or by the name o
 config of one robot process is :class:`dfrl.experiments.robot_host.config.RobotConfig`.
 
 A config is checked once: :meth:`ExperimentConfig.from_dict` (and :meth:`~ExperimentConfig.load`)
-check its JSON form as a whole and build it without checking again; a config built in Python
-checks itself in ``__post_init__``; :meth:`~ExperimentConfig.check` loads the arenas unless that
-was done already; :meth:`~ExperimentConfig.with_token` checks the token alone.
+check its JSON form as a whole and build it with ``_checked=True`` (a keyword-only init-only
+field: the whole was checked), which it passes on to the entries it builds; a config built in
+Python without it checks itself in ``__post_init__``; :meth:`~ExperimentConfig.check` loads
+the arenas unless that was done already; :meth:`~ExperimentConfig.with_token` checks the token
+alone.
 """
 from __future__ import annotations
 
 import dataclasses
 import json
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, InitVar, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from dfrl.experiments.config_rules import (JsonDicts, ConfigError, check_value, checked, is_checked,
-                                           json_form, raise_problems, resolve_trainer,
-                                           token_rule)
+from dfrl.experiments.config_rules import (JsonDicts, ConfigError, check_value, json_form,
+                                           raise_problems, resolve_trainer, token_rule)
 from dfrl.experiments.driver.config_check import (BUILTIN_METHODS, COMMENT_KEYS, GRID,
                                                   check_experiment, host_port_problem)
 from dfrl.experiments.robot_host.config import DEFAULT_ITERATIONS, Mode, boundaries
@@ -53,9 +54,11 @@ class RobotSpec:
     algo: str = "qlearning"
     seed: int | None = None
     robot_host: str | None = None
+    _: KW_ONLY
+    _checked: InitVar[bool] = False       # True: checked as part of its config's JSON form
 
-    def __post_init__(self) -> None:
-        if not is_checked():
+    def __post_init__(self, _checked: bool) -> None:
+        if not _checked:
             problems = check_experiment({"robots": [json_form(self)]}, resources=False)
             raise_problems([p.removeprefix("robots[0].") for p in problems])
 
@@ -204,17 +207,19 @@ class ExperimentConfig(JsonDicts):
     itinerary: str = "chain"
     fanout: int = 2
     learners: dict[str, Any] = field(default_factory=dict)
+    _: KW_ONLY
+    _checked: InitVar[bool] = False       # True: its JSON form was checked as a whole
 
-    def __post_init__(self) -> None:
-        if not is_checked():
+    def __post_init__(self, _checked: bool) -> None:
+        if not _checked:
             raise_problems(check_experiment(json_form(self), resources=False))
-        with checked():                 # the entries were part of the whole
-            object.__setattr__(self, "mode", Mode(self.mode))
-            object.__setattr__(self, "robots", tuple(_robot(r) for r in self.robots))
-            object.__setattr__(self, "joins", tuple(
-                j if isinstance(j, JoinSpec) else
-                JoinSpec(robot=_robot(j["robot"]), after_round=int(j.get("after_round", 1)))
-                for j in self.joins))
+        # the entries were part of the whole: built without checking again
+        object.__setattr__(self, "mode", Mode(self.mode))
+        object.__setattr__(self, "robots", tuple(_robot(r) for r in self.robots))
+        object.__setattr__(self, "joins", tuple(
+            j if isinstance(j, JoinSpec) else
+            JoinSpec(robot=_robot(j["robot"]), after_round=int(j.get("after_round", 1)))
+            for j in self.joins))
 
     def check(self) -> None:
         """Check what :meth:`from_dict` may leave to run time: every arena exists and parses
@@ -271,12 +276,13 @@ class ExperimentConfig(JsonDicts):
         :class:`~dfrl.robots.training.TrainerConfig` field, defaults included
         (:func:`~dfrl.experiments.config_rules.resolve_trainer`). It runs exactly as this
         one (the same seeds, the same trainers) and resolves to itself."""
-        with checked():             # seeds >= 0 and a trainer the checks accept
-            robots = tuple(dataclasses.replace(r, seed=self.robot_seed(r)) for r in self.robots)
-            joins = tuple(dataclasses.replace(j, robot=dataclasses.replace(
-                j.robot, seed=self.robot_seed(j.robot))) for j in self.joins)
-            cfg = dataclasses.replace(self, robots=robots, joins=joins,
-                                      trainer=resolve_trainer(self.trainer))
+        # seeds >= 0 and a trainer the checks accept: not checked again
+        robots = tuple(dataclasses.replace(r, seed=self.robot_seed(r), _checked=True)
+                       for r in self.robots)
+        joins = tuple(dataclasses.replace(j, robot=dataclasses.replace(
+            j.robot, seed=self.robot_seed(j.robot), _checked=True)) for j in self.joins)
+        cfg = dataclasses.replace(self, robots=robots, joins=joins,
+                                  trainer=resolve_trainer(self.trainer), _checked=True)
         object.__setattr__(cfg, "_arenas_checked", getattr(self, "_arenas_checked", False))
         return cfg
 
@@ -300,8 +306,7 @@ class ExperimentConfig(JsonDicts):
         ConfigError
         """
         raise_problems(check_experiment(data, resources=resources))
-        with checked():
-            cfg = cls(**{k: v for k, v in data.items() if k not in COMMENT_KEYS})
+        cfg = cls(**{k: v for k, v in data.items() if k not in COMMENT_KEYS}, _checked=True)
         object.__setattr__(cfg, "_arenas_checked", resources)
         return cfg
 
@@ -345,14 +350,14 @@ class ExperimentConfig(JsonDicts):
             ``token: not a token: ...``.
         """
         raise_problems(check_value("token", token, token_rule()))
-        with checked():
-            cfg = dataclasses.replace(self, token=token)
+        cfg = dataclasses.replace(self, token=token, _checked=True)
         object.__setattr__(cfg, "_arenas_checked", getattr(self, "_arenas_checked", False))
         return cfg
 
 
 def _robot(entry: RobotSpec | dict[str, Any]) -> RobotSpec:
-    return entry if isinstance(entry, RobotSpec) else RobotSpec(**entry)
+    """An entry of a config checked as a whole (a dict is not checked again)."""
+    return entry if isinstance(entry, RobotSpec) else RobotSpec(**entry, _checked=True)
 
 
 CONFIGS_DIR: Path = Path(__file__).resolve().parent.parent / "configs"

@@ -36,14 +36,15 @@ default).
 With ``eval_every`` > 0 the node measures its greedy policy every so many iterations in an
 environment of its own (``eval_<robot>.csv``, a ``DFRL_EVAL`` line; :mod:`.evaluate`).
 
-Modules: :mod:`.process` (the spawned node's life cycle, ``main``), :mod:`.run` (one
+Modules: :mod:`.process` (the spawned node's life cycle, ``main``), :mod:`.training` (one
 experiment: trainer, files, the control loop one iteration at a time), :mod:`.service`
 (``dfrl robot``: the same robot as a long-lived service configured over the platform),
 :mod:`.checkpoint` (atomic checkpoints at every share and at the end), :mod:`.table` (the
 provider registered with the bridge: the trainer's table, or a static one for benchmarks, plus
-share bookkeeping with each write's round, agent and epoch), :mod:`.files` (the CSV files),
-:mod:`.lines` (stdout protocol, stdin watch), :mod:`.evaluate` (greedy evaluations while
-learning).
+share bookkeeping with each write's round, agent and epoch), :mod:`.static_robot` (a
+benchmark's robot without a simulation, asked for by ``bench_table`` or ``bench_params``),
+:mod:`.files` (the CSV files), :mod:`.lines` (stdout protocol, stdin watch), :mod:`.evaluate`
+(greedy evaluations while learning).
 
 The node stops early when stdin reaches end of file or reads a line ``stop`` (the launcher
 closes it when the experiment ends), unless stdin was at end of file from the start; after

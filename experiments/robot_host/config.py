@@ -6,13 +6,14 @@ with its key path), so a robot host needs nothing of the driver.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, InitVar, dataclass, field
 from enum import Enum
 from typing import Any
 
 from dfrl.experiments.config_rules import (JsonDicts, Rule, check_keys, check_robot_id,
-                                           check_trainer, checked, is_checked, json_form,
-                                           known_algorithms, raise_problems, token_rule)
+                                           check_trainer, json_form, known_algorithms,
+                                           raise_problems, token_rule)
+from dfrl.experiments.robot_host.static_robot import static_problems
 
 __all__ = ["DEFAULT_ITERATIONS", "Mode", "RobotConfig", "boundaries", "check_robot_config"]
 
@@ -76,12 +77,13 @@ class RobotConfig(JsonDicts):
     events : bool
         Print ``DFRL_EVENT`` lines.
     bench_table : list of int or None
-        ``[S, A]``: no simulation; serve a random table of that shape until stdin closes.
+        ``[S, A]``: a static robot (:mod:`.static_robot`), no simulation; serve a random table
+        of that shape until stdin closes.
     bench_params : dict or None
-        ``{"samples": N}``: no simulation; serve a random parameter vector with the layout of
-        the network of ``algo`` (a function learner: ``linear``, ``dqn``; its size from the
-        ``trainer`` config), learnt from ``N`` samples (its FedAvg weight), until stdin
-        closes. A robot has a bench table or bench params, not both.
+        ``{"samples": N}``: a static robot, no simulation; serve a random parameter vector
+        with the layout of the network of ``algo`` (a function learner: ``linear``, ``dqn``;
+        its size from the ``trainer`` config), learnt from ``N`` samples (its FedAvg weight),
+        until stdin closes. A robot has a bench table or bench params, not both.
     host, tls : str, str or None
         Address to bind; a node's TLS folder (``dfrl certs node``; None: plaintext).
     eval_every, eval_steps : int
@@ -93,6 +95,10 @@ class RobotConfig(JsonDicts):
     learners : dict
         The run's plug-in learners (``name -> {"class": spec, "options": {...}}``, the
         experiment's ``learners``), registered by the process before it builds its learner.
+
+    Built in Python, a config checks itself (every problem at once); :meth:`from_dict` checks
+    the JSON form and builds it with ``_checked=True`` (keyword only, not a field), so that it
+    is checked once.
     """
 
     robot: str
@@ -118,9 +124,11 @@ class RobotConfig(JsonDicts):
     eval_steps: int = 500
     clone_limit: int | None = None
     learners: dict[str, Any] = field(default_factory=dict)
+    _: KW_ONLY
+    _checked: InitVar[bool] = False
 
-    def __post_init__(self) -> None:
-        if not is_checked():
+    def __post_init__(self, _checked: bool) -> None:
+        if not _checked:
             raise_problems(check_robot_config(json_form(self)))
         object.__setattr__(self, "mode", Mode(self.mode))
 
@@ -144,8 +152,7 @@ class RobotConfig(JsonDicts):
         ConfigError
         """
         raise_problems(check_robot_config(data))
-        with checked():
-            return cls(**data)
+        return cls(**data, _checked=True)
 
     def trainer_config(self):  # noqa: ANN201 - TrainerConfig (imported lazily)
         """The :class:`dfrl.robots.training.TrainerConfig` of this robot."""
@@ -186,35 +193,8 @@ def check_robot_config(data: Any) -> list[str]:
     if not isinstance(data, dict):
         return out
     out += check_robot_id("robot", data.get("robot"))
-    table = data.get("bench_table")
-    if isinstance(table, list) and (len(table) != 2 or not all(
-            isinstance(n, int) and not isinstance(n, bool) and n > 0 for n in table)):
-        out.append(f"bench_table: expected [STATES, ACTIONS], two positive integers, got {table!r}")
-    out += _check_bench_params(data)
+    out += static_problems(data)
     if "trainer" in data:
         out += check_trainer("trainer", data["trainer"])
     return out
 
-
-def _check_bench_params(data: dict[str, Any]) -> list[str]:
-    """The problems of ``bench_params``: its form, its learner, and not beside ``bench_table``."""
-    params = data.get("bench_params")
-    if not isinstance(params, dict):
-        return []
-    out = []
-    samples = params.get("samples")
-    if set(params) != {"samples"} or isinstance(samples, bool) or not isinstance(samples, int) \
-            or samples < 0:
-        out.append(f"bench_params: expected {{\"samples\": N}}, N an integer >= 0, "
-                   f"got {params!r}")
-    if data.get("bench_table") is not None:
-        out.append("bench_params: a benchmark robot holds a bench table or bench params, "
-                   "not both (drop bench_table or bench_params)")
-    algo = data.get("algo", "qlearning")
-    if isinstance(algo, str) and algo in known_algorithms():
-        from dfrl.robots.learners import learner_kind
-
-        if learner_kind(algo) != "function":
-            out.append(f"bench_params: algo {algo!r} is a tabular learner, it has no network; "
-                       f"bench params need a function learner (linear, dqn)")
-    return out

@@ -126,8 +126,8 @@ class RobotProcess:
 
     # -- life cycle ----------------------------------------------------------------------------
     def start(self) -> tuple[str, int]:
-        """Start the platform node, build the robot (or the benchmark's static table) and
-        register it; return the address."""
+        """Start the platform node, build the robot (or the static robot its config asks for)
+        and register it with the bridge; return the address."""
         from dfrl.pybridge import Atom, Bridge
 
         c = self.config
@@ -138,6 +138,7 @@ class RobotProcess:
             probe.started(self.bridge, c)
         self.run_ = Training(c, self.bridge, self.lines, host=_StdinHost(self.stdin), poll_every=50)
         self.run_.open()
+        self.run_.register()
         options: dict[str, Any] = {"idle_timeout": 5.0}
         if c.token is not None:         # none: an open node (node_start/3 warns on loopback)
             options["tokens"] = [Atom(c.token) if isinstance(c.token, str) else c.token]

@@ -327,6 +327,7 @@ class RobotService:
                   host=self, resume=resume, poll_every=1, warn=warn)
         try:
             run.open()
+            run.register()
         except Exception as exc:  # noqa: BLE001 - a bad configure leaves the service up
             run.close()
             self._close_logs()

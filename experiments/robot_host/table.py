@@ -1,8 +1,8 @@
 """The provider the robot process registers with the bridge: its table (and parameters), with
 share bookkeeping.
 
-The table itself (a :class:`dfrl.robots.training.Trainer`, or a
-:class:`dfrl.pybridge.StaticTable` in benchmark mode) is chosen once, when the node starts;
+The table itself (a :class:`dfrl.robots.training.Trainer`, or a static robot's
+:class:`dfrl.pybridge.StaticTable`, :mod:`.static_robot`) is chosen once, when the node starts;
 :class:`SharedTable` adds what the node records about agents' visits, and never calls back
 into the process that owns it. A base that also offers its learnt parameters as a flat vector
 (a ``Trainer``: ``params``, ``param_layout``, ``set_params``, ``samples``, ``learner_kind``)

@@ -30,39 +30,13 @@ from dfrl.experiments.robot_host.evaluate import LiveEvaluator
 from dfrl.experiments.robot_host.files import METRIC_FIELDS, SHARE_FIELDS, CsvLog
 from dfrl.experiments.robot_host.lines import ProtocolLines
 from dfrl.experiments.robot_host.share_notes import ShareNotes
+from dfrl.experiments.robot_host.static_robot import StaticRobot, static_robot
 from dfrl.experiments.robot_host.table import SharedLearner, SharedTable, shared_provider
 
-__all__ = ["Training", "TrainingHost", "SleepHost", "SAMPLE_S", "network_layout"]
+__all__ = ["Training", "TrainingHost", "SleepHost", "SAMPLE_S"]
 
 #: Wall seconds between two ``DFRL_SAMPLE`` lines at least (written with progress lines).
 SAMPLE_S = 0.5
-
-
-def network_layout(config: Any) -> list[tuple[str, tuple[int, ...]]]:
-    """The parameter layout a robot of the function learner ``config.algo`` offers agents.
-
-    Built by the learner's own code (:func:`dfrl.robots.training.build_learner`) over the
-    observation and actions of ``config``'s environment (the proximity sensors, the action
-    set), without a simulation: what a benchmark robot holds is what a real one offers.
-
-    Parameters
-    ----------
-    config : dfrl.robots.training.TrainerConfig
-
-    Raises
-    ------
-    ValueError
-        ``config.algo`` is a tabular learner.
-    """
-    from dfrl.robots.learners import learner_kind
-    from dfrl.robots.training import build_learner
-
-    if learner_kind(config.algo) != "function":
-        raise ValueError(f"{config.algo!r} is a tabular learner: it has no network")
-    env = config.env_config()
-    learner = build_learner(config, 1, len(env.sim.robot.sensor_angles), len(env.actions.actions),
-                            np.random.default_rng(0))
-    return learner.param_layout
 
 
 class TrainingHost(Protocol):
@@ -94,7 +68,7 @@ class Training:
     config : RobotConfig
         Its ``out_dir`` is the experiment's folder.
     bridge : Bridge
-        The process's bridge; :meth:`open` registers the robot with it.
+        The process's bridge; :meth:`register` registers the robot with it.
     lines : ProtocolLines
     host : TrainingHost
     resume : bool
@@ -104,6 +78,11 @@ class Training:
         Iterations between two ``host.should_stop()`` checks.
     warn : callable
         Where warnings go (default: stderr).
+    static_source : callable
+        The seam :meth:`open` takes a static robot from: given the config, the static robot
+        it asks for, or None for a learning robot (default:
+        :func:`~dfrl.experiments.robot_host.static_robot.static_robot`, which reads the keys
+        a benchmark sets).
 
     Attributes
     ----------
@@ -115,7 +94,9 @@ class Training:
 
     def __init__(self, config: RobotConfig, bridge: Any, lines: ProtocolLines, *,
                  host: TrainingHost | None = None, resume: bool = False, poll_every: int = 1,
-                 warn: Callable[[str], None] | None = None) -> None:
+                 warn: Callable[[str], None] | None = None,
+                 static_source: Callable[[RobotConfig], StaticRobot | None] = static_robot
+                 ) -> None:
         self.config = config
         self.bridge = bridge
         self.lines = lines
@@ -123,6 +104,7 @@ class Training:
         self.resume = resume
         self.poll_every = max(1, int(poll_every))
         self.warn = warn or (lambda text: print(text, file=sys.stderr, flush=True))
+        self.static_source = static_source
         self.out_dir = Path(config.out_dir)
         self.checkpoint_dir = self.out_dir / "checkpoint"
         self.trainer: Any = None
@@ -137,6 +119,8 @@ class Training:
         self._evals: LiveEvaluator | None = None
         self._notes: ShareNotes | None = None
         self._registered = False
+        self._static: StaticRobot | None = None
+        self.shape: tuple[int, int] | None = None
         self._sampled_at = -SAMPLE_S
 
     # -- state ---------------------------------------------------------------------------------
@@ -152,7 +136,7 @@ class Training:
 
     @property
     def simulated(self) -> bool:
-        """False for a benchmark's static table (no trainer)."""
+        """False for a static robot (no trainer; :mod:`.static_robot`)."""
         return self.trainer is not None
 
     @property
@@ -168,8 +152,9 @@ class Training:
 
     # -- life cycle ----------------------------------------------------------------------------
     def open(self) -> tuple[int, int] | None:
-        """Build the robot (or the static table or parameters), open the files, register the
-        robot with its shape; return the shape (None: static parameters, no table).
+        """Build the robot (a learning robot, or the static robot its config asks for), open
+        its files and wrap what it serves in a :class:`SharedTable`; return the table's shape
+        (None: parameters only, no table). Agents reach it once :meth:`register` offered it.
 
         Raises
         ------
@@ -178,57 +163,71 @@ class Training:
         ValueError
             A checkpoint that does not fit this robot.
         """
-        from dfrl.pybridge import StaticParams, StaticTable
-
         c = self.config
         self.out_dir.mkdir(parents=True, exist_ok=True)
-        shares = 0
-        if c.bench_table is not None:
-            shape = (int(c.bench_table[0]), int(c.bench_table[1]))
-            base: Any = StaticTable(shape, c.seed)
-            self._shares = CsvLog(self.out_dir / f"shares_{c.robot}.csv", SHARE_FIELDS)
-        elif c.bench_params is not None:       # a function learner's parameters, no table
-            shape = None
-            base = StaticParams(network_layout(c.trainer_config()), c.seed,
-                                int(c.bench_params["samples"]))
-            self._shares = CsvLog(self.out_dir / f"shares_{c.robot}.csv", SHARE_FIELDS)
+        self._static = self.static_source(c)
+        if self._static is not None:
+            base: Any = self._static.base
+            shape, shares = self._static.shape, 0
+            self._shares = shares_log = CsvLog(self.out_dir / f"shares_{c.robot}.csv",
+                                               SHARE_FIELDS)
         else:
-            from dfrl.robots.training import Trainer
-
-            cp = load_checkpoint(self.checkpoint_dir, c.robot) if self.resume else None
-            self.trainer = base = Trainer(c.trainer_config())
-            shape = (self.trainer.n_states, len(self.trainer.action_names))
-            if cp is not None:
-                restore_trainer(self.trainer, cp)
-                shares = cp.shares
-            if c.rtf:
-                self.period = self.trainer.config.sim.control_dt / c.rtf
-            upto, upto_share = self.trainer.iteration, shares
-            keep_m = (lambda r: int(r["iteration"]) <= upto) if cp is not None else None
-            keep_s = (lambda r: int(r["share_index"]) <= upto_share) if cp is not None else None
-            self._metrics = CsvLog(self.out_dir / f"metrics_{c.robot}.csv", METRIC_FIELDS, keep_m)
-            self._shares = CsvLog(self.out_dir / f"shares_{c.robot}.csv", SHARE_FIELDS, keep_s)
-            self._stops = set(boundaries(c.iterations, c.respite)) if c.mode is Mode.SYNC else set()
-            if c.eval_every:
-                self._evals = LiveEvaluator(self.trainer.config, c.robot, c.seed, c.eval_every,
-                                            c.eval_steps, self.out_dir, self.lines,
-                                            upto if cp is not None else None)
-        if self.function:           # its Q-function on the state grid too (robots/grid_view.py)
-            from dfrl.robots.grid_view import GridView
-            base = GridView(self.trainer)
+            base, shape, shares, shares_log = self._open_trainer()
         on_share = self.on_share if self.trainer is not None else None
-        # distillation residuals and FedAvg weights (a learning robot's, not a benchmark's)
+        # distillation residuals and FedAvg weights (a learning robot's, not a static one's)
         self._notes = ShareNotes(self.out_dir, c.robot) if self.trainer is not None else None
-        self.table = shared_provider(base, c.robot, self._shares, self.lines, on_share, shares,
+        self.table = shared_provider(base, c.robot, shares_log, self.lines, on_share, shares,
                                      self._notes)
         if self.trainer is not None:
             self.table.iteration = self.trainer.iteration
-        # what the robot offers agents: its Q-table (a function learner: the grid view of its
-        # Q-function, for an agent of a grid federation) and its parameters, if its base has them
-        self.bridge.register_robot(c.robot, self.table, shape=shape, algo=c.algo)
-        self._registered = True
+        self.shape = shape
         self._next_tick = time.perf_counter()
         return shape
+
+    def _open_trainer(self) -> tuple[Any, tuple[int, int], int, CsvLog]:
+        """Build the learning robot (from its checkpoint when resuming) and open its files;
+        return the base it serves (a function learner: the grid view of its Q-function too,
+        ``robots/grid_view.py``), the table's shape, the shares applied before and the shares
+        file."""
+        from dfrl.robots.training import Trainer
+
+        c = self.config
+        cp = load_checkpoint(self.checkpoint_dir, c.robot) if self.resume else None
+        self.trainer = Trainer(c.trainer_config())
+        base: Any = self.trainer
+        shape = (self.trainer.n_states, len(self.trainer.action_names))
+        shares = 0
+        if cp is not None:
+            restore_trainer(self.trainer, cp)
+            shares = cp.shares
+        if c.rtf:
+            self.period = self.trainer.config.sim.control_dt / c.rtf
+        upto, upto_share = self.trainer.iteration, shares
+        keep_m = (lambda r: int(r["iteration"]) <= upto) if cp is not None else None
+        keep_s = (lambda r: int(r["share_index"]) <= upto_share) if cp is not None else None
+        self._metrics = CsvLog(self.out_dir / f"metrics_{c.robot}.csv", METRIC_FIELDS, keep_m)
+        self._shares = shares_log = CsvLog(self.out_dir / f"shares_{c.robot}.csv", SHARE_FIELDS,
+                                           keep_s)
+        self._stops = set(boundaries(c.iterations, c.respite)) if c.mode is Mode.SYNC else set()
+        if c.eval_every:
+            self._evals = LiveEvaluator(self.trainer.config, c.robot, c.seed, c.eval_every,
+                                        c.eval_steps, self.out_dir, self.lines,
+                                        upto if cp is not None else None)
+        if self.function:
+            from dfrl.robots.grid_view import GridView
+            base = GridView(self.trainer)
+        return base, shape, shares, shares_log
+
+    def register(self) -> None:
+        """Offer the robot to agents: register what :meth:`open` built with the bridge (its
+        Q-table, of a function learner the grid view of its Q-function, for an agent of a grid
+        federation; and its parameters, if its base has them); once, after :meth:`open`.
+        :meth:`close` unregisters it."""
+        if self.table is None:
+            raise RuntimeError(f"robot {self.config.robot}: Training.open() first")
+        self.bridge.register_robot(self.config.robot, self.table, shape=self.shape,
+                                   algo=self.config.algo)
+        self._registered = True
 
     def _opened(self) -> tuple[SharedTable, CsvLog]:
         """The table and the metrics file of a learning robot, made by :meth:`open`."""
@@ -379,14 +378,13 @@ class Training:
             self.checkpoint()
 
     def close(self) -> None:
-        """Unregister the robot, close the files and the simulation (idempotent). A benchmark
-        robot's static parameters are saved first, as ``params/<robot>.npy`` (what the agents
-        left it)."""
-        if isinstance(self.table, SharedLearner) and self.config.bench_params is not None \
-                and self._registered:
-            d = self.out_dir / "params"
-            d.mkdir(parents=True, exist_ok=True)
-            np.save(d / f"{self.config.robot}.npy", self.table.params)
+        """Unregister the robot, close the files and the simulation (idempotent). A static
+        robot's parameters are saved first, as ``params/<robot>.npy`` (what the agents left
+        it)."""
+        if self._static is not None and self._registered:
+            self._static.save_held(self.out_dir, self.config.robot,
+                                   self.table.params if isinstance(self.table, SharedLearner)
+                                   else None)
         if self._registered:
             self._registered = False
             try:

@@ -17,7 +17,7 @@ checkpoints).
 
 With ``learner="dqn"`` (or ``"linear"``) each robot holds, instead of a table, a random
 parameter vector with the layout of that learner's network, built by the learner's own code
-(:func:`dfrl.experiments.robot_host.training.network_layout`: the size a real ``dqn`` robot
+(:func:`dfrl.experiments.robot_host.static_robot.network_layout`: the size a real ``dqn`` robot
 offers), learnt from :func:`bench_samples` samples; the agent carries parameter vectors
 (``"carries": "params"``, FedAvg weighted by samples), as in a ``dfrl run`` with such robots.
 Every robot saves what it holds at the end as ``params/<robot>.npy`` under ``out``.
@@ -56,7 +56,7 @@ def bench_samples(index: int) -> int:
 def bench_layout(learner: str) -> list[tuple[str, tuple[int, ...]]]:
     """The parameter layout of a robot of the function learner ``learner`` with the default
     trainer config (what each robot of a params benchmark holds)."""
-    from dfrl.experiments.robot_host.training import network_layout
+    from dfrl.experiments.robot_host.static_robot import network_layout
     from dfrl.robots.training import TrainerConfig
 
     return network_layout(TrainerConfig(algo=learner))

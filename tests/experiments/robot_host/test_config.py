@@ -40,3 +40,18 @@ def test_checked_once_and_round_trip(monkeypatch: pytest.MonkeyPatch) -> None:
     assert "token" not in cfg.public_dict() and cfg.to_dict()["token"] == "dfrl_tok"
     assert cfg.trainer_config().learner.alpha == 0.3
     assert boundaries(0, 500) == []
+
+
+def test_the_checked_mark_is_no_key(monkeypatch: pytest.MonkeyPatch) -> None:
+    # what from_dict passes to say "checked as a whole" is neither read from nor written to JSON
+    with pytest.raises(ConfigError, match="_checked: unknown key"):
+        RobotConfig.from_dict({"robot": "r1", "out_dir": "x", "iterations": -1,
+                               "_checked": True})
+    cfg = RobotConfig.from_dict({"robot": "r1", "out_dir": "x"})
+    assert "_checked" not in cfg.to_dict()
+    calls: list[dict[str, Any]] = []
+    real = config_module.check_robot_config
+    monkeypatch.setattr(config_module, "check_robot_config",
+                        lambda data: calls.append(data) or real(data))
+    RobotConfig(robot="r1", out_dir="x")            # built in Python: checked, once
+    assert len(calls) == 1
