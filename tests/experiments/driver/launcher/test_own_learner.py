@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,7 @@ from dfrl.experiments.driver.config import ConfigError, ExperimentConfig
 from dfrl.experiments.driver.launcher import run
 from dfrl.experiments.processes import find_swipl
 from dfrl.robots.grid_view import grid_table
+from dfrl.robots import plugins
 from dfrl.robots.plugins import load_class
 from dfrl.robots.state import Discretiser
 from dfrl.robots.td import LearnerParams
@@ -25,6 +27,17 @@ from .test_params_run import _assert_federated
 pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
 EXAMPLE = Path(__file__).resolve().parents[4] / "docs" / "learners" / "rbf_sarsa.py"
+
+
+@pytest.fixture(autouse=True)
+def _forget_plugins() -> Iterator[None]:
+    """The learners these configs register stay registered in the process (a ``dfrl robot``
+    service keeps them for its next run); here they are forgotten after each test, so that a
+    later test in the same worker sees only the built-in learners."""
+    before = dict(plugins._REGISTERED)
+    yield
+    plugins._REGISTERED.clear()
+    plugins._REGISTERED.update(before)
 
 
 def _config_file(folder: Path, robots: list[dict], **extra: object) -> Path:
