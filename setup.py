@@ -8,6 +8,7 @@ Prolog file or arena is shipped without being listed (tests/packaging checks the
 the files git tracks). The platform's foreign libraries ship as C sources: they are compiled on
 first use into a per-user cache (platform_pl/native_library.pl says why).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -35,9 +36,10 @@ def _packages() -> dict[str, Path]:
 
 
 def _package_data(packages: dict[str, Path]) -> dict[str, list[str]]:
-    return {name: sorted(p.name for p in folder.iterdir()
-                         if p.is_file() and p.suffix in DATA_SUFFIXES)
-            for name, folder in packages.items()}
+    return {
+        name: sorted(p.name for p in folder.iterdir() if p.is_file() and p.suffix in DATA_SUFFIXES)
+        for name, folder in packages.items()
+    }
 
 
 PACKAGES = _packages()

@@ -6,6 +6,7 @@ The package imports no pybullet (a platform node loads arena specs, never a simu
 :mod:`dfrl.arenas.builder` and the robots' simulation import it through
 :mod:`dfrl.arenas.pybullet_quiet`, without its build-time banner.
 """
+
 from dfrl.arenas.spec import (
     HELD_OUT_ARENAS,
     PAPER_ARENAS,

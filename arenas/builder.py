@@ -1,4 +1,5 @@
 """Loading an :class:`~dfrl.arenas.spec.ArenaSpec` into a pybullet client."""
+
 from __future__ import annotations
 
 import math
@@ -99,20 +100,33 @@ def build_arena(spec: ArenaSpec, client: int) -> ArenaBodies:
     floor_half = (w / 2, d / 2, 0.01)
     floor_col = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=client)
     floor_vis = p.createVisualShape(
-        p.GEOM_BOX, halfExtents=floor_half, visualFramePosition=(0.0, 0.0, -floor_half[2]),
-        rgbaColor=FLOOR_RGBA, physicsClientId=client,
+        p.GEOM_BOX,
+        halfExtents=floor_half,
+        visualFramePosition=(0.0, 0.0, -floor_half[2]),
+        rgbaColor=FLOOR_RGBA,
+        physicsClientId=client,
     )
     floor = p.createMultiBody(
-        baseMass=0.0, baseCollisionShapeIndex=floor_col, baseVisualShapeIndex=floor_vis,
+        baseMass=0.0,
+        baseCollisionShapeIndex=floor_col,
+        baseVisualShapeIndex=floor_vis,
         physicsClientId=client,
     )
     h = spec.wall_height
     walls = _static_boxes(
         client,
-        half_extents=[(w / 2 + t, t / 2, h / 2), (w / 2 + t, t / 2, h / 2),
-                      (t / 2, d / 2 + t, h / 2), (t / 2, d / 2 + t, h / 2)],
-        positions=[(0.0, d / 2 + t / 2, h / 2), (0.0, -d / 2 - t / 2, h / 2),
-                   (w / 2 + t / 2, 0.0, h / 2), (-w / 2 - t / 2, 0.0, h / 2)],
+        half_extents=[
+            (w / 2 + t, t / 2, h / 2),
+            (w / 2 + t, t / 2, h / 2),
+            (t / 2, d / 2 + t, h / 2),
+            (t / 2, d / 2 + t, h / 2),
+        ],
+        positions=[
+            (0.0, d / 2 + t / 2, h / 2),
+            (0.0, -d / 2 - t / 2, h / 2),
+            (w / 2 + t / 2, 0.0, h / 2),
+            (-w / 2 - t / 2, 0.0, h / 2),
+        ],
         yaws=[0.0] * 4,
         rgba=WALL_RGBA,
     )

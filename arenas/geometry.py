@@ -1,4 +1,5 @@
 """Footprint geometry of arena blocks: corners and overlap (used to validate arena files)."""
+
 from __future__ import annotations
 
 import math

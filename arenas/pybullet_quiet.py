@@ -7,6 +7,7 @@ that: during the import fd 1 goes to /dev/null and fd 2 to a temporary file, who
 other than the banner are written back to fd 2 (a real warning is never lost). Later imports
 reuse the module.
 """
+
 from __future__ import annotations
 
 import ctypes
@@ -40,8 +41,9 @@ def load() -> ModuleType:
             for fd in saved:
                 os.close(fd)
             caught.seek(0)
-            rest = [ln for ln in caught.read().splitlines(keepends=True)
-                    if not ln.startswith(BANNER)]
+            rest = [
+                ln for ln in caught.read().splitlines(keepends=True) if not ln.startswith(BANNER)
+            ]
             if rest:
                 os.write(2, b"".join(rest))
     return pybullet

@@ -5,6 +5,7 @@ The format is documented in ``arenas/README.md``; this module is its reference p
 Coordinates are metres in a frame whose origin is the centre of the floor, ``x`` to the
 right, ``y`` up (top view), ``z`` vertical; yaw angles are radians, counter-clockwise.
 """
+
 from __future__ import annotations
 
 import json
@@ -29,8 +30,7 @@ _ARENA_DIR = Path(__file__).resolve().parent
 #: touches nothing. The arena layer knows no robot; this is the robot it is made for.
 START_CLEARANCE: float = 0.037
 
-_TOP_LEVEL_KEYS = {"name", "size", "wall_height", "blocks", "start", "description",
-                   "allow_overlap"}
+_TOP_LEVEL_KEYS = {"name", "size", "wall_height", "blocks", "start", "description", "allow_overlap"}
 _BLOCK_KEYS = {"center", "size", "yaw"}
 
 
@@ -142,9 +142,7 @@ class ArenaSpec:
         """
         xy = np.atleast_2d(np.asarray(xy, dtype=float))
         hw, hd = self.size[0] / 2.0, self.size[1] / 2.0
-        dist = np.minimum.reduce(
-            [hw - xy[:, 0], xy[:, 0] + hw, hd - xy[:, 1], xy[:, 1] + hd]
-        )
+        dist = np.minimum.reduce([hw - xy[:, 0], xy[:, 0] + hw, hd - xy[:, 1], xy[:, 1] + hd])
         for block in self.blocks:
             dist = np.minimum(dist, block.clearance(xy))
         return dist
@@ -196,11 +194,11 @@ class ArenaSpec:
             "size": list(self.size),
             "wall_height": self.wall_height,
             "blocks": [
-                {"center": list(b.center), "size": list(b.size), "yaw": b.yaw}
-                for b in self.blocks
+                {"center": list(b.center), "size": list(b.size), "yaw": b.yaw} for b in self.blocks
             ],
-            "start": ({"random": True} if self.start.random
-                      else {"pose": list(self.start.pose or ())}),
+            "start": (
+                {"random": True} if self.start.random else {"pose": list(self.start.pose or ())}
+            ),
         }
         if self.description:
             out["description"] = self.description
@@ -223,8 +221,9 @@ def _number(value: Any, source: str, where: str, positive: bool = False) -> floa
     return float(value)
 
 
-def _vector(value: Any, n: int, source: str, where: str,
-            positive: bool = False) -> tuple[float, ...]:
+def _vector(
+    value: Any, n: int, source: str, where: str, positive: bool = False
+) -> tuple[float, ...]:
     if not isinstance(value, list) or len(value) != n:
         raise _fail(source, where, f"expected a list of {n} numbers, got {json.dumps(value)}")
     return tuple(_number(v, source, f"{where}[{i}]", positive) for i, v in enumerate(value))
@@ -253,8 +252,9 @@ def parse_arena(data: Any, source: str = "<dict>") -> ArenaSpec:
         raise _fail(source, "top level", f"expected a JSON object, got {type(data).__name__}")
     unknown = sorted(set(data) - _TOP_LEVEL_KEYS)
     if unknown:
-        raise _fail(source, "top level",
-                    f"unknown key(s) {unknown}; allowed: {sorted(_TOP_LEVEL_KEYS)}")
+        raise _fail(
+            source, "top level", f"unknown key(s) {unknown}; allowed: {sorted(_TOP_LEVEL_KEYS)}"
+        )
     for key in ("name", "size", "wall_height", "blocks", "start"):
         if key not in data:
             raise _fail(source, "top level", f"missing required key '{key}'")
@@ -287,22 +287,28 @@ def parse_arena(data: Any, source: str = "<dict>") -> ArenaSpec:
         yaw = _number(raw.get("yaw", 0.0), source, f"{where}.yaw")
         if not (-hw < center[0] < hw and -hd < center[1] < hd):
             raise _fail(
-                source, f"{where}.center",
+                source,
+                f"{where}.center",
                 f"{list(center)} lies outside the floor x in ({-hw}, {hw}), y in ({-hd}, {hd})",
             )
-        blocks.append(Block(center=(center[0], center[1]), size=(bsize[0], bsize[1], bsize[2]),
-                            yaw=yaw))
+        blocks.append(
+            Block(center=(center[0], center[1]), size=(bsize[0], bsize[1], bsize[2]), yaw=yaw)
+        )
 
     allow_overlap = data.get("allow_overlap", False)
     if not isinstance(allow_overlap, bool):
-        raise _fail(source, "allow_overlap",
-                    f"expected true or false, got {json.dumps(allow_overlap)}")
+        raise _fail(
+            source, "allow_overlap", f"expected true or false, got {json.dumps(allow_overlap)}"
+        )
     if not allow_overlap:
         for i in range(len(blocks)):
             for j in range(i + 1, len(blocks)):
                 if blocks_overlap(blocks[i], blocks[j]):
-                    raise _fail(source, f"blocks[{j}]",
-                                f"overlaps blocks[{i}] (set \"allow_overlap\": true if meant)")
+                    raise _fail(
+                        source,
+                        f"blocks[{j}]",
+                        f'overlaps blocks[{i}] (set "allow_overlap": true if meant)',
+                    )
 
     raw_start = data["start"]
     if not isinstance(raw_start, dict):
@@ -316,24 +322,36 @@ def parse_arena(data: Any, source: str = "<dict>") -> ArenaSpec:
         start = StartSpec((pose[0], pose[1], pose[2]))
     else:
         raise _fail(
-            source, "start",
-            f"expected exactly one of {{\"pose\": [x, y, yaw]}} or {{\"random\": true}}, "
+            source,
+            "start",
+            f'expected exactly one of {{"pose": [x, y, yaw]}} or {{"random": true}}, '
             f"got keys {sorted(raw_start)}",
         )
     spec = ArenaSpec(
-        name=name.strip(), size=(size[0], size[1]), wall_height=wall_height,
-        blocks=tuple(blocks), start=start, description=description, source=source,
+        name=name.strip(),
+        size=(size[0], size[1]),
+        wall_height=wall_height,
+        blocks=tuple(blocks),
+        start=start,
+        description=description,
+        source=source,
         allow_overlap=allow_overlap,
     )
     if start.pose is not None:
         x, y, _ = start.pose
         gap = float(spec.clearance(np.array([[x, y]]))[0])
         if gap < START_CLEARANCE:
-            where = "inside a block or outside the floor" if gap <= 0.0 else (
-                f"only {gap:.3f} m from a block or wall")
-            raise _fail(source, "start.pose",
-                        f"({x}, {y}) is {where}; a start pose needs {START_CLEARANCE} m "
-                        "(the robot's radius) of free floor around it")
+            where = (
+                "inside a block or outside the floor"
+                if gap <= 0.0
+                else (f"only {gap:.3f} m from a block or wall")
+            )
+            raise _fail(
+                source,
+                "start.pose",
+                f"({x}, {y}) is {where}; a start pose needs {START_CLEARANCE} m "
+                "(the robot's radius) of free floor around it",
+            )
     return spec
 
 

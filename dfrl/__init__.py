@@ -15,6 +15,7 @@ cheap: :class:`TrainerConfig`, :func:`train`, :func:`load_arena`, :class:`Experi
 :func:`run_experiment`. Importing ``dfrl`` registers the Gymnasium id ``dfrl/EPuck-v0``
 (see :mod:`dfrl.robots.registration`).
 """
+
 from __future__ import annotations
 
 import importlib
@@ -62,8 +63,17 @@ _API: dict[str, str] = {
     "run_experiment": "dfrl.experiments.driver.launcher",
 }
 
-__all__ = ["ENV_ID", "__version__", "TrainerConfig", "Trainer", "train", "load_arena",
-           "ExperimentConfig", "RobotSpec", "run_experiment"]
+__all__ = [
+    "ENV_ID",
+    "__version__",
+    "TrainerConfig",
+    "Trainer",
+    "train",
+    "load_arena",
+    "ExperimentConfig",
+    "RobotSpec",
+    "run_experiment",
+]
 
 
 def __getattr__(name: str) -> Any:

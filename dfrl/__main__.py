@@ -1,4 +1,5 @@
 """``python -m dfrl``: the ``dfrl`` command line."""
+
 import sys
 
 from dfrl.experiments.cli import main

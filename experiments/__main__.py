@@ -1,4 +1,5 @@
 """``python -m experiments`` runs the ``dfrl`` command line."""
+
 import sys
 
 from dfrl.experiments.cli import main

@@ -14,6 +14,7 @@ then builds the dataclass with ``_checked=True`` (a keyword-only init-only field
 its ``__post_init__`` -- the check of a config built in Python -- that the whole was checked,
 for it and for the entries it builds; a config built in Python without it checks itself.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -27,10 +28,22 @@ from typing import Any
 
 from dfrl.experiments.suggestions import did_you_mean
 
-__all__ = ["ConfigError", "Rule", "TRAINER_OWNED", "check_keys", "check_robot_id",
-           "check_trainer", "check_value", "json_form",
-           "known_algorithms", "raise_problems", "resolve_trainer", "to_json_dict", "token_rule",
-           "unknown_value"]
+__all__ = [
+    "ConfigError",
+    "Rule",
+    "TRAINER_OWNED",
+    "check_keys",
+    "check_robot_id",
+    "check_trainer",
+    "check_value",
+    "json_form",
+    "known_algorithms",
+    "raise_problems",
+    "resolve_trainer",
+    "to_json_dict",
+    "token_rule",
+    "unknown_value",
+]
 
 _ROBOT_ID = re.compile(r"[a-z][a-z0-9_]*\Z")
 
@@ -107,10 +120,23 @@ class Rule:
     check: Callable[[Any], str | None] | None = None
 
 
-_TYPE_NAMES = {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
-               list: "a list", dict: "an object", type(None): "null"}
-_EXPECT = {int: "an integer", float: "a number", str: "a string", bool: "true or false",
-           dict: "an object", list: "a list"}
+_TYPE_NAMES = {
+    bool: "a boolean",
+    int: "an integer",
+    float: "a number",
+    str: "a string",
+    list: "a list",
+    dict: "an object",
+    type(None): "null",
+}
+_EXPECT = {
+    int: "an integer",
+    float: "a number",
+    str: "a string",
+    bool: "true or false",
+    dict: "an object",
+    list: "a list",
+}
 
 
 def _type_name(value: Any) -> str:
@@ -133,8 +159,10 @@ def check_value(path: str, value: Any, rule: Rule) -> list[str]:
         why = rule.check(value)
         return [] if why is None else [f"{path}: {why}"]
     if not _is_kind(value, rule.kind):
-        return [f"{path}: expected {_EXPECT[rule.kind]}{' or null' if rule.nullable else ''}, "
-                f"got {value!r} ({_type_name(value)})"]
+        return [
+            f"{path}: expected {_EXPECT[rule.kind]}{' or null' if rule.nullable else ''}, "
+            f"got {value!r} ({_type_name(value)})"
+        ]
     if rule.kind is float and not math.isfinite(value):
         return [f"{path}: must be a finite number, got {value!r}"]
     hint = f" ({rule.hint})" if rule.hint else ""
@@ -154,13 +182,19 @@ def unknown_value(path: str, what: str, value: Any, known: Sequence[str]) -> str
     nearest of them when one is near (:func:`dfrl.experiments.suggestions.did_you_mean`):
     ``robots[0].algo: unknown algorithm 'qlearing' (did you mean 'qlearning'?); known: ...``."""
     near = did_you_mean(value, known)
-    return (f"{path}: unknown {what} {value!r}{f' ({near})' if near else ''}; "
-            f"known: {', '.join(known)}")
+    return (
+        f"{path}: unknown {what} {value!r}{f' ({near})' if near else ''}; known: {', '.join(known)}"
+    )
 
 
-def check_keys(path: str, data: Any, rules: Mapping[str, Rule], required: Sequence[str] = (),
-               extra: frozenset[str] = frozenset(),
-               renamed: Mapping[str, str] = {}) -> list[str]:
+def check_keys(
+    path: str,
+    data: Any,
+    rules: Mapping[str, Rule],
+    required: Sequence[str] = (),
+    extra: frozenset[str] = frozenset(),
+    renamed: Mapping[str, str] = {},
+) -> list[str]:
     """Problems of object ``data``: not an object, unknown, renamed (``renamed`` maps an old
     key to its note, e.g. ``"renamed robot_host (...)"``) or missing keys, bad values; keys in
     ``extra`` are allowed and not checked."""
@@ -196,8 +230,12 @@ def _token_problem(value: Any) -> str | None:
     from dfrl.experiments.tokens import token_problem
 
     why = token_problem(value)
-    return None if why is None else f"not a token: {why} (an integer >= 0 or a string " \
+    return (
+        None
+        if why is None
+        else f"not a token: {why} (an integer >= 0 or a string "
         "without white space; dfrl secret prints a strong one)"
+    )
 
 
 def token_rule() -> Rule:
@@ -207,8 +245,7 @@ def token_rule() -> Rule:
 
 def check_robot_id(path: str, rid: Any) -> list[str]:
     if isinstance(rid, str) and not _ROBOT_ID.match(rid):
-        return [f"{path}: robot id {rid!r}: use a lower-case name like r1 "
-                "(letters, digits, _)"]
+        return [f"{path}: robot id {rid!r}: use a lower-case name like r1 (letters, digits, _)"]
     return []
 
 
@@ -241,8 +278,10 @@ def check_trainer(path: str, trainer: Any) -> list[str]:
     defaults = TrainerConfig().to_dict(full=True)
     problems = _check_like(path, trainer, defaults, trainer_choices())
     owned = TRAINER_OWNED & set(trainer)
-    problems += [f"{path}.{k}: set by the experiment (robots[..].{k} or {k}), not in trainer"
-                 for k in sorted(owned)]
+    problems += [
+        f"{path}.{k}: set by the experiment (robots[..].{k} or {k}), not in trainer"
+        for k in sorted(owned)
+    ]
     if not problems:
         try:
             TrainerConfig.from_dict({**defaults, **trainer})
@@ -280,8 +319,13 @@ def _known(values: Sequence[str] | None) -> Callable[[], Sequence[str]] | None:
     return lambda: values
 
 
-def _check_like(path: str, data: dict[str, Any], model: dict[str, Any],
-                choices: Mapping[str, Sequence[str]], rel: str = "") -> list[str]:
+def _check_like(
+    path: str,
+    data: dict[str, Any],
+    model: dict[str, Any],
+    choices: Mapping[str, Sequence[str]],
+    rel: str = "",
+) -> list[str]:
     """Keys and value kinds of ``data`` against the defaults ``model`` (nested), and the
     values of enumerated fields against ``choices`` (by key relative to the top, ``rel``)."""
     out = []
@@ -289,14 +333,18 @@ def _check_like(path: str, data: dict[str, Any], model: dict[str, Any],
         here = f"{path}.{key}"
         if key not in model:
             near = did_you_mean(key, model)
-            out.append(f"{here}: unknown key{'; ' + near if near else ''} "
-                       f"(known: {', '.join(sorted(model))})")
+            out.append(
+                f"{here}: unknown key{'; ' + near if near else ''} "
+                f"(known: {', '.join(sorted(model))})"
+            )
             continue
         ref = model[key]
         if isinstance(ref, dict):
-            out += (_check_like(here, value, ref, choices, f"{rel}{key}.")
-                    if isinstance(value, dict)
-                    else [f"{here}: expected an object, got {value!r}"])
+            out += (
+                _check_like(here, value, ref, choices, f"{rel}{key}.")
+                if isinstance(value, dict)
+                else [f"{here}: expected an object, got {value!r}"]
+            )
         elif ref is not None:
             kind = float if isinstance(ref, float) else type(ref)
             known = choices.get(f"{rel}{key}")

@@ -1,4 +1,5 @@
 """The exception root of :mod:`dfrl.experiments`."""
+
 from __future__ import annotations
 
 

@@ -6,6 +6,7 @@ after a grace period, then reap. Children start in a session of their own
 (:func:`start`), so the group holds the child and whatever it started, and a Ctrl-C at the
 terminal reaches the parent only (which then stops its children in order).
 """
+
 from __future__ import annotations
 
 import os
@@ -42,10 +43,17 @@ def swipl() -> str:
     return path
 
 
-def start(argv: Sequence[str], *, stdin: int | IO[Any] | None = subprocess.DEVNULL,
-          stdout: int | IO[Any] | None = None, stderr: int | IO[Any] | None = None,
-          env: Mapping[str, str] | None = None, cwd: str | os.PathLike[str] | None = None,
-          text: bool = True, bufsize: int = -1) -> subprocess.Popen[Any]:
+def start(
+    argv: Sequence[str],
+    *,
+    stdin: int | IO[Any] | None = subprocess.DEVNULL,
+    stdout: int | IO[Any] | None = None,
+    stderr: int | IO[Any] | None = None,
+    env: Mapping[str, str] | None = None,
+    cwd: str | os.PathLike[str] | None = None,
+    text: bool = True,
+    bufsize: int = -1,
+) -> subprocess.Popen[Any]:
     """Start ``argv`` in a session (and so a process group) of its own.
 
     ``stdin`` defaults to ``/dev/null``: a child never reads the terminal. With ``text`` the
@@ -57,10 +65,18 @@ def start(argv: Sequence[str], *, stdin: int | IO[Any] | None = subprocess.DEVNU
         The executable could not be started (missing, not executable).
     """
     try:
-        return subprocess.Popen(list(argv), stdin=stdin, stdout=stdout, stderr=stderr,
-                                env=None if env is None else dict(env), cwd=cwd,
-                                text=text, encoding="utf-8" if text else None,
-                                bufsize=bufsize, start_new_session=True)
+        return subprocess.Popen(
+            list(argv),
+            stdin=stdin,
+            stdout=stdout,
+            stderr=stderr,
+            env=None if env is None else dict(env),
+            cwd=cwd,
+            text=text,
+            encoding="utf-8" if text else None,
+            bufsize=bufsize,
+            start_new_session=True,
+        )
     except OSError as exc:
         raise ExperimentError(f"could not start {argv[0]}: {exc.strerror or exc}") from exc
 
@@ -89,12 +105,11 @@ def stop(proc: subprocess.Popen[Any], grace_s: float = GRACE_S) -> int | None:
             except subprocess.TimeoutExpired:
                 return None
     elif proc.pid:
-        _signal_group(proc, signal.SIGKILL)     # what it left behind in its group
+        _signal_group(proc, signal.SIGKILL)  # what it left behind in its group
     return proc.returncode
 
 
-def wait_or_stop(proc: subprocess.Popen[Any], timeout_s: float,
-                 grace_s: float = GRACE_S) -> bool:
+def wait_or_stop(proc: subprocess.Popen[Any], timeout_s: float, grace_s: float = GRACE_S) -> bool:
     """Wait up to ``timeout_s`` for ``proc`` to exit by itself; :func:`stop` it otherwise.
     True if it exited by itself."""
     try:

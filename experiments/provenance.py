@@ -22,6 +22,7 @@ checkout git could not read). A package that is not installed is ``null``, as is
 without ``swipl`` on the PATH; finding a value never fails the run. The token never lands
 here: the value after ``--token`` on the command line is replaced by ``<hidden>``.
 """
+
 from __future__ import annotations
 
 import json
@@ -46,16 +47,24 @@ SECRET_OPTIONS = ("--token",)
 TIMEOUT_S = 5.0
 #: The distributions whose versions are recorded (besides dfrl, Python and SWI-Prolog): what
 #: the simulation, the learners and the bridge to Prolog run on.
-PACKAGES: tuple[str, ...] = ("pybullet", "numpy", "scipy", "gymnasium", "pyswip", "autograd",
-                             "numba")
+PACKAGES: tuple[str, ...] = (
+    "pybullet",
+    "numpy",
+    "scipy",
+    "gymnasium",
+    "pyswip",
+    "autograd",
+    "numba",
+)
 #: ``git``'s note when the package does not run from a git checkout.
 NOT_A_CHECKOUT = "not a checkout"
 
 
 def _output(argv: list[str], cwd: Path | None = None) -> str | None:
     try:
-        done = subprocess.run(argv, cwd=cwd, capture_output=True, text=True, timeout=TIMEOUT_S,
-                              check=False)
+        done = subprocess.run(
+            argv, cwd=cwd, capture_output=True, text=True, timeout=TIMEOUT_S, check=False
+        )
     except (OSError, subprocess.SubprocessError):
         return None
     return done.stdout.strip() if done.returncode == 0 else None
@@ -86,8 +95,11 @@ def checkout_state(root: Path | None) -> dict[str, Any]:
         return {"commit": None, "dirty": None, "note": NOT_A_CHECKOUT}
     commit = _output(["git", "rev-parse", "HEAD"], root)
     if commit is None:
-        return {"commit": None, "dirty": None,
-                "note": f"git failed: no commit from git rev-parse HEAD in {root}"}
+        return {
+            "commit": None,
+            "dirty": None,
+            "note": f"git failed: no commit from git rev-parse HEAD in {root}",
+        }
     status = _output(["git", "status", "--porcelain", "--untracked-files=no"], root)
     return {"commit": commit, "dirty": None if status is None else bool(status)}
 
@@ -143,8 +155,11 @@ def provenance(argv: list[str] | None = None) -> dict[str, Any]:
         "python": f"{platform.python_version()} ({platform.python_implementation()})",
         "swipl": swipl_version(),
         **{dist: _version(dist) for dist in PACKAGES},
-        "host": {"name": socket.gethostname(), "platform": platform.platform(),
-                 "cpus": os.cpu_count()},
+        "host": {
+            "name": socket.gethostname(),
+            "platform": platform.platform(),
+            "cpus": os.cpu_count(),
+        },
         "command": command_line(argv),
         "cwd": os.getcwd(),
         "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
@@ -174,9 +189,10 @@ def describe(p: dict[str, Any]) -> str:
     git = p.get("git") or {}
     where = str(git.get("note") or NOT_A_CHECKOUT)
     if git.get("commit"):
-        where = f"commit {str(git['commit'])[:10]}" + (", with changes" if git.get("dirty")
-                                                       else "")
+        where = f"commit {str(git['commit'])[:10]}" + (", with changes" if git.get("dirty") else "")
     host = (p.get("host") or {}).get("name", "?")
-    return (f"dfrl {p.get('dfrl')} ({where}), Python {p.get('python')}, SWI-Prolog "
-            f"{p.get('swipl') or 'not found'}, pybullet {p.get('pybullet')}, numpy "
-            f"{p.get('numpy')} on {host}")
+    return (
+        f"dfrl {p.get('dfrl')} ({where}), Python {p.get('python')}, SWI-Prolog "
+        f"{p.get('swipl') or 'not found'}, pybullet {p.get('pybullet')}, numpy "
+        f"{p.get('numpy')} on {host}"
+    )

@@ -1,4 +1,4 @@
-""""Did you mean": the known names closest to a misspelt one, for every message that refuses an
+""" "Did you mean": the known names closest to a misspelt one, for every message that refuses an
 unknown key or value (config keys, algorithms, methods, itineraries, arenas, ...).
 
 The distance is Damerau-Levenshtein in its optimal-string-alignment form
@@ -17,6 +17,7 @@ Why not :func:`difflib.get_close_matches`: its ratio counts matching blocks, so 
 letters costs as much as two changes, and no single cutoff both catches one slip in a
 3-letter name and rejects unrelated 8-letter names; an edit count states the rule directly.
 """
+
 from __future__ import annotations
 
 from collections.abc import Iterable
@@ -67,7 +68,7 @@ def near_names(word: str, known: Iterable[str]) -> list[str]:
             short, long_ = sorted((w, n), key=len)
             if len(short) < 3 or not long_.startswith(short):
                 continue
-            d = limit + 0.5                      # a prefix: after every near spelling
+            d = limit + 0.5  # a prefix: after every near spelling
         scored.setdefault(name, d)
     if not scored:
         return []

@@ -19,6 +19,7 @@ A cluster member's folder (the Dask scheduler's, a worker's or the driver's on a
 
 The names differ from a node folder's so that one is never taken for the other.
 """
+
 from __future__ import annotations
 
 import os
@@ -72,13 +73,14 @@ def check_cluster_dir(directory: str | os.PathLike[str]) -> Path:
     return _check_dir(directory, CLUSTER_FILES, "cluster")
 
 
-def _check_dir(directory: str | os.PathLike[str], files: tuple[str, ...],
-               kind: str) -> Path:
+def _check_dir(directory: str | os.PathLike[str], files: tuple[str, ...], kind: str) -> Path:
     """``directory`` as a path if it holds every one of ``files``, else the error naming the
     missing ones and the ``dfrl certs KIND`` command that makes such a folder."""
     d = Path(directory)
     missing = [f for f in files if not (d / f).is_file()]
     if missing:
-        raise CertError(f"{d} is not a {kind} TLS directory: missing {', '.join(missing)} "
-                        f"(make one with 'dfrl certs {kind} NAME CA_DIR --out DIR')")
+        raise CertError(
+            f"{d} is not a {kind} TLS directory: missing {', '.join(missing)} "
+            f"(make one with 'dfrl certs {kind} NAME CA_DIR --out DIR')"
+        )
     return d

@@ -23,6 +23,7 @@ The format: one token per line; surrounding white space and blank lines are igno
 ASCII digits only is an integer token (as Tartarus tokens are), any other line an atom. So a
 token is an integer >= 0 or a text without white space (:func:`token_problem`).
 """
+
 from __future__ import annotations
 
 import os
@@ -32,9 +33,21 @@ import stat
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
-__all__ = ["SECRET_FILE", "TOKEN_ENV", "Token", "TokenError", "env_with_tokens",
-           "format_tokens", "new_secret", "parse_tokens", "pop_env_tokens", "read_token_file",
-           "run_tokens", "token_problem", "write_secret_file"]
+__all__ = [
+    "SECRET_FILE",
+    "TOKEN_ENV",
+    "Token",
+    "TokenError",
+    "env_with_tokens",
+    "format_tokens",
+    "new_secret",
+    "parse_tokens",
+    "pop_env_tokens",
+    "read_token_file",
+    "run_tokens",
+    "token_problem",
+    "write_secret_file",
+]
 
 Token = int | str
 """A platform token: an integer >= 0 or an atom's text (no white space)."""
@@ -114,8 +127,9 @@ def format_tokens(tokens: Iterable[Token]) -> str:
     return "".join(line + "\n" for line in lines)
 
 
-def env_with_tokens(tokens: Iterable[Token],
-                    base: Mapping[str, str] | None = None) -> dict[str, str]:
+def env_with_tokens(
+    tokens: Iterable[Token], base: Mapping[str, str] | None = None
+) -> dict[str, str]:
     """The environment of a child that gets ``tokens``: ``base`` (default this process's
     environment) with :data:`TOKEN_ENV` set (or removed when there are no tokens)."""
     env = dict(os.environ if base is None else base)
@@ -150,8 +164,10 @@ def read_token_file(path: str | os.PathLike[str]) -> list[Token]:
     except OSError as exc:
         raise TokenError(f"token file {p}: {exc.strerror}") from None
     if mode & (stat.S_IRWXG | stat.S_IRWXO):
-        raise TokenError(f"token file {p}: other users may read it (mode "
-                         f"{stat.S_IMODE(mode):04o}); run chmod 600 {p}")
+        raise TokenError(
+            f"token file {p}: other users may read it (mode "
+            f"{stat.S_IMODE(mode):04o}); run chmod 600 {p}"
+        )
     try:
         tokens = parse_tokens(data.decode("utf-8"))
     except UnicodeDecodeError:
@@ -195,6 +211,8 @@ def run_tokens(results_dir: str | os.PathLike[str]) -> list[Token]:
     """
     path = Path(results_dir) / SECRET_FILE
     if not path.is_file():
-        raise TokenError(f"{path} not found: the run's token is kept there (mode 0600) by "
-                         "dfrl run; is this the results folder of a running experiment?")
+        raise TokenError(
+            f"{path} not found: the run's token is kept there (mode 0600) by "
+            "dfrl run; is this the results folder of a running experiment?"
+        )
     return read_token_file(path)

@@ -3,6 +3,7 @@
 The platform itself is pure Prolog; this package only locates its files so that Python
 code (the bridge, the node launcher, benchmarks) can load them.
 """
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -4,6 +4,7 @@
 everything that needs the embedded SWI-Prolog) is imported on first use, so importing
 ``pybridge`` alone does not start Prolog.
 """
+
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any

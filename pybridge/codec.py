@@ -17,6 +17,7 @@ Two encodings of a flat list of N floats, both pure numpy (no Prolog here):
 
 Both round-trip every finite float, -0.0 and subnormals bit for bit.
 """
+
 from __future__ import annotations
 
 import enum
@@ -134,8 +135,9 @@ def decode_fts(data: bytes | bytearray, expected: int | None = None) -> np.ndarr
             raise CodecError(f"not an fts float list (size field {size})")
         n = (size - 1) // 10
         if cells != 6 * n or len(data) != pos + 10 * n + 1:
-            raise CodecError("not an fts float list "
-                             "(length mismatch: not all elements are floats?)")
+            raise CodecError(
+                "not an fts float list (length mismatch: not all elements are floats?)"
+            )
         body = np.frombuffer(data, dtype=_ELEMENT, count=n, offset=pos)
         if not np.all(body["tag"] == _TAG_WORD):
             raise CodecError("not an fts float list (an element is not a float)")

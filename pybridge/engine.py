@@ -10,6 +10,7 @@ predicate is called through ``PL_open_query`` and the query is always closed.
 One process-wide lock serialises calls. A Prolog exception arrives as
 :class:`~dfrl.pybridge.errors.PrologError` whose ``term`` is the exception term as data.
 """
+
 from __future__ import annotations
 
 import ctypes
@@ -69,22 +70,26 @@ class _Lib:
         self.put_nil = fn("PL_put_nil", c_int, term_t)
         self.cons_list = fn("PL_cons_list", c_int, term_t, term_t, term_t)
         self.cons_functor_v = fn("PL_cons_functor_v", c_int, term_t, functor_t, term_t)
-        self.put_term_from_chars = fn("PL_put_term_from_chars", c_int, term_t, c_int, c_size_t,
-                                      c_char_p)
+        self.put_term_from_chars = fn(
+            "PL_put_term_from_chars", c_int, term_t, c_int, c_size_t, c_char_p
+        )
         self.new_atom_mbchars = fn("PL_new_atom_mbchars", atom_t, c_int, c_size_t, c_char_p)
         self.unregister_atom = fn("PL_unregister_atom", None, atom_t)
         self.new_functor_sz = fn("PL_new_functor_sz", functor_t, atom_t, c_size_t)
         self.term_type = fn("PL_term_type", c_int, term_t)
         self.is_acyclic = fn("PL_is_acyclic", c_int, term_t)
-        self.get_nchars = fn("PL_get_nchars", c_int, term_t, POINTER(c_size_t), POINTER(c_void_p),
-                             c_uint)
+        self.get_nchars = fn(
+            "PL_get_nchars", c_int, term_t, POINTER(c_size_t), POINTER(c_void_p), c_uint
+        )
         self.get_int64 = fn("PL_get_int64", c_int, term_t, POINTER(c_int64))
         self.get_float = fn("PL_get_float", c_int, term_t, POINTER(c_double))
-        self.get_name_arity_sz = fn("PL_get_name_arity_sz", c_int, term_t, POINTER(atom_t),
-                                    POINTER(c_size_t))
+        self.get_name_arity_sz = fn(
+            "PL_get_name_arity_sz", c_int, term_t, POINTER(atom_t), POINTER(c_size_t)
+        )
         self.get_arg_sz = fn("PL_get_arg_sz", c_int, c_size_t, term_t, term_t)
-        self.atom_mbchars = fn("PL_atom_mbchars", c_int, atom_t, POINTER(c_size_t),
-                               POINTER(c_void_p), c_uint)
+        self.atom_mbchars = fn(
+            "PL_atom_mbchars", c_int, atom_t, POINTER(c_size_t), POINTER(c_void_p), c_uint
+        )
         self.get_list = fn("PL_get_list", c_int, term_t, term_t, term_t)
         self.get_nil = fn("PL_get_nil", c_int, term_t)
         self.predicate = fn("PL_predicate", c_void_p, c_char_p, c_int, c_char_p)
@@ -95,8 +100,9 @@ class _Lib:
         self.open_foreign_frame = fn("PL_open_foreign_frame", fid_t)
         self.discard_foreign_frame = fn("PL_discard_foreign_frame", None, fid_t)
         self.mark_string_buffers = fn("PL_mark_string_buffers", None, POINTER(buf_mark_t))
-        self.release_string_buffers_from_mark = fn("PL_release_string_buffers_from_mark", None,
-                                                   buf_mark_t)
+        self.release_string_buffers_from_mark = fn(
+            "PL_release_string_buffers_from_mark", None, buf_mark_t
+        )
         self.thread_self = fn("PL_thread_self", c_int)
         self.thread_attach_engine = fn("PL_thread_attach_engine", c_int, c_void_p)
 
@@ -137,8 +143,9 @@ class Prolog:
         sols = self._run(name, args, module, 1)
         return sols[0] if sols else None
 
-    def call_all(self, name: str, *args: Any, module: str | None = None,
-                 limit: int | None = None) -> list[dict[str, Any]]:
+    def call_all(
+        self, name: str, *args: Any, module: str | None = None, limit: int | None = None
+    ) -> list[dict[str, Any]]:
         """All solutions (at most ``limit``) of ``module:name(args...)`` as binding dicts."""
         return self._run(name, args, module, limit)
 
@@ -159,8 +166,9 @@ class Prolog:
         key = (name, arity, module)
         pred = self._predicates.get(key)
         if pred is None:
-            pred = self._lib.predicate(name.encode("utf-8"), arity,
-                                       module.encode("utf-8") if module else None)
+            pred = self._lib.predicate(
+                name.encode("utf-8"), arity, module.encode("utf-8") if module else None
+            )
             self._predicates[key] = pred
         return pred
 
@@ -186,8 +194,9 @@ class Prolog:
             finally:
                 self._pyswip._queryIsOpen = False
 
-    def _run(self, name: str, args: Sequence[Any], module: str | None,
-             limit: int | None) -> list[dict[str, Any]]:
+    def _run(
+        self, name: str, args: Sequence[Any], module: str | None, limit: int | None
+    ) -> list[dict[str, Any]]:
         lib = self._lib
         with self._query_slot():
             self._ensure_engine()
@@ -216,8 +225,9 @@ class Prolog:
                 lib.discard_foreign_frame(fid)
 
     # -- Python -> Prolog ---------------------------------------------------------------------
-    def _put(self, t: int, value: Any, names: dict[str, int],
-             vars_: dict[int, int] | None = None) -> None:
+    def _put(
+        self, t: int, value: Any, names: dict[str, int], vars_: dict[int, int] | None = None
+    ) -> None:
         lib = self._lib
         if vars_ is None:
             vars_ = {}
@@ -261,8 +271,9 @@ class Prolog:
             ok = self._put_list(t, value, names, vars_)
         elif isinstance(value, tuple):
             if len(value) < 2:
-                raise TermConversionError("only tuples of 2 or more items map to Prolog "
-                                          "(comma terms)")
+                raise TermConversionError(
+                    "only tuples of 2 or more items map to Prolog (comma terms)"
+                )
             rest = value[1] if len(value) == 2 else value[1:]
             self._put(t, Term(",", value[0], rest), names, vars_)
             ok = None
@@ -274,13 +285,16 @@ class Prolog:
             ok = lib.cons_functor_v(t, self._functor(value.name, n), argv)
         else:
             raise TermConversionError(
-                f"no Prolog term for a Python {type(value).__name__}: {value!r}")
+                f"no Prolog term for a Python {type(value).__name__}: {value!r}"
+            )
         if ok is not None and not ok:
-            raise BridgeError(f"Prolog could not build a term for {type(value).__name__} "
-                              f"(out of stack?)")
+            raise BridgeError(
+                f"Prolog could not build a term for {type(value).__name__} (out of stack?)"
+            )
 
-    def _put_list(self, t: int, items: list[Any], names: dict[str, int],
-                  vars_: dict[int, int]) -> int:
+    def _put_list(
+        self, t: int, items: list[Any], names: dict[str, int], vars_: dict[int, int]
+    ) -> int:
         lib = self._lib
         lib.put_nil(t)
         head = lib.new_term_ref()

@@ -1,4 +1,5 @@
 """Exceptions of the bridge: one root, Prolog errors kept as data."""
+
 from __future__ import annotations
 
 from typing import Any

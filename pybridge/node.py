@@ -6,6 +6,7 @@ control loop calls :meth:`Bridge.serve_pending` once per control step, in the Py
 thread, which answers the queued requests from the robot's numpy tables. So an agent sees a
 consistent snapshot between two learning steps and no thread fights for the GIL.
 """
+
 from __future__ import annotations
 
 import atexit
@@ -30,8 +31,7 @@ from dfrl.pybridge.serving import RegisteredRobot, RequestServer, ServiceHandler
 from dfrl.pybridge.tartarus_commands import TartarusCommands
 from dfrl.pybridge.terms import Atom, Term, Var, atom_or_self, robot_term
 
-__all__ = ["TableProvider", "Bridge", "BRIDGE_FILE", "CODEC_FILE", "SERVICE_FILE",
-           "SelfTestReport"]
+__all__ = ["TableProvider", "Bridge", "BRIDGE_FILE", "CODEC_FILE", "SERVICE_FILE", "SelfTestReport"]
 
 log = logging.getLogger(__name__)
 
@@ -43,7 +43,6 @@ CODEC_FILE: Path = Path(__file__).resolve().parent / "table_codec.pl"
 
 SERVICE_FILE: Path = Path(__file__).resolve().parent / "robot_service.pl"
 """The ``dfrl_robot(...)`` platform requests of a robot service (module ``robot_service``)."""
-
 
 
 class Bridge(TartarusCommands):
@@ -70,8 +69,13 @@ class Bridge(TartarusCommands):
     #: worker pools) no longer matches its threads, so it cannot run again in this process
     _platform_spent: ClassVar[bool] = False
 
-    def __init__(self, *, request_timeout: float = 30.0, codec: Codec | str | None = None,
-                 load_platform: bool = False) -> None:
+    def __init__(
+        self,
+        *,
+        request_timeout: float = 30.0,
+        codec: Codec | str | None = None,
+        load_platform: bool = False,
+    ) -> None:
         with Bridge._class_lock:
             if Bridge._active is not None:
                 raise NodeStateError("another Bridge is open in this process; close it first")
@@ -179,8 +183,10 @@ class Bridge(TartarusCommands):
         """
         self._check_open()
         if Bridge._platform_spent:
-            raise NodeStateError("the platform's threads were stopped by an earlier close() in "
-                                 "this process; it cannot run again here (use a new process)")
+            raise NodeStateError(
+                "the platform's threads were stopped by an earlier close() in "
+                "this process; it cannot run again here (use a new process)"
+            )
         if entry is None:
             from dfrl.platform_pl import ENTRY_POINT
 
@@ -256,9 +262,16 @@ class Bridge(TartarusCommands):
         return node
 
     # -- robots -------------------------------------------------------------------------------
-    def register_robot(self, robot_id: str | int, provider: Any, *,
-                       shape: Sequence[int] | None = None, algo: str | None = None,
-                       learner: str | None = None, algorithm: str | None = None) -> None:
+    def register_robot(
+        self,
+        robot_id: str | int,
+        provider: Any,
+        *,
+        shape: Sequence[int] | None = None,
+        algo: str | None = None,
+        learner: str | None = None,
+        algorithm: str | None = None,
+    ) -> None:
         """Register a robot whose table or parameters agents on this node may read and write.
 
         What the robot offers is fixed here and told to agents in its props:
@@ -309,8 +322,7 @@ class Bridge(TartarusCommands):
         if layout is not None:
             props.append(Term("layout", layout_term(layout)))
         self._must("bridge_register_robot", rid, props, module=_MODULE)
-        self._robots[rid] = RegisteredRobot(rid, provider, table_shape, algo, layout,
-                                            learner)
+        self._robots[rid] = RegisteredRobot(rid, provider, table_shape, algo, layout, learner)
 
     def unregister_robot(self, robot_id: str | int) -> None:
         """Forget a robot; later requests for it get ``existence_error(robot, Id)``."""
@@ -346,8 +358,9 @@ class Bridge(TartarusCommands):
             self.load_platform()
         self._must("use_module", Atom(str(SERVICE_FILE)))
 
-    def serve_service(self, handler: ServiceHandler, max_requests: int = 4,
-                      timeout: float = 0.0) -> int:
+    def serve_service(
+        self, handler: ServiceHandler, max_requests: int = 4, timeout: float = 0.0
+    ) -> int:
         """Answer up to ``max_requests`` queued ``dfrl_robot`` service requests with
         ``handler`` (request term -> reply term); return how many. Main thread only, like
         :meth:`serve_pending`; a positive ``timeout`` waits that long for the first one."""
@@ -385,15 +398,25 @@ class Bridge(TartarusCommands):
             self._nodes.clear()
             self._robots.clear()
             try:
-                if self._platform_loaded and self.prolog.call(
-                        "current_predicate", Term("/", Atom("platform_shutdown"), 0)) is not None:
-                    self.prolog.call("platform_shutdown")   # the platform's own clean stop
+                if (
+                    self._platform_loaded
+                    and self.prolog.call(
+                        "current_predicate", Term("/", Atom("platform_shutdown"), 0)
+                    )
+                    is not None
+                ):
+                    self.prolog.call("platform_shutdown")  # the platform's own clean stop
             except BridgeError:
                 log.warning("platform_shutdown/0 failed", exc_info=True)
             try:
                 self.prolog.call("bridge_shutdown", module=_MODULE)
-                sol = self.prolog.call("bridge_stop_threads", float(thread_timeout), Var("Left"),
-                                       Var("Aborted"), module=_MODULE)
+                sol = self.prolog.call(
+                    "bridge_stop_threads",
+                    float(thread_timeout),
+                    Var("Left"),
+                    Var("Aborted"),
+                    module=_MODULE,
+                )
                 remaining = list(sol["Left"]) if sol else []
                 aborted = sol["Aborted"] if sol else 0
                 if self._platform_loaded and aborted:
@@ -426,6 +449,9 @@ def _algo_keyword(algo: str | None, algorithm: str | None) -> str:
         return "qlearning" if algo is None else algo
     if algo is not None:
         raise TypeError("register_robot: give algo only (algorithm is its deprecated name)")
-    warnings.warn("register_robot(algorithm=...) is deprecated; use algo=...",
-                  DeprecationWarning, stacklevel=3)
+    warnings.warn(
+        "register_robot(algorithm=...) is deprecated; use algo=...",
+        DeprecationWarning,
+        stacklevel=3,
+    )
     return algorithm

@@ -7,6 +7,7 @@ Prints one JSON object per size::
 
     python -m dfrl.pybridge.params_bench --floats 10000 100000 --repeats 30
 """
+
 from __future__ import annotations
 
 import argparse
@@ -23,8 +24,10 @@ BENCH_FILE = Path(__file__).resolve().parent / "bridge_bench.pl"
 
 def _stats(values: list[float]) -> dict[str, float]:
     arr = np.asarray(values, dtype=np.float64)
-    return {"median_ms": round(float(np.median(arr)), 3),
-            "p90_ms": round(float(np.percentile(arr, 90)), 3)}
+    return {
+        "median_ms": round(float(np.median(arr)), 3),
+        "p90_ms": round(float(np.percentile(arr, 90)), 3),
+    }
 
 
 def time_pairs(node: Any, what: str, robot: str, warmup: int, repeats: int) -> dict[str, Any]:
@@ -33,9 +36,13 @@ def time_pairs(node: Any, what: str, robot: str, warmup: int, repeats: int) -> d
     from dfrl.pybridge import Atom, Term, Var
 
     goal = Term(f"bench_{what}_round_trips", Atom(robot), warmup, repeats, [])
-    node.call("thread_create", goal, Var(),
-              [Term("alias", Atom(f"bench_{what}")), Term("detached", Atom("true"))],
-              module="bridge_bench")
+    node.call(
+        "thread_create",
+        goal,
+        Var(),
+        [Term("alias", Atom(f"bench_{what}")), Term("detached", Atom("true"))],
+        module="bridge_bench",
+    )
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline:
         if node.serve_pending(timeout=0.005):
@@ -46,8 +53,12 @@ def time_pairs(node: Any, what: str, robot: str, warmup: int, repeats: int) -> d
             if result.name == "error":
                 raise RuntimeError(f"the benchmark agent failed: {result.args[0]!r}")
             totals, gets, sets = (list(x) for x in result.args)
-            return {"pair": _stats(totals), "get": _stats(gets), "set": _stats(sets),
-                    "pairs": len(totals)}
+            return {
+                "pair": _stats(totals),
+                "get": _stats(gets),
+                "set": _stats(sets),
+                "pairs": len(totals),
+            }
     raise RuntimeError("the benchmark agent did not finish in 300 s")
 
 
@@ -67,8 +78,9 @@ def bench(floats: list[int], repeats: int = 30, warmup: int = 3) -> list[dict[st
             before = params.params
             row: dict[str, Any] = {"floats": n, "codec": node.codec.value}
             row["params"] = time_pairs(node, "params", "p", warmup, repeats)
-            row["params"]["bit_exact"] = bool(np.array_equal(params.params.view(np.int64),
-                                                             before.view(np.int64)))
+            row["params"]["bit_exact"] = bool(
+                np.array_equal(params.params.view(np.int64), before.view(np.int64))
+            )
             row["table"] = time_pairs(node, "table", "t", warmup, repeats)
             rows.append(row)
             node.unregister_robot("p")

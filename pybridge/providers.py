@@ -17,6 +17,7 @@ they still serve a provider written before the verb pair (deprecated: a ``q_tabl
 property, ``set_q_table(table)`` or ``set_q_table_from(table, origin)``, and an optional
 ``table_read()`` note).
 """
+
 from __future__ import annotations
 
 import math
@@ -25,8 +26,17 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["TableProvider", "ParamsProvider", "StaticTable", "StaticParams", "Layout",
-           "check_layout", "layout_size", "read_table", "write_table"]
+__all__ = [
+    "TableProvider",
+    "ParamsProvider",
+    "StaticTable",
+    "StaticParams",
+    "Layout",
+    "check_layout",
+    "layout_size",
+    "read_table",
+    "write_table",
+]
 
 #: A parameter layout: (name, shape) per block of the flat vector, in order; the vector is
 #: the blocks' row-major values one after the other.
@@ -140,8 +150,9 @@ def check_layout(layout: Sequence[tuple[str, Sequence[int]]]) -> Layout:
         if not (isinstance(name, str) and name):
             raise ValueError(f"a layout name is a non-empty str, got {name!r:.80}")
         dims = tuple(shape) if isinstance(shape, (tuple, list)) else None
-        if dims is None or not all(isinstance(d, (int, np.integer)) and not isinstance(d, bool)
-                                   and d >= 0 for d in dims):
+        if dims is None or not all(
+            isinstance(d, (int, np.integer)) and not isinstance(d, bool) and d >= 0 for d in dims
+        ):
             raise ValueError(f"the shape of {name!r} is a tuple of integers >= 0, got {shape!r}")
         out.append((name, tuple(int(d) for d in dims)))
     names = [n for n, _ in out]
@@ -239,8 +250,13 @@ class StaticParams:
         How many times :meth:`set_params` replaced the vector.
     """
 
-    def __init__(self, layout: Sequence[tuple[str, Sequence[int]]], seed: int = 0,
-                 samples: int = 0, learner_kind: str = "function") -> None:
+    def __init__(
+        self,
+        layout: Sequence[tuple[str, Sequence[int]]],
+        seed: int = 0,
+        samples: int = 0,
+        learner_kind: str = "function",
+    ) -> None:
         self._layout = check_layout(layout)
         if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 0:
             raise ValueError(f"samples is an integer >= 0, got {samples!r}")
@@ -281,23 +297,24 @@ class StaticParams:
         """
         arr = np.asarray(vec, dtype=np.float64)
         if arr.shape != self._vec.shape or not np.isfinite(arr).all():
-            raise ValueError(f"parameters of shape {self._vec.shape} with finite entries "
-                             f"expected, got shape {arr.shape}")
+            raise ValueError(
+                f"parameters of shape {self._vec.shape} with finite entries "
+                f"expected, got shape {arr.shape}"
+            )
         self._vec = arr.copy()
         self.sets += 1
 
     def __repr__(self) -> str:
-        return (f"<StaticParams size={self._vec.size} samples={self._samples} "
-                f"sets={self.sets}>")
+        return f"<StaticParams size={self._vec.size} samples={self._samples} sets={self.sets}>"
 
 
 #: what a provider needs to offer its parameters (ParamsProvider, without learner_kind)
 _PARAMS_ATTRS = ("params", "param_layout", "set_params", "samples")
 
 
-def provider_offer(provider: Any, shape: Sequence[int] | None = None,
-                   learner: str | None = None
-                   ) -> tuple[str, tuple[int, int] | None, Layout | None]:
+def provider_offer(
+    provider: Any, shape: Sequence[int] | None = None, learner: str | None = None
+) -> tuple[str, tuple[int, int] | None, Layout | None]:
     """What ``provider`` offers agents: ``(learner, table_shape, layout)``, checked.
 
     ``learner`` defaults to the provider's ``learner_kind``, else ``"tabular"``. A tabular
@@ -316,7 +333,7 @@ def provider_offer(provider: Any, shape: Sequence[int] | None = None,
     ValueError
         A bad shape, layout or learner kind.
     """
-    names = dir(provider)                  # (hasattr would read the properties)
+    names = dir(provider)  # (hasattr would read the properties)
     if learner is None:
         learner = str(provider.learner_kind) if "learner_kind" in names else "tabular"
     if learner not in ("tabular", "function"):
@@ -331,16 +348,17 @@ def provider_offer(provider: Any, shape: Sequence[int] | None = None,
         for attr in _PARAMS_ATTRS:
             if attr not in names:
                 raise TypeError(f"provider of a function learner has no {attr!r}")
-        if shape is not None:            # a table view of its Q-function (robots/grid_view.py)
+        if shape is not None:  # a table view of its Q-function (robots/grid_view.py)
             for attr in _table_attrs(names):
                 if attr not in names:
-                    raise ValueError(f"a function learner registered with a table shape offers "
-                                     f"a table view (q_table, visits, set_q_table); no {attr!r}")
+                    raise ValueError(
+                        f"a function learner registered with a table shape offers "
+                        f"a table view (q_table, visits, set_q_table); no {attr!r}"
+                    )
             table_shape = _table_shape(provider, shape)
     offers_params = all(a in names for a in _PARAMS_ATTRS)
     layout = check_layout(provider.param_layout) if offers_params else None
     return learner, table_shape, layout
-
 
 
 def _table_attrs(names: list[str]) -> tuple[str, ...]:
@@ -351,7 +369,7 @@ def _table_attrs(names: list[str]) -> tuple[str, ...]:
 
 
 def _table_shape(provider: Any, shape: Sequence[int] | None) -> tuple[int, int]:
-    if shape is None:                       # q_table: a plain getter, where it has one
+    if shape is None:  # q_table: a plain getter, where it has one
         table = provider.q_table if "q_table" in dir(provider) else provider.read_table()
         dims = tuple(np.shape(table))
     else:

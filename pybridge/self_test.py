@@ -6,6 +6,7 @@ byte for byte first: Prolog's encoder and Python's must make the same bytes, and
 are Python-made bytes given to Prolog to decode (``fast_term_serialized/2`` aborts the
 process on malformed input).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -34,14 +35,28 @@ class SelfTestReport:
 def self_test_samples() -> list[np.ndarray]:
     """Value lists whose fts headers need varints of 1, 2 and 3 bytes, and awkward floats."""
     rng = np.random.default_rng(20240611)
-    special = np.array([0.0, -0.0, 1.0, -2.5, 0.1, 1 / 3, 5e-324, 2.2250738585072014e-308,
-                        1.7976931348623157e308, -1e-300, 1e22, 123456.789e-12])
+    special = np.array(
+        [
+            0.0,
+            -0.0,
+            1.0,
+            -2.5,
+            0.1,
+            1 / 3,
+            5e-324,
+            2.2250738585072014e-308,
+            1.7976931348623157e308,
+            -1e-300,
+            1e22,
+            123456.789e-12,
+        ]
+    )
     return [
         np.empty(0),
         np.array([1.0]),
-        special,                                        # varints of 1 byte
-        rng.standard_normal(13) * 1e3,                  # 10*13+1 = 131: 2-byte varint
-        rng.uniform(-1e6, 1e6, 1700),                   # 17001: 3-byte varint
+        special,  # varints of 1 byte
+        rng.standard_normal(13) * 1e3,  # 10*13+1 = 131: 2-byte varint
+        rng.uniform(-1e6, 1e6, 1700),  # 17001: 3-byte varint
     ]
 
 

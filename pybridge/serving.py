@@ -16,6 +16,7 @@ with the names of before); ``origin`` holds the write's origin (the agent's opti
 :meth:`RequestServer.serve_service` serves the host's own service queue the same way, with a
 handler the host gives (``dfrl robot``'s ``dfrl_robot(...)`` requests, robot_service.pl).
 """
+
 from __future__ import annotations
 
 import logging
@@ -29,12 +30,26 @@ from dfrl.pybridge import codec as _codec
 from dfrl.pybridge.codec import Codec
 from dfrl.pybridge.engine import Prolog
 from dfrl.pybridge.errors import BridgeError, CodecError
-from dfrl.pybridge.providers import (Layout, ParamsProvider, TableProvider, layout_size,
-                                      read_table, write_table)
+from dfrl.pybridge.providers import (
+    Layout,
+    ParamsProvider,
+    TableProvider,
+    layout_size,
+    read_table,
+    write_table,
+)
 from dfrl.pybridge.terms import Atom, Term, Var
 
-__all__ = ["RequestError", "RegisteredRobot", "RequestServer", "ServiceHandler", "validate_write",
-           "validate_params", "layout_term", "write_origin"]
+__all__ = [
+    "RequestError",
+    "RegisteredRobot",
+    "RequestServer",
+    "ServiceHandler",
+    "validate_write",
+    "validate_params",
+    "layout_term",
+    "write_origin",
+]
 
 #: Answers one service request: takes the request term, returns the reply term
 #: (``ok(...)``, ``ok(json(Text))`` or ``error(Formal)``); may raise :class:`RequestError`.
@@ -112,8 +127,12 @@ def layout_term(layout: Layout) -> list[Term]:
 
 def _decode_data(data: Any) -> np.ndarray:
     """The float64 vector in ``fts(String)`` / ``text(String)``."""
-    if not (isinstance(data, Term) and data.arity == 1 and isinstance(data.args[0], str)
-            and data.name in (Codec.FTS.value, Codec.TEXT.value)):
+    if not (
+        isinstance(data, Term)
+        and data.arity == 1
+        and isinstance(data.args[0], str)
+        and data.name in (Codec.FTS.value, Codec.TEXT.value)
+    ):
         raise BridgeError(f"malformed value data {data!r:.80}")
     try:
         return _codec.decode(Codec(data.name), data.args[0].encode("latin-1"))
@@ -222,15 +241,17 @@ class RequestServer:
         :meth:`dfrl.pybridge.node.Bridge.serve_pending`)."""
         return self._serve_queue("bridge_next_request", self.serve, max_requests, timeout)
 
-    def serve_service(self, handler: ServiceHandler, max_requests: int = 4,
-                      timeout: float = 0.0) -> int:
+    def serve_service(
+        self, handler: ServiceHandler, max_requests: int = 4, timeout: float = 0.0
+    ) -> int:
         """Answer up to ``max_requests`` queued service requests with ``handler``; return
         how many. A handler's :class:`RequestError` becomes ``error(Formal)``, any other
         exception ``error(python_error(Class, Message))``."""
         return self._serve_queue("bridge_next_service_request", handler, max_requests, timeout)
 
-    def _serve_queue(self, next_pred: str, handler: ServiceHandler, max_requests: int,
-                     timeout: float) -> int:
+    def _serve_queue(
+        self, next_pred: str, handler: ServiceHandler, max_requests: int, timeout: float
+    ) -> int:
         served = 0
         wait = float(timeout)
         while served < max_requests:
@@ -272,8 +293,9 @@ class RequestServer:
         if op.name == "read_table_and_visits" and op.arity == 1:
             provider = self._robot(op.args[0])[0].table_provider
             visits = provider.visits
-            return Term("tables", self._table_reply(read_table(provider)),
-                        self._table_reply(visits))
+            return Term(
+                "tables", self._table_reply(read_table(provider)), self._table_reply(visits)
+            )
         if op.name == "write_table" and op.arity == 4:
             rid, shape, data, origin = op.args
             robot, robot_shape = self._robot(rid)
@@ -307,8 +329,10 @@ class RequestServer:
         vec = np.asarray(provider.params)
         n = layout_size(layout)
         if vec.shape != (n,):
-            raise BridgeError(f"robot {robot.robot_id}'s parameters have shape {vec.shape}, "
-                              f"its layout says ({n},)")
+            raise BridgeError(
+                f"robot {robot.robot_id}'s parameters have shape {vec.shape}, "
+                f"its layout says ({n},)"
+            )
         samples = provider.samples
         if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 0:
             raise BridgeError(f"robot {robot.robot_id}'s samples is {samples!r}, not an int >= 0")

@@ -3,6 +3,7 @@
 Links are ``(Ip, Port)`` tuples; names and handlers given as ``str`` are atoms. The class is
 a mixin: it needs the node's ``_must`` (call once, raise on failure) and ``_check_open``.
 """
+
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
@@ -28,34 +29,40 @@ class TartarusCommands:
         ip, port = link
         return (atom_or_self(ip), int(port))
 
-    def create_mobile_agent(self, name: str | None, link: Sequence[Any], handler: str,
-                            tokens: Iterable[int] = ()) -> Atom:
+    def create_mobile_agent(
+        self, name: str | None, link: Sequence[Any], handler: str, tokens: Iterable[int] = ()
+    ) -> Atom:
         """``create_mobile_agent(?Name, (Ip,Port), Handler, Tokens)``; returns the agent name."""
         self._check_open()
         name_arg: Any = Var("Name") if name is None else Atom(name)
-        sol = self._must("create_mobile_agent", name_arg, self._link(link), Atom(handler),
-                         list(tokens))
+        sol = self._must(
+            "create_mobile_agent", name_arg, self._link(link), Atom(handler), list(tokens)
+        )
         return Atom(sol["Name"]) if name is None else Atom(name)
 
-    def create_static_agent(self, name: str | None, link: Sequence[Any], handler: str,
-                            tokens: Iterable[int] = ()) -> Atom:
+    def create_static_agent(
+        self, name: str | None, link: Sequence[Any], handler: str, tokens: Iterable[int] = ()
+    ) -> Atom:
         """``create_static_agent(?Name, (Ip,Port), Handler, Tokens)``: an agent that never moves."""
         self._check_open()
         name_arg: Any = Var("Name") if name is None else Atom(name)
-        sol = self._must("create_static_agent", name_arg, self._link(link), Atom(handler),
-                         list(tokens))
+        sol = self._must(
+            "create_static_agent", name_arg, self._link(link), Atom(handler), list(tokens)
+        )
         return Atom(sol["Name"]) if name is None else Atom(name)
 
-    def execute_agent(self, name: str, link: Sequence[Any], handler: str,
-                      event: Any = None) -> None:
+    def execute_agent(
+        self, name: str, link: Sequence[Any], handler: str, event: Any = None
+    ) -> None:
         """``execute_agent(Name, (Ip,Port), Handler)``, or ``execute_agent/4`` with a start
         ``event`` other than ``main``."""
         self._check_open()
         if event is None:
             self._must("execute_agent", Atom(name), self._link(link), Atom(handler))
         else:
-            self._must("execute_agent", Atom(name), self._link(link), Atom(handler),
-                       atom_or_self(event))
+            self._must(
+                "execute_agent", Atom(name), self._link(link), Atom(handler), atom_or_self(event)
+            )
 
     def move_agent(self, name: str, link: Sequence[Any]) -> None:
         """``move_agent(Name, (Ip,Port))``."""

@@ -20,6 +20,7 @@ Python                      Prolog
 
 Nothing here touches Prolog: these are plain values, built and compared in Python.
 """
+
 from __future__ import annotations
 
 import itertools

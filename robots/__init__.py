@@ -8,11 +8,12 @@ Public API for other layers: :class:`dfrl.robots.training.Trainer` / :class:`Tra
 (steppable training, live Q-table or parameter vector), :data:`dfrl.robots.learners.LEARNERS`,
 :func:`dfrl.robots.tables.save_table` / :func:`dfrl.robots.tables.load_table`.
 """
+
 from __future__ import annotations
 
 from dfrl.robots.registration import ENV_ID, register_envs
 
-register_envs()   # imports neither pybullet nor the environment (modules that use pybullet
-                  # import it through dfrl.arenas.pybullet_quiet, without its banner)
+register_envs()  # imports neither pybullet nor the environment (modules that use pybullet
+# import it through dfrl.arenas.pybullet_quiet, without its banner)
 
 __all__ = ["ENV_ID"]

@@ -20,6 +20,7 @@ learns from (``watchers``), and ``after_distil`` (run after its arrays were move
 New learners subclass :class:`FunctionLearner` and register in
 :data:`dfrl.robots.learners.LEARNERS`.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -69,12 +70,14 @@ def unflatten(vec: np.ndarray, layout: Layout) -> list[np.ndarray]:
     """
     vec = np.asarray(vec, dtype=np.float64)
     if vec.ndim != 1 or vec.shape[0] != layout_size(layout):
-        raise ValueError(f"parameter vector of shape {vec.shape} does not fit the layout "
-                         f"({layout_size(layout)} floats: {layout})")
+        raise ValueError(
+            f"parameter vector of shape {vec.shape} does not fit the layout "
+            f"({layout_size(layout)} floats: {layout})"
+        )
     out, start = [], 0
     for _, shape in layout:
         n = int(np.prod(shape, dtype=np.int64))
-        out.append(vec[start:start + n].reshape(shape).copy())
+        out.append(vec[start : start + n].reshape(shape).copy())
         start += n
     return out
 
@@ -90,11 +93,13 @@ def validate_params(vec: np.ndarray, layout: Layout) -> np.ndarray:
     arr = np.array(vec, dtype=np.float64, copy=True)
     size = layout_size(layout)
     if arr.ndim != 1 or arr.shape[0] != size:
-        raise ValueError(f"parameter vector of shape {arr.shape} does not fit the layout "
-                         f"({size} floats)")
+        raise ValueError(
+            f"parameter vector of shape {arr.shape} does not fit the layout ({size} floats)"
+        )
     if not np.all(np.isfinite(arr)):
-        raise ValueError(f"parameter vector has a non-finite entry at index "
-                         f"{int(np.argmax(~np.isfinite(arr)))}")
+        raise ValueError(
+            f"parameter vector has a non-finite entry at index {int(np.argmax(~np.isfinite(arr)))}"
+        )
     return arr
 
 
@@ -130,8 +135,9 @@ class FunctionLearner(ABC):
     #: (the learner's own hyper-parameters), or None.
     config_field: ClassVar[str | None] = None
 
-    def __init__(self, obs_dim: int, n_actions: int, params: "LearnerParams",
-                 rng: np.random.Generator) -> None:
+    def __init__(
+        self, obs_dim: int, n_actions: int, params: "LearnerParams", rng: np.random.Generator
+    ) -> None:
         if obs_dim < 1 or n_actions < 1:
             raise ValueError("obs_dim and n_actions must be positive")
         self.obs_dim = obs_dim
@@ -163,10 +169,16 @@ class FunctionLearner(ABC):
         """What the learner is and its settings, for results and summaries (a plug-in may add
         its own hyper-parameters: extend this dict)."""
         size = int(sum(int(np.prod(shape)) for _, shape in self.param_layout))
-        return {"name": self.name, "kind": self.kind, "gamma": self.params.gamma,
-                "epsilon": self.params.epsilon.describe(), "parameters": size,
-                "layout": [[n, list(shape)] for n, shape in self.param_layout],
-                "grid": self.distillable, **self._own_settings()}
+        return {
+            "name": self.name,
+            "kind": self.kind,
+            "gamma": self.params.gamma,
+            "epsilon": self.params.epsilon.describe(),
+            "parameters": size,
+            "layout": [[n, list(shape)] for n, shape in self.param_layout],
+            "grid": self.distillable,
+            **self._own_settings(),
+        }
 
     def _own_settings(self) -> dict[str, Any]:
         own = getattr(self, "config", None)
@@ -179,8 +191,9 @@ class FunctionLearner(ABC):
         return greedy_action(self.q_values(obs))
 
     @abstractmethod
-    def learn(self, obs: np.ndarray, action: int, reward: float, next_obs: np.ndarray,
-              terminal: bool) -> int:
+    def learn(
+        self, obs: np.ndarray, action: int, reward: float, next_obs: np.ndarray, terminal: bool
+    ) -> int:
         """Learn from one transition and return the next action (for ``next_obs``); tells
         :attr:`watchers` first (:meth:`_observed`)."""
 
@@ -198,8 +211,10 @@ class FunctionLearner(ABC):
         NotImplementedError
             The learner does not offer its model.
         """
-        raise NotImplementedError(f"learner {self.name!r} has no q_model(): it cannot join a "
-                                  "grid federation (robots/README.md, 'Bring your own learner')")
+        raise NotImplementedError(
+            f"learner {self.name!r} has no q_model(): it cannot join a "
+            "grid federation (robots/README.md, 'Bring your own learner')"
+        )
 
     @property
     def distillable(self) -> bool:

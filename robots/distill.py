@@ -19,6 +19,7 @@ tile and 33 of them sum to a value), stop early once the root mean squared resid
 fit an arbitrary grid table (its values are a sum of one function per sensor): its residual
 stops at the least-squares floor (measured in robots/README.md).
 """
+
 from __future__ import annotations
 
 import time
@@ -93,8 +94,14 @@ class DistilReport:
     seconds: float
 
 
-def distil_loss(model: "QModel", arrays: list[Any], x: np.ndarray, targets: np.ndarray,
-                weights: np.ndarray, xp: Any = np) -> Any:
+def distil_loss(
+    model: "QModel",
+    arrays: list[Any],
+    x: np.ndarray,
+    targets: np.ndarray,
+    weights: np.ndarray,
+    xp: Any = np,
+) -> Any:
     """The weighted mean squared error of the module doc.
 
     Parameters
@@ -114,13 +121,19 @@ def distil_loss(model: "QModel", arrays: list[Any], x: np.ndarray, targets: np.n
     return xp.sum(weights * per_point) / float(np.sum(weights))
 
 
-def _residual(model: "QModel", arrays: list[np.ndarray], x: np.ndarray,
-              targets: np.ndarray) -> np.ndarray:
+def _residual(
+    model: "QModel", arrays: list[np.ndarray], x: np.ndarray, targets: np.ndarray
+) -> np.ndarray:
     return np.asarray(model(arrays, x, np), dtype=np.float64) - targets
 
 
-def distil(learner: "FunctionLearner", x: np.ndarray, targets: np.ndarray,
-           weights: np.ndarray | None = None, config: DistilConfig | None = None) -> DistilReport:
+def distil(
+    learner: "FunctionLearner",
+    x: np.ndarray,
+    targets: np.ndarray,
+    weights: np.ndarray | None = None,
+    config: DistilConfig | None = None,
+) -> DistilReport:
     """Move ``learner``'s values at ``x`` towards ``targets`` in place (see the module doc),
     then call its ``after_distil``.
 
@@ -171,5 +184,10 @@ def distil(learner: "FunctionLearner", x: np.ndarray, targets: np.ndarray,
         res = _residual(model, arrays, x, t)
         rms = float(np.sqrt(np.mean(res * res)))
     learner.after_distil()
-    return DistilReport(steps=steps, rms_before=before, rms_after=rms,
-                        max_after=float(np.max(np.abs(res))), seconds=time.perf_counter() - t0)
+    return DistilReport(
+        steps=steps,
+        rms_before=before,
+        rms_after=rms,
+        max_after=float(np.max(np.abs(res))),
+        seconds=time.perf_counter() - t0,
+    )

@@ -23,6 +23,7 @@ Parameters for the federated layer (:attr:`DQN.param_layout`): ``w1 (8, 64), b1 
 w2 (64, 64), b2 (64,), w3 (64, A), b3 (A,)``; ``set_params`` sets the online and the target
 network and keeps the Adam moments and the replay buffer.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -30,8 +31,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from dfrl.robots.approx import (FunctionLearner, Layout, QModel, flatten, unflatten,
-                               validate_params)
+from dfrl.robots.approx import FunctionLearner, Layout, QModel, flatten, unflatten, validate_params
 
 if TYPE_CHECKING:
     from dfrl.robots.td import LearnerParams
@@ -86,8 +86,9 @@ class DQNConfig:
 
 
 # -- pure maths ----------------------------------------------------------------------------
-def dqn_targets(rewards: np.ndarray, next_q: np.ndarray, terminals: np.ndarray,
-                gamma: float) -> np.ndarray:
+def dqn_targets(
+    rewards: np.ndarray, next_q: np.ndarray, terminals: np.ndarray, gamma: float
+) -> np.ndarray:
     """Q-learning targets of a minibatch: ``r + gamma * max_a' next_q`` (``r`` if terminal).
 
     Parameters
@@ -171,14 +172,15 @@ class Adam:
 
     @classmethod
     def for_arrays(cls, arrays: list[np.ndarray], lr: float) -> "Adam":
-        return cls(lr=lr, m=[np.zeros_like(a) for a in arrays],
-                   v=[np.zeros_like(a) for a in arrays])
+        return cls(
+            lr=lr, m=[np.zeros_like(a) for a in arrays], v=[np.zeros_like(a) for a in arrays]
+        )
 
     def step(self, arrays: list[np.ndarray], grads: list[np.ndarray]) -> None:
         """Update ``arrays`` in place from their gradients."""
         self.step_count += 1
-        c1 = 1.0 - self.beta1 ** self.step_count
-        c2 = 1.0 - self.beta2 ** self.step_count
+        c1 = 1.0 - self.beta1**self.step_count
+        c2 = 1.0 - self.beta2**self.step_count
         for a, g, m, v in zip(arrays, grads, self.m, self.v):
             m *= self.beta1
             m += (1.0 - self.beta1) * g
@@ -205,14 +207,15 @@ class ReplayBuffer:
         self.actions = np.zeros(capacity, dtype=np.int64)
         self.rewards = np.zeros(capacity, dtype=np.float64)
         self.terminals = np.zeros(capacity, dtype=np.bool_)
-        self.size = 0      #: transitions held, at most ``capacity``
-        self.added = 0     #: transitions ever added; the next goes to ``added % capacity``
+        self.size = 0  #: transitions held, at most ``capacity``
+        self.added = 0  #: transitions ever added; the next goes to ``added % capacity``
 
     def __len__(self) -> int:
         return self.size
 
-    def add(self, obs: np.ndarray, action: int, reward: float, next_obs: np.ndarray,
-            terminal: bool) -> None:
+    def add(
+        self, obs: np.ndarray, action: int, reward: float, next_obs: np.ndarray, terminal: bool
+    ) -> None:
         """Store a transition, overwriting the oldest when full."""
         i = self.added % self.capacity
         self.obs[i], self.actions[i], self.rewards[i] = obs, action, reward
@@ -236,8 +239,13 @@ class ReplayBuffer:
         if self.size == 0:
             raise ValueError("cannot sample from an empty replay buffer")
         idx = rng.integers(0, self.size, size=batch_size)
-        return (self.obs[idx], self.actions[idx], self.rewards[idx], self.next_obs[idx],
-                self.terminals[idx])
+        return (
+            self.obs[idx],
+            self.actions[idx],
+            self.rewards[idx],
+            self.next_obs[idx],
+            self.terminals[idx],
+        )
 
 
 def _loss_gradient(huber_delta: float) -> Callable[..., list[np.ndarray]]:
@@ -278,8 +286,14 @@ class DQN(FunctionLearner):
     name = "dqn"
     config_field = "dqn"
 
-    def __init__(self, obs_dim: int, n_actions: int, params: "LearnerParams",
-                 rng: np.random.Generator, config: DQNConfig | None = None) -> None:
+    def __init__(
+        self,
+        obs_dim: int,
+        n_actions: int,
+        params: "LearnerParams",
+        rng: np.random.Generator,
+        config: DQNConfig | None = None,
+    ) -> None:
         super().__init__(obs_dim, n_actions, params, rng)
         self.config = config or DQNConfig()
         self._layout = mlp_layout(obs_dim, self.config.hidden, n_actions)
@@ -294,8 +308,9 @@ class DQN(FunctionLearner):
         x = np.asarray(obs, dtype=np.float64).reshape(1, -1)
         return mlp_forward(self.online, x)[0]
 
-    def learn(self, obs: np.ndarray, action: int, reward: float, next_obs: np.ndarray,
-              terminal: bool) -> int:
+    def learn(
+        self, obs: np.ndarray, action: int, reward: float, next_obs: np.ndarray, terminal: bool
+    ) -> int:
         self._observed(obs, action)
         self.buffer.add(obs, action, reward, next_obs, terminal)
         self.t += 1

@@ -8,6 +8,7 @@ Termination: a collision (contact with a wall or a block) ends the episode when
 free pose. Truncation: the robot has moved less than ``stuck_distance`` during the last
 ``stuck_steps`` control steps (e.g. wedged, or spinning on the spot).
 """
+
 from __future__ import annotations
 
 import math
@@ -181,8 +182,9 @@ class EPuckEnv(gym.Env):
         self._v_max = rc.max_linear_speed
         self._clearance = rc.body_radius + 0.03
         self.action_space = spaces.Discrete(len(self._actions))
-        self.observation_space = spaces.Box(0.0, 1.0, shape=(self.robot.n_sensors,),
-                                            dtype=np.float32)
+        self.observation_space = spaces.Box(
+            0.0, 1.0, shape=(self.robot.n_sensors,), dtype=np.float32
+        )
         self._pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._trail: deque[tuple[float, float]] = deque(maxlen=max(1, config.stuck_steps + 1))
         self._distances = np.full(self.robot.n_sensors, rc.sensor_range)
@@ -236,14 +238,20 @@ class EPuckEnv(gym.Env):
         self._pose = pose
         heading = yaw0 + 0.5 * math.remainder(pose[2] - yaw0, 2 * math.pi)
         progress = ((pose[0] - x0) * math.cos(heading) + (pose[1] - y0) * math.sin(heading)) / (
-            self._v_max * self.config.sim.control_dt)
+            self._v_max * self.config.sim.control_dt
+        )
         collision = self.world.in_collision()
         obs = self._observe()
         stuck = self._stuck(pose)
         reward = self._reward(obs, progress, collision)
         terminated = self._terminated(collision)
-        return (obs, reward, terminated, stuck and not terminated,
-                self._info(collision, stuck, progress))
+        return (
+            obs,
+            reward,
+            terminated,
+            stuck and not terminated,
+            self._info(collision, stuck, progress),
+        )
 
     def render(self) -> np.ndarray | None:
         """Top view as an RGB array, shape (480, 480, 3), uint8 (``rgb_array`` mode)."""

@@ -9,6 +9,7 @@ expressed in the body frame.
 Frames: the base frame has ``x`` forward, ``y`` to the left, ``z`` up, origin on the wheel axle.
 Every pybullet call passes ``physicsClientId``.
 """
+
 from __future__ import annotations
 
 import math
@@ -74,9 +75,19 @@ class EPuckConfig:
     sensor_noise_std: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("body_radius", "body_height", "body_mass", "wheel_radius", "wheel_width",
-                     "wheel_mass", "axle_length", "max_wheel_speed", "max_wheel_torque",
-                     "sensor_range", "sensor_height"):
+        for name in (
+            "body_radius",
+            "body_height",
+            "body_mass",
+            "wheel_radius",
+            "wheel_width",
+            "wheel_mass",
+            "axle_length",
+            "max_wheel_speed",
+            "max_wheel_torque",
+            "sensor_range",
+            "sensor_height",
+        ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"EPuckConfig.{name} must be a positive number, got {value}")
@@ -120,7 +131,9 @@ class EPuck:
     RIGHT: int = 1
 
     def __init__(
-        self, client: int, config: EPuckConfig | None = None,
+        self,
+        client: int,
+        config: EPuckConfig | None = None,
         pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
     ) -> None:
         self.client = client
@@ -160,23 +173,35 @@ class EPuck:
             shapeTypes=[p.GEOM_CYLINDER, p.GEOM_SPHERE, p.GEOM_SPHERE],
             radii=[c.body_radius, caster_r, caster_r],
             lengths=[c.body_height, 0.0, 0.0],
-            collisionFramePositions=[(0, 0, body_z), (caster_x, 0, caster_z),
-                                     (-caster_x, 0, caster_z)],
+            collisionFramePositions=[
+                (0, 0, body_z),
+                (caster_x, 0, caster_z),
+                (-caster_x, 0, caster_z),
+            ],
             physicsClientId=cid,
         )
         base_vis = p.createVisualShape(
-            p.GEOM_CYLINDER, radius=c.body_radius, length=c.body_height,
-            visualFramePosition=(0, 0, body_z), rgbaColor=(0.25, 0.55, 0.30, 1.0),
+            p.GEOM_CYLINDER,
+            radius=c.body_radius,
+            length=c.body_height,
+            visualFramePosition=(0, 0, body_z),
+            rgbaColor=(0.25, 0.55, 0.30, 1.0),
             physicsClientId=cid,
         )
         wheel_orn = p.getQuaternionFromEuler((math.pi / 2, 0.0, 0.0))
         wheel_col = p.createCollisionShape(
-            p.GEOM_CYLINDER, radius=r_wheel, height=c.wheel_width,
-            collisionFrameOrientation=wheel_orn, physicsClientId=cid,
+            p.GEOM_CYLINDER,
+            radius=r_wheel,
+            height=c.wheel_width,
+            collisionFrameOrientation=wheel_orn,
+            physicsClientId=cid,
         )
         wheel_vis = p.createVisualShape(
-            p.GEOM_CYLINDER, radius=r_wheel, length=c.wheel_width,
-            visualFrameOrientation=wheel_orn, rgbaColor=(0.1, 0.1, 0.1, 1.0),
+            p.GEOM_CYLINDER,
+            radius=r_wheel,
+            length=c.wheel_width,
+            visualFrameOrientation=wheel_orn,
+            rgbaColor=(0.1, 0.1, 0.1, 1.0),
             physicsClientId=cid,
         )
         half_axle = c.axle_length / 2
@@ -199,18 +224,33 @@ class EPuck:
             physicsClientId=cid,
         )
         # Frictionless body and casters (they slide), grippy tyres.
-        p.changeDynamics(body, -1, lateralFriction=0.0, rollingFriction=0.0,
-                         spinningFriction=0.0, physicsClientId=cid)
+        p.changeDynamics(
+            body,
+            -1,
+            lateralFriction=0.0,
+            rollingFriction=0.0,
+            spinningFriction=0.0,
+            physicsClientId=cid,
+        )
         for link in (self.LEFT, self.RIGHT):
-            p.changeDynamics(body, link, lateralFriction=c.wheel_friction, rollingFriction=0.0,
-                             spinningFriction=0.0, jointDamping=0.0, physicsClientId=cid)
+            p.changeDynamics(
+                body,
+                link,
+                lateralFriction=c.wheel_friction,
+                rollingFriction=0.0,
+                spinningFriction=0.0,
+                jointDamping=0.0,
+                physicsClientId=cid,
+            )
         return body
 
     def reset_pose(self, x: float, y: float, yaw: float) -> None:
         """Place the robot at rest at ``(x, y, yaw)`` with still wheels."""
         cid = self.client
         p.resetBasePositionAndOrientation(
-            self.body_id, (x, y, self.config.wheel_radius), yaw_to_quaternion(yaw),
+            self.body_id,
+            (x, y, self.config.wheel_radius),
+            yaw_to_quaternion(yaw),
             physicsClientId=cid,
         )
         p.resetBaseVelocity(self.body_id, (0, 0, 0), (0, 0, 0), physicsClientId=cid)
@@ -228,9 +268,12 @@ class EPuck:
         """
         vmax = self.config.max_wheel_speed
         p.setJointMotorControlArray(
-            self.body_id, self._wheels, p.VELOCITY_CONTROL,
+            self.body_id,
+            self._wheels,
+            p.VELOCITY_CONTROL,
             targetVelocities=[min(max(left, -vmax), vmax), min(max(right, -vmax), vmax)],
-            forces=self._forces, physicsClientId=self.client,
+            forces=self._forces,
+            physicsClientId=self.client,
         )
 
     def sense(self, rng: np.random.Generator | None = None) -> np.ndarray:
@@ -248,8 +291,12 @@ class EPuck:
             ``sensor_range`` when nothing is in range.
         """
         hits = p.rayTestBatch(
-            self._ray_from, self._ray_to, parentObjectUniqueId=self.body_id,
-            parentLinkIndex=-1, numThreads=1, physicsClientId=self.client,
+            self._ray_from,
+            self._ray_to,
+            parentObjectUniqueId=self.body_id,
+            parentLinkIndex=-1,
+            numThreads=1,
+            physicsClientId=self.client,
         )
         rng_ = self.config.sensor_range
         frac = np.fromiter((h[2] for h in hits), dtype=np.float64, count=len(hits))

@@ -15,6 +15,7 @@ progress and coverage are near 0; that is why the measure has three numbers. Pol
 greedy policy of a Q-table or of a function learner's parameter vector (``linear``, ``dqn``:
 :func:`greedy_policy`), uniform random actions, or any callable ``obs -> action``.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -76,8 +77,9 @@ class EvalResult:
     episodes: int = 1
 
 
-def greedy_policy(config: TrainerConfig, params: np.ndarray, obs_dim: int = 8,
-                  n_actions: int | None = None) -> Policy:
+def greedy_policy(
+    config: TrainerConfig, params: np.ndarray, obs_dim: int = 8, n_actions: int | None = None
+) -> Policy:
     """The greedy policy of a function learner (``config.algo``) with parameters ``params``.
 
     Parameters
@@ -101,7 +103,7 @@ def greedy_policy(config: TrainerConfig, params: np.ndarray, obs_dim: int = 8,
     learner = build_learner(config, 1, obs_dim, n, np.random.default_rng(0))
     learner.set_params(params)
 
-    assert isinstance(learner, FunctionLearner), learner       # tabular ones refused above
+    assert isinstance(learner, FunctionLearner), learner  # tabular ones refused above
 
     def greedy(obs: np.ndarray) -> int:
         return learner.greedy_action(np.asarray(obs, dtype=np.float64))
@@ -193,11 +195,15 @@ def evaluate_policy(
             fn = greedy_policy(config, params, int(env.observation_space.shape[0]), n_actions)
         elif kind is PolicyKind.GREEDY:
             if q_table is None:
-                raise ValueError("a greedy evaluation needs a Q-table (tabular learners) or "
-                                 "params (function learners)")
+                raise ValueError(
+                    "a greedy evaluation needs a Q-table (tabular learners) or "
+                    "params (function learners)"
+                )
             if q_table.shape != (disc.n_states, n_actions):
-                raise ValueError(f"Q-table shape {q_table.shape} does not fit the configuration "
-                                 f"({disc.n_states}, {n_actions})")
+                raise ValueError(
+                    f"Q-table shape {q_table.shape} does not fit the configuration "
+                    f"({disc.n_states}, {n_actions})"
+                )
         cover = _Coverage(env.arena, env.robot.config.body_radius)
         obs, info = env.reset(seed=seed, options={"random": True})
         # a random start so that evaluation seeds differ even in arenas with a fixed start
@@ -215,7 +221,7 @@ def evaluate_policy(
             if fn is not None:
                 action = int(fn(obs))
             elif kind is PolicyKind.GREEDY:
-                assert q_table is not None          # checked above: no policy, so a table
+                assert q_table is not None  # checked above: no policy, so a table
                 action = greedy_action(q_table[disc(obs)], rng)
             else:
                 action = int(rng.integers(n_actions))
@@ -231,17 +237,31 @@ def evaluate_policy(
                 obs, info = env.reset()
                 x, y, _ = info["pose"]
         n = max(steps, 1)
-        return EvalResult(policy=name, steps=steps, collisions=collisions,
-                          collisions_per_1000=1000.0 * collisions / n,
-                          distance=distance, mean_reward=total / n, progress=progress / n,
-                          coverage=(covered + cover.share()) / episodes, episodes=episodes)
+        return EvalResult(
+            policy=name,
+            steps=steps,
+            collisions=collisions,
+            collisions_per_1000=1000.0 * collisions / n,
+            distance=distance,
+            mean_reward=total / n,
+            progress=progress / n,
+            coverage=(covered + cover.share()) / episodes,
+            episodes=episodes,
+        )
     finally:
         env.close()
 
 
 #: Columns of :func:`evaluate_snapshots` rows (``evaluations.csv``).
-EVAL_FIELDS: tuple[str, ...] = ("iteration", "arena", "steps", "collisions_per_1000",
-                                "progress", "coverage", "mean_reward")
+EVAL_FIELDS: tuple[str, ...] = (
+    "iteration",
+    "arena",
+    "steps",
+    "collisions_per_1000",
+    "progress",
+    "coverage",
+    "mean_reward",
+)
 
 
 def evaluate_snapshots(
@@ -276,16 +296,31 @@ def evaluate_snapshots(
     rows: list[dict[str, float | int | str]] = []
     for iteration in sorted(snapshots):
         for arena in arenas:
-            r = evaluate_policy(config.replace(arena=arena), PolicyKind.GREEDY, steps, seed,
-                                q_table=snapshots[iteration], episode_steps=episode_steps)
-            rows.append({"iteration": iteration, "arena": arena, "steps": r.steps,
-                         "collisions_per_1000": r.collisions_per_1000, "progress": r.progress,
-                         "coverage": r.coverage, "mean_reward": r.mean_reward})
+            r = evaluate_policy(
+                config.replace(arena=arena),
+                PolicyKind.GREEDY,
+                steps,
+                seed,
+                q_table=snapshots[iteration],
+                episode_steps=episode_steps,
+            )
+            rows.append(
+                {
+                    "iteration": iteration,
+                    "arena": arena,
+                    "steps": r.steps,
+                    "collisions_per_1000": r.collisions_per_1000,
+                    "progress": r.progress,
+                    "coverage": r.coverage,
+                    "mean_reward": r.mean_reward,
+                }
+            )
     return rows
 
 
-def learnt_vs_random(config: TrainerConfig, seed: int, steps: int, eval_seed: int,
-                     params: np.ndarray | None = None) -> dict[str, Any]:
+def learnt_vs_random(
+    config: TrainerConfig, seed: int, steps: int, eval_seed: int, params: np.ndarray | None = None
+) -> dict[str, Any]:
     """Train ``config`` with ``seed`` (unless ``params`` are given), then measure its greedy
     policy and a uniform random one from the same start and respawn poses.
 
@@ -318,5 +353,9 @@ def learnt_vs_random(config: TrainerConfig, seed: int, steps: int, eval_seed: in
     train_s = time.perf_counter() - t0
     greedy = evaluate_policy(cfg, PolicyKind.GREEDY, steps, eval_seed, q_table=table, params=params)
     rand = evaluate_policy(cfg, PolicyKind.RANDOM, steps, eval_seed)
-    return {"seed": seed, "train_s": round(train_s, 2), "greedy": greedy.__dict__,
-            "random": rand.__dict__}
+    return {
+        "seed": seed,
+        "train_s": round(train_s, 2),
+        "greedy": greedy.__dict__,
+        "random": rand.__dict__,
+    }

@@ -19,6 +19,7 @@ constant; it generalises between nearby readings of one sensor, not across senso
 Defaults: 4 tilings of 8 tiles (resolution 1/28 of the 6 cm range, about 2 mm), 257 features,
 33 active.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -72,9 +73,9 @@ def active_features(obs: np.ndarray, coding: TileCoding) -> np.ndarray:
     """
     p = np.clip(np.asarray(obs, dtype=np.float64), 0.0, 1.0)
     t, n = coding.tilings, coding.tiles
-    offsets = np.arange(t, dtype=np.float64) / t                       # (tilings,)
+    offsets = np.arange(t, dtype=np.float64) / t  # (tilings,)
     tile = np.floor(p[:, None] * (n - 1) + offsets[None, :]).astype(np.int64)
-    tile = np.minimum(tile, n - 1)                                     # guards rounding only
+    tile = np.minimum(tile, n - 1)  # guards rounding only
     base = 1 + (np.arange(p.shape[0])[:, None] * t + np.arange(t)[None, :]) * n
     return np.concatenate([np.zeros(1, dtype=np.int64), (base + tile).ravel()])
 

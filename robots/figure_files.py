@@ -1,6 +1,7 @@
 """Writing a figure to files: the formats (PNG, or PDF and SVG for print) and the resolution
 asked for. Shared by every figure of dfrl (the robots' learning curves and arenas, and the
 experiments' figures in :mod:`dfrl.experiments.driver.results.plots`)."""
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -27,13 +28,20 @@ def parse_formats(text: str) -> tuple[str, ...]:
     names = tuple(dict.fromkeys(f.strip().lower() for f in text.split(",") if f.strip()))
     bad = [f for f in names if f not in FORMATS]
     if not names or bad:
-        raise ValueError(f"figure format {', '.join(bad) or repr(text)}: "
-                         f"use a comma-separated list of {', '.join(FORMATS)}")
+        raise ValueError(
+            f"figure format {', '.join(bad) or repr(text)}: "
+            f"use a comma-separated list of {', '.join(FORMATS)}"
+        )
     return names
 
 
-def save_figure(fig: Any, path: str | Path, formats: Sequence[str] = ("png",),
-                dpi: float | None = None, default_dpi: float = SCREEN_DPI) -> list[Path]:
+def save_figure(
+    fig: Any,
+    path: str | Path,
+    formats: Sequence[str] = ("png",),
+    dpi: float | None = None,
+    default_dpi: float = SCREEN_DPI,
+) -> list[Path]:
     """Write ``fig`` as ``path`` with each suffix of ``formats`` (``q_sum.png``,
     ``q_sum.pdf``, ...) at ``dpi`` (``default_dpi`` when None); return the files written.
 

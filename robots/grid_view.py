@@ -23,6 +23,7 @@ state of its own (nothing to checkpoint, the same points on every robot and afte
 it is what a file can be checked against, and it stays inside its cell (the mean of
 observations of a cell whose value is a maximum over sensors need not).
 """
+
 from __future__ import annotations
 
 from typing import Any

@@ -14,6 +14,7 @@ also holds the learners over the raw observation (``linear``, :mod:`dfrl.robots.
 ``dqn``, :mod:`dfrl.robots.dqn`; base :class:`dfrl.robots.approx.FunctionLearner`), which
 have no table; :func:`learner_kind` tells the two apart.
 """
+
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
@@ -27,9 +28,16 @@ from dfrl.robots.linear import LinearQ
 
 # The pure maths live in dfrl.robots.td (shared with the function-approximation learners);
 # they are imported here under their old home, where callers and tests find them.
-from dfrl.robots.td import (EpsilonSchedule, LearnerParams, ScheduleKind,  # noqa: F401
-                            epsilon_greedy, greedy_action,  # noqa: F401 - re-exported, see above
-                            q_learning_target, sarsa_target, td_update)
+from dfrl.robots.td import (
+    EpsilonSchedule,  # noqa: F401 - re-exported, see above
+    LearnerParams,
+    ScheduleKind,  # noqa: F401 - re-exported, see above
+    epsilon_greedy,
+    greedy_action,  # noqa: F401 - re-exported, see above
+    q_learning_target,
+    sarsa_target,
+    td_update,
+)
 
 
 def validate_table(table: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
@@ -68,8 +76,9 @@ class TabularLearner(ABC):
     #: What :attr:`dfrl.robots.training.Trainer.learner_kind` reports.
     kind: ClassVar[str] = "tabular"
 
-    def __init__(self, n_states: int, n_actions: int, params: LearnerParams,
-                 rng: np.random.Generator) -> None:
+    def __init__(
+        self, n_states: int, n_actions: int, params: LearnerParams, rng: np.random.Generator
+    ) -> None:
         self.params = params
         self.rng = rng
         self.q = np.full((n_states, n_actions), params.initial_q, dtype=np.float64)
@@ -118,9 +127,15 @@ class TabularLearner(ABC):
 
     def describe(self) -> dict[str, Any]:
         """What the learner is and its settings, for results and summaries."""
-        return {"name": self.name, "kind": self.kind, "alpha": self.params.alpha,
-                "gamma": self.params.gamma, "epsilon": self.params.epsilon.describe(),
-                "initial_q": self.params.initial_q, "shape": list(self.q.shape)}
+        return {
+            "name": self.name,
+            "kind": self.kind,
+            "alpha": self.params.alpha,
+            "gamma": self.params.gamma,
+            "epsilon": self.params.epsilon.describe(),
+            "initial_q": self.params.initial_q,
+            "shape": list(self.q.shape),
+        }
 
     @abstractmethod
     def learn(self, state: int, action: int, reward: float, next_state: int, terminal: bool) -> int:
@@ -183,11 +198,14 @@ def learner_class(name: str) -> type[TabularLearner] | type[FunctionLearner]:
     cls = LEARNERS.get(name)
     if cls is None:
         from dfrl.robots.plugins import find, plugin_names
+
         cls = find(name)
         if cls is None:
-            raise KeyError(f"unknown learner '{name}'; built in: {sorted(LEARNERS)}; plug-ins: "
-                           f"{plugin_names() or 'none'} (robots/README.md, 'Bring your own "
-                           "learner')")
+            raise KeyError(
+                f"unknown learner '{name}'; built in: {sorted(LEARNERS)}; plug-ins: "
+                f"{plugin_names() or 'none'} (robots/README.md, 'Bring your own "
+                "learner')"
+            )
     return cls
 
 
@@ -207,8 +225,14 @@ def is_tabular(name: str) -> bool:
     return learner_kind(name) == "tabular"
 
 
-def make_learner(name: str, n_inputs: int, n_actions: int, params: LearnerParams,
-                 rng: np.random.Generator, **options: Any) -> TabularLearner | FunctionLearner:
+def make_learner(
+    name: str,
+    n_inputs: int,
+    n_actions: int,
+    params: LearnerParams,
+    rng: np.random.Generator,
+    **options: Any,
+) -> TabularLearner | FunctionLearner:
     """Instantiate a registered learner.
 
     Parameters

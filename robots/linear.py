@@ -18,6 +18,7 @@ weight of every action is ``initial_q``, the others 0, so ``Q`` starts at ``init
 everywhere as a tabular learner's table does. Parameters for the federated layer:
 ``[("w", (n_actions, n_features))]``.
 """
+
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
@@ -54,7 +55,7 @@ class LinearConfig:
     def __post_init__(self) -> None:
         if not 0.0 < self.alpha <= 1.0:
             raise ValueError(f"alpha must be in (0, 1], got {self.alpha}")
-        self.coding()                                    # checks tilings and tiles
+        self.coding()  # checks tilings and tiles
 
     def coding(self) -> TileCoding:
         """The feature map."""
@@ -119,8 +120,14 @@ class LinearQ(FunctionLearner):
     name = "linear"
     config_field = "linear"
 
-    def __init__(self, obs_dim: int, n_actions: int, params: "LearnerParams",
-                 rng: np.random.Generator, config: LinearConfig | None = None) -> None:
+    def __init__(
+        self,
+        obs_dim: int,
+        n_actions: int,
+        params: "LearnerParams",
+        rng: np.random.Generator,
+        config: LinearConfig | None = None,
+    ) -> None:
         super().__init__(obs_dim, n_actions, params, rng)
         self.config = config or LinearConfig()
         self.coding = self.config.coding()
@@ -138,14 +145,16 @@ class LinearQ(FunctionLearner):
     def q_values(self, obs: np.ndarray) -> np.ndarray:
         return linear_q(self.weights, self._active(obs))
 
-    def learn(self, obs: np.ndarray, action: int, reward: float, next_obs: np.ndarray,
-              terminal: bool) -> int:
+    def learn(
+        self, obs: np.ndarray, action: int, reward: float, next_obs: np.ndarray, terminal: bool
+    ) -> int:
         self._observed(obs, action)
         active = self._active(obs)
         next_q = self.q_values(next_obs)
         target = q_learning_target(reward, next_q, self.params.gamma, terminal)
-        self.weights[action, active] = semi_gradient_update(self.weights[action, active],
-                                                            target, self.config.alpha)
+        self.weights[action, active] = semi_gradient_update(
+            self.weights[action, active], target, self.config.alpha
+        )
         self.t += 1
         return self.select_action(next_obs)
 
@@ -153,7 +162,7 @@ class LinearQ(FunctionLearner):
         """``[weights]`` and ``Q(x, .) = phi(x) @ weights.T`` over a batch (the feature matrix
         of the batch is computed with numpy: it does not depend on the weights)."""
         coding = self.coding
-        cache: dict[bytes, np.ndarray] = {}             # the last batch's features
+        cache: dict[bytes, np.ndarray] = {}  # the last batch's features
 
         def model(arrays: list, x: np.ndarray, xp: object = np) -> object:
             key = np.ascontiguousarray(x, dtype=np.float64).tobytes()

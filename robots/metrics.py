@@ -2,6 +2,7 @@
 
 Imported by :mod:`dfrl.robots.training`, where callers usually take them from.
 """
+
 from __future__ import annotations
 
 import csv
@@ -55,8 +56,20 @@ class StepMetrics:
     x: float
     y: float
 
-    FIELDS = ("iteration", "q_sum", "cumulative_reward", "collisions", "reward", "collided",
-              "respawns", "epsilon", "state", "action", "x", "y")
+    FIELDS = (
+        "iteration",
+        "q_sum",
+        "cumulative_reward",
+        "collisions",
+        "reward",
+        "collided",
+        "respawns",
+        "epsilon",
+        "state",
+        "action",
+        "x",
+        "y",
+    )
 
     def as_row(self) -> tuple[Any, ...]:
         """Values in :attr:`FIELDS` order."""
@@ -64,12 +77,22 @@ class StepMetrics:
 
 
 #: One record per iteration, the fields of :class:`StepMetrics`.
-METRIC_DTYPE = np.dtype([
-    ("iteration", np.int64), ("q_sum", np.float64), ("cumulative_reward", np.float64),
-    ("collisions", np.int64), ("reward", np.float64), ("collided", np.bool_),
-    ("respawns", np.int64), ("epsilon", np.float64), ("state", np.int64), ("action", np.int64),
-    ("x", np.float64), ("y", np.float64),
-])
+METRIC_DTYPE = np.dtype(
+    [
+        ("iteration", np.int64),
+        ("q_sum", np.float64),
+        ("cumulative_reward", np.float64),
+        ("collisions", np.int64),
+        ("reward", np.float64),
+        ("collided", np.bool_),
+        ("respawns", np.int64),
+        ("epsilon", np.float64),
+        ("state", np.int64),
+        ("action", np.int64),
+        ("x", np.float64),
+        ("y", np.float64),
+    ]
+)
 
 
 def write_metrics_csv(path: str | Path, metrics: np.ndarray) -> None:
@@ -79,8 +102,12 @@ def write_metrics_csv(path: str | Path, metrics: np.ndarray) -> None:
         writer = csv.writer(fh)
         writer.writerow(names)
         for rec in metrics.tolist():
-            writer.writerow([int(v) if isinstance(v, bool) else
-                             (repr(v) if isinstance(v, float) else v) for v in rec])
+            writer.writerow(
+                [
+                    int(v) if isinstance(v, bool) else (repr(v) if isinstance(v, float) else v)
+                    for v in rec
+                ]
+            )
 
 
 def read_metrics_csv(path: str | Path) -> np.ndarray:

@@ -3,6 +3,7 @@
 
 matplotlib is an optional dependency (``pip install dfrl[plot]``); it is imported here only.
 """
+
 from __future__ import annotations
 
 import math
@@ -26,8 +27,12 @@ def _pyplot():  # noqa: ANN202 - matplotlib module
 
 
 def plot_learning_curves(
-    curves: Mapping[str, np.ndarray | Sequence[np.ndarray]], path: str | Path, title: str,
-    formats: Sequence[str] = ("png",), dpi: float | None = None, summed: str = "Q-values",
+    curves: Mapping[str, np.ndarray | Sequence[np.ndarray]],
+    path: str | Path,
+    title: str,
+    formats: Sequence[str] = ("png",),
+    dpi: float | None = None,
+    summed: str = "Q-values",
 ) -> Path:
     """Sum of Q-values (or of what ``summed`` names) and cumulative reward against
     iterations, one line per label.
@@ -78,8 +83,14 @@ def plot_learning_curves(
     return _save(plt, fig, path, formats, dpi, 110)
 
 
-def _save(plt, fig, path: str | Path, formats: Sequence[str], dpi: float | None,  # noqa: ANN001
-          default_dpi: float) -> Path:
+def _save(
+    plt,
+    fig,
+    path: str | Path,
+    formats: Sequence[str],
+    dpi: float | None,  # noqa: ANN001
+    default_dpi: float,
+) -> Path:
     """Write ``fig`` in each of ``formats`` and close it; the first file written."""
     try:
         return save_figure(fig, path, formats, dpi, default_dpi)[0]
@@ -87,9 +98,14 @@ def _save(plt, fig, path: str | Path, formats: Sequence[str], dpi: float | None,
         plt.close(fig)
 
 
-def plot_arena(image: np.ndarray, spec, path: str | Path,  # noqa: ANN001 - ArenaSpec
-               rays: np.ndarray | None = None, formats: Sequence[str] = ("png",),
-               dpi: float | None = None) -> Path:
+def plot_arena(
+    image: np.ndarray,
+    spec,
+    path: str | Path,  # noqa: ANN001 - ArenaSpec
+    rays: np.ndarray | None = None,
+    formats: Sequence[str] = ("png",),
+    dpi: float | None = None,
+) -> Path:
     """Save a rendered top view with metric axes, the start pose and its heading.
 
     Parameters
@@ -124,9 +140,12 @@ def draw_arena(ax, image: np.ndarray, spec, rays: np.ndarray | None = None) -> d
     heading = None
     if spec.start.pose is not None:
         x, y, yaw = spec.start.pose
-        heading = ax.annotate("", xy=(x + 0.09 * math.cos(yaw), y + 0.09 * math.sin(yaw)),
-                              xytext=(x, y),
-                              arrowprops={"arrowstyle": "->", "color": "black", "lw": 1.5})
+        heading = ax.annotate(
+            "",
+            xy=(x + 0.09 * math.cos(yaw), y + 0.09 * math.sin(yaw)),
+            xytext=(x, y),
+            arrowprops={"arrowstyle": "->", "color": "black", "lw": 1.5},
+        )
         ax.text(x, y - 0.07, "start", ha="center", va="top", fontsize=8)
     else:
         ax.text(0, -half + 0.01, "start: random free pose", ha="center", va="bottom", fontsize=8)
@@ -141,8 +160,12 @@ def draw_arena(ax, image: np.ndarray, spec, rays: np.ndarray | None = None) -> d
     return {"heading": heading, "rays": lines}
 
 
-def plot_arena_overview(images: Mapping[str, np.ndarray], path: str | Path,
-                        formats: Sequence[str] = ("png",), dpi: float | None = None) -> Path:
+def plot_arena_overview(
+    images: Mapping[str, np.ndarray],
+    path: str | Path,
+    formats: Sequence[str] = ("png",),
+    dpi: float | None = None,
+) -> Path:
     """All arenas side by side (one row), in ``formats`` at ``dpi`` (default 100); the first
     file written."""
     plt = _pyplot()

@@ -14,6 +14,7 @@ own learner"). A name resolves, in this order, to
 A spec ``module:Class`` imports ``module``; ``file.py:Class`` loads that file (an absolute
 path: a config's relative paths are resolved against its folder when it is read).
 """
+
 from __future__ import annotations
 
 import functools
@@ -30,7 +31,6 @@ if TYPE_CHECKING:
 
 #: The entry-point group installed distributions declare their learners in.
 GROUP: str = "dfrl.learners"
-
 
 
 @dataclass(frozen=True)
@@ -52,10 +52,16 @@ class PluginError(ValueError):
 
 
 def _check_name(name: str) -> None:
-    if not name or not name.replace("_", "a").isalnum() or not name[0].isalpha() \
-            or name != name.lower():
-        raise PluginError(f"learner name {name!r}: lower-case letters, digits and '_', "
-                          "starting with a letter (it names agents and result columns)")
+    if (
+        not name
+        or not name.replace("_", "a").isalnum()
+        or not name[0].isalpha()
+        or name != name.lower()
+    ):
+        raise PluginError(
+            f"learner name {name!r}: lower-case letters, digits and '_', "
+            "starting with a letter (it names agents and result columns)"
+        )
 
 
 def load_class(spec: str) -> type["FunctionLearner"]:
@@ -69,6 +75,7 @@ def load_class(spec: str) -> type["FunctionLearner"]:
         class that is not a learner.
     """
     from dfrl.robots.approx import FunctionLearner
+
     where, sep, attr = spec.rpartition(":")
     if not sep or not where or not attr.isidentifier():
         raise PluginError(f"learner spec {spec!r}: expected 'module:Class' or 'file.py:Class'")
@@ -80,22 +87,27 @@ def load_class(spec: str) -> type["FunctionLearner"]:
     except PluginError:
         raise
     except Exception as e:  # the user's module failing to import: say which and why
-        raise PluginError(f"learner spec {spec!r}: importing {where} failed: "
-                          f"{type(e).__name__}: {e}") from e
+        raise PluginError(
+            f"learner spec {spec!r}: importing {where} failed: {type(e).__name__}: {e}"
+        ) from e
     cls = getattr(module, attr, None)
     if cls is None:
         raise PluginError(f"learner spec {spec!r}: {where} has no {attr}")
     if not (isinstance(cls, type) and issubclass(cls, FunctionLearner)):
-        raise PluginError(f"learner spec {spec!r}: {attr} is not a subclass of "
-                          "dfrl.robots.approx.FunctionLearner (robots/README.md, "
-                          "'Bring your own learner')")
+        raise PluginError(
+            f"learner spec {spec!r}: {attr} is not a subclass of "
+            "dfrl.robots.approx.FunctionLearner (robots/README.md, "
+            "'Bring your own learner')"
+        )
     return cls
 
 
 def _load_file(path: Path):  # noqa: ANN202 - a module
     if not path.is_absolute():
-        raise PluginError(f"learner file {path}: the path must be absolute here (a config "
-                          "resolves it against its own folder)")
+        raise PluginError(
+            f"learner file {path}: the path must be absolute here (a config "
+            "resolves it against its own folder)"
+        )
     if not path.is_file():
         raise PluginError(f"learner file {path} does not exist")
     name = "dfrl_plugin_" + "".join(c if c.isalnum() else "_" for c in str(path))
@@ -114,8 +126,9 @@ def _load_file(path: Path):  # noqa: ANN202 - a module
     return module
 
 
-def register_learner(name: str, spec: str,
-                     options: dict[str, Any] | None = None) -> type["FunctionLearner"]:
+def register_learner(
+    name: str, spec: str, options: dict[str, Any] | None = None
+) -> type["FunctionLearner"]:
     """Load the learner ``spec`` names and register it as ``name`` in this process, with the
     keyword ``options`` its constructor gets after ``(obs_dim, n_actions, params, rng)``.
     Again with the same spec and options nothing changes; with others they replace the
@@ -128,6 +141,7 @@ def register_learner(name: str, spec: str,
         A bad name or spec (see :func:`load_class`), or a built-in's name.
     """
     from dfrl.robots.learners import LEARNERS
+
     _check_name(name)
     opts = dict(options or {})
     if name in LEARNERS:
@@ -183,8 +197,10 @@ def section_problems(section: Any) -> list[str]:
     "file.py:Class" | {"class": ..., "options": {...}}``, a file's path absolute: see
     :func:`absolute_section`); every problem, located (``learners.NAME: ...``)."""
     if not isinstance(section, dict):
-        return ["learners: expected an object of name -> 'module:Class' or "
-                "{\"class\": ..., \"options\": {...}}"]
+        return [
+            "learners: expected an object of name -> 'module:Class' or "
+            '{"class": ..., "options": {...}}'
+        ]
     problems: list[str] = []
     for name, entry in section.items():
         try:
@@ -198,12 +214,16 @@ def section_problems(section: Any) -> list[str]:
 def _entry(entry: Any) -> tuple[str, dict[str, Any]]:
     if isinstance(entry, str):
         return entry, {}
-    if isinstance(entry, dict) and isinstance(entry.get("class"), str) \
-            and isinstance(entry.get("options", {}), dict) \
-            and not set(entry) - {"class", "options"}:
+    if (
+        isinstance(entry, dict)
+        and isinstance(entry.get("class"), str)
+        and isinstance(entry.get("options", {}), dict)
+        and not set(entry) - {"class", "options"}
+    ):
         return entry["class"], dict(entry.get("options", {}))
-    raise PluginError("expected 'module:Class', 'file.py:Class' or "
-                      "{\"class\": ..., \"options\": {...}}")
+    raise PluginError(
+        "expected 'module:Class', 'file.py:Class' or {\"class\": ..., \"options\": {...}}"
+    )
 
 
 def _absolute(spec: str, base: Path) -> str:
@@ -227,4 +247,3 @@ def absolute_section(section: Any, base: Path) -> Any:
         else:
             out[name] = entry
     return out
-

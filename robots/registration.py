@@ -8,6 +8,7 @@ neither pybullet, numba nor the environments: the registry holds the entry point
 ``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")`` builds
 :class:`dfrl.robots.vector_env.EPuckVectorEnv` (the batched simulator).
 """
+
 from __future__ import annotations
 
 ENV_ID = "dfrl/EPuck-v0"
@@ -22,8 +23,12 @@ def register_envs() -> None:
 
     if ENV_ID in gym.registry:
         return
-    if hasattr(gym.vector, "AutoresetMode"):   # Gymnasium >= 1.1, whose VectorEnv it implements
-        gym.register(id=ENV_ID, entry_point="dfrl.robots.env:EPuckEnv", max_episode_steps=1000,
-                     vector_entry_point="dfrl.robots.vector_env:EPuckVectorEnv")
+    if hasattr(gym.vector, "AutoresetMode"):  # Gymnasium >= 1.1, whose VectorEnv it implements
+        gym.register(
+            id=ENV_ID,
+            entry_point="dfrl.robots.env:EPuckEnv",
+            max_episode_steps=1000,
+            vector_entry_point="dfrl.robots.vector_env:EPuckVectorEnv",
+        )
     else:
         gym.register(id=ENV_ID, entry_point="dfrl.robots.env:EPuckEnv", max_episode_steps=1000)

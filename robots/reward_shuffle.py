@@ -38,6 +38,7 @@ The measured greedy scores of all of these against the zero table are in robots/
 "Controls". What the robot earns and where it respawns are unchanged: only the update sees
 the control's outcome.
 """
+
 from __future__ import annotations
 
 from enum import Enum
@@ -82,8 +83,9 @@ class RewardShuffle:
         ``capacity`` < 1 or an unknown mode.
     """
 
-    def __init__(self, capacity: int, rng: np.random.Generator,
-                 mode: ShuffleMode | str = DEFAULT_MODE) -> None:
+    def __init__(
+        self, capacity: int, rng: np.random.Generator, mode: ShuffleMode | str = DEFAULT_MODE
+    ) -> None:
         if capacity < 1:
             raise ValueError(f"reward_shuffle capacity must be >= 1, got {capacity}")
         self.capacity = int(capacity)
@@ -91,7 +93,7 @@ class RewardShuffle:
         self._rng = rng
         self.buffer: list[tuple[float, bool]] = []
         self.drawn: tuple[float, bool] | None = None
-        self._sum = 0.0        # of the buffered rewards, recomputed exactly every capacity calls
+        self._sum = 0.0  # of the buffered rewards, recomputed exactly every capacity calls
         self._calls = 0
 
     def mean(self) -> float:
@@ -102,7 +104,7 @@ class RewardShuffle:
         """The (reward, terminal) to learn from in place of the observed ones."""
         seen = (float(reward), bool(terminal))
         self._calls += 1
-        if self._calls % self.capacity == 0:       # no drift of the running sum
+        if self._calls % self.capacity == 0:  # no drift of the running sum
             self._sum = float(np.sum([r for r, _ in self.buffer]))
         if len(self.buffer) < self.capacity:
             self.buffer.append(seen)
@@ -133,5 +135,6 @@ def shuffle_mode(mode: ShuffleMode | str) -> ShuffleMode:
     try:
         return ShuffleMode(mode)
     except ValueError:
-        raise ValueError(f"reward_shuffle_mode must be one of "
-                         f"{[m.value for m in ShuffleMode]}, got {mode!r}") from None
+        raise ValueError(
+            f"reward_shuffle_mode must be one of {[m.value for m in ShuffleMode]}, got {mode!r}"
+        ) from None

@@ -11,6 +11,7 @@ levels:
 The state index is the mixed-radix number ``sum_g level_g * levels**g`` (group 0 is the least
 significant digit), so ``n_states = levels ** n_groups``.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -70,8 +71,9 @@ class DiscretisationConfig:
     def __post_init__(self) -> None:
         object.__setattr__(self, "grouping", SensorGrouping(self.grouping))
         if int(self.levels) != self.levels or self.levels < 2:
-            raise ValueError(f"DiscretisationConfig.levels must be an integer >= 2, "
-                             f"got {self.levels}")
+            raise ValueError(
+                f"DiscretisationConfig.levels must be an integer >= 2, got {self.levels}"
+            )
 
     @property
     def n_states(self) -> int:
@@ -130,7 +132,7 @@ class Discretiser:
             "levels": self.levels,
             "n_states": self.n_states,
             "encoding": "state = sum_g level_g * levels**g; level 0 = nothing in range, "
-                        "level k = proximity in ((k-1)/(levels-1), k/(levels-1)]; "
-                        "proximity = 1 - distance / sensor_range; "
-                        "group value = max over its sensors",
+            "level k = proximity in ((k-1)/(levels-1), k/(levels-1)]; "
+            "proximity = 1 - distance / sensor_range; "
+            "group value = max over its sensors",
         }

@@ -7,6 +7,7 @@ The ``.npy`` holds the float64 array of shape ``(n_states, n_actions)``. The JSO
 ``NAME.visits.npy`` holds the int64 update counts of each entry. A sidecar written before the
 learner's name was called ``algo`` everywhere names it ``algorithm``; it still loads.
 """
+
 from __future__ import annotations
 
 import json
@@ -73,12 +74,16 @@ def _paths(path: str | Path) -> tuple[Path, Path, Path]:
         base = base.with_suffix("")
     elif base.suffix == ".json":
         base = base.with_suffix("")
-    return (base.with_name(base.name + ".npy"), base.with_name(base.name + ".json"),
-            base.with_name(base.name + ".visits.npy"))
+    return (
+        base.with_name(base.name + ".npy"),
+        base.with_name(base.name + ".json"),
+        base.with_name(base.name + ".visits.npy"),
+    )
 
 
-def save_table(path: str | Path, q: np.ndarray, meta: TableMeta,
-               visits: np.ndarray | None = None) -> Path:
+def save_table(
+    path: str | Path, q: np.ndarray, meta: TableMeta, visits: np.ndarray | None = None
+) -> Path:
     """Write a Q-table and its sidecar JSON (and visits when given).
 
     Parameters
@@ -126,12 +131,15 @@ def load_table(path: str | Path) -> LoadedTable:
         raise ValueError(f"{npy}: missing sidecar {js.name} describing the table")
     doc = json.loads(js.read_text(encoding="utf-8"))
     if doc.get("format") != TABLE_FORMAT:
-        raise ValueError(f"{js}: unknown table format {doc.get('format')!r}, "
-                         f"expected {TABLE_FORMAT!r}")
+        raise ValueError(
+            f"{js}: unknown table format {doc.get('format')!r}, expected {TABLE_FORMAT!r}"
+        )
     q = validate_table(np.load(npy, allow_pickle=False), tuple(doc["shape"]))
-    meta = TableMeta(algo=_algo(doc), **{k: doc[k] for k in ("arena", "seed", "iterations",
-                                                             "actions", "state")},
-                     extra=doc.get("extra", {}))
+    meta = TableMeta(
+        algo=_algo(doc),
+        **{k: doc[k] for k in ("arena", "seed", "iterations", "actions", "state")},
+        extra=doc.get("extra", {}),
+    )
     visits = None
     if doc.get("visits_file"):
         visits = np.load(vis, allow_pickle=False).astype(np.int64)
@@ -190,8 +198,13 @@ def save_params(path: str | Path, vec: np.ndarray, meta: ParamsMeta) -> Path:
     npy, js, _ = _paths(path)
     npy.parent.mkdir(parents=True, exist_ok=True)
     np.save(npy, arr)
-    doc = {"format": PARAMS_FORMAT, "size": int(arr.shape[0]), "dtype": "float64",
-           **asdict(meta), "layout": [[n, list(s)] for n, s in layout]}
+    doc = {
+        "format": PARAMS_FORMAT,
+        "size": int(arr.shape[0]),
+        "dtype": "float64",
+        **asdict(meta),
+        "layout": [[n, list(s)] for n, s in layout],
+    }
     js.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
     return npy
 
@@ -220,9 +233,16 @@ def load_params(path: str | Path) -> LoadedParams:
         raise ValueError(f"{js}: format {doc.get('format')!r}, expected {PARAMS_FORMAT!r}")
     layout = [(str(n), tuple(int(d) for d in s)) for n, s in doc["layout"]]
     vec = validate_params(np.load(npy, allow_pickle=False), layout)
-    meta = ParamsMeta(algo=_algo(doc), arena=doc["arena"], seed=doc["seed"],
-                      iterations=doc["iterations"], actions=list(doc["actions"]), layout=layout,
-                      model=dict(doc.get("model", {})), extra=dict(doc.get("extra", {})))
+    meta = ParamsMeta(
+        algo=_algo(doc),
+        arena=doc["arena"],
+        seed=doc["seed"],
+        iterations=doc["iterations"],
+        actions=list(doc["actions"]),
+        layout=layout,
+        model=dict(doc.get("model", {})),
+        extra=dict(doc.get("extra", {})),
+    )
     return LoadedParams(params=vec, meta=meta)
 
 

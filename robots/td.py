@@ -5,6 +5,7 @@ function-approximation learners (:mod:`dfrl.robots.linear`, :mod:`dfrl.robots.dq
 action values their model computes for an observation. :mod:`dfrl.robots.learners` re-exports
 every name.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -109,8 +110,12 @@ class EpsilonSchedule:
 
     def describe(self) -> dict[str, object]:
         """The schedule as plain values (for results and summaries)."""
-        return {"kind": self.kind.value, "start": self.start, "end": self.end,
-                "decay_steps": self.decay_steps}
+        return {
+            "kind": self.kind.value,
+            "start": self.start,
+            "end": self.end,
+            "decay_steps": self.decay_steps,
+        }
 
 
 @dataclass(frozen=True)

@@ -2,6 +2,7 @@
 
 Imported by :mod:`dfrl.robots.training`, where callers usually take it from.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -86,10 +87,12 @@ class TrainerConfig(EnvConfig):
         if self.iterations < 0:
             raise ValueError("iterations must be >= 0")
         if not isinstance(self.reward_shuffle, int) or self.reward_shuffle < 0:
-            raise ValueError(f"reward_shuffle must be an int >= 0 (0: off), got "
-                             f"{self.reward_shuffle!r}")
-        object.__setattr__(self, "reward_shuffle_mode",
-                           shuffle_mode(self.reward_shuffle_mode).value)
+            raise ValueError(
+                f"reward_shuffle must be an int >= 0 (0: off), got {self.reward_shuffle!r}"
+            )
+        object.__setattr__(
+            self, "reward_shuffle_mode", shuffle_mode(self.reward_shuffle_mode).value
+        )
 
     def env_config(self) -> EnvConfig:
         """The environment part of the configuration."""

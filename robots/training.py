@@ -18,6 +18,7 @@ by default its reward centred and every update terminal (``reward_shuffle_mode``
 :mod:`dfrl.robots.reward_shuffle`), while the robot still respawns after a collision and the
 metrics keep the reward earned.
 """
+
 from __future__ import annotations
 
 import json
@@ -33,8 +34,12 @@ from dfrl.robots.env import EPuckEnv
 from dfrl.robots.learners import TabularLearner, learner_class, make_learner
 from dfrl.robots.plugins import options as plugin_options
 from dfrl.robots.reward_shuffle import RewardShuffle
-from dfrl.robots.metrics import (METRIC_DTYPE, StepMetrics, read_metrics_csv,  # noqa: F401
-                                 write_metrics_csv)
+from dfrl.robots.metrics import (
+    METRIC_DTYPE,
+    StepMetrics,
+    read_metrics_csv,  # noqa: F401
+    write_metrics_csv,
+)
 from dfrl.robots.state import Discretiser
 from dfrl.robots.tables import ParamsMeta, TableMeta, save_params, save_table
 from dfrl.robots.trainer_config import DEMO_ITERATIONS, TrainerConfig, to_jsonable  # noqa: F401
@@ -43,16 +48,20 @@ from dfrl.robots.trainer_config import DEMO_ITERATIONS, TrainerConfig, to_jsonab
 # (robots/metrics.py) are imported here too: callers find them in this module.
 
 
-def build_learner(config: TrainerConfig, n_states: int, obs_dim: int, n_actions: int,
-                  rng: np.random.Generator) -> TabularLearner | FunctionLearner:
+def build_learner(
+    config: TrainerConfig, n_states: int, obs_dim: int, n_actions: int, rng: np.random.Generator
+) -> TabularLearner | FunctionLearner:
     """The learner ``config.algo`` names: tabular over ``n_states`` states, or over the
     ``obs_dim`` raw readings with its own configuration (the ``TrainerConfig`` field its class
     names in ``config_field``)."""
     cls = learner_class(config.algo)
     if issubclass(cls, TabularLearner):
         return make_learner(config.algo, n_states, n_actions, config.learner, rng)
-    options = ({"config": getattr(config, cls.config_field)} if cls.config_field
-               else plugin_options(config.algo))
+    options = (
+        {"config": getattr(config, cls.config_field)}
+        if cls.config_field
+        else plugin_options(config.algo)
+    )
     return make_learner(config.algo, obs_dim, n_actions, config.learner, rng, **options)
 
 
@@ -77,9 +86,13 @@ class Trainer:
         env_seq, learner_seq, shuffle_seq = np.random.SeedSequence(c.seed).spawn(3)
         #: Negative control (``reward_shuffle``): what the learner learns from instead of the
         #: reward earned; None in an ordinary run.
-        self.reward_shuffle = (RewardShuffle(c.reward_shuffle, np.random.default_rng(shuffle_seq),
-                                             c.reward_shuffle_mode)
-                               if c.reward_shuffle else None)
+        self.reward_shuffle = (
+            RewardShuffle(
+                c.reward_shuffle, np.random.default_rng(shuffle_seq), c.reward_shuffle_mode
+            )
+            if c.reward_shuffle
+            else None
+        )
         #: The reward and end-of-episode flag the last update learnt from (the ones observed
         #: unless shuffled).
         self.learned_reward, self.learned_terminal = 0.0, False
@@ -87,15 +100,21 @@ class Trainer:
         self.discretiser = Discretiser(c.discretisation)
         n_actions = int(self.env.action_space.n)
         self.learner: TabularLearner | FunctionLearner = build_learner(
-            c, self.discretiser.n_states, int(self.env.observation_space.shape[0]), n_actions,
-            np.random.default_rng(learner_seq))
+            c,
+            self.discretiser.n_states,
+            int(self.env.observation_space.shape[0]),
+            n_actions,
+            np.random.default_rng(learner_seq),
+        )
         self._tabular = isinstance(self.learner, TabularLearner)
         obs, _ = self.env.reset(seed=int(env_seq.generate_state(1)[0]))
         self._state = self.discretiser(obs)
         self._obs = np.array(obs, dtype=np.float64)
-        self._action = (self.learner.select_action(self._state)
-                        if isinstance(self.learner, TabularLearner)
-                        else self.learner.select_action(self._obs))
+        self._action = (
+            self.learner.select_action(self._state)
+            if isinstance(self.learner, TabularLearner)
+            else self.learner.select_action(self._obs)
+        )
         self.iteration = 0
         self.cumulative_reward = 0.0
         self.collisions = 0
@@ -151,8 +170,10 @@ class Trainer:
 
     def _tabular_only(self, what: str) -> TabularLearner:
         if not isinstance(self.learner, TabularLearner):
-            raise TypeError(f"{what}: learner '{self.config.algo}' is a function-approximation "
-                            f"learner without a Q-table; use params / set_params")
+            raise TypeError(
+                f"{what}: learner '{self.config.algo}' is a function-approximation "
+                f"learner without a Q-table; use params / set_params"
+            )
         return self.learner
 
     @property
@@ -230,8 +251,11 @@ class Trainer:
         state, action = self._state, self._action
         obs, reward, terminated, truncated, info = env.step(action)
         next_state = self.discretiser(obs)
-        learnt, end = ((reward, terminated) if self.reward_shuffle is None
-                       else self.reward_shuffle(reward, terminated))
+        learnt, end = (
+            (reward, terminated)
+            if self.reward_shuffle is None
+            else self.reward_shuffle(reward, terminated)
+        )
         self.learned_reward, self.learned_terminal = learnt, end
         if isinstance(self.learner, TabularLearner):
             next_action = self.learner.learn(state, action, learnt, next_state, end)
@@ -241,9 +265,11 @@ class Trainer:
         if terminated or truncated:
             obs, _ = env.reset()
             next_state = self.discretiser(obs)
-            next_action = (self.learner.select_action(next_state)
-                           if isinstance(self.learner, TabularLearner)
-                           else self.learner.select_action(np.array(obs, dtype=np.float64)))
+            next_action = (
+                self.learner.select_action(next_state)
+                if isinstance(self.learner, TabularLearner)
+                else self.learner.select_action(np.array(obs, dtype=np.float64))
+            )
             self.respawns += 1
         self._state, self._action = next_state, next_action
         if not self._tabular:
@@ -254,10 +280,18 @@ class Trainer:
         self.collisions += collided
         x, y, _ = info["pose"]
         return StepMetrics(
-            iteration=self.iteration, q_sum=self._q_sum(),
-            cumulative_reward=self.cumulative_reward, collisions=self.collisions, reward=reward,
-            collided=collided, respawns=self.respawns, epsilon=self.learner.epsilon,
-            state=state, action=action, x=x, y=y,
+            iteration=self.iteration,
+            q_sum=self._q_sum(),
+            cumulative_reward=self.cumulative_reward,
+            collisions=self.collisions,
+            reward=reward,
+            collided=collided,
+            respawns=self.respawns,
+            epsilon=self.learner.epsilon,
+            state=state,
+            action=action,
+            x=x,
+            y=y,
         )
 
     def _q_sum(self) -> float:
@@ -269,6 +303,7 @@ class Trainer:
         """The learnt greedy action for an observation (ties: lowest index), no exploration."""
         if isinstance(self.learner, TabularLearner):
             from dfrl.robots.td import greedy_action
+
             return greedy_action(self.learner.q[self.discretiser(obs)])
         return self.learner.greedy_action(np.asarray(obs, dtype=np.float64))
 
@@ -277,16 +312,28 @@ class Trainer:
         c = self.config
         field_name = getattr(self.learner, "config_field", None)
         model = to_jsonable(getattr(c, field_name)) if field_name else {}
-        return ParamsMeta(algo=c.algo, arena=self.env.arena.name, seed=c.seed,
-                          iterations=self.iteration, actions=self.action_names,
-                          layout=self.param_layout, model=model, extra=dict(extra))
+        return ParamsMeta(
+            algo=c.algo,
+            arena=self.env.arena.name,
+            seed=c.seed,
+            iterations=self.iteration,
+            actions=self.action_names,
+            layout=self.param_layout,
+            model=model,
+            extra=dict(extra),
+        )
 
     def table_meta(self, **extra: Any) -> TableMeta:
         """Sidecar description of the current table."""
         c = self.config
         return TableMeta(
-            algo=c.algo, arena=self.env.arena.name, seed=c.seed, iterations=self.iteration,
-            actions=self.action_names, state=self.discretiser.describe(), extra=dict(extra),
+            algo=c.algo,
+            arena=self.env.arena.name,
+            seed=c.seed,
+            iterations=self.iteration,
+            actions=self.action_names,
+            state=self.discretiser.describe(),
+            extra=dict(extra),
         )
 
     def save_table(self, path: str | Path) -> Path:
@@ -380,24 +427,32 @@ def train(
         wall = time.perf_counter() - t0
         if progress is not None and config.iterations % chunk:
             progress(config.iterations % chunk)
-        result = TrainingResult(metrics=rows,
-                                q_table=trainer.q_table.copy() if tabular else None,
-                                visits=trainer.visits.copy() if tabular else None, wall_time=wall,
-                                output_dir=Path(output_dir) if output_dir is not None else None,
-                                snapshots=snapshots, params=trainer.params)
+        result = TrainingResult(
+            metrics=rows,
+            q_table=trainer.q_table.copy() if tabular else None,
+            visits=trainer.visits.copy() if tabular else None,
+            wall_time=wall,
+            output_dir=Path(output_dir) if output_dir is not None else None,
+            snapshots=snapshots,
+            params=trainer.params,
+        )
         if output_dir is not None:
             out = Path(output_dir)
             out.mkdir(parents=True, exist_ok=True)
-            (out / "config.json").write_text(json.dumps(config.to_dict(), indent=2) + "\n",
-                                             encoding="utf-8")
+            (out / "config.json").write_text(
+                json.dumps(config.to_dict(), indent=2) + "\n", encoding="utf-8"
+            )
             write_metrics_csv(out / "metrics.csv", rows)
             if tabular:
-                save_table(out / "q_table", trainer.q_table,
-                           trainer.table_meta(wall_time_s=round(wall, 3)), visits=trainer.visits)
+                save_table(
+                    out / "q_table",
+                    trainer.q_table,
+                    trainer.table_meta(wall_time_s=round(wall, 3)),
+                    visits=trainer.visits,
+                )
             else:
                 trainer.save_params(out / "params", wall_time_s=round(wall, 3))
             if snapshots:
                 # numpy's stubs match a **dict of arrays against savez's allow_pickle: bool too
-                np.savez(out / "snapshots.npz",
-                         **{f"it{k}": v for k, v in snapshots.items()})  # type: ignore[arg-type]
+                np.savez(out / "snapshots.npz", **{f"it{k}": v for k, v in snapshots.items()})  # type: ignore[arg-type]
     return result

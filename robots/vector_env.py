@@ -21,6 +21,7 @@ in the registered ``TimeLimit``):
   reset's observation and info.
 * Infos are arrays with one row per sub-environment, each key with its ``_key`` mask.
 """
+
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
@@ -84,15 +85,21 @@ class EPuckVectorEnv(VectorEnv):
         **overrides: Any,
     ) -> None:
         super().__init__()
-        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
-                or num_envs < 1:
+        if (
+            isinstance(num_envs, bool)
+            or not isinstance(num_envs, (int, np.integer))
+            or num_envs < 1
+        ):
             raise ValueError(f"EPuckVectorEnv: num_envs must be an integer >= 1, got {num_envs!r}")
         if max_episode_steps is not None and max_episode_steps < 1:
-            raise ValueError(f"EPuckVectorEnv: max_episode_steps must be >= 1 or None, got "
-                             f"{max_episode_steps}")
+            raise ValueError(
+                f"EPuckVectorEnv: max_episode_steps must be >= 1 or None, got {max_episode_steps}"
+            )
         if render_mode is not None:
-            raise ValueError(f"EPuckVectorEnv: render_mode must be None (the batched simulator "
-                             f"draws nothing), got {render_mode!r}")
+            raise ValueError(
+                f"EPuckVectorEnv: render_mode must be None (the batched simulator "
+                f"draws nothing), got {render_mode!r}"
+            )
         config = config or EnvConfig()
         if overrides:
             config = EnvConfig(**{**config.__dict__, **overrides})
@@ -105,13 +112,16 @@ class EPuckVectorEnv(VectorEnv):
         else:
             specs = [_spec(a) for a in arena]
             if len(specs) != self.num_envs:
-                raise ValueError(f"EPuckVectorEnv: {len(specs)} arenas for {self.num_envs} "
-                                 f"sub-environments; give one arena or one per sub-environment")
+                raise ValueError(
+                    f"EPuckVectorEnv: {len(specs)} arenas for {self.num_envs} "
+                    f"sub-environments; give one arena or one per sub-environment"
+                )
         # the world keeps these generator objects: reseeding one sets its state in place
         self._rngs = [np.random.default_rng() for _ in range(self.num_envs)]
         self.world = BatchedWorld(config, specs, self._rngs)
-        self.single_observation_space = spaces.Box(0.0, 1.0, shape=(self.world.n_sensors,),
-                                                   dtype=np.float32)
+        self.single_observation_space = spaces.Box(
+            0.0, 1.0, shape=(self.world.n_sensors,), dtype=np.float32
+        )
         self.single_action_space = spaces.Discrete(self.world.n_actions)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -131,7 +141,9 @@ class EPuckVectorEnv(VectorEnv):
 
     # -- Gymnasium API ---------------------------------------------------------------------
     def reset(
-        self, *, seed: int | Sequence[int | None] | None = None,
+        self,
+        *,
+        seed: int | Sequence[int | None] | None = None,
         options: dict[str, Any] | None = None,
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Reset the sub-environments and return every observation, shape (num_envs, 8).
@@ -156,8 +168,9 @@ class EPuckVectorEnv(VectorEnv):
         mask = self._reset_mask(options.pop("reset_mask", None))
         poses = self._poses(options.pop("pose", None))
         if options:
-            raise ValueError(f"EPuckVectorEnv.reset: unknown options {sorted(options)} (known: "
-                             f"reset_mask, pose)")
+            raise ValueError(
+                f"EPuckVectorEnv.reset: unknown options {sorted(options)} (known: reset_mask, pose)"
+            )
         for index in np.flatnonzero(mask):
             i = int(index)
             seed_i = seeds[i]
@@ -199,10 +212,15 @@ class EPuckVectorEnv(VectorEnv):
             Actions not in :attr:`action_space`.
         """
         acts = np.asarray(actions)
-        if acts.shape != (self.num_envs,) or not np.issubdtype(acts.dtype, np.integer) \
-                or not self.action_space.contains(acts.astype(np.int64)):
-            raise ValueError(f"EPuckVectorEnv.step: actions must be {self.num_envs} integers in "
-                             f"0..{self.world.n_actions - 1}, got {actions!r}")
+        if (
+            acts.shape != (self.num_envs,)
+            or not np.issubdtype(acts.dtype, np.integer)
+            or not self.action_space.contains(acts.astype(np.int64))
+        ):
+            raise ValueError(
+                f"EPuckVectorEnv.step: actions must be {self.num_envs} integers in "
+                f"0..{self.world.n_actions - 1}, got {actions!r}"
+            )
         resetting = np.flatnonzero(self._autoreset)
         # the kernel steps every robot: a robot being reset is stepped too and its step thrown
         # away; its generators are put back first, so the reset draws what EPuckEnv.reset()
@@ -242,7 +260,7 @@ class EPuckVectorEnv(VectorEnv):
     def _seed(self, i: int, seed: int) -> None:
         """Robot ``i``'s generators as a world built with ``default_rng(seed)`` has them."""
         fresh = np.random.default_rng(seed)
-        motion = fresh.spawn(1)[0]          # as BatchedWorld spawns it, before any draw
+        motion = fresh.spawn(1)[0]  # as BatchedWorld spawns it, before any draw
         self._set_states(i, (fresh.bit_generator.state, motion.bit_generator.state))
 
     def _states(self, i: int) -> tuple[Mapping[str, Any], ...]:
@@ -262,8 +280,7 @@ class EPuckVectorEnv(VectorEnv):
             raise TypeError(f"EPuckVectorEnv.reset: a seed is an int, got {seed!r}")
         seeds = list(seed)
         if len(seeds) != n:
-            raise ValueError(f"EPuckVectorEnv.reset: {len(seeds)} seeds for {n} "
-                             f"sub-environments")
+            raise ValueError(f"EPuckVectorEnv.reset: {len(seeds)} seeds for {n} sub-environments")
         return [None if s is None else int(s) for s in seeds]
 
     def _poses(self, poses: Any) -> np.ndarray | None:
@@ -272,30 +289,45 @@ class EPuckVectorEnv(VectorEnv):
         n = self.num_envs
         array = np.asarray(poses, dtype=np.float64)
         if array.shape not in ((3,), (n, 3)) or not np.isfinite(array).all():
-            raise ValueError(f"EPuckVectorEnv.reset: options['pose'] must be finite (x, y, yaw) "
-                             f"or of shape ({n}, 3), got shape {array.shape}")
+            raise ValueError(
+                f"EPuckVectorEnv.reset: options['pose'] must be finite (x, y, yaw) "
+                f"or of shape ({n}, 3), got shape {array.shape}"
+            )
         return np.broadcast_to(array, (n, 3))
 
     def _reset_mask(self, mask: Any) -> np.ndarray:
         n = self.num_envs
         if mask is None:
             return np.ones(n, dtype=np.bool_)
-        if not isinstance(mask, np.ndarray) or mask.dtype != np.bool_ or mask.shape != (n,) \
-                or not mask.any():
-            raise ValueError(f"EPuckVectorEnv.reset: options['reset_mask'] must be a bool "
-                             f"array of shape ({n},) with at least one True")
+        if (
+            not isinstance(mask, np.ndarray)
+            or mask.dtype != np.bool_
+            or mask.shape != (n,)
+            or not mask.any()
+        ):
+            raise ValueError(
+                f"EPuckVectorEnv.reset: options['reset_mask'] must be a bool "
+                f"array of shape ({n},) with at least one True"
+            )
         return mask
 
-    def _infos(self, collision: np.ndarray, stuck: np.ndarray, progress: np.ndarray,
-               mask: np.ndarray) -> dict[str, Any]:
-        values = {"collision": collision, "stuck": stuck, "progress": progress,
-                  "pose": self.world.pose.copy(), "distances": self.world.dist.copy()}
+    def _infos(
+        self, collision: np.ndarray, stuck: np.ndarray, progress: np.ndarray, mask: np.ndarray
+    ) -> dict[str, Any]:
+        values = {
+            "collision": collision,
+            "stuck": stuck,
+            "progress": progress,
+            "pose": self.world.pose.copy(),
+            "distances": self.world.dist.copy(),
+        }
         infos: dict[str, Any] = {}
         for key in INFO_KEYS:
             value = values[key]
             if not mask.all():
-                value = np.where(mask.reshape(-1, *[1] * (value.ndim - 1)), value,
-                                 np.zeros_like(value))
+                value = np.where(
+                    mask.reshape(-1, *[1] * (value.ndim - 1)), value, np.zeros_like(value)
+                )
             infos[key] = value
             infos[f"_{key}"] = mask.copy()
         return infos

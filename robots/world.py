@@ -1,4 +1,5 @@
 """A pybullet client holding one arena and one e-puck, stepped at the control rate."""
+
 from __future__ import annotations
 
 import math
@@ -158,16 +159,25 @@ class World:
         fov = 8.0
         dist = (extent / 2) / math.tan(math.radians(fov / 2))
         view = p.computeViewMatrix(
-            cameraEyePosition=(0, 0, dist), cameraTargetPosition=(0, 0, 0),
-            cameraUpVector=(0, 1, 0), physicsClientId=self.client,
+            cameraEyePosition=(0, 0, dist),
+            cameraTargetPosition=(0, 0, 0),
+            cameraUpVector=(0, 1, 0),
+            physicsClientId=self.client,
         )
         proj = p.computeProjectionMatrixFOV(
-            fov=fov, aspect=width / height, nearVal=dist - 0.5, farVal=dist + 0.5,
+            fov=fov,
+            aspect=width / height,
+            nearVal=dist - 0.5,
+            farVal=dist + 0.5,
             physicsClientId=self.client,
         )
         _, _, rgba, _, _ = p.getCameraImage(
-            width, height, viewMatrix=view, projectionMatrix=proj,
-            renderer=p.ER_TINY_RENDERER, lightDirection=(0.3, 0.4, 1.0),
+            width,
+            height,
+            viewMatrix=view,
+            projectionMatrix=proj,
+            renderer=p.ER_TINY_RENDERER,
+            lightDirection=(0.3, 0.4, 1.0),
             physicsClientId=self.client,
         )
         return np.asarray(rgba, dtype=np.uint8).reshape(height, width, 4)[:, :, :3]

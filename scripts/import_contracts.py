@@ -6,6 +6,7 @@ in a folder ``dfrl/robots/``. So this builds the link tree (:mod:`link_tree`) an
 tree's ``dfrl`` then shadows the checkout's). Exits with lint-imports' status (0: every contract
 kept). Usage: ``python scripts/import_contracts.py [--root DIR]``.
 """
+
 from __future__ import annotations
 
 import os
@@ -26,8 +27,9 @@ def main(argv: list[str]) -> int:
     link_tree.build(root, tree)
     exe = shutil.which("lint-imports", path=str(Path(sys.executable).parent)) or "lint-imports"
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    done = subprocess.run([exe, "--no-cache", str(root / "pyproject.toml")], cwd=tree, env=env,
-                          check=False)
+    done = subprocess.run(
+        [exe, "--no-cache", str(root / "pyproject.toml")], cwd=tree, env=env, check=False
+    )
     return done.returncode
 
 

@@ -9,6 +9,7 @@ copy. ``OUT`` is rebuilt on every call (a folder that disappeared leaves no stal
 
 Usage: ``python scripts/link_tree.py [ROOT [OUT]]`` (defaults: the checkout, ``build/typecheck``).
 """
+
 from __future__ import annotations
 
 import ast

@@ -18,6 +18,7 @@ Each finding is one line, naming its file(s). Exits 1 if there is a finding, 0 i
 ``python scripts/prolog_graph.py [--root DIR] [--edges] [--warn] [--max-lines N] [FOLDER ...]``
 (``--edges`` also prints every load edge).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -40,7 +41,7 @@ def _skip_quoted(text: str, i: int, quote: str) -> int:
             i += 2
             continue
         if c == quote:
-            if text[i + 1:i + 2] == quote:        # a doubled quote stands for one
+            if text[i + 1 : i + 2] == quote:  # a doubled quote stands for one
                 i += 2
                 continue
             return i + 1
@@ -65,7 +66,7 @@ def clauses(text: str) -> list[tuple[str, str]]:
             i = n if j < 0 else j + 2
             kept.append(" ")
             blank.append(" ")
-        elif text.startswith("0'", i) and i + 2 < n:       # a character code: 0'a, 0''', 0'\n
+        elif text.startswith("0'", i) and i + 2 < n:  # a character code: 0'a, 0''', 0'\n
             j = i + 3
             if text[i + 2] == "\\" or text.startswith("''", i + 2):
                 j = i + 4
@@ -124,7 +125,7 @@ def load_specs(clause: str) -> list[str]:
         return []
     specs: list[str] = []
     for m in re.finditer(rf"\b({'|'.join(LOADERS)})\s*\(", clause):
-        arg = _first_arg(clause[m.end():]).strip()
+        arg = _first_arg(clause[m.end() :]).strip()
         items = _top_args(arg[1:-1]) if arg.startswith("[") and arg.endswith("]") else [arg]
         specs += items
     return specs
@@ -166,8 +167,9 @@ def read_file(path: Path) -> PlFile:
             target = resolve(spec, path)
             if target is not None:
                 item.loads.append(target)
-        item.qualifiers |= set(re.findall(r"(?<![A-Za-z0-9_])([a-z][A-Za-z0-9_]*)\s*:(?![-=])",
-                                          blank))
+        item.qualifiers |= set(
+            re.findall(r"(?<![A-Za-z0-9_])([a-z][A-Za-z0-9_]*)\s*:(?![-=])", blank)
+        )
     return item
 
 
@@ -231,8 +233,10 @@ def app_names(files: dict[Path, PlFile], root: Path) -> list[str]:
         if loads or named:
             what = [f"loads {', '.join(loads)}"] if loads else []
             what += [f"qualifies with {', '.join(named)}"] if named else []
-            out.append(f"{_rel(f.path, root)}: platform module {f.module} names the dFRL "
-                       f"application ({'; '.join(what)})")
+            out.append(
+                f"{_rel(f.path, root)}: platform module {f.module} names the dFRL "
+                f"application ({'; '.join(what)})"
+            )
     return out
 
 
@@ -247,35 +251,49 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--root", type=Path, default=Path(__file__).resolve().parent.parent)
     parser.add_argument("--edges", action="store_true", help="print every load edge too")
-    parser.add_argument("--warn", action="store_true",
-                        help="report the findings without failing (exit 0)")
-    parser.add_argument("--max-lines", type=int, default=500,
-                        help="the longest a module may be (default: %(default)s)")
+    parser.add_argument(
+        "--warn", action="store_true", help="report the findings without failing (exit 0)"
+    )
+    parser.add_argument(
+        "--max-lines",
+        type=int,
+        default=500,
+        help="the longest a module may be (default: %(default)s)",
+    )
     parser.add_argument("folders", nargs="*", default=["platform_pl", "pybridge"])
     args = parser.parse_args(argv)
     root = args.root.resolve()
     missing = [d for d in args.folders if not (root / d).is_dir()]
     paths = sorted(p for d in args.folders for p in (root / d).rglob("*.pl"))
-    if missing or not paths:        # a check that read nothing must not pass
-        print(f"prolog_graph: no Prolog sources read under {root} "
-              f"(missing folders: {', '.join(missing) or 'none'})", file=sys.stderr)
+    if missing or not paths:  # a check that read nothing must not pass
+        print(
+            f"prolog_graph: no Prolog sources read under {root} "
+            f"(missing folders: {', '.join(missing) or 'none'})",
+            file=sys.stderr,
+        )
         return 2
     files = {f.path: f for f in map(read_file, paths)}
     if args.edges:
         for f in sorted(files.values(), key=lambda f: f.path):
             for t in f.loads:
                 print(f"{_rel(f.path, root)} -> {_rel(t, root)}")
-    findings = [f"load cycle: {', '.join(_rel(p, root) for p in comp)} load each other"
-                for comp in cycles(files)]
+    findings = [
+        f"load cycle: {', '.join(_rel(p, root) for p in comp)} load each other"
+        for comp in cycles(files)
+    ]
     findings += app_names(files, root)
-    findings += [f"{_rel(f.path, root)}: module {f.module} has {f.lines} lines, over "
-                 f"{args.max_lines}" for f in sorted(files.values(), key=lambda f: f.path)
-                 if f.module is not None and f.lines > args.max_lines]
+    findings += [
+        f"{_rel(f.path, root)}: module {f.module} has {f.lines} lines, over {args.max_lines}"
+        for f in sorted(files.values(), key=lambda f: f.path)
+        if f.module is not None and f.lines > args.max_lines
+    ]
     for line in findings:
         print(line)
-    print(f"prolog_graph: {len(files)} files, "
-          f"{sum(len(f.loads) for f in files.values())} load edges, {len(findings)} findings",
-          file=sys.stderr)
+    print(
+        f"prolog_graph: {len(files)} files, "
+        f"{sum(len(f.loads) for f in files.values())} load edges, {len(findings)} findings",
+        file=sys.stderr,
+    )
     return 1 if findings and not args.warn else 0
 
 

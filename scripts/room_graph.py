@@ -7,6 +7,7 @@ those inside functions and under ``TYPE_CHECKING`` too (grimp, the graph import-
 ``python scripts/room_graph.py`` builds the checkout's link tree first (:mod:`link_tree`);
 ``--tree DIR`` reads a tree built elsewhere (``python scripts/link_tree.py OTHER_CHECKOUT DIR``).
 """
+
 from __future__ import annotations
 
 import argparse

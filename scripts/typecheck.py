@@ -7,6 +7,7 @@ the checkout's ``pyproject.toml`` (``[tool.mypy]``: ``mypy_path`` is that tree, 
 
 Usage: ``python scripts/typecheck.py [--root DIR] [MYPY_ARGS...]``.
 """
+
 from __future__ import annotations
 
 import os
@@ -33,8 +34,14 @@ def main(argv: list[str]) -> int:
     tree = "build/typecheck"
     link_tree.build(root, root / tree)
     cmd = [sys.executable, "-m", "mypy", "--config-file", str(root / "pyproject.toml"), *argv]
-    done = subprocess.run(cmd, cwd=root, capture_output=True, text=True, check=False,
-                          env={**os.environ, "MYPY_FORCE_COLOR": "0"})
+    done = subprocess.run(
+        cmd,
+        cwd=root,
+        capture_output=True,
+        text=True,
+        check=False,
+        env={**os.environ, "MYPY_FORCE_COLOR": "0"},
+    )
     folders = link_tree.roots(root)
     sys.stdout.write(real_paths(done.stdout, tree, folders))
     sys.stderr.write(real_paths(done.stderr, tree, folders))

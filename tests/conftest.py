@@ -2,6 +2,7 @@
 pyproject.toml) are named at the end, not only counted, so that nobody mistakes the default
 suite for the whole one. Works with pytest-xdist: each worker writes what it deselected into a
 folder the controller made, and the controller reads it back."""
+
 from __future__ import annotations
 
 import shutil
@@ -16,7 +17,7 @@ _deselected: list[str] = []
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    if not hasattr(config, "workerinput"):          # the controller (or a run without xdist)
+    if not hasattr(config, "workerinput"):  # the controller (or a run without xdist)
         config._dfrl_deselected_dir = tempfile.mkdtemp(prefix="dfrl-deselected-")  # type: ignore[attr-defined]
 
 
@@ -36,8 +37,7 @@ def pytest_collection_finish(session: pytest.Session) -> None:
         Path(folder, f"{worker}.txt").write_text("\n".join(_deselected) + "\n")
 
 
-def pytest_terminal_summary(terminalreporter: Any, exitstatus: int,
-                            config: pytest.Config) -> None:
+def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pytest.Config) -> None:
     folder = getattr(config, "_dfrl_deselected_dir", None)
     if folder is None:
         return
@@ -49,7 +49,10 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int,
         return
     marks, words = config.getoption("markexpr") or "", config.getoption("keyword") or ""
     how = ", ".join([f"-m {marks!r}"] * bool(marks) + [f"-k {words!r}"] * bool(words))
-    terminalreporter.write_sep("-", f"{len(names)} tests deselected ({how or 'by a plugin'}; "
-                                    "the slow ones: scripts/test.sh -m slow runs them)")
+    terminalreporter.write_sep(
+        "-",
+        f"{len(names)} tests deselected ({how or 'by a plugin'}; "
+        "the slow ones: scripts/test.sh -m slow runs them)",
+    )
     for name in sorted(names):
         terminalreporter.write_line(f"deselected: {name}")

@@ -1,5 +1,6 @@
 """The gates of scripts/gates.sh: each one fails on a copy broken on purpose, naming the file, and
 passes on the real tree (ruff, mypy, the import contracts)."""
+
 from __future__ import annotations
 
 import os
@@ -16,16 +17,40 @@ SCRIPTS = ROOT / "scripts"
 MYPY_CACHE = ROOT / "build" / "mypy_cache_tests"
 #: the modules the import contracts of pyproject.toml name (layers and shared modules)
 CONTRACT_MODULES = (
-    "experiments/cli", "experiments/tools", "experiments/science", "experiments/driver",
-    "experiments/robot_host", "pybridge", "robots", "arenas", "platform_pl",
-    *(f"experiments/{m}.py" for m in ("errors", "processes", "tokens", "tls_folder",
-                                      "config_rules", "provenance", "suggestions")),
+    "experiments/cli",
+    "experiments/tools",
+    "experiments/science",
+    "experiments/driver",
+    "experiments/robot_host",
+    "pybridge",
+    "robots",
+    "arenas",
+    "platform_pl",
+    *(
+        f"experiments/{m}.py"
+        for m in (
+            "errors",
+            "processes",
+            "tokens",
+            "tls_folder",
+            "config_rules",
+            "provenance",
+            "suggestions",
+        )
+    ),
 )
 
 
 def _run(*cmd: str | Path, cwd: Path = ROOT, **env: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([str(c) for c in cmd], cwd=cwd, capture_output=True, text=True,
-                          timeout=300, env={**os.environ, **env}, check=False)
+    return subprocess.run(
+        [str(c) for c in cmd],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**os.environ, **env},
+        check=False,
+    )
 
 
 def _project(tmp_path: Path, files: dict[str, str]) -> Path:
@@ -49,7 +74,9 @@ def _project(tmp_path: Path, files: dict[str, str]) -> Path:
 
 
 def test_ruff_fails_on_an_unused_import_naming_the_file(tmp_path: Path) -> None:
-    root = _project(tmp_path, {"robots/unused.py": '"""Imports what it never uses."""\nimport os\n'})
+    root = _project(
+        tmp_path, {"robots/unused.py": '"""Imports what it never uses."""\nimport os\n'}
+    )
     done = _run(sys.executable, "-m", "ruff", "check", "--no-cache", "robots", cwd=root)
     assert done.returncode != 0
     assert "robots/unused.py" in done.stdout and "F401" in done.stdout
@@ -57,30 +84,38 @@ def test_ruff_fails_on_an_unused_import_naming_the_file(tmp_path: Path) -> None:
 
 def test_mypy_follows_dfrl_to_the_folders_and_fails_naming_the_file(tmp_path: Path) -> None:
     # the error is only seen if dfrl.robots.counts resolves to robots/counts.py
-    root = _project(tmp_path, {
-        "robots/counts.py": "COUNT: int = 3\n",
-        "robots/words.py": "from dfrl.robots.counts import COUNT\n\nWORD: str = COUNT\n",
-    })
-    done = _run(sys.executable, SCRIPTS / "typecheck.py", "--root", root,
-                MYPY_CACHE_DIR=str(MYPY_CACHE))
+    root = _project(
+        tmp_path,
+        {
+            "robots/counts.py": "COUNT: int = 3\n",
+            "robots/words.py": "from dfrl.robots.counts import COUNT\n\nWORD: str = COUNT\n",
+        },
+    )
+    done = _run(
+        sys.executable, SCRIPTS / "typecheck.py", "--root", root, MYPY_CACHE_DIR=str(MYPY_CACHE)
+    )
     assert done.returncode != 0, done.stdout
     assert "robots/words.py:3: error" in done.stdout and "build/typecheck" not in done.stdout
     assert "[assignment]" in done.stdout
-    (root / "robots" / "words.py").write_text("from dfrl.robots.counts import COUNT\n\n"
-                                              "WORD: str = str(COUNT)\n")
-    done = _run(sys.executable, SCRIPTS / "typecheck.py", "--root", root,
-                MYPY_CACHE_DIR=str(MYPY_CACHE))
+    (root / "robots" / "words.py").write_text(
+        "from dfrl.robots.counts import COUNT\n\nWORD: str = str(COUNT)\n"
+    )
+    done = _run(
+        sys.executable, SCRIPTS / "typecheck.py", "--root", root, MYPY_CACHE_DIR=str(MYPY_CACHE)
+    )
     assert done.returncode == 0, done.stdout
 
 
 def test_import_contracts_fail_on_a_robot_host_importing_a_tool(tmp_path: Path) -> None:
-    root = _project(tmp_path, {
-        "experiments/tools/probe.py": "VALUE = 1\n",
-        "experiments/robot_host/process.py":
-            "def main() -> int:\n"
+    root = _project(
+        tmp_path,
+        {
+            "experiments/tools/probe.py": "VALUE = 1\n",
+            "experiments/robot_host/process.py": "def main() -> int:\n"
             "    from dfrl.experiments.tools.probe import VALUE\n"
             "    return VALUE\n",
-    })
+        },
+    )
     done = _run(sys.executable, SCRIPTS / "import_contracts.py", "--root", root)
     assert done.returncode != 0, done.stdout + done.stderr
     assert "rooms: cli -> tools -> science -> driver -> robot_host BROKEN" in done.stdout
@@ -91,27 +126,35 @@ def test_import_contracts_fail_on_a_robot_host_importing_a_tool(tmp_path: Path) 
 
 
 def test_prolog_graph_fails_on_a_load_cycle_and_on_a_platform_module_naming_dfrl(
-        tmp_path: Path) -> None:
-    root = _project(tmp_path, {
-        "platform_pl/ring_a.pl": ":- module(ring_a, []).\n:- use_module(ring_b, [b/0]).\n",
-        "platform_pl/sub/ring_b.pl": "",        # replaced below: the cycle crosses folders
-        "platform_pl/dfrl_agent/dfrl_fold.pl": ":- module(dfrl_fold, [fold/2]).\nfold(X, X).\n",
-        "platform_pl/safe.pl": (":- module(safe, [hook/1]).\n"
-                                "% dfrl_fold:fold/2 in a comment is no reference\n"
-                                "note('dfrl_fold:fold').\n"
-                                "hook(dfrl_fold:fold/2).\n"),
-        "platform_pl/clean.pl": ":- module(clean, []).\n:- use_module(library(lists)).\n",
-    })
+    tmp_path: Path,
+) -> None:
+    root = _project(
+        tmp_path,
+        {
+            "platform_pl/ring_a.pl": ":- module(ring_a, []).\n:- use_module(ring_b, [b/0]).\n",
+            "platform_pl/sub/ring_b.pl": "",  # replaced below: the cycle crosses folders
+            "platform_pl/dfrl_agent/dfrl_fold.pl": ":- module(dfrl_fold, [fold/2]).\nfold(X, X).\n",
+            "platform_pl/safe.pl": (
+                ":- module(safe, [hook/1]).\n"
+                "% dfrl_fold:fold/2 in a comment is no reference\n"
+                "note('dfrl_fold:fold').\n"
+                "hook(dfrl_fold:fold/2).\n"
+            ),
+            "platform_pl/clean.pl": ":- module(clean, []).\n:- use_module(library(lists)).\n",
+        },
+    )
     (root / "platform_pl/sub/ring_b.pl").unlink()
     (root / "platform_pl/ring_b.pl").write_text(
-        ":- module(ring_b, [b/0]).\n:- use_module('sub/../ring_a').\nb.\n")
+        ":- module(ring_b, [b/0]).\n:- use_module('sub/../ring_a').\nb.\n"
+    )
     done = _run(sys.executable, SCRIPTS / "prolog_graph.py", "--root", root)
     assert done.returncode == 1
     lines = done.stdout.splitlines()
-    assert ("load cycle: platform_pl/ring_a.pl, platform_pl/ring_b.pl load each other"
-            in lines)
-    assert lines[-1].startswith("platform_pl/safe.pl: platform module safe names the dFRL "
-                                "application (qualifies with dfrl_fold)")
+    assert "load cycle: platform_pl/ring_a.pl, platform_pl/ring_b.pl load each other" in lines
+    assert lines[-1].startswith(
+        "platform_pl/safe.pl: platform module safe names the dFRL "
+        "application (qualifies with dfrl_fold)"
+    )
     assert not any("clean.pl" in line or "dfrl_agent/" in line.split(":")[0] for line in lines)
     warned = _run(sys.executable, SCRIPTS / "prolog_graph.py", "--root", root, "--warn")
     assert warned.returncode == 0 and warned.stdout == done.stdout
@@ -127,10 +170,25 @@ def test_prolog_graph_fails_on_a_load_cycle_and_on_a_platform_module_naming_dfrl
 
 @pytest.mark.parametrize("gate", ["ruff", "mypy", "import-contracts"])
 def test_the_real_tree_passes(gate: str) -> None:
-    cmd = {"ruff": [sys.executable, "-m", "ruff", "check", "--no-cache", "platform_pl",
-                    "pybridge", "robots", "arenas", "experiments", "dfrl", "scripts", "tests"],
-           "mypy": [sys.executable, SCRIPTS / "typecheck.py"],
-           "import-contracts": [sys.executable, SCRIPTS / "import_contracts.py"]}[gate]
+    cmd = {
+        "ruff": [
+            sys.executable,
+            "-m",
+            "ruff",
+            "check",
+            "--no-cache",
+            "platform_pl",
+            "pybridge",
+            "robots",
+            "arenas",
+            "experiments",
+            "dfrl",
+            "scripts",
+            "tests",
+        ],
+        "mypy": [sys.executable, SCRIPTS / "typecheck.py"],
+        "import-contracts": [sys.executable, SCRIPTS / "import_contracts.py"],
+    }[gate]
     done = _run(*cmd)
     assert done.returncode == 0, done.stdout + done.stderr
 

@@ -6,6 +6,7 @@ imported when the parser is built; a module that fails to import is an error, no
 command. ``dfrl node`` builds only its own parser: it imports neither the simulation nor the
 learners (a platform node needs none of them).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -16,8 +17,21 @@ from collections.abc import Sequence
 from dfrl import __version__
 
 #: Modules (of this package) that add subcommands, in the order of ``dfrl --help``.
-COMMAND_MODULES = ("node", "federated", "running", "history", "bench", "standalone", "transfer",
-                   "studies", "hetero", "robot", "view", "secret", "certs")
+COMMAND_MODULES = (
+    "node",
+    "federated",
+    "running",
+    "history",
+    "bench",
+    "standalone",
+    "transfer",
+    "studies",
+    "hetero",
+    "robot",
+    "view",
+    "secret",
+    "certs",
+)
 
 
 def build_parser(only: Sequence[str] | None = None) -> argparse.ArgumentParser:

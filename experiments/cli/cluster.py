@@ -6,6 +6,7 @@ Only the options and the choice of backend live here; ``dfrl run`` (:mod:`.feder
 :func:`run_experiment_for` where it would call the launcher. Without ``--cluster`` nothing of
 the engine is imported (``dfrl demo`` does not need it).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -21,31 +22,53 @@ def add_cluster_arguments(p: argparse.ArgumentParser) -> None:
     """``--cluster ADDRESS``, ``--cluster-tls DIR``, ``--insecure`` and ``--cluster-cpus N``
     of ``dfrl run``."""
     g = p.add_argument_group("cluster (README: 'Running on a cluster')")
-    g.add_argument("--cluster", default=None, metavar="ADDRESS",
-                   help="place every robot without robot_host on the Dask cluster whose "
-                        "scheduler is ADDRESS (e.g. tls://10.0.0.1:8786, with --cluster-tls): "
-                        "each starts a dfrl robot service on a worker's host (needs pip "
-                        "install 'dfrl[cluster]', --token-file, and dfrl.token beside every "
-                        "worker)")
-    g.add_argument("--cluster-tls", type=Path, default=None, metavar="DIR",
-                   help="with a tls:// --cluster: this host's cluster certificate folder "
-                        "(ca.crt, cluster.crt, cluster.key: 'dfrl certs cluster NAME CA_DIR "
-                        "--out DIR')")
-    g.add_argument("--insecure", action="store_true",
-                   help="accept a plaintext tcp:// --cluster off loopback (refused otherwise: "
-                        "anyone who reaches such a scheduler runs code on its workers)")
-    g.add_argument("--cluster-cpus", type=_positive, default=1.0, metavar="N",
-                   help="the CPU resource each robot asks the cluster for (default 1; workers "
-                        "offer it with dask worker --resources CPU=N)")
+    g.add_argument(
+        "--cluster",
+        default=None,
+        metavar="ADDRESS",
+        help="place every robot without robot_host on the Dask cluster whose "
+        "scheduler is ADDRESS (e.g. tls://10.0.0.1:8786, with --cluster-tls): "
+        "each starts a dfrl robot service on a worker's host (needs pip "
+        "install 'dfrl[cluster]', --token-file, and dfrl.token beside every "
+        "worker)",
+    )
+    g.add_argument(
+        "--cluster-tls",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="with a tls:// --cluster: this host's cluster certificate folder "
+        "(ca.crt, cluster.crt, cluster.key: 'dfrl certs cluster NAME CA_DIR "
+        "--out DIR')",
+    )
+    g.add_argument(
+        "--insecure",
+        action="store_true",
+        help="accept a plaintext tcp:// --cluster off loopback (refused otherwise: "
+        "anyone who reaches such a scheduler runs code on its workers)",
+    )
+    g.add_argument(
+        "--cluster-cpus",
+        type=_positive,
+        default=1.0,
+        metavar="N",
+        help="the CPU resource each robot asks the cluster for (default 1; workers "
+        "offer it with dask worker --resources CPU=N)",
+    )
 
 
 def add_study_cluster_arguments(p: argparse.ArgumentParser) -> None:
     """``--cluster``, ``--cluster-cpus`` and ``--token-file`` of a study: its federated runs'
     robots on the cluster."""
     add_cluster_arguments(p)
-    p.add_argument("--token-file", type=Path, default=None, metavar="FILE",
-                   help="with --cluster: the token the workers' robot services prove (the "
-                        "dfrl.token beside every worker)")
+    p.add_argument(
+        "--token-file",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="with --cluster: the token the workers' robot services prove (the "
+        "dfrl.token beside every worker)",
+    )
 
 
 def cluster_access_of(args: argparse.Namespace) -> Any:
@@ -62,8 +85,10 @@ def cluster_access_of(args: argparse.Namespace) -> Any:
 
     address = getattr(args, "cluster", None)
     if address is None:
-        for flag, given in (("--cluster-tls", getattr(args, "cluster_tls", None) is not None),
-                            ("--insecure", getattr(args, "insecure", False))):
+        for flag, given in (
+            ("--cluster-tls", getattr(args, "cluster_tls", None) is not None),
+            ("--insecure", getattr(args, "insecure", False)),
+        ):
             if given:
                 raise ClusterAccessError(f"{flag} is for --cluster ADDRESS")
         return None
@@ -93,14 +118,20 @@ def study_cluster(args: argparse.Namespace) -> Any:
             raise ValueError("--token-file is for --cluster (the workers' token)")
         return None
     if args.token_file is None:
-        raise ValueError("--cluster needs --token-file FILE: the token of the dfrl.token "
-                         "beside every worker")
+        raise ValueError(
+            "--cluster needs --token-file FILE: the token of the dfrl.token beside every worker"
+        )
     try:
         read_token_file(args.token_file)
     except TokenError as exc:
         raise ValueError(f"--token-file: {exc}") from None
-    return ClusterOptions(access.address, args.token_file.resolve(), args.cluster_cpus,
-                          tls=access.tls, insecure=args.insecure)
+    return ClusterOptions(
+        access.address,
+        args.token_file.resolve(),
+        args.cluster_cpus,
+        tls=access.tls,
+        insecure=args.insecure,
+    )
 
 
 def _positive(text: str) -> float:
@@ -113,8 +144,9 @@ def _positive(text: str) -> float:
     return value
 
 
-def run_experiment_for(args: argparse.Namespace, cfg: ExperimentConfig, claimed: ClaimedFolder,
-                       tls: Path | None) -> Results:
+def run_experiment_for(
+    args: argparse.Namespace, cfg: ExperimentConfig, claimed: ClaimedFolder, tls: Path | None
+) -> Results:
     """Run ``cfg`` into ``claimed``: on the cluster of ``--cluster`` if given, else with the
     launcher alone.
 
@@ -131,5 +163,12 @@ def run_experiment_for(args: argparse.Namespace, cfg: ExperimentConfig, claimed:
         return run(cfg, claimed, tls=tls)
     from dfrl.experiments.driver.launcher.cluster import run_on_cluster
 
-    return run_on_cluster(cfg, claimed, address, cpus=args.cluster_cpus, tls=tls,
-                          cluster_tls=args.cluster_tls, insecure=args.insecure)
+    return run_on_cluster(
+        cfg,
+        claimed,
+        address,
+        cpus=args.cluster_cpus,
+        tls=tls,
+        cluster_tls=args.cluster_tls,
+        insecure=args.insecure,
+    )

@@ -4,6 +4,7 @@ Not a command module (it registers nothing). Commands that write their figures t
 library call that draws PNGs at screen resolution (the launcher, the paper, a transfer) redraw
 them with :func:`redraw_experiment` when other formats or a resolution were asked for.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -24,8 +25,9 @@ def _dpi(text: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: a resolution in dots per inch, "
-                                         "e.g. 300") from None
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: a resolution in dots per inch, e.g. 300"
+        ) from None
     if not 0 < value <= 2400:
         raise argparse.ArgumentTypeError(f"{text}: a resolution is > 0 and <= 2400 dpi")
     return value
@@ -33,18 +35,29 @@ def _dpi(text: str) -> float:
 
 def add_figure_arguments(p: argparse.ArgumentParser) -> None:
     """``--figure-format png,pdf,svg`` and ``--dpi N``."""
-    p.add_argument("--figure-format", type=_formats, default=("png",), metavar="FMT[,FMT]",
-                   help=f"formats of the figures, comma-separated, of {', '.join(FORMATS)} "
-                        "(pdf and svg are vector formats for print; default: png)")
-    p.add_argument("--dpi", type=_dpi, default=None,
-                   help="resolution of the figures, e.g. 300 for print (default: the screen "
-                        "resolution of each figure, 100 or 110)")
+    p.add_argument(
+        "--figure-format",
+        type=_formats,
+        default=("png",),
+        metavar="FMT[,FMT]",
+        help=f"formats of the figures, comma-separated, of {', '.join(FORMATS)} "
+        "(pdf and svg are vector formats for print; default: png)",
+    )
+    p.add_argument(
+        "--dpi",
+        type=_dpi,
+        default=None,
+        help="resolution of the figures, e.g. 300 for print (default: the screen "
+        "resolution of each figure, 100 or 110)",
+    )
 
 
 def wants_redraw(args: argparse.Namespace) -> bool:
     """Were other formats than PNG or a resolution asked for?"""
-    return tuple(getattr(args, "figure_format", ("png",))) != ("png",) \
+    return (
+        tuple(getattr(args, "figure_format", ("png",))) != ("png",)
         or getattr(args, "dpi", None) is not None
+    )
 
 
 def redraw_experiment(out: Path, args: argparse.Namespace, title: str, prog: str) -> list[Path]:
@@ -57,8 +70,11 @@ def redraw_experiment(out: Path, args: argparse.Namespace, title: str, prog: str
     try:
         return plot_experiment(out, title, args.figure_format, args.dpi)
     except ImportError as exc:
-        print(f"{prog}: figures not drawn: {exc.name or 'matplotlib'} is not installed "
-              "(pip install 'dfrl[plot]')", file=sys.stderr)
+        print(
+            f"{prog}: figures not drawn: {exc.name or 'matplotlib'} is not installed "
+            "(pip install 'dfrl[plot]')",
+            file=sys.stderr,
+        )
     except (OSError, ValueError) as exc:
         print(f"{prog}: figures in {out} failed: {exc}", file=sys.stderr)
     return []
@@ -80,8 +96,9 @@ def redraw_paper(out: Path, done: object, args: argparse.Namespace) -> None:
     for metrics in sorted(out.glob("seed*/*/metrics.csv")):
         run_dir = metrics.parent
         try:
-            cfg = ExperimentConfig.from_dict(json.loads((run_dir / "config.json").read_text(
-                encoding="utf-8")))
+            cfg = ExperimentConfig.from_dict(
+                json.loads((run_dir / "config.json").read_text(encoding="utf-8"))
+            )
             title = cfg.default_title()
         except (OSError, ValueError, ConfigError):
             title = run_dir.name

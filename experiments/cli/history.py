@@ -1,5 +1,6 @@
 """``dfrl check-history``: check the table writes a run's robots recorded
 (:mod:`dfrl.experiments.driver.results.history`) and say whether they kept the rules."""
+
 from __future__ import annotations
 
 import argparse
@@ -20,9 +21,12 @@ def cmd_check_history(args: argparse.Namespace) -> int:
     except HistoryInputError as exc:
         print(f"dfrl check-history: {exc}", file=sys.stderr)
         return 2
-    if verdict.writes == 0:                 # nothing checked is no verdict, never an "ok"
-        print(f"dfrl check-history: {args.results_dir}: its shares files hold no agent's "
-              "write: nothing to check", file=sys.stderr)
+    if verdict.writes == 0:  # nothing checked is no verdict, never an "ok"
+        print(
+            f"dfrl check-history: {args.results_dir}: its shares files hold no agent's "
+            "write: nothing to check",
+            file=sys.stderr,
+        )
         return 2
     if args.json:
         print(json.dumps(verdict.to_json(), indent=2))
@@ -36,9 +40,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "check-history",
         help="check the table writes a run's robots recorded (shares_*.csv): no doubled "
-             "write, no epoch regressed, no stale epoch, no split round (exit 1: violations, "
-             "2: no readable history)")
+        "write, no epoch regressed, no stale epoch, no split round (exit 1: violations, "
+        "2: no readable history)",
+    )
     p.add_argument("results_dir", type=Path, help="results folder of the run")
-    p.add_argument("--json", action="store_true",
-                   help="print the verdict as JSON (ok, counts, every violation)")
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print the verdict as JSON (ok, counts, every violation)",
+    )
     p.set_defaults(func=cmd_check_history)

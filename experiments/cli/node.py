@@ -1,4 +1,5 @@
 """``dfrl node``: run one platform node in its own SWI-Prolog process."""
+
 from __future__ import annotations
 
 import argparse
@@ -10,8 +11,14 @@ from typing import Callable, Union
 from dfrl.experiments import processes
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.tls_folder import CertError, check_node_dir, is_node_name
-from dfrl.experiments.tokens import (TOKEN_ENV, Token, env_with_tokens, parse_tokens,
-                                     pop_env_tokens, read_token_file)
+from dfrl.experiments.tokens import (
+    TOKEN_ENV,
+    Token,
+    env_with_tokens,
+    parse_tokens,
+    pop_env_tokens,
+    read_token_file,
+)
 from dfrl.platform_pl import PLATFORM_DIR
 
 
@@ -48,39 +55,123 @@ class BoundFlag:
 #: Every node option that bounds what agents (or frames) may take, as flags of ``dfrl node``
 #: and ``dfrl robot`` (node_start/3 documents them; platform_pl/README.md "Bounds on agents").
 BOUND_FLAGS: tuple[BoundFlag, ...] = (
-    BoundFlag("--agent-cpu-limit", "agent_cpu_limit", False, True, "SEC",
-              "CPU seconds of one handler call of an agent (default 2)"),
-    BoundFlag("--agent-stack-limit", "agent_stack_limit", True, True, "BYTES",
-              "stacks of one handler call (default 268435456, 256 MiB)"),
-    BoundFlag("--agent-module-limit", "agent_module_limit", True, True, "BYTES",
-              "an agent's own code and facts (default 67108864, 64 MiB)"),
-    BoundFlag("--agent-post-limit", "agent_post_limit", True, True, "N",
-              "posts an agent sends per minute (default 600)"),
-    BoundFlag("--agent-log-limit", "agent_log_limit", True, True, "N",
-              "output lines per agent and minute (default 200)"),
-    BoundFlag("--max-agents", "max_agents", True, True, "N",
-              "agents on the node (default 100)"),
-    BoundFlag("--clone-limit", "clone_limit", True, True, "N",
-              "clones arriving per minute (default 60)"),
-    BoundFlag("--agent-memory-budget", "agent_memory_budget", True, True, "BYTES",
-              "what the node's agents hold together: modules plus stacks of running calls "
-              "(default 1073741824, 1 GiB)"),
-    BoundFlag("--max-running-agents", "max_running_agents", True, True, "N",
-              "agent handler calls running at once; more wait (default 8)"),
-    BoundFlag("--agent-slot-wait", "agent_slot_wait", False, False, "SEC",
-              "how long a call waits for a running slot (default 60)"),
-    BoundFlag("--agent-wall-limit", "agent_wall_limit", False, True, "SEC",
-              "wall seconds one handler call may hold a running slot (default 60)"),
-    BoundFlag("--agent-idle-limit", "agent_idle_limit", False, True, "SEC",
-              "seconds an agent from a peer may stay idle before it is removed (default 600)"),
-    BoundFlag("--max-agents-per-peer", "max_agents_per_peer", True, True, "N",
-              "agents one peer may have on the node (default 50)"),
-    BoundFlag("--max-running-per-peer", "max_running_per_peer", True, True, "N",
-              "running slots the agents of one peer may hold at once (default 4)"),
-    BoundFlag("--peer-post-limit", "peer_post_limit", True, True, "N",
-              "posts one peer may deliver per minute (default 6000)"),
-    BoundFlag("--max-frame-size", "max_frame_size", True, False, "BYTES",
-              "largest frame from a peer that proved a token (default 33554432, 32 MiB)"),
+    BoundFlag(
+        "--agent-cpu-limit",
+        "agent_cpu_limit",
+        False,
+        True,
+        "SEC",
+        "CPU seconds of one handler call of an agent (default 2)",
+    ),
+    BoundFlag(
+        "--agent-stack-limit",
+        "agent_stack_limit",
+        True,
+        True,
+        "BYTES",
+        "stacks of one handler call (default 268435456, 256 MiB)",
+    ),
+    BoundFlag(
+        "--agent-module-limit",
+        "agent_module_limit",
+        True,
+        True,
+        "BYTES",
+        "an agent's own code and facts (default 67108864, 64 MiB)",
+    ),
+    BoundFlag(
+        "--agent-post-limit",
+        "agent_post_limit",
+        True,
+        True,
+        "N",
+        "posts an agent sends per minute (default 600)",
+    ),
+    BoundFlag(
+        "--agent-log-limit",
+        "agent_log_limit",
+        True,
+        True,
+        "N",
+        "output lines per agent and minute (default 200)",
+    ),
+    BoundFlag("--max-agents", "max_agents", True, True, "N", "agents on the node (default 100)"),
+    BoundFlag(
+        "--clone-limit", "clone_limit", True, True, "N", "clones arriving per minute (default 60)"
+    ),
+    BoundFlag(
+        "--agent-memory-budget",
+        "agent_memory_budget",
+        True,
+        True,
+        "BYTES",
+        "what the node's agents hold together: modules plus stacks of running calls "
+        "(default 1073741824, 1 GiB)",
+    ),
+    BoundFlag(
+        "--max-running-agents",
+        "max_running_agents",
+        True,
+        True,
+        "N",
+        "agent handler calls running at once; more wait (default 8)",
+    ),
+    BoundFlag(
+        "--agent-slot-wait",
+        "agent_slot_wait",
+        False,
+        False,
+        "SEC",
+        "how long a call waits for a running slot (default 60)",
+    ),
+    BoundFlag(
+        "--agent-wall-limit",
+        "agent_wall_limit",
+        False,
+        True,
+        "SEC",
+        "wall seconds one handler call may hold a running slot (default 60)",
+    ),
+    BoundFlag(
+        "--agent-idle-limit",
+        "agent_idle_limit",
+        False,
+        True,
+        "SEC",
+        "seconds an agent from a peer may stay idle before it is removed (default 600)",
+    ),
+    BoundFlag(
+        "--max-agents-per-peer",
+        "max_agents_per_peer",
+        True,
+        True,
+        "N",
+        "agents one peer may have on the node (default 50)",
+    ),
+    BoundFlag(
+        "--max-running-per-peer",
+        "max_running_per_peer",
+        True,
+        True,
+        "N",
+        "running slots the agents of one peer may hold at once (default 4)",
+    ),
+    BoundFlag(
+        "--peer-post-limit",
+        "peer_post_limit",
+        True,
+        True,
+        "N",
+        "posts one peer may deliver per minute (default 6000)",
+    ),
+    BoundFlag(
+        "--max-frame-size",
+        "max_frame_size",
+        True,
+        False,
+        "BYTES",
+        "largest frame from a peer that proved a token (default 33554432, 32 MiB)",
+    ),
 )
 
 
@@ -89,14 +180,23 @@ def add_bound_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("bounds on agents (each may be 'infinite' unless noted)")
     for b in BOUND_FLAGS:
         parse: Callable[[str], Bound] = b.parse
-        g.add_argument(b.flag, dest=b.option, type=parse, default=None, metavar=b.metavar,
-                       help=b.help + ("" if b.infinite else "; not infinite"))
+        g.add_argument(
+            b.flag,
+            dest=b.option,
+            type=parse,
+            default=None,
+            metavar=b.metavar,
+            help=b.help + ("" if b.infinite else "; not infinite"),
+        )
 
 
 def bounds_of_args(args: argparse.Namespace) -> dict[str, Bound]:
     """The bound options a command line gave, by node option name."""
-    return {b.option: getattr(args, b.option) for b in BOUND_FLAGS
-            if getattr(args, b.option, None) is not None}
+    return {
+        b.option: getattr(args, b.option)
+        for b in BOUND_FLAGS
+        if getattr(args, b.option, None) is not None
+    }
 
 
 def node_command(
@@ -154,8 +254,15 @@ def node_command(
     """
     if not 0 <= port <= 65535:
         raise ValueError(f"port {port} is outside 0..65535")
-    cmd = [processes.swipl(), "-q", str(PLATFORM_DIR / "node_main.pl"), "--host", host, "--port",
-           str(port)]
+    cmd = [
+        processes.swipl(),
+        "-q",
+        str(PLATFORM_DIR / "node_main.pl"),
+        "--host",
+        host,
+        "--port",
+        str(port),
+    ]
     for path in consult or []:
         cmd += ["--consult", os.path.abspath(path)]
     if advertise:
@@ -197,8 +304,10 @@ def check_trust_names(names: list[str]) -> None:
     names: letters, digits, ``-`` and ``.``, at most 64 characters)."""
     for name in names:
         if not is_node_name(name):
-            raise ValueError(f"--trust {name!r}: not a certificate name (letters, digits, "
-                             "'-' and '.', at most 64 characters, as 'dfrl certs node' makes)")
+            raise ValueError(
+                f"--trust {name!r}: not a certificate name (letters, digits, "
+                "'-' and '.', at most 64 characters, as 'dfrl certs node' makes)"
+            )
 
 
 def tokens_of_args(args: argparse.Namespace, prog: str) -> list[Token]:
@@ -213,9 +322,12 @@ def tokens_of_args(args: argparse.Namespace, prog: str) -> list[Token]:
     """
     tokens: list[Token] = []
     if args.token:
-        print(f"{prog}: warning: --token puts the token on the command line, where other "
-              "users of this host see it (ps); use --token-file FILE (mode 600) or the "
-              f"environment variable {TOKEN_ENV}", file=sys.stderr)
+        print(
+            f"{prog}: warning: --token puts the token on the command line, where other "
+            "users of this host see it (ps); use --token-file FILE (mode 600) or the "
+            f"environment variable {TOKEN_ENV}",
+            file=sys.stderr,
+        )
         tokens += parse_tokens("\n".join(args.token))
     for path in args.token_file:
         tokens += read_token_file(path)
@@ -225,21 +337,41 @@ def tokens_of_args(args: argparse.Namespace, prog: str) -> list[Token]:
 
 def add_token_arguments(p: argparse.ArgumentParser, what: str) -> None:
     """``--token-file FILE`` and ``--token T`` (both repeatable)."""
-    p.add_argument("--token-file", action="append", default=[], metavar="FILE",
-                   help=f"file of {what}, one per line, readable by you only (chmod 600; "
-                        f"'dfrl secret' prints a strong token); or set {TOKEN_ENV} (repeatable)")
-    p.add_argument("--token", action="append", default=[], metavar="T",
-                   help="a token on the command line (repeatable): other users of the host "
-                        "see it (ps), so this warns; prefer --token-file or " + TOKEN_ENV)
+    p.add_argument(
+        "--token-file",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help=f"file of {what}, one per line, readable by you only (chmod 600; "
+        f"'dfrl secret' prints a strong token); or set {TOKEN_ENV} (repeatable)",
+    )
+    p.add_argument(
+        "--token",
+        action="append",
+        default=[],
+        metavar="T",
+        help="a token on the command line (repeatable): other users of the host "
+        "see it (ps), so this warns; prefer --token-file or " + TOKEN_ENV,
+    )
 
 
 def _run(args: argparse.Namespace) -> int:
     try:
         tokens = tokens_of_args(args, "dfrl node")
-        cmd = node_command(args.host, args.port, args.consult, args.interactive,
-                           args.advertise, args.store, args.insecure, args.tls,
-                           args.tls_peer, args.trust, bounds_of_args(args))
-    except (ValueError, ExperimentError) as exc:      # TokenError is a ValueError
+        cmd = node_command(
+            args.host,
+            args.port,
+            args.consult,
+            args.interactive,
+            args.advertise,
+            args.store,
+            args.insecure,
+            args.tls,
+            args.tls_peer,
+            args.trust,
+            bounds_of_args(args),
+        )
+    except (ValueError, ExperimentError) as exc:  # TokenError is a ValueError
         print(f"dfrl node: {exc}", file=sys.stderr)
         return 2
     # the node reads DFRL_TOKEN and deletes it from its environment
@@ -252,23 +384,50 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("node", help="run one platform node (prints its address)")
     p.add_argument("--host", default="localhost", help="address to bind (default localhost)")
     p.add_argument("--port", type=int, default=0, help="port (default 0: the OS chooses)")
-    add_token_arguments(p, "platform tokens an arriving agent or peer must prove (none: an "
-                           "open node, refused off loopback)")
-    p.add_argument("--consult", action="append", default=[], metavar="FILE",
-                   help="agent program to load (repeatable)")
-    p.add_argument("--advertise", default=None, metavar="HOST[:PORT]",
-                   help="address other nodes reach this one at (default: the bound one)")
-    p.add_argument("--store", default=None, metavar="DIR",
-                   help="keep the node's identity and custody records in DIR (survive restarts)")
-    p.add_argument("--insecure", action="store_true",
-                   help="accept a weak token (or none) on an address other than loopback "
-                        "(default: refused)")
-    p.add_argument("--tls", default=None, metavar="DIR",
-                   help="mutual TLS with the node certificate in DIR (ca.crt, node.crt, "
-                        "node.key from 'dfrl certs node'); default: plaintext")
-    p.add_argument("--tls-peer", action="append", default=[], metavar="NAME",
-                   help="with --tls: a certificate name that may send agents or code "
-                        "(repeatable; default: any name the CA signed)")
+    add_token_arguments(
+        p,
+        "platform tokens an arriving agent or peer must prove (none: an "
+        "open node, refused off loopback)",
+    )
+    p.add_argument(
+        "--consult",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="agent program to load (repeatable)",
+    )
+    p.add_argument(
+        "--advertise",
+        default=None,
+        metavar="HOST[:PORT]",
+        help="address other nodes reach this one at (default: the bound one)",
+    )
+    p.add_argument(
+        "--store",
+        default=None,
+        metavar="DIR",
+        help="keep the node's identity and custody records in DIR (survive restarts)",
+    )
+    p.add_argument(
+        "--insecure",
+        action="store_true",
+        help="accept a weak token (or none) on an address other than loopback (default: refused)",
+    )
+    p.add_argument(
+        "--tls",
+        default=None,
+        metavar="DIR",
+        help="mutual TLS with the node certificate in DIR (ca.crt, node.crt, "
+        "node.key from 'dfrl certs node'); default: plaintext",
+    )
+    p.add_argument(
+        "--tls-peer",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="with --tls: a certificate name that may send agents or code "
+        "(repeatable; default: any name the CA signed)",
+    )
     add_trust_argument(p)
     add_bound_arguments(p)
     p.add_argument("--interactive", action="store_true", help="open a Prolog toplevel on the node")
@@ -277,7 +436,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def add_trust_argument(p: argparse.ArgumentParser) -> None:
     """``--trust NAME`` (repeatable): code from that certificate name skips the sandbox."""
-    p.add_argument("--trust", action="append", default=[], metavar="NAME",
-                   help="with --tls: install agents and programs from the peer whose "
-                        "certificate names NAME without the sandbox check (repeatable; "
-                        "default: none, all code from peers is checked)")
+    p.add_argument(
+        "--trust",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="with --tls: install agents and programs from the peer whose "
+        "certificate names NAME without the sandbox check (repeatable; "
+        "default: none, all code from peers is checked)",
+    )

@@ -2,6 +2,7 @@
 what probably holds it and what to do (one wording for ``dfrl robot``, ``view`` and
 ``run --view-port``; ``dfrl node`` says the same from Prolog,
 ``platform_errors.pl`` ``address_in_use``)."""
+
 from __future__ import annotations
 
 import errno
@@ -19,8 +20,10 @@ def port_in_use_text(host: str, port: int, holder: str, option: str) -> str:
     option : str
         The option that chooses the port, e.g. ``"--port"``.
     """
-    return (f"port {port} on {host} is in use ({holder}?); pick another {option} "
-            f"(0: the OS chooses one) or stop what holds it")
+    return (
+        f"port {port} on {host} is in use ({holder}?); pick another {option} "
+        f"(0: the OS chooses one) or stop what holds it"
+    )
 
 
 def is_address_in_use(exc: BaseException) -> bool:

@@ -1,5 +1,6 @@
 """``dfrl secret``: print a strong platform token (256 random bits), or write it to a new
 token file of mode 0600 (``--out FILE``, for ``--token-file``)."""
+
 from __future__ import annotations
 
 import argparse
@@ -27,22 +28,34 @@ def secret_main(args: argparse.Namespace) -> int:
         print(f"dfrl secret: {args.out} exists; not replacing it", file=sys.stderr)
         return 2
     write_secret_file(args.out, [token])
-    print(f"dfrl secret: a new token in {args.out} (mode 600): give it to dfrl robot, dfrl "
-          "node and dfrl run with --token-file", file=sys.stderr)
+    print(
+        f"dfrl secret: a new token in {args.out} (mode 600): give it to dfrl robot, dfrl "
+        "node and dfrl run with --token-file",
+        file=sys.stderr,
+    )
     return 0
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
-        "secret", help="print a strong platform token",
+        "secret",
+        help="print a strong platform token",
         description="Print a token with 256 bits of entropy, for the token file (--token-file) "
-                    "or DFRL_TOKEN of nodes reachable "
-                    "from the network (nodes off loopback refuse tokens under 128 bits "
-                    "without TLS unless told --insecure).")
-    p.add_argument("--integer", action="store_true",
-                   help="print an integer of 129 random bits instead (experiment configs take "
-                        "integer tokens)")
-    p.add_argument("--out", type=Path, default=None, metavar="FILE",
-                   help="write it to FILE, created with mode 600, instead of printing it "
-                        "(the token file of --token-file; FILE must not exist)")
+        "or DFRL_TOKEN of nodes reachable "
+        "from the network (nodes off loopback refuse tokens under 128 bits "
+        "without TLS unless told --insecure).",
+    )
+    p.add_argument(
+        "--integer",
+        action="store_true",
+        help="print an integer of 129 random bits instead (experiment configs take integer tokens)",
+    )
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="write it to FILE, created with mode 600, instead of printing it "
+        "(the token file of --token-file; FILE must not exist)",
+    )
     p.set_defaults(func=secret_main)

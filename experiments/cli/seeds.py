@@ -1,6 +1,7 @@
 """The seeds of a study on the command line, said one unambiguous way (``--seeds``,
 ``--n-seeds``, ``--seed``): shared by ``dfrl paper``, ``speedup``, ``sweep``, ``transfer``,
 ``transfer-study`` and ``hetero``."""
+
 from __future__ import annotations
 
 import argparse
@@ -11,11 +12,18 @@ def add_seed_arguments(p: argparse.ArgumentParser, default: int) -> None:
     least two), ``--n-seeds K`` (the seeds 1..K) or ``--seed S`` (that seed alone); default
     ``default`` seeds 1..default. :func:`chosen_seeds` reads them."""
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--seeds", type=int, nargs="+", default=None, metavar="S",
-                   help="the seeds, listed (at least two; a lone value is refused as "
-                        "ambiguous: use --n-seeds K or --seed S)")
-    g.add_argument("--n-seeds", type=int, default=None, metavar="K",
-                   help=f"K seeds: 1..K (default: {default})")
+    g.add_argument(
+        "--seeds",
+        type=int,
+        nargs="+",
+        default=None,
+        metavar="S",
+        help="the seeds, listed (at least two; a lone value is refused as "
+        "ambiguous: use --n-seeds K or --seed S)",
+    )
+    g.add_argument(
+        "--n-seeds", type=int, default=None, metavar="K", help=f"K seeds: 1..K (default: {default})"
+    )
     g.add_argument("--seed", type=int, default=None, metavar="S", help="one seed, S alone")
     p.set_defaults(default_seed_count=default)
 
@@ -32,8 +40,10 @@ def chosen_seeds(args: argparse.Namespace) -> tuple[int, ...]:
     if args.seeds is not None:
         if len(args.seeds) == 1:
             k = args.seeds[0]
-            raise ValueError(f"--seeds {k} is ambiguous: write --n-seeds {k} for the seeds "
-                             f"1..{k}, or --seed {k} for seed {k} alone")
+            raise ValueError(
+                f"--seeds {k} is ambiguous: write --n-seeds {k} for the seeds "
+                f"1..{k}, or --seed {k} for seed {k} alone"
+            )
         twice = sorted({s for s in args.seeds if args.seeds.count(s) > 1})
         if twice:
             raise ValueError(f"--seeds: seed {', '.join(map(str, twice))} given twice")

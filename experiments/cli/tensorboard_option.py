@@ -1,6 +1,7 @@
 """``--tensorboard`` of ``dfrl run``, ``demo``, ``collect`` and ``train``: the option
 (checked while the command line is parsed, before anything starts) and the writing once the
 run has ended (:mod:`dfrl.experiments.driver.results.tensorboard`)."""
+
 from __future__ import annotations
 
 import argparse
@@ -20,8 +21,13 @@ class _TensorBoardFlag(argparse.Action):
     def __init__(self, option_strings: list[str], dest: str, **kwargs: Any) -> None:
         super().__init__(option_strings, dest, nargs=0, default=False, **kwargs)
 
-    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
-                 values: object, option_string: str | None = None) -> None:
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: object,
+        option_string: str | None = None,
+    ) -> None:
         from dfrl.experiments.driver.results.tensorboard import TensorBoardMissing, require
 
         try:
@@ -33,10 +39,13 @@ class _TensorBoardFlag(argparse.Action):
 
 def add_tensorboard_argument(p: argparse.ArgumentParser) -> None:
     """Add ``--tensorboard``."""
-    p.add_argument("--tensorboard", action=_TensorBoardFlag,
-                   help="also write the scalars (rewards, collisions, epsilon, evaluations, "
-                        "shares, rounds) as TensorBoard event files into tensorboard/ of the "
-                        "results folder; needs pip install 'dfrl[tensorboard]'")
+    p.add_argument(
+        "--tensorboard",
+        action=_TensorBoardFlag,
+        help="also write the scalars (rewards, collisions, epsilon, evaluations, "
+        "shares, rounds) as TensorBoard event files into tensorboard/ of the "
+        "results folder; needs pip install 'dfrl[tensorboard]'",
+    )
 
 
 def write_run_tensorboard(results: Results, args: argparse.Namespace, prog: str) -> bool:
@@ -54,8 +63,11 @@ def write_run_tensorboard(results: Results, args: argparse.Namespace, prog: str)
     except (OSError, ValueError) as exc:
         print(f"{prog}: TensorBoard scalars not written: {exc}", file=sys.stderr)
         return False
-    print(f"{prog}: {sum(written.values())} TensorBoard scalars in "
-          f"{results.output_dir / TENSORBOARD_DIR}", file=sys.stderr)
+    print(
+        f"{prog}: {sum(written.values())} TensorBoard scalars in "
+        f"{results.output_dir / TENSORBOARD_DIR}",
+        file=sys.stderr,
+    )
     return True
 
 

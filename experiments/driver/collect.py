@@ -28,6 +28,7 @@ outboxes) until its robots are gone. ``dfrl robot`` services do not
 depend on the driver: they run the experiment to its end and keep its files until they are
 configured for another one.
 """
+
 from __future__ import annotations
 
 import os
@@ -56,8 +57,12 @@ class NotAResultsFolder(ExperimentError):
     """The folder holds no readable ``config.json``: nothing to collect."""
 
 
-def collect(results_dir: str | Path, progress: TextIO | None = sys.stderr,
-            wait_s: float = 30.0, tls: str | Path | None = None) -> Results:
+def collect(
+    results_dir: str | Path,
+    progress: TextIO | None = sys.stderr,
+    wait_s: float = 30.0,
+    tls: str | Path | None = None,
+) -> Results:
     """Fetch what a run's robot hosts hold and write its end-of-run files (see the module
     doc); idempotent. Robot processes of this host and robots on robot hosts still running
     the run get ``wait_s`` seconds to end; one still running then is reported and makes the
@@ -72,13 +77,19 @@ def collect(results_dir: str | Path, progress: TextIO | None = sys.stderr,
     """
     out = Path(results_dir).resolve()
     config = _config(out)
-    say = (lambda line: print(f"dfrl collect: {line}", file=progress, flush=True)) \
-        if progress is not None else (lambda line: None)
+    say = (
+        (lambda line: print(f"dfrl collect: {line}", file=progress, flush=True))
+        if progress is not None
+        else (lambda line: None)
+    )
     nodes = out / "nodes.json"
     info: dict[str, Any] = read_json(nodes) if nodes.is_file() else {"nodes": [], "agents": []}
-    notes = [f"collected at {time.strftime('%Y-%m-%d %H:%M:%S')} by `dfrl collect` from the "
-             "results folder" + (" and the robot hosts" if _remote(info) else "")
-             + "; wall time is the span of the logged rounds"]
+    notes = [
+        f"collected at {time.strftime('%Y-%m-%d %H:%M:%S')} by `dfrl collect` from the "
+        "results folder"
+        + (" and the robot hosts" if _remote(info) else "")
+        + "; wall time is the span of the logged rounds"
+    ]
     other: list[str] = []
     lost: dict[str, str] = {}
     if not nodes.is_file():
@@ -86,10 +97,12 @@ def collect(results_dir: str | Path, progress: TextIO | None = sys.stderr,
     deadline = time.monotonic() + wait_s
     running = _wait_local(out, info, deadline)
     for rid, pid in running.items():
-        other.append(f"{rid} was still running (pid {pid}) when collected: collect again "
-                     "once it ended")
-    status, gathered = (_fetch_remote(out, info, deadline, tls, notes, other, say)
-                        if _remote(info) else ({}, {}))
+        other.append(
+            f"{rid} was still running (pid {pid}) when collected: collect again once it ended"
+        )
+    status, gathered = (
+        _fetch_remote(out, info, deadline, tls, notes, other, say) if _remote(info) else ({}, {})
+    )
     robots = [str(n["robot"]) for n in info["nodes"]]
     for spec in config.robots:
         if spec.id not in robots:
@@ -112,17 +125,25 @@ def collect(results_dir: str | Path, progress: TextIO | None = sys.stderr,
     logs: dict[str, AgentLog] = {}
     budgets: dict[str, int] = {}
     for a in info["agents"]:
-        own = out / f"rounds_{a['name']}.log"      # this folder's, even if it was moved
-        logs[a["name"]] = read_rounds_log(own if own.is_file() else rounds_log(out, a),
-                                          a["name"], kept=kept_logs(out, a["name"]))
+        own = out / f"rounds_{a['name']}.log"  # this folder's, even if it was moved
+        logs[a["name"]] = read_rounds_log(
+            own if own.is_file() else rounds_log(out, a), a["name"], kept=kept_logs(out, a["name"])
+        )
         budgets[a["name"]] = int(a["rounds"])
     for label, algos in config.agent_groups():
         if agent_name(label) not in logs and any(s.algo in algos for s in config.robots):
             other.append(f"agent {agent_name(label)} was never launched (not in nodes.json)")
     spans = [t for lg in logs.values() for r in lg.rounds for t in (r.start, r.end)]
     wall = max(spans) - min(spans) if spans else 0.0
-    facts = RunFacts(wall, iterations=iterations, lost=lost, other=other, gathered=gathered,
-                     collected=notes, finished=finished)
+    facts = RunFacts(
+        wall,
+        iterations=iterations,
+        lost=lost,
+        other=other,
+        gathered=gathered,
+        collected=notes,
+        finished=finished,
+    )
     return write_end_files(out, config, robots, logs, budgets, facts, say)
 
 
@@ -154,19 +175,29 @@ def _alive(pid: int, config_path: Path) -> bool:
 def _wait_local(out: Path, info: dict[str, Any], deadline: float) -> dict[str, int]:
     """Wait (until ``deadline``) for the robot processes of this host the run started; return
     those still running -> pid."""
-    local = {str(n["robot"]): int(n["pid"]) for n in info["nodes"]
-             if not n.get("robot_host") and n.get("pid")}
+    local = {
+        str(n["robot"]): int(n["pid"])
+        for n in info["nodes"]
+        if not n.get("robot_host") and n.get("pid")
+    }
     while True:
-        running = {rid: pid for rid, pid in local.items()
-                   if _alive(pid, out / "nodes" / f"{rid}.json")}
+        running = {
+            rid: pid for rid, pid in local.items() if _alive(pid, out / "nodes" / f"{rid}.json")
+        }
         if not running or time.monotonic() >= deadline:
             return running
         time.sleep(LOOK_S)
 
 
-def _fetch_remote(out: Path, info: dict[str, Any], deadline: float, tls: str | Path | None,
-                  notes: list[str], other: list[str],
-                  say: Any) -> tuple[dict[str, dict[str, Any]], dict[str, list[str]]]:
+def _fetch_remote(
+    out: Path,
+    info: dict[str, Any],
+    deadline: float,
+    tls: str | Path | None,
+    notes: list[str],
+    other: list[str],
+    say: Any,
+) -> tuple[dict[str, dict[str, Any]], dict[str, list[str]]]:
     """Fetch the files of the run's robots on robot hosts (waiting until ``deadline`` for
     those still running it); return (robot -> its last status, robot -> files fetched). What
     could not be fetched goes to ``notes``, and to ``other`` when the folder lacks it."""
@@ -175,8 +206,12 @@ def _fetch_remote(out: Path, info: dict[str, Any], deadline: float, tls: str | P
     statuses: dict[str, dict[str, Any]] = {}
     gathered: dict[str, list[str]] = {}
     host = route_source(str(first["host"]), int(first["port"]))
-    with open_console(tokens_of(out), out / "logs" / "collect_console.err", host=host,
-                      tls=driver_tls(out, info, tls)) as console:
+    with open_console(
+        tokens_of(out),
+        out / "logs" / "collect_console.err",
+        host=host,
+        tls=driver_tls(out, info, tls),
+    ) as console:
         for node in remote:
             rid, where = str(node["robot"]), str(node["robot_host"])
             service = (str(node["host"]), int(node["port"]))
@@ -189,8 +224,10 @@ def _fetch_remote(out: Path, info: dict[str, Any], deadline: float, tls: str | P
                     why = f"robot host {where} did not answer: {exc}"
                     break
                 if status.get("experiment") != info.get("experiment"):
-                    why = (f"robot host {where} holds experiment {status.get('experiment')!r}, "
-                           f"not this run's ({info.get('experiment')})")
+                    why = (
+                        f"robot host {where} holds experiment {status.get('experiment')!r}, "
+                        f"not this run's ({info.get('experiment')})"
+                    )
                     break
                 if status.get("state") != "running" or time.monotonic() >= deadline:
                     break
@@ -198,9 +235,11 @@ def _fetch_remote(out: Path, info: dict[str, Any], deadline: float, tls: str | P
             if why is None:
                 statuses[rid] = status
                 if status.get("state") == "running":
-                    other.append(f"{rid} was still running on {where} (iteration "
-                                 f"{status.get('iteration')}) when collected: collect again "
-                                 "once it ended")
+                    other.append(
+                        f"{rid} was still running on {where} (iteration "
+                        f"{status.get('iteration')}) when collected: collect again "
+                        "once it ended"
+                    )
                 try:
                     gathered[rid] = fetch_files(console, service, rid, out)
                     say(f"{len(gathered[rid])} files of {rid} fetched from {where}")
@@ -208,16 +247,19 @@ def _fetch_remote(out: Path, info: dict[str, Any], deadline: float, tls: str | P
                 except ExperimentError as exc:
                     why = f"files of {rid} not fetched from {where}: {exc}"
             have = (out / f"metrics_{rid}.csv").is_file()
-            notes.append(f"NOT FETCHED {rid}: {why}" + ("; the folder has its files from "
-                                                        "before" if have else ""))
+            notes.append(
+                f"NOT FETCHED {rid}: {why}"
+                + ("; the folder has its files from before" if have else "")
+            )
             say(f"{rid}: {why}")
             if not have:
                 other.append(f"files of {rid} not fetched: {why}")
     return statuses, gathered
 
 
-def _progress(out: Path, rid: str, status: dict[str, Any] | None,
-              iterations: int) -> tuple[int | None, int | None]:
+def _progress(
+    out: Path, rid: str, status: dict[str, Any] | None, iterations: int
+) -> tuple[int | None, int | None]:
     """(iterations the robot ran, iterations it was to run) from its robot host's status, its
     checkpoint, or its metrics (planned: the config's; None when unknown)."""
     if status is not None and status.get("iterations"):

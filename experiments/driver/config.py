@@ -11,6 +11,7 @@ Python without it checks itself in ``__post_init__``; :meth:`~ExperimentConfig.c
 the arenas unless that was done already; :meth:`~ExperimentConfig.with_token` checks the token
 alone.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -19,14 +20,35 @@ from dataclasses import KW_ONLY, InitVar, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from dfrl.experiments.config_rules import (JsonDicts, ConfigError, check_value, json_form,
-                                           raise_problems, resolve_trainer, token_rule)
-from dfrl.experiments.driver.config_check import (BUILTIN_METHODS, COMMENT_KEYS, GRID,
-                                                  check_experiment, host_port_problem)
+from dfrl.experiments.config_rules import (
+    JsonDicts,
+    ConfigError,
+    check_value,
+    json_form,
+    raise_problems,
+    resolve_trainer,
+    token_rule,
+)
+from dfrl.experiments.driver.config_check import (
+    BUILTIN_METHODS,
+    COMMENT_KEYS,
+    GRID,
+    check_experiment,
+    host_port_problem,
+)
 from dfrl.experiments.robot_host.config import DEFAULT_ITERATIONS, Mode, boundaries
 
-__all__ = ["BUILTIN_METHODS", "CONFIGS_DIR", "GRID", "ConfigError", "ExperimentConfig", "JoinSpec",
-           "RobotSpec", "parse_host_port", "resolve_config"]
+__all__ = [
+    "BUILTIN_METHODS",
+    "CONFIGS_DIR",
+    "GRID",
+    "ConfigError",
+    "ExperimentConfig",
+    "JoinSpec",
+    "RobotSpec",
+    "parse_host_port",
+    "resolve_config",
+]
 
 
 @dataclass(frozen=True)
@@ -55,7 +77,7 @@ class RobotSpec:
     seed: int | None = None
     robot_host: str | None = None
     _: KW_ONLY
-    _checked: InitVar[bool] = False       # True: checked as part of its config's JSON form
+    _checked: InitVar[bool] = False  # True: checked as part of its config's JSON form
 
     def __post_init__(self, _checked: bool) -> None:
         if not _checked:
@@ -208,7 +230,7 @@ class ExperimentConfig(JsonDicts):
     fanout: int = 2
     learners: dict[str, Any] = field(default_factory=dict)
     _: KW_ONLY
-    _checked: InitVar[bool] = False       # True: its JSON form was checked as a whole
+    _checked: InitVar[bool] = False  # True: its JSON form was checked as a whole
 
     def __post_init__(self, _checked: bool) -> None:
         if not _checked:
@@ -216,10 +238,16 @@ class ExperimentConfig(JsonDicts):
         # the entries were part of the whole: built without checking again
         object.__setattr__(self, "mode", Mode(self.mode))
         object.__setattr__(self, "robots", tuple(_robot(r) for r in self.robots))
-        object.__setattr__(self, "joins", tuple(
-            j if isinstance(j, JoinSpec) else
-            JoinSpec(robot=_robot(j["robot"]), after_round=int(j.get("after_round", 1)))
-            for j in self.joins))
+        object.__setattr__(
+            self,
+            "joins",
+            tuple(
+                j
+                if isinstance(j, JoinSpec)
+                else JoinSpec(robot=_robot(j["robot"]), after_round=int(j.get("after_round", 1)))
+                for j in self.joins
+            ),
+        )
 
     def check(self) -> None:
         """Check what :meth:`from_dict` may leave to run time: every arena exists and parses
@@ -277,23 +305,32 @@ class ExperimentConfig(JsonDicts):
         (:func:`~dfrl.experiments.config_rules.resolve_trainer`). It runs exactly as this
         one (the same seeds, the same trainers) and resolves to itself."""
         # seeds >= 0 and a trainer the checks accept: not checked again
-        robots = tuple(dataclasses.replace(r, seed=self.robot_seed(r), _checked=True)
-                       for r in self.robots)
-        joins = tuple(dataclasses.replace(j, robot=dataclasses.replace(
-            j.robot, seed=self.robot_seed(j.robot), _checked=True)) for j in self.joins)
-        cfg = dataclasses.replace(self, robots=robots, joins=joins,
-                                  trainer=resolve_trainer(self.trainer), _checked=True)
+        robots = tuple(
+            dataclasses.replace(r, seed=self.robot_seed(r), _checked=True) for r in self.robots
+        )
+        joins = tuple(
+            dataclasses.replace(
+                j, robot=dataclasses.replace(j.robot, seed=self.robot_seed(j.robot), _checked=True)
+            )
+            for j in self.joins
+        )
+        cfg = dataclasses.replace(
+            self, robots=robots, joins=joins, trainer=resolve_trainer(self.trainer), _checked=True
+        )
         object.__setattr__(cfg, "_arenas_checked", getattr(self, "_arenas_checked", False))
         return cfg
 
     def default_title(self) -> str:
         if self.title:
             return self.title
-        algos = "+".join({"qlearning": "Q-learning", "sarsa": "SARSA"}.get(a, a)
-                         for a in self.algorithms())
+        algos = "+".join(
+            {"qlearning": "Q-learning", "sarsa": "SARSA"}.get(a, a) for a in self.algorithms()
+        )
         methods = "/".join(sorted({self.method_for(a) for a in self.algorithms()}))
-        return (f"dFRL {algos}, {methods}, {len(self.robots)} robots, "
-                f"{self.iterations} iterations, respite {self.respite} ({self.mode.value})")
+        return (
+            f"dFRL {algos}, {methods}, {len(self.robots)} robots, "
+            f"{self.iterations} iterations, respite {self.respite} ({self.mode.value})"
+        )
 
     # -- (de)serialisation ---------------------------------------------------------------------
     @classmethod
@@ -311,8 +348,9 @@ class ExperimentConfig(JsonDicts):
         return cfg
 
     @classmethod
-    def load(cls, path: str | Path, overrides: dict[str, Any] | None = None,
-             resources: bool = True) -> "ExperimentConfig":
+    def load(
+        cls, path: str | Path, overrides: dict[str, Any] | None = None, resources: bool = True
+    ) -> "ExperimentConfig":
         """Read a config file, apply ``overrides`` (top-level keys) and check it all.
 
         Raises
@@ -328,10 +366,13 @@ class ExperimentConfig(JsonDicts):
             raise ConfigError([f"cannot read it: {exc.strerror}"], str(path)) from None
         if isinstance(data, dict) and overrides:
             data = {**data, **overrides}
-        if isinstance(data, dict) and "learners" in data:   # files beside the config
+        if isinstance(data, dict) and "learners" in data:  # files beside the config
             from dfrl.robots.plugins import absolute_section
-            data = {**data, "learners": absolute_section(data["learners"],
-                                                         Path(path).resolve().parent)}
+
+            data = {
+                **data,
+                "learners": absolute_section(data["learners"], Path(path).resolve().parent),
+            }
         try:
             return cls.from_dict(data, resources=resources)
         except ConfigError as exc:
@@ -375,5 +416,6 @@ def resolve_config(name: str) -> Path:
 
     known = sorted(q.stem for q in CONFIGS_DIR.glob("*.json"))
     near = did_you_mean(name.removesuffix(".json"), known)
-    raise FileNotFoundError(f"no config {name!r} (neither a file nor one of {known})"
-                            + (f"; {near}" if near else ""))
+    raise FileNotFoundError(
+        f"no config {name!r} (neither a file nor one of {known})" + (f"; {near}" if near else "")
+    )

@@ -11,18 +11,34 @@ method applies to parameter vectors), a grid federation's rules (:func:`check_fe
 the ``trainer`` fields, and (``resources=True``) that every arena exists and parses
 (:func:`dfrl.arenas.load_arena`, whose errors name file and place).
 """
+
 from __future__ import annotations
 
 from typing import Any
 
-from dfrl.experiments.config_rules import (Rule, check_keys, check_robot_id, check_trainer,
-                                           check_value, known_algorithms, token_rule,
-                                           unknown_value)
+from dfrl.experiments.config_rules import (
+    Rule,
+    check_keys,
+    check_robot_id,
+    check_trainer,
+    check_value,
+    known_algorithms,
+    token_rule,
+    unknown_value,
+)
 from dfrl.experiments.suggestions import did_you_mean
 from dfrl.experiments.robot_host.config import DEFAULT_ITERATIONS, modes
 
-__all__ = ["BUILTIN_METHODS", "COMMENT_KEYS", "FEDERATIONS", "GRID", "ITINERARIES",
-           "PARAMS_REFUSED", "check_experiment", "host_port_problem"]
+__all__ = [
+    "BUILTIN_METHODS",
+    "COMMENT_KEYS",
+    "FEDERATIONS",
+    "GRID",
+    "ITINERARIES",
+    "PARAMS_REFUSED",
+    "check_experiment",
+    "host_port_problem",
+]
 
 #: Aggregation methods built into the agent; others are injected into a running experiment
 #: with ``dfrl inject`` (an experiment config can only name these).
@@ -50,9 +66,11 @@ def _methods() -> list[str]:
 
 
 ROBOT_RULES: dict[str, Rule] = {
-    "id": Rule(str), "arena": Rule(str),
+    "id": Rule(str),
+    "arena": Rule(str),
     "algo": Rule(str, choices=known_algorithms, what="algorithm"),
-    "seed": Rule(int, nullable=True, low=0), "robot_host": Rule(str, nullable=True),
+    "seed": Rule(int, nullable=True, low=0),
+    "robot_host": Rule(str, nullable=True),
 }
 
 #: Keys of a robot entry that were renamed, and what to write instead.
@@ -60,22 +78,37 @@ ROBOT_RENAMED = {"node": "renamed robot_host (HOST:PORT of a dfrl robot service)
 
 JOIN_RULES: dict[str, Rule] = {"robot": Rule(dict), "after_round": Rule(int, low=1)}
 
-_METHOD = Rule(str, choices=_methods, what="method",
-               hint="a new method is loaded into a running experiment with dfrl inject")
+_METHOD = Rule(
+    str,
+    choices=_methods,
+    what="method",
+    hint="a new method is loaded into a running experiment with dfrl inject",
+)
 
 EXPERIMENT_RULES: dict[str, Rule] = {
-    "name": Rule(str), "robots": Rule(list), "iterations": Rule(int, low=1),
-    "respite": Rule(int, low=1), "seed": Rule(int, low=0),
+    "name": Rule(str),
+    "robots": Rule(list),
+    "iterations": Rule(int, low=1),
+    "respite": Rule(int, low=1),
+    "seed": Rule(int, low=0),
     "mode": Rule(str, choices=modes, what="mode"),
     "rtf": Rule(float, nullable=True, above=0, hint="null means flat out"),
-    "method": _METHOD, "methods": Rule(dict), "rest_s": Rule(float, nullable=True, low=0),
-    "token": token_rule(), "trainer": Rule(dict), "joins": Rule(list),
-    "timeout_s": Rule(float, above=0), "skip_after_s": Rule(float, above=0),
+    "method": _METHOD,
+    "methods": Rule(dict),
+    "rest_s": Rule(float, nullable=True, low=0),
+    "token": token_rule(),
+    "trainer": Rule(dict),
+    "joins": Rule(list),
+    "timeout_s": Rule(float, above=0),
+    "skip_after_s": Rule(float, above=0),
     "partition_wait_s": Rule(float, low=0, hint="0: no wait, robots not answering are lost"),
-    "title": Rule(str), "console": Rule(str, nullable=True),
-    "tolerate_lost_robots": Rule(int, low=0), "tolerate_missing_rounds": Rule(int, low=0),
+    "title": Rule(str),
+    "console": Rule(str, nullable=True),
+    "tolerate_lost_robots": Rule(int, low=0),
+    "tolerate_missing_rounds": Rule(int, low=0),
     "tolerate_method_errors": Rule(int, low=0),
-    "eval_every": Rule(int, low=0, hint="0 means no evaluation"), "eval_steps": Rule(int, low=1),
+    "eval_every": Rule(int, low=0, hint="0 means no evaluation"),
+    "eval_steps": Rule(int, low=1),
     "federation": Rule(str, choices=lambda: list(FEDERATIONS), what="federation"),
     "itinerary": Rule(str, choices=lambda: list(ITINERARIES), what="itinerary"),
     "fanout": Rule(int, low=2, hint="children of each stop in a tree itinerary"),
@@ -120,8 +153,9 @@ def check_experiment(data: Any, resources: bool = True) -> list[str]:
     out = check_keys("", data, EXPERIMENT_RULES, extra=COMMENT_KEYS)
     if not isinstance(data, dict):
         return out
-    if isinstance(data.get("learners"), dict):      # before the robots name them
+    if isinstance(data.get("learners"), dict):  # before the robots name them
         from dfrl.robots.plugins import section_problems
+
         out += section_problems(data["learners"])
     robots = data.get("robots", [])
     entries: list[tuple[str, Any]] = []
@@ -173,8 +207,10 @@ def check_robots(entries: list[tuple[str, Any]], resources: bool) -> list[str]:
             ids.setdefault(rid, path)
         if isinstance(host, str):
             if host in hosts:
-                out.append(f"{path}.robot_host: {host} already runs {hosts[host]}; one robot "
-                           "per robot host")
+                out.append(
+                    f"{path}.robot_host: {host} already runs {hosts[host]}; one robot "
+                    "per robot host"
+                )
             hosts.setdefault(host, path)
     return out
 
@@ -207,11 +243,16 @@ def check_params_methods(data: dict[str, Any], entries: list[tuple[str, Any]]) -
         method = methods.get(algo, data.get("method", "average"))
         if not isinstance(method, str) or method not in PARAMS_REFUSED:
             continue
-        also = (f" (methods: {{\"{algo}\": \"average\"}} keeps {method} for the tabular robots)"
-                if path == "method" and tabular else "")
-        out.append(f"{path}: {method} does not apply to the {algo} robots: {algo} is a function "
-                   f"learner, its agent carries parameter vectors, and "
-                   f"{PARAMS_REFUSED[method]}; methods that do: average (FedAvg){also}")
+        also = (
+            f' (methods: {{"{algo}": "average"}} keeps {method} for the tabular robots)'
+            if path == "method" and tabular
+            else ""
+        )
+        out.append(
+            f"{path}: {method} does not apply to the {algo} robots: {algo} is a function "
+            f"learner, its agent carries parameter vectors, and "
+            f"{PARAMS_REFUSED[method]}; methods that do: average (FedAvg){also}"
+        )
     return out
 
 
@@ -224,20 +265,26 @@ def check_federation(data: dict[str, Any]) -> list[str]:
     out: list[str] = []
     methods = data.get("methods")
     if isinstance(methods, dict) and methods:
-        out.append(f"methods: a grid federation has one agent for all its robots, so one method: "
-                   f"give it in \"method\" instead of per algorithm ({', '.join(methods)})")
+        out.append(
+            f"methods: a grid federation has one agent for all its robots, so one method: "
+            f'give it in "method" instead of per algorithm ({", ".join(methods)})'
+        )
     joins = data.get("joins")
     if isinstance(joins, list) and joins:
-        out.append("joins: a robot cannot join a grid federation (a joiner is handed to the "
-                   "agent of its algorithm); list it in robots")
+        out.append(
+            "joins: a robot cannot join a grid federation (a joiner is handed to the "
+            "agent of its algorithm); list it in robots"
+        )
     listed = data.get("robots")
     robots: list[Any] = listed if isinstance(listed, list) else []
     for i, robot in enumerate(robots):
         algo = robot.get("algo") if isinstance(robot, dict) else None
         if isinstance(algo, str) and algo in known_algorithms() and not _distillable(algo):
-            out.append(f"robots[{i}].algo: {algo} has no q_model(), so its Q-function cannot be "
-                       "read on the grid nor distilled back: it cannot join a grid federation "
-                       "(robots/README.md, 'Bring your own learner')")
+            out.append(
+                f"robots[{i}].algo: {algo} has no q_model(), so its Q-function cannot be "
+                "read on the grid nor distilled back: it cannot join a grid federation "
+                "(robots/README.md, 'Bring your own learner')"
+            )
     return out
 
 
@@ -253,8 +300,14 @@ def check_eval_every(data: dict[str, Any]) -> list[str]:
     """An ``eval_every`` larger than the run's iterations would evaluate nothing, silently:
     it is a problem (0 is the way to say "no evaluation")."""
     every, iterations = data.get("eval_every"), data.get("iterations", DEFAULT_ITERATIONS)
-    if (isinstance(every, int) and isinstance(iterations, int) and not isinstance(every, bool)
-            and 0 < iterations < every):
-        return [f"eval_every: {every} is more than the {iterations} iterations, so no "
-                "evaluation would run (0 means no evaluation)"]
+    if (
+        isinstance(every, int)
+        and isinstance(iterations, int)
+        and not isinstance(every, bool)
+        and 0 < iterations < every
+    ):
+        return [
+            f"eval_every: {every} is more than the {iterations} iterations, so no "
+            "evaluation would run (0 means no evaluation)"
+        ]
     return []

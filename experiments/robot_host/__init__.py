@@ -51,6 +51,7 @@ closes it when the experiment ends), unless stdin was at end of file from the st
 the last iteration it keeps its platform up until no agent is left on it (sync) or until
 stdin closes (async), at most ``grace_s`` seconds.
 """
+
 from __future__ import annotations
 
 from dfrl.experiments.robot_host.files import METRIC_FIELDS, SHARE_FIELDS, table_digest

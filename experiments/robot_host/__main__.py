@@ -1,4 +1,5 @@
 """``python -m dfrl.experiments.robot_host --config NODE.json``."""
+
 import sys
 
 from dfrl.experiments.robot_host.process import main

@@ -36,6 +36,7 @@ The final tables (``tables/<robot>.npy``, ``.json``, ``.visits.npy``, in the for
 function learner's final parameters (``params/<robot>.npy`` + ``.json``, format
 ``dfrl-params/1``) by :func:`save_params_atomically`.
 """
+
 from __future__ import annotations
 
 import io
@@ -51,9 +52,17 @@ import numpy as np
 
 from dfrl.experiments.robot_host.files import table_digest
 
-__all__ = ["Checkpoint", "atomic_write", "save_checkpoint", "load_checkpoint",
-           "checkpoint_of", "restore_trainer", "save_table_atomically", "save_params_atomically",
-           "save_learnt_atomically"]
+__all__ = [
+    "Checkpoint",
+    "atomic_write",
+    "save_checkpoint",
+    "load_checkpoint",
+    "checkpoint_of",
+    "restore_trainer",
+    "save_table_atomically",
+    "save_params_atomically",
+    "save_learnt_atomically",
+]
 
 
 @dataclass
@@ -78,8 +87,13 @@ class Checkpoint:
 
 
 _SCALARS: tuple[tuple[str, str], ...] = (
-    ("iteration", "<i8"), ("shares", "<i8"), ("learner_t", "<i8"),
-    ("cumulative_reward", "<f8"), ("collisions", "<i8"), ("respawns", "<i8"))
+    ("iteration", "<i8"),
+    ("shares", "<i8"),
+    ("learner_t", "<i8"),
+    ("cumulative_reward", "<f8"),
+    ("collisions", "<i8"),
+    ("respawns", "<i8"),
+)
 
 
 def atomic_write(path: Path, data: bytes) -> None:
@@ -90,7 +104,7 @@ def atomic_write(path: Path, data: bytes) -> None:
     try:
         view = memoryview(data)
         while view:
-            view = view[os.write(fd, view):]
+            view = view[os.write(fd, view) :]
         os.fsync(fd)
     finally:
         os.close(fd)
@@ -154,8 +168,9 @@ def paths(directory: Path, robot: str) -> tuple[Path, Path]:
     return directory / f"{robot}.npy", directory / f"{robot}.json"
 
 
-def save_checkpoint(directory: Path, robot: str, cp: Checkpoint,
-                    meta: dict[str, Any] | None = None) -> Path:
+def save_checkpoint(
+    directory: Path, robot: str, cp: Checkpoint, meta: dict[str, Any] | None = None
+) -> Path:
     """Write ``cp`` as ``directory/<robot>.npy`` (+ ``.json``) atomically; return the .npy."""
     if cp.params is not None:
         q = np.ascontiguousarray(cp.params, dtype=np.float64)
@@ -180,11 +195,16 @@ def save_checkpoint(directory: Path, robot: str, cp: Checkpoint,
     np.save(buf, rec, allow_pickle=False)
     npy, side = paths(directory, robot)
     atomic_write(npy, buf.getvalue())
-    info = dict(meta or {}, robot=robot, iteration=int(cp.iteration), shares=int(cp.shares),
-                shape=list(q.shape), **{digest_key: table_digest(q)},
-                wall_time=time.time(),
-                format=f"numpy structured scalar: {fields}, "
-                + ", ".join(n for n, _ in _SCALARS))
+    info = dict(
+        meta or {},
+        robot=robot,
+        iteration=int(cp.iteration),
+        shares=int(cp.shares),
+        shape=list(q.shape),
+        **{digest_key: table_digest(q)},
+        wall_time=time.time(),
+        format=f"numpy structured scalar: {fields}, " + ", ".join(n for n, _ in _SCALARS),
+    )
     atomic_write(side, (json.dumps(info, indent=2) + "\n").encode("utf-8"))
     return npy
 
@@ -207,26 +227,34 @@ def load_checkpoint(directory: Path, robot: str) -> Checkpoint:
     missing = {*learnt, *(n for n, _ in _SCALARS)} - set(names)
     if rec.shape != () or missing:
         raise ValueError(f"{npy} is not a robot checkpoint (missing {sorted(missing)})")
-    return Checkpoint(q=None if function else np.array(rec["q"], dtype=np.float64),
-                      visits=None if function else np.array(rec["visits"], dtype=np.int64),
-                      params=np.array(rec["params"], dtype=np.float64) if function else None,
-                      iteration=int(rec["iteration"]), shares=int(rec["shares"]),
-                      learner_t=int(rec["learner_t"]),
-                      cumulative_reward=float(rec["cumulative_reward"]),
-                      collisions=int(rec["collisions"]), respawns=int(rec["respawns"]))
+    return Checkpoint(
+        q=None if function else np.array(rec["q"], dtype=np.float64),
+        visits=None if function else np.array(rec["visits"], dtype=np.int64),
+        params=np.array(rec["params"], dtype=np.float64) if function else None,
+        iteration=int(rec["iteration"]),
+        shares=int(rec["shares"]),
+        learner_t=int(rec["learner_t"]),
+        cumulative_reward=float(rec["cumulative_reward"]),
+        collisions=int(rec["collisions"]),
+        respawns=int(rec["respawns"]),
+    )
 
 
 def checkpoint_of(trainer: Any, shares: int) -> Checkpoint:
     """The learning state of a :class:`dfrl.robots.training.Trainer` now (a function learner:
     its parameters instead of a table)."""
     function = getattr(trainer, "learner_kind", "tabular") == "function"
-    return Checkpoint(q=None if function else np.array(trainer.q_table),
-                      visits=None if function else np.array(trainer.visits),
-                      params=trainer.params if function else None,
-                      iteration=int(trainer.iteration), shares=int(shares),
-                      learner_t=int(trainer.learner.t),
-                      cumulative_reward=float(trainer.cumulative_reward),
-                      collisions=int(trainer.collisions), respawns=int(trainer.respawns))
+    return Checkpoint(
+        q=None if function else np.array(trainer.q_table),
+        visits=None if function else np.array(trainer.visits),
+        params=trainer.params if function else None,
+        iteration=int(trainer.iteration),
+        shares=int(shares),
+        learner_t=int(trainer.learner.t),
+        cumulative_reward=float(trainer.cumulative_reward),
+        collisions=int(trainer.collisions),
+        respawns=int(trainer.respawns),
+    )
 
 
 def restore_trainer(trainer: Any, cp: Checkpoint) -> None:
@@ -244,16 +272,20 @@ def restore_trainer(trainer: Any, cp: Checkpoint) -> None:
     function = getattr(trainer, "learner_kind", "tabular") == "function"
     if function != (cp.params is not None):
         held = "parameters" if cp.params is not None else "a Q-table"
-        raise ValueError(f"the checkpoint holds {held}, this robot's learner "
-                         f"({trainer.config.algo}) {'has parameters' if function else 'a table'}")
-    if cp.params is not None:                   # a function learner's (checked just above)
+        raise ValueError(
+            f"the checkpoint holds {held}, this robot's learner "
+            f"({trainer.config.algo}) {'has parameters' if function else 'a table'}"
+        )
+    if cp.params is not None:  # a function learner's (checked just above)
         trainer.set_params(cp.params)
     else:
         if cp.q is None:
             raise ValueError("the checkpoint holds neither a table nor parameters")
         if cp.q.shape != trainer.q_table.shape:
-            raise ValueError(f"the checkpoint's table has shape {cp.q.shape}, this robot's "
-                             f"{trainer.q_table.shape}")
+            raise ValueError(
+                f"the checkpoint's table has shape {cp.q.shape}, this robot's "
+                f"{trainer.q_table.shape}"
+            )
         trainer.set_q_table(cp.q)
         trainer.visits[...] = cp.visits
     trainer.learner.t = cp.learner_t

@@ -28,6 +28,7 @@ is placed once per run; the driver reports the loss like that of a robot host.
 
 Imports the engine (``distributed``) only when it runs, on a worker.
 """
+
 from __future__ import annotations
 
 import ctypes
@@ -68,16 +69,29 @@ def _die_with_parent() -> None:
     try:
         ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL, 0, 0, 0)
     except (OSError, AttributeError):
-        pass    # not Linux: the service outlives a killed worker until its run ends
+        pass  # not Linux: the service outlives a killed worker until its run ends
 
 
-def service_argv(host: str, token_file: Path, workdir: Path,
-                 tls: Path | None = None) -> list[str]:
+def service_argv(host: str, token_file: Path, workdir: Path, tls: Path | None = None) -> list[str]:
     """The ``dfrl robot`` command the task runs (the same as a hand-started robot host's,
     on a port the OS chooses; with ``--tls`` when the run uses TLS)."""
-    return [sys.executable, "-m", "dfrl", "robot", "--host", "0.0.0.0", "--port", "0",
-            "--advertise", host, "--token-file", str(token_file), "--workdir", str(workdir),
-            *(["--tls", str(tls)] if tls is not None else [])]
+    return [
+        sys.executable,
+        "-m",
+        "dfrl",
+        "robot",
+        "--host",
+        "0.0.0.0",
+        "--port",
+        "0",
+        "--advertise",
+        host,
+        "--token-file",
+        str(token_file),
+        "--workdir",
+        str(workdir),
+        *(["--tls", str(tls)] if tls is not None else []),
+    ]
 
 
 def _await_listening(proc: subprocess.Popen, out: Path, where: str) -> tuple[str, int]:
@@ -89,10 +103,13 @@ def _await_listening(proc: subprocess.Popen, out: Path, where: str) -> tuple[str
             return m.group(1), int(m.group(2))
         if proc.poll() is not None:
             err = out.with_suffix(".err")
-            tail = (err.read_text(encoding="utf-8", errors="replace")[-1500:]
-                    if err.is_file() else "")
-            raise ClusterTaskError(f"{where}: dfrl robot exited with status {proc.returncode} "
-                                   f"before it listened: {tail.strip()}")
+            tail = (
+                err.read_text(encoding="utf-8", errors="replace")[-1500:] if err.is_file() else ""
+            )
+            raise ClusterTaskError(
+                f"{where}: dfrl robot exited with status {proc.returncode} "
+                f"before it listened: {tail.strip()}"
+            )
         time.sleep(0.1)
     raise ClusterTaskError(f"{where}: dfrl robot did not listen within {START_S:.0f} s")
 
@@ -109,9 +126,14 @@ def _end(proc: subprocess.Popen) -> int | None:
     return proc.returncode
 
 
-def serve_robot(run_key: str, robot: str, token_file: str = "dfrl.token",
-                workdir: str = "dfrl-robot", lease_s: float = 60.0,
-                tls: bool = False) -> dict[str, Any]:
+def serve_robot(
+    run_key: str,
+    robot: str,
+    token_file: str = "dfrl.token",
+    workdir: str = "dfrl-robot",
+    lease_s: float = 60.0,
+    tls: bool = False,
+) -> dict[str, Any]:
     """Run one robot's ``dfrl robot`` service on this worker for one run (see the module doc).
 
     Parameters
@@ -152,32 +174,53 @@ def serve_robot(run_key: str, robot: str, token_file: str = "dfrl.token",
     prefix = f"dfrl-{run_key}"
     placed = Event(f"{prefix}-{robot}-placed")
     if placed.is_set():
-        return {"robot": robot, "worker": worker, "address": None, "exit": None,
-                "ended": "not started again: its first placement was lost with its worker"}
+        return {
+            "robot": robot,
+            "worker": worker,
+            "address": None,
+            "exit": None,
+            "ended": "not started again: its first placement was lost with its worker",
+        }
     placed.set()
     token = Path(token_file).resolve()
     if not token.is_file():
-        raise ClusterTaskError(f"{where}: no token file {token} (copy the run's token file "
-                               f"into the folder the worker was started from)")
+        raise ClusterTaskError(
+            f"{where}: no token file {token} (copy the run's token file "
+            f"into the folder the worker was started from)"
+        )
     tls_dir = Path(TLS_FOLDER).resolve() if tls else None
-    if tls_dir is not None and not all((tls_dir / f).is_file()
-                                       for f in ("ca.crt", "node.crt", "node.key")):
-        raise ClusterTaskError(f"{where}: the run uses TLS but {tls_dir} is not a node TLS "
-                               f"folder (ca.crt, node.crt, node.key: copy the folder "
-                               f"'dfrl certs node' made for this host there)")
+    if tls_dir is not None and not all(
+        (tls_dir / f).is_file() for f in ("ca.crt", "node.crt", "node.key")
+    ):
+        raise ClusterTaskError(
+            f"{where}: the run uses TLS but {tls_dir} is not a node TLS "
+            f"folder (ca.crt, node.crt, node.key: copy the folder "
+            f"'dfrl certs node' made for this host there)"
+        )
     folder = (Path(workdir) / robot).resolve()
     folder.mkdir(parents=True, exist_ok=True)
-    out = folder / f"service-{run_key}.out"      # per run: two runs may place one robot id
+    out = folder / f"service-{run_key}.out"  # per run: two runs may place one robot id
     with STARTING:
-        if Event(f"{prefix}-stop").is_set():          # the run ended while we waited
-            return {"robot": robot, "worker": worker, "address": None, "exit": None,
-                    "ended": "not started: the run ended before"}
-        with open(out, "w", encoding="utf-8") as out_fh, \
-                open(out.with_suffix(".err"), "w", encoding="utf-8") as err_fh:
-            proc = subprocess.Popen(service_argv(host, token, folder, tls_dir),
-                                    stdin=subprocess.DEVNULL, stdout=out_fh, stderr=err_fh,
-                                    cwd=folder,
-                                    preexec_fn=_die_with_parent if os.name == "posix" else None)
+        if Event(f"{prefix}-stop").is_set():  # the run ended while we waited
+            return {
+                "robot": robot,
+                "worker": worker,
+                "address": None,
+                "exit": None,
+                "ended": "not started: the run ended before",
+            }
+        with (
+            open(out, "w", encoding="utf-8") as out_fh,
+            open(out.with_suffix(".err"), "w", encoding="utf-8") as err_fh,
+        ):
+            proc = subprocess.Popen(
+                service_argv(host, token, folder, tls_dir),
+                stdin=subprocess.DEVNULL,
+                stdout=out_fh,
+                stderr=err_fh,
+                cwd=folder,
+                preexec_fn=_die_with_parent if os.name == "posix" else None,
+            )
         try:
             address = _await_listening(proc, out, where)
         except BaseException:
@@ -185,12 +228,17 @@ def serve_robot(run_key: str, robot: str, token_file: str = "dfrl.token",
             raise
     try:
         Variable(f"{prefix}-{robot}-address").set([address[0], address[1], worker])
-        Event(f"{prefix}-{robot}-listening").set()    # waiting on an event logs no timeouts
+        Event(f"{prefix}-{robot}-listening").set()  # waiting on an event logs no timeouts
         ended = _hold(proc, Event(f"{prefix}-stop"), Variable(f"{prefix}-lease"), lease_s)
     finally:
         code = _end(proc)
-    return {"robot": robot, "worker": worker, "address": list(address), "ended": ended,
-            "exit": code}
+    return {
+        "robot": robot,
+        "worker": worker,
+        "address": list(address),
+        "ended": ended,
+        "exit": code,
+    }
 
 
 def _hold(proc: subprocess.Popen, stop: Any, lease: Any, lease_s: float) -> str:

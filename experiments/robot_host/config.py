@@ -4,15 +4,24 @@ sent to a ``dfrl robot`` service), its pacing :class:`Mode` and the sync :func:`
 Checked with the rules of :mod:`dfrl.experiments.config_rules` (every problem at once, each
 with its key path), so a robot host needs nothing of the driver.
 """
+
 from __future__ import annotations
 
 from dataclasses import KW_ONLY, InitVar, dataclass, field
 from enum import Enum
 from typing import Any
 
-from dfrl.experiments.config_rules import (JsonDicts, Rule, check_keys, check_robot_id,
-                                           check_trainer, json_form, known_algorithms,
-                                           raise_problems, token_rule)
+from dfrl.experiments.config_rules import (
+    JsonDicts,
+    Rule,
+    check_keys,
+    check_robot_id,
+    check_trainer,
+    json_form,
+    known_algorithms,
+    raise_problems,
+    token_rule,
+)
 from dfrl.experiments.robot_host.static_robot import static_problems
 
 __all__ = ["DEFAULT_ITERATIONS", "Mode", "RobotConfig", "boundaries", "check_robot_config"]
@@ -167,19 +176,29 @@ class RobotConfig(JsonDicts):
 _NO_EVAL = "0 means no evaluation"
 
 RULES: dict[str, Rule] = {
-    "robot": Rule(str), "out_dir": Rule(str), "arena": Rule(str),
+    "robot": Rule(str),
+    "out_dir": Rule(str),
+    "arena": Rule(str),
     "algo": Rule(str, choices=known_algorithms, what="algorithm"),
-    "seed": Rule(int, low=0), "iterations": Rule(int, low=0), "respite": Rule(int, low=1),
+    "seed": Rule(int, low=0),
+    "iterations": Rule(int, low=0),
+    "respite": Rule(int, low=1),
     "mode": Rule(str, choices=modes, what="mode"),
     "rtf": Rule(float, nullable=True, low=0, hint="null or 0 means flat out"),
-    "token": token_rule(), "trainer": Rule(dict), "grace_s": Rule(float, low=0),
-    "sync_timeout_s": Rule(float, above=0), "progress_every": Rule(int, low=0),
-    "events": Rule(bool), "bench_table": Rule(list, nullable=True),
-    "bench_params": Rule(dict, nullable=True), "host": Rule(str),
+    "token": token_rule(),
+    "trainer": Rule(dict),
+    "grace_s": Rule(float, low=0),
+    "sync_timeout_s": Rule(float, above=0),
+    "progress_every": Rule(int, low=0),
+    "events": Rule(bool),
+    "bench_table": Rule(list, nullable=True),
+    "bench_params": Rule(dict, nullable=True),
+    "host": Rule(str),
     "tls": Rule(str, nullable=True),
-    "eval_every": Rule(int, low=0, hint=_NO_EVAL), "eval_steps": Rule(int, low=1),
+    "eval_every": Rule(int, low=0, hint=_NO_EVAL),
+    "eval_steps": Rule(int, low=1),
     "clone_limit": Rule(int, nullable=True, low=1),
-    "learners": Rule(dict, hint="plug-in learners: name -> {\"class\": spec, \"options\": {}}"),
+    "learners": Rule(dict, hint='plug-in learners: name -> {"class": spec, "options": {}}'),
 }
 
 
@@ -188,6 +207,7 @@ def check_robot_config(data: Any) -> list[str]:
     out: list[str] = []
     if isinstance(data, dict) and isinstance(data.get("learners"), dict):  # before algo
         from dfrl.robots.plugins import section_problems
+
         out += section_problems(data["learners"])
     out += check_keys("", data, RULES, required=("robot", "out_dir"))
     if not isinstance(data, dict):
@@ -197,4 +217,3 @@ def check_robot_config(data: Any) -> list[str]:
     if "trainer" in data:
         out += check_trainer("trainer", data["trainer"])
     return out
-

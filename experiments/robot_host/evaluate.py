@@ -8,6 +8,7 @@ own (its own pybullet client, headless) and its own random generator seeded by
 :func:`eval_seed`, so training is not disturbed: the trainer's generator, environment and
 metrics are the same with and without evaluations (tested). Its cost is wall time only.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -23,8 +24,17 @@ from dfrl.experiments.robot_host.lines import ProtocolLines
 __all__ = ["EVAL_FIELDS", "LiveEvaluator", "eval_seed"]
 
 #: Columns of ``eval_<robot>.csv`` (and of the results folder's ``live_evaluations.csv``).
-EVAL_FIELDS: tuple[str, ...] = ("robot", "iteration", "arena", "steps", "collisions_per_1000",
-                                "distance", "progress", "coverage", "mean_reward")
+EVAL_FIELDS: tuple[str, ...] = (
+    "robot",
+    "iteration",
+    "arena",
+    "steps",
+    "collisions_per_1000",
+    "distance",
+    "progress",
+    "coverage",
+    "mean_reward",
+)
 
 #: Mixed into :func:`eval_seed` so that evaluation seeds never equal a training seed's stream.
 _EVAL_SALT = 0xE7A1
@@ -37,8 +47,7 @@ def eval_seed(seed: int, iteration: int) -> int:
     >>> eval_seed(1, 100) == eval_seed(1, 100) != eval_seed(1, 200)
     True
     """
-    return int(np.random.SeedSequence([int(seed), int(iteration), _EVAL_SALT])
-               .generate_state(1)[0])
+    return int(np.random.SeedSequence([int(seed), int(iteration), _EVAL_SALT]).generate_state(1)[0])
 
 
 class LiveEvaluator:
@@ -60,8 +69,17 @@ class LiveEvaluator:
         Resuming from a checkpoint at this iteration: the file's rows up to it are kept.
     """
 
-    def __init__(self, trainer_config: Any, robot: str, seed: int, every: int, steps: int,
-                 out_dir: Path, lines: ProtocolLines, upto: int | None = None) -> None:
+    def __init__(
+        self,
+        trainer_config: Any,
+        robot: str,
+        seed: int,
+        every: int,
+        steps: int,
+        out_dir: Path,
+        lines: ProtocolLines,
+        upto: int | None = None,
+    ) -> None:
         sim = dataclasses.replace(trainer_config.sim, connection="direct")
         self.config = trainer_config.replace(sim=sim)
         self.robot = robot
@@ -77,8 +95,9 @@ class LiveEvaluator:
         """An evaluation is due after ``iteration``."""
         return iteration > 0 and iteration % self.every == 0
 
-    def evaluate(self, iteration: int, q_table: np.ndarray | None = None, *,
-                 params: np.ndarray | None = None) -> dict[str, Any]:
+    def evaluate(
+        self, iteration: int, q_table: np.ndarray | None = None, *, params: np.ndarray | None = None
+    ) -> dict[str, Any]:
         """Measure the greedy policy of ``q_table`` (a function learner: of ``params``; copied
         first), append the row (flushed) and write the ``DFRL_EVAL`` line; return the row.
 
@@ -90,22 +109,41 @@ class LiveEvaluator:
         from dfrl.robots.evaluation import PolicyKind, evaluate_policy
 
         if params is not None:
-            r = evaluate_policy(self.config, PolicyKind.GREEDY, self.steps,
-                                eval_seed(self.seed, iteration), params=np.array(params))
+            r = evaluate_policy(
+                self.config,
+                PolicyKind.GREEDY,
+                self.steps,
+                eval_seed(self.seed, iteration),
+                params=np.array(params),
+            )
         else:
-            r = evaluate_policy(self.config, PolicyKind.GREEDY, self.steps,
-                                eval_seed(self.seed, iteration), q_table=np.array(q_table))
-        row: dict[str, Any] = {"robot": self.robot, "iteration": iteration,
-                               "arena": str(self.config.arena),
-               "steps": r.steps, "collisions_per_1000": r.collisions_per_1000,
-               "distance": r.distance, "progress": r.progress, "coverage": r.coverage,
-               "mean_reward": r.mean_reward}
+            r = evaluate_policy(
+                self.config,
+                PolicyKind.GREEDY,
+                self.steps,
+                eval_seed(self.seed, iteration),
+                q_table=np.array(q_table),
+            )
+        row: dict[str, Any] = {
+            "robot": self.robot,
+            "iteration": iteration,
+            "arena": str(self.config.arena),
+            "steps": r.steps,
+            "collisions_per_1000": r.collisions_per_1000,
+            "distance": r.distance,
+            "progress": r.progress,
+            "coverage": r.coverage,
+            "mean_reward": r.mean_reward,
+        }
         bad = [k for k in EVAL_FIELDS[4:] if not math.isfinite(row[k])]
         if bad:
-            raise ValueError(f"evaluation of {self.robot} at iteration {iteration}: "
-                             f"not finite: {', '.join(bad)}")
-        self._log.row(tuple(repr(float(row[k])) if k in EVAL_FIELDS[4:] else row[k]
-                            for k in EVAL_FIELDS), flush=True)
+            raise ValueError(
+                f"evaluation of {self.robot} at iteration {iteration}: not finite: {', '.join(bad)}"
+            )
+        self._log.row(
+            tuple(repr(float(row[k])) if k in EVAL_FIELDS[4:] else row[k] for k in EVAL_FIELDS),
+            flush=True,
+        )
         self.lines.evaluation(iteration, r.collisions_per_1000, r.progress, r.coverage)
         return row
 

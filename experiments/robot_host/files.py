@@ -1,4 +1,5 @@
 """The robot process's result files: ``metrics_<robot>.csv`` and ``shares_<robot>.csv``."""
+
 from __future__ import annotations
 
 import csv
@@ -14,8 +15,17 @@ import numpy as np
 __all__ = ["METRIC_FIELDS", "SHARE_FIELDS", "ORIGIN_FIELDS", "table_digest", "CsvLog", "share_row"]
 
 METRIC_FIELDS: tuple[str, ...] = ("robot", "iteration", "q_sum", "cumulative_reward", "collisions")
-SHARE_FIELDS: tuple[str, ...] = ("robot", "share_index", "iteration", "wall_time", "digest",
-                                  "round", "agent", "epoch", "q_sum")
+SHARE_FIELDS: tuple[str, ...] = (
+    "robot",
+    "share_index",
+    "iteration",
+    "wall_time",
+    "digest",
+    "round",
+    "agent",
+    "epoch",
+    "q_sum",
+)
 #: The options of an agent's table write recorded with each share (contract K4).
 ORIGIN_FIELDS: tuple[str, ...] = ("round", "agent", "epoch")
 
@@ -40,14 +50,18 @@ class CsvLog:
         file, a new file is started.
     """
 
-    def __init__(self, path: Path, fields: tuple[str, ...],
-                 keep: Callable[[dict[str, str]], bool] | None = None) -> None:
+    def __init__(
+        self,
+        path: Path,
+        fields: tuple[str, ...],
+        keep: Callable[[dict[str, str]], bool] | None = None,
+    ) -> None:
         kept: list[list[str]] = []
         if keep is not None and path.is_file():
             with open(path, newline="", encoding="utf-8") as fh:
                 for row in csv.DictReader(fh):
                     if None in row.values() or None in row:
-                        continue                       # torn (too short or too long)
+                        continue  # torn (too short or too long)
                     try:
                         if keep(row):
                             kept.append([row.get(f, "") for f in fields])
@@ -80,14 +94,22 @@ class CsvLog:
             self._fh.close()
 
 
-def share_row(robot: str, share_index: int, iteration: int, table: np.ndarray,
-              origin: Mapping[str, Any] | None = None,
-              q_sum: float | None = None) -> tuple[Any, ...]:
+def share_row(
+    robot: str,
+    share_index: int,
+    iteration: int,
+    table: np.ndarray,
+    origin: Mapping[str, Any] | None = None,
+    q_sum: float | None = None,
+) -> tuple[Any, ...]:
     """A ``shares_<robot>.csv`` row for a table just set (wall time: now); ``origin`` holds
     the write's ``round``, ``agent`` and ``epoch`` (each empty when absent); ``q_sum`` the sum
     the write left, as the robot's metrics measure it (the table's sum; a function learner's:
     its parameters'), empty when not given."""
     origin = origin or {}
     extra = tuple("" if origin.get(f) is None else origin[f] for f in ORIGIN_FIELDS)
-    return (robot, share_index, iteration, repr(time.time()), table_digest(table)) + extra + \
-        ("" if q_sum is None else repr(float(q_sum)),)
+    return (
+        (robot, share_index, iteration, repr(time.time()), table_digest(table))
+        + extra
+        + ("" if q_sum is None else repr(float(q_sum)),)
+    )

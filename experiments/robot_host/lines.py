@@ -1,4 +1,5 @@
 """The robot process's stdout protocol lines and its stdin watch (the launcher's two channels)."""
+
 from __future__ import annotations
 
 import math
@@ -33,8 +34,12 @@ def parse_event(line: str) -> tuple[str, int] | None:
     """``(op, iteration)`` of a ``DFRL_EVENT <robot> get|set <iteration>`` line (None: not
     such a line, or malformed): an agent read (``get``) or wrote (``set``) the robot's table."""
     parts = line.split()
-    if len(parts) != 4 or parts[0] != "DFRL_EVENT" or parts[2] not in ("get", "set") \
-            or not parts[3].isdigit():
+    if (
+        len(parts) != 4
+        or parts[0] != "DFRL_EVENT"
+        or parts[2] not in ("get", "set")
+        or not parts[3].isdigit()
+    ):
         return None
     return parts[2], int(parts[3])
 
@@ -125,24 +130,34 @@ class ProtocolLines:
         if self.events:
             self.say(f"DFRL_EVENT {self.robot} {what} {iteration}")
 
-    def sample(self, iteration: int, pose: tuple[float, float, float], q_sum: float,
-               cumulative_reward: float) -> None:
+    def sample(
+        self,
+        iteration: int,
+        pose: tuple[float, float, float],
+        q_sum: float,
+        cumulative_reward: float,
+    ) -> None:
         """``DFRL_SAMPLE <robot> <iteration> <x> <y> <yaw> <q_sum> <cumulative_reward>``:
         where the robot is and how its curves stand, for the live view (if events are on;
         the run writes one now and then, see :data:`~.run.SAMPLE_S`)."""
         if self.events:
             x, y, yaw = (float(v) for v in pose)
-            self.say(f"DFRL_SAMPLE {self.robot} {iteration} {x:.4f} {y:.4f} {yaw:.4f} "
-                     f"{float(q_sum)!r} {float(cumulative_reward)!r}")
+            self.say(
+                f"DFRL_SAMPLE {self.robot} {iteration} {x:.4f} {y:.4f} {yaw:.4f} "
+                f"{float(q_sum)!r} {float(cumulative_reward)!r}"
+            )
 
-    def evaluation(self, iteration: int, collisions_per_1000: float, progress: float,
-                   coverage: float) -> None:
+    def evaluation(
+        self, iteration: int, collisions_per_1000: float, progress: float, coverage: float
+    ) -> None:
         """``DFRL_EVAL <robot> <iteration> <collisions_per_1000> <progress> <coverage>``: a
         greedy evaluation of the table at this iteration (if events are on; see
         :mod:`.evaluate`)."""
         if self.events:
-            self.say(f"DFRL_EVAL {self.robot} {iteration} {float(collisions_per_1000)!r} "
-                     f"{float(progress)!r} {float(coverage)!r}")
+            self.say(
+                f"DFRL_EVAL {self.robot} {iteration} {float(collisions_per_1000)!r} "
+                f"{float(progress)!r} {float(coverage)!r}"
+            )
 
     def done(self, iterations: int, shares: int) -> None:
         """``DFRL_DONE <robot> <iterations> <shares>``."""
@@ -173,7 +188,7 @@ class StdinWatch:
 
     def poll(self) -> bool:
         """True once stdin reached EOF or a ``stop`` line arrived (never when detached)."""
-        if self.detached or self.fd is None:            # detached: no descriptor
+        if self.detached or self.fd is None:  # detached: no descriptor
             return False
         if self.closed:
             return True

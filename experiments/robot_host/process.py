@@ -1,4 +1,5 @@
 """The spawned robot process's life cycle (:class:`RobotProcess`) and its entry point."""
+
 from __future__ import annotations
 
 import argparse
@@ -15,8 +16,15 @@ from dfrl.experiments.robot_host.lines import ProtocolLines, StdinWatch
 from dfrl.experiments.robot_host.training import Training
 from dfrl.experiments.tokens import TOKEN_ENV, pop_env_tokens
 
-__all__ = ["RobotProcess", "ProcessProbe", "main", "load_agent_program", "NodeStartError",
-           "start_node", "keep_agent_logs"]
+__all__ = [
+    "RobotProcess",
+    "ProcessProbe",
+    "main",
+    "load_agent_program",
+    "NodeStartError",
+    "start_node",
+    "keep_agent_logs",
+]
 
 
 class ProcessProbe(Protocol):
@@ -49,8 +57,10 @@ class NodeStartError(ExperimentError):
     def address_in_use(self) -> bool:
         """The node's port is held by another socket (``socket_error(eaddrinuse, _)``)."""
         formal = getattr(self.term, "args", (None,))[0]
-        return (getattr(formal, "name", None) == "socket_error"
-                and str(getattr(formal, "args", ("",))[0]) == "eaddrinuse")
+        return (
+            getattr(formal, "name", None) == "socket_error"
+            and str(getattr(formal, "args", ("",))[0]) == "eaddrinuse"
+        )
 
     @property
     def weak_token(self) -> bool:
@@ -103,8 +113,13 @@ class RobotProcess:
         Measurements a tool installs (none in a run).
     """
 
-    def __init__(self, config: RobotConfig, stdout: TextIO = sys.stdout,
-                 stdin: TextIO | None = sys.stdin, probes: Sequence[ProcessProbe] = ()) -> None:
+    def __init__(
+        self,
+        config: RobotConfig,
+        stdout: TextIO = sys.stdout,
+        stdin: TextIO | None = sys.stdin,
+        probes: Sequence[ProcessProbe] = (),
+    ) -> None:
         self.config = config
         self.lines = ProtocolLines(stdout, config.robot, config.events)
         self.stdin = StdinWatch(stdin)
@@ -140,7 +155,7 @@ class RobotProcess:
         self.run_.open()
         self.run_.register()
         options: dict[str, Any] = {"idle_timeout": 5.0}
-        if c.token is not None:         # none: an open node (node_start/3 warns on loopback)
+        if c.token is not None:  # none: an open node (node_start/3 warns on loopback)
             options["tokens"] = [Atom(c.token) if isinstance(c.token, str) else c.token]
         if c.tls is not None:
             options["tls"] = str(Path(c.tls).resolve())
@@ -228,9 +243,10 @@ def main(argv: list[str] | None = None, probes: Sequence[ProcessProbe] = ()) -> 
     that no child inherits it; :mod:`dfrl.experiments.tokens`), or else from the config file;
     never from the command line.
     """
-    parser = argparse.ArgumentParser(prog="python -m dfrl.experiments.robot_host",
-                                     description="one robot process of a federated experiment "
-                                                 f"(its token in ${TOKEN_ENV})")
+    parser = argparse.ArgumentParser(
+        prog="python -m dfrl.experiments.robot_host",
+        description=f"one robot process of a federated experiment (its token in ${TOKEN_ENV})",
+    )
     parser.add_argument("--config", type=Path, required=True, help="node config (JSON)")
     args = parser.parse_args(argv)
     tokens = pop_env_tokens()

@@ -14,6 +14,7 @@ control steps and while idle): ``status``, ``configure(Json)``, ``start``, ``sto
 ``finished`` (or ``failed``); ``configure`` is allowed in ``idle``, ``finished`` and
 ``failed`` and replaces the last experiment, whose files stay in ``WORKDIR/<its id>/``.
 """
+
 from __future__ import annotations
 
 import base64
@@ -54,8 +55,9 @@ class State(str, Enum):
 
 
 def _state_error(action: str, state: State) -> RequestError:
-    return RequestError(Term("permission_error", Atom(action), Atom("robot_state"),
-                             Atom(state.value)))
+    return RequestError(
+        Term("permission_error", Atom(action), Atom("robot_state"), Atom(state.value))
+    )
 
 
 class RobotService:
@@ -91,12 +93,19 @@ class RobotService:
         ``trust`` without ``tls``.
     """
 
-    def __init__(self, host: str, port: int, token: Token | Sequence[Token],
-                 advertise: str | None = None,
-                 workdir: Path = Path("dfrl-robot"), out: TextIO = sys.stdout,
-                 insecure: bool = False, tls: Path | None = None,
-                 trust: Sequence[str] = (),
-                 bounds: dict[str, int | float | str] | None = None) -> None:
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        token: Token | Sequence[Token],
+        advertise: str | None = None,
+        workdir: Path = Path("dfrl-robot"),
+        out: TextIO = sys.stdout,
+        insecure: bool = False,
+        tls: Path | None = None,
+        trust: Sequence[str] = (),
+        bounds: dict[str, int | float | str] | None = None,
+    ) -> None:
         if trust and tls is None:
             raise ValueError("trusting peers by name needs tls (a TLS certificate name)")
         self.bind = (host, int(port))
@@ -134,7 +143,8 @@ class RobotService:
         adv = self.advertise
         options: dict[str, Any] = {
             "tokens": [Atom(t) if isinstance(t, str) else t for t in self.tokens],
-            "idle_timeout": 30.0}
+            "idle_timeout": 30.0,
+        }
         if self.insecure:
             options["insecure"] = True
         if self.tls is not None:
@@ -156,6 +166,7 @@ class RobotService:
 
     def install_signals(self) -> None:
         """SIGTERM and SIGINT end :meth:`serve_forever` cleanly."""
+
         def stop(signum: int, _frame: Any) -> None:
             self._signalled = True
 
@@ -191,7 +202,7 @@ class RobotService:
         if self.run is None:
             return False
         if self.state is State.FINISHED:
-            return True                          # an agent's last visit after our last step
+            return True  # an agent's last visit after our last step
         return self.state is State.CONFIGURED and self.run.config.mode is Mode.ASYNC
 
     def close(self) -> None:
@@ -237,8 +248,14 @@ class RobotService:
             return self._configure(op.args[0])
         if isinstance(op, Term) and op.name == "fetch" and op.arity == 3:
             data, eof = self.fetch(str(op.args[0]), int(op.args[1]), int(op.args[2]))
-            return Term("ok", Term("chunk", base64.b64encode(data).decode("ascii"),
-                                   Atom("true" if eof else "false")))
+            return Term(
+                "ok",
+                Term(
+                    "chunk",
+                    base64.b64encode(data).decode("ascii"),
+                    Atom("true" if eof else "false"),
+                ),
+            )
         raise RequestError(Term("domain_error", Atom("dfrl_robot_request"), op))
 
     def status(self) -> dict[str, Any]:
@@ -263,8 +280,9 @@ class RobotService:
         checks it is enough before it starts."""
         if self.bridge is None:
             return None
-        sol = self.bridge.prolog.call("node_option", self.node_name, Atom("clone_limit"),
-                                      Var("V"), module="node")
+        sol = self.bridge.prolog.call(
+            "node_option", self.node_name, Atom("clone_limit"), Var("V"), module="node"
+        )
         value = None if sol is None else sol["V"]
         return value if isinstance(value, int) or value is None else str(value)
 
@@ -290,8 +308,10 @@ class RobotService:
             return
         self.state = State.FINISHED
         self.training.lines.done(self.training.iteration, self.training.shares)
-        self.say(f"dfrl robot: experiment {self.experiment} {how} at iteration "
-                 f"{self.training.iteration} ({self.training.shares} shares)")
+        self.say(
+            f"dfrl robot: experiment {self.experiment} {how} at iteration "
+            f"{self.training.iteration} ({self.training.shares} shares)"
+        )
 
     def _fail(self, exc: BaseException) -> None:
         self.state = State.FAILED
@@ -323,8 +343,15 @@ class RobotService:
             err_fh.flush()
             print(message, file=sys.stderr, flush=True)
 
-        run = Training(config, self.bridge, ProtocolLines(lines_fh, config.robot, config.events),
-                  host=self, resume=resume, poll_every=1, warn=warn)
+        run = Training(
+            config,
+            self.bridge,
+            ProtocolLines(lines_fh, config.robot, config.events),
+            host=self,
+            resume=resume,
+            poll_every=1,
+            warn=warn,
+        )
         try:
             run.open()
             run.register()
@@ -337,9 +364,11 @@ class RobotService:
             raise config_error(f"{type(exc).__name__}: {exc}") from None
         self.run, self.state = run, State.CONFIGURED
         self._forget_leases(warn)
-        self.say(f"dfrl robot: experiment {experiment} configured (robot {config.robot}, "
-                 f"{config.iterations} iterations"
-                 f"{', resumed at ' + str(run.iteration) if resume else ''})")
+        self.say(
+            f"dfrl robot: experiment {experiment} configured (robot {config.robot}, "
+            f"{config.iterations} iterations"
+            f"{', resumed at ' + str(run.iteration) if resume else ''})"
+        )
         return Term("ok", Atom("true"))
 
     def _forget_leases(self, warn: Any) -> None:

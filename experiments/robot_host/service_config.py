@@ -1,5 +1,6 @@
 """The ``configure`` request of a ``dfrl robot`` service (:mod:`.service`): its JSON checked
 and turned into the robot's :class:`~dfrl.experiments.robot_host.config.RobotConfig`."""
+
 from __future__ import annotations
 
 import json
@@ -26,8 +27,9 @@ def config_error(message: str) -> RequestError:
     return RequestError(Term("robot_config_error", message))
 
 
-def parse_configure(text: str, tokens: Sequence[Token], workdir: Path
-                    ) -> tuple[str, RobotConfig, bool]:
+def parse_configure(
+    text: str, tokens: Sequence[Token], workdir: Path
+) -> tuple[str, RobotConfig, bool]:
     """A ``configure`` request's JSON text checked: ``(experiment, its RobotConfig, resume)``;
     the arena it carries and the text itself are kept in ``WORKDIR/EXPERIMENT/service/``.
 
@@ -44,10 +46,14 @@ def parse_configure(text: str, tokens: Sequence[Token], workdir: Path
     if not isinstance(data, dict):
         raise config_error("the configuration is a JSON object")
     experiment = data.get("experiment")
-    if not isinstance(experiment, str) or not _EXPERIMENT_ID.fullmatch(experiment) \
-            or set(experiment) == {"."}:
-        raise config_error(f"experiment {experiment!r}: a name of letters, digits, "
-                            "'.', '_' and '-'")
+    if (
+        not isinstance(experiment, str)
+        or not _EXPERIMENT_ID.fullmatch(experiment)
+        or set(experiment) == {"."}
+    ):
+        raise config_error(
+            f"experiment {experiment!r}: a name of letters, digits, '.', '_' and '-'"
+        )
     node = data.get("robot")
     if not isinstance(node, dict):
         raise config_error("'robot' must be a JSON object (a robot process config)")
@@ -64,7 +70,8 @@ def parse_configure(text: str, tokens: Sequence[Token], workdir: Path
         raise config_error(
             f"learners {sorted(node['learners'])}: a robot host loads no learner a driver names; "
             "install it on this host as a dfrl.learners entry point (robots/README.md, 'Bring "
-            "your own learner') and the robot can name it in algo")
+            "your own learner') and the robot can name it in algo"
+        )
     out = workdir / experiment
     arena = data.get("arena")
     if arena is not None:
@@ -107,10 +114,12 @@ def service_arena(name: object, workdir: Path) -> str:
             return str(own[name])
     offered = [*builtin, *sorted(own)]
     near = did_you_mean(name, offered) if isinstance(name, str) and len(name) <= 64 else ""
-    raise config_error(f"unknown arena {str(name)[:64]!r}{f' ({near})' if near else ''}: this "
-                       f"robot host offers the arenas {', '.join(offered)} (its built-in "
-                       f"arenas and the files of its {ARENA_FOLDER}/ folder); a driver sends "
-                       "any other arena as its JSON object")
+    raise config_error(
+        f"unknown arena {str(name)[:64]!r}{f' ({near})' if near else ''}: this "
+        f"robot host offers the arenas {', '.join(offered)} (its built-in "
+        f"arenas and the files of its {ARENA_FOLDER}/ folder); a driver sends "
+        "any other arena as its JSON object"
+    )
 
 
 def _own_arenas(workdir: Path) -> dict[str, Path]:
@@ -149,8 +158,9 @@ def _arena_object_text(arena: object, name: str) -> str:
         raise config_error("'arena' must be an arena's JSON object or null")
     text = json.dumps(arena)
     if len(text) > MAX_ARENA_BYTES:
-        raise config_error(f"the arena object is {len(text)} bytes of JSON; at most "
-                           f"{MAX_ARENA_BYTES}")
+        raise config_error(
+            f"the arena object is {len(text)} bytes of JSON; at most {MAX_ARENA_BYTES}"
+        )
     try:
         parse_arena(arena, f"the arena object of {name[:64]!r}")
     except ArenaError as exc:

@@ -17,6 +17,7 @@ from a checkpoint keeps the rows of the writes it had done; the driver reads the
     agent's FedAvg. A read names no round; the driver matches a round's write to the last
     read before it (:mod:`dfrl.experiments.driver.results.carried`).
 """
+
 from __future__ import annotations
 
 import csv
@@ -27,9 +28,18 @@ from typing import Any, TextIO
 
 __all__ = ["DISTILLATION_FIELDS", "WEIGHT_FIELDS", "ShareNotes"]
 
-DISTILLATION_FIELDS: tuple[str, ...] = ("robot", "round", "agent", "epoch", "iteration",
-                                        "steps", "rms_before", "rms_after", "max_after",
-                                        "seconds")
+DISTILLATION_FIELDS: tuple[str, ...] = (
+    "robot",
+    "round",
+    "agent",
+    "epoch",
+    "iteration",
+    "steps",
+    "rms_before",
+    "rms_after",
+    "max_after",
+    "seconds",
+)
 WEIGHT_FIELDS: tuple[str, ...] = ("robot", "iteration", "wall_time", "samples")
 
 
@@ -60,20 +70,28 @@ class ShareNotes:
 
     def __init__(self, out_dir: Path, robot: str) -> None:
         self.robot = robot
-        self._distilled = _Appender(Path(out_dir) / f"distillation_{robot}.csv",
-                                    DISTILLATION_FIELDS)
+        self._distilled = _Appender(
+            Path(out_dir) / f"distillation_{robot}.csv", DISTILLATION_FIELDS
+        )
         self._weights = _Appender(Path(out_dir) / f"weights_{robot}.csv", WEIGHT_FIELDS)
 
-    def write_distillation(self, iteration: int, origin: Mapping[str, Any],
-                           report: Any) -> None:
+    def write_distillation(self, iteration: int, origin: Mapping[str, Any], report: Any) -> None:
         """Append the row of a write absorbed by distillation (``report``: a
         :class:`dfrl.robots.distill.DistilReport`; ``origin``: the write's ``round``,
         ``agent``, ``epoch``)."""
-        got = tuple("" if origin.get(f) is None else origin[f] for f in ("round", "agent",
-                                                                         "epoch"))
-        self._distilled.row((self.robot, *got, iteration, report.steps,
-                             repr(float(report.rms_before)), repr(float(report.rms_after)),
-                             repr(float(report.max_after)), repr(float(report.seconds))))
+        got = tuple("" if origin.get(f) is None else origin[f] for f in ("round", "agent", "epoch"))
+        self._distilled.row(
+            (
+                self.robot,
+                *got,
+                iteration,
+                report.steps,
+                repr(float(report.rms_before)),
+                repr(float(report.rms_after)),
+                repr(float(report.max_after)),
+                repr(float(report.seconds)),
+            )
+        )
 
     def write_weight(self, iteration: int, samples: int) -> None:
         """Append the row of a read of the parameters that reported ``samples``."""

@@ -11,6 +11,7 @@ This module is the one place those keys mean something: :func:`static_problems` 
 builds what they ask for, the one seam :class:`~dfrl.experiments.robot_host.training.Training`
 takes the robot it serves from.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -61,9 +62,15 @@ def static_robot(config: RobotConfig) -> StaticRobot | None:
     if config.bench_table is not None:
         shape = (int(config.bench_table[0]), int(config.bench_table[1]))
         return StaticRobot(StaticTable(shape, config.seed), shape)
-    if config.bench_params is not None:            # a function learner's parameters, no table
-        return StaticRobot(StaticParams(network_layout(config.trainer_config()), config.seed,
-                                        int(config.bench_params["samples"])), None)
+    if config.bench_params is not None:  # a function learner's parameters, no table
+        return StaticRobot(
+            StaticParams(
+                network_layout(config.trainer_config()),
+                config.seed,
+                int(config.bench_params["samples"]),
+            ),
+            None,
+        )
     return None
 
 
@@ -89,8 +96,13 @@ def network_layout(config: Any) -> list[tuple[str, tuple[int, ...]]]:
     if learner_kind(config.algo) != "function":
         raise ValueError(f"{config.algo!r} is a tabular learner: it has no network")
     env = config.env_config()
-    learner = build_learner(config, 1, len(env.sim.robot.sensor_angles), len(env.actions.actions),
-                            np.random.default_rng(0))
+    learner = build_learner(
+        config,
+        1,
+        len(env.sim.robot.sensor_angles),
+        len(env.actions.actions),
+        np.random.default_rng(0),
+    )
     return learner.param_layout
 
 
@@ -100,25 +112,34 @@ def static_problems(data: dict[str, Any]) -> list[str]:
     learner, and not both at once."""
     out = []
     table = data.get("bench_table")
-    if isinstance(table, list) and (len(table) != 2 or not all(
-            isinstance(n, int) and not isinstance(n, bool) and n > 0 for n in table)):
+    if isinstance(table, list) and (
+        len(table) != 2
+        or not all(isinstance(n, int) and not isinstance(n, bool) and n > 0 for n in table)
+    ):
         out.append(f"bench_table: expected [STATES, ACTIONS], two positive integers, got {table!r}")
     params = data.get("bench_params")
     if not isinstance(params, dict):
         return out
     samples = params.get("samples")
-    if set(params) != {"samples"} or isinstance(samples, bool) or not isinstance(samples, int) \
-            or samples < 0:
-        out.append(f"bench_params: expected {{\"samples\": N}}, N an integer >= 0, "
-                   f"got {params!r}")
+    if (
+        set(params) != {"samples"}
+        or isinstance(samples, bool)
+        or not isinstance(samples, int)
+        or samples < 0
+    ):
+        out.append(f'bench_params: expected {{"samples": N}}, N an integer >= 0, got {params!r}')
     if data.get("bench_table") is not None:
-        out.append("bench_params: a benchmark robot holds a bench table or bench params, "
-                   "not both (drop bench_table or bench_params)")
+        out.append(
+            "bench_params: a benchmark robot holds a bench table or bench params, "
+            "not both (drop bench_table or bench_params)"
+        )
     algo = data.get("algo", "qlearning")
     if isinstance(algo, str) and algo in known_algorithms():
         from dfrl.robots.learners import learner_kind
 
         if learner_kind(algo) != "function":
-            out.append(f"bench_params: algo {algo!r} is a tabular learner, it has no network; "
-                       f"bench params need a function learner (linear, dqn)")
+            out.append(
+                f"bench_params: algo {algo!r} is a tabular learner, it has no network; "
+                f"bench params need a function learner (linear, dqn)"
+            )
     return out

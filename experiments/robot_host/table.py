@@ -8,6 +8,7 @@ into the process that owns it. A base that also offers its learnt parameters as 
 (a ``Trainer``: ``params``, ``param_layout``, ``set_params``, ``samples``, ``learner_kind``)
 is wrapped in :class:`SharedLearner`, which offers them too (:func:`shared_provider` picks).
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
@@ -71,9 +72,16 @@ class SharedTable:
         Shares applied so far.
     """
 
-    def __init__(self, base: LiveTable, robot: str, shares_log: CsvLog,
-                 lines: ProtocolLines, on_share: Callable[[], None] | None = None,
-                 shares: int = 0, notes: ShareNotes | None = None) -> None:
+    def __init__(
+        self,
+        base: LiveTable,
+        robot: str,
+        shares_log: CsvLog,
+        lines: ProtocolLines,
+        on_share: Callable[[], None] | None = None,
+        shares: int = 0,
+        notes: ShareNotes | None = None,
+    ) -> None:
         self.base = base
         self.notes = notes
         self.robot = robot
@@ -108,10 +116,14 @@ class SharedTable:
         (``round``, ``agent``, ``epoch``; see :mod:`dfrl.pybridge.serving`)."""
         write_table(self.base, table, {})
         self.shares += 1
-        self.shares_log.row(share_row(self.robot, self.shares, self.iteration, self.base.q_table,
-                                      origin, self.q_sum), flush=True)
+        self.shares_log.row(
+            share_row(
+                self.robot, self.shares, self.iteration, self.base.q_table, origin, self.q_sum
+            ),
+            flush=True,
+        )
         report = getattr(self.base, "last_distillation", None)
-        if report is not None and self.notes is not None:      # this write's (a grid view)
+        if report is not None and self.notes is not None:  # this write's (a grid view)
             self.notes.write_distillation(self.iteration, origin, report)
         self.lines.event("set", self.iteration)
         if self.on_share is not None:
@@ -179,19 +191,31 @@ class SharedLearner(SharedTable):
         recorded as a table share is, with the digest of the vector."""
         self.base.set_params(vec)
         self.shares += 1
-        self.shares_log.row(share_row(self.robot, self.shares, self.iteration, self.base.params,
-                                      origin, self.q_sum), flush=True)
+        self.shares_log.row(
+            share_row(
+                self.robot, self.shares, self.iteration, self.base.params, origin, self.q_sum
+            ),
+            flush=True,
+        )
         self.lines.event("set", self.iteration)
         if self.on_share is not None:
             self.on_share()
 
 
-def shared_provider(base: Any, robot: str, shares_log: CsvLog, lines: ProtocolLines,
-                    on_share: Callable[[], None] | None = None,
-                    shares: int = 0, notes: ShareNotes | None = None) -> SharedTable:
+def shared_provider(
+    base: Any,
+    robot: str,
+    shares_log: CsvLog,
+    lines: ProtocolLines,
+    on_share: Callable[[], None] | None = None,
+    shares: int = 0,
+    notes: ShareNotes | None = None,
+) -> SharedTable:
     """A :class:`SharedLearner` over a base that offers parameters, else a :class:`SharedTable`
     (arguments as :class:`SharedTable`'s)."""
-    offers = all(name in dir(base) for name in ("params", "param_layout", "set_params", "samples",
-                                                "learner_kind"))
+    offers = all(
+        name in dir(base)
+        for name in ("params", "param_layout", "set_params", "samples", "learner_kind")
+    )
     cls = SharedLearner if offers else SharedTable
     return cls(base, robot, shares_log, lines, on_share, shares, notes)

@@ -7,6 +7,7 @@ robot service (:mod:`.service`, runs one after another). What a process does bes
 called between iterations, while a sync robot waits for a share and while real-time pacing
 waits.
 """
+
 from __future__ import annotations
 
 import os
@@ -92,11 +93,18 @@ class Training:
         :meth:`finish` ran.
     """
 
-    def __init__(self, config: RobotConfig, bridge: Any, lines: ProtocolLines, *,
-                 host: TrainingHost | None = None, resume: bool = False, poll_every: int = 1,
-                 warn: Callable[[str], None] | None = None,
-                 static_source: Callable[[RobotConfig], StaticRobot | None] = static_robot
-                 ) -> None:
+    def __init__(
+        self,
+        config: RobotConfig,
+        bridge: Any,
+        lines: ProtocolLines,
+        *,
+        host: TrainingHost | None = None,
+        resume: bool = False,
+        poll_every: int = 1,
+        warn: Callable[[str], None] | None = None,
+        static_source: Callable[[RobotConfig], StaticRobot | None] = static_robot,
+    ) -> None:
         self.config = config
         self.bridge = bridge
         self.lines = lines
@@ -169,15 +177,15 @@ class Training:
         if self._static is not None:
             base: Any = self._static.base
             shape, shares = self._static.shape, 0
-            self._shares = shares_log = CsvLog(self.out_dir / f"shares_{c.robot}.csv",
-                                               SHARE_FIELDS)
+            self._shares = shares_log = CsvLog(self.out_dir / f"shares_{c.robot}.csv", SHARE_FIELDS)
         else:
             base, shape, shares, shares_log = self._open_trainer()
         on_share = self.on_share if self.trainer is not None else None
         # distillation residuals and FedAvg weights (a learning robot's, not a static one's)
         self._notes = ShareNotes(self.out_dir, c.robot) if self.trainer is not None else None
-        self.table = shared_provider(base, c.robot, shares_log, self.lines, on_share, shares,
-                                     self._notes)
+        self.table = shared_provider(
+            base, c.robot, shares_log, self.lines, on_share, shares, self._notes
+        )
         if self.trainer is not None:
             self.table.iteration = self.trainer.iteration
         self.shape = shape
@@ -206,15 +214,24 @@ class Training:
         keep_m = (lambda r: int(r["iteration"]) <= upto) if cp is not None else None
         keep_s = (lambda r: int(r["share_index"]) <= upto_share) if cp is not None else None
         self._metrics = CsvLog(self.out_dir / f"metrics_{c.robot}.csv", METRIC_FIELDS, keep_m)
-        self._shares = shares_log = CsvLog(self.out_dir / f"shares_{c.robot}.csv", SHARE_FIELDS,
-                                           keep_s)
+        self._shares = shares_log = CsvLog(
+            self.out_dir / f"shares_{c.robot}.csv", SHARE_FIELDS, keep_s
+        )
         self._stops = set(boundaries(c.iterations, c.respite)) if c.mode is Mode.SYNC else set()
         if c.eval_every:
-            self._evals = LiveEvaluator(self.trainer.config, c.robot, c.seed, c.eval_every,
-                                        c.eval_steps, self.out_dir, self.lines,
-                                        upto if cp is not None else None)
+            self._evals = LiveEvaluator(
+                self.trainer.config,
+                c.robot,
+                c.seed,
+                c.eval_every,
+                c.eval_steps,
+                self.out_dir,
+                self.lines,
+                upto if cp is not None else None,
+            )
         if self.function:
             from dfrl.robots.grid_view import GridView
+
             base = GridView(self.trainer)
         return base, shape, shares, shares_log
 
@@ -225,8 +242,9 @@ class Training:
         :meth:`close` unregisters it."""
         if self.table is None:
             raise RuntimeError(f"robot {self.config.robot}: Training.open() first")
-        self.bridge.register_robot(self.config.robot, self.table, shape=self.shape,
-                                   algo=self.config.algo)
+        self.bridge.register_robot(
+            self.config.robot, self.table, shape=self.shape, algo=self.config.algo
+        )
         self._registered = True
 
     def _opened(self) -> tuple[SharedTable, CsvLog]:
@@ -267,7 +285,7 @@ class Training:
         elif c.mode is Mode.ASYNC:
             self.bridge.serve_pending()
         if self._evals is not None and not self.stopped and self._evals.due(it):
-            if self.function:                                   # after this boundary's share
+            if self.function:  # after this boundary's share
                 self._evals.evaluate(it, params=self.trainer.params)
             else:
                 self._evals.evaluate(it, self.trainer.q_table)
@@ -319,9 +337,11 @@ class Training:
             if self.host.should_stop():
                 return False
             if time.monotonic() > deadline:
-                self.warn(f"robot {self.config.robot}: no share within "
-                          f"{self.config.sync_timeout_s} s at iteration {self.iteration}; "
-                          "going on")
+                self.warn(
+                    f"robot {self.config.robot}: no share within "
+                    f"{self.config.sync_timeout_s} s at iteration {self.iteration}; "
+                    "going on"
+                )
                 break
         return True
 
@@ -351,9 +371,12 @@ class Training:
         for log in (self._metrics, self._shares, self._evals):
             if log is not None:
                 log.sync()
-        save_checkpoint(self.checkpoint_dir, self.config.robot,
-                        checkpoint_of(self.trainer, self.shares),
-                        meta={"iterations": self.config.iterations})
+        save_checkpoint(
+            self.checkpoint_dir,
+            self.config.robot,
+            checkpoint_of(self.trainer, self.shares),
+            meta={"iterations": self.config.iterations},
+        )
 
     def finish(self) -> None:
         """After the last iteration (or a stop): flush the metrics, save the tables
@@ -366,7 +389,7 @@ class Training:
         table, metrics = self._opened()
         metrics.flush()
         self.save_tables()
-        table.on_share = self.save_tables     # a late share updates the saved tables
+        table.on_share = self.save_tables  # a late share updates the saved tables
         self.lines.progress(self.iteration)
         self.sample()
 
@@ -382,9 +405,11 @@ class Training:
         robot's parameters are saved first, as ``params/<robot>.npy`` (what the agents left
         it)."""
         if self._static is not None and self._registered:
-            self._static.save_held(self.out_dir, self.config.robot,
-                                   self.table.params if isinstance(self.table, SharedLearner)
-                                   else None)
+            self._static.save_held(
+                self.out_dir,
+                self.config.robot,
+                self.table.params if isinstance(self.table, SharedLearner) else None,
+            )
         if self._registered:
             self._registered = False
             try:

@@ -4,6 +4,7 @@ survival and medians, a median's bootstrap interval and the ratio of two groups'
 A run that never reached the target only says its time exceeds the budget: it is never
 counted as reaching it there.
 """
+
 from __future__ import annotations
 
 import math
@@ -12,8 +13,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dfrl.experiments.science.statistics import (LEVEL, POWER, BootstrapInterval,
-                                                 checked_values, normal_quantile)
+from dfrl.experiments.science.statistics import (
+    LEVEL,
+    POWER,
+    BootstrapInterval,
+    checked_values,
+    normal_quantile,
+)
 
 
 # -- censored times to a target ----------------------------------------------------------------
@@ -63,8 +69,10 @@ def _resampled(t: np.ndarray, ev: np.ndarray, rng: np.random.Generator, k: int) 
 
 def _ends(low: np.ndarray, high: np.ndarray) -> tuple[float, float]:
     tail = (1.0 - LEVEL) / 2.0
-    return (float(np.quantile(low, tail, method="lower")),
-            float(np.quantile(high, 1.0 - tail, method="higher")))
+    return (
+        float(np.quantile(low, tail, method="lower")),
+        float(np.quantile(high, 1.0 - tail, method="higher")),
+    )
 
 
 @dataclass(frozen=True)
@@ -110,9 +118,12 @@ def _span(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return a[..., 0] / b[..., 1], a[..., 1] / b[..., 0]
 
 
-def censored_ratio(a: tuple[Sequence[float], Sequence[bool]],
-                   b: tuple[Sequence[float], Sequence[bool]],
-                   resamples: int = 4000, seed: int = 0) -> CensoredRatio:
+def censored_ratio(
+    a: tuple[Sequence[float], Sequence[bool]],
+    b: tuple[Sequence[float], Sequence[bool]],
+    resamples: int = 4000,
+    seed: int = 0,
+) -> CensoredRatio:
     """The ratio of Kaplan-Meier medians ``a / b`` (e.g. T(1) / T(N)) of two independent groups
     of ``(times, reached)``: each group's runs resampled with replacement on their own
     (generator seeded with ``seed``), censored runs staying censored (none is set to the
@@ -121,16 +132,28 @@ def censored_ratio(a: tuple[Sequence[float], Sequence[bool]],
     (ta, ea), (tb, eb) = _censored(*a), _censored(*b)
     ba, bb = np.array(_bounds(ta, ea)), np.array(_bounds(tb, eb))
     lo, hi = _span(ba, bb)
-    known = {(True, True): "exact", (False, True): "at least", (True, False): "at most",
-             (False, False): "unknown"}[(ba[0] == ba[1], bb[0] == bb[1])]
+    known = {
+        (True, True): "exact",
+        (False, True): "at least",
+        (True, False): "at most",
+        (False, False): "unknown",
+    }[(ba[0] == ba[1], bb[0] == bb[1])]
     est = {"exact": lo, "at least": lo, "at most": hi}.get(known, math.nan)
     low, high = _span(_resampled(ta, ea, rng, resamples), _resampled(tb, eb, rng, resamples))
-    return CensoredRatio(float(est), *_ends(low, high), resamples, "percentile",
-                         min(len(ta), len(tb)), known, np.stack([low, high], axis=1))
+    return CensoredRatio(
+        float(est),
+        *_ends(low, high),
+        resamples,
+        "percentile",
+        min(len(ta), len(tb)),
+        known,
+        np.stack([low, high], axis=1),
+    )
 
 
-def km_median_interval(times: Sequence[float], reached: Sequence[bool], resamples: int = 4000,
-                       seed: int = 0) -> BootstrapInterval:
+def km_median_interval(
+    times: Sequence[float], reached: Sequence[bool], resamples: int = 4000, seed: int = 0
+) -> BootstrapInterval:
     """The Kaplan-Meier median (``inf`` beyond the budget) with its 95% percentile bootstrap
     interval (a resample whose median lies beyond gives its largest time to ``low`` and
     ``inf`` to ``high``)."""

@@ -10,6 +10,7 @@ robots save their tables, and the run's folder says it was interrupted.
 Only the robots go to the cluster: the study's standalone trainings and evaluations stay in
 its local pool (they write files the study reads, and a worker's disk is not the driver's).
 """
+
 from __future__ import annotations
 
 import json
@@ -80,16 +81,33 @@ def runs_at_once(opts: ClusterOptions, robots: int) -> int:
 
 def run_argv(config_file: Path, out: Path, opts: ClusterOptions) -> list[str]:
     """The ``dfrl run`` command of one federated run on the cluster."""
-    return [sys.executable, "-m", "dfrl", "run", str(config_file), "--out", str(out), "--force",
-            "--cluster", opts.address, "--cluster-cpus", f"{opts.cpus:g}",
-            "--token-file", str(opts.token_file),
-            *(["--cluster-tls", str(opts.tls)] if opts.tls is not None else []),
-            *(["--insecure"] if opts.insecure else [])]
+    return [
+        sys.executable,
+        "-m",
+        "dfrl",
+        "run",
+        str(config_file),
+        "--out",
+        str(out),
+        "--force",
+        "--cluster",
+        opts.address,
+        "--cluster-cpus",
+        f"{opts.cpus:g}",
+        "--token-file",
+        str(opts.token_file),
+        *(["--cluster-tls", str(opts.tls)] if opts.tls is not None else []),
+        *(["--insecure"] if opts.insecure else []),
+    ]
 
 
-def run_on_cluster(runs: Sequence[tuple[ExperimentConfig, Path]], opts: ClusterOptions,
-                   at_once: int, done: Callable[[Finished], None],
-                   progress: TextIO | None = None) -> list[Finished]:
+def run_on_cluster(
+    runs: Sequence[tuple[ExperimentConfig, Path]],
+    opts: ClusterOptions,
+    at_once: int,
+    done: Callable[[Finished], None],
+    progress: TextIO | None = None,
+) -> list[Finished]:
     """Run every ``(config, out)`` on the cluster, at most ``at_once`` at a time, calling
     ``done`` as each one ends (in this thread); returns them in the order they ended.
 
@@ -113,8 +131,12 @@ def run_on_cluster(runs: Sequence[tuple[ExperimentConfig, Path]], opts: ClusterO
                 ended.append(end)
                 if progress is not None:
                     state = "done" if end.ok else f"FAILED (exit {end.exit}, see {_log(out)})"
-                    print(f"== {out.parent.name}/{out.name} on the cluster: {state} in "
-                          f"{end.wall:.0f} s", file=progress, flush=True)
+                    print(
+                        f"== {out.parent.name}/{out.name} on the cluster: {state} in "
+                        f"{end.wall:.0f} s",
+                        file=progress,
+                        flush=True,
+                    )
                 done(end)
             time.sleep(POLL_S)
     except BaseException:
@@ -127,19 +149,28 @@ def _log(out: Path) -> Path:
     return out.with_name(out.name + ".log")
 
 
-def _start(cfg: ExperimentConfig, out: Path, opts: ClusterOptions,
-           progress: TextIO | None) -> subprocess.Popen:
+def _start(
+    cfg: ExperimentConfig, out: Path, opts: ClusterOptions, progress: TextIO | None
+) -> subprocess.Popen:
     out.parent.mkdir(parents=True, exist_ok=True)
     config_file = out.with_name(out.name + ".config.json")
     config_file.write_text(json.dumps(cfg.public_dict(), indent=2), encoding="utf-8")
     if progress is not None:
-        print(f"== {out.parent.name}/{cfg.name}: {len(cfg.robots)} robots, {cfg.iterations} "
-              f"iterations, on cluster {opts.address}", file=progress, flush=True)
+        print(
+            f"== {out.parent.name}/{cfg.name}: {len(cfg.robots)} robots, {cfg.iterations} "
+            f"iterations, on cluster {opts.address}",
+            file=progress,
+            flush=True,
+        )
     with open(_log(out), "w", encoding="utf-8") as log:
         try:
-            return subprocess.Popen(run_argv(config_file, out, opts), stdin=subprocess.DEVNULL,
-                                    stdout=log, stderr=subprocess.STDOUT,
-                                    start_new_session=True)
+            return subprocess.Popen(
+                run_argv(config_file, out, opts),
+                stdin=subprocess.DEVNULL,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+            )
         except OSError as exc:
             raise ExperimentError(f"cannot start the run of {cfg.name}: {exc}") from None
 

@@ -3,11 +3,13 @@ reward rates, dips, and measures over an evaluation grid (area under the curve, 
 step, whether it resolves an effect, the first point that reaches a level). Pure functions of
 arrays; the intervals and verdicts over seeds are in :mod:`.statistics`.
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
 
 import numpy as np
+
 
 def smooth(y: np.ndarray, window: int = 200) -> np.ndarray:
     """Moving average (same length; the window shrinks at the start)."""
@@ -60,8 +62,9 @@ def dip(y: np.ndarray) -> tuple[float, int]:
     return float(drop[k]), k
 
 
-def _grid(iterations: Sequence[float], values: Sequence[float] | None = None
-          ) -> tuple[np.ndarray, np.ndarray | None]:
+def _grid(
+    iterations: Sequence[float], values: Sequence[float] | None = None
+) -> tuple[np.ndarray, np.ndarray | None]:
     """An evaluation grid checked: at least 2 finite, strictly increasing points, and as many
     finite values."""
     x = np.asarray(iterations, dtype=np.float64)
@@ -117,8 +120,9 @@ def resolves(iterations: Sequence[float], effect: float) -> bool:
     return grid_step(iterations) < effect
 
 
-def first_reach(iterations: Sequence[float], values: Sequence[float], level: float,
-                side: str = "below") -> float | None:
+def first_reach(
+    iterations: Sequence[float], values: Sequence[float], level: float, side: str = "below"
+) -> float | None:
     """The first grid point at which a curve reaches ``level`` (``side="below"``: a value
     ``<= level``, as an error falls; ``"above"``: ``>= level``, as a score rises), or None
     when it never does within the grid: a censored time, known only to exceed the last point.

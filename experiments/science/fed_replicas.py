@@ -41,6 +41,7 @@ platform and the agent (about a quarter of the CPU), and two replicas side by si
 every 15 s where the driver takes 21 s; under a load of 5 the driver took 46.8 s, a replica
 72.9 s (it had half a core).
 """
+
 from __future__ import annotations
 
 import json
@@ -63,12 +64,13 @@ from dfrl.experiments.science.studies.fedsim import AGGREGATIONS, federate
 from dfrl.robots.learners import learner_kind
 from dfrl.robots.training import StepMetrics, Trainer, TrainerConfig
 
-__all__ = ["Replica", "replica_job", "replica_problems", "replica_trainer_configs",
-           "run_replica"]
+__all__ = ["Replica", "replica_job", "replica_problems", "replica_trainer_configs", "run_replica"]
 
 #: The line of ``summary.md`` that tells a replica from a driver run.
-REPLICA_LINE = ("- replicated in one process (dfrl.experiments.science.fed_replicas): no robot "
-                "processes, no agent; the same tables as a sync `dfrl run`")
+REPLICA_LINE = (
+    "- replicated in one process (dfrl.experiments.science.fed_replicas): no robot "
+    "processes, no agent; the same tables as a sync `dfrl run`"
+)
 
 
 @dataclass(frozen=True)
@@ -124,19 +126,33 @@ def replica_problems(cfg: ExperimentConfig) -> list[str]:
     return out
 
 
-def replica_trainer_configs(cfg: ExperimentConfig,
-                            out: Path) -> list[tuple[RobotSpec, TrainerConfig]]:
+def replica_trainer_configs(
+    cfg: ExperimentConfig, out: Path
+) -> list[tuple[RobotSpec, TrainerConfig]]:
     """Each robot with the trainer config its robot process would build (seed
     ``cfg.robot_seed``, the config's ``trainer`` fields over the defaults)."""
-    return [(r, RobotConfig(robot=r.id, out_dir=str(out), arena=r.arena, algo=r.algo,
-                            seed=cfg.robot_seed(r), iterations=cfg.iterations,
-                            respite=cfg.respite, mode=cfg.mode,
-                            trainer=dict(cfg.trainer)).trainer_config())
-            for r in cfg.robots]
+    return [
+        (
+            r,
+            RobotConfig(
+                robot=r.id,
+                out_dir=str(out),
+                arena=r.arena,
+                algo=r.algo,
+                seed=cfg.robot_seed(r),
+                iterations=cfg.iterations,
+                respite=cfg.respite,
+                mode=cfg.mode,
+                trainer=dict(cfg.trainer),
+            ).trainer_config(),
+        )
+        for r in cfg.robots
+    ]
 
 
-def run_replica(cfg: ExperimentConfig, out: str | Path, *, force: bool = False,
-                progress: TextIO | None = None) -> Replica:
+def run_replica(
+    cfg: ExperimentConfig, out: str | Path, *, force: bool = False, progress: TextIO | None = None
+) -> Replica:
     """Run ``cfg`` in this process and write its results folder (see the module's docs).
 
     Parameters
@@ -164,8 +180,9 @@ def run_replica(cfg: ExperimentConfig, out: str | Path, *, force: bool = False,
     cfg.check()
     t0 = time.monotonic()
     out = claim_output(Path(out).resolve(), force)
-    (out / "config.json").write_text(json.dumps(cfg.resolved().public_dict(), indent=2) + "\n",
-                                     encoding="utf-8")
+    (out / "config.json").write_text(
+        json.dumps(cfg.resolved().public_dict(), indent=2) + "\n", encoding="utf-8"
+    )
     write_provenance(out)
     robots = replica_trainer_configs(cfg, out)
     ids = [r.id for r, _ in robots]
@@ -177,26 +194,37 @@ def run_replica(cfg: ExperimentConfig, out: str | Path, *, force: bool = False,
     shares = 0
 
     def on_step(k: int, m: StepMetrics) -> None:
-        logs[k].row((ids[k], m.iteration, repr(m.q_sum), repr(m.cumulative_reward),
-                     m.collisions))
+        logs[k].row((ids[k], m.iteration, repr(m.q_sum), repr(m.cumulative_reward), m.collisions))
 
     def on_share(iteration: int, trainers: Sequence[Trainer]) -> None:
         nonlocal shares
         shares += 1
         for k, (rid, t) in enumerate(zip(ids, trainers)):
             _save_history(history, rid, iteration, t)
-            share_logs[k].row(share_row(rid, shares, iteration, t.q_table, {"round": shares},
-                                        float(t.q_table.sum())))
-        if iteration == cfg.iterations:             # the robots' final save
+            share_logs[k].row(
+                share_row(
+                    rid, shares, iteration, t.q_table, {"round": shares}, float(t.q_table.sum())
+                )
+            )
+        if iteration == cfg.iterations:  # the robots' final save
             for rid, t in zip(ids, trainers):
                 save_learnt_atomically(t, out, rid)
         if progress is not None:
-            print(f"{cfg.name}: share {shares}/{len(planned)} at iteration {iteration}",
-                  file=progress, flush=True)
+            print(
+                f"{cfg.name}: share {shares}/{len(planned)} at iteration {iteration}",
+                file=progress,
+                flush=True,
+            )
 
     try:
-        federate([c for _, c in robots], cfg.iterations, cfg.respite,
-                 cfg.method_for(robots[0][0].algo), on_step=on_step, on_share=on_share)
+        federate(
+            [c for _, c in robots],
+            cfg.iterations,
+            cfg.respite,
+            cfg.method_for(robots[0][0].algo),
+            on_step=on_step,
+            on_share=on_share,
+        )
     finally:
         for log in logs + share_logs:
             log.close()
@@ -224,18 +252,25 @@ def _save_history(folder: Path, robot: str, iteration: int, trainer: Trainer) ->
 
 def _write_summary(out: Path, cfg: ExperimentConfig, wall: float, shares: int) -> Path:
     """``summary.md``: the driver's first lines (wall time, mode, seed) and the final tables."""
-    lines = [f"# {cfg.name}", "", cfg.default_title(), "",
-             f"- wall time: {wall:.1f} s",
-             f"- mode: {cfg.mode.value}, real-time factor: none (flat out)",
-             f"- seed: {cfg.seed}; iterations {cfg.iterations}, respite {cfg.respite}, "
-             f"rounds planned {cfg.rounds}, shares done {shares}",
-             REPLICA_LINE]
+    lines = [
+        f"# {cfg.name}",
+        "",
+        cfg.default_title(),
+        "",
+        f"- wall time: {wall:.1f} s",
+        f"- mode: {cfg.mode.value}, real-time factor: none (flat out)",
+        f"- seed: {cfg.seed}; iterations {cfg.iterations}, respite {cfg.respite}, "
+        f"rounds planned {cfg.rounds}, shares done {shares}",
+        REPLICA_LINE,
+    ]
     made_by = read_provenance(out)
     if made_by is not None:
         lines.append(f"- produced by {describe(made_by)} (provenance.json)")
-    lines += ["",
-              "| robot | arena | algo | seed | final sum of Q (tables/) |",
-              "|---|---|---|---|---|"]
+    lines += [
+        "",
+        "| robot | arena | algo | seed | final sum of Q (tables/) |",
+        "|---|---|---|---|---|",
+    ]
     for r in cfg.robots:
         final = table_sum(out, r.id)
         q = "no table saved" if final is None else f"{final:.2f}"

@@ -24,6 +24,7 @@ The same comparison against the untrained learner follows in one line. The defau
 (6 episodes x 200 steps x 3 policies: 3,600 steps, a few seconds) is said with the verdict;
 a short evaluation can miss a small gain (the "not better" line says how small).
 """
+
 from __future__ import annotations
 
 import time
@@ -33,11 +34,16 @@ from typing import Any
 import numpy as np
 
 from dfrl.experiments.science.standalone import EVAL_SEED_OFFSET
-from dfrl.experiments.science.statistics import (Interval, Judgement, Measured, Outcome, judge,
-                                               paired)
+from dfrl.experiments.science.statistics import (
+    Interval,
+    Judgement,
+    Measured,
+    Outcome,
+    judge,
+    paired,
+)
 
-__all__ = ["DEFAULT_EPISODES", "DEFAULT_STEPS", "LearningCheck", "PolicyScores",
-           "check_learning"]
+__all__ = ["DEFAULT_EPISODES", "DEFAULT_STEPS", "LearningCheck", "PolicyScores", "check_learning"]
 
 DEFAULT_EPISODES = 6
 DEFAULT_STEPS = 200
@@ -85,46 +91,70 @@ class LearningCheck:
 
     def _collision_caveat(self) -> str:
         """When the learnt policy collides more often than random (its interval above 0)."""
-        more = judge(paired(self.learnt.collisions_per_1000, self.random.collisions_per_1000),
-                     0.0, "above")
+        more = judge(
+            paired(self.learnt.collisions_per_1000, self.random.collisions_per_1000), 0.0, "above"
+        )
         if not more.holds:
             return ""
         m = _interval(more)
-        return (f"; {'but' if self.vs_random.holds else 'and'} it collides more often than "
-                f"random: +{m.mean:.1f} collisions per 1,000 steps {_span(m, 1)}")
+        return (
+            f"; {'but' if self.vs_random.holds else 'and'} it collides more often than "
+            f"random: +{m.mean:.1f} collisions per 1,000 steps {_span(m, 1)}"
+        )
 
     def lines(self) -> list[str]:
         """What ``dfrl train`` prints: the verdict, the untrained comparison, the three
         policies' numbers and the evaluation's budget."""
-        out = [self.verdict() + self._collision_caveat(),
-               f"against the untrained learner: "
-               f"{_compared(self.vs_untrained, 'the untrained learner')}"]
+        out = [
+            self.verdict() + self._collision_caveat(),
+            f"against the untrained learner: "
+            f"{_compared(self.vs_untrained, 'the untrained learner')}",
+        ]
         for p in (self.learnt, self.untrained, self.random):
-            out.append(f"  {p.policy:>9}: {p.mean_reward:.3f} reward per step, "
-                       f"{p.mean_collisions:.1f} collisions per 1,000 steps")
+            out.append(
+                f"  {p.policy:>9}: {p.mean_reward:.3f} reward per step, "
+                f"{p.mean_collisions:.1f} collisions per 1,000 steps"
+            )
         total = 3 * self.episodes * self.steps
-        out.append(f"evaluation budget: 3 policies x {self.episodes} episodes x {self.steps} "
-                   f"steps ({total:,} steps, {self.seconds:.1f} s); 95% t intervals over the "
-                   f"episodes (--eval-episodes, --eval-steps)")
+        out.append(
+            f"evaluation budget: 3 policies x {self.episodes} episodes x {self.steps} "
+            f"steps ({total:,} steps, {self.seconds:.1f} s); 95% t intervals over the "
+            f"episodes (--eval-episodes, --eval-steps)"
+        )
         return out
 
     def to_dict(self) -> dict[str, Any]:
         """The check as JSON data (``learning_check.json``)."""
+
         def judged(j: Judgement) -> dict[str, Any]:
             m = _interval(j)
-            return {"difference": m.mean, "low": m.low, "high": m.high, "n": m.n,
-                    "p": j.p, "outcome": j.outcome.value}
+            return {
+                "difference": m.mean,
+                "low": m.low,
+                "high": m.high,
+                "n": m.n,
+                "p": j.p,
+                "outcome": j.outcome.value,
+            }
 
-        return {"verdict": self.verdict() + self._collision_caveat(),
-                "learnt": self.learnt_something,
-                "measure": "mean reward per step, paired by episode",
-                "episodes": self.episodes, "steps": self.steps, "seconds": self.seconds,
-                "vs_random": judged(self.vs_random),
-                "vs_untrained": judged(self.vs_untrained),
-                "policies": {p.policy: {"reward_per_step": list(p.rewards),
-                                        "collisions_per_1000": list(p.collisions_per_1000)}
-                             for p in (self.learnt, self.untrained, self.random)},
-                "lines": self.lines()}
+        return {
+            "verdict": self.verdict() + self._collision_caveat(),
+            "learnt": self.learnt_something,
+            "measure": "mean reward per step, paired by episode",
+            "episodes": self.episodes,
+            "steps": self.steps,
+            "seconds": self.seconds,
+            "vs_random": judged(self.vs_random),
+            "vs_untrained": judged(self.vs_untrained),
+            "policies": {
+                p.policy: {
+                    "reward_per_step": list(p.rewards),
+                    "collisions_per_1000": list(p.collisions_per_1000),
+                }
+                for p in (self.learnt, self.untrained, self.random)
+            },
+            "lines": self.lines(),
+        }
 
 
 def _interval(j: Judgement) -> Interval:
@@ -146,8 +176,10 @@ def _compared(j: Judgement, other: str, unit: str = "reward per step") -> str:
         how = "worse than" if m.mean < 0 else "no better than"
         return f"{how} {other} by {abs(m.mean):.3f} {unit} {_span(m)}"
     if j.outcome is Outcome.NOT_SIGNIFICANT:
-        return (f"not better than {other} ({m.mean:+.3f} {unit} {_span(m)}; smallest "
-                f"detectable difference {m.detectable():.3f})")
+        return (
+            f"not better than {other} ({m.mean:+.3f} {unit} {_span(m)}; smallest "
+            f"detectable difference {m.detectable():.3f})"
+        )
     return f"cannot judge against {other}: {j.words()}"
 
 
@@ -172,9 +204,13 @@ def _untrained(config: Any) -> tuple[np.ndarray | None, np.ndarray | None]:
         trainer.close()
 
 
-def check_learning(config: Any, q_table: np.ndarray | None, params: np.ndarray | None,
-                   episodes: int = DEFAULT_EPISODES,
-                   steps: int = DEFAULT_STEPS) -> LearningCheck:
+def check_learning(
+    config: Any,
+    q_table: np.ndarray | None,
+    params: np.ndarray | None,
+    episodes: int = DEFAULT_EPISODES,
+    steps: int = DEFAULT_STEPS,
+) -> LearningCheck:
     """Evaluate a run's learnt policy against random and the untrained learner (module doc).
 
     Parameters
@@ -203,16 +239,37 @@ def check_learning(config: Any, q_table: np.ndarray | None, params: np.ndarray |
         raise ValueError("no learnt table or parameters to evaluate")
     t0 = time.perf_counter()
     fresh_table, fresh_params = _untrained(config)
-    policies = {"learnt": (PolicyKind.GREEDY, q_table, None if q_table is not None else params),
-                "untrained": (PolicyKind.GREEDY, fresh_table, fresh_params),
-                "random": (PolicyKind.RANDOM, None, None)}
+    policies = {
+        "learnt": (PolicyKind.GREEDY, q_table, None if q_table is not None else params),
+        "untrained": (PolicyKind.GREEDY, fresh_table, fresh_params),
+        "random": (PolicyKind.RANDOM, None, None),
+    }
     scores = {}
     for name, (kind, table, vec) in policies.items():
-        results = [evaluate_policy(config, kind, steps, EVAL_SEED_OFFSET + 1000 * config.seed + k,
-                                   q_table=table, params=vec) for k in range(episodes)]
-        scores[name] = PolicyScores(name, tuple(r.mean_reward for r in results),
-                                    tuple(r.collisions_per_1000 for r in results))
+        results = [
+            evaluate_policy(
+                config,
+                kind,
+                steps,
+                EVAL_SEED_OFFSET + 1000 * config.seed + k,
+                q_table=table,
+                params=vec,
+            )
+            for k in range(episodes)
+        ]
+        scores[name] = PolicyScores(
+            name,
+            tuple(r.mean_reward for r in results),
+            tuple(r.collisions_per_1000 for r in results),
+        )
     learnt, fresh, rand = scores["learnt"], scores["untrained"], scores["random"]
-    return LearningCheck(episodes, steps, time.perf_counter() - t0, learnt, fresh, rand,
-                         judge(paired(learnt.rewards, rand.rewards), 0.0, "above"),
-                         judge(paired(learnt.rewards, fresh.rewards), 0.0, "above"))
+    return LearningCheck(
+        episodes,
+        steps,
+        time.perf_counter() - t0,
+        learnt,
+        fresh,
+        rand,
+        judge(paired(learnt.rewards, rand.rewards), 0.0, "above"),
+        judge(paired(learnt.rewards, fresh.rewards), 0.0, "above"),
+    )

@@ -5,6 +5,7 @@ each row compared with the rule of the other studies' confirmations
 (:data:`.studies.confirm.RULE`: the pybullet 95% interval contains the batched estimate, or the
 verdicts are the same).
 """
+
 from __future__ import annotations
 
 import json
@@ -30,13 +31,15 @@ def estimates(ans: Answers) -> dict[str, Estimate]:
         for a in ans.questions.get(q, []):
             c = a.judged.contrast
             low, high = c.interval()
-            out[f"{q}: {a.row.label}"] = Estimate(c.estimate, low, high, c.n, a.judged.words(),
-                                                  (a.judged.outcome.value,))
+            out[f"{q}: {a.row.label}"] = Estimate(
+                c.estimate, low, high, c.n, a.judged.words(), (a.judged.outcome.value,)
+            )
     return out
 
 
-def confirm_paper(out: Path, opts: PaperOptions, batched: Answers, seeds: int,
-                  progress: TextIO | None = None) -> list[Confirmation]:
+def confirm_paper(
+    out: Path, opts: PaperOptions, batched: Answers, seeds: int, progress: TextIO | None = None
+) -> list[Confirmation]:
     """Run the pybullet paper on the first ``seeds`` seeds of ``opts`` and compare; writes
     ``OUT/confirmation.json``."""
     first = tuple(_seeds(opts)[:seeds])
@@ -44,23 +47,38 @@ def confirm_paper(out: Path, opts: PaperOptions, batched: Answers, seeds: int,
     ours, theirs = estimates(batched), estimates(rep.answers)
     found = [Confirmation(name, ours[name], theirs[name]) for name in ours if name in theirs]
     (Path(out) / "confirmation.json").write_text(
-        json.dumps({"seeds": list(first), "rule": RULE,
-                    "contrasts": [c.to_dict() for c in found]}, indent=2) + "\n",
-        encoding="utf-8")
+        json.dumps(
+            {"seeds": list(first), "rule": RULE, "contrasts": [c.to_dict() for c in found]},
+            indent=2,
+        )
+        + "\n",
+        encoding="utf-8",
+    )
     return found
 
 
 def markdown(found: list[Confirmation], seeds: int) -> list[str]:
     """The report's "Confirmation in pybullet" section."""
     bad = disagreeing(found)
-    head = (f"**{len(bad)} of {len(found)} contrasts disagree**: " + ", ".join(
-        c.contrast for c in bad) if bad else f"All {len(found)} contrasts agree")
-    lines = ["", "## Confirmation in pybullet", "",
-             f"{head} ({RULE}; pybullet on the first {seeds} seeds, `{FOLDER}/`).", "",
-             "| contrast | batched [95%] | pybullet [95%] | agrees |", "|---|---|---|---|"]
+    head = (
+        f"**{len(bad)} of {len(found)} contrasts disagree**: " + ", ".join(c.contrast for c in bad)
+        if bad
+        else f"All {len(found)} contrasts agree"
+    )
+    lines = [
+        "",
+        "## Confirmation in pybullet",
+        "",
+        f"{head} ({RULE}; pybullet on the first {seeds} seeds, `{FOLDER}/`).",
+        "",
+        "| contrast | batched [95%] | pybullet [95%] | agrees |",
+        "|---|---|---|---|",
+    ]
     for c in found:
-        lines.append(f"| {c.contrast} | {_shown(c.batched)} | {_shown(c.pybullet)} | "
-                     f"{'yes' if c.agrees else '**no**'} |")
+        lines.append(
+            f"| {c.contrast} | {_shown(c.batched)} | {_shown(c.pybullet)} | "
+            f"{'yes' if c.agrees else '**no**'} |"
+        )
     return lines
 
 

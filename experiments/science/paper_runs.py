@@ -2,6 +2,7 @@
 on a Dask cluster several at once (:mod:`.cluster_runs`), and queue the greedy evaluations of
 each run's table snapshots as soon as it ends (:class:`FederatedRuns`).
 """
+
 from __future__ import annotations
 
 import re
@@ -17,8 +18,12 @@ import numpy as np
 from dfrl.experiments.driver.config import ExperimentConfig
 from dfrl.experiments.driver.launcher import run
 from dfrl.experiments.science.fed_replicas import replica_job
-from dfrl.experiments.science.cluster_runs import (ClusterOptions, Finished, run_on_cluster,
-                                                    runs_at_once)
+from dfrl.experiments.science.cluster_runs import (
+    ClusterOptions,
+    Finished,
+    run_on_cluster,
+    runs_at_once,
+)
 from dfrl.experiments.science.studies.history import Evaluator, PendingRows, history_tables, pick
 
 #: One seed's runs: (key, config) in order.
@@ -35,8 +40,9 @@ class StudyInterrupted(KeyboardInterrupt):
 def recorded_wall(d: Path) -> float:
     """The wall time a finished run's ``summary.md`` recorded (nan if none)."""
     try:
-        m = re.search(r"^- wall time: ([0-9.]+) s$", (d / "summary.md").read_text(
-            encoding="utf-8"), re.M)
+        m = re.search(
+            r"^- wall time: ([0-9.]+) s$", (d / "summary.md").read_text(encoding="utf-8"), re.M
+        )
     except OSError:
         return float("nan")
     return float(m.group(1)) if m else float("nan")
@@ -66,9 +72,15 @@ class FederatedRuns:
         ``seed<S>/<key>`` -> wall time of the runs run now / recorded by the runs reused.
     """
 
-    def __init__(self, out: Path, evaluators: dict[int, Evaluator], points: int,
-                 held_out: Sequence[str], skip_existing: bool,
-                 progress: TextIO | None) -> None:
+    def __init__(
+        self,
+        out: Path,
+        evaluators: dict[int, Evaluator],
+        points: int,
+        held_out: Sequence[str],
+        skip_existing: bool,
+        progress: TextIO | None,
+    ) -> None:
         self.out = out
         self.evaluators = evaluators
         self.points = points
@@ -93,14 +105,17 @@ class FederatedRuns:
                 d = self._folder(s, cfg)
                 if self._reuse(s, key, cfg, d):
                     continue
-                self._say(f"== {d.parent.name}/{cfg.name}: {len(cfg.robots)} robots, "
-                          f"{cfg.iterations} iterations")
+                self._say(
+                    f"== {d.parent.name}/{cfg.name}: {len(cfg.robots)} robots, "
+                    f"{cfg.iterations} iterations"
+                )
                 t0 = time.monotonic()
-                done = run(cfg, d, progress=None, force=True)   # the study owns its folders
+                done = run(cfg, d, progress=None, force=True)  # the study owns its folders
                 self.walls[f"seed{s}/{key}"] = time.monotonic() - t0
                 if done.interrupted:
-                    raise StudyInterrupted(f"{d.parent.name}/{cfg.name} interrupted "
-                                           f"({done.interrupted})")
+                    raise StudyInterrupted(
+                        f"{d.parent.name}/{cfg.name} interrupted ({done.interrupted})"
+                    )
                 ok = ok and done.ok
                 self._queue(s, key, cfg, d)
         return ok
@@ -126,8 +141,10 @@ class FederatedRuns:
         for fut in as_completed(by_future):
             s, key, cfg, d = by_future[fut]
             self.walls[f"seed{s}/{key}"] = fut.result()["wall_time_s"]
-            self._say(f"== {d.parent.name}/{cfg.name}: replica done in "
-                      f"{self.walls[f'seed{s}/{key}']:.0f} s")
+            self._say(
+                f"== {d.parent.name}/{cfg.name}: replica done in "
+                f"{self.walls[f'seed{s}/{key}']:.0f} s"
+            )
             self._queue(s, key, cfg, d)
         order = [(s, key) for s, cfgs in configs.items() for key, _ in cfgs]
         self.pendings = {k: self.pendings[k] for k in order if k in self.pendings}
@@ -152,8 +169,7 @@ class FederatedRuns:
         if not where:
             return True
         at_once = runs_at_once(cluster, max(len(c.robots) for _, _, c in where.values()))
-        self._say(f"== {len(where)} federated runs on cluster {cluster.address}, {at_once} "
-                  f"at once")
+        self._say(f"== {len(where)} federated runs on cluster {cluster.address}, {at_once} at once")
         failed: list[str] = []
 
         def done(end: Finished) -> None:
@@ -166,8 +182,9 @@ class FederatedRuns:
             if (end.out / "metrics.csv").is_file():
                 self._queue(s, key, cfg, end.out)
 
-        run_on_cluster([(cfg, d) for d, (_, _, cfg) in where.items()], cluster, at_once, done,
-                       self.progress)
+        run_on_cluster(
+            [(cfg, d) for d, (_, _, cfg) in where.items()], cluster, at_once, done, self.progress
+        )
         # in the order of the configs, as here(): the report pairs runs by seed in this order
         order = [(s, key) for s, cfgs in configs.items() for key, _ in cfgs]
         self.pendings = {k: self.pendings[k] for k in order if k in self.pendings}
@@ -192,9 +209,15 @@ class FederatedRuns:
         arenas = {r.id: r.arena for r in cfg.robots}
         for robot, files in history_tables(d).items():
             its = pick(files, cfg.iterations, self.points)
-            for it in its:      # the held-out arenas at the last point only (what T reads)
-                pending.add(self.evaluators[seed], robot, it, np.load(files[it]), arenas[robot],
-                            self.held_out if it == its[-1] else ())
+            for it in its:  # the held-out arenas at the last point only (what T reads)
+                pending.add(
+                    self.evaluators[seed],
+                    robot,
+                    it,
+                    np.load(files[it]),
+                    arenas[robot],
+                    self.held_out if it == its[-1] else (),
+                )
         self.pendings[(seed, key)] = (d, pending)
 
     def _say(self, line: str) -> None:

@@ -5,6 +5,7 @@ the executor does not do by itself: a forked worker inherits the study's SIGTERM
 would outlive a study stopped with SIGTERM), and ``shutdown`` waits for running jobs and then
 forgets its workers, so they must be taken before it to be ended at once.
 """
+
 from __future__ import annotations
 
 import signal

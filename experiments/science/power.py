@@ -11,6 +11,7 @@ measured at n seeds to the n at which it would reach a given effect (a differenc
 itself scales; a ratio: its logarithm does). Both are planning figures: the spread at the
 new n is assumed to be the measured one.
 """
+
 from __future__ import annotations
 
 import math
@@ -54,7 +55,7 @@ def seeds_needed(sd: float, effect: float, power: float = POWER) -> int:
         if hi >= MOST:
             raise ValueError(f"more than {MOST} values for an effect of {effect} at sd {sd}")
         lo, hi = hi, min(2 * hi, MOST)
-    while lo < hi:                  # D falls with n: the first n that reaches the effect
+    while lo < hi:  # D falls with n: the first n that reaches the effect
         mid = (lo + hi) // 2
         if detectable_at(sd, mid, power) <= abs(effect):
             hi = mid
@@ -84,8 +85,9 @@ def seeds_for(n: int, detectable: float, effect: float, scale: str = "difference
         factor = (abs(detectable) / abs(effect)) ** 2
     elif scale == "ratio":
         if not (effect > 1 and detectable > 1):
-            raise ValueError(f"a ratio's D and effect are factors above 1, got {detectable}, "
-                             f"{effect}")
+            raise ValueError(
+                f"a ratio's D and effect are factors above 1, got {detectable}, {effect}"
+            )
         factor = (math.log(detectable) / math.log(effect)) ** 2
     else:
         raise ValueError(f"scale is 'difference' or 'ratio', got {scale!r}")

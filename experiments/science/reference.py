@@ -56,6 +56,7 @@ naming the file. Whatever goes wrong, nothing is silently rebuilt over a corrupt
   times, the mean probability that the table's greedy action (ties broken uniformly, as the
   learners do) is not one of the reference's greedy actions.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -153,9 +154,12 @@ def _greedy_sets(q: np.ndarray) -> np.ndarray:
     return q == q.max(axis=1, keepdims=True)
 
 
-def table_error(table: np.ndarray, reference: Reference | np.ndarray,
-                visits: np.ndarray | None = None,
-                min_visits: int = DEFAULT_MIN_VISITS) -> TableError:
+def table_error(
+    table: np.ndarray,
+    reference: Reference | np.ndarray,
+    visits: np.ndarray | None = None,
+    min_visits: int = DEFAULT_MIN_VISITS,
+) -> TableError:
     """The distance of ``table`` to ``reference`` (module docstring, "The distance").
 
     Parameters
@@ -209,13 +213,20 @@ def table_error(table: np.ndarray, reference: Reference | np.ndarray,
         disagreement = float(np.mean(1.0 - agree))
     else:
         disagreement = float("nan")
-    return TableError(rms=rms, relative=relative, disagreement=disagreement, pairs=pairs,
-                      states=n_states)
+    return TableError(
+        rms=rms, relative=relative, disagreement=disagreement, pairs=pairs, states=n_states
+    )
 
 
 # -- recipes and names -------------------------------------------------------------------------
-def reference_recipe(arena: str, algo: str, iterations: int, seeds: Sequence[int],
-                     base: Any = None, min_visits: int = DEFAULT_MIN_VISITS) -> dict[str, Any]:
+def reference_recipe(
+    arena: str,
+    algo: str,
+    iterations: int,
+    seeds: Sequence[int],
+    base: Any = None,
+    min_visits: int = DEFAULT_MIN_VISITS,
+) -> dict[str, Any]:
     """What a reference is trained from: JSON-ready, the input of its name and key.
 
     Parameters
@@ -247,10 +258,17 @@ def reference_recipe(arena: str, algo: str, iterations: int, seeds: Sequence[int
         raise ValueError(f"seeds must be distinct and at least one, got {seeds}")
     if learner_kind(algo) != "tabular":
         raise ValueError(f"a reference table needs a tabular learner, not {algo!r}")
-    cfg = (base or TrainerConfig()).replace(arena=str(arena), algo=algo, seed=0,
-                                            iterations=int(iterations))
-    return {"arena": str(arena), "algo": algo, "iterations": int(iterations),
-            "seeds": seeds, "min_visits": int(min_visits), "config": cfg.to_dict()}
+    cfg = (base or TrainerConfig()).replace(
+        arena=str(arena), algo=algo, seed=0, iterations=int(iterations)
+    )
+    return {
+        "arena": str(arena),
+        "algo": algo,
+        "iterations": int(iterations),
+        "seeds": seeds,
+        "min_visits": int(min_visits),
+        "config": cfg.to_dict(),
+    }
 
 
 def recipe_key(recipe: dict[str, Any]) -> str:
@@ -262,8 +280,10 @@ def recipe_key(recipe: dict[str, Any]) -> str:
 def reference_name(recipe: dict[str, Any]) -> str:
     """``<arena>-<algo>-<iterations>x<K>-<key12>``; an arena file contributes its stem."""
     arena = re.sub(r"[^A-Za-z0-9_]+", "_", Path(recipe["arena"]).stem) or "arena"
-    return (f"{arena}-{recipe['algo']}-{recipe['iterations']}x{len(recipe['seeds'])}-"
-            f"{recipe_key(recipe)[:12]}")
+    return (
+        f"{arena}-{recipe['algo']}-{recipe['iterations']}x{len(recipe['seeds'])}-"
+        f"{recipe_key(recipe)[:12]}"
+    )
 
 
 def default_cache() -> Path:
@@ -285,8 +305,9 @@ def _run(cfg_dict: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     return result.q_table, result.visits
 
 
-def combine(tables: Sequence[np.ndarray], visits: Sequence[np.ndarray],
-            initial_q: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def combine(
+    tables: Sequence[np.ndarray], visits: Sequence[np.ndarray], initial_q: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The reference of some runs' tables (module docstring): ``(q, visits, runs)``.
 
     Parameters
@@ -327,7 +348,13 @@ def build_reference(recipe: dict[str, Any], jobs: int = 1) -> Reference:
     from dfrl.experiments.provenance import provenance
 
     prov = provenance()
-    built = {"dfrl": prov["dfrl"], "git": prov["git"], "provenance": prov, "seconds": seconds,
-             "jobs": jobs, "seed_rms": float(np.mean(seed_rms)),
-             "seed_rms_per_run": [float(x) for x in seed_rms]}
+    built = {
+        "dfrl": prov["dfrl"],
+        "git": prov["git"],
+        "provenance": prov,
+        "seconds": seconds,
+        "jobs": jobs,
+        "seed_rms": float(np.mean(seed_rms)),
+        "seed_rms_per_run": [float(x) for x in seed_rms],
+    }
     return Reference(q=q, visits=v, runs=runs, recipe=recipe, built=built)

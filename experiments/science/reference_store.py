@@ -3,6 +3,7 @@ recipe, provenance and sha256 of ``NAME.q.npy`` and ``NAME.visits.npy``), and
 :func:`reference_table`, which loads a reference from the cache or the shipped folder or builds
 it (:mod:`.reference` holds what a reference is, its distance and how it is built).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -13,11 +14,19 @@ from typing import Any
 
 import numpy as np
 
-from dfrl.experiments.science.reference import (DEFAULT_ITERATIONS, DEFAULT_MIN_VISITS,
-                                                DEFAULT_SEEDS, REFERENCE_FORMAT, SHIPPED,
-                                                Reference, ReferenceError, build_reference,
-                                                default_cache, reference_name,
-                                                reference_recipe)
+from dfrl.experiments.science.reference import (
+    DEFAULT_ITERATIONS,
+    DEFAULT_MIN_VISITS,
+    DEFAULT_SEEDS,
+    REFERENCE_FORMAT,
+    SHIPPED,
+    Reference,
+    ReferenceError,
+    build_reference,
+    default_cache,
+    reference_name,
+    reference_recipe,
+)
 
 
 def _sha256(path: Path) -> str:
@@ -36,10 +45,14 @@ def save_reference(reference: Reference, folder: str | Path) -> Path:
     side, qf, vf = _files(folder, reference.name)
     np.save(qf, np.asarray(reference.q, dtype=np.float64))
     np.save(vf, np.stack([reference.visits, reference.runs]).astype(np.int64))
-    meta = {"format": REFERENCE_FORMAT, "name": reference.name,
-            "shape": list(reference.q.shape), "recipe": reference.recipe,
-            "built": reference.built,
-            "sha256": {qf.name: _sha256(qf), vf.name: _sha256(vf)}}
+    meta = {
+        "format": REFERENCE_FORMAT,
+        "name": reference.name,
+        "shape": list(reference.q.shape),
+        "recipe": reference.recipe,
+        "built": reference.built,
+        "sha256": {qf.name: _sha256(qf), vf.name: _sha256(vf)},
+    }
     tmp = side.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
     tmp.replace(side)
@@ -70,8 +83,10 @@ def load_reference(path: str | Path) -> Reference:
             raise ReferenceError(f"{f}: missing (named by {side})")
         got = _sha256(f)
         if got != sums.get(f.name):
-            raise ReferenceError(f"{f}: sha256 {got} differs from {sums.get(f.name)} recorded "
-                                 f"in {side}; delete the reference's files to rebuild it")
+            raise ReferenceError(
+                f"{f}: sha256 {got} differs from {sums.get(f.name)} recorded "
+                f"in {side}; delete the reference's files to rebuild it"
+            )
     q = np.load(qf, allow_pickle=False)
     vr = np.load(vf, allow_pickle=False)
     shape = tuple(meta.get("shape", ()))
@@ -80,16 +95,22 @@ def load_reference(path: str | Path) -> Reference:
     recipe = meta.get("recipe", {})
     if reference_name(recipe) != name:
         raise ReferenceError(f"{side}: the recipe does not give the name {name!r}")
-    return Reference(q=q, visits=vr[0], runs=vr[1], recipe=recipe,
-                     built=meta.get("built", {}), path=side)
+    return Reference(
+        q=q, visits=vr[0], runs=vr[1], recipe=recipe, built=meta.get("built", {}), path=side
+    )
 
 
-def reference_table(arena: str, algo: str = "qlearning",
-                    iterations: int = DEFAULT_ITERATIONS,
-                    seeds: Sequence[int] = tuple(range(1, DEFAULT_SEEDS + 1)),
-                    base: Any = None, cache: str | Path | None = None,
-                    min_visits: int = DEFAULT_MIN_VISITS, jobs: int = 1,
-                    rebuild: bool = False) -> Reference:
+def reference_table(
+    arena: str,
+    algo: str = "qlearning",
+    iterations: int = DEFAULT_ITERATIONS,
+    seeds: Sequence[int] = tuple(range(1, DEFAULT_SEEDS + 1)),
+    base: Any = None,
+    cache: str | Path | None = None,
+    min_visits: int = DEFAULT_MIN_VISITS,
+    jobs: int = 1,
+    rebuild: bool = False,
+) -> Reference:
     """The reference of an arena: loaded (and verified) from the cache or, failing that,
     from the references shipped in :data:`SHIPPED`; else built into the cache.
 
@@ -123,5 +144,6 @@ def reference_table(arena: str, algo: str = "qlearning",
             return ref
     ref = build_reference(recipe, jobs=jobs)
     path = save_reference(ref, folder)
-    return Reference(q=ref.q, visits=ref.visits, runs=ref.runs, recipe=ref.recipe,
-                     built=ref.built, path=path)
+    return Reference(
+        q=ref.q, visits=ref.visits, runs=ref.runs, recipe=ref.recipe, built=ref.built, path=path
+    )

@@ -36,6 +36,7 @@ or Ctrl-C stops the whole study (the current run stops cleanly, pending jobs are
 ``--skip-existing`` then reuses what finished. :func:`rejudge` judges a study's folder again
 from its ``evaluations.csv`` without running anything (``dfrl paper --from``).
 """
+
 from __future__ import annotations
 
 import signal
@@ -59,9 +60,13 @@ from dfrl.experiments.science.paper_runs import FederatedRuns, StudyInterrupted 
 from dfrl.experiments.science.pool import stop_pool, study_pool
 from dfrl.experiments.science.questions.answers import Answers, answer
 from dfrl.experiments.science.questions.catalogue import CONTROL, REFERENCE, UNTRAINED
-from dfrl.experiments.science.questions.evaluations import (EVALUATIONS_FILE, Evaluation,
-                                                            from_rows, read_evaluations,
-                                                            write_evaluations)
+from dfrl.experiments.science.questions.evaluations import (
+    EVALUATIONS_FILE,
+    Evaluation,
+    from_rows,
+    read_evaluations,
+    write_evaluations,
+)
 from dfrl.experiments.science.questions.report import write_files
 from dfrl.experiments.science.report.measures import SeedRun
 from dfrl.experiments.science.report.paper import write_questions_report, write_report
@@ -91,30 +96,35 @@ UNTRAINED_SEED = 70_707
 ZERO_TABLE = "reference/zero_table"
 #: The algorithms, and the federated conditions (algo, method) of every seed.
 ALGOS = ("qlearning", "sarsa")
-FEDERATED = (("qlearning", "average"), ("qlearning", "max"), ("qlearning", "visit_average"),
-             ("sarsa", "average"), ("sarsa", "max"))
+FEDERATED = (
+    ("qlearning", "average"),
+    ("qlearning", "max"),
+    ("qlearning", "visit_average"),
+    ("sarsa", "average"),
+    ("sarsa", "max"),
+)
 
 
 @dataclass(frozen=True)
 class PaperOptions:
     """What ``dfrl paper`` runs (defaults: the 15-minute budget on two cores)."""
 
-    seeds: int | tuple[int, ...] = 5    # a count (first_seed, first_seed + 1, ...) or the seeds
+    seeds: int | tuple[int, ...] = 5  # a count (first_seed, first_seed + 1, ...) or the seeds
     first_seed: int = 1
-    iterations: int | None = PAPER_ITERATIONS   # None: the configs' (20,000)
+    iterations: int | None = PAPER_ITERATIONS  # None: the configs' (20,000)
     respite: int | None = None
-    points: int = 2                     # greedy evaluations per run (held-out: the last)
-    eval_steps: int = 1000              # per table and arena
+    points: int = 2  # greedy evaluations per run (held-out: the last)
+    eval_steps: int = 1000  # per table and arena
     episode_steps: int = 200
     jobs: int = 2
-    control: bool = True                # the learning controls and the untrained table
-    driver: bool = False                # federated runs through `dfrl run`, not replicas
-    diagnostics: bool = False           # the off-policy reference (epsilon 1)
+    control: bool = True  # the learning controls and the untrained table
+    driver: bool = False  # federated runs through `dfrl run`, not replicas
+    diagnostics: bool = False  # the off-policy reference (epsilon 1)
     skip_existing: bool = False
     shuffle_buffer: int = SHUFFLE_BUFFER
-    deltas: tuple[tuple[str, float], ...] = ()   # question -> smallest effect of interest
-    cluster: ClusterOptions | None = None   # federated runs' robots on a Dask cluster
-    resamples: int = 2000               # of the rliable intervals in the report's aggregates
+    deltas: tuple[tuple[str, float], ...] = ()  # question -> smallest effect of interest
+    cluster: ClusterOptions | None = None  # federated runs' robots on a Dask cluster
+    resamples: int = 2000  # of the rliable intervals in the report's aggregates
 
 
 @dataclass
@@ -132,7 +142,7 @@ class Reproduction:
     ok: bool
     walls: dict[str, float] = field(default_factory=dict)
     seeds: list[int] = field(default_factory=list)
-    reused: dict[str, float] = field(default_factory=dict)   # run -> its recorded wall time
+    reused: dict[str, float] = field(default_factory=dict)  # run -> its recorded wall time
 
 
 def reference_learner() -> dict[str, Any]:
@@ -159,39 +169,64 @@ def paper_configs(opts: PaperOptions, seed: int) -> list[tuple[str, ExperimentCo
 
     def base(algo: str) -> ExperimentConfig:
         return ExperimentConfig.load(resolve_config(f"paper_{algo}_average")).replace(**changes)
+
     out = []
     for algo, method in FEDERATED:
         if method in ("average", "max"):
             cfg = ExperimentConfig.load(resolve_config(f"paper_{algo}_{method}"))
             out.append((f"{algo}/{method}", cfg.replace(**changes)))
         else:
-            out.append((f"{algo}/{method}", base(algo).replace(
-                name=f"paper_{algo}_{method}", method=method,
-                title=f"paper: 5 robots in R1..R5, {algo}, {method}")))
+            out.append(
+                (
+                    f"{algo}/{method}",
+                    base(algo).replace(
+                        name=f"paper_{algo}_{method}",
+                        method=method,
+                        title=f"paper: 5 robots in R1..R5, {algo}, {method}",
+                    ),
+                )
+            )
     if opts.control:
         for algo in ALGOS:
             b = base(algo)
-            out.append((f"{CONTROL}{algo}/average", b.replace(
-                name=f"control_{algo}_average", trainer=control_trainer(b.trainer, opts),
-                title=f"learning control: {algo}, average, control rewards")))
+            out.append(
+                (
+                    f"{CONTROL}{algo}/average",
+                    b.replace(
+                        name=f"control_{algo}_average",
+                        trainer=control_trainer(b.trainer, opts),
+                        title=f"learning control: {algo}, average, control rewards",
+                    ),
+                )
+            )
     if opts.diagnostics:
         b = base("qlearning")
         trainer = {**b.trainer, "learner": reference_learner()}
-        out.append((f"{REFERENCE}qlearning/average", b.replace(
-            name="reference_qlearning_average", trainer=trainer,
-            title="off-policy reference: random behaviour (epsilon 1)")))
+        out.append(
+            (
+                f"{REFERENCE}qlearning/average",
+                b.replace(
+                    name="reference_qlearning_average",
+                    trainer=trainer,
+                    title="off-policy reference: random behaviour (epsilon 1)",
+                ),
+            )
+        )
     return out
 
 
-def standalone_plan(opts: PaperOptions, cfg: ExperimentConfig,
-                    ) -> list[tuple[str, str, TrainerConfig]]:
+def standalone_plan(
+    opts: PaperOptions,
+    cfg: ExperimentConfig,
+) -> list[tuple[str, str, TrainerConfig]]:
     """(condition, folder name, trainer config) of one seed's standalone runs: each arena of
     ``cfg``'s robots alone with its robot's training seed."""
     out = []
     for r in cfg.robots:
         for algo in ALGOS:
-            plain = TrainerConfig(arena=r.arena, algo=algo, seed=cfg.robot_seed(r),
-                                  iterations=cfg.iterations)
+            plain = TrainerConfig(
+                arena=r.arena, algo=algo, seed=cfg.robot_seed(r), iterations=cfg.iterations
+            )
             out.append((f"standalone/{algo}", f"{algo}_{r.arena}", plain))
             if opts.control:
                 ctrl = TrainerConfig.from_dict(control_trainer(plain.to_dict(), opts))
@@ -207,8 +242,9 @@ def _raise_interrupt(signum: int, frame: Any) -> None:
     raise StudyInterrupted(f"signal {signum}")
 
 
-def reproduce_paper(out: Path, opts: PaperOptions = PaperOptions(),
-                    progress: TextIO | None = sys.stderr) -> Reproduction:
+def reproduce_paper(
+    out: Path, opts: PaperOptions = PaperOptions(), progress: TextIO | None = sys.stderr
+) -> Reproduction:
     """Run everything and write ``OUT/report.md``, the questions' files and ``OUT/figures``
     (progress lines to ``progress``).
 
@@ -232,8 +268,11 @@ def reproduce_paper(out: Path, opts: PaperOptions = PaperOptions(),
 
 
 def _seeds(opts: PaperOptions) -> list[int]:
-    return (list(opts.seeds) if isinstance(opts.seeds, tuple)
-            else list(range(opts.first_seed, opts.first_seed + opts.seeds)))
+    return (
+        list(opts.seeds)
+        if isinstance(opts.seeds, tuple)
+        else list(range(opts.first_seed, opts.first_seed + opts.seeds))
+    )
 
 
 def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reproduction:
@@ -247,12 +286,19 @@ def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reprod
     try:
         n_states = Discretiser(TrainerConfig().discretisation).n_states
         shape = (n_states, len(TrainerConfig().actions.names))
-        runs = FederatedRuns(out, {s: Evaluator(pool, base_cfg, opts.eval_steps,
-                                                opts.episode_steps, EVAL_SEED + s)
-                                   for s in seeds},
-                             opts.points, HELD_OUT, opts.skip_existing, progress)
+        runs = FederatedRuns(
+            out,
+            {
+                s: Evaluator(pool, base_cfg, opts.eval_steps, opts.episode_steps, EVAL_SEED + s)
+                for s in seeds
+            },
+            opts.points,
+            HELD_OUT,
+            opts.skip_existing,
+            progress,
+        )
         replicas = opts.cluster is None and not opts.driver
-        if replicas:        # the longest jobs first
+        if replicas:  # the longest jobs first
             runs.in_pool(fed_cfgs, pool)
         sa_jobs: dict[tuple[int, str, str], Future] = {}
         fixed_jobs: dict[tuple[int, str], dict[tuple[str, str], Future]] = {}
@@ -260,14 +306,23 @@ def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reprod
             cfg0 = fed_cfgs[s][0][1]
             for run, name, tcfg in standalone_plan(opts, cfg0):
                 sa_jobs[(s, run, tcfg.arena)] = _standalone(
-                    pool, out / f"seed{s}" / "standalone" / name, tcfg, opts, s)
+                    pool, out / f"seed{s}" / "standalone" / name, tcfg, opts, s
+                )
             if opts.control:
                 for run, table in ((UNTRAINED, untrained_table), (ZERO_TABLE, _zeros)):
                     fixed_jobs[(s, run)] = {
-                        (a, b): pool.submit(eval_job, base_cfg, table(s, a, shape), b,
-                                            opts.eval_steps, opts.episode_steps, EVAL_SEED + s)
+                        (a, b): pool.submit(
+                            eval_job,
+                            base_cfg,
+                            table(s, a, shape),
+                            b,
+                            opts.eval_steps,
+                            opts.episode_steps,
+                            EVAL_SEED + s,
+                        )
                         for a in dict.fromkeys(r.arena for r in cfg0.robots)
-                        for b in (a,) + HELD_OUT}
+                        for b in (a,) + HELD_OUT
+                    }
         if replicas:
             ok = runs.collect(fed_cfgs)
         elif opts.cluster is not None:
@@ -305,11 +360,13 @@ def _reproduce(out: Path, opts: PaperOptions, progress: TextIO | None) -> Reprod
         for run in (r for (t, r) in fixed_jobs if t == s):
             rows = read_rows(out / f"seed{s}" / run.split("/")[-1] / "evaluations.csv")
             by_run.setdefault(run, []).append(
-                SeedRun({}, {r["robot"]: r["robot"] for r in rows}, rows))
+                SeedRun({}, {r["robot"]: r["robot"] for r in rows}, rows)
+            )
             evals += from_rows(run, s, rows)
     ans = _judge(out, evals, opts)
-    rep = Reproduction(out / "report.md", by_run, ans, time.monotonic() - t0, ok,
-                       runs.walls, seeds, runs.reused)
+    rep = Reproduction(
+        out / "report.md", by_run, ans, time.monotonic() - t0, ok, runs.walls, seeds, runs.reused
+    )
     write_tidy(out / TIDY_FILE, tidy_rows(rep))
     write_report(out, rep, opts, seeds)
     return rep
@@ -323,8 +380,12 @@ def _judge(out: Path, evals: list[Evaluation], opts: PaperOptions) -> Answers:
     return ans
 
 
-def rejudge(folder: Path, deltas: Mapping[str, float] | None = None,
-            out: Path | None = None, resamples: int = 2000) -> tuple[Answers, Path]:
+def rejudge(
+    folder: Path,
+    deltas: Mapping[str, float] | None = None,
+    out: Path | None = None,
+    resamples: int = 2000,
+) -> tuple[Answers, Path]:
     """Judge a study's questions again from ``folder/evaluations.csv``, running nothing;
     write ``questions.csv``, ``contrasts_by_seed.csv`` and ``questions.md`` into ``out``
     (default: ``folder``). Returns the answers and the report's path.
@@ -383,18 +444,34 @@ def _write_fixed(d: Path, cfg: ExperimentConfig, jobs: Mapping[tuple[str, str], 
     """``d/evaluations.csv`` of a table that is never trained: one robot per arena the
     federated robots learn in (robot = arena), in its own arena and the held-out ones, at the
     budget's iteration."""
-    rows = [{"robot": a, "iteration": cfg.iterations, "arena": b,
-             "role": "own" if a == b else "held_out", **fut.result()}
-            for (a, b), fut in jobs.items()]
+    rows = [
+        {
+            "robot": a,
+            "iteration": cfg.iterations,
+            "arena": b,
+            "role": "own" if a == b else "held_out",
+            **fut.result(),
+        }
+        for (a, b), fut in jobs.items()
+    ]
     d.mkdir(parents=True, exist_ok=True)
     write_rows(d / "evaluations.csv", rows)
 
 
-def _standalone(pool: ProcessPoolExecutor, d: Path, cfg: TrainerConfig, opts: PaperOptions,
-                seed: int) -> Future:
+def _standalone(
+    pool: ProcessPoolExecutor, d: Path, cfg: TrainerConfig, opts: PaperOptions, seed: int
+) -> Future:
     if opts.skip_existing and (d / "evaluations.csv").is_file():
         fut: Future = Future()
         fut.set_result(str(d))
         return fut
-    return pool.submit(evaluated_job, cfg.to_dict(), str(d), opts.points, list(HELD_OUT),
-                       opts.eval_steps, opts.episode_steps, EVAL_SEED + seed)
+    return pool.submit(
+        evaluated_job,
+        cfg.to_dict(),
+        str(d),
+        opts.points,
+        list(HELD_OUT),
+        opts.eval_steps,
+        opts.episode_steps,
+        EVAL_SEED + seed,
+    )

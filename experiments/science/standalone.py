@@ -3,6 +3,7 @@
 Used by ``dfrl baselines``, ``dfrl eval`` and the paper reproduction. Library code: the
 functions return numbers and paths; the CLI prints them.
 """
+
 from __future__ import annotations
 
 import time
@@ -32,8 +33,9 @@ def baseline_job(cfg_dict: dict[str, Any], out: str) -> tuple[str, str, float]:
     return cfg.algo, cfg.arena, result.wall_time
 
 
-def run_jobs(jobs: list[tuple[TrainerConfig, Path]], workers: int,
-             on_done: RunDone | None = None) -> None:
+def run_jobs(
+    jobs: list[tuple[TrainerConfig, Path]], workers: int, on_done: RunDone | None = None
+) -> None:
     """Train every ``(config, folder)`` on ``workers`` processes, in order of submission."""
     if not jobs:
         return
@@ -45,8 +47,15 @@ def run_jobs(jobs: list[tuple[TrainerConfig, Path]], workers: int,
                 on_done(algo, arena, wall)
 
 
-def evaluated_job(cfg_dict: dict[str, Any], out: str, points: int, held_out: list[str],
-                  steps: int, episode_steps: int, eval_seed: int) -> str:
+def evaluated_job(
+    cfg_dict: dict[str, Any],
+    out: str,
+    points: int,
+    held_out: list[str],
+    steps: int,
+    episode_steps: int,
+    eval_seed: int,
+) -> str:
     """Train one standalone robot into ``out`` with ``points`` snapshots, then evaluate each
     snapshot's greedy policy in its own arena and the last one's in the held-out arenas too
     (``out/evaluations.csv``, :mod:`dfrl.experiments.science.studies.history`); a worker
@@ -56,10 +65,17 @@ def evaluated_job(cfg_dict: dict[str, Any], out: str, points: int, held_out: lis
     rows = []
     last = max(res.snapshots, default=None)
     for it, q in sorted(res.snapshots.items()):
-        elsewhere = held_out if it == last else []     # held-out arenas at the end only
+        elsewhere = held_out if it == last else []  # held-out arenas at the end only
         for arena, role in [(cfg.arena, "own")] + [(a, "held_out") for a in elsewhere]:
-            rows.append({"robot": cfg.arena, "iteration": it, "arena": arena, "role": role,
-                         **history.eval_job(cfg_dict, q, arena, steps, episode_steps, eval_seed)})
+            rows.append(
+                {
+                    "robot": cfg.arena,
+                    "iteration": it,
+                    "arena": arena,
+                    "role": role,
+                    **history.eval_job(cfg_dict, q, arena, steps, episode_steps, eval_seed),
+                }
+            )
     history.write_rows(Path(out) / "evaluations.csv", rows)
     return out
 
@@ -84,8 +100,9 @@ class EvalSummary:
         return dict(self.__dict__)
 
 
-def eval_job(cfg_dict: dict[str, Any], seed: int, steps: int,
-             table_path: str | None) -> dict[str, Any]:
+def eval_job(
+    cfg_dict: dict[str, Any], seed: int, steps: int, table_path: str | None
+) -> dict[str, Any]:
     """Train with ``seed`` (or load ``table_path``), then evaluate greedy and random."""
     cfg = TrainerConfig.from_dict(cfg_dict).replace(seed=seed)
     t0 = time.perf_counter()
@@ -94,8 +111,12 @@ def eval_job(cfg_dict: dict[str, Any], seed: int, steps: int,
     eval_seed = EVAL_SEED_OFFSET + seed
     greedy = evaluate_policy(cfg, PolicyKind.GREEDY, steps, eval_seed, q_table=q)
     rand = evaluate_policy(cfg, PolicyKind.RANDOM, steps, eval_seed)
-    return {"seed": seed, "train_s": round(train_s, 2), "greedy": greedy.__dict__,
-            "random": rand.__dict__}
+    return {
+        "seed": seed,
+        "train_s": round(train_s, 2),
+        "greedy": greedy.__dict__,
+        "random": rand.__dict__,
+    }
 
 
 def with_table_discretisation(cfg: TrainerConfig, table: str) -> TrainerConfig:
@@ -110,8 +131,9 @@ def with_table_discretisation(cfg: TrainerConfig, table: str) -> TrainerConfig:
     return cfg.replace(discretisation=DiscretisationConfig(state["grouping"], state["levels"]))
 
 
-def evaluate(cfg: TrainerConfig, seeds: list[int], steps: int, table: str | None = None,
-             jobs: int = 1) -> EvalSummary:
+def evaluate(
+    cfg: TrainerConfig, seeds: list[int], steps: int, table: str | None = None, jobs: int = 1
+) -> EvalSummary:
     """Greedy vs random over ``seeds`` (one training run per seed unless ``table`` is given).
 
     Raises
@@ -130,5 +152,15 @@ def evaluate(cfg: TrainerConfig, seeds: list[int], steps: int, table: str | None
     g_rate = 1000.0 * sum(r["greedy"]["collisions"] for r in rows) / total
     r_rate = 1000.0 * sum(r["random"]["collisions"] for r in rows) / total
     reduction = 1.0 - g_rate / r_rate if r_rate > 0 else float("nan")
-    return EvalSummary(cfg.arena, cfg.algo, cfg.iterations, list(seeds), steps, table, rows,
-                       g_rate, r_rate, reduction)
+    return EvalSummary(
+        cfg.arena,
+        cfg.algo,
+        cfg.iterations,
+        list(seeds),
+        steps,
+        table,
+        rows,
+        g_rate,
+        r_rate,
+        reduction,
+    )

@@ -13,6 +13,7 @@ touches the bound from there); ``not significant at n = K (smallest detectable e
 (neither; D is the true distance from the bound a 5% test at this n and spread finds with 80%
 power); ``cannot judge (n = K < M)`` (too few values).
 """
+
 from __future__ import annotations
 
 from typing import Protocol
@@ -30,6 +31,7 @@ def _stats():  # noqa: ANN202 - the module scipy.stats
     """``scipy.stats``, imported when a statistic is first computed: importing it costs about
     0.4 s, which every ``dfrl`` command would otherwise pay while it builds its parser."""
     from scipy import stats
+
     return stats
 
 
@@ -167,7 +169,7 @@ def welch(a: Sequence[float], b: Sequence[float]) -> Interval:
     se = math.sqrt(va + vb)
     if se == 0.0:
         return Interval(ma - mb, 0.0, min(na, nb), 0.0, float(na + nb - 2))
-    df = (va + vb) ** 2 / (va ** 2 / (na - 1) + vb ** 2 / (nb - 1))
+    df = (va + vb) ** 2 / (va**2 / (na - 1) + vb**2 / (nb - 1))
     return Interval(ma - mb, t975(df) * se, min(na, nb), se, df)
 
 
@@ -189,8 +191,13 @@ class BootstrapInterval:
         return f"{self.estimate:.3g} [{self.low:.3g}, {self.high:.3g}]"
 
 
-def bootstrap(samples: Sequence[Sequence[float]], statistic: Callable[..., float],
-              resamples: int = 10_000, seed: int = 0, method: str = "bca") -> BootstrapInterval:
+def bootstrap(
+    samples: Sequence[Sequence[float]],
+    statistic: Callable[..., float],
+    resamples: int = 10_000,
+    seed: int = 0,
+    method: str = "bca",
+) -> BootstrapInterval:
     """95% bootstrap interval of ``statistic(*samples)`` (``scipy.stats.bootstrap``): each
     sample resampled with replacement on its own, ``resamples`` times, from a generator seeded
     with ``seed``; ``method`` ``percentile`` or ``bca`` (Efron 1987), percentile (and
@@ -208,10 +215,17 @@ def bootstrap(samples: Sequence[Sequence[float]], statistic: Callable[..., float
 
     def run(how: str) -> tuple[float, float]:
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore")         # degenerate data: NaN, handled below
-            res = _stats().bootstrap(data, once, n_resamples=resamples, vectorized=False,
-                                  paired=False, confidence_level=LEVEL, method=how,
-                                  rng=np.random.default_rng(seed))
+            warnings.simplefilter("ignore")  # degenerate data: NaN, handled below
+            res = _stats().bootstrap(
+                data,
+                once,
+                n_resamples=resamples,
+                vectorized=False,
+                paired=False,
+                confidence_level=LEVEL,
+                method=how,
+                rng=np.random.default_rng(seed),
+            )
         return float(res.confidence_interval.low), float(res.confidence_interval.high)
 
     used = method
@@ -277,8 +291,10 @@ class Judgement:
         if self.outcome is Outcome.REFUTED:
             return "refuted (effect excluded at 95%)"
         if self.outcome is Outcome.NOT_SIGNIFICANT:
-            return (f"not significant at n = {self.measure.n} (smallest detectable effect "
-                    f"{self.measure.detectable():.2g})")
+            return (
+                f"not significant at n = {self.measure.n} (smallest detectable effect "
+                f"{self.measure.detectable():.2g})"
+            )
         if self.outcome is Outcome.CANNOT_JUDGE:
             return f"cannot judge (n = {self.measure.n} < {self.min_n})"
         return "holds"
@@ -308,8 +324,9 @@ class Measured(Protocol):
     def detectable(self, power: float = POWER) -> float: ...
 
 
-def judge(measure: Measured, bound: float = 0.0, side: str = "above",
-          min_n: int = MIN_N) -> Judgement:
+def judge(
+    measure: Measured, bound: float = 0.0, side: str = "above", min_n: int = MIN_N
+) -> Judgement:
     """The verdict on "the mean is above (``side="above"``) or below ``bound``", from the 95%
     interval ``measure`` (see the module's docs for the words)."""
     if side not in ("above", "below"):

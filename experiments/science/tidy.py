@@ -7,6 +7,7 @@ kind (``federated``, ``standalone``, ``control federated``, ...). Metrics of a c
 the last one; a greedy evaluation gives ``<measure>@<arena>`` (``score@h1``,
 ``collisions_per_1000@r1``). Read it with ``pandas.read_csv`` or any spreadsheet.
 """
+
 from __future__ import annotations
 
 import csv
@@ -29,8 +30,9 @@ CURVE_STEP = 100
 Row = tuple[str, int, str, str, int, str, float]
 
 
-def curve_rows(run: str, seed: int, condition: str, curves: dict[str, np.ndarray],
-               step: int = CURVE_STEP) -> Iterator[Row]:
+def curve_rows(
+    run: str, seed: int, condition: str, curves: dict[str, np.ndarray], step: int = CURVE_STEP
+) -> Iterator[Row]:
     """Rows of per-robot curves (structured arrays with an ``iteration`` column), every
     ``step`` iterations and the last row."""
     for robot, c in curves.items():
@@ -47,14 +49,22 @@ def curve_rows(run: str, seed: int, condition: str, curves: dict[str, np.ndarray
                     yield (run, seed, condition, robot, int(its[i]), m, float(c[m][i]))
 
 
-def evaluation_rows(run: str, seed: int, condition: str,
-                    evals: Iterable[dict[str, Any]]) -> Iterator[Row]:
+def evaluation_rows(
+    run: str, seed: int, condition: str, evals: Iterable[dict[str, Any]]
+) -> Iterator[Row]:
     """Rows of greedy evaluations (``robot, iteration, arena`` and the measures)."""
     for e in evals:
         for m in EVAL_METRICS:
             if m in e:
-                yield (run, seed, condition, str(e["robot"]), int(e["iteration"]),
-                       f"{m}@{e['arena']}", float(e[m]))
+                yield (
+                    run,
+                    seed,
+                    condition,
+                    str(e["robot"]),
+                    int(e["iteration"]),
+                    f"{m}@{e['arena']}",
+                    float(e[m]),
+                )
 
 
 def write_tidy(path: str | Path, rows: Iterable[Row]) -> int:

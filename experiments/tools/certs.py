@@ -30,6 +30,7 @@ accepts a node certificate and still sandboxes the agents of peers it does not t
 (``trusted_peers``). With one CA every node certificate would be a key to the workers; with
 two, a node certificate opens no cluster and a cluster certificate no node.
 """
+
 from __future__ import annotations
 
 import os
@@ -39,8 +40,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from dfrl.experiments.tls_folder import (CA_CERT, CLUSTER_FILES, NODE_FILES, CertError,
-                                         is_node_name)
+from dfrl.experiments.tls_folder import CA_CERT, CLUSTER_FILES, NODE_FILES, CertError, is_node_name
 
 CA_KEY = "ca.key"
 #: The cluster CA's folder inside the project CA's folder.
@@ -78,8 +78,10 @@ def openssl() -> str:
 def check_name(name: str) -> str:
     """Return ``name`` if it can name a node in a certificate, else raise :class:`CertError`."""
     if not is_node_name(name):
-        raise CertError(f"bad node name {name!r}: use 1-64 letters, digits, '-' or '.', "
-                        "starting and ending with a letter or digit")
+        raise CertError(
+            f"bad node name {name!r}: use 1-64 letters, digits, '-' or '.', "
+            "starting and ending with a letter or digit"
+        )
     return name
 
 
@@ -100,13 +102,16 @@ def _new_key(path: Path) -> None:
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
     os.close(fd)
     os.chmod(path, 0o600)
-    _run(["genpkey", "-algorithm", "EC", "-pkeyopt", "ec_paramgen_curve:P-256",
-          "-out", str(path)], "make a private key")
+    _run(
+        ["genpkey", "-algorithm", "EC", "-pkeyopt", "ec_paramgen_curve:P-256", "-out", str(path)],
+        "make a private key",
+    )
     os.chmod(path, 0o600)
 
 
-def init_ca(directory: str | os.PathLike[str], force: bool = False,
-            name: str = "dfrl project CA") -> Path:
+def init_ca(
+    directory: str | os.PathLike[str], force: bool = False, name: str = "dfrl project CA"
+) -> Path:
     """Make a project CA in ``directory``: ``ca.crt`` and ``ca.key`` (mode 0600).
 
     Returns the CA certificate's path.
@@ -125,18 +130,40 @@ def init_ca(directory: str | os.PathLike[str], force: bool = False,
     with tempfile.TemporaryDirectory(dir=d, prefix=".ca-") as tmp:
         tkey, tcert = Path(tmp) / CA_KEY, Path(tmp) / CA_CERT
         _new_key(tkey)
-        _run(["req", "-new", "-x509", "-key", str(tkey), "-out", str(tcert),
-              "-days", str(CA_DAYS), "-sha256", "-subj", f"/CN={name}",
-              "-addext", "basicConstraints=critical,CA:TRUE,pathlen:0",
-              "-addext", "keyUsage=critical,keyCertSign,cRLSign",
-              "-addext", "subjectKeyIdentifier=hash"], "make the CA certificate")
+        _run(
+            [
+                "req",
+                "-new",
+                "-x509",
+                "-key",
+                str(tkey),
+                "-out",
+                str(tcert),
+                "-days",
+                str(CA_DAYS),
+                "-sha256",
+                "-subj",
+                f"/CN={name}",
+                "-addext",
+                "basicConstraints=critical,CA:TRUE,pathlen:0",
+                "-addext",
+                "keyUsage=critical,keyCertSign,cRLSign",
+                "-addext",
+                "subjectKeyIdentifier=hash",
+            ],
+            "make the CA certificate",
+        )
         os.replace(tkey, key)
         os.replace(tcert, cert)
     return cert
 
 
-def make_node(name: str, ca_directory: str | os.PathLike[str],
-              out: str | os.PathLike[str] | None = None, force: bool = False) -> NodeCert:
+def make_node(
+    name: str,
+    ca_directory: str | os.PathLike[str],
+    out: str | os.PathLike[str] | None = None,
+    force: bool = False,
+) -> NodeCert:
     """Make a certificate for node ``name`` signed by the CA in ``ca_directory``.
 
     Writes ``out/{ca.crt,node.crt,node.key}`` (default ``out``: ``ca_directory/name``); the
@@ -153,9 +180,12 @@ def make_node(name: str, ca_directory: str | os.PathLike[str],
     return NodeCert(name, node_dir)
 
 
-def make_cluster_member(name: str, ca_directory: str | os.PathLike[str],
-                        out: str | os.PathLike[str] | None = None,
-                        force: bool = False) -> NodeCert:
+def make_cluster_member(
+    name: str,
+    ca_directory: str | os.PathLike[str],
+    out: str | os.PathLike[str] | None = None,
+    force: bool = False,
+) -> NodeCert:
     """Make a certificate for cluster member ``name`` (the scheduler, a worker's host, the
     driver) signed by the cluster CA of the project CA in ``ca_directory``.
 
@@ -201,18 +231,40 @@ def _sign(name: str, ca: Path, out: Path, files: tuple[str, str, str], force: bo
         t = Path(tmp)
         key, csr, cert, ext = t / key_name, t / "req.csr", t / cert_name, t / "ext.cnf"
         _new_key(key)
-        _run(["req", "-new", "-key", str(key), "-out", str(csr), "-subj", f"/CN={name}"],
-             "make the certificate request")
-        ext.write_text("basicConstraints=critical,CA:FALSE\n"
-                       "keyUsage=critical,digitalSignature,keyEncipherment\n"
-                       "extendedKeyUsage=serverAuth,clientAuth\n"
-                       f"subjectAltName=DNS:{name}\n"
-                       "subjectKeyIdentifier=hash\n"
-                       "authorityKeyIdentifier=keyid\n")
-        _run(["x509", "-req", "-in", str(csr), "-CA", str(ca_cert), "-CAkey", str(ca_key),
-              "-set_serial", _serial(), "-out", str(cert),
-              "-days", str(NODE_DAYS), "-sha256", "-extfile", str(ext)],
-             "sign the certificate")
+        _run(
+            ["req", "-new", "-key", str(key), "-out", str(csr), "-subj", f"/CN={name}"],
+            "make the certificate request",
+        )
+        ext.write_text(
+            "basicConstraints=critical,CA:FALSE\n"
+            "keyUsage=critical,digitalSignature,keyEncipherment\n"
+            "extendedKeyUsage=serverAuth,clientAuth\n"
+            f"subjectAltName=DNS:{name}\n"
+            "subjectKeyIdentifier=hash\n"
+            "authorityKeyIdentifier=keyid\n"
+        )
+        _run(
+            [
+                "x509",
+                "-req",
+                "-in",
+                str(csr),
+                "-CA",
+                str(ca_cert),
+                "-CAkey",
+                str(ca_key),
+                "-set_serial",
+                _serial(),
+                "-out",
+                str(cert),
+                "-days",
+                str(NODE_DAYS),
+                "-sha256",
+                "-extfile",
+                str(ext),
+            ],
+            "sign the certificate",
+        )
         shutil.copyfile(ca_cert, t / copy_name)
         for f in files:
             os.replace(t / f, out / f)
@@ -225,9 +277,12 @@ def _serial() -> str:
 
 def certificate_subject(path: str | os.PathLike[str]) -> str:
     """The subject line openssl prints for a certificate (for messages and tests)."""
-    run = subprocess.run([openssl(), "x509", "-in", str(path), "-noout", "-subject",
-                          "-nameopt", "RFC2253"], capture_output=True, text=True, timeout=30)
+    run = subprocess.run(
+        [openssl(), "x509", "-in", str(path), "-noout", "-subject", "-nameopt", "RFC2253"],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     if run.returncode != 0:
         raise CertError(f"cannot read certificate {path}: {run.stderr.strip()}")
     return run.stdout.strip().removeprefix("subject=")
-

@@ -48,6 +48,7 @@ Usage (bounded: every run is 15,000 iterations by default)::
 ``summary`` prints the table. This tool imports the science studies it measures with
 (``history``, ``fedsim``): it is a measurement, not part of any run.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -91,7 +92,7 @@ class CentredShuffle:
         """(drawn reward - mean of the buffer drawn from, drawn end flag)."""
         self._n += 1
         if self._n % self.capacity == 0:
-            self._sum = float(np.sum(self.r))      # no drift of the running sum
+            self._sum = float(np.sum(self.r))  # no drift of the running sum
         if len(self.r) < self.capacity:
             self.r.append(float(reward))
             self.end.append(bool(terminal))
@@ -122,8 +123,8 @@ class PermutedPairs:
         self.buffer = CentredShuffle(BUFFER, rng)
 
     def __call__(self, reward: float, terminal: bool) -> tuple[float, bool]:
-        k = self.t._state * self.n_actions + self.t._action   # the pair being updated
-        drawn = self.buffer(reward, terminal)                  # keeps the buffer and its mean
+        k = self.t._state * self.n_actions + self.t._action  # the pair being updated
+        drawn = self.buffer(reward, terminal)  # keeps the buffer and its mean
         mean = self.buffer._sum / len(self.buffer.r)
         self.last_r[k], self.last_end[k] = reward, terminal
         src = self.perm[k]
@@ -144,11 +145,11 @@ def make_trainer(candidate: str, cfg: TrainerConfig) -> Trainer:
     t = Trainer(cfg)
     rng = _shuffle_rng(cfg.seed)
     if candidate == "centred":
-        t.reward_shuffle = CentredShuffle(BUFFER, rng)      # type: ignore[assignment]
+        t.reward_shuffle = CentredShuffle(BUFFER, rng)  # type: ignore[assignment]
     elif candidate == "no_bootstrap":
         t.reward_shuffle = CentredShuffle(BUFFER, rng, always_end=True)  # type: ignore[assignment]
     elif candidate == "permuted":
-        t.reward_shuffle = PermutedPairs(t, rng)            # type: ignore[assignment]
+        t.reward_shuffle = PermutedPairs(t, rng)  # type: ignore[assignment]
     elif candidate == "library":
         t.close()
         return Trainer(cfg.replace(reward_shuffle=BUFFER))
@@ -173,11 +174,13 @@ def _random_table(seed: int, k: int) -> np.ndarray:
     federation's one table)."""
     cfg = TrainerConfig()
     return np.random.default_rng([seed, k, 34]).standard_normal(
-        (Discretiser(cfg.discretisation).n_states, len(cfg.actions.names)))
+        (Discretiser(cfg.discretisation).n_states, len(cfg.actions.names))
+    )
 
 
-def standalone_job(candidate: str, algo: str, arena: str, seed: int,
-                   iterations: int) -> list[dict[str, Any]]:
+def standalone_job(
+    candidate: str, algo: str, arena: str, seed: int, iterations: int
+) -> list[dict[str, Any]]:
     """Train one robot (the paper's seed for ``arena``) and evaluate its final table."""
     k = ARENAS.index(arena)
     cfg = TrainerConfig(arena=arena, algo=algo, seed=seed + k, iterations=iterations)
@@ -189,22 +192,37 @@ def standalone_job(candidate: str, algo: str, arena: str, seed: int,
             for _ in range(iterations):
                 t.step()
             q, visits = t.q_table.copy(), t.visits.copy()
-    base = {"candidate": candidate, "algo": algo, "mode": "standalone", "seed": seed,
-            "robot": arena, "train_cpu": round(time.process_time() - t0, 2),
-            **_describe(q, visits)}
-    return [{**base, "arena": a, "role": "own" if a == arena else "held_out",
-             **history.eval_job(TrainerConfig().to_dict(), q, a, EVAL_STEPS, EPISODE_STEPS,
-                                EVAL_SEED + seed)}
-            for a in (arena,) + HELD_OUT]
+    base = {
+        "candidate": candidate,
+        "algo": algo,
+        "mode": "standalone",
+        "seed": seed,
+        "robot": arena,
+        "train_cpu": round(time.process_time() - t0, 2),
+        **_describe(q, visits),
+    }
+    return [
+        {
+            **base,
+            "arena": a,
+            "role": "own" if a == arena else "held_out",
+            **history.eval_job(
+                TrainerConfig().to_dict(), q, a, EVAL_STEPS, EPISODE_STEPS, EVAL_SEED + seed
+            ),
+        }
+        for a in (arena,) + HELD_OUT
+    ]
 
 
 def federated_job(candidate: str, algo: str, seed: int, iterations: int) -> list[dict[str, Any]]:
     """Five robots R1..R5 averaging every 500 iterations; the shared final table evaluated in
     every robot's arena and the held-out ones (identical tables: once per arena)."""
-    cfgs = [TrainerConfig(arena=a, algo=algo, seed=seed + k, iterations=iterations)
-            for k, a in enumerate(ARENAS)]
+    cfgs = [
+        TrainerConfig(arena=a, algo=algo, seed=seed + k, iterations=iterations)
+        for k, a in enumerate(ARENAS)
+    ]
     t0 = time.process_time()
-    if candidate == "random_table":     # one table of random numbers for all five robots
+    if candidate == "random_table":  # one table of random numbers for all five robots
         table, visits = _random_table(seed, 5), None
     else:
         original = fedsim.Trainer
@@ -214,15 +232,32 @@ def federated_job(candidate: str, algo: str, seed: int, iterations: int) -> list
         finally:
             fedsim.Trainer = original  # type: ignore[misc]
         table, visits = fed.table, fed.visits
-    base = {"candidate": candidate, "algo": algo, "mode": "federated", "seed": seed,
-            "train_cpu": round(time.process_time() - t0, 2), **_describe(table, visits)}
-    scores = {a: history.eval_job(TrainerConfig().to_dict(), table, a, EVAL_STEPS,
-                                  EPISODE_STEPS, EVAL_SEED + seed) for a in ARENAS + HELD_OUT}
+    base = {
+        "candidate": candidate,
+        "algo": algo,
+        "mode": "federated",
+        "seed": seed,
+        "train_cpu": round(time.process_time() - t0, 2),
+        **_describe(table, visits),
+    }
+    scores = {
+        a: history.eval_job(
+            TrainerConfig().to_dict(), table, a, EVAL_STEPS, EPISODE_STEPS, EVAL_SEED + seed
+        )
+        for a in ARENAS + HELD_OUT
+    }
     rows = []
-    for robot in ARENAS:           # one row per robot and arena, as the paper's evaluations
+    for robot in ARENAS:  # one row per robot and arena, as the paper's evaluations
         for a in (robot,) + HELD_OUT:
-            rows.append({**base, "robot": robot, "arena": a,
-                         "role": "own" if a == robot else "held_out", **scores[a]})
+            rows.append(
+                {
+                    **base,
+                    "robot": robot,
+                    "arena": a,
+                    "role": "own" if a == robot else "held_out",
+                    **scores[a],
+                }
+            )
     return rows
 
 
@@ -230,9 +265,15 @@ def zero_job(seed: int) -> list[dict[str, Any]]:
     """The all-zero table in every arena with the seed's evaluation seed."""
     cfg = TrainerConfig()
     q = np.zeros((Discretiser(cfg.discretisation).n_states, len(cfg.actions.names)))
-    return [{"candidate": "zero", "seed": seed, "arena": a,
-             **history.eval_job(cfg.to_dict(), q, a, EVAL_STEPS, EPISODE_STEPS, EVAL_SEED + seed)}
-            for a in ARENAS + HELD_OUT]
+    return [
+        {
+            "candidate": "zero",
+            "seed": seed,
+            "arena": a,
+            **history.eval_job(cfg.to_dict(), q, a, EVAL_STEPS, EPISODE_STEPS, EVAL_SEED + seed),
+        }
+        for a in ARENAS + HELD_OUT
+    ]
 
 
 def read_rows(out: Path) -> list[dict[str, Any]]:
@@ -241,12 +282,24 @@ def read_rows(out: Path) -> list[dict[str, Any]]:
 
 
 def _key(r: dict[str, Any]) -> tuple:
-    return (r["candidate"], r.get("algo"), r.get("mode"), r["seed"],
-            r.get("robot") if r.get("mode") == "standalone" else None)
+    return (
+        r["candidate"],
+        r.get("algo"),
+        r.get("mode"),
+        r["seed"],
+        r.get("robot") if r.get("mode") == "standalone" else None,
+    )
 
 
-def run(out: Path, candidates: Iterable[str], algos: Iterable[str], seeds: list[int],
-        modes: Iterable[str], iterations: int, jobs: int) -> None:
+def run(
+    out: Path,
+    candidates: Iterable[str],
+    algos: Iterable[str],
+    seeds: list[int],
+    modes: Iterable[str],
+    iterations: int,
+    jobs: int,
+) -> None:
     """Every missing job on ``jobs`` processes, rows appended as they finish."""
     out.mkdir(parents=True, exist_ok=True)
     done = {_key(r) for r in read_rows(out)}
@@ -273,8 +326,9 @@ def run(out: Path, candidates: Iterable[str], algos: Iterable[str], seeds: list[
             for r in rows:
                 f.write(json.dumps(r) + "\n")
             f.flush()
-            print(f"[{i + 1}/{len(futs)}] {time.monotonic() - t0:.0f}s {todo[i][1]}",
-                  file=sys.stderr)
+            print(
+                f"[{i + 1}/{len(futs)}] {time.monotonic() - t0:.0f}s {todo[i][1]}", file=sys.stderr
+            )
 
 
 def contrasts(rows: list[dict[str, Any]]) -> dict[tuple, dict[str, Any]]:
@@ -284,11 +338,14 @@ def contrasts(rows: list[dict[str, Any]]) -> dict[tuple, dict[str, Any]]:
     for r in rows:
         if r["candidate"] != "zero":
             groups.setdefault((r["candidate"], r["algo"], r["mode"]), {}).setdefault(
-                r["seed"], []).append(r)
+                r["seed"], []
+            ).append(r)
     out = {}
     for key, by_seed in groups.items():
-        per_seed = {s: float(np.mean([r["score"] - zero[(s, r["arena"])] for r in rs]))
-                    for s, rs in sorted(by_seed.items())}
+        per_seed = {
+            s: float(np.mean([r["score"] - zero[(s, r["arena"])] for r in rs]))
+            for s, rs in sorted(by_seed.items())
+        }
         arena: dict[str, list[float]] = {}
         for s, rs in by_seed.items():
             for r in rs:
@@ -296,28 +353,39 @@ def contrasts(rows: list[dict[str, Any]]) -> dict[tuple, dict[str, Any]]:
                     arena.setdefault(r["robot"], []).append(r["score"] - zero[(s, r["arena"])])
         fwd = [r["fwd_share"] for rs in by_seed.values() for r in rs if "fwd_share" in r]
         g0 = [r["greedy0"] for rs in by_seed.values() for r in rs]
-        out[key] = {"seeds": per_seed, "interval": interval(list(per_seed.values())),
-                    "arena_own": {a: float(np.mean(v)) for a, v in sorted(arena.items())},
-                    "fwd_share": float(np.mean(fwd)) if fwd else float("nan"),
-                    "greedy0_forward": float(np.mean([g == 0 for g in g0])),
-                    "cpu": sum(rs[0]["train_cpu"] if key[2] == "federated" else
-                               sum(r["train_cpu"] for r in rs if r["arena"] == r["robot"])
-                               for rs in by_seed.values())}
+        out[key] = {
+            "seeds": per_seed,
+            "interval": interval(list(per_seed.values())),
+            "arena_own": {a: float(np.mean(v)) for a, v in sorted(arena.items())},
+            "fwd_share": float(np.mean(fwd)) if fwd else float("nan"),
+            "greedy0_forward": float(np.mean([g == 0 for g in g0])),
+            "cpu": sum(
+                rs[0]["train_cpu"]
+                if key[2] == "federated"
+                else sum(r["train_cpu"] for r in rs if r["arena"] == r["robot"])
+                for rs in by_seed.values()
+            ),
+        }
     return out
 
 
 def summary(out: Path) -> str:
     """The measured table as Markdown."""
-    lines = ["| candidate | algo | mode | contrast (mean ± 95% t, n seeds) | per seed | "
-             "own arena r1..r5 | open-floor greedy forward | train CPU s |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| candidate | algo | mode | contrast (mean ± 95% t, n seeds) | per seed | "
+        "own arena r1..r5 | open-floor greedy forward | train CPU s |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for (c, algo, mode), v in sorted(contrasts(read_rows(out)).items()):
         iv = v["interval"]
         lines.append(
             f"| {c} | {algo} | {mode} | {iv.mean:+.3f} ± {iv.half:.3f} (n={iv.n}) | "
-            + " ".join(f"{x:+.2f}" for x in v["seeds"].values()) + " | "
-            + " ".join(f"{x:+.2f}" for x in v["arena_own"].values()) + " | "
-            + f"{v['greedy0_forward']:.2f} | {v['cpu']:.0f} |")
+            + " ".join(f"{x:+.2f}" for x in v["seeds"].values())
+            + " | "
+            + " ".join(f"{x:+.2f}" for x in v["arena_own"].values())
+            + " | "
+            + f"{v['greedy0_forward']:.2f} | {v['cpu']:.0f} |"
+        )
     return "\n".join(lines)
 
 
@@ -328,8 +396,9 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("out", type=Path)
     r.add_argument("--candidates", nargs="+", default=["shuffle", "centred"])
     r.add_argument("--algos", nargs="+", default=["qlearning", "sarsa"])
-    r.add_argument("--modes", nargs="+", default=["standalone"],
-                   choices=["standalone", "federated"])
+    r.add_argument(
+        "--modes", nargs="+", default=["standalone"], choices=["standalone", "federated"]
+    )
     r.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3, 4, 5])
     r.add_argument("--iterations", type=int, default=15_000)
     r.add_argument("--jobs", type=int, default=2, choices=[1, 2])

@@ -21,6 +21,7 @@ out, never through a shared folder.
 Needs root (CAP_NET_ADMIN) and ``ip``; :func:`unavailable` says why not, for ``pytest.skip``.
 Private disks need ``unshare``, ``nsenter`` and ``env -C`` (util-linux, coreutils).
 """
+
 from __future__ import annotations
 
 import os
@@ -63,7 +64,7 @@ class Host:
     name: str
     namespace: str
     address: str
-    link: str                    #: the veth end on the bridge (cut it to cut the host off)
+    link: str  #: the veth end on the bridge (cut it to cut the host off)
     procs: list[subprocess.Popen] = field(default_factory=list)
     #: the process holding this host's mount namespace (None: the host shares the disk)
     keeper: subprocess.Popen | None = None
@@ -72,8 +73,20 @@ class Host:
         """``argv`` run inside this host, from ``cwd`` (a path as this host sees it)."""
         if self.keeper is None:
             return ["ip", "netns", "exec", self.namespace, *argv]
-        return ["ip", "netns", "exec", self.namespace, "nsenter", "-t", str(self.keeper.pid),
-                "-m", "env", "-C", str(cwd if cwd is not None else "/"), *argv]
+        return [
+            "ip",
+            "netns",
+            "exec",
+            self.namespace,
+            "nsenter",
+            "-t",
+            str(self.keeper.pid),
+            "-m",
+            "env",
+            "-C",
+            str(cwd if cwd is not None else "/"),
+            *argv,
+        ]
 
     def view(self, path: str | Path) -> Path:
         """Where the lab's maker reads and writes this host's ``path`` (absolute)."""
@@ -82,8 +95,7 @@ class Host:
             return path
         return Path(f"/proc/{self.keeper.pid}/root") / path.relative_to("/")
 
-    def popen(self, argv: list[str], cwd: str | Path | None = None,
-              **kwargs) -> subprocess.Popen:  # noqa: ANN003
+    def popen(self, argv: list[str], cwd: str | Path | None = None, **kwargs) -> subprocess.Popen:  # noqa: ANN003
         """Start ``argv`` inside this host, from ``cwd`` (this host's path); it is killed when
         the lab closes."""
         cmd, here = self._args(argv, cwd)
@@ -91,14 +103,14 @@ class Host:
         self.procs.append(proc)
         return proc
 
-    def run(self, argv: list[str], timeout: float = 60.0, cwd: str | Path | None = None,
-            **kwargs) -> subprocess.CompletedProcess:  # noqa: ANN003
+    def run(
+        self, argv: list[str], timeout: float = 60.0, cwd: str | Path | None = None, **kwargs
+    ) -> subprocess.CompletedProcess:  # noqa: ANN003
         """Run ``argv`` inside this host, from ``cwd`` (this host's path), bounded."""
         cmd, here = self._args(argv, cwd)
         return subprocess.run(cmd, cwd=here, timeout=timeout, **kwargs)
 
-    def _args(self, argv: list[str],
-              cwd: str | Path | None) -> tuple[list[str], str | Path | None]:
+    def _args(self, argv: list[str], cwd: str | Path | None) -> tuple[list[str], str | Path | None]:
         """The command and the working directory to start it from (this process's view: a
         host with a disk of its own takes its working directory after entering it)."""
         if self.keeper is None:
@@ -120,8 +132,9 @@ class Lab:
         module doc); None: the hosts share the machine's disk.
     """
 
-    def __init__(self, hosts: list[str], lab_id: int | None = None,
-                 private: Path | None = None) -> None:
+    def __init__(
+        self, hosts: list[str], lab_id: int | None = None, private: Path | None = None
+    ) -> None:
         self.tag = f"dfrl{os.getpid() % 100000}"
         self.lab_id = (os.getpid() % 200) + 1 if lab_id is None else lab_id
         self.bridge_ns = f"{self.tag}-br"
@@ -161,24 +174,40 @@ class Lab:
         """A mount namespace for ``host`` with a tmpfs of its own over ``private``."""
         if not private.is_absolute() or not private.is_dir():
             raise ValueError(f"private must be an existing absolute folder, got {private}")
-        keeper = subprocess.Popen(["unshare", "--mount", "--propagation", "private", "--",
-                                   "sleep", str(KEEPER_S)], stdin=subprocess.DEVNULL)
+        keeper = subprocess.Popen(
+            ["unshare", "--mount", "--propagation", "private", "--", "sleep", str(KEEPER_S)],
+            stdin=subprocess.DEVNULL,
+        )
         host.keeper = keeper
         mine = os.readlink("/proc/self/ns/mnt")
         deadline = time.monotonic() + 10
-        while True:          # until unshare has made the namespace (then it execs sleep)
+        while True:  # until unshare has made the namespace (then it execs sleep)
             try:
                 if os.readlink(f"/proc/{keeper.pid}/ns/mnt") != mine:
                     break
             except OSError:
                 pass
             if keeper.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"unshare --mount for {host.name} failed "
-                                   f"(exit {keeper.poll()})")
+                raise RuntimeError(f"unshare --mount for {host.name} failed (exit {keeper.poll()})")
             time.sleep(0.01)
-        done = subprocess.run(["nsenter", "-t", str(keeper.pid), "-m", "mount", "-t", "tmpfs",
-                               "-o", "mode=0755", f"dfrl-{host.name}", str(private)],
-                              capture_output=True, text=True, timeout=30)
+        done = subprocess.run(
+            [
+                "nsenter",
+                "-t",
+                str(keeper.pid),
+                "-m",
+                "mount",
+                "-t",
+                "tmpfs",
+                "-o",
+                "mode=0755",
+                f"dfrl-{host.name}",
+                str(private),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
         if done.returncode != 0:
             raise RuntimeError(f"tmpfs for {host.name} over {private}: {done.stderr.strip()}")
 
@@ -252,8 +281,7 @@ def _pids_in(ns: str) -> list[int]:
 def leftover_namespaces(prefix: str = "dfrl") -> list[str]:
     """Namespaces whose names start with ``prefix`` (a test checks it left none)."""
     done = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True)
-    return [line.split()[0] for line in done.stdout.splitlines()
-            if line.strip().startswith(prefix)]
+    return [line.split()[0] for line in done.stdout.splitlines() if line.strip().startswith(prefix)]
 
 
 REPO_ROOT = Path(__file__).resolve().parents[2]

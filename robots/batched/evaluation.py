@@ -7,6 +7,7 @@ fresh random poses, respawns after collisions and when stuck, ties broken by the
 ``default_rng([seed, 7])``, and the same measures (collisions per 1,000 steps, progress, floor
 coverage on the 5 cm grid).
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -50,9 +51,34 @@ def _share(seen, j, free, grid):
 
 
 @njit(cache=True)
-def _evaluate(q, steps, episode_steps, out, seen, free, grids, pose, prev, dist, trail,
-              trail_len, trail_head, arena, first, count, half, boxes, angles, motion, groups,
-              P, I, env_rngs, motion_rngs, tie_rngs):
+def _evaluate(
+    q,
+    steps,
+    episode_steps,
+    out,
+    seen,
+    free,
+    grids,
+    pose,
+    prev,
+    dist,
+    trail,
+    trail_len,
+    trail_head,
+    arena,
+    first,
+    count,
+    half,
+    boxes,
+    angles,
+    motion,
+    groups,
+    P,
+    I,
+    env_rngs,
+    motion_rngs,
+    tie_rngs,
+):
     """Run evaluation ``j`` with table ``q[j]`` in its arena; ``out[j]`` gets the sums.
     Returns the first evaluation whose arena had no free pose left, or -1."""
     step_out = np.zeros(4)
@@ -67,8 +93,23 @@ def _evaluate(q, steps, episode_steps, out, seen, free, grids, pose, prev, dist,
         episodes, covered = 1, 0.0
         for k in range(steps):
             if episode_steps > 0 and k > 0 and k % episode_steps == 0:
-                if not K.respawn(j, pose, prev, dist, trail, trail_len, trail_head, arena,
-                                 first, count, half, boxes, angles, P, er):
+                if not K.respawn(
+                    j,
+                    pose,
+                    prev,
+                    dist,
+                    trail,
+                    trail_len,
+                    trail_head,
+                    arena,
+                    first,
+                    count,
+                    half,
+                    boxes,
+                    angles,
+                    P,
+                    er,
+                ):
                     return j
                 episodes += 1
                 covered += _share(seen, j, fr, grid)
@@ -76,8 +117,27 @@ def _evaluate(q, steps, episode_steps, out, seen, free, grids, pose, prev, dist,
                 _visit(seen, j, x, y, grid)
             s = K.discretise(dist[j], rng_, groups, levels)
             action = greedy(q[j, s], tr)
-            K.move(j, action, pose, prev, dist, trail, trail_len, trail_head, arena, first,
-                   count, boxes, angles, motion, P, I, er, mr, step_out)
+            K.move(
+                j,
+                action,
+                pose,
+                prev,
+                dist,
+                trail,
+                trail_len,
+                trail_head,
+                arena,
+                first,
+                count,
+                boxes,
+                angles,
+                motion,
+                P,
+                I,
+                er,
+                mr,
+                step_out,
+            )
             out[j, _REWARD] += step_out[0]
             out[j, _PROGRESS] += min(max(step_out[3], -1.0), 1.0)
             collided = step_out[1] > 0.0
@@ -87,8 +147,23 @@ def _evaluate(q, steps, episode_steps, out, seen, free, grids, pose, prev, dist,
             x, y = nx, ny
             _visit(seen, j, x, y, grid)
             if (collided and I[K.I_RESPAWN] == 1) or step_out[2] > 0.0:
-                if not K.respawn(j, pose, prev, dist, trail, trail_len, trail_head, arena,
-                                 first, count, half, boxes, angles, P, er):
+                if not K.respawn(
+                    j,
+                    pose,
+                    prev,
+                    dist,
+                    trail,
+                    trail_len,
+                    trail_head,
+                    arena,
+                    first,
+                    count,
+                    half,
+                    boxes,
+                    angles,
+                    P,
+                    er,
+                ):
                     return j
                 x, y = pose[j, 0], pose[j, 1]
         out[j, _COVERED] = covered + _share(seen, j, fr, grid)
@@ -96,9 +171,14 @@ def _evaluate(q, steps, episode_steps, out, seen, free, grids, pose, prev, dist,
     return -1
 
 
-def evaluate_greedy(config: TrainerConfig, tables: Sequence[np.ndarray],
-                    arenas: Sequence[str | ArenaSpec], steps: int, seeds: Sequence[int] | int,
-                    episode_steps: int | None = None) -> list[EvalResult]:
+def evaluate_greedy(
+    config: TrainerConfig,
+    tables: Sequence[np.ndarray],
+    arenas: Sequence[str | ArenaSpec],
+    steps: int,
+    seeds: Sequence[int] | int,
+    episode_steps: int | None = None,
+) -> list[EvalResult]:
     """The greedy policy of ``tables[j]`` in ``arenas[j]`` with seed ``seeds[j]``, for every
     ``j`` (as :func:`dfrl.robots.evaluation.evaluate_policy` with ``PolicyKind.GREEDY``).
 
@@ -110,8 +190,10 @@ def evaluate_greedy(config: TrainerConfig, tables: Sequence[np.ndarray],
     m = len(tables)
     seed_list = [seeds] * m if isinstance(seeds, (int, np.integer)) else list(seeds)
     if len(arenas) != m or len(seed_list) != m:
-        raise ValueError(f"{m} tables, {len(arenas)} arenas and {len(seed_list)} seeds: one "
-                         f"of each per evaluation")
+        raise ValueError(
+            f"{m} tables, {len(arenas)} arenas and {len(seed_list)} seeds: one "
+            f"of each per evaluation"
+        )
     if episode_steps is not None and episode_steps < 1:
         raise ValueError("episode_steps must be >= 1")
     if m == 0:
@@ -121,9 +203,10 @@ def evaluate_greedy(config: TrainerConfig, tables: Sequence[np.ndarray],
     shape = (config.discretisation.n_states, len(config.actions.names))
     if q.shape[1:] != shape:
         raise ValueError(f"Q-table shape {q.shape[1:]} does not fit the configuration {shape}")
-    world = BatchedWorld(env, list(arenas), [np.random.default_rng(int(s)) for s in seed_list],
-                         config.discretisation)
-    for j in range(m):       # the seeded reset, then the random start evaluate_policy makes
+    world = BatchedWorld(
+        env, list(arenas), [np.random.default_rng(int(s)) for s in seed_list], config.discretisation
+    )
+    for j in range(m):  # the seeded reset, then the random start evaluate_policy makes
         world.start(j)
         world.respawn(j)
     specs = world.packed.arenas
@@ -133,23 +216,54 @@ def evaluate_greedy(config: TrainerConfig, tables: Sequence[np.ndarray],
     free = np.zeros((len(specs), nx, ny), dtype=np.bool_)
     grids = np.zeros((len(specs), 6))
     for a, c in enumerate(covers):
-        free[a, :c.nx, :c.ny] = c.free
+        free[a, : c.nx, : c.ny] = c.free
         grids[a] = (c.x0, c.y0, c.cw, c.cd, c.nx, c.ny)
     out = np.zeros((m, 6))
     seen = np.zeros((m, nx, ny), dtype=np.bool_)
     ties = List([np.random.default_rng([int(s), 7]) for s in seed_list])
     p = world.packed
-    bad = _evaluate(q, steps, episode_steps or 0, out, seen, free, grids, world.pose,
-                    world.prev, world.dist, world.trail, world.trail_len, world.trail_head,
-                    world.arena, p.first, p.count, p.half, p.boxes, world.angles, world.motion,
-                    world.groups, world.P, world.I, world.rngs, world.motion_rngs,
-                    ties)
+    bad = _evaluate(
+        q,
+        steps,
+        episode_steps or 0,
+        out,
+        seen,
+        free,
+        grids,
+        world.pose,
+        world.prev,
+        world.dist,
+        world.trail,
+        world.trail_len,
+        world.trail_head,
+        world.arena,
+        p.first,
+        p.count,
+        p.half,
+        p.boxes,
+        world.angles,
+        world.motion,
+        world.groups,
+        world.P,
+        world.I,
+        world.rngs,
+        world.motion_rngs,
+        ties,
+    )
     if bad >= 0:
         raise ArenaError(f"{world.arenas[bad].source}: evaluation {bad} found no free pose")
     n = max(steps, 1)
-    return [EvalResult(policy="greedy", steps=steps, collisions=int(r[_COLLISIONS]),
-                       collisions_per_1000=1000.0 * r[_COLLISIONS] / n,
-                       distance=float(r[_DISTANCE]),
-                       mean_reward=float(r[_REWARD]) / n, progress=float(r[_PROGRESS]) / n,
-                       coverage=float(r[_COVERED]) / r[_EPISODES], episodes=int(r[_EPISODES]))
-            for r in out]
+    return [
+        EvalResult(
+            policy="greedy",
+            steps=steps,
+            collisions=int(r[_COLLISIONS]),
+            collisions_per_1000=1000.0 * r[_COLLISIONS] / n,
+            distance=float(r[_DISTANCE]),
+            mean_reward=float(r[_REWARD]) / n,
+            progress=float(r[_PROGRESS]) / n,
+            coverage=float(r[_COVERED]) / r[_EPISODES],
+            episodes=int(r[_EPISODES]),
+        )
+        for r in out
+    ]

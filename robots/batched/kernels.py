@@ -6,6 +6,7 @@ draws from exactly as numpy does), and the constants of the simulation in two ve
 the ``P_*`` and ``I_*`` names below. The maths follow :class:`dfrl.robots.env.EPuckEnv` line by
 line (robots/README.md, "The batched simulator", says where they differ and by how much).
 """
+
 from __future__ import annotations
 
 import math
@@ -16,12 +17,12 @@ from numba import njit
 # float parameters, P[...]
 P_BODY_RADIUS = 0
 P_SENSOR_RANGE = 1
-P_RAY_START = 2          # where a ray starts, from the centre (inside the body, beyond the wheels)
+P_RAY_START = 2  # where a ray starts, from the centre (inside the body, beyond the wheels)
 P_NOISE_STD = 3
-P_STEP_LENGTH = 4        # top speed x control period: progress 1
+P_STEP_LENGTH = 4  # top speed x control period: progress 1
 P_RESPAWN_CLEARANCE = 5
 P_STUCK_DISTANCE = 6
-P_CONTACT = 7            # clearance at or below which the body touches (pybullet's margin)
+P_CONTACT = 7  # clearance at or below which the body touches (pybullet's margin)
 P_ALIVE = 8
 P_FORWARD = 9
 P_NEAR_THRESHOLD = 10
@@ -30,7 +31,7 @@ P_COLLISION_PENALTY = 12
 N_FLOAT_PARAMS = 13
 # integer parameters, I[...]
 I_STUCK_STEPS = 0
-I_RESPAWN = 1            # 1: a collision ends the episode
+I_RESPAWN = 1  # 1: a collision ends the episode
 I_LEVELS = 2
 N_INT_PARAMS = 3
 #: most draws a free pose may take before the arena counts as too crowded (as ArenaSpec's)
@@ -107,7 +108,7 @@ def sense(i, pose, dist, boxes, lo, hi, angles, P, rng):
         dist[i, k] = d
     std = P[P_NOISE_STD]
     if std > 0.0:
-        for k in range(angles.shape[0]):   # numpy draws all, then keeps the seen ones
+        for k in range(angles.shape[0]):  # numpy draws all, then keeps the seen ones
             noise = rng.normal(0.0, std)
             if dist[i, k] < rng_:
                 dist[i, k] = min(max(dist[i, k] + noise, 0.0), rng_)
@@ -180,8 +181,9 @@ def free_pose(rng, boxes, lo, hi, hw, hd, clear):
 
 
 @njit(cache=True)
-def place(i, x, y, yaw, pose, prev, dist, trail, trail_len, trail_head, boxes, lo, hi,
-          angles, P, rng):
+def place(
+    i, x, y, yaw, pose, prev, dist, trail, trail_len, trail_head, boxes, lo, hi, angles, P, rng
+):
     """Put robot ``i`` at rest at a pose and read its sensors."""
     pose[i, 0], pose[i, 1], pose[i, 2] = x, y, yaw
     prev[i] = 0
@@ -190,16 +192,46 @@ def place(i, x, y, yaw, pose, prev, dist, trail, trail_len, trail_head, boxes, l
 
 
 @njit(cache=True)
-def respawn(i, pose, prev, dist, trail, trail_len, trail_head, arena, first, count, half,
-            boxes, angles, P, rng):
+def respawn(
+    i,
+    pose,
+    prev,
+    dist,
+    trail,
+    trail_len,
+    trail_head,
+    arena,
+    first,
+    count,
+    half,
+    boxes,
+    angles,
+    P,
+    rng,
+):
     """A reset without a seed: a random free pose. False when the arena is too crowded."""
     a = arena[i]
     lo, hi = first[a], first[a] + count[a]
-    x, y, yaw, ok = free_pose(rng, boxes, lo, hi, half[a, 0], half[a, 1],
-                              P[P_RESPAWN_CLEARANCE])
+    x, y, yaw, ok = free_pose(rng, boxes, lo, hi, half[a, 0], half[a, 1], P[P_RESPAWN_CLEARANCE])
     if ok:
-        place(i, x, y, yaw, pose, prev, dist, trail, trail_len, trail_head, boxes, lo, hi,
-              angles, P, rng)
+        place(
+            i,
+            x,
+            y,
+            yaw,
+            pose,
+            prev,
+            dist,
+            trail,
+            trail_len,
+            trail_head,
+            boxes,
+            lo,
+            hi,
+            angles,
+            P,
+            rng,
+        )
     return ok
 
 
@@ -210,8 +242,27 @@ def wrap(angle):
 
 
 @njit(cache=True)
-def move(i, action, pose, prev, dist, trail, trail_len, trail_head, arena, first, count,
-         boxes, angles, motion, P, I, rng, motion_rng, out):
+def move(
+    i,
+    action,
+    pose,
+    prev,
+    dist,
+    trail,
+    trail_len,
+    trail_head,
+    arena,
+    first,
+    count,
+    boxes,
+    angles,
+    motion,
+    P,
+    I,
+    rng,
+    motion_rng,
+    out,
+):
     """One control step of robot ``i``: drive, stop at contact, sense, reward.
 
     ``rng`` draws the sensor noise (as the environment's generator does in pybullet),
@@ -221,7 +272,7 @@ def move(i, action, pose, prev, dist, trail, trail_len, trail_head, arena, first
     a = arena[i]
     lo, hi = first[a], first[a] + count[a]
     x0, y0, yaw0 = pose[i, 0], pose[i, 1], pose[i, 2]
-    m = motion[prev[i], action]     # mean (forward, left, turn), then their spread
+    m = motion[prev[i], action]  # mean (forward, left, turn), then their spread
     fwd = m[0] + m[3] * motion_rng.normal()
     left = m[1] + m[4] * motion_rng.normal()
     dyaw = m[2] + m[5] * motion_rng.normal()
@@ -230,7 +281,7 @@ def move(i, action, pose, prev, dist, trail, trail_len, trail_head, arena, first
     rim, contact = P[P_BODY_RADIUS], P[P_CONTACT]
     gap1 = clearance(x0 + dx, y0 + dy, boxes, lo, hi) - rim
     collision = gap1 <= contact
-    if collision:   # the body stops where it meets the obstacle (the part of the step before)
+    if collision:  # the body stops where it meets the obstacle (the part of the step before)
         gap0 = clearance(x0, y0, boxes, lo, hi) - rim
         f = 0.0
         if gap0 > gap1:
@@ -244,8 +295,9 @@ def move(i, action, pose, prev, dist, trail, trail_len, trail_head, arena, first
     heading = yaw0 + 0.5 * wrap(yaw1 - yaw0)
     progress = (dx * math.cos(heading) + dy * math.sin(heading)) / P[P_STEP_LENGTH]
     sense(i, pose, dist, boxes, lo, hi, angles, P, rng)
-    stuck = trail_stuck(i, trail, trail_len, trail_head, x1, y1, I[I_STUCK_STEPS],
-                        P[P_STUCK_DISTANCE])
+    stuck = trail_stuck(
+        i, trail, trail_len, trail_head, x1, y1, I[I_STUCK_STEPS], P[P_STUCK_DISTANCE]
+    )
     p_max = 0.0
     for k in range(angles.shape[0]):
         v = np.float64(proximity(dist[i, k], P[P_SENSOR_RANGE]))
@@ -264,17 +316,74 @@ def move(i, action, pose, prev, dist, trail, trail_len, trail_head, arena, first
 
 
 @njit(cache=True)
-def step_all(actions, pose, prev, dist, trail, trail_len, trail_head, arena, first, count,
-             boxes, angles, motion, P, I, rngs, motion_rngs, out):
+def step_all(
+    actions,
+    pose,
+    prev,
+    dist,
+    trail,
+    trail_len,
+    trail_head,
+    arena,
+    first,
+    count,
+    boxes,
+    angles,
+    motion,
+    P,
+    I,
+    rngs,
+    motion_rngs,
+    out,
+):
     """One control step of every robot; ``out[i]`` as :func:`move`'s."""
     for i in range(pose.shape[0]):
-        move(i, actions[i], pose, prev, dist, trail, trail_len, trail_head, arena, first,
-             count, boxes, angles, motion, P, I, rngs[i], motion_rngs[i], out[i])
+        move(
+            i,
+            actions[i],
+            pose,
+            prev,
+            dist,
+            trail,
+            trail_len,
+            trail_head,
+            arena,
+            first,
+            count,
+            boxes,
+            angles,
+            motion,
+            P,
+            I,
+            rngs[i],
+            motion_rngs[i],
+            out[i],
+        )
 
 
 @njit(cache=True)
-def wander(steps, n_actions, pose, prev, dist, trail, trail_len, trail_head, arena, first,
-           count, half, boxes, angles, motion, P, I, rngs, motion_rngs, policy_rngs):
+def wander(
+    steps,
+    n_actions,
+    pose,
+    prev,
+    dist,
+    trail,
+    trail_len,
+    trail_head,
+    arena,
+    first,
+    count,
+    half,
+    boxes,
+    angles,
+    motion,
+    P,
+    I,
+    rngs,
+    motion_rngs,
+    policy_rngs,
+):
     """``steps`` control steps of every robot with uniform random actions drawn from
     ``policy_rngs[i]``, respawning a robot whose episode ends (no learning). Returns the first
     robot whose arena had no free pose left, or -1."""
@@ -282,10 +391,44 @@ def wander(steps, n_actions, pose, prev, dist, trail, trail_len, trail_head, are
     for i in range(pose.shape[0]):
         for _ in range(steps):
             a = policy_rngs[i].integers(0, n_actions)
-            move(i, a, pose, prev, dist, trail, trail_len, trail_head, arena, first, count,
-                 boxes, angles, motion, P, I, rngs[i], motion_rngs[i], out)
+            move(
+                i,
+                a,
+                pose,
+                prev,
+                dist,
+                trail,
+                trail_len,
+                trail_head,
+                arena,
+                first,
+                count,
+                boxes,
+                angles,
+                motion,
+                P,
+                I,
+                rngs[i],
+                motion_rngs[i],
+                out,
+            )
             if (out[1] > 0.0 and I[I_RESPAWN] == 1) or out[2] > 0.0:
-                if not respawn(i, pose, prev, dist, trail, trail_len, trail_head, arena, first,
-                               count, half, boxes, angles, P, rngs[i]):
+                if not respawn(
+                    i,
+                    pose,
+                    prev,
+                    dist,
+                    trail,
+                    trail_len,
+                    trail_head,
+                    arena,
+                    first,
+                    count,
+                    half,
+                    boxes,
+                    angles,
+                    P,
+                    rngs[i],
+                ):
                     return i
     return -1

@@ -11,6 +11,7 @@ the next observation's values before the update, every active weight of the acti
 bit.) :class:`BatchedLinearTrainer` holds the weights of every robot, shape
 ``(n, n_actions, n_features)``, the layout of ``Trainer.params``.
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -54,9 +55,40 @@ def values(w, i, active, out):
 
 
 @njit(cache=True)
-def train(steps, alpha, gamma, eps, w, t, action, stats, pose, prev, dist, trail, trail_len,
-          trail_head, arena, first, count, half, boxes, angles, motion, P, I, tilings, tiles,
-          env_rngs, motion_rngs, learner_rngs, sh_buffer, sh_meta, sh_total, sh_rngs):
+def train(
+    steps,
+    alpha,
+    gamma,
+    eps,
+    w,
+    t,
+    action,
+    stats,
+    pose,
+    prev,
+    dist,
+    trail,
+    trail_len,
+    trail_head,
+    arena,
+    first,
+    count,
+    half,
+    boxes,
+    angles,
+    motion,
+    P,
+    I,
+    tilings,
+    tiles,
+    env_rngs,
+    motion_rngs,
+    learner_rngs,
+    sh_buffer,
+    sh_meta,
+    sh_total,
+    sh_rngs,
+):
     """``steps`` iterations of every linear robot (see :func:`.tabular.train`). Returns the
     first robot whose arena had no free pose left, or -1."""
     out = np.zeros(4)
@@ -70,15 +102,35 @@ def train(steps, alpha, gamma, eps, w, t, action, stats, pose, prev, dist, trail
         active_features(dist[i], rng_, tilings, tiles, now)
         for _ in range(steps):
             a = action[i]
-            K.move(i, a, pose, prev, dist, trail, trail_len, trail_head, arena, first, count,
-                   boxes, angles, motion, P, I, er, mr, out)
+            K.move(
+                i,
+                a,
+                pose,
+                prev,
+                dist,
+                trail,
+                trail_len,
+                trail_head,
+                arena,
+                first,
+                count,
+                boxes,
+                angles,
+                motion,
+                P,
+                I,
+                er,
+                mr,
+                out,
+            )
             r, collided, stuck = out[0], out[1] > 0.0, out[2] > 0.0
             terminated = collided and I[K.I_RESPAWN] == 1
             active_features(dist[i], rng_, tilings, tiles, nxt)
             lr_r, lr_end = r, terminated
             if sh_meta[i, M_CAPACITY] > 0:
-                lr_r, lr_end = learnt_outcome(i, r, terminated, sh_buffer, sh_meta, sh_total,
-                                              sh_rngs[i])
+                lr_r, lr_end = learnt_outcome(
+                    i, r, terminated, sh_buffer, sh_meta, sh_total, sh_rngs[i]
+                )
             values(w, i, nxt, qn)
             target = lr_r
             if not lr_end:
@@ -94,8 +146,23 @@ def train(steps, alpha, gamma, eps, w, t, action, stats, pose, prev, dist, trail
             values(w, i, nxt, qn)
             na = T.choose(qn, T.epsilon(eps[i], t[i]), lr)
             if terminated or stuck:
-                if not K.respawn(i, pose, prev, dist, trail, trail_len, trail_head, arena,
-                                 first, count, half, boxes, angles, P, er):
+                if not K.respawn(
+                    i,
+                    pose,
+                    prev,
+                    dist,
+                    trail,
+                    trail_len,
+                    trail_head,
+                    arena,
+                    first,
+                    count,
+                    half,
+                    boxes,
+                    angles,
+                    P,
+                    er,
+                ):
                     return i
                 active_features(dist[i], rng_, tilings, tiles, nxt)
                 values(w, i, nxt, qn)
@@ -152,12 +219,40 @@ class BatchedLinearTrainer(RobotBatch):
         if steps < 0:
             raise ValueError(f"steps must be >= 0, got {steps}")
         w, p = self.world, self.world.packed
-        bad = train(steps, self.alpha, self.gamma, self.eps, self.weights, self.t, self.action,
-                    self.stats, w.pose, w.prev, w.dist, w.trail, w.trail_len, w.trail_head,
-                    w.arena, p.first, p.count, p.half, p.boxes, w.angles, w.motion, w.P, w.I,
-                    self.tilings, self.tiles, w.rngs, w.motion_rngs, self.learner_rngs,
-                    self.shuffle_buffer, self.shuffle_meta, self.shuffle_total,
-                    self.shuffle_rngs)
+        bad = train(
+            steps,
+            self.alpha,
+            self.gamma,
+            self.eps,
+            self.weights,
+            self.t,
+            self.action,
+            self.stats,
+            w.pose,
+            w.prev,
+            w.dist,
+            w.trail,
+            w.trail_len,
+            w.trail_head,
+            w.arena,
+            p.first,
+            p.count,
+            p.half,
+            p.boxes,
+            w.angles,
+            w.motion,
+            w.P,
+            w.I,
+            self.tilings,
+            self.tiles,
+            w.rngs,
+            w.motion_rngs,
+            self.learner_rngs,
+            self.shuffle_buffer,
+            self.shuffle_meta,
+            self.shuffle_total,
+            self.shuffle_rngs,
+        )
         self._arena_full(bad)
         self.iteration += steps
 

@@ -16,6 +16,7 @@ new speed within a few milliseconds, but not instantly: turning left after drivi
 
 Measured once per simulation and action set in a process (about a second) and cached.
 """
+
 from __future__ import annotations
 
 import math
@@ -35,8 +36,12 @@ WALK_STEPS: int = 3000
 #: Seed of the random walk.
 WALK_SEED: int = 2026
 
-_OPEN_FLOOR = ArenaSpec(name="open", size=(4.0, 4.0), wall_height=0.1,
-                        description="an empty floor for measuring the robot's motion")
+_OPEN_FLOOR = ArenaSpec(
+    name="open",
+    size=(4.0, 4.0),
+    wall_height=0.1,
+    description="an empty floor for measuring the robot's motion",
+)
 
 
 @dataclass(frozen=True)
@@ -51,8 +56,9 @@ class Motion:
     std: np.ndarray
 
 
-def body_delta(before: tuple[float, float, float],
-               after: tuple[float, float, float]) -> tuple[float, float, float]:
+def body_delta(
+    before: tuple[float, float, float], after: tuple[float, float, float]
+) -> tuple[float, float, float]:
     """``(forward, left, turn)``: the displacement from ``before`` to ``after`` in the frame
     of ``before`` (m, m) and the change of yaw (rad, in ``(-pi, pi]``)."""
     dx, dy = after[0] - before[0], after[1] - before[1]
@@ -76,8 +82,9 @@ def _settled(env, n: int) -> np.ndarray:  # noqa: ANN001 - EPuckEnv
 def _walk(env, n: int) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001 - EPuckEnv
     """Mean and standard deviation of each (previous command, command)'s step in the walk."""
     rng = np.random.default_rng(WALK_SEED)
-    steps: list[list[list[tuple[float, float, float]]]] = [[[] for _ in range(n)]
-                                                          for _ in range(n + 1)]
+    steps: list[list[list[tuple[float, float, float]]]] = [
+        [[] for _ in range(n)] for _ in range(n + 1)
+    ]
     env.reset(seed=0, options={"pose": (0.0, 0.0, 0.0)})
     prev = -1
     for _ in range(WALK_STEPS):
@@ -86,7 +93,7 @@ def _walk(env, n: int) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001 - EPuck
         before = env.robot.pose()
         env.step(action)
         after = env.robot.pose()
-        if max(abs(after[0]), abs(after[1])) > 1.5:      # far from the middle: start again
+        if max(abs(after[0]), abs(after[1])) > 1.5:  # far from the middle: start again
             env.reset(seed=0, options={"pose": (0.0, 0.0, float(rng.uniform(-3, 3)))})
             prev = -1
             continue

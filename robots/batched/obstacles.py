@@ -9,6 +9,7 @@ floor's edge, as in :meth:`dfrl.arenas.spec.ArenaSpec.clearance`.
 Several arenas are packed into one table (:class:`PackedArenas`); robot ``i`` uses the rows
 ``first[a] .. first[a] + count[a]`` of its arena ``a``.
 """
+
 from __future__ import annotations
 
 import math
@@ -42,8 +43,17 @@ def arena_boxes(arena: ArenaSpec, sensor_height: float) -> np.ndarray:
         (0.0, -hd - t / 2, hw + t, t / 2, 1.0, 0.0, seen),
     ]
     for b in arena.blocks:
-        rows.append((b.center[0], b.center[1], b.size[0] / 2.0, b.size[1] / 2.0,
-                     math.cos(b.yaw), math.sin(b.yaw), 1.0 if b.size[2] > sensor_height else 0.0))
+        rows.append(
+            (
+                b.center[0],
+                b.center[1],
+                b.size[0] / 2.0,
+                b.size[1] / 2.0,
+                math.cos(b.yaw),
+                math.sin(b.yaw),
+                1.0 if b.size[2] > sensor_height else 0.0,
+            )
+        )
     return np.asarray(rows, dtype=np.float64)
 
 
@@ -77,7 +87,15 @@ def pack_arenas(arenas: Sequence[ArenaSpec], sensor_height: float) -> PackedAren
     count = np.array([len(t) for t in tables], dtype=np.int64)
     first = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int64)
     half = np.array([[a.size[0] / 2.0, a.size[1] / 2.0] for a in arenas], dtype=np.float64)
-    start = np.array([(1.0, 0.0, 0.0, 0.0) if a.start.random else (0.0, *(a.start.pose or ()))
-                      for a in arenas], dtype=np.float64)
-    return PackedArenas(arenas=tuple(arenas), boxes=np.concatenate(tables), first=first,
-                        count=count, half=half, start=start)
+    start = np.array(
+        [(1.0, 0.0, 0.0, 0.0) if a.start.random else (0.0, *(a.start.pose or ())) for a in arenas],
+        dtype=np.float64,
+    )
+    return PackedArenas(
+        arenas=tuple(arenas),
+        boxes=np.concatenate(tables),
+        first=first,
+        count=count,
+        half=half,
+        start=start,
+    )

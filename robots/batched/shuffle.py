@@ -5,6 +5,7 @@ Per robot ``i``: ``buffer[i, j] = (reward, terminal)`` of slot ``j``; ``meta[i]`
 capacity (0: the control is off), the mode code of :data:`MODES`, the slots filled and the calls
 so far; ``total[i]`` the running sum of the buffered rewards.
 """
+
 from __future__ import annotations
 
 from numba import njit
@@ -12,8 +13,11 @@ from numba import njit
 from dfrl.robots.reward_shuffle import ShuffleMode
 
 #: Mode codes in ``meta[:, M_MODE]``.
-MODES: dict[ShuffleMode, int] = {ShuffleMode.CENTRED_NO_BOOTSTRAP: 0, ShuffleMode.CENTRED: 1,
-                                 ShuffleMode.RAW: 2}
+MODES: dict[ShuffleMode, int] = {
+    ShuffleMode.CENTRED_NO_BOOTSTRAP: 0,
+    ShuffleMode.CENTRED: 1,
+    ShuffleMode.RAW: 2,
+}
 M_CAPACITY, M_MODE, M_FILLED, M_CALLS = 0, 1, 2, 3
 
 
@@ -23,7 +27,7 @@ def learnt_outcome(i, reward, terminal, buffer, meta, total, rng):
     cap = meta[i, M_CAPACITY]
     meta[i, M_CALLS] += 1
     filled = meta[i, M_FILLED]
-    if meta[i, M_CALLS] % cap == 0:                 # no drift of the running sum
+    if meta[i, M_CALLS] % cap == 0:  # no drift of the running sum
         s = 0.0
         for j in range(filled):
             s += buffer[i, j, 0]

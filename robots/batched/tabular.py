@@ -5,6 +5,7 @@ The maths and the order of random draws are those of :mod:`dfrl.robots.learners`
 tables ``q[i]`` of every robot ``i`` (shape (n, n_states, n_actions)). :func:`train` runs
 ``steps`` iterations of every robot without returning to Python.
 """
+
 from __future__ import annotations
 
 import math
@@ -99,10 +100,43 @@ def learn(i, algo, q, visits, t, stats, s, a, r, ns, terminal, alpha, gamma, eps
 
 
 @njit(cache=True)
-def train(steps, algo, alpha, gamma, eps, q, visits, t, state, action, stats, record,
-          pose, prev, dist, trail, trail_len, trail_head, arena, first, count, half, boxes,
-          angles, motion, groups, P, I, env_rngs, motion_rngs, learner_rngs, sh_buffer, sh_meta,
-          sh_total, sh_rngs):
+def train(
+    steps,
+    algo,
+    alpha,
+    gamma,
+    eps,
+    q,
+    visits,
+    t,
+    state,
+    action,
+    stats,
+    record,
+    pose,
+    prev,
+    dist,
+    trail,
+    trail_len,
+    trail_head,
+    arena,
+    first,
+    count,
+    half,
+    boxes,
+    angles,
+    motion,
+    groups,
+    P,
+    I,
+    env_rngs,
+    motion_rngs,
+    learner_rngs,
+    sh_buffer,
+    sh_meta,
+    sh_total,
+    sh_rngs,
+):
     """``steps`` iterations of every robot: act, simulate, update, choose (a respawn after a
     collision or when stuck). ``record`` of shape (n, steps, N_RECORD) is filled when it has
     ``steps`` rows (pass shape (n, 0, N_RECORD) not to record). Returns the first robot whose
@@ -116,21 +150,71 @@ def train(steps, algo, alpha, gamma, eps, q, visits, t, state, action, stats, re
         er, mr, lr = env_rngs[i], motion_rngs[i], learner_rngs[i]
         for k in range(steps):
             s, a = state[i], action[i]
-            K.move(i, a, pose, prev, dist, trail, trail_len, trail_head, arena, first, count,
-                   boxes, angles, motion, P, I, er, mr, out)
+            K.move(
+                i,
+                a,
+                pose,
+                prev,
+                dist,
+                trail,
+                trail_len,
+                trail_head,
+                arena,
+                first,
+                count,
+                boxes,
+                angles,
+                motion,
+                P,
+                I,
+                er,
+                mr,
+                out,
+            )
             r, collided, stuck = out[0], out[1] > 0.0, out[2] > 0.0
             x, y = pose[i, 0], pose[i, 1]
             terminated = collided and I[K.I_RESPAWN] == 1
             ns = K.discretise(dist[i], rng_, groups, levels)
             lr_r, lr_end = r, terminated
             if sh_meta[i, M_CAPACITY] > 0:
-                lr_r, lr_end = learnt_outcome(i, r, terminated, sh_buffer, sh_meta, sh_total,
-                                              sh_rngs[i])
-            na = learn(i, algo[i], q, visits, t, stats, s, a, lr_r, ns, lr_end, alpha[i],
-                       gamma[i], eps[i], lr)
+                lr_r, lr_end = learnt_outcome(
+                    i, r, terminated, sh_buffer, sh_meta, sh_total, sh_rngs[i]
+                )
+            na = learn(
+                i,
+                algo[i],
+                q,
+                visits,
+                t,
+                stats,
+                s,
+                a,
+                lr_r,
+                ns,
+                lr_end,
+                alpha[i],
+                gamma[i],
+                eps[i],
+                lr,
+            )
             if terminated or stuck:
-                if not K.respawn(i, pose, prev, dist, trail, trail_len, trail_head, arena,
-                                 first, count, half, boxes, angles, P, er):
+                if not K.respawn(
+                    i,
+                    pose,
+                    prev,
+                    dist,
+                    trail,
+                    trail_len,
+                    trail_head,
+                    arena,
+                    first,
+                    count,
+                    half,
+                    boxes,
+                    angles,
+                    P,
+                    er,
+                ):
                     return i
                 ns = K.discretise(dist[i], rng_, groups, levels)
                 na = choose(q[i, ns], epsilon(eps[i], t[i]), lr)

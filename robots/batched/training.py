@@ -7,6 +7,7 @@ same random streams per seed (``SeedSequence(seed).spawn``: the environment's, t
 learner's), the tables of all robots in one array ``q`` of shape (n, n_states, n_actions), and
 :meth:`run` to advance every robot by many iterations in compiled code.
 """
+
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
@@ -32,8 +33,9 @@ class BatchError(ValueError):
     """Configurations the batched simulator cannot run together (the message says which)."""
 
 
-def shared_env(configs: Sequence[TrainerConfig],
-               learners: Mapping[str, int] | None = None) -> EnvConfig:
+def shared_env(
+    configs: Sequence[TrainerConfig], learners: Mapping[str, int] | None = None
+) -> EnvConfig:
     """The environment every config shares (arena aside).
 
     Raises
@@ -48,13 +50,24 @@ def shared_env(configs: Sequence[TrainerConfig],
     accepted = T.ALGOS if learners is None else learners
     for k, c in enumerate(configs):
         if c.algo not in accepted:
-            raise BatchError(f"robot {k}: learner '{c.algo}' is not batched here (batched "
-                             f"together: {sorted(accepted)}); use --sim pybullet")
-        for name in ("sim", "actions", "reward", "collision_response", "stuck_steps",
-                     "stuck_distance", "discretisation"):
+            raise BatchError(
+                f"robot {k}: learner '{c.algo}' is not batched here (batched "
+                f"together: {sorted(accepted)}); use --sim pybullet"
+            )
+        for name in (
+            "sim",
+            "actions",
+            "reward",
+            "collision_response",
+            "stuck_steps",
+            "stuck_distance",
+            "discretisation",
+        ):
             if getattr(c, name) != getattr(first, name):
-                raise BatchError(f"robot {k}: '{name}' differs from robot 0's; one batch "
-                                 f"shares the simulation, actions, reward and states")
+                raise BatchError(
+                    f"robot {k}: '{name}' differs from robot 0's; one batch "
+                    f"shares the simulation, actions, reward and states"
+                )
     return env_part(first)
 
 
@@ -93,14 +106,16 @@ class RobotBatch:
         The learners this batch accepts (name -> code).
     """
 
-    def __init__(self, configs: Sequence[TrainerConfig], motion_noise: bool,
-                 learners: Mapping[str, int]) -> None:
+    def __init__(
+        self, configs: Sequence[TrainerConfig], motion_noise: bool, learners: Mapping[str, int]
+    ) -> None:
         env = shared_env(configs, learners)
         self.configs = list(configs)
         streams = [np.random.SeedSequence(c.seed).spawn(3) for c in configs]
         env_rngs = [np.random.default_rng(int(s[0].generate_state(1)[0])) for s in streams]
-        self.world = BatchedWorld(env, [c.arena for c in configs], env_rngs,
-                                  configs[0].discretisation, motion_noise)
+        self.world = BatchedWorld(
+            env, [c.arena for c in configs], env_rngs, configs[0].discretisation, motion_noise
+        )
         self.learner_rngs = List([np.random.default_rng(s[1]) for s in streams])
         # the learning control (reward_shuffle): a third stream, as Trainer's
         self.shuffle_rngs = List([np.random.default_rng(s[2]) for s in streams])
@@ -112,9 +127,18 @@ class RobotBatch:
         self.shuffle_total = np.zeros(len(configs))
         self.algo = np.array([learners[c.algo] for c in configs], dtype=np.int64)
         self.gamma = np.array([c.learner.gamma for c in configs])
-        self.eps = np.array([(T.SCHEDULES[c.learner.epsilon.kind.value], c.learner.epsilon.start,
-                              c.learner.epsilon.end, c.learner.epsilon.decay_steps)
-                             for c in configs], dtype=np.float64)
+        self.eps = np.array(
+            [
+                (
+                    T.SCHEDULES[c.learner.epsilon.kind.value],
+                    c.learner.epsilon.start,
+                    c.learner.epsilon.end,
+                    c.learner.epsilon.decay_steps,
+                )
+                for c in configs
+            ],
+            dtype=np.float64,
+        )
         self.t = np.zeros(len(configs), dtype=np.int64)
         self.stats = np.zeros((len(configs), T.N_STATS))
         self.iteration = 0
@@ -126,8 +150,10 @@ class RobotBatch:
 
     def _arena_full(self, bad: int) -> None:
         if bad >= 0:
-            raise ArenaError(f"{self.world.arenas[bad].source}: robot {bad} found no free pose "
-                             f"to respawn; the arena is too crowded")
+            raise ArenaError(
+                f"{self.world.arenas[bad].source}: robot {bad} found no free pose "
+                f"to respawn; the arena is too crowded"
+            )
 
     @property
     def collisions(self) -> np.ndarray:
@@ -168,16 +194,19 @@ class BatchedTrainer(RobotBatch):
         n, w = len(configs), self.world
         n_states = configs[0].discretisation.n_states
         self.alpha = np.array([c.learner.alpha for c in configs])
-        self.q = np.stack([np.full((n_states, w.n_actions), c.learner.initial_q)
-                           for c in configs])
+        self.q = np.stack([np.full((n_states, w.n_actions), c.learner.initial_q) for c in configs])
         self.visits = np.zeros(self.q.shape, dtype=np.int64)
         self.stats[:, T.S_QSUM] = self.q.sum(axis=(1, 2))
         for i in range(n):
             w.start(i)
         self.state = w.states()
-        self.action = np.array([T.choose(self.q[i, self.state[i]],
-                                         T.epsilon(self.eps[i], 0), self.learner_rngs[i])
-                                for i in range(n)], dtype=np.int64)
+        self.action = np.array(
+            [
+                T.choose(self.q[i, self.state[i]], T.epsilon(self.eps[i], 0), self.learner_rngs[i])
+                for i in range(n)
+            ],
+            dtype=np.int64,
+        )
 
     def run(self, steps: int, record: bool = False) -> Record | None:
         """Advance every robot by ``steps`` iterations; with ``record``, their per-step values.
@@ -191,18 +220,50 @@ class BatchedTrainer(RobotBatch):
             raise ValueError(f"steps must be >= 0, got {steps}")
         rec = np.zeros((self.n, steps if record else 0, T.N_RECORD))
         w, p = self.world, self.world.packed
-        bad = T.train(steps, self.algo, self.alpha, self.gamma, self.eps, self.q, self.visits,
-                      self.t, self.state, self.action, self.stats, rec, w.pose, w.prev, w.dist,
-                      w.trail, w.trail_len, w.trail_head, w.arena, p.first, p.count, p.half,
-                      p.boxes, w.angles, w.motion, w.groups, w.P, w.I, w.rngs,
-                      w.motion_rngs, self.learner_rngs, self.shuffle_buffer, self.shuffle_meta,
-                      self.shuffle_total, self.shuffle_rngs)
+        bad = T.train(
+            steps,
+            self.algo,
+            self.alpha,
+            self.gamma,
+            self.eps,
+            self.q,
+            self.visits,
+            self.t,
+            self.state,
+            self.action,
+            self.stats,
+            rec,
+            w.pose,
+            w.prev,
+            w.dist,
+            w.trail,
+            w.trail_len,
+            w.trail_head,
+            w.arena,
+            p.first,
+            p.count,
+            p.half,
+            p.boxes,
+            w.angles,
+            w.motion,
+            w.groups,
+            w.P,
+            w.I,
+            w.rngs,
+            w.motion_rngs,
+            self.learner_rngs,
+            self.shuffle_buffer,
+            self.shuffle_meta,
+            self.shuffle_total,
+            self.shuffle_rngs,
+        )
         self._arena_full(bad)
         self.iteration += steps
         if not record:
             return None
-        fields: dict[str, np.ndarray] = {name: rec[:, :, k]
-                                         for k, name in enumerate(T.RECORD_FIELDS)}
+        fields: dict[str, np.ndarray] = {
+            name: rec[:, :, k] for k, name in enumerate(T.RECORD_FIELDS)
+        }
         for name in ("state", "action"):
             fields[name] = fields[name].astype(np.int64)
         fields["collided"] = fields["collided"] > 0

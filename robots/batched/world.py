@@ -10,6 +10,7 @@ sensing and contact are geometry (rays and signed distances against the arena's 
 Each robot draws from its own ``numpy.random.Generator`` (``rngs[i]``), as ``EPuckEnv`` draws from
 its ``np_random``: the same seed gives the same run whatever else is in the batch.
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -37,10 +38,10 @@ def float_params(config: EnvConfig) -> np.ndarray:
     p = np.zeros(K.N_FLOAT_PARAMS)
     p[K.P_BODY_RADIUS] = rc.body_radius
     p[K.P_SENSOR_RANGE] = rc.sensor_range
-    p[K.P_RAY_START] = rc.axle_length / 2 + rc.wheel_width / 2 + 1e-3   # as EPuck's rays
+    p[K.P_RAY_START] = rc.axle_length / 2 + rc.wheel_width / 2 + 1e-3  # as EPuck's rays
     p[K.P_NOISE_STD] = rc.sensor_noise_std
     p[K.P_STEP_LENGTH] = rc.max_linear_speed * config.sim.control_dt
-    p[K.P_RESPAWN_CLEARANCE] = rc.body_radius + 0.03                   # as EPuckEnv's
+    p[K.P_RESPAWN_CLEARANCE] = rc.body_radius + 0.03  # as EPuckEnv's
     p[K.P_STUCK_DISTANCE] = config.stuck_distance
     p[K.P_CONTACT] = CONTACT_MARGIN
     p[K.P_ALIVE] = rw.alive_bonus
@@ -65,7 +66,7 @@ def group_table(discretisation: DiscretisationConfig) -> np.ndarray:
     groups = discretisation.grouping.groups
     out = np.full((len(groups), max(len(g) for g in groups)), -1, dtype=np.int64)
     for g, members in enumerate(groups):
-        out[g, :len(members)] = members
+        out[g, : len(members)] = members
     return out
 
 
@@ -97,16 +98,21 @@ class BatchedWorld:
         False replays the means (a deterministic robot, for the fidelity report's ablation).
     """
 
-    def __init__(self, config: EnvConfig, arenas: Sequence[str | ArenaSpec],
-                 rngs: Sequence[np.random.Generator],
-                 discretisation: DiscretisationConfig | None = None,
-                 motion_noise: bool = True) -> None:
+    def __init__(
+        self,
+        config: EnvConfig,
+        arenas: Sequence[str | ArenaSpec],
+        rngs: Sequence[np.random.Generator],
+        discretisation: DiscretisationConfig | None = None,
+        motion_noise: bool = True,
+    ) -> None:
         if len(arenas) != len(rngs) or not arenas:
-            raise ValueError(f"one generator per robot: {len(arenas)} arenas, {len(rngs)} "
-                             f"generators")
+            raise ValueError(
+                f"one generator per robot: {len(arenas)} arenas, {len(rngs)} generators"
+            )
         self.config = config
         specs: dict[str, ArenaSpec] = {}
-        parsed: dict[str, ArenaSpec] = {}       # each name or path read once
+        parsed: dict[str, ArenaSpec] = {}  # each name or path read once
         index: list[int] = []
         for a in arenas:
             if isinstance(a, ArenaSpec):
@@ -158,9 +164,24 @@ class BatchedWorld:
     def place(self, i: int, pose: tuple[float, float, float]) -> None:
         """Put robot ``i`` at rest at ``pose`` and read its sensors."""
         lo, hi = self._rows(i)
-        K.place(i, float(pose[0]), float(pose[1]), float(pose[2]), self.pose, self.prev,
-                self.dist, self.trail, self.trail_len, self.trail_head, self.packed.boxes, lo,
-                hi, self.angles, self.P, self.rngs[i])
+        K.place(
+            i,
+            float(pose[0]),
+            float(pose[1]),
+            float(pose[2]),
+            self.pose,
+            self.prev,
+            self.dist,
+            self.trail,
+            self.trail_len,
+            self.trail_head,
+            self.packed.boxes,
+            lo,
+            hi,
+            self.angles,
+            self.P,
+            self.rngs[i],
+        )
 
     def start(self, i: int) -> None:
         """A seeded reset of robot ``i``: its arena's start pose, or a random free pose."""
@@ -179,13 +200,29 @@ class BatchedWorld:
             No free pose found (the arena is too crowded).
         """
         p = self.packed
-        if not K.respawn(i, self.pose, self.prev, self.dist, self.trail, self.trail_len,
-                         self.trail_head, self.arena, p.first, p.count, p.half, p.boxes,
-                         self.angles, self.P, self.rngs[i]):
+        if not K.respawn(
+            i,
+            self.pose,
+            self.prev,
+            self.dist,
+            self.trail,
+            self.trail_len,
+            self.trail_head,
+            self.arena,
+            p.first,
+            p.count,
+            p.half,
+            p.boxes,
+            self.angles,
+            self.P,
+            self.rngs[i],
+        ):
             arena = p.arenas[self.arena[i]]
-            raise ArenaError(f"{arena.source}: no free pose with clearance "
-                             f"{self.P[K.P_RESPAWN_CLEARANCE]} m found in {K.MAX_TRIES} tries; "
-                             f"the arena is too crowded")
+            raise ArenaError(
+                f"{arena.source}: no free pose with clearance "
+                f"{self.P[K.P_RESPAWN_CLEARANCE]} m found in {K.MAX_TRIES} tries; "
+                f"the arena is too crowded"
+            )
 
     def step(self, actions: np.ndarray) -> StepResult:
         """Every robot takes its action for one control step."""
@@ -193,12 +230,30 @@ class BatchedWorld:
         if acts.shape != (self.n,) or acts.min() < 0 or acts.max() >= self.n_actions:
             raise ValueError(f"actions must be {self.n} integers in 0..{self.n_actions - 1}")
         p = self.packed
-        K.step_all(acts, self.pose, self.prev, self.dist, self.trail, self.trail_len,
-                   self.trail_head, self.arena, p.first, p.count, p.boxes, self.angles,
-                   self.motion, self.P, self.I, self.rngs, self.motion_rngs, self._out)
+        K.step_all(
+            acts,
+            self.pose,
+            self.prev,
+            self.dist,
+            self.trail,
+            self.trail_len,
+            self.trail_head,
+            self.arena,
+            p.first,
+            p.count,
+            p.boxes,
+            self.angles,
+            self.motion,
+            self.P,
+            self.I,
+            self.rngs,
+            self.motion_rngs,
+            self._out,
+        )
         o = self._out
-        return StepResult(reward=o[:, 0].copy(), collision=o[:, 1] > 0, stuck=o[:, 2] > 0,
-                          progress=o[:, 3].copy())
+        return StepResult(
+            reward=o[:, 0].copy(), collision=o[:, 1] > 0, stuck=o[:, 2] > 0, progress=o[:, 3].copy()
+        )
 
     def wander(self, steps: int, policy_rngs: Sequence[np.random.Generator]) -> None:
         """``steps`` steps of every robot with uniform random actions (robot ``i``'s drawn
@@ -210,13 +265,32 @@ class BatchedWorld:
             A robot's arena has no free pose left.
         """
         if len(policy_rngs) != self.n:
-            raise ValueError(f"one policy generator per robot: {self.n} robots, "
-                             f"{len(policy_rngs)} generators")
+            raise ValueError(
+                f"one policy generator per robot: {self.n} robots, {len(policy_rngs)} generators"
+            )
         p = self.packed
-        bad = K.wander(steps, self.n_actions, self.pose, self.prev, self.dist, self.trail,
-                       self.trail_len, self.trail_head, self.arena, p.first, p.count, p.half,
-                       p.boxes, self.angles, self.motion, self.P, self.I, self.rngs,
-                       self.motion_rngs, List(policy_rngs))
+        bad = K.wander(
+            steps,
+            self.n_actions,
+            self.pose,
+            self.prev,
+            self.dist,
+            self.trail,
+            self.trail_len,
+            self.trail_head,
+            self.arena,
+            p.first,
+            p.count,
+            p.half,
+            p.boxes,
+            self.angles,
+            self.motion,
+            self.P,
+            self.I,
+            self.rngs,
+            self.motion_rngs,
+            List(policy_rngs),
+        )
         if bad >= 0:
             raise ArenaError(f"{self.arenas[bad].source}: robot {bad} found no free pose")
 
@@ -228,8 +302,10 @@ class BatchedWorld:
         """Each robot's tabular state, shape (n,), int64."""
         rng_ = self.P[K.P_SENSOR_RANGE]
         levels = int(self.I[K.I_LEVELS])
-        return np.array([K.discretise(self.dist[i], rng_, self.groups, levels)
-                         for i in range(self.n)], dtype=np.int64)
+        return np.array(
+            [K.discretise(self.dist[i], rng_, self.groups, levels) for i in range(self.n)],
+            dtype=np.int64,
+        )
 
     @property
     def respawn_on_collision(self) -> bool:

@@ -1,5 +1,6 @@
 """Arena renders: the floor ends at the walls; the plotted view has a heading marker and,
 asked for, the sensor rays."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -24,27 +25,28 @@ def test_the_floor_is_drawn_within_the_walls_only(name: str) -> None:
     spec = load_arena(name)
     world = World(spec)
     try:
-        world.place_robot(10.0 * max(spec.size), 0.0, 0.0)   # out of the picture
+        world.place_robot(10.0 * max(spec.size), 0.0, 0.0)  # out of the picture
         size = 220
         img = world.render_top(size, size)
     finally:
         world.close()
-    extent = max(spec.size) + 0.1                       # render_top's field of view
+    extent = max(spec.size) + 0.1  # render_top's field of view
     rows, cols = np.nonzero(floor_mask(img))
-    assert len(rows) > 0.3 * size * size               # the floor is there
+    assert len(rows) > 0.3 * size * size  # the floor is there
     x = (cols + 0.5) / size * extent - extent / 2
     y = extent / 2 - (rows + 0.5) / size * extent
     px = extent / size
     assert np.all(np.abs(x) <= spec.size[0] / 2 + px)  # ... and ends at the walls
     assert np.all(np.abs(y) <= spec.size[1] / 2 + px)
-    assert not floor_mask(img[:1, :1]).any()           # the margin is background
+    assert not floor_mask(img[:1, :1]).any()  # the margin is background
 
 
 def test_render_arenas_draws_heading_and_sensor_rays(tmp_path: Path) -> None:
     plain, rays = tmp_path / "plain", tmp_path / "rays"
     assert main(["render-arenas", "--arena", "r1", "--out", str(plain), "--size", "120"]) == 0
-    assert main(["render-arenas", "--arena", "r1", "--out", str(rays), "--size", "120",
-                 "--rays"]) == 0
+    assert (
+        main(["render-arenas", "--arena", "r1", "--out", str(rays), "--size", "120", "--rays"]) == 0
+    )
     a = plt_image(plain / "arena_r1.png")
     b = plt_image(rays / "arena_r1.png")
     assert a.shape == b.shape

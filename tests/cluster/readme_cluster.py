@@ -6,6 +6,7 @@ host, copied beside its token), the TLS scheduler in ``head``, a TLS worker in `
 
 Needs root, ``ip`` and Dask distributed: :data:`WHY` says why not (None when it can run).
 """
+
 from __future__ import annotations
 
 import csv
@@ -22,6 +23,7 @@ from dfrl.experiments.tools.netns import REPO_ROOT, Lab, leftover_namespaces, un
 
 try:
     import distributed  # noqa: F401
+
     ENGINE = None
 except ImportError:
     ENGINE = "Dask distributed is not installed (pip install -e '.[cluster]'; scripts/test.sh does)"
@@ -35,10 +37,11 @@ WORKERS = ["w1", "w2"]
 def cluster_blocks() -> dict[str, tuple[str, str]]:
     """``<!-- cluster:KIND [ARG] -->`` markers of the README -> (ARG, the next fenced block)."""
     text = README.read_text(encoding="utf-8")
-    found = {m.group(1): (m.group(2), m.group(3)) for m in re.finditer(
-        r"<!-- cluster:(\w+)\s*([^ ]*?)\s*-->\s*```\w*\n(.*?)```", text, re.S)}
-    assert set(found) >= {"token", "certs", "scheduler", "worker", "config", "driver"}, \
-        found.keys()
+    found = {
+        m.group(1): (m.group(2), m.group(3))
+        for m in re.finditer(r"<!-- cluster:(\w+)\s*([^ ]*?)\s*-->\s*```\w*\n(.*?)```", text, re.S)
+    }
+    assert set(found) >= {"token", "certs", "scheduler", "worker", "config", "driver"}, found.keys()
     return found
 
 
@@ -80,7 +83,7 @@ def run_certs(lab: Lab, drv: Path, blocks: dict) -> dict[str, Path]:
     worker host); the worker name -> the folder made for its host."""
     made: dict[str, Path] = {}
     for line in blocks["certs"][1].strip().splitlines():
-        for w in (WORKERS if "HOSTn" in line else [None]):
+        for w in WORKERS if "HOSTn" in line else [None]:
             cmd = line.replace("HOSTn", lab[w].address) if w else line
             done = lab["head"].run(argv_of(cmd), cwd=drv, capture_output=True, text=True)
             assert done.returncode == 0, (cmd, done.stderr)
@@ -90,7 +93,9 @@ def run_certs(lab: Lab, drv: Path, blocks: dict) -> dict[str, Path]:
 
 
 @contextmanager
-def cluster(tmp: Path, per_worker: int, others: tuple[str, ...] = ()) -> Iterator[tuple[Lab, Path, dict]]:
+def cluster(
+    tmp: Path, per_worker: int, others: tuple[str, ...] = ()
+) -> Iterator[tuple[Lab, Path, dict]]:
     """The README's cluster in namespaces: token, cluster certificates, scheduler, workers
     offering ``per_worker`` CPUs (and hosts ``others`` with nothing started); yields the lab,
     the driver's folder and the blocks. The lab is gone afterwards."""
@@ -106,21 +111,36 @@ def cluster(tmp: Path, per_worker: int, others: tuple[str, ...] = ()) -> Iterato
         member = run_certs(lab, drv, blocks)
         phase("token and certificates made")
         line = blocks["scheduler"][1].strip().replace("HEAD", head)
-        lab["head"].popen(argv_of(line), cwd=drv, stdin=subprocess.DEVNULL,
-                          stdout=subprocess.DEVNULL, stderr=open(drv / "scheduler.log", "w"))
+        lab["head"].popen(
+            argv_of(line),
+            cwd=drv,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=open(drv / "scheduler.log", "w"),
+        )
         wait_for(drv / "scheduler.log", "Scheduler at:", 60)
         phase("scheduler up")
         for w in WORKERS:
             cwd = tmp / w
             cwd.mkdir()
-            shutil.copy2(token, cwd)                      # scp -p: mode 0600 kept
-            line = (blocks["worker"][1].strip().replace("HEAD", head)
-                    .replace("HOSTn", lab[w].address).replace("=N", f"={per_worker}")
-                    .replace(" N ", f" {per_worker} "))
+            shutil.copy2(token, cwd)  # scp -p: mode 0600 kept
+            line = (
+                blocks["worker"][1]
+                .strip()
+                .replace("HEAD", head)
+                .replace("HOSTn", lab[w].address)
+                .replace("=N", f"={per_worker}")
+                .replace(" N ", f" {per_worker} ")
+            )
             assert " N" not in line and "HOST" not in line, line
             shutil.copytree(member[w], cwd / Path(flag(line, "--tls-cert")).parent)  # scp -rp
-            lab[w].popen(argv_of(line), cwd=cwd, stdin=subprocess.DEVNULL,
-                         stdout=subprocess.DEVNULL, stderr=open(cwd / "worker.log", "w"))
+            lab[w].popen(
+                argv_of(line),
+                cwd=cwd,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL,
+                stderr=open(cwd / "worker.log", "w"),
+            )
         for w in WORKERS:
             wait_for(tmp / w / "worker.log", "Registered to:", 60)
         phase("workers registered")
@@ -142,6 +162,8 @@ def rounds_of(out: Path) -> list[dict[str, str]]:
 def logs_of(tmp_path: Path) -> str:
     """The workers' logs and the services' stderr tails (what a failed check shows)."""
     parts = []
-    for f in sorted(tmp_path.glob("w*/worker.log")) + sorted(tmp_path.glob("w*/dfrl-robot/*/service-*")):
+    for f in sorted(tmp_path.glob("w*/worker.log")) + sorted(
+        tmp_path.glob("w*/dfrl-robot/*/service-*")
+    ):
         parts.append(f"--- {f.relative_to(tmp_path)}\n{f.read_text(errors='replace')[-1500:]}")
     return "\n".join(parts)

@@ -19,6 +19,7 @@ client (a Client that failed leaves state behind that spoils the next one), and 
 :data:`TIMEOUT_S` to connect, to read and for the task, :data:`ATTEMPT_S` in all (then the
 child is killed and the attempt counts as answered by nothing).
 """
+
 from __future__ import annotations
 
 import asyncio
@@ -59,17 +60,25 @@ def security_of(tls: Any) -> Security | None:
         return None
     if tls == "none":
         return CertlessTls()
-    return Security(tls_ca_file=tls["ca"], tls_client_cert=tls["cert"],
-                    tls_client_key=tls["key"], require_encryption=True)
+    return Security(
+        tls_ca_file=tls["ca"],
+        tls_client_cert=tls["cert"],
+        tls_client_key=tls["key"],
+        require_encryption=True,
+    )
 
 
 def try_client(address: str, tls: Any) -> str:
     import cloudpickle
 
-    cloudpickle.register_pickle_by_value(sys.modules[__name__])   # the workers lack this file
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])  # the workers lack this file
     sec = security_of(tls)
-    with Client(address, timeout=TIMEOUT_S, set_as_default=False,
-                **({"security": sec} if sec is not None else {})) as client:
+    with Client(
+        address,
+        timeout=TIMEOUT_S,
+        set_as_default=False,
+        **({"security": sec} if sec is not None else {}),
+    ) as client:
         workers = len(client.scheduler_info(n_workers=-1)["workers"])
         answer = client.submit(task, pure=False).result(timeout=TIMEOUT_S)
     return json.dumps({"workers": workers, "task": answer})
@@ -78,8 +87,9 @@ def try_client(address: str, tls: Any) -> str:
 async def _identity(address: str, tls: Any) -> str:
     sec = security_of(tls)
     args = sec.get_connection_args("client") if sec is not None else {}
-    comm = await connect(address, timeout=TIMEOUT_S, **({"ssl_context": args["ssl_context"]}
-                                                         if args else {}))
+    comm = await connect(
+        address, timeout=TIMEOUT_S, **({"ssl_context": args["ssl_context"]} if args else {})
+    )
     try:
         await asyncio.wait_for(comm.write({"op": "identity", "reply": True}), TIMEOUT_S)
         reply = await asyncio.wait_for(comm.read(), TIMEOUT_S)
@@ -99,14 +109,18 @@ def attempt(spec: dict[str, Any]) -> dict[str, Any]:
         if spec["kind"] == "client":
             detail = try_client(spec["address"], spec["tls"])
         elif spec["kind"] == "identity":
-            detail = asyncio.run(asyncio.wait_for(_identity(spec["address"], spec["tls"]),
-                                                  3 * TIMEOUT_S))
+            detail = asyncio.run(
+                asyncio.wait_for(_identity(spec["address"], spec["tls"]), 3 * TIMEOUT_S)
+            )
         else:
             detail = try_http(spec["address"])
         return {"label": spec["label"], "ok": True, "detail": detail}
     except Exception as exc:  # noqa: BLE001 - a refusal is the answer we record
-        return {"label": spec["label"], "ok": False,
-                "detail": f"{type(exc).__name__}: {str(exc)[:300]}"}
+        return {
+            "label": spec["label"],
+            "ok": False,
+            "detail": f"{type(exc).__name__}: {str(exc)[:300]}",
+        }
 
 
 def _child(spec: dict[str, Any], out: Any) -> None:
@@ -124,11 +138,17 @@ def attempt_alone(spec: dict[str, Any]) -> dict[str, Any]:
     try:
         if receive.poll(ATTEMPT_S):
             return receive.recv()
-        return {"label": spec["label"], "ok": False,
-                "detail": f"no answer within {ATTEMPT_S:.0f} s (child killed)"}
+        return {
+            "label": spec["label"],
+            "ok": False,
+            "detail": f"no answer within {ATTEMPT_S:.0f} s (child killed)",
+        }
     except EOFError:
-        return {"label": spec["label"], "ok": False,
-                "detail": f"the attempt's process died (exit {child.exitcode})"}
+        return {
+            "label": spec["label"],
+            "ok": False,
+            "detail": f"the attempt's process died (exit {child.exitcode})",
+        }
     finally:
         child.kill()
         child.join(10)

@@ -2,6 +2,7 @@
 ``--cluster-cpus``, a worker without ``dfrl.token`` (a real Dask cluster in this process: its
 task fails and the driver names the worker and the missing file), and that a plain run does not
 import the engine."""
+
 from __future__ import annotations
 
 import subprocess
@@ -12,13 +13,15 @@ import pytest
 
 from dfrl.experiments.errors import ExperimentError
 
-distributed = pytest.importorskip("distributed", reason="Dask distributed is not installed "
-                                  "(pip install -e '.[cluster]'; scripts/test.sh does)")
+distributed = pytest.importorskip(
+    "distributed",
+    reason="Dask distributed is not installed (pip install -e '.[cluster]'; scripts/test.sh does)",
+)
 
 
-def test_without_a_token_or_with_bad_cpus_nothing_starts(tmp_path: Path,
-                                                        monkeypatch: pytest.MonkeyPatch,
-                                                        capsys: pytest.CaptureFixture) -> None:
+def test_without_a_token_or_with_bad_cpus_nothing_starts(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
     from dfrl.experiments.cli import main
 
     monkeypatch.chdir(tmp_path)
@@ -33,15 +36,21 @@ def test_without_a_token_or_with_bad_cpus_nothing_starts(tmp_path: Path,
     assert bad.value.code == 2 and "--cluster-cpus: must be > 0" in err, err
 
 
-def test_a_worker_without_the_token_file_is_named(tmp_path: Path,
-                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_worker_without_the_token_file_is_named(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     from distributed import LocalCluster
 
     from dfrl.experiments.driver.launcher.cluster import ClusterPlacement
 
-    monkeypatch.chdir(tmp_path)          # the worker's folder: no dfrl.token in it
-    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
-                      dashboard_address=":0", resources={"CPU": 2}) as cluster:
+    monkeypatch.chdir(tmp_path)  # the worker's folder: no dfrl.token in it
+    with LocalCluster(
+        n_workers=1,
+        threads_per_worker=2,
+        processes=False,
+        dashboard_address=":0",
+        resources={"CPU": 2},
+    ) as cluster:
         placement = ClusterPlacement(cluster.scheduler_address).open()
         try:
             with pytest.raises(ExperimentError) as err:
@@ -58,9 +67,10 @@ def test_a_worker_without_the_token_file_is_named(tmp_path: Path,
 
 
 def test_a_plain_run_does_not_import_the_engine() -> None:
-    code = ("import sys; from dfrl.experiments.cli import build_parser; "
-            "from dfrl.experiments.cli.cluster import run_experiment_for; "
-            "build_parser(); print('distributed' in sys.modules)")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=120)
+    code = (
+        "import sys; from dfrl.experiments.cli import build_parser; "
+        "from dfrl.experiments.cli.cluster import run_experiment_for; "
+        "build_parser(); print('distributed' in sys.modules)"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0 and done.stdout.strip() == "False", done.stderr

@@ -5,6 +5,7 @@ control: never the driver's), be visited by later rounds with tables identical t
 and appear in ``cluster.json``; a sixth robot still fits, a seventh does not, and its join is
 refused at once with the reason while the run goes on. Slow (about a minute).
 """
+
 from __future__ import annotations
 
 import json
@@ -32,8 +33,9 @@ def test_a_robot_that_joins_a_cluster_run_is_placed_on_the_cluster(tmp_path: Pat
         (drv / name).write_text(json.dumps(planned), encoding="utf-8")
         cmd = driver_cmd(blocks, lab)
         out = drv / cmd.split("--out", 1)[1].split()[0]
-        driver = lab["head"].popen(argv_of(cmd), cwd=drv, stdout=subprocess.PIPE,
-                                   stderr=subprocess.PIPE, text=True)
+        driver = lab["head"].popen(
+            argv_of(cmd), cwd=drv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
         log = out / f"rounds_{AGENT}.log"
         deadline = time.monotonic() + 180
         while time.monotonic() < deadline and len(read_rounds_log(log, AGENT).rounds) < 1:
@@ -42,8 +44,19 @@ def test_a_robot_that_joins_a_cluster_run_is_placed_on_the_cluster(tmp_path: Pat
         phase("round 1 logged; r7 joins")
 
         def join(robot: str) -> subprocess.CompletedProcess:
-            argv = [sys.executable, "-m", "dfrl", "join", str(out), "--robot", robot,
-                    "--arena", "r2", "--iterations", "900"]
+            argv = [
+                sys.executable,
+                "-m",
+                "dfrl",
+                "join",
+                str(out),
+                "--robot",
+                robot,
+                "--arena",
+                "r2",
+                "--iterations",
+                "900",
+            ]
             return lab["head"].run(argv, cwd=drv, timeout=200, capture_output=True, text=True)
 
         joined = join("r7")
@@ -51,11 +64,12 @@ def test_a_robot_that_joins_a_cluster_run_is_placed_on_the_cluster(tmp_path: Pat
         workers = {lab[w].address for w in WORKERS}
         host = joined.stdout.split("runs at ", 1)[1].split(":", 1)[0]
         assert host in workers and host != lab["head"].address, joined.stdout
-        assert join("r8").returncode == 0       # 6 CPUs: 4 robots, r7 and r8
+        assert join("r8").returncode == 0  # 6 CPUs: 4 robots, r7 and r8
         t0 = time.monotonic()
         full = join("r9")
-        assert full.returncode != 0 and "fit only 0 more at once" in full.stderr + full.stdout, \
+        assert full.returncode != 0 and "fit only 0 more at once" in full.stderr + full.stdout, (
             full.stdout + full.stderr
+        )
         assert time.monotonic() - t0 < 60
         _, stderr = driver.communicate(timeout=400)
         phase("driver exited")

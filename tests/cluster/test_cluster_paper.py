@@ -6,6 +6,7 @@ cluster holds two runs at once, so runs must overlap in time (the control that t
 not queued one after the other), every run's robots must sit on workers' hosts (none on the
 driver's), every run must complete, and the report must be written. Slow (about 3 minutes).
 """
+
 from __future__ import annotations
 
 import json
@@ -32,10 +33,33 @@ def test_paper_spreads_its_federations_over_the_cluster(tmp_path: Path) -> None:
         driver = blocks["driver"][1].split()
         address = driver[driver.index("--cluster") + 1].replace("HEAD", lab["head"].address)
         member = drv / driver[driver.index("--cluster-tls") + 1]
-        argv = [sys.executable, "-m", "dfrl", "paper", "--out", "paper", "--n-seeds", "2",
-                "--iterations", "200", "--respite", "100", "--eval-points", "1",
-                "--eval-steps", "50", "--no-control", "--jobs", "1",
-                "--cluster", address, "--cluster-tls", str(member), "--token-file", str(token)]
+        argv = [
+            sys.executable,
+            "-m",
+            "dfrl",
+            "paper",
+            "--out",
+            "paper",
+            "--n-seeds",
+            "2",
+            "--iterations",
+            "200",
+            "--respite",
+            "100",
+            "--eval-points",
+            "1",
+            "--eval-steps",
+            "50",
+            "--no-control",
+            "--jobs",
+            "1",
+            "--cluster",
+            address,
+            "--cluster-tls",
+            str(member),
+            "--token-file",
+            str(token),
+        ]
         done = lab["head"].run(argv, cwd=drv, timeout=900, capture_output=True, text=True)
         phase("paper exited")
         detail = f"exit {done.returncode}\n{done.stderr[-4000:]}"

@@ -14,6 +14,7 @@ The control: each robot's address in ``nodes.json`` is a worker's, never the dri
 Runs in CI (as root, ``distributed`` installed by scripts/test.sh); skipped with the reason
 where namespaces cannot be made or the engine is missing.
 """
+
 from __future__ import annotations
 
 import json
@@ -28,8 +29,17 @@ import pytest
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
 from dfrl.experiments.tools.netns import Lab
 
-from .readme_cluster import WHY, WORKERS, argv_of, cluster, cluster_blocks, driver_cmd, \
-    logs_of, phase, rounds_of
+from .readme_cluster import (
+    WHY,
+    WORKERS,
+    argv_of,
+    cluster,
+    cluster_blocks,
+    driver_cmd,
+    logs_of,
+    phase,
+    rounds_of,
+)
 
 pytestmark = pytest.mark.skipif(WHY is not None, reason=WHY or "")
 
@@ -62,9 +72,10 @@ def federate(tmp_path: Path, lab: Lab, drv: Path, blocks: dict, cfg: str) -> str
     assert set(hosts) == set(robots) and set(hosts.values()) == workers, hosts
     record = json.loads((out / "cluster.json").read_text(encoding="utf-8"))
     assert record["losses"] == [], record
-    assert all(t["ended"] == "released by the driver" and t["exit"] == 0
-               for t in record["tasks"].values()), (record["tasks"], logs_of(tmp_path))
-    for r in robots:     # files came back over the platform from the workers' folders
+    assert all(
+        t["ended"] == "released by the driver" and t["exit"] == 0 for t in record["tasks"].values()
+    ), (record["tasks"], logs_of(tmp_path))
+    for r in robots:  # files came back over the platform from the workers' folders
         assert (out / f"metrics_{r}.csv").stat().st_size > 0
         assert (out / "tables" / f"{r}.npy").is_file()
         w = next(w for w in WORKERS if lab[w].address == hosts[r])
@@ -88,8 +99,7 @@ def test_24_robots_placed_on_the_cluster_federate(tmp_path: Path) -> None:
     blocks = cluster_blocks()
     planned = json.loads(blocks["config"][1])
     arenas = [r["arena"] for r in planned["robots"]]
-    planned["robots"] = [{"id": f"r{i + 1}", "arena": arenas[i % len(arenas)]}
-                         for i in range(24)]
+    planned["robots"] = [{"id": f"r{i + 1}", "arena": arenas[i % len(arenas)]} for i in range(24)]
     planned["iterations"], planned["respite"], planned["timeout_s"] = 200, 100, 600
     with cluster(tmp_path, 12) as (lab, drv, blocks):
         federate(tmp_path, lab, drv, blocks, json.dumps(planned))
@@ -99,23 +109,23 @@ def test_a_killed_cluster_worker_is_reported_like_a_lost_host(tmp_path: Path) ->
     with cluster(tmp_path, 2) as (lab, drv, blocks):
         name, cfg = blocks["config"]
         planned = {**json.loads(cfg), "iterations": 600, "rtf": 4.0, "timeout_s": 150}
-        planned["robots"] = planned["robots"][:4]       # 2 per worker: half of them lost
+        planned["robots"] = planned["robots"][:4]  # 2 per worker: half of them lost
         (drv / name).write_text(json.dumps(planned), encoding="utf-8")
         cmd = driver_cmd(blocks, lab)
         out = drv / cmd.split("--out", 1)[1].split()[0]
-        driver = lab["head"].popen(argv_of(cmd), cwd=drv, stdout=subprocess.PIPE,
-                                   stderr=subprocess.PIPE, text=True)
+        driver = lab["head"].popen(
+            argv_of(cmd), cwd=drv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
         log = out / "rounds_fed_qlearning.log"
-        deadline = time.monotonic() + 180     # placing 6 services on a loaded CI
-        while time.monotonic() < deadline and \
-                len(read_rounds_log(log, "fed_qlearning").rounds) < 1:
+        deadline = time.monotonic() + 180  # placing 6 services on a loaded CI
+        while time.monotonic() < deadline and len(read_rounds_log(log, "fed_qlearning").rounds) < 1:
             time.sleep(0.1)
         assert log.is_file(), "no round within 180 s"
         nodes = json.loads((out / "nodes.json").read_text(encoding="utf-8"))["nodes"]
         gone = sorted(n["robot"] for n in nodes if n["host"] == lab["w2"].address)
         assert len(gone) == 2, nodes
         phase(f"round 1 logged; killing w2 ({', '.join(gone)})")
-        for pid in _pids_in(lab["w2"].namespace):       # the node dies: every process on it
+        for pid in _pids_in(lab["w2"].namespace):  # the node dies: every process on it
             try:
                 os.kill(pid, signal.SIGKILL)
             except ProcessLookupError:

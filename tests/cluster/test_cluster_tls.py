@@ -6,6 +6,7 @@ A service without TLS could not answer the driver's mutual-TLS connections, so a
 shows the services used their folders. The control: a worker without the folder refuses to place its robot in a TLS run, with the
 folder named, and nothing of the run starts (exit 1). Slow (about a minute).
 """
+
 from __future__ import annotations
 
 import json
@@ -20,19 +21,28 @@ from dfrl.experiments.robot_host.cluster_task import TLS_FOLDER
 
 from .readme_cluster import WORKERS, argv_of, cluster, driver_cmd, phase, rounds_of
 
-pytestmark = [pytest.mark.slow,
-              pytest.mark.skipif(shutil.which("openssl") is None, reason="needs openssl")]
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(shutil.which("openssl") is None, reason="needs openssl"),
+]
 
 
 def _certs(lab, drv: Path, tmp: Path, workers: list[str]) -> Path:  # noqa: ANN001
     """The README's node certificates from the project CA the cluster's recipe made (``ca``):
     one folder per worker host (copied beside its token as ``dfrl-tls``) and the driver's;
     returns the driver's folder."""
+
     def dfrl(*args: str) -> None:
-        done = subprocess.run([sys.executable, "-m", "dfrl", "certs", *args], cwd=drv,
-                              capture_output=True, text=True, timeout=60)
+        done = subprocess.run(
+            [sys.executable, "-m", "dfrl", "certs", *args],
+            cwd=drv,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
         assert done.returncode == 0, done.stderr
-    assert (drv / "ca" / "ca.key").is_file()       # made by the README's cluster:certs block
+
+    assert (drv / "ca" / "ca.key").is_file()  # made by the README's cluster:certs block
     for w in workers:
         dfrl("node", lab[w].address, "ca", "--out", f"tls-{w}")
         shutil.copytree(drv / f"tls-{w}", tmp / w / TLS_FOLDER)
@@ -70,7 +80,8 @@ def test_a_worker_without_its_tls_folder_is_named(tmp_path: Path) -> None:
         shutil.rmtree(tmp_path / "w2" / TLS_FOLDER)
         done = _run(lab, drv, blocks, tls)
         assert done.returncode == 1, done.stderr[-3000:]
-        assert f"{tmp_path / 'w2' / TLS_FOLDER} is not a node TLS folder" in done.stderr, \
+        assert f"{tmp_path / 'w2' / TLS_FOLDER} is not a node TLS folder" in done.stderr, (
             done.stderr[-3000:]
+        )
         assert "Traceback" not in done.stderr
         assert not (drv / "results" / "swarm" / "rounds.csv").exists()

@@ -3,6 +3,7 @@ agent): 2 Q-learning robots and 1 dqn robot under one agent that carries Q-table
 grid. After every share the tabular robots hold the same table bit for bit, the dqn robot's grid
 view equals it within the distillation's residual, and the run is the same with the same seed.
 """
+
 from __future__ import annotations
 
 import csv
@@ -32,13 +33,25 @@ RMS_TOLERANCE = 0.05
 
 
 def _config() -> ExperimentConfig:
-    robots = (RobotSpec("r1", "r1", "qlearning"), RobotSpec("r2", "r4", "qlearning"),
-              RobotSpec("r3", "r1", "dqn"))
+    robots = (
+        RobotSpec("r1", "r1", "qlearning"),
+        RobotSpec("r2", "r4", "qlearning"),
+        RobotSpec("r3", "r1", "dqn"),
+    )
     # visit_average: the agent reads every robot's visits too (the dqn's grid view counts its
     # transitions per state and action)
-    return ExperimentConfig(name="hetero", robots=robots, iterations=300, respite=100, seed=1,
-                            mode="sync", timeout_s=120, federation="grid",
-                            method="visit_average", trainer={"dqn": _DQN})
+    return ExperimentConfig(
+        name="hetero",
+        robots=robots,
+        iterations=300,
+        respite=100,
+        seed=1,
+        mode="sync",
+        timeout_s=120,
+        federation="grid",
+        method="visit_average",
+        trainer={"dqn": _DQN},
+    )
 
 
 def _rounds(out: Path) -> list[dict[str, str]]:
@@ -77,7 +90,8 @@ def test_grid_federation_of_qlearning_and_dqn(tmp_path: Path) -> None:
     assert [s["robot"] for s in launch["itinerary"]] == ["r1", "r2", "r3"]
     rows = _rounds(out)
     assert [(r["agent"], r["round"], r["method"], r["visited"]) for r in rows] == [
-        ("fed_grid", str(k), "visit_average", "r1 r2 r3") for k in (1, 2, 3)]
+        ("fed_grid", str(k), "visit_average", "r1 r2 r3") for k in (1, 2, 3)
+    ]
     # the tabular robots hold the same table (digest and file) after every share
     assert all(r["digest_r1"] == r["digest_r2"] for r in rows)
     its = [100, 200, 300]
@@ -95,29 +109,40 @@ def test_grid_federation_of_qlearning_and_dqn(tmp_path: Path) -> None:
     assert min(others) > 4 * RMS_TOLERANCE, others
     assert len({r["digest_r1"] for r in rows}) == 3
     # the same seed gives the same run: every digest (the dqn's grid view too) and the metrics
-    assert [{k: v for k, v in r.items() if k.startswith("digest_")} for r in rows] == \
-        [{k: v for k, v in r.items() if k.startswith("digest_")} for r in _rounds(tmp_path / "b")]
+    assert [{k: v for k, v in r.items() if k.startswith("digest_")} for r in rows] == [
+        {k: v for k, v in r.items() if k.startswith("digest_")} for r in _rounds(tmp_path / "b")
+    ]
     assert (out / "metrics.csv").read_bytes() == (tmp_path / "b" / "metrics.csv").read_bytes()
-    print(f"grid federation, 3 robots x 300 iterations: {wall:.1f} s; dqn residual RMS "
-          f"{', '.join(f'{r:.4f}' for r in residuals)}")
+    print(
+        f"grid federation, 3 robots x 300 iterations: {wall:.1f} s; dqn residual RMS "
+        f"{', '.join(f'{r:.4f}' for r in residuals)}"
+    )
 
 
 def test_grid_federation_config_rules() -> None:
     # accepted: mixed learners in a grid federation, with a method that needs visits
-    robots = [{"id": "r1", "arena": "r1", "algo": "qlearning"},
-              {"id": "r2", "arena": "r4", "algo": "dqn"},
-              {"id": "r3", "arena": "r2", "algo": "linear"}]
-    cfg = ExperimentConfig.from_dict({"robots": robots, "federation": "grid",
-                                      "method": "visit_average"})
+    robots = [
+        {"id": "r1", "arena": "r1", "algo": "qlearning"},
+        {"id": "r2", "arena": "r4", "algo": "dqn"},
+        {"id": "r3", "arena": "r2", "algo": "linear"},
+    ]
+    cfg = ExperimentConfig.from_dict(
+        {"robots": robots, "federation": "grid", "method": "visit_average"}
+    )
     assert cfg.agent_groups() == [("grid", ("qlearning", "dqn", "linear"))]
     # the same robots per algorithm: visit_average is refused for the function learners
     with pytest.raises(ConfigError, match="method: visit_average does not apply to the dqn"):
         ExperimentConfig.from_dict({"robots": robots, "method": "visit_average"})
     # refused in a grid federation, each with its key: per-algorithm methods, joins, a typo
     with pytest.raises(ConfigError) as exc:
-        ExperimentConfig.from_dict({
-            "robots": robots, "federation": "grid", "methods": {"dqn": "average"},
-            "joins": [{"robot": {"id": "r9", "arena": "r1"}, "after_round": 1}]})
+        ExperimentConfig.from_dict(
+            {
+                "robots": robots,
+                "federation": "grid",
+                "methods": {"dqn": "average"},
+                "joins": [{"robot": {"id": "r9", "arena": "r1"}, "after_round": 1}],
+            }
+        )
     text = str(exc.value)
     assert "methods: a grid federation has one agent" in text
     assert "joins: a robot cannot join a grid federation" in text

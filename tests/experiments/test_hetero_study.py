@@ -1,6 +1,7 @@
 """``dfrl hetero`` on a tiny budget on pybullet: the runs, the rows, the paired comparisons and
 the files; a run is the same with the same seed, and federating changes the robots (the
 control: the same robots alone end elsewhere)."""
+
 from __future__ import annotations
 
 import json
@@ -11,8 +12,16 @@ import pytest
 from dfrl.experiments.cli import main
 from dfrl.experiments.science.studies.hetero import HeteroOptions, run, run_one
 
-TINY = HeteroOptions(seeds=(1, 2), iterations=60, respite=30, eval_at=(30, 60), eval_steps=20,
-                     episode_steps=20, jobs=1, sim="pybullet")
+TINY = HeteroOptions(
+    seeds=(1, 2),
+    iterations=60,
+    respite=30,
+    eval_at=(30, 60),
+    eval_steps=20,
+    episode_steps=20,
+    jobs=1,
+    sim="pybullet",
+)
 
 
 def test_study_on_a_tiny_budget(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -20,17 +29,22 @@ def test_study_on_a_tiny_budget(tmp_path: Path, capsys: pytest.CaptureFixture[st
     # 2 seeds x (1 + 1 + 2 + 2 robots) x 2 evaluations
     assert len(res.rows) == 2 * 6 * 2
     assert {(c["role"], c["run"], c["baseline"]) for c in res.comparisons} == {
-        ("dqn", "mixed", "dqn_alone"), ("ql", "mixed", "ql_alone"), ("ql", "ql_pair", "ql_alone")}
+        ("dqn", "mixed", "dqn_alone"),
+        ("ql", "mixed", "ql_alone"),
+        ("ql", "ql_pair", "ql_alone"),
+    }
     for c in res.comparisons:
         assert c["score"]["n"] == 2
-        assert c["score"]["mean"] == pytest.approx(c[f"score_{c['run']}"]
-                                                   - c[f"score_{c['baseline']}"])
+        assert c["score"]["mean"] == pytest.approx(
+            c[f"score_{c['run']}"] - c[f"score_{c['baseline']}"]
+        )
     assert res.residuals["shares"] == 2 * 2 and res.residuals["max"] <= 0.05
     # the same seed gives the same run (rows and final parameters)...
     again = run_one("mixed", 1, TINY)
-    order = lambda r: (r["role"], r["iteration"])                      # noqa: E731
-    assert sorted(again["rows"], key=order) == \
-        [r for r in res.rows if r["seed"] == 1 and r["run"] == "mixed"]
+    order = lambda r: (r["role"], r["iteration"])  # noqa: E731
+    assert sorted(again["rows"], key=order) == [
+        r for r in res.rows if r["seed"] == 1 and r["run"] == "mixed"
+    ]
     assert again["digests"] == res.digests["mixed/1"]
     # ...and federating changes both robots: alone, the same robots end elsewhere
     assert res.digests["mixed/1"]["dqn"] != res.digests["dqn_alone/1"]["dqn"]

@@ -1,4 +1,5 @@
 """One kill policy and one ``swipl`` lookup (experiments/processes.py), on real processes."""
+
 from __future__ import annotations
 
 import os
@@ -22,14 +23,15 @@ def _alive(pid: int) -> bool:
 
 
 def test_stop_kills_a_child_that_ignores_sigterm_and_its_grandchild() -> None:
-    proc = processes.start(["sh", "-c", "trap '' TERM; sleep 60 & echo $!; wait"],
-                           stdout=subprocess.PIPE)
+    proc = processes.start(
+        ["sh", "-c", "trap '' TERM; sleep 60 & echo $!; wait"], stdout=subprocess.PIPE
+    )
     assert proc.stdout is not None
     grandchild = int(proc.stdout.readline())
     began = time.monotonic()
     code = processes.stop(proc, grace_s=0.5)
     took = time.monotonic() - began
-    assert code == -9                      # SIGTERM was ignored, SIGKILL ended it
+    assert code == -9  # SIGTERM was ignored, SIGKILL ended it
     assert 0.4 < took < 5
     deadline = time.monotonic() + 5
     while _alive(grandchild) and time.monotonic() < deadline:
@@ -46,8 +48,9 @@ def test_stop_is_quick_for_a_child_that_obeys_sigterm() -> None:
 
 def test_wait_or_stop_tells_exit_from_kill() -> None:
     assert processes.wait_or_stop(processes.start(["true"]), timeout_s=5) is True
-    assert processes.wait_or_stop(processes.start(["sleep", "60"]), timeout_s=0.2,
-                                  grace_s=1) is False
+    assert (
+        processes.wait_or_stop(processes.start(["sleep", "60"]), timeout_s=0.2, grace_s=1) is False
+    )
 
 
 def test_one_error_when_swipl_is_missing(monkeypatch: pytest.MonkeyPatch) -> None:

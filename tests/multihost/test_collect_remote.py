@@ -6,6 +6,7 @@ columns). The control: the same run, not interrupted, on the same hosts.
 The robot hosts' folders (``tmp/h<i>/dfrl-robot``) are not the driver's (``tmp/driver``): the
 rounds logged after the kill, which the console (ended with its driver) never got, come from
 the agent lines the robot nodes kept (``agent_logs/``, issue 33)."""
+
 from __future__ import annotations
 
 import csv
@@ -35,10 +36,20 @@ CLOCK_COLUMNS = {"start", "end", "duration_ms", "wall_s", "time_s"}
 
 
 def _config(lab: Lab, name: str) -> dict:
-    return {"name": name, "iterations": 500, "respite": 100, "mode": "sync", "rtf": 8.0,
-            "seed": 7, "token": TOKEN, "timeout_s": 120,
-            "robots": [{"id": f"r{i}", "arena": a, "robot_host": f"{lab[h].address}:7001"}
-                       for i, (h, a) in enumerate(zip(HOSTS, ("r1", "r4", "r2")), 1)]}
+    return {
+        "name": name,
+        "iterations": 500,
+        "respite": 100,
+        "mode": "sync",
+        "rtf": 8.0,
+        "seed": 7,
+        "token": TOKEN,
+        "timeout_s": 120,
+        "robots": [
+            {"id": f"r{i}", "arena": a, "robot_host": f"{lab[h].address}:7001"}
+            for i, (h, a) in enumerate(zip(HOSTS, ("r1", "r4", "r2")), 1)
+        ],
+    }
 
 
 def _csv_without_clock(path: Path) -> list[dict[str, str]]:
@@ -49,8 +60,11 @@ def _csv_without_clock(path: Path) -> list[dict[str, str]]:
 def _summary_without_clock(path: Path) -> list[str]:
     """summary.md's lines without the collect section, with times and durations blanked (and
     the commit, which another checkout may have moved between the two runs)."""
-    text = re.sub(r"## Collected after the driver stopped.*?\n\n(- .*\n)*\n?", "",
-                  path.read_text(encoding="utf-8"))
+    text = re.sub(
+        r"## Collected after the driver stopped.*?\n\n(- .*\n)*\n?",
+        "",
+        path.read_text(encoding="utf-8"),
+    )
     text = re.sub(r"\d+(\.\d+)?\s*(s|ms|min)\b", "T", text)
     text = re.sub(r"commit [0-9a-f]+", "commit C", text)
     return text.splitlines()
@@ -63,26 +77,43 @@ def test_collect_from_robot_hosts_equals_an_uninterrupted_run(tmp_path: Path) ->
         drv.mkdir()
         # the control: an uninterrupted run
         (drv / "whole.json").write_text(json.dumps(_config(lab, "whole")), encoding="utf-8")
-        whole = lab["driver"].run(argv_of("dfrl run whole.json --out whole"), cwd=drv,
-                                  timeout=150, capture_output=True, text=True)
+        whole = lab["driver"].run(
+            argv_of("dfrl run whole.json --out whole"),
+            cwd=drv,
+            timeout=150,
+            capture_output=True,
+            text=True,
+        )
         assert whole.returncode == 0, whole.stderr[-3000:]
         # the same run, its driver killed with SIGKILL once 2 rounds are logged
         (drv / "cut.json").write_text(json.dumps(_config(lab, "whole")), encoding="utf-8")
         out = drv / "cut"
-        driver = lab["driver"].popen(argv_of(f"dfrl run cut.json --out {out}"), cwd=drv,
-                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                     text=True)
+        driver = lab["driver"].popen(
+            argv_of(f"dfrl run cut.json --out {out}"),
+            cwd=drv,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and driver.poll() is None and \
-                len(read_rounds_log(out / f"rounds_{AGENT}.log", AGENT).rounds) < 2:
+        while (
+            time.monotonic() < deadline
+            and driver.poll() is None
+            and len(read_rounds_log(out / f"rounds_{AGENT}.log", AGENT).rounds) < 2
+        ):
             time.sleep(0.05)
         assert driver.poll() is None, driver.communicate()[1][-3000:]
         driver.send_signal(signal.SIGKILL)
         driver.wait(timeout=10)
         assert not (out / "rounds.csv").exists()
         # collect waits for the robot hosts to end the run, then fetches their files
-        collected = lab["driver"].run(argv_of(f"dfrl collect {out} --wait 90"), cwd=drv,
-                                      timeout=150, capture_output=True, text=True)
+        collected = lab["driver"].run(
+            argv_of(f"dfrl collect {out} --wait 90"),
+            cwd=drv,
+            timeout=150,
+            capture_output=True,
+            text=True,
+        )
     detail = f"exit {collected.returncode}\n{collected.stderr[-3000:]}"
     assert collected.returncode == 0, detail
     # the console ended with its driver: the later rounds are only in the robot hosts' kept
@@ -91,9 +122,13 @@ def test_collect_from_robot_hosts_equals_an_uninterrupted_run(tmp_path: Path) ->
     console = read_rounds_log(out / f"rounds_{AGENT}.log", AGENT)
     assert len(console.rounds) < budget and console.finished is None, len(console.rounds)
     assert kept_logs(out, AGENT), sorted(p.name for p in out.iterdir())
-    assert _csv_without_clock(out / "rounds.csv") == _csv_without_clock(drv / "whole" / "rounds.csv")
-    assert _csv_without_clock(out / "metrics.csv") == \
-        _csv_without_clock(drv / "whole" / "metrics.csv")
-    assert _summary_without_clock(out / "summary.md") == \
-        _summary_without_clock(drv / "whole" / "summary.md")
+    assert _csv_without_clock(out / "rounds.csv") == _csv_without_clock(
+        drv / "whole" / "rounds.csv"
+    )
+    assert _csv_without_clock(out / "metrics.csv") == _csv_without_clock(
+        drv / "whole" / "metrics.csv"
+    )
+    assert _summary_without_clock(out / "summary.md") == _summary_without_clock(
+        drv / "whole" / "summary.md"
+    )
     assert "federation complete" in (out / "summary.md").read_text(encoding="utf-8")

@@ -3,6 +3,7 @@ robot hosts, its lines wait in the robot nodes' outboxes, the driver says it is 
 instead of calling every robot LOST, and once the cut heals the run completes (exit 0) with
 every round in ``rounds.csv``. Before, the agent waited for the console on every line and the
 driver called all robots LOST and ended early."""
+
 from __future__ import annotations
 
 import csv
@@ -30,27 +31,46 @@ CUT_S = 25.0
 def test_a_cut_driver_waits_and_the_run_completes(tmp_path: Path) -> None:
     with Lab([*HOSTS, "driver"]) as lab:
         start_readme_robots(lab, tmp_path, HOSTS, TOKEN)
-        cfg = {"name": "cut", "iterations": 800, "respite": 100, "mode": "sync", "rtf": 4.0,
-               "token": TOKEN, "timeout_s": 240, "partition_wait_s": 90,
-               "robots": [{"id": f"r{i}", "arena": a, "robot_host": f"{lab[h].address}:7001"}
-                          for i, (h, a) in enumerate(zip(HOSTS, ("r1", "r4", "r2")), 1)]}
+        cfg = {
+            "name": "cut",
+            "iterations": 800,
+            "respite": 100,
+            "mode": "sync",
+            "rtf": 4.0,
+            "token": TOKEN,
+            "timeout_s": 240,
+            "partition_wait_s": 90,
+            "robots": [
+                {"id": f"r{i}", "arena": a, "robot_host": f"{lab[h].address}:7001"}
+                for i, (h, a) in enumerate(zip(HOSTS, ("r1", "r4", "r2")), 1)
+            ],
+        }
         drv = tmp_path / "driver"
         drv.mkdir()
         (drv / "cut.json").write_text(json.dumps(cfg), encoding="utf-8")
         out = drv / "out"
         log = out / f"rounds_{AGENT}.log"
-        driver = lab["driver"].popen(argv_of(f"dfrl run cut.json --out {out}"), cwd=drv,
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        driver = lab["driver"].popen(
+            argv_of(f"dfrl run cut.json --out {out}"),
+            cwd=drv,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         deadline = time.monotonic() + 90
-        while time.monotonic() < deadline and driver.poll() is None and \
-                len(read_rounds_log(log, AGENT).rounds) < 1:
+        while (
+            time.monotonic() < deadline
+            and driver.poll() is None
+            and len(read_rounds_log(log, AGENT).rounds) < 1
+        ):
             time.sleep(0.1)
         # Execute: cut the driver's host off for CUT_S, then mend it
         lab.cut("driver")
         before = len(read_rounds_log(log, AGENT).rounds)
         time.sleep(CUT_S)
-        kept = read_rounds_log(out / "none.log", AGENT,
-                               kept=sorted((tmp_path).glob(f"h*/**/rounds_{AGENT}.log")))
+        kept = read_rounds_log(
+            out / "none.log", AGENT, kept=sorted((tmp_path).glob(f"h*/**/rounds_{AGENT}.log"))
+        )
         lab.mend("driver")
         _, stderr = driver.communicate(timeout=240)
     detail = f"exit {driver.returncode}\n{stderr[-4000:]}"
@@ -64,5 +84,4 @@ def test_a_cut_driver_waits_and_the_run_completes(tmp_path: Path) -> None:
         rows = list(csv.DictReader(fh))
     assert [int(r["round"]) for r in rows] == list(range(1, 9)), detail
     summary = (out / "summary.md").read_text(encoding="utf-8")
-    assert "federation complete" in summary and "driver partitioned from all 3" in summary, \
-        summary
+    assert "federation complete" in summary and "driver partitioned from all 3" in summary, summary

@@ -6,6 +6,7 @@ have come back to the driver over the platform.
 
 Runs in CI (as root); skipped with the reason where namespaces cannot be made.
 """
+
 from __future__ import annotations
 
 import csv
@@ -34,8 +35,7 @@ def section_blocks(text: str) -> dict[str, tuple[str, str]]:
     """``<!-- multihost:KIND [ARG] -->`` markers of the README section -> (ARG, the next fenced
     block's text)."""
     blocks = {}
-    for m in re.finditer(r"<!-- multihost:(\w+)\s*([^ ]*?)\s*-->\s*```\w*\n(.*?)```", text,
-                         re.S):
+    for m in re.finditer(r"<!-- multihost:(\w+)\s*([^ ]*?)\s*-->\s*```\w*\n(.*?)```", text, re.S):
         blocks[m.group(1)] = (m.group(2), m.group(3))
     return blocks
 
@@ -47,15 +47,17 @@ def argv_of(line: str) -> list[str]:
     return [sys.executable, "-m", "dfrl", *words[1:]]
 
 
-def drive_and_check(lab: Lab, drv: Path, config_name: str, cfg: str,
-                    driver_cmd: str) -> tuple[Path, list[str]]:
+def drive_and_check(
+    lab: Lab, drv: Path, config_name: str, cfg: str, driver_cmd: str
+) -> tuple[Path, list[str]]:
     """Write the config, run the README's driver command in the driver's namespace and check
     what every recipe promises: exit 0, every planned round visiting every robot with no skip
     and identical tables, every robot's files back over the platform. Returns the results
     folder and the robot ids."""
     (drv / config_name).write_text(cfg, encoding="utf-8")
-    done = lab["driver"].run(argv_of(driver_cmd), cwd=drv, timeout=180,
-                             capture_output=True, text=True)
+    done = lab["driver"].run(
+        argv_of(driver_cmd), cwd=drv, timeout=180, capture_output=True, text=True
+    )
     out = drv / driver_cmd.split("--out", 1)[1].split()[0]
     detail = f"exit {done.returncode}\n{done.stderr[-3000:]}"
     assert done.returncode == 0, detail
@@ -90,8 +92,9 @@ def make_token_file(lab: Lab, drv: Path, blocks: dict[str, tuple[str, str]]) -> 
     return path
 
 
-def start_readme_robots(lab: Lab, tmp: Path, hosts: tuple[str, ...] | list[str],
-                        token: int) -> None:
+def start_readme_robots(
+    lab: Lab, tmp: Path, hosts: tuple[str, ...] | list[str], token: int
+) -> None:
     """On each of ``hosts``, the README's ``dfrl robot`` command in its own folder ``tmp/<host>``
     with the README's token file (``token``), waited for until it listens."""
     from dfrl.experiments.tokens import write_secret_file
@@ -100,9 +103,14 @@ def start_readme_robots(lab: Lab, tmp: Path, hosts: tuple[str, ...] | list[str],
     for h in hosts:
         (tmp / h).mkdir()
         write_secret_file(tmp / h / "dfrl.token", [token])
-        proc = lab[h].popen(argv_of(robot_cmd.replace("HOSTn", lab[h].address)),
-                            cwd=tmp / h, stdin=subprocess.DEVNULL,
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        proc = lab[h].popen(
+            argv_of(robot_cmd.replace("HOSTn", lab[h].address)),
+            cwd=tmp / h,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            text=True,
+        )
         wait_line(proc, "dfrl robot listening on", 60)
 
 
@@ -123,8 +131,9 @@ def wait_line(proc: subprocess.Popen, pattern: str, timeout_s: float) -> str:
     t.start()
     t.join(timeout_s)
     if not found:
-        raise AssertionError(f"no {pattern!r} within {timeout_s} s (exit {proc.poll()}): "
-                             f"{''.join(seen)[-2000:]}")
+        raise AssertionError(
+            f"no {pattern!r} within {timeout_s} s (exit {proc.poll()}): {''.join(seen)[-2000:]}"
+        )
     return found[0]
 
 
@@ -144,11 +153,16 @@ def test_the_documented_lan_setup_federates_three_hosts(tmp_path: Path) -> None:
         for i, h in enumerate(ROBOT_HOSTS):
             cwd = tmp_path / h
             cwd.mkdir()
-            shutil.copy2(token_file, cwd)           # scp -p: mode 0600 kept
+            shutil.copy2(token_file, cwd)  # scp -p: mode 0600 kept
             line = robot_cmd.replace("HOSTn", lab[h].address)
-            proc = lab[h].popen(argv_of(line), cwd=cwd, stdin=subprocess.DEVNULL,
-                                stdout=subprocess.PIPE, stderr=open(cwd / "robot.err", "w"),
-                                text=True)
+            proc = lab[h].popen(
+                argv_of(line),
+                cwd=cwd,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.PIPE,
+                stderr=open(cwd / "robot.err", "w"),
+                text=True,
+            )
             said = wait_line(proc, "dfrl robot listening on", 60)
             assert f"{lab[h].address}:7001" in said, said
         cfg = config_text

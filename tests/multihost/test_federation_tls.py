@@ -8,6 +8,7 @@ a plaintext peer must be refused by a TLS robot node inside the namespaces.
 
 Runs in CI (as root); skipped with the reason where namespaces cannot be made.
 """
+
 from __future__ import annotations
 
 import json
@@ -22,8 +23,13 @@ from pathlib import Path
 import pytest
 
 from dfrl.experiments.tools.netns import REPO_ROOT, Lab, leftover_namespaces, unavailable
-from .test_federation_hosts import (argv_of, drive_and_check, make_token_file, section_blocks,
-                                    wait_line)
+from .test_federation_hosts import (
+    argv_of,
+    drive_and_check,
+    make_token_file,
+    section_blocks,
+    wait_line,
+)
 
 WHY = unavailable() or (None if shutil.which("openssl") else "the openssl command is missing")
 pytestmark = pytest.mark.skipif(WHY is not None, reason=WHY or "")
@@ -56,8 +62,9 @@ PLAINTEXT_PEER = textwrap.dedent("""
 def tls_blocks(text: str) -> dict[str, tuple[str, str]]:
     """``<!-- multihost-tls:KIND [ARG] -->`` markers -> (ARG, the next fenced block's text)."""
     blocks = {}
-    for m in re.finditer(r"<!-- multihost-tls:(\w+)\s*([^ ]*?)\s*-->\s*```\w*\n(.*?)```", text,
-                         re.S):
+    for m in re.finditer(
+        r"<!-- multihost-tls:(\w+)\s*([^ ]*?)\s*-->\s*```\w*\n(.*?)```", text, re.S
+    ):
         blocks[m.group(1)] = (m.group(2), m.group(3))
     return blocks
 
@@ -81,8 +88,9 @@ def test_the_documented_tls_lan_setup_federates_three_hosts(tmp_path: Path) -> N
             targets = [lab[h].address for h in ROBOT_HOSTS] if "HOSTn" in line else [None]
             for addr in targets:
                 cmd = line.replace("HOSTn", addr) if addr else line
-                made = lab["driver"].run(argv_of(cmd), cwd=drv, timeout=60,
-                                         capture_output=True, text=True)
+                made = lab["driver"].run(
+                    argv_of(cmd), cwd=drv, timeout=60, capture_output=True, text=True
+                )
                 assert made.returncode == 0, f"{cmd}: {made.stderr}"
         # ... and each robot host's folder copied to it
         for h in ROBOT_HOSTS:
@@ -94,15 +102,23 @@ def test_the_documented_tls_lan_setup_federates_three_hosts(tmp_path: Path) -> N
         for h in ROBOT_HOSTS:
             cwd = tmp_path / h
             line = robot_cmd.replace("HOSTn", lab[h].address)
-            proc = lab[h].popen(argv_of(line), cwd=cwd, stdin=subprocess.DEVNULL,
-                                stdout=subprocess.PIPE, stderr=open(cwd / "robot.err", "w"),
-                                text=True)
+            proc = lab[h].popen(
+                argv_of(line),
+                cwd=cwd,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.PIPE,
+                stderr=open(cwd / "robot.err", "w"),
+                text=True,
+            )
             said = wait_line(proc, "dfrl robot listening on", 60)
             assert f"{lab[h].address}:7001" in said, said
         # a plaintext peer is refused by a TLS robot node: no hello, no pong, closed
-        peer = lab["driver"].run([sys.executable, "-c", PLAINTEXT_PEER, lab["h1"].address,
-                                  "7001", str(REPO_ROOT)], timeout=30, capture_output=True,
-                                 text=True)
+        peer = lab["driver"].run(
+            [sys.executable, "-c", PLAINTEXT_PEER, lab["h1"].address, "7001", str(REPO_ROOT)],
+            timeout=30,
+            capture_output=True,
+            text=True,
+        )
         assert peer.returncode == 0, peer.stderr
         seen = json.loads(peer.stdout)
         got = bytes.fromhex(seen["hex"])

@@ -1,5 +1,6 @@
 """A robot host dies mid-run (kill -9 of its ``dfrl robot``): the agent goes on without it and
 the driver reports it -- ``skipped`` in rounds.csv, LOST in summary.md, exit status 1."""
+
 from __future__ import annotations
 
 import csv
@@ -28,25 +29,45 @@ def test_a_killed_robot_host_is_skipped_and_reported(tmp_path: Path) -> None:
         procs = {}
         for h in ("h1", "h2", "h3"):
             (tmp_path / h).mkdir()
-            write_secret_file(tmp_path / h / "dfrl.token", [TOKEN])   # the README's token file
-            procs[h] = lab[h].popen(argv_of(robot_cmd.replace("HOSTn", lab[h].address)),
-                                    cwd=tmp_path / h, stdin=subprocess.DEVNULL,
-                                    stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+            write_secret_file(tmp_path / h / "dfrl.token", [TOKEN])  # the README's token file
+            procs[h] = lab[h].popen(
+                argv_of(robot_cmd.replace("HOSTn", lab[h].address)),
+                cwd=tmp_path / h,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.DEVNULL,
+                text=True,
+            )
             wait_line(procs[h], "dfrl robot listening on", 60)
-        cfg = {"name": "fail", "iterations": 600, "respite": 100, "mode": "sync", "rtf": 4.0,
-               "token": TOKEN, "timeout_s": 120,
-               "robots": [{"id": f"r{i}", "arena": a, "robot_host": f"{lab[h].address}:7001"}
-                          for i, (h, a) in enumerate(zip(("h1", "h2", "h3"),
-                                                         ("r1", "r4", "r2")), 1)]}
+        cfg = {
+            "name": "fail",
+            "iterations": 600,
+            "respite": 100,
+            "mode": "sync",
+            "rtf": 4.0,
+            "token": TOKEN,
+            "timeout_s": 120,
+            "robots": [
+                {"id": f"r{i}", "arena": a, "robot_host": f"{lab[h].address}:7001"}
+                for i, (h, a) in enumerate(zip(("h1", "h2", "h3"), ("r1", "r4", "r2")), 1)
+            ],
+        }
         drv = tmp_path / "driver"
         drv.mkdir()
         (drv / "fail.json").write_text(json.dumps(cfg), encoding="utf-8")
         out = drv / "out"
-        driver = lab["driver"].popen(argv_of(f"dfrl run fail.json --out {out}"), cwd=drv,
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        driver = lab["driver"].popen(
+            argv_of(f"dfrl run fail.json --out {out}"),
+            cwd=drv,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and \
-                len(read_rounds_log(out / "rounds_fed_qlearning.log", "fed_qlearning").rounds) < 1:
+        while (
+            time.monotonic() < deadline
+            and len(read_rounds_log(out / "rounds_fed_qlearning.log", "fed_qlearning").rounds) < 1
+        ):
             time.sleep(0.1)
         procs["h3"].send_signal(signal.SIGKILL)
         stdout, stderr = driver.communicate(timeout=150)

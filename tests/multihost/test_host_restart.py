@@ -3,6 +3,7 @@ docs advise (issue 20): the driver sees the service back with no experiment, con
 again from its checkpoint and starts it; the agent visits its stop again; the summary says
 which rounds it missed, when it was lost and that it rejoined from its checkpoint, and the
 run is not called complete. The control is the run's own first rounds (all three visited)."""
+
 from __future__ import annotations
 
 import csv
@@ -33,9 +34,14 @@ def test_a_restarted_robot_host_rejoins_from_its_checkpoint(tmp_path: Path) -> N
         procs = {}
 
         def start(h: str) -> subprocess.Popen:
-            p = lab[h].popen(argv_of(robot_cmd.replace("HOSTn", lab[h].address)),
-                             cwd=tmp_path / h, stdin=subprocess.DEVNULL,
-                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+            p = lab[h].popen(
+                argv_of(robot_cmd.replace("HOSTn", lab[h].address)),
+                cwd=tmp_path / h,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.DEVNULL,
+                text=True,
+            )
             wait_line(p, "dfrl robot listening on", 60)
             return p
 
@@ -43,17 +49,31 @@ def test_a_restarted_robot_host_rejoins_from_its_checkpoint(tmp_path: Path) -> N
             (tmp_path / h).mkdir()
             write_secret_file(tmp_path / h / "dfrl.token", [TOKEN])
             procs[h] = start(h)
-        cfg = {"name": "restart", "iterations": 1200, "respite": 100, "mode": "sync",
-               "rtf": 4.0, "seed": 3, "token": TOKEN, "timeout_s": 150,
-               "robots": [{"id": f"r{i}", "arena": a, "robot_host": f"{lab[h].address}:7001"}
-                          for i, (h, a) in enumerate(zip(("h1", "h2", "h3"),
-                                                         ("r1", "r4", "r2")), 1)]}
+        cfg = {
+            "name": "restart",
+            "iterations": 1200,
+            "respite": 100,
+            "mode": "sync",
+            "rtf": 4.0,
+            "seed": 3,
+            "token": TOKEN,
+            "timeout_s": 150,
+            "robots": [
+                {"id": f"r{i}", "arena": a, "robot_host": f"{lab[h].address}:7001"}
+                for i, (h, a) in enumerate(zip(("h1", "h2", "h3"), ("r1", "r4", "r2")), 1)
+            ],
+        }
         drv = tmp_path / "driver"
         drv.mkdir()
         (drv / "restart.json").write_text(json.dumps(cfg), encoding="utf-8")
         out = drv / "out"
-        driver = lab["driver"].popen(argv_of(f"dfrl run restart.json --out {out}"), cwd=drv,
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        driver = lab["driver"].popen(
+            argv_of(f"dfrl run restart.json --out {out}"),
+            cwd=drv,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         log = out / f"rounds_{AGENT}.log"
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline and len(read_rounds_log(log, AGENT).rounds) < 3:
@@ -61,7 +81,7 @@ def test_a_restarted_robot_host_rejoins_from_its_checkpoint(tmp_path: Path) -> N
         procs["h3"].send_signal(signal.SIGKILL)
         procs["h3"].wait(timeout=10)
         time.sleep(2.0)
-        procs["h3"] = start("h3")            # the same command in the same folder
+        procs["h3"] = start("h3")  # the same command in the same folder
         stdout, stderr = driver.communicate(timeout=200)
     detail = f"exit {driver.returncode}\n{stderr[-3000:]}"
     with open(out / "rounds.csv", newline="", encoding="utf-8") as fh:
@@ -70,8 +90,11 @@ def test_a_restarted_robot_host_rejoins_from_its_checkpoint(tmp_path: Path) -> N
     assert all("r3" in r["visited"].split() for r in rows[:3]), rows[:3]
     missed = [int(r["round"]) for r in rows if "r3" not in r["visited"].split()]
     assert missed, detail
-    back = [int(r["round"]) for r in rows if int(r["round"]) > missed[0]
-            and "r3" in r["visited"].split()]
+    back = [
+        int(r["round"])
+        for r in rows
+        if int(r["round"]) > missed[0] and "r3" in r["visited"].split()
+    ]
     assert back, f"r3 was never visited again after round {missed[0]}\n{detail}"
     for r in rows:
         if int(r["round"]) >= back[0]:

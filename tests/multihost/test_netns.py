@@ -1,5 +1,6 @@
 """The namespace lab itself: hosts reach each other over TCP, a cut link stops that, and
 closing the lab leaves no namespace behind."""
+
 from __future__ import annotations
 
 import sys
@@ -38,8 +39,9 @@ def test_hosts_talk_and_a_cut_link_separates_them() -> None:
 
     with Lab(["a", "b"]) as lab:
         a, b = lab["a"], lab["b"]
-        server = b.popen([sys.executable, "-c", ECHO_SERVER, b.address],
-                         stdout=subprocess.PIPE, text=True)
+        server = b.popen(
+            [sys.executable, "-c", ECHO_SERVER, b.address], stdout=subprocess.PIPE, text=True
+        )
         assert server.stdout is not None and server.stdout.readline().strip() == "up"
         out = a.run([sys.executable, "-c", CLIENT, b.address], capture_output=True, text=True)
         assert out.stdout.strip() == "HELLO"
@@ -60,8 +62,7 @@ def test_private_disks_a_file_of_the_driver_is_not_on_a_robot_host(tmp_path: Pat
         drv, h1 = lab["driver"], lab["h1"]
         secret = tmp_path / "driver" / "out" / "rounds.csv"
         # Execute: the driver writes a file from inside its host
-        made = drv.run([sys.executable, "-c", WRITE, str(secret)], capture_output=True,
-                       text=True)
+        made = drv.run([sys.executable, "-c", WRITE, str(secret)], capture_output=True, text=True)
         assert made.returncode == 0, made.stderr
         # Assert: the driver reads it back; the robot host and the machine do not see it
         seen = drv.run(["cat", str(secret)], capture_output=True, text=True)

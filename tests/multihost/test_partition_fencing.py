@@ -14,6 +14,7 @@ of a ``shares_<robot>.csv``; the history checker (``dfrl check-history``) judges
 written twice in a round, no write of a superseded epoch, one table per round. Control: the
 same cut of s1 with the holder's quorum off is shown to break that (``dfrl_quorum`` false).
 """
+
 from __future__ import annotations
 
 import json
@@ -39,8 +40,8 @@ LEASE_S = 2.0
 STOPS = 5
 
 NODE = f"""
-:- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
-:- use_module({str(PLATFORM_DIR / 'dfrl_agent' / 'dfrl_agent.pl')!r}).
+:- use_module({str(PLATFORM_DIR / "tartarus.pl")!r}).
+:- use_module({str(PLATFORM_DIR / "dfrl_agent" / "dfrl_agent.pl")!r}).
 :- use_module({str(MEMORY_ROBOTS)!r}).
 main :-
     current_prolog_flag(argv, Argv),
@@ -74,8 +75,8 @@ serve_stdin :-
 """
 
 CONSOLE = f"""
-:- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
-:- use_module({str(PLATFORM_DIR / 'dfrl_agent' / 'dfrl_agent.pl')!r}).
+:- use_module({str(PLATFORM_DIR / "tartarus.pl")!r}).
+:- use_module({str(PLATFORM_DIR / "dfrl_agent" / "dfrl_agent.pl")!r}).
 main :-
     current_prolog_flag(argv, Argv),
     append(_, [Host, PlanFile], Argv), !,
@@ -100,11 +101,27 @@ class Federation:
         self.nodes: list[subprocess.Popen] = []
         for i in range(STOPS):
             host = lab[f"s{i}"]
-            p = host.popen([SWIPL, "-q", "-g", "main", str(tmp / "node.pl"), host.address,
-                            str(PORT), f"r{i}", f"{float(i)}", str(LEASE_S),
-                            str(tmp / f"shares_r{i}.csv"), "on" if quorum else "off"],
-                           stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                           stderr=open(tmp / f"s{i}.err", "w"), text=True, bufsize=1)
+            p = host.popen(
+                [
+                    SWIPL,
+                    "-q",
+                    "-g",
+                    "main",
+                    str(tmp / "node.pl"),
+                    host.address,
+                    str(PORT),
+                    f"r{i}",
+                    f"{float(i)}",
+                    str(LEASE_S),
+                    str(tmp / f"shares_r{i}.csv"),
+                    "on" if quorum else "off",
+                ],
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=open(tmp / f"s{i}.err", "w"),
+                text=True,
+                bufsize=1,
+            )
             self.nodes.append(p)
         for p in self.nodes:
             assert p.stdout is not None
@@ -114,11 +131,26 @@ class Federation:
         stops = ",".join(f"stop('{self.lab[f's{i}'].address}',{PORT},r{i})" for i in range(STOPS))
         plan = self.tmp / "plan.txt"
         kind = "" if itinerary == "chain" else ", itinerary(tree(2))"
-        plan.write_text(f"plan([{stops}], {rounds}, {rest}, {str(self.log)!r}, "
-                        f"[skip_after(1.0){kind}]).\n")
+        plan.write_text(
+            f"plan([{stops}], {rounds}, {rest}, {str(self.log)!r}, [skip_after(1.0){kind}]).\n"
+        )
         drv = self.lab["drv"]
-        done = drv.run([SWIPL, "-q", "-g", "main", "-t", "halt", str(self.tmp / "console.pl"),
-                        drv.address, str(plan)], timeout=60, capture_output=True, text=True)
+        done = drv.run(
+            [
+                SWIPL,
+                "-q",
+                "-g",
+                "main",
+                "-t",
+                "halt",
+                str(self.tmp / "console.pl"),
+                drv.address,
+                str(plan),
+            ],
+            timeout=60,
+            capture_output=True,
+            text=True,
+        )
         assert "LAUNCHED" in done.stdout, done.stdout + done.stderr
 
     def events(self, kind: str | None = None) -> list[dict]:
@@ -133,8 +165,10 @@ class Federation:
             if cond():
                 return
             time.sleep(0.05)
-        raise AssertionError(f"timed out waiting for {what}; log:\n"
-                             + "\n".join(json.dumps(e) for e in self.events()))
+        raise AssertionError(
+            f"timed out waiting for {what}; log:\n"
+            + "\n".join(json.dumps(e) for e in self.events())
+        )
 
     def agents(self, i: int) -> str:
         """What stop i lists (``AGENTS [Name-Status, ...]``)."""
@@ -152,12 +186,14 @@ class Federation:
         return p.stdout.readline().strip()
 
     def stderr(self) -> str:
-        return "\n".join(f"--- s{i}\n" + (self.tmp / f"s{i}.err").read_text()[-3000:]
-                         for i in range(STOPS))
+        return "\n".join(
+            f"--- s{i}\n" + (self.tmp / f"s{i}.err").read_text()[-3000:] for i in range(STOPS)
+        )
 
 
-def _tour_with_a_cut(lab: Lab, tmp: Path, host: str, itinerary: str = "chain",
-                     quorum: bool = True) -> Federation:
+def _tour_with_a_cut(
+    lab: Lab, tmp: Path, host: str, itinerary: str = "chain", quorum: bool = True
+) -> Federation:
     """Launch a 16-round tour, cut ``host`` for four leases after round 4, wait for the end."""
     fed = Federation(lab, tmp, quorum)
     fed.launch(rounds=16, rest=0.6, itinerary=itinerary)
@@ -191,7 +227,7 @@ ITINERARIES = ["chain", "tree"]
 def test_cut_holder_does_not_resurrect(tmp_path: Path, itinerary: str) -> None:
     with Lab([*(f"s{i}" for i in range(STOPS)), "drv"]) as lab:
         fed = _tour_with_a_cut(lab, tmp_path, "s1", itinerary)
-        time.sleep(LEASE_S)              # a late copy would show itself now
+        time.sleep(LEASE_S)  # a late copy would show itself now
         assert fed.events("resurrected") == [], fed.events("resurrected")
         _judge(fed)
         rounds = fed.events("round")

@@ -1,4 +1,4 @@
-""""Is this address me?" asks no other host (issue 20).
+""" "Is this address me?" asks no other host (issue 20).
 
 A mover asks it twice a hop. It used to connect to the address to read the id in its hello
 once the last hello seen there was a minute old; a stop cut off for longer then cost each try
@@ -6,6 +6,7 @@ up to two connect timeouts beyond the skip time (rounds of 19 s in `dfrl bench f
 cut_90s). Only an address of this host can reach a node of this process, and the kernel says
 which those are when a socket binds, so a remote address is now answered without a packet.
 """
+
 from __future__ import annotations
 
 import subprocess
@@ -21,8 +22,10 @@ from dfrl.experiments.processes import find_swipl
 
 WHY = unavailable()
 SWIPL = find_swipl()
-pytestmark = [pytest.mark.skipif(WHY is not None, reason=WHY or ""),
-              pytest.mark.skipif(SWIPL is None, reason="swipl not installed")]
+pytestmark = [
+    pytest.mark.skipif(WHY is not None, reason=WHY or ""),
+    pytest.mark.skipif(SWIPL is None, reason="swipl not installed"),
+]
 
 #: Counts the connections it accepts on port 7001, one line each.
 COUNTER = """
@@ -36,7 +39,7 @@ for _ in range(20):
 #: A node bound to 0.0.0.0:7001; `self(Host).` prints SELF true|false and the time taken,
 #: `touch(Host).` makes one plain TCP connection to Host:7001 (the counter's control).
 NODE = f"""
-:- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
+:- use_module({str(PLATFORM_DIR / "tartarus.pl")!r}).
 :- use_module(library(socket)).
 main :-
     node_start('0.0.0.0':7001, N, [token(7), default(true), insecure(true)]),
@@ -88,15 +91,23 @@ def _self(node: Node, host: str) -> tuple[bool, float]:
 def test_a_remote_address_is_not_self_without_a_connection(tmp_path) -> None:
     with Lab(["a", "b"]) as lab:
         a, b = lab["a"], lab["b"]
-        counter = b.popen([sys.executable, "-c", COUNTER, b.address],
-                          stdout=subprocess.PIPE, text=True)
+        counter = b.popen(
+            [sys.executable, "-c", COUNTER, b.address], stdout=subprocess.PIPE, text=True
+        )
         assert counter.stdout is not None and counter.stdout.readline().strip() == "up"
         accepted: list[str] = []
         threading.Thread(target=lambda: accepted.extend(counter.stdout), daemon=True).start()
         script = tmp_path / "node.pl"
         script.write_text(NODE)
-        node = Node(a.popen([SWIPL, "-q", "-g", "main", str(script)], stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True))
+        node = Node(
+            a.popen(
+                [SWIPL, "-q", "-g", "main", str(script)],
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.DEVNULL,
+                text=True,
+            )
+        )
         # Execute / Assert: b's address is not the node, and b saw no connection for it.
         is_self, ms = _self(node, b.address)
         assert not is_self

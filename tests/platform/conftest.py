@@ -1,4 +1,5 @@
 """Helpers for tests that run real SWI-Prolog processes on loopback."""
+
 from __future__ import annotations
 
 import queue
@@ -27,11 +28,18 @@ def free_port() -> int:
 class Proc:
     """A subprocess whose output lines are collected by a reader thread."""
 
-    def __init__(self, cmd: list[str], cwd: Path | None = None,
-                 env: dict[str, str] | None = None) -> None:
+    def __init__(
+        self, cmd: list[str], cwd: Path | None = None, env: dict[str, str] | None = None
+    ) -> None:
         self.popen = subprocess.Popen(
-            cmd, cwd=cwd, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT, text=True, bufsize=1, env=env,
+            cmd,
+            cwd=cwd,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            bufsize=1,
+            env=env,
         )
         self.lines: list[str] = []
         self._q: queue.Queue[str] = queue.Queue()
@@ -57,7 +65,9 @@ class Proc:
                 break
             if text in line:
                 return line.rstrip("\n")
-        raise AssertionError(f"no line with {text!r} in time; output so far:\n" + "\n".join(self.lines))
+        raise AssertionError(
+            f"no line with {text!r} in time; output so far:\n" + "\n".join(self.lines)
+        )
 
     def output(self) -> str:
         return "\n".join(self.lines)
@@ -75,12 +85,13 @@ def procs() -> Iterator[list[Proc]]:
     yield started
     for p in started:
         p.stop()
-    for i, p in enumerate(started):      # shown by pytest only when the test failed
+    for i, p in enumerate(started):  # shown by pytest only when the test failed
         print(f"--- process {i}: {' '.join(p.popen.args[:3])}\n{p.output()}")
 
 
-def start_node(procs: list[Proc], *args: str,
-               env: dict[str, str] | None = None) -> tuple[Proc, int]:
+def start_node(
+    procs: list[Proc], *args: str, env: dict[str, str] | None = None
+) -> tuple[Proc, int]:
     """Start ``node_main.pl`` with ``args`` (and environment ``env``, e.g. the node's tokens in
     ``DFRL_TOKEN``: ``dfrl.experiments.tokens.env_with_tokens``); return it and its port."""
     assert SWIPL, "swipl missing"

@@ -2,6 +2,7 @@
 
 For the hostile-input tests: the options are a Prolog option list written by the test.
 """
+
 from __future__ import annotations
 
 import os
@@ -24,8 +25,14 @@ main :-
 """
 
 
-def start(procs: list[Proc], tmp_path: Path, options: str, name: str = "node",
-          consult: tuple[Path, ...] = (), flags: tuple[str, ...] = ()) -> tuple[Proc, int]:
+def start(
+    procs: list[Proc],
+    tmp_path: Path,
+    options: str,
+    name: str = "node",
+    consult: tuple[Path, ...] = (),
+    flags: tuple[str, ...] = (),
+) -> tuple[Proc, int]:
     """Start a node with ``options`` (Prolog list text, e.g. ``"[token(9)]"``); give it and its port.
 
     ``consult``: files loaded (as ``use_module``) before the node starts; ``flags``: more
@@ -34,8 +41,11 @@ def start(procs: list[Proc], tmp_path: Path, options: str, name: str = "node",
     assert SWIPL, "swipl missing"
     script = tmp_path / f"{name}.pl"
     consults = "\n".join(f":- use_module({str(f)!r})." for f in consult)
-    script.write_text(SCRIPT.format(tartarus=str(PLATFORM_DIR / "tartarus.pl"),
-                                    options=options, consults=consults))
+    script.write_text(
+        SCRIPT.format(
+            tartarus=str(PLATFORM_DIR / "tartarus.pl"), options=options, consults=consults
+        )
+    )
     p = Proc([SWIPL, *flags, "-q", str(script)])
     procs.append(p)
     line = p.wait_for("LISTENING")

@@ -5,6 +5,7 @@ first stop, the agent migrates to the attacker with its tokens, the attacker loa
 command with them. Here the first post is refused, as are listings, migration status and
 posts to agents, unless the peer proved a token; with a proof they are served.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -19,8 +20,12 @@ TOKEN = "9"
 
 
 def _node(procs: list[Proc], tmp_path: Path) -> int:
-    _, port = hostile_node.start(procs, tmp_path, f"[token({TOKEN})]",
-                                 consult=(PLATFORM_DIR / "dfrl_agent" / "dfrl_agent.pl",))
+    _, port = hostile_node.start(
+        procs,
+        tmp_path,
+        f"[token({TOKEN})]",
+        consult=(PLATFORM_DIR / "dfrl_agent" / "dfrl_agent.pl",),
+    )
     return port
 
 
@@ -35,13 +40,13 @@ def test_hijack_chain_fails_at_its_first_step(tmp_path: Path, procs: list[Proc])
 
 def test_listing_status_and_posts_need_a_proof(tmp_path: Path, procs: list[Proc]) -> None:
     port = _node(procs, tmp_path)
-    for req in ("agents", "migration_status(m1)", "custody_agents",
-                "post(nobody, hello, x, [])"):
+    for req in ("agents", "migration_status(m1)", "custody_agents", "post(nobody, hello, x, [])"):
         assert "permission_error(request,platform," in request(port, req), req
     assert request(port, "agents", token=TOKEN).startswith("ok(")
     assert request(port, "migration_status(m1)", token=TOKEN).startswith("ok(unknown(")
-    assert "existence_error(agent,nobody)" in request(port, "post(nobody, hello, x, [])",
-                                                      token=TOKEN)
+    assert "existence_error(agent,nobody)" in request(
+        port, "post(nobody, hello, x, [])", token=TOKEN
+    )
     # ping stays public; a wrong token proves nothing
     assert request(port, "ping").startswith("ok(pong(")
     try:

@@ -7,6 +7,7 @@ then the nodes settle by themselves and a census (``custody_agents/2`` on both) 
 exactly one copy, idle, where the protocol says it belongs -- and never two live copies on the
 way.
 """
+
 from __future__ import annotations
 
 import signal
@@ -46,12 +47,14 @@ class Pair:
         self.proxy.close()
 
     def create(self, name: str = "p1") -> None:
-        assert self.console.ask({"op": "create", "port": self.a.port, "agent": name,
-                                 "kind": "parcel"})["ok"]
+        assert self.console.ask(
+            {"op": "create", "port": self.a.port, "agent": name, "kind": "parcel"}
+        )["ok"]
 
     def move(self, name: str = "p1") -> dict:
-        return self.console.ask({"op": "move", "port": self.a.port, "agent": name,
-                                 "to": self.proxy.address[1]})
+        return self.console.ask(
+            {"op": "move", "port": self.a.port, "agent": name, "to": self.proxy.address[1]}
+        )
 
     def census(self) -> dict[str, list[tuple[str, int]]]:
         """Node ("A"/"B") -> [(status, arrivals)] of the parcel; a node that does not answer
@@ -108,23 +111,23 @@ def test_destination_killed_after_staged_reply(pair: Pair) -> None:
     trigger = fault(pair, "staged", PASS, pair.b.kill)
     answer = pair.move()
     assert trigger.fired.wait(5)
-    assert answer["ok"], answer          # the source committed: B holds it (on disk)
+    assert answer["ok"], answer  # the source committed: B holds it (on disk)
     assert pair.census()["A"] == []
     pair.proxy.rule(None)
-    pair.b.start([])                     # recovers the staged parcel, asks A: committed
+    pair.b.start([])  # recovers the staged parcel, asks A: committed
     assert at_b(pair.settle(at_b))
 
 
 def test_source_killed_after_commit_decision_before_commit_frame(pair: Pair) -> None:
     pair.create()
     trigger = fault(pair, "commit", DROP, pair.a.kill)
-    assert not pair.move()["ok"]         # A died while answering
+    assert not pair.move()["ok"]  # A died while answering
     assert trigger.fired.wait(5)
-    time.sleep(2.0)                      # B's commit timeout passes, A cannot be asked
+    time.sleep(2.0)  # B's commit timeout passes, A cannot be asked
     c = pair.census()
     assert "A" not in c and [s for s, _ in c["B"]] in (["staged"], ["in_doubt"])
     pair.proxy.rule(None)
-    pair.a.start([])                     # its stored decision says committed
+    pair.a.start([])  # its stored decision says committed
     assert at_b(pair.settle(at_b))
 
 
@@ -133,14 +136,14 @@ def test_source_killed_before_its_decision(pair: Pair) -> None:
     fault(pair, "staged", PASS, pair.a.kill)
     assert not pair.move()["ok"]
     pair.proxy.rule(None)
-    pair.a.start([])                     # no record of the migration: presumed abort
+    pair.a.start([])  # no record of the migration: presumed abort
     assert at_a(pair.settle(at_a))
 
 
 def test_lost_commit(pair: Pair) -> None:
     pair.create()
     fault(pair, "commit", DROP)
-    assert pair.move()["ok"]             # decided committed; the commit frame is lost
+    assert pair.move()["ok"]  # decided committed; the commit frame is lost
     pair.proxy.rule(None)
     assert at_b(pair.settle(at_b))
 
@@ -148,19 +151,19 @@ def test_lost_commit(pair: Pair) -> None:
 def test_lost_staged_reply(pair: Pair) -> None:
     pair.create()
     fault(pair, "staged", DROP)
-    assert not pair.move()["ok"]         # no staged answer: aborted, A keeps it
+    assert not pair.move()["ok"]  # no staged answer: aborted, A keeps it
     pair.proxy.rule(None)
-    assert at_a(pair.settle(at_a))       # B asks A, learns aborted, discards
+    assert at_a(pair.settle(at_a))  # B asks A, learns aborted, discards
 
 
 def test_transfer_delayed_beyond_every_timeout(pair: Pair) -> None:
     pair.create()
-    pair.proxy.delay(2.5)                # > A's reply timeout (1.5 s) and B's commit timeout
+    pair.proxy.delay(2.5)  # > A's reply timeout (1.5 s) and B's commit timeout
     assert not pair.move()["ok"]
     pair.proxy.delay(0)
-    time.sleep(3.0)                      # the late transfer reaches B, is staged, then asked about
+    time.sleep(3.0)  # the late transfer reaches B, is staged, then asked about
     assert at_a(pair.settle(at_a))
-    assert pair.move()["ok"]             # and the parcel still moves afterwards
+    assert pair.move()["ok"]  # and the parcel still moves afterwards
     assert at_b(pair.settle(at_b))
 
 
@@ -168,7 +171,7 @@ def test_sigstopped_destination(pair: Pair) -> None:
     pair.create()
     pair.b.signal(signal.SIGSTOP)
     try:
-        assert not pair.move()["ok"]     # A times out: aborted
+        assert not pair.move()["ok"]  # A times out: aborted
     finally:
         pair.b.signal(signal.SIGCONT)
     assert at_a(pair.settle(at_a))
@@ -178,9 +181,9 @@ def test_restart_of_either_side_with_its_store(pair: Pair) -> None:
     pair.create()
     pair.a.kill()
     pair.a.start([])
-    assert at_a(pair.settle(at_a))       # the created parcel came back from A's store
+    assert at_a(pair.settle(at_a))  # the created parcel came back from A's store
     assert pair.move()["ok"]
     assert at_b(pair.settle(at_b))
     pair.b.kill()
     pair.b.start([])
-    assert at_b(pair.settle(at_b))       # the arrived parcel came back from B's store
+    assert at_b(pair.settle(at_b))  # the arrived parcel came back from B's store

@@ -6,6 +6,7 @@ real: ``kill -9`` of the node the agent runs on, ``kill -9`` of the first stop (
 its port), ``SIGSTOP`` of the agent's node for longer than the lease, then ``SIGCONT``. The round
 log (JSON lines, written by whichever process the agent is on) is the record checked.
 """
+
 from __future__ import annotations
 
 import os
@@ -30,9 +31,9 @@ TOKEN = 7
 LEASE_S = 1.0
 
 NODE = f"""
-:- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
-:- use_module({str(PLATFORM_DIR / 'dfrl_agent' / 'dfrl_agent.pl')!r}).
-:- use_module({str(HERE / 'memory_robots.pl')!r}).
+:- use_module({str(PLATFORM_DIR / "tartarus.pl")!r}).
+:- use_module({str(PLATFORM_DIR / "dfrl_agent" / "dfrl_agent.pl")!r}).
+:- use_module({str(HERE / "memory_robots.pl")!r}).
 main :-
     current_prolog_flag(argv, Argv),
     append(_, [PortA, Robot, DelayA], Argv), !,
@@ -46,8 +47,8 @@ main :-
 """
 
 CONSOLE = f"""
-:- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
-:- use_module({str(PLATFORM_DIR / 'dfrl_agent' / 'dfrl_agent.pl')!r}).
+:- use_module({str(PLATFORM_DIR / "tartarus.pl")!r}).
+:- use_module({str(PLATFORM_DIR / "dfrl_agent" / "dfrl_agent.pl")!r}).
 main :-
     current_prolog_flag(argv, Argv),
     append(_, [PlanFile], Argv), !,
@@ -71,15 +72,26 @@ class Federation(Tour):
         self.nodes: list[Proc] = [self.start(i) for i in range(len(delays))]
 
     def start(self, i: int) -> Proc:
-        return self.listening(i, lambda port: Proc([SWIPL, "-q", "-g", "main",
-                                                    str(self.tmp / "node.pl"), str(port),
-                                                    f"r{i}", str(self.delays[i])]))
+        return self.listening(
+            i,
+            lambda port: Proc(
+                [
+                    SWIPL,
+                    "-q",
+                    "-g",
+                    "main",
+                    str(self.tmp / "node.pl"),
+                    str(port),
+                    f"r{i}",
+                    str(self.delays[i]),
+                ]
+            ),
+        )
 
     def launch(self, rounds: int, rest: float, via: dict[int, int] | None = None) -> None:
         """Start agent ``fx``; ``via`` maps a stop to another port (a proxy) in the plan."""
         ports = [(via or {}).get(i, p) for i, p in enumerate(self.ports)]
-        self.launch_plan(f"plan([{self.stops_term(ports)}], {rounds}, {rest}, "
-                         f"{str(self.log)!r})")
+        self.launch_plan(f"plan([{self.stops_term(ports)}], {rounds}, {rest}, {str(self.log)!r})")
 
 
 def assert_each_round_once(fed: Federation, rounds: int) -> list[dict]:

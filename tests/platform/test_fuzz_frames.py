@@ -8,6 +8,7 @@ main, which aborts a ``swipl`` that decodes it unchecked, is refused by the chec
 The seed is printed; ``DFRL_FUZZ_SEED`` and ``DFRL_FUZZ_FRAMES`` repeat or lengthen a run
 (``dfrl bench fuzz --frames 20000`` is the long one).
 """
+
 from __future__ import annotations
 
 import os
@@ -46,8 +47,7 @@ hex_bytes([A, B|T], [X|Xs]) :- number_codes(X, [0'0, 0'x, A, B]), hex_bytes(T, X
 
 def _decode(tmp_path: Path, checked: bool) -> subprocess.CompletedProcess[str]:
     script = tmp_path / "decode.pl"
-    script.write_text(DECODE.format(check=str(PLATFORM_DIR / "fast_term_check.pl"),
-                                    hex=LETHAL))
+    script.write_text(DECODE.format(check=str(PLATFORM_DIR / "fast_term_check.pl"), hex=LETHAL))
     assert SWIPL
     argv = [SWIPL, "-q", str(script)] + (["checked"] if checked else [])
     return subprocess.run(argv, capture_output=True, text=True, timeout=60)
@@ -66,8 +66,9 @@ def test_control_lethal_body_aborts_unchecked_and_is_refused_checked(tmp_path: P
 
 def _fuzz(frames: int, native: bool) -> fuzz.FuzzResult:
     print(f"fuzz seed {SEED}, {frames} frames, native check {native}")
-    return fuzz.run(fuzz.FuzzConfig(frames=frames, seed=SEED, max_s=120.0,
-                                    native_check=native, max_crashes=1))
+    return fuzz.run(
+        fuzz.FuzzConfig(frames=frames, seed=SEED, max_s=120.0, native_check=native, max_crashes=1)
+    )
 
 
 @pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
@@ -83,6 +84,12 @@ def test_fuzzed_frames_leave_the_node_alive(native: bool) -> None:
     # ... and the frames reached every layer: refused by the check, by the size and length
     # checks, as truncated, for their depth, and decoded and answered by the node
     kinds = set(r.replies)
-    for expected in ("wire_error:syntax", "wire_error:protocol", "wire_error:truncated",
-                     "wire_error:too_deep", "wire_error:too_large", "error:domain_error"):
+    for expected in (
+        "wire_error:syntax",
+        "wire_error:protocol",
+        "wire_error:truncated",
+        "wire_error:too_deep",
+        "wire_error:too_large",
+        "error:domain_error",
+    ):
         assert expected in kinds, (expected, r.replies)

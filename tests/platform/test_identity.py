@@ -4,6 +4,7 @@ Address text cannot tell: a node bound to 0.0.0.0 is reached by every name of it
 hosts may use one port number. Here two processes bind the same port on 127.0.0.1 and 127.0.0.2,
 and a node bound to 0.0.0.0 is reached through another loopback address and through a proxy.
 """
+
 from __future__ import annotations
 
 import socket
@@ -24,7 +25,9 @@ pytestmark = pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
 TARTARUS = repr(str(PLATFORM_DIR / "tartarus.pl"))
 
 
-def _node(procs: list[Proc], tmp_path: Path, name: str, host: str, port: int = 0) -> tuple[Proc, int]:
+def _node(
+    procs: list[Proc], tmp_path: Path, name: str, host: str, port: int = 0
+) -> tuple[Proc, int]:
     """A node process on host:port (token 7) that answers commands on stdin.
 
     `self(Host, Port).` prints SELF true|false (node_is_self of its node); `move(Name, Host,
@@ -92,8 +95,12 @@ def test_wildcard_node_knows_itself_by_any_address(tmp_path: Path, procs: list[P
     with FaultProxy(("127.0.0.1", port)) as proxy:
         # Execute / Assert: itself through 127.0.0.1, its host name, 127.0.0.2 and the proxy
         # (the last two by the id in the hello); not any other node.
-        for host, p in [("127.0.0.1", port), (socket.gethostname(), port),
-                        ("127.0.0.2", port), ("127.0.0.1", proxy.address[1])]:
+        for host, p in [
+            ("127.0.0.1", port),
+            (socket.gethostname(), port),
+            ("127.0.0.2", port),
+            ("127.0.0.1", proxy.address[1]),
+        ]:
             assert _ask(node, f"self('{host}', {p})", "SELF") == "SELF true", (host, p)
         other, other_port = _node(procs, tmp_path, "o", "127.0.0.1")
         assert _ask(node, f"self('127.0.0.1', {other_port})", "SELF") == "SELF false"
@@ -127,8 +134,9 @@ def _hello(port: int) -> str:
 
 
 def test_node_command_advertises(procs: list[Proc]) -> None:
-    proc, port = start_node(procs, "--host", "0.0.0.0", "--advertise", "robot-3.lab:7300",
-                             "--insecure")
+    proc, port = start_node(
+        procs, "--host", "0.0.0.0", "--advertise", "robot-3.lab:7300", "--insecure"
+    )
     assert "listening on robot-3.lab:7300" in proc.output()
     assert "node('robot-3.lab',7300," in _hello(_bound_port(proc))
 

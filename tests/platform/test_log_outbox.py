@@ -9,6 +9,7 @@ waited for the console's reply, up to the stops' reply timeout), the lines are i
 kept logs, and after ``SIGCONT`` every one reaches the console's file, each once as read
 (:func:`read_rounds_log` drops a line posted twice).
 """
+
 from __future__ import annotations
 
 import os
@@ -29,14 +30,16 @@ pytestmark = pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
 
 ROUNDS = 10
 REST_S = 0.3
-REPLY_S = 4.0            # the stops' reply timeout: what one line cost before, per line
+REPLY_S = 4.0  # the stops' reply timeout: what one line cost before, per line
 FROZEN_S = 5.0
 
 #: the stop of test_resting_holder, keeping its lines in KEEP/<robot>
-KEEPING = NODE.replace("node_start(localhost:Port, _,", "node_start(localhost:Port, Node,") \
-    .replace('    format("LISTENING', "    getenv('KEEP', Keep), directory_file_path(Keep, Robot, "
-             "Dir),\n    log_outbox:outbox_configure(Node, [keep_dir(Dir)]),\n"
-             '    format("LISTENING')
+KEEPING = NODE.replace("node_start(localhost:Port, _,", "node_start(localhost:Port, Node,").replace(
+    '    format("LISTENING',
+    "    getenv('KEEP', Keep), directory_file_path(Keep, Robot, "
+    "Dir),\n    log_outbox:outbox_configure(Node, [keep_dir(Dir)]),\n"
+    '    format("LISTENING',
+)
 
 
 class KeepingStops(Tour):
@@ -46,9 +49,27 @@ class KeepingStops(Tour):
         super().__init__(tmp_path, procs, n, TOKEN)
         (tmp_path / "node.pl").write_text(KEEPING)
         env = {**os.environ, "KEEP": str(tmp_path / "agent_logs")}
-        self.nodes = [Proc([SWIPL, "-q", "-g", "main", str(tmp_path / "node.pl"),
-                            str(self.ports[i]), f"r{i}", f"{float(i)}", "0.0", "1.5",
-                            str(REPLY_S), "new", "none"], env=env) for i in range(n)]
+        self.nodes = [
+            Proc(
+                [
+                    SWIPL,
+                    "-q",
+                    "-g",
+                    "main",
+                    str(tmp_path / "node.pl"),
+                    str(self.ports[i]),
+                    f"r{i}",
+                    f"{float(i)}",
+                    "0.0",
+                    "1.5",
+                    str(REPLY_S),
+                    "new",
+                    "none",
+                ],
+                env=env,
+            )
+            for i in range(n)
+        ]
         procs.extend(self.nodes)
         for p in self.nodes:
             p.wait_for("LISTENING")
@@ -69,10 +90,19 @@ def test_frozen_console_does_not_stop_the_rounds(tmp_path: Path, procs: list[Pro
     console = ConsoleNode(tokens=TOKEN, log_path=tmp_path / "console.err")
     try:
         host, port = console.address
-        console.launch_agent({"name": "fx", "rounds": ROUNDS, "rest_s": REST_S,
-                              "rounds_log": str(log), "log_to": [host, port],
-                              "itinerary": [{"host": "localhost", "port": p, "robot": f"r{i}"}
-                                            for i, p in enumerate(stops.ports)]})
+        console.launch_agent(
+            {
+                "name": "fx",
+                "rounds": ROUNDS,
+                "rest_s": REST_S,
+                "rounds_log": str(log),
+                "log_to": [host, port],
+                "itinerary": [
+                    {"host": "localhost", "port": p, "robot": f"r{i}"}
+                    for i, p in enumerate(stops.ports)
+                ],
+            }
+        )
         stops.log = log
         stops.wait(lambda: len(read_rounds_log(log, "fx").rounds) >= 2, 30, "round 2")
         # Execute: freeze the console; the rounds go on meanwhile
@@ -85,8 +115,11 @@ def test_frozen_console_does_not_stop_the_rounds(tmp_path: Path, procs: list[Pro
         finally:
             os.kill(console.pid, signal.SIGCONT)
         # the lines kept while frozen reach the console once it answers
-        stops.wait(lambda: read_rounds_log(log, "fx").finished is not None, 60,
-                   "the finished line in the console's file")
+        stops.wait(
+            lambda: read_rounds_log(log, "fx").finished is not None,
+            60,
+            "the finished line in the console's file",
+        )
         whole = read_rounds_log(log, "fx")
         kept = read_kept(tmp_path)
     finally:
@@ -102,4 +135,4 @@ def test_frozen_console_does_not_stop_the_rounds(tmp_path: Path, procs: list[Pro
     assert whole.duplicates == [] and whole.unreadable == []
     assert whole.rounds == kept.rounds
     raw = [line for line in log.read_text().splitlines() if line.strip()]
-    assert len(set(raw)) == len(whole.rounds) + 1       # + finished
+    assert len(set(raw)) == len(whole.rounds) + 1  # + finished

@@ -1,4 +1,5 @@
 """The platform across real SWI-Prolog processes on loopback."""
+
 from __future__ import annotations
 
 import socket
@@ -75,7 +76,7 @@ def test_three_processes_native_itinerary(tmp_path: Path, procs: list[Proc]) -> 
     ports = [start_node(procs, "--token", "77")[1] for _ in range(3)]
     # Execute: a console process creates an agent that visits all and returns home.
     prog = f"""
-    :- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
+    :- use_module({str(PLATFORM_DIR / "tartarus.pl")!r}).
     :- dynamic hop/3, seen/2, home/2.
     seen(guid, []).
     hop(guid, (_, P), main) :-
@@ -135,7 +136,7 @@ def test_bad_inputs_leave_node_serving(procs: list[Proc]) -> None:
     assert "syntax" in request(port, "foo((((")
     assert "domain_error(platform_request" in request(port, "shell('touch /tmp/dfrl_pwned')")
     post = "post(nobody, shell, x, ['touch /tmp/dfrl_pwned'])"
-    assert "permission_error(request" in request(port, post)      # posts need a token proof
+    assert "permission_error(request" in request(port, post)  # posts need a token proof
     assert "existence_error(agent" in request(port, post, token="9")
     # a half-sent frame, connection left open
     half = socket.create_connection(("127.0.0.1", port))
@@ -149,7 +150,9 @@ def test_bad_inputs_leave_node_serving(procs: list[Proc]) -> None:
         s.close()
 
 
-def test_unresponsive_destination_times_out_and_keeps_agent(tmp_path: Path, procs: list[Proc]) -> None:
+def test_unresponsive_destination_times_out_and_keeps_agent(
+    tmp_path: Path, procs: list[Proc]
+) -> None:
     # Prepare: a "destination" that accepts connections and never answers.
     silent = socket.socket()
     silent.bind(("127.0.0.1", 0))
@@ -157,7 +160,7 @@ def test_unresponsive_destination_times_out_and_keeps_agent(tmp_path: Path, proc
     silent_port = silent.getsockname()[1]
     good, good_port = start_node(procs)
     prog = f"""
-    :- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
+    :- use_module({str(PLATFORM_DIR / "tartarus.pl")!r}).
     :- dynamic h/3.
     h(guid, _, main).
     main :- node_start(localhost:0, _, [reply_timeout(1), connect_timeout(1)]),
@@ -186,7 +189,7 @@ def test_destination_killed_mid_itinerary(tmp_path: Path, procs: list[Proc]) -> 
     victim, victim_port = start_node(procs)
     victim.stop()
     prog = f"""
-    :- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
+    :- use_module({str(PLATFORM_DIR / "tartarus.pl")!r}).
     :- dynamic h/3.
     h(guid, _, main).
     main :- node_start(localhost:0, _, [connect_timeout(1)]),
@@ -204,10 +207,10 @@ def test_remote_code_loading_injects_new_agent(tmp_path: Path, procs: list[Proc]
     program = tmp_path / "newagent.pl"
     program.write_text(
         ":- dynamic greeter/3.\n"
-        "greeter(guid, (_, P), main) :- format(\"GREETER ~w at ~w~n\", [guid, P]), flush_output.\n"
+        'greeter(guid, (_, P), main) :- format("GREETER ~w at ~w~n", [guid, P]), flush_output.\n'
     )
     prog = f"""
-    :- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
+    :- use_module({str(PLATFORM_DIR / "tartarus.pl")!r}).
     main :- node_start(localhost:0, _, [token(5)]),
             load_program_at(localhost:{port}, {str(program)!r}, []),
             catch(load_program_at(localhost:{port}, {str(program)!r}, [tokens([6])]), E, true),

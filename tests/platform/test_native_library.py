@@ -2,6 +2,7 @@
 wheel meets them: a copy of platform_pl/ holding the C sources only, real swipl and swipl-ld
 processes, a cache folder made here.
 """
+
 from __future__ import annotations
 
 import os
@@ -15,12 +16,17 @@ from dfrl.platform_pl import PLATFORM_DIR
 
 from .conftest import SWIPL
 
-pytestmark = pytest.mark.skipif(SWIPL is None or shutil.which("swipl-ld") is None,
-                                reason="swipl or swipl-ld missing")
+pytestmark = pytest.mark.skipif(
+    SWIPL is None or shutil.which("swipl-ld") is None, reason="swipl or swipl-ld missing"
+)
 
 #: Each foreign library and the predicate saying whether it is loaded.
-LIBRARIES = {"float_vectors": "float_vectors_native", "bulk_write": "bulk_write_native",
-             "fast_term_check": "fast_term_check_native", "tls": "tls_direct_native"}
+LIBRARIES = {
+    "float_vectors": "float_vectors_native",
+    "bulk_write": "bulk_write_native",
+    "fast_term_check": "fast_term_check_native",
+    "tls": "tls_direct_native",
+}
 
 
 def _sources_only(tmp: Path) -> Path:
@@ -33,13 +39,15 @@ def _load_all(platform: Path, cache: Path, path: str | None = None) -> subproces
     goal = ", ".join(
         [f"use_module('{platform / m}')" for m in LIBRARIES]
         + [f"{p}(B{i}), writeln({p}=B{i})" for i, p in enumerate(LIBRARIES.values())]
-        + ["halt"])
+        + ["halt"]
+    )
     env = {**os.environ, "DFRL_NATIVE_CACHE": str(cache)}
     if path is not None:
         env["PATH"] = path
     assert SWIPL
-    return subprocess.run([SWIPL, "-q", "-g", goal], capture_output=True, text=True,
-                          timeout=120, env=env)
+    return subprocess.run(
+        [SWIPL, "-q", "-g", goal], capture_output=True, text=True, timeout=120, env=env
+    )
 
 
 def test_sources_only_are_built_once_into_the_cache(tmp_path: Path) -> None:
@@ -79,7 +87,8 @@ def test_without_a_compiler_the_platform_says_so_and_runs_its_prolog(tmp_path: P
 
 
 def test_a_source_that_does_not_compile_is_reported_with_the_compiler_output(
-        tmp_path: Path) -> None:
+    tmp_path: Path,
+) -> None:
     platform, cache = _sources_only(tmp_path), tmp_path / "cache"
     (platform / "native" / "bulk_write.c").write_text("int broken(\n")
     run = _load_all(platform, cache)

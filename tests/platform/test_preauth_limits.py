@@ -8,6 +8,7 @@ parsed (quoted text aside), memory given back after large rejected frames and by
 that ran out of C stack, at most two large pre-auth frames parsed at once (auth and ping
 never wait), binary frames bounded by the frame size limit.
 """
+
 from __future__ import annotations
 
 import socket
@@ -17,14 +18,22 @@ from pathlib import Path
 
 from . import hostile_node
 from .conftest import Proc
-from .wire_client import (connect, connect_auth, connect_nonce, frame, open_proof, read_frame,
-                          token_proof)
+from .wire_client import (
+    connect,
+    connect_auth,
+    connect_nonce,
+    frame,
+    open_proof,
+    read_frame,
+    token_proof,
+)
 
 TOKEN = "9"
 
 
-def _node(procs: list[Proc], tmp_path: Path, extra: str = "",
-          name: str = "node") -> tuple[Proc, int]:
+def _node(
+    procs: list[Proc], tmp_path: Path, extra: str = "", name: str = "node"
+) -> tuple[Proc, int]:
     return hostile_node.start(procs, tmp_path, f"[token({TOKEN}){extra}]", name=name)
 
 
@@ -76,11 +85,13 @@ def test_trickled_frame_hits_the_whole_frame_deadline(tmp_path: Path, procs: lis
     s.close()
 
 
-def test_unauthenticated_flood_never_displaces_authenticated(tmp_path: Path,
-                                                            procs: list[Proc]) -> None:
+def test_unauthenticated_flood_never_displaces_authenticated(
+    tmp_path: Path, procs: list[Proc]
+) -> None:
     # Prepare: 16 connections at most, 8 unauthenticated, 4 per peer address.
-    _, port = _node(procs, tmp_path,
-                    ", max_connections(16), max_unauth_connections(8), max_unauth_per_peer(4)")
+    _, port = _node(
+        procs, tmp_path, ", max_connections(16), max_unauth_connections(8), max_unauth_per_peer(4)"
+    )
     held = connect_auth(port, TOKEN)
     # Execute: 40 idle unauthenticated connections from one address, 10 each from two others
     idle = [connect(port) for _ in range(40)]
@@ -126,14 +137,15 @@ def test_operator_chain_costs_linear_time(tmp_path: Path, procs: list[Proc]) -> 
     # Assert: refused for its depth, answered by name, refused for its size; seconds, not hours
     assert before_auth is not None and "too_deep(64)" in before_auth[1], before_auth
     assert wide_before_auth is not None and "too_deep(64)" in wide_before_auth[1]
-    assert after_auth is not None and "domain_error(platform_request,/(+,2))" in after_auth[1], after_auth
+    assert after_auth is not None and "domain_error(platform_request,/(+,2))" in after_auth[1], (
+        after_auth
+    )
     assert oversized is not None and "too_large(200004,4096)" in oversized[1], oversized
     assert cpu < 5.0, cpu
 
 
 def _nested(shape: str, depth: int) -> bytes:
-    opening, closing = {"list": (b"[", b"]"), "call": (b"f(", b")"),
-                        "brace": (b"{", b"}")}[shape]
+    opening, closing = {"list": (b"[", b"]"), "call": (b"f(", b")"), "brace": (b"{", b"}")}[shape]
     return opening * depth + b"a" + closing * depth + b" .\n"
 
 
@@ -177,12 +189,12 @@ def test_deep_nesting_is_refused_before_it_is_parsed(tmp_path: Path, procs: list
     assert rss1 - rss0 < 30, (rss0, rss1)
 
 
-def test_quoted_brackets_and_codes_do_not_count_as_nesting(tmp_path: Path,
-                                                          procs: list[Proc]) -> None:
+def test_quoted_brackets_and_codes_do_not_count_as_nesting(
+    tmp_path: Path, procs: list[Proc]
+) -> None:
     _, port = _node(procs, tmp_path)
     # a request f(Atom, Codes, String): 1000 brackets quoted, 0'( 0'[ 0''' codes, a comment
-    text = (b"f('" + b"[" * 1000 + b"', [0'(, 0'[, 0'''], \"" + b"{" * 500
-            + b"\") /* ((( */ .\n")
+    text = b"f('" + b"[" * 1000 + b"', [0'(, 0'[, 0'''], \"" + b"{" * 500 + b'") /* ((( */ .\n'
     with connect(port) as s:
         s.sendall(frame(text))
         reply = read_frame(s)
@@ -195,14 +207,18 @@ def test_quoted_brackets_and_codes_do_not_count_as_nesting(tmp_path: Path,
         assert reply is not None and "too_deep(64)" in reply[1], (body[:20], reply)
 
 
-def test_worker_that_ran_out_of_c_stack_gives_its_memory_back(tmp_path: Path,
-                                                             procs: list[Proc]) -> None:
+def test_worker_that_ran_out_of_c_stack_gives_its_memory_back(
+    tmp_path: Path, procs: list[Proc]
+) -> None:
     # Prepare: limits that let 40,000 levels reach read_term/3, which runs out of C stack;
     # the C stack pages a thread touched stay resident until the thread exits.
     # (frame_deadline 60: the 16 frames share two parse slots, and on a loaded machine the
     # last ones waited past the default 5 s and were answered "deadline", not parsed)
-    node, port = _node(procs, tmp_path, ", max_text_frame_size(200000), "
-                       "max_term_depth(1000000), frame_deadline(60)")
+    node, port = _node(
+        procs,
+        tmp_path,
+        ", max_text_frame_size(200000), max_term_depth(1000000), frame_deadline(60)",
+    )
     pid = node.popen.pid
     time.sleep(0.3)
     rss0 = hostile_node.rss_mb(pid)
@@ -216,20 +232,25 @@ def test_worker_that_ran_out_of_c_stack_gives_its_memory_back(tmp_path: Path,
         time.sleep(0.25)
         rss1 = hostile_node.rss_mb(pid)
     # Assert: each one a C-stack syntax error; its worker exited, so the memory is back
-    assert len(replies) == 16 and all("c_stack" in r for r in replies), \
-        [r for r in replies if "c_stack" not in r] or replies
+    assert len(replies) == 16 and all("c_stack" in r for r in replies), [
+        r for r in replies if "c_stack" not in r
+    ] or replies
     assert rss1 - rss0 < 40, (rss0, rss1)
 
 
-def test_preauth_parsing_waits_for_a_slot_auth_and_ping_do_not(tmp_path: Path,
-                                                               procs: list[Proc]) -> None:
+def test_preauth_parsing_waits_for_a_slot_auth_and_ping_do_not(
+    tmp_path: Path, procs: list[Proc]
+) -> None:
     # Prepare: both parse slots of the process taken (as by two frames being parsed)
     held = tmp_path / "hold_slots.pl"
-    held.write_text(":- module(hold_slots, []).\n"
-                    ":- initialization(( node_connection:preauth_parse_slots(Q),\n"
-                    "     thread_get_message(Q, slot), thread_get_message(Q, slot) )).\n")
-    _, port = hostile_node.start(procs, tmp_path, f"[token({TOKEN}), frame_deadline(1)]",
-                                 consult=(held,))
+    held.write_text(
+        ":- module(hold_slots, []).\n"
+        ":- initialization(( node_connection:preauth_parse_slots(Q),\n"
+        "     thread_get_message(Q, slot), thread_get_message(Q, slot) )).\n"
+    )
+    _, port = hostile_node.start(
+        procs, tmp_path, f"[token({TOKEN}), frame_deadline(1)]", consult=(held,)
+    )
     # Execute / Assert: a 2 KB unauthenticated frame waits for a slot until its deadline ...
     t0 = time.monotonic()
     with connect(port) as s:
@@ -303,8 +324,9 @@ def test_binary_frames_bounded_by_the_frame_size(tmp_path: Path, procs: list[Pro
         assert reply is not None and "binary_not_allowed" in reply[1], reply
 
 
-def test_pipelined_frames_before_authentication_are_refused(tmp_path: Path,
-                                                            procs: list[Proc]) -> None:
+def test_pipelined_frames_before_authentication_are_refused(
+    tmp_path: Path, procs: list[Proc]
+) -> None:
     _, port = _node(procs, tmp_path)
     with connect(port) as s:
         s.sendall(frame(b"ping .\n") + frame(b"ping .\n"))

@@ -7,6 +7,7 @@ answer and arriving agents were never started. These tests shorten every idle ti
 ``dfrl_pool_idle`` and the node's ``idle_timeout``), keep the node quiet past them, then send it
 connections and agents.
 """
+
 from __future__ import annotations
 
 import threading
@@ -37,7 +38,11 @@ def _swipl(procs: list[Proc], tmp_path: Path, name: str, program: str) -> Proc:
 
 
 def _quiet_node(procs: list[Proc], tmp_path: Path) -> tuple[Proc, int]:
-    node = _swipl(procs, tmp_path, "quiet_node", f"""
+    node = _swipl(
+        procs,
+        tmp_path,
+        "quiet_node",
+        f"""
     :- use_module({TARTARUS}).
     main :-
         set_prolog_flag(dfrl_pool_idle, {POOL_IDLE_S}),
@@ -45,7 +50,8 @@ def _quiet_node(procs: list[Proc], tmp_path: Path) -> tuple[Proc, int]:
         node_property(N, address(_:P)),
         format("LISTENING ~w~n", [P]), flush_output,
         thread_get_message(_).
-    """)
+    """,
+    )
     return node, int(node.wait_for("LISTENING").split()[1])
 
 
@@ -91,7 +97,11 @@ def test_connections_answered_after_quiet(tmp_path: Path, procs: list[Proc]) -> 
 def test_agents_start_after_quiet(tmp_path: Path, procs: list[Proc]) -> None:
     # Prepare: the quiet node, and a sender that moves one agent to it per line it reads.
     node, port = _quiet_node(procs, tmp_path)
-    sender = _swipl(procs, tmp_path, "sender", f"""
+    sender = _swipl(
+        procs,
+        tmp_path,
+        "sender",
+        f"""
     :- use_module({TARTARUS}).
     :- dynamic visitor/3.
     visitor(guid, (_, Port), main) :-          % runs at the quiet node (weak migration)
@@ -107,7 +117,8 @@ def test_agents_start_after_quiet(tmp_path: Path, procs: list[Proc]) -> None:
             format("SENT ~w~n", [Name]), flush_output,
             I =:= 3, !,
         thread_get_message(_).
-    """)
+    """,
+    )
     sender.wait_for("READY")
     # Execute and assert: each agent, sent after a quiet period, starts at the node.
     for i in (1, 2, 3):

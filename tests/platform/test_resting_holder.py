@@ -9,6 +9,7 @@ The control runs the same fault with the flag ``dfrl_resting_holder`` false on e
 heartbeat, no adopted holder: the behaviour before), where an agent at its first stop after the
 launch has no holder and dies with it.
 """
+
 from __future__ import annotations
 
 import signal
@@ -28,12 +29,12 @@ pytestmark = pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
 
 HERE = Path(__file__).parent
 TOKEN = 7
-SLACK_S = 1.5            # scheduling on a shared 2-core machine, a probe, the round's own time
+SLACK_S = 1.5  # scheduling on a shared 2-core machine, a probe, the round's own time
 
 NODE = f"""
-:- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
-:- use_module({str(PLATFORM_DIR / 'dfrl_agent' / 'dfrl_agent.pl')!r}).
-:- use_module({str(HERE / 'memory_robots.pl')!r}).
+:- use_module({str(PLATFORM_DIR / "tartarus.pl")!r}).
+:- use_module({str(PLATFORM_DIR / "dfrl_agent" / "dfrl_agent.pl")!r}).
+:- use_module({str(HERE / "memory_robots.pl")!r}).
 main :-
     current_prolog_flag(argv, Argv),
     append(_, [PortA, Robot, V0A, DelayA, LeaseA, ReplyA, Legacy, Store], Argv), !,
@@ -75,8 +76,8 @@ serve_stdin(Robot) :-
 """
 
 CONSOLE = f"""
-:- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
-:- use_module({str(PLATFORM_DIR / 'dfrl_agent' / 'dfrl_agent.pl')!r}).
+:- use_module({str(PLATFORM_DIR / "tartarus.pl")!r}).
+:- use_module({str(PLATFORM_DIR / "dfrl_agent" / "dfrl_agent.pl")!r}).
 main :-
     current_prolog_flag(argv, Argv),
     append(_, [PlanFile], Argv), !,
@@ -104,23 +105,44 @@ class Stops(Tour):
         Every stop keeps its custody in a store (``store(Dir)``), kept across a restart.
     """
 
-    def __init__(self, tmp_path: Path, procs: list[Proc], delays: list[float], *,
-                 lease_s: float = 1.5, reply_s: float = 8.0, legacy: bool = False,
-                 store: bool = False) -> None:
+    def __init__(
+        self,
+        tmp_path: Path,
+        procs: list[Proc],
+        delays: list[float],
+        *,
+        lease_s: float = 1.5,
+        reply_s: float = 8.0,
+        legacy: bool = False,
+        store: bool = False,
+    ) -> None:
         super().__init__(tmp_path, procs, len(delays), TOKEN)
         self.store = store
         (tmp_path / "node.pl").write_text(NODE)
         (tmp_path / "console.pl").write_text(CONSOLE)
         self.delays, self.lease_s, self.reply_s, self.legacy = delays, lease_s, reply_s, legacy
-        self.nodes: list[Proc] = [self.spawn(i) for i in range(len(delays))]   # in parallel
+        self.nodes: list[Proc] = [self.spawn(i) for i in range(len(delays))]  # in parallel
         for p in self.nodes:
             p.wait_for("LISTENING")
 
     def spawn(self, i: int) -> Proc:
-        p = Proc([SWIPL, "-q", "-g", "main", str(self.tmp / "node.pl"),
-                  str(self.ports[i]), f"r{i}", f"{float(i)}", str(self.delays[i]),
-                  str(self.lease_s), str(self.reply_s), "legacy" if self.legacy else "new",
-                  str(self.tmp / f"store{i}") if self.store else "none"])
+        p = Proc(
+            [
+                SWIPL,
+                "-q",
+                "-g",
+                "main",
+                str(self.tmp / "node.pl"),
+                str(self.ports[i]),
+                f"r{i}",
+                f"{float(i)}",
+                str(self.delays[i]),
+                str(self.lease_s),
+                str(self.reply_s),
+                "legacy" if self.legacy else "new",
+                str(self.tmp / f"store{i}") if self.store else "none",
+            ]
+        )
         self.procs.append(p)
         return p
 
@@ -130,8 +152,9 @@ class Stops(Tour):
         return p
 
     def launch(self, rounds: int, rest: float, options: str = "[]") -> None:
-        self.launch_plan(f"plan([{self.stops_term()}], {rounds}, {rest}, {str(self.log)!r}, "
-                         f"{options})")
+        self.launch_plan(
+            f"plan([{self.stops_term()}], {rounds}, {rest}, {str(self.log)!r}, {options})"
+        )
 
     def table(self, i: int) -> list[float]:
         """Robot r_i's table, asked from its process."""
@@ -205,13 +228,14 @@ def test_first_stop_killed_in_round_one_control(tmp_path: Path, procs: list[Proc
     stops.wait(lambda: stops.has_agent(0, "running"), 15, "the agent running on r0")
     time.sleep(0.3)
     stops.kill(0)
-    time.sleep(lease + SLACK_S + 1.0)       # longer than the resurrection takes above
+    time.sleep(lease + SLACK_S + 1.0)  # longer than the resurrection takes above
     assert stops.events("resurrected") == [] and stops.events("round") == []
     assert not any(stops.has_agent(i) for i in (1, 2, 3))
 
 
-@pytest.mark.parametrize("restart", [pytest.param(False, marks=pytest.mark.slow), True],
-                         ids=["no-restart", "restart"])
+@pytest.mark.parametrize(
+    "restart", [pytest.param(False, marks=pytest.mark.slow), True], ids=["no-restart", "restart"]
+)
 def test_resting_host_killed(tmp_path: Path, procs: list[Proc], restart: bool) -> None:
     # Prepare: five stops; the agent rests 0.8 s at its first stop between rounds.
     lease = 1.5
@@ -230,8 +254,11 @@ def test_resting_host_killed(tmp_path: Path, procs: list[Proc], restart: bool) -
     assert (res["round"], res["epoch"], res["from"]) == (2, 2, stops.address(1)), res
     rounds = rounds_once(stops, 3)
     stall = rounds[1]["start"] - killed
-    report(f"resting-host kill ({'restart' if restart else 'no restart'}): "
-           "next round start after kill (s)", stall)
+    report(
+        f"resting-host kill ({'restart' if restart else 'no restart'}): "
+        "next round start after kill (s)",
+        stall,
+    )
     assert stall < lease + SLACK_S, stall
     assert rounds[1]["skipped"] and rounds[1]["skipped"][0]["robot"] == "r0"
     assert all(r["epoch"] == 2 for r in rounds[1:])
@@ -284,13 +311,18 @@ def test_hold_request_checks_what_it_stores(tmp_path: Path, procs: list[Proc]) -
     resume = "resume(_{acc:none,index:0},0,round_done(0,false))"
 
     def hold(handler_body: str, resume_term: str = resume) -> str:
-        record = (f"agent(fx,dfrl_tour,mobile,[],[],[dfrl_custody_of/2],"
-                  f"[{custody},(dfrl_tour(_,_,_):-{handler_body})],[])")
-        return request(stops.ports[0], f"dfrl_custody(hold(fx,1,1,'localhost:1','localhost:2',"
-                                       f"{record},{resume_term}))", token=str(TOKEN))
+        record = (
+            f"agent(fx,dfrl_tour,mobile,[],[],[dfrl_custody_of/2],"
+            f"[{custody},(dfrl_tour(_,_,_):-{handler_body})],[])"
+        )
+        return request(
+            stops.ports[0],
+            f"dfrl_custody(hold(fx,1,1,'localhost:1','localhost:2',{record},{resume_term}))",
+            token=str(TOKEN),
+        )
 
     unsafe = hold("shell(ls)")
     assert "refused(" in unsafe and "shell" in unsafe, unsafe
-    packed = hold("true", "resume(_{acc:packed(\"x\"),index:0},0,round_done(0,false))")
+    packed = hold("true", 'resume(_{acc:packed("x"),index:0},0,round_done(0,false))')
     assert "refused(hold)" in packed, packed
-    assert "ok(held)" in hold("true")        # control: a well-formed, safe record is held
+    assert "ok(held)" in hold("true")  # control: a well-formed, safe record is held

@@ -5,6 +5,7 @@ the node through (i) an arriving agent, (ii) a post and (iii) load_program_text.
 Each is refused, the sender sees why, nothing runs, the refused agent is still
 at its source (idle, or running as before) and the node still serves.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -22,7 +23,7 @@ def attacker(procs: list[Proc], tmp_path: Path, body: str, port: int) -> Proc:
     """A console process with its own node and the victim's token."""
     pwned = tmp_path / "pwned"
     prog = f"""
-    :- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
+    :- use_module({str(PLATFORM_DIR / "tartarus.pl")!r}).
     :- dynamic evil/3, opener/3, stopper/3, good/3, mover/3, sink/4.
     evil(guid, _, main) :- shell('touch {pwned}').
     opener(guid, _, main) :- open({str(pwned)!r}, write, S), close(S).
@@ -52,7 +53,10 @@ def attacker(procs: list[Proc], tmp_path: Path, body: str, port: int) -> Proc:
 
 def test_arriving_agents_refused_and_kept_at_home(tmp_path: Path, procs: list[Proc]) -> None:
     node, port = start_node(procs, "--token", "5")
-    a = attacker(procs, tmp_path, f"""
+    a = attacker(
+        procs,
+        tmp_path,
+        f"""
         forall(member(H, [evil, opener, stopper]),
                ( atom_concat(H, '_1', N),
                  create_mobile_agent(N, H, [5]),
@@ -66,7 +70,9 @@ def test_arriving_agents_refused_and_kept_at_home(tmp_path: Path, procs: list[Pr
         sleep(1), list_agents(L2), format("AFTER ~w~n", [L2]),
         create_mobile_agent(g1, good, [5]),
         report(move_agent(g1, (localhost, {port}))),
-    """, port)
+    """,
+        port,
+    )
     a.wait_for("DONE")
     out = a.output()
     results = [line for line in out.splitlines() if line.startswith("RESULT")]
@@ -78,15 +84,18 @@ def test_arriving_agents_refused_and_kept_at_home(tmp_path: Path, procs: list[Pr
     for name in ("evil_1", "opener_1", "stopper_1"):
         assert f"STATUS {name} idle" in out
     assert "MOVER" in out and "Refused mobile code" in a.wait_for("MOVER")
-    assert "m1" in a.wait_for("AFTER")                   # the running agent stayed
-    node.wait_for("GOOD at")                             # the node still serves
+    assert "m1" in a.wait_for("AFTER")  # the running agent stayed
+    node.wait_for("GOOD at")  # the node still serves
     assert not (tmp_path / "pwned").exists()
 
 
 def test_posts_and_programs_refused(tmp_path: Path, procs: list[Proc]) -> None:
     node, port = start_node(procs, "--token", "5")
     pwned = tmp_path / "pwned"
-    a = attacker(procs, tmp_path, f"""
+    a = attacker(
+        procs,
+        tmp_path,
+        f"""
         report(agent_post(localhost:{port}, platform, shell, x, ['touch {pwned}'])),
         report(agent_post(localhost:{port}, platform, halt, x, [])),
         report(load_program_text(localhost:{port}, evil,
@@ -98,7 +107,9 @@ def test_posts_and_programs_refused(tmp_path: Path, procs: list[Proc]) -> None:
                ":- dynamic greet/3.\\ngreet(guid, (_, P), main) :- format(\\"GREET ~w~n\\", [P]), flush_output.", [])),
         create_mobile_agent(g2, good, [5]),
         report(move_agent(g2, (localhost, {port}))),
-    """, port)
+    """,
+        port,
+    )
     a.wait_for("DONE")
     out = a.output()
     results = [line for line in out.splitlines() if line.startswith("RESULT")]

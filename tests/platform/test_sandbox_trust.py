@@ -2,6 +2,7 @@
 of a TLS peer whose certificate names one of them; any other peer's code goes through the
 sandbox. Real processes, real mutual TLS handshakes.
 """
+
 from __future__ import annotations
 
 import shutil
@@ -15,14 +16,16 @@ from dfrl.platform_pl import PLATFORM_DIR
 from . import hostile_node
 from .conftest import SWIPL, Proc
 
-pytestmark = [pytest.mark.skipif(shutil.which("openssl") is None, reason="openssl missing"),
-              pytest.mark.skipif(SWIPL is None, reason="swipl not installed")]
+pytestmark = [
+    pytest.mark.skipif(shutil.which("openssl") is None, reason="openssl missing"),
+    pytest.mark.skipif(SWIPL is None, reason="swipl not installed"),
+]
 
 
 def sender(procs: list[Proc], tmp_path: Path, tls: Path, port: int, name: str) -> Proc:
     """A TLS console that moves an agent whose code the sandbox refuses (a qualified assert)."""
     prog = f"""
-    :- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
+    :- use_module({str(PLATFORM_DIR / "tartarus.pl")!r}).
     :- dynamic marker/3.
     marker(guid, _, main) :- assertz(user:marked(guid)), format("MARKED ~w~n", [guid]), flush_output.
     main :- node_start(localhost:0, _, [token(9), tls({str(tls)!r})]),
@@ -42,7 +45,8 @@ def test_trusted_peer_code_installed_unchecked(tmp_path: Path, procs: list[Proc]
     init_ca(tmp_path / "ca")
     dirs = {n: make_node(n, tmp_path / "ca").directory for n in ("victim", "alpha", "beta")}
     node, port = hostile_node.start(
-        procs, tmp_path, f"[token(9), tls({str(dirs['victim'])!r}), trusted_peers([alpha])]")
+        procs, tmp_path, f"[token(9), tls({str(dirs['victim'])!r}), trusted_peers([alpha])]"
+    )
     # Execute
     alpha = sender(procs, tmp_path, dirs["alpha"], port, "from_alpha")
     beta = sender(procs, tmp_path, dirs["beta"], port, "from_beta")

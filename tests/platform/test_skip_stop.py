@@ -9,6 +9,7 @@ Control (the behaviour before): a skip time above the nodes' reply timeout gives
 before (one reply timeout); the flag ``dfrl_replace_stale`` false on the healed stop keeps the
 stale copy, and a later round is refused there with "No permission to create agent".
 """
+
 from __future__ import annotations
 
 import os
@@ -23,15 +24,23 @@ from .test_resting_holder import SLACK_S, Stops, report, rounds_once
 
 pytestmark = pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
 
-REPLY_S = 4.0            # the stops' reply timeout: what a frozen stop cost before
+REPLY_S = 4.0  # the stops' reply timeout: what a frozen stop cost before
 
 
-def freeze_second_round(stops: Stops, skip_after: float, hold_s: float, *, rest: float = 0.6,
-                        rounds: int = 4, retries: int = 2) -> tuple[float, float]:
+def freeze_second_round(
+    stops: Stops,
+    skip_after: float,
+    hold_s: float,
+    *,
+    rest: float = 0.6,
+    rounds: int = 4,
+    retries: int = 2,
+) -> tuple[float, float]:
     """Launch, freeze r2 right after round 1 until round 2 is logged and at least ``hold_s``,
     thaw it; return (frozen, thawed)."""
-    stops.launch(rounds=rounds, rest=rest,
-                 options=f"[skip_after({skip_after}), retries({retries})]")
+    stops.launch(
+        rounds=rounds, rest=rest, options=f"[skip_after({skip_after}), retries({retries})]"
+    )
     stops.wait(lambda: stops.events("round"), 20, "round 1")
     pid = stops.nodes[2].popen.pid
     frozen = time.time()
@@ -48,8 +57,7 @@ def skip_of(r: dict, robot: str) -> dict | None:
     return next((s for s in r["skipped"] if s["robot"] == robot), None)
 
 
-def test_frozen_stop_skipped_in_bound_then_visited_again(tmp_path: Path,
-                                                         procs: list[Proc]) -> None:
+def test_frozen_stop_skipped_in_bound_then_visited_again(tmp_path: Path, procs: list[Proc]) -> None:
     # Prepare: four stops, skip time 1.5 s (well under the nodes' 4 s reply timeout).
     skip = 1.5
     stops = Stops(tmp_path, procs, [0.0] * 4, reply_s=REPLY_S)
@@ -92,7 +100,10 @@ def test_frozen_stop_control_before(tmp_path: Path, procs: list[Proc]) -> None:
     assert skip_of(r2, "r2") is not None, r2
     report("control (before): round with the frozen stop took (s)", r2["end"] - r2["start"])
     assert r2["end"] - r2["start"] >= REPLY_S - 0.5, r2
-    refused = [r for r in rounds[2:] if (s := skip_of(r, "r2")) is not None
-               and "No permission to create agent" in s["reason"]]
+    refused = [
+        r
+        for r in rounds[2:]
+        if (s := skip_of(r, "r2")) is not None and "No permission to create agent" in s["reason"]
+    ]
     assert refused, rounds
     report("control (before): later rounds refused by the stale copy", len(refused))

@@ -7,6 +7,7 @@ give up with ``time_limit_exceeded`` in about 2 s. The control, the transport's 
 (``call_with_time_limit/2`` around ``tcp_connect/3``), must still be blocked after 8 s: the
 alarm cannot interrupt the connect without signals. Before the cut both connect.
 """
+
 from __future__ import annotations
 
 import re
@@ -39,8 +40,18 @@ main :- current_prolog_flag(argv, [H, Which|_]), G =.. [Which, H:{PORT}],
 def connect(lab: Lab, script: Path, which: str, timeout: float) -> tuple[str, float] | None:
     """(outcome, seconds) of one connect from ``a`` to ``b``; None if still blocked after
     ``timeout`` seconds."""
-    argv = [find_swipl(), "-q", "--no-signals", "-g", "main", "-t", "halt", str(script),
-            lab["b"].address, which]
+    argv = [
+        find_swipl(),
+        "-q",
+        "--no-signals",
+        "-g",
+        "main",
+        "-t",
+        "halt",
+        str(script),
+        lab["b"].address,
+        which,
+    ]
     try:
         done = lab["a"].run(argv, capture_output=True, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
@@ -54,10 +65,15 @@ def test_a_cut_host_costs_the_connect_its_time_limit_only(tmp_path: Path) -> Non
     script = tmp_path / "connect.pl"
     script.write_text(SCRIPT, encoding="utf-8")
     with Lab(["a", "b"]) as lab:
-        lab["b"].popen([sys.executable, "-c",
-                        "import socket, time; s = socket.socket(); "
-                        f"s.bind(('0.0.0.0', {PORT})); s.listen(50); time.sleep(120)"])
-        deadline = time.monotonic() + 10            # until b's listener is up
+        lab["b"].popen(
+            [
+                sys.executable,
+                "-c",
+                "import socket, time; s = socket.socket(); "
+                f"s.bind(('0.0.0.0', {PORT})); s.listen(50); time.sleep(120)",
+            ]
+        )
+        deadline = time.monotonic() + 10  # until b's listener is up
         got = connect(lab, script, "timed", 10)
         while (got is None or got[0] != "ok") and time.monotonic() < deadline:
             time.sleep(0.2)
@@ -68,4 +84,4 @@ def test_a_cut_host_costs_the_connect_its_time_limit_only(tmp_path: Path) -> Non
         timed = connect(lab, script, "timed", 15)
         assert timed is not None and timed[0] == "time_limit_exceeded", timed
         assert 1.9 <= timed[1] < 4.0, timed
-        assert connect(lab, script, "alarm", 8) is None     # control: blocked past its limit
+        assert connect(lab, script, "alarm", 8) is None  # control: blocked past its limit

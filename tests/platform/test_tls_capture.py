@@ -3,6 +3,7 @@ Q-value. A recording proxy sits between node A and node B (two real TLS nodes); 
 carrying a payload of known floats moves A -> B through it, after A's hello proof of the
 token. The control: the same run without TLS, whose capture must show the Q-values.
 """
+
 from __future__ import annotations
 
 import shutil
@@ -17,8 +18,9 @@ from dfrl.platform_pl import PLATFORM_DIR
 
 from .conftest import SWIPL, Proc
 
-pytestmark = pytest.mark.skipif(shutil.which("openssl") is None or SWIPL is None,
-                                reason="openssl or swipl missing")
+pytestmark = pytest.mark.skipif(
+    shutil.which("openssl") is None or SWIPL is None, reason="openssl or swipl missing"
+)
 
 TOKEN = "tok_capture_5be1c0ffee"
 Q_VALUES = [1234.5678901 + i for i in range(50)]
@@ -52,9 +54,15 @@ def _capture(tmp_path: Path, tls: tuple[Path, Path] | None) -> bytes:
     tls_a = f", tls({str(tls[0])!r})" if tls else ""
     tls_b = f", tls({str(tls[1])!r})" if tls else ""
     script = tmp_path / ("tls.pl" if tls else "plain.pl")
-    script.write_text(SCRIPT.format(tartarus=str(PLATFORM_DIR / "tartarus.pl"), token=TOKEN,
-                                    qvalues="[" + ", ".join(repr(v) for v in Q_VALUES) + "]",
-                                    tls_a=tls_a, tls_b=tls_b))
+    script.write_text(
+        SCRIPT.format(
+            tartarus=str(PLATFORM_DIR / "tartarus.pl"),
+            token=TOKEN,
+            qvalues="[" + ", ".join(repr(v) for v in Q_VALUES) + "]",
+            tls_a=tls_a,
+            tls_b=tls_b,
+        )
+    )
     assert SWIPL
     proc = Proc([SWIPL, "-q", str(script)])
     try:
@@ -79,8 +87,11 @@ def _leaks(captured: bytes) -> list[str]:
     if TOKEN.encode() in captured:
         found.append("token")
     for v in Q_VALUES:
-        for enc, name in ((repr(v).encode(), "text"), (struct.pack("<d", v), "binary-le"),
-                          (struct.pack(">d", v), "binary-be")):
+        for enc, name in (
+            (repr(v).encode(), "text"),
+            (struct.pack("<d", v), "binary-le"),
+            (struct.pack(">d", v), "binary-be"),
+        ):
             if enc in captured:
                 found.append(f"{v} ({name})")
     for marker in (b"DFRL", b"hello(", b"auth("):
@@ -96,10 +107,11 @@ def pki(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     return make_node("a", root / "ca").directory, make_node("b", root / "ca").directory
 
 
-def test_tls_capture_reveals_no_token_and_no_q_value(tmp_path: Path,
-                                                     pki: tuple[Path, Path]) -> None:
+def test_tls_capture_reveals_no_token_and_no_q_value(
+    tmp_path: Path, pki: tuple[Path, Path]
+) -> None:
     captured = _capture(tmp_path, pki)
-    assert len(captured) > 8 * len(Q_VALUES)      # the agent did cross the proxy
+    assert len(captured) > 8 * len(Q_VALUES)  # the agent did cross the proxy
     assert _leaks(captured) == []
 
 

@@ -5,6 +5,7 @@ pre-authentication deadline; ``tls_peers(Names)`` refuses agents and code from o
 The clients are Python's ``ssl`` sockets speaking the platform's frames (as
 ``wire_client.py`` does in plaintext), so each case is one real handshake against a real node.
 """
+
 from __future__ import annotations
 
 import shutil
@@ -39,7 +40,7 @@ def pki(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 def _tls_client(node_dir: Path | None, ca: Path) -> ssl.SSLContext:
     ctx = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
-    ctx.check_hostname = False          # names are checked by allow-list, not host name
+    ctx.check_hostname = False  # names are checked by allow-list, not host name
     ctx.load_verify_locations(ca / "ca.crt")
     if node_dir is not None:
         ctx.load_cert_chain(node_dir / "node.crt", node_dir / "node.key")
@@ -74,16 +75,21 @@ def _until_closed(s: socket.socket, limit: int = 100) -> bytes:
     raise AssertionError(f"the node kept the connection open: {data!r}")
 
 
-def _tls_node(procs: list[Proc], tmp_path: Path, node_dir: Path, extra: str = "",
-              flags: tuple[str, ...] = ()) -> int:
+def _tls_node(
+    procs: list[Proc], tmp_path: Path, node_dir: Path, extra: str = "", flags: tuple[str, ...] = ()
+) -> int:
     _, port = hostile_node.start(
-        procs, tmp_path, f"[token({TOKEN}), tls({str(node_dir)!r}), frame_deadline(1){extra}]",
-        flags=flags)
+        procs,
+        tmp_path,
+        f"[token({TOKEN}), tls({str(node_dir)!r}), frame_deadline(1){extra}]",
+        flags=flags,
+    )
     return port
 
 
-def test_a_peer_with_a_certificate_of_the_ca_is_served(pki: dict[str, Path], tmp_path: Path,
-                                                      procs: list[Proc]) -> None:
+def test_a_peer_with_a_certificate_of_the_ca_is_served(
+    pki: dict[str, Path], tmp_path: Path, procs: list[Proc]
+) -> None:
     port = _tls_node(procs, tmp_path, pki["alpha"])
     s, nonce = _connect(port, _tls_client(pki["client"], pki["alpha"]))
     with s:
@@ -95,9 +101,9 @@ def test_a_peer_with_a_certificate_of_the_ca_is_served(pki: dict[str, Path], tmp
 
 
 @pytest.mark.parametrize("flags", [(), ("--no-signals",)], ids=["signals", "no-signals"])
-def test_plaintext_peer_is_refused_within_the_deadline(pki: dict[str, Path], tmp_path: Path,
-                                                       procs: list[Proc],
-                                                       flags: tuple[str, ...]) -> None:
+def test_plaintext_peer_is_refused_within_the_deadline(
+    pki: dict[str, Path], tmp_path: Path, procs: list[Proc], flags: tuple[str, ...]
+) -> None:
     # --no-signals: as a robot process's Prolog runs (pyswip), where the handshake's alarm
     # cannot interrupt a read and only the plain stream's own timeout ends it
     port = _tls_node(procs, tmp_path, pki["alpha"], flags=flags)
@@ -118,8 +124,9 @@ def test_plaintext_peer_is_refused_within_the_deadline(pki: dict[str, Path], tmp
     s2.close()
 
 
-def test_stalled_handshake_does_not_hold_a_slot(pki: dict[str, Path], tmp_path: Path,
-                                                 procs: list[Proc]) -> None:
+def test_stalled_handshake_does_not_hold_a_slot(
+    pki: dict[str, Path], tmp_path: Path, procs: list[Proc]
+) -> None:
     port = _tls_node(procs, tmp_path, pki["alpha"], ", max_connections(4)")
     # more stalled handshakes than slots, each sending one byte of a ClientHello a second
     stalled = [socket.create_connection(("127.0.0.1", port), timeout=10) for _ in range(6)]
@@ -140,8 +147,9 @@ def test_stalled_handshake_does_not_hold_a_slot(pki: dict[str, Path], tmp_path: 
 
 
 @pytest.mark.parametrize("who", ["mallory", None])
-def test_certificate_of_another_ca_or_none_is_refused(who: str | None, pki: dict[str, Path],
-                                                      tmp_path: Path, procs: list[Proc]) -> None:
+def test_certificate_of_another_ca_or_none_is_refused(
+    who: str | None, pki: dict[str, Path], tmp_path: Path, procs: list[Proc]
+) -> None:
     port = _tls_node(procs, tmp_path, pki["alpha"])
     # trust the node's CA ourselves: the refusal must come from the node
     ctx = _tls_client(pki[who] if who else None, pki["alpha"])
@@ -150,12 +158,17 @@ def test_certificate_of_another_ca_or_none_is_refused(who: str | None, pki: dict
         s.close()
 
 
-def test_tls_peers_refuses_an_unlisted_name(pki: dict[str, Path], tmp_path: Path,
-                                            procs: list[Proc]) -> None:
+def test_tls_peers_refuses_an_unlisted_name(
+    pki: dict[str, Path], tmp_path: Path, procs: list[Proc]
+) -> None:
     port = _tls_node(procs, tmp_path, pki["alpha"], ", tls_peers([beta])")
     # the sender is 'client', a name the CA signed but not listed
-    requests = ["load_code(x, \"foo.\")", "execute(nobody, main)", "commit(m1)",
-                "transfer(m1, move, s, 0, rec, 1)"]
+    requests = [
+        'load_code(x, "foo.")',
+        "execute(nobody, main)",
+        "commit(m1)",
+        "transfer(m1, move, s, 0, rec, 1)",
+    ]
     s, nonce = _connect(port, _tls_client(pki["client"], pki["alpha"]))
     with s:
         first = _request(s, nonce, requests[0])

@@ -5,6 +5,7 @@ destination node; every byte of the hand-over in both directions is kept, and
 the token string must not occur in them, while the agent's payload does (the
 capture did see the record).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -18,7 +19,7 @@ from .conftest import SWIPL, Proc, start_node
 
 pytestmark = pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
 
-TOKEN = "dfrl_" + "5e" * 32          # a strong token: no loopback warning, easy to find
+TOKEN = "dfrl_" + "5e" * 32  # a strong token: no loopback warning, easy to find
 
 
 def test_migration_sends_no_token(tmp_path: Path, procs: list[Proc]) -> None:
@@ -27,7 +28,7 @@ def test_migration_sends_no_token(tmp_path: Path, procs: list[Proc]) -> None:
     with FaultProxy(("127.0.0.1", port), record=True) as proxy:
         pport = proxy.address[1]
         prog = f"""
-        :- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
+        :- use_module({str(PLATFORM_DIR / "tartarus.pl")!r}).
         :- dynamic courier/3, parcel/2.
         parcel(guid, payload_marker_0451).
         courier(guid, (_, P), main) :- parcel(guid, X),

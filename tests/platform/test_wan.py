@@ -7,6 +7,7 @@ after 10 s of silence, so every hop after a long rest paid for a new connection;
 connection to a peer that was never visited again stayed open for ever (CLOSE_WAIT). Here a
 Python proxy delays every chunk by 50 ms each way between two node processes.
 """
+
 from __future__ import annotations
 
 import os
@@ -36,10 +37,15 @@ def _swipl(procs: list[Proc], tmp_path: Path, name: str, program: str) -> Proc:
     return proc
 
 
-def _destination(procs: list[Proc], tmp_path: Path, options: str = "", nodes: int = 1,
-                 name: str = "dest") -> tuple[Proc, list[int]]:
+def _destination(
+    procs: list[Proc], tmp_path: Path, options: str = "", nodes: int = 1, name: str = "dest"
+) -> tuple[Proc, list[int]]:
     """A process with ``nodes`` nodes (token 7); returns it and their ports."""
-    proc = _swipl(procs, tmp_path, name, f"""
+    proc = _swipl(
+        procs,
+        tmp_path,
+        name,
+        f"""
     :- use_module({TARTARUS}).
     main :-
         forall(between(1, {nodes}, _),
@@ -48,7 +54,8 @@ def _destination(procs: list[Proc], tmp_path: Path, options: str = "", nodes: in
                  format("LISTENING ~w~n", [P]) )),
         flush_output,
         thread_get_message(_).
-    """)
+    """,
+    )
     proc.wait_for("LISTENING")
     deadline = time.monotonic() + 20
     while time.monotonic() < deadline:
@@ -65,7 +72,11 @@ def _source(procs: list[Proc], tmp_path: Path, flags: str = "") -> Proc:
     The agent prints ``ARRIVED Name Time`` where it arrives; the source prints ``SENT Name
     Time`` just before the move and ``MOVED Name`` or ``FAILED Name`` after it.
     """
-    proc = _swipl(procs, tmp_path, "source", f"""
+    proc = _swipl(
+        procs,
+        tmp_path,
+        "source",
+        f"""
     :- use_module({TARTARUS}).
     :- dynamic hop/3.
     hop(guid, _, main) :-
@@ -93,7 +104,8 @@ def _source(procs: list[Proc], tmp_path: Path, flags: str = "") -> Proc:
             flush_output,
             fail
         ).
-    """)
+    """,
+    )
     proc.wait_for("READY")
     return proc
 
@@ -109,8 +121,9 @@ def _move(source: Proc, dest: Proc, name: str, port: int) -> float:
     return arrived - sent
 
 
-def test_pooled_hop_after_long_rest_costs_one_and_a_half_rtt(tmp_path: Path,
-                                                            procs: list[Proc]) -> None:
+def test_pooled_hop_after_long_rest_costs_one_and_a_half_rtt(
+    tmp_path: Path, procs: list[Proc]
+) -> None:
     # Prepare: source -> proxy (50 ms each way) -> destination, default timeouts.
     dest, [port] = _destination(procs, tmp_path)
     with FaultProxy(("127.0.0.1", port), delay_s=ONE_WAY_S) as proxy:
@@ -120,8 +133,10 @@ def test_pooled_hop_after_long_rest_costs_one_and_a_half_rtt(tmp_path: Path,
         first = _move(source, dest, "a1", proxy.address[1])
         time.sleep(12.0)
         pooled = _move(source, dest, "a2", proxy.address[1])
-        print(f"\nhop over 50 ms one-way: new connection {first * 1000:.0f} ms, "
-              f"pooled after 12 s rest {pooled * 1000:.0f} ms (RTT {RTT_S * 1000:.0f} ms)")
+        print(
+            f"\nhop over 50 ms one-way: new connection {first * 1000:.0f} ms, "
+            f"pooled after 12 s rest {pooled * 1000:.0f} ms (RTT {RTT_S * 1000:.0f} ms)"
+        )
         # Assert: one connection served both moves; the pooled one costs 1.5 RTT where a new
         # connection costs 2.5 or more: under 2 RTT, and at least half an RTT less than the new
         # one (a busy machine adds to both; 1.5 RTT + 30 ms failed at 180 ms once, load 6).

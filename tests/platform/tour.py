@@ -1,6 +1,7 @@
 """What the fault tests of the dFRL agent share (test_dfrl_faults.py, test_resting_holder.py,
 test_skip_stop.py): stop processes on fixed loopback ports, a console process that launches
 agent ``fx`` from a plan file, and the round log (JSON lines) they read."""
+
 from __future__ import annotations
 
 import json
@@ -33,8 +34,11 @@ class Tour:
                 p.wait_for("LISTENING")
                 return p
             except AssertionError:
-                if self.launched or attempt == tries - 1 \
-                        or "Address already in use" not in p.output():
+                if (
+                    self.launched
+                    or attempt == tries - 1
+                    or "Address already in use" not in p.output()
+                ):
                     raise
                 self.ports[i] = free_port()
         raise AssertionError("unreachable")
@@ -67,8 +71,9 @@ class Tour:
     def has_agent(self, i: int, status: str = "") -> bool:
         """Node i lists agent fx (with ``status``, e.g. ``running``, if given)."""
         try:
-            return f"agent(fx,dfrl_tour,mobile,{status}" in request(self.ports[i], "agents",
-                                                                     token=str(self.token))
+            return f"agent(fx,dfrl_tour,mobile,{status}" in request(
+                self.ports[i], "agents", token=str(self.token)
+            )
         except (OSError, AssertionError):
             return False
 
@@ -79,8 +84,10 @@ class Tour:
             if cond():
                 return
             time.sleep(0.02)
-        raise AssertionError(f"timed out waiting for {what}; log:\n" + "\n".join(
-            json.dumps(e) for e in self.events()))
+        raise AssertionError(
+            f"timed out waiting for {what}; log:\n"
+            + "\n".join(json.dumps(e) for e in self.events())
+        )
 
     def address(self, i: int) -> str:
         return f"localhost:{self.ports[i]}"

@@ -1,4 +1,5 @@
 """A minimal client of the platform's text frames, for tests from Python."""
+
 from __future__ import annotations
 
 import hashlib
@@ -64,8 +65,9 @@ def connect(port: int, timeout: float = 5.0, source: str | None = None) -> socke
     return s
 
 
-def connect_nonce(port: int, timeout: float = 5.0,
-                  source: str | None = None) -> tuple[socket.socket, str]:
+def connect_nonce(
+    port: int, timeout: float = 5.0, source: str | None = None
+) -> tuple[socket.socket, str]:
     """Connect, read the hello; give the socket and the hello's nonce."""
     src = (source, 0) if source else None
     s = socket.create_connection(("127.0.0.1", port), timeout=timeout, source_address=src)
@@ -89,8 +91,9 @@ def authenticate(s: socket.socket, nonce: str, key_text: str) -> str:
     return verdict[1]
 
 
-def connect_auth(port: int, key_text: str, timeout: float = 5.0,
-                 source: str | None = None) -> socket.socket:
+def connect_auth(
+    port: int, key_text: str, timeout: float = 5.0, source: str | None = None
+) -> socket.socket:
     """A connection on which the token ``key_text`` was proved."""
     s, nonce = connect_nonce(port, timeout, source)
     verdict = authenticate(s, nonce, key_text)
@@ -103,7 +106,7 @@ def request(port: int, text: str, token: str | None = None) -> str:
 
     With ``token`` (a token's canonical text) the request is sent after a proof of it.
     """
-    with (connect_auth(port, token) if token is not None else connect(port)) as s:
+    with connect_auth(port, token) if token is not None else connect(port) as s:
         s.sendall(frame(f"{text} .\n".encode()))
         reply = read_frame(s)
         assert reply is not None

@@ -1,4 +1,5 @@
 """Helpers shared by the bridge tests (imported by conftest.py and the test modules)."""
+
 from __future__ import annotations
 
 import time

@@ -1,5 +1,6 @@
 """Fixtures for the bridge tests: one embedded SWI-Prolog per pytest process (pyswip can
 be initialised only once), a fresh Bridge per test."""
+
 from __future__ import annotations
 
 from collections.abc import Iterator
@@ -19,5 +20,3 @@ def node() -> Iterator[Any]:
         yield n
     finally:
         n.close()
-
-

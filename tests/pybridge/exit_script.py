@@ -3,6 +3,7 @@
 usage: exit_script.py MODE   (MODE: atexit | close | serving | raise)
 Prints "READY" once the agents run; the exit code and stderr tell whether shutdown was clean.
 """
+
 from __future__ import annotations
 
 import sys
@@ -18,13 +19,20 @@ def main(mode: str) -> int:
     node.call("use_module", Atom(str(HELPER)))
     robot = ArrayRobot(2000, 10)
     node.register_robot("r1", robot)
-    loop = Term("forall", Term("between", 1, 1000000, Var()),
-                Term(",", Term("get_qtable", Atom("r1"), Var("T")), Term("set_qtable", Atom("r1"), Var("T"))))
+    loop = Term(
+        "forall",
+        Term("between", 1, 1000000, Var()),
+        Term(
+            ",", Term("get_qtable", Atom("r1"), Var("T")), Term("set_qtable", Atom("r1"), Var("T"))
+        ),
+    )
     for i in range(3):
         node.call("spawn", Atom(f"busy_{i}"), loop, module="bridge_test_agents")
     spin = Term("forall", Term("between", 1, 100000000, Var()), Atom("true"))
     node.call("spawn", Atom("spinner"), spin, module="bridge_test_agents")
-    node.call("spawn", Atom("sleeper"), Term("thread_get_message", Var()), module="bridge_test_agents")
+    node.call(
+        "spawn", Atom("sleeper"), Term("thread_get_message", Var()), module="bridge_test_agents"
+    )
     deadline = time.monotonic() + 0.5
     served = 0
     while time.monotonic() < deadline:

@@ -6,6 +6,7 @@ two function learners (:class:`StaticParams`, different seeds and samples) regis
 bridge. The real dFRL agent (``carries(params)``, ``average``) makes two rounds, hopping
 between the nodes; this main thread serves the bridge like a control loop. Prints JSON.
 """
+
 from __future__ import annotations
 
 import faulthandler
@@ -46,22 +47,35 @@ def main() -> int:
     node.call("use_module", Atom(str(AGENT)))
     nodes = [node.start("127.0.0.1", 0, idle_timeout=1, token="test") for _ in range(3)]
     home, n1, n2 = nodes
-    robots = {"r1": StaticParams(LAYOUT, seed=1, samples=SAMPLES["r1"]),
-              "r2": StaticParams(LAYOUT, seed=2, samples=SAMPLES["r2"])}
+    robots = {
+        "r1": StaticParams(LAYOUT, seed=1, samples=SAMPLES["r1"]),
+        "r2": StaticParams(LAYOUT, seed=2, samples=SAMPLES["r2"]),
+    }
     for rid, robot in robots.items():
         node.register_robot(rid, robot, algo="dqn")
     expected = {rid: r.params for rid, r in robots.items()}
     for _ in range(ROUNDS):
         mean = fedavg(expected["r1"], SAMPLES["r1"], expected["r2"], SAMPLES["r2"])
         expected = {rid: mean for rid in robots}
-    stops = [Term("stop", Atom(h), p, Atom(rid))
-             for (h, p), rid in ((node.address(n1), "r1"), (node.address(n2), "r2"))]
+    stops = [
+        Term("stop", Atom(h), p, Atom(rid))
+        for (h, p), rid in ((node.address(n1), "r1"), (node.address(n2), "r2"))
+    ]
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "rounds.jsonl"
         plan = Term("plan", stops, ROUNDS, 0.0, Atom(str(log)), 10)
-        node.call("dfrl_create", home, Atom("fed_dqn"), plan,
-                  [Term("method", Atom("average")), Term("carries", Atom("params")),
-                   Term("tokens", ["test"])], module="dfrl_agent")
+        node.call(
+            "dfrl_create",
+            home,
+            Atom("fed_dqn"),
+            plan,
+            [
+                Term("method", Atom("average")),
+                Term("carries", Atom("params")),
+                Term("tokens", ["test"]),
+            ],
+            module="dfrl_agent",
+        )
         first = node.address(n1)
         moved = node.call("with_node", home, Term("move_agent", Atom("fed_dqn"), first))
         out["moved"] = moved is not None

@@ -3,6 +3,7 @@
 Two platform nodes in this process; an agent created on the first moves to the second,
 reads the robot's table through the bridge and writes it back plus one. Prints JSON.
 """
+
 from __future__ import annotations
 
 import json
@@ -42,7 +43,7 @@ def main() -> int:
     robot_node = node.start("127.0.0.1", 0, idle_timeout=1, token="test")
     home_host, home_port = node.address(home)
     robot_host, robot_port = node.address(robot_node)
-    out["joined_home"] = node.join() == home   # the first node started is the default
+    out["joined_home"] = node.join() == home  # the first node started is the default
     robot = ArrayRobot(100, 4, seed=9)
     before = robot.q_table
     node.register_robot("r1", robot)
@@ -58,8 +59,11 @@ def main() -> int:
     if done:
         out["agent"] = str(done["A"])
         out["port_ok"] = done["P"] == robot_port
-        out["sum_ok"] = bool(done["S"].name == "-" and np.isclose(done["S"].args[0], before.sum())
-                             and done["S"].args[1] == Atom("none"))
+        out["sum_ok"] = bool(
+            done["S"].name == "-"
+            and np.isclose(done["S"].args[0], before.sum())
+            and done["S"].args[1] == Atom("none")
+        )
     out["table_plus_one"] = bool(np.array_equal(robot.q_table, before + 1.0))
     out["name"] = str(name)
     home_link, robot_link = (home_host, home_port), (robot_host, robot_port)
@@ -71,10 +75,13 @@ def main() -> int:
     node.add_payload("mover", [("carried", 2)])
     node.move_agent("mover", robot_link)
     done = wait_for(node, Term("agent_done", Atom("mover"), Var("P"), Var("R")))
-    out["moved_ok"] = bool(done and done["P"] == robot_port
-                           and done["R"] == Term("-", done["R"].args[0], "from python")
-                           and np.isclose(done["R"].args[0], after_first.sum())
-                           and np.array_equal(robot.q_table, after_first + 1.0))
+    out["moved_ok"] = bool(
+        done
+        and done["P"] == robot_port
+        and done["R"] == Term("-", done["R"].args[0], "from python")
+        and np.isclose(done["R"].args[0], after_first.sum())
+        and np.array_equal(robot.q_table, after_first + 1.0)
+    )
 
     # list and purge
     node.create_mobile_agent("idle", home_link, "hop", [])
@@ -99,7 +106,9 @@ def main() -> int:
     again = Bridge()
     try:
         again.load_platform()
-        out["reload"] = "ran" if again.address(again.start("127.0.0.1", 0, token="test"))[1] > 0 else "broken"
+        out["reload"] = (
+            "ran" if again.address(again.start("127.0.0.1", 0, token="test"))[1] > 0 else "broken"
+        )
     except NodeStateError:
         out["reload"] = "refused"
     finally:

@@ -1,4 +1,5 @@
 """The table codecs alone (pure numpy, no Prolog)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -52,13 +53,18 @@ def test_text_non_finite_in_prolog_syntax() -> None:
     assert back[0] == np.inf and back[1] == -np.inf and np.isnan(back[2]) and back[3] == 1.0
 
 
-@pytest.mark.parametrize("data", [
-    b"", b"r", bytes([114, 11, 6, 8, 14, 0, 0, 0, 0, 0, 0, 240, 63]),        # no trailer
-    bytes([114, 11, 6, 8, 15, 0, 0, 0, 0, 0, 0, 240, 63, 9]),                # wrong tag
-    bytes([114, 21, 12, 8, 14, 0, 0, 0, 0, 0, 0, 240, 63, 9]),               # says 2, has 1
-    bytes([114, 11, 6, 8, 14, 0, 0, 0, 0, 0, 0, 240, 63, 0, 9]),             # extra byte
-    bytes([115, 11, 6, 8, 14, 0, 0, 0, 0, 0, 0, 240, 63, 9]),                # wrong header
-])
+@pytest.mark.parametrize(
+    "data",
+    [
+        b"",
+        b"r",
+        bytes([114, 11, 6, 8, 14, 0, 0, 0, 0, 0, 0, 240, 63]),  # no trailer
+        bytes([114, 11, 6, 8, 15, 0, 0, 0, 0, 0, 0, 240, 63, 9]),  # wrong tag
+        bytes([114, 21, 12, 8, 14, 0, 0, 0, 0, 0, 0, 240, 63, 9]),  # says 2, has 1
+        bytes([114, 11, 6, 8, 14, 0, 0, 0, 0, 0, 0, 240, 63, 0, 9]),  # extra byte
+        bytes([115, 11, 6, 8, 14, 0, 0, 0, 0, 0, 0, 240, 63, 9]),  # wrong header
+    ],
+)
 def test_fts_rejects_malformed(data: bytes) -> None:
     with pytest.raises(CodecError):
         codec.decode_fts(data)

@@ -1,4 +1,5 @@
 """The Python <-> Prolog term converter and calls with bound arguments (real SWI-Prolog)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -13,16 +14,43 @@ def pl():
     return prolog()
 
 
-@pytest.mark.parametrize("value", [
-    Atom("plain"), Atom("with space"), Atom("quote'and\"dq"), Atom("héllo ∀"), Atom(""),
-    Atom("foo), halt, (bar"), Atom("[]"),
-    "a string", "", "nul\x00inside", "ünï ∀",
-    0, -1, 2**62, -(2**63), 2**63, -(2**100), 10**40,
-    0.0, -0.0, 1.5, 5e-324, 1.7976931348623157e308, float("inf"),
-    [], [1, 2, 3], [Atom("a"), "b", [1.5, []]],
-    (Atom("localhost"), 5000), (1, 2, 3),
-    Term("f", Atom("a")), Term("g", Term("h", 1, [2]), "s"), Term("-", Atom("x"), 1),
-])
+@pytest.mark.parametrize(
+    "value",
+    [
+        Atom("plain"),
+        Atom("with space"),
+        Atom("quote'and\"dq"),
+        Atom("héllo ∀"),
+        Atom(""),
+        Atom("foo), halt, (bar"),
+        Atom("[]"),
+        "a string",
+        "",
+        "nul\x00inside",
+        "ünï ∀",
+        0,
+        -1,
+        2**62,
+        -(2**63),
+        2**63,
+        -(2**100),
+        10**40,
+        0.0,
+        -0.0,
+        1.5,
+        5e-324,
+        1.7976931348623157e308,
+        float("inf"),
+        [],
+        [1, 2, 3],
+        [Atom("a"), "b", [1.5, []]],
+        (Atom("localhost"), 5000),
+        (1, 2, 3),
+        Term("f", Atom("a")),
+        Term("g", Term("h", 1, [2]), "s"),
+        Term("-", Atom("x"), 1),
+    ],
+)
 def test_round_trip_through_prolog(pl, value) -> None:
     sol = pl.call("=", Var("X"), value)
     assert sol is not None
@@ -46,8 +74,8 @@ def test_atoms_are_not_parsed(pl) -> None:
     # a value that would be code if pasted into a goal string stays one atom
     sol = pl.call("atom_length", Atom("x), halt(1"), Var("N"))
     assert sol == {"N": 10}
-    assert pl.call("atom", Atom("X")) == {}          # an atom, not a variable
-    assert pl.call("atom", "X") is None              # str is a string
+    assert pl.call("atom", Atom("X")) == {}  # an atom, not a variable
+    assert pl.call("atom", "X") is None  # str is a string
 
 
 def test_named_variables_are_shared(pl) -> None:
@@ -143,6 +171,6 @@ def test_cyclic_binding_is_a_conversion_error(pl) -> None:
 def test_deep_term_is_a_conversion_error(pl) -> None:
     step = Term(">>", [Var(), Var("A0"), Var("A")], Term("=", Var("A"), Term("f", Var("A0"))))
     with pytest.raises(TermConversionError):
-        pl.call("foldl", step, list(range(5000)), Atom("x"), Var("T"))   # f(f(...f(x)...))
+        pl.call("foldl", step, list(range(5000)), Atom("x"), Var("T"))  # f(f(...f(x)...))
     sol = pl.call("foldl", step, list(range(50)), Atom("x"), Var("T"))
     assert sol["T"].name == "f"

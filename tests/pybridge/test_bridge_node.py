@@ -1,5 +1,6 @@
 """Bridge and robot_bridge.pl together: agents in Prolog threads, the test's main thread
 serving their requests like a control loop."""
+
 from __future__ import annotations
 
 import time
@@ -41,8 +42,11 @@ def test_register_and_list_robots(node) -> None:
     node.register_robot("r1", ArrayRobot(3, 2), algo="sarsa")
     node.register_robot(7, ArrayRobot(2, 2))
     robots = dict(node.robots())
-    assert robots[Atom("r1")] == [Term("algo", Atom("sarsa")), Term("shape", [3, 2]),
-                                  Term("learner", Atom("tabular"))]
+    assert robots[Atom("r1")] == [
+        Term("algo", Atom("sarsa")),
+        Term("shape", [3, 2]),
+        Term("learner", Atom("tabular")),
+    ]
     assert robots[7][1] == Term("shape", [2, 2])
     node.unregister_robot(7)
     assert [r for r, _ in node.robots()] == [Atom("r1")]
@@ -85,15 +89,23 @@ def test_python_prolog_python_round_trip(node, codec) -> None:
     robot.sets = 0
     node.register_robot("r1", robot)
     before = robot.q_table
-    goal = Term(",", Term("get_qtable", Atom("r1"), Var("T")), Term("set_qtable", Atom("r1"), Var("T")))
+    goal = Term(
+        ",", Term("get_qtable", Atom("r1"), Var("T")), Term("set_qtable", Atom("r1"), Var("T"))
+    )
     assert run_agent(node, goal).name == "true"
     assert robot.sets == 1
     assert np.array_equal(_bits(robot.q_table), _bits(before))
     # a table built by the agent: each value halved in Prolog arithmetic
     half = Term(">>", [Var("X"), Var("Y")], Term("is", Var("Y"), Term("/", Var("X"), 2)))
-    halve = Term(",", Term("get_qtable", Atom("r1"), Term("qtable", Var("S"), Var("V"))),
-                 Term(",", Term("maplist", half, Var("V"), Var("W")),
-                      Term("set_qtable", Atom("r1"), Term("qtable", Var("S"), Var("W")))))
+    halve = Term(
+        ",",
+        Term("get_qtable", Atom("r1"), Term("qtable", Var("S"), Var("V"))),
+        Term(
+            ",",
+            Term("maplist", half, Var("V"), Var("W")),
+            Term("set_qtable", Atom("r1"), Term("qtable", Var("S"), Var("W"))),
+        ),
+    )
     assert run_agent(node, halve).name == "true"
     assert np.array_equal(_bits(robot.q_table), _bits(before / 2))
 
@@ -129,9 +141,11 @@ def test_set_accepts_integers(node) -> None:
 
 def test_unknown_robot_is_existence_error(node) -> None:
     node.register_robot("r1", ArrayRobot(2, 2))
-    for goal in (Term("get_qtable", Atom("nobody"), Var()),
-                 Term("get_visits", Atom("nobody"), Var()),
-                 Term("set_qtable", Atom("nobody"), Term("qtable", [2, 2], [0.0] * 4))):
+    for goal in (
+        Term("get_qtable", Atom("nobody"), Var()),
+        Term("get_visits", Atom("nobody"), Var()),
+        Term("set_qtable", Atom("nobody"), Term("qtable", [2, 2], [0.0] * 4)),
+    ):
         formal = _error_formal(run_agent(node, goal))
         assert formal == Term("existence_error", Atom("robot"), Atom("nobody"))
 
@@ -153,23 +167,37 @@ def test_robot_unregistered_while_request_queued(node) -> None:
 _NAN = float("nan")
 
 
-@pytest.mark.parametrize("table, expected", [
-    (Term("qtable", [2, 3], [0.0] * 6),                       # wrong shape
-     Term("domain_error", Term("shape", [2, 2]), [2, 3])),
-    (Term("qtable", [2, 2], [0.0] * 3),                       # wrong number of values
-     Term("domain_error", Term("qtable_size", 4), 3)),
-    (Term("qtable", [2, 2], [0.0] * 5),
-     Term("domain_error", Term("qtable_size", 4), 5)),
-    (Term("qtable", [2, 2], [0.0, 1.0, Atom("x"), 2.0]),      # not a number
-     Term("type_error", Atom("number"), Atom("x"))),
-    (Term("qtable", [2, 2], [0.0, float("inf"), 1.0, 2.0]),   # non-finite
-     Term("domain_error", Atom("finite_float"), float("inf"))),
-    (Term("qtable", [2, 2], [0.0, 1.0, 2.0, -float("inf")]),
-     Term("domain_error", Atom("finite_float"), -float("inf"))),
-    (Term("qtable", [2, 2], [0.0, _NAN, 1.0, 2.0]), None),     # NaN: checked below
-    (Term("table", [2, 2], [0.0] * 4),                        # not a qtable term
-     Term("type_error", Atom("qtable"), Term("table", [2, 2], [0.0] * 4))),
-])
+@pytest.mark.parametrize(
+    "table, expected",
+    [
+        (
+            Term("qtable", [2, 3], [0.0] * 6),  # wrong shape
+            Term("domain_error", Term("shape", [2, 2]), [2, 3]),
+        ),
+        (
+            Term("qtable", [2, 2], [0.0] * 3),  # wrong number of values
+            Term("domain_error", Term("qtable_size", 4), 3),
+        ),
+        (Term("qtable", [2, 2], [0.0] * 5), Term("domain_error", Term("qtable_size", 4), 5)),
+        (
+            Term("qtable", [2, 2], [0.0, 1.0, Atom("x"), 2.0]),  # not a number
+            Term("type_error", Atom("number"), Atom("x")),
+        ),
+        (
+            Term("qtable", [2, 2], [0.0, float("inf"), 1.0, 2.0]),  # non-finite
+            Term("domain_error", Atom("finite_float"), float("inf")),
+        ),
+        (
+            Term("qtable", [2, 2], [0.0, 1.0, 2.0, -float("inf")]),
+            Term("domain_error", Atom("finite_float"), -float("inf")),
+        ),
+        (Term("qtable", [2, 2], [0.0, _NAN, 1.0, 2.0]), None),  # NaN: checked below
+        (
+            Term("table", [2, 2], [0.0] * 4),  # not a qtable term
+            Term("type_error", Atom("qtable"), Term("table", [2, 2], [0.0] * 4)),
+        ),
+    ],
+)
 @pytest.mark.parametrize("codec", ["fts", "text"])
 def test_bad_set_is_an_error_and_table_unchanged(node, table, expected, codec) -> None:
     """Validated once, where the table enters Python; the message names what is wrong."""
@@ -207,7 +235,8 @@ def test_validation_happens_in_python_only(node) -> None:
         validate_write((2, 2), op.args[1], op.args[2])
     node.call("bridge_reply", req_id, Term("error", info.value.formal), module="robot_bridge")
     assert _error_formal(agent_result(node, "bad_writer")) == Term(
-        "domain_error", Term("shape", [2, 2]), [4, 1])
+        "domain_error", Term("shape", [2, 2]), [4, 1]
+    )
     assert robot.sets == 0
 
 
@@ -262,7 +291,9 @@ def test_timeout_when_nobody_serves(node) -> None:
     # the default timeout comes from the flag
     node.request_timeout = 0.1
     assert node.request_timeout == pytest.approx(0.1)
-    result = run_agent(node, Term("set_qtable", Atom("r1"), Term("qtable", [2, 2], [0.0] * 4)), serve=False)
+    result = run_agent(
+        node, Term("set_qtable", Atom("r1"), Term("qtable", [2, 2], [0.0] * 4)), serve=False
+    )
     assert _error_formal(result) == Term("timeout_error", Atom("bridge"), Atom("r1"))
 
 
@@ -275,7 +306,9 @@ def test_waiting_from_the_serving_thread_is_refused(node) -> None:
 
 def test_prolog_errors_arrive_as_terms(node) -> None:
     with pytest.raises(PrologError) as info:
-        node.call("bridge_register_robot", Atom("r1"), [Term("shape", [0, 2])], module="robot_bridge")
+        node.call(
+            "bridge_register_robot", Atom("r1"), [Term("shape", [0, 2])], module="robot_bridge"
+        )
     domain = Term("shape", [Atom("nstates"), Atom("nactions")])
     assert info.value.formal == Term("domain_error", domain, [0, 2])
 

@@ -1,4 +1,5 @@
 """The bridge with the real platform (platform_pl/tartarus.pl), in a process of its own."""
+
 from __future__ import annotations
 
 import json
@@ -12,10 +13,13 @@ ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = Path(__file__).with_name("platform_script.py")
 
 
-@pytest.mark.skipif(not (ROOT / "platform_pl" / "tartarus.pl").exists(), reason="platform not built")
+@pytest.mark.skipif(
+    not (ROOT / "platform_pl" / "tartarus.pl").exists(), reason="platform not built"
+)
 def test_agent_moves_to_robot_node_and_updates_table() -> None:
-    proc = subprocess.run([sys.executable, str(SCRIPT)], cwd=ROOT, capture_output=True, text=True,
-                          timeout=120)
+    proc = subprocess.run(
+        [sys.executable, str(SCRIPT)], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert out["done"], out

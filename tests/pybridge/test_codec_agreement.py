@@ -1,6 +1,7 @@
 """Both sides of each table codec agree: ``dfrl.pybridge.codec`` (Python) and
 ``pybridge/table_codec.pl`` (Prolog) make the same fts bytes, and each decodes what the
 other encodes, bit for bit."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -14,8 +15,16 @@ def _table(shape: tuple[int, int], seed: int) -> np.ndarray:
     rng = np.random.default_rng(seed)
     table = rng.standard_normal(shape) * 10.0 ** rng.integers(-300, 300, shape)
     flat = table.reshape(-1)
-    awkward = [-1.5, -0.0, 5e-324, -2.2250738585072014e-308, 1.7976931348623157e308,
-               np.inf, -np.inf, np.nan]
+    awkward = [
+        -1.5,
+        -0.0,
+        5e-324,
+        -2.2250738585072014e-308,
+        1.7976931348623157e308,
+        np.inf,
+        -np.inf,
+        np.nan,
+    ]
     flat[: min(flat.size, len(awkward))] = awkward[: flat.size]
     return table
 

@@ -1,5 +1,6 @@
 """A dFRL agent federates parameter vectors between two robots of a robot process
 (params_round_script.py, in a process of its own: the platform runs once per process)."""
+
 from __future__ import annotations
 
 import json
@@ -12,8 +13,9 @@ SCRIPT = Path(__file__).with_name("params_round_script.py")
 
 
 def test_two_robots_hold_the_same_fedavg_after_every_round() -> None:
-    proc = subprocess.run([sys.executable, str(SCRIPT)], cwd=ROOT, capture_output=True,
-                          text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, str(SCRIPT)], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert out["moved"], out

@@ -1,5 +1,6 @@
 """An agent reaches the robots of this process through the platform's resource hook
 (platform_pl/robot_resources.pl), which the bridge implements; nothing goes through ``user``."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -18,17 +19,35 @@ def test_agent_reads_and_writes_through_robot_resources(node) -> None:
     before = robot.q_table
     opts = [Term("timeout", 5.0)]
     rr = "robot_resources"
-    goal = Term(",", Term(":", Atom(rr), Term("hosted_robot", Atom("r1"), Var("Props"))),
-                Term(",", Term(":", Atom(rr), Term("get_robot_table", Atom("r1"),
-                                                   Term("qtable", Var("S"), Var("V")), opts)),
-                     Term(",", Term("maplist", _half("X", "Y"), Var("V"), Var("W")),
-                          Term(":", Atom(rr), Term("set_robot_table", Atom("r1"),
-                                                   Term("qtable", Var("S"), Var("W")), opts)))))
+    goal = Term(
+        ",",
+        Term(":", Atom(rr), Term("hosted_robot", Atom("r1"), Var("Props"))),
+        Term(
+            ",",
+            Term(
+                ":",
+                Atom(rr),
+                Term("get_robot_table", Atom("r1"), Term("qtable", Var("S"), Var("V")), opts),
+            ),
+            Term(
+                ",",
+                Term("maplist", _half("X", "Y"), Var("V"), Var("W")),
+                Term(
+                    ":",
+                    Atom(rr),
+                    Term("set_robot_table", Atom("r1"), Term("qtable", Var("S"), Var("W")), opts),
+                ),
+            ),
+        ),
+    )
     result = run_agent(node, goal)
     assert result.name == "true", result
-    props = result.args[0][0].args[1].args[1]      # the conjunction comes back as a tuple
-    assert props == [Term("algo", Atom("sarsa")), Term("shape", [81, 3]),
-                     Term("learner", Atom("tabular"))]
+    props = result.args[0][0].args[1].args[1]  # the conjunction comes back as a tuple
+    assert props == [
+        Term("algo", Atom("sarsa")),
+        Term("shape", [81, 3]),
+        Term("learner", Atom("tabular")),
+    ]
     assert robot.sets == 1
     assert np.array_equal(robot.q_table, before / 2)
 
@@ -36,18 +55,31 @@ def test_agent_reads_and_writes_through_robot_resources(node) -> None:
 def test_tables_and_errors_through_robot_resources(node) -> None:
     robot = ArrayRobot(4, 2)
     node.register_robot("r1", robot, shape=(4, 2))
-    got = run_agent(node, Term(":", Atom("robot_resources"),
-                               Term("get_robot_tables", Atom("r1"), Var("T"), Var("V"), [])))
+    got = run_agent(
+        node,
+        Term(
+            ":",
+            Atom("robot_resources"),
+            Term("get_robot_tables", Atom("r1"), Var("T"), Var("V"), []),
+        ),
+    )
     assert got.name == "true", got
     _, table, visits, _ = got.args[0].args[1].args
     assert np.array_equal(np.array(table.args[1]), robot.q_table.reshape(-1))
     assert np.array_equal(np.array(visits.args[1]), robot.visits.reshape(-1).astype(float))
     # unknown robot: the hook module's existence error; a bad write: the host's error
-    missing = run_agent(node, Term(":", Atom("robot_resources"),
-                                   Term("get_robot_table", Atom("nobody"), Var(), [])))
+    missing = run_agent(
+        node, Term(":", Atom("robot_resources"), Term("get_robot_table", Atom("nobody"), Var(), []))
+    )
     assert missing.args[0].args[0] == Term("existence_error", Atom("robot"), Atom("nobody"))
-    bad = run_agent(node, Term(":", Atom("robot_resources"), Term(
-        "set_robot_table", Atom("r1"), Term("qtable", [4, 2], [1.0] * 7), [])))
+    bad = run_agent(
+        node,
+        Term(
+            ":",
+            Atom("robot_resources"),
+            Term("set_robot_table", Atom("r1"), Term("qtable", [4, 2], [1.0] * 7), []),
+        ),
+    )
     assert bad.args[0].args[0] == Term("domain_error", Term("qtable_size", 8), 7)
     assert robot.sets == 0
 
@@ -60,10 +92,19 @@ def test_packed_values_cross_the_hook_bit_exact(node) -> None:
     node.register_robot("r2", r2, shape=(50, 4))
     rr = "robot_resources"
     opts = [Term("values", Atom("packed")), Term("timeout", 5.0)]
-    goal = Term(",", Term(":", Atom(rr), Term("get_robot_table", Atom("r1"),
-                                              Term("qtable", Var("S"), Var("V")), opts)),
-                Term(":", Atom(rr), Term("set_robot_table", Atom("r2"),
-                                         Term("qtable", Var("S"), Var("V")), [])))
+    goal = Term(
+        ",",
+        Term(
+            ":",
+            Atom(rr),
+            Term("get_robot_table", Atom("r1"), Term("qtable", Var("S"), Var("V")), opts),
+        ),
+        Term(
+            ":",
+            Atom(rr),
+            Term("set_robot_table", Atom("r2"), Term("qtable", Var("S"), Var("V")), []),
+        ),
+    )
     result = run_agent(node, goal)
     assert result.name == "true", result
     table = result.args[0][0].args[1].args[1]
@@ -73,8 +114,7 @@ def test_packed_values_cross_the_hook_bit_exact(node) -> None:
     assert r2.sets == 1
     assert r2.q_table.tobytes() == r1.q_table.tobytes()
     # control: without the option the values are a list
-    plain = run_agent(node, Term(":", Atom(rr), Term("get_robot_table", Atom("r1"),
-                                                     Var("T"), [])))
+    plain = run_agent(node, Term(":", Atom(rr), Term("get_robot_table", Atom("r1"), Var("T"), [])))
     listed = plain.args[0].args[1].args[1]
     assert listed.name == "qtable" and isinstance(listed.args[1], list), listed
     assert np.array_equal(np.array(listed.args[1]), r1.q_table.reshape(-1))
@@ -84,9 +124,19 @@ def test_malformed_packed_write_is_refused(node) -> None:
     robot = ArrayRobot(4, 2)
     node.register_robot("r1", robot, shape=(4, 2))
     before = robot.q_table.copy()
-    bad = run_agent(node, Term(":", Atom("robot_resources"), Term(
-        "set_robot_table", Atom("r1"), Term("qtable", [4, 2], Term("fts", "r\x05garbage\t")),
-        [])))
+    bad = run_agent(
+        node,
+        Term(
+            ":",
+            Atom("robot_resources"),
+            Term(
+                "set_robot_table",
+                Atom("r1"),
+                Term("qtable", [4, 2], Term("fts", "r\x05garbage\t")),
+                [],
+            ),
+        ),
+    )
     assert bad.name != "true", bad
     assert bad.args[0].args[0].name == "domain_error", bad
     assert bad.args[0].args[0].args[0] == Atom("fts_float_list"), bad

@@ -1,6 +1,7 @@
 """One verb pair along a Q-table's path (issue 37): an agent's ``robot_resources``
 ``read_robot_table/3`` and ``write_robot_table/3`` reach a provider's ``read_table()`` and
 ``write_table(table, origin)``; the deprecated Prolog names of before still do."""
+
 from __future__ import annotations
 
 from collections.abc import Mapping
@@ -42,11 +43,15 @@ def test_the_verb_pair_reaches_the_provider(node) -> None:
     node.register_robot("r1", robot, shape=(2, 2))
     got = _call(node, "read_robot_table", Atom("r1"), Var("T"), [])
     assert got.name == "true", got
-    table = got.args[0].args[1].args[1]          # true(robot_resources:Goal)
+    table = got.args[0].args[1].args[1]  # true(robot_resources:Goal)
     assert table == Term("qtable", [2, 2], [0.0, 1.0, 2.0, 3.0]) and robot.reads == 1
     new = Term("qtable", [2, 2], [4.0, 3.0, 2.0, 1.0])
-    assert _call(node, "write_robot_table", Atom("r1"), new,
-                 [Term("round", 7), Term("agent", Atom("a"))]).name == "true"
+    assert (
+        _call(
+            node, "write_robot_table", Atom("r1"), new, [Term("round", 7), Term("agent", Atom("a"))]
+        ).name
+        == "true"
+    )
     assert len(robot.writes) == 1
     written, origin = robot.writes[0]
     assert np.array_equal(written, [[4.0, 3.0], [2.0, 1.0]])

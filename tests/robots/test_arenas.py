@@ -1,4 +1,5 @@
 """Arena files: the shipped ones load, bad ones are rejected with clear messages."""
+
 from __future__ import annotations
 
 import json
@@ -8,14 +9,25 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from dfrl.arenas import (HELD_OUT_ARENAS, PAPER_ARENAS, ArenaError, build_arena,
-                         builtin_arena_names, load_arena, parse_arena)
+from dfrl.arenas import (
+    HELD_OUT_ARENAS,
+    PAPER_ARENAS,
+    ArenaError,
+    build_arena,
+    builtin_arena_names,
+    load_arena,
+    parse_arena,
+)
 
 
 def _good() -> dict:
-    return {"name": "mine", "size": [1.0, 0.8], "wall_height": 0.1,
-            "blocks": [{"center": [0.2, 0.1], "size": [0.1, 0.2, 0.1], "yaw": 0.3}],
-            "start": {"pose": [-0.3, -0.2, 0.0]}}
+    return {
+        "name": "mine",
+        "size": [1.0, 0.8],
+        "wall_height": 0.1,
+        "blocks": [{"center": [0.2, 0.1], "size": [0.1, 0.2, 0.1], "yaw": 0.3}],
+        "start": {"pose": [-0.3, -0.2, 0.0]},
+    }
 
 
 def test_paper_arenas_ship_with_their_block_counts() -> None:
@@ -37,20 +49,32 @@ def test_user_file_round_trip(tmp_path: Path) -> None:
     assert parse_arena(spec.to_dict()).blocks == spec.blocks
 
 
-@pytest.mark.parametrize("mutate, expected", [
-    (lambda d: d.pop("size"), "missing required key 'size'"),
-    (lambda d: d.update(size=[1.0]), "size: expected a list of 2 numbers"),
-    (lambda d: d.update(size=[1.0, -2]), "size[1]: expected a positive number"),
-    (lambda d: d.update(wall_height="high"), "wall_height: expected a number"),
-    (lambda d: d.update(colour="red"), "unknown key(s) ['colour']"),
-    (lambda d: d["blocks"][0].update(size=[0.1, 0.1]), "blocks[0].size: expected a list of 3 numbers"),
-    (lambda d: d["blocks"][0].pop("center"), "blocks[0]: missing required key 'center'"),
-    (lambda d: d["blocks"][0].update(center=[3.0, 0.0]), "blocks[0].center: [3.0, 0.0] lies outside"),
-    (lambda d: d["blocks"][0].update(yaw=None), "blocks[0].yaw: expected a number"),
-    (lambda d: d.update(start={"random": False}), "start.random: must be true"),
-    (lambda d: d.update(start={"pose": [0.2, 0.1, 0.0]}), "start.pose: (0.2, 0.1) is inside a block"),
-    (lambda d: d.update(start={}), "start: expected exactly one of"),
-])
+@pytest.mark.parametrize(
+    "mutate, expected",
+    [
+        (lambda d: d.pop("size"), "missing required key 'size'"),
+        (lambda d: d.update(size=[1.0]), "size: expected a list of 2 numbers"),
+        (lambda d: d.update(size=[1.0, -2]), "size[1]: expected a positive number"),
+        (lambda d: d.update(wall_height="high"), "wall_height: expected a number"),
+        (lambda d: d.update(colour="red"), "unknown key(s) ['colour']"),
+        (
+            lambda d: d["blocks"][0].update(size=[0.1, 0.1]),
+            "blocks[0].size: expected a list of 3 numbers",
+        ),
+        (lambda d: d["blocks"][0].pop("center"), "blocks[0]: missing required key 'center'"),
+        (
+            lambda d: d["blocks"][0].update(center=[3.0, 0.0]),
+            "blocks[0].center: [3.0, 0.0] lies outside",
+        ),
+        (lambda d: d["blocks"][0].update(yaw=None), "blocks[0].yaw: expected a number"),
+        (lambda d: d.update(start={"random": False}), "start.random: must be true"),
+        (
+            lambda d: d.update(start={"pose": [0.2, 0.1, 0.0]}),
+            "start.pose: (0.2, 0.1) is inside a block",
+        ),
+        (lambda d: d.update(start={}), "start: expected exactly one of"),
+    ],
+)
 def test_bad_content_is_rejected_with_location(tmp_path: Path, mutate, expected: str) -> None:
     data = _good()
     mutate(data)
@@ -116,8 +140,10 @@ def test_start_pose_must_clear_blocks_by_the_robot_radius() -> None:
 
 def test_overlapping_blocks_are_an_error_unless_allowed() -> None:
     data = _good()
-    data["blocks"] = [{"center": [0.2, 0.1], "size": [0.1, 0.2, 0.1]},
-                      {"center": [0.26, 0.1], "size": [0.1, 0.1, 0.1], "yaw": 0.7}]
+    data["blocks"] = [
+        {"center": [0.2, 0.1], "size": [0.1, 0.2, 0.1]},
+        {"center": [0.26, 0.1], "size": [0.1, 0.1, 0.1], "yaw": 0.7},
+    ]
     with pytest.raises(ArenaError, match=r"blocks\[1\]: overlaps blocks\[0\]"):
         parse_arena(data, "lshape.json")
     data["allow_overlap"] = True
@@ -125,8 +151,10 @@ def test_overlapping_blocks_are_an_error_unless_allowed() -> None:
     assert spec.allow_overlap and parse_arena(spec.to_dict()) == spec
     # blocks that only touch along an edge do not overlap
     touching = _good()
-    touching["blocks"] = [{"center": [0.2, 0.1], "size": [0.1, 0.2, 0.1]},
-                          {"center": [0.3, 0.1], "size": [0.1, 0.2, 0.1]}]
+    touching["blocks"] = [
+        {"center": [0.2, 0.1], "size": [0.1, 0.2, 0.1]},
+        {"center": [0.3, 0.1], "size": [0.1, 0.2, 0.1]},
+    ]
     assert len(parse_arena(touching).blocks) == 2
     with pytest.raises(ArenaError, match="allow_overlap: expected true or false"):
         parse_arena({**_good(), "allow_overlap": "yes"})

@@ -1,4 +1,5 @@
 """The simulated e-puck and its Gymnasium environment (real pybullet, no mocks)."""
+
 from __future__ import annotations
 
 import math
@@ -51,7 +52,10 @@ def test_ir_sensors_see_a_few_centimetres_and_collisions_register() -> None:
         # facing the +x wall from 3 cm: front sensors read about 3 cm, rear sensors nothing
         world.place_robot(0.5 - rc.body_radius - 0.03, 0.0, 0.0)
         d = world.robot.sense()
-        assert d[0] == pytest.approx(0.03 / math.cos(0.30) + rc.body_radius * (1 - math.cos(0.30)) / math.cos(0.30), abs=0.004)
+        assert d[0] == pytest.approx(
+            0.03 / math.cos(0.30) + rc.body_radius * (1 - math.cos(0.30)) / math.cos(0.30),
+            abs=0.004,
+        )
         assert d[3] == rc.sensor_range and d[4] == rc.sensor_range
         assert not world.in_collision()
         for _ in range(20):

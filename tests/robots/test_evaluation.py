@@ -1,4 +1,5 @@
 """The evaluation measure tells driving from spinning (issue 10)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -59,11 +60,19 @@ def test_snapshots_are_evaluated_in_own_and_held_out_arenas() -> None:
     assert sorted(res.snapshots) == [200, 400, 600]
     assert np.array_equal(res.snapshots[600], res.q_table)
     assert not np.array_equal(res.snapshots[200], res.snapshots[600])
-    rows = evaluate_snapshots(cfg, res.snapshots, ["r4", "h1"], steps=200, seed=5,
-                              episode_steps=100)
+    rows = evaluate_snapshots(
+        cfg, res.snapshots, ["r4", "h1"], steps=200, seed=5, episode_steps=100
+    )
     assert [(r["iteration"], r["arena"]) for r in rows] == [
-        (200, "r4"), (200, "h1"), (400, "r4"), (400, "h1"), (600, "r4"), (600, "h1")]
+        (200, "r4"),
+        (200, "h1"),
+        (400, "r4"),
+        (400, "h1"),
+        (600, "r4"),
+        (600, "h1"),
+    ]
     assert all(set(r) == set(EVAL_FIELDS) for r in rows)
-    again = evaluate_snapshots(cfg, res.snapshots, ["r4", "h1"], steps=200, seed=5,
-                               episode_steps=100)
+    again = evaluate_snapshots(
+        cfg, res.snapshots, ["r4", "h1"], steps=200, seed=5, episode_steps=100
+    )
     assert again == rows

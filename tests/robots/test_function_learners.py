@@ -1,5 +1,6 @@
 """The learners over the raw observation in the training loop: the parameter contract with the
 federated layer, determinism, greedy evaluation, and that they learn on a small budget."""
+
 from __future__ import annotations
 
 import json
@@ -48,7 +49,7 @@ def test_the_parameter_contract() -> None:
         assert t.samples == 200
         p = t.params
         assert p.dtype == np.float64 and p.shape == (771,)
-        p[:] = 0.0                                            # a copy: the learner keeps its own
+        p[:] = 0.0  # a copy: the learner keeps its own
         assert np.any(t.params != 0.0)
         with pytest.raises(TypeError, match="no.*Q-table|without a Q-table"):
             t.q_table
@@ -90,7 +91,7 @@ def test_params_round_trip_gives_the_same_greedy_actions(algo: str) -> None:
         mine = [other.greedy_action(x) for x in observations]
     policy = greedy_policy(_config(algo), learnt)
     assert [policy(x) for x in observations] == mine
-    assert len(set(mine)) > 1                                 # not a constant policy
+    assert len(set(mine)) > 1  # not a constant policy
 
 
 def test_train_writes_a_parameter_file(tmp_path: Path) -> None:
@@ -100,7 +101,10 @@ def test_train_writes_a_parameter_file(tmp_path: Path) -> None:
     loaded = load_params(tmp_path / "params.npy")
     assert np.array_equal(loaded.params, res.params)
     assert loaded.meta.algo == "linear" and loaded.meta.layout == [("w", (3, 257))]
-    assert loaded.meta.model == {"alpha": 0.05, "tilings": 4, "tiles": 8} and loaded.meta.iterations == 50
+    assert (
+        loaded.meta.model == {"alpha": 0.05, "tilings": 4, "tiles": 8}
+        and loaded.meta.iterations == 50
+    )
     cfg = json.loads((tmp_path / "config.json").read_text())
     assert TrainerConfig.from_dict(cfg) == _config("linear").replace(iterations=50)
     assert not (tmp_path / "q_table.npy").exists()
@@ -117,7 +121,7 @@ def _learns(algo: str, seeds: tuple[int, ...], iterations: int) -> None:
     for seed in seeds:
         cfg = _config(algo, seed).replace(iterations=iterations)
         if algo == "dqn":
-            cfg = cfg.replace(dqn=TrainerConfig().dqn)       # the documented defaults
+            cfg = cfg.replace(dqn=TrainerConfig().dqn)  # the documented defaults
         learnt = _score(cfg, train(cfg).params, seed)
         untrained = _score(cfg, train(cfg.replace(iterations=0)).params, seed)
         random = _score(cfg, None, seed)

@@ -1,6 +1,7 @@
 """The grid view of a function learner (robots/grid_view.py) and distillation (robots/distill.py):
 hand-computed grid points, get = evaluate, set = distil (with its residual), visits, refusals,
 determinism, and the linear learner's capacity floor."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -17,12 +18,13 @@ from dfrl.robots.training import Trainer, TrainerConfig
 
 
 def _dqn(seed: int = 0) -> DQN:
-    return DQN(8, 3, LearnerParams(), np.random.default_rng(seed),
-               config=DQNConfig(hidden=(32, 32)))
+    return DQN(
+        8, 3, LearnerParams(), np.random.default_rng(seed), config=DQNConfig(hidden=(32, 32))
+    )
 
 
 def test_grid_points_are_cell_centres_that_map_back() -> None:
-    d = Discretiser()                                         # four groups x 3 levels: 81 states
+    d = Discretiser()  # four groups x 3 levels: 81 states
     pts = grid_points(d)
     assert pts.shape == (81, 8)
     # state 1: group 0 (sensor 2) at level 1 -> the middle of (0, 0.5]
@@ -31,8 +33,11 @@ def test_grid_points_are_cell_centres_that_map_back() -> None:
     assert pts[6].tolist() == [0.75, 0.75, 0, 0, 0, 0, 0, 0]
     # state 80: every group at level 2; the rear sensors 3 and 4 read nothing
     assert pts[80].tolist() == [0.75, 0.75, 0.75, 0, 0, 0.75, 0.75, 0.75]
-    for cfg in (DiscretisationConfig(), DiscretisationConfig("three", 4),
-                DiscretisationConfig("eight", 2)):
+    for cfg in (
+        DiscretisationConfig(),
+        DiscretisationConfig("three", 4),
+        DiscretisationConfig("eight", 2),
+    ):
         disc = Discretiser(cfg)
         assert [disc(p) for p in grid_points(disc)] == list(range(disc.n_states))
 
@@ -50,8 +55,8 @@ def test_distil_moves_the_values_towards_the_targets_deterministically() -> None
     after = a.q_batch(x)
     assert ra.rms_after == pytest.approx(np.sqrt(np.mean((after - targets) ** 2)))
     assert ra.rms_after < 0.3 * ra.rms_before
-    assert np.array_equal(a.get_params(), b.get_params())           # same start, same result
-    assert all(np.array_equal(o, t) for o, t in zip(a.online, a.target))   # target synced
+    assert np.array_equal(a.get_params(), b.get_params())  # same start, same result
+    assert all(np.array_equal(o, t) for o, t in zip(a.online, a.target))  # target synced
     # already there: no step taken
     r0 = distil(a, x, after, config=DistilConfig(steps=50, stop_rms=1e-9))
     assert r0.steps == 0 and r0.rms_after == 0.0
@@ -73,7 +78,7 @@ def test_linear_fits_a_sum_of_per_sensor_functions_but_not_any_table() -> None:
     # a table that is no sum of per-sensor functions: the residual stops at the least-squares
     # floor of the features (computed here with numpy's solver), well above zero
     table = np.zeros((81, 3))
-    table[80] = 10.0                                             # only when every group is near
+    table[80] = 10.0  # only when every group is near
     phi = feature_matrix(x, lin.coding)
     floor = np.sqrt(np.mean((phi @ np.linalg.lstsq(phi, table, rcond=None)[0] - table) ** 2))
     lin2 = LinearQ(8, 3, LearnerParams(), np.random.default_rng(0))
@@ -83,8 +88,9 @@ def test_linear_fits_a_sum_of_per_sensor_functions_but_not_any_table() -> None:
 
 
 def test_grid_view_of_a_trainer() -> None:
-    cfg = TrainerConfig(arena="r1", algo="dqn", seed=2, dqn=DQNConfig(learning_starts=20,
-                                                                     batch_size=8))
+    cfg = TrainerConfig(
+        arena="r1", algo="dqn", seed=2, dqn=DQNConfig(learning_starts=20, batch_size=8)
+    )
     with Trainer(cfg) as t:
         view = GridView(t)
         states, actions = [], []
@@ -115,7 +121,7 @@ def test_grid_view_of_a_trainer() -> None:
         with pytest.raises(ValueError, match="non-finite"):
             view.set_q_table(np.full((81, 3), np.inf))
         assert np.array_equal(t.params, p)
-        t.step()                                                # learning goes on after a share
+        t.step()  # learning goes on after a share
 
 
 def test_grid_view_refuses_a_tabular_learner() -> None:
@@ -131,7 +137,7 @@ def test_the_bridge_takes_a_grid_view_as_a_table() -> None:
     with Trainer(TrainerConfig(arena="r1", algo="linear", seed=1)) as t:
         view = GridView(t)
         assert provider_offer(view, (81, 3)) == ("function", (81, 3), [("w", (3, 257))])
-        assert provider_offer(view) == ("function", None, [("w", (3, 257))])   # params only
+        assert provider_offer(view) == ("function", None, [("w", (3, 257))])  # params only
     # a function learner without a table view cannot be given a table shape
     with pytest.raises(ValueError, match="offers a table view"):
         provider_offer(StaticParams([("w", (2, 3))]), (81, 3))

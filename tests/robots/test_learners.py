@@ -1,4 +1,5 @@
 """Learner maths on hand-computed values, the registry, schedules, table files."""
+
 from __future__ import annotations
 
 import json
@@ -7,9 +8,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dfrl.robots.learners import (LEARNERS, EpsilonSchedule, LearnerParams, QLearning, Sarsa,
-                             epsilon_greedy, greedy_action, make_learner, q_learning_target,
-                             sarsa_target, td_update, validate_table)
+from dfrl.robots.learners import (
+    LEARNERS,
+    EpsilonSchedule,
+    LearnerParams,
+    QLearning,
+    Sarsa,
+    epsilon_greedy,
+    greedy_action,
+    make_learner,
+    q_learning_target,
+    sarsa_target,
+    td_update,
+    validate_table,
+)
 from dfrl.robots.tables import TableMeta, load_params, load_table, save_table
 
 
@@ -20,7 +32,11 @@ def test_registry_has_the_tabular_and_the_function_learners() -> None:
 
     assert LEARNERS == {"qlearning": QLearning, "sarsa": Sarsa, "linear": LinearQ, "dqn": DQN}
     assert [learner_kind(n) for n in ("qlearning", "sarsa", "linear", "dqn")] == [
-        "tabular", "tabular", "function", "function"]
+        "tabular",
+        "tabular",
+        "function",
+        "function",
+    ]
     assert is_tabular("sarsa") and not is_tabular("dqn")
     with pytest.raises(KeyError, match="built in: .*plug-ins"):
         make_learner("ppo", 2, 2, LearnerParams(), np.random.default_rng(0))
@@ -47,9 +63,12 @@ def test_qlearning_and_sarsa_one_step_by_hand() -> None:
         assert learner.q[0, 1] == pytest.approx(expected)
         assert learner.visits.tolist() == [[0, 1], [0, 0]]
     # SARSA bootstraps on the action it actually picks: force exploration of action 1
-    sarsa = Sarsa(2, 2, LearnerParams(alpha=1.0, gamma=0.5,
-                                      epsilon=EpsilonSchedule("constant", 1.0, 1.0, 1)),
-                  np.random.default_rng(3))
+    sarsa = Sarsa(
+        2,
+        2,
+        LearnerParams(alpha=1.0, gamma=0.5, epsilon=EpsilonSchedule("constant", 1.0, 1.0, 1)),
+        np.random.default_rng(3),
+    )
     sarsa.q[1] = [4.0, -1.0]
     a2 = sarsa.learn(0, 0, 1.0, 1, False)
     assert sarsa.q[0, 0] == pytest.approx(1.0 + 0.5 * sarsa.q[1, a2])
@@ -88,8 +107,14 @@ def test_validate_table() -> None:
 def test_table_file_round_trip(tmp_path: Path) -> None:
     q = np.arange(12, dtype=float).reshape(4, 3)
     visits = np.arange(12, dtype=np.int64).reshape(4, 3)
-    meta = TableMeta(algo="sarsa", arena="r4", seed=3, iterations=100,
-                     actions=["forward", "left", "right"], state={"n_states": 4})
+    meta = TableMeta(
+        algo="sarsa",
+        arena="r4",
+        seed=3,
+        iterations=100,
+        actions=["forward", "left", "right"],
+        state={"n_states": 4},
+    )
     path = save_table(tmp_path / "t", q, meta, visits=visits)
     assert path.name == "t.npy" and (tmp_path / "t.json").exists()
     loaded = load_table(tmp_path / "t.npy")
@@ -101,17 +126,30 @@ def test_table_file_round_trip(tmp_path: Path) -> None:
 
 
 def test_sidecar_names_the_learner_algo_and_one_saying_algorithm_still_loads(
-        tmp_path: Path) -> None:
+    tmp_path: Path,
+) -> None:
     q = np.array([[0.0, 1.0], [2.0, 3.0]])
     save_table(tmp_path / "new", q, TableMeta("sarsa", "r4", 3, 100, ["a", "b"], {}))
     doc = json.loads((tmp_path / "new.json").read_text())
     assert doc["algo"] == "sarsa" and "algorithm" not in doc
     # a sidecar written by hand the way dfrl wrote them before (key "algorithm")
     np.save(tmp_path / "old.npy", q)
-    (tmp_path / "old.json").write_text(json.dumps({
-        "format": "dfrl-qtable/1", "shape": [2, 2], "dtype": "float64",
-        "algorithm": "qlearning", "arena": "r1", "seed": 7, "iterations": 50,
-        "actions": ["a", "b"], "state": {"n_states": 2}, "extra": {}}))
+    (tmp_path / "old.json").write_text(
+        json.dumps(
+            {
+                "format": "dfrl-qtable/1",
+                "shape": [2, 2],
+                "dtype": "float64",
+                "algorithm": "qlearning",
+                "arena": "r1",
+                "seed": 7,
+                "iterations": 50,
+                "actions": ["a", "b"],
+                "state": {"n_states": 2},
+                "extra": {},
+            }
+        )
+    )
     old = load_table(tmp_path / "old.npy")
     assert old.meta == TableMeta("qlearning", "r1", 7, 50, ["a", "b"], {"n_states": 2})
     np.testing.assert_array_equal(old.q, q)
@@ -119,10 +157,27 @@ def test_sidecar_names_the_learner_algo_and_one_saying_algorithm_still_loads(
 
 def test_params_sidecar_saying_algorithm_still_loads(tmp_path: Path) -> None:
     np.save(tmp_path / "old.npy", np.array([0.5, -1.0, 2.0]))
-    (tmp_path / "old.json").write_text(json.dumps({
-        "format": "dfrl-params/1", "size": 3, "dtype": "float64", "algorithm": "linear",
-        "arena": "r2", "seed": 1, "iterations": 10, "actions": ["a"],
-        "layout": [["w", [1, 3]]], "model": {"alpha": 0.1}, "extra": {}}))
+    (tmp_path / "old.json").write_text(
+        json.dumps(
+            {
+                "format": "dfrl-params/1",
+                "size": 3,
+                "dtype": "float64",
+                "algorithm": "linear",
+                "arena": "r2",
+                "seed": 1,
+                "iterations": 10,
+                "actions": ["a"],
+                "layout": [["w", [1, 3]]],
+                "model": {"alpha": 0.1},
+                "extra": {},
+            }
+        )
+    )
     meta = load_params(tmp_path / "old.npy").meta
     assert (meta.algo, meta.arena, meta.layout, meta.model) == (
-        "linear", "r2", [("w", (1, 3))], {"alpha": 0.1})
+        "linear",
+        "r2",
+        [("w", (1, 3))],
+        {"alpha": 0.1},
+    )

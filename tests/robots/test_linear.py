@@ -1,4 +1,5 @@
 """The linear learner: its feature map and one semi-gradient update, by hand."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -48,10 +49,11 @@ def test_linear_q_and_update_maths_by_hand() -> None:
 def test_one_semi_gradient_q_learning_step_by_hand() -> None:
     # Prepare: x = (0, 0.8) has active features {0, 1, 4, 8, 12}, x' = (1, 1) has {0, 3, 6, 9, 12}
     params = LearnerParams(gamma=0.5, epsilon=GREEDY)
-    learner = LinearQ(2, 2, params, np.random.default_rng(0),
-                      LinearConfig(alpha=0.5, tilings=2, tiles=3))
-    learner.weights[0, [0, 12]] = 1.0          # Q(x, 0) = 2, Q(x', 0) = 2
-    learner.weights[1, 3] = 4.0                # Q(x', 1) = 4
+    learner = LinearQ(
+        2, 2, params, np.random.default_rng(0), LinearConfig(alpha=0.5, tilings=2, tiles=3)
+    )
+    learner.weights[0, [0, 12]] = 1.0  # Q(x, 0) = 2, Q(x', 0) = 2
+    learner.weights[1, 3] = 4.0  # Q(x', 1) = 4
     x, x2 = np.array([0.0, 0.8]), np.array([1.0, 1.0])
     assert learner.q_values(x).tolist() == [2.0, 0.0]
     assert learner.q_values(x2).tolist() == [2.0, 4.0]
@@ -59,9 +61,9 @@ def test_one_semi_gradient_q_learning_step_by_hand() -> None:
     nxt = learner.learn(x, 0, 1.0, x2, False)
     # Assert
     assert learner.weights[0, [0, 1, 4, 8, 12]] == pytest.approx([1.1, 0.1, 0.1, 0.1, 1.1])
-    assert learner.q_values(x)[0] == pytest.approx(2.5)          # moved half way to 3
+    assert learner.q_values(x)[0] == pytest.approx(2.5)  # moved half way to 3
     assert learner.weights[1].tolist() == [0, 0, 0, 4, 0, 0, 0, 0, 0, 0, 0, 0, 0]
-    assert nxt == 1 and learner.t == 1                            # greedy in x': 4 > 2.2
+    assert nxt == 1 and learner.t == 1  # greedy in x': 4 > 2.2
     # a terminal transition does not bootstrap: target = reward = -10
     before = learner.q_values(x2)[1]
     learner.learn(x2, 1, -10.0, x, True)
@@ -77,7 +79,7 @@ def test_initial_q_and_params() -> None:
     assert learner.weights[1, 0] == 257.0
     got = learner.get_params()
     assert np.array_equal(got, vec)
-    got[0] = 99.0                                      # a copy: the learner is unchanged
+    got[0] = 99.0  # a copy: the learner is unchanged
     assert learner.weights[0, 0] == 0.0
     with pytest.raises(ValueError, match="does not fit"):
         learner.set_params(vec[:-1])
@@ -85,4 +87,4 @@ def test_initial_q_and_params() -> None:
     bad[5] = np.nan
     with pytest.raises(ValueError, match="non-finite"):
         learner.set_params(bad)
-    assert learner.weights[0, 5] == 5.0                # a refused vector changes nothing
+    assert learner.weights[0, 5] == 5.0  # a refused vector changes nothing

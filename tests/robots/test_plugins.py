@@ -1,6 +1,7 @@
 """The learner interface (robots/README.md, "Bring your own learner"): the four built-in learners
 implement it, and a learner from outside the package is found by an installed entry point or by
 a spec, and trained by the Trainer like a built-in."""
+
 from __future__ import annotations
 
 import os
@@ -45,8 +46,9 @@ def test_a_registered_file_learner_trains_like_a_builtin() -> None:
     assert result.q_table is None and result.params is not None
     assert np.array_equal(result.params, again.params), "same seed, same parameters"
     assert np.any(result.params != 0)
-    learner = learner_class("rbf_example")(8, 3, LearnerParams(), np.random.default_rng(0),
-                                           alpha=0.2)
+    learner = learner_class("rbf_example")(
+        8, 3, LearnerParams(), np.random.default_rng(0), alpha=0.2
+    )
     assert learner.describe()["alpha"] == 0.2 and learner.describe()["grid"] is True
 
 
@@ -63,17 +65,27 @@ def test_an_installed_entry_point_is_found_by_name(tmp_path: Path) -> None:
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: myplug\nVersion: 0.1\n")
     (info / "entry_points.txt").write_text("[dfrl.learners]\nmyplug = myplug_mod:RbfSarsa\n")
     (site / "myplug_mod.py").write_text(EXAMPLE.read_text())
-    code = ("from dfrl.robots.learners import learner_class, learner_kind;"
-            "from dfrl.robots.plugins import plugin_names;"
-            "print(learner_class('myplug').__name__, learner_kind('myplug'), plugin_names())")
+    code = (
+        "from dfrl.robots.learners import learner_class, learner_kind;"
+        "from dfrl.robots.plugins import plugin_names;"
+        "print(learner_class('myplug').__name__, learner_kind('myplug'), plugin_names())"
+    )
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), *sys.path])}
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         env=env, timeout=120)
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120
+    )
     assert out.returncode == 0, out.stderr
     assert out.stdout.split()[:2] == ["RbfSarsa", "function"], out.stdout
     assert "'myplug'" in out.stdout
     # control: without the distribution on the path the name is unknown, and said so
-    bare = subprocess.run([sys.executable, "-c", "from dfrl.robots.learners import "
-                           "learner_class; learner_class('myplug')"], capture_output=True,
-                          text=True, timeout=120)
+    bare = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "from dfrl.robots.learners import learner_class; learner_class('myplug')",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert bare.returncode != 0 and "unknown learner 'myplug'" in bare.stderr

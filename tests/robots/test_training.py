@@ -1,4 +1,5 @@
 """The steppable trainer: determinism, table access, learning, outputs."""
+
 from __future__ import annotations
 
 import json
@@ -77,12 +78,22 @@ def test_control_and_physics_rates_are_configurable() -> None:
 
 
 def test_train_writes_outputs(tmp_path: Path) -> None:
-    cfg = TrainerConfig(arena="r2", algo="sarsa", seed=3, iterations=400,
-                        discretisation=DiscretisationConfig("five", 3))
+    cfg = TrainerConfig(
+        arena="r2",
+        algo="sarsa",
+        seed=3,
+        iterations=400,
+        discretisation=DiscretisationConfig("five", 3),
+    )
     result = train(cfg, tmp_path)
     names = {p.name for p in tmp_path.iterdir()}
-    assert {"config.json", "metrics.csv", "q_table.npy", "q_table.json",
-            "q_table.visits.npy"} <= names
+    assert {
+        "config.json",
+        "metrics.csv",
+        "q_table.npy",
+        "q_table.json",
+        "q_table.visits.npy",
+    } <= names
     m = read_metrics_csv(tmp_path / "metrics.csv")
     assert len(m) == 400 and m["iteration"][-1] == 400
     for field in ("iteration", "q_sum", "cumulative_reward", "collisions"):
@@ -118,8 +129,10 @@ def test_learning_shows_on_a_small_budget() -> None:
 def test_interleaved_trainers_do_not_disturb_each_other() -> None:
     """Several robots in one process (own pybullet clients) give the same runs as alone."""
     alone, _, _ = _run(TrainerConfig(arena="r3", seed=11), 300)
-    with Trainer(TrainerConfig(arena="r3", seed=11)) as a, \
-            Trainer(TrainerConfig(arena="r1", seed=12)) as b:
+    with (
+        Trainer(TrainerConfig(arena="r3", seed=11)) as a,
+        Trainer(TrainerConfig(arena="r1", seed=12)) as b,
+    ):
         together = []
         for _ in range(300):
             together.append(a.step())

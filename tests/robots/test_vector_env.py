@@ -8,6 +8,7 @@ batch, ``env_checker.data_equivalence`` for determinism, ``SyncVectorEnv`` over 
 the shape of infos, and the vector wrappers ``RecordEpisodeStatistics`` and ``DictInfoToList``,
 which rely on the autoreset mode and the ``_key`` masks.
 """
+
 from __future__ import annotations
 
 import math
@@ -43,8 +44,7 @@ IR_TOLERANCE_M = 0.0025
 
 
 def make(num_envs: int, **kwargs: object) -> EPuckVectorEnv:
-    env = gym.make_vec(ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point",
-                       **kwargs)
+    env = gym.make_vec(ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
     assert isinstance(env, EPuckVectorEnv)
     return env
 
@@ -69,7 +69,7 @@ def drive_until_done(env: EPuckVectorEnv, action: int, limit: int = 200) -> int:
 
 def test_make_vec_builds_the_batched_vector_env() -> None:
     with warnings.catch_warnings():
-        warnings.simplefilter("error")              # e.g. make_vec's missing-autoreset warning
+        warnings.simplefilter("error")  # e.g. make_vec's missing-autoreset warning
         env = make(3, arena="r1", stuck_steps=40, actions="extended")
     assert env.num_envs == 3 and env.spec is not None and env.spec.id == ENV_ID
     assert env.metadata["autoreset_mode"] is AutoresetMode.NEXT_STEP
@@ -77,7 +77,7 @@ def test_make_vec_builds_the_batched_vector_env() -> None:
     assert env.single_action_space == gym.spaces.Discrete(5)
     assert env.observation_space == batch_space(env.single_observation_space, 3)
     assert env.action_space == gym.spaces.MultiDiscrete([5, 5, 5])
-    assert env.config.stuck_steps == 40 and env.max_episode_steps == 1000   # the registered
+    assert env.config.stuck_steps == 40 and env.max_episode_steps == 1000  # the registered
     assert [a.name for a in env.arenas] == ["r1"] * 3
     mixed = make(2, arena=["r1", load_arena("r4")], max_episode_steps=50)
     assert [a.name for a in mixed.arenas] == ["r1", "r4"] and mixed.max_episode_steps == 50
@@ -104,11 +104,12 @@ def test_bad_arguments_are_refused() -> None:
 
 
 def test_registration_imports_neither_pybullet_nor_numba() -> None:
-    code = ("import sys, gymnasium, dfrl.robots\n"
-            "print(gymnasium.spec('dfrl/EPuck-v0').vector_entry_point)\n"
-            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('pybullet', 'numba')))")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=120)
+    code = (
+        "import sys, gymnasium, dfrl.robots\n"
+        "print(gymnasium.spec('dfrl/EPuck-v0').vector_entry_point)\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('pybullet', 'numba')))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split("\n")[:2] == ["dfrl.robots.vector_env:EPuckVectorEnv", "[]"]
 
@@ -136,8 +137,10 @@ def test_infos_have_the_keys_of_a_sync_vector_env_of_epuck_envs() -> None:
     sync = SyncVectorEnv([lambda: EPuckEnv(arena="r4") for _ in range(2)])
     try:
         ours = make(2, arena="r4")
-        for a, b in ((sync.reset(seed=1), ours.reset(seed=1)),
-                     (sync.step(np.array([0, 1])), ours.step(np.array([0, 1])))):
+        for a, b in (
+            (sync.reset(seed=1), ours.reset(seed=1)),
+            (sync.step(np.array([0, 1])), ours.step(np.array([0, 1]))),
+        ):
             assert set(a[-1]) == set(b[-1])
             assert [np.shape(x) for x in a[:-1]] == [np.shape(x) for x in b[:-1]]
             assert [np.asarray(x).dtype for x in a[:-1]] == [np.asarray(x).dtype for x in b[:-1]]
@@ -150,7 +153,7 @@ def test_same_seed_same_trajectories_whatever_else_is_in_the_batch() -> None:
     first = rollout(make(3, arena="r4", stuck_steps=10), seed=7, steps=150)
     second = rollout(make(3, arena="r4", stuck_steps=10), seed=7, steps=150)
     assert data_equivalence(first, second, exact=True)
-    assert sum(int(s[2].sum() + s[3].sum()) for s in first[1:]) >= 3   # episodes did end
+    assert sum(int(s[2].sum() + s[3].sum()) for s in first[1:]) >= 3  # episodes did end
     # sub-environment 2 of seed 7 is a lone environment seeded 9, driven by the same actions
     batch, lone = make(3, arena="r4", stuck_steps=10), make(1, arena="r4", stuck_steps=10)
     batch.action_space.seed(7)
@@ -193,7 +196,7 @@ def test_first_observations_match_pybullet_at_the_same_pose() -> None:
 def test_a_collision_terminates_and_the_next_step_resets_as_epuck_env_would() -> None:
     arena = load_arena("r5")
     rim = EnvConfig().sim.robot.body_radius
-    near_wall = (0.5 - rim - 0.02, 0.0, 0.0)        # 2 cm from the +x wall, facing it
+    near_wall = (0.5 - rim - 0.02, 0.0, 0.0)  # 2 cm from the +x wall, facing it
     env = make(2, arena="r5", stuck_steps=0)
     env.reset(seed=11, options={"pose": near_wall})
     k = drive_until_done(env, action=0)
@@ -231,7 +234,7 @@ def test_an_autoreset_draws_only_what_the_reset_draws() -> None:
     k = drive_until_done(env, action=0)
     _, _, _, _, infos = env.step(np.array([0]))
     rng = np.random.default_rng(3)
-    rng.normal(0.0, std, size=(k + 1, 8))           # the reset's and the k steps' readings
+    rng.normal(0.0, std, size=(k + 1, 8))  # the reset's and the k steps' readings
     expected = load_arena("r5").sample_free_pose(rng, rim + 0.03)
     np.testing.assert_allclose(infos["pose"][0], expected, rtol=0, atol=1e-12)
 
@@ -263,19 +266,19 @@ def test_an_autoreset_leaves_no_trace_of_the_step_it_throws_away() -> None:
 def test_stuck_and_time_limit_truncate() -> None:
     env = make(2, arena="r5", stuck_steps=5, max_episode_steps=100)
     env.reset(seed=0)
-    assert drive_until_done(env, action=1) == 5     # spinning: moved < 3 cm over 5 steps
+    assert drive_until_done(env, action=1) == 5  # spinning: moved < 3 cm over 5 steps
     single = EPuckEnv(arena="r5", stuck_steps=5)
     try:
         single.reset(seed=0)
-        assert [single.step(1)[3] for _ in range(5)] == [False] * 4 + [True]   # as pybullet
+        assert [single.step(1)[3] for _ in range(5)] == [False] * 4 + [True]  # as pybullet
     finally:
         single.close()
     env = make(2, arena="r5", stuck_steps=0, max_episode_steps=7)
     env.reset(seed=0)
     assert drive_until_done(env, action=1) == 7
-    _, _, terminated, truncated, _ = env.step(np.array([1, 1]))   # the autoreset
+    _, _, terminated, truncated, _ = env.step(np.array([1, 1]))  # the autoreset
     assert not terminated.any() and not truncated.any()
-    assert drive_until_done(env, action=1) == 7                    # a new episode's 7 steps
+    assert drive_until_done(env, action=1) == 7  # a new episode's 7 steps
 
 
 def test_reset_mask_resets_only_the_masked() -> None:

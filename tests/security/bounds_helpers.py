@@ -1,5 +1,6 @@
 """Helpers of the bounds tests (tests/security/test_bounds.py, test_node_budgets.py): a victim
 node, an attacker process that sends agents to it, and what /proc says of a process."""
+
 from __future__ import annotations
 
 import os
@@ -16,15 +17,16 @@ TICK = os.sysconf("SC_CLK_TCK")
 MIB = 1024 * 1024
 
 
-def start_victim(procs: list[Proc], tmp_path: Path, options: str = "",
-                 prelude: str = "") -> tuple[Proc, int]:
+def start_victim(
+    procs: list[Proc], tmp_path: Path, options: str = "", prelude: str = ""
+) -> tuple[Proc, int]:
     """A node with token 5 and the given extra node options (and ``prelude``, clauses and
     directives loaded before it starts); return it and its port."""
     path = tmp_path / f"victim_{len(procs)}.pl"
     path.write_text(f"""
-    :- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
+    :- use_module({str(PLATFORM_DIR / "tartarus.pl")!r}).
     {prelude}
-    main :- node_start(localhost:0, N, [token(5), default(true){', ' + options if options else ''}]),
+    main :- node_start(localhost:0, N, [token(5), default(true){", " + options if options else ""}]),
             node_property(N, address(H:P)),
             format("dfrl node listening on ~w:~w~n", [H, P]), flush_output,
             thread_get_message(_).
@@ -36,8 +38,9 @@ def start_victim(procs: list[Proc], tmp_path: Path, options: str = "",
     return p, int(line.rsplit(":", 1)[1])
 
 
-def attacker(procs: list[Proc], tmp_path: Path, clauses: str, body: str,
-             node_options: str = "") -> Proc:
+def attacker(
+    procs: list[Proc], tmp_path: Path, clauses: str, body: str, node_options: str = ""
+) -> Proc:
     """A process with its own node (token 5, and ``node_options``, e.g. its ``tls(Dir)``) that
     runs ``body``; its agents are ``clauses``.
 
@@ -45,8 +48,8 @@ def attacker(procs: list[Proc], tmp_path: Path, clauses: str, body: str,
     that its agent Name was stopped, or ``NO REPORT Name`` after Secs.
     """
     prog = f"""
-    :- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
-    :- use_module({str(PLATFORM_DIR / 'agent_bounds.pl')!r}).
+    :- use_module({str(PLATFORM_DIR / "tartarus.pl")!r}).
+    :- use_module({str(PLATFORM_DIR / "agent_bounds.pl")!r}).
     :- dynamic good/3.
     good(guid, (_, P), main) :- format("GOOD at ~w~n", [P]), flush_output.
     {clauses}
@@ -71,7 +74,7 @@ def attacker(procs: list[Proc], tmp_path: Path, clauses: str, body: str,
         ;   format("NO REPORT ~w~n", [Name])
         ),
         flush_output.
-    main :- node_start(localhost:0, _, [token(5){', ' + node_options if node_options else ''}]),
+    main :- node_start(localhost:0, _, [token(5){", " + node_options if node_options else ""}]),
             {body}
             format("DONE~n"), flush_output.
     """

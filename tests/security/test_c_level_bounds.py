@@ -8,6 +8,7 @@ to its baseline plus agent_memory_budget. Real
 processes; RSS peak from /proc (VmHWM). Each attack has a control: the same code with small
 sizes runs on the same node and prints the right result.
 """
+
 from __future__ import annotations
 
 import re
@@ -55,23 +56,32 @@ SMALL = "[n-100000, d-10, p-100]"
 
 def test_c_level_bombs_within_budget(tmp_path: Path, procs: list[Proc]) -> None:
     budget = 512 * MIB
-    victim, port = start_victim(procs, tmp_path, f"agent_cpu_limit(30), agent_memory_budget({budget})")
+    victim, port = start_victim(
+        procs, tmp_path, f"agent_cpu_limit(30), agent_memory_budget({budget})"
+    )
     pid = victim.popen.pid
     time.sleep(0.3)
     base = status(pid, "VmRSS")
     bombs = ["b_fmt-fmt", "b_alc-alc", "b_dbl-dbl", "b_wot-wot", "b_pow-pw"]
-    sends = "".join(f"with_size({n.split('-')[0]}, {n.split('-')[1]}, {BIG}, {port}), " for n in bombs)
+    sends = "".join(
+        f"with_size({n.split('-')[0]}, {n.split('-')[1]}, {BIG}, {port}), " for n in bombs
+    )
     awaits = "".join(f"await_report({n.split('-')[0]}, 40), " for n in bombs)
-    a = attacker(procs, tmp_path, AGENTS, f"""
+    a = attacker(
+        procs,
+        tmp_path,
+        AGENTS,
+        f"""
         send(l_fmt, lit_fmt, {port}), send(l_pow, lit_pow, {port}),
         get_time(T0), {sends}
         send(g1, good, {port}),
         {awaits}
         get_time(T1), D is T1 - T0, format("ALL STOPPED after ~3f s~n", [D]),
-    """)
+    """,
+    )
     a.wait_for("SENT b_pow", 60)
     t_sent = time.monotonic()
-    victim.wait_for("GOOD at", 5)              # an ordinary agent, sent amid the bombs: within 5 s
+    victim.wait_for("GOOD at", 5)  # an ordinary agent, sent amid the bombs: within 5 s
     served = time.monotonic() - t_sent
     a.wait_for("DONE", 120)
     out = a.output()
@@ -85,11 +95,14 @@ def test_c_level_bombs_within_budget(tmp_path: Path, procs: list[Proc]) -> None:
     assert set(kinds) == {"b_fmt", "b_alc", "b_dbl", "b_wot", "b_pow"}, out
     # the memory stream filled write by write: its writes checked together (a sink), before each
     # write, not by the RSS monitor's tick, which a busy machine delays
-    assert kinds["b_fmt"] == kinds["b_alc"] == kinds["b_dbl"] == kinds["b_wot"] == "text_size", \
+    assert kinds["b_fmt"] == kinds["b_alc"] == kinds["b_dbl"] == kinds["b_wot"] == "text_size", (
         kinds
+    )
     assert kinds["b_pow"] == "integer_size", kinds
-    print(f"C-level bombs: {a.wait_for('ALL STOPPED')}, stopped by {kinds}; RSS before "
-          f"{base // 1024} MiB, peak +{(hwm - base) // 1024} MiB; good agent served in {served:.2f} s")
+    print(
+        f"C-level bombs: {a.wait_for('ALL STOPPED')}, stopped by {kinds}; RSS before "
+        f"{base // 1024} MiB, peak +{(hwm - base) // 1024} MiB; good agent served in {served:.2f} s"
+    )
     # the stated bound (README "Bounds on agents"): baseline + agent_memory_budget + 256 MiB
     # (the growth of one monitor tick, and the atoms and buffers in flight of 8 running calls)
     assert (hwm - base) * 1024 < budget + 256 * MIB, (base, hwm)
@@ -100,11 +113,19 @@ def test_c_level_bombs_within_budget(tmp_path: Path, procs: list[Proc]) -> None:
 def test_c_level_controls_run(tmp_path: Path, procs: list[Proc]) -> None:
     victim, port = start_victim(procs, tmp_path)
     names = ["c_fmt-fmt", "c_alc-alc", "c_dbl-dbl", "c_wot-wot", "c_pow-pw"]
-    sends = "".join(f"with_size({n.split('-')[0]}, {n.split('-')[1]}, {SMALL}, {port}), " for n in names)
+    sends = "".join(
+        f"with_size({n.split('-')[0]}, {n.split('-')[1]}, {SMALL}, {port}), " for n in names
+    )
     a = attacker(procs, tmp_path, AGENTS, sends)
     a.wait_for("DONE", 60)
     try:
-        for line in ("FMT 100000", "ALC 100000", "DBL 1024", "WOT 100000", f"POW {pow(7, 100, 1000)}"):
+        for line in (
+            "FMT 100000",
+            "ALC 100000",
+            "DBL 1024",
+            "WOT 100000",
+            f"POW {pow(7, 100, 1000)}",
+        ):
             victim.wait_for(line, 20)
     except AssertionError:
         raise AssertionError(a.output() + victim.output())

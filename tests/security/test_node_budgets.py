@@ -2,6 +2,7 @@
 (max_running_agents x agent_stack_limit, the memory budget, the frame size), real processes;
 helpers in bounds_helpers.py. Each test has a control that would fail if the bound were too tight.
 """
+
 from __future__ import annotations
 
 import re
@@ -28,19 +29,25 @@ def wait_rss_settled(pid: int, base_kb: int, within_kb: int, limit_s: float = 10
     return rss
 
 
-def concurrent_bombs(procs: list[Proc], tmp_path: Path, port: int, handler: str,
-                     clauses: str, n: int = 8) -> Proc:
+def concurrent_bombs(
+    procs: list[Proc], tmp_path: Path, port: int, handler: str, clauses: str, n: int = 8
+) -> Proc:
     """An attacker that sends ``n`` agents with ``handler`` at once (b1..bn), waits for the
     victim's report on each, then sends an ordinary agent g1."""
     names = [f"b{i}" for i in range(1, n + 1)]
     sends = "".join(f"send({b}, {handler}, {port}), " for b in names)
     awaits = "".join(f"await_report({b}, 40), " for b in names)
-    return attacker(procs, tmp_path, clauses, f"""
+    return attacker(
+        procs,
+        tmp_path,
+        clauses,
+        f"""
         get_time(T0), {sends}
         {awaits}
         get_time(T1), D is T1 - T0, format("ALL STOPPED after ~3f s~n", [D]),
         send(g1, good, {port}),
-    """)
+    """,
+    )
 
 
 def test_eight_memory_bombs_within_node_budget(tmp_path: Path, procs: list[Proc]) -> None:
@@ -50,15 +57,22 @@ def test_eight_memory_bombs_within_node_budget(tmp_path: Path, procs: list[Proc]
     # and was stopped by the CPU bound, which is another test's claim.
     # the 8 bombs come from one peer: max_running_per_peer (4) would run only 4 at once, so it
     # is off here, for the node-wide bounds to meet 8
-    victim, port = start_victim(procs, tmp_path,
-                                "agent_cpu_limit(30), max_running_per_peer(infinite)")
+    victim, port = start_victim(
+        procs, tmp_path, "agent_cpu_limit(30), max_running_per_peer(infinite)"
+    )
     pid = victim.popen.pid
     time.sleep(0.3)
     base = status(pid, "VmRSS")
-    a = concurrent_bombs(procs, tmp_path, port, "bomb", """
+    a = concurrent_bombs(
+        procs,
+        tmp_path,
+        port,
+        "bomb",
+        """
     :- dynamic bomb/3.
     bomb(guid, _, main) :- numlist(1, 200000000, L), length(L, N), N > 0.
-    """)
+    """,
+    )
     a.wait_for("DONE", 120)
     out = a.output()
     kinds = re.findall(r"REPORT b\d+ (\w+)\(", out)
@@ -66,8 +80,10 @@ def test_eight_memory_bombs_within_node_budget(tmp_path: Path, procs: list[Proc]
     hwm = status(pid, "VmHWM")
     victim.wait_for("GOOD at", 20)
     after = wait_rss_settled(pid, base, 50 * 1024)
-    print(f"8 memory bombs: {a.wait_for('ALL STOPPED')}, stopped by {sorted(kinds)}; RSS before "
-          f"{base // 1024} MiB, peak +{(hwm - base) // 1024} MiB, after +{(after - base) // 1024} MiB")
+    print(
+        f"8 memory bombs: {a.wait_for('ALL STOPPED')}, stopped by {sorted(kinds)}; RSS before "
+        f"{base // 1024} MiB, peak +{(hwm - base) // 1024} MiB, after +{(after - base) // 1024} MiB"
+    )
     # the stated bound (README "Bounds on agents"), the hard one: stacks never exceed
     # max_running_agents x agent_stack_limit (8 x 256 MiB), plus 256 MiB for the node itself.
     # The budget (1 GiB, enforced by the monitor) keeps it lower when the monitor gets the CPU:
@@ -79,15 +95,22 @@ def test_eight_memory_bombs_within_node_budget(tmp_path: Path, procs: list[Proc]
 def test_eight_assert_bombs_within_node_budget(tmp_path: Path, procs: list[Proc]) -> None:
     # the 8 bombs come from one peer: max_running_per_peer (4) would run only 4 at once, so it
     # is off here, for the node-wide bounds to meet 8
-    victim, port = start_victim(procs, tmp_path,
-                                "agent_cpu_limit(30), max_running_per_peer(infinite)")
+    victim, port = start_victim(
+        procs, tmp_path, "agent_cpu_limit(30), max_running_per_peer(infinite)"
+    )
     pid = victim.popen.pid
     time.sleep(0.3)
     base = status(pid, "VmRSS")
-    a = concurrent_bombs(procs, tmp_path, port, "asserter", """
+    a = concurrent_bombs(
+        procs,
+        tmp_path,
+        port,
+        "asserter",
+        """
     :- dynamic asserter/3.
     asserter(guid, _, main) :- between(1, inf, I), assertz(fact(I)), fail.
-    """)
+    """,
+    )
     a.wait_for("DONE", 180)
     out = a.output()
     kinds = re.findall(r"REPORT b\d+ (\w+)\(", out)
@@ -95,31 +118,43 @@ def test_eight_assert_bombs_within_node_budget(tmp_path: Path, procs: list[Proc]
     hwm = status(pid, "VmHWM")
     victim.wait_for("GOOD at", 20)
     after = wait_rss_settled(pid, base, 50 * 1024)
-    print(f"8 assert bombs: {a.wait_for('ALL STOPPED')}, stopped by {sorted(kinds)}; RSS before "
-          f"{base // 1024} MiB, peak +{(hwm - base) // 1024} MiB, after +{(after - base) // 1024} MiB")
+    print(
+        f"8 assert bombs: {a.wait_for('ALL STOPPED')}, stopped by {sorted(kinds)}; RSS before "
+        f"{base // 1024} MiB, peak +{(hwm - base) // 1024} MiB, after +{(after - base) // 1024} MiB"
+    )
     assert (hwm - base) * 1024 < 1024 * MIB + 512 * MIB, (base, hwm)
     assert (after - base) < 50 * 1024, (base, after)
 
 
 def test_assert_bombs_stopped_by_node_budget(tmp_path: Path, procs: list[Proc]) -> None:
     # a budget below the sum of the module limits (8 x 64 MiB): the budget stops them
-    victim, port = start_victim(procs, tmp_path,
-                                "agent_cpu_limit(30), agent_memory_budget(268435456), "
-                                "max_running_per_peer(infinite)")       # see above
+    victim, port = start_victim(
+        procs,
+        tmp_path,
+        "agent_cpu_limit(30), agent_memory_budget(268435456), max_running_per_peer(infinite)",
+    )  # see above
     pid = victim.popen.pid
     time.sleep(0.3)
     base = status(pid, "VmRSS")
-    a = concurrent_bombs(procs, tmp_path, port, "asserter", """
+    a = concurrent_bombs(
+        procs,
+        tmp_path,
+        port,
+        "asserter",
+        """
     :- dynamic asserter/3.
     asserter(guid, _, main) :- between(1, inf, I), assertz(fact(I)), fail.
-    """)
+    """,
+    )
     a.wait_for("DONE", 180)
     kinds = re.findall(r"REPORT b\d+ (\w+)\(", a.output())
     assert len(kinds) == 8 and "memory_budget" in kinds, a.output()
     hwm = status(pid, "VmHWM")
     victim.wait_for("GOOD at", 20)
-    print(f"8 assert bombs, budget 256 MiB: stopped by {sorted(kinds)}; "
-          f"RSS peak +{(hwm - base) // 1024} MiB")
+    print(
+        f"8 assert bombs, budget 256 MiB: stopped by {sorted(kinds)}; "
+        f"RSS peak +{(hwm - base) // 1024} MiB"
+    )
     # facts take about 1.15 x their predicate_property size in RSS, and the calls grow until
     # the monitor's next tick, which comes late on a loaded machine (+559 MiB was seen while
     # the whole suite ran): the stated bound is the budget plus 8 slots x 64 MiB
@@ -128,30 +163,40 @@ def test_assert_bombs_stopped_by_node_budget(tmp_path: Path, procs: list[Proc]) 
 
 def test_running_slots_bound_stacks(tmp_path: Path, procs: list[Proc]) -> None:
     # no budget: only max_running_agents(2) x agent_stack_limit(128 MiB) bounds the stacks
-    victim, port = start_victim(procs, tmp_path,
-                                "agent_memory_budget(infinite), max_running_agents(2), "
-                                "agent_stack_limit(134217728)")
+    victim, port = start_victim(
+        procs,
+        tmp_path,
+        "agent_memory_budget(infinite), max_running_agents(2), agent_stack_limit(134217728)",
+    )
     pid = victim.popen.pid
     time.sleep(0.3)
     base = status(pid, "VmRSS")
-    a = concurrent_bombs(procs, tmp_path, port, "bomb", """
+    a = concurrent_bombs(
+        procs,
+        tmp_path,
+        port,
+        "bomb",
+        """
     :- dynamic bomb/3.
     bomb(guid, _, main) :- numlist(1, 200000000, L), length(L, N), N > 0.
-    """)
+    """,
+    )
     a.wait_for("DONE", 180)
     kinds = re.findall(r"REPORT b\d+ (\w+)\(", a.output())
     assert kinds == ["memory"] * 8, a.output()
     hwm = status(pid, "VmHWM")
     victim.wait_for("GOOD at", 20)
-    print(f"8 memory bombs, 2 slots of 128 MiB: {a.wait_for('ALL STOPPED')}; "
-          f"RSS peak +{(hwm - base) // 1024} MiB")
+    print(
+        f"8 memory bombs, 2 slots of 128 MiB: {a.wait_for('ALL STOPPED')}; "
+        f"RSS peak +{(hwm - base) // 1024} MiB"
+    )
     assert (hwm - base) * 1024 < 2 * 128 * MIB + 128 * MIB, (base, hwm)
 
 
 def test_two_max_size_frames_bounded(tmp_path: Path, procs: list[Proc]) -> None:
     from dfrl.experiments.tools.bench.hostile_auth_attacks import _Conn, _frame
 
-    victim, port = start_victim(procs, tmp_path)               # max_frame_size: 32 MiB
+    victim, port = start_victim(procs, tmp_path)  # max_frame_size: 32 MiB
     pid = victim.popen.pid
     time.sleep(0.3)
     base = status(pid, "VmRSS")

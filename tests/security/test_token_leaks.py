@@ -2,6 +2,7 @@
 strong, never on a command line (``/proc/PID/cmdline``, what ``ps`` shows every user), and
 in one file of the results folder only, ``secret.token`` of mode 0600. Real runs, real
 processes; each scan has a control that shows it finds a planted token."""
+
 from __future__ import annotations
 
 import json
@@ -16,8 +17,15 @@ from pathlib import Path
 import pytest
 
 from dfrl.experiments.driver.launcher.remote import tokens_of
-from dfrl.experiments.tokens import (SECRET_FILE, TOKEN_ENV, env_with_tokens, new_secret,
-                                     pop_env_tokens, read_token_file, TokenError)
+from dfrl.experiments.tokens import (
+    SECRET_FILE,
+    TOKEN_ENV,
+    env_with_tokens,
+    new_secret,
+    pop_env_tokens,
+    read_token_file,
+    TokenError,
+)
 from dfrl.platform_pl import PLATFORM_DIR
 from tests.experiments.driver.launcher.helpers import run_in_thread, small_config
 from tests.platform.conftest import Proc, start_node
@@ -40,10 +48,11 @@ def children_of(pid: int) -> dict[int, str]:
             fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
             if int(fields[1]) != pid:
                 continue
-            found[int(entry.name)] = (entry / "cmdline").read_bytes().replace(b"\0", b" ") \
-                .decode(errors="replace")
+            found[int(entry.name)] = (
+                (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+            )
         except (OSError, IndexError, ValueError):
-            continue                                # gone in between
+            continue  # gone in between
     return found
 
 
@@ -62,16 +71,29 @@ def cmdlines_with(token: str) -> list[int]:
 
 def files_with(folder: Path, token: str) -> dict[Path, int]:
     """Every file under ``folder`` that holds ``token``, with its permission bits."""
-    return {p: stat.S_IMODE(p.stat().st_mode) for p in folder.rglob("*")
-            if p.is_file() and not p.is_symlink() and token.encode() in p.read_bytes()}
+    return {
+        p: stat.S_IMODE(p.stat().st_mode)
+        for p in folder.rglob("*")
+        if p.is_file() and not p.is_symlink() and token.encode() in p.read_bytes()
+    }
 
 
 def entropy_bits(token: str) -> int:
     assert SWIPL
     done = subprocess.run(
-        [SWIPL, "-q", "-g", f"use_module({str(PLATFORM_DIR / 'secrets.pl')!r}),"
-         f"token_entropy_bits('{token}', B), write(B), nl", "-t", "halt"],
-        capture_output=True, text=True, timeout=30)
+        [
+            SWIPL,
+            "-q",
+            "-g",
+            f"use_module({str(PLATFORM_DIR / 'secrets.pl')!r}),"
+            f"token_entropy_bits('{token}', B), write(B), nl",
+            "-t",
+            "halt",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     return int(done.stdout.strip())
 
 
@@ -86,7 +108,7 @@ def _scan_running(out: Path) -> tuple[str, dict[int, str]]:
             if nodes.is_file() and json.loads(nodes.read_text())["agents"]:
                 break
         except (ValueError, KeyError):
-            pass                                    # being written
+            pass  # being written
         time.sleep(0.02)
     else:
         raise AssertionError("the run launched no agent in time")
@@ -94,7 +116,8 @@ def _scan_running(out: Path) -> tuple[str, dict[int, str]]:
 
 
 def test_a_run_keeps_its_random_token_off_command_lines_and_in_one_0600_file(
-        tmp_path: Path) -> None:
+    tmp_path: Path,
+) -> None:
     # Prepare: two real runs of 2 robots each, with no token in their config
     cfg = small_config(2, iterations=1500, respite=500)
     assert cfg.token is None
@@ -125,8 +148,13 @@ def test_a_run_keeps_its_random_token_off_command_lines_and_in_one_0600_file(
         assert files_with(out, token) == {secret: 0o600}
         assert read_token_file(secret) == [token]
         # results name no token at all (not even as a key)
-        for name in ("nodes.json", "config.json", "launch_fed_qlearning.json",
-                     "nodes/r1.json", "nodes/r2.json"):
+        for name in (
+            "nodes.json",
+            "config.json",
+            "launch_fed_qlearning.json",
+            "nodes/r1.json",
+            "nodes/r2.json",
+        ):
             assert "token" not in json.loads((out / name).read_text()), name
     # the default token is random and strong
     assert tokens[0] != tokens[1]
@@ -171,16 +199,18 @@ def test_node_reads_its_token_from_the_environment_and_deletes_it(procs: list[Pr
     token = new_secret()
     p, port = start_node(procs, "--port", "0", "--interactive", env=env_with_tokens([token]))
     assert token not in Path(f"/proc/{p.popen.pid}/cmdline").read_text()
-    s, nonce = connect_nonce(port)                 # the node holds the token
+    s, nonce = connect_nonce(port)  # the node holds the token
     with s:
         assert authenticate(s, nonce, token).startswith("ok(authenticated)")
-    s, nonce = connect_nonce(port)                 # and only it: a wrong one is refused
+    s, nonce = connect_nonce(port)  # and only it: a wrong one is refused
     with s:
         assert not authenticate(s, nonce, new_secret()).startswith("ok(authenticated)")
     # a process the node starts does not inherit DFRL_TOKEN
     assert p.popen.stdin is not None
-    p.popen.stdin.write("(getenv('DFRL_TOKEN', _) -> writeln(env_kept) ; writeln(env_gone)), "
-                        "shell('env; echo ENV_END').\n")
+    p.popen.stdin.write(
+        "(getenv('DFRL_TOKEN', _) -> writeln(env_kept) ; writeln(env_gone)), "
+        "shell('env; echo ENV_END').\n"
+    )
     p.popen.stdin.flush()
     p.wait_for("ENV_END")
     assert "env_gone" in p.output() and token not in p.output(), p.output()
@@ -212,12 +242,18 @@ def test_node_without_token_warns_on_loopback_and_refuses_elsewhere(procs: list[
     assert SWIPL
     p, _ = start_node(procs, "--port", "0", env=env_with_tokens([]))
     p.wait_for("has no token: it is OPEN")
-    done = subprocess.run([SWIPL, "-q", str(PLATFORM_DIR / "node_main.pl"), "--host", "0.0.0.0",
-                           "--port", "0"], capture_output=True, text=True, timeout=30,
-                          stdin=subprocess.DEVNULL, env=env_with_tokens([]))
+    done = subprocess.run(
+        [SWIPL, "-q", str(PLATFORM_DIR / "node_main.pl"), "--host", "0.0.0.0", "--port", "0"],
+        capture_output=True,
+        text=True,
+        timeout=30,
+        stdin=subprocess.DEVNULL,
+        env=env_with_tokens([]),
+    )
     assert done.returncode == 1, done
-    assert "No permission to listen" in done.stderr and "0 bits of entropy" in done.stderr, \
+    assert "No permission to listen" in done.stderr and "0 bits of entropy" in done.stderr, (
         done.stderr
+    )
     assert "listening" not in done.stdout
 
 
@@ -227,7 +263,8 @@ def _dfrl(*args: str) -> list[str]:
 
 @pytest.mark.parametrize("command", ["node", "robot"])
 def test_dfrl_node_and_robot_take_the_token_from_a_file_or_the_environment(
-        command: str, procs: list[Proc], tmp_path: Path) -> None:
+    command: str, procs: list[Proc], tmp_path: Path
+) -> None:
     token = new_secret()
     path = tmp_path / "t.token"
     path.write_text(token + "\n")
@@ -236,13 +273,17 @@ def test_dfrl_node_and_robot_take_the_token_from_a_file_or_the_environment(
         base += ["--workdir", str(tmp_path / "work")]
     # a token file others may read is refused
     path.chmod(0o644)
-    done = subprocess.run(_dfrl(*base, "--token-file", str(path)), capture_output=True,
-                          text=True, timeout=60, stdin=subprocess.DEVNULL)
+    done = subprocess.run(
+        _dfrl(*base, "--token-file", str(path)),
+        capture_output=True,
+        text=True,
+        timeout=60,
+        stdin=subprocess.DEVNULL,
+    )
     assert done.returncode == 2 and "chmod 600" in done.stderr, done.stderr
     # from a 0600 file, and from DFRL_TOKEN: off every command line, no warning
     path.chmod(0o600)
-    for args, env in (([*base, "--token-file", str(path)], None),
-                      (base, env_with_tokens([token]))):
+    for args, env in (([*base, "--token-file", str(path)], None), (base, env_with_tokens([token]))):
         p = Proc(_dfrl(*args), env=env)
         procs.append(p)
         port = int(p.wait_for(f"dfrl {command} listening on", timeout=60).rsplit(":", 1)[1])
@@ -260,9 +301,14 @@ def test_dfrl_node_and_robot_take_the_token_from_a_file_or_the_environment(
 
 
 def test_dfrl_robot_needs_a_token() -> None:
-    done = subprocess.run(_dfrl("robot", "--host", "127.0.0.1", "--port", "0"),
-                          capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL,
-                          env=env_with_tokens([]))
+    done = subprocess.run(
+        _dfrl("robot", "--host", "127.0.0.1", "--port", "0"),
+        capture_output=True,
+        text=True,
+        timeout=60,
+        stdin=subprocess.DEVNULL,
+        env=env_with_tokens([]),
+    )
     assert done.returncode == 2 and "no token" in done.stderr, done.stderr
 
 
@@ -284,6 +330,7 @@ def test_token_formats(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
 
 def tokens_of_missing(folder: Path) -> None:
     from dfrl.experiments.tokens import run_tokens
+
     run_tokens(folder)
 
 
@@ -295,7 +342,7 @@ def test_a_node_store_keeps_tokens_from_other_users(tmp_path: Path) -> None:
     store = tmp_path / "store"
     script = tmp_path / "stored.pl"
     script.write_text(f"""
-    :- use_module({str(PLATFORM_DIR / 'tartarus.pl')!r}).
+    :- use_module({str(PLATFORM_DIR / "tartarus.pl")!r}).
     :- dynamic keeper/3, notes/2.
     keeper(guid, _, _).
     main :- node_start(localhost:0, _, [token({token!r}), store({str(store)!r})]),
@@ -304,12 +351,16 @@ def test_a_node_store_keeps_tokens_from_other_users(tmp_path: Path) -> None:
             add_payload(k1, [(notes, 2)]),
             sleep(0.5), format("STORED~n"), flush_output.
     """)
-    done = subprocess.run([find_swipl() or "swipl", "-q", "-g", "main", "-t", "halt",
-                           str(script)], capture_output=True, text=True, timeout=60)
+    done = subprocess.run(
+        [find_swipl() or "swipl", "-q", "-g", "main", "-t", "halt", str(script)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert "STORED" in done.stdout, done
     holding = files_with(store, token)
-    assert holding, sorted(p.name for p in store.rglob("*"))          # control
+    assert holding, sorted(p.name for p in store.rglob("*"))  # control
     for path in holding:
         assert stat.S_IMODE(path.stat().st_mode) & 0o077 == 0, (path, oct(path.stat().st_mode))
-        d = path.parent                                   # and the folder the records are in
+        d = path.parent  # and the folder the records are in
         assert stat.S_IMODE(d.stat().st_mode) & 0o077 == 0, (d, oct(d.stat().st_mode))

@@ -10,6 +10,7 @@ Threading: two reader threads (stdout, stderr) and any number of callers. Replie
 the end of input and the waiting queues are guarded by one condition; writes to stdin by a
 lock; events go through a thread-safe queue.
 """
+
 from __future__ import annotations
 
 import collections
@@ -50,8 +51,11 @@ class ConsoleRequestError(ExperimentError):
     def token_refused(self) -> bool:
         """A platform accepted none of the tokens the console node proved
         (``permission_error(_, platform, Address)``, platform_pl/transport.pl)."""
-        return (self.formal_name == "permission_error" and len(self.formal_args) == 3
-                and self.formal_args[1] == "platform")
+        return (
+            self.formal_name == "permission_error"
+            and len(self.formal_args) == 3
+            and self.formal_args[1] == "platform"
+        )
 
 
 class ConsoleChannel:
@@ -74,8 +78,13 @@ class ConsoleChannel:
         The process could not be started or did not report its address in time.
     """
 
-    def __init__(self, argv: Sequence[str], env: Mapping[str, str], ready_timeout_s: float,
-                 log_path: Path | None = None) -> None:
+    def __init__(
+        self,
+        argv: Sequence[str],
+        env: Mapping[str, str],
+        ready_timeout_s: float,
+        log_path: Path | None = None,
+    ) -> None:
         self._ids = itertools.count(1)
         self._cond = threading.Condition()
         self._replies: dict[Any, dict[str, Any]] = {}
@@ -87,16 +96,24 @@ class ConsoleChannel:
         self._address: Address | None = None
         self._log: IO[str] | None = open(log_path, "a", encoding="utf-8") if log_path else None
         try:
-            self._proc = processes.start(argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                         stderr=subprocess.PIPE, env=env, bufsize=1)
+            self._proc = processes.start(
+                argv,
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                env=env,
+                bufsize=1,
+            )
         except BaseException:
             if self._log is not None:
                 self._log.close()
             raise
-        self._reader = threading.Thread(target=self._read_stdout, daemon=True,
-                                        name="console-stdout")
-        self._err_reader = threading.Thread(target=self._read_stderr, daemon=True,
-                                            name="console-stderr")
+        self._reader = threading.Thread(
+            target=self._read_stdout, daemon=True, name="console-stdout"
+        )
+        self._err_reader = threading.Thread(
+            target=self._read_stderr, daemon=True, name="console-stderr"
+        )
         self._reader.start()
         self._err_reader.start()
         try:
@@ -145,8 +162,11 @@ class ConsoleChannel:
         else:
             request = msg.get("request")
             with self._cond:
-                waiter = self._waiters.get(request) \
-                    if event == "reply" and isinstance(request, str) else None
+                waiter = (
+                    self._waiters.get(request)
+                    if event == "reply" and isinstance(request, str)
+                    else None
+                )
             (waiter or self._events).put(msg)
 
     def _await_ready(self, timeout_s: float) -> None:
@@ -158,8 +178,11 @@ class ConsoleChannel:
                     break
                 self._cond.wait(left)
         if self._address is None:
-            gone = "exited before it was ready" if self._eof else \
-                f"did not report its address within {timeout_s} s"
+            gone = (
+                "exited before it was ready"
+                if self._eof
+                else f"did not report its address within {timeout_s} s"
+            )
             raise ExperimentError(f"the console node {gone} ({self._exit_text()})")
 
     def _exit_text(self) -> str:
@@ -169,7 +192,7 @@ class ConsoleChannel:
         except subprocess.TimeoutExpired:
             code = None
         if code is not None:
-            self._err_reader.join(timeout=2.0)       # its last words
+            self._err_reader.join(timeout=2.0)  # its last words
         return f"exit code {code}: {self.stderr_tail()}"
 
     # -- requests --------------------------------------------------------------------------
@@ -188,16 +211,17 @@ class ConsoleChannel:
             while rid not in self._replies and not self._eof:
                 left = deadline - time.monotonic()
                 if left <= 0:
-                    raise ExperimentError(f"the console node did not answer {op} within "
-                                          f"{timeout_s} s")
+                    raise ExperimentError(
+                        f"the console node did not answer {op} within {timeout_s} s"
+                    )
                 self._cond.wait(left)
             reply = self._replies.pop(rid, None)
         if reply is None:
-            raise ExperimentError(f"the console node exited during {op} "
-                                  f"({self._exit_text()})")
+            raise ExperimentError(f"the console node exited during {op} ({self._exit_text()})")
         if not reply.get("ok"):
-            raise ConsoleRequestError(f"{op} failed: {reply.get('error', reply)}",
-                                      reply.get("formal"))
+            raise ConsoleRequestError(
+                f"{op} failed: {reply.get('error', reply)}", reply.get("formal")
+            )
         return {k: v for k, v in reply.items() if k not in ("id", "ok")}
 
     def _send(self, line: str, op: str) -> None:
@@ -209,8 +233,9 @@ class ConsoleChannel:
                 stdin.write(line + "\n")
                 stdin.flush()
         except (BrokenPipeError, OSError, ValueError) as exc:
-            raise ExperimentError(f"cannot send {op} to the console node ({exc}; "
-                                  f"{self._exit_text()})") from None
+            raise ExperimentError(
+                f"cannot send {op} to the console node ({exc}; {self._exit_text()})"
+            ) from None
 
     @contextlib.contextmanager
     def expect(self, request: str) -> Iterator[queue.Queue[dict[str, Any]]]:
@@ -279,4 +304,3 @@ class ConsoleChannel:
             self._log.close()
             self._log = None
         return self._proc.returncode
-

@@ -1,6 +1,7 @@
 """The command line that starts an experiment's console node (a ``swipl`` process running
 ``platform_pl/dfrl_agent/dfrl_console.pl``;
 :class:`dfrl.experiments.driver.console.node.ConsoleNode` drives it)."""
+
 from __future__ import annotations
 
 import os
@@ -14,8 +15,9 @@ CONSOLE_SCRIPT: Path = DFRL_AGENT_DIR / "dfrl_console.pl"
 """The Prolog program a console node runs."""
 
 
-def console_command(host: str, port: int, tls: str | os.PathLike[str] | None = None,
-                    swipl: str | None = None) -> list[str]:
+def console_command(
+    host: str, port: int, tls: str | os.PathLike[str] | None = None, swipl: str | None = None
+) -> list[str]:
     """The argv of a console node bound to ``host:port`` (0: the OS chooses). It holds no
     token: the node reads its tokens from ``DFRL_TOKEN`` in its environment
     (:func:`dfrl.experiments.tokens.env_with_tokens`), as ``ps`` shows every argv to every
@@ -37,8 +39,15 @@ def console_command(host: str, port: int, tls: str | os.PathLike[str] | None = N
     CertError
         ``tls`` does not hold the three files.
     """
-    cmd = [swipl or processes.swipl(), "-q", str(CONSOLE_SCRIPT), "--host", host,
-           "--port", str(int(port))]
+    cmd = [
+        swipl or processes.swipl(),
+        "-q",
+        str(CONSOLE_SCRIPT),
+        "--host",
+        host,
+        "--port",
+        str(int(port)),
+    ]
     if tls is not None:
         cmd += ["--tls", str(check_node_dir(tls).resolve())]
     return cmd

@@ -16,6 +16,7 @@ with the node's own error text.
 Example: ``with ConsoleNode(tokens=[1111]) as console: console.control(("127.0.0.1", 7001),
 "fed_qlearning", {"method": "max"})`` (after ``console.launch_agent(plan)``).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -66,10 +67,16 @@ class ConsoleNode:
         report its address in time (e.g. its TLS files do not make a context).
     """
 
-    def __init__(self, tokens: int | str | Sequence[int | str] | None = None,
-                 host: str = "127.0.0.1", port: int = 0, ready_timeout_s: float = 30.0,
-                 log_path: Path | None = None, swipl: str | None = None,
-                 tls: str | os.PathLike[str] | None = None) -> None:
+    def __init__(
+        self,
+        tokens: int | str | Sequence[int | str] | None = None,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        ready_timeout_s: float = 30.0,
+        log_path: Path | None = None,
+        swipl: str | None = None,
+        tls: str | os.PathLike[str] | None = None,
+    ) -> None:
         if tokens is None:
             tokens = []
         elif isinstance(tokens, (int, str)):
@@ -107,8 +114,9 @@ class ConsoleNode:
         """
         return self._request("launch", timeout_s, plan=dict(plan))
 
-    def control(self, first_stop: Address, agent: str, command: Mapping[str, Any],
-                timeout_s: float = 30.0) -> dict[str, Any]:
+    def control(
+        self, first_stop: Address, agent: str, command: Mapping[str, Any], timeout_s: float = 30.0
+    ) -> dict[str, Any]:
         """Post a control command to ``agent`` at the node of its first stop.
 
         ``command`` is ``{"join": {"host", "port", "robot"}}``, ``{"method": name}`` or
@@ -117,23 +125,30 @@ class ConsoleNode:
         (the command as the Prolog term posted).
         """
         host, port = first_stop
-        return self._request("control", timeout_s, agent=agent, host=host, port=int(port),
-                             command=dict(command))
+        return self._request(
+            "control", timeout_s, agent=agent, host=host, port=int(port), command=dict(command)
+        )
 
-    def load_program(self, program: str | Path, nodes: Sequence[Address],
-                     timeout_s: float = 60.0) -> dict[str, Any]:
+    def load_program(
+        self, program: str | Path, nodes: Sequence[Address], timeout_s: float = 60.0
+    ) -> dict[str, Any]:
         """Load a Prolog program file into each of ``nodes``, in order (this node's tokens
         prove the right to). The first failure raises."""
-        return self._request("load_program", timeout_s, program=str(Path(program).resolve()),
-                             nodes=[[h, int(p)] for h, p in nodes])
+        return self._request(
+            "load_program",
+            timeout_s,
+            program=str(Path(program).resolve()),
+            nodes=[[h, int(p)] for h, p in nodes],
+        )
 
     def agents_at(self, node: Address, timeout_s: float = 30.0) -> list[dict[str, Any]]:
         """The agents on ``node``: ``[{"name", "handler", "kind", "status"}, ...]``."""
         host, port = node
         return list(self._request("agents", timeout_s, node=[host, int(port)])["agents"])
 
-    def robot(self, node: Address, request: str | Mapping[str, Any],
-              timeout_s: float = 30.0) -> Any:
+    def robot(
+        self, node: Address, request: str | Mapping[str, Any], timeout_s: float = 30.0
+    ) -> Any:
         """Send one request to the robot service (``dfrl robot``) at ``node``; its answer.
 
         Parameters
@@ -158,11 +173,17 @@ class ConsoleNode:
         """
         host, port = node
         req = request if isinstance(request, str) else dict(request)
-        return self._request("robot", timeout_s + 5.0, node=[host, int(port)], request=req,
-                             wait_s=float(timeout_s))["result"]
+        return self._request(
+            "robot", timeout_s + 5.0, node=[host, int(port)], request=req, wait_s=float(timeout_s)
+        )["result"]
 
-    def request_join(self, driver: Address, robot_spec: Mapping[str, Any] | Any,
-                     iterations: int | None = None, timeout_s: float = 60.0) -> dict[str, Any]:
+    def request_join(
+        self,
+        driver: Address,
+        robot_spec: Mapping[str, Any] | Any,
+        iterations: int | None = None,
+        timeout_s: float = 60.0,
+    ) -> dict[str, Any]:
         """Ask the driver whose console node is at ``driver`` to add a robot (``robot_spec``, a
         mapping or dataclass such as ``RobotSpec``, is passed on as a JSON object); wait for
         its answer and return the driver's result.
@@ -173,18 +194,27 @@ class ConsoleNode:
             The request could not be posted, no answer came within ``timeout_s``, or the
             answer carries an ``error``.
         """
-        spec = dict(robot_spec) if isinstance(robot_spec, Mapping) \
-            else dataclasses.asdict(robot_spec)
+        spec = (
+            dict(robot_spec) if isinstance(robot_spec, Mapping) else dataclasses.asdict(robot_spec)
+        )
         request = uuid.uuid4().hex
         deadline = time.monotonic() + timeout_s
         with self._channel.expect(request) as waiter:
-            self._request("join", timeout_s, to=list(driver), request=request, robot=spec,
-                          iterations=iterations)
+            self._request(
+                "join",
+                timeout_s,
+                to=list(driver),
+                request=request,
+                robot=spec,
+                iterations=iterations,
+            )
             try:
                 event = waiter.get(timeout=max(0.0, deadline - time.monotonic()))
             except queue.Empty:
-                raise ExperimentError(f"no answer to the join request from {driver[0]}:"
-                                      f"{driver[1]} within {timeout_s} s") from None
+                raise ExperimentError(
+                    f"no answer to the join request from {driver[0]}:"
+                    f"{driver[1]} within {timeout_s} s"
+                ) from None
         result = event.get("result")
         if not isinstance(result, dict):
             raise ExperimentError(f"unreadable answer to the join request: {event}")
@@ -192,19 +222,26 @@ class ConsoleNode:
             raise ExperimentError(f"join refused: {result['error']}")
         return result
 
-    def reply(self, to: Address, request: str | int, result: Mapping[str, Any],
-              timeout_s: float = 30.0) -> None:
+    def reply(
+        self, to: Address, request: str | int, result: Mapping[str, Any], timeout_s: float = 30.0
+    ) -> None:
         """Answer the join request ``request`` that came from the console node ``to``
         (a ``join_request`` event's ``from``)."""
         self._request("reply", timeout_s, to=list(to), request=request, result=dict(result))
 
-    def announce_program(self, driver: Address, program: str | Path,
-                         timeout_s: float = 30.0) -> None:
+    def announce_program(
+        self, driver: Address, program: str | Path, timeout_s: float = 30.0
+    ) -> None:
         """Tell the driver whose console node is at ``driver`` that ``program`` was injected,
         so that it loads it into the robots that join later (a ``program`` event there)."""
         path = Path(program)
-        self._request("program", timeout_s, to=list(driver), name=path.name,
-                      text=path.read_text(encoding="utf-8"))
+        self._request(
+            "program",
+            timeout_s,
+            to=list(driver),
+            name=path.name,
+            text=path.read_text(encoding="utf-8"),
+        )
 
     # -- events and lifecycle ----------------------------------------------------------------
     def next_event(self, timeout_s: float) -> dict[str, Any] | None:
@@ -232,6 +269,10 @@ class ConsoleNode:
     def __enter__(self) -> ConsoleNode:
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
         self.close()

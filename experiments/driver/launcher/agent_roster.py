@@ -6,6 +6,7 @@ their logs; the reader threads of the robot processes report hops
 (:meth:`AgentRoster.on_hop`); a test may ask where an agent is (:meth:`AgentRoster.at`). Every
 field is guarded by the roster's lock.
 """
+
 from __future__ import annotations
 
 import threading
@@ -28,13 +29,19 @@ class AgentInfo:
     rounds: int
     rounds_log: str
     itinerary: tuple[dict[str, Any], ...] = field(default_factory=tuple)
-    kind: str = "chain"                 # the itinerary's: chain, or tree (clones)
+    kind: str = "chain"  # the itinerary's: chain, or tree (clones)
     fanout: int = 2
 
     def to_dict(self) -> dict[str, Any]:
-        out = {"name": self.name, "algo": self.algo, "method": self.method,
-               "rounds": self.rounds, "rounds_log": self.rounds_log,
-               "itinerary": [dict(s) for s in self.itinerary], "kind": self.kind}
+        out = {
+            "name": self.name,
+            "algo": self.algo,
+            "method": self.method,
+            "rounds": self.rounds,
+            "rounds_log": self.rounds_log,
+            "itinerary": [dict(s) for s in self.itinerary],
+            "kind": self.kind,
+        }
         if self.kind == "tree":
             out["fanout"] = self.fanout
         return out
@@ -49,8 +56,8 @@ class AgentRoster:
         self._lock = threading.Lock()
         self._agents: dict[str, AgentInfo] = {}
         self._logs: dict[str, AgentLog] = {}
-        self._at: dict[str, tuple[str, str, int]] = {}     # agent -> robot, op, iteration
-        self._said: dict[str, int] = {}                    # agent -> rounds said
+        self._at: dict[str, tuple[str, str, int]] = {}  # agent -> robot, op, iteration
+        self._said: dict[str, int] = {}  # agent -> rounds said
 
     def add(self, info: AgentInfo) -> None:
         with self._lock:
@@ -99,10 +106,16 @@ class AgentRoster:
                 if info.algo == algo or any(s.get("robot") == robot for s in info.itinerary):
                     self._at[name] = (robot, op, iteration)
                     log = self._logs.get(name)
-                    self._event({"kind": "hop", "agent": name, "robot": robot,
-                                 "phase": "forward" if op == "get" else "backward",
-                                 "round": (len(log.rounds) if log else 0) + 1,
-                                 "iteration": iteration})
+                    self._event(
+                        {
+                            "kind": "hop",
+                            "agent": name,
+                            "robot": robot,
+                            "phase": "forward" if op == "get" else "backward",
+                            "round": (len(log.rounds) if log else 0) + 1,
+                            "iteration": iteration,
+                        }
+                    )
 
     def read_logs(self, robots: RobotRoster, kept_in: Path | None = None) -> None:
         """Re-read every agent's log; say each round not said yet (with the iterations of the
@@ -116,25 +129,33 @@ class AgentRoster:
                 self._logs[info.name] = log
                 shown, self._said[info.name] = self._said.get(info.name, 0), len(log.rounds)
             for rec in log.rounds[shown:]:
-                mine = {s.get("robot") for s in info.itinerary}     # (a grid agent's: any algo)
-                its = " ".join(f"{rid}:{it}" for rid, it in robots.iterations().items()
-                               if rid in mine)
-                flags = "".join(f" SKIPPED {s.robot} ({' '.join(s.reason.split())[:120]})"
-                                for s in rec.skipped)
+                mine = {s.get("robot") for s in info.itinerary}  # (a grid agent's: any algo)
+                its = " ".join(
+                    f"{rid}:{it}" for rid, it in robots.iterations().items() if rid in mine
+                )
+                flags = "".join(
+                    f" SKIPPED {s.robot} ({' '.join(s.reason.split())[:120]})" for s in rec.skipped
+                )
                 if rec.failed_method:
-                    flags += (f" METHOD {rec.failed_method} FAILED, round done again with "
-                              f"{rec.method}: {rec.error[:300]}")
+                    flags += (
+                        f" METHOD {rec.failed_method} FAILED, round done again with "
+                        f"{rec.method}: {rec.error[:300]}"
+                    )
                 elif rec.error:
                     flags += f" METHOD FAILED, round aborted, no table written: {rec.error[:300]}"
-                self._say(f"{info.name} round {rec.round}/{info.rounds} {rec.method} "
-                          f"{rec.duration_ms:.0f} ms, {rec.hops} hops, visited "
-                          f"{','.join(rec.visited) or 'none'}{flags} | {its}")
+                self._say(
+                    f"{info.name} round {rec.round}/{info.rounds} {rec.method} "
+                    f"{rec.duration_ms:.0f} ms, {rec.hops} hops, visited "
+                    f"{','.join(rec.visited) or 'none'}{flags} | {its}"
+                )
 
     def all_finished(self) -> bool:
         """Every agent logged ``finished``."""
         with self._lock:
-            return all(self._logs.get(n) is not None and self._logs[n].finished is not None
-                       for n in self._agents)
+            return all(
+                self._logs.get(n) is not None and self._logs[n].finished is not None
+                for n in self._agents
+            )
 
     def where(self) -> list[str]:
         """Per agent: rounds done and where it is (or that it finished), for a status line."""

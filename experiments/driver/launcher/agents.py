@@ -1,6 +1,7 @@
 """Where the launcher starts agents and sends them control commands: through one long-lived
 console node per experiment (:class:`dfrl.experiments.driver.console.ConsoleNode`, a ``swipl``
 child driven in JSON lines), never one ``swipl`` process per command."""
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -18,8 +19,12 @@ def agent_name(algo: str) -> str:
     return f"fed_{algo}"
 
 
-def open_console(token: Token | Sequence[Token], log_path: Path | None = None,
-                 host: str = "127.0.0.1", tls: str | Path | None = None) -> ConsoleNode:
+def open_console(
+    token: Token | Sequence[Token],
+    log_path: Path | None = None,
+    host: str = "127.0.0.1",
+    tls: str | Path | None = None,
+) -> ConsoleNode:
     """Start the console node of an experiment at ``host`` (an address the robots reach; its
     token, handed over in its environment, lets it load programs into the robot processes, drive
     robot services, and its agents carry it); its stderr
@@ -47,9 +52,15 @@ def launch_agent(console: ConsoleNode, launch: dict[str, Any], timeout_s: float 
     console.launch_agent(launch, timeout_s=timeout_s)
 
 
-def send_control(console: ConsoleNode, first_stop: Address, agent: str,
-                 command: dict[str, Any], program: str | Path | None = None,
-                 nodes: Sequence[Address] = (), timeout_s: float = 30.0) -> None:
+def send_control(
+    console: ConsoleNode,
+    first_stop: Address,
+    agent: str,
+    command: dict[str, Any],
+    program: str | Path | None = None,
+    nodes: Sequence[Address] = (),
+    timeout_s: float = 30.0,
+) -> None:
     """Post a control command to ``agent`` at its first stop.
 
     ``command``: ``{"join": {"host", "port", "robot"}}``, ``{"method": name}`` or

@@ -12,6 +12,7 @@ Threading: one reader thread per child parses its stdout; what it learns (addres
 iteration, samples ...) is guarded by the child's lock, and the event handler is called
 outside it.
 """
+
 from __future__ import annotations
 
 import os
@@ -29,18 +30,29 @@ from dfrl.experiments.robot_host.config import RobotConfig
 from dfrl.experiments.driver.launcher.robots import Address, EventHandler, Progress, RobotStatus
 from dfrl.experiments.driver.results.files import write_json
 from dfrl.experiments.errors import ExperimentError
-from dfrl.experiments.robot_host.lines import (Evaluation, Sample, parse_eval, parse_event,
-                                                parse_sample)
+from dfrl.experiments.robot_host.lines import (
+    Evaluation,
+    Sample,
+    parse_eval,
+    parse_event,
+    parse_sample,
+)
 from dfrl.experiments.tokens import Token, env_with_tokens
+
 
 def child_env(tokens: Sequence[Token] = ()) -> dict[str, str]:
     """Environment of a Python child: unbuffered, importing this process's ``dfrl``, with
     ``tokens`` in ``DFRL_TOKEN`` (none: no such variable, not even one this process got)."""
     root = str(Path(dfrl.__file__).resolve().parent.parent)
     path = os.environ.get("PYTHONPATH")
-    return env_with_tokens(tokens, dict(
-        os.environ, PYTHONUNBUFFERED="1",
-        PYTHONPATH=root if not path else os.pathsep.join([root, path])))
+    return env_with_tokens(
+        tokens,
+        dict(
+            os.environ,
+            PYTHONUNBUFFERED="1",
+            PYTHONPATH=root if not path else os.pathsep.join([root, path]),
+        ),
+    )
 
 
 class RobotChild:
@@ -61,9 +73,14 @@ class RobotChild:
         process with its probes installed (``dfrl bench round --trace``).
     """
 
-    def __init__(self, robot: RobotSpec, cfg: RobotConfig, out_dir: Path,
-                 on_event: EventHandler | None = None,
-                 module: str = "dfrl.experiments.robot_host") -> None:
+    def __init__(
+        self,
+        robot: RobotSpec,
+        cfg: RobotConfig,
+        out_dir: Path,
+        on_event: EventHandler | None = None,
+        module: str = "dfrl.experiments.robot_host",
+    ) -> None:
         self._spec = robot
         self._module = module
         self._cfg = cfg
@@ -73,12 +90,12 @@ class RobotChild:
         self._proc: subprocess.Popen[Any] | None = None
         self._reader: threading.Thread | None = None
         self._lock = threading.Lock()
-        self._address: Address | None = None      # guarded by _lock, and so on below
+        self._address: Address | None = None  # guarded by _lock, and so on below
         self._iteration = 0
         self._shares = 0
         self._done = False
-        self._sample: Sample | None = None        # the newest, not taken yet
-        self._evals: list[Evaluation] = []        # not taken yet
+        self._sample: Sample | None = None  # the newest, not taken yet
+        self._evals: list[Evaluation] = []  # not taken yet
 
     @property
     def spec(self) -> RobotSpec:
@@ -101,13 +118,19 @@ class RobotChild:
         cfg_path = self._out / "nodes" / f"{self._spec.id}.json"
         write_json(cfg_path, self._cfg.public_dict())
         self.err_path.parent.mkdir(exist_ok=True)
-        with open(self.err_path, "w", encoding="utf-8") as err:    # the child keeps its copy
+        with open(self.err_path, "w", encoding="utf-8") as err:  # the child keeps its copy
             self._proc = processes.start(
                 [sys.executable, "-m", self._module, "--config", str(cfg_path)],
-                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=err, cwd=self._out,
-                env=child_env(() if self._cfg.token is None else [self._cfg.token]), bufsize=1)
-        self._reader = threading.Thread(target=self._read, name=f"read-{self._spec.id}",
-                                        daemon=True)
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=err,
+                cwd=self._out,
+                env=child_env(() if self._cfg.token is None else [self._cfg.token]),
+                bufsize=1,
+            )
+        self._reader = threading.Thread(
+            target=self._read, name=f"read-{self._spec.id}", daemon=True
+        )
         self._reader.start()
 
     def _read(self) -> None:
@@ -143,10 +166,15 @@ class RobotChild:
         running = self._proc is not None and code is None
         with self._lock:
             return RobotStatus(
-                address=self._address, iteration=self._iteration, shares=self._shares,
-                done=self._done, running=running,
+                address=self._address,
+                iteration=self._iteration,
+                shares=self._shares,
+                done=self._done,
+                running=running,
                 lost=f"process exited with code {code}" if code else None,
-                exit_code=code, pid=self._proc.pid if self._proc is not None else None)
+                exit_code=code,
+                pid=self._proc.pid if self._proc is not None else None,
+            )
 
     def take_progress(self) -> Progress:
         with self._lock:

@@ -28,6 +28,7 @@ cluster) and elsewhere only when the caller says ``insecure``.
 Threading: the caller's thread calls every public method; the watch thread renews the lease
 and records losses, guarded by the placement's lock.
 """
+
 from __future__ import annotations
 
 import ipaddress
@@ -45,8 +46,13 @@ from dfrl.experiments.driver.config import ExperimentConfig
 from dfrl.experiments.driver.results.files import ClaimedFolder
 from dfrl.experiments.driver.results.summary import Results
 from dfrl.experiments.errors import ExperimentError
-from dfrl.experiments.tls_folder import CA_CERT, CLUSTER_CERT, CLUSTER_KEY, CertError, \
-    check_cluster_dir
+from dfrl.experiments.tls_folder import (
+    CA_CERT,
+    CLUSTER_CERT,
+    CLUSTER_KEY,
+    CertError,
+    check_cluster_dir,
+)
 
 #: The resource a robot's task asks for (workers offer it: ``--resources CPU=N``).
 RESOURCE = "CPU"
@@ -93,13 +99,17 @@ class ClusterAccess:
             return None
         from distributed import Security
 
-        return Security(tls_ca_file=str(self.tls / CA_CERT),
-                        tls_client_cert=str(self.tls / CLUSTER_CERT),
-                        tls_client_key=str(self.tls / CLUSTER_KEY), require_encryption=True)
+        return Security(
+            tls_ca_file=str(self.tls / CA_CERT),
+            tls_client_cert=str(self.tls / CLUSTER_CERT),
+            tls_client_key=str(self.tls / CLUSTER_KEY),
+            require_encryption=True,
+        )
 
 
-def cluster_access(address: str, tls: str | Path | None = None,
-                   insecure: bool = False) -> ClusterAccess:
+def cluster_access(
+    address: str, tls: str | Path | None = None, insecure: bool = False
+) -> ClusterAccess:
     """Check that ``address`` with the cluster folder ``tls`` makes a safe connection.
 
     Parameters
@@ -122,38 +132,45 @@ def cluster_access(address: str, tls: str | Path | None = None,
         without ``insecure`` (anyone who reaches such a scheduler runs code on its workers).
     """
     scheme, _, rest = address.partition("://") if "://" in address else ("tcp", "", address)
-    if scheme == "inproc":                  # a scheduler in this process: no network at all
+    if scheme == "inproc":  # a scheduler in this process: no network at all
         return ClusterAccess(address)
     if scheme not in ("tls", "tcp"):
-        raise ClusterAccessError(f"--cluster {address}: use a tls:// address (or tcp:// on "
-                                 f"loopback), not {scheme}://")
+        raise ClusterAccessError(
+            f"--cluster {address}: use a tls:// address (or tcp:// on loopback), not {scheme}://"
+        )
     if scheme == "tls":
         if tls is None:
             raise ClusterAccessError(
                 f"--cluster {address} needs --cluster-tls DIR: the driver's cluster certificate "
-                f"folder (make it with 'dfrl certs cluster driver CA_DIR --out DIR')")
+                f"folder (make it with 'dfrl certs cluster driver CA_DIR --out DIR')"
+            )
         try:
             return ClusterAccess(address, check_cluster_dir(tls).resolve())
         except CertError as exc:
             raise ClusterAccessError(f"--cluster-tls: {exc}") from None
     if tls is not None:
-        raise ClusterAccessError(f"--cluster-tls is for a tls:// scheduler; {address} is "
-                                 f"plaintext (write tls://{rest})")
+        raise ClusterAccessError(
+            f"--cluster-tls is for a tls:// scheduler; {address} is plaintext (write tls://{rest})"
+        )
     if not (_on_loopback(rest) or insecure):
         raise ClusterAccessError(
             f"--cluster {address} is plaintext TCP off loopback: the scheduler asks no "
             f"certificate, so anyone who reaches it can run code on every worker (and read "
             f"dfrl.token there); start the cluster with TLS as the README says ('Running on a "
             f"cluster') and use --cluster tls://{rest} --cluster-tls DIR, or say --insecure "
-            f"if the network is yours alone")
+            f"if the network is yours alone"
+        )
     return ClusterAccess(address)
 
 
 def _on_loopback(host_port: str) -> bool:
     """True if the host of ``HOST:PORT`` (``[V6]:PORT`` too) is ``localhost`` or a loopback
     address."""
-    host = host_port.rsplit(":", 1)[0] if host_port.count(":") == 1 or \
-        host_port.startswith("[") else host_port
+    host = (
+        host_port.rsplit(":", 1)[0]
+        if host_port.count(":") == 1 or host_port.startswith("[")
+        else host_port
+    )
     host = host.strip("[]")
     if host == "localhost":
         return True
@@ -190,8 +207,13 @@ class ClusterPlacement:
         (:data:`~dfrl.experiments.robot_host.cluster_task.TLS_FOLDER`).
     """
 
-    def __init__(self, access: ClusterAccess | str, cpus: float = 1.0,
-                 say: Callable[[str], None] = lambda line: None, tls: bool = False) -> None:
+    def __init__(
+        self,
+        access: ClusterAccess | str,
+        cpus: float = 1.0,
+        say: Callable[[str], None] = lambda line: None,
+        tls: bool = False,
+    ) -> None:
         if cpus <= 0:
             raise ExperimentError(f"--cluster-cpus must be > 0, got {cpus}")
         self.access = access if isinstance(access, ClusterAccess) else cluster_access(access)
@@ -203,7 +225,7 @@ class ClusterPlacement:
         self._client: Any = None
         self._futures: dict[str, Any] = {}
         self._lock = threading.Lock()
-        self._placed: dict[str, Placement] = {}     # guarded by _lock, and so on below
+        self._placed: dict[str, Placement] = {}  # guarded by _lock, and so on below
         self._losses: list[str] = []
         self._said: set[str] = set()
         self._ended: dict[str, Any] = {}
@@ -223,12 +245,18 @@ class ClusterPlacement:
         try:
             from distributed import Client
         except ImportError:
-            raise ExperimentError("--cluster needs Dask distributed: pip install "
-                                  "'dfrl[cluster]' (or distributed) on this host and on every "
-                                  "worker") from None
+            raise ExperimentError(
+                "--cluster needs Dask distributed: pip install "
+                "'dfrl[cluster]' (or distributed) on this host and on every "
+                "worker"
+            ) from None
         try:
-            self._client = Client(self.address, timeout=CONNECT_S, set_as_default=False,
-                                  security=self.access.security())
+            self._client = Client(
+                self.address,
+                timeout=CONNECT_S,
+                set_as_default=False,
+                security=self.access.security(),
+            )
         except (OSError, TimeoutError, ValueError) as exc:
             raise ExperimentError(f"cluster {self.address}: cannot connect: {exc}") from None
         return self
@@ -236,8 +264,9 @@ class ClusterPlacement:
     def offered(self) -> dict[str, float]:
         """The amount of :data:`RESOURCE` each worker offers (worker address -> amount)."""
         workers = self._client.scheduler_info(n_workers=-1)["workers"]
-        return {w: float(info.get("resources", {}).get(RESOURCE, 0.0))
-                for w, info in workers.items()}
+        return {
+            w: float(info.get("resources", {}).get(RESOURCE, 0.0)) for w, info in workers.items()
+        }
 
     def place(self, robots: Sequence[str]) -> dict[str, Placement]:
         """Submit one task per robot and wait until each reports its service's address.
@@ -275,36 +304,50 @@ class ClusterPlacement:
                 f"each, but its {len(offered)} workers fit only {fits} more at once "
                 f"({RESOURCE} offered: "
                 f"{', '.join(f'{w} {a:g}' for w, a in offered.items()) or 'none'}); "
-                f"start workers with --resources {RESOURCE}=N")
+                f"start workers with --resources {RESOURCE}=N"
+            )
         if self._lease is None:
             self._lease = Variable(f"dfrl-{self.run_key}-lease", client=self._client)
-            self._lease.set(0)          # before any task looks at it
+            self._lease.set(0)  # before any task looks at it
         for rid in robots:
             self._futures[rid] = self._client.submit(
-                serve_robot, self.run_key, rid, lease_s=LEASE_S, tls=self.tls,
+                serve_robot,
+                self.run_key,
+                rid,
+                lease_s=LEASE_S,
+                tls=self.tls,
                 key=f"dfrl-{self.run_key}-{rid}",
-                resources={RESOURCE: self.cpus}, pure=False, retries=0)
+                resources={RESOURCE: self.cpus},
+                pure=False,
+                retries=0,
+            )
         if self._thread is None:
             self._start_watch()
-        waiting = {rid: Event(f"dfrl-{self.run_key}-{rid}-listening", client=self._client)
-                   for rid in robots}
-        moved = time.monotonic()           # the last time a robot reported
+        waiting = {
+            rid: Event(f"dfrl-{self.run_key}-{rid}-listening", client=self._client)
+            for rid in robots
+        }
+        moved = time.monotonic()  # the last time a robot reported
         while waiting:
             for rid, listening in list(waiting.items()):
                 if not listening.wait(timeout=0.05):
                     if self._futures[rid].done():
-                        raise ExperimentError(f"robot {rid} was not placed: "
-                                              f"{self._why(self._futures[rid])}")
+                        raise ExperimentError(
+                            f"robot {rid} was not placed: {self._why(self._futures[rid])}"
+                        )
                     continue
-                host, port, worker = Variable(f"dfrl-{self.run_key}-{rid}-address",
-                                              client=self._client).get(timeout=10)
+                host, port, worker = Variable(
+                    f"dfrl-{self.run_key}-{rid}-address", client=self._client
+                ).get(timeout=10)
                 with self._lock:
                     self._placed[rid] = Placement(rid, str(host), int(port), str(worker))
                 del waiting[rid]
                 moved = time.monotonic()
             if waiting and time.monotonic() - moved > PLACE_S:
-                raise ExperimentError(f"robots {', '.join(waiting)} were not placed on cluster "
-                                      f"{self.address}: none reported for {PLACE_S:.0f} s")
+                raise ExperimentError(
+                    f"robots {', '.join(waiting)} were not placed on cluster "
+                    f"{self.address}: none reported for {PLACE_S:.0f} s"
+                )
             time.sleep(0.2)
         return self.placements()
 
@@ -326,8 +369,11 @@ class ClusterPlacement:
         exc = future.exception() if future.status == "error" else None
         if exc is not None:
             return f"{type(exc).__name__}: {exc}"
-        return str(future.result().get("ended")) if future.status == "finished" \
+        return (
+            str(future.result().get("ended"))
+            if future.status == "finished"
             else f"its task is {future.status}"
+        )
 
     def placements(self) -> dict[str, Placement]:
         with self._lock:
@@ -355,11 +401,17 @@ class ClusterPlacement:
                 continue
             for rid, p in self.placements().items():
                 if p.worker not in workers:
-                    self._lose(rid, f"cluster worker {p.worker} left the cluster; robot {rid} "
-                                    f"({p.host}:{p.port}) went with it")
+                    self._lose(
+                        rid,
+                        f"cluster worker {p.worker} left the cluster; robot {rid} "
+                        f"({p.host}:{p.port}) went with it",
+                    )
                 elif self._futures[rid].done() and not self._stop.is_set():
-                    self._lose(rid, f"the cluster task of robot {rid} ended on {p.worker}: "
-                                    f"{self._why(self._futures[rid])}")
+                    self._lose(
+                        rid,
+                        f"the cluster task of robot {rid} ended on {p.worker}: "
+                        f"{self._why(self._futures[rid])}",
+                    )
 
     def _lose(self, key: str, line: str) -> None:
         with self._lock:
@@ -390,8 +442,11 @@ class ClusterPlacement:
                 while time.monotonic() < deadline and not all(f.done() for f in alive):
                     time.sleep(0.1)
                 for rid, future in self._futures.items():
-                    ended[rid] = future.result() if future.status == "finished" else \
-                        {"robot": rid, "ended": self._why(future)}
+                    ended[rid] = (
+                        future.result()
+                        if future.status == "finished"
+                        else {"robot": rid, "ended": self._why(future)}
+                    )
                 self._client.cancel(list(self._futures.values()))
         except Exception as exc:  # noqa: BLE001 - a cluster that is gone is reported
             ended.setdefault("error", f"{type(exc).__name__}: {exc}")
@@ -404,24 +459,36 @@ class ClusterPlacement:
     def record(self) -> dict[str, Any]:
         """What ``cluster.json`` holds: the scheduler, the resource request, the placements,
         the losses and how each task ended."""
-        return {"scheduler": self.address,
-                "cluster_tls": str(self.access.tls) if self.access.tls is not None else None,
-                "resources": {RESOURCE: self.cpus},
-                "placements": {rid: p.__dict__ for rid, p in self.placements().items()},
-                "losses": self.losses(), "tasks": self._ended}
+        return {
+            "scheduler": self.address,
+            "cluster_tls": str(self.access.tls) if self.access.tls is not None else None,
+            "resources": {RESOURCE: self.cpus},
+            "placements": {rid: p.__dict__ for rid, p in self.placements().items()},
+            "losses": self.losses(),
+            "tasks": self._ended,
+        }
 
 
 def placed_config(config: ExperimentConfig, placed: dict[str, Placement]) -> ExperimentConfig:
     """``config`` with every placed robot's ``robot_host`` the address of its service."""
-    robots = tuple(replace(r, robot_host=f"{placed[r.id].host}:{placed[r.id].port}")
-                   if r.id in placed else r for r in config.robots)
+    robots = tuple(
+        replace(r, robot_host=f"{placed[r.id].host}:{placed[r.id].port}") if r.id in placed else r
+        for r in config.robots
+    )
     return config.replace(robots=robots)
 
 
-def run_on_cluster(config: ExperimentConfig, output_dir: str | Path | ClaimedFolder,
-                   address: str, cpus: float = 1.0, progress: TextIO | None = sys.stderr,
-                   force: bool = False, tls: str | Path | None = None,
-                   cluster_tls: str | Path | None = None, insecure: bool = False) -> Results:
+def run_on_cluster(
+    config: ExperimentConfig,
+    output_dir: str | Path | ClaimedFolder,
+    address: str,
+    cpus: float = 1.0,
+    progress: TextIO | None = sys.stderr,
+    force: bool = False,
+    tls: str | Path | None = None,
+    cluster_tls: str | Path | None = None,
+    insecure: bool = False,
+) -> Results:
     """Run ``config`` with every robot that names no ``robot_host`` placed on the Dask cluster
     at ``address`` (see the module doc); the results folder gets ``cluster.json`` and
     ``summary.md`` a section "Cluster". ``tls`` is the platform's node folder (the run over
@@ -441,8 +508,10 @@ def run_on_cluster(config: ExperimentConfig, output_dir: str | Path | ClaimedFol
 
     access = cluster_access(address, cluster_tls, insecure)
     if config.token is None:
-        raise ExperimentError("--cluster: the robots' services prove the token of dfrl.token "
-                              "on their workers: give the same one (--token-file dfrl.token)")
+        raise ExperimentError(
+            "--cluster: the robots' services prove the token of dfrl.token "
+            "on their workers: give the same one (--token-file dfrl.token)"
+        )
 
     def say(line: str) -> None:
         if progress is not None:
@@ -453,21 +522,32 @@ def run_on_cluster(config: ExperimentConfig, output_dir: str | Path | ClaimedFol
     placement = ClusterPlacement(access, cpus, say, tls=tls is not None).open()
     try:
         placed = placement.place(local)
-        say(f"cluster {address}: placed " + ", ".join(
-            f"{p.robot}@{p.host}:{p.port}" for p in placed.values())
-            + f" in {time.monotonic() - t0:.1f} s")
-        results = run(placed_config(config, placed), output_dir, progress, force, tls=tls,
-                      placer=placement.place_joiner)
+        say(
+            f"cluster {address}: placed "
+            + ", ".join(f"{p.robot}@{p.host}:{p.port}" for p in placed.values())
+            + f" in {time.monotonic() - t0:.1f} s"
+        )
+        results = run(
+            placed_config(config, placed),
+            output_dir,
+            progress,
+            force,
+            tls=tls,
+            placer=placement.place_joiner,
+        )
     finally:
         t1 = time.monotonic()
         placement.release()
         say(f"cluster {address}: released the robots' tasks in {time.monotonic() - t1:.1f} s")
     out = results.output_dir
-    (out / CLUSTER_FILE).write_text(json.dumps(placement.record(), indent=2) + "\n",
-                                    encoding="utf-8")
+    (out / CLUSTER_FILE).write_text(
+        json.dumps(placement.record(), indent=2) + "\n", encoding="utf-8"
+    )
     with open(out / "summary.md", "a", encoding="utf-8") as fh:
-        fh.write(f"\n## Cluster\n\n{len(placed)} robots placed on the Dask cluster {address} "
-                 f"({RESOURCE} {cpus:g} each); `{CLUSTER_FILE}` says where.\n")
+        fh.write(
+            f"\n## Cluster\n\n{len(placed)} robots placed on the Dask cluster {address} "
+            f"({RESOURCE} {cpus:g} each); `{CLUSTER_FILE}` says where.\n"
+        )
         for line in placement.losses() or ["no worker left the cluster during the run"]:
             fh.write(f"- {line}\n")
     return results

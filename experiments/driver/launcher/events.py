@@ -23,6 +23,7 @@ same way.
 ``t`` is the writer's wall clock (:func:`time.time`), filled in when the event has none. Any
 other ``kind`` is shown in the view's event list as it is.
 """
+
 from __future__ import annotations
 
 import json

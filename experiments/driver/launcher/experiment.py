@@ -7,6 +7,7 @@ fields and every process of the run. Alongside it run the robot processes' reade
 node's readers; what they share lives in the rosters, each guarded by its lock. Another thread
 may look at a running experiment through :meth:`Launcher.robots` and :meth:`Launcher.agent_at`.
 """
+
 from __future__ import annotations
 
 import os
@@ -40,10 +41,15 @@ from dfrl.experiments.tokens import SECRET_FILE, new_secret, write_secret_file
 class Launcher:
     """Runs one experiment; see :func:`run`."""
 
-    def __init__(self, config: ExperimentConfig, output_dir: str | Path | ClaimedFolder,
-                 progress: TextIO | None = sys.stderr, force: bool = False,
-                 tls: str | Path | None = None,
-                 placer: Callable[[str], str] | None = None) -> None:
+    def __init__(
+        self,
+        config: ExperimentConfig,
+        output_dir: str | Path | ClaimedFolder,
+        progress: TextIO | None = sys.stderr,
+        force: bool = False,
+        tls: str | Path | None = None,
+        placer: Callable[[str], str] | None = None,
+    ) -> None:
         self._claimed = isinstance(output_dir, ClaimedFolder)
         path = output_dir.path if isinstance(output_dir, ClaimedFolder) else Path(output_dir)
         self._out = path.resolve()
@@ -106,21 +112,25 @@ class Launcher:
         c = c.resolved()
         if c.token is None and c.remote_robots():
             where = c.remote_robots()[0].robot_host
-            raise ConfigError([f"token: robots on other hosts ({where}) "
-                               "prove the token their dfrl robot was started with: name it "
-                               "in the config (without one a run makes a random token)"])
+            raise ConfigError(
+                [
+                    f"token: robots on other hosts ({where}) "
+                    "prove the token their dfrl robot was started with: name it "
+                    "in the config (without one a run makes a random token)"
+                ]
+            )
         if self._tls is not None:
             check_node_dir(self._tls)
         if not self._claimed:
             claim_output(self._out, self._force)
         token = c.token
-        if token is None:                   # a strong token of this run only
+        if token is None:  # a strong token of this run only
             token = new_secret()
             c = c.with_token(token)
         # the one file of the folder that holds the token (mode 0600): for dfrl join/inject
         write_secret_file(self._out / SECRET_FILE, [token])
         write_json(self._out / "config.json", c.public_dict())
-        write_provenance(self._out)         # versions, commit, host, command line
+        write_provenance(self._out)  # versions, commit, host, command line
         return c
 
     def _run(self) -> Results:
@@ -133,27 +143,38 @@ class Launcher:
         try:
             host = console_host(c)
             assert c.token is not None, "_prepare() gave the run a token"
-            console = open_console(c.token, self._out / "logs" / "console.err", host=host,
-                                   tls=self._tls)
+            console = open_console(
+                c.token, self._out / "logs" / "console.err", host=host, tls=self._tls
+            )
             poller = StatusPoller().start()
             site = Site(c, self._out, console, host, self._tls, experiment_id, poller)
             for spec in c.robots:
                 self._stage = f"starting robot {spec.id}" + (
-                    f" on its robot host {spec.robot_host}" if spec.robot_host else "")
+                    f" on its robot host {spec.robot_host}" if spec.robot_host else ""
+                )
                 self._robots.add(start_robot(site, spec, c.iterations, self._agents))
             robots = self._robots.robots()
             self._stage = "waiting for the robots to come up"
             await_ready(list(robots.values()))
             write_nodes(site, self._robots, self._agents)
-            say(f"{len(robots)} robot processes up: " + ", ".join(
-                f"{rid}@{s.address[1]}" for rid, s in self._robots.statuses().items()
-                if s.address is not None))
+            say(
+                f"{len(robots)} robot processes up: "
+                + ", ".join(
+                    f"{rid}@{s.address[1]}"
+                    for rid, s in self._robots.statuses().items()
+                    if s.address is not None
+                )
+            )
             self._stage = "launching the agents"
             launch_agents(site, self._robots, self._agents, self._reporter)
             self._stage = None
-            monitor(c, self._robots, self._agents, Joins(site, self._robots, self._agents,
-                                                         self._reporter, self._placer),
-                    self._reporter)
+            monitor(
+                c,
+                self._robots,
+                self._agents,
+                Joins(site, self._robots, self._agents, self._reporter, self._placer),
+                self._reporter,
+            )
         except KeyboardInterrupt as exc:
             ok = False
             self._interrupted = str(exc) or "KeyboardInterrupt"
@@ -163,10 +184,13 @@ class Launcher:
             self._interrupted = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
             if self._stage is not None:
                 why = " ".join(str(exc).split())
-                said = "accepts none of this run's tokens" in why     # the console's words
+                said = "accepts none of this run's tokens" in why  # the console's words
                 refused = not said and "permission" in why.lower() and "token" in why.lower()
-                self._start_error = f"{self._stage} failed" + (
-                    ": the robot host refused the run's token" if refused else "") + f": {why}"
+                self._start_error = (
+                    f"{self._stage} failed"
+                    + (": the robot host refused the run's token" if refused else "")
+                    + f": {why}"
+                )
             self._robots.kill_all()
             raise
         finally:
@@ -189,25 +213,46 @@ class Launcher:
         (:func:`~dfrl.experiments.driver.results.ending.write_end_files`, which ``dfrl collect``
         also uses), with the lines the robots kept that the console did not get."""
         self._agents.read_logs(self._robots, kept_in=self._out)
-        self._robots.show_progress()        # lines the robots wrote after the last look
+        self._robots.show_progress()  # lines the robots wrote after the last look
         r = self._robots
-        facts = RunFacts(wall, ok, self._interrupted, r.crashed(), r.iterations(), r.lost(),
-                         r.stalls(), r.gather_errors(), r.gathered(), r.failed_joins(),
-                         resumed=r.resumed(), finished=r.finished(),
-                         start_error=self._start_error)
-        return write_end_files(self._out, self._config, list(r.robots()), self._agents.logs(),
-                               {a.name: a.rounds for a in self._agents.infos()}, facts,
-                               self._reporter.say)
+        facts = RunFacts(
+            wall,
+            ok,
+            self._interrupted,
+            r.crashed(),
+            r.iterations(),
+            r.lost(),
+            r.stalls(),
+            r.gather_errors(),
+            r.gathered(),
+            r.failed_joins(),
+            resumed=r.resumed(),
+            finished=r.finished(),
+            start_error=self._start_error,
+        )
+        return write_end_files(
+            self._out,
+            self._config,
+            list(r.robots()),
+            self._agents.logs(),
+            {a.name: a.rounds for a in self._agents.infos()},
+            facts,
+            self._reporter.say,
+        )
 
 
 def _interrupt(signum: int, frame: Any) -> None:
     raise KeyboardInterrupt(f"signal {signum}")
 
 
-def run(config: ExperimentConfig, output_dir: str | Path | ClaimedFolder,
-        progress: TextIO | None = sys.stderr, force: bool = False,
-        tls: str | Path | None = None,
-        placer: Callable[[str], str] | None = None) -> Results:
+def run(
+    config: ExperimentConfig,
+    output_dir: str | Path | ClaimedFolder,
+    progress: TextIO | None = sys.stderr,
+    force: bool = False,
+    tls: str | Path | None = None,
+    placer: Callable[[str], str] | None = None,
+) -> Results:
     """Run a federated experiment on loopback and write its results folder.
 
     Keeps the run's token (the config's, or a new random one) in ``secret.token`` (mode

@@ -6,6 +6,7 @@ driver, loaded into every robot that joins afterwards.
 :class:`Joins` owns what it needs to remember (the joins handled, the programs); the
 launcher's thread alone calls it.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -25,12 +26,19 @@ from dfrl.experiments.errors import ExperimentError
 
 
 #: Key paths of a join request as ``dfrl join`` names them.
-_FLAGS = {"join.id": "--robot", "join.arena": "--arena", "join.algo": "--algo",
-          "join.seed": "--seed", "join.robot_host": "--robot-host", "join": "join"}
+_FLAGS = {
+    "join.id": "--robot",
+    "join.arena": "--arena",
+    "join.algo": "--algo",
+    "join.seed": "--seed",
+    "join.robot_host": "--robot-host",
+    "join": "join",
+}
 
 
-def check_join(entry: dict[str, Any], robot_ids: list[str],
-               agent_algos: dict[str, str]) -> list[str]:
+def check_join(
+    entry: dict[str, Any], robot_ids: list[str], agent_algos: dict[str, str]
+) -> list[str]:
     """Problems of a join request before anything is started: the robot entry checked as a
     config's (id, known algorithm, an arena that exists and parses, ``HOST:PORT``), its id
     free among ``robot_ids``, an agent learning with its algorithm (``agent_algos``: agent
@@ -44,23 +52,28 @@ def check_join(entry: dict[str, Any], robot_ids: list[str],
         out.append(f"--robot: robot {rid} is already part of the experiment")
     if not any(p.startswith("--algo") for p in out) and algo not in agent_algos.values():
         known = ", ".join(f"{n} ({a})" for n, a in agent_algos.items()) or "none"
-        out.append(f"--algo: no agent of this experiment learns with {algo} (its agents: "
-                   f"{known})")
+        out.append(f"--algo: no agent of this experiment learns with {algo} (its agents: {known})")
     return out
 
 
 class Joins:
     """Joins of one run (see the module doc)."""
 
-    def __init__(self, site: Site, robots: RobotRoster, agents: AgentRoster,
-                 reporter: Reporter, placer: Callable[[str], str] | None = None) -> None:
+    def __init__(
+        self,
+        site: Site,
+        robots: RobotRoster,
+        agents: AgentRoster,
+        reporter: Reporter,
+        placer: Callable[[str], str] | None = None,
+    ) -> None:
         self._site = site
-        self._placer = placer                      # places a joiner elsewhere: its robot_host
+        self._placer = placer  # places a joiner elsewhere: its robot_host
         self._robots = robots
         self._agents = agents
         self._say = reporter.say
-        self._handled: set[str] = set()            # config joins settled, robots that joined
-        self._programs: dict[str, Path] = {}       # injected, for robots that join
+        self._handled: set[str] = set()  # config joins settled, robots that joined
+        self._programs: dict[str, Path] = {}  # injected, for robots that join
 
     def handle(self) -> None:
         """Start every config join whose round has come and answer every join request that
@@ -99,34 +112,43 @@ class Joins:
         robot = None
         try:
             if self._placer is not None and spec.robot.robot_host is None:
-                spec = replace(spec, robot=replace(spec.robot,
-                                                   robot_host=self._placer(rid)))
-            robot = start_robot(self._site, spec.robot, remaining, self._agents,
-                                joins=len(self._handled))
+                spec = replace(spec, robot=replace(spec.robot, robot_host=self._placer(rid)))
+            robot = start_robot(
+                self._site, spec.robot, remaining, self._agents, joins=len(self._handled)
+            )
             self._robots.add(robot, joined=True)
             await_ready([robot])
         except (ExperimentError, OSError, ValueError) as exc:
             if robot is not None:
                 robot.stop(0.0)
-            self._robots.failed_join(rid, str(exc))    # a failed join, not a lost robot
+            self._robots.failed_join(rid, str(exc))  # a failed join, not a lost robot
             raise
         status = robot.status()
         assert status.address is not None
         host, port = status.address
-        for program in self._programs.values():     # methods injected before it joined
+        for program in self._programs.values():  # methods injected before it joined
             try:
                 self._site.console.load_program(program, [(host, port)])
-            except ExperimentError as exc:          # the robot joins; its stop lacks the method
+            except ExperimentError as exc:  # the robot joins; its stop lacks the method
                 self._say(f"robot {rid}: injected program {program.name} did not load: {exc}")
         stop = {"host": host, "port": port, "robot": rid}
         first = self._agents.add_stop(agent, stop)
         send_control(self._site.console, (first["host"], first["port"]), agent, {"join": stop})
         write_nodes(self._site, self._robots, self._agents)
-        self._say(f"robot {rid} ({spec.robot.arena}, {remaining} iterations) joins {agent} "
-                  f"after round {done}")
-        return {"robot": rid, "algo": spec.robot.algo, "arena": spec.robot.arena, "host": host,
-                "port": port, "pid": status.pid, "robot_host": spec.robot.robot_host,
-                "joined": True}
+        self._say(
+            f"robot {rid} ({spec.robot.arena}, {remaining} iterations) joins {agent} "
+            f"after round {done}"
+        )
+        return {
+            "robot": rid,
+            "algo": spec.robot.algo,
+            "arena": spec.robot.arena,
+            "host": host,
+            "port": port,
+            "pid": status.pid,
+            "robot_host": spec.robot.robot_host,
+            "joined": True,
+        }
 
     def _due(self, spec: JoinSpec) -> tuple[str | None, str | None]:
         """(agent, None) when ``spec`` can join now, (None, why not) when it never can,
@@ -154,8 +176,13 @@ class Joins:
         """A ``program`` event (``dfrl inject`` told us): keep the program in ``programs/`` of
         the results, to load it into every robot that joins from now on."""
         name, text = event.get("name"), event.get("text")
-        if not (isinstance(name, str) and isinstance(text, str) and name.endswith(".pl")
-                and name == Path(name).name and not name.startswith(".")):
+        if not (
+            isinstance(name, str)
+            and isinstance(text, str)
+            and name.endswith(".pl")
+            and name == Path(name).name
+            and not name.startswith(".")
+        ):
             self._say(f"console node: unreadable program event {event.get('name')!r}")
             return
         path = self._site.out / "programs" / name
@@ -168,8 +195,9 @@ class Joins:
         """Start the robot of a ``join_request`` event and reply to its sender."""
         try:
             entry = {k: v for k, v in dict(event["robot"]).items() if v is not None}
-            problems = check_join(entry, list(self._robots.robots()),
-                                  {a.name: a.algo for a in self._agents.infos()})
+            problems = check_join(
+                entry, list(self._robots.robots()), {a.name: a.algo for a in self._agents.infos()}
+            )
             if problems:
                 raise ExperimentError("; ".join(problems))
             spec = JoinSpec(RobotSpec(**event["robot"]), after_round=0)

@@ -1,4 +1,5 @@
 """Following a running experiment: the agents' logs, the robots, joins, when to stop."""
+
 from __future__ import annotations
 
 import time
@@ -18,13 +19,19 @@ STATUS_PERIOD_S = 5.0
 def status_line(robots: RobotRoster, agents: AgentRoster, reporter: Reporter) -> str:
     """Iterations per robot (``!``: crashed) and where each agent is."""
     crashed = robots.crashed()
-    its = " ".join(f"{rid}:{it}" + ("!" if rid in crashed else "")
-                   for rid, it in robots.iterations().items())
+    its = " ".join(
+        f"{rid}:{it}" + ("!" if rid in crashed else "") for rid, it in robots.iterations().items()
+    )
     return f"[{reporter.elapsed():6.1f} s] {its} | " + "; ".join(agents.where())
 
 
-def monitor(config: ExperimentConfig, robots: RobotRoster, agents: AgentRoster, joins: Joins,
-            reporter: Reporter) -> None:
+def monitor(
+    config: ExperimentConfig,
+    robots: RobotRoster,
+    agents: AgentRoster,
+    joins: Joins,
+    reporter: Reporter,
+) -> None:
     """Follow the run until the agents finished and the robots ended, or a limit passed."""
     c = config
     deadline = time.monotonic() - reporter.elapsed() + c.timeout_s
@@ -59,8 +66,9 @@ def monitor(config: ExperimentConfig, robots: RobotRoster, agents: AgentRoster, 
             robots_done_at = robots_done_at or now
             if agents.all_finished():
                 return
-            if now - robots_done_at > (60.0 if c.mode is Mode.SYNC else
-                                       max(30.0, 3 * c.rounds * rest_s(c))):
+            if now - robots_done_at > (
+                60.0 if c.mode is Mode.SYNC else max(30.0, 3 * c.rounds * rest_s(c))
+            ):
                 reporter.say("robots finished but the agents did not; stopping")
                 return
         if now > deadline:

@@ -1,4 +1,5 @@
 """Acting on a running experiment from another process: ``dfrl inject`` and ``dfrl join``."""
+
 from __future__ import annotations
 
 import time
@@ -61,16 +62,22 @@ def require_running(results_dir: str | Path, what: str) -> None:
         name = read_json(Path(results_dir) / "config.json").get("name")
     except (OSError, ValueError, AttributeError):
         name = None
-    raise ExperimentError(f"run {name or Path(results_dir).name} ({results_dir}) finished at "
-                          f"{when} (its summary.md); nothing to {what} (dfrl inject and dfrl "
-                          f"join act on a run that is still going)")
+    raise ExperimentError(
+        f"run {name or Path(results_dir).name} ({results_dir}) finished at "
+        f"{when} (its summary.md); nothing to {what} (dfrl inject and dfrl "
+        f"join act on a run that is still going)"
+    )
 
 
 def unreachable(exc: BaseException) -> bool:
     """``exc`` is the console node failing to connect to a node (nobody listens there):
     ``transport_error(Address, connect(Detail))``."""
-    return (isinstance(exc, ConsoleRequestError) and exc.formal_name == "transport_error"
-            and len(exc.formal_args) == 2 and exc.formal_args[1].startswith("connect("))
+    return (
+        isinstance(exc, ConsoleRequestError)
+        and exc.formal_name == "transport_error"
+        and len(exc.formal_args) == 2
+        and exc.formal_args[1].startswith("connect(")
+    )
 
 
 def tokens_of(results_dir: str | Path) -> list[Token]:
@@ -88,8 +95,9 @@ def tokens_of(results_dir: str | Path) -> list[Token]:
         raise ExperimentError(str(exc)) from None
 
 
-def driver_tls(results_dir: str | Path, info: dict[str, Any],
-               tls: str | Path | None = None) -> Path | None:
+def driver_tls(
+    results_dir: str | Path, info: dict[str, Any], tls: str | Path | None = None
+) -> Path | None:
     """The TLS folder the driver's console node uses: ``tls`` when given (checked by the
     caller or here), else the one ``nodes.json`` records (None: a plaintext run).
 
@@ -108,9 +116,11 @@ def driver_tls(results_dir: str | Path, info: dict[str, Any],
     try:
         return check_node_dir(recorded).resolve()
     except CertError as exc:
-        raise ExperimentError(f"{Path(results_dir) / 'nodes.json'} names the TLS folder "
-                              f"{recorded}, not usable here ({exc}); give this host's copy "
-                              "of the driver's certificate folder with --tls DIR") from exc
+        raise ExperimentError(
+            f"{Path(results_dir) / 'nodes.json'} names the TLS folder "
+            f"{recorded}, not usable here ({exc}); give this host's copy "
+            "of the driver's certificate folder with --tls DIR"
+        ) from exc
 
 
 def rounds_log(results_dir: str | Path, agent: dict[str, Any]) -> Path:
@@ -123,9 +133,15 @@ def _controls(path: Path, agent: str, command: str) -> list[ControlEvent]:
     return [c for c in read_rounds_log(path, agent).controls if c.command == command]
 
 
-def inject_method(results_dir: str | Path, program: str | Path, method: str,
-                  agent: str | None = None, wait_s: float = 120.0,
-                  poll_s: float = 0.2, tls: str | Path | None = None) -> dict[str, str]:
+def inject_method(
+    results_dir: str | Path,
+    program: str | Path,
+    method: str,
+    agent: str | None = None,
+    wait_s: float = 120.0,
+    poll_s: float = 0.2,
+    tls: str | Path | None = None,
+) -> dict[str, str]:
     """Load ``program`` into every node of the running experiment, tell the agent(s) to switch
     to ``method``, and wait until each agent acknowledged it in its round log (the ``control``
     event it writes when it takes the command at its next round start). The program is loaded
@@ -157,12 +173,14 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
         known = ", ".join(a["name"] for a in info["agents"])
         raise ExperimentError(f"no agent {agent!r} in {results_dir} (agents: {known})")
     command = f"method({method})" if method.isidentifier() else f"method('{method}')"
-    seen = {a["name"]: len(_controls(rounds_log(results_dir, a), a["name"], command))
-            for a in targets}
+    seen = {
+        a["name"]: len(_controls(rounds_log(results_dir, a), a["name"], command)) for a in targets
+    }
     first = targets[0]["itinerary"][0]
-    with open_console(tokens_of(results_dir), host=route_source(first["host"], int(first["port"])),
-                      tls=tls_dir) as console:
-        for a in targets:            # loaded everywhere first: a refused program goes no further
+    with open_console(
+        tokens_of(results_dir), host=route_source(first["host"], int(first["port"])), tls=tls_dir
+    ) as console:
+        for a in targets:  # loaded everywhere first: a refused program goes no further
             nodes = [(s["host"], s["port"]) for s in a["itinerary"]]
             try:
                 console.load_program(prog, nodes)
@@ -172,10 +190,13 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
                     raise ExperimentError(
                         f"nothing injected: {why}; the run's nodes do not answer, yet it has "
                         f"no summary.md: its driver may have stopped (dfrl collect "
-                        f"{results_dir} writes its end-of-run files)") from None
-                raise ExperimentError(f"program {prog.name} refused, nothing injected (the "
-                                      f"agents keep their method): {why}") from None
-        if info.get("console"):      # the driver gives the program to robots that join later
+                        f"{results_dir} writes its end-of-run files)"
+                    ) from None
+                raise ExperimentError(
+                    f"program {prog.name} refused, nothing injected (the "
+                    f"agents keep their method): {why}"
+                ) from None
+        if info.get("console"):  # the driver gives the program to robots that join later
             console.announce_program(tuple(info["console"]), prog)
         for a in targets:
             nodes = [(s["host"], s["port"]) for s in a["itinerary"]]
@@ -188,23 +209,33 @@ def inject_method(results_dir: str | Path, program: str | Path, method: str,
             if status[name] != "sent":
                 continue
             path = rounds_log(results_dir, a)
-            new = _controls(path, name, command)[seen[name]:]
+            new = _controls(path, name, command)[seen[name] :]
             if new:
                 if new[0].status != "applied":
-                    raise ExperimentError(f"agent {name} ignored method {method} (round "
-                                          f"{new[0].round}): {new[0].reason}")
+                    raise ExperimentError(
+                        f"agent {name} ignored method {method} (round "
+                        f"{new[0].round}): {new[0].reason}"
+                    )
                 status[name] = "applied"
             elif read_rounds_log(path, name).finished is not None:
-                raise ExperimentError(f"agent {name} finished its tour before it took "
-                                      f"method {method}")
+                raise ExperimentError(
+                    f"agent {name} finished its tour before it took method {method}"
+                )
         time.sleep(poll_s)
     return status
 
 
-def join_robot(results_dir: str | Path, robot: str, arena: str, algo: str = "qlearning",
-               iterations: int | None = None, seed: int | None = None,
-               timeout_s: float = 60.0, node: str | None = None,
-               tls: str | Path | None = None) -> dict[str, Any]:
+def join_robot(
+    results_dir: str | Path,
+    robot: str,
+    arena: str,
+    algo: str = "qlearning",
+    iterations: int | None = None,
+    seed: int | None = None,
+    timeout_s: float = 60.0,
+    node: str | None = None,
+    tls: str | Path | None = None,
+) -> dict[str, Any]:
     """Ask the launcher of a running experiment to start a robot and add it to the agent of
     its algorithm (from the agent's next round). Returns the new node's ``nodes.json`` entry.
     With ``node`` (``"HOST:PORT"`` of a running ``dfrl robot``) the launcher configures that
@@ -234,14 +265,19 @@ def join_robot(results_dir: str | Path, robot: str, arena: str, algo: str = "qle
         entry["seed"] = seed
     if node is not None:
         entry["robot_host"] = node
-    raise_problems(check_join(entry, [n["robot"] for n in info["nodes"]],
-                              {a["name"]: a["algo"] for a in info["agents"]}))
+    raise_problems(
+        check_join(
+            entry,
+            [n["robot"] for n in info["nodes"]],
+            {a["name"]: a["algo"] for a in info["agents"]},
+        )
+    )
     if not info.get("console"):
         raise ExperimentError(f"{results_dir}/nodes.json names no console node to ask")
     spec = RobotSpec(robot, arena, algo, seed, node)
     tls_dir = driver_tls(results_dir, info, tls)
     driver = tuple(info["console"])
-    with open_console(tokens_of(results_dir), host=route_source(driver[0], int(driver[1])),
-                      tls=tls_dir) as console:
-        return console.request_join(tuple(info["console"]), spec, iterations,
-                                    timeout_s=timeout_s)
+    with open_console(
+        tokens_of(results_dir), host=route_source(driver[0], int(driver[1])), tls=tls_dir
+    ) as console:
+        return console.request_join(tuple(info["console"]), spec, iterations, timeout_s=timeout_s)

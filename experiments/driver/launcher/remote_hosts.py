@@ -2,6 +2,7 @@
 towards a robot host (:func:`route_source`), where the console node binds
 (:func:`console_host`), an arena as configuration data (:func:`arena_payload`), and the check of
 a file name a robot host lists (:func:`safe_relative`)."""
+
 from __future__ import annotations
 
 import json
@@ -94,4 +95,5 @@ def short_of_clones(where: str, has: object, needs: int | None) -> None:
     raise ExperimentError(
         f"robot host {where} admits {has} clones a minute, and this tree itinerary needs "
         f"{needs} (its copies are clones: with fewer, most rounds skip robots); start its "
-        f"dfrl robot with --clone-limit {needs} or more")
+        f"dfrl robot with --clone-limit {needs} or more"
+    )

@@ -16,6 +16,7 @@ Threading: the poller thread calls :meth:`RemoteRobot.poll` and
 :meth:`RemoteRobot.poll_samples`; the launcher's thread calls the rest. Every field both touch
 is guarded by the robot's lock, which is never held during a request to the service.
 """
+
 from __future__ import annotations
 
 import base64
@@ -29,12 +30,20 @@ from dfrl.experiments.driver.config import RobotSpec
 from dfrl.experiments.robot_host.config import RobotConfig
 from dfrl.experiments.driver.console.channel import ConsoleRequestError
 from dfrl.experiments.driver.console.node import ConsoleNode
-from dfrl.experiments.driver.launcher.remote_hosts import (arena_payload, safe_relative,
-                                                           short_of_clones)
+from dfrl.experiments.driver.launcher.remote_hosts import (
+    arena_payload,
+    safe_relative,
+    short_of_clones,
+)
 from dfrl.experiments.driver.launcher.robots import Address, EventHandler, Progress, RobotStatus
 from dfrl.experiments.errors import ExperimentError
-from dfrl.experiments.robot_host.lines import (Evaluation, Sample, parse_eval, parse_event,
-                                                parse_sample)
+from dfrl.experiments.robot_host.lines import (
+    Evaluation,
+    Sample,
+    parse_eval,
+    parse_event,
+    parse_sample,
+)
 
 #: Seconds without a status answer after which a remote robot counts as lost.
 LOST_AFTER_S = 10.0
@@ -69,9 +78,15 @@ class RemoteRobot:
         agent read or wrote its table), as for a robot process of this host.
     """
 
-    def __init__(self, robot: RobotSpec, cfg: RobotConfig, console: ConsoleNode,
-                 experiment: str, poller: StatusPoller,
-                 on_event: EventHandler | None = None) -> None:
+    def __init__(
+        self,
+        robot: RobotSpec,
+        cfg: RobotConfig,
+        console: ConsoleNode,
+        experiment: str,
+        poller: StatusPoller,
+        on_event: EventHandler | None = None,
+    ) -> None:
         if robot.robot_host_address is None:
             raise ExperimentError(f"robot {robot.id} names no robot host")
         self._spec = robot
@@ -82,23 +97,23 @@ class RemoteRobot:
         self._poller = poller
         self._on_event = on_event
         self._lock = threading.Lock()
-        self._address: Address | None = None      # guarded by _lock, and so on below
+        self._address: Address | None = None  # guarded by _lock, and so on below
         self._state = "unknown"
         self._iteration = 0
         self._shares = 0
         self._error: str | None = None
         self._stopped = False
         self._last_answer = time.monotonic()
-        self._unreachable: str | None = None      # why the last poll failed
+        self._unreachable: str | None = None  # why the last poll failed
         self._down_since = 0.0
-        self._outages: list[tuple[float, float, str]] = []   # (from, to, why), monotonic
-        self._sample: Sample | None = None        # the newest DFRL_SAMPLE, not taken yet
-        self._sample_error: str | None = None     # why the last read of them failed
-        self._evals: list[Evaluation] = []        # DFRL_EVAL lines not taken yet
-        self._lines_at = 0                        # bytes of its lines file read (poller only)
+        self._outages: list[tuple[float, float, str]] = []  # (from, to, why), monotonic
+        self._sample: Sample | None = None  # the newest DFRL_SAMPLE, not taken yet
+        self._sample_error: str | None = None  # why the last read of them failed
+        self._evals: list[Evaluation] = []  # DFRL_EVAL lines not taken yet
+        self._lines_at = 0  # bytes of its lines file read (poller only)
         self._lines_rest = b""
         self._err_path: Path | None = None
-        self._resumed: list[int] = []             # checkpoint iterations it was resumed at
+        self._resumed: list[int] = []  # checkpoint iterations it was resumed at
 
     @property
     def spec(self) -> RobotSpec:
@@ -122,17 +137,25 @@ class RemoteRobot:
         with self._lock:
             lost = self._lost()
             return RobotStatus(
-                address=self._address, iteration=self._iteration, shares=self._shares,
+                address=self._address,
+                iteration=self._iteration,
+                shares=self._shares,
                 done=self._state == "finished" or self._iteration >= self._cfg.iterations,
                 running=not self._stopped and self._state != "failed" and lost is None,
-                lost=lost, resumed=tuple(self._resumed),
+                lost=lost,
+                resumed=tuple(self._resumed),
                 silent_since=self._down_since if self._unreachable is not None else None,
-                answered_at=self._last_answer)
+                answered_at=self._last_answer,
+            )
 
     def take_progress(self) -> Progress:
         with self._lock:
-            progress = Progress(sample=self._sample, evals=self._evals,
-                                error=self._sample_error, outages=self._outages)
+            progress = Progress(
+                sample=self._sample,
+                evals=self._evals,
+                error=self._sample_error,
+                outages=self._outages,
+            )
             self._sample, self._evals, self._outages = None, [], []
         return progress
 
@@ -163,16 +186,18 @@ class RemoteRobot:
             status = self._ask("status")
         except ConsoleRequestError as exc:
             if not exc.token_refused:
-                raise ExperimentError(f"robot {self._spec.id} (robot host {where}): "
-                                      f"{exc}") from exc
+                raise ExperimentError(f"robot {self._spec.id} (robot host {where}): {exc}") from exc
             raise ExperimentError(
                 f"robot {self._spec.id}: its robot host {where} accepts none of this run's "
                 f"tokens; run with the token that dfrl robot was started with there "
                 f"(--token-file FILE, DFRL_TOKEN or the config's token), or restart that "
-                f"dfrl robot with this run's token (its --token-file or DFRL_TOKEN)") from exc
+                f"dfrl robot with this run's token (its --token-file or DFRL_TOKEN)"
+            ) from exc
         if status.get("state") in ACTIVE:
-            raise ExperimentError(f"robot host {where} is busy with experiment "
-                                  f"{status.get('experiment')!r} (state {status.get('state')})")
+            raise ExperimentError(
+                f"robot host {where} is busy with experiment "
+                f"{status.get('experiment')!r} (state {status.get('state')})"
+            )
         short_of_clones(where, status.get("clone_limit"), self._cfg.clone_limit)
         self._configure(resume=False)
         with self._lock:
@@ -187,16 +212,29 @@ class RemoteRobot:
         workdir holds) and read the status it leads to."""
         name, arena = arena_payload(self._spec.arena)
         robot = {**self._cfg.public_dict(), "arena": name}  # the robot has its own token
-        self._ask({"configure": json.dumps({"experiment": self._experiment, "robot": robot,
-                                            "arena": arena, "resume": resume})})
+        self._ask(
+            {
+                "configure": json.dumps(
+                    {
+                        "experiment": self._experiment,
+                        "robot": robot,
+                        "arena": arena,
+                        "resume": resume,
+                    }
+                )
+            }
+        )
         self._update(self._ask("status"))
 
     def _restarted(self, status: dict[str, Any]) -> bool:
         """The service answers, idle and holding no experiment, while ours ran there and had
         iterations left: its process was restarted (its workdir keeps our checkpoint)."""
         with self._lock:
-            ours = (not self._stopped and self._state in ("running", "configured")
-                    and self._iteration < self._cfg.iterations)
+            ours = (
+                not self._stopped
+                and self._state in ("running", "configured")
+                and self._iteration < self._cfg.iterations
+            )
         return ours and status.get("state") == "idle" and status.get("experiment") is None
 
     def _resume(self) -> None:
@@ -284,9 +322,16 @@ class RemoteRobot:
         (the live view's pose and curves) and every ``DFRL_EVAL``. A failure is remembered
         (the ``error`` of :meth:`take_progress`)."""
         try:
-            chunk = self._ask({"fetch": {"name": f"logs/{self._spec.id}.out",
-                                         "offset": self._lines_at, "max": FETCH_CHUNK}},
-                              timeout_s=5.0)
+            chunk = self._ask(
+                {
+                    "fetch": {
+                        "name": f"logs/{self._spec.id}.out",
+                        "offset": self._lines_at,
+                        "max": FETCH_CHUNK,
+                    }
+                },
+                timeout_s=5.0,
+            )
             data = base64.b64decode(chunk["data"])
         except (ExperimentError, KeyError, TypeError, ValueError) as exc:
             with self._lock:
@@ -320,13 +365,15 @@ class RemoteRobot:
             self.poll_samples()
         copied = fetch_files(self._console, self._service, self._spec.id, out)
         with self._lock:
-            self._err_path = next((out / c for c in copied if c.startswith("logs/") and
-                                   c.endswith(".err")), None)
+            self._err_path = next(
+                (out / c for c in copied if c.startswith("logs/") and c.endswith(".err")), None
+            )
         return copied
 
 
-def fetch_files(console: ConsoleNode, service: Address, robot: str, out: Path,
-                timeout_s: float = 20.0) -> list[str]:
+def fetch_files(
+    console: ConsoleNode, service: Address, robot: str, out: Path, timeout_s: float = 20.0
+) -> list[str]:
     """Copy every result file the ``dfrl robot`` service at ``service`` lists (``files``: those
     of the experiment it holds) into ``out`` under the same relative names, chunk by chunk
     (``fetch``), each through a ``.part`` file; return the names copied. Used by
@@ -347,9 +394,11 @@ def fetch_files(console: ConsoleNode, service: Address, robot: str, out: Path,
         offset = 0
         with open(tmp, "wb") as fh:
             for _ in range(size // FETCH_CHUNK + 2):
-                chunk = console.robot(service, {"fetch": {"name": str(rel), "offset": offset,
-                                                          "max": FETCH_CHUNK}},
-                                      timeout_s=timeout_s)
+                chunk = console.robot(
+                    service,
+                    {"fetch": {"name": str(rel), "offset": offset, "max": FETCH_CHUNK}},
+                    timeout_s=timeout_s,
+                )
                 data = base64.b64decode(chunk["data"])
                 fh.write(data)
                 offset += len(data)
@@ -357,8 +406,7 @@ def fetch_files(console: ConsoleNode, service: Address, robot: str, out: Path,
                     break
         if offset < size:
             tmp.unlink()
-            raise ExperimentError(f"robot {robot}: {rel} came back with {offset} "
-                                  f"of {size} bytes")
+            raise ExperimentError(f"robot {robot}: {rel} came back with {offset} of {size} bytes")
         tmp.replace(target)
         copied.append(str(rel))
     return copied

@@ -1,5 +1,6 @@
 """Where a run says what happens: progress lines on a text stream (stderr for ``dfrl run``) and
 events of the live view in ``events.jsonl`` (:mod:`.events`). Safe from any thread."""
+
 from __future__ import annotations
 
 import threading
@@ -24,7 +25,7 @@ class Reporter:
     def __init__(self, out: Path, progress: TextIO | None) -> None:
         self._out = out
         self._progress = progress
-        self._lock = threading.Lock()      # keeps lines whole; guards _t0
+        self._lock = threading.Lock()  # keeps lines whole; guards _t0
         self._t0 = time.monotonic()
 
     @property

@@ -7,6 +7,7 @@ threads (a test, a bench sampling memory) may call :meth:`RobotRoster.robots` an
 :meth:`RobotRoster.iterations`. Every field is guarded by the roster's lock, which is never
 held while a robot is asked anything (a robot may answer over the network).
 """
+
 from __future__ import annotations
 
 import threading
@@ -40,32 +41,33 @@ class RobotRoster:
         from being lost (see :meth:`partitioned`).
     """
 
-    def __init__(self, out: Path, reporter: Reporter,
-                 partition_wait_s: float = PARTITION_WAIT_S) -> None:
+    def __init__(
+        self, out: Path, reporter: Reporter, partition_wait_s: float = PARTITION_WAIT_S
+    ) -> None:
         self._partition_wait_s = partition_wait_s
-        self._cut_since: float | None = None       # when the driver's partition began
-        self._cut_robots = 0                       # robot hosts it cut the driver from
-        self._cut_expired = False                  # its wait ran out
-        self._healed_at: float | None = None       # when the last partition healed
-        self._held_now: set[str] = set()           # robots held back from being lost
+        self._cut_since: float | None = None  # when the driver's partition began
+        self._cut_robots = 0  # robot hosts it cut the driver from
+        self._cut_expired = False  # its wait ran out
+        self._healed_at: float | None = None  # when the last partition healed
+        self._held_now: set[str] = set()  # robots held back from being lost
         self._out = out
         self._say = reporter.say
         self._event = reporter.event
         self._elapsed = reporter.elapsed
         self._lock = threading.Lock()
-        self._robots: dict[str, Robot] = {}        # in the order they were added
-        self._joined: set[str] = set()             # robots that joined the running experiment
-        self._killed: set[str] = set()             # robots the launcher itself stopped
-        self._crashed: dict[str, int] = {}         # robot -> exit code of its process
-        self._lost: dict[str, str] = {}            # robot -> why (crashed, failed, gone)
+        self._robots: dict[str, Robot] = {}  # in the order they were added
+        self._joined: set[str] = set()  # robots that joined the running experiment
+        self._killed: set[str] = set()  # robots the launcher itself stopped
+        self._crashed: dict[str, int] = {}  # robot -> exit code of its process
+        self._lost: dict[str, str] = {}  # robot -> why (crashed, failed, gone)
         self._stalls: list[str] = []
-        self._progress_at: dict[str, tuple[int, float]] = {}   # robot -> iteration, since
-        self._stalled: dict[str, float] = {}       # robot -> stalled since
-        self._sample_errors: dict[str, str] = {}   # robot -> the last one shown in the view
+        self._progress_at: dict[str, tuple[int, float]] = {}  # robot -> iteration, since
+        self._stalled: dict[str, float] = {}  # robot -> stalled since
+        self._sample_errors: dict[str, str] = {}  # robot -> the last one shown in the view
         self._gathered: dict[str, list[str]] = {}
         self._gather_errors: list[str] = []
-        self._failed_joins: dict[str, str] = {}    # robot -> why it could not join
-        self._resumed: dict[str, tuple[int, ...]] = {}   # robot -> checkpoint iterations
+        self._failed_joins: dict[str, str] = {}  # robot -> why it could not join
+        self._resumed: dict[str, tuple[int, ...]] = {}  # robot -> checkpoint iterations
 
     # -- the robots ---------------------------------------------------------------------------
     def add(self, robot: Robot, joined: bool = False) -> None:
@@ -108,8 +110,11 @@ class RobotRoster:
 
     def iterations(self, algo: str | None = None) -> dict[str, int]:
         """Iterations per robot (of those learning with ``algo``, or all)."""
-        return {rid: robot.status().iteration for rid, robot in self.robots().items()
-                if algo is None or robot.spec.algo == algo}
+        return {
+            rid: robot.status().iteration
+            for rid, robot in self.robots().items()
+            if algo is None or robot.spec.algo == algo
+        }
 
     def all_exited(self) -> bool:
         """Every robot ended (robots held back by a driver partition have not)."""
@@ -117,9 +122,10 @@ class RobotRoster:
 
     def robots_done(self) -> bool:
         """Every robot ended or ran all its iterations."""
-        return not self.partitioned() and \
-            all(not s.running or s.iteration >= r.config.iterations
-                for r, s in ((r, r.status()) for r in self.robots().values()))
+        return not self.partitioned() and all(
+            not s.running or s.iteration >= r.config.iterations
+            for r, s in ((r, r.status()) for r in self.robots().values())
+        )
 
     # -- the driver's own partition -----------------------------------------------------------
     def partitioned(self) -> bool:
@@ -140,38 +146,49 @@ class RobotRoster:
         or the robot's silence, lasted ``partition_wait_s``."""
         with self._lock:
             killed = set(self._killed)
-        remote = {rid: s for rid, s in statuses.items()
-                  if s.answered_at is not None and rid not in killed}
+        remote = {
+            rid: s for rid, s in statuses.items() if s.answered_at is not None and rid not in killed
+        }
         if len(remote) < 2:
             return set()
         silent = {rid: s.silent_since for rid, s in remote.items() if s.silent_since is not None}
         last = max(s.answered_at for s in remote.values() if s.answered_at is not None)
-        held = {rid for rid, since in silent.items() if since is not None and last <= since
-                and now - since <= self._partition_wait_s}
+        held = {
+            rid
+            for rid, since in silent.items()
+            if since is not None and last <= since and now - since <= self._partition_wait_s
+        }
         with self._lock:
             began, healed = self._cut_since, self._healed_at
         if began is None and silent and len(silent) == len(remote):
             began = min(v for v in silent.values() if v is not None)
             with self._lock:
                 self._cut_since, self._cut_robots = began, len(remote)
-            self._say(f"DRIVER PARTITIONED: none of the {len(remote)} robot hosts answers "
-                      f"(silent {now - began:.0f} s); waiting up to "
-                      f"{self._partition_wait_s:.0f} s before calling them lost")
-            self._event({"kind": "driver_partition", "state": "partitioned",
-                         "robots": sorted(remote)})
+            self._say(
+                f"DRIVER PARTITIONED: none of the {len(remote)} robot hosts answers "
+                f"(silent {now - began:.0f} s); waiting up to "
+                f"{self._partition_wait_s:.0f} s before calling them lost"
+            )
+            self._event(
+                {"kind": "driver_partition", "state": "partitioned", "robots": sorted(remote)}
+            )
         elif began is not None and len(silent) < len(remote):
             with self._lock:
                 self._cut_since, self._healed_at, count = None, now, self._cut_robots
                 expired, self._cut_expired = self._cut_expired, False
                 if not expired:
-                    self._stalls.append(f"driver partitioned from all {count} robot hosts "
-                                        f"from {self._elapsed(began):.1f} s to "
-                                        f"{self._elapsed(now):.1f} s (waited; not counted "
-                                        "as lost)")
-            self._say(f"driver partition healed: robot hosts answer again after "
-                      f"{now - began:.0f} s")
-            self._event({"kind": "driver_partition", "state": "healed",
-                         "seconds": round(now - began, 1)})
+                    self._stalls.append(
+                        f"driver partitioned from all {count} robot hosts "
+                        f"from {self._elapsed(began):.1f} s to "
+                        f"{self._elapsed(now):.1f} s (waited; not counted "
+                        "as lost)"
+                    )
+            self._say(
+                f"driver partition healed: robot hosts answer again after {now - began:.0f} s"
+            )
+            self._event(
+                {"kind": "driver_partition", "state": "healed", "seconds": round(now - began, 1)}
+            )
             began, healed = None, now
         if healed is not None and now - healed < LOST_AFTER_S:
             held |= {rid for rid, since in silent.items() if since is not None and since < healed}
@@ -179,13 +196,17 @@ class RobotRoster:
             with self._lock:
                 expired, self._cut_expired = not self._cut_expired, True
                 if expired:
-                    self._stalls.append(f"driver partitioned from all {self._cut_robots} "
-                                        f"robot hosts from {self._elapsed(began):.1f} s; "
-                                        f"after {self._partition_wait_s:.0f} s "
-                                        "(partition_wait_s) they count as lost")
+                    self._stalls.append(
+                        f"driver partitioned from all {self._cut_robots} "
+                        f"robot hosts from {self._elapsed(began):.1f} s; "
+                        f"after {self._partition_wait_s:.0f} s "
+                        "(partition_wait_s) they count as lost"
+                    )
             if expired:
-                self._say(f"driver partitioned for {now - began:.0f} s: the robot hosts that "
-                          "do not answer count as lost from now on")
+                self._say(
+                    f"driver partitioned for {now - began:.0f} s: the robot hosts that "
+                    "do not answer count as lost from now on"
+                )
             return set()
         return held
 
@@ -208,28 +229,38 @@ class RobotRoster:
     def _check_health(self, rid: str, robot: Robot, status: RobotStatus) -> None:
         why, code = status.lost, status.exit_code
         with self._lock:
-            resumed = status.resumed[len(self._resumed.get(rid, ())):]
+            resumed = status.resumed[len(self._resumed.get(rid, ())) :]
             if resumed:
                 self._resumed[rid] = status.resumed
         for it in resumed:
-            self._say(f"robot {rid}: its robot host was restarted; resumed from its checkpoint "
-                      f"at iteration {it}")
+            self._say(
+                f"robot {rid}: its robot host was restarted; resumed from its checkpoint "
+                f"at iteration {it}"
+            )
             self._event({"kind": "robot_state", "robot": rid, "state": "learning"})
         with self._lock:
             new = why is not None and rid not in self._lost and rid not in self._killed
             back = why is None and rid in self._lost
-            if new and why is not None:         # new: lost just now (why is not None)
+            if new and why is not None:  # new: lost just now (why is not None)
                 self._lost[rid] = why
                 if code is not None:
                     self._crashed[rid] = code
             elif back:
                 del self._lost[rid]
         if new and code is not None:
-            self._event({"kind": "robot_state", "robot": rid, "state": "dead",
-                         "reason": f"exit code {code}"})
-            self._say(f"ROBOT {rid} CRASHED (exit code {code}) at iteration "
-                      f"{status.iteration}; see {self._out / 'logs' / f'{rid}.err'}\n"
-                      f"{robot.log_tail()}")
+            self._event(
+                {
+                    "kind": "robot_state",
+                    "robot": rid,
+                    "state": "dead",
+                    "reason": f"exit code {code}",
+                }
+            )
+            self._say(
+                f"ROBOT {rid} CRASHED (exit code {code}) at iteration "
+                f"{status.iteration}; see {self._out / 'logs' / f'{rid}.err'}\n"
+                f"{robot.log_tail()}"
+            )
         elif new:
             self._say(f"ROBOT {rid} LOST at iteration {status.iteration}: {why}")
             self._event({"kind": "robot_state", "robot": rid, "state": "dead", "reason": why})
@@ -247,8 +278,13 @@ class RobotRoster:
                 if rid in self._stalled:
                     self._stall(rid, self._stalled.pop(rid), now, it)
                 self._progress_at[rid] = (status.iteration, now)
-            elif status.running and not status.done and it < robot.config.iterations \
-                    and now - since > STALL_S and rid not in self._stalled:
+            elif (
+                status.running
+                and not status.done
+                and it < robot.config.iterations
+                and now - since > STALL_S
+                and rid not in self._stalled
+            ):
                 self._stalled[rid] = since
                 said = f"robot {rid} stalled at iteration {it} for {now - since:.0f} s"
         if said:
@@ -256,8 +292,10 @@ class RobotRoster:
 
     def _stall(self, rid: str, since: float, until: float, it: int) -> None:
         """Record a stall (caller holds the lock)."""
-        self._stalls.append(f"{rid} made no progress at iteration {it} from "
-                            f"{self._elapsed(since):.1f} s to {self._elapsed(until):.1f} s")
+        self._stalls.append(
+            f"{rid} made no progress at iteration {it} from "
+            f"{self._elapsed(since):.1f} s to {self._elapsed(until):.1f} s"
+        )
 
     def end_stalls(self) -> None:
         """Record the stalls still going on (the run is ending)."""
@@ -276,29 +314,54 @@ class RobotRoster:
         taken = [(rid, robot, robot.take_progress()) for rid, robot in self.robots().items()]
         for rid, robot, p in taken:
             for e in p.evals:
-                self._event({"kind": "eval", "robot": rid, "iteration": e.iteration,
-                             "progress": e.progress, "collisions_per_1000": e.collisions_per_1000,
-                             "coverage": e.coverage})
+                self._event(
+                    {
+                        "kind": "eval",
+                        "robot": rid,
+                        "iteration": e.iteration,
+                        "progress": e.progress,
+                        "collisions_per_1000": e.collisions_per_1000,
+                        "coverage": e.coverage,
+                    }
+                )
             s = p.sample
             if s is None:
                 continue
-            self._event({"kind": "pose", "robot": rid, "iteration": s.iteration, "x": s.x,
-                         "y": s.y, "yaw": s.yaw})
+            self._event(
+                {
+                    "kind": "pose",
+                    "robot": rid,
+                    "iteration": s.iteration,
+                    "x": s.x,
+                    "y": s.y,
+                    "yaw": s.yaw,
+                }
+            )
             if robot.spec.robot_host is not None:
-                self._event({"kind": "progress", "robot": rid, "iteration": s.iteration,
-                             "q_sum": s.q_sum, "cumulative_reward": s.cumulative_reward,
-                             "shares": robot.status().shares})
+                self._event(
+                    {
+                        "kind": "progress",
+                        "robot": rid,
+                        "iteration": s.iteration,
+                        "q_sum": s.q_sum,
+                        "cumulative_reward": s.cumulative_reward,
+                        "shares": robot.status().shares,
+                    }
+                )
         for rid, _, p in taken:
             with self._lock:
                 for t0, t1, reason in p.outages:
-                    self._stalls.append(f"{rid} unreachable from {self._elapsed(t0):.1f} s to "
-                                        f"{self._elapsed(t1):.1f} s ({reason[:120]})")
+                    self._stalls.append(
+                        f"{rid} unreachable from {self._elapsed(t0):.1f} s to "
+                        f"{self._elapsed(t1):.1f} s ({reason[:120]})"
+                    )
                 new = p.error is not None and self._sample_errors.get(rid) != p.error
                 if new and p.error is not None:
                     self._sample_errors[rid] = p.error
             if new and p.error is not None:
-                self._event({"kind": "error",
-                             "text": f"no live samples from {rid}: {p.error[:200]}"})
+                self._event(
+                    {"kind": "error", "text": f"no live samples from {rid}: {p.error[:200]}"}
+                )
 
     # -- the end ------------------------------------------------------------------------------
     def kill_all(self) -> None:
@@ -332,9 +395,9 @@ class RobotRoster:
             except ExperimentError as exc:
                 self._say(f"files of {rid} not gathered: {exc}")
                 with self._lock:
-                    if rid in self._lost:      # already counted: say it with the loss
+                    if rid in self._lost:  # already counted: say it with the loss
                         self._lost[rid] += "; its result files could not be fetched"
-                    else:                      # answered till the end, then failed to give them
+                    else:  # answered till the end, then failed to give them
                         self._gather_errors.append(f"files of {rid} not gathered: {exc}")
                 continue
             if names:

@@ -12,6 +12,7 @@ and :meth:`Robot.take_progress`, ended with :meth:`Robot.request_stop` (every ro
 then :meth:`Robot.stop` (each, waiting), and its result files brought into the results folder
 with :meth:`Robot.gather`.
 """
+
 from __future__ import annotations
 
 import time
@@ -181,9 +182,11 @@ def await_ready(robots: Sequence[Robot], timeout_s: float = 120.0) -> None:
             if status.address is not None:
                 break
             now = time.monotonic()
-            if not status.running:      # its last lines may still be on their way: 1 s more
+            if not status.running:  # its last lines may still be on their way: 1 s more
                 ended_at = ended_at or now
             if now > deadline or (ended_at is not None and now - ended_at > 1.0):
-                raise ExperimentError(f"robot {robot.spec.id} did not start (exit code "
-                                      f"{status.exit_code}): {robot.log_tail()}")
+                raise ExperimentError(
+                    f"robot {robot.spec.id} did not start (exit code "
+                    f"{status.exit_code}): {robot.log_tail()}"
+                )
             time.sleep(0.02)

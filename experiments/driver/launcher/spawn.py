@@ -1,4 +1,5 @@
 """Starting the robots and the agents of an experiment, and the ``nodes.json`` that lists them."""
+
 from __future__ import annotations
 
 import os
@@ -27,8 +28,9 @@ from dfrl.robots.learners import learner_kind
 #: (host, port) written into the itinerary. None (the default): the node's own address. A
 #: benchmark sets it (in the thread that runs the launcher) to put a delaying proxy in front of
 #: every node (``dfrl bench scale --delay-ms``).
-STOP_ROUTE: ContextVar[Callable[[str, tuple[str, int]], tuple[str, int]] | None] = \
-    ContextVar("stop_route", default=None)
+STOP_ROUTE: ContextVar[Callable[[str, tuple[str, int]], tuple[str, int]] | None] = ContextVar(
+    "stop_route", default=None
+)
 
 
 @dataclass(frozen=True)
@@ -88,20 +90,33 @@ def robot_config(site: Site, robot: RobotSpec, iterations: int, joins: int = 0) 
     """The configuration a robot runs."""
     c = site.config
     grace = 10.0 if c.mode is Mode.SYNC else c.timeout_s
-    return RobotConfig(robot=robot.id, out_dir=str(site.out), arena=robot.arena,
-                       algo=robot.algo, seed=robot_seed(c, robot, joins), iterations=iterations,
-                       respite=c.respite, mode=c.mode, rtf=c.rtf, token=c.token,
-                       trainer=dict(c.trainer), grace_s=grace,
-                       sync_timeout_s=max(60.0, c.timeout_s), host=site.console_host,
-                       eval_every=c.eval_every, eval_steps=c.eval_steps,
-                       clone_limit=clone_limit(c), learners=dict(c.learners),
-                       # a remote robot has its own TLS folder (dfrl robot --tls): not ours
-                       tls=None if site.tls is None or robot.robot_host is not None
-                       else str(site.tls))
+    return RobotConfig(
+        robot=robot.id,
+        out_dir=str(site.out),
+        arena=robot.arena,
+        algo=robot.algo,
+        seed=robot_seed(c, robot, joins),
+        iterations=iterations,
+        respite=c.respite,
+        mode=c.mode,
+        rtf=c.rtf,
+        token=c.token,
+        trainer=dict(c.trainer),
+        grace_s=grace,
+        sync_timeout_s=max(60.0, c.timeout_s),
+        host=site.console_host,
+        eval_every=c.eval_every,
+        eval_steps=c.eval_steps,
+        clone_limit=clone_limit(c),
+        learners=dict(c.learners),
+        # a remote robot has its own TLS folder (dfrl robot --tls): not ours
+        tls=None if site.tls is None or robot.robot_host is not None else str(site.tls),
+    )
 
 
-def start_robot(site: Site, robot: RobotSpec, iterations: int, agents: AgentRoster,
-                joins: int = 0) -> Robot:
+def start_robot(
+    site: Site, robot: RobotSpec, iterations: int, agents: AgentRoster, joins: int = 0
+) -> Robot:
     """Start a robot: a process on this host (not waiting for it to come up), or, for a robot
     with a ``robot_host``, the ``dfrl robot`` service there (configured and started).
 
@@ -120,8 +135,9 @@ def start_robot(site: Site, robot: RobotSpec, iterations: int, agents: AgentRost
     if robot.robot_host is None:
         started = RobotChild(robot, cfg, site.out, on_event=on_event)
     else:
-        started = RemoteRobot(robot, cfg, site.console, site.experiment_id, site.poller,
-                              on_event=on_event)
+        started = RemoteRobot(
+            robot, cfg, site.console, site.experiment_id, site.poller, on_event=on_event
+        )
     started.start()
     return started
 
@@ -133,20 +149,33 @@ def write_nodes(site: Site, robots: RobotRoster, agents: AgentRoster) -> None:
     for rid, robot in robots.robots().items():
         status = robot.status()
         if status.address is not None:
-            nodes.append({"robot": rid, "algo": robot.spec.algo, "arena": robot.spec.arena,
-                          "host": status.address[0], "port": status.address[1],
-                          "pid": status.pid, "robot_host": robot.spec.robot_host,
-                          "joined": robots.joined(rid)})
-    write_json(site.out / "nodes.json", {"console": list(site.console.address),
-                                         "tls": str(site.tls) if site.tls else None,
-                                         "experiment": site.experiment_id,
-                                         "nodes": nodes,
-                                         "agents": [a.to_dict() for a in agents.infos()]})
+            nodes.append(
+                {
+                    "robot": rid,
+                    "algo": robot.spec.algo,
+                    "arena": robot.spec.arena,
+                    "host": status.address[0],
+                    "port": status.address[1],
+                    "pid": status.pid,
+                    "robot_host": robot.spec.robot_host,
+                    "joined": robots.joined(rid),
+                }
+            )
+    write_json(
+        site.out / "nodes.json",
+        {
+            "console": list(site.console.address),
+            "tls": str(site.tls) if site.tls else None,
+            "experiment": site.experiment_id,
+            "nodes": nodes,
+            "agents": [a.to_dict() for a in agents.infos()],
+        },
+    )
 
 
 def control_dt(config: ExperimentConfig) -> float:
     """Simulated seconds per iteration of the robots (the trainer's ``control_dt``)."""
-    from dfrl.robots.training import TrainerConfig    # pybullet: only when asked
+    from dfrl.robots.training import TrainerConfig  # pybullet: only when asked
 
     base = TrainerConfig().to_dict()
     base.update(config.trainer)
@@ -165,8 +194,7 @@ def rest_s(config: ExperimentConfig) -> float:
     return round(config.respite * 0.0005 * share, 3)
 
 
-def await_first_respite(config: ExperimentConfig, robots: RobotRoster,
-                        ids: list[str]) -> None:
+def await_first_respite(config: ExperimentConfig, robots: RobotRoster, ids: list[str]) -> None:
     """Async: wait until the robots ``ids`` reach the first respite boundary, so that rounds
     fall near iterations respite, 2 x respite, ... (the agent rests in between)."""
     target = min(config.respite, config.iterations)
@@ -179,8 +207,7 @@ def await_first_respite(config: ExperimentConfig, robots: RobotRoster,
         time.sleep(0.02)
 
 
-def launch_agents(site: Site, robots: RobotRoster, agents: AgentRoster,
-                  reporter: Reporter) -> None:
+def launch_agents(site: Site, robots: RobotRoster, agents: AgentRoster, reporter: Reporter) -> None:
     """One agent per algorithm, over the robots using it, in config order; an agent of a
     function learner (``dfrl.robots.learners.learner_kind``: ``linear``, ``dqn``) carries
     parameter vectors (launch plan ``"carries": "params"``), the others Q-tables. In a grid
@@ -199,31 +226,51 @@ def launch_agents(site: Site, robots: RobotRoster, agents: AgentRoster,
         for rid, robot in robots.robots().items():
             address = robot.status().address
             if robot.spec.algo in algos and address is not None:
-                host, port = (route(rid, (str(address[0]), int(address[1])))
-                              if route is not None else address)
+                host, port = (
+                    route(rid, (str(address[0]), int(address[1]))) if route is not None else address
+                )
                 stops.append({"host": host, "port": port, "robot": rid})
         if not stops:
-            continue      # only joiners use it: nobody to start with
+            continue  # only joiners use it: nobody to start with
         name = agent_name(algo)
         if c.mode is Mode.ASYNC:
             await_first_respite(c, robots, [s["robot"] for s in stops])
         log_path = site.out / f"rounds_{name}.log"
-        launch = {"name": name, "itinerary": stops, "method": c.method_for(algo),
-                  "rounds": c.rounds, "rest_s": rest_s(c), "rounds_log": str(log_path),
-                  # no token: the agent carries the console node's (the run's) tokens
-                  "timeout_s": float(c.timeout_s), "skip_after_s": float(c.skip_after_s),
-                  # the agent posts its round log to the console node, which writes it here:
-                  # no shared disk between the hosts the agent visits and the driver's
-                  "log_to": list(site.console.address)}
+        launch = {
+            "name": name,
+            "itinerary": stops,
+            "method": c.method_for(algo),
+            "rounds": c.rounds,
+            "rest_s": rest_s(c),
+            "rounds_log": str(log_path),
+            # no token: the agent carries the console node's (the run's) tokens
+            "timeout_s": float(c.timeout_s),
+            "skip_after_s": float(c.skip_after_s),
+            # the agent posts its round log to the console node, which writes it here:
+            # no shared disk between the hosts the agent visits and the driver's
+            "log_to": list(site.console.address),
+        }
         if c.itinerary != "chain":
-            launch["itinerary_kind"] = c.itinerary     # tree: clones over the robots
+            launch["itinerary_kind"] = c.itinerary  # tree: clones over the robots
             launch["fanout"] = c.fanout
         if algo != GRID and learner_kind(algo) == "function":
-            launch["carries"] = "params"     # linear, dqn: FedAvg of parameter vectors
-        agents.add(AgentInfo(name, algo, c.method_for(algo), c.rounds, str(log_path),
-                             tuple(stops), c.itinerary, c.fanout))
+            launch["carries"] = "params"  # linear, dqn: FedAvg of parameter vectors
+        agents.add(
+            AgentInfo(
+                name,
+                algo,
+                c.method_for(algo),
+                c.rounds,
+                str(log_path),
+                tuple(stops),
+                c.itinerary,
+                c.fanout,
+            )
+        )
         write_nodes(site, robots, agents)
         write_json(site.out / f"launch_{name}.json", launch)
         launch_agent(site.console, launch)
-        reporter.say(f"agent {name} ({c.method_for(algo)}, {c.rounds} rounds) launched to "
-                     f"{' -> '.join(s['robot'] for s in stops)}")
+        reporter.say(
+            f"agent {name} ({c.method_for(algo)}, {c.rounds} rounds) launched to "
+            f"{' -> '.join(s['robot'] for s in stops)}"
+        )

@@ -10,6 +10,7 @@ rejects a difference of ``margin`` or more). A block of tables per seed is neede
 learnt table's score varies by 0.2-0.3 between seeds at 10,000 iterations: with one table per
 seed, 10 seeds give an interval of about +-0.2.
 """
+
 from __future__ import annotations
 
 from concurrent.futures import Executor
@@ -60,45 +61,70 @@ def train_job(cfg: dict[str, Any]) -> np.ndarray:
     return result.q_table
 
 
-def eval_job(cfg: dict[str, Any], table: np.ndarray, steps: int, episode_steps: int,
-             seed: int) -> float:
+def eval_job(
+    cfg: dict[str, Any], table: np.ndarray, steps: int, episode_steps: int, seed: int
+) -> float:
     """The pybullet score of a table's greedy policy (a pool job)."""
-    r = evaluate_policy(TrainerConfig.from_dict(cfg), PolicyKind.GREEDY, steps, seed,
-                        q_table=table, episode_steps=episode_steps)
+    r = evaluate_policy(
+        TrainerConfig.from_dict(cfg),
+        PolicyKind.GREEDY,
+        steps,
+        seed,
+        q_table=table,
+        episode_steps=episode_steps,
+    )
     return _score(r.progress, r.collisions_per_1000)
 
 
-def check_learning(base: TrainerConfig, arena: str, budget: LearningCheck,
-                   pool: Executor) -> dict[str, Any]:
+def check_learning(
+    base: TrainerConfig, arena: str, budget: LearningCheck, pool: Executor
+) -> dict[str, Any]:
     """Run the decisive check in one arena (see the module doc); pybullet work on ``pool``."""
     budget.check()
     keys = [(s, m) for s in range(1, budget.seeds + 1) for m in range(budget.tables)]
-    configs = [base.replace(arena=arena, seed=1000 * s + m, iterations=budget.iterations)
-               for s, m in keys]
+    configs = [
+        base.replace(arena=arena, seed=1000 * s + m, iterations=budget.iterations) for s, m in keys
+    ]
     eval_seeds = [EVAL_SEED + 1000 * s + m for s, m in keys]
     pb_futures = [pool.submit(train_job, c.to_dict()) for c in configs]
     batched = BatchedTrainer(configs)
     batched.run(budget.iterations)
     b_tables = [batched.q[k].copy() for k in range(len(keys))]
-    in_batched = [_score(r.progress, r.collisions_per_1000) for r in evaluate_greedy(
-        configs[0], b_tables, [arena] * len(keys), budget.eval_steps, eval_seeds,
-        budget.episode_steps)]
+    in_batched = [
+        _score(r.progress, r.collisions_per_1000)
+        for r in evaluate_greedy(
+            configs[0],
+            b_tables,
+            [arena] * len(keys),
+            budget.eval_steps,
+            eval_seeds,
+            budget.episode_steps,
+        )
+    ]
     cfg = configs[0].to_dict()
-    b_scores = [pool.submit(eval_job, cfg, t, budget.eval_steps, budget.episode_steps, e)
-                for t, e in zip(b_tables, eval_seeds)]
-    pb_scores = [pool.submit(eval_job, cfg, f.result(), budget.eval_steps,
-                             budget.episode_steps, e) for f, e in zip(pb_futures, eval_seeds)]
+    b_scores = [
+        pool.submit(eval_job, cfg, t, budget.eval_steps, budget.episode_steps, e)
+        for t, e in zip(b_tables, eval_seeds)
+    ]
+    pb_scores = [
+        pool.submit(eval_job, cfg, f.result(), budget.eval_steps, budget.episode_steps, e)
+        for f, e in zip(pb_futures, eval_seeds)
+    ]
     b = np.array([f.result() for f in b_scores]).reshape(budget.seeds, budget.tables)
     pb = np.array([f.result() for f in pb_scores]).reshape(budget.seeds, budget.tables)
     diff = interval((b.mean(axis=1) - pb.mean(axis=1)).tolist())
     return {
-        "arena": arena, "seeds": budget.seeds, "tables_per_seed": budget.tables,
-        "iterations": budget.iterations, "margin": budget.margin,
+        "arena": arena,
+        "seeds": budget.seeds,
+        "tables_per_seed": budget.tables,
+        "iterations": budget.iterations,
+        "margin": budget.margin,
         "batched_learnt_in_pybullet": float(b.mean()),
         "pybullet_learnt_in_pybullet": float(pb.mean()),
         "batched_learnt_in_batched": float(np.mean(in_batched)),
         "table_sd": {"batched": float(b.std(ddof=1)), "pybullet": float(pb.std(ddof=1))},
-        "difference": diff.mean, "half_width": diff.half,
+        "difference": diff.mean,
+        "half_width": diff.half,
         "interval": [diff.low, diff.high],
         "per_seed": (b.mean(axis=1) - pb.mean(axis=1)).tolist(),
         "holds": bool(-budget.margin < diff.low and diff.high < budget.margin),

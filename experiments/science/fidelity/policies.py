@@ -1,4 +1,5 @@
 """Fixed policies in both simulators: collisions per 1,000 steps and progress."""
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -40,13 +41,14 @@ POLICIES: dict[str, Rule] = {"avoid": avoid, "uniform": uniform, "ahead": ahead}
 
 def _blocks(collided: list[bool], progress: list[float]) -> tuple[list[float], list[float]]:
     n = len(collided) // BLOCK
-    c = np.asarray(collided[:n * BLOCK], dtype=float).reshape(n, BLOCK).mean(axis=1) * 1000
-    p = np.asarray(progress[:n * BLOCK]).reshape(n, BLOCK).mean(axis=1)
+    c = np.asarray(collided[: n * BLOCK], dtype=float).reshape(n, BLOCK).mean(axis=1) * 1000
+    p = np.asarray(progress[: n * BLOCK]).reshape(n, BLOCK).mean(axis=1)
     return c.tolist(), p.tolist()
 
 
-def _pybullet(config: EnvConfig, spec: ArenaSpec, rule: Rule, steps: int, seed: int
-              ) -> tuple[list[bool], list[float]]:
+def _pybullet(
+    config: EnvConfig, spec: ArenaSpec, rule: Rule, steps: int, seed: int
+) -> tuple[list[bool], list[float]]:
     env = EPuckEnv(arena=spec, config=config)
     rng = np.random.default_rng(seed)
     collided, progress = [], []
@@ -64,8 +66,9 @@ def _pybullet(config: EnvConfig, spec: ArenaSpec, rule: Rule, steps: int, seed: 
     return collided, progress
 
 
-def _batched(config: EnvConfig, spec: ArenaSpec, rule: Rule, steps: int, seed: int
-             ) -> tuple[list[bool], list[float]]:
+def _batched(
+    config: EnvConfig, spec: ArenaSpec, rule: Rule, steps: int, seed: int
+) -> tuple[list[bool], list[float]]:
     world = BatchedWorld(config, [spec], [np.random.default_rng(seed)])
     rng = np.random.default_rng(seed)
     world.start(0)
@@ -82,8 +85,9 @@ def _batched(config: EnvConfig, spec: ArenaSpec, rule: Rule, steps: int, seed: i
     return collided, progress
 
 
-def compare_policies(config: EnvConfig, arena: str | ArenaSpec, steps: int,
-                     seed: int) -> dict[str, Any]:
+def compare_policies(
+    config: EnvConfig, arena: str | ArenaSpec, steps: int, seed: int
+) -> dict[str, Any]:
     """Each of :data:`POLICIES` for ``steps`` steps in both simulators.
 
     Returns
@@ -101,10 +105,10 @@ def compare_policies(config: EnvConfig, arena: str | ArenaSpec, steps: int,
         cp, pp = _blocks(*_pybullet(config, spec, rule, steps, seed))
         cb, pb = _blocks(*_batched(config, spec, rule, steps, seed))
         dc, dp = welch(cb, cp), welch(pb, pp)
-        out[name] = {"pybullet": {"collisions_per_1000": float(np.mean(cp)),
-                                  "progress": float(np.mean(pp))},
-                     "batched": {"collisions_per_1000": float(np.mean(cb)),
-                                 "progress": float(np.mean(pb))},
-                     "collisions_difference": [dc.mean, dc.half],
-                     "progress_difference": [dp.mean, dp.half]}
+        out[name] = {
+            "pybullet": {"collisions_per_1000": float(np.mean(cp)), "progress": float(np.mean(pp))},
+            "batched": {"collisions_per_1000": float(np.mean(cb)), "progress": float(np.mean(pb))},
+            "collisions_difference": [dc.mean, dc.half],
+            "progress_difference": [dp.mean, dp.half],
+        }
     return out

@@ -1,4 +1,5 @@
 """Sensing and one-step transitions of the two simulators from the same states."""
+
 from __future__ import annotations
 
 from collections import defaultdict
@@ -16,8 +17,9 @@ def _batched(config: EnvConfig, arena: ArenaSpec, seed: int) -> BatchedWorld:
     return BatchedWorld(config, [arena], [np.random.default_rng(seed)])
 
 
-def compare_sensing(config: EnvConfig, arena: str | ArenaSpec, poses: int,
-                    seed: int) -> dict[str, Any]:
+def compare_sensing(
+    config: EnvConfig, arena: str | ArenaSpec, poses: int, seed: int
+) -> dict[str, Any]:
     """IR distances of both simulators at ``poses`` random free poses (clearance: the body).
 
     Returns
@@ -40,18 +42,24 @@ def compare_sensing(config: EnvConfig, arena: str | ArenaSpec, poses: int,
             reading = env.robot.sense()
             world.place(0, pose)
             errors.append(np.abs(world.dist[0] - reading))
-            same += disc(env.robot.proximity(reading).astype(np.float32)) == \
-                disc(world.observations()[0])
+            same += disc(env.robot.proximity(reading).astype(np.float32)) == disc(
+                world.observations()[0]
+            )
     finally:
         env.close()
     err = np.concatenate(errors) * 1000.0
-    return {"readings": int(err.size), "mean_abs_mm": float(err.mean()),
-            "p99_abs_mm": float(np.percentile(err, 99)), "max_abs_mm": float(err.max()),
-            "state_agreement": same / poses}
+    return {
+        "readings": int(err.size),
+        "mean_abs_mm": float(err.mean()),
+        "p99_abs_mm": float(np.percentile(err, 99)),
+        "max_abs_mm": float(err.max()),
+        "state_agreement": same / poses,
+    }
 
 
-def _walk(env: EPuckEnv, disc: Discretiser, steps: int, rng: np.random.Generator
-          ) -> list[tuple[tuple[float, float, float], int, int, int, int]]:
+def _walk(
+    env: EPuckEnv, disc: Discretiser, steps: int, rng: np.random.Generator
+) -> list[tuple[tuple[float, float, float], int, int, int, int]]:
     """A pybullet random walk: (pose, previous action + 1, action, state, next state)."""
     rows = []
     obs, _ = env.reset()
@@ -68,8 +76,11 @@ def _walk(env: EPuckEnv, disc: Discretiser, steps: int, rng: np.random.Generator
     return rows
 
 
-def _replay(world: BatchedWorld, disc: Discretiser,
-            rows: list[tuple[tuple[float, float, float], int, int, int, int]]) -> list[int]:
+def _replay(
+    world: BatchedWorld,
+    disc: Discretiser,
+    rows: list[tuple[tuple[float, float, float], int, int, int, int]],
+) -> list[int]:
     nexts = []
     for pose, prev, action, _, _ in rows:
         world.place(0, pose)
@@ -98,8 +109,9 @@ def _tv(rows: list[tuple[int, int]], a: list[int], b: list[int]) -> float:
     return total / len(rows)
 
 
-def compare_transitions(config: EnvConfig, arena: str | ArenaSpec, steps: int,
-                        seed: int) -> dict[str, Any]:
+def compare_transitions(
+    config: EnvConfig, arena: str | ArenaSpec, steps: int, seed: int
+) -> dict[str, Any]:
     """One-step outcomes from the states of a pybullet random walk, replayed in batched.
 
     Returns
@@ -121,6 +133,9 @@ def compare_transitions(config: EnvConfig, arena: str | ArenaSpec, steps: int,
     first = _replay(_batched(config, spec, seed), disc, rows)
     second = _replay(_batched(config, spec, seed + 1), disc, rows)
     keys = [(r[3], r[2]) for r in rows]
-    return {"transitions": len(rows),
-            "agreement": float(np.mean([x == y for x, y in zip(pb, first)])),
-            "tv_distance": _tv(keys, pb, first), "tv_floor": _tv(keys, second, first)}
+    return {
+        "transitions": len(rows),
+        "agreement": float(np.mean([x == y for x, y in zip(pb, first)])),
+        "tv_distance": _tv(keys, pb, first),
+        "tv_floor": _tv(keys, second, first),
+    }

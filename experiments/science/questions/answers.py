@@ -5,15 +5,14 @@ interval, no correction: a check that errs, errs towards failing the control); t
 question's family, Holm within it; an L row of a condition whose control failed its check, or
 which has no control, is "cannot judge" with the reason and takes no part in the correction.
 """
+
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
-from dfrl.experiments.science.questions.catalogue import (CONTROL, DELTAS, UNTRAINED, Row,
-                                                          rows_for)
-from dfrl.experiments.science.questions.contrast import (Contrast, Judged, Outcome,
-                                                         judge_family)
+from dfrl.experiments.science.questions.catalogue import CONTROL, DELTAS, UNTRAINED, Row, rows_for
+from dfrl.experiments.science.questions.contrast import Contrast, Judged, Outcome, judge_family
 from dfrl.experiments.science.questions.evaluations import Evaluation
 from dfrl.experiments.science.questions.measures import ByArena, final_by_arena, paired, runs_of
 
@@ -57,9 +56,9 @@ class CheckResult:
         low, high = c.interval()
         if self.passes:
             return "includes 0: learns nothing we can detect"
-        return (f"FAILS: the control learns ({c.estimate:+.3f} [{low:+.3f}, {high:+.3f}])"
-                + ("" if self.vetoes else f", less than delta = {c.delta:g}: L is still judged "
-                   "against it"))
+        return f"FAILS: the control learns ({c.estimate:+.3f} [{low:+.3f}, {high:+.3f}])" + (
+            "" if self.vetoes else f", less than delta = {c.delta:g}: L is still judged against it"
+        )
 
 
 @dataclass
@@ -112,8 +111,10 @@ def answer(evals: Iterable[Evaluation], deltas: Mapping[str, float] | None = Non
         contrasts = [_contrast(values, r, "score", d[q]) for r in family]
         vetoes = [_veto(r, runs, failed) for r in family] if q == "L" else None
         judged = judge_family(contrasts, vetoes)
-        out.questions[q] = [Answered(r, j, _contrast(values, r, "collisions_per_1000", d[q]))
-                            for r, j in zip(family, judged)]
+        out.questions[q] = [
+            Answered(r, j, _contrast(values, r, "collisions_per_1000", d[q]))
+            for r, j in zip(family, judged)
+        ]
     return out
 
 

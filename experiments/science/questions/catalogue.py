@@ -23,6 +23,7 @@ the arenas it never learnt in (T); collisions per 1,000 steps are shown beside i
 (a control that cannot learn what L asks); L's rows of a condition whose control fails its
 check, or has none, cannot be judged. Holm's correction runs within each question's family.
 """
+
 from __future__ import annotations
 
 from collections.abc import Mapping
@@ -64,8 +65,9 @@ class Row:
 def trained_runs(runs: list[str]) -> list[str]:
     """Conditions that learnt from real rewards: neither a control, the reference, nor the
     untrained table."""
-    return [r for r in runs if not (r == UNTRAINED or r.startswith(CONTROL)
-                                    or r.startswith(REFERENCE))]
+    return [
+        r for r in runs if not (r == UNTRAINED or r.startswith(CONTROL) or r.startswith(REFERENCE))
+    ]
 
 
 def federated(run: str) -> tuple[str, str] | None:
@@ -91,8 +93,11 @@ def learning_rows(runs: list[str]) -> list[Row]:
 
 def check_rows(runs: list[str]) -> list[Row]:
     """C: each learning control against the untrained table (two-sided)."""
-    return [Row("C", f"{r} - untrained", r, UNTRAINED, side="two-sided")
-            for r in runs if r.startswith(CONTROL)]
+    return [
+        Row("C", f"{r} - untrained", r, UNTRAINED, side="two-sided")
+        for r in runs
+        if r.startswith(CONTROL)
+    ]
 
 
 def federation_rows(runs: list[str], question: str) -> list[Row]:
@@ -103,8 +108,9 @@ def federation_rows(runs: list[str], question: str) -> list[Row]:
     for r in trained_runs(runs):
         fed = federated(r)
         if fed and STANDALONE + fed[0] in runs:
-            out.append(Row(question, f"{r} - {STANDALONE}{fed[0]}", r, STANDALONE + fed[0],
-                           role=role))
+            out.append(
+                Row(question, f"{r} - {STANDALONE}{fed[0]}", r, STANDALONE + fed[0], role=role)
+            )
     return out
 
 
@@ -119,14 +125,25 @@ def method_rows(runs: list[str]) -> list[Row]:
     for algo, methods in by_algo.items():
         known = [m for m in METHODS if m in methods] + sorted(set(methods) - set(METHODS))
         for i, m1 in enumerate(known):
-            for m2 in known[i + 1:]:
-                out.append(Row("M", f"{algo}: {m1} - {m2}", f"{algo}/{m1}", f"{algo}/{m2}",
-                               side="two-sided"))
+            for m2 in known[i + 1 :]:
+                out.append(
+                    Row(
+                        "M",
+                        f"{algo}: {m1} - {m2}",
+                        f"{algo}/{m1}",
+                        f"{algo}/{m2}",
+                        side="two-sided",
+                    )
+                )
     return out
 
 
 def rows_for(runs: list[str]) -> dict[str, list[Row]]:
     """Every question's rows for the conditions present."""
-    return {"C": check_rows(runs), "L": learning_rows(runs),
-            "F": federation_rows(runs, "F"), "T": federation_rows(runs, "T"),
-            "M": method_rows(runs)}
+    return {
+        "C": check_rows(runs),
+        "L": learning_rows(runs),
+        "F": federation_rows(runs, "F"),
+        "T": federation_rows(runs, "T"),
+        "M": method_rows(runs),
+    }

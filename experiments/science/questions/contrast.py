@@ -21,6 +21,7 @@ The words of a verdict (:class:`Outcome`):
   same difference: nothing to estimate a variance from, the interval would have zero width),
   or a row whose control failed its check (the reason is given).
 """
+
 from __future__ import annotations
 
 import math
@@ -44,8 +45,10 @@ def need_statsmodels() -> None:
     try:
         import statsmodels  # noqa: F401
     except ImportError as exc:
-        raise ImportError("the questions need statsmodels: pip install 'dfrl[science]' "
-                          f"(or run scripts/setup.sh): {exc}") from exc
+        raise ImportError(
+            "the questions need statsmodels: pip install 'dfrl[science]' "
+            f"(or run scripts/setup.sh): {exc}"
+        ) from exc
 
 
 class Outcome(Enum):
@@ -82,8 +85,10 @@ class Contrast:
 
     def __post_init__(self) -> None:
         if not (len(self.seeds) == len(self.a) == len(self.b)):
-            raise ValueError(f"a contrast needs one value per seed on each side: {len(self.seeds)}"
-                             f" seeds, {len(self.a)} and {len(self.b)} values")
+            raise ValueError(
+                f"a contrast needs one value per seed on each side: {len(self.seeds)}"
+                f" seeds, {len(self.a)} and {len(self.b)} values"
+            )
         if self.side not in ("above", "below", "two-sided"):
             raise ValueError(f"side: above, below or two-sided, got {self.side!r}")
         if not (math.isfinite(self.delta) and self.delta > 0):
@@ -116,6 +121,7 @@ class Contrast:
         if self.degenerate:
             return float("nan"), float("nan")
         from scipy import stats
+
         ci = stats.ttest_rel(self.a, self.b).confidence_interval(level)
         return float(ci.low), float(ci.high)
 
@@ -126,6 +132,7 @@ class Contrast:
         if self.degenerate:
             return float("nan")
         from scipy import stats
+
         alt = {"above": "greater", "below": "less", "two-sided": "two-sided"}[self.side]
         return float(stats.ttest_rel(self.a, self.b, alternative=alt).pvalue)
 
@@ -147,19 +154,26 @@ class Contrast:
         import warnings
 
         from statsmodels.stats.power import TTestPower
+
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # a failed root find gives nan: handled
-                guess = _scalar(TTestPower().solve_power(
-                    effect_size=self.delta / self.sd, nobs=None, power=POWER,
-                    alpha=ALPHA / self.family_size, alternative=self._alternative))
+                guess = _scalar(
+                    TTestPower().solve_power(
+                        effect_size=self.delta / self.sd,
+                        nobs=None,
+                        power=POWER,
+                        alpha=ALPHA / self.family_size,
+                        alternative=self._alternative,
+                    )
+                )
         except (ValueError, ArithmeticError):
             return None
         if not math.isfinite(guess) or guess > MOST_SEEDS:
             return None
         n = max(2, math.ceil(guess))
         while n > 2 and self._effect_size(n - 1) * self.sd <= self.delta:
-            n -= 1                          # the root finder may overshoot by one
+            n -= 1  # the root finder may overshoot by one
         while n <= MOST_SEEDS and self._effect_size(n) * self.sd > self.delta:
             n += 1
         return n if n <= MOST_SEEDS else None
@@ -172,15 +186,24 @@ class Contrast:
         import warnings
 
         from statsmodels.stats.power import TTestPower
+
         alpha = ALPHA / self.family_size
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore")      # the root finder's failure is handled below
-            d = _scalar(TTestPower().solve_power(effect_size=None, nobs=n, power=POWER,
-                                                 alpha=alpha, alternative=self._alternative))
+            warnings.simplefilter("ignore")  # the root finder's failure is handled below
+            d = _scalar(
+                TTestPower().solve_power(
+                    effect_size=None,
+                    nobs=n,
+                    power=POWER,
+                    alpha=alpha,
+                    alternative=self._alternative,
+                )
+            )
         if math.isfinite(d):
             return d
         # beyond the solver's bracket (tiny n at a strict level): the central-t approximation
         from scipy import stats
+
         tail = alpha / 2 if self.side == "two-sided" else alpha
         return float((stats.t.ppf(1 - tail, n - 1) + stats.t.ppf(POWER, n - 1)) / math.sqrt(n))
 
@@ -203,8 +226,7 @@ class Judged:
         """The verdict as the report prints it."""
         c = self.contrast
         if self.outcome is Outcome.NOT_SIGNIFICANT:
-            return (f"not significant at n = {c.n} (smallest detectable effect "
-                    f"{c.detectable():.3g})")
+            return f"not significant at n = {c.n} (smallest detectable effect {c.detectable():.3g})"
         if self.outcome is Outcome.CANNOT_JUDGE:
             return f"cannot judge ({self.reason})" if self.reason else "cannot judge"
         if self.outcome is Outcome.HOLDS and c.side == "two-sided":
@@ -212,8 +234,9 @@ class Judged:
         return self.outcome.value
 
 
-def judge_family(contrasts: Sequence[Contrast],
-                 vetoes: Sequence[str] | None = None) -> list[Judged]:
+def judge_family(
+    contrasts: Sequence[Contrast], vetoes: Sequence[str] | None = None
+) -> list[Judged]:
     """Every row of one family judged, with Holm's correction over the rows that can be judged.
 
     ``vetoes[i]``, when not empty, makes row i "cannot judge" with that reason (its control
@@ -221,6 +244,7 @@ def judge_family(contrasts: Sequence[Contrast],
     """
     need_statsmodels()
     from statsmodels.stats.multitest import multipletests
+
     vetoes = list(vetoes) if vetoes is not None else [""] * len(contrasts)
     reasons = []
     for c, veto in zip(contrasts, vetoes):
@@ -229,8 +253,11 @@ def judge_family(contrasts: Sequence[Contrast],
         elif c.n < MIN_SEEDS:
             reasons.append(f"n = {c.n} < {MIN_SEEDS} seeds")
         elif c.degenerate:
-            reasons.append("every seed gives the same difference: no spread to judge by"
-                           if np.isfinite(c.differences).all() else "a value is not finite")
+            reasons.append(
+                "every seed gives the same difference: no spread to judge by"
+                if np.isfinite(c.differences).all()
+                else "a value is not finite"
+            )
         else:
             reasons.append("")
     live = [i for i, r in enumerate(reasons) if not r]

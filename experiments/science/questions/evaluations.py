@@ -19,6 +19,7 @@ Columns (:data:`COLUMNS`):
 
 A condition's measure for a seed is taken at each robot's last evaluated iteration.
 """
+
 from __future__ import annotations
 
 import csv
@@ -30,8 +31,18 @@ from typing import Any
 
 #: The file name in a study's folder.
 EVALUATIONS_FILE = "evaluations.csv"
-COLUMNS = ("run", "seed", "robot", "robot_arena", "iteration", "arena", "role", "score",
-           "collisions_per_1000", "progress")
+COLUMNS = (
+    "run",
+    "seed",
+    "robot",
+    "robot_arena",
+    "iteration",
+    "arena",
+    "role",
+    "score",
+    "collisions_per_1000",
+    "progress",
+)
 ROLES = ("own", "held_out")
 MEASURES = ("score", "collisions_per_1000", "progress")
 
@@ -88,8 +99,9 @@ def read_evaluations(path: str | Path) -> list[Evaluation]:
         reader = csv.DictReader(fh)
         missing = [c for c in COLUMNS if c not in (reader.fieldnames or [])]
         if missing:
-            raise EvaluationsError(f"{path}:1: missing column(s) {', '.join(missing)}; "
-                                   f"expected {', '.join(COLUMNS)}")
+            raise EvaluationsError(
+                f"{path}:1: missing column(s) {', '.join(missing)}; expected {', '.join(COLUMNS)}"
+            )
         for line, rec in enumerate(reader, start=2):
             out.append(_parse(rec, f"{path}:{line}"))
     if not out:
@@ -108,25 +120,39 @@ def _parse(rec: Mapping[str, str], where: str) -> Evaluation:
         if kind is float and not math.isfinite(value):
             raise EvaluationsError(f"{where}: {col} is not finite ({text})")
         return value
-    texts = {c: (rec.get(c) or "").strip()
-             for c in ("run", "robot", "robot_arena", "arena", "role")}
+
+    texts = {
+        c: (rec.get(c) or "").strip() for c in ("run", "robot", "robot_arena", "arena", "role")
+    }
     for c, v in texts.items():
         if not v:
             raise EvaluationsError(f"{where}: {c} is empty")
     if texts["role"] not in ROLES:
-        raise EvaluationsError(f"{where}: role must be one of {', '.join(ROLES)}, got "
-                               f"{texts['role']!r}")
+        raise EvaluationsError(
+            f"{where}: role must be one of {', '.join(ROLES)}, got {texts['role']!r}"
+        )
     if texts["role"] == "own" and texts["arena"] != texts["robot_arena"]:
-        raise EvaluationsError(f"{where}: an own evaluation in {texts['arena']!r} of a robot of "
-                               f"{texts['robot_arena']!r}")
-    return Evaluation(texts["run"], number("seed", int), texts["robot"], texts["robot_arena"],
-                      number("iteration", int), texts["arena"], texts["role"],
-                      number("score", float), number("collisions_per_1000", float),
-                      number("progress", float))
+        raise EvaluationsError(
+            f"{where}: an own evaluation in {texts['arena']!r} of a robot of "
+            f"{texts['robot_arena']!r}"
+        )
+    return Evaluation(
+        texts["run"],
+        number("seed", int),
+        texts["robot"],
+        texts["robot_arena"],
+        number("iteration", int),
+        texts["arena"],
+        texts["role"],
+        number("score", float),
+        number("collisions_per_1000", float),
+        number("progress", float),
+    )
 
 
-def from_rows(run: str, seed: int, rows: Iterable[Mapping[str, Any]],
-              arenas: Mapping[str, str] | None = None) -> list[Evaluation]:
+def from_rows(
+    run: str, seed: int, rows: Iterable[Mapping[str, Any]], arenas: Mapping[str, str] | None = None
+) -> list[Evaluation]:
     """Evaluations from the per-run ``evaluations.csv`` rows of the studies (``robot,
     iteration, arena, role, score, ...``); ``arenas`` maps robot -> its arena (default: the
     arena of its ``own`` rows)."""
@@ -134,7 +160,18 @@ def from_rows(run: str, seed: int, rows: Iterable[Mapping[str, Any]],
     own = {str(r["robot"]): str(r["arena"]) for r in rows if r["role"] == "own"}
     if arenas:
         own.update(arenas)
-    return [Evaluation(run, int(seed), str(r["robot"]), own.get(str(r["robot"]), "?"),
-                       int(r["iteration"]), str(r["arena"]), str(r["role"]), float(r["score"]),
-                       float(r["collisions_per_1000"]), float(r["progress"]))
-            for r in rows]
+    return [
+        Evaluation(
+            run,
+            int(seed),
+            str(r["robot"]),
+            own.get(str(r["robot"]), "?"),
+            int(r["iteration"]),
+            str(r["arena"]),
+            str(r["role"]),
+            float(r["score"]),
+            float(r["collisions_per_1000"]),
+            float(r["progress"]),
+        )
+        for r in rows
+    ]

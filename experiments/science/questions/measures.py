@@ -6,6 +6,7 @@ robot's own arena (``own``) or averaged over the arenas it never learnt in (``he
 Two conditions are compared on the arenas both have (the same arenas, seeds and evaluation
 episodes), so a standalone robot of R1 meets the federated robot of R1.
 """
+
 from __future__ import annotations
 
 from collections import defaultdict
@@ -50,8 +51,13 @@ def seeds_of(values: ByArena, run: str) -> list[int]:
     return sorted({k[1] for k in values if k[0] == run})
 
 
-def paired(values: ByArena, a: str, b: str, role: str, measure: str,
-           ) -> tuple[list[int], list[float], list[float]]:
+def paired(
+    values: ByArena,
+    a: str,
+    b: str,
+    role: str,
+    measure: str,
+) -> tuple[list[int], list[float], list[float]]:
     """The seeds both conditions have, and each one's value there over their common arenas
     (a seed where they share no arena is left out)."""
     seeds, va, vb = [], [], []
@@ -67,12 +73,20 @@ def paired(values: ByArena, a: str, b: str, role: str, measure: str,
     return seeds, va, vb
 
 
-def arena_matrix(values: ByArena, run: str, role: str = "own", measure: str = "score",
-                 arenas: Sequence[str] | None = None) -> np.ndarray:
+def arena_matrix(
+    values: ByArena,
+    run: str,
+    role: str = "own",
+    measure: str = "score",
+    arenas: Sequence[str] | None = None,
+) -> np.ndarray:
     """(seeds x arenas) of one condition (rliable's runs x tasks layout); nan where missing."""
     seeds = seeds_of(values, run)
-    arenas = list(arenas) if arenas is not None else sorted(
-        {a for k, v in values.items() if k[0] == run and k[2] == role for a in v})
+    arenas = (
+        list(arenas)
+        if arenas is not None
+        else sorted({a for k, v in values.items() if k[0] == run and k[2] == role for a in v})
+    )
     m = np.full((len(seeds), len(arenas)), np.nan)
     for i, s in enumerate(seeds):
         row = values.get((run, s, role, measure), {})

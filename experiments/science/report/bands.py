@@ -1,4 +1,5 @@
 """Figures over seeds: the mean of each curve with its 95% t band (matplotlib, PNG)."""
+
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
@@ -32,8 +33,13 @@ def _score_curve(runs: Sequence[SeedRun], role: str) -> tuple[np.ndarray, np.nda
     return np.array(its), m, h
 
 
-def plot_groups(groups: Mapping[str, Sequence[SeedRun]], path: Path, title: str,
-                formats: Sequence[str] = ("png",), dpi: float | None = None) -> list[Path]:
+def plot_groups(
+    groups: Mapping[str, Sequence[SeedRun]],
+    path: Path,
+    title: str,
+    formats: Sequence[str] = ("png",),
+    dpi: float | None = None,
+) -> list[Path]:
     """Three panels: robots' mean sum of Q-values, mean cumulative reward, and the greedy
     score (own arena solid, held-out dashed), one colour per group, mean over seeds with a
     95% band; written in each of ``formats`` (see
@@ -53,11 +59,25 @@ def plot_groups(groups: Mapping[str, Sequence[SeedRun]], path: Path, title: str,
         for role, style in (("own", "-"), ("held_out", "--")):
             its, m, h = _score_curve(runs, role)
             if len(its):
-                axes[2].plot(its, m, style, color=colour, marker="o", ms=3, lw=1.3,
-                             label=f"{name}, {role.replace('_', '-')}")
+                axes[2].plot(
+                    its,
+                    m,
+                    style,
+                    color=colour,
+                    marker="o",
+                    ms=3,
+                    lw=1.3,
+                    label=f"{name}, {role.replace('_', '-')}",
+                )
                 axes[2].fill_between(its, m - h, m + h, color=colour, alpha=0.15, lw=0)
-    for ax, label in zip(axes, ("mean sum of Q-values", "mean cumulative reward",
-                                "greedy score (progress - 0.05 x collisions/1000)")):
+    for ax, label in zip(
+        axes,
+        (
+            "mean sum of Q-values",
+            "mean cumulative reward",
+            "greedy score (progress - 0.05 x collisions/1000)",
+        ),
+    ):
         ax.set_xlabel("iterations")
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.3)

@@ -1,5 +1,6 @@
 """Per-robot statistics of runs that the paper's observations are checked against (the curve
 measures themselves are :mod:`dfrl.experiments.science.statistics`)."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -9,8 +10,12 @@ import numpy as np
 from dfrl.experiments.driver.config import ExperimentConfig
 from dfrl.experiments.science.curves import dip, late_growth, reward_rate, t_fraction
 
-COMBOS: tuple[tuple[str, str], ...] = (("qlearning", "average"), ("qlearning", "max"),
-                                       ("sarsa", "average"), ("sarsa", "max"))
+COMBOS: tuple[tuple[str, str], ...] = (
+    ("qlearning", "average"),
+    ("qlearning", "max"),
+    ("sarsa", "average"),
+    ("sarsa", "max"),
+)
 ALGO_NAMES = {"qlearning": "Q-learning", "sarsa": "SARSA"}
 
 
@@ -36,12 +41,21 @@ def stats_of(curves: dict[str, np.ndarray], arenas: dict[str, str]) -> list[RunS
     out = []
     for robot, cur in curves.items():
         d, k = dip(cur["q_sum"])
-        out.append(RunStats(robot, arenas.get(robot, robot), float(cur["q_sum"][-1]),
-                            float(cur["cumulative_reward"][-1]), int(cur["collisions"][-1]),
-                            t_fraction(cur["iteration"], cur["q_sum"]), late_growth(cur["q_sum"]),
-                            reward_rate(cur["cumulative_reward"], "first"),
-                            reward_rate(cur["cumulative_reward"], "last"), d,
-                            int(cur["iteration"][k])))
+        out.append(
+            RunStats(
+                robot,
+                arenas.get(robot, robot),
+                float(cur["q_sum"][-1]),
+                float(cur["cumulative_reward"][-1]),
+                int(cur["collisions"][-1]),
+                t_fraction(cur["iteration"], cur["q_sum"]),
+                late_growth(cur["q_sum"]),
+                reward_rate(cur["cumulative_reward"], "first"),
+                reward_rate(cur["cumulative_reward"], "last"),
+                d,
+                int(cur["iteration"][k]),
+            )
+        )
     return out
 
 

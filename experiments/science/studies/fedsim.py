@@ -21,6 +21,7 @@ divides the sum by the count; ``max`` keeps the aggregate unless it is below the
 :func:`federate` give the same tables, curves and table history
 (:mod:`dfrl.experiments.science.fed_replicas`, tested in ``test_fedsim_identity.py``).
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
@@ -41,8 +42,9 @@ StepHook = Callable[[int, StepMetrics], None]
 ShareHook = Callable[[int, Sequence[Trainer]], None]
 
 
-def _check(tables: Sequence[np.ndarray],
-           visits: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+def _check(
+    tables: Sequence[np.ndarray], visits: Sequence[np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
     if not tables:
         raise ValueError("nothing to aggregate")
     q = np.stack([np.asarray(t, dtype=np.float64) for t in tables])
@@ -80,8 +82,9 @@ def aggregate_max(tables: Sequence[np.ndarray], visits: Sequence[np.ndarray]) ->
     return _fold(q, _keep_unless_below)
 
 
-def aggregate_visit_average(tables: Sequence[np.ndarray],
-                            visits: Sequence[np.ndarray]) -> np.ndarray:
+def aggregate_visit_average(
+    tables: Sequence[np.ndarray], visits: Sequence[np.ndarray]
+) -> np.ndarray:
     """Mean weighted by visit counts; entries nobody visited get the plain mean."""
     q, w = _check(tables, visits)
     qw = _fold(q * w, np.add)
@@ -92,8 +95,7 @@ def aggregate_visit_average(tables: Sequence[np.ndarray],
     return np.where(tot > 0, weighted, plain)
 
 
-def aggregate_max_visited(tables: Sequence[np.ndarray],
-                          visits: Sequence[np.ndarray]) -> np.ndarray:
+def aggregate_max_visited(tables: Sequence[np.ndarray], visits: Sequence[np.ndarray]) -> np.ndarray:
     """Element-wise maximum over the robots that visited the entry; plain mean elsewhere."""
     q, w = _check(tables, visits)
     seen = w > 0
@@ -140,11 +142,19 @@ class Federation:
     iterations: int = 0
 
 
-def federate(configs: Sequence[TrainerConfig], iterations: int, respite: int,
-             method: str = "average", snapshot_every: int = 0,
-             initial: np.ndarray | None = None, observe: Observer | None = None,
-             observe_every: int = 0, final_share: bool = True,
-             on_step: StepHook | None = None, on_share: ShareHook | None = None) -> Federation:
+def federate(
+    configs: Sequence[TrainerConfig],
+    iterations: int,
+    respite: int,
+    method: str = "average",
+    snapshot_every: int = 0,
+    initial: np.ndarray | None = None,
+    observe: Observer | None = None,
+    observe_every: int = 0,
+    final_share: bool = True,
+    on_step: StepHook | None = None,
+    on_share: ShareHook | None = None,
+) -> Federation:
     """Train one robot per config for ``iterations`` steps each, aggregating every
     ``respite`` (a single config with ``method`` anything is a standalone run).
 
@@ -212,11 +222,15 @@ def federate(configs: Sequence[TrainerConfig], iterations: int, respite: int,
             if observe is not None and (i + 1) % observe_every == 0 and observe(i + 1, trainers):
                 done = i + 1
                 break
-        return Federation(table=trainers[0].q_table.copy(),
-                          visits=np.sum([t.visits for t in trainers], axis=0),
-                          snapshots=snaps, q_sum=q_sum[:, :done], reward=reward[:, :done],
-                          collisions=np.array([t.collisions for t in trainers]),
-                          iterations=done)
+        return Federation(
+            table=trainers[0].q_table.copy(),
+            visits=np.sum([t.visits for t in trainers], axis=0),
+            snapshots=snaps,
+            q_sum=q_sum[:, :done],
+            reward=reward[:, :done],
+            collisions=np.array([t.collisions for t in trainers]),
+            iterations=done,
+        )
     finally:
         for t in trainers:
             t.close()

@@ -13,6 +13,7 @@ what they read of a :class:`~dfrl.robots.training.Trainer`: ``q_table`` and ``vi
 views), ``collisions``, ``respawns``, ``cumulative_reward``, ``iteration``, ``config`` and
 ``set_q_table``.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
@@ -85,11 +86,18 @@ def next_stop(i: int, iterations: int, respite: int, observe_every: int) -> int:
     return stop
 
 
-def federate_batched(configs: Sequence[TrainerConfig], iterations: int, respite: int,
-                     method: str = "average", snapshot_every: int = 0,
-                     initial: np.ndarray | None = None, observe: BatchedObserver | None = None,
-                     observe_every: int = 0, final_share: bool = True,
-                     on_share: BatchedShareHook | None = None) -> Federation:
+def federate_batched(
+    configs: Sequence[TrainerConfig],
+    iterations: int,
+    respite: int,
+    method: str = "average",
+    snapshot_every: int = 0,
+    initial: np.ndarray | None = None,
+    observe: BatchedObserver | None = None,
+    observe_every: int = 0,
+    final_share: bool = True,
+    on_share: BatchedShareHook | None = None,
+) -> Federation:
     """:func:`.fedsim.federate` on the batched simulator (the same parameters and outcome;
     no per-step hook).
 
@@ -137,9 +145,15 @@ def federate_batched(configs: Sequence[TrainerConfig], iterations: int, respite:
         if observe is not None and i % observe_every == 0 and observe(i, robots):
             done = i
             break
-    return Federation(table=bt.q[0].copy(), visits=bt.visits.sum(axis=0), snapshots=snaps,
-                      q_sum=q_sum[:, :done], reward=reward[:, :done],
-                      collisions=bt.collisions.copy(), iterations=done)
+    return Federation(
+        table=bt.q[0].copy(),
+        visits=bt.visits.sum(axis=0),
+        snapshots=snaps,
+        q_sum=q_sum[:, :done],
+        reward=reward[:, :done],
+        collisions=bt.collisions.copy(),
+        iterations=done,
+    )
 
 
 def in_turn_batched(config: TrainerConfig, arenas: Sequence[str], iterations: int) -> np.ndarray:

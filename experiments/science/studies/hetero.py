@@ -31,6 +31,7 @@ reported too.
 and the dqn robot stays on pybullet, the batched simulator having no dqn
 (:mod:`.hetero_batched`); ``results.json`` records both (``sim``, ``simulators``).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -56,8 +57,11 @@ ROSTER: dict[str, tuple[tuple[str, str, int], ...]] = {
     "ql_pair": (("ql", "qlearning", 1), ("ql2", "qlearning", 2)),
 }
 #: (role, run compared, baseline run) of the paired comparisons.
-COMPARISONS = (("dqn", "mixed", "dqn_alone"), ("ql", "mixed", "ql_alone"),
-               ("ql", "ql_pair", "ql_alone"))
+COMPARISONS = (
+    ("dqn", "mixed", "dqn_alone"),
+    ("ql", "mixed", "ql_alone"),
+    ("ql", "ql_pair", "ql_alone"),
+)
 EVAL_SEED = 20_000
 
 
@@ -94,18 +98,32 @@ class HeteroOptions:
 def trainer_config(algo: str, seed: int, options: HeteroOptions) -> Any:
     from dfrl.robots.training import TrainerConfig
 
-    return TrainerConfig(arena=options.arena, algo=algo, seed=seed,
-                         iterations=options.iterations)
+    return TrainerConfig(arena=options.arena, algo=algo, seed=seed, iterations=options.iterations)
 
 
-def score_policy(config: Any, seed: int, options: HeteroOptions, q_table: np.ndarray | None,
-           params: np.ndarray | None) -> dict[str, float]:
+def score_policy(
+    config: Any,
+    seed: int,
+    options: HeteroOptions,
+    q_table: np.ndarray | None,
+    params: np.ndarray | None,
+) -> dict[str, float]:
     from dfrl.robots.evaluation import evaluate_policy
 
-    r = evaluate_policy(config, "greedy", options.eval_steps, EVAL_SEED + seed, q_table=q_table,
-                        params=params, episode_steps=options.episode_steps)
-    return {"score": r.progress - 0.05 * r.collisions_per_1000,
-            "collisions_per_1000": r.collisions_per_1000, "progress": r.progress}
+    r = evaluate_policy(
+        config,
+        "greedy",
+        options.eval_steps,
+        EVAL_SEED + seed,
+        q_table=q_table,
+        params=params,
+        episode_steps=options.episode_steps,
+    )
+    return {
+        "score": r.progress - 0.05 * r.collisions_per_1000,
+        "collisions_per_1000": r.collisions_per_1000,
+        "progress": r.progress,
+    }
 
 
 def share(views: list[Any], aggregate: Any, residuals: list[float]) -> None:
@@ -130,8 +148,9 @@ def run_one(run: str, seed: int, options: HeteroOptions) -> dict[str, Any]:
 
     t0 = time.perf_counter()
     roster = ROSTER[run]
-    trainers = [Trainer(trainer_config(algo, 1000 * seed + off, options))
-                for _, algo, off in roster]
+    trainers = [
+        Trainer(trainer_config(algo, 1000 * seed + off, options)) for _, algo, off in roster
+    ]
     views = [GridView(t) if t.learner_kind == "function" else t for t in trainers]
     rows: list[dict[str, Any]] = []
     residuals: list[float] = []
@@ -145,24 +164,44 @@ def run_one(run: str, seed: int, options: HeteroOptions) -> dict[str, Any]:
             if i in options.eval_at:
                 for (role, algo, _), t in zip(roster, trainers):
                     function = t.learner_kind == "function"
-                    m = score_policy(t.config, seed, options,
-                                     None if function else t.q_table.copy(),
-                                     t.params if function else None)
-                    rows.append({"seed": seed, "run": run, "role": role, "algo": algo,
-                                 "sim": PYBULLET, "iteration": i, **m})
-        digests = {role: hashlib.sha256(t.params.tobytes()).hexdigest()
-                   for (role, _, _), t in zip(roster, trainers)}
+                    m = score_policy(
+                        t.config,
+                        seed,
+                        options,
+                        None if function else t.q_table.copy(),
+                        t.params if function else None,
+                    )
+                    rows.append(
+                        {
+                            "seed": seed,
+                            "run": run,
+                            "role": role,
+                            "algo": algo,
+                            "sim": PYBULLET,
+                            "iteration": i,
+                            **m,
+                        }
+                    )
+        digests = {
+            role: hashlib.sha256(t.params.tobytes()).hexdigest()
+            for (role, _, _), t in zip(roster, trainers)
+        }
     finally:
         for t in trainers:
             t.close()
-    return {"rows": rows, "residuals": residuals, "digests": digests,
-            "seconds": time.perf_counter() - t0}
+    return {
+        "rows": rows,
+        "residuals": residuals,
+        "digests": digests,
+        "seconds": time.perf_counter() - t0,
+    }
 
 
 def _job(args: tuple[str, int, HeteroOptions]) -> tuple[str, int, dict[str, Any]]:
     run, seed, options = args
     if options.sim == BATCHED:
         from dfrl.experiments.science.studies.hetero_batched import run_one_batched
+
         return run, seed, run_one_batched(run, seed, options)
     return run, seed, run_one(run, seed, options)
 
@@ -174,6 +213,7 @@ def simulators(sim: str) -> dict[str, str]:
     if sim == PYBULLET:
         return {"qlearning": PYBULLET, "dqn": PYBULLET}
     from dfrl.experiments.science.studies.hetero_batched import SIMULATORS
+
     return dict(SIMULATORS)
 
 
@@ -219,8 +259,9 @@ def _interval(iv: Interval) -> dict[str, float]:
     return {"mean": iv.mean, "half": iv.half, "n": iv.n, "p": iv.p_value()}
 
 
-def compare(rows: list[dict[str, Any]], seeds: tuple[int, ...],
-            eval_at: tuple[int, ...]) -> list[dict[str, Any]]:
+def compare(
+    rows: list[dict[str, Any]], seeds: tuple[int, ...], eval_at: tuple[int, ...]
+) -> list[dict[str, Any]]:
     """The paired comparisons of :data:`COMPARISONS` at every evaluation iteration."""
     by = {(r["seed"], r["run"], r["role"], r["iteration"]): r for r in rows}
     out = []
@@ -257,26 +298,37 @@ def run(options: HeteroOptions, output_dir: str | Path | None = None) -> HeteroR
     else:
         with ProcessPoolExecutor(options.jobs) as pool:
             done = list(pool.map(_job, jobs))
-    rows = sorted((row for _, _, res in done for row in res["rows"]),
-                  key=lambda r: (r["seed"], RUNS.index(r["run"]), r["role"], r["iteration"]))
+    rows = sorted(
+        (row for _, _, res in done for row in res["rows"]),
+        key=lambda r: (r["seed"], RUNS.index(r["run"]), r["role"], r["iteration"]),
+    )
     res_rms = [x for run_name, _, res in done if run_name == "mixed" for x in res["residuals"]]
     results = HeteroResults(
-        rows=rows, comparisons=compare(rows, options.seeds, options.eval_at),
-        residuals={"mean": float(np.mean(res_rms)) if res_rms else float("nan"),
-                   "max": float(np.max(res_rms)) if res_rms else float("nan"),
-                   "shares": len(res_rms)},
+        rows=rows,
+        comparisons=compare(rows, options.seeds, options.eval_at),
+        residuals={
+            "mean": float(np.mean(res_rms)) if res_rms else float("nan"),
+            "max": float(np.max(res_rms)) if res_rms else float("nan"),
+            "shares": len(res_rms),
+        },
         digests={f"{r}/{s}": res["digests"] for r, s, res in done},
-        seconds=time.perf_counter() - t0, sim=options.sim,
-        simulators=simulators(options.sim))
+        seconds=time.perf_counter() - t0,
+        sim=options.sim,
+        simulators=simulators(options.sim),
+    )
     if output_dir is not None:
         out = Path(output_dir)
         out.mkdir(parents=True, exist_ok=True)
-        (out / "options.json").write_text(json.dumps(asdict(options), indent=2) + "\n",
-                                          encoding="utf-8")
+        (out / "options.json").write_text(
+            json.dumps(asdict(options), indent=2) + "\n", encoding="utf-8"
+        )
         fields = list(rows[0]) if rows else []
-        lines = [",".join(fields)] + [",".join(repr(r[f]) if isinstance(r[f], float) else str(r[f])
-                                               for f in fields) for r in rows]
+        lines = [",".join(fields)] + [
+            ",".join(repr(r[f]) if isinstance(r[f], float) else str(r[f]) for f in fields)
+            for r in rows
+        ]
         (out / "rows.csv").write_text("\n".join(lines) + "\n", encoding="utf-8")
-        (out / "results.json").write_text(json.dumps(results.to_dict(), indent=2) + "\n",
-                                          encoding="utf-8")
+        (out / "results.json").write_text(
+            json.dumps(results.to_dict(), indent=2) + "\n", encoding="utf-8"
+        )
     return results

@@ -10,6 +10,7 @@ is pybullet in ``dqn_alone`` and ``mixed``; in ``mixed`` the two share as in
 its own up to the next share or evaluation; the Q-tables are evaluated in one compiled call
 (:func:`.history.eval_many`), the dqn in pybullet.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -18,8 +19,14 @@ from typing import Any
 
 from dfrl.experiments.science.studies.fedsim import AGGREGATIONS
 from dfrl.experiments.science.studies.fedsim_batched import BatchedRobot, next_stop
-from dfrl.experiments.science.studies.hetero import (EVAL_SEED, ROSTER, HeteroOptions,
-                                                     score_policy, share, trainer_config)
+from dfrl.experiments.science.studies.hetero import (
+    EVAL_SEED,
+    ROSTER,
+    HeteroOptions,
+    score_policy,
+    share,
+    trainer_config,
+)
 from dfrl.experiments.science.studies.history import eval_many
 from dfrl.experiments.science.studies.simulators import BATCHED, PYBULLET
 
@@ -55,8 +62,10 @@ def run_one_batched(run: str, seed: int, options: HeteroOptions) -> dict[str, An
     try:
         i = 0
         while i < options.iterations:
-            stop = min(next_stop(i, options.iterations, respite, 0),
-                       min((e for e in options.eval_at if e > i), default=options.iterations))
+            stop = min(
+                next_stop(i, options.iterations, respite, 0),
+                min((e for e in options.eval_at if e > i), default=options.iterations),
+            )
             for t in pyb.values():
                 for _ in range(stop - i):
                     t.step()
@@ -67,32 +76,70 @@ def run_one_batched(run: str, seed: int, options: HeteroOptions) -> dict[str, An
                 share(views, aggregate, residuals)
             if i in options.eval_at:
                 rows += _evaluate(run, seed, options, roster, views, pyb, i)
-        digests = {role: hashlib.sha256((pyb[k].params if k in pyb
-                                         else views[k].q_table.ravel()).tobytes()).hexdigest()
-                   for k, (role, _, _) in enumerate(roster)}
+        digests = {
+            role: hashlib.sha256(
+                (pyb[k].params if k in pyb else views[k].q_table.ravel()).tobytes()
+            ).hexdigest()
+            for k, (role, _, _) in enumerate(roster)
+        }
     finally:
         for t in pyb.values():
             t.close()
-    return {"rows": rows, "residuals": residuals, "digests": digests,
-            "seconds": time.perf_counter() - t0}
+    return {
+        "rows": rows,
+        "residuals": residuals,
+        "digests": digests,
+        "seconds": time.perf_counter() - t0,
+    }
 
 
-def _evaluate(run: str, seed: int, options: HeteroOptions, roster: tuple, views: list[Any],
-              pyb: dict[int, Any], iteration: int) -> list[dict[str, Any]]:
+def _evaluate(
+    run: str,
+    seed: int,
+    options: HeteroOptions,
+    roster: tuple,
+    views: list[Any],
+    pyb: dict[int, Any],
+    iteration: int,
+) -> list[dict[str, Any]]:
     """Every robot's greedy score: the batched tables in one call, the others in pybullet."""
     batched = [k for k in range(len(roster)) if k not in pyb]
     measured: dict[int, dict[str, float]] = {}
     if batched:
         cfg = views[batched[0]].config.to_dict()
-        evs = eval_many(cfg, [views[k].q_table for k in batched], [options.arena] * len(batched),
-                        options.eval_steps, options.episode_steps, EVAL_SEED + seed, BATCHED)
+        evs = eval_many(
+            cfg,
+            [views[k].q_table for k in batched],
+            [options.arena] * len(batched),
+            options.eval_steps,
+            options.episode_steps,
+            EVAL_SEED + seed,
+            BATCHED,
+        )
         for k, ev in zip(batched, evs):
-            measured[k] = {"score": ev["score"], "collisions_per_1000": ev["collisions_per_1000"],
-                           "progress": ev["progress"]}
+            measured[k] = {
+                "score": ev["score"],
+                "collisions_per_1000": ev["collisions_per_1000"],
+                "progress": ev["progress"],
+            }
     for k, t in pyb.items():
         function = t.learner_kind == "function"
-        measured[k] = score_policy(t.config, seed, options,
-                                   None if function else t.q_table.copy(),
-                                   t.params if function else None)
-    return [{"seed": seed, "run": run, "role": role, "algo": algo, "sim": SIMULATORS[algo],
-             "iteration": iteration, **measured[k]} for k, (role, algo, _) in enumerate(roster)]
+        measured[k] = score_policy(
+            t.config,
+            seed,
+            options,
+            None if function else t.q_table.copy(),
+            t.params if function else None,
+        )
+    return [
+        {
+            "seed": seed,
+            "run": run,
+            "role": role,
+            "algo": algo,
+            "sim": SIMULATORS[algo],
+            "iteration": iteration,
+            **measured[k],
+        }
+        for k, (role, algo, _) in enumerate(roster)
+    ]

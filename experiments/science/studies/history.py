@@ -12,6 +12,7 @@ Score of one evaluation: ``progress - COLLISION_COST * collisions_per_1000``
 (:mod:`dfrl.experiments.science.studies.sweep`): driving ahead without colliding scores near 1,
 spinning in place 0.
 """
+
 from __future__ import annotations
 
 import csv
@@ -31,8 +32,18 @@ from dfrl.robots.evaluation import EvalResult, PolicyKind, evaluate_policy
 from dfrl.robots.training import TrainerConfig
 
 #: Columns of ``evaluations.csv``.
-FIELDS: tuple[str, ...] = ("robot", "iteration", "arena", "role", "steps", "collisions_per_1000",
-                           "progress", "coverage", "mean_reward", "score")
+FIELDS: tuple[str, ...] = (
+    "robot",
+    "iteration",
+    "arena",
+    "role",
+    "steps",
+    "collisions_per_1000",
+    "progress",
+    "coverage",
+    "mean_reward",
+    "score",
+)
 
 _HIST = re.compile(r"^(?P<robot>.+)_it(?P<it>\d+)\.npy$")
 
@@ -66,23 +77,34 @@ def digest(q: np.ndarray) -> str:
 
 def measured(r: EvalResult) -> dict[str, float]:
     """An evaluation's numbers as the rows keep them, with its score."""
-    return {"steps": r.steps, "collisions_per_1000": r.collisions_per_1000,
-            "progress": r.progress, "coverage": r.coverage, "mean_reward": r.mean_reward,
-            "score": r.progress - COLLISION_COST * r.collisions_per_1000}
+    return {
+        "steps": r.steps,
+        "collisions_per_1000": r.collisions_per_1000,
+        "progress": r.progress,
+        "coverage": r.coverage,
+        "mean_reward": r.mean_reward,
+        "score": r.progress - COLLISION_COST * r.collisions_per_1000,
+    }
 
 
-def eval_job(cfg_dict: dict[str, Any], q: np.ndarray, arena: str, steps: int,
-             episode_steps: int, seed: int) -> dict[str, float]:
+def eval_job(
+    cfg_dict: dict[str, Any], q: np.ndarray, arena: str, steps: int, episode_steps: int, seed: int
+) -> dict[str, float]:
     """One greedy evaluation in pybullet (a process-pool job)."""
     cfg = TrainerConfig.from_dict(cfg_dict).replace(arena=arena)
-    r = evaluate_policy(cfg, PolicyKind.GREEDY, steps, seed, q_table=q,
-                        episode_steps=episode_steps)
+    r = evaluate_policy(cfg, PolicyKind.GREEDY, steps, seed, q_table=q, episode_steps=episode_steps)
     return measured(r)
 
 
-def eval_many(cfg_dict: dict[str, Any], tables: Sequence[np.ndarray], arenas: Sequence[str],
-              steps: int, episode_steps: int, seeds: Sequence[int] | int,
-              sim: str = PYBULLET) -> list[dict[str, float]]:
+def eval_many(
+    cfg_dict: dict[str, Any],
+    tables: Sequence[np.ndarray],
+    arenas: Sequence[str],
+    steps: int,
+    episode_steps: int,
+    seeds: Sequence[int] | int,
+    sim: str = PYBULLET,
+) -> list[dict[str, float]]:
     """The greedy evaluation of ``tables[j]`` in ``arenas[j]`` with seed ``seeds[j]`` (or one
     seed for all), for every ``j``, as :func:`eval_job` measures it: on the batched simulator
     in one compiled call (:func:`dfrl.robots.batched.evaluation.evaluate_greedy`), on pybullet
@@ -96,18 +118,26 @@ def eval_many(cfg_dict: dict[str, Any], tables: Sequence[np.ndarray], arenas: Se
     check_sim(sim)
     seed_list = [seeds] * len(tables) if isinstance(seeds, (int, np.integer)) else list(seeds)
     if not len(tables) == len(arenas) == len(seed_list):
-        raise ValueError(f"{len(tables)} tables, {len(arenas)} arenas and {len(seed_list)} "
-                         f"seeds: one of each per evaluation")
+        raise ValueError(
+            f"{len(tables)} tables, {len(arenas)} arenas and {len(seed_list)} "
+            f"seeds: one of each per evaluation"
+        )
     if sim == PYBULLET:
-        return [eval_job(cfg_dict, q, a, steps, episode_steps, int(s))
-                for q, a, s in zip(tables, arenas, seed_list)]
+        return [
+            eval_job(cfg_dict, q, a, steps, episode_steps, int(s))
+            for q, a, s in zip(tables, arenas, seed_list)
+        ]
     from dfrl.robots.batched.evaluation import evaluate_greedy
 
     cfg = TrainerConfig.from_dict(cfg_dict)
     # each arena parsed once: the batched world would parse a name once per evaluation
     specs = {a: load_arena(a) for a in dict.fromkeys(arenas)}
-    return [measured(r) for r in evaluate_greedy(cfg, tables, [specs[a] for a in arenas],
-                                                 steps, seed_list, episode_steps)]
+    return [
+        measured(r)
+        for r in evaluate_greedy(
+            cfg, tables, [specs[a] for a in arenas], steps, seed_list, episode_steps
+        )
+    ]
 
 
 class Evaluator:
@@ -122,8 +152,9 @@ class Evaluator:
         As in :func:`dfrl.robots.evaluation.evaluate_policy`.
     """
 
-    def __init__(self, pool: Executor, cfg_dict: dict[str, Any], steps: int,
-                 episode_steps: int, seed: int) -> None:
+    def __init__(
+        self, pool: Executor, cfg_dict: dict[str, Any], steps: int, episode_steps: int, seed: int
+    ) -> None:
         self.pool, self.cfg, self.steps = pool, cfg_dict, steps
         self.episode_steps, self.seed = episode_steps, seed
         self._futures: dict[tuple[str, str], Any] = {}
@@ -131,8 +162,9 @@ class Evaluator:
     def submit(self, q: np.ndarray, arena: str) -> Any:
         key = (digest(q), arena)
         if key not in self._futures:
-            self._futures[key] = self.pool.submit(eval_job, self.cfg, q, arena, self.steps,
-                                                  self.episode_steps, self.seed)
+            self._futures[key] = self.pool.submit(
+                eval_job, self.cfg, q, arena, self.steps, self.episode_steps, self.seed
+            )
         return self._futures[key]
 
 
@@ -142,11 +174,22 @@ class PendingRows:
     def __init__(self) -> None:
         self.rows: list[tuple[dict[str, Any], Any]] = []
 
-    def add(self, evaluator: Evaluator, robot: str, iteration: int, q: np.ndarray,
-            own: str, held_out: Sequence[str]) -> None:
+    def add(
+        self,
+        evaluator: Evaluator,
+        robot: str,
+        iteration: int,
+        q: np.ndarray,
+        own: str,
+        held_out: Sequence[str],
+    ) -> None:
         for arena, role in [(own, "own")] + [(a, "held_out") for a in held_out]:
-            self.rows.append(({"robot": robot, "iteration": iteration, "arena": arena,
-                               "role": role}, evaluator.submit(q, arena)))
+            self.rows.append(
+                (
+                    {"robot": robot, "iteration": iteration, "arena": arena, "role": role},
+                    evaluator.submit(q, arena),
+                )
+            )
 
     def write(self, path: Path) -> list[dict[str, Any]]:
         """Wait for every number and write the CSV; return the rows."""
@@ -173,4 +216,3 @@ def read_rows(path: Path) -> list[dict[str, Any]]:
         for k in FIELDS[5:]:
             r[k] = float(r[k])
     return rows
-

@@ -10,6 +10,7 @@ A study records the simulator it ran on (``"sim"`` in its JSON, CSV and summary)
 add runs of one simulator to results of the other (:func:`check_same`). Results written before
 the studies took ``--sim`` ran on pybullet (:data:`LEGACY_SIM`).
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -59,7 +60,8 @@ def check_same(recorded: str, wanted: str, where: str) -> None:
         raise SimulatorMismatch(
             f"{where}: ran on the {recorded} simulator, these options ask for {wanted}; one "
             f"study does not mix simulators (--sim {recorded} to continue it, or another "
-            f"output folder)")
+            f"output folder)"
+        )
 
 
 def federator(sim: str) -> Callable[..., Federation]:
@@ -69,6 +71,8 @@ def federator(sim: str) -> Callable[..., Federation]:
     check_sim(sim)
     if sim == PYBULLET:
         from dfrl.experiments.science.studies.fedsim import federate
+
         return federate
     from dfrl.experiments.science.studies.fedsim_batched import federate_batched
+
     return federate_batched

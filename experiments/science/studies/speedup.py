@@ -25,6 +25,7 @@ it has reached every target or at the budget ``iterations``; one that never reac
 *censored* at the budget (:mod:`..statistics`: Kaplan-Meier medians, ratio bootstrap), never
 counted as reaching it there.
 """
+
 from __future__ import annotations
 
 import json
@@ -41,16 +42,25 @@ from dfrl.experiments.science.curves import first_reach
 from dfrl.experiments.science.pool import stop_pool, study_pool
 from dfrl.experiments.science.reference import Reference, table_error
 from dfrl.experiments.science.studies.history import eval_many
-from dfrl.experiments.science.studies.simulators import (DEFAULT_SIM, LEGACY_SIM, check_same,
-                                                         check_sim, federator)
+from dfrl.experiments.science.studies.simulators import (
+    DEFAULT_SIM,
+    LEGACY_SIM,
+    check_same,
+    check_sim,
+    federator,
+)
 from dfrl.robots.training import TrainerConfig
 
 PAPER_ARENAS = ("r1", "r2", "r3", "r4", "r5")
 TARGET_ARENA = "r1"
 CONDITIONS = ("homogeneous", "heterogeneous")
 #: The reference the error is measured against (shipped: science/references/).
-REFERENCE: dict[str, Any] = {"arena": TARGET_ARENA, "algo": "qlearning", "iterations": 50_000,
-             "seeds": (1, 2, 3, 4, 5)}
+REFERENCE: dict[str, Any] = {
+    "arena": TARGET_ARENA,
+    "algo": "qlearning",
+    "iterations": 50_000,
+    "seeds": (1, 2, 3, 4, 5),
+}
 #: Seed of the greedy evaluations' episodes (the same for every run).
 EVAL_SEED = 70_000
 
@@ -86,20 +96,32 @@ class SpeedupOptions:
         if bad or not self.conditions:
             raise ValueError(f"conditions: some of {', '.join(CONDITIONS)}, got {bad}")
         if not self.robots or min(self.robots) < 1 or 1 not in self.robots:
-            raise ValueError(f"robots: counts >= 1 including 1 (T(1) is the baseline), got "
-                             f"{self.robots}")
+            raise ValueError(
+                f"robots: counts >= 1 including 1 (T(1) is the baseline), got {self.robots}"
+            )
         if len(set(self.robots)) != len(self.robots) or len(set(self.seeds)) != len(self.seeds):
             raise ValueError("robots and seeds must not repeat")
-        for name in ("iterations", "share_every", "grid", "score_every", "score_hold",
-                     "eval_steps", "episode_steps", "resamples", "jobs"):
+        for name in (
+            "iterations",
+            "share_every",
+            "grid",
+            "score_every",
+            "score_hold",
+            "eval_steps",
+            "episode_steps",
+            "resamples",
+            "jobs",
+        ):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if any(n < 1 or b < 1 for n, b in self.budgets):
-            raise ValueError(f"budgets: pairs (N, iterations) of positive numbers, got "
-                             f"{self.budgets}")
+            raise ValueError(
+                f"budgets: pairs (N, iterations) of positive numbers, got {self.budgets}"
+            )
         if self.score_every % self.grid:
-            raise ValueError(f"score_every ({self.score_every}) must be a multiple of grid "
-                             f"({self.grid})")
+            raise ValueError(
+                f"score_every ({self.score_every}) must be a multiple of grid ({self.grid})"
+            )
         if not self.targets or not all(0 < t < 1 for t in self.targets):
             raise ValueError(f"targets: relative errors in (0, 1), got {self.targets}")
         if self.alpha is not None and not 0 < self.alpha <= 1:
@@ -145,18 +167,20 @@ def base_config(opts: SpeedupOptions) -> TrainerConfig:
     return base
 
 
-def score_time(its: Sequence[int], scores: Sequence[float], threshold: float,
-               hold: int) -> int | None:
+def score_time(
+    its: Sequence[int], scores: Sequence[float], threshold: float, hold: int
+) -> int | None:
     """The first evaluation that starts ``hold`` consecutive ones at or above ``threshold``
     (None: censored)."""
     for k in range(len(scores) - hold + 1):
-        if all(s >= threshold for s in scores[k:k + hold]):
+        if all(s >= threshold for s in scores[k : k + hold]):
             return int(its[k])
     return None
 
 
-def run_one(arena_list: tuple[str, ...], seed: int, opts: SpeedupOptions,
-            reference: Reference) -> dict[str, Any]:
+def run_one(
+    arena_list: tuple[str, ...], seed: int, opts: SpeedupOptions, reference: Reference
+) -> dict[str, Any]:
     """One federation: its error and score curves and its time to each target (None: not
     reached within the budget)."""
     base = base_config(opts)
@@ -169,42 +193,85 @@ def run_one(arena_list: tuple[str, ...], seed: int, opts: SpeedupOptions,
     base_dict = base.to_dict()
 
     def reached_all() -> bool:
-        return (bool(error) and min(error) <= min(opts.targets)
-                and score_time(score_its, scores, opts.score_threshold, opts.score_hold)
-                is not None)
+        return (
+            bool(error)
+            and min(error) <= min(opts.targets)
+            and score_time(score_its, scores, opts.score_threshold, opts.score_hold) is not None
+        )
 
     def observe(it: int, trainers: Sequence[Any]) -> bool:
         grid.append(it)
-        error.append(float(np.mean([table_error(trainers[k].q_table, reference).relative
-                                    for k in in_target])))
+        error.append(
+            float(
+                np.mean([table_error(trainers[k].q_table, reference).relative for k in in_target])
+            )
+        )
         if it % opts.score_every == 0:
             score_its.append(it)
-            scores.append(eval_many(base_dict, [trainers[0].q_table], [TARGET_ARENA],
-                                    opts.eval_steps, opts.episode_steps, EVAL_SEED,
-                                    opts.sim)[0]["score"])
+            scores.append(
+                eval_many(
+                    base_dict,
+                    [trainers[0].q_table],
+                    [TARGET_ARENA],
+                    opts.eval_steps,
+                    opts.episode_steps,
+                    EVAL_SEED,
+                    opts.sim,
+                )[0]["score"]
+            )
         return reached_all()
 
     t0 = time.perf_counter()
-    fed = federator(opts.sim)(cfgs, budget(opts, len(cfgs)), opts.share_every, opts.method,
-                              observe=observe, observe_every=opts.grid, final_share=False)
+    fed = federator(opts.sim)(
+        cfgs,
+        budget(opts, len(cfgs)),
+        opts.share_every,
+        opts.method,
+        observe=observe,
+        observe_every=opts.grid,
+        final_share=False,
+    )
     times: dict[str, int | None] = {}
     for t in opts.targets:
-        hit = first_reach(grid, error, t, "below") if len(grid) > 1 else (
-            grid[0] if grid and error[0] <= t else None)
+        hit = (
+            first_reach(grid, error, t, "below")
+            if len(grid) > 1
+            else (grid[0] if grid and error[0] <= t else None)
+        )
         times[f"error<={t:g}"] = None if hit is None else int(hit)
-    times[f"score>={opts.score_threshold:g}"] = score_time(score_its, scores,
-                                                           opts.score_threshold,
-                                                           opts.score_hold)
-    return {"robots": len(arena_list), "arenas": list(arena_list), "seed": seed,
-            "iterations": fed.iterations, "budget": budget(opts, len(cfgs)), "grid": grid,
-            "error": error, "score_iterations": score_its, "score": scores, "times": times,
-            "seconds": time.perf_counter() - t0}
+    times[f"score>={opts.score_threshold:g}"] = score_time(
+        score_its, scores, opts.score_threshold, opts.score_hold
+    )
+    return {
+        "robots": len(arena_list),
+        "arenas": list(arena_list),
+        "seed": seed,
+        "iterations": fed.iterations,
+        "budget": budget(opts, len(cfgs)),
+        "grid": grid,
+        "error": error,
+        "score_iterations": score_its,
+        "score": scores,
+        "times": times,
+        "seconds": time.perf_counter() - t0,
+    }
 
 
 #: The options a federation's result depends on (the rest only change the analysis).
-RUN_OPTIONS = ("iterations", "share_every", "grid", "targets", "score_threshold",
-               "score_every", "score_hold", "eval_steps", "episode_steps", "alpha", "method",
-               "sim")
+RUN_OPTIONS = (
+    "iterations",
+    "share_every",
+    "grid",
+    "targets",
+    "score_threshold",
+    "score_every",
+    "score_hold",
+    "eval_steps",
+    "episode_steps",
+    "alpha",
+    "method",
+    "sim",
+)
 #: One finished federation per line, appended as each ends (``--out``).
 RUNS_FILE = "speedup_runs.jsonl"
 
@@ -212,8 +279,10 @@ RUNS_FILE = "speedup_runs.jsonl"
 def recipe(opts: SpeedupOptions, n: int) -> dict[str, Any]:
     """What a federation of ``n`` robots depends on besides its arenas and seed (JSON-ready;
     ``iterations`` is its budget)."""
-    out = {k: list(v) if isinstance(v, tuple) else v
-           for k, v in ((k, getattr(opts, k)) for k in RUN_OPTIONS)}
+    out = {
+        k: list(v) if isinstance(v, tuple) else v
+        for k, v in ((k, getattr(opts, k)) for k in RUN_OPTIONS)
+    }
     return {**out, "iterations": budget(opts, n)}
 
 
@@ -225,10 +294,13 @@ def runs_needed(opts: SpeedupOptions) -> list[tuple[tuple[str, ...], int]]:
     return sorted(keys, key=lambda k: (len(k[0]), k[0], k[1]))
 
 
-def run_all(opts: SpeedupOptions, reference: Reference,
-            progress: Callable[[int, int, dict[str, Any]], None] | None = None,
-            done: Mapping[tuple[tuple[str, ...], int], dict[str, Any]] | None = None,
-            record: Path | None = None) -> dict[tuple[tuple[str, ...], int], dict[str, Any]]:
+def run_all(
+    opts: SpeedupOptions,
+    reference: Reference,
+    progress: Callable[[int, int, dict[str, Any]], None] | None = None,
+    done: Mapping[tuple[tuple[str, ...], int], dict[str, Any]] | None = None,
+    record: Path | None = None,
+) -> dict[tuple[tuple[str, ...], int], dict[str, Any]]:
     """Every federation of the study on ``opts.jobs`` processes; by (arenas, seed). Those in
     ``done`` (:func:`load_runs`) are reused; each new one is appended to ``record`` (a
     :data:`RUNS_FILE`) as it ends, with :func:`recipe`.
@@ -268,8 +340,9 @@ def run_all(opts: SpeedupOptions, reference: Reference,
     return out
 
 
-def load_runs(path: str | Path, opts: SpeedupOptions, complete: bool = True
-              ) -> dict[tuple[tuple[str, ...], int], dict[str, Any]]:
+def load_runs(
+    path: str | Path, opts: SpeedupOptions, complete: bool = True
+) -> dict[tuple[tuple[str, ...], int], dict[str, Any]]:
     """The federations a study recorded (a :data:`RUNS_FILE`) that these options would run
     with the same :func:`recipe`, by (arenas, seed); the last line of a federation wins.
 
@@ -301,15 +374,21 @@ def load_runs(path: str | Path, opts: SpeedupOptions, complete: bool = True
     missing = [k for k in runs_needed(opts) if k not in out]
     if complete and missing:
         k = missing[0]
-        raise ValueError(f"{path}: {len(missing)} federations these options need are missing "
-                         f"or were run with other options, e.g. {'+'.join(k[0])} seed {k[1]}")
+        raise ValueError(
+            f"{path}: {len(missing)} federations these options need are missing "
+            f"or were run with other options, e.g. {'+'.join(k[0])} seed {k[1]}"
+        )
     return out
 
 
-def study_runs(opts: SpeedupOptions, reference: Reference, out: Path | None, resume: bool,
-               from_runs: Path | None,
-               progress: Callable[[int, int, dict[str, Any]], None] | None = None
-               ) -> dict[tuple[tuple[str, ...], int], dict[str, Any]]:
+def study_runs(
+    opts: SpeedupOptions,
+    reference: Reference,
+    out: Path | None,
+    resume: bool,
+    from_runs: Path | None,
+    progress: Callable[[int, int, dict[str, Any]], None] | None = None,
+) -> dict[tuple[tuple[str, ...], int], dict[str, Any]]:
     """The federations of ``dfrl speedup``: read from ``from_runs`` alone, or run, each
     appended to ``out/``:data:`RUNS_FILE` when ``out`` is given, reusing those already there
     with ``resume``. A file of federations of another simulator is refused
@@ -317,8 +396,9 @@ def study_runs(opts: SpeedupOptions, reference: Reference, out: Path | None, res
     if from_runs is not None:
         return load_runs(from_runs, opts)
     record = None if out is None else Path(out) / RUNS_FILE
-    found = (load_runs(record, opts, complete=False)
-             if record is not None and record.is_file() else {})
+    found = (
+        load_runs(record, opts, complete=False) if record is not None and record.is_file() else {}
+    )
     done = found if resume else {}
     if record is not None:
         record.parent.mkdir(parents=True, exist_ok=True)

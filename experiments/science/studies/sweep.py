@@ -17,6 +17,7 @@ Score: ``progress - 0.05 * collisions_per_1000``, averaged over the evaluation a
 collision per 1,000 steps costs as much as 5% of top speed): a policy must drive ahead and
 not collide; spinning scores 0.
 """
+
 from __future__ import annotations
 
 import copy
@@ -81,8 +82,12 @@ def settings(factors: dict[str, Sequence[Any]], mode: str = "ofat") -> list[Sett
     else:
         paths = list(factors)
         for combo in itertools.product(*(factors[p] for p in paths)):
-            out.append(Setting(", ".join(f"{p}={_label(v)}" for p, v in zip(paths, combo)),
-                               tuple(zip(paths, combo))))
+            out.append(
+                Setting(
+                    ", ".join(f"{p}={_label(v)}" for p, v in zip(paths, combo)),
+                    tuple(zip(paths, combo)),
+                )
+            )
     return out
 
 
@@ -92,8 +97,9 @@ def _label(v: Any) -> str:
     return str(v)
 
 
-def setting_config(base: dict[str, Any], changes: tuple[tuple[str, Any], ...],
-                   seed: int) -> TrainerConfig:
+def setting_config(
+    base: dict[str, Any], changes: tuple[tuple[str, Any], ...], seed: int
+) -> TrainerConfig:
     """The configuration of one setting and seed."""
     d = copy.deepcopy(base)
     for path, value in changes:
@@ -102,8 +108,14 @@ def setting_config(base: dict[str, Any], changes: tuple[tuple[str, Any], ...],
     return TrainerConfig.from_dict(d)
 
 
-def run_one(base: dict[str, Any], changes: tuple[tuple[str, Any], ...], seed: int,
-            arenas: tuple[str, ...], eval_steps: int, stable_last: int) -> dict[str, Any]:
+def run_one(
+    base: dict[str, Any],
+    changes: tuple[tuple[str, Any], ...],
+    seed: int,
+    arenas: tuple[str, ...],
+    eval_steps: int,
+    stable_last: int,
+) -> dict[str, Any]:
     """Train one setting with one seed on pybullet and evaluate it (a process-pool job)."""
     cfg = setting_config(base, changes, seed)
     res = train(cfg, snapshot_every=max(1, cfg.iterations // 4))
@@ -113,8 +125,9 @@ def run_one(base: dict[str, Any], changes: tuple[tuple[str, Any], ...], seed: in
     return run_summary(cfg, rows, res.metrics["q_sum"], res.visits)
 
 
-def run_summary(cfg: TrainerConfig, rows: Sequence[dict[str, Any]], q_sum: np.ndarray,
-                visits: np.ndarray) -> dict[str, Any]:
+def run_summary(
+    cfg: TrainerConfig, rows: Sequence[dict[str, Any]], q_sum: np.ndarray, visits: np.ndarray
+) -> dict[str, Any]:
     """One run's measures from the evaluations of its last snapshots (``rows``: iteration,
     arena, progress, coverage, collisions_per_1000), its sum of Q-values per iteration and
     its visit counts (shape (n_states, n_actions))."""
@@ -124,28 +137,40 @@ def run_summary(cfg: TrainerConfig, rows: Sequence[dict[str, Any]], q_sum: np.nd
     score_by_it = {}
     for it in last:
         sel = [r for r in rows if r["iteration"] == it]
-        score_by_it[it] = float(np.mean([r["progress"] - COLLISION_COST * r["collisions_per_1000"]
-                                         for r in sel]))
+        score_by_it[it] = float(
+            np.mean([r["progress"] - COLLISION_COST * r["collisions_per_1000"] for r in sel])
+        )
     final = [r for r in rows if r["iteration"] == final_it]
     own = next(r for r in final if r["arena"] == cfg.arena)
     held = [r for r in final if r["arena"] != cfg.arena] or [own]
     visited = int((visits.sum(axis=1) > 0).sum())
     return {
-        "seed": seed, "score": score_by_it[final_it],
+        "seed": seed,
+        "score": score_by_it[final_it],
         "score_spread": float(max(score_by_it.values()) - min(score_by_it.values())),
-        "own_progress": own["progress"], "own_coverage": own["coverage"],
+        "own_progress": own["progress"],
+        "own_coverage": own["coverage"],
         "own_collisions_per_1000": own["collisions_per_1000"],
         "held_progress": float(np.mean([r["progress"] for r in held])),
         "held_collisions_per_1000": float(np.mean([r["collisions_per_1000"] for r in held])),
         "late_growth": late_growth(q_sum),
-        "states_visited": visited, "states": int(visits.shape[0]),
+        "states_visited": visited,
+        "states": int(visits.shape[0]),
     }
 
 
 #: Per-setting summaries reported (mean and interval over seeds).
-MEASURES = ("score", "own_progress", "own_coverage", "own_collisions_per_1000",
-            "held_progress", "held_collisions_per_1000", "late_growth", "score_spread",
-            "states_visited")
+MEASURES = (
+    "score",
+    "own_progress",
+    "own_coverage",
+    "own_collisions_per_1000",
+    "held_progress",
+    "held_collisions_per_1000",
+    "late_growth",
+    "score_spread",
+    "states_visited",
+)
 
 
 @dataclass(frozen=True)
@@ -160,9 +185,17 @@ class SettingResult:
         return interval(values) if values else Interval(float("nan"), float("nan"), 0)
 
 
-def sweep(base: dict[str, Any], factors: dict[str, Sequence[Any]], seeds: Sequence[int],
-          mode: str = "ofat", arenas: tuple[str, ...] = ("h1", "h2"), eval_steps: int = 2000,
-          stable_last: int = 3, jobs: int = 2, sim: str = DEFAULT_SIM) -> list[SettingResult]:
+def sweep(
+    base: dict[str, Any],
+    factors: dict[str, Sequence[Any]],
+    seeds: Sequence[int],
+    mode: str = "ofat",
+    arenas: tuple[str, ...] = ("h1", "h2"),
+    eval_steps: int = 2000,
+    stable_last: int = 3,
+    jobs: int = 2,
+    sim: str = DEFAULT_SIM,
+) -> list[SettingResult]:
     """Run every setting with every seed; results in setting order. On pybullet each run is
     a job of ``jobs`` processes; on the batched simulator (``sim``) the seeds of a setting
     train in one batch and its snapshots are evaluated in one call (:mod:`.sweep_batched`).
@@ -177,31 +210,38 @@ def sweep(base: dict[str, Any], factors: dict[str, Sequence[Any]], seeds: Sequen
     """
     check_sim(sim)
     todo = settings(factors, mode)
-    for s in todo:                      # fail before the first run, not after an hour
+    for s in todo:  # fail before the first run, not after an hour
         probe = copy.deepcopy(base)
         for path, value in s.changes:
             set_path(probe, path, value)
     if sim == BATCHED:
         from dfrl.experiments.science.studies.sweep_batched import sweep_batched
-        runs = sweep_batched(base, [s.changes for s in todo], seeds, arenas, eval_steps,
-                             stable_last)
+
+        runs = sweep_batched(
+            base, [s.changes for s in todo], seeds, arenas, eval_steps, stable_last
+        )
         return [SettingResult(s, r) for s, r in zip(todo, runs)]
-    args = [(base, s.changes, seed, tuple(arenas), eval_steps, stable_last)
-            for s in todo for seed in seeds]
+    args = [
+        (base, s.changes, seed, tuple(arenas), eval_steps, stable_last)
+        for s in todo
+        for seed in seeds
+    ]
     if jobs <= 1:
         flat = [run_one(*a) for a in args]
     else:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
             flat = list(pool.map(run_one, *zip(*args)))
     n = len(seeds)
-    return [SettingResult(s, flat[i * n:(i + 1) * n]) for i, s in enumerate(todo)]
+    return [SettingResult(s, flat[i * n : (i + 1) * n]) for i, s in enumerate(todo)]
 
 
 def markdown_table(results: list[SettingResult]) -> str:
     """The sweep as a markdown table (mean ± 95% half width over seeds), best score first."""
-    head = ("| setting | score | progress (own) | coverage (own) | collisions/1000 (own) | "
-            "progress (held out) | collisions/1000 (held out) | Q-sum growth, last quarter | "
-            "score spread, last snapshots | states visited |")
+    head = (
+        "| setting | score | progress (own) | coverage (own) | collisions/1000 (own) | "
+        "progress (held out) | collisions/1000 (held out) | Q-sum growth, last quarter | "
+        "score spread, last snapshots | states visited |"
+    )
     lines = [head, "|" + "---|" * 10]
     ranked = sorted(results, key=lambda r: -r.summary("score").mean)
     for r in ranked:

@@ -3,6 +3,7 @@
 :func:`dfrl.robots.training.train` keeps them, and every snapshot, seed and evaluation arena
 of the setting in one compiled evaluation call; the measures of :func:`.sweep.run_summary`.
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -27,8 +28,9 @@ def snapshot_points(iterations: int) -> list[int]:
     return sorted(set(range(every, iterations + 1, every)) | {iterations})
 
 
-def train_setting(configs: Sequence[TrainerConfig], stable_last: int
-                  ) -> tuple[dict[int, np.ndarray], np.ndarray, np.ndarray]:
+def train_setting(
+    configs: Sequence[TrainerConfig], stable_last: int
+) -> tuple[dict[int, np.ndarray], np.ndarray, np.ndarray]:
     """Train one robot per config (same iterations) in one batch: the last ``stable_last``
     snapshots (iteration -> tables, shape (robots, n_states, n_actions)), the sums of
     Q-values per iteration (robots, iterations) and the final visit counts."""
@@ -47,9 +49,14 @@ def train_setting(configs: Sequence[TrainerConfig], stable_last: int
     return snaps, q_sum, bt.visits.copy()
 
 
-def sweep_batched(base: dict[str, Any], settings: Sequence[tuple[tuple[str, Any], ...]],
-                  seeds: Sequence[int], arenas: tuple[str, ...], eval_steps: int,
-                  stable_last: int) -> list[list[dict[str, Any]]]:
+def sweep_batched(
+    base: dict[str, Any],
+    settings: Sequence[tuple[tuple[str, Any], ...]],
+    seeds: Sequence[int],
+    arenas: tuple[str, ...],
+    eval_steps: int,
+    stable_last: int,
+) -> list[list[dict[str, Any]]]:
     """The runs of every setting (its changes to ``base``), one per seed, in order.
 
     Raises
@@ -68,14 +75,22 @@ def sweep_batched(base: dict[str, Any], settings: Sequence[tuple[tuple[str, Any]
     return [_setting(cfgs, arenas, eval_steps, stable_last) for cfgs in configs]
 
 
-def _setting(cfgs: list[TrainerConfig], arenas: tuple[str, ...], eval_steps: int,
-             stable_last: int) -> list[dict[str, Any]]:
+def _setting(
+    cfgs: list[TrainerConfig], arenas: tuple[str, ...], eval_steps: int, stable_last: int
+) -> list[dict[str, Any]]:
     snaps, q_sum, visits = train_setting(cfgs, stable_last)
-    jobs = [(k, it, a) for k, c in enumerate(cfgs) for it in sorted(snaps)
-            for a in (c.arena, *arenas)]
-    evs = eval_many(cfgs[0].to_dict(), [snaps[it][k] for k, it, _ in jobs],
-                    [a for _, _, a in jobs], eval_steps, EPISODE_STEPS,
-                    [EVAL_SEED + cfgs[k].seed for k, _, _ in jobs], BATCHED)
+    jobs = [
+        (k, it, a) for k, c in enumerate(cfgs) for it in sorted(snaps) for a in (c.arena, *arenas)
+    ]
+    evs = eval_many(
+        cfgs[0].to_dict(),
+        [snaps[it][k] for k, it, _ in jobs],
+        [a for _, _, a in jobs],
+        eval_steps,
+        EPISODE_STEPS,
+        [EVAL_SEED + cfgs[k].seed for k, _, _ in jobs],
+        BATCHED,
+    )
     rows: list[list[dict[str, Any]]] = [[] for _ in cfgs]
     for (k, it, a), ev in zip(jobs, evs):
         rows[k].append({"iteration": it, "arena": a, **ev})

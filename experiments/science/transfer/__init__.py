@@ -29,15 +29,38 @@ censored time to a threshold lifted above every start; learning phases seeded pe
 paired intervals, Holm, verdicts, no verdict from a degenerate interval) is
 ``dfrl transfer-study``: :mod:`.study` runs it, :mod:`.claims` judges it and writes its files.
 """
+
 from __future__ import annotations
 
-from dfrl.experiments.science.transfer.model import (HEAD_STEPS, METRICS, Condition, RunResult,
-                                                     Stat, TableInfo, TransferConfig,
-                                                     TransferResult)
+from dfrl.experiments.science.transfer.model import (
+    HEAD_STEPS,
+    METRICS,
+    Condition,
+    RunResult,
+    Stat,
+    TableInfo,
+    TransferConfig,
+    TransferResult,
+)
 from dfrl.experiments.science.transfer.outputs import plot_transfer, write_outputs
 from dfrl.experiments.science.transfer.runs import aggregate, run, run_one, summarise
 from dfrl.experiments.science.transfer.table import load_initial_table, trainer_config_for
 
-__all__ = ["Condition", "HEAD_STEPS", "METRICS", "RunResult", "Stat", "TableInfo",
-           "TransferConfig", "TransferResult", "aggregate", "load_initial_table", "run",
-           "run_one", "summarise", "trainer_config_for", "write_outputs", "plot_transfer"]
+__all__ = [
+    "Condition",
+    "HEAD_STEPS",
+    "METRICS",
+    "RunResult",
+    "Stat",
+    "TableInfo",
+    "TransferConfig",
+    "TransferResult",
+    "aggregate",
+    "load_initial_table",
+    "run",
+    "run_one",
+    "summarise",
+    "trainer_config_for",
+    "write_outputs",
+    "plot_transfer",
+]

@@ -29,6 +29,7 @@ The smallest detectable effect D of a t interval is ``(t(0.975, df) + t(0.8, df)
 a censored difference ``(z(0.975) + z(0.8)) x se``, se = the interval's width / (2 x 1.96)
 (``inf`` for an open interval).
 """
+
 from __future__ import annotations
 
 import json
@@ -41,9 +42,19 @@ from typing import Any
 import numpy as np
 
 from dfrl.experiments.science.censored import km_median
-from dfrl.experiments.science.statistics import (LEVEL, POWER, Interval, Judgement, Outcome,
-                                                 adjust, interval, judge, normal_quantile, paired,
-                                                 welch)
+from dfrl.experiments.science.statistics import (
+    LEVEL,
+    POWER,
+    Interval,
+    Judgement,
+    Outcome,
+    adjust,
+    interval,
+    judge,
+    normal_quantile,
+    paired,
+    welch,
+)
 from dfrl.experiments.science.tidy import TIDY_FILE, Row, write_tidy
 from dfrl.experiments.science.transfer.model import json_safe
 from dfrl.experiments.science.transfer.study import StudyOptions
@@ -55,9 +66,11 @@ PRIMARY = ("collisions_per_1000", "score_auc")
 #: The side of 0 the claim puts federated minus control on.
 SIDE = {"collisions_per_1000": "below", "score_auc": "above", "time_to_threshold": "below"}
 #: Each measure in the report's words.
-WORDS = {"collisions_per_1000": "collisions while learning",
-         "score_auc": "score while learning",
-         "time_to_threshold": "time to the threshold"}
+WORDS = {
+    "collisions_per_1000": "collisions while learning",
+    "score_auc": "score while learning",
+    "time_to_threshold": "time to the threshold",
+}
 #: Fewest source seeds a claim is judged on.
 MIN_SEEDS = 3
 
@@ -66,8 +79,9 @@ def per_seed(rows: Sequence[dict[str, Any]], condition: str, measure: str) -> di
     """pair seed -> the mean of ``measure`` over that source's learning phases."""
     mine = [r for r in rows if r["condition"] == condition]
     seeds = sorted({r["pair_seed"] for r in mine})
-    return {s: float(np.mean([float(r[measure]) for r in mine if r["pair_seed"] == s]))
-            for s in seeds}
+    return {
+        s: float(np.mean([float(r[measure]) for r in mine if r["pair_seed"] == s])) for s in seeds
+    }
 
 
 def compare(a: dict[int, float], b: dict[int, float]) -> tuple[Interval, str]:
@@ -117,8 +131,7 @@ class CensoredDifference:
 
     def __str__(self) -> str:
         sign = {"at least": ">= ", "at most": "<= "}.get(self.known, "")
-        return (f"{sign}{cell_text(self.estimate)} [{cell_text(self.low)}, "
-                f"{cell_text(self.high)}]")
+        return f"{sign}{cell_text(self.estimate)} [{cell_text(self.low)}, {cell_text(self.high)}]"
 
 
 def _median_bounds(t: np.ndarray, ok: np.ndarray) -> tuple[float, float]:
@@ -126,18 +139,28 @@ def _median_bounds(t: np.ndarray, ok: np.ndarray) -> tuple[float, float]:
     return (m, m) if math.isfinite(m) else (float(t.max()), math.inf)
 
 
-def _difference(ta: np.ndarray, ea: np.ndarray, tb: np.ndarray, eb: np.ndarray, n: int,
-                draws: np.ndarray) -> CensoredDifference:
+def _difference(
+    ta: np.ndarray, ea: np.ndarray, tb: np.ndarray, eb: np.ndarray, n: int, draws: np.ndarray
+) -> CensoredDifference:
     """The estimate of the whole samples and the interval of ``draws`` (lowest and highest
     difference each resample allows)."""
     (al, ah), (bl, bh) = _median_bounds(ta, ea), _median_bounds(tb, eb)
-    known = {(True, True): "exact", (False, True): "at least", (True, False): "at most",
-             (False, False): "unknown"}[(al == ah, bl == bh)]
+    known = {
+        (True, True): "exact",
+        (False, True): "at least",
+        (True, False): "at most",
+        (False, False): "unknown",
+    }[(al == ah, bl == bh)]
     est = {"exact": al - bl, "at least": al - bl, "at most": ah - bl}.get(known, math.nan)
     tail = (1.0 - LEVEL) / 2.0
-    return CensoredDifference(float(est), float(np.quantile(draws[:, 0], tail, method="lower")),
-                              float(np.quantile(draws[:, 1], 1.0 - tail, method="higher")),
-                              n, known, draws)
+    return CensoredDifference(
+        float(est),
+        float(np.quantile(draws[:, 0], tail, method="lower")),
+        float(np.quantile(draws[:, 1], 1.0 - tail, method="higher")),
+        n,
+        known,
+        draws,
+    )
 
 
 def _draw(ta: np.ndarray, ea: np.ndarray, tb: np.ndarray, eb: np.ndarray) -> tuple[float, float]:
@@ -145,9 +168,13 @@ def _draw(ta: np.ndarray, ea: np.ndarray, tb: np.ndarray, eb: np.ndarray) -> tup
     return xl - yh, xh - yl
 
 
-def censored_difference(a: tuple[Sequence[float], Sequence[bool]],
-                        b: tuple[Sequence[float], Sequence[bool]], n: int,
-                        resamples: int = 4000, seed: int = 0) -> CensoredDifference:
+def censored_difference(
+    a: tuple[Sequence[float], Sequence[bool]],
+    b: tuple[Sequence[float], Sequence[bool]],
+    n: int,
+    resamples: int = 4000,
+    seed: int = 0,
+) -> CensoredDifference:
     """Kaplan-Meier median of ``a`` minus that of ``b`` (``(times, reached)`` each, reached
     False: censored at that time), each group resampled with replacement on its own from a
     generator seeded with ``seed``; ``n`` is the count the verdict is given at."""
@@ -164,8 +191,9 @@ def censored_difference(a: tuple[Sequence[float], Sequence[bool]],
 Phases = tuple[Sequence[float], Sequence[bool]]
 
 
-def paired_censored_difference(a: Sequence[Phases], b: Sequence[Phases], resamples: int = 4000,
-                               seed: int = 0) -> CensoredDifference:
+def paired_censored_difference(
+    a: Sequence[Phases], b: Sequence[Phases], resamples: int = 4000, seed: int = 0
+) -> CensoredDifference:
     """As :func:`censored_difference` for matched sources: ``a[i]`` and ``b[i]`` are the
     learning phases (times, reached) of source seed i under the two conditions. Each resample
     draws n seeds with replacement (n = ``len(a)``, the count the verdict is given at) and
@@ -178,15 +206,20 @@ def paired_censored_difference(a: Sequence[Phases], b: Sequence[Phases], resampl
         ``a`` and ``b`` have not the same number of seeds, or a seed has no phase.
     """
     if len(a) != len(b) or not a or any(len(x[0]) == 0 for x in list(a) + list(b)):
-        raise ValueError(f"paired censored times need the same seeds on both sides, each with "
-                         f"phases: {len(a)} and {len(b)} seeds")
+        raise ValueError(
+            f"paired censored times need the same seeds on both sides, each with "
+            f"phases: {len(a)} and {len(b)} seeds"
+        )
     sa = [(np.asarray(t, dtype=float), np.asarray(r, dtype=bool)) for t, r in a]
     sb = [(np.asarray(t, dtype=float), np.asarray(r, dtype=bool)) for t, r in b]
 
-    def pool(groups: list[tuple[np.ndarray, np.ndarray]], idx: Sequence[int] | np.ndarray
-             ) -> tuple[np.ndarray, np.ndarray]:
-        return (np.concatenate([groups[i][0] for i in idx]),
-                np.concatenate([groups[i][1] for i in idx]))
+    def pool(
+        groups: list[tuple[np.ndarray, np.ndarray]], idx: Sequence[int] | np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        return (
+            np.concatenate([groups[i][0] for i in idx]),
+            np.concatenate([groups[i][1] for i in idx]),
+        )
 
     rng = np.random.default_rng(seed)
     draws = np.empty((resamples, 2))
@@ -212,16 +245,17 @@ def degenerate(estimate: Interval | CensoredDifference) -> str | None:
         if estimate.low == estimate.high:
             return f"zero width: every resample's difference is {cell_text(estimate.low)}"
         if math.isinf(estimate.low) and math.isinf(estimate.high):
-            return ("open at both ends: in most resamples a source never reached the "
-                    "threshold, the difference is unbounded")
+            return (
+                "open at both ends: in most resamples a source never reached the "
+                "threshold, the difference is unbounded"
+            )
         return None
     if estimate.half == 0.0:
         return f"zero width: the difference is {cell_text(estimate.mean)} in every seed"
     return None
 
 
-def verdict(estimate: Interval | CensoredDifference, side: str
-            ) -> tuple[Judgement, str]:
+def verdict(estimate: Interval | CensoredDifference, side: str) -> tuple[Judgement, str]:
     """The (unadjusted) verdict on "federated minus control is ``side`` 0" and, for cannot
     judge, its reason: :func:`judge` with at least :data:`MIN_SEEDS` seeds, else cannot
     judge; a :func:`degenerate` interval is cannot judge too. A claim that cannot be judged
@@ -245,12 +279,12 @@ class Claim:
     measure: str
     control: str
     estimate: Interval | CensoredDifference
-    method: str                 #: "paired", "Welch", "censored, paired (KM medians)" or
+    method: str  #: "paired", "Welch", "censored, paired (KM medians)" or
     #: "censored (KM medians)" (unpaired)
-    censored: tuple[int, int]   #: censored learning phases (federated, control)
-    phases: tuple[int, int]     #: learning phases (federated, control)
+    censored: tuple[int, int]  #: censored learning phases (federated, control)
+    phases: tuple[int, int]  #: learning phases (federated, control)
     judgement: Judgement
-    reason: str = ""            #: why it cannot be judged ("" otherwise)
+    reason: str = ""  #: why it cannot be judged ("" otherwise)
 
     @property
     def family(self) -> str:
@@ -272,29 +306,48 @@ class Claim:
 
     def to_dict(self) -> dict[str, Any]:
         e = self.estimate
-        return json_safe({
-            "measure": self.measure, "family": self.family, "control": self.control,
-            "method": self.method, "estimate": e.mean,
-            "low": e.low, "high": e.high, "n": e.n,
-            "known": e.known if isinstance(e, CensoredDifference) else "exact",
-            "censored": list(self.censored), "phases": list(self.phases),
-            "bound": self.judgement.bound, "side": self.judgement.side,
-            "p": self.judgement.p, "p_holm": self.judgement.p_adjusted,
-            "detectable": e.detectable(), "verdict": self.words(),
-            "reason": self.reason})
+        return json_safe(
+            {
+                "measure": self.measure,
+                "family": self.family,
+                "control": self.control,
+                "method": self.method,
+                "estimate": e.mean,
+                "low": e.low,
+                "high": e.high,
+                "n": e.n,
+                "known": e.known if isinstance(e, CensoredDifference) else "exact",
+                "censored": list(self.censored),
+                "phases": list(self.phases),
+                "bound": self.judgement.bound,
+                "side": self.judgement.side,
+                "p": self.judgement.p,
+                "p_holm": self.judgement.p_adjusted,
+                "detectable": e.detectable(),
+                "verdict": self.words(),
+                "reason": self.reason,
+            }
+        )
 
 
-def _times(rows: Sequence[dict[str, Any]], condition: str,
-           pair: int | None = None) -> tuple[list[float], list[bool]]:
+def _times(
+    rows: Sequence[dict[str, Any]], condition: str, pair: int | None = None
+) -> tuple[list[float], list[bool]]:
     """The times and reached flags of a condition's learning phases (of pair seed ``pair``
     alone when given)."""
-    mine = [r for r in rows if r["condition"] == condition
-            and (pair is None or r["pair_seed"] == pair)]
+    mine = [
+        r for r in rows if r["condition"] == condition and (pair is None or r["pair_seed"] == pair)
+    ]
     return [float(r["time_to_threshold"]) for r in mine], [bool(r["reached"]) for r in mine]
 
 
-def claim(rows: Sequence[dict[str, Any]], federated: str, control: str, measure: str,
-          resamples: int = 4000) -> Claim:
+def claim(
+    rows: Sequence[dict[str, Any]],
+    federated: str,
+    control: str,
+    measure: str,
+    resamples: int = 4000,
+) -> Claim:
     """The (unadjusted) claim that ``federated`` beats ``control`` on ``measure``."""
     tf, rf = _times(rows, federated)
     tc, rc = _times(rows, control)
@@ -304,9 +357,11 @@ def claim(rows: Sequence[dict[str, Any]], federated: str, control: str, measure:
     if measure == "time_to_threshold" and any(censored):
         fs, cs = per_seed(rows, federated, measure), per_seed(rows, control, measure)
         if set(fs) == set(cs):
-            est = paired_censored_difference([_times(rows, federated, s) for s in sorted(fs)],
-                                             [_times(rows, control, s) for s in sorted(fs)],
-                                             resamples)
+            est = paired_censored_difference(
+                [_times(rows, federated, s) for s in sorted(fs)],
+                [_times(rows, control, s) for s in sorted(fs)],
+                resamples,
+            )
             how = "censored, paired (KM medians)"
         else:
             est = censored_difference((tf, rf), (tc, rc), min(len(fs), len(cs)), resamples)
@@ -330,13 +385,16 @@ def check_rows(rows: Sequence[dict[str, Any]]) -> None:
         raise ValueError("no learning phase")
     old = [r for r in rows if "phase_seed" not in r or "score_auc" not in r]
     if old:
-        raise ValueError(f"{len(old)} of {len(rows)} learning phases were recorded by an "
-                         f"earlier version (one target seed shared by every source seed, "
-                         f"scores stopped at the threshold): run the study again")
+        raise ValueError(
+            f"{len(old)} of {len(rows)} learning phases were recorded by an "
+            f"earlier version (one target seed shared by every source seed, "
+            f"scores stopped at the threshold): run the study again"
+        )
 
 
-def claims(rows: Sequence[dict[str, Any]], opts: StudyOptions,
-           resamples: int = 4000) -> list[Claim]:
+def claims(
+    rows: Sequence[dict[str, Any]], opts: StudyOptions, resamples: int = 4000
+) -> list[Claim]:
     """Every claim of the study, Holm-adjusted within its family (primary, secondary).
 
     Raises
@@ -345,8 +403,12 @@ def claims(rows: Sequence[dict[str, Any]], opts: StudyOptions,
         Rows :func:`check_rows` refuses.
     """
     check_rows(rows)
-    raw = [claim(rows, opts.federated, c, m, resamples) for m in MEASURES
-           for c in opts.conditions if c != opts.federated]
+    raw = [
+        claim(rows, opts.federated, c, m, resamples)
+        for m in MEASURES
+        for c in opts.conditions
+        if c != opts.federated
+    ]
     out = list(raw)
     for family in ("primary", "secondary"):
         idx = [i for i, c in enumerate(raw) if c.family == family]
@@ -381,7 +443,7 @@ def _level(rows: Sequence[dict[str, Any]], condition: str, measure: str) -> str:
         if len(med) < len(t):
             return f"{len(t) - len(med)} of {len(t)} censored"
     iv = interval(list(per_seed(rows, condition, measure).values()))
-    if iv.half == 0.0:                  # no zero-width interval: the same value in every seed
+    if iv.half == 0.0:  # no zero-width interval: the same value in every seed
         return f"{iv.mean:.3g} in every seed (n={iv.n})"
     return str(iv)
 
@@ -391,65 +453,93 @@ def floor(rows: Sequence[dict[str, Any]], arena: str) -> tuple[int, int, int]:
     the arena's threshold before the lift (``threshold_base``: at the threshold before they
     learnt anything), those at or above the threshold used (0 by construction) and all."""
     mine = [r for r in rows if r["arena"] == arena]
-    return (sum(r["start_score"] >= r["threshold_base"] for r in mine),
-            sum(r["start_score"] >= r["threshold"] for r in mine), len(mine))
+    return (
+        sum(r["start_score"] >= r["threshold_base"] for r in mine),
+        sum(r["start_score"] >= r["threshold"] for r in mine),
+        len(mine),
+    )
 
 
-def markdown(rows: Sequence[dict[str, Any]], opts: StudyOptions, found: Sequence[Claim],
-             wall_time: float) -> str:
+def markdown(
+    rows: Sequence[dict[str, Any]], opts: StudyOptions, found: Sequence[Claim], wall_time: float
+) -> str:
     """The study's report: the thresholds, each source's levels, then every claim with its
     verdict."""
     n = len(opts.source_seeds)
-    L = [f"# Transfer to unseen arenas ({', '.join(opts.targets)})", "",
-         f"Simulator: {opts.sim}. Sources: {n} source seeds, {opts.iterations} iterations "
-         f"per robot (the federation "
-         f"shares every {opts.respite}, method {opts.method}). Learning phase: {opts.learn} "
-         f"steps from the source table in each unseen arena x {len(opts.target_seeds)} target "
-         f"seed(s), seeded per source seed (the sources of a seed share the phase's seeds, no "
-         f"two seeds do); greedy score ({opts.eval_steps} steps) at 0 and every "
-         f"{opts.eval_every} iterations. Score while learning: its mean over the phase (area "
-         f"under the score curve / {opts.learn}). Time: the first of {opts.confirm} "
-         f"evaluations in a row at or above the arena's threshold, lifted above every phase's "
-         f"iteration-0 score (a phase that never reaches it is censored at {opts.learn}). "
-         f"Wall time {wall_time:.0f} s.", "",
-         "| unseen arena | threshold | from | phases at the unlifted threshold at iteration 0 "
-         "| at the threshold used |", "|---|---|---|---|---|"]
+    L = [
+        f"# Transfer to unseen arenas ({', '.join(opts.targets)})",
+        "",
+        f"Simulator: {opts.sim}. Sources: {n} source seeds, {opts.iterations} iterations "
+        f"per robot (the federation "
+        f"shares every {opts.respite}, method {opts.method}). Learning phase: {opts.learn} "
+        f"steps from the source table in each unseen arena x {len(opts.target_seeds)} target "
+        f"seed(s), seeded per source seed (the sources of a seed share the phase's seeds, no "
+        f"two seeds do); greedy score ({opts.eval_steps} steps) at 0 and every "
+        f"{opts.eval_every} iterations. Score while learning: its mean over the phase (area "
+        f"under the score curve / {opts.learn}). Time: the first of {opts.confirm} "
+        f"evaluations in a row at or above the arena's threshold, lifted above every phase's "
+        f"iteration-0 score (a phase that never reaches it is censored at {opts.learn}). "
+        f"Wall time {wall_time:.0f} s.",
+        "",
+        "| unseen arena | threshold | from | phases at the unlifted threshold at iteration 0 "
+        "| at the threshold used |",
+        "|---|---|---|---|---|",
+    ]
     for arena, (value, origin) in thresholds_of(rows, opts).items():
         base, used, k = floor(rows, arena)
         L.append(f"| {arena} | {value:.4g} | {origin} | {base} of {k} | {used} of {k} |")
-    L += ["", "| source | collisions/1000 while learning | score while learning "
-          "| score at iteration 0 | time to threshold (iterations) |", "|---|---|---|---|---|"]
+    L += [
+        "",
+        "| source | collisions/1000 while learning | score while learning "
+        "| score at iteration 0 | time to threshold (iterations) |",
+        "|---|---|---|---|---|",
+    ]
     for c in opts.conditions:
-        L.append(f"| {c} | {_level(rows, c, 'collisions_per_1000')} | "
-                 f"{_level(rows, c, 'score_auc')} | {_level(rows, c, 'start_score')} | "
-                 f"{_level(rows, c, 'time_to_threshold')} |")
-    fam = {f: sum(c.family == f and c.judgement.outcome is not Outcome.CANNOT_JUDGE
-                  for c in found) for f in ("primary", "secondary")}
-    L += ["", f"Claims: {opts.federated} against each control, federated minus control. "
-          "Primary: collisions while learning (claimed < 0) and score while learning (claimed "
-          "> 0), paired t over source seeds (Welch when unpaired). Secondary: time to the "
-          "threshold in iterations (claimed < 0), from the per-seed means when no phase is "
-          "censored, else from the Kaplan-Meier medians over the learning phases (`>= x`: a "
-          "bound, a median beyond the budget; matched sources: the source seeds resampled, "
-          "each with its phases of both sides). 95% intervals; p adjusted by Holm within "
-          f"each family ({fam['primary']} primary, {fam['secondary']} secondary claims that "
-          "can be judged); an interval of zero width or whose every resample is the same "
-          "cannot be judged (no p, outside the family); D = smallest detectable effect at "
-          "80% power ((t(0.975, df) + t(0.8, df)) x se; censored: (z(0.975) + z(0.8)) x se, "
-          "se = width / 3.92).", "",
-          "| family | measure | control | method | estimate [95%] | censored (fed, control) "
-          "| p (Holm) | verdict |", "|---|---|---|---|---|---|---|---|"]
+        L.append(
+            f"| {c} | {_level(rows, c, 'collisions_per_1000')} | "
+            f"{_level(rows, c, 'score_auc')} | {_level(rows, c, 'start_score')} | "
+            f"{_level(rows, c, 'time_to_threshold')} |"
+        )
+    fam = {
+        f: sum(c.family == f and c.judgement.outcome is not Outcome.CANNOT_JUDGE for c in found)
+        for f in ("primary", "secondary")
+    }
+    L += [
+        "",
+        f"Claims: {opts.federated} against each control, federated minus control. "
+        "Primary: collisions while learning (claimed < 0) and score while learning (claimed "
+        "> 0), paired t over source seeds (Welch when unpaired). Secondary: time to the "
+        "threshold in iterations (claimed < 0), from the per-seed means when no phase is "
+        "censored, else from the Kaplan-Meier medians over the learning phases (`>= x`: a "
+        "bound, a median beyond the budget; matched sources: the source seeds resampled, "
+        "each with its phases of both sides). 95% intervals; p adjusted by Holm within "
+        f"each family ({fam['primary']} primary, {fam['secondary']} secondary claims that "
+        "can be judged); an interval of zero width or whose every resample is the same "
+        "cannot be judged (no p, outside the family); D = smallest detectable effect at "
+        "80% power ((t(0.975, df) + t(0.8, df)) x se; censored: (z(0.975) + z(0.8)) x se, "
+        "se = width / 3.92).",
+        "",
+        "| family | measure | control | method | estimate [95%] | censored (fed, control) "
+        "| p (Holm) | verdict |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for cl in found:
-        cens = (f"{cl.censored[0]}/{cl.phases[0]}, {cl.censored[1]}/{cl.phases[1]}"
-                if cl.measure == "time_to_threshold" else "-")
-        L.append(f"| {cl.family} | {cl.measure} | {cl.control} | {cl.method} | {_estimate(cl)} | "
-                 f"{cens} | {cell_text(cl.judgement.p_adjusted)} | {cl.words()} |")
+        cens = (
+            f"{cl.censored[0]}/{cl.phases[0]}, {cl.censored[1]}/{cl.phases[1]}"
+            if cl.measure == "time_to_threshold"
+            else "-"
+        )
+        L.append(
+            f"| {cl.family} | {cl.measure} | {cl.control} | {cl.method} | {_estimate(cl)} | "
+            f"{cens} | {cell_text(cl.judgement.p_adjusted)} | {cl.words()} |"
+        )
     L += ["", headline(found, opts)]
     return "\n".join(L)
 
 
-def thresholds_of(rows: Sequence[dict[str, Any]], opts: StudyOptions
-                  ) -> dict[str, tuple[float, str]]:
+def thresholds_of(
+    rows: Sequence[dict[str, Any]], opts: StudyOptions
+) -> dict[str, tuple[float, str]]:
     """arena -> (threshold, how it was chosen) as the learning phases recorded them."""
     out: dict[str, tuple[float, str]] = {}
     for a in opts.targets:
@@ -470,14 +560,19 @@ def headline(found: Sequence[Claim], opts: StudyOptions) -> str:
         refuted = [c.control for c in cs if c.judgement.outcome is Outcome.REFUTED]
         unsure = [c for c in cs if c.judgement.outcome is Outcome.NOT_SIGNIFICANT]
         blind = [c.control for c in cs if c.judgement.outcome is Outcome.CANNOT_JUDGE]
-        s = f"**{WORDS[m]}** ({'primary' if m in PRIMARY else 'secondary'}): holds against " \
+        s = (
+            f"**{WORDS[m]}** ({'primary' if m in PRIMARY else 'secondary'}): holds against "
             f"{len(held)} of {len(cs)} standalone controls"
+        )
         if refuted:
             s += f"; refuted against {', '.join(refuted)}"
         if unsure:
             ds = [c.estimate.detectable() for c in unsure]
-            s += (f"; not significant against {len(unsure)} (D {cell_text(min(ds))}"
-                  + (f" to {cell_text(max(ds))}" if max(ds) != min(ds) else "") + ")")
+            s += (
+                f"; not significant against {len(unsure)} (D {cell_text(min(ds))}"
+                + (f" to {cell_text(max(ds))}" if max(ds) != min(ds) else "")
+                + ")"
+            )
         if blind:
             s += f"; cannot judge against {', '.join(blind)}"
         zero = [c for c in found if c.measure == m and c.control == "zeros"]
@@ -499,26 +594,41 @@ def tidy_rows(rows: Sequence[dict[str, Any]]) -> Iterator[Row]:
         for it, v in r["collisions"]:
             yield (run, seed, cond, where, int(it), f"collisions@{a}", float(v))
         end = int(r["collisions"][-1][0])
-        yield (run, seed, cond, where, end, f"collisions_per_1000_learning@{a}",
-               float(r["collisions_per_1000"]))
+        yield (
+            run,
+            seed,
+            cond,
+            where,
+            end,
+            f"collisions_per_1000_learning@{a}",
+            float(r["collisions_per_1000"]),
+        )
         yield (run, seed, cond, where, end, f"score_auc@{a}", float(r["score_auc"]))
-        yield (run, seed, cond, where, end, f"time_to_threshold@{a}",
-               float(r["time_to_threshold"]))
+        yield (run, seed, cond, where, end, f"time_to_threshold@{a}", float(r["time_to_threshold"]))
         yield (run, seed, cond, where, end, f"reached@{a}", float(bool(r["reached"])))
         yield (run, seed, cond, where, end, f"threshold@{a}", float(r["threshold"]))
 
 
-def write_study(out: Path, rows: Sequence[dict[str, Any]], opts: StudyOptions,
-                found: Sequence[Claim], text: str, wall_time: float,
-                confirmation: Sequence[dict[str, Any]] | None = None) -> None:
+def write_study(
+    out: Path,
+    rows: Sequence[dict[str, Any]],
+    opts: StudyOptions,
+    found: Sequence[Claim],
+    text: str,
+    wall_time: float,
+    confirmation: Sequence[dict[str, Any]] | None = None,
+) -> None:
     """``transfer_study.md``, ``transfer_study.json`` (options, claims, the
     ``confirmation`` in pybullet when given, rows) and ``tidy.csv`` (provenance.json is
     written when the study starts)."""
     out.mkdir(parents=True, exist_ok=True)
     (out / "transfer_study.md").write_text(text + "\n", encoding="utf-8")
-    doc = {"options": opts.to_dict(), "wall_time": round(wall_time, 3),
-           "claims": [c.to_dict() for c in found],
-           **({} if confirmation is None else {"confirmation": list(confirmation)}),
-           "rows": json_safe(list(rows))}
+    doc = {
+        "options": opts.to_dict(),
+        "wall_time": round(wall_time, 3),
+        "claims": [c.to_dict() for c in found],
+        **({} if confirmation is None else {"confirmation": list(confirmation)}),
+        "rows": json_safe(list(rows)),
+    }
     (out / "transfer_study.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
     write_tidy(out / TIDY_FILE, tidy_rows(rows))

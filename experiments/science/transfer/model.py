@@ -1,4 +1,5 @@
 """The transfer experiment's configuration and results (dataclasses, JSON form)."""
+
 from __future__ import annotations
 
 import math
@@ -187,12 +188,25 @@ class RunResult:
     curve_reward: np.ndarray = field(repr=False)
 
     #: Columns of the per-seed CSV (the scalar fields).
-    CSV_FIELDS = ("seed", "condition", "iterations", "collisions", "collisions_per_1000",
-                  "head_steps", "head_collisions_per_1000", "head10_steps",
-                  "head10_collisions_per_1000", "cumulative_reward", "mean_reward",
-                  "eval_collisions_per_1000", "eval_mean_reward",
-                  "initial_eval_collisions_per_1000", "initial_eval_mean_reward", "respawns",
-                  "wall_time")
+    CSV_FIELDS = (
+        "seed",
+        "condition",
+        "iterations",
+        "collisions",
+        "collisions_per_1000",
+        "head_steps",
+        "head_collisions_per_1000",
+        "head10_steps",
+        "head10_collisions_per_1000",
+        "cumulative_reward",
+        "mean_reward",
+        "eval_collisions_per_1000",
+        "eval_mean_reward",
+        "initial_eval_collisions_per_1000",
+        "initial_eval_mean_reward",
+        "respawns",
+        "wall_time",
+    )
 
     def scalars(self) -> dict[str, Any]:
         """The CSV fields as a JSON-ready dict."""
@@ -244,19 +258,22 @@ class TransferResult:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (NaN written as ``None``); per-run curves are left out."""
-        return json_safe({
-            "config": self.config.to_dict(),
-            "trainer_config": self.trainer_config.to_dict(),
-            "table": asdict(self.table),
-            "arena": self.arena_name,
-            "same_arena": self.same_arena,
-            "runs": [r.scalars() for r in self.runs],
-            "summary": {c: {m: asdict(s) for m, s in per.items()}
-                        for c, per in self.summary.items()},
-            "ratio": self.ratio,
-            "wall_time": round(self.wall_time, 3),
-            "output_dir": str(self.output_dir) if self.output_dir is not None else None,
-        })
+        return json_safe(
+            {
+                "config": self.config.to_dict(),
+                "trainer_config": self.trainer_config.to_dict(),
+                "table": asdict(self.table),
+                "arena": self.arena_name,
+                "same_arena": self.same_arena,
+                "runs": [r.scalars() for r in self.runs],
+                "summary": {
+                    c: {m: asdict(s) for m, s in per.items()} for c, per in self.summary.items()
+                },
+                "ratio": self.ratio,
+                "wall_time": round(self.wall_time, 3),
+                "output_dir": str(self.output_dir) if self.output_dir is not None else None,
+            }
+        )
 
 
 def json_safe(obj: Any) -> Any:

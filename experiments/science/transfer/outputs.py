@@ -1,4 +1,5 @@
 """Files and figure of a transfer experiment."""
+
 from __future__ import annotations
 
 import csv
@@ -15,8 +16,12 @@ from dfrl.experiments.science.transfer.model import RunResult, TransferResult
 def write_outputs(result: TransferResult, out: Path) -> None:
     """Write ``config.json``, ``runs.csv``, ``curves.csv``, ``summary.json``, ``transfer.png``."""
     out.mkdir(parents=True, exist_ok=True)
-    doc = {"transfer": result.config.to_dict(), "trainer": result.trainer_config.to_dict(),
-           "table": asdict(result.table), "arena": result.arena_name}
+    doc = {
+        "transfer": result.config.to_dict(),
+        "trainer": result.trainer_config.to_dict(),
+        "table": asdict(result.table),
+        "arena": result.arena_name,
+    }
     (out / "config.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
     with open(out / "runs.csv", "w", newline="", encoding="utf-8") as fh:
         writer = csv.writer(fh)
@@ -27,19 +32,22 @@ def write_outputs(result: TransferResult, out: Path) -> None:
         writer = csv.writer(fh)
         writer.writerow(("seed", "condition", "iteration", "collisions", "cumulative_reward"))
         for r in result.runs:
-            for it, c, rew in zip(r.curve_iteration.tolist(), r.curve_collisions.tolist(),
-                                  r.curve_reward.tolist()):
+            for it, c, rew in zip(
+                r.curve_iteration.tolist(), r.curve_collisions.tolist(), r.curve_reward.tolist()
+            ):
                 writer.writerow((r.seed, r.condition, it, c, repr(rew)))
-    (out / "summary.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n",
-                                      encoding="utf-8")
+    (out / "summary.json").write_text(
+        json.dumps(result.to_dict(), indent=2) + "\n", encoding="utf-8"
+    )
     try:
         plot_transfer(result, out / "transfer.png")
     except ImportError:  # matplotlib is an optional extra
         pass
 
 
-def plot_transfer(result: TransferResult, path: Path, formats: Sequence[str] = ("png",),
-                  dpi: float | None = None) -> list[Path]:
+def plot_transfer(
+    result: TransferResult, path: Path, formats: Sequence[str] = ("png",), dpi: float | None = None
+) -> list[Path]:
     """Cumulative collisions and reward against iterations, mean over seeds, min-max band,
     in each of ``formats`` at ``dpi`` (:func:`dfrl.experiments.driver.results.plots.save_figure`,
     screen default 100 dpi); return the files written.
@@ -60,8 +68,13 @@ def plot_transfer(result: TransferResult, path: Path, formats: Sequence[str] = (
         it = runs[0].curve_iteration
         for ax, name in ((ax_c, "curve_collisions"), (ax_r, "curve_reward")):
             ys = np.stack([getattr(r, name) for r in runs]).astype(np.float64)
-            ax.plot(it, ys.mean(axis=0), color=colour, lw=1.4,
-                    label=f"{labels[cond]}, mean of {len(runs)}")
+            ax.plot(
+                it,
+                ys.mean(axis=0),
+                color=colour,
+                lw=1.4,
+                label=f"{labels[cond]}, mean of {len(runs)}",
+            )
             if len(runs) > 1:
                 ax.fill_between(it, ys.min(axis=0), ys.max(axis=0), color=colour, alpha=0.18, lw=0)
     ax_c.set_ylabel("cumulative collisions")

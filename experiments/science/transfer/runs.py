@@ -1,4 +1,5 @@
 """Training runs of the transfer experiment, their statistics over seeds, :func:`run`."""
+
 from __future__ import annotations
 
 import math
@@ -12,16 +13,29 @@ import numpy as np
 from dfrl.arenas import load_arena
 from dfrl.experiments.provenance import write_provenance
 from dfrl.experiments.science.standalone import EVAL_SEED_OFFSET
-from dfrl.experiments.science.transfer.model import (HEAD_STEPS, METRICS, Condition, RunResult,
-                                                     Stat, TransferConfig, TransferResult)
+from dfrl.experiments.science.transfer.model import (
+    HEAD_STEPS,
+    METRICS,
+    Condition,
+    RunResult,
+    Stat,
+    TransferConfig,
+    TransferResult,
+)
 from dfrl.experiments.science.transfer.outputs import write_outputs
 from dfrl.experiments.science.transfer.table import load_initial_table, trainer_config_for
 from dfrl.robots.evaluation import PolicyKind, evaluate_policy
 from dfrl.robots.training import Trainer, TrainerConfig
 
 
-def run_one(trainer_config: TrainerConfig, condition: Condition | str, q0: np.ndarray | None,
-            seed: int, eval_steps: int, every: int) -> RunResult:
+def run_one(
+    trainer_config: TrainerConfig,
+    condition: Condition | str,
+    q0: np.ndarray | None,
+    seed: int,
+    eval_steps: int,
+    every: int,
+) -> RunResult:
     """Train one robot for ``trainer_config.iterations`` steps from ``q0`` (or zeros).
 
     Parameters
@@ -72,17 +86,25 @@ def run_one(trainer_config: TrainerConfig, condition: Condition | str, q0: np.nd
         ev0_c, ev0_r = before.collisions_per_1000, before.mean_reward
     total = int(collided.sum())
     return RunResult(
-        seed=int(seed), condition=condition.value, iterations=n, collisions=total,
+        seed=int(seed),
+        condition=condition.value,
+        iterations=n,
+        collisions=total,
         collisions_per_1000=1000.0 * total / n,
-        head_steps=head, head_collisions_per_1000=1000.0 * int(collided[:head].sum()) / head,
+        head_steps=head,
+        head_collisions_per_1000=1000.0 * int(collided[:head].sum()) / head,
         head10_steps=head10,
         head10_collisions_per_1000=1000.0 * int(collided[:head10].sum()) / head10,
-        cumulative_reward=float(cum_reward), mean_reward=float(cum_reward) / n,
-        eval_collisions_per_1000=ev_c, eval_mean_reward=ev_r,
-        initial_eval_collisions_per_1000=ev0_c, initial_eval_mean_reward=ev0_r,
+        cumulative_reward=float(cum_reward),
+        mean_reward=float(cum_reward) / n,
+        eval_collisions_per_1000=ev_c,
+        eval_mean_reward=ev_r,
+        initial_eval_collisions_per_1000=ev0_c,
+        initial_eval_mean_reward=ev0_r,
         respawns=int(respawns),
         wall_time=round(time.perf_counter() - t0, 3),
-        curve_iteration=np.asarray(points, dtype=np.int64), curve_collisions=curve_c,
+        curve_iteration=np.asarray(points, dtype=np.int64),
+        curve_collisions=curve_c,
         curve_reward=curve_r,
     )
 
@@ -105,8 +127,12 @@ def aggregate(values: list[float]) -> Stat:
 
 def summarise(runs: list[RunResult]) -> tuple[dict[str, dict[str, Stat]], dict[str, float]]:
     """Statistics per condition and metric, and the ratio of the means (init / zero)."""
-    summary = {c.value: {m: aggregate([getattr(r, m) for r in runs if r.condition == c.value])
-                         for m in METRICS} for c in Condition}
+    summary = {
+        c.value: {
+            m: aggregate([getattr(r, m) for r in runs if r.condition == c.value]) for m in METRICS
+        }
+        for c in Condition
+    }
     ratio = {}
     for m in METRICS:
         a, b = summary["init"][m].mean, summary["zero"][m].mean
@@ -136,9 +162,18 @@ def run(config: TransferConfig, output_dir: Path | None = None) -> TransferResul
     q, info, state = load_initial_table(config.init)
     tcfg = trainer_config_for(config, q, info, state)
     spec = load_arena(config.arena)  # ArenaError is a ValueError
-    jobs = [(tcfg.to_dict(), cond.value, q if cond is Condition.INIT else None, seed,
-             config.eval_steps, config.every)
-            for seed in config.seeds for cond in (Condition.INIT, Condition.ZERO)]
+    jobs = [
+        (
+            tcfg.to_dict(),
+            cond.value,
+            q if cond is Condition.INIT else None,
+            seed,
+            config.eval_steps,
+            config.every,
+        )
+        for seed in config.seeds
+        for cond in (Condition.INIT, Condition.ZERO)
+    ]
     workers = max(1, min(config.jobs, len(jobs)))
     if workers == 1:
         runs = [run_job(j) for j in jobs]
@@ -148,11 +183,17 @@ def run(config: TransferConfig, output_dir: Path | None = None) -> TransferResul
     summary, ratio = summarise(runs)
     out = Path(output_dir) if output_dir is not None else None
     result = TransferResult(
-        config=config, trainer_config=tcfg, table=info, arena_name=spec.name,
+        config=config,
+        trainer_config=tcfg,
+        table=info,
+        arena_name=spec.name,
         same_arena=info.arena is not None and info.arena.lower() == spec.name.lower(),
-        runs=runs, summary=summary, ratio=ratio, wall_time=time.perf_counter() - t0,
-        output_dir=out)
+        runs=runs,
+        summary=summary,
+        ratio=ratio,
+        wall_time=time.perf_counter() - t0,
+        output_dir=out,
+    )
     if out is not None:
         write_outputs(result, out)
     return result
-

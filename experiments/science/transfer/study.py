@@ -37,6 +37,7 @@ runs every reference run, source and learning phase as a job of a process pool o
 workers; batched (the default) runs the study in this process, each stage in a few compiled
 calls (:mod:`.batched`).
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -51,8 +52,12 @@ from dfrl.experiments.science.curves import auc
 from dfrl.experiments.science.studies.fedsim import AGGREGATIONS, federate, in_turn
 from dfrl.experiments.science.studies.history import eval_job
 from dfrl.experiments.science.studies.simulators import BATCHED, DEFAULT_SIM, check_sim
-from dfrl.experiments.science.transfer.thresholds import (Threshold, lift, thresholds_for,
-                                                          time_to_threshold)
+from dfrl.experiments.science.transfer.thresholds import (
+    Threshold,
+    lift,
+    thresholds_for,
+    time_to_threshold,
+)
 from dfrl.robots.training import Trainer, TrainerConfig
 
 ARENAS = ("r1", "r2", "r3", "r4", "r5")
@@ -95,11 +100,21 @@ class StudyOptions:
 
     def __post_init__(self) -> None:
         check_sim(self.sim)
-        object.__setattr__(self, "arena_thresholds",
-                           tuple((str(a), float(v)) for a, v in self.arena_thresholds))
-        for name in ("iterations", "respite", "learn", "eval_every", "eval_steps",
-                     "episode_steps", "confirm", "jobs", "threshold_iterations",
-                     "threshold_runs"):
+        object.__setattr__(
+            self, "arena_thresholds", tuple((str(a), float(v)) for a, v in self.arena_thresholds)
+        )
+        for name in (
+            "iterations",
+            "respite",
+            "learn",
+            "eval_every",
+            "eval_steps",
+            "episode_steps",
+            "confirm",
+            "jobs",
+            "threshold_iterations",
+            "threshold_runs",
+        ):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if not self.source_seeds or not self.target_seeds or not self.targets:
@@ -109,8 +124,9 @@ class StudyOptions:
         if min(self.source_seeds) < 0:
             raise ValueError(f"source seeds must be >= 0, got {list(self.source_seeds)}")
         if not all(0 <= t < PHASE_EVAL_OFFSET for t in self.target_seeds):
-            raise ValueError(f"target seeds must be in 0..{PHASE_EVAL_OFFSET - 1}, got "
-                             f"{list(self.target_seeds)}")
+            raise ValueError(
+                f"target seeds must be in 0..{PHASE_EVAL_OFFSET - 1}, got {list(self.target_seeds)}"
+            )
         if self.method not in AGGREGATIONS:
             raise ValueError(f"unknown method {self.method!r}; one of {sorted(AGGREGATIONS)}")
         unknown = [c for c in self.extra if c not in EXTRA]
@@ -121,11 +137,12 @@ class StudyOptions:
             raise ValueError(f"target arenas must be unseen, {bad} are source arenas")
         stray = [a for a, _ in self.arena_thresholds if a not in self.targets]
         if stray:
-            raise ValueError(f"a threshold for {stray}, which are not among the target arenas "
-                             f"{list(self.targets)}")
+            raise ValueError(
+                f"a threshold for {stray}, which are not among the target arenas "
+                f"{list(self.targets)}"
+            )
         if not 0.0 < self.threshold_fraction <= 1.0:
-            raise ValueError(f"threshold_fraction must be in (0, 1], got "
-                             f"{self.threshold_fraction}")
+            raise ValueError(f"threshold_fraction must be in (0, 1], got {self.threshold_fraction}")
 
     @property
     def federated(self) -> str:
@@ -133,8 +150,12 @@ class StudyOptions:
 
     @property
     def conditions(self) -> tuple[str, ...]:
-        return ((self.federated,) + tuple(f"standalone_{a}" for a in ARENAS) + ("zeros",)
-                + tuple(dict.fromkeys(self.extra)))
+        return (
+            (self.federated,)
+            + tuple(f"standalone_{a}" for a in ARENAS)
+            + ("zeros",)
+            + tuple(dict.fromkeys(self.extra))
+        )
 
     def given_thresholds(self) -> dict[str, float]:
         """arena -> its threshold where one was given (``threshold`` for every arena,
@@ -171,6 +192,7 @@ def phase_seeds(pair: int, target_seed: int) -> tuple[int, int]:
 def _alone(c: TrainerConfig, sim: str) -> np.ndarray:
     if sim == BATCHED:
         from dfrl.experiments.science.transfer.batched import alone
+
         return alone(c)
     with Trainer(c) as t:
         for _ in range(c.iterations):
@@ -186,8 +208,11 @@ def source_job(condition: str, seed: int, opts: StudyOptions) -> tuple[str, int,
     fed: Callable[..., Any]
     turn: Callable[..., Any]
     if opts.sim == BATCHED:
-        from dfrl.experiments.science.studies.fedsim_batched import (federate_batched,
-                                                                     in_turn_batched)
+        from dfrl.experiments.science.studies.fedsim_batched import (
+            federate_batched,
+            in_turn_batched,
+        )
+
         fed, turn = federate_batched, in_turn_batched
     else:
         fed, turn = federate, in_turn
@@ -208,28 +233,45 @@ def source_job(condition: str, seed: int, opts: StudyOptions) -> tuple[str, int,
         arena = condition.removeprefix("standalone_")
         q = _alone(cfg(arena, ARENAS.index(arena)), opts.sim)
     elif condition == opts.federated:
-        q = fed([cfg(a, k) for k, a in enumerate(ARENAS)], opts.iterations, opts.respite,
-                opts.method).table
+        q = fed(
+            [cfg(a, k) for k, a in enumerate(ARENAS)], opts.iterations, opts.respite, opts.method
+        ).table
     else:
         raise ValueError(f"unknown condition {condition!r}")
     return condition, seed, q
 
 
-def phase_row(condition: str, seed: int, arena: str, tseed: int, opts: StudyOptions,
-              scores: list[tuple[int, float]], collisions: list[tuple[int, int]]
-              ) -> dict[str, Any]:
+def phase_row(
+    condition: str,
+    seed: int,
+    arena: str,
+    tseed: int,
+    opts: StudyOptions,
+    scores: list[tuple[int, float]],
+    collisions: list[tuple[int, int]],
+) -> dict[str, Any]:
     """A learning phase's row from its greedy scores and cumulative collisions on the grid."""
     pair = pair_seed(condition, seed, opts)
     train_seed, ev_seed = phase_seeds(pair, tseed)
-    return {"condition": condition, "source_seed": seed, "pair_seed": pair, "arena": arena,
-            "target_seed": tseed, "phase_seed": train_seed, "eval_seed": ev_seed,
-            "collisions_per_1000": 1000.0 * collisions[-1][1] / opts.learn,
-            "score_auc": auc([g for g, _ in scores], [v for _, v in scores]),
-            "start_score": scores[0][1], "scores": scores, "collisions": collisions}
+    return {
+        "condition": condition,
+        "source_seed": seed,
+        "pair_seed": pair,
+        "arena": arena,
+        "target_seed": tseed,
+        "phase_seed": train_seed,
+        "eval_seed": ev_seed,
+        "collisions_per_1000": 1000.0 * collisions[-1][1] / opts.learn,
+        "score_auc": auc([g for g, _ in scores], [v for _, v in scores]),
+        "start_score": scores[0][1],
+        "scores": scores,
+        "collisions": collisions,
+    }
 
 
-def target_job(condition: str, seed: int, q: np.ndarray, arena: str, tseed: int,
-               opts: StudyOptions) -> dict[str, Any]:
+def target_job(
+    condition: str, seed: int, q: np.ndarray, arena: str, tseed: int, opts: StudyOptions
+) -> dict[str, Any]:
     """One learning phase from table ``q`` in ``arena`` on pybullet (a worker job):
     collisions while learning and the greedy score on the whole grid
     (:meth:`StudyOptions.grid`), its mean level over the phase (``score_auc``) and its
@@ -248,14 +290,16 @@ def target_job(condition: str, seed: int, q: np.ndarray, arena: str, tseed: int,
                 t.step()
             done = g
             collisions.append((g, int(t.collisions)))
-            ev = eval_job(ev_cfg, t.q_table.copy(), arena, opts.eval_steps,
-                          opts.episode_steps, ev_seed)
+            ev = eval_job(
+                ev_cfg, t.q_table.copy(), arena, opts.eval_steps, opts.episode_steps, ev_seed
+            )
             scores.append((g, float(ev["score"])))
     return phase_row(condition, seed, arena, tseed, opts, scores, collisions)
 
 
-def with_times(rows: list[dict[str, Any]], thresholds: dict[str, Threshold],
-               confirm: int, budget: int) -> tuple[list[dict[str, Any]], dict[str, Threshold]]:
+def with_times(
+    rows: list[dict[str, Any]], thresholds: dict[str, Threshold], confirm: int, budget: int
+) -> tuple[list[dict[str, Any]], dict[str, Threshold]]:
     """Every arena's threshold lifted above the iteration-0 scores of its learning phases
     (:func:`~dfrl.experiments.science.transfer.thresholds.lift`), and each row with its
     arena's ``threshold``, ``threshold_base`` (before the lift), ``threshold_from`` and its
@@ -266,25 +310,35 @@ def with_times(rows: list[dict[str, Any]], thresholds: dict[str, Threshold],
     ValueError
         An arena of ``thresholds`` without a learning phase.
     """
-    lifted = {a: lift(th, [r["start_score"] for r in rows if r["arena"] == a])
-              for a, th in thresholds.items()}
+    lifted = {
+        a: lift(th, [r["start_score"] for r in rows if r["arena"] == a])
+        for a, th in thresholds.items()
+    }
     out = []
     for r in rows:
         th = lifted[r["arena"]]
         time, reached = time_to_threshold(r["scores"], th.value, confirm, budget)
-        out.append({**r, "threshold": th.value, "threshold_base": th.base,
-                    "threshold_from": th.origin(), "time_to_threshold": time,
-                    "reached": reached})
+        out.append(
+            {
+                **r,
+                "threshold": th.value,
+                "threshold_base": th.base,
+                "threshold_from": th.origin(),
+                "time_to_threshold": time,
+                "reached": reached,
+            }
+        )
     return out, lifted
 
 
-def transfer_study(opts: StudyOptions,
-                   progress: Callable[[str], None] | None = None) -> list[dict[str, Any]]:
+def transfer_study(
+    opts: StudyOptions, progress: Callable[[str], None] | None = None
+) -> list[dict[str, Any]]:
     """The target arenas' thresholds, every source table, every learning phase, then each
     phase's time to its arena's threshold lifted above every phase's start
     (:func:`with_times`); one row per learning phase."""
     say = progress or (lambda _msg: None)
-    for arena in opts.targets:          # an unknown arena fails here, before any training
+    for arena in opts.targets:  # an unknown arena fails here, before any training
         load_arena(arena)
     if opts.sim == BATCHED:
         rows, thresholds = _batched_study(opts, say)
@@ -296,14 +350,21 @@ def transfer_study(opts: StudyOptions,
     return rows
 
 
-def _pybullet_study(opts: StudyOptions, say: Callable[[str], None]
-                    ) -> tuple[list[dict[str, Any]], dict[str, Threshold]]:
+def _pybullet_study(
+    opts: StudyOptions, say: Callable[[str], None]
+) -> tuple[list[dict[str, Any]], dict[str, Threshold]]:
     """Thresholds, sources and learning phases on ``opts.jobs`` processes."""
     with ProcessPoolExecutor(max_workers=opts.jobs) as pool:
-        thresholds = thresholds_for(opts.targets, opts.given_thresholds(),
-                                    opts.threshold_fraction, opts.threshold_iterations,
-                                    opts.threshold_runs, opts.eval_steps, opts.episode_steps,
-                                    pool)
+        thresholds = thresholds_for(
+            opts.targets,
+            opts.given_thresholds(),
+            opts.threshold_fraction,
+            opts.threshold_iterations,
+            opts.threshold_runs,
+            opts.eval_steps,
+            opts.episode_steps,
+            pool,
+        )
         for th in thresholds.values():
             say(f"threshold in {th.arena} before the lift: {th.value:.3g} ({th.origin()})")
         jobs = [(c, s, opts) for c in opts.conditions for s in opts.source_seeds]
@@ -311,26 +372,41 @@ def _pybullet_study(opts: StudyOptions, say: Callable[[str], None]
         for i, src in enumerate(pool.map(source_job, *zip(*jobs)), 1):
             srcs.append(src)
             say(f"source {i}/{len(jobs)}: {src[0]} seed {src[1]}")
-        args = [(c, s, q, a, t, opts) for c, s, q in srcs for a in opts.targets
-                for t in opts.target_seeds]
+        args = [
+            (c, s, q, a, t, opts)
+            for c, s, q in srcs
+            for a in opts.targets
+            for t in opts.target_seeds
+        ]
         rows = []
         for i, row in enumerate(pool.map(target_job, *zip(*args)), 1):
             rows.append(row)
-            say(f"learning phase {i}/{len(args)}: {row['condition']} seed {row['source_seed']} "
-                f"in {row['arena']}")
+            say(
+                f"learning phase {i}/{len(args)}: {row['condition']} seed {row['source_seed']} "
+                f"in {row['arena']}"
+            )
     return rows, thresholds
 
 
-def _batched_study(opts: StudyOptions, say: Callable[[str], None]
-                   ) -> tuple[list[dict[str, Any]], dict[str, Threshold]]:
+def _batched_study(
+    opts: StudyOptions, say: Callable[[str], None]
+) -> tuple[list[dict[str, Any]], dict[str, Threshold]]:
     """Thresholds, sources and learning phases on the batched simulator, in this process:
     the reference runs in one batch, the sources one after the other (milliseconds each),
     every learning phase in one batch (:mod:`.batched`)."""
     from dfrl.experiments.science.transfer.batched import learning_phases
 
-    thresholds = thresholds_for(opts.targets, opts.given_thresholds(), opts.threshold_fraction,
-                                opts.threshold_iterations, opts.threshold_runs,
-                                opts.eval_steps, opts.episode_steps, None, BATCHED)
+    thresholds = thresholds_for(
+        opts.targets,
+        opts.given_thresholds(),
+        opts.threshold_fraction,
+        opts.threshold_iterations,
+        opts.threshold_runs,
+        opts.eval_steps,
+        opts.episode_steps,
+        None,
+        BATCHED,
+    )
     for th in thresholds.values():
         say(f"threshold in {th.arena} before the lift: {th.value:.3g} ({th.origin()})")
     jobs = [(c, s) for c in opts.conditions for s in opts.source_seeds]

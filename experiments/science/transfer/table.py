@@ -1,4 +1,5 @@
 """The table to transfer and the trainer configuration that fits it."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -36,9 +37,15 @@ def load_initial_table(path: str | Path) -> tuple[np.ndarray, TableInfo, dict[st
     if npy.with_suffix(".json").exists():
         loaded = load_table(npy)
         q, meta = loaded.q, loaded.meta
-        info = TableInfo(path=str(npy), shape=tuple(q.shape), algo=meta.algo,
-                         arena=meta.arena, iterations=meta.iterations, sidecar=True,
-                         extra=dict(meta.extra))
+        info = TableInfo(
+            path=str(npy),
+            shape=tuple(q.shape),
+            algo=meta.algo,
+            arena=meta.arena,
+            iterations=meta.iterations,
+            sidecar=True,
+            extra=dict(meta.extra),
+        )
         found: dict[str, Any] = dict(meta.state)
         found["actions"] = list(meta.actions)
         return q, info, found
@@ -49,13 +56,15 @@ def load_initial_table(path: str | Path) -> tuple[np.ndarray, TableInfo, dict[st
     if raw.ndim != 2:
         raise ValueError(f"{npy}: a Q-table is 2-D (n_states, n_actions), got shape {raw.shape}")
     q = validate_table(raw, raw.shape)
-    info = TableInfo(path=str(npy), shape=tuple(q.shape), algo=None, arena=None,
-                     iterations=None, sidecar=False)
+    info = TableInfo(
+        path=str(npy), shape=tuple(q.shape), algo=None, arena=None, iterations=None, sidecar=False
+    )
     return q, info, None
 
 
-def trainer_config_for(config: TransferConfig, q: np.ndarray, info: TableInfo,
-                       state: dict[str, Any] | None) -> TrainerConfig:
+def trainer_config_for(
+    config: TransferConfig, q: np.ndarray, info: TableInfo, state: dict[str, Any] | None
+) -> TrainerConfig:
     """The training configuration of both conditions, checked against the table's shape.
 
     Algorithm (``info``), sensor grouping, levels and action set (``state``, the sidecar's
@@ -80,8 +89,10 @@ def trainer_config_for(config: TransferConfig, q: np.ndarray, info: TableInfo,
         names = list(state["actions"])
         matches = [a for a in ActionSet if a.names == names]
         if not matches:
-            raise ValueError(f"{config.init}: action names {names} match no action set "
-                             f"({', '.join(f'{a.value}: {a.names}' for a in ActionSet)})")
+            raise ValueError(
+                f"{config.init}: action names {names} match no action set "
+                f"({', '.join(f'{a.value}: {a.names}' for a in ActionSet)})"
+            )
         actions = matches[0]
     expected = (disc.n_states, len(actions.names))
     if tuple(q.shape) != expected:
@@ -90,7 +101,12 @@ def trainer_config_for(config: TransferConfig, q: np.ndarray, info: TableInfo,
             f"{config.init}: table shape {tuple(q.shape)} does not fit the trainer: grouping "
             f"'{disc.grouping.value}' x {disc.levels} levels = {disc.n_states} states and "
             f"{len(actions.names)} actions ({actions.value}) need shape {expected} "
-            f"(discretisation from {'the overrides' if config.grouping or config.levels else src})")
-    return base.replace(arena=config.arena, iterations=config.iterations, algo=algo,
-                        discretisation=disc, actions=actions)
-
+            f"(discretisation from {'the overrides' if config.grouping or config.levels else src})"
+        )
+    return base.replace(
+        arena=config.arena,
+        iterations=config.iterations,
+        algo=algo,
+        discretisation=disc,
+        actions=actions,
+    )

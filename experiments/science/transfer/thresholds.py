@@ -29,6 +29,7 @@ an arena's threshold (derived or given) is lifted to just above the best iterati
 any phase in that arena, of any source: no phase reaches it before it has learnt something.
 :func:`time_to_threshold` reads a phase's time off its score curve.
 """
+
 from __future__ import annotations
 
 import math
@@ -47,7 +48,7 @@ from dfrl.robots.training import Trainer, TrainerConfig
 REFERENCE_SEED_BASE = 70_000
 REFERENCE_EVAL_OFFSET = 5_000
 #: The points of a reference run, as fractions of its steps, whose mean score is its level.
-LEVEL_POINTS = (4, 5, 6, 7, 8)     # eighths: N/2 .. N
+LEVEL_POINTS = (4, 5, 6, 7, 8)  # eighths: N/2 .. N
 
 
 @dataclass(frozen=True)
@@ -107,24 +108,37 @@ class Threshold:
             said = f"given {self.base:.3g}"
         else:
             spread = ", ".join(f"{x:.3g}" for x in self.levels)
-            said = (f"{self.fraction:g} x {self.level:.3g} = {self.base:.3g} (the mean level "
-                    f"of {len(self.levels)} reference runs of {self.iterations} steps from "
-                    f"zeros in {self.arena}: {spread})")
+            said = (
+                f"{self.fraction:g} x {self.level:.3g} = {self.base:.3g} (the mean level "
+                f"of {len(self.levels)} reference runs of {self.iterations} steps from "
+                f"zeros in {self.arena}: {spread})"
+            )
         if self.lifted:
-            said += (f"; lifted to just above {self.best_start:.4g}, the best iteration-0 "
-                     f"score of the {self.phases} learning phases")
+            said += (
+                f"; lifted to just above {self.best_start:.4g}, the best iteration-0 "
+                f"score of the {self.phases} learning phases"
+            )
         elif self.phases:
-            said += (f"; above every iteration-0 score of the {self.phases} learning phases "
-                     f"(best {self.best_start:.3g})")
+            said += (
+                f"; above every iteration-0 score of the {self.phases} learning phases "
+                f"(best {self.best_start:.3g})"
+            )
         return said
 
     def to_dict(self) -> dict[str, Any]:
-        return {"arena": self.arena, "value": self.value, "given": self.given,
-                "fraction": None if self.given else self.fraction,
-                "levels": list(self.levels), "iterations": self.iterations,
-                "base": self.base, "lifted": self.lifted,
-                "best_start": None if math.isnan(self.best_start) else self.best_start,
-                "phases": self.phases, "from": self.origin()}
+        return {
+            "arena": self.arena,
+            "value": self.value,
+            "given": self.given,
+            "fraction": None if self.given else self.fraction,
+            "levels": list(self.levels),
+            "iterations": self.iterations,
+            "base": self.base,
+            "lifted": self.lifted,
+            "best_start": None if math.isnan(self.best_start) else self.best_start,
+            "phases": self.phases,
+            "from": self.origin(),
+        }
 
 
 def lift(threshold: Threshold, starts: Sequence[float]) -> Threshold:
@@ -139,15 +153,18 @@ def lift(threshold: Threshold, starts: Sequence[float]) -> Threshold:
         No start, or one that is not finite.
     """
     if len(starts) == 0 or not all(np.isfinite(starts)):
-        raise ValueError(f"{threshold.arena}: the iteration-0 scores must be finite and at "
-                         f"least one, got {list(starts)}")
+        raise ValueError(
+            f"{threshold.arena}: the iteration-0 scores must be finite and at "
+            f"least one, got {list(starts)}"
+        )
     best = float(max(starts))
     value = max(threshold.base, float(np.nextafter(best, math.inf)))
     return replace(threshold, value=value, best_start=best, phases=len(starts))
 
 
-def time_to_threshold(scores: Sequence[tuple[int, float]], threshold: float, confirm: int,
-                      budget: int) -> tuple[float, bool]:
+def time_to_threshold(
+    scores: Sequence[tuple[int, float]], threshold: float, confirm: int, budget: int
+) -> tuple[float, bool]:
     """A learning phase's time to ``threshold`` and whether it reached it: the grid point of
     the first of ``confirm`` evaluations in a row at or above it (``scores``: (iteration,
     greedy score) on the phase's grid, in order); ``(budget, False)``, censored, when no
@@ -168,8 +185,9 @@ def time_to_threshold(scores: Sequence[tuple[int, float]], threshold: float, con
     return float(budget), False
 
 
-def threshold_from(arena: str, levels: Sequence[float], fraction: float,
-                   iterations: int) -> Threshold:
+def threshold_from(
+    arena: str, levels: Sequence[float], fraction: float, iterations: int
+) -> Threshold:
     """The derived threshold: ``fraction`` x the mean of ``levels``.
 
     Raises
@@ -178,13 +196,15 @@ def threshold_from(arena: str, levels: Sequence[float], fraction: float,
         No level, a level that is not finite, or ``fraction`` outside (0, 1].
     """
     if not levels or not all(np.isfinite(levels)):
-        raise ValueError(f"{arena}: reference levels must be finite and at least one, "
-                         f"got {list(levels)}")
+        raise ValueError(
+            f"{arena}: reference levels must be finite and at least one, got {list(levels)}"
+        )
     if not 0.0 < fraction <= 1.0:
         raise ValueError(f"threshold fraction must be in (0, 1], got {fraction}")
     level = float(np.mean(levels))
-    return Threshold(arena, fraction * level, False, fraction, tuple(float(x) for x in levels),
-                     iterations)
+    return Threshold(
+        arena, fraction * level, False, fraction, tuple(float(x) for x in levels), iterations
+    )
 
 
 def level_points(iterations: int) -> list[int]:
@@ -192,26 +212,42 @@ def level_points(iterations: int) -> list[int]:
     return sorted({max(1, iterations * k // 8) for k in LEVEL_POINTS})
 
 
-def reference_job(arena: str, k: int, iterations: int, eval_steps: int,
-                  episode_steps: int) -> float:
+def reference_job(
+    arena: str, k: int, iterations: int, eval_steps: int, episode_steps: int
+) -> float:
     """One reference run's level (a worker job): a robot learns ``arena`` from zeros for
     ``iterations`` steps; the mean of its greedy score at :func:`level_points`."""
     points = level_points(iterations)
     scores = []
-    with Trainer(TrainerConfig(arena=arena, seed=REFERENCE_SEED_BASE + k,
-                               iterations=iterations)) as t:
+    with Trainer(
+        TrainerConfig(arena=arena, seed=REFERENCE_SEED_BASE + k, iterations=iterations)
+    ) as t:
         for point in points:
             while t.iteration < point:
                 t.step()
-            ev = eval_job(TrainerConfig().to_dict(), t.q_table.copy(), arena, eval_steps,
-                          episode_steps, REFERENCE_SEED_BASE + REFERENCE_EVAL_OFFSET + k)
+            ev = eval_job(
+                TrainerConfig().to_dict(),
+                t.q_table.copy(),
+                arena,
+                eval_steps,
+                episode_steps,
+                REFERENCE_SEED_BASE + REFERENCE_EVAL_OFFSET + k,
+            )
             scores.append(float(ev["score"]))
     return float(np.mean(scores))
 
 
-def thresholds_for(targets: Sequence[str], given: dict[str, float], fraction: float,
-                   iterations: int, runs: int, eval_steps: int, episode_steps: int,
-                   pool: Executor | None, sim: str = PYBULLET) -> dict[str, Threshold]:
+def thresholds_for(
+    targets: Sequence[str],
+    given: dict[str, float],
+    fraction: float,
+    iterations: int,
+    runs: int,
+    eval_steps: int,
+    episode_steps: int,
+    pool: Executor | None,
+    sim: str = PYBULLET,
+) -> dict[str, Threshold]:
     """Every target arena's threshold: ``given[arena]`` when set, else derived from
     ``runs`` reference runs of ``iterations`` steps, run on ``pool`` (pybullet) or in one
     batch (``sim`` batched: :func:`.batched.reference_levels`; ``pool`` unused)."""
@@ -220,13 +256,21 @@ def thresholds_for(targets: Sequence[str], given: dict[str, float], fraction: fl
     jobs = [(a, k) for a in todo for k in range(1, runs + 1)]
     if sim == BATCHED:
         from dfrl.experiments.science.transfer.batched import reference_levels
+
         levels = reference_levels(jobs, iterations, eval_steps, episode_steps)
     else:
         if pool is None:
             raise ValueError("pybullet reference runs need a process pool")
-        levels = list(pool.map(reference_job, [a for a, _ in jobs], [k for _, k in jobs],
-                               [iterations] * len(jobs), [eval_steps] * len(jobs),
-                               [episode_steps] * len(jobs)))
+        levels = list(
+            pool.map(
+                reference_job,
+                [a for a, _ in jobs],
+                [k for _, k in jobs],
+                [iterations] * len(jobs),
+                [eval_steps] * len(jobs),
+                [episode_steps] * len(jobs),
+            )
+        )
     for a in todo:
         mine = [lv for (arena, _), lv in zip(jobs, levels) if arena == a]
         out[a] = threshold_from(a, mine, fraction, iterations)

@@ -7,6 +7,7 @@ node does. Each codec (``fts``: fast_term_serialized bytes, ``text``: float text
 in turn. The table must come back bit for bit. Target: read+write under 5 ms for 20,000
 entries (fts).
 """
+
 from __future__ import annotations
 
 import time
@@ -47,13 +48,15 @@ class BenchSim:
 
             self.p = pybullet
             self.client = pybullet.connect(pybullet.DIRECT)
-            pybullet.setAdditionalSearchPath(pybullet_data.getDataPath(),
-                                             physicsClientId=self.client)
+            pybullet.setAdditionalSearchPath(
+                pybullet_data.getDataPath(), physicsClientId=self.client
+            )
             pybullet.setGravity(0, 0, -9.81, physicsClientId=self.client)
             pybullet.loadURDF("plane.urdf", physicsClientId=self.client)
             rng = np.random.default_rng(seed)
-            box = pybullet.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[0.05] * 3,
-                                                physicsClientId=self.client)
+            box = pybullet.createCollisionShape(
+                pybullet.GEOM_BOX, halfExtents=[0.05] * 3, physicsClientId=self.client
+            )
             for _ in range(bodies):
                 pos = [*rng.uniform(-0.5, 0.5, 2), rng.uniform(0.1, 2.0)]
                 pybullet.createMultiBody(0.1, box, basePosition=pos, physicsClientId=self.client)
@@ -76,21 +79,27 @@ def _stats(values: list[float]) -> dict[str, float]:
     arr = np.asarray(values, dtype=np.float64)
     if arr.size == 0:
         return {"median_ms": float("nan"), "p90_ms": float("nan")}
-    return {"median_ms": round(float(np.median(arr)), 4),
-            "p90_ms": round(float(np.percentile(arr, 90)), 4)}
+    return {
+        "median_ms": round(float(np.median(arr)), 4),
+        "p90_ms": round(float(np.percentile(arr, 90)), 4),
+    }
 
 
-def run_codec(node: Any, robot: StaticTable, sim: BenchSim, codec: str, warmup: int,
-              repeats: int) -> dict[str, Any]:
+def run_codec(
+    node: Any, robot: StaticTable, sim: BenchSim, codec: str, warmup: int, repeats: int
+) -> dict[str, Any]:
     """Time ``repeats`` read+write pairs with ``codec`` while ``sim`` steps."""
     from dfrl.pybridge import Atom, Term, Var
 
     node.codec = codec
     before = robot.q_table
-    node.call("thread_create",
-              Term("bench_table_round_trips", Atom("bench_robot"), warmup, repeats, []),
-              Var(), [Term("alias", Atom("bench_agent")), Term("detached", Atom("true"))],
-              module="bridge_bench")
+    node.call(
+        "thread_create",
+        Term("bench_table_round_trips", Atom("bench_robot"), warmup, repeats, []),
+        Var(),
+        [Term("alias", Atom("bench_agent")), Term("detached", Atom("true"))],
+        module="bridge_bench",
+    )
     serve_ms: list[float] = []
     step_ms: list[float] = []
     deadline = time.monotonic() + 120
@@ -115,15 +124,30 @@ def run_codec(node: Any, robot: StaticTable, sim: BenchSim, codec: str, warmup: 
         raise RuntimeError(f"the benchmark agent failed: {result.args[0]!r}")
     totals, gets, sets = (list(x) for x in result.args)
     exact = bool(np.array_equal(robot.q_table.view(np.int64), before.view(np.int64)))
-    out = {"codec": codec, **_stats(totals), "get": _stats(gets), "set": _stats(sets),
-           "serve_per_request": _stats(serve_ms), "sim_step": _stats(step_ms),
-           "pairs": len(totals), "bit_exact": exact}
+    out = {
+        "codec": codec,
+        **_stats(totals),
+        "get": _stats(gets),
+        "set": _stats(sets),
+        "serve_per_request": _stats(serve_ms),
+        "sim_step": _stats(step_ms),
+        "pairs": len(totals),
+        "bit_exact": exact,
+    }
     return out
 
 
-def bench(entries: int = 20000, actions: int = 4, repeats: int = 50, warmup: int = 5,
-          codec: str = "both", sim: str = "pybullet", bodies: int = 30, physics_steps: int = 1,
-          seed: int = 0) -> dict[str, Any]:
+def bench(
+    entries: int = 20000,
+    actions: int = 4,
+    repeats: int = 50,
+    warmup: int = 5,
+    codec: str = "both",
+    sim: str = "pybullet",
+    bodies: int = 30,
+    physics_steps: int = 1,
+    seed: int = 0,
+) -> dict[str, Any]:
     """Run the benchmark; return its figures (``codecs``: one entry per codec timed).
 
     Raises

@@ -19,6 +19,7 @@ is known to catch real faults: with the destination starting an agent whose sour
 record (instead of presumed abort) 6 faults gave ``doubled`` 12; with it discarding an agent
 whose source does not answer, 6 faults gave ``lost`` 4.
 """
+
 from __future__ import annotations
 
 import json
@@ -42,12 +43,21 @@ from dfrl.experiments.tools.bench.fault_proxy import DROP, PASS, STALL, Action, 
 SCRIPT = Path(__file__).resolve().parent / "chaos_node.pl"
 TOKEN = new_secret()
 """The nodes' token, this process's own, handed to them in the environment (never argv)."""
-REPLY_TIMEOUT_S = 1.5        # the nodes' reply_timeout (chaos_node.pl)
-PAST_TIMEOUTS_S = 2.5        # SIGSTOP, stall and delay last this long
+REPLY_TIMEOUT_S = 1.5  # the nodes' reply_timeout (chaos_node.pl)
+PAST_TIMEOUTS_S = 2.5  # SIGSTOP, stall and delay last this long
 FAULT_KINDS = (
-    "kill_dest_after_staged", "kill_dest_during_transfer", "kill_source_before_decision",
-    "kill_source_after_commit", "kill_random", "drop_transfer", "drop_staged", "drop_commit",
-    "stall", "delay", "sigstop", "cut",
+    "kill_dest_after_staged",
+    "kill_dest_during_transfer",
+    "kill_source_before_decision",
+    "kill_source_after_commit",
+    "kill_random",
+    "drop_transfer",
+    "drop_staged",
+    "drop_commit",
+    "stall",
+    "delay",
+    "sigstop",
+    "cut",
 )
 
 
@@ -64,12 +74,20 @@ class NodeProcess:
         self.starts = 0
 
     def start(self, agents: list[str], timeout: float = 20.0) -> None:
-        args = [processes.swipl(), "-q", str(SCRIPT), "node", str(self.port), str(self.store),
-                self.routes] + ([",".join(agents)] if agents else [])
+        args = [
+            processes.swipl(),
+            "-q",
+            str(SCRIPT),
+            "node",
+            str(self.port),
+            str(self.store),
+            self.routes,
+        ] + ([",".join(agents)] if agents else [])
         offset = self.log.stat().st_size if self.log.exists() else 0
         with open(self.log, "ab") as log:
-            self.proc = processes.start(args, stdout=log, stderr=subprocess.STDOUT,
-                                        env=env_with_tokens([TOKEN]))
+            self.proc = processes.start(
+                args, stdout=log, stderr=subprocess.STDOUT, env=env_with_tokens([TOKEN])
+            )
         self.starts += 1
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
@@ -103,9 +121,13 @@ class ChaosConsole:
     """``chaos_node.pl console``: JSON lines, each answer awaited with a deadline."""
 
     def __init__(self) -> None:
-        self.proc = processes.start([processes.swipl(), "-q", str(SCRIPT), "console"],
-                                    stdin=subprocess.PIPE, stdout=subprocess.PIPE, bufsize=1,
-                                    env=env_with_tokens([TOKEN]))
+        self.proc = processes.start(
+            [processes.swipl(), "-q", str(SCRIPT), "console"],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            bufsize=1,
+            env=env_with_tokens([TOKEN]),
+        )
         self.sel = selectors.DefaultSelector()
         assert self.proc.stdout is not None
         self.sel.register(self.proc.stdout, selectors.EVENT_READ)
@@ -154,21 +176,32 @@ class Trigger:
             return PASS
         self.done = True
         self.on_fire()
-        self.fired.set()     # after on_fire: the injector then sees what it did
+        self.fired.set()  # after on_fire: the injector then sees what it did
         return self.action
 
 
 class _Chaos:
-    def __init__(self, work: Path, seed: int, n_nodes: int, n_agents: int,
-                 settle_timeout: float) -> None:
+    def __init__(
+        self, work: Path, seed: int, n_nodes: int, n_agents: int, settle_timeout: float
+    ) -> None:
         self.rng = random.Random(seed)
         self.settle_timeout = settle_timeout
         ports = [_free_port() for _ in range(n_nodes)]
-        self.proxies = {(i, j): FaultProxy(("127.0.0.1", ports[j]))
-                        for i in range(n_nodes) for j in range(n_nodes) if i != j}
-        self.nodes = [NodeProcess(i, ports[i], work,
-                            {j: self.proxies[(i, j)].address[1] for j in range(n_nodes) if j != i})
-                      for i in range(n_nodes)]
+        self.proxies = {
+            (i, j): FaultProxy(("127.0.0.1", ports[j]))
+            for i in range(n_nodes)
+            for j in range(n_nodes)
+            if i != j
+        }
+        self.nodes = [
+            NodeProcess(
+                i,
+                ports[i],
+                work,
+                {j: self.proxies[(i, j)].address[1] for j in range(n_nodes) if j != i},
+            )
+            for i in range(n_nodes)
+        ]
         self.agents = [f"a{k}" for k in range(n_agents)]
         self.console: ChaosConsole | None = None
 
@@ -198,17 +231,20 @@ class _Chaos:
             node.kill()
             dead.append(node)
 
-        points = {"kill_dest_after_staged": ("staged", PASS, lambda: kill(self.nodes[j])),
-                  "kill_dest_during_transfer": ("transfer", PASS, lambda: kill(self.nodes[j])),
-                  "kill_source_before_decision": ("staged", PASS, lambda: kill(self.nodes[i])),
-                  "kill_source_after_commit": ("commit", DROP, lambda: kill(self.nodes[i])),
-                  "drop_transfer": ("transfer", DROP, lambda: None),
-                  "drop_staged": ("staged", DROP, lambda: None),
-                  "drop_commit": ("commit", DROP, lambda: None)}
+        points = {
+            "kill_dest_after_staged": ("staged", PASS, lambda: kill(self.nodes[j])),
+            "kill_dest_during_transfer": ("transfer", PASS, lambda: kill(self.nodes[j])),
+            "kill_source_before_decision": ("staged", PASS, lambda: kill(self.nodes[i])),
+            "kill_source_after_commit": ("commit", DROP, lambda: kill(self.nodes[i])),
+            "drop_transfer": ("transfer", DROP, lambda: None),
+            "drop_staged": ("staged", DROP, lambda: None),
+            "drop_commit": ("commit", DROP, lambda: None),
+        }
         hit = True
         if kind in points or kind == "stall":
             point, action, fire = points.get(
-                kind, (self.rng.choice(["transfer", "staged", "commit"]), STALL, lambda: None))
+                kind, (self.rng.choice(["transfer", "staged", "commit"]), STALL, lambda: None)
+            )
             trigger = Trigger(point, action, fire)
             proxy.rule(trigger)
             hit = trigger.fired.wait(5.0)
@@ -262,8 +298,9 @@ class _Chaos:
                 for a in n.get("agents", []):
                     copies.setdefault(a["name"], []).append(a["status"])
                     hops[a["name"]] = max(hops.get(a["name"], 0), a["hops"])
-            settled = all_ok and all(len(s) == 1 and s[0] in ("running", "idle")
-                                     for s in copies.values())
+            settled = all_ok and all(
+                len(s) == 1 and s[0] in ("running", "idle") for s in copies.values()
+            )
             if settled or time.monotonic() > deadline:
                 break
             time.sleep(0.2)
@@ -278,8 +315,14 @@ class _Chaos:
                 doubled += 1
             elif not (len(statuses) == 1 and live == 1):
                 unsettled += 1
-        return {"lost": lost, "doubled": doubled, "unsettled": unsettled, "settle_s": settle_s,
-                "moves": sum(hops.values()), "copies": copies}
+        return {
+            "lost": lost,
+            "doubled": doubled,
+            "unsettled": unsettled,
+            "settle_s": settle_s,
+            "moves": sum(hops.values()),
+            "copies": copies,
+        }
 
 
 def _free_port() -> int:
@@ -288,10 +331,16 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def run(faults: int = 100, seed: int = 0, nodes: int = 3, agents: int = 4,
-        settle_timeout: float = 30.0, workdir: Path | None = None,
-        progress: Callable[[int, str, dict], None] | None = None,
-        kinds: tuple[str, ...] = FAULT_KINDS) -> dict:
+def run(
+    faults: int = 100,
+    seed: int = 0,
+    nodes: int = 3,
+    agents: int = 4,
+    settle_timeout: float = 30.0,
+    workdir: Path | None = None,
+    progress: Callable[[int, str, dict], None] | None = None,
+    kinds: tuple[str, ...] = FAULT_KINDS,
+) -> dict:
     """Run the benchmark; return its figures (see the module doc). ``kinds`` are drawn in
     seeded shuffled rounds, so each kind occurs ``faults / len(kinds)`` times (+1).
 
@@ -322,8 +371,7 @@ def run(faults: int = 100, seed: int = 0, nodes: int = 3, agents: int = 4,
         rng.shuffle(batch)
         order += batch
     order = order[:faults]
-    by_kind = {k: {"faults": 0, "hit": 0, "lost": 0, "doubled": 0, "unsettled": 0}
-               for k in kinds}
+    by_kind = {k: {"faults": 0, "hit": 0, "lost": 0, "doubled": 0, "unsettled": 0} for k in kinds}
     totals = {"lost": 0, "doubled": 0, "unsettled": 0}
     settles: list[float] = []
     chaos = _Chaos(workdir, seed, nodes, agents, settle_timeout)
@@ -350,9 +398,15 @@ def run(faults: int = 100, seed: int = 0, nodes: int = 3, agents: int = 4,
         if tmp is not None:
             tmp.cleanup()
     return {
-        "faults": faults, **totals, "seed": seed, "nodes": nodes, "agents": agents,
-        "moves": final["moves"], "restarts": sum(n.starts - 1 for n in chaos.nodes),
+        "faults": faults,
+        **totals,
+        "seed": seed,
+        "nodes": nodes,
+        "agents": agents,
+        "moves": final["moves"],
+        "restarts": sum(n.starts - 1 for n in chaos.nodes),
         "settle_s_median": round(statistics.median(settles), 3) if settles else 0.0,
         "settle_s_max": round(max(settles), 3) if settles else 0.0,
-        "wall_s": round(time.monotonic() - t_start, 1), "by_kind": by_kind,
+        "wall_s": round(time.monotonic() - t_start, 1),
+        "by_kind": by_kind,
     }

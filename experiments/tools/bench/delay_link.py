@@ -8,6 +8,7 @@ binds loopback and advertises the host's address): the kernel here has no ``nete
 discipline, so the delay is made in user space. Prints ``delay_link listening on HOST:PORT``
 once it accepts connections; runs until SIGTERM or SIGINT.
 """
+
 from __future__ import annotations
 
 import signal
@@ -16,8 +17,9 @@ import threading
 
 from dfrl.experiments.tools.bench.fault_proxy import FaultProxy
 
-USAGE = ("usage: python -m dfrl.experiments.tools.bench.delay_link "
-         "LISTEN_HOST:PORT TARGET_HOST:PORT MS")
+USAGE = (
+    "usage: python -m dfrl.experiments.tools.bench.delay_link LISTEN_HOST:PORT TARGET_HOST:PORT MS"
+)
 
 
 def _address(text: str) -> tuple[str, int]:

@@ -27,6 +27,7 @@ length field is 0, or TLS records) is forwarded raw from there on, without furth
 (where a header is due, bytes are held until its 12 have come). Every wait is
 bounded (socket timeouts and queue polls of at most 0.2 s); ``close()`` joins all threads.
 """
+
 from __future__ import annotations
 
 import enum
@@ -70,8 +71,9 @@ def _abort(sock: socket.socket) -> None:
 class _FrameReader:
     """Splits one direction's byte stream at frame headers and asks the rule about each."""
 
-    def __init__(self, direction: str, conn: int,
-                 decide: Callable[[str, int, int, str, int], Action]):
+    def __init__(
+        self, direction: str, conn: int, decide: Callable[[str, int, int, str, int], Action]
+    ):
         self.direction = direction
         self.conn = conn
         self.decide = decide
@@ -91,7 +93,7 @@ class _FrameReader:
                 take = data[: self.body_left]
                 out += take
                 self.body_left -= len(take)
-                data = data[len(take):]
+                data = data[len(take) :]
                 continue
             need = HEADER - len(self.header)
             self.header += data[:need]
@@ -117,8 +119,9 @@ class _FrameReader:
 class _Link:
     """One proxied connection: client and upstream sockets, two readers and two senders."""
 
-    def __init__(self, proxy: FaultProxy, conn: int, client: socket.socket,
-                 upstream: socket.socket):
+    def __init__(
+        self, proxy: FaultProxy, conn: int, client: socket.socket, upstream: socket.socket
+    ):
         self.proxy = proxy
         self.conn = conn
         self.client = client
@@ -131,10 +134,22 @@ class _Link:
         for direction, src, dst in (("up", client, upstream), ("down", upstream, client)):
             q: queue.Queue[tuple[float, bytes]] = queue.Queue()
             reader = _FrameReader(direction, conn, proxy._decide)
-            self.threads.append(threading.Thread(target=self._read, args=(src, reader, q),
-                                                 daemon=True, name=f"proxy-{direction}-{conn}"))
-            self.threads.append(threading.Thread(target=self._send, args=(dst, q), daemon=True,
-                                                 name=f"proxy-send-{direction}-{conn}"))
+            self.threads.append(
+                threading.Thread(
+                    target=self._read,
+                    args=(src, reader, q),
+                    daemon=True,
+                    name=f"proxy-{direction}-{conn}",
+                )
+            )
+            self.threads.append(
+                threading.Thread(
+                    target=self._send,
+                    args=(dst, q),
+                    daemon=True,
+                    name=f"proxy-send-{direction}-{conn}",
+                )
+            )
         for t in self.threads:
             t.start()
 
@@ -162,7 +177,7 @@ class _Link:
                 return
             if action is STALL:
                 self.stalled.set()
-        q.put((0.0, b""))   # end of stream: the sender half-closes after what is queued
+        q.put((0.0, b""))  # end of stream: the sender half-closes after what is queued
 
     def _send(self, dst: socket.socket, q: queue.Queue) -> None:
         while not self.closed.is_set():
@@ -193,7 +208,7 @@ class _Link:
         view = memoryview(data)
         while view and not self.closed.is_set():
             try:
-                view = view[dst.send(view):]
+                view = view[dst.send(view) :]
             except socket.timeout:
                 continue
 
@@ -245,9 +260,15 @@ class FaultProxy:
         Keep every byte read (:meth:`captured_bytes`).
     """
 
-    def __init__(self, target: tuple[str, int], listen: tuple[str, int] = ("127.0.0.1", 0),
-                 connect_timeout: float = 2.0, *, delay_s: float = 0.0,
-                 record: bool = False) -> None:
+    def __init__(
+        self,
+        target: tuple[str, int],
+        listen: tuple[str, int] = ("127.0.0.1", 0),
+        connect_timeout: float = 2.0,
+        *,
+        delay_s: float = 0.0,
+        record: bool = False,
+    ) -> None:
         self.target = target
         self.connect_timeout = connect_timeout
         self.delay_s = 0.0
@@ -360,7 +381,8 @@ class FaultProxy:
 
     def _reap(self) -> None:
         with self._lock:
-            done = [c for c, link in self._links.items()
-                    if link.closed.is_set() and link.finished()]
+            done = [
+                c for c, link in self._links.items() if link.closed.is_set() and link.finished()
+            ]
             for c in done:
                 del self._links[c]

@@ -23,6 +23,7 @@ missing rounds and those it calls LOST.
 
 Needs root and ``ip`` (:func:`~dfrl.experiments.tools.netns.unavailable` says why not).
 """
+
 from __future__ import annotations
 
 import csv
@@ -39,8 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from dfrl.experiments.driver.results.history import HistoryInputError, check_history
-from dfrl.experiments.tools.bench.faults_cases import (
-    CASES, SKIP_AFTER_S, Acted, Case, Expectation)
+from dfrl.experiments.tools.bench.faults_cases import CASES, SKIP_AFTER_S, Acted, Case, Expectation
 from dfrl.experiments.tools.bench.faults_federation import FaultBenchError, Federation
 from dfrl.experiments.tools.netns import Lab
 
@@ -60,20 +60,29 @@ def verdict_of(summary: str) -> str | None:
     """``complete`` or ``INCOMPLETE`` as summary.md's fault section says (None: no verdict)."""
     for line in summary.splitlines():
         if line.startswith(VERDICT_LINE):
-            return line[len(VERDICT_LINE):].strip()
+            return line[len(VERDICT_LINE) :].strip()
     return None
 
 
-def measure(rows: list[dict[str, str]], summary: str, exit_status: int, t_fault: float,
-            t0: float, robots: list[str], planned: int, victim: str | None) -> dict[str, Any]:
+def measure(
+    rows: list[dict[str, str]],
+    summary: str,
+    exit_status: int,
+    t_fault: float,
+    t0: float,
+    robots: list[str],
+    planned: int,
+    victim: str | None,
+) -> dict[str, Any]:
     """The figures of one fault run from its rounds.csv rows and summary.md (see module doc).
 
     ``truth_problems`` lists where the verdict, the exit status or the summary's fault lines
     disagree with the rounds themselves: the federation was complete only if every planned
     round completed with every robot visited and no method failed.
     """
-    done = sorted((r for r in rows if not r["error"] or r.get("failed_method")),
-                  key=lambda r: float(r["end"]))
+    done = sorted(
+        (r for r in rows if not r["error"] or r.get("failed_method")), key=lambda r: float(r["end"])
+    )
     failed = [r for r in rows if r["error"]]
     ends = [float(r["end"]) for r in done]
     after = [e for e in ends if e > t_fault]
@@ -89,19 +98,24 @@ def measure(rows: list[dict[str, str]], summary: str, exit_status: int, t_fault:
     rejoined = None
     if victim is not None:
         gone = absent.get(victim, [])
-        rejoined = bool(gone) and any(victim in r["visited"].split() and
-                                      int(r["round"]) > max(gone) for r in done)
+        rejoined = bool(gone) and any(
+            victim in r["visited"].split() and int(r["round"]) > max(gone) for r in done
+        )
     truth_complete = n_done >= planned and not failed and not absent
     verdict = verdict_of(summary)
     truth: list[str] = []
     if verdict is None:
         truth.append("summary.md gives no verdict" if summary else "no summary.md")
     elif (verdict == "complete") != truth_complete:
-        truth.append(f"summary says federation {verdict}, but the federation was "
-                     f"{'complete' if truth_complete else 'not complete'}")
+        truth.append(
+            f"summary says federation {verdict}, but the federation was "
+            f"{'complete' if truth_complete else 'not complete'}"
+        )
     if (exit_status == 0) != truth_complete:
-        truth.append(f"exit status {exit_status}, but the federation was "
-                     f"{'complete' if truth_complete else 'not complete'}")
+        truth.append(
+            f"exit status {exit_status}, but the federation was "
+            f"{'complete' if truth_complete else 'not complete'}"
+        )
     for rid, missed in absent.items():
         if f"MISSED rounds: {rid} " not in summary and f"LOST robot {rid}:" not in summary:
             truth.append(f"summary does not name {rid}, absent from round(s) {missed[:10]}")
@@ -110,24 +124,41 @@ def measure(rows: list[dict[str, str]], summary: str, exit_status: int, t_fault:
     if n_done < planned and not failed and "MISSING rounds" not in summary:
         truth.append(f"{planned - n_done} planned round(s) not done, not reported")
     return {
-        "fault_at_s": round(t_fault - t0, 2), "fault_time": round(t_fault, 3),
+        "fault_at_s": round(t_fault - t0, 2),
+        "fault_time": round(t_fault, 3),
         "recovery_s": round(after[0] - t_fault, 2) if after else None,
         "longest_stall_s": round(max(gaps), 2) if gaps else None,
         "normal_gap_s": round(statistics.median(before), 2) if before else None,
-        "rounds_done": n_done, "rounds_planned": planned, "rounds_failed": len(failed),
+        "rounds_done": n_done,
+        "rounds_planned": planned,
+        "rounds_failed": len(failed),
         "tables_identical": bool(done) and not differing,
         "rounds_unverified": unverified,
         "driver_all_equal_rounds": sum(r["all_equal"] == "true" for r in done),
         "absent": {rid: len(v) for rid, v in absent.items()},
-        "victim": victim, "rejoined": rejoined,
-        "verdict": verdict, "exit_status": exit_status,
-        "summary_says": [ln.strip() for ln in summary.splitlines()
-                         if ln.startswith(("- MISSED", "- LOST", "- METHOD FAILED",
-                                           "- MISSING", "- ENDED SHORT", "- NOT LOGGED",
-                                           "- HISTORY VIOLATED"))],
+        "victim": victim,
+        "rejoined": rejoined,
+        "verdict": verdict,
+        "exit_status": exit_status,
+        "summary_says": [
+            ln.strip()
+            for ln in summary.splitlines()
+            if ln.startswith(
+                (
+                    "- MISSED",
+                    "- LOST",
+                    "- METHOD FAILED",
+                    "- MISSING",
+                    "- ENDED SHORT",
+                    "- NOT LOGGED",
+                    "- HISTORY VIOLATED",
+                )
+            )
+        ],
         # rounds the agent's log lacks, rebuilt from the robots' shares by the driver
         "rounds_rebuilt": sum(r.get("reconstructed") == "true" for r in rows),
-        "truthful": not truth, "truth_problems": truth,
+        "truthful": not truth,
+        "truth_problems": truth,
     }
 
 
@@ -149,16 +180,21 @@ def judge(m: dict[str, Any], expect: Expectation) -> list[str]:
     problems = []
     lost = m["rounds_planned"] - m["rounds_done"]
     if lost > expect.max_rounds_lost:
-        problems.append(f"{lost} planned round(s) not completed (at most "
-                        f"{expect.max_rounds_lost} expected)")
+        problems.append(
+            f"{lost} planned round(s) not completed (at most {expect.max_rounds_lost} expected)"
+        )
     if m["recovery_s"] is None:
         problems.append("no round completed after the fault")
     elif m["recovery_s"] > expect.recovery_bound_s:
-        problems.append(f"the next round completed {m['recovery_s']} s after the fault "
-                        f"(bound {expect.recovery_bound_s:g} s)")
+        problems.append(
+            f"the next round completed {m['recovery_s']} s after the fault "
+            f"(bound {expect.recovery_bound_s:g} s)"
+        )
     if m["longest_stall_s"] is not None and m["longest_stall_s"] > expect.stall_bound_s:
-        problems.append(f"{m['longest_stall_s']} s between two completed rounds (bound "
-                        f"{expect.stall_bound_s:g} s)")
+        problems.append(
+            f"{m['longest_stall_s']} s between two completed rounds (bound "
+            f"{expect.stall_bound_s:g} s)"
+        )
     if not m["tables_identical"]:
         problems.append("a completed round left differing tables")
     if not m["truthful"]:
@@ -179,19 +215,25 @@ def judge(m: dict[str, Any], expect: Expectation) -> list[str]:
             problems.append(f"the robots' shares break the history: {bad}")
     gap, bound = m.get("longest_write_gap_s"), m.get("write_gap_bound_s")
     if expect.gap_within_skip and (gap is None or bound is None or gap > bound):
-        problems.append(f"{gap} s between two rounds written on the robots (bound: skip time "
-                        f"{SKIP_AFTER_S:g} s + one round = {bound} s)")
+        problems.append(
+            f"{gap} s between two rounds written on the robots (bound: skip time "
+            f"{SKIP_AFTER_S:g} s + one round = {bound} s)"
+        )
     if expect.incomplete and (m["verdict"] != "INCOMPLETE" or m["exit_status"] == 0):
-        problems.append(f"verdict {m['verdict']} and exit status {m['exit_status']} after a "
-                        "robot host was cut (INCOMPLETE and non-zero expected)")
+        problems.append(
+            f"verdict {m['verdict']} and exit status {m['exit_status']} after a "
+            "robot host was cut (INCOMPLETE and non-zero expected)"
+        )
     return problems
 
 
 def named_in_summary(summary: str) -> dict[str, list[str]]:
     """The robots summary.md names as missing rounds (``- MISSED rounds: rI ...``) and as
     ``LOST`` (``- LOST robot rI: ...``)."""
-    return {"missed": sorted(set(re.findall(r"^- MISSED rounds: (\S+)", summary, re.M))),
-            "lost": sorted(set(re.findall(r"^- LOST robot (\S+?):", summary, re.M)))}
+    return {
+        "missed": sorted(set(re.findall(r"^- MISSED rounds: (\S+)", summary, re.M))),
+        "lost": sorted(set(re.findall(r"^- LOST robot (\S+?):", summary, re.M))),
+    }
 
 
 def write_gaps(shares: dict[str, list[dict[str, str]]]) -> tuple[float | None, float | None]:
@@ -218,14 +260,17 @@ def judge_history(folder: Path, robots: list[str]) -> dict[str, Any]:
     could not read a file."""
     try:
         verdict = check_history(folder, robots)
-    except HistoryInputError as exc:   # a malformed file is a finding, not a crash
+    except HistoryInputError as exc:  # a malformed file is a finding, not a crash
         return {"ok": None, "error": f"{type(exc).__name__}: {exc}"}
     counts: dict[str, int] = {}
     for v in verdict.violations:
         kind = getattr(v.kind, "value", str(v.kind))
         counts[kind] = counts.get(kind, 0) + 1
-    return {"ok": bool(verdict.ok), "counts": counts,
-            "first": [v.to_json() for v in verdict.violations[:3]]}
+    return {
+        "ok": bool(verdict.ok),
+        "counts": counts,
+        "first": [v.to_json() for v in verdict.violations[:3]],
+    }
 
 
 def gather_shares(fed: Federation, folder: Path) -> dict[str, list[dict[str, str]]]:
@@ -241,8 +286,14 @@ def gather_shares(fed: Federation, folder: Path) -> dict[str, list[dict[str, str
     return out
 
 
-def run_case(case: Case, hosts: int, work: Path, delay_ms: float = 0.0,
-             rounds: int | None = None, itinerary: str = "chain") -> dict[str, Any]:
+def run_case(
+    case: Case,
+    hosts: int,
+    work: Path,
+    delay_ms: float = 0.0,
+    rounds: int | None = None,
+    itinerary: str = "chain",
+) -> dict[str, Any]:
     """One run of ``case`` on ``hosts`` robot hosts, its files under ``work`` (each host's on
     a disk of its own, copied out to ``work/<host>`` at the end), every link into a robot host
     ``delay_ms`` slow each way, ``rounds`` rounds (None: the case's plan) over an
@@ -250,24 +301,28 @@ def run_case(case: Case, hosts: int, work: Path, delay_ms: float = 0.0,
     carry out fails with ``error``)."""
     plan = dataclasses.replace(case.plan(hosts), delay_ms=delay_ms, itinerary=itinerary)
     if rounds is not None:
-        plan = dataclasses.replace(plan, iterations=plan.respite * rounds,
-                                   timeout_s=60.0 + 3 * 2.5 * rounds)
+        plan = dataclasses.replace(
+            plan, iterations=plan.respite * rounds, timeout_s=60.0 + 3 * 2.5 * rounds
+        )
     names = [f"h{i}" for i in range(1, hosts + 1)] + ["driver"]
     started = time.monotonic()
     record: dict[str, Any] = {"fault": case.name, "itinerary": itinerary}
     work.mkdir(parents=True, exist_ok=True)
     with Lab(names, private=work.resolve()) as lab:
-        fed = Federation(lab, work.resolve(), plan,
-                         name=f"faults-{case.name.replace('_', '-')}")
+        fed = Federation(lab, work.resolve(), plan, name=f"faults-{case.name.replace('_', '-')}")
         try:
             fed.start_robot_hosts()
             fed.start_driver()
             acted: Acted = case.act(fed)
         except (FaultBenchError, OSError, ValueError, subprocess.TimeoutExpired) as exc:
             fed.copy_out()
-            record.update(actions=fed.actions, error=f"{type(exc).__name__}: {exc}",
-                          problems=[f"the benchmark could not carry the run out: {exc}"],
-                          passed=False, wall_s=round(time.monotonic() - started, 1))
+            record.update(
+                actions=fed.actions,
+                error=f"{type(exc).__name__}: {exc}",
+                problems=[f"the benchmark could not carry the run out: {exc}"],
+                passed=False,
+                wall_s=round(time.monotonic() - started, 1),
+            )
             return record
         # the robots may still be writing (a run whose driver was cut or killed): bounded
         wait_robots_idle(fed, 30.0)
@@ -277,12 +332,21 @@ def run_case(case: Case, hosts: int, work: Path, delay_ms: float = 0.0,
     summary_path = acted.results / "summary.md"
     summary = summary_path.read_text(encoding="utf-8") if summary_path.is_file() else ""
     rows = read_rows(acted.results)
-    m = measure(rows or [], summary, acted.exit_status, acted.t_fault, fed.t0, fed.robots,
-                plan.rounds, acted.victim)
+    m = measure(
+        rows or [],
+        summary,
+        acted.exit_status,
+        acted.t_fault,
+        fed.t0,
+        fed.robots,
+        plan.rounds,
+        acted.victim,
+    )
     m["history"] = judge_history(work / "history", fed.robots)
     m["longest_write_gap_s"], write_median = write_gaps(shares)
-    m["write_gap_bound_s"] = (round(SKIP_AFTER_S + write_median, 2)
-                              if write_median is not None else None)
+    m["write_gap_bound_s"] = (
+        round(SKIP_AFTER_S + write_median, 2) if write_median is not None else None
+    )
     named = named_in_summary(summary)
     m["summary_missed"], m["summary_lost"] = named["missed"], named["lost"]
     m["any_lost"] = bool(named["lost"])
@@ -297,9 +361,16 @@ def run_case(case: Case, hosts: int, work: Path, delay_ms: float = 0.0,
         problems.insert(0, "no rounds.csv was written")
     if copy_problems:
         acted.notes.append("could not copy out: " + "; ".join(copy_problems))
-    record.update(actions=fed.actions, notes=acted.notes, **acted.extra, **m,
-                  delay_ms=delay_ms, problems=problems,
-                  passed=not problems, wall_s=round(time.monotonic() - started, 1))
+    record.update(
+        actions=fed.actions,
+        notes=acted.notes,
+        **acted.extra,
+        **m,
+        delay_ms=delay_ms,
+        problems=problems,
+        passed=not problems,
+        wall_s=round(time.monotonic() - started, 1),
+    )
     if not problems:
         return record
     record["driver_stderr_tail"] = fed.driver_tail(600)
@@ -311,8 +382,9 @@ def run_case(case: Case, hosts: int, work: Path, delay_ms: float = 0.0,
 NOT_WRITTEN = "round log line not written"
 
 
-def lines_not_written(work: Path, robots: list[str],
-                      host_of: Callable[[str], str]) -> dict[str, int]:
+def lines_not_written(
+    work: Path, robots: list[str], host_of: Callable[[str], str]
+) -> dict[str, int]:
     """Per robot host (its ``robot.log``, copied out to ``work/<host>``), the round log lines
     its node could not write anywhere: lost from the run's round log (only hosts with some)."""
     out = {}
@@ -341,8 +413,11 @@ def slowed(expect: Expectation, delay_ms: float, normal_gap_s: float | None) -> 
     (a round at that link's pace); unchanged without a delay."""
     if delay_ms <= 0 or not normal_gap_s:
         return expect
-    return dataclasses.replace(expect, recovery_bound_s=expect.recovery_bound_s + normal_gap_s,
-                               stall_bound_s=expect.stall_bound_s + normal_gap_s)
+    return dataclasses.replace(
+        expect,
+        recovery_bound_s=expect.recovery_bound_s + normal_gap_s,
+        stall_bound_s=expect.stall_bound_s + normal_gap_s,
+    )
 
 
 def _median(values: list[Any]) -> float | None:
@@ -350,17 +425,28 @@ def _median(values: list[Any]) -> float | None:
     return round(statistics.median(xs), 2) if xs else None
 
 
-def summarize(case: Case, runs: list[dict[str, Any]],
-              itinerary: str = "chain") -> dict[str, Any]:
+def summarize(case: Case, runs: list[dict[str, Any]], itinerary: str = "chain") -> dict[str, Any]:
     """The JSON object of one fault: its runs, their medians and the verdict."""
     return {
-        "fault": case.name, "itinerary": itinerary, "what": case.what,
+        "fault": case.name,
+        "itinerary": itinerary,
+        "what": case.what,
         "expectation": case.expect.text(),
-        "runs": len(runs), "passed_runs": sum(r["passed"] for r in runs),
+        "runs": len(runs),
+        "passed_runs": sum(r["passed"] for r in runs),
         "passed": all(r["passed"] for r in runs),
-        "median": {k: _median([r.get(k) for r in runs])
-                   for k in ("recovery_s", "longest_stall_s", "normal_gap_s", "rounds_done",
-                             "rounds_unverified", "longest_write_gap_s", "wall_s")},
+        "median": {
+            k: _median([r.get(k) for r in runs])
+            for k in (
+                "recovery_s",
+                "longest_stall_s",
+                "normal_gap_s",
+                "rounds_done",
+                "rounds_unverified",
+                "longest_write_gap_s",
+                "wall_s",
+            )
+        },
         "history_clean_runs": sum(bool((r.get("history") or {}).get("ok")) for r in runs),
         "rounds_planned": runs[0].get("rounds_planned") if runs else None,
         "tables_identical_runs": sum(bool(r.get("tables_identical")) for r in runs),
@@ -369,11 +455,17 @@ def summarize(case: Case, runs: list[dict[str, Any]],
     }
 
 
-def run(faults: list[str], runs: int = 3, hosts: int = 4, keep: Path | None = None,
-        on_fault: Callable[[dict[str, Any]], None] | None = None,
-        cases: dict[str, Case] | None = None, delay_ms: float = 0.0,
-        rounds: int | None = None,
-        itineraries: tuple[str, ...] = ("chain",)) -> list[dict[str, Any]]:
+def run(
+    faults: list[str],
+    runs: int = 3,
+    hosts: int = 4,
+    keep: Path | None = None,
+    on_fault: Callable[[dict[str, Any]], None] | None = None,
+    cases: dict[str, Case] | None = None,
+    delay_ms: float = 0.0,
+    rounds: int | None = None,
+    itineraries: tuple[str, ...] = ("chain",),
+) -> list[dict[str, Any]]:
     """Run each fault of ``faults`` ``runs`` times on ``hosts`` robot hosts, every link into
     a robot host ``delay_ms`` slow each way, for each itinerary of ``itineraries``, ``rounds``
     rounds (None: each case's own plan); one summary per fault and itinerary (see
@@ -393,17 +485,20 @@ def run(faults: list[str], runs: int = 3, hosts: int = 4, keep: Path | None = No
         raise ValueError(f"--rounds must be 5 to 200, got {rounds}")
     bad = [i for i in itineraries if i not in ITINERARIES]
     if bad or not itineraries:
-        raise ValueError(f"--itinerary must be among {', '.join(ITINERARIES)}, got "
-                         f"{' '.join(itineraries) or 'none'}")
+        raise ValueError(
+            f"--itinerary must be among {', '.join(ITINERARIES)}, got "
+            f"{' '.join(itineraries) or 'none'}"
+        )
     base = keep if keep is not None else Path(tempfile.mkdtemp(prefix="dfrl-faults-"))
     out = []
     try:
         for itinerary in itineraries:
             for name in faults:
                 tag = name if itinerary == "chain" else f"{name}-{itinerary}"
-                results = [run_case(cases[name], hosts, base / f"{tag}-{i}", delay_ms,
-                                    rounds, itinerary)
-                           for i in range(1, runs + 1)]
+                results = [
+                    run_case(cases[name], hosts, base / f"{tag}-{i}", delay_ms, rounds, itinerary)
+                    for i in range(1, runs + 1)
+                ]
                 for i, r in enumerate(results, 1):
                     r["run"] = i
                 out.append(summarize(cases[name], results, itinerary))

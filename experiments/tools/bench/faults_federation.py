@@ -14,6 +14,7 @@ No shared disk: the lab gives each host a private tmpfs over the run's folder ``
 files through :meth:`Federation.view` (the host's mount namespace, never a shared folder) and
 copies every host's folder out at the end (:meth:`Federation.copy_out`) for the judging.
 """
+
 from __future__ import annotations
 
 import json
@@ -68,8 +69,9 @@ def dfrl_argv(*words: str) -> list[str]:
     return [sys.executable, "-m", "dfrl", *words]
 
 
-def wait_until(cond: Callable[[], object], timeout_s: float, what: str,
-               poll_s: float = 0.05) -> object:
+def wait_until(
+    cond: Callable[[], object], timeout_s: float, what: str, poll_s: float = 0.05
+) -> object:
     """``cond()``'s first true value within ``timeout_s`` seconds, else FaultBenchError."""
     deadline = time.monotonic() + timeout_s
     while True:
@@ -113,12 +115,12 @@ class Federation:
         problems = []
         for h in self.lab.hosts:
             for src, dst in [(self.view(h, self.work / h), self.work / h)] + [
-                    (self.view(h, self.work / rel), self.work / h / "_foreign" / rel)
-                    for rel in self.foreign_files().get(h, [])]:
+                (self.view(h, self.work / rel), self.work / h / "_foreign" / rel)
+                for rel in self.foreign_files().get(h, [])
+            ]:
                 try:
                     if src.is_dir():
-                        shutil.copytree(src, dst, dirs_exist_ok=True,
-                                        ignore_dangling_symlinks=True)
+                        shutil.copytree(src, dst, dirs_exist_ok=True, ignore_dangling_symlinks=True)
                     elif src.is_file():
                         dst.parent.mkdir(parents=True, exist_ok=True)
                         shutil.copy2(src, dst)
@@ -138,7 +140,7 @@ class Federation:
             except OSError:
                 continue
             for top in tops:
-                for f in ([top] if top.is_file() else sorted(top.rglob("*"))):
+                for f in [top] if top.is_file() else sorted(top.rglob("*")):
                     if f.is_file() and len(found.setdefault(h, [])) < most:
                         found[h].append(str(f.relative_to(root)))
         return {h: fs for h, fs in found.items() if fs}
@@ -169,30 +171,50 @@ class Federation:
             # host's address (and dies with the host's other processes on a kill)
             bind = "127.0.0.1"
             self._start_link(h, cwd, mine)
-        argv = dfrl_argv("robot", "--host", bind, "--port", str(PORT), "--token-file",
-                         "dfrl.token", "--advertise", self.lab[h].address, "--workdir",
-                         "dfrl-robot")
+        argv = dfrl_argv(
+            "robot",
+            "--host",
+            bind,
+            "--port",
+            str(PORT),
+            "--token-file",
+            "dfrl.token",
+            "--advertise",
+            self.lab[h].address,
+            "--workdir",
+            "dfrl-robot",
+        )
         if self.plan.itinerary == "tree":
             # a tree's copies are clones: admit as many as a tree run's driver asks for
             argv += ["--clone-limit", str(self.plan.fanout * TREE_ROUNDS_PER_S * 60)]
         with open(log, "ab") as fh:
-            self.procs[robot] = self.lab[h].popen(argv, cwd=cwd, stdin=subprocess.DEVNULL,
-                                                  stdout=fh, stderr=subprocess.STDOUT)
+            self.procs[robot] = self.lab[h].popen(
+                argv, cwd=cwd, stdin=subprocess.DEVNULL, stdout=fh, stderr=subprocess.STDOUT
+            )
         return offset
 
     def _start_link(self, h: str, cwd: Path, mine: Path) -> None:
-        argv = [sys.executable, "-m", "dfrl.experiments.tools.bench.delay_link",
-                f"{self.lab[h].address}:{PORT}", f"127.0.0.1:{PORT}", f"{self.plan.delay_ms:g}"]
+        argv = [
+            sys.executable,
+            "-m",
+            "dfrl.experiments.tools.bench.delay_link",
+            f"{self.lab[h].address}:{PORT}",
+            f"127.0.0.1:{PORT}",
+            f"{self.plan.delay_ms:g}",
+        ]
         log = mine / "link.log"
         with open(log, "ab") as fh:
             offset = fh.tell()
-            proc = self.lab[h].popen(argv, cwd=cwd, stdin=subprocess.DEVNULL, stdout=fh,
-                                     stderr=subprocess.STDOUT)
+            proc = self.lab[h].popen(
+                argv, cwd=cwd, stdin=subprocess.DEVNULL, stdout=fh, stderr=subprocess.STDOUT
+            )
 
         def listening() -> bool:
             if proc.poll() is not None:
-                raise FaultBenchError(f"the delayed link of {h} exited {proc.returncode}: "
-                                      f"{log.read_bytes()[offset:][-800:].decode(errors='replace')}")
+                raise FaultBenchError(
+                    f"the delayed link of {h} exited {proc.returncode}: "
+                    f"{log.read_bytes()[offset:][-800:].decode(errors='replace')}"
+                )
             return LINK_LISTENING in log.read_bytes()[offset:].decode(errors="replace")
 
         wait_until(listening, 30.0, f"{h}'s delayed link to listen")
@@ -204,8 +226,10 @@ class Federation:
 
         def listening() -> bool:
             if proc.poll() is not None:
-                raise FaultBenchError(f"dfrl robot of {robot} exited {proc.returncode}: "
-                                      f"{log.read_bytes()[offset:][-1500:].decode(errors='replace')}")
+                raise FaultBenchError(
+                    f"dfrl robot of {robot} exited {proc.returncode}: "
+                    f"{log.read_bytes()[offset:][-1500:].decode(errors='replace')}"
+                )
             return LISTENING in log.read_bytes()[offset:].decode(errors="replace")
 
         wait_until(listening, timeout_s, f"{robot}'s host to listen")
@@ -245,13 +269,25 @@ class Federation:
 
     # -- the driver ------------------------------------------------------------------------
     def config(self) -> dict:
-        return {"name": self.name, "iterations": self.plan.iterations,
-                "respite": self.plan.respite, "mode": "sync", "rtf": self.plan.rtf,
-                "seed": self.plan.seed, "timeout_s": self.plan.timeout_s,
-                "itinerary": self.plan.itinerary, "fanout": self.plan.fanout,
-                "robots": [{"id": r, "arena": ARENAS[i % len(ARENAS)],
-                            "robot_host": f"{self.lab[self.host_of(r)].address}:{PORT}"}
-                           for i, r in enumerate(self.robots)]}
+        return {
+            "name": self.name,
+            "iterations": self.plan.iterations,
+            "respite": self.plan.respite,
+            "mode": "sync",
+            "rtf": self.plan.rtf,
+            "seed": self.plan.seed,
+            "timeout_s": self.plan.timeout_s,
+            "itinerary": self.plan.itinerary,
+            "fanout": self.plan.fanout,
+            "robots": [
+                {
+                    "id": r,
+                    "arena": ARENAS[i % len(ARENAS)],
+                    "robot_host": f"{self.lab[self.host_of(r)].address}:{PORT}",
+                }
+                for i, r in enumerate(self.robots)
+            ],
+        }
 
     def start_driver(self) -> None:
         drv = self.work / "driver"
@@ -263,7 +299,11 @@ class Federation:
         with open(mine / "driver.out", "wb") as out, open(mine / "driver.err", "wb") as err:
             self.driver = self.lab["driver"].popen(
                 dfrl_argv("run", "faults.json", "--token-file", "dfrl.token", "--out", "out"),
-                cwd=drv, stdin=subprocess.DEVNULL, stdout=out, stderr=err)
+                cwd=drv,
+                stdin=subprocess.DEVNULL,
+                stdout=out,
+                stderr=err,
+            )
         self.mark("driver started")
 
     def kill_driver(self) -> float:
@@ -294,21 +334,30 @@ class Federation:
 
     def dfrl_on_driver(self, *words: str, timeout_s: float = 180.0) -> subprocess.CompletedProcess:
         """``dfrl WORDS...`` run in the driver's host, from its folder (bounded)."""
-        return self.lab["driver"].run(dfrl_argv(*words), cwd=self.work / "driver",
-                                      timeout=timeout_s, capture_output=True, text=True)
+        return self.lab["driver"].run(
+            dfrl_argv(*words),
+            cwd=self.work / "driver",
+            timeout=timeout_s,
+            capture_output=True,
+            text=True,
+        )
 
     # -- what a case waits on --------------------------------------------------------------
     def logged_rounds(self) -> list[RoundRecord]:
         """The rounds the driver has logged so far (its live round log)."""
-        return list(read_rounds_log(self.view("driver", self.out / f"rounds_{AGENT}.log"),
-                                    AGENT).rounds)
+        return list(
+            read_rounds_log(self.view("driver", self.out / f"rounds_{AGENT}.log"), AGENT).rounds
+        )
 
     def wait_rounds(self, n: int, timeout_s: float = 120.0) -> RoundRecord:
         """Wait until ``n`` rounds are logged (the driver still running); the last one."""
+
         def enough() -> RoundRecord | None:
             if self.driver is not None and self.driver.poll() is not None:
-                raise FaultBenchError(f"the driver exited {self.driver.returncode} before "
-                                      f"round {n}: {self.driver_tail()}")
+                raise FaultBenchError(
+                    f"the driver exited {self.driver.returncode} before "
+                    f"round {n}: {self.driver_tail()}"
+                )
             rs = self.logged_rounds()
             return rs[-1] if len(rs) >= n else None
 
@@ -318,8 +367,9 @@ class Federation:
         """``robot``'s shares file on its host (the experiment's folder there is
         ``NAME-<time>-<pid>``), as this process reads it; None before it exists."""
         h = self.host_of(robot)
-        found = sorted(self.view(h, self.work / h / "dfrl-robot").glob(
-            f"{self.name}-*/shares_{robot}.csv"))
+        found = sorted(
+            self.view(h, self.work / h / "dfrl-robot").glob(f"{self.name}-*/shares_{robot}.csv")
+        )
         return found[-1] if found else None
 
     def shares(self, robot: str) -> int:

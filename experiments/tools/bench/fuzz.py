@@ -19,6 +19,7 @@ Every random choice comes from one ``random.Random(seed)``: a run is repeated wi
 must find the crash); ``native_check=False`` makes the node check bodies with the Prolog walk
 of ``fast_term_check.pl`` (the platform without its C library).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -41,8 +42,13 @@ HERE = Path(__file__).resolve().parent
 TOKEN = "4243"
 MAGIC = b"DFRL"
 INTERESTING = (0, 1, 2, 3, 4, 6, 8, 9, 11, 12, 13, 14, 15, 16, 17, 18, 19, 0x7F, 0x80, 0xFF)
-HUGE_VARINTS = (b"\xff" * 8 + b"\x7f", b"\x8f\xff\xff\xff\x7f", b"\x81\x80\x80\x80\x00",
-                b"\x84\x00", b"\xff\xff\x7f")
+HUGE_VARINTS = (
+    b"\xff" * 8 + b"\x7f",
+    b"\x8f\xff\xff\xff\x7f",
+    b"\x81\x80\x80\x80\x00",
+    b"\x84\x00",
+    b"\xff\xff\x7f",
+)
 
 
 @dataclass(frozen=True)
@@ -87,10 +93,17 @@ def frame(body: bytes, kind: bytes = b"B", length: int | None = None) -> bytes:
 
 def seeds() -> list[tuple[str, bytes]]:
     """The valid bodies (name, bytes) that ``fuzz_seeds.pl`` prints."""
-    out = subprocess.run([processes.swipl(), "-q", str(HERE / "fuzz_seeds.pl")],
-                         capture_output=True, text=True, timeout=60, check=True).stdout
-    return [(name, bytes.fromhex(hexed))
-            for name, hexed in (line.split() for line in out.splitlines() if line.strip())]
+    out = subprocess.run(
+        [processes.swipl(), "-q", str(HERE / "fuzz_seeds.pl")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    ).stdout
+    return [
+        (name, bytes.fromhex(hexed))
+        for name, hexed in (line.split() for line in out.splitlines() if line.strip())
+    ]
 
 
 def deep_body(rng: random.Random) -> tuple[bytes, str]:
@@ -127,32 +140,40 @@ def mutate(rng: random.Random, body: bytes) -> tuple[bytes, int | None, list[str
         elif op == "truncate" and n:
             keep = rng.randrange(n)
             if rng.random() < 0.5:
-                length = n                  # the header still says the whole body
+                length = n  # the header still says the whole body
             del b[keep:]
         elif op == "length":
-            length = rng.choice((max(0, n - 1), n + 1, n + rng.randrange(1, 100), 0,
-                                 rng.randrange(n + 1), 2**32 - 1, 33_554_432, 33_554_433))
+            length = rng.choice(
+                (
+                    max(0, n - 1),
+                    n + 1,
+                    n + rng.randrange(1, 100),
+                    0,
+                    rng.randrange(n + 1),
+                    2**32 - 1,
+                    33_554_432,
+                    33_554_433,
+                )
+            )
         elif op == "insert":
             b[i:i] = bytes(rng.randrange(256) for _ in range(rng.randrange(1, 9)))
         elif op == "delete" and n:
-            del b[i:i + rng.randrange(1, 9)]
+            del b[i : i + rng.randrange(1, 9)]
         elif op == "duplicate" and n:
             j = rng.randrange(n)
-            chunk = b[i:i + rng.randrange(1, 33)]
+            chunk = b[i : i + rng.randrange(1, 33)]
             b[j:j] = chunk
         elif op == "huge_count" and n:
             at = rng.choice((1, 2, 3, i)) if n > 3 else i
-            b[at:at + 1] = rng.choice(HUGE_VARINTS)
+            b[at : at + 1] = rng.choice(HUGE_VARINTS)
     return bytes(b), length, names
 
 
-MUTATIONS = ("bitflip", "byte", "truncate", "length", "insert", "delete", "duplicate",
-             "huge_count")
+MUTATIONS = ("bitflip", "byte", "truncate", "length", "insert", "delete", "duplicate", "huge_count")
 
 
 #: A goal run before the target starts: fast_term_check.pl's Prolog walk instead of its C one.
-PROLOG_CHECK = ("fast_term_check:retractall(native(_)), "
-                "assertz(fast_term_check:native(false))")
+PROLOG_CHECK = "fast_term_check:retractall(native(_)), assertz(fast_term_check:native(false))"
 
 
 class _Node:
@@ -161,10 +182,12 @@ class _Node:
     def __init__(self, checkout: Path, native_check: bool = True) -> None:
         script = checkout / "experiments" / "tools" / "bench" / "hostile_node.pl"
         goal = [] if native_check else ["-g", PROLOG_CHECK]
-        self.proc = processes.start([processes.swipl(), "-q", *goal, str(script), "target",
-                                     TOKEN],
-                                    stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                    stderr=subprocess.PIPE)
+        self.proc = processes.start(
+            [processes.swipl(), "-q", *goal, str(script), "target", TOKEN],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
         self.err: list[str] = []
         threading.Thread(target=self._drain_err, daemon=True).start()
         assert self.proc.stdout is not None
@@ -253,7 +276,7 @@ def _send_fuzzed(port: int, data: bytes, timeout: float) -> str:
             s.sendall(data)
             s.shutdown(socket.SHUT_WR)
         except OSError:
-            pass                            # the node may close before all was sent
+            pass  # the node may close before all was sent
         try:
             return _reply_kind(_read_frame(s))
         except (TimeoutError, socket.timeout):
@@ -332,10 +355,16 @@ def run(cfg: FuzzConfig = FuzzConfig(), progress: Any = None) -> FuzzResult:
                 if progress and k % 1000 == 0:
                     progress(k, result)
                 continue
-            crash = {"frame": k, "seed_frame": seed_name, "mutations": names,
-                     "length": len(data) - 12, "frame_hex": data[:4096].hex(),
-                     "node_alive": node.alive(), "exit_code": node.proc.poll(),
-                     "stderr": "".join(node.err[:6])[-1500:]}
+            crash = {
+                "frame": k,
+                "seed_frame": seed_name,
+                "mutations": names,
+                "length": len(data) - 12,
+                "frame_hex": data[:4096].hex(),
+                "node_alive": node.alive(),
+                "exit_code": node.proc.poll(),
+                "stderr": "".join(node.err[:6])[-1500:],
+            }
             result.crashes.append(crash)
             if result.first_crash_frame is None:
                 result.first_crash_frame = k

@@ -22,6 +22,7 @@ call). A probe costs one ``assertz/1`` (some 2 us), so the probed run's hop is a
 than the timed one; both medians are printed. Without the variable the probes are compiled to
 ``true``.
 """
+
 from __future__ import annotations
 
 import statistics
@@ -31,14 +32,32 @@ from pathlib import Path
 
 from dfrl.experiments.tools.bench import migrate
 
-SOURCE_POINTS = ("move_called", "prepared", "transfer_sent", "answer_read", "committed",
-                 "commit_sent")
+SOURCE_POINTS = (
+    "move_called",
+    "prepared",
+    "transfer_sent",
+    "answer_read",
+    "committed",
+    "commit_sent",
+)
 """The points the source process stamps in the agent's thread, in their order."""
 
-DEST_POINTS = ("frame_arrived (transfer)", "frame_read (transfer)", "checked", "installed",
-               "staged", "replied (transfer)", "frame_arrived (commit)", "frame_read (commit)",
-               "activated", "dispatched", "replied (commit)", "run_started", "bounds_entering",
-               "handler_called")
+DEST_POINTS = (
+    "frame_arrived (transfer)",
+    "frame_read (transfer)",
+    "checked",
+    "installed",
+    "staged",
+    "replied (transfer)",
+    "frame_arrived (commit)",
+    "frame_read (commit)",
+    "activated",
+    "dispatched",
+    "replied (commit)",
+    "run_started",
+    "bounds_entering",
+    "handler_called",
+)
 """The points the destination stamps, labelled (a frame's by its request: a hop may also see
 the hello and proof of a new connection, which are left out)."""
 
@@ -68,8 +87,9 @@ def read_stamps(probe_dir: str | Path, role: str) -> list[tuple[float, str]]:
     return sorted(stamps)
 
 
-def timeline(probe_dir: str | Path, warmup: int = 2,
-             roles: tuple[str, str] = ("home", "peer")) -> list[Point]:
+def timeline(
+    probe_dir: str | Path, warmup: int = 2, roles: tuple[str, str] = ("home", "peer")
+) -> list[Point]:
     """The median timeline of the hops probed into ``probe_dir`` (both processes' files of
     the benchmark's bounce), in the order of the medians, over the hops after the first
     ``warmup`` that passed every point of :data:`SOURCE_POINTS` and :data:`DEST_POINTS`.
@@ -80,20 +100,20 @@ def timeline(probe_dir: str | Path, warmup: int = 2,
     the agent has already moved on (the destination answers the commit beside the agent's
     start, so either may come first)."""
     files = {role: read_stamps(probe_dir, role) for role in roles}
-    starts = sorted((t, role) for role, stamps in files.items()
-                    for t, p in stamps if p == "move_called")
+    starts = sorted(
+        (t, role) for role, stamps in files.items() for t, p in stamps if p == "move_called"
+    )
     at: dict[tuple[str, str], list[float]] = {}
     for i, (t0, source) in enumerate(starts):
         if i < warmup:
             continue
-        t_end = next((t for t, r in starts[i + 1:] if r == source), float("inf"))
+        t_end = next((t for t, r in starts[i + 1 :] if r == source), float("inf"))
         dest = next(r for r in roles if r != source)
         hop = _one_hop(files[source], files[dest], t0, t_end)
         if hop is not None:
             for key, t in hop.items():
                 at.setdefault(key, []).append((t - t0) * 1000)
-    rows = sorted((statistics.median(v), side, point, len(v))
-                  for (side, point), v in at.items())
+    rows = sorted((statistics.median(v), side, point, len(v)) for (side, point), v in at.items())
     points: list[Point] = []
     before = 0.0
     for median, side, point, n in rows:
@@ -102,8 +122,9 @@ def timeline(probe_dir: str | Path, warmup: int = 2,
     return points
 
 
-def _one_hop(source: list[tuple[float, str]], dest: list[tuple[float, str]], t0: float,
-             t_end: float) -> dict[tuple[str, str], float] | None:
+def _one_hop(
+    source: list[tuple[float, str]], dest: list[tuple[float, str]], t0: float, t_end: float
+) -> dict[tuple[str, str], float] | None:
     """The points of the hop that started at ``t0``, looked for until ``t_end``: the source's
     own points and the destination's; None if one is missing."""
     hop: dict[tuple[str, str], float] = {}
@@ -112,11 +133,12 @@ def _one_hop(source: list[tuple[float, str]], dest: list[tuple[float, str]], t0:
             hop.setdefault(("source", p), t)
     window = [(t, p) for t, p in dest if t0 <= t < t_end]
     for i, (t, p) in enumerate(window):
-        label = _dest_label(p, window[i + 1:])
+        label = _dest_label(p, window[i + 1 :])
         if label is not None:
             hop.setdefault(("destination", label), t)
-    complete = (all(("source", p) in hop for p in SOURCE_POINTS)
-                and all(("destination", p) in hop for p in DEST_POINTS))
+    complete = all(("source", p) in hop for p in SOURCE_POINTS) and all(
+        ("destination", p) in hop for p in DEST_POINTS
+    )
     return hop if complete else None
 
 
@@ -126,14 +148,15 @@ def _dest_label(point: str, later: list[tuple[float, str]]) -> str | None:
     takes the request of the next frame read); those of other requests, and the points the
     same process stamps as the next hop's source, are left out."""
     if point == "frame_arrived":
-        kind = next((p[len("frame_read("):-1] for _, p in later if p.startswith("frame_read(")),
-                    None)
+        kind = next(
+            (p[len("frame_read(") : -1] for _, p in later if p.startswith("frame_read(")), None
+        )
         label = f"frame_arrived ({kind})"
     else:
         label = point
         for name in ("frame_read", "replied"):
             if point.startswith(name + "("):
-                label = f"{name} ({point[len(name) + 1:-1]})"
+                label = f"{name} ({point[len(name) + 1 : -1]})"
     return label if label in DEST_POINTS else None
 
 
@@ -146,12 +169,14 @@ class TimelineRun:
     points: list[Point]
 
 
-def measure(floats: int, hops: int, warmup: int = 2, payload: str = "packed",
-            tls: str | Path | None = None) -> TimelineRun:
+def measure(
+    floats: int, hops: int, warmup: int = 2, payload: str = "packed", tls: str | Path | None = None
+) -> TimelineRun:
     """Run the benchmark with the probes compiled in (no naive hop) and read the timeline."""
     with tempfile.TemporaryDirectory(prefix="dfrl-probe-") as folder:
-        result = migrate.run(floats, hops, warmup, naive=False, payload=payload, tls=tls,
-                             probe_dir=folder)
+        result = migrate.run(
+            floats, hops, warmup, naive=False, payload=payload, tls=tls, probe_dir=folder
+        )
         points = timeline(folder, warmup)
     if not points:
         raise RuntimeError("the probed run left no complete hop (were the probes compiled in?)")
@@ -160,8 +185,10 @@ def measure(floats: int, hops: int, warmup: int = 2, payload: str = "packed",
 
 def table(run: TimelineRun) -> str:
     """The timeline as text, one point a line."""
-    lines = [f"  timeline of a hop with {run.floats} floats (probed run, median hop "
-             f"{run.median_ms:.3f} ms): point, side, ms from move_called, step"]
+    lines = [
+        f"  timeline of a hop with {run.floats} floats (probed run, median hop "
+        f"{run.median_ms:.3f} ms): point, side, ms from move_called, step"
+    ]
     for p in run.points:
         lines.append(f"    {p.point:28} {p.side:12} {p.at_ms:8.3f}  +{p.step_ms:7.3f}")
     return "\n".join(lines)

@@ -32,6 +32,7 @@ phase (the peak), and its worker pools (``worker_pool:pool_statistics/2``, read 
 target's ``probe.``); what became of the attack's connections or agents; the agents the
 target hosts at the end. When a phase passes: :mod:`hostile_verdict`.
 """
+
 from __future__ import annotations
 
 import statistics
@@ -44,15 +45,18 @@ from typing import Any
 
 from dfrl.experiments.tools.bench import hostile_verdict as verdict
 from dfrl.experiments.tools.bench.hostile_attacks import FRAME_KINDS, sources
-from dfrl.experiments.tools.bench.hostile_auth_attacks import (AUTH_ATTACKS, AuthAttacker,
-                                                               escape_results)
+from dfrl.experiments.tools.bench.hostile_auth_attacks import (
+    AUTH_ATTACKS,
+    AuthAttacker,
+    escape_results,
+)
 from dfrl.experiments.tools.bench.hostile_child import ChildAttacker
 from dfrl.experiments.tools.bench.hostile_measure import Sampler, hop_figures, proc_status
 from dfrl.experiments.tools.bench.hostile_nodes import HostileNode
 from dfrl.experiments.tools.certs import init_ca, make_node
 
 TOKEN = 4243
-IDLE_MARGIN_S = 1.0      # after the pools' idle time, before threads are counted
+IDLE_MARGIN_S = 1.0  # after the pools' idle time, before threads are counted
 CPU_WINDOW_S = 1.0
 ATTACKS = ("slowloris", "flood", "frames", *AUTH_ATTACKS)
 
@@ -117,9 +121,9 @@ class _Bench:
     marker_dir: Path
     peer: HostileNode
     quiet: dict[str, Any] | None = None
-    nonpool: int = 0                     # threads of the quiet target outside its pools
+    nonpool: int = 0  # threads of the quiet target outside its pools
     limits: dict[str, int] = field(default_factory=dict)
-    pool_idle_s: float = 30.0            # the target's dfrl_pool_idle
+    pool_idle_s: float = 30.0  # the target's dfrl_pool_idle
 
 
 def _outside_pools(b: _Bench, samples: int = 3) -> int:
@@ -139,17 +143,33 @@ def _attacker(name: str, b: _Bench) -> Attacker:
     assert port is not None
     limit = cfg.duration_s + 60
     if name in ("slowloris", "flood", "frames"):
-        return ChildAttacker({
-            "kind": name, "port": port, "max_s": limit, "sources": cfg.sources,
-            "n": {"slowloris": cfg.slowloris, "flood": cfg.flood, "frames": cfg.frames}[name],
-            "reconnect_s": cfg.reconnect_s, "frame_size": cfg.frame_size,
-            "pause_s": cfg.frame_pause_s, "kinds": list(cfg.frame_kinds)})
+        return ChildAttacker(
+            {
+                "kind": name,
+                "port": port,
+                "max_s": limit,
+                "sources": cfg.sources,
+                "n": {"slowloris": cfg.slowloris, "flood": cfg.flood, "frames": cfg.frames}[name],
+                "reconnect_s": cfg.reconnect_s,
+                "frame_size": cfg.frame_size,
+                "pause_s": cfg.frame_pause_s,
+                "kinds": list(cfg.frame_kinds),
+            }
+        )
     if name == "authframes":
         max_frame = int(b.target.command("probe")["max_frame_size"])
         big = max_frame - 65536 if cfg.auth_big_mb == 0 else int(cfg.auth_big_mb * 2**20)
-        return ChildAttacker({"kind": name, "port": port, "max_s": limit, "token": TOKEN,
-                              "big": cfg.auth_big, "big_size": max(64, big),
-                              "flood": cfg.auth_flood})
+        return ChildAttacker(
+            {
+                "kind": name,
+                "port": port,
+                "max_s": limit,
+                "token": TOKEN,
+                "big": cfg.auth_big,
+                "big_size": max(64, big),
+                "flood": cfg.auth_flood,
+            }
+        )
     options: dict[str, Any] = {"duration_s": cfg.duration_s}
     if b.cfg.trust_attacker:
         options["tls"] = b.marker_dir / "pki" / "attacker"
@@ -172,8 +192,7 @@ def _trust_args(tmp: Path) -> tuple[list[str], list[str]]:
     return [str(dirs["target"]), "attacker"], [str(dirs["peer"])]
 
 
-def run(cfg: HostileConfig = HostileConfig(),
-        attacks: tuple[str, ...] = ATTACKS) -> dict[str, Any]:
+def run(cfg: HostileConfig = HostileConfig(), attacks: tuple[str, ...] = ATTACKS) -> dict[str, Any]:
     """Run the quiet phase and each attack in turn; return the figures (see the module doc).
 
     Raises
@@ -193,9 +212,15 @@ def run(cfg: HostileConfig = HostileConfig(),
     events: list[tuple] = []
     lock = threading.Lock()
     idle = cfg.pool_idle_s or 30.0
-    budget = (len(attacks) + 1) * (cfg.duration_s + 10 + max(
-        cfg.settle_s + CPU_WINDOW_S, idle + IDLE_MARGIN_S + cfg.threads_wait_s,
-        verdict.ACCEPT_MAX_S + 1)) + 30
+    budget = (len(attacks) + 1) * (
+        cfg.duration_s
+        + 10
+        + max(
+            cfg.settle_s + CPU_WINDOW_S,
+            idle + IDLE_MARGIN_S + cfg.threads_wait_s,
+            verdict.ACCEPT_MAX_S + 1,
+        )
+    ) + 30
     with tempfile.TemporaryDirectory(prefix="dfrl-hostile-") as tmp_name:
         tmp = Path(tmp_name)
         (tmp / "markers").mkdir()
@@ -205,14 +230,27 @@ def run(cfg: HostileConfig = HostileConfig(),
         peer = None
         try:
             assert target.port is not None
-            peer = HostileNode(["peer", str(TOKEN), str(target.port), str(cfg.floats),
-                          str(cfg.pause_ms), str(int(budget)), "true" if cfg.fresh else "false",
-                          *peer_extra], events, lock)
-            time.sleep(1.0)                                   # warm-up hops, not counted
+            peer = HostileNode(
+                [
+                    "peer",
+                    str(TOKEN),
+                    str(target.port),
+                    str(cfg.floats),
+                    str(cfg.pause_ms),
+                    str(int(budget)),
+                    "true" if cfg.fresh else "false",
+                    *peer_extra,
+                ],
+                events,
+                lock,
+            )
+            time.sleep(1.0)  # warm-up hops, not counted
             b = _Bench(cfg, target, events, lock, tmp, peer)
             probe = target.command("probe")
-            b.limits = {k: int(probe[k]) for k in
-                        ("max_connections", "max_agents", "connection_workers_max")}
+            b.limits = {
+                k: int(probe[k])
+                for k in ("max_connections", "max_agents", "connection_workers_max")
+            }
             b.pool_idle_s = float(probe["pool_idle_s"])
             b.nonpool = _outside_pools(b)
             phases = [_phase("quiet", b)]
@@ -220,25 +258,34 @@ def run(cfg: HostileConfig = HostileConfig(),
             for name in attacks:
                 phases.append(_phase(name, b))
                 if target.proc.poll() is not None:
-                    raise RuntimeError(f"the target node died in phase {name}: "
-                                       f"{''.join(target.stderr)[-2000:]}")
+                    raise RuntimeError(
+                        f"the target node died in phase {name}: {''.join(target.stderr)[-2000:]}"
+                    )
         finally:
             if peer is not None:
                 peer.close()
             target.close()
     pool_idle, limits = b.pool_idle_s, b.limits
-    return {"benchmark": "hostile", "config": asdict(cfg),
-            "targets": {"p90_ratio_max": verdict.P90_RATIO_MAX,
-                        "rss_delta_max_mb": verdict.RSS_DELTA_MAX_MB,
-                        "accept_max_s": verdict.ACCEPT_MAX_S, "keep_warm": verdict.KEEP_WARM,
-                        "settled_slack": verdict.SETTLED_SLACK,
-                        "peak_slack": verdict.PEAK_SLACK,
-                        "cpu_margin_cores": verdict.CPU_MARGIN,
-                        "target_pool_idle_s": pool_idle, "target_limits": limits,
-                        "threads": "peak < thread_ceiling; after the pools' idle time, "
-                                   "threads <= settled_bound (see the module doc)"},
-            "phases": phases, "pass": all(p["pass"] for p in phases),
-            "wall_s": round(time.monotonic() - started, 1)}
+    return {
+        "benchmark": "hostile",
+        "config": asdict(cfg),
+        "targets": {
+            "p90_ratio_max": verdict.P90_RATIO_MAX,
+            "rss_delta_max_mb": verdict.RSS_DELTA_MAX_MB,
+            "accept_max_s": verdict.ACCEPT_MAX_S,
+            "keep_warm": verdict.KEEP_WARM,
+            "settled_slack": verdict.SETTLED_SLACK,
+            "peak_slack": verdict.PEAK_SLACK,
+            "cpu_margin_cores": verdict.CPU_MARGIN,
+            "target_pool_idle_s": pool_idle,
+            "target_limits": limits,
+            "threads": "peak < thread_ceiling; after the pools' idle time, "
+            "threads <= settled_bound (see the module doc)",
+        },
+        "phases": phases,
+        "pass": all(p["pass"] for p in phases),
+        "wall_s": round(time.monotonic() - started, 1),
+    }
 
 
 def _phase(name: str, b: _Bench) -> dict[str, Any]:
@@ -262,13 +309,13 @@ def _phase(name: str, b: _Bench) -> dict[str, Any]:
             if attacker is not None:
                 attack = attacker.stop()
         finally:
-            t_end = time.time()                 # the attacker stopped and is gone
+            t_end = time.time()  # the attacker stopped and is gone
             time.sleep(cfg.settle_s)
     after = proc_status(pid)
     time.sleep(CPU_WINDOW_S)
     cpu_settled = (proc_status(pid)["cpu_s"] - after["cpu_s"]) / CPU_WINDOW_S
     threads = _threads_settled(pid, b, t_end)
-    settled_rss = proc_status(pid)["rss_mb"]   # RSS once the attack's workers have gone idle
+    settled_rss = proc_status(pid)["rss_mb"]  # RSS once the attack's workers have gone idle
     accept_s = _accepted_after(b, t_end)
     sampler.stop()
     probe = b.target.command("probe")
@@ -280,28 +327,43 @@ def _phase(name: str, b: _Bench) -> dict[str, Any]:
     elif attack is not None and "escapes" in attack:
         attack.pop("escapes")
     purged = b.target.command("purge")["agents"] if name in AUTH_ATTACKS else 0
-    lost = [line.strip()[:300] for line in b.peer.stderr[peer_lines_before:]
-            if "hostile_bencher" in line]
+    lost = [
+        line.strip()[:300]
+        for line in b.peer.stderr[peer_lines_before:]
+        if "hostile_bencher" in line
+    ]
     relaunched = bool(lost) and b.peer.command("relaunch")["launched"]
     cpu_rate = (after["cpu_s"] - before["cpu_s"]) / max(1e-9, t_end - t0 + cfg.settle_s)
-    threads |= {"before": int(before["threads"]), "after_settle": int(after["threads"]),
-                "peak": sampler.peak_threads,
-                "peak_ceiling": verdict.thread_ceiling(b.nonpool, b.limits),
-                "quiet_outside_pools": b.nonpool}
+    threads |= {
+        "before": int(before["threads"]),
+        "after_settle": int(after["threads"]),
+        "peak": sampler.peak_threads,
+        "peak_ceiling": verdict.thread_ceiling(b.nonpool, b.limits),
+        "quiet_outside_pools": b.nonpool,
+    }
     phase = {
-        "phase": name, "seconds": round(t1 - t0, 2), "hops": hops,
-        "p90_ratio": verdict.p90_ratio(hops, b.quiet), "accepted_after_s": accept_s,
-        "rss_mb": {"before": round(before["rss_mb"], 1), "after": round(settled_rss, 1),
-                   "after_settle_s": round(after["rss_mb"], 1),
-                   "peak": round(max(sampler.peak_rss, after["rss_mb"], settled_rss), 1),
-                   "delta": round(settled_rss - before["rss_mb"], 1)},
+        "phase": name,
+        "seconds": round(t1 - t0, 2),
+        "hops": hops,
+        "p90_ratio": verdict.p90_ratio(hops, b.quiet),
+        "accepted_after_s": accept_s,
+        "rss_mb": {
+            "before": round(before["rss_mb"], 1),
+            "after": round(settled_rss, 1),
+            "after_settle_s": round(after["rss_mb"], 1),
+            "peak": round(max(sampler.peak_rss, after["rss_mb"], settled_rss), 1),
+            "delta": round(settled_rss - before["rss_mb"], 1),
+        },
         "threads": threads,
         "target_cpu_s": round(after["cpu_s"] - before["cpu_s"], 2),
         "cpu_cores": {"phase": round(cpu_rate, 3), "settled": round(cpu_settled, 3)},
-        "agents_at_end": probe["agents"], "agents_purged": purged,
+        "agents_at_end": probe["agents"],
+        "agents_purged": purged,
         "target_other_lines": b.target.other_lines - lines_before,
-        "attack": attack, "escapes": escapes,
-        "peer_agent_stopped": lost, "peer_agent_relaunched": relaunched,
+        "attack": attack,
+        "escapes": escapes,
+        "peer_agent_stopped": lost,
+        "peer_agent_relaunched": relaunched,
     }
     why = verdict.misses(phase, b.quiet)
     return phase | {"pass": not why, "why": why}
@@ -321,8 +383,12 @@ def _threads_settled(pid: int, b: _Bench, t_end: float) -> dict[str, Any]:
             break
         time.sleep(0.5)
     pools = b.target.command("probe")["pools"]
-    return {"settled": n, "settled_bound": bound, "settled_after_s": round(time.time() - t_end, 1),
-            "pools_settled": pools}
+    return {
+        "settled": n,
+        "settled_bound": bound,
+        "settled_after_s": round(time.time() - t_end, 1),
+        "pools_settled": pools,
+    }
 
 
 def _accepted_after(b: _Bench, t_end: float) -> float | None:
@@ -331,8 +397,11 @@ def _accepted_after(b: _Bench, t_end: float) -> float | None:
     port = str(b.target.port)
     while True:
         with b.lock:
-            arrivals = [float(e[2]) for e in b.events
-                        if e[0] == "HOP" and e[4] == port and float(e[2]) >= t_end]
+            arrivals = [
+                float(e[2])
+                for e in b.events
+                if e[0] == "HOP" and e[4] == port and float(e[2]) >= t_end
+            ]
         if arrivals:
             return round(min(arrivals) - t_end, 2)
         if time.time() >= t_end + verdict.ACCEPT_MAX_S + 1:

@@ -14,6 +14,7 @@ own deadline. Each counts what became of its connections:
 ``held_at_end``
     still open when the attack was stopped (then closed by the attacker).
 """
+
 from __future__ import annotations
 
 import errno
@@ -28,9 +29,8 @@ MAGIC = b"DFRL"
 VERSION = 1
 HEADER = 12
 OUTCOMES = ("deadline", "refused", "rejected", "closed", "reset")
-FRAME_KINDS = ("chain_big", "nested_big", "binary_big", "chain_limit", "nested_limit",
-               "call_limit")
-PRE_AUTH_LIMIT = 4096           # the node's max_text_frame_size default (node.pl), tested
+FRAME_KINDS = ("chain_big", "nested_big", "binary_big", "chain_limit", "nested_limit", "call_limit")
+PRE_AUTH_LIMIT = 4096  # the node's max_text_frame_size default (node.pl), tested
 
 
 def frame_header(length: int, kind: bytes = b"T") -> bytes:
@@ -51,8 +51,8 @@ def outcome_of(received: bytes) -> str:
     rest = received
     while len(rest) >= HEADER and rest[:4] == MAGIC:
         (n,) = struct.unpack(">I", rest[8:HEADER])
-        frames.append(rest[HEADER:HEADER + n])
-        rest = rest[HEADER + n:]
+        frames.append(rest[HEADER : HEADER + n])
+        rest = rest[HEADER + n :]
     errors = [f for f in frames if f.startswith(b"error(")]
     if not errors:
         return "closed"
@@ -84,10 +84,16 @@ class Counts:
 
     def as_dict(self) -> dict:
         closed = sum(self.outcomes.values())
-        return {"attempted": self.attempted, "opened": self.opened,
-                "connect_failed": self.connect_failed, "closed_by_node": closed,
-                **self.outcomes, "held_at_end": self.held_at_end,
-                "bytes_sent": self.bytes_sent, "reject_reasons": self.reasons}
+        return {
+            "attempted": self.attempted,
+            "opened": self.opened,
+            "connect_failed": self.connect_failed,
+            "closed_by_node": closed,
+            **self.outcomes,
+            "held_at_end": self.held_at_end,
+            "bytes_sent": self.bytes_sent,
+            "reject_reasons": self.reasons,
+        }
 
 
 def _reason(received: bytes) -> str:
@@ -103,8 +109,8 @@ class _Slot:
 
     def __init__(self) -> None:
         self.sock: socket.socket | None = None
-        self.state = "idle"          # idle | connecting | open
-        self.due = 0.0               # next connect (idle) or next byte (open)
+        self.state = "idle"  # idle | connecting | open
+        self.due = 0.0  # next connect (idle) or next byte (open)
         self.received = b""
         self.sent = 0
 
@@ -117,9 +123,16 @@ class Swarm(threading.Thread):
     limit, one byte every ``trickle_s``. One thread, one selector, non-blocking sockets.
     """
 
-    def __init__(self, port: int, n: int, srcs: list[str], trickle: bool,
-                 reconnect_s: float = 1.0, trickle_s: float = 1.0,
-                 max_s: float = 600.0) -> None:
+    def __init__(
+        self,
+        port: int,
+        n: int,
+        srcs: list[str],
+        trickle: bool,
+        reconnect_s: float = 1.0,
+        trickle_s: float = 1.0,
+        max_s: float = 600.0,
+    ) -> None:
         super().__init__(daemon=True, name="hostile-swarm")
         if n < 1:
             raise ValueError("a swarm needs at least one connection")
@@ -200,7 +213,7 @@ class Swarm(threading.Thread):
     def _send_byte(self, sel: selectors.BaseSelector, slot: _Slot, now: float) -> None:
         assert slot.sock is not None
         try:
-            slot.sock.send(self.payload[slot.sent % len(self.payload):][:1])
+            slot.sock.send(self.payload[slot.sent % len(self.payload) :][:1])
             slot.sent += 1
             self.counts.bytes_sent += 1
             slot.due = now + self.trickle_s
@@ -264,9 +277,16 @@ class FrameSenders:
     """``n`` threads, each sending hostile frames one connection at a time (``kinds`` in turn by
     thread), waiting for the node's answer or close, pausing ``pause_s``, and again."""
 
-    def __init__(self, port: int, n: int, size: int, srcs: list[str],
-                 pause_s: float = 0.25, max_s: float = 600.0,
-                 kinds: tuple[str, ...] = FRAME_KINDS) -> None:
+    def __init__(
+        self,
+        port: int,
+        n: int,
+        size: int,
+        srcs: list[str],
+        pause_s: float = 0.25,
+        max_s: float = 600.0,
+        kinds: tuple[str, ...] = FRAME_KINDS,
+    ) -> None:
         if n < 1 or size < 1 or not kinds:
             raise ValueError("frames >= 1 and frame size >= 1 are required")
         self.port, self.srcs, self.pause_s, self.max_s = port, srcs, pause_s, max_s
@@ -277,8 +297,10 @@ class FrameSenders:
         self.lock = threading.Lock()
         self.stopping = threading.Event()
         self.errors: list[str] = []
-        self.threads = [threading.Thread(target=self._loop, args=(i,), daemon=True,
-                                         name=f"hostile-frames-{i}") for i in range(n)]
+        self.threads = [
+            threading.Thread(target=self._loop, args=(i,), daemon=True, name=f"hostile-frames-{i}")
+            for i in range(n)
+        ]
 
     def start(self) -> None:
         for t in self.threads:
@@ -299,8 +321,9 @@ class FrameSenders:
         end = time.monotonic() + self.max_s
         try:
             while not self.stopping.is_set() and time.monotonic() < end:
-                outcome, received, sent, opened = self._one(self.srcs[i % len(self.srcs)],
-                                                            self.frames[kind])
+                outcome, received, sent, opened = self._one(
+                    self.srcs[i % len(self.srcs)], self.frames[kind]
+                )
                 with self.lock:
                     self.counts.attempted += 1
                     self.counts.opened += opened
@@ -318,8 +341,9 @@ class FrameSenders:
     def _one(self, src: str, data: bytes) -> tuple[str | None, bytes, int, int]:
         """Send one frame on a new connection; (outcome, bytes received, bytes sent, opened)."""
         try:
-            s = socket.create_connection(("127.0.0.1", self.port), timeout=5.0,
-                                         source_address=(src, 0))
+            s = socket.create_connection(
+                ("127.0.0.1", self.port), timeout=5.0, source_address=(src, 0)
+            )
         except OSError:
             return None, b"", 0, 0
         received, sent = b"", 0
@@ -328,7 +352,7 @@ class FrameSenders:
                 s.sendall(data)
                 sent = len(data)
             except OSError:
-                pass                     # the node stopped reading (refused at the header)
+                pass  # the node stopped reading (refused at the header)
             s.settimeout(10.0)
             deadline = time.monotonic() + 15.0
             try:

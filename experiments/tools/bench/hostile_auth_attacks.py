@@ -19,6 +19,7 @@ process (:class:`AuthFrames`, run by :mod:`hostile_child`).
 ``authframes`` text frames near the target's ``max_frame_size`` and a flood of small requests,
                on authenticated connections.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -37,8 +38,18 @@ from dfrl.experiments import processes
 from dfrl.experiments.tools.bench.hostile_attacks import MAGIC, HEADER, frame_header
 
 AUTH_SCRIPT = Path(__file__).resolve().parent / "hostile_auth_node.pl"
-AGENT_ATTACKS = ("loop", "memory", "clone", "assert", "log", "post", "catom", "gmp", "sleep",
-                 "idle")
+AGENT_ATTACKS = (
+    "loop",
+    "memory",
+    "clone",
+    "assert",
+    "log",
+    "post",
+    "catom",
+    "gmp",
+    "sleep",
+    "idle",
+)
 AUTH_ATTACKS = ("escapes", *AGENT_ATTACKS, "authframes")
 
 
@@ -53,8 +64,17 @@ class AuthAttacker:
         if attack not in ("escapes", *AGENT_ATTACKS):
             raise ValueError(f"unknown authenticated attack {attack!r}")
         self.attack = attack
-        self.argv = ["nice", "-n", "19", processes.swipl(), "-q", str(AUTH_SCRIPT), attack,
-                     str(token), str(port)]
+        self.argv = [
+            "nice",
+            "-n",
+            "19",
+            processes.swipl(),
+            "-q",
+            str(AUTH_SCRIPT),
+            attack,
+            str(token),
+            str(port),
+        ]
         self.argv += [f"--{k.replace('_', '-')}={v}" for k, v in options.items()]
         self.records: list[dict[str, Any]] = []
         self.stderr: list[str] = []
@@ -62,8 +82,9 @@ class AuthAttacker:
         self.reader: threading.Thread | None = None
 
     def start(self) -> None:
-        self.proc = processes.start(self.argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                    stderr=subprocess.PIPE)
+        self.proc = processes.start(
+            self.argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+        )
         self.reader = threading.Thread(target=self._read, daemon=True)
         self.reader.start()
         threading.Thread(target=self._read_err, daemon=True).start()
@@ -95,17 +116,25 @@ class AuthAttacker:
         self.reader.join(10)
         summary = next((r for r in self.records if r.get("event") == "summary"), None)
         if summary is None:
-            raise RuntimeError(f"attacker {self.attack} ended without a summary "
-                               f"(exit {self.proc.returncode}): {' | '.join(self.stderr)[-2000:]}")
+            raise RuntimeError(
+                f"attacker {self.attack} ended without a summary "
+                f"(exit {self.proc.returncode}): {' | '.join(self.stderr)[-2000:]}"
+            )
         refusals = [r["error"] for r in self.records if r.get("event") == "sent"]
-        return {"counts": summary["counts"], "heard": summary["heard"],
-                "refusal_examples": refusals[:3],
-                "escapes": [r for r in self.records if r.get("event") == "escape"]}
+        return {
+            "counts": summary["counts"],
+            "heard": summary["heard"],
+            "refusal_examples": refusals[:3],
+            "escapes": [r for r in self.records if r.get("event") == "escape"],
+        }
 
 
-def escape_results(attempts: list[dict[str, Any]], token: int,
-                   double_quotes_before: str | None,
-                   double_quotes_after: str | None) -> dict[str, Any]:
+def escape_results(
+    attempts: list[dict[str, Any]],
+    token: int,
+    double_quotes_before: str | None,
+    double_quotes_after: str | None,
+) -> dict[str, Any]:
     """Each escape attempt with ``ran`` decided, and the totals.
 
     An attempt ran if its marker file exists, it reported home what it looked for (the
@@ -127,15 +156,27 @@ def escape_results(attempts: list[dict[str, Any]], token: int,
                 ran = ran or carried == "atom"
         if a["name"] == "double_quotes" and double_quotes_after != double_quotes_before:
             ran = True
-        out.append({"name": a["name"], "via": a["via"], "verdict": a["verdict"], "ran": ran,
-                    "reported": a["reported"], "carried": carried,
-                    "leaked_token": leaked_token, "error": (a.get("error") or "")[:300]})
-    return {"attempts": out, "tried": len(out),
-            "refused": sum(a["verdict"] == "refused" for a in out),
-            "accepted": sum(a["verdict"] == "accepted" for a in out),
-            "stopped": sum(a["verdict"] == "stopped" for a in out),
-            "ran": sum(a["ran"] for a in out),
-            "ran_names": [f"{a['via']}:{a['name']}" for a in out if a["ran"]]}
+        out.append(
+            {
+                "name": a["name"],
+                "via": a["via"],
+                "verdict": a["verdict"],
+                "ran": ran,
+                "reported": a["reported"],
+                "carried": carried,
+                "leaked_token": leaked_token,
+                "error": (a.get("error") or "")[:300],
+            }
+        )
+    return {
+        "attempts": out,
+        "tried": len(out),
+        "refused": sum(a["verdict"] == "refused" for a in out),
+        "accepted": sum(a["verdict"] == "accepted" for a in out),
+        "stopped": sum(a["verdict"] == "stopped" for a in out),
+        "ran": sum(a["ran"] for a in out),
+        "ran_names": [f"{a['via']}:{a['name']}" for a in out if a["ran"]],
+    }
 
 
 def token_proof(token: int, nonce: str) -> str:
@@ -168,7 +209,7 @@ class _Conn:
                     raise ConnectionError("not a frame")
                 (n,) = struct.unpack(">I", self.buf[8:HEADER])
                 if len(self.buf) >= HEADER + n:
-                    body, self.buf = self.buf[HEADER:HEADER + n], self.buf[HEADER + n:]
+                    body, self.buf = self.buf[HEADER : HEADER + n], self.buf[HEADER + n :]
                     return body[:4096].decode("utf-8", "replace")
             chunk = self.sock.recv(65536)
             if not chunk:
@@ -198,8 +239,9 @@ class AuthFrames:
     long string) and ``flood`` threads sending small posts as fast as replies come, each on an
     authenticated connection (a new one when the node closes it)."""
 
-    def __init__(self, port: int, token: int, big: int, big_size: int, flood: int,
-                 max_s: float = 600.0) -> None:
+    def __init__(
+        self, port: int, token: int, big: int, big_size: int, flood: int, max_s: float = 600.0
+    ) -> None:
         if big < 0 or flood < 0 or big + flood < 1 or big_size < 64:
             raise ValueError("authframes needs big + flood >= 1 and a big size >= 64")
         self.port, self.token, self.max_s = port, token, max_s
@@ -209,13 +251,15 @@ class AuthFrames:
         self.lock = threading.Lock()
         self.counts: dict[str, dict[str, int]] = {
             k: {"connections": 0, "connect_failed": 0, "sent": 0, "bytes_sent": 0}
-            for k in ("big", "flood")}
+            for k in ("big", "flood")
+        }
         self.stopping = threading.Event()
         self.errors: list[str] = []
-        self.threads = ([threading.Thread(target=self._loop, args=("big",), daemon=True)
-                         for _ in range(big)] +
-                        [threading.Thread(target=self._loop, args=("flood",), daemon=True)
-                         for _ in range(flood)])
+        self.threads = [
+            threading.Thread(target=self._loop, args=("big",), daemon=True) for _ in range(big)
+        ] + [
+            threading.Thread(target=self._loop, args=("flood",), daemon=True) for _ in range(flood)
+        ]
 
     def start(self) -> None:
         for t in self.threads:
@@ -227,8 +271,11 @@ class AuthFrames:
             t.join(timeout=60)
         if any(t.is_alive() for t in self.threads):
             raise RuntimeError("authenticated frame senders did not stop within 60 s")
-        return {**self.counts, "big_frame_bytes": len(self.big_frame),
-                "sender_errors": self.errors[:3]}
+        return {
+            **self.counts,
+            "big_frame_bytes": len(self.big_frame),
+            "sender_errors": self.errors[:3],
+        }
 
     def _count(self, kind: str, key: str, n: int = 1) -> None:
         with self.lock:
@@ -262,4 +309,3 @@ class AuthFrames:
                 self.stopping.wait(0.2)
         if conn is not None:
             conn.close()
-

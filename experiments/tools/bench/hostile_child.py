@@ -9,6 +9,7 @@ process would compete with the nodes for the CPU at the same priority (and for t
 benchmark's GIL); a nice'd process leaves the CPU to the nodes, so that what is measured is the
 node under attack, not the machine. :class:`ChildAttacker` is the parent's side.
 """
+
 from __future__ import annotations
 
 import json
@@ -27,14 +28,28 @@ def build(spec: dict[str, Any]) -> Swarm | FrameSenders | AuthFrames:
     """The attacker that ``spec`` describes (see the module doc)."""
     kind, port, max_s = spec["kind"], spec["port"], spec["max_s"]
     if kind in ("slowloris", "flood"):
-        return Swarm(port, spec["n"], sources(spec["sources"]), trickle=kind == "slowloris",
-                     reconnect_s=spec["reconnect_s"], max_s=max_s)
+        return Swarm(
+            port,
+            spec["n"],
+            sources(spec["sources"]),
+            trickle=kind == "slowloris",
+            reconnect_s=spec["reconnect_s"],
+            max_s=max_s,
+        )
     if kind == "frames":
-        return FrameSenders(port, spec["n"], spec["frame_size"], sources(spec["sources"]),
-                            spec["pause_s"], max_s=max_s, kinds=tuple(spec["kinds"]))
+        return FrameSenders(
+            port,
+            spec["n"],
+            spec["frame_size"],
+            sources(spec["sources"]),
+            spec["pause_s"],
+            max_s=max_s,
+            kinds=tuple(spec["kinds"]),
+        )
     if kind == "authframes":
-        return AuthFrames(port, spec["token"], spec["big"], spec["big_size"], spec["flood"],
-                          max_s=max_s)
+        return AuthFrames(
+            port, spec["token"], spec["big"], spec["big_size"], spec["flood"], max_s=max_s
+        )
     raise ValueError(f"unknown attacker kind {kind!r}")
 
 
@@ -66,9 +81,16 @@ class ChildAttacker:
 
     def start(self) -> None:
         self.proc = processes.start(
-            [sys.executable, "-m", "dfrl.experiments.tools.bench.hostile_child",
-             json.dumps(self.spec)],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+            [
+                sys.executable,
+                "-m",
+                "dfrl.experiments.tools.bench.hostile_child",
+                json.dumps(self.spec),
+            ],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
         assert self.proc.stdout is not None
         first = self.proc.stdout.readline()
         if '"started"' not in first:
@@ -92,8 +114,10 @@ class ChildAttacker:
         lines = [json.loads(x) for x in box["out"].splitlines() if x.startswith("{")]
         result = next((x for x in lines if x["event"] in ("result", "error")), None)
         if result is None or result["event"] == "error":
-            raise RuntimeError(f"attacker {self.spec['kind']} failed: "
-                               f"{(result or {}).get('error', box['err'][-2000:])}")
+            raise RuntimeError(
+                f"attacker {self.spec['kind']} failed: "
+                f"{(result or {}).get('error', box['err'][-2000:])}"
+            )
         return result["result"]
 
 

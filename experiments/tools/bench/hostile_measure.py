@@ -1,4 +1,5 @@
 """What ``dfrl bench hostile`` measures of the target process and of the agent's hops."""
+
 from __future__ import annotations
 
 import os
@@ -42,17 +43,23 @@ class Sampler(threading.Thread):
         self.join(5)
 
 
-def hop_figures(events: list[tuple], t0: float, t1: float, until: float,
-                target_port: int) -> dict[str, Any]:
+def hop_figures(
+    events: list[tuple], t0: float, t1: float, until: float, target_port: int
+) -> dict[str, Any]:
     """Hops that departed in ``[t0, t1)``, their outcome known by ``until`` (event lines)."""
     departs = {(float(e[1]), e[2]) for e in events if e[0] == "DEPART" and t0 <= float(e[1]) < t1}
-    arrived = {(float(e[1]), e[3]): (float(e[2]) - float(e[1])) * 1000.0 for e in events
-               if e[0] == "HOP" and float(e[2]) <= until}
+    arrived = {
+        (float(e[1]), e[3]): (float(e[2]) - float(e[1])) * 1000.0
+        for e in events
+        if e[0] == "HOP" and float(e[2]) <= until
+    }
     failed = [e for e in events if e[0] == "FAIL" and (float(e[1]), e[3]) in departs]
     ms = [arrived[d] for d in departs if d in arrived]
     into = [arrived[d] for d in departs if d in arrived and int(d[1]) != target_port]
     fig: dict[str, Any] = {
-        "attempted": len(departs), "succeeded": len(ms), "failed": len(failed),
+        "attempted": len(departs),
+        "succeeded": len(ms),
+        "failed": len(failed),
         "unfinished": len(departs) - len(ms) - len(failed),
         "fail_examples": [" ".join(e[5:])[:300] for e in failed[:3]],
     }

@@ -4,6 +4,7 @@ Each prints ``PORT N`` once it listens, event lines of the peer's agent (``DEPAR
 ``FAIL``, ``DONE``: fields separated by spaces) and one JSON line in reply to each command read
 from its standard input (the target: ``probe.``, ``purge.``; the peer: ``relaunch.``).
 """
+
 from __future__ import annotations
 
 import json
@@ -32,11 +33,20 @@ class HostileNode:
         The node did not print its port within 20 s.
     """
 
-    def __init__(self, args: list[str], events: list[tuple], lock: threading.Lock,
-                 env: dict[str, str] | None = None) -> None:
-        self.proc = processes.start([processes.swipl(), "-q", str(SCRIPT), *args],
-                                    env={**os.environ, **(env or {})}, stdin=subprocess.PIPE,
-                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    def __init__(
+        self,
+        args: list[str],
+        events: list[tuple],
+        lock: threading.Lock,
+        env: dict[str, str] | None = None,
+    ) -> None:
+        self.proc = processes.start(
+            [processes.swipl(), "-q", str(SCRIPT), *args],
+            env={**os.environ, **(env or {})},
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
         self.events, self.lock = events, lock
         self.replies: queue.Queue[dict[str, Any]] = queue.Queue()
         self.other_lines = 0
@@ -67,7 +77,7 @@ class HostileNode:
                 except json.JSONDecodeError:
                     self.other_lines += 1
             else:
-                self.other_lines += 1           # e.g. a log flood's lines
+                self.other_lines += 1  # e.g. a log flood's lines
         self.ready.set()
 
     def command(self, name: str, timeout_s: float = 20.0) -> dict[str, Any]:

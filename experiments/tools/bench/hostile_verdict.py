@@ -27,32 +27,35 @@ A phase passes if
 * the settled CPU use is within ``CPU_MARGIN`` (cores) of the quiet phase's;
 * no escape ran.
 """
+
 from __future__ import annotations
 
 from typing import Any
 
 P90_RATIO_MAX = 10.0
 RSS_DELTA_MAX_MB = 50.0
-KEEP_WARM = 8            # worker_pool.pl's keep(8): the node's pools pass no keep option
-SETTLED_SLACK = 4        # the peer's hop in flight: a connection worker, its handler, a transient
-PEAK_SLACK = 8           # threads that exit while their replacement starts, between two samples
-ACCEPT_MAX_S = 20.0      # issue 16: an ordinary agent is accepted within 20 s
+KEEP_WARM = 8  # worker_pool.pl's keep(8): the node's pools pass no keep option
+SETTLED_SLACK = 4  # the peer's hop in flight: a connection worker, its handler, a transient
+PEAK_SLACK = 8  # threads that exit while their replacement starts, between two samples
+ACCEPT_MAX_S = 20.0  # issue 16: an ordinary agent is accepted within 20 s
 CPU_MARGIN = 0.25
 
 
 def thread_ceiling(nonpool: int, limits: dict[str, int]) -> int:
     """The most threads the node's limits allow (see the module doc): ``nonpool`` threads
     outside the pools, every pool at the most workers its limits let it need, ``PEAK_SLACK``."""
-    return (nonpool + limits["connection_workers_max"] + 2 * limits["max_agents"] + 2
-            + PEAK_SLACK)
+    return nonpool + limits["connection_workers_max"] + 2 * limits["max_agents"] + 2 + PEAK_SLACK
 
 
 def settled_bound(nonpool: int, limits: dict[str, int]) -> int:
     """The most threads of a settled node (see the module doc): ``nonpool`` threads outside the
     pools, ``KEEP_WARM`` idle workers in each pool (at most its maximum), ``SETTLED_SLACK``."""
-    pool_max = {"connections": limits["connection_workers_max"],
-                "agents": limits["max_agents"], "messages": limits["max_agents"],
-                "dfrl_bound_notices": 2}
+    pool_max = {
+        "connections": limits["connection_workers_max"],
+        "agents": limits["max_agents"],
+        "messages": limits["max_agents"],
+        "dfrl_bound_notices": 2,
+    }
     return nonpool + sum(min(KEEP_WARM, m) for m in pool_max.values()) + SETTLED_SLACK
 
 
@@ -84,11 +87,15 @@ def misses(p: dict[str, Any], quiet: dict[str, Any] | None) -> list[str]:
     if th["peak"] >= th["peak_ceiling"]:
         why.append(f"peak of {th['peak']} threads, ceiling {th['peak_ceiling']}")
     if th["settled_bound"] is not None and th["settled"] > th["settled_bound"]:
-        why.append(f"{th['settled']} threads {th['settled_after_s']} s after the attack, "
-                   f"bound {th['settled_bound']} (pools {_pool_sizes(th['pools_settled'])})")
+        why.append(
+            f"{th['settled']} threads {th['settled_after_s']} s after the attack, "
+            f"bound {th['settled_bound']} (pools {_pool_sizes(th['pools_settled'])})"
+        )
     if quiet is not None and cpu["settled"] > quiet["cpu_cores"]["phase"] + CPU_MARGIN:
-        why.append(f"CPU {cpu['settled']:.2f} cores after settling, quiet "
-                   f"{quiet['cpu_cores']['phase']:.2f} (limit +{CPU_MARGIN:g})")
+        why.append(
+            f"CPU {cpu['settled']:.2f} cores after settling, quiet "
+            f"{quiet['cpu_cores']['phase']:.2f} (limit +{CPU_MARGIN:g})"
+        )
     if p["escapes"] is not None and p["escapes"]["ran"]:
         why.append(f"{p['escapes']['ran']} escapes ran: {', '.join(p['escapes']['ran_names'])}")
     return why

@@ -23,6 +23,7 @@ With ``trace_dir``, both processes time the steps of every hand-over (see
 of an older commit), alternating in the same minutes: on a shared machine only such a
 comparison tells whether a change made the hop faster.
 """
+
 from __future__ import annotations
 
 import json
@@ -96,10 +97,19 @@ def percentile(values: list[float], q: float) -> float:
     return xs[lo] + (xs[hi] - xs[lo]) * (pos - lo)
 
 
-def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
-        timeout: float = 600, tls: str | Path | None = None, naive: bool = True,
-        trace_dir: str | Path | None = None, script: Path | None = None,
-        payload: str = "packed", probe_dir: str | Path | None = None) -> MigrationResult:
+def run(
+    floats: int,
+    hops: int,
+    warmup: int = 2,
+    token: int = 4242,
+    timeout: float = 600,
+    tls: str | Path | None = None,
+    naive: bool = True,
+    trace_dir: str | Path | None = None,
+    script: Path | None = None,
+    payload: str = "packed",
+    probe_dir: str | Path | None = None,
+) -> MigrationResult:
     """Measure ``hops`` hops (after ``warmup`` uncounted ones) with a payload of ``floats`` floats,
     ``payload`` ``packed`` or ``list`` (:data:`PAYLOADS`).
 
@@ -130,13 +140,14 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
     tls_args: list[str] = []
     if tls is not None:
         from dfrl.experiments.tls_folder import CertError, check_node_dir
+
         try:
             tls_args = [str(check_node_dir(tls).resolve())]
         except CertError as exc:
             raise ValueError(str(exc)) from exc
     swipl = processes.swipl()
     program = str(script if script is not None else SCRIPT)
-    env = env_with_tokens([token])            # the token in the environment, never in argv
+    env = env_with_tokens([token])  # the token in the environment, never in argv
     if trace_dir is not None:
         # step_trace.pl's variable; checkouts older than it read DFRL_HOP_TRACE
         env[STEP_TRACE_ENV] = env["DFRL_HOP_TRACE"] = str(Path(trace_dir).resolve())
@@ -148,8 +159,12 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
     else:
         env.pop(PROBE_ENV, None)
     naive_ms: list[float] | None = None
-    peer = processes.start([swipl, "-q", program, "peer", *tls_args],
-                           stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
+    peer = processes.start(
+        [swipl, "-q", program, "peer", *tls_args],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        env=env,
+    )
     try:
         assert peer.stdout is not None
         line = peer.stdout.readline()
@@ -158,17 +173,27 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
         words = line.split()
         port, naive_port = int(words[1]), int(words[3])
         home = processes.start(
-            [swipl, "-q", program, "home", str(port),
-             f"packed:{floats}" if payload == "packed" else str(floats),
-             str(hops + warmup), *tls_args],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+            [
+                swipl,
+                "-q",
+                program,
+                "home",
+                str(port),
+                f"packed:{floats}" if payload == "packed" else str(floats),
+                str(hops + warmup),
+                *tls_args,
+            ],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            env=env,
+        )
         try:
             out, err = _read_latencies(home, timeout)
         finally:
             _finish(home)
         if naive:
-            naive_ms = _naive_hops(swipl, program, env, naive_port, floats, hops + warmup,
-                                   timeout)
+            naive_ms = _naive_hops(swipl, program, env, naive_port, floats, hops + warmup, timeout)
             naive_ms = naive_ms[warmup:]
     finally:
         _finish(peer)
@@ -181,19 +206,31 @@ def run(floats: int, hops: int, warmup: int = 2, token: int = 4242,
     native_words = [] if native_line is None else native_line.split()[1:]
     native = None if native_line is None else native_words[:2] == ["true", "true"]
     # the library loaded (its word), and no connection refused by its checks (tls.pl warns)
-    tls_direct = (native_words[2] == "true" and TLS_DIRECT_REFUSED not in err
-                  if len(native_words) > 2 else None)
+    tls_direct = (
+        native_words[2] == "true" and TLS_DIRECT_REFUSED not in err
+        if len(native_words) > 2
+        else None
+    )
     cpu_ms = None if stamps is None else cpu_per_hop(stamps, warmup)
     median = statistics.median(ms)
     naive_median = statistics.median(naive_ms) if naive_ms else None
     return MigrationResult(
-        floats=floats, hops=len(ms), warmup=warmup,
-        median_ms=median, p10_ms=percentile(ms, 0.1), p90_ms=percentile(ms, 0.9),
-        min_ms=min(ms), max_ms=max(ms), mean_ms=statistics.fmean(ms),
-        payload_bytes=10 * floats + 1, payload=payload,
+        floats=floats,
+        hops=len(ms),
+        warmup=warmup,
+        median_ms=median,
+        p10_ms=percentile(ms, 0.1),
+        p90_ms=percentile(ms, 0.9),
+        min_ms=min(ms),
+        max_ms=max(ms),
+        mean_ms=statistics.fmean(ms),
+        payload_bytes=10 * floats + 1,
+        payload=payload,
         naive_median_ms=naive_median,
         naive_ratio=median / naive_median if naive_median else None,
-        cpu_ms_per_hop=cpu_ms, native=native, tls_direct=tls_direct,
+        cpu_ms_per_hop=cpu_ms,
+        native=native,
+        tls_direct=tls_direct,
     )
 
 
@@ -206,8 +243,10 @@ def _hop_figures(out: str) -> tuple[list[float], list[list[float]] | None] | Non
     old = next((l for l in lines if l.startswith("LATENCIES_MS")), None)
     if old is not None:
         cpu = next((l for l in lines if l.startswith("CPU_S")), None)
-        return (json.loads(old.split(" ", 1)[1]),
-                None if cpu is None else json.loads(cpu.split(" ", 1)[1]))
+        return (
+            json.loads(old.split(" ", 1)[1]),
+            None if cpu is None else json.loads(cpu.split(" ", 1)[1]),
+        )
     if "ARRIVALS_END" not in lines:
         return None
     ms: list[float] = []
@@ -255,13 +294,25 @@ def _finish(proc: subprocess.Popen) -> None:
     processes.wait_or_stop(proc, timeout_s=10)
 
 
-def _naive_hops(swipl: str, program: str, env: dict[str, str], naive_port: int, floats: int,
-                hops: int, timeout: float) -> list[float]:
+def _naive_hops(
+    swipl: str,
+    program: str,
+    env: dict[str, str],
+    naive_port: int,
+    floats: int,
+    hops: int,
+    timeout: float,
+) -> list[float]:
     """The naive text hop's figures (ms), ``hops`` of them, from the ``naive`` mode of
     ``program`` (``env`` carries the token)."""
     done = subprocess.run(
         [swipl, "-q", program, "naive", str(naive_port), str(floats), str(hops)],
-        stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=timeout, env=env)
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=env,
+    )
     line = next((l for l in done.stdout.splitlines() if l.startswith("NAIVE_MS")), None)
     if line is None:
         raise RuntimeError(f"naive hop failed:\n{done.stdout}\n{done.stderr}")
@@ -299,14 +350,21 @@ def phase_breakdown(trace_dir: str | Path, warmup: int = 2) -> list[Phase]:
         for t0, t1, step, process in steps:
             if start[0] <= t0 < end:
                 side = "source" if process == start[3] else "destination"
-                per.setdefault((step, side), []).append(((t1 - t0) * 1000,
-                                                         (t0 - start[0]) * 1000))
+                per.setdefault((step, side), []).append(((t1 - t0) * 1000, (t0 - start[0]) * 1000))
                 if step == "agent_run" and process != start[3]:
                     break
     hops = len(exports) - warmup
-    phases = [Phase(step, side, len(v), statistics.median(d for d, _ in v),
-                    statistics.median(s for _, s in v))
-              for (step, side), v in per.items() if len(v) >= hops // 2]
+    phases = [
+        Phase(
+            step,
+            side,
+            len(v),
+            statistics.median(d for d, _ in v),
+            statistics.median(s for _, s in v),
+        )
+        for (step, side), v in per.items()
+        if len(v) >= hops // 2
+    ]
     return sorted(phases, key=lambda p: p.median_start_ms)
 
 
@@ -355,8 +413,10 @@ class RatioInterval:
     def __str__(self) -> str:
         if math.isnan(self.low):
             return f"{self.mean:.3f} (1 pair)"
-        return (f"{self.mean:.3f} [{self.low:.3f}, {self.high:.3f}] "
-                f"(95% interval, {len(self.ratios)} pairs)")
+        return (
+            f"{self.mean:.3f} [{self.low:.3f}, {self.high:.3f}] "
+            f"(95% interval, {len(self.ratios)} pairs)"
+        )
 
 
 def paired_ratio(a_ms: list[float], b_ms: list[float]) -> RatioInterval:
@@ -372,11 +432,15 @@ def paired_ratio(a_ms: list[float], b_ms: list[float]) -> RatioInterval:
         raise ValueError(f"paired runs need equal counts, got {len(a_ms)} and {len(b_ms)}")
     if not a_ms:
         raise ValueError("no pairs of runs")
-    if any(not (x > 0) for x in [*a_ms, *b_ms]):   # also NaN
+    if any(not (x > 0) for x in [*a_ms, *b_ms]):  # also NaN
         raise ValueError(f"run medians must be positive: {a_ms} against {b_ms}")
-    iv = paired([math.log(a) for a in a_ms], [math.log(b) for b in b_ms])   # half: NaN for 1
-    return RatioInterval([a / b for a, b in zip(a_ms, b_ms)], math.exp(iv.mean),
-                         math.exp(iv.mean - iv.half), math.exp(iv.mean + iv.half))
+    iv = paired([math.log(a) for a in a_ms], [math.log(b) for b in b_ms])  # half: NaN for 1
+    return RatioInterval(
+        [a / b for a, b in zip(a_ms, b_ms)],
+        math.exp(iv.mean),
+        math.exp(iv.mean - iv.half),
+        math.exp(iv.mean + iv.half),
+    )
 
 
 @dataclass
@@ -393,8 +457,14 @@ class TlsComparison:
     the cost moves with the machine; None for one round."""
 
 
-def compare_tls(floats: int, hops: int, tls: str | Path, warmup: int = 2,
-                rounds: int = 1, payload: str = "packed") -> TlsComparison:
+def compare_tls(
+    floats: int,
+    hops: int,
+    tls: str | Path,
+    warmup: int = 2,
+    rounds: int = 1,
+    payload: str = "packed",
+) -> TlsComparison:
     """Measure plaintext and TLS hops beside each other, ``rounds`` times each, alternating
     (so a load change on the machine hits both); the figures pool every round's hops."""
     if rounds < 1:
@@ -405,10 +475,14 @@ def compare_tls(floats: int, hops: int, tls: str | Path, warmup: int = 2,
         plain.append(run(floats, hops, warmup, payload=payload))
         secure.append(run(floats, hops, warmup, tls=tls, naive=False, payload=payload))
     p, t = _pool(plain), _pool(secure)
-    paired = (paired_ratio([r.median_ms for r in secure], [r.median_ms for r in plain])
-              if rounds > 1 else None)
-    return TlsComparison(floats=floats, plain=p, tls=t, tls_cost=t.median_ms / p.median_ms - 1,
-                         rounds=paired)
+    paired = (
+        paired_ratio([r.median_ms for r in secure], [r.median_ms for r in plain])
+        if rounds > 1
+        else None
+    )
+    return TlsComparison(
+        floats=floats, plain=p, tls=t, tls_cost=t.median_ms / p.median_ms - 1, rounds=paired
+    )
 
 
 def _all_or_none(flags: list[bool | None]) -> bool | None:
@@ -424,15 +498,23 @@ def _pool(results: list[MigrationResult]) -> MigrationResult:
     naive = [r.naive_median_ms for r in results if r.naive_median_ms is not None]
     naive_median = statistics.median(naive) if naive else None
     return MigrationResult(
-        floats=r0.floats, hops=sum(r.hops for r in results), warmup=r0.warmup,
-        median_ms=statistics.median(meds), p10_ms=statistics.median(r.p10_ms for r in results),
+        floats=r0.floats,
+        hops=sum(r.hops for r in results),
+        warmup=r0.warmup,
+        median_ms=statistics.median(meds),
+        p10_ms=statistics.median(r.p10_ms for r in results),
         p90_ms=statistics.median(r.p90_ms for r in results),
-        min_ms=min(r.min_ms for r in results), max_ms=max(r.max_ms for r in results),
-        mean_ms=statistics.fmean(r.mean_ms for r in results), payload_bytes=r0.payload_bytes,
-        payload=r0.payload, naive_median_ms=naive_median,
+        min_ms=min(r.min_ms for r in results),
+        max_ms=max(r.max_ms for r in results),
+        mean_ms=statistics.fmean(r.mean_ms for r in results),
+        payload_bytes=r0.payload_bytes,
+        payload=r0.payload,
+        naive_median_ms=naive_median,
         naive_ratio=statistics.median(meds) / naive_median if naive_median else None,
-        cpu_ms_per_hop=_median_or_none([r.cpu_ms_per_hop for r in results]), native=r0.native,
-        tls_direct=_all_or_none([r.tls_direct for r in results]))
+        cpu_ms_per_hop=_median_or_none([r.cpu_ms_per_hop for r in results]),
+        native=r0.native,
+        tls_direct=_all_or_none([r.tls_direct for r in results]),
+    )
 
 
 def _median_or_none(xs: list[float | None]) -> float | None:
@@ -480,13 +562,21 @@ def other_script(root: str | Path) -> Path:
     """
     script = Path(root).resolve() / "experiments" / "tools" / "bench" / "bench_migrate.pl"
     if not script.is_file():
-        raise ValueError(f"{root}: no experiments/tools/bench/bench_migrate.pl there "
-                         "(give the root of a dfrl checkout, e.g. a git worktree)")
+        raise ValueError(
+            f"{root}: no experiments/tools/bench/bench_migrate.pl there "
+            "(give the root of a dfrl checkout, e.g. a git worktree)"
+        )
     return script
 
 
-def compare_checkouts(floats: int, hops: int, other_root: str | Path, runs: int = 3,
-                      warmup: int = 2, payload: str = "packed") -> CheckoutComparison:
+def compare_checkouts(
+    floats: int,
+    hops: int,
+    other_root: str | Path,
+    runs: int = 3,
+    warmup: int = 2,
+    payload: str = "packed",
+) -> CheckoutComparison:
     """Time this checkout's hop and the one of the checkout at ``other_root`` (say a worktree
     of an older commit), ``runs`` runs each, alternating which goes first, so that a change in
     the machine's load hits both; each run times its own naive text hop too.
@@ -504,7 +594,7 @@ def compare_checkouts(floats: int, hops: int, other_root: str | Path, runs: int 
     theirs: list[MigrationResult] = []
     for i in range(runs):
         order = [(mine, None, payload), (theirs, other, other_payload)]
-        for results, script, kind in (order if i % 2 == 0 else order[::-1]):
+        for results, script, kind in order if i % 2 == 0 else order[::-1]:
             results.append(run(floats, hops, warmup, script=script, payload=kind))
 
     def ratio(rs: list[MigrationResult]) -> float | None:
@@ -514,12 +604,18 @@ def compare_checkouts(floats: int, hops: int, other_root: str | Path, runs: int 
     this_ms = [r.median_ms for r in mine]
     other_ms = [r.median_ms for r in theirs]
     return CheckoutComparison(
-        floats=floats, runs=runs, this_median_ms=statistics.median(this_ms),
+        floats=floats,
+        runs=runs,
+        this_median_ms=statistics.median(this_ms),
         other_median_ms=statistics.median(other_ms),
         this_over_other=statistics.median(this_ms) / statistics.median(other_ms),
-        this_naive_ratio=ratio(mine), other_naive_ratio=ratio(theirs),
-        this_runs_ms=this_ms, other_runs_ms=other_ms,
+        this_naive_ratio=ratio(mine),
+        other_naive_ratio=ratio(theirs),
+        this_runs_ms=this_ms,
+        other_runs_ms=other_ms,
         this_cpu_ms_per_hop=_median_or_none([r.cpu_ms_per_hop for r in mine]),
         other_cpu_ms_per_hop=_median_or_none([r.cpu_ms_per_hop for r in theirs]),
-        this_payload=payload, other_payload=other_payload,
-        pairs=paired_ratio(this_ms, other_ms) if runs > 1 else None)
+        this_payload=payload,
+        other_payload=other_payload,
+        pairs=paired_ratio(this_ms, other_ms) if runs > 1 else None,
+    )

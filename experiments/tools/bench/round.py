@@ -22,6 +22,7 @@ offers), learnt from :func:`bench_samples` samples; the agent carries parameter 
 (``"carries": "params"``, FedAvg weighted by samples), as in a ``dfrl run`` with such robots.
 Every robot saves what it holds at the end as ``params/<robot>.npy`` under ``out``.
 """
+
 from __future__ import annotations
 
 import math
@@ -62,9 +63,18 @@ def bench_layout(learner: str) -> list[tuple[str, tuple[int, ...]]]:
     return network_layout(TrainerConfig(algo=learner))
 
 
-def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int = 30,
-          warmup: int = 3, method: str = "average", out: Path | None = None,
-          hop_hops: int = 20, learner: str = "table", trace_dir: Path | None = None) -> dict:
+def bench(
+    entries: int = 20000,
+    actions: int = 4,
+    robots: int = 5,
+    rounds: int = 30,
+    warmup: int = 3,
+    method: str = "average",
+    out: Path | None = None,
+    hop_hops: int = 20,
+    learner: str = "table",
+    trace_dir: Path | None = None,
+) -> dict:
     """Run the benchmark; return its figures. ``hop_hops``: how many migrate hops to time
     beside the round (0: none; the hop fields are then None). ``learner``: one of
     :data:`LEARNERS`; for a function learner ``entries`` and ``actions`` are not used.
@@ -99,10 +109,14 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
     try:
         for i in range(robots):
             spec = RobotSpec(f"r{i + 1}", "r1")
-            bench_of: dict = ({"algo": learner, "bench_params": {"samples": bench_samples(i)}}
-                              if params else {"bench_table": [states, actions]})
-            cfg = RobotConfig(robot=spec.id, out_dir=str(out), seed=i, events=False,
-                              progress_every=0, **bench_of)
+            bench_of: dict = (
+                {"algo": learner, "bench_params": {"samples": bench_samples(i)}}
+                if params
+                else {"bench_table": [states, actions]}
+            )
+            cfg = RobotConfig(
+                robot=spec.id, out_dir=str(out), seed=i, events=False, progress_every=0, **bench_of
+            )
             module = TRACED_ROBOT if trace_dir is not None else "dfrl.experiments.robot_host"
             children.append(RobotChild(spec, cfg, out, module=module))
             with trace_env:
@@ -112,12 +126,22 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
         if log.exists():
             log.unlink()
         total = warmup + rounds
-        launch = {"name": "bench", "method": method, "rounds": total, "rest_s": 0.0,
-                  "rounds_log": str(log), "token": 1111, "timeout_s": 60.0,
-                  "itinerary": [{"host": a[0], "port": a[1], "robot": ch.spec.id}
-                                for ch in children if (a := ch.status().address)]}
+        launch = {
+            "name": "bench",
+            "method": method,
+            "rounds": total,
+            "rest_s": 0.0,
+            "rounds_log": str(log),
+            "token": 1111,
+            "timeout_s": 60.0,
+            "itinerary": [
+                {"host": a[0], "port": a[1], "robot": ch.spec.id}
+                for ch in children
+                if (a := ch.status().address)
+            ],
+        }
         if params:
-            launch["carries"] = "params"      # FedAvg of parameter vectors, as in dfrl run
+            launch["carries"] = "params"  # FedAvg of parameter vectors, as in dfrl run
         t0 = time.monotonic()
         with open_console(1111, out / "logs" / "console.err") as console:
             launch_agent(console, launch)
@@ -128,8 +152,9 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
             agent_log = read_rounds_log(log, "bench")
         wall = time.monotonic() - t0
         if agent_log.finished is None:
-            raise RuntimeError(f"the agent did not finish {total} rounds in time "
-                               f"({len(agent_log.rounds)} done)")
+            raise RuntimeError(
+                f"the agent did not finish {total} rounds in time ({len(agent_log.rounds)} done)"
+            )
     finally:
         for ch in children:
             ch.request_stop()
@@ -142,30 +167,54 @@ def bench(entries: int = 20000, actions: int = 4, robots: int = 5, rounds: int =
     ms = sorted(r.duration_ms for r in timed)
     hop_ms = _hop_median(floats, hop_hops)
     hops = timed[0].hops
-    what: dict = ({"learner": learner, "floats": floats, "payload_bytes": 8 * floats,
-                   "layout": [[name, list(shape)] for name, shape in layout],
-                   "samples": [bench_samples(i) for i in range(robots)]}
-                  if layout else {"entries": entries, "shape": [states, actions]})
+    what: dict = (
+        {
+            "learner": learner,
+            "floats": floats,
+            "payload_bytes": 8 * floats,
+            "layout": [[name, list(shape)] for name, shape in layout],
+            "samples": [bench_samples(i) for i in range(robots)],
+        }
+        if layout
+        else {"entries": entries, "shape": [states, actions]}
+    )
     result = {
-        "benchmark": "round", "robots": robots, **what, "method": method, "rounds": len(timed),
+        "benchmark": "round",
+        "robots": robots,
+        **what,
+        "method": method,
+        "rounds": len(timed),
         "warmup": warmup,
         "median_ms": round(statistics.median(ms), 2),
         "p90_ms": round(ms[min(len(ms) - 1, int(0.9 * len(ms)))], 2),
-        "min_ms": round(ms[0], 2), "max_ms": round(ms[-1], 2),
-        "hops": hops, "bytes_carried": timed[0].bytes,
-        "hop_floats": floats, "hop_median_ms": None if hop_ms is None else round(hop_ms, 3),
-        "round_over_hops": (None if not hop_ms or not hops
-                            else round(statistics.median(ms) / (hops * hop_ms), 3)),
-        "all_equal_rounds": count_equal(rows), "total_rounds": len(rows),
-        "wall_s": round(wall, 2), "target_ms": TARGET_MS,
-        "log_problems": agent_log.unreadable + [f"round {a.round} aborted: {a.error}"
-                                                  for a in agent_log.aborted],
+        "min_ms": round(ms[0], 2),
+        "max_ms": round(ms[-1], 2),
+        "hops": hops,
+        "bytes_carried": timed[0].bytes,
+        "hop_floats": floats,
+        "hop_median_ms": None if hop_ms is None else round(hop_ms, 3),
+        "round_over_hops": (
+            None if not hop_ms or not hops else round(statistics.median(ms) / (hops * hop_ms), 3)
+        ),
+        "all_equal_rounds": count_equal(rows),
+        "total_rounds": len(rows),
+        "wall_s": round(wall, 2),
+        "target_ms": TARGET_MS,
+        "log_problems": agent_log.unreadable
+        + [f"round {a.round} aborted: {a.error}" for a in agent_log.aborted],
         "meets_target": statistics.median(ms) < TARGET_MS,
     }
     if trace_dir is not None:
-        result["steps"] = [{"step": t.step, "calls": t.calls, "median_ms": round(t.median_ms, 3),
-                            "p90_ms": round(t.p90_ms, 3), "total_ms": round(t.total_ms, 1)}
-                           for t in step_summary(trace_dir)]
+        result["steps"] = [
+            {
+                "step": t.step,
+                "calls": t.calls,
+                "median_ms": round(t.median_ms, 3),
+                "p90_ms": round(t.p90_ms, 3),
+                "total_ms": round(t.total_ms, 1),
+            }
+            for t in step_summary(trace_dir)
+        ]
     if tmp is not None:
         tmp.cleanup()
     return result
@@ -198,4 +247,5 @@ def _hop_median(floats: int, hops: int) -> float | None:
     if hops <= 0:
         return None
     from dfrl.experiments.tools.bench import migrate
+
     return migrate.run(floats, hops, warmup=2, naive=False).median_ms

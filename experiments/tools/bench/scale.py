@@ -13,6 +13,7 @@ robot's platform node, so every hop, clone and message between the nodes costs t
 way (the kernel's netem is not needed). ``compare`` gives the tree's median round over the
 chain's, per N and delay.
 """
+
 from __future__ import annotations
 
 import statistics
@@ -65,13 +66,22 @@ def _rss_mb(pid: int) -> float | None:
     return None
 
 
-def config_for(n: int, iterations: int, respite: int, seed: int = 1,
-               itinerary: str = "chain", fanout: int = 2) -> ExperimentConfig:
+def config_for(
+    n: int, iterations: int, respite: int, seed: int = 1, itinerary: str = "chain", fanout: int = 2
+) -> ExperimentConfig:
     """The experiment of one point: ``n`` robots over the five arenas in turn."""
     robots = tuple(RobotSpec(f"r{i + 1}", ARENAS[i % len(ARENAS)]) for i in range(n))
-    return ExperimentConfig(name=f"scale{n}", robots=robots, iterations=iterations,
-                            respite=respite, seed=seed, mode=Mode.SYNC,
-                            timeout_s=max(600.0, 30.0 * n), itinerary=itinerary, fanout=fanout)
+    return ExperimentConfig(
+        name=f"scale{n}",
+        robots=robots,
+        iterations=iterations,
+        respite=respite,
+        seed=seed,
+        mode=Mode.SYNC,
+        timeout_s=max(600.0, 30.0 * n),
+        itinerary=itinerary,
+        fanout=fanout,
+    )
 
 
 class _Proxies:
@@ -91,9 +101,15 @@ class _Proxies:
             proxy.close()
 
 
-def measure(n: int, iterations: int = 2000, respite: int = 500,
-            out_dir: Path | None = None, itinerary: str = "chain", fanout: int = 2,
-            delay_ms: float = 0.0) -> ScalePoint:
+def measure(
+    n: int,
+    iterations: int = 2000,
+    respite: int = 500,
+    out_dir: Path | None = None,
+    itinerary: str = "chain",
+    fanout: int = 2,
+    delay_ms: float = 0.0,
+) -> ScalePoint:
     """Run one point (see the module doc).
 
     Raises
@@ -109,8 +125,11 @@ def measure(n: int, iterations: int = 2000, respite: int = 500,
         out_dir = Path(tmp.name)
     from dfrl.experiments.driver.launcher.spawn import STOP_ROUTE
 
-    launcher = Launcher(config_for(n, iterations, respite, itinerary=itinerary, fanout=fanout),
-                        out_dir, progress=None)
+    launcher = Launcher(
+        config_for(n, iterations, respite, itinerary=itinerary, fanout=fanout),
+        out_dir,
+        progress=None,
+    )
     proxies = _Proxies(delay_ms / 1000.0) if delay_ms > 0 else None
     peak: dict[int, float] = {}
     done = threading.Event()
@@ -149,26 +168,40 @@ def measure(n: int, iterations: int = 2000, respite: int = 500,
     if "exc" in box:
         raise RuntimeError(f"{n} robots: {box['exc']!r}")
     res = box["res"]
-    durations = [float(r["duration_ms"]) for r in res.rounds
-                 if r.get("duration_ms") not in ("", None)]
+    durations = [
+        float(r["duration_ms"]) for r in res.rounds if r.get("duration_ms") not in ("", None)
+    ]
     rss = sorted(peak.values())
     return ScalePoint(
-        robots=n, itinerary=itinerary, fanout=fanout, delay_ms=delay_ms,
-        iterations=iterations, respite=respite, wall_s=round(wall, 2),
-        rounds=len(res.rounds), rounds_planned=res.config.rounds,
+        robots=n,
+        itinerary=itinerary,
+        fanout=fanout,
+        delay_ms=delay_ms,
+        iterations=iterations,
+        respite=respite,
+        wall_s=round(wall, 2),
+        rounds=len(res.rounds),
+        rounds_planned=res.config.rounds,
         rounds_all_equal=res.equal_rounds,
         round_median_ms=round(statistics.median(durations), 1) if durations else float("nan"),
         round_max_ms=round(max(durations), 1) if durations else float("nan"),
         rss_median_mb=round(statistics.median(rss), 1) if rss else float("nan"),
         rss_max_mb=round(max(rss), 1) if rss else float("nan"),
-        identical_every_round=bool(res.rounds) and len(res.rounds) == res.config.rounds
+        identical_every_round=bool(res.rounds)
+        and len(res.rounds) == res.config.rounds
         and res.equal_rounds == res.config.rounds,
-        ok=bool(res.ok))
+        ok=bool(res.ok),
+    )
 
 
-def bench(robots: list[int], iterations: int = 2000, respite: int = 500,
-          itineraries: tuple[str, ...] = ("chain",), fanout: int = 2,
-          delays_ms: tuple[float, ...] = (0.0,)) -> dict[str, Any]:
+def bench(
+    robots: list[int],
+    iterations: int = 2000,
+    respite: int = 500,
+    itineraries: tuple[str, ...] = ("chain",),
+    fanout: int = 2,
+    delays_ms: tuple[float, ...] = (0.0,),
+) -> dict[str, Any]:
     """Every N in ``robots``, smallest first, each with every delay and itinerary; with the
     per-robot round-time growth of each itinerary (without delay, else the first delay) and
     the tree-over-chain round ratio per N and delay.
@@ -185,25 +218,48 @@ def bench(robots: list[int], iterations: int = 2000, respite: int = 500,
         raise ValueError(f"fanout {fanout}: a tree needs at least 2")
     if any(d < 0 for d in delays_ms):
         raise ValueError(f"delays {list(delays_ms)}: a delay is >= 0 ms")
-    points = [measure(n, iterations, respite, itinerary=it, fanout=fanout, delay_ms=d)
-              for n in sorted(robots) for d in delays_ms for it in itineraries]
+    points = [
+        measure(n, iterations, respite, itinerary=it, fanout=fanout, delay_ms=d)
+        for n in sorted(robots)
+        for d in delays_ms
+        for it in itineraries
+    ]
     growth = []
     for it in itineraries:
         own = [p for p in points if p.itinerary == it and p.delay_ms == delays_ms[0]]
         first = own[0]
-        growth += [{"itinerary": it, "delay_ms": p.delay_ms, "robots": p.robots,
-                    "round_ms_per_robot": round(p.round_median_ms / p.robots, 2),
-                    "round_ratio_vs_linear": round((p.round_median_ms / first.round_median_ms)
-                                                   / (p.robots / first.robots), 3)}
-                   for p in own]
+        growth += [
+            {
+                "itinerary": it,
+                "delay_ms": p.delay_ms,
+                "robots": p.robots,
+                "round_ms_per_robot": round(p.round_median_ms / p.robots, 2),
+                "round_ratio_vs_linear": round(
+                    (p.round_median_ms / first.round_median_ms) / (p.robots / first.robots), 3
+                ),
+            }
+            for p in own
+        ]
     compare = []
     if {"chain", "tree"} <= set(itineraries):
         for n in sorted(robots):
             for d in delays_ms:
-                c, t = (next(p for p in points if (p.robots, p.delay_ms, p.itinerary) ==
-                             (n, d, it)) for it in ("chain", "tree"))
-                compare.append({"robots": n, "delay_ms": d, "chain_ms": c.round_median_ms,
-                                "tree_ms": t.round_median_ms,
-                                "tree_over_chain": round(t.round_median_ms / c.round_median_ms, 3)})
-    return {"benchmark": "scale", "points": [asdict(p) for p in points], "growth": growth,
-            "compare": compare}
+                c, t = (
+                    next(p for p in points if (p.robots, p.delay_ms, p.itinerary) == (n, d, it))
+                    for it in ("chain", "tree")
+                )
+                compare.append(
+                    {
+                        "robots": n,
+                        "delay_ms": d,
+                        "chain_ms": c.round_median_ms,
+                        "tree_ms": t.round_median_ms,
+                        "tree_over_chain": round(t.round_median_ms / c.round_median_ms, 3),
+                    }
+                )
+    return {
+        "benchmark": "scale",
+        "points": [asdict(p) for p in points],
+        "growth": growth,
+        "compare": compare,
+    }

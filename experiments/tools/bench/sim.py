@@ -20,6 +20,7 @@ both see the same machine.
   or loads its on-disk cache) is timed apart as ``compile_s``; then the warm-up, then the
   timed steps.
 """
+
 from __future__ import annotations
 
 import os
@@ -81,22 +82,46 @@ class _RandomBatch:
             self.world.start(i)
 
     def run(self, steps: int) -> None:
-        self.world.wander(steps, self.policy)     # actions drawn in the compiled loop
+        self.world.wander(steps, self.policy)  # actions drawn in the compiled loop
 
 
-def _point(sim: str, robots: int, learning: bool, steps: int, warmup: int, wall: float,
-           cpu: float, control_dt: float, **extra: Any) -> dict[str, Any]:
+def _point(
+    sim: str,
+    robots: int,
+    learning: bool,
+    steps: int,
+    warmup: int,
+    wall: float,
+    cpu: float,
+    control_dt: float,
+    **extra: Any,
+) -> dict[str, Any]:
     rate = steps * robots / wall if wall > 0 else float("inf")
     per_cpu = steps * robots / cpu if cpu > 0 else float("inf")
-    return {"sim": sim, "robots": robots, "learning": learning, "steps": steps,
-            "warmup": warmup, "robot_steps": steps * robots, "wall_s": round(wall, 9),
-            "cpu_s": round(cpu, 9), "steps_per_s_per_core": round(rate, 1),
-            "steps_per_cpu_s": round(per_cpu, 1),
-            "realtime_factor_per_core": round(rate * control_dt, 1), **extra}
+    return {
+        "sim": sim,
+        "robots": robots,
+        "learning": learning,
+        "steps": steps,
+        "warmup": warmup,
+        "robot_steps": steps * robots,
+        "wall_s": round(wall, 9),
+        "cpu_s": round(cpu, 9),
+        "steps_per_s_per_core": round(rate, 1),
+        "steps_per_cpu_s": round(per_cpu, 1),
+        "realtime_factor_per_core": round(rate * control_dt, 1),
+        **extra,
+    }
 
 
-def measure_pybullet(config: TrainerConfig, robots: int, steps: int, warmup: int,
-                     learning: bool, live: int = PYBULLET_LIVE) -> dict[str, Any]:
+def measure_pybullet(
+    config: TrainerConfig,
+    robots: int,
+    steps: int,
+    warmup: int,
+    learning: bool,
+    live: int = PYBULLET_LIVE,
+) -> dict[str, Any]:
     """Time ``steps`` control steps of each of ``robots`` pybullet robots, at most ``live``
     alive at once, stepped round-robin after ``warmup`` untimed steps.
 
@@ -110,8 +135,10 @@ def measure_pybullet(config: TrainerConfig, robots: int, steps: int, warmup: int
     wall = cpu = setup = 0.0
     for first in range(0, robots, live):
         t0 = time.perf_counter()
-        group = [make(config.replace(seed=config.seed + first + k))
-                 for k in range(min(live, robots - first))]
+        group = [
+            make(config.replace(seed=config.seed + first + k))
+            for k in range(min(live, robots - first))
+        ]
         setup += time.perf_counter() - t0
         try:
             for _ in range(warmup):
@@ -126,12 +153,23 @@ def measure_pybullet(config: TrainerConfig, robots: int, steps: int, warmup: int
         finally:
             for r in group:
                 r.close()
-    return _point("pybullet", robots, learning, steps, warmup, wall, cpu,
-                  config.sim.control_dt, live=min(live, robots), setup_s=round(setup, 3))
+    return _point(
+        "pybullet",
+        robots,
+        learning,
+        steps,
+        warmup,
+        wall,
+        cpu,
+        config.sim.control_dt,
+        live=min(live, robots),
+        setup_s=round(setup, 3),
+    )
 
 
-def measure_batched(config: TrainerConfig, robots: int, steps: int, warmup: int,
-                    learning: bool) -> dict[str, Any]:
+def measure_batched(
+    config: TrainerConfig, robots: int, steps: int, warmup: int, learning: bool
+) -> dict[str, Any]:
     """Time ``steps`` control steps of ``robots`` robots in the batched simulator, after its
     first call (``compile_s``) and ``warmup`` untimed steps.
 
@@ -154,8 +192,18 @@ def measure_batched(config: TrainerConfig, robots: int, steps: int, warmup: int,
     c0, t0 = time.process_time(), time.perf_counter()
     batch.run(steps)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    return _point("batched", robots, learning, steps, warmup, wall, cpu, config.sim.control_dt,
-                  setup_s=round(setup, 3), compile_s=round(compile_s, 3))
+    return _point(
+        "batched",
+        robots,
+        learning,
+        steps,
+        warmup,
+        wall,
+        cpu,
+        config.sim.control_dt,
+        setup_s=round(setup, 3),
+        compile_s=round(compile_s, 3),
+    )
 
 
 def ratios(points: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -166,8 +214,13 @@ def ratios(points: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     for (sim, robots, learning), batched in rate.items():
         pybullet = rate.get(("pybullet", robots, learning))
         if sim == "batched" and pybullet:
-            out.append({"robots": robots, "learning": learning,
-                        "batched_over_pybullet": round(batched / pybullet, 1)})
+            out.append(
+                {
+                    "robots": robots,
+                    "learning": learning,
+                    "batched_over_pybullet": round(batched / pybullet, 1),
+                }
+            )
     return out
 
 
@@ -177,19 +230,31 @@ def _scaling(points: Sequence[dict[str, Any]], dt: float) -> list[dict[str, Any]
     for p in points:
         if p["sim"] == "pybullet" and p["learning"]:
             rate = p["steps_per_s_per_core"]
-            rows.append({"robots": p["robots"], "wall_s": round(p["wall_s"], 3),
-                         "steps_per_s": rate,
-                         "steps_per_s_per_robot": round(rate / p["robots"], 1),
-                         "realtime_factor": round(rate * dt, 1),
-                         "realtime_factor_per_robot": round(rate * dt / p["robots"], 1)})
+            rows.append(
+                {
+                    "robots": p["robots"],
+                    "wall_s": round(p["wall_s"], 3),
+                    "steps_per_s": rate,
+                    "steps_per_s_per_robot": round(rate / p["robots"], 1),
+                    "realtime_factor": round(rate * dt, 1),
+                    "realtime_factor_per_robot": round(rate * dt / p["robots"], 1),
+                }
+            )
     return rows
 
 
-def bench(arena: str = "r4", algo: str = "qlearning", steps: int = 5000,
-          robots: Sequence[int] | None = None, physics_dt: float | None = None,
-          control_dt: float | None = None, warmup: int = 200,
-          sims: Sequence[str] = SIMS, pybullet_budget: int = PYBULLET_BUDGET,
-          pybullet_live: int = PYBULLET_LIVE) -> dict[str, Any]:
+def bench(
+    arena: str = "r4",
+    algo: str = "qlearning",
+    steps: int = 5000,
+    robots: Sequence[int] | None = None,
+    physics_dt: float | None = None,
+    control_dt: float | None = None,
+    warmup: int = 200,
+    sims: Sequence[str] = SIMS,
+    pybullet_budget: int = PYBULLET_BUDGET,
+    pybullet_live: int = PYBULLET_LIVE,
+) -> dict[str, Any]:
     """Measure each robot count of ``robots``, with and without learning, in each of ``sims``.
 
     Parameters
@@ -222,22 +287,30 @@ def bench(arena: str = "r4", algo: str = "qlearning", steps: int = 5000,
     if min(robots) < 1 or steps < 1 or warmup < 1 or pybullet_budget < 1 or pybullet_live < 1:
         raise ValueError("robots, steps, warmup, pybullet budget and live robots must be >= 1")
     d = SimConfig()
-    sim = SimConfig(control_dt=d.control_dt if control_dt is None else control_dt,
-                    physics_dt=d.physics_dt if physics_dt is None else physics_dt)
+    sim = SimConfig(
+        control_dt=d.control_dt if control_dt is None else control_dt,
+        physics_dt=d.physics_dt if physics_dt is None else physics_dt,
+    )
     config = TrainerConfig(arena=arena, algo=algo, seed=0, sim=sim)
     if "batched" in sims:
         from dfrl.robots.batched.training import shared_env
 
-        shared_env([config])                      # a learner it lacks fails here, not later
+        shared_env([config])  # a learner it lacks fails here, not later
     points = []
     for n in robots:
         for learning in (True, False):
             for name in (s for s in SIMS if s in sims):
                 if name == "pybullet":
-                    points.append(measure_pybullet(
-                        config, n, pybullet_steps(n, steps, pybullet_budget),
-                        pybullet_steps(n, warmup, max(1, pybullet_budget // 10)), learning,
-                        pybullet_live))
+                    points.append(
+                        measure_pybullet(
+                            config,
+                            n,
+                            pybullet_steps(n, steps, pybullet_budget),
+                            pybullet_steps(n, warmup, max(1, pybullet_budget // 10)),
+                            learning,
+                            pybullet_live,
+                        )
+                    )
                 else:
                     points.append(measure_batched(config, n, steps, warmup, learning))
     out: dict[str, Any] = {
@@ -261,6 +334,10 @@ def bench(arena: str = "r4", algo: str = "qlearning", steps: int = 5000,
     }
     scaling = _scaling(points, sim.control_dt)
     if scaling:
-        out.update(robots=scaling[0]["robots"], steps_per_s=scaling[0]["steps_per_s"],
-                   realtime_factor=scaling[0]["realtime_factor"], scaling=scaling)
+        out.update(
+            robots=scaling[0]["robots"],
+            steps_per_s=scaling[0]["steps_per_s"],
+            realtime_factor=scaling[0]["realtime_factor"],
+            scaling=scaling,
+        )
     return out

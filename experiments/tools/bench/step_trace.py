@@ -5,6 +5,7 @@ A traced process writes ``DIR/ROLE.jsonl``, one JSON object a line: ``step`` (th
 predicate's step name), ``t0`` and ``t1`` (its call's start and end, seconds since the epoch)
 and ``thread``. The robot processes of ``dfrl bench round --trace DIR`` are ``robot-<id>``.
 """
+
 from __future__ import annotations
 
 import json
@@ -42,8 +43,11 @@ def read_steps(trace_dir: str | Path, roles: list[str] | None = None) -> list[St
     """Every step recorded in ``trace_dir`` (only the files of ``roles`` if given), in the
     order of their start."""
     folder = Path(trace_dir)
-    paths = ([folder / f"{r}.jsonl" for r in roles] if roles is not None
-             else sorted(folder.glob("*.jsonl")))
+    paths = (
+        [folder / f"{r}.jsonl" for r in roles]
+        if roles is not None
+        else sorted(folder.glob("*.jsonl"))
+    )
     records: list[StepRecord] = []
     for path in paths:
         if path.exists():
@@ -60,7 +64,14 @@ def step_summary(trace_dir: str | Path) -> list[StepSummary]:
     per: dict[str, list[float]] = {}
     for r in read_steps(trace_dir):
         per.setdefault(r.step, []).append((r.t1 - r.t0) * 1000)
-    out = [StepSummary(step, len(ms), statistics.median(ms),
-                       sorted(ms)[min(len(ms) - 1, int(0.9 * len(ms)))], sum(ms))
-           for step, ms in per.items()]
+    out = [
+        StepSummary(
+            step,
+            len(ms),
+            statistics.median(ms),
+            sorted(ms)[min(len(ms) - 1, int(0.9 * len(ms)))],
+            sum(ms),
+        )
+        for step, ms in per.items()
+    ]
     return sorted(out, key=lambda s: -s.total_ms)

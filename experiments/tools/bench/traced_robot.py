@@ -7,6 +7,7 @@ installed (:class:`StepTraceProbe`): the platform's steps are wrapped by ``step_
 the platform is loaded, and the records go to ``DIR/robot-<id>.jsonl`` when the process closes
 (``DIR`` from ``DFRL_STEP_TRACE``). The robot process itself knows no benchmark.
 """
+
 from __future__ import annotations
 
 import sys

@@ -5,6 +5,7 @@ events read from the results folder (``dfrl run --view``, ``dfrl view RESULTS_DI
 * :class:`EventSource`: the results folder turned into events (:mod:`.source`);
 * :func:`append_event`: the run's own ``events.jsonl`` (hops, robot states, poses).
 """
+
 from dfrl.experiments.driver.launcher.events import EVENTS_FILE, append_event
 from dfrl.experiments.tools.view.server import ViewServer, start_view
 from dfrl.experiments.tools.view.source import EventSource

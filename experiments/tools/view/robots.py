@@ -14,6 +14,7 @@ inference):
 
 :func:`arena_event` draws a robot's arena small (floor, blocks, start pose).
 """
+
 from __future__ import annotations
 
 import bisect
@@ -61,16 +62,16 @@ class RobotTrack:
     pid: int | None = None
     respite: int = 0
     local: bool = False
-    born: float = 0.0                        # when the view learnt of it (nodes.json)
+    born: float = 0.0  # when the view learnt of it (nodes.json)
     metrics: CsvTail = field(init=False)
     shares: CsvTail = field(init=False)
     iteration: int = 0
     grew_at: float = 0.0
-    shared_at: int = 0                       # iteration of the last share
+    shared_at: int = 0  # iteration of the last share
     anchors_it: list[int] = field(default_factory=list)
     anchors_t: list[float] = field(default_factory=list)
-    skipped: bool = False                    # skipped in the agent's last round
-    told: str | None = None                  # state from events.jsonl
+    skipped: bool = False  # skipped in the agent's last round
+    told: str | None = None  # state from events.jsonl
     state: str | None = None
 
     def __post_init__(self) -> None:
@@ -102,9 +103,14 @@ class RobotTrack:
             if it is None or wall is None:
                 continue
             rnd = _num(row.get("round"))
-            ev = {"t": wall, "kind": "share", "robot": self.robot, "iteration": int(it),
-                  "round": int(rnd) if rnd is not None else None,
-                  "agent": row.get("agent") or None}
+            ev = {
+                "t": wall,
+                "kind": "share",
+                "robot": self.robot,
+                "iteration": int(it),
+                "round": int(rnd) if rnd is not None else None,
+                "agent": row.get("agent") or None,
+            }
             if not self.anchors_it or int(it) > self.anchors_it[-1]:
                 self.anchors_it.append(int(it))
                 self.anchors_t.append(wall)
@@ -143,8 +149,14 @@ class RobotTrack:
         for seg in sorted(batches):
             pts = batches[seg]
             t = self.time_of(int(pts[-1][0]))
-            out.append({"t": max(self.born, t if t is not None else mtime), "kind": "metrics",
-                        "robot": self.robot, "points": pts})
+            out.append(
+                {
+                    "t": max(self.born, t if t is not None else mtime),
+                    "kind": "metrics",
+                    "robot": self.robot,
+                    "points": pts,
+                }
+            )
         return out
 
     def progressed(self, ev: dict[str, Any], now: float) -> None:
@@ -180,8 +192,11 @@ class RobotTrack:
             return "dead"
         if self.skipped:
             return "dead" if quiet > DEAD_S else "skipped"
-        at_boundary = respite > 0 and self.iteration > 0 and (
-            self.iteration % respite == 0 or self.iteration >= self.target)
+        at_boundary = (
+            respite > 0
+            and self.iteration > 0
+            and (self.iteration % respite == 0 or self.iteration >= self.target)
+        )
         if sync and at_boundary and self.shared_at < self.iteration:
             return "waiting"
         if quiet > STALL_S:
@@ -201,8 +216,14 @@ def arena_event(robot: str, arena: str, out_dir: Path, t: float) -> dict[str, An
             spec = load_arena(out_dir / arena if (out_dir / arena).exists() else arena)
     except (ArenaError, OSError) as exc:
         return {"t": t, "kind": "error", "text": f"arena of {robot} not drawn: {exc}"}
-    return {"t": t, "kind": "arena", "robot": robot, "name": spec.name or name,
-            "size": list(spec.size),
-            "blocks": [{"center": list(b.center), "size": list(b.size[:2]), "yaw": b.yaw}
-                       for b in spec.blocks],
-            "start": list(spec.start.pose) if spec.start.pose is not None else None}
+    return {
+        "t": t,
+        "kind": "arena",
+        "robot": robot,
+        "name": spec.name or name,
+        "size": list(spec.size),
+        "blocks": [
+            {"center": list(b.center), "size": list(b.size[:2]), "yaw": b.yaw} for b in spec.blocks
+        ],
+        "start": list(spec.start.pose) if spec.start.pose is not None else None,
+    }

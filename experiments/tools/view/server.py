@@ -17,6 +17,7 @@ Threading model: one poller thread reads the results folder every ``poll_s`` sec
 list under a condition; each HTTP connection has its own thread (``ThreadingHTTPServer``)
 that only reads the list and waits on the condition. Nothing is printed.
 """
+
 from __future__ import annotations
 
 import json
@@ -31,8 +32,12 @@ from urllib.parse import parse_qs, urlparse
 from dfrl.experiments.tools.view.source import EventSource
 from dfrl.experiments.tools.view.tail import file_mtime
 
-_TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8",
-          ".css": "text/css; charset=utf-8", ".svg": "image/svg+xml"}
+_TYPES = {
+    ".html": "text/html; charset=utf-8",
+    ".js": "text/javascript; charset=utf-8",
+    ".css": "text/css; charset=utf-8",
+    ".svg": "image/svg+xml",
+}
 #: Events sent in one server-sent message at most.
 BATCH = 2000
 #: Seconds between two keep-alive comments on an idle event stream.
@@ -60,8 +65,14 @@ class ViewServer:
     source : EventSource
     """
 
-    def __init__(self, results_dir: str | Path, host: str = "127.0.0.1", port: int = 0,
-                 poll_s: float = 0.25, fresh: bool = False) -> None:
+    def __init__(
+        self,
+        results_dir: str | Path,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        poll_s: float = 0.25,
+        fresh: bool = False,
+    ) -> None:
         self.results_dir = Path(results_dir)
         self.source = EventSource(self.results_dir)
         self.poll_s = poll_s
@@ -77,8 +88,12 @@ class ViewServer:
         shown = f"[{bound_host}]" if ":" in str(bound_host) else bound_host
         self.url = f"http://{shown}:{bound_port}/"
         self._poller = threading.Thread(target=self._poll_loop, name="view-poll", daemon=True)
-        self._serve = threading.Thread(target=self._httpd.serve_forever, name="view-http",
-                                       kwargs={"poll_interval": 0.2}, daemon=True)
+        self._serve = threading.Thread(
+            target=self._httpd.serve_forever,
+            name="view-http",
+            kwargs={"poll_interval": 0.2},
+            daemon=True,
+        )
         self._poller.start()
         self._serve.start()
 
@@ -86,14 +101,15 @@ class ViewServer:
     def events_from(self, first: int, limit: int = BATCH) -> list[dict[str, Any]]:
         """Events numbered ``first`` on (at most ``limit``)."""
         with self._cond:
-            return self.source.events[first:first + limit]
+            return self.source.events[first : first + limit]
 
     def wait_events(self, first: int, timeout: float) -> list[dict[str, Any]]:
         """Events from ``first`` on, waiting up to ``timeout`` for one (empty: none)."""
         with self._cond:
-            self._cond.wait_for(lambda: len(self.source.events) > first or
-                                self._closed.is_set(), timeout)
-            return self.source.events[first:first + BATCH]
+            self._cond.wait_for(
+                lambda: len(self.source.events) > first or self._closed.is_set(), timeout
+            )
+            return self.source.events[first : first + BATCH]
 
     def pause(self, seconds: float) -> None:
         """Wait ``seconds`` (less if the view closes)."""
@@ -126,8 +142,14 @@ class ViewServer:
             except Exception as exc:  # noqa: BLE001 - the view says it, the run goes on
                 self.errors.append(f"{type(exc).__name__}: {exc}")
                 with self._cond:
-                    self.source.events.append({"seq": len(self.source.events), "t": time.time(),
-                                               "kind": "error", "text": self.errors[-1]})
+                    self.source.events.append(
+                        {
+                            "seq": len(self.source.events),
+                            "t": time.time(),
+                            "kind": "error",
+                            "text": self.errors[-1],
+                        }
+                    )
                     self._cond.notify_all()
             self._closed.wait(self.poll_s if self.source.live else max(1.0, self.poll_s))
 
@@ -155,8 +177,14 @@ class ViewServer:
         return self._closed.is_set()
 
 
-def start_view(results_dir: str | Path, host: str = "127.0.0.1", port: int = 0, *,
-               poll_s: float = 0.25, fresh: bool = False) -> ViewServer:
+def start_view(
+    results_dir: str | Path,
+    host: str = "127.0.0.1",
+    port: int = 0,
+    *,
+    poll_s: float = 0.25,
+    fresh: bool = False,
+) -> ViewServer:
     """Serve the live view of a results folder (a run going on, or a finished one).
 
     Parameters
@@ -186,7 +214,7 @@ def _handler(view: ViewServer) -> type[BaseHTTPRequestHandler]:
         protocol_version = "HTTP/1.1"
 
         def log_message(self, format: str, *args: Any) -> None:  # noqa: A002
-            pass                                    # nothing printed
+            pass  # nothing printed
 
         def do_GET(self) -> None:  # noqa: N802 - http.server's name
             url = urlparse(self.path)
@@ -194,12 +222,12 @@ def _handler(view: ViewServer) -> type[BaseHTTPRequestHandler]:
             if url.path in ("/", "/index.html"):
                 self._file("index.html")
             elif url.path.startswith("/static/"):
-                self._file(url.path[len("/static/"):])
+                self._file(url.path[len("/static/") :])
             elif url.path == "/favicon.ico":
                 self._send(204, "image/x-icon", b"")
             elif url.path == "/events.json":
                 first = _int(query.get("from", ["0"])[0])
-                body = json.dumps(view.events_from(first, 10 ** 9)).encode()
+                body = json.dumps(view.events_from(first, 10**9)).encode()
                 self._send(200, "application/json", body)
             elif url.path == "/events":
                 last = self.headers.get("Last-Event-ID")
@@ -213,8 +241,7 @@ def _handler(view: ViewServer) -> type[BaseHTTPRequestHandler]:
             if body is None:
                 self._send(404, "text/plain", b"not found\n")
             else:
-                self._send(200, _TYPES.get(Path(name).suffix, "application/octet-stream"),
-                           body)
+                self._send(200, _TYPES.get(Path(name).suffix, "application/octet-stream"), body)
 
         def _send(self, code: int, ctype: str, body: bytes) -> None:
             self.send_response(code)
@@ -244,9 +271,9 @@ def _handler(view: ViewServer) -> type[BaseHTTPRequestHandler]:
                         self.wfile.write(b": ping\n\n")
                     self.wfile.flush()
                     if batch and len(batch) < BATCH:
-                        view.pause(SEND_S)          # gather what comes next
+                        view.pause(SEND_S)  # gather what comes next
             except (BrokenPipeError, ConnectionResetError, OSError):
-                return                              # the browser went away
+                return  # the browser went away
 
     return Handler
 

@@ -36,6 +36,7 @@ deduced (``inferred``) from the itinerary, at the latest when the round is logge
 agent's copies read and write at every robot at once: its hops come in the order seen, none
 deduced before another.
 """
+
 from __future__ import annotations
 
 import heapq
@@ -60,7 +61,7 @@ class _Round:
     """Hops of one round of one agent seen so far."""
 
     def __init__(self) -> None:
-        self.done: set[tuple[str, str]] = set()     # (phase, robot)
+        self.done: set[tuple[str, str]] = set()  # (phase, robot)
         self.closed = False
 
 
@@ -85,8 +86,8 @@ class EventSource:
         self._logs: dict[str, FileTail] = {}
         self._methods: dict[str, str] = {}
         self._rounds: dict[tuple[str, int], _Round] = {}
-        self._skipped: dict[str, set[str]] = {}        # agent -> skipped in its last round
-        self._last_end: dict[str, float] = {}          # agent -> end of its last round
+        self._skipped: dict[str, set[str]] = {}  # agent -> skipped in its last round
+        self._last_end: dict[str, float] = {}  # agent -> end of its last round
         self._extra = FileTail(self.dir / EVENTS_FILE)
         self._ended = False
         self._bulk = False
@@ -106,7 +107,7 @@ class EventSource:
         (up to :data:`DRAIN_BYTES`) in the first poll, so the events come in time order across
         the files; metrics events are merged into the others by time."""
         got: list[dict[str, Any]] = []
-        self._bulk = True          # each file read whole: one poll orders everything by time
+        self._bulk = True  # each file read whole: one poll orders everything by time
         try:
             for _ in range(max_polls):
                 got += self._collect()
@@ -152,15 +153,14 @@ class EventSource:
                 timed += [(e["t"], "share", e) for e in track.read_shares()]
             for agent in self.agents:
                 timed += self._read_log(out, agent)
-            timed.sort(key=lambda item: item[0])       # stable: a file's own order is kept
+            timed.sort(key=lambda item: item[0])  # stable: a file's own order is kept
             for _, what, ev in timed:
                 self._apply(out, what, ev)
             for track in self.robots.values():
                 out += track.read_metrics(now)
             if not self._ended and (self.dir / "summary.md").is_file():
                 self._ended = True
-                out.append({"t": file_mtime(self.dir / "summary.md") or now,
-                            "kind": "run_end"})
+                out.append({"t": file_mtime(self.dir / "summary.md") or now, "kind": "run_end"})
             self._states(out, now)
         return out
 
@@ -171,23 +171,32 @@ class EventSource:
         except (OSError, ValueError):
             return
         its = int(cfg.get("iterations") or 0)
-        self.run = {"t": file_mtime(path) or self.clock(), "kind": "run",
-                    "name": cfg.get("name"), "iterations": its,
-                    "respite": int(cfg.get("respite") or 0), "mode": cfg.get("mode"),
-                    "seed": cfg.get("seed"), "robots": len(cfg.get("robots") or []),
-                    "stride": max(1, its // POINTS)}
+        self.run = {
+            "t": file_mtime(path) or self.clock(),
+            "kind": "run",
+            "name": cfg.get("name"),
+            "iterations": its,
+            "respite": int(cfg.get("respite") or 0),
+            "mode": cfg.get("mode"),
+            "seed": cfg.get("seed"),
+            "robots": len(cfg.get("robots") or []),
+            "stride": max(1, its // POINTS),
+        }
         out.append(self.run)
 
     def _read_nodes(self, out: list[dict[str, Any]]) -> None:
         path = self.dir / "nodes.json"
         mtime = file_mtime(path)
-        if mtime is None or mtime == self._nodes_mtime or \
-                (self.run is not None and mtime < self.run["t"]):
-            return                                  # unchanged, or an older run's
+        if (
+            mtime is None
+            or mtime == self._nodes_mtime
+            or (self.run is not None and mtime < self.run["t"])
+        ):
+            return  # unchanged, or an older run's
         try:
             nodes = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, ValueError):
-            return                                  # being written: next time
+            return  # being written: next time
         self._nodes_mtime = mtime
         assert self.run is not None
         for n in nodes.get("nodes", []):
@@ -202,9 +211,18 @@ class EventSource:
                 self.agents[name] = {"itinerary": stops, "kind": kind}
                 self._methods[name] = str(a.get("method"))
                 self._logs[name] = FileTail(self.dir / f"rounds_{name}.log")
-                out.append({"t": mtime, "kind": "agent", "agent": name, "algo": a.get("algo"),
-                            "method": a.get("method"), "rounds": a.get("rounds"),
-                            "itinerary": stops, "itinerary_kind": kind})
+                out.append(
+                    {
+                        "t": mtime,
+                        "kind": "agent",
+                        "agent": name,
+                        "algo": a.get("algo"),
+                        "method": a.get("method"),
+                        "rounds": a.get("rounds"),
+                        "itinerary": stops,
+                        "itinerary_kind": kind,
+                    }
+                )
 
     def _add_robot(self, out: list[dict[str, Any]], n: dict[str, Any], t: float) -> None:
         assert self.run is not None
@@ -216,14 +234,25 @@ class EventSource:
         except (OSError, ValueError):
             pass
         local = n.get("robot_host") is None and str(n.get("host", "")).startswith("127.")
-        track = RobotTrack(rid, self.dir, target, self.run["stride"], n.get("pid"),
-                           self.run["respite"], local, t)
+        track = RobotTrack(
+            rid, self.dir, target, self.run["stride"], n.get("pid"), self.run["respite"], local, t
+        )
         track.set_start(self.run["t"])
         self.robots[rid] = track
-        out.append({"t": t, "kind": "robot", "robot": rid, "host": n.get("host"),
-                    "port": n.get("port"), "arena": n.get("arena"), "algo": n.get("algo"),
-                    "robot_host": n.get("robot_host"), "joined": bool(n.get("joined")),
-                    "iterations": target})
+        out.append(
+            {
+                "t": t,
+                "kind": "robot",
+                "robot": rid,
+                "host": n.get("host"),
+                "port": n.get("port"),
+                "arena": n.get("arena"),
+                "algo": n.get("algo"),
+                "robot_host": n.get("robot_host"),
+                "joined": bool(n.get("joined")),
+                "iterations": target,
+            }
+        )
         out.append(arena_event(rid, str(n.get("arena")), self.dir, t))
 
     def _read_extra(self, out: list[dict[str, Any]]) -> list[tuple[float, str, Any]]:
@@ -236,8 +265,13 @@ class EventSource:
                     raise ValueError("no kind")
                 ev["t"] = float(ev.get("t", self.clock()))
             except (ValueError, TypeError, AttributeError):
-                out.append({"t": self.clock(), "kind": "error",
-                            "text": f"{EVENTS_FILE}: unreadable line {line[:200]!r}"})
+                out.append(
+                    {
+                        "t": self.clock(),
+                        "kind": "error",
+                        "text": f"{EVENTS_FILE}: unreadable line {line[:200]!r}",
+                    }
+                )
                 continue
             timed.append((ev["t"], "extra", ev))
         return timed
@@ -254,13 +288,21 @@ class EventSource:
                 self._round(out, agent, item)
             else:
                 rec = {k: v for k, v in item.items() if k != "event"}
-                rec.update(t=self._last_end.get(agent, self.clock()), kind=item["event"],
-                           agent=agent)
+                rec.update(
+                    t=self._last_end.get(agent, self.clock()), kind=item["event"], agent=agent
+                )
                 out.append(rec)
         elif ev["kind"] == "hop":
             try:
-                self._hop(out, str(ev["agent"]), int(ev["round"]), str(ev["robot"]),
-                          str(ev["phase"]), ev["t"], False)
+                self._hop(
+                    out,
+                    str(ev["agent"]),
+                    int(ev["round"]),
+                    str(ev["robot"]),
+                    str(ev["phase"]),
+                    ev["t"],
+                    False,
+                )
             except (KeyError, TypeError, ValueError):
                 out.append({"t": ev["t"], "kind": "error", "text": f"bad hop event {ev!r}"})
         else:
@@ -278,34 +320,49 @@ class EventSource:
     def _tree(self, agent: str) -> bool:
         return self.agents.get(agent, {}).get("kind") == "tree"
 
-    def _copy_hop(self, agent: str, rnd: int, robot: str, phase: str, t: float,
-                  inferred: bool) -> dict[str, Any]:
+    def _copy_hop(
+        self, agent: str, rnd: int, robot: str, phase: str, t: float, inferred: bool
+    ) -> dict[str, Any]:
         """A tree agent's hop: a copy's (``clone``) unless at the root."""
-        return {**_hop_event(agent, rnd, robot, phase, t, inferred),
-                "clone": robot != (self.agents[agent].get("itinerary") or [robot])[0]}
+        return {
+            **_hop_event(agent, rnd, robot, phase, t, inferred),
+            "clone": robot != (self.agents[agent].get("itinerary") or [robot])[0],
+        }
 
-    def _hop(self, out: list[dict[str, Any]], agent: str, rnd: int, robot: str, phase: str,
-             t: float, inferred: bool) -> None:
+    def _hop(
+        self,
+        out: list[dict[str, Any]],
+        agent: str,
+        rnd: int,
+        robot: str,
+        phase: str,
+        t: float,
+        inferred: bool,
+    ) -> None:
         """Emit a hop, and first the ones it implies: the forward pass precedes the backward
         pass, and the backward pass runs from the last stop to the first."""
         r = self._rounds.setdefault((agent, rnd), _Round())
         if r.closed or (phase, robot) in r.done:
             return
-        if self._tree(agent):                # copies at every stop at once: no order to infer
+        if self._tree(agent):  # copies at every stop at once: no order to infer
             r.done.add((phase, robot))
             out.append(self._copy_hop(agent, rnd, robot, phase, t, inferred))
             return
-        stops = [s for s in self.agents.get(agent, {}).get("itinerary", [])
-                 if s not in self._skipped.get(agent, set())]
+        stops = [
+            s
+            for s in self.agents.get(agent, {}).get("itinerary", [])
+            if s not in self._skipped.get(agent, set())
+        ]
         if phase == "backward" and robot in stops:
-            before = [("forward", s) for s in stops] + \
-                     [("backward", s) for s in reversed(stops[stops.index(robot) + 1:])]
+            before = [("forward", s) for s in stops] + [
+                ("backward", s) for s in reversed(stops[stops.index(robot) + 1 :])
+            ]
             for ph, s in before:
                 if (ph, s) not in r.done:
                     r.done.add((ph, s))
                     out.append(_hop_event(agent, rnd, s, ph, t, True))
         elif phase == "forward" and robot in stops:
-            for s in stops[:stops.index(robot)]:
+            for s in stops[: stops.index(robot)]:
                 if ("forward", s) not in r.done:
                     r.done.add(("forward", s))
                     out.append(_hop_event(agent, rnd, s, "forward", t, True))
@@ -330,8 +387,13 @@ class EventSource:
                 else:
                     raise ValueError(kind)
             except (ValueError, KeyError, TypeError):
-                out.append({"t": self.clock(), "kind": "error",
-                            "text": f"rounds_{agent}.log: unreadable line {line[:200]!r}"})
+                out.append(
+                    {
+                        "t": self.clock(),
+                        "kind": "error",
+                        "text": f"rounds_{agent}.log: unreadable line {line[:200]!r}",
+                    }
+                )
                 continue
             timed.append((t, "log", (agent, ev)))
         return timed
@@ -339,13 +401,19 @@ class EventSource:
     def _round(self, out: list[dict[str, Any]], agent: str, ev: dict[str, Any]) -> None:
         rnd, start, end = int(ev["round"]), float(ev["start"]), float(ev["end"])
         visited = [str(v) for v in ev.get("visited", [])]
-        skipped = [{"robot": str(s.get("robot")), "reason": str(s.get("reason"))}
-                   for s in ev.get("skipped", [])]
+        skipped = [
+            {"robot": str(s.get("robot")), "reason": str(s.get("reason"))}
+            for s in ev.get("skipped", [])
+        ]
         r = self._rounds.setdefault((agent, rnd), _Round())
         if not r.closed:
-            tree = self._tree(agent)     # a tree's copies leave no order: the writes not seen
-            plan = [("backward", s) for s in visited] if tree else \
-                [("forward", s) for s in visited] + [("backward", s) for s in reversed(visited)]
+            tree = self._tree(agent)  # a tree's copies leave no order: the writes not seen
+            plan = (
+                [("backward", s) for s in visited]
+                if tree
+                else [("forward", s) for s in visited]
+                + [("backward", s) for s in reversed(visited)]
+            )
             missing = [p for p in plan if p not in r.done]
             for k, (ph, s) in enumerate(missing):
                 t = start + (end - start) * (k + 1) / (len(missing) + 1)
@@ -354,8 +422,16 @@ class EventSource:
             r.closed = True
         method = str(ev.get("method"))
         if method != self._methods.get(agent):
-            out.append({"t": start, "kind": "method", "agent": agent, "round": rnd,
-                        "method": method, "previous": self._methods.get(agent)})
+            out.append(
+                {
+                    "t": start,
+                    "kind": "method",
+                    "agent": agent,
+                    "round": rnd,
+                    "method": method,
+                    "previous": self._methods.get(agent),
+                }
+            )
             self._methods[agent] = method
         for skip in skipped:
             out.append({"t": end, "kind": "skip", "agent": agent, "round": rnd, **skip})
@@ -363,12 +439,24 @@ class EventSource:
         for rid, track in self.robots.items():
             if rid in visited or rid in self._skipped[agent]:
                 track.skipped = rid in self._skipped[agent]
-        out.append({"t": end, "kind": "round", "agent": agent, "round": rnd, "start": start,
-                    "end": end, "duration_ms": round((end - start) * 1000.0, 1),
-                    "method": method, "visited": visited, "skipped": skipped,
-                    "hops": int(ev.get("hops") or 0), "epoch": int(ev.get("epoch") or 0),
-                    "error": str(ev.get("error") or ""),
-                    "failed_method": str(ev.get("failed_method") or "")})
+        out.append(
+            {
+                "t": end,
+                "kind": "round",
+                "agent": agent,
+                "round": rnd,
+                "start": start,
+                "end": end,
+                "duration_ms": round((end - start) * 1000.0, 1),
+                "method": method,
+                "visited": visited,
+                "skipped": skipped,
+                "hops": int(ev.get("hops") or 0),
+                "epoch": int(ev.get("epoch") or 0),
+                "error": str(ev.get("error") or ""),
+                "failed_method": str(ev.get("failed_method") or ""),
+            }
+        )
 
     def _states(self, out: list[dict[str, Any]], now: float) -> None:
         assert self.run is not None
@@ -377,14 +465,31 @@ class EventSource:
             state = track.infer(now, sync, self.run["respite"], not self._ended)
             if state != track.state:
                 track.state = state
-                t = now if not self._ended else (track.anchors_t[-1] if track.anchors_t
-                                                 else self.run["t"])
-                out.append({"t": t,
-                            "kind": "robot_state", "robot": rid, "state": state,
-                            "inferred": track.told is None})
+                t = (
+                    now
+                    if not self._ended
+                    else (track.anchors_t[-1] if track.anchors_t else self.run["t"])
+                )
+                out.append(
+                    {
+                        "t": t,
+                        "kind": "robot_state",
+                        "robot": rid,
+                        "state": state,
+                        "inferred": track.told is None,
+                    }
+                )
 
 
-def _hop_event(agent: str, rnd: int, robot: str, phase: str, t: float,
-               inferred: bool) -> dict[str, Any]:
-    return {"t": t, "kind": "hop", "agent": agent, "round": rnd, "robot": robot,
-            "phase": phase, "inferred": inferred}
+def _hop_event(
+    agent: str, rnd: int, robot: str, phase: str, t: float, inferred: bool
+) -> dict[str, Any]:
+    return {
+        "t": t,
+        "kind": "hop",
+        "agent": agent,
+        "round": rnd,
+        "robot": robot,
+        "phase": phase,
+        "inferred": inferred,
+    }

@@ -5,6 +5,7 @@ most ``max_bytes`` from the saved offset and returns the whole lines found (a to
 waits for the next read). A file that shrank or was replaced (a new run in the same folder)
 is read again from the start, and :attr:`FileTail.restarted` says so.
 """
+
 from __future__ import annotations
 
 import csv
@@ -66,7 +67,7 @@ class FileTail:
         if cut < 0:
             self._rest = data
             return []
-        self._rest = data[cut + 1:]
+        self._rest = data[cut + 1 :]
         return data[:cut].decode("utf-8", errors="replace").splitlines()
 
 

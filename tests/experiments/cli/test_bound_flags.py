@@ -1,4 +1,5 @@
 """``dfrl robot`` passes the bound flags (``--max-agents`` ...) to its embedded node."""
+
 from __future__ import annotations
 
 import subprocess
@@ -32,21 +33,64 @@ svc.close()
 
 def test_robot_passes_bounds_to_its_node(tmp_path: Path) -> None:
     run = subprocess.run(
-        [sys.executable, "-c", PROBE, "robot", "--host", "127.0.0.1", "--port", "0",
-         "--workdir", str(tmp_path), "--max-agents", "5", "--agent-cpu-limit", "infinite",
-         "--agent-memory-budget", "268435456", "--max-running-agents", "3",
-         "--agent-wall-limit", "90", "--max-agents-per-peer", "infinite"],
-        capture_output=True, text=True, timeout=120, cwd=REPO)
+        [
+            sys.executable,
+            "-c",
+            PROBE,
+            "robot",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            "0",
+            "--workdir",
+            str(tmp_path),
+            "--max-agents",
+            "5",
+            "--agent-cpu-limit",
+            "infinite",
+            "--agent-memory-budget",
+            "268435456",
+            "--max-running-agents",
+            "3",
+            "--agent-wall-limit",
+            "90",
+            "--max-agents-per-peer",
+            "infinite",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=REPO,
+    )
     opts = dict(line.split()[1:3] for line in run.stdout.splitlines() if line.startswith("OPT "))
-    assert opts == {"max_agents": "5", "agent_cpu_limit": "infinite",
-                    "agent_memory_budget": "268435456", "max_running_agents": "3",
-                    "max_frame_size": "33554432", "agent_wall_limit": "90.0",
-                    "max_agents_per_peer": "infinite"}, run.stdout + run.stderr
+    assert opts == {
+        "max_agents": "5",
+        "agent_cpu_limit": "infinite",
+        "agent_memory_budget": "268435456",
+        "max_running_agents": "3",
+        "max_frame_size": "33554432",
+        "agent_wall_limit": "90.0",
+        "max_agents_per_peer": "infinite",
+    }, run.stdout + run.stderr
 
 
 def test_robot_refuses_a_bad_bound(tmp_path: Path) -> None:
     run = subprocess.run(
-        [sys.executable, "-m", "dfrl.experiments", "robot", "--port", "0", "--workdir",
-         str(tmp_path), "--max-running-agents", "none"],
-        capture_output=True, text=True, timeout=60, cwd=REPO)
+        [
+            sys.executable,
+            "-m",
+            "dfrl.experiments",
+            "robot",
+            "--port",
+            "0",
+            "--workdir",
+            str(tmp_path),
+            "--max-running-agents",
+            "none",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=REPO,
+    )
     assert run.returncode == 2 and "--max-running-agents" in run.stderr, run.stderr

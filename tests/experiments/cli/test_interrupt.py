@@ -1,4 +1,5 @@
 """Ctrl-C in ``dfrl run`` stops cleanly: exit 130, says what it kept, tables saved."""
+
 from __future__ import annotations
 
 import json
@@ -17,19 +18,33 @@ pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
 def test_ctrl_c_keeps_tables_and_says_so(tmp_path: Path) -> None:
     # Prepare: a run that lasts long enough (rtf 10: 4000 iterations take ~26 s)
-    cfg = {"name": "intr", "robots": [{"id": "r1", "arena": "r1"}, {"id": "r2", "arena": "r4"}],
-           "iterations": 4000, "respite": 100, "mode": "sync", "rtf": 10.0, "timeout_s": 120}
+    cfg = {
+        "name": "intr",
+        "robots": [{"id": "r1", "arena": "r1"}, {"id": "r2", "arena": "r4"}],
+        "iterations": 4000,
+        "respite": 100,
+        "mode": "sync",
+        "rtf": 10.0,
+        "timeout_s": 120,
+    }
     path = tmp_path / "intr.json"
     path.write_text(json.dumps(cfg))
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "dfrl", "run", str(path), "--out", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "dfrl", "run", str(path), "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         # Execute: Ctrl-C once the first round is logged
         log = out / "rounds_fed_qlearning.log"
         deadline = time.monotonic() + 90
-        while time.monotonic() < deadline and proc.poll() is None and not (
-                log.is_file() and '"event":"round"' in log.read_text()):
+        while (
+            time.monotonic() < deadline
+            and proc.poll() is None
+            and not (log.is_file() and '"event":"round"' in log.read_text())
+        ):
             time.sleep(0.1)
         assert proc.poll() is None, proc.communicate()
         proc.send_signal(signal.SIGINT)

@@ -1,13 +1,36 @@
 """The ``dfrl`` command line as a whole: its commands, and help without a command."""
+
 from __future__ import annotations
 
 import pytest
 
 from dfrl.experiments.cli import build_parser, main
 
-COMMANDS = ["node", "demo", "run", "inject", "join", "collect", "check-history", "bench", "train",
-            "eval", "baselines", "render-arenas", "transfer", "transfer-study", "sweep", "paper",
-            "speedup", "reference", "hetero", "robot", "view", "secret", "certs"]
+COMMANDS = [
+    "node",
+    "demo",
+    "run",
+    "inject",
+    "join",
+    "collect",
+    "check-history",
+    "bench",
+    "train",
+    "eval",
+    "baselines",
+    "render-arenas",
+    "transfer",
+    "transfer-study",
+    "sweep",
+    "paper",
+    "speedup",
+    "reference",
+    "hetero",
+    "robot",
+    "view",
+    "secret",
+    "certs",
+]
 
 
 def test_every_command_is_listed_in_order() -> None:

@@ -8,6 +8,7 @@ A shown line is read as a user would type it: the comment after ``#`` dropped, o
 ``N``, ``K``, ``S``, ``W`` and ``C``. The control: a line with an option
 that does not exist is refused by the same check.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -20,8 +21,13 @@ import pytest
 from dfrl.experiments.cli import build_parser
 from dfrl.experiments.tools.netns import REPO_ROOT
 
-READMES = sorted({REPO_ROOT / "README.md", *REPO_ROOT.glob("*/README.md"),
-                  *REPO_ROOT.glob("experiments/*/README.md")})
+READMES = sorted(
+    {
+        REPO_ROOT / "README.md",
+        *REPO_ROOT.glob("*/README.md"),
+        *REPO_ROOT.glob("experiments/*/README.md"),
+    }
+)
 LINE = re.compile(r"^\s*(?:\$ )?(dfrl [a-z].*)$")
 #: Placeholders the READMEs use for numbers, and what the check types for them.
 COUNTS = {"N", "K", "S", "W", "C"}

@@ -4,6 +4,7 @@ with the platform's own message (bits, what is needed, ``dfrl secret``, ``--host
 never a ``Term(...)`` repr; the same token on loopback and the README's ``--token-file`` of a
 ``dfrl secret`` token listen. Real processes.
 """
+
 from __future__ import annotations
 
 import os
@@ -35,9 +36,14 @@ def _env() -> dict[str, str]:
 
 def test_weak_token_on_every_interface_is_explained(tmp_path: Path) -> None:
     port = _free_port()
-    run = subprocess.run(_dfrl("robot", "--port", str(port), "--token", "4242",
-                               "--workdir", str(tmp_path / "work")),
-                         capture_output=True, text=True, timeout=120, cwd=tmp_path, env=_env())
+    run = subprocess.run(
+        _dfrl("robot", "--port", str(port), "--token", "4242", "--workdir", str(tmp_path / "work")),
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,
+        env=_env(),
+    )
     err = run.stderr
     assert run.returncode == 1, err
     assert "Term(" not in err and "Atom(" not in err, err
@@ -47,8 +53,21 @@ def test_weak_token_on_every_interface_is_explained(tmp_path: Path) -> None:
 
 
 def test_weak_token_on_loopback_listens(tmp_path: Path) -> None:
-    proc = Proc(_dfrl("robot", "--host", "127.0.0.1", "--port", "0", "--token", "4242",
-                      "--workdir", str(tmp_path / "work")), env=_env(), cwd=tmp_path)
+    proc = Proc(
+        _dfrl(
+            "robot",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            "0",
+            "--token",
+            "4242",
+            "--workdir",
+            str(tmp_path / "work"),
+        ),
+        env=_env(),
+        cwd=tmp_path,
+    )
     try:
         assert "dfrl robot listening on 127.0.0.1:" in proc.wait_for("listening", timeout=120)
     finally:
@@ -56,12 +75,29 @@ def test_weak_token_on_loopback_listens(tmp_path: Path) -> None:
 
 
 def test_readme_token_file_command_listens(tmp_path: Path) -> None:
-    made = subprocess.run(_dfrl("secret", "--out", "dfrl.token"), capture_output=True,
-                          text=True, timeout=60, cwd=tmp_path, env=_env())
+    made = subprocess.run(
+        _dfrl("secret", "--out", "dfrl.token"),
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=tmp_path,
+        env=_env(),
+    )
     assert made.returncode == 0, made.stderr
     port = _free_port()
-    proc = Proc(_dfrl("robot", "--port", str(port), "--token-file", "dfrl.token",
-                      "--workdir", str(tmp_path / "work")), env=_env(), cwd=tmp_path)
+    proc = Proc(
+        _dfrl(
+            "robot",
+            "--port",
+            str(port),
+            "--token-file",
+            "dfrl.token",
+            "--workdir",
+            str(tmp_path / "work"),
+        ),
+        env=_env(),
+        cwd=tmp_path,
+    )
     try:
         assert f":{port}" in proc.wait_for("dfrl robot listening on", timeout=120)
     finally:

@@ -1,5 +1,6 @@
 """``dfrl sweep``, the studies' seed options, SIGTERM to ``dfrl paper`` and ``dfrl --version``
 from the command line."""
+
 from __future__ import annotations
 
 import json
@@ -14,8 +15,9 @@ from dfrl.experiments.cli.studies import parse_factor
 
 
 def _dfrl(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "dfrl", *args], capture_output=True, text=True,
-                          timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "dfrl", *args], capture_output=True, text=True, timeout=300
+    )
 
 
 def test_version() -> None:
@@ -26,19 +28,38 @@ def test_version() -> None:
 def test_factor_syntax() -> None:
     assert parse_factor("learner.alpha=0.1;0.2") == ("learner.alpha", [0.1, 0.2])
     assert parse_factor('learner.epsilon={"kind":"constant"}') == (
-        "learner.epsilon", [{"kind": "constant"}])
+        "learner.epsilon",
+        [{"kind": "constant"}],
+    )
     assert parse_factor("discretisation.grouping=five") == ("discretisation.grouping", ["five"])
 
 
 def test_sweep_command_writes_its_table(tmp_path: Path) -> None:
-    out = _dfrl("sweep", "--set", "learner.alpha=0.5", "--iterations", "300", "--seeds", "1", "2",
-                "--eval-steps", "100", "--held-out", "h1", "--out", str(tmp_path))
+    out = _dfrl(
+        "sweep",
+        "--set",
+        "learner.alpha=0.5",
+        "--iterations",
+        "300",
+        "--seeds",
+        "1",
+        "2",
+        "--eval-steps",
+        "100",
+        "--held-out",
+        "h1",
+        "--out",
+        str(tmp_path),
+    )
     assert out.returncode == 0, out.stderr
     data = json.loads((tmp_path / "sweep.json").read_text())
     assert [d["setting"] for d in data] == ["base", "learner.alpha=0.5"]
     assert len(data[0]["runs"]) == 2
     assert (tmp_path / "sweep.md").read_text().startswith("| setting | score |")
-    assert json.loads((tmp_path / "provenance.json").read_text())["command"][:2] == ["dfrl", "sweep"]
+    assert json.loads((tmp_path / "provenance.json").read_text())["command"][:2] == [
+        "dfrl",
+        "sweep",
+    ]
     bad = _dfrl("sweep", "--set", "learner.nope=1", "--iterations", "300", "--seed", "1")
     assert bad.returncode == 2 and "learner.nope" in bad.stderr
 
@@ -51,7 +72,7 @@ def test_seed_options_are_unambiguous() -> None:
 
     parser = build_parser()
     seeds = lambda *a: chosen_seeds(parser.parse_args(["paper", *a]))  # noqa: E731
-    assert seeds() == (1, 2, 3, 4, 5)                      # the default count
+    assert seeds() == (1, 2, 3, 4, 5)  # the default count
     assert seeds("--n-seeds", "3") == (1, 2, 3)
     assert seeds("--seeds", "4", "9") == (4, 9)
     assert seeds("--seed", "5") == (5,)
@@ -61,7 +82,7 @@ def test_seed_options_are_unambiguous() -> None:
         seeds("--seeds", "2", "2")
     with pytest.raises(ValueError, match="at least 1"):
         seeds("--n-seeds", "0")
-    with pytest.raises(SystemExit):                          # one way at a time
+    with pytest.raises(SystemExit):  # one way at a time
         parser.parse_args(["paper", "--seeds", "1", "2", "--n-seeds", "2"])
     assert isinstance(parser, argparse.ArgumentParser)
 
@@ -70,7 +91,7 @@ def test_ambiguous_seeds_refused_by_every_study(tmp_path: Path) -> None:
     for cmd in (["paper", "--out", str(tmp_path / "p")], ["speedup"], ["sweep"]):
         out = _dfrl(*cmd, "--seeds", "5")
         assert out.returncode == 2 and "--seeds 5 is ambiguous" in out.stderr, (cmd, out.stderr)
-    assert not (tmp_path / "p").exists()                      # nothing started
+    assert not (tmp_path / "p").exists()  # nothing started
 
 
 @pytest.mark.slow
@@ -87,10 +108,32 @@ def test_sigterm_stops_the_whole_paper(tmp_path: Path, how: str, started: str) -
         pytest.skip("needs swipl")
     # Prepare: one seed, five federated runs one after another
     out = tmp_path / "paper"
-    proc = subprocess.Popen([sys.executable, "-m", "dfrl", "paper", "--out", str(out), "--seed",
-                             "1", "--iterations", "3000", "--respite", "500", "--eval-points",
-                             "1", "--eval-steps", "50", "--jobs", "1"] + ([how] if how else []),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "dfrl",
+            "paper",
+            "--out",
+            str(out),
+            "--seed",
+            "1",
+            "--iterations",
+            "3000",
+            "--respite",
+            "500",
+            "--eval-points",
+            "1",
+            "--eval-steps",
+            "50",
+            "--jobs",
+            "1",
+        ]
+        + ([how] if how else []),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         # Execute: SIGTERM once the first federated run has its robots up
         first = out / "seed1" / "paper_qlearning_average" / started

@@ -4,6 +4,7 @@ NAME has its agent's code installed without the sandbox check; the same agent fr
 certificate name is refused. Real processes, real mutual TLS; ``--trust`` without ``--tls`` or
 with a name no certificate can have exits 2 before anything listens.
 """
+
 from __future__ import annotations
 
 import shutil
@@ -18,8 +19,10 @@ from dfrl.experiments.tools.certs import init_ca, make_node
 from dfrl.platform_pl import PLATFORM_DIR
 from tests.platform.conftest import SWIPL, Proc
 
-pytestmark = [pytest.mark.skipif(shutil.which("openssl") is None, reason="openssl missing"),
-              pytest.mark.skipif(SWIPL is None, reason="swipl not installed")]
+pytestmark = [
+    pytest.mark.skipif(shutil.which("openssl") is None, reason="openssl missing"),
+    pytest.mark.skipif(SWIPL is None, reason="swipl not installed"),
+]
 
 REPO = Path(__file__).resolve().parents[3]
 
@@ -61,24 +64,52 @@ def _send(procs: list[Proc], tmp_path: Path, tls: Path, port: int, agent: str) -
     """Move ``agent`` (its code unsafe to the sandbox) from a TLS node with ``tls``'s
     certificate to ``localhost:port``; the sender's ``RESULT`` line."""
     path = tmp_path / f"{agent}.pl"
-    path.write_text(SENDER.format(tartarus=str(PLATFORM_DIR / "tartarus.pl"), tls=str(tls),
-                                  agent=agent, port=port))
+    path.write_text(
+        SENDER.format(
+            tartarus=str(PLATFORM_DIR / "tartarus.pl"), tls=str(tls), agent=agent, port=port
+        )
+    )
     proc = Proc([str(SWIPL), "-q", "-g", "main", "-t", "halt", str(path)])
     procs.append(proc)
     return proc.wait_for("RESULT", timeout=60)
 
 
 COMMANDS = {
-    "node": lambda tls: _dfrl("node", "--host", "127.0.0.1", "--port", "0", "--token", "9",
-                              "--tls", str(tls), "--trust", "alpha"),
-    "robot": lambda tls: _dfrl("robot", "--host", "127.0.0.1", "--port", "0", "--token", "9",
-                               "--workdir", "work", "--tls", str(tls), "--trust", "alpha"),
+    "node": lambda tls: _dfrl(
+        "node",
+        "--host",
+        "127.0.0.1",
+        "--port",
+        "0",
+        "--token",
+        "9",
+        "--tls",
+        str(tls),
+        "--trust",
+        "alpha",
+    ),
+    "robot": lambda tls: _dfrl(
+        "robot",
+        "--host",
+        "127.0.0.1",
+        "--port",
+        "0",
+        "--token",
+        "9",
+        "--workdir",
+        "work",
+        "--tls",
+        str(tls),
+        "--trust",
+        "alpha",
+    ),
 }
 
 
 @pytest.mark.parametrize("command", sorted(COMMANDS))
 def test_trusted_name_installs_unchecked_other_name_refused(
-        command: str, tmp_path: Path, pki: dict[str, Path], procs: list[Proc]) -> None:
+    command: str, tmp_path: Path, pki: dict[str, Path], procs: list[Proc]
+) -> None:
     # Prepare: `dfrl node|robot --tls victim --trust alpha` as its own process
     node = Proc(COMMANDS[command](pki["victim"]), cwd=tmp_path)
     procs.append(node)
@@ -90,8 +121,7 @@ def test_trusted_name_installs_unchecked_other_name_refused(
     # sender was told why
     assert from_alpha == "RESULT moved", node.output()
     node.wait_for("MARKED from_alpha", timeout=30)
-    assert "permission_error(install,code,assertz(user:marked(from_beta)))" in from_beta, \
-        from_beta
+    assert "permission_error(install,code,assertz(user:marked(from_beta)))" in from_beta, from_beta
     assert "MARKED from_beta" not in node.output()
 
 
@@ -99,10 +129,12 @@ def test_trusted_name_installs_unchecked_other_name_refused(
 def test_trust_without_tls_exits_2(command: str, tmp_path: Path, pki: dict[str, Path]) -> None:
     base = ["--host", "127.0.0.1", "--port", "0", "--token", "9"]
     for extra, message in (
-            (["--trust", "alpha"], "--trust needs --tls"),
-            (["--tls", str(pki["victim"]), "--trust", "al pha"], "not a certificate name")):
-        done = subprocess.run(_dfrl(command, *base, *extra), cwd=tmp_path, capture_output=True,
-                              text=True, timeout=60)
+        (["--trust", "alpha"], "--trust needs --tls"),
+        (["--tls", str(pki["victim"]), "--trust", "al pha"], "not a certificate name"),
+    ):
+        done = subprocess.run(
+            _dfrl(command, *base, *extra), cwd=tmp_path, capture_output=True, text=True, timeout=60
+        )
         assert done.returncode == 2, done.stdout + done.stderr
         assert f"dfrl {command}: " in done.stderr and message in done.stderr, done.stderr
         assert "listening" not in done.stdout

@@ -1,5 +1,6 @@
 """``dfrl collect`` on real runs: after a driver killed with SIGKILL mid-run (its robot
 processes left to end on their own), and on a run that ended normally (the control)."""
+
 from __future__ import annotations
 
 import csv
@@ -51,21 +52,34 @@ def _robot_pids(out: Path) -> list[int]:
 
 def test_collect_after_the_driver_was_killed(tmp_path: Path) -> None:
     # Prepare: a sync run of 2 robots that lasts ~10 s (rtf 10), driven by `dfrl run`
-    cfg = {"name": "killed", "robots": [{"id": "r1", "arena": "r1"}, {"id": "r2", "arena": "r4"}],
-           "iterations": 1000, "respite": 50, "mode": "sync", "rtf": 10.0, "seed": 1,
-           "timeout_s": 120}
+    cfg = {
+        "name": "killed",
+        "robots": [{"id": "r1", "arena": "r1"}, {"id": "r2", "arena": "r4"}],
+        "iterations": 1000,
+        "respite": 50,
+        "mode": "sync",
+        "rtf": 10.0,
+        "seed": 1,
+        "timeout_s": 120,
+    }
     path = tmp_path / "killed.json"
     path.write_text(json.dumps(cfg))
     out = tmp_path / "out"
     log = out / f"rounds_{AGENT}.log"
-    driver = subprocess.Popen([sys.executable, "-m", "dfrl", "run", str(path), "--out", str(out)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    driver = subprocess.Popen(
+        [sys.executable, "-m", "dfrl", "run", str(path), "--out", str(out)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
     try:
         # Execute: SIGKILL the driver alone (a crash: no handler runs, its children are left
         # in their own process groups) once 2 rounds are logged
         deadline = time.monotonic() + 90
-        while time.monotonic() < deadline and driver.poll() is None and \
-                len(read_rounds_log(log, AGENT).rounds) < 2:
+        while (
+            time.monotonic() < deadline
+            and driver.poll() is None
+            and len(read_rounds_log(log, AGENT).rounds) < 2
+        ):
             time.sleep(0.05)
         assert driver.poll() is None, driver.communicate()[1][-3000:]
         driver.send_signal(signal.SIGKILL)
@@ -79,16 +93,24 @@ def test_collect_after_the_driver_was_killed(tmp_path: Path) -> None:
             time.sleep(0.2)
         assert not any(map(_running, pids)), "robot processes outlived their driver by 30 s"
         assert not (out / "rounds.csv").exists() and not (out / "summary.md").exists()
-        collected = subprocess.run([sys.executable, "-m", "dfrl", "collect", str(out),
-                                    "--wait", "5"], capture_output=True, text=True, timeout=120)
+        collected = subprocess.run(
+            [sys.executable, "-m", "dfrl", "collect", str(out), "--wait", "5"],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         again = (out / "rounds.csv").read_bytes()
-        second = subprocess.run([sys.executable, "-m", "dfrl", "collect", str(out)],
-                                capture_output=True, text=True, timeout=120)
+        second = subprocess.run(
+            [sys.executable, "-m", "dfrl", "collect", str(out)],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
     finally:
         if driver.poll() is None:
             driver.kill()
             driver.wait()
-        for pid in _robot_pids(out):         # the robots the killed driver started, if left
+        for pid in _robot_pids(out):  # the robots the killed driver started, if left
             if _running(pid):
                 os.kill(pid, signal.SIGKILL)
     # Assert: the end-of-run files are there, the rounds logged before the kill in them, and
@@ -103,7 +125,7 @@ def test_collect_after_the_driver_was_killed(tmp_path: Path) -> None:
     for rec in before:
         row = rows[rec.round]
         assert row["visited"] == " ".join(rec.visited) and row["method"] == rec.method
-        if not rec.skipped:      # a round the agent finished before the kill: shared by both
+        if not rec.skipped:  # a round the agent finished before the kill: shared by both
             assert row["all_equal"] == "true" and row["digest_r1"] == row["digest_r2"]
     summary = (out / "summary.md").read_text()
     assert "federation INCOMPLETE" in summary and "federation complete" not in summary

@@ -1,5 +1,6 @@
 """Experiment and robot process configurations: round trips, validation, shipped configs,
 boundaries, the renamed robot_host key, one check per run."""
+
 from __future__ import annotations
 
 import json
@@ -12,8 +13,7 @@ import numpy as np
 import pytest
 
 from dfrl.experiments.driver import config as config_module
-from dfrl.experiments.driver.config import (ConfigError, ExperimentConfig, RobotSpec,
-                                            parse_host_port)
+from dfrl.experiments.driver.config import ConfigError, ExperimentConfig, RobotSpec, parse_host_port
 from dfrl.experiments.robot_host.config import RobotConfig, boundaries
 from dfrl.experiments.robot_host import table_digest
 
@@ -32,8 +32,12 @@ def test_configs_round_trip_and_validate() -> None:
     assert RobotConfig.from_dict(n.to_dict()) == n
     with pytest.raises(ValueError):
         RobotConfig.from_dict({"robot": "r1", "out_dir": "x", "colour": 1})
-    cfg = ExperimentConfig(robots=(RobotSpec("r1", "r1"), RobotSpec("r2", "r4", "sarsa")),
-                           iterations=1200, respite=500, methods={"sarsa": "max"})
+    cfg = ExperimentConfig(
+        robots=(RobotSpec("r1", "r1"), RobotSpec("r2", "r4", "sarsa")),
+        iterations=1200,
+        respite=500,
+        methods={"sarsa": "max"},
+    )
     assert cfg.rounds == 3
     assert cfg.algorithms() == ["qlearning", "sarsa"]
     assert cfg.method_for("sarsa") == "max" and cfg.method_for("qlearning") == "average"
@@ -49,21 +53,34 @@ def test_shipped_configs_load() -> None:
     from dfrl.experiments.driver.config import CONFIGS_DIR
 
     names = sorted(p.stem for p in CONFIGS_DIR.glob("*.json"))
-    assert {"demo", "paper_qlearning_average", "paper_qlearning_max", "paper_sarsa_average",
-            "paper_sarsa_max", "hetero", "join"} <= set(names)
+    assert {
+        "demo",
+        "paper_qlearning_average",
+        "paper_qlearning_max",
+        "paper_sarsa_average",
+        "paper_sarsa_max",
+        "hetero",
+        "join",
+    } <= set(names)
     for p in CONFIGS_DIR.glob("*.json"):
         ExperimentConfig.load(p)
 
 
 def test_renamed_node_key_is_located_and_named() -> None:
-    data = {"robots": [{"id": "r1", "arena": "r1"}, {"id": "r2", "arena": "r4"},
-                       {"id": "r3", "arena": "r2", "node": "10.0.0.7:7001"}],
-            "joins": [{"robot": {"id": "r4", "arena": "r1", "node": "10.0.0.8:7001"}}]}
+    data = {
+        "robots": [
+            {"id": "r1", "arena": "r1"},
+            {"id": "r2", "arena": "r4"},
+            {"id": "r3", "arena": "r2", "node": "10.0.0.7:7001"},
+        ],
+        "joins": [{"robot": {"id": "r4", "arena": "r1", "node": "10.0.0.8:7001"}}],
+    }
     with pytest.raises(ConfigError) as info:
         ExperimentConfig.from_dict(data)
     assert info.value.problems == [
         "robots[2].node: renamed robot_host (HOST:PORT of a dfrl robot service)",
-        "joins[0].robot.node: renamed robot_host (HOST:PORT of a dfrl robot service)"]
+        "joins[0].robot.node: renamed robot_host (HOST:PORT of a dfrl robot service)",
+    ]
     data["robots"][2] = {"id": "r3", "arena": "r2", "robot_host": "10.0.0.7:7001"}
     data["joins"][0]["robot"] = {"id": "r4", "arena": "r1", "robot_host": "[::1]:7002"}
     cfg = ExperimentConfig.from_dict(data)
@@ -90,25 +107,34 @@ def counting(monkeypatch: pytest.MonkeyPatch) -> list[bool]:
 
 def test_a_loaded_config_is_checked_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     path = tmp_path / "cfg.json"
-    path.write_text(json.dumps({"comment": "two robots", "iterations": 300, "respite": 100,
-                                "robots": [{"id": "r1", "arena": "r1"},
-                                           {"id": "r2", "arena": "r4", "algo": "sarsa"}],
-                                "joins": [{"robot": {"id": "r3", "arena": "r2"}}]}))
+    path.write_text(
+        json.dumps(
+            {
+                "comment": "two robots",
+                "iterations": 300,
+                "respite": 100,
+                "robots": [
+                    {"id": "r1", "arena": "r1"},
+                    {"id": "r2", "arena": "r4", "algo": "sarsa"},
+                ],
+                "joins": [{"robot": {"id": "r3", "arena": "r2"}}],
+            }
+        )
+    )
     calls = counting(monkeypatch)
     cfg = ExperimentConfig.load(path, {"seed": 4})
-    cfg.check()                                     # the arenas were loaded by load()
-    cfg = cfg.with_token("dfrl_" + "a" * 64)        # the token alone is checked
+    cfg.check()  # the arenas were loaded by load()
+    cfg = cfg.with_token("dfrl_" + "a" * 64)  # the token alone is checked
     cfg.check()
     assert calls == [True]
     assert cfg.seed == 4 and cfg.joins[0].robot.arena == "r2"
     with pytest.raises(ConfigError, match="token: not a token"):
         cfg.with_token("two words")
-    cfg.replace(seed=5).check()                     # a change: checked as a whole again
+    cfg.replace(seed=5).check()  # a change: checked as a whole again
     assert calls == [True, False, True]
 
 
-def test_dfrl_run_checks_the_config_once(tmp_path: Path,
-                                         monkeypatch: pytest.MonkeyPatch) -> None:
+def test_dfrl_run_checks_the_config_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from dfrl.experiments import cli
     from dfrl.experiments.driver import launcher
     from dfrl.experiments.errors import ExperimentError
@@ -116,7 +142,7 @@ def test_dfrl_run_checks_the_config_once(tmp_path: Path,
     seen: list[ExperimentConfig] = []
 
     def fake_run(cfg: ExperimentConfig, out: Path, **_: Any) -> None:
-        cfg.check()                                  # what the launcher does first
+        cfg.check()  # what the launcher does first
         seen.append(cfg.with_token(cfg.token if cfg.token is not None else 7))
         raise ExperimentError("stopped before anything started")
 
@@ -130,10 +156,13 @@ def test_dfrl_run_checks_the_config_once(tmp_path: Path,
 
 
 def test_robot_host_needs_nothing_of_the_driver() -> None:
-    code = ("import sys, dfrl.experiments.robot_host.config, dfrl.experiments.robot_host.service;"
-            "print(sorted(m for m in sys.modules if '.driver' in m))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True).stdout
+    code = (
+        "import sys, dfrl.experiments.robot_host.config, dfrl.experiments.robot_host.service;"
+        "print(sorted(m for m in sys.modules if '.driver' in m))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout
     assert out.strip() == "[]"
 
 
@@ -146,22 +175,34 @@ def test_function_learner_method_must_apply_to_params() -> None:
     assert check_experiment({"robots": robots}, resources=False) == []
     problems = check_experiment({"robots": robots, "method": "max"}, resources=False)
     assert len(problems) == 1
-    assert problems[0].startswith("method: max does not apply to the dqn robots: dqn is a "
-                                  "function learner")
+    assert problems[0].startswith(
+        "method: max does not apply to the dqn robots: dqn is a function learner"
+    )
     assert "is no network" in problems[0] and '{"dqn": "average"}' in problems[0]
-    assert check_experiment({"robots": robots, "method": "max",
-                             "methods": {"dqn": "average"}}, resources=False) == []
-    problems = check_experiment({"robots": [{"id": "r1", "arena": "r1", "algo": "linear"}],
-                                 "methods": {"linear": "visit_average"}}, resources=False)
-    assert len(problems) == 1 and problems[0].startswith("methods.linear: visit_average does "
-                                                         "not apply")
+    assert (
+        check_experiment(
+            {"robots": robots, "method": "max", "methods": {"dqn": "average"}}, resources=False
+        )
+        == []
+    )
+    problems = check_experiment(
+        {
+            "robots": [{"id": "r1", "arena": "r1", "algo": "linear"}],
+            "methods": {"linear": "visit_average"},
+        },
+        resources=False,
+    )
+    assert len(problems) == 1 and problems[0].startswith(
+        "methods.linear: visit_average does not apply"
+    )
     assert "no visit counts" in problems[0]
     joins = [{"robot": {"id": "r3", "arena": "r2", "algo": "dqn"}, "after_round": 1}]
-    problems = check_experiment({"robots": robots[:1], "joins": joins, "method": "max"},
-                                resources=False)
+    problems = check_experiment(
+        {"robots": robots[:1], "joins": joins, "method": "max"}, resources=False
+    )
     assert len(problems) == 1 and problems[0].startswith("method: max does not apply to the dqn")
     only_dqn = check_experiment({"robots": robots[1:], "method": "max"}, resources=False)
-    assert len(only_dqn) == 1 and "tabular" not in only_dqn[0]     # no hint about others
+    assert len(only_dqn) == 1 and "tabular" not in only_dqn[0]  # no hint about others
     with pytest.raises(ConfigError, match="max does not apply"):
         ExperimentConfig(robots=(RobotSpec("r1", "r1", "dqn"),), method="max")
 
@@ -173,9 +214,12 @@ def test_resolved_config_writes_out_every_seed_and_trainer_setting() -> None:
     from dfrl.experiments.driver.config import JoinSpec
     from dfrl.robots.training import TrainerConfig
 
-    cfg = ExperimentConfig(robots=(RobotSpec("r1", "r1"), RobotSpec("r2", "r4", seed=40)),
-                           joins=(JoinSpec(RobotSpec("r3", "r2")),), seed=7,
-                           trainer={"learner": {"alpha": 0.1}})
+    cfg = ExperimentConfig(
+        robots=(RobotSpec("r1", "r1"), RobotSpec("r2", "r4", seed=40)),
+        joins=(JoinSpec(RobotSpec("r3", "r2")),),
+        seed=7,
+        trainer={"learner": {"alpha": 0.1}},
+    )
     # Execute
     res = cfg.resolved()
     # Assert: the seeds the run uses, written out
@@ -185,30 +229,32 @@ def test_resolved_config_writes_out_every_seed_and_trainer_setting() -> None:
     d = TrainerConfig()
     learner = res.trainer["learner"]
     assert learner["alpha"] == 0.1 and learner["gamma"] == d.learner.gamma
-    assert learner["epsilon"] == {"kind": d.learner.epsilon.kind.value,
-                                  "start": d.learner.epsilon.start,
-                                  "end": d.learner.epsilon.end,
-                                  "decay_steps": d.learner.epsilon.decay_steps}
-    assert set(res.trainer) == set(d.to_dict(full=True)) - {"arena", "algo", "seed",
-                                                             "iterations"}
+    assert learner["epsilon"] == {
+        "kind": d.learner.epsilon.kind.value,
+        "start": d.learner.epsilon.start,
+        "end": d.learner.epsilon.end,
+        "decay_steps": d.learner.epsilon.decay_steps,
+    }
+    assert set(res.trainer) == set(d.to_dict(full=True)) - {"arena", "algo", "seed", "iterations"}
     assert check_trainer("trainer", res.trainer) == []
     # the robots train exactly as before: the same TrainerConfig from either trainer dict
     for a, b in ((cfg, cfg.trainer), (res, res.trainer)):
-        node = RobotConfig(robot="r1", out_dir="/tmp/x", seed=a.robot_seed(a.robots[0]),
-                           trainer=b)
-        assert node.trainer_config() == RobotConfig(
-            robot="r1", out_dir="/tmp/x", seed=7, trainer={"learner": {"alpha": 0.1}}
-        ).trainer_config()
+        node = RobotConfig(robot="r1", out_dir="/tmp/x", seed=a.robot_seed(a.robots[0]), trainer=b)
+        assert (
+            node.trainer_config()
+            == RobotConfig(
+                robot="r1", out_dir="/tmp/x", seed=7, trainer={"learner": {"alpha": 0.1}}
+            ).trainer_config()
+        )
     # it loads back through the same checks (as config.json, without the token), unchanged,
     # and resolves to itself
     back = ExperimentConfig.from_dict(json.loads(json.dumps(res.public_dict())))
     assert back == res and back.resolved() == res
-    assert cfg.resolved() != cfg                 # control: the unresolved config differs
+    assert cfg.resolved() != cfg  # control: the unresolved config differs
 
 
 @pytest.mark.parametrize("name", sorted(p.stem for p in config_module.CONFIGS_DIR.glob("*.json")))
-def test_every_shipped_config_resolves_to_one_the_loader_takes(name: str,
-                                                               tmp_path: Path) -> None:
+def test_every_shipped_config_resolves_to_one_the_loader_takes(name: str, tmp_path: Path) -> None:
     # Prepare: a shipped config, resolved and written as a run writes it
     cfg = ExperimentConfig.load(config_module.resolve_config(name))
     path = tmp_path / "config.json"

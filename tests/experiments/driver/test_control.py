@@ -1,4 +1,5 @@
 """The console node (dfrl_console.pl) and its Python driver, with real swipl processes."""
+
 from __future__ import annotations
 
 import json
@@ -31,15 +32,28 @@ class Node:
     def __init__(self, consult: Path = ROBOTS) -> None:
         assert SWIPL is not None
         self.proc = subprocess.Popen(
-            [SWIPL, "-q", str(PLATFORM_DIR / "node_main.pl"), "--host", "127.0.0.1",
-             "--token", str(TOKEN), "--consult", str(DFRL_AGENT_DIR / "dfrl_agent.pl"),
-             "--consult", str(consult)],
-            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-            text=True)
+            [
+                SWIPL,
+                "-q",
+                str(PLATFORM_DIR / "node_main.pl"),
+                "--host",
+                "127.0.0.1",
+                "--token",
+                str(TOKEN),
+                "--consult",
+                str(DFRL_AGENT_DIR / "dfrl_agent.pl"),
+                "--consult",
+                str(consult),
+            ],
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
         assert self.proc.stdout is not None
         self.lines: list[str] = []
-        first = self.proc.stdout.readline()        # bounded: the node prints it or exits
-        while first.startswith("Warning:"):         # e.g. a Tartarus-style token on loopback
+        first = self.proc.stdout.readline()  # bounded: the node prints it or exits
+        while first.startswith("Warning:"):  # e.g. a Tartarus-style token on loopback
             self.lines.append(first)
             first = self.proc.stdout.readline()
         self.lines.append(first)
@@ -72,6 +86,7 @@ def nodes() -> Iterator[Callable[[], Node]]:
         n = Node()
         started.append(n)
         return n
+
     yield start
     for n in started:
         n.stop()
@@ -101,11 +116,19 @@ def wait_until(what: str, cond: Callable[[], Any], timeout_s: float = 20.0) -> A
     raise AssertionError(f"timed out waiting for {what}")
 
 
-def plan(name: str, stops: list[tuple[Node, str]], log: Path, rounds: int = 10_000,
-         rest_s: float = 0.05) -> dict[str, Any]:
-    return {"name": name, "method": "average", "rounds": rounds, "rest_s": rest_s,
-            "rounds_log": str(log), "token": TOKEN, "timeout_s": 10,
-            "itinerary": [{"host": "127.0.0.1", "port": n.port, "robot": r} for n, r in stops]}
+def plan(
+    name: str, stops: list[tuple[Node, str]], log: Path, rounds: int = 10_000, rest_s: float = 0.05
+) -> dict[str, Any]:
+    return {
+        "name": name,
+        "method": "average",
+        "rounds": rounds,
+        "rest_s": rest_s,
+        "rounds_log": str(log),
+        "token": TOKEN,
+        "timeout_s": 10,
+        "itinerary": [{"host": "127.0.0.1", "port": n.port, "robot": r} for n, r in stops],
+    }
 
 
 def test_console_starts_and_reports_its_address() -> None:
@@ -113,7 +136,7 @@ def test_console_starts_and_reports_its_address() -> None:
         host, port = c.address
         assert host == "127.0.0.1" and port > 0
         with socket.create_connection((host, port), timeout=5):
-            pass                                        # it listens there
+            pass  # it listens there
         assert c.running
     assert not c.running
 
@@ -127,24 +150,34 @@ def test_console_on_a_taken_port_fails_with_the_reason(console: ConsoleNode) -> 
 def test_bad_requests_get_error_replies_and_the_node_keeps_serving() -> None:
     # Prepare: the console script driven by hand, line by line.
     assert SWIPL is not None
-    proc = subprocess.Popen([SWIPL, "-q", str(CONSOLE_SCRIPT)], stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [SWIPL, "-q", str(CONSOLE_SCRIPT)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     assert proc.stdin is not None and proc.stdout is not None
     try:
         ready = json.loads(proc.stdout.readline())
         assert ready["event"] == "ready"
         own = [ready["host"], ready["port"]]
-        requests = ["this is not json", "[1, 2]", '{"id": 1}', '{"id": 2, "op": "nope"}',
-                    '{"id": 3, "op": "control", "agent": "a", "host": "127.0.0.1", '
-                    '"port": 1, "command": {"bogus": 1}}',
-                    '{"id": 4, "op": "launch", "plan": {"itinerary": []}}',
-                    json.dumps({"id": 5, "op": "agents", "node": own})]
+        requests = [
+            "this is not json",
+            "[1, 2]",
+            '{"id": 1}',
+            '{"id": 2, "op": "nope"}',
+            '{"id": 3, "op": "control", "agent": "a", "host": "127.0.0.1", '
+            '"port": 1, "command": {"bogus": 1}}',
+            '{"id": 4, "op": "launch", "plan": {"itinerary": []}}',
+            json.dumps({"id": 5, "op": "agents", "node": own}),
+        ]
         # Execute
         for r in requests:
             proc.stdin.write(r + "\n")
         proc.stdin.flush()
         replies = [json.loads(proc.stdout.readline()) for _ in requests]
-        proc.stdin.close()                                    # end of input: clean exit
+        proc.stdin.close()  # end of input: clean exit
         code = proc.wait(timeout=10)
     finally:
         if proc.poll() is None:
@@ -166,25 +199,28 @@ def test_errors_raise_with_the_node_text(console: ConsoleNode, tmp_path: Path) -
         console.control(("127.0.0.1", 1), "a", {"stop": True})
     with pytest.raises(ExperimentError, match="does not exist"):
         console.load_program(tmp_path / "missing.pl", [console.address])
-    assert console.agents_at(console.address) == []        # still serving
+    assert console.agents_at(console.address) == []  # still serving
 
 
-def test_launch_moves_the_agent_to_its_first_stop(console: ConsoleNode, nodes: Callable[[], Node],
-                                                  tmp_path: Path) -> None:
+def test_launch_moves_the_agent_to_its_first_stop(
+    console: ConsoleNode, nodes: Callable[[], Node], tmp_path: Path
+) -> None:
     a = nodes()
     log = tmp_path / "rounds.log"
     got = console.launch_agent(plan("fed_test", [(a, "r1")], log, rest_s=0.2))
     assert got == {"agent": "fed_test", "host": "127.0.0.1", "port": a.port}
-    names = wait_until("the agent at its first stop",
-                       lambda: [x["name"] for x in console.agents_at(a.address)])
+    names = wait_until(
+        "the agent at its first stop", lambda: [x["name"] for x in console.agents_at(a.address)]
+    )
     assert names == ["fed_test"]
-    assert console.agents_at(console.address) == []        # it left the console
+    assert console.agents_at(console.address) == []  # it left the console
     with pytest.raises(ExperimentError, match="permission to create agent `fed_test"):
         console.launch_agent(plan("fed_test", [(a, "r1")], log))
 
 
-def test_control_reaches_a_running_agent(console: ConsoleNode, nodes: Callable[[], Node],
-                                         tmp_path: Path) -> None:
+def test_control_reaches_a_running_agent(
+    console: ConsoleNode, nodes: Callable[[], Node], tmp_path: Path
+) -> None:
     # Prepare: an agent on two nodes, resting between rounds; a third node to join.
     a, b, c = nodes(), nodes(), nodes()
     log = tmp_path / "rounds.log"
@@ -194,8 +230,11 @@ def test_control_reaches_a_running_agent(console: ConsoleNode, nodes: Callable[[
         return [e for e in log_events(log) if e["event"] == "round"]
 
     def control(command: str) -> dict[str, Any] | None:
-        return next((e for e in log_events(log)
-                     if e["event"] == "control" and e["command"] == command), None)
+        return next(
+            (e for e in log_events(log) if e["event"] == "control" and e["command"] == command),
+            None,
+        )
+
     wait_until("a first round", rounds)
     # Execute and assert: method, an unknown method, join, another agent's stop, stop.
     console.control(a.address, "fed_test", {"method": "max"})
@@ -204,33 +243,40 @@ def test_control_reaches_a_running_agent(console: ConsoleNode, nodes: Callable[[
     console.control(a.address, "fed_test", {"method": "nonesuch"})
     ignored = wait_until("unknown method ignored", lambda: control("method(nonesuch)"))
     assert ignored["status"] == "ignored" and ignored["reason"]
-    console.control(a.address, "fed_test", {"join": {"host": "127.0.0.1", "port": c.port,
-                                                     "robot": "r3"}})
-    wait_until("a round visiting r3",
-               lambda: any(r["visited"] == ["r1", "r2", "r3"] for r in rounds()))
+    console.control(
+        a.address, "fed_test", {"join": {"host": "127.0.0.1", "port": c.port, "robot": "r3"}}
+    )
+    wait_until(
+        "a round visiting r3", lambda: any(r["visited"] == ["r1", "r2", "r3"] for r in rounds())
+    )
     assert all(r["method"] == "max" for r in rounds()[-1:])
     console.control(a.address, "someone_else", {"stop": True})
     n = len(rounds())
     wait_until("rounds go on", lambda: len(rounds()) >= n + 3)
     assert not any(e["event"] == "finished" for e in log_events(log))
     console.control(a.address, "fed_test", {"stop": True})
-    finished = wait_until("finished", lambda: [e for e in log_events(log)
-                                               if e["event"] == "finished"])
+    finished = wait_until(
+        "finished", lambda: [e for e in log_events(log) if e["event"] == "finished"]
+    )
     assert finished[0]["agent"] == "fed_test"
     wait_until("the agent gone", lambda: console.agents_at(a.address) == [])
 
 
-def test_program_loaded_then_selected(console: ConsoleNode, nodes: Callable[[], Node],
-                                      tmp_path: Path) -> None:
+def test_program_loaded_then_selected(
+    console: ConsoleNode, nodes: Callable[[], Node], tmp_path: Path
+) -> None:
     a, b = nodes(), nodes()
     log = tmp_path / "rounds.log"
     console.launch_agent(plan("fed_test", [(a, "r1"), (b, "r2")], log))
-    got = console.load_program(DFRL_AGENT_DIR / "examples" / "median_method.pl",
-                               [a.address, b.address])
+    got = console.load_program(
+        DFRL_AGENT_DIR / "examples" / "median_method.pl", [a.address, b.address]
+    )
     assert got["loaded"] == [list(a.address), list(b.address)]
     console.control(a.address, "fed_test", {"method": "median"})
-    wait_until("a median round", lambda: any(
-        e["event"] == "round" and e["method"] == "median" for e in log_events(log)))
+    wait_until(
+        "a median round",
+        lambda: any(e["event"] == "round" and e["method"] == "median" for e in log_events(log)),
+    )
     console.control(a.address, "fed_test", {"stop": True})
     wait_until("finished", lambda: any(e["event"] == "finished" for e in log_events(log)))
 
@@ -244,6 +290,7 @@ def test_join_request_reaches_the_driver_and_its_reply_comes_back() -> None:
             assert event is not None
             answers.append(event)
             driver.reply(tuple(event["from"]), event["request"], result)
+
         spec = {"id": "r9", "arena": "open", "algo": "qlearning", "seed": None}
         # Execute: one accepted, one refused request.
         t = threading.Thread(target=serve, args=({"robot": "r9", "port": 7009},))
@@ -282,8 +329,12 @@ def test_one_shot_scripts_launch_and_control(nodes: Callable[[], Node], tmp_path
     log = tmp_path / "rounds.log"
     launch = tmp_path / "launch.json"
     launch.write_text(json.dumps(plan("fed_test", [(a, "r1")], log)), encoding="utf-8")
-    out = subprocess.run([SWIPL, "-q", str(DFRL_AGENT_DIR / "dfrl_launch.pl"), str(launch)],
-                         capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [SWIPL, "-q", str(DFRL_AGENT_DIR / "dfrl_launch.pl"), str(launch)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode == 0, out.stderr
     assert f"DFRL_AGENT fed_test launched to 127.0.0.1:{a.port}" in out.stdout
     wait_until("a first round", lambda: any(e["event"] == "round" for e in log_events(log)))
@@ -291,17 +342,37 @@ def test_one_shot_scripts_launch_and_control(nodes: Callable[[], Node], tmp_path
 
     def control(doc: dict[str, Any]) -> subprocess.CompletedProcess[str]:
         command.write_text(json.dumps(doc), encoding="utf-8")
-        return subprocess.run([SWIPL, "-q", str(DFRL_AGENT_DIR / "dfrl_control.pl"), "127.0.0.1",
-                               str(a.port), str(command)], env=env_with_tokens([TOKEN]),
-                              capture_output=True, text=True, timeout=60)
-    refused = control({"stop": True})                        # no agent named: refused
+        return subprocess.run(
+            [
+                SWIPL,
+                "-q",
+                str(DFRL_AGENT_DIR / "dfrl_control.pl"),
+                "127.0.0.1",
+                str(a.port),
+                str(command),
+            ],
+            env=env_with_tokens([TOKEN]),
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+
+    refused = control({"stop": True})  # no agent named: refused
     assert refused.returncode == 1 and "agent" in refused.stderr
     program = str(DFRL_AGENT_DIR / "examples" / "median_method.pl")
-    sent = control({"agent": "fed_test", "method": "median", "program": program,
-                    "nodes": [["127.0.0.1", a.port]]})
+    sent = control(
+        {
+            "agent": "fed_test",
+            "method": "median",
+            "program": program,
+            "nodes": [["127.0.0.1", a.port]],
+        }
+    )
     assert sent.returncode == 0, sent.stderr
-    wait_until("a median round", lambda: any(
-        e["event"] == "round" and e["method"] == "median" for e in log_events(log)))
+    wait_until(
+        "a median round",
+        lambda: any(e["event"] == "round" and e["method"] == "median" for e in log_events(log)),
+    )
     assert control({"agent": "fed_test", "stop": True}).returncode == 0
     wait_until("finished", lambda: any(e["event"] == "finished" for e in log_events(log)))
 
@@ -325,8 +396,9 @@ def test_robot_op_sends_k5_requests_and_converts_the_answers() -> None:
             assert files == [{"name": "metrics_r1.csv", "size": 26}]
             data, offset = b"", 0
             for _ in range(20):
-                chunk = c.robot(peer.address, {"fetch": {"name": "metrics_r1.csv",
-                                                         "offset": offset, "max": 10}})
+                chunk = c.robot(
+                    peer.address, {"fetch": {"name": "metrics_r1.csv", "offset": offset, "max": 10}}
+                )
                 part = base64.b64decode(chunk["data"])
                 data += part
                 offset += len(part)
@@ -337,7 +409,7 @@ def test_robot_op_sends_k5_requests_and_converts_the_answers() -> None:
                 c.robot(peer.address, {"reboot": True})
             with pytest.raises(ExperimentError, match="robot_request"):
                 c.robot(peer.address, {"fetch": {"name": "nope", "offset": 0, "max": 1}})
-        with ConsoleNode(tokens=12345) as wrong:        # a token the peer does not know
+        with ConsoleNode(tokens=12345) as wrong:  # a token the peer does not know
             with pytest.raises(ExperimentError):
                 wrong.robot(peer.address, "status")
     finally:
@@ -345,8 +417,9 @@ def test_robot_op_sends_k5_requests_and_converts_the_answers() -> None:
 
 
 def test_robot_op_to_a_dead_address_fails_without_blocking_the_console(
-        console: ConsoleNode) -> None:
-    with socket.socket() as s:                       # a port nobody listens on
+    console: ConsoleNode,
+) -> None:
+    with socket.socket() as s:  # a port nobody listens on
         s.bind(("127.0.0.1", 0))
         dead = ("127.0.0.1", s.getsockname()[1])
     with pytest.raises(ExperimentError, match="robot failed"):
@@ -355,7 +428,8 @@ def test_robot_op_to_a_dead_address_fails_without_blocking_the_console(
 
 
 def test_launch_with_its_first_stop_down_starts_at_the_next(
-        console: ConsoleNode, nodes: Callable[[], Node], tmp_path: Path) -> None:
+    console: ConsoleNode, nodes: Callable[[], Node], tmp_path: Path
+) -> None:
     # Prepare: the first stop is a node that was started and killed (nothing listens there).
     dead, b = nodes(), nodes()
     dead.proc.kill()
@@ -366,8 +440,7 @@ def test_launch_with_its_first_stop_down_starts_at_the_next(
     # Assert: the launch says what happened, the agent re-homes at r2 and runs its rounds,
     # each reporting the dead stop as skipped.
     assert got["first_stop_failed"], got
-    done = wait_until("finished", lambda: [e for e in log_events(log)
-                                           if e["event"] == "finished"])
+    done = wait_until("finished", lambda: [e for e in log_events(log) if e["event"] == "finished"])
     assert done[0]["round"] == 3
     rounds = [e for e in log_events(log) if e["event"] == "round"]
     assert [r["round"] for r in rounds] == [1, 2, 3]

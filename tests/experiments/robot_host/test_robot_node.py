@@ -1,4 +1,5 @@
 """The robot node process on its own (no agent): protocol lines, files, stopping."""
+
 from __future__ import annotations
 
 import csv
@@ -21,9 +22,14 @@ def _start(tmp_path: Path, **kw) -> subprocess.Popen:
     cfg = RobotConfig(robot="r7", out_dir=str(tmp_path), arena="r2", **kw)
     path = tmp_path / "node.json"
     path.write_text(json.dumps(cfg.to_dict()))
-    return subprocess.Popen([sys.executable, "-m", "dfrl.experiments.robot_host", "--config", str(path)],
-                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, cwd=REPO)
+    return subprocess.Popen(
+        [sys.executable, "-m", "dfrl.experiments.robot_host", "--config", str(path)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=REPO,
+    )
 
 
 def _line(p: subprocess.Popen, samples: list | None = None) -> list[str]:
@@ -76,7 +82,7 @@ def test_async_node_trains_then_waits_for_stdin(tmp_path: Path) -> None:
     assert _line(p, samples) == ["DFRL_PROGRESS", "r7", "100"]
     assert _line(p, samples) == ["DFRL_PROGRESS", "r7", "120"]
     time.sleep(0.3)
-    assert p.poll() is None                       # lingers, serving, until stdin closes
+    assert p.poll() is None  # lingers, serving, until stdin closes
     out = _finish(p)
     assert _rest(out, samples) == ["DFRL_DONE", "r7", "120", "0"]
     # the pose and the curves now and then (here: the first progress line and the end)
@@ -94,7 +100,7 @@ def test_async_node_trains_then_waits_for_stdin(tmp_path: Path) -> None:
 def test_sync_node_stops_at_a_boundary_when_told(tmp_path: Path) -> None:
     p = _start(tmp_path, iterations=1000, respite=40, mode="sync", progress_every=0)
     assert p.stdout.readline().startswith("DFRL_NODE r7")
-    time.sleep(1.0)                                # waits at iteration 40 for a share
+    time.sleep(1.0)  # waits at iteration 40 for a share
     assert p.poll() is None
     out = _finish(p, "stop\n")
     assert _rest(out)[-4:] == ["DFRL_DONE", "r7", "40", "0"]
@@ -105,8 +111,13 @@ def test_sync_node_stops_at_a_boundary_when_told(tmp_path: Path) -> None:
 def test_bad_config_exits_2(tmp_path: Path) -> None:
     path = tmp_path / "node.json"
     path.write_text(json.dumps({"robot": "r1", "out_dir": str(tmp_path), "colour": "red"}))
-    p = subprocess.run([sys.executable, "-m", "dfrl.experiments.robot_host", "--config", str(path)],
-                       capture_output=True, text=True, cwd=REPO, timeout=60)
+    p = subprocess.run(
+        [sys.executable, "-m", "dfrl.experiments.robot_host", "--config", str(path)],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=60,
+    )
     assert p.returncode == 2 and "colour" in p.stderr
 
 
@@ -152,13 +163,19 @@ def test_pace_follows_the_trainers_control_dt(tmp_path: Path) -> None:
 def test_node_with_stdin_at_eof_from_the_start_runs_every_iteration(tmp_path: Path) -> None:
     """Started with stdin at end of file (< /dev/null), the node is not told to stop at
     iteration 50: stdin is no channel then."""
-    cfg = RobotConfig(robot="r7", out_dir=str(tmp_path), arena="r2", iterations=160,
-                     progress_every=0, grace_s=0.0)
+    cfg = RobotConfig(
+        robot="r7", out_dir=str(tmp_path), arena="r2", iterations=160, progress_every=0, grace_s=0.0
+    )
     path = tmp_path / "node.json"
     path.write_text(json.dumps(cfg.to_dict()))
-    p = subprocess.run([sys.executable, "-m", "dfrl.experiments.robot_host", "--config", str(path)],
-                       stdin=subprocess.DEVNULL, capture_output=True, text=True, cwd=REPO,
-                       timeout=120)
+    p = subprocess.run(
+        [sys.executable, "-m", "dfrl.experiments.robot_host", "--config", str(path)],
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=120,
+    )
     assert p.returncode == 0, p.stderr
     assert _rest(p.stdout)[-4:] == ["DFRL_DONE", "r7", "160", "0"]
     with open(tmp_path / "metrics_r7.csv", newline="") as fh:
@@ -170,9 +187,9 @@ def test_a_robot_whose_driver_died_stops_cleanly_and_saves_its_tables(tmp_path: 
     # the driver killed: its end of our stdout pipe and of our stdin close at once
     p = _start(tmp_path, iterations=200_000, progress_every=50, events=False, grace_s=0.0)
     assert _line(p)[0] == "DFRL_NODE"
-    assert _line(p)[0] == "DFRL_PROGRESS"             # training
-    p.stdout.close()                                   # the reader is gone ...
-    p.stdin.close()                                    # ... and so is the writer
+    assert _line(p)[0] == "DFRL_PROGRESS"  # training
+    p.stdout.close()  # the reader is gone ...
+    p.stdin.close()  # ... and so is the writer
     try:
         code = p.wait(timeout=60)
     finally:
@@ -181,5 +198,5 @@ def test_a_robot_whose_driver_died_stops_cleanly_and_saves_its_tables(tmp_path: 
     err = p.stderr.read()
     assert code == 0, err
     assert "BrokenPipeError" not in err and "Traceback" not in err, err
-    assert (tmp_path / "tables" / "r7.npy").exists()   # stopped early, tables saved
+    assert (tmp_path / "tables" / "r7.npy").exists()  # stopped early, tables saved
     assert (tmp_path / "metrics_r7.csv").exists()

@@ -1,5 +1,6 @@
 """What a robot process offers the bridge (robot_host/table.py): a table, or a table and its
 parameters, or parameters only; a parameter write is a share like a table write."""
+
 from __future__ import annotations
 
 import csv
@@ -20,15 +21,16 @@ def _shared(base, tmp_path: Path):
     out = io.StringIO()
     log = CsvLog(tmp_path / "shares_r1.csv", SHARE_FIELDS)
     shares: list[int] = []
-    provider = shared_provider(base, "r1", log, ProtocolLines(out, "r1"),
-                               on_share=lambda: shares.append(1))
+    provider = shared_provider(
+        base, "r1", log, ProtocolLines(out, "r1"), on_share=lambda: shares.append(1)
+    )
     return provider, log, out, shares
 
 
 def test_a_table_without_params_stays_a_shared_table(tmp_path: Path) -> None:
     provider, *_ = _shared(StaticTable((3, 2), seed=1), tmp_path)
     assert type(provider) is SharedTable
-    assert "params" not in dir(provider)          # the bridge then offers no parameters
+    assert "params" not in dir(provider)  # the bridge then offers no parameters
 
 
 def test_a_params_write_is_a_share(tmp_path: Path) -> None:
@@ -44,13 +46,21 @@ def test_a_params_write_is_a_share(tmp_path: Path) -> None:
     log.flush()
     assert base.sets == 1 and np.array_equal(base.params, vec)
     assert provider.shares == 1 and shares == [1]
-    assert out.getvalue().split() == ["DFRL_EVENT", "r1", "get", "0",
-                                      "DFRL_EVENT", "r1", "set", "0"]
+    assert out.getvalue().split() == [
+        "DFRL_EVENT",
+        "r1",
+        "get",
+        "0",
+        "DFRL_EVENT",
+        "r1",
+        "set",
+        "0",
+    ]
     with open(tmp_path / "shares_r1.csv") as fh:
         (row,) = list(csv.DictReader(fh))
     assert row["digest"] == table_digest(vec)
     assert (row["round"], row["agent"], row["epoch"]) == ("2", "fed_dqn", "1")
-    assert float(row["q_sum"]) == 28.0            # the sum the write left: 0 + 1 + ... + 7
+    assert float(row["q_sum"]) == 28.0  # the sum the write left: 0 + 1 + ... + 7
 
 
 def test_a_table_write_records_the_sum_it_left(tmp_path: Path) -> None:

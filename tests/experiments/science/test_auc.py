@@ -1,4 +1,5 @@
 """Area under a curve and evaluation-grid resolution, against values worked out by hand."""
+
 from __future__ import annotations
 
 import pytest
@@ -53,9 +54,9 @@ def test_grid_resolution() -> None:
 def test_first_reach_and_censoring() -> None:
     grid = [1000, 2000, 3000, 4000]
     error = [0.9, 0.8, 0.7, 0.72]
-    assert first_reach(grid, error, 0.8) == 2000.0          # <= counts: reached at 2,000
-    assert first_reach(grid, error, 0.75) == 3000.0         # the later rise does not undo it
-    assert first_reach(grid, error, 0.6) is None            # censored: beyond 4,000
+    assert first_reach(grid, error, 0.8) == 2000.0  # <= counts: reached at 2,000
+    assert first_reach(grid, error, 0.75) == 3000.0  # the later rise does not undo it
+    assert first_reach(grid, error, 0.6) is None  # censored: beyond 4,000
     assert first_reach(grid, [0.1, 0.5, 0.4, 0.6], 0.5, side="above") == 2000.0
     with pytest.raises(ValueError, match="side"):
         first_reach(grid, error, 0.8, side="under")

@@ -4,6 +4,7 @@ learnt without bootstrapping (``reward_shuffle_mode``), so that what a learner l
 depends on the state and action; in the real training loop, for every learner; and (slow) its
 greedy score is the zero table's where the control before issue 34 (``raw``) drove ahead.
 """
+
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
@@ -41,7 +42,7 @@ def test_the_buffer_is_a_seeded_permutation_delayed_by_its_capacity():
     assert out == drawn
     assert out == again and out != other
     # while filling: draws from what was seen so far
-    assert all(out[t] in seen[:t + 1] for t in range(W))
+    assert all(out[t] in seen[: t + 1] for t in range(W))
     # once full: what was learnt plus what is left is exactly what was seen (same multiset),
     # and no step learns its own outcome
     assert sorted(out[W:] + left) == sorted(seen)
@@ -54,8 +55,9 @@ def test_the_buffer_is_a_seeded_permutation_delayed_by_its_capacity():
 def test_a_centred_mode_learns_the_draw_minus_the_mean_of_the_buffer_it_came_from(mode):
     # Prepare: rewards with a large positive mean (as the robots' are) and some collisions
     rng = np.random.default_rng(0)
-    seen = [(float(r), bool(c)) for r, c in zip(rng.uniform(0.3, 1.0, 3000),
-                                                  rng.random(3000) < 0.02)]
+    seen = [
+        (float(r), bool(c)) for r, c in zip(rng.uniform(0.3, 1.0, 3000), rng.random(3000) < 0.02)
+    ]
     seen = [(-10.0, True) if c else (r, False) for r, c in seen]
     # Execute
     learnt, drawn, means, left = _shuffle(seen, 5, capacity=50, mode=mode)
@@ -64,8 +66,7 @@ def test_a_centred_mode_learns_the_draw_minus_the_mean_of_the_buffer_it_came_fro
     assert drawn == raw_drawn == raw
     assert sorted(drawn[50:] + left) == sorted(seen)
     # ... each learnt reward is its draw minus the mean of the buffer it was drawn from
-    assert np.allclose([r for r, _ in learnt], [d[0] - m for d, m in zip(drawn, means)],
-                       atol=1e-12)
+    assert np.allclose([r for r, _ in learnt], [d[0] - m for d, m in zip(drawn, means)], atol=1e-12)
     # so their mean is 0 where the observed (and the raw learnt) rewards' is far from it
     assert abs(np.mean([r for r, _ in learnt])) < 0.02
     assert np.mean([r for r, _ in seen]) > 0.4 and np.mean([r for r, _ in raw]) > 0.4
@@ -98,14 +99,17 @@ def test_the_options_are_checked_and_old_configurations_still_load():
     assert check_trainer("trainer", {"reward_shuffle": 1000}) == []
     assert check_trainer("trainer", {"reward_shuffle": 1000, "reward_shuffle_mode": "raw"}) == []
     assert "unknown key" in check_trainer("trainer", {"reward_shufle": 1000})[0]
-    assert "trainer.reward_shuffle_mode: unknown value 'centered' (did you mean 'centred'?)" \
+    assert (
+        "trainer.reward_shuffle_mode: unknown value 'centered' (did you mean 'centred'?)"
         in check_trainer("trainer", {"reward_shuffle": 1000, "reward_shuffle_mode": "centered"})[0]
+    )
 
 
 def _run(algo: str, shuffle: int, steps: int, seed: int = 3, mode: str = "centred_no_bootstrap"):
     seen, learnt, drawn, pairs = [], [], [], []
-    cfg = TrainerConfig(arena="r1", algo=algo, seed=seed, reward_shuffle=shuffle,
-                        reward_shuffle_mode=mode)
+    cfg = TrainerConfig(
+        arena="r1", algo=algo, seed=seed, reward_shuffle=shuffle, reward_shuffle_mode=mode
+    )
     with Trainer(cfg) as t:
         for _ in range(steps):
             pairs.append((t._state, t._action))
@@ -183,8 +187,9 @@ def _contrast(seed: int, mode: str) -> float:
     """Greedy score in R1 of a table trained there with the control ``mode`` minus the zero
     table's, with the paper's evaluation (1,000 steps in episodes of 200, evaluation seed
     50,000 + seed)."""
-    cfg = TrainerConfig(arena="r1", seed=seed, iterations=ITERATIONS, reward_shuffle=1000,
-                        reward_shuffle_mode=mode)
+    cfg = TrainerConfig(
+        arena="r1", seed=seed, iterations=ITERATIONS, reward_shuffle=1000, reward_shuffle_mode=mode
+    )
     zero = eval_job(cfg.to_dict(), np.zeros((81, 3)), "r1", 1000, 200, 50_000 + seed)["score"]
     with Trainer(cfg) as t:
         for _ in range(ITERATIONS):

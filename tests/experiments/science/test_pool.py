@@ -1,5 +1,6 @@
 """A study's worker processes end when the study stops them (science/pool.py): real worker
 processes running a real job, not a stand-in."""
+
 from __future__ import annotations
 
 import os

@@ -1,5 +1,6 @@
 """The seeds an effect needs (``science/power.py``) on hand-computed numbers, checked against
 the smallest detectable effect of a real interval."""
+
 from __future__ import annotations
 
 import math
@@ -22,12 +23,12 @@ def test_detectable_at_by_hand() -> None:
 
 
 def test_seeds_needed_is_the_first_n_that_reaches_the_effect() -> None:
-    assert seeds_needed(1.0, 3.1) == 3           # D(3) = 3.0965 <= 3.1 < D(2) = 9.96
-    assert seeds_needed(1.0, 3.09) == 4          # D(3) = 3.0965 > 3.09 >= D(4) = 2.080
-    assert seeds_needed(1.0, -3.09) == 4         # a size: the sign does not matter
+    assert seeds_needed(1.0, 3.1) == 3  # D(3) = 3.0965 <= 3.1 < D(2) = 9.96
+    assert seeds_needed(1.0, 3.09) == 4  # D(3) = 3.0965 > 3.09 >= D(4) = 2.080
+    assert seeds_needed(1.0, -3.09) == 4  # a size: the sign does not matter
     n = seeds_needed(2.0, 0.5)
     assert detectable_at(2.0, n) <= 0.5 < detectable_at(2.0, n - 1)
-    assert 120 <= n <= 130                       # about (1.96 + 0.84)^2 x 16 = 125.6
+    assert 120 <= n <= 130  # about (1.96 + 0.84)^2 x 16 = 125.6
     for bad in (0.0, math.inf):
         with pytest.raises(ValueError):
             seeds_needed(1.0, bad)
@@ -36,8 +37,8 @@ def test_seeds_needed_is_the_first_n_that_reaches_the_effect() -> None:
 def test_seeds_for_a_measured_d_by_hand() -> None:
     # the speed-up study: D = 4.8 at n = 10; 10 x (ln 4.8 / ln 2.2)^2 = 39.58 -> 40
     assert seeds_for(10, 4.8, 2.2, "ratio") == 40
-    assert seeds_for(10, 2.0, 1.0) == 40         # a difference: 10 x 2^2
-    assert seeds_for(10, 1.0, 2.0) == 3          # already below: 10 / 4 = 2.5 -> 3
+    assert seeds_for(10, 2.0, 1.0) == 40  # a difference: 10 x 2^2
+    assert seeds_for(10, 1.0, 2.0) == 3  # already below: 10 / 4 = 2.5 -> 3
     with pytest.raises(ValueError, match="open"):
         seeds_for(10, math.inf, 1.0)
     with pytest.raises(ValueError):

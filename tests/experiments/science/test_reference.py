@@ -1,5 +1,6 @@
 """Reference tables: the distance and the combination on hand-computed tables, the cache's
 checksums, and one end-to-end build with a tiny budget (about 10 s)."""
+
 from __future__ import annotations
 
 import hashlib
@@ -9,10 +10,18 @@ import math
 import numpy as np
 import pytest
 
-from dfrl.experiments.science.reference import (REFERENCE_FORMAT, SHIPPED, Reference,
-                                                ReferenceError, combine, default_cache,
-                                                recipe_key, reference_name, reference_recipe,
-                                                table_error)
+from dfrl.experiments.science.reference import (
+    REFERENCE_FORMAT,
+    SHIPPED,
+    Reference,
+    ReferenceError,
+    combine,
+    default_cache,
+    recipe_key,
+    reference_name,
+    reference_recipe,
+    table_error,
+)
 from dfrl.experiments.science.reference_store import load_reference, reference_table, save_reference
 
 
@@ -38,9 +47,9 @@ def test_table_error_by_hand() -> None:
 
 def test_table_error_zero_table_and_defaults() -> None:
     ref = np.array([[1.0, -1.0, 2.0], [0.5, 0.5, 0.0]])
-    e = table_error(np.zeros_like(ref), ref)          # no visits: every pair counts
+    e = table_error(np.zeros_like(ref), ref)  # no visits: every pair counts
     assert (e.pairs, e.states) == (6, 2)
-    assert e.relative == pytest.approx(1.0)           # the zero table is at exactly 1
+    assert e.relative == pytest.approx(1.0)  # the zero table is at exactly 1
     # state 0: reference best {2}, zero table ties all 3: 2/3 miss; state 1: best {0, 1}: 1/3
     assert e.disagreement == pytest.approx(0.5)
     assert table_error(ref, ref).rms == 0.0 and table_error(ref, ref).disagreement == 0.0
@@ -48,8 +57,7 @@ def test_table_error_zero_table_and_defaults() -> None:
 
 def test_table_error_takes_visits_from_a_reference_and_counts_nothing_as_nan() -> None:
     q = np.array([[1.0, 2.0]])
-    ref = Reference(q=q, visits=np.array([[3, 0]]), runs=np.array([[1, 0]]), recipe={},
-                    built={})
+    ref = Reference(q=q, visits=np.array([[3, 0]]), runs=np.array([[1, 0]]), recipe={}, built={})
     e = table_error(np.array([[0.0, 0.0]]), ref, min_visits=1)
     assert (e.pairs, e.states, e.rms) == (1, 0, 1.0)
     assert math.isnan(e.disagreement)
@@ -87,28 +95,33 @@ def test_recipe_name_and_key() -> None:
     name = reference_name(a)
     assert name.startswith("r1-qlearning-3000x2-") and name.endswith(recipe_key(a)[:12])
     assert reference_name(reference_recipe("r1", "qlearning", 3000, [1, 3])) != name
-    assert reference_name(reference_recipe("arenas/my arena.json", "sarsa", 10, [1])
-                          ).startswith("my_arena-sarsa-10x1-")
+    assert reference_name(reference_recipe("arenas/my arena.json", "sarsa", 10, [1])).startswith(
+        "my_arena-sarsa-10x1-"
+    )
     for bad in ({"seeds": []}, {"seeds": [1, 1]}, {"iterations": 0}, {"algo": "dqn"}):
         kw = {"arena": "r1", "algo": "qlearning", "iterations": 10, "seeds": [1], **bad}
         with pytest.raises(ValueError):
             reference_recipe(**kw)
 
 
-def test_default_cache_follows_the_environment(monkeypatch: pytest.MonkeyPatch,
-                                               tmp_path) -> None:
+def test_default_cache_follows_the_environment(monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:
     monkeypatch.setenv("DFRL_REFERENCE_CACHE", str(tmp_path / "refs"))
     assert default_cache() == tmp_path / "refs"
     monkeypatch.delenv("DFRL_REFERENCE_CACHE")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     assert default_cache() == tmp_path / "xdg" / "dfrl" / "references"
-    assert not (tmp_path / "xdg").exists()            # a getter creates nothing
+    assert not (tmp_path / "xdg").exists()  # a getter creates nothing
 
 
 def _fake(tmp_path) -> tuple[Reference, object]:
     recipe = reference_recipe("r1", "qlearning", 10, [1, 2])
-    ref = Reference(q=np.arange(6.0).reshape(3, 2), visits=np.array([[1, 2], [3, 4], [5, 6]]),
-                    runs=np.ones((3, 2), dtype=np.int64), recipe=recipe, built={"seconds": 0})
+    ref = Reference(
+        q=np.arange(6.0).reshape(3, 2),
+        visits=np.array([[1, 2], [3, 4], [5, 6]]),
+        runs=np.ones((3, 2), dtype=np.int64),
+        recipe=recipe,
+        built={"seconds": 0},
+    )
     return ref, save_reference(ref, tmp_path)
 
 
@@ -128,11 +141,11 @@ def test_corrupted_or_missing_files_are_errors_naming_the_file(tmp_path) -> None
     qf = tmp_path / f"{ref.name}.q.npy"
     good = qf.read_bytes()
     data = bytearray(good)
-    data[-1] ^= 0x01                                   # one bit of the last value
+    data[-1] ^= 0x01  # one bit of the last value
     qf.write_bytes(bytes(data))
     with pytest.raises(ReferenceError, match=f"{qf.name}: sha256"):
         load_reference(side)
-    with pytest.raises(ReferenceError, match=f"{qf.name}: sha256"):   # never rebuilt silently
+    with pytest.raises(ReferenceError, match=f"{qf.name}: sha256"):  # never rebuilt silently
         reference_table("r1", "qlearning", 10, [1, 2], cache=tmp_path)
     qf.write_bytes(good)
     assert load_reference(side).q.tolist() == ref.q.tolist()
@@ -163,12 +176,12 @@ def test_reference_end_to_end(tmp_path) -> None:
     long = train(TrainerConfig(arena="r1", algo="qlearning", seed=3, iterations=3000))
     # Assert: the cache
     assert ref.path is not None and ref.path.parent == tmp_path / "a"
-    assert again.built == ref.built                    # loaded, not rebuilt
-    assert np.array_equal(twin.q, ref.q)               # the same recipe, the same bits
+    assert again.built == ref.built  # loaded, not rebuilt
+    assert np.array_equal(twin.q, ref.q)  # the same recipe, the same bits
     sums = json.loads(ref.path.read_text())["sha256"]
     assert sums == json.loads(twin.path.read_text())["sha256"]
     assert ref.built["seed_rms"] > 0 and len(ref.built["seed_rms_per_run"]) == 2
-    assert (ref.visits >= 10).sum() > 20               # R1 visits a few dozen pairs
+    assert (ref.visits >= 10).sum() > 20  # R1 visits a few dozen pairs
     # Assert: the error falls with training; the zero table is further than both
     assert ref.q.shape == short.q_table.shape == (81, 3)
     e_short, e_long = table_error(short.q_table, ref), table_error(long.q_table, ref)
@@ -192,12 +205,15 @@ def test_shipped_reference_verifies_and_matches_todays_defaults(tmp_path) -> Non
     changes, its name no longer matches and this test says so."""
     ref = reference_table(*SHIPPED_RECIPE, cache=tmp_path)
     assert ref.path is not None and ref.path.parent == SHIPPED
-    assert not any(tmp_path.iterdir())                 # nothing built
+    assert not any(tmp_path.iterdir())  # nothing built
     assert ref.recipe == reference_recipe(*SHIPPED_RECIPE)
     assert ref.q.shape == (81, 3)
     # the counts the README quotes: 140 pairs updated, 116 at least 10 times, 80 by all 5 runs
     assert ((ref.visits > 0).sum(), (ref.visits >= 10).sum(), (ref.runs == 5).sum()) == (
-        140, 116, 80)
+        140,
+        116,
+        80,
+    )
     assert table_error(ref.q, ref).states == 34
     # a 50,000-iteration run is at about half the zero table's distance: the floor of a run
     zero = table_error(np.zeros_like(ref.q), ref)
@@ -211,5 +227,7 @@ def test_shipped_reference_rebuilds_bit_for_bit(tmp_path) -> None:
     again = reference_table(*SHIPPED_RECIPE, cache=tmp_path, rebuild=True, jobs=2)
     assert again.path is not None and again.path.parent == tmp_path
     assert np.array_equal(again.q, shipped.q) and np.array_equal(again.visits, shipped.visits)
-    assert (json.loads(again.path.read_text())["sha256"]
-            == json.loads(shipped.path.read_text())["sha256"])
+    assert (
+        json.loads(again.path.read_text())["sha256"]
+        == json.loads(shipped.path.read_text())["sha256"]
+    )

@@ -1,4 +1,5 @@
 """``dfrl bench sim-fidelity`` end to end at a tiny budget (real pybullet and batched runs)."""
+
 from __future__ import annotations
 
 import json
@@ -10,15 +11,39 @@ from tests.robots.batched.made_arena import make_arena
 
 
 def _bench(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "dfrl.experiments", "bench", "sim-fidelity",
-                           *args], capture_output=True, text=True, timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "dfrl.experiments", "bench", "sim-fidelity", *args],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
 
 
 def test_the_report_says_each_check_and_its_verdict(tmp_path: Path) -> None:
     arena = str(make_arena(tmp_path / "made.json", seed=4))
-    r = _bench("--arenas", arena, "--poses", "100", "--transitions", "400",
-               "--policy-steps", "2000", "--n-seeds", "2", "--tables", "1", "--iterations", "300",
-               "--eval-steps", "200", "--workers", "1", "--json", "--out", str(tmp_path / "out"))
+    r = _bench(
+        "--arenas",
+        arena,
+        "--poses",
+        "100",
+        "--transitions",
+        "400",
+        "--policy-steps",
+        "2000",
+        "--n-seeds",
+        "2",
+        "--tables",
+        "1",
+        "--iterations",
+        "300",
+        "--eval-steps",
+        "200",
+        "--workers",
+        "1",
+        "--json",
+        "--out",
+        str(tmp_path / "out"),
+    )
     assert r.returncode in (0, 1), r.stderr
     out = json.loads(r.stdout)
     a = out["arenas"][arena]

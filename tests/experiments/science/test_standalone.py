@@ -1,4 +1,5 @@
 """Standalone evaluation: a learned greedy policy collides far less than a random one."""
+
 from __future__ import annotations
 
 import pytest
@@ -14,10 +15,12 @@ def test_evaluate_returns_consistent_numbers() -> None:
     s = evaluate(TrainerConfig(iterations=200), [1], 200)
     assert [r["seed"] for r in s.runs] == [1] and s.eval_steps == 200
     assert s.greedy_collisions_per_1000 == pytest.approx(
-        1000 * s.runs[0]["greedy"]["collisions"] / 200)
+        1000 * s.runs[0]["greedy"]["collisions"] / 200
+    )
     if s.random_collisions_per_1000 > 0:
         assert s.reduction == pytest.approx(
-            1 - s.greedy_collisions_per_1000 / s.random_collisions_per_1000)
+            1 - s.greedy_collisions_per_1000 / s.random_collisions_per_1000
+        )
 
 
 @pytest.mark.slow

@@ -1,5 +1,6 @@
 """The statistics module against values worked out by hand (in the comments) or read from
 printed tables of Student's t, never from the implementation."""
+
 from __future__ import annotations
 
 import math
@@ -7,9 +8,20 @@ import math
 import numpy as np
 import pytest
 
-from dfrl.experiments.science.statistics import (Interval, Outcome, adjust, bootstrap, holm,
-                                                 interval, judge,
-                                                 paired, t975, t_cdf, t_quantile, welch)
+from dfrl.experiments.science.statistics import (
+    Interval,
+    Outcome,
+    adjust,
+    bootstrap,
+    holm,
+    interval,
+    judge,
+    paired,
+    t975,
+    t_cdf,
+    t_quantile,
+    welch,
+)
 
 
 def test_t_distribution_closed_forms() -> None:
@@ -30,11 +42,18 @@ def test_t_distribution_closed_forms() -> None:
 
 def test_t975_matches_printed_tables() -> None:
     # printed two-sided 95% values of Student's t (3 decimals)
-    for df, printed in ((1, 12.706), (2, 4.303), (4, 2.776), (9, 2.262), (30, 2.042),
-                        (60, 2.000), (120, 1.980)):
+    for df, printed in (
+        (1, 12.706),
+        (2, 4.303),
+        (4, 2.776),
+        (9, 2.262),
+        (30, 2.042),
+        (60, 2.000),
+        (120, 1.980),
+    ):
         assert t975(df) == pytest.approx(printed, abs=5e-4), df
-    assert t975(1e7) == pytest.approx(1.95996, abs=1e-4)      # the normal quantile
-    assert t975(2.5) < t975(2) and t975(2.5) > t975(3)        # Welch's df need not be whole
+    assert t975(1e7) == pytest.approx(1.95996, abs=1e-4)  # the normal quantile
+    assert t975(2.5) < t975(2) and t975(2.5) > t975(3)  # Welch's df need not be whole
     with pytest.raises(ValueError):
         t975(0)
 
@@ -78,7 +97,7 @@ def test_welch_by_hand() -> None:
     assert d.mean == pytest.approx(8.0)
     assert d.se == pytest.approx(math.sqrt(5 / 3))
     assert d.df == pytest.approx(50 / 17)
-    assert t975(2) > d.half / d.se > t975(3)         # between the df-2 and df-3 multipliers
+    assert t975(2) > d.half / d.se > t975(3)  # between the df-2 and df-3 multipliers
     assert d.excludes(0.0)
     assert not welch([1.0, 2.0, 3.0], [1.5, 2.5, 2.0]).excludes(0.0)
     assert math.isnan(welch([1.0], [2.0, 3.0]).half)
@@ -99,7 +118,7 @@ def test_bootstrap_is_seeded_and_bca_shifts_with_skew() -> None:
     data = [[1.0, 3.0, 5.0, 9.0, 2.0, 14.0], [1.0, 1.0, 2.0, 4.0]]
     ratio = lambda a, b: a.mean() / b.mean()  # noqa: E731
     first = bootstrap(data, ratio, resamples=2000, seed=3)
-    assert first == bootstrap(data, ratio, resamples=2000, seed=3)      # same seed, same interval
+    assert first == bootstrap(data, ratio, resamples=2000, seed=3)  # same seed, same interval
     assert first != bootstrap(data, ratio, resamples=2000, seed=4)
     assert first.low < first.estimate < first.high
     # the mean of a symmetric sample: BCa and percentile agree closely, both near the t interval
@@ -107,7 +126,9 @@ def test_bootstrap_is_seeded_and_bca_shifts_with_skew() -> None:
     mean = lambda a: a.mean()  # noqa: E731
     pc = bootstrap(sym, mean, resamples=4000, method="percentile")
     bca = bootstrap(sym, mean, resamples=4000, method="bca")
-    assert bca.low == pytest.approx(pc.low, abs=0.03) and bca.high == pytest.approx(pc.high, abs=0.03)
+    assert bca.low == pytest.approx(pc.low, abs=0.03) and bca.high == pytest.approx(
+        pc.high, abs=0.03
+    )
     assert pc.high == pytest.approx(interval(sym[0]).high, abs=0.06)
     with pytest.raises(ValueError):
         bootstrap(data, ratio, method="basic")
@@ -117,8 +138,8 @@ def test_holm_by_hand() -> None:
     # p = .01, .04, .03, .005 (m = 4), sorted .005, .01, .03, .04 times 4, 3, 2, 1:
     # .02, .03, .06, .04 -> running maximum .02, .03, .06, .06; back in the order given:
     assert holm([0.01, 0.04, 0.03, 0.005]) == pytest.approx([0.03, 0.06, 0.06, 0.02])
-    assert holm([0.5, 0.6]) == [1.0, 1.0]                      # capped at 1
-    out = holm([0.01, float("nan"), 0.02])                      # NaN does not count in m
+    assert holm([0.5, 0.6]) == [1.0, 1.0]  # capped at 1
+    out = holm([0.01, float("nan"), 0.02])  # NaN does not count in m
     assert out[0] == pytest.approx(0.02) and math.isnan(out[1]) and out[2] == pytest.approx(0.02)
 
 
@@ -141,7 +162,9 @@ def test_holm_turns_a_weak_verdict_in_a_family_into_not_significant() -> None:
     # = 1 - 10.392/10.488 = 0.00914; 1, 2, 3 against -1: t = 3/0.57735 = 5.196, p = 1 -
     # 5.196/sqrt(29) = 0.03510. Each holds alone.
     strong, weak = judge(interval([10.0, 12.0, 14.0])), judge(interval([1.0, 2.0, 3.0]), -1.0)
-    assert strong.p == pytest.approx(0.00914, abs=1e-5) and weak.p == pytest.approx(0.03510, abs=1e-5)
+    assert strong.p == pytest.approx(0.00914, abs=1e-5) and weak.p == pytest.approx(
+        0.03510, abs=1e-5
+    )
     assert strong.holds and weak.holds
     # Execute: a family of three (strong, weak, weak): Holm multiplies the sorted p-values by
     # 3, 2, 1: 0.0274, 0.0702, 0.0351 -> running maximum 0.0274, 0.0702, 0.0702
@@ -149,7 +172,9 @@ def test_holm_turns_a_weak_verdict_in_a_family_into_not_significant() -> None:
     # Assert
     assert s.holds and s.p_adjusted == pytest.approx(0.02743, abs=1e-4)
     for w in (w1, w2):
-        assert w.outcome is Outcome.NOT_SIGNIFICANT and w.p_adjusted == pytest.approx(0.07020, abs=1e-4)
+        assert w.outcome is Outcome.NOT_SIGNIFICANT and w.p_adjusted == pytest.approx(
+            0.07020, abs=1e-4
+        )
         assert str(w).startswith("not significant at n = 3")
     # in a family of two, the second p-value is multiplied by 1: both hold
     assert all(j.holds for j in adjust([strong, weak]))

@@ -1,13 +1,18 @@
 """Times to a target that some runs never reach: Kaplan-Meier, its median and the bootstrap of
 a ratio of medians, against values worked out by hand in the comments."""
+
 from __future__ import annotations
 
 import math
 
 import pytest
 
-from dfrl.experiments.science.censored import (censored_ratio, kaplan_meier, km_median,
-                                               km_median_interval)
+from dfrl.experiments.science.censored import (
+    censored_ratio,
+    kaplan_meier,
+    km_median,
+    km_median_interval,
+)
 from dfrl.experiments.science.statistics import Outcome, judge
 
 
@@ -20,7 +25,7 @@ def test_kaplan_meier_by_hand() -> None:
     steps = kaplan_meier([3, 5, 5, 8, 10, 12], [True, False, True, True, False, True])
     assert [u for u, _ in steps] == [3, 5, 8, 12]
     assert [s for _, s in steps] == pytest.approx([5 / 6, 2 / 3, 4 / 9, 0.0])
-    assert km_median([3, 5, 5, 8, 10, 12], [1, 0, 1, 1, 0, 1]) == 8.0     # first S <= 1/2
+    assert km_median([3, 5, 5, 8, 10, 12], [1, 0, 1, 1, 0, 1]) == 8.0  # first S <= 1/2
     # no censoring: S = 3/4, 1/2 at 1, 2: the median is 2
     assert km_median([4, 2, 3, 1], [1, 1, 1, 1]) == 2.0
 
@@ -45,8 +50,8 @@ def test_ratio_of_uncensored_constant_groups_is_exact() -> None:
     assert (r.estimate, r.low, r.high, r.known, r.n) == (3.0, 3.0, 3.0, "exact", 3)
     assert r.p_value(1.0) == 0.0 and r.p_value(3.0) == 1.0
     assert judge(r, 1.0, "above", 3).outcome is Outcome.HOLDS
-    assert judge(r, 3.5, "above", 3).outcome is Outcome.REFUTED        # 3 <= 3.5: excluded
-    assert judge(r, 1.0, "above", 4).outcome is Outcome.CANNOT_JUDGE   # n = 3 < 4
+    assert judge(r, 3.5, "above", 3).outcome is Outcome.REFUTED  # 3 <= 3.5: excluded
+    assert judge(r, 1.0, "above", 4).outcome is Outcome.CANNOT_JUDGE  # n = 3 < 4
 
 
 def test_a_censored_median_makes_the_ratio_a_bound() -> None:
@@ -56,7 +61,7 @@ def test_a_censored_median_makes_the_ratio_a_bound() -> None:
     # it is not significant.
     r = censored_ratio(([12, 12, 12], [0, 0, 0]), ([8, 8, 8], [1, 1, 1]), resamples=200)
     assert (r.known, r.estimate, r.low, r.high) == ("at least", 1.5, 1.5, math.inf)
-    assert judge(r, 1.0, "above", 3).outcome is Outcome.HOLDS          # at least 1.5 > 1
+    assert judge(r, 1.0, "above", 3).outcome is Outcome.HOLDS  # at least 1.5 > 1
     assert judge(r, 2.5, "above", 3).outcome is Outcome.NOT_SIGNIFICANT
     control = censored_ratio(([12, 12, 12], [1, 1, 1]), ([8, 8, 8], [1, 1, 1]), resamples=200)
     assert judge(control, 2.5, "above", 3).outcome is Outcome.REFUTED

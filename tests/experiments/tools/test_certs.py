@@ -1,4 +1,5 @@
 """``dfrl certs``: a project CA and node certificates (made with openssl)."""
+
 from __future__ import annotations
 
 import shutil
@@ -24,11 +25,18 @@ def test_ca_and_node_certificate(tmp_path: Path) -> None:
     assert {p.name for p in node.iterdir()} == {"ca.crt", "node.crt", "node.key"}
     assert stat.S_IMODE((node / "node.key").stat().st_mode) == 0o600
     assert certificate_subject(node / "node.crt") == "CN=robot-1.lab"
-    text = subprocess.run(["openssl", "x509", "-in", str(node / "node.crt"), "-noout", "-text"],
-                          capture_output=True, text=True, check=True).stdout
+    text = subprocess.run(
+        ["openssl", "x509", "-in", str(node / "node.crt"), "-noout", "-text"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
     assert "DNS:robot-1.lab" in text and "TLS Web Client Authentication" in text
-    verify = subprocess.run(["openssl", "verify", "-CAfile", str(ca / "ca.crt"),
-                             str(node / "node.crt")], capture_output=True, text=True)
+    verify = subprocess.run(
+        ["openssl", "verify", "-CAfile", str(ca / "ca.crt"), str(node / "node.crt")],
+        capture_output=True,
+        text=True,
+    )
     assert verify.returncode == 0, verify.stderr
 
 

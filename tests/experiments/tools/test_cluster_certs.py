@@ -1,6 +1,7 @@
 """``dfrl certs cluster``: a cluster member's folder, signed by the cluster CA that the first
 call makes beside the project CA (not by the project CA: a node certificate must open no
 cluster, a cluster certificate no node)."""
+
 from __future__ import annotations
 
 import shutil
@@ -18,8 +19,15 @@ pytestmark = pytest.mark.skipif(shutil.which("openssl") is None, reason="openssl
 
 
 def _verifies(ca_cert: Path, cert: Path) -> bool:
-    return subprocess.run(["openssl", "verify", "-CAfile", str(ca_cert), str(cert)],
-                          capture_output=True, text=True, timeout=30).returncode == 0
+    return (
+        subprocess.run(
+            ["openssl", "verify", "-CAfile", str(ca_cert), str(cert)],
+            capture_output=True,
+            text=True,
+            timeout=30,
+        ).returncode
+        == 0
+    )
 
 
 def test_a_member_is_signed_by_the_cluster_ca_not_the_project_ca(tmp_path: Path) -> None:
@@ -49,8 +57,9 @@ def test_a_member_is_signed_by_the_cluster_ca_not_the_project_ca(tmp_path: Path)
         check_cluster_dir(n1)
 
 
-def test_without_a_project_ca_or_over_a_member_it_refuses(tmp_path: Path,
-                                                          capsys: pytest.CaptureFixture) -> None:
+def test_without_a_project_ca_or_over_a_member_it_refuses(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
     assert main(["certs", "cluster", "w1", str(tmp_path / "none")]) == 2
     assert "dfrl certs init" in capsys.readouterr().err
     assert not (tmp_path / "none").exists()

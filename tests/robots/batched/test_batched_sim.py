@@ -1,4 +1,5 @@
 """The batched simulator against the pybullet reference (real pybullet, real numba kernels)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -63,7 +64,7 @@ def test_one_step_outcomes_match_pybullet(arena: str, made: str) -> None:
     r = compare_transitions(EnvConfig(arena=name), name, steps=1500, seed=5)
     assert r["agreement"] > 0.95
     assert r["tv_distance"] < 0.05
-    assert r["tv_distance"] < r["tv_floor"] + 0.02    # no more than the motion noise explains
+    assert r["tv_distance"] < r["tv_floor"] + 0.02  # no more than the motion noise explains
 
 
 def test_fixed_policies_collide_as_in_pybullet() -> None:
@@ -92,10 +93,16 @@ def test_learning_beats_the_untrained_table_in_pybullet() -> None:
     base = TrainerConfig(arena="r1")
     bt = BatchedTrainer([base.replace(seed=s) for s in range(4)])
     bt.run(8000)
-    learnt = [evaluate_policy(base, PolicyKind.GREEDY, 600, 100 + k, q_table=bt.q[k],
-                              episode_steps=200) for k in range(4)]
-    zero = [evaluate_policy(base, PolicyKind.GREEDY, 600, 100 + k, q_table=np.zeros_like(bt.q[k]),
-                            episode_steps=200) for k in range(4)]
+    learnt = [
+        evaluate_policy(base, PolicyKind.GREEDY, 600, 100 + k, q_table=bt.q[k], episode_steps=200)
+        for k in range(4)
+    ]
+    zero = [
+        evaluate_policy(
+            base, PolicyKind.GREEDY, 600, 100 + k, q_table=np.zeros_like(bt.q[k]), episode_steps=200
+        )
+        for k in range(4)
+    ]
     score = lambda r: r.progress - 0.05 * r.collisions_per_1000  # noqa: E731
     assert np.mean([score(r) for r in learnt]) > np.mean([score(r) for r in zero]) + 0.2
 
@@ -103,7 +110,7 @@ def test_learning_beats_the_untrained_table_in_pybullet() -> None:
 def test_batched_evaluation_measures_as_pybullet_does() -> None:
     base = TrainerConfig(arena="r4")
     ahead = np.zeros((81, 3))
-    ahead[:, 0] = 1.0                                    # always forward
+    ahead[:, 0] = 1.0  # always forward
     b = evaluate_greedy(base, [ahead], ["r4"], 3000, [21], episode_steps=300)[0]
     p = evaluate_policy(base, PolicyKind.GREEDY, 3000, 21, q_table=ahead, episode_steps=300)
     assert b.episodes == p.episodes == 10
@@ -124,8 +131,11 @@ def test_what_the_batch_cannot_run_is_refused() -> None:
 
 def test_a_crowded_arena_is_a_located_error(tmp_path: Path) -> None:
     path = tmp_path / "crowded.json"
-    path.write_text('{"name": "crowded", "size": [0.12, 0.12], "wall_height": 0.1, "blocks": [], '
-                    '"start": {"pose": [0, 0, 0]}}', encoding="utf-8")
+    path.write_text(
+        '{"name": "crowded", "size": [0.12, 0.12], "wall_height": 0.1, "blocks": [], '
+        '"start": {"pose": [0, 0, 0]}}',
+        encoding="utf-8",
+    )
     world = BatchedWorld(EnvConfig(), [str(path)], [np.random.default_rng(0)])
     with pytest.raises(ArenaError, match="crowded.json: no free pose"):
         world.respawn(0)
@@ -150,11 +160,13 @@ def test_the_learning_control_draws_as_the_reference_does(mode: str) -> None:
 
 def test_a_control_robot_learns_nothing_of_the_task() -> None:
     base = TrainerConfig(arena="r1")
-    bt = BatchedTrainer([base.replace(seed=s) for s in range(3)]
-                        + [base.replace(seed=s, reward_shuffle=500) for s in range(3)])
+    bt = BatchedTrainer(
+        [base.replace(seed=s) for s in range(3)]
+        + [base.replace(seed=s, reward_shuffle=500) for s in range(3)]
+    )
     bt.run(6000)
     trained, control = bt.q[:3], bt.q[3:]
-    assert np.abs(control).max() < np.abs(trained).max() / 2   # values stay near 0
+    assert np.abs(control).max() < np.abs(trained).max() / 2  # values stay near 0
     assert np.array_equal(bt.collisions[:3] > 0, [True] * 3)
 
 
@@ -179,13 +191,25 @@ def test_linear_robots_learn_in_batch_and_act_well_in_pybullet() -> None:
     bt.run(3000)
     again = BatchedLinearTrainer([base.replace(seed=1)])
     again.run(3000)
-    assert np.array_equal(bt.weights[1], again.weights[0])        # the seed, not the batch
+    assert np.array_equal(bt.weights[1], again.weights[0])  # the seed, not the batch
     score = lambda r: r.progress - 0.05 * r.collisions_per_1000  # noqa: E731
-    learnt = [score(evaluate_policy(base, PolicyKind.GREEDY, 600, 40 + k, params=bt.params(k),
-                                    episode_steps=200)) for k in range(3)]
+    learnt = [
+        score(
+            evaluate_policy(
+                base, PolicyKind.GREEDY, 600, 40 + k, params=bt.params(k), episode_steps=200
+            )
+        )
+        for k in range(3)
+    ]
     untrained = BatchedLinearTrainer([base.replace(seed=9)]).params(0)
-    flat = [score(evaluate_policy(base, PolicyKind.GREEDY, 600, 40 + k, params=untrained,
-                                  episode_steps=200)) for k in range(3)]
+    flat = [
+        score(
+            evaluate_policy(
+                base, PolicyKind.GREEDY, 600, 40 + k, params=untrained, episode_steps=200
+            )
+        )
+        for k in range(3)
+    ]
     assert np.mean(learnt) > np.mean(flat) + 0.2
     bt.set_params(0, bt.params(2))
     assert np.array_equal(bt.weights[0], bt.weights[2])
@@ -197,8 +221,9 @@ def test_linear_robots_learn_in_batch_and_act_well_in_pybullet() -> None:
 
 def test_wandering_robots_respawn_and_repeat_with_their_seeds() -> None:
     def walk(seeds: list[int]) -> BatchedWorld:
-        world = BatchedWorld(EnvConfig(arena="r4"), ["r4"] * len(seeds),
-                             [np.random.default_rng(s) for s in seeds])
+        world = BatchedWorld(
+            EnvConfig(arena="r4"), ["r4"] * len(seeds), [np.random.default_rng(s) for s in seeds]
+        )
         for i in range(world.n):
             world.start(i)
         world.wander(3000, [np.random.default_rng([s, 1]) for s in seeds])

@@ -1,4 +1,5 @@
 """Helpers of the launcher tests: configs, reading a results folder, a run in a thread."""
+
 from __future__ import annotations
 
 import csv
@@ -27,11 +28,15 @@ def diagnose(*outs: Path) -> str:
     text = []
     for out in outs:
         text.append(f"--- {out}")
-        text += [f"{r['round']} {r['method']} [{r['visited']}] {r['all_equal']}"
-                 for r in rounds_csv(out)]
+        text += [
+            f"{r['round']} {r['method']} [{r['visited']}] {r['all_equal']}" for r in rounds_csv(out)
+        ]
         for err in sorted((out / "logs").glob("*")):
-            lines = [ln for ln in err.read_text(errors="replace").splitlines()
-                     if ln and not ln.startswith("pybullet build time")]
+            lines = [
+                ln
+                for ln in err.read_text(errors="replace").splitlines()
+                if ln and not ln.startswith("pybullet build time")
+            ]
             text += [f"{err.name}: {ln}" for ln in lines[:10]]
     return "\n".join(text)
 
@@ -39,22 +44,30 @@ def diagnose(*outs: Path) -> str:
 def small_config(n: int = 2, **kw: Any) -> ExperimentConfig:
     """``n`` robots in r1, r4, r2, r3, r5; 200 iterations, respite 50, sync."""
     arenas = ["r1", "r4", "r2", "r3", "r5"]
-    base: dict[str, Any] = dict(name="t", robots=tuple(RobotSpec(f"r{i + 1}", arenas[i])
-                                                       for i in range(n)),
-                                iterations=200, respite=50, seed=1, mode="sync", timeout_s=120)
+    base: dict[str, Any] = dict(
+        name="t",
+        robots=tuple(RobotSpec(f"r{i + 1}", arenas[i]) for i in range(n)),
+        iterations=200,
+        respite=50,
+        seed=1,
+        mode="sync",
+        timeout_s=120,
+    )
     base.update(kw)
     return ExperimentConfig(**base)
 
 
-def run_in_thread(cfg: ExperimentConfig, out: Path,
-                  **run_options: Any) -> tuple[threading.Thread, dict[str, Any]]:
+def run_in_thread(
+    cfg: ExperimentConfig, out: Path, **run_options: Any
+) -> tuple[threading.Thread, dict[str, Any]]:
     """Start ``run(cfg, out, **run_options)`` in a thread (``tls=DIR``, say); its result or
     exception lands in the dict."""
     return call_in_thread(lambda: run(cfg, out, progress=None, **run_options))
 
 
-def launcher_in_thread(cfg: ExperimentConfig,
-                       out: Path) -> tuple[Launcher, threading.Thread, dict[str, Any]]:
+def launcher_in_thread(
+    cfg: ExperimentConfig, out: Path
+) -> tuple[Launcher, threading.Thread, dict[str, Any]]:
     """A :class:`Launcher` of ``cfg`` running in a thread (its robots can be reached while it
     runs); its result or exception lands in the dict."""
     launcher = Launcher(cfg, out, progress=None)
@@ -85,8 +98,6 @@ def wait_rounds(out: Path, agent: str, n: int, timeout: float = 60.0) -> None:
     raise AssertionError(f"fewer than {n} rounds after {timeout} s")
 
 
-
-
 def stop_agents(out: Path, tls: Path | None = None) -> None:
     """Tell every agent of the running experiment in ``out`` to stop at its next round start
     (the ``stop`` control command; a sync run then ends within seconds). Tests that act on a
@@ -99,12 +110,10 @@ def stop_agents(out: Path, tls: Path | None = None) -> None:
     with open_console(tokens_of(out), tls=driver_tls(out, info, tls)) as console:
         for a in info["agents"]:
             first = a["itinerary"][0]
-            send_control(console, (first["host"], int(first["port"])), a["name"],
-                         {"stop": True})
+            send_control(console, (first["host"], int(first["port"])), a["name"], {"stop": True})
 
 
-def robot_service(workdir: Path, *flags: str,
-                  token: int = 1111) -> tuple[subprocess.Popen, int]:
+def robot_service(workdir: Path, *flags: str, token: int = 1111) -> tuple[subprocess.Popen, int]:
     """A ``dfrl robot`` service on a free loopback port with ``token`` and ``flags``, up
     (its "listening on" line read); the caller terminates it."""
     with socket.socket() as s:
@@ -112,10 +121,25 @@ def robot_service(workdir: Path, *flags: str,
         port = s.getsockname()[1]
     workdir.mkdir()
     svc = subprocess.Popen(
-        [sys.executable, "-m", "dfrl.experiments", "robot", "--host", "127.0.0.1",
-         "--port", str(port), "--workdir", str(workdir), *flags],
-        stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        env=env_with_tokens([token]))
+        [
+            sys.executable,
+            "-m",
+            "dfrl.experiments",
+            "robot",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(port),
+            "--workdir",
+            str(workdir),
+            *flags,
+        ],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env_with_tokens([token]),
+    )
     assert svc.stdout is not None and svc.stderr is not None
     line = svc.stdout.readline()
     assert "listening on" in line, line + svc.stderr.read()
@@ -124,6 +148,21 @@ def robot_service(workdir: Path, *flags: str,
 
 def dfrl_inject(out: Path, program: Path, method: str) -> subprocess.CompletedProcess[str]:
     """``dfrl inject OUT --program PROGRAM --method METHOD`` (waiting up to 60 s)."""
-    return subprocess.run([sys.executable, "-m", "dfrl", "inject", str(out), "--program",
-                           str(program), "--method", method, "--wait", "60"],
-                          capture_output=True, text=True, timeout=120)
+    return subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "dfrl",
+            "inject",
+            str(out),
+            "--program",
+            str(program),
+            "--method",
+            method,
+            "--wait",
+            "60",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )

@@ -7,6 +7,7 @@ with SIGKILL while the agent is there. The stop the agent came from (r1) holds i
 under a lease; when the lease expires and neither r2 nor any other stop knows of the agent, r1
 resurrects it with a higher epoch, and the federation completes its planned rounds on r1 and r3.
 """
+
 from __future__ import annotations
 
 import os
@@ -30,10 +31,17 @@ SLOW = Path(__file__).parent / "slow_method.pl"
 
 def test_run_completes_when_the_agents_host_is_killed(tmp_path: Path) -> None:
     # Prepare: 6 rounds of 200 iterations at rtf 8 (1.6 s of robot time each).
-    cfg = ExperimentConfig(name="kill", robots=(RobotSpec("r1", "r1"), RobotSpec("r2", "r4"),
-                                                RobotSpec("r3", "r2")),
-                           iterations=1200, respite=200, seed=3, mode="sync", rtf=8.0,
-                           timeout_s=120, tolerate_lost_robots=1)
+    cfg = ExperimentConfig(
+        name="kill",
+        robots=(RobotSpec("r1", "r1"), RobotSpec("r2", "r4"), RobotSpec("r3", "r2")),
+        iterations=1200,
+        respite=200,
+        seed=3,
+        mode="sync",
+        rtf=8.0,
+        timeout_s=120,
+        tolerate_lost_robots=1,
+    )
     launcher, runner, box = launcher_in_thread(cfg, tmp_path)
     wait_rounds(tmp_path, "fed_qlearning", 1)
     assert inject_method(tmp_path, SLOW, "slow") == {"fed_qlearning": "applied"}

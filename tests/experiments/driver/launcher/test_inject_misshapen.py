@@ -3,6 +3,7 @@ values wrapped in a term) is a method failure, found by the agent before it writ
 round is done again with the method it falls back to, every table is written, sync robots
 are not left waiting (all rounds done), and nothing echoes the whole value into the logs.
 Before the check every write was refused and the agent stopped with a type error. Real run."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -33,7 +34,7 @@ def test_misshapen_final_aggregate_is_a_method_failure(tmp_path: Path) -> None:
     assert all("aggregate_final(misshapen)" in r["error"] for r in failed), failed
     assert all(r["method"] == "average" and r["visited"] == "r1 r2" for r in failed), failed
     assert all(r["all_equal"] == "true" and r["skipped"] == "" for r in rows), rows
-    assert not res.ok and not res.complete         # loud: a method failed
+    assert not res.ok and not res.complete  # loud: a method failed
     summary = (tmp_path / "summary.md").read_text()
     assert "16 of 16 planned rounds done" in summary, summary
     assert "done again with average" in summary, summary

@@ -4,6 +4,7 @@ nothing is started; a joiner that passes the checks but fails to start (its robo
 not answer) is a failed join: ``dfrl join`` exits 1, the run still completes (exit status 0)
 and ``summary.md`` says the join failed. Real run, real ``dfrl join`` processes.
 """
+
 from __future__ import annotations
 
 import socket
@@ -22,8 +23,12 @@ pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
 
 def _join(out: Path, *args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "dfrl", "join", str(out), *args],
-                          capture_output=True, text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "dfrl", "join", str(out), *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
 
 
 def _dead_port() -> int:
@@ -49,8 +54,7 @@ def test_join_checked_and_failed_join_does_not_fail_the_run(tmp_path: Path) -> N
     assert "--algo: no agent of this experiment learns with sarsa" in taken.stderr, taken.stderr
     assert not (out / "logs" / "r9.err").exists()
 
-    dead = _join(out, "--robot", "r4", "--arena", "r2",
-                 "--robot-host", f"127.0.0.1:{_dead_port()}")
+    dead = _join(out, "--robot", "r4", "--arena", "r2", "--robot-host", f"127.0.0.1:{_dead_port()}")
     assert dead.returncode == 1, dead.stderr
     assert "Traceback" not in dead.stderr, dead.stderr
 

@@ -1,4 +1,5 @@
 """Robots joining a running experiment: the config's ``joins`` and ``dfrl join``."""
+
 from __future__ import annotations
 
 import json
@@ -18,8 +19,12 @@ pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
 
 def test_robot_joins_running_experiment(tmp_path: Path) -> None:
-    cfg = small_config(iterations=1000, respite=100, rtf=20.0,
-                  joins=(JoinSpec(RobotSpec("r3", "r5"), after_round=2),))
+    cfg = small_config(
+        iterations=1000,
+        respite=100,
+        rtf=20.0,
+        joins=(JoinSpec(RobotSpec("r3", "r5"), after_round=2),),
+    )
     res = run(cfg, tmp_path, progress=None)
     assert res.ok, (res.crashed, res.agents_finished)
     rows = rounds_csv(tmp_path)
@@ -35,8 +40,6 @@ def test_robot_joins_running_experiment(tmp_path: Path) -> None:
     assert [n["robot"] for n in nodes["nodes"]] == ["r1", "r2", "r3"]
 
 
-
-
 def test_dfrl_join_asks_the_launcher_through_the_platform(tmp_path: Path) -> None:
     # Prepare: a running experiment (rtf 20: 100 iterations take 0.32 s)
     cfg = small_config(iterations=2000, respite=100, rtf=20.0)
@@ -45,7 +48,7 @@ def test_dfrl_join_asks_the_launcher_through_the_platform(tmp_path: Path) -> Non
     # Execute: another process's view (join_robot opens its own console node and posts the
     # request to the launcher's; no request files)
     entry = join_robot(tmp_path, "r3", "r5", iterations=600)
-    with pytest.raises(ConfigError, match="already part"):     # checked up front: exit 2
+    with pytest.raises(ConfigError, match="already part"):  # checked up front: exit 2
         join_robot(tmp_path, "r3", "r5")
     t.join(timeout=120)
     # Assert

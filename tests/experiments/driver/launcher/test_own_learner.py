@@ -2,6 +2,7 @@
 the test's own), named in a config's ``learners``, in real federated runs: its two robots hold
 the same parameters after every share, and it joins a grid federation with a Q-learning robot.
 Also the config's errors, each located."""
+
 from __future__ import annotations
 
 import json
@@ -43,21 +44,38 @@ def _forget_plugins() -> Iterator[None]:
 def _config_file(folder: Path, robots: list[dict], **extra: object) -> Path:
     """The example learner copied beside a config that names it by a relative path."""
     shutil.copy(EXAMPLE, folder / "my_learner.py")
-    data = {"name": "own", "robots": robots, "iterations": 300, "respite": 100, "seed": 1,
-            "mode": "sync", "timeout_s": 120, "method": "average",
-            "learners": {"rbf_sarsa": {"class": "my_learner.py:RbfSarsa",
-                                       "options": {"alpha": 0.1, "lam": 0.8}}}, **extra}
+    data = {
+        "name": "own",
+        "robots": robots,
+        "iterations": 300,
+        "respite": 100,
+        "seed": 1,
+        "mode": "sync",
+        "timeout_s": 120,
+        "method": "average",
+        "learners": {
+            "rbf_sarsa": {"class": "my_learner.py:RbfSarsa", "options": {"alpha": 0.1, "lam": 0.8}}
+        },
+        **extra,
+    }
     path = folder / "own.json"
     path.write_text(json.dumps(data))
     return path
 
 
 def test_an_outside_learner_federates_with_equal_parameters_after_every_share(
-        tmp_path: Path) -> None:
+    tmp_path: Path,
+) -> None:
     # Prepare: two robots on the outside learner, sync, 3 rounds of FedAvg
-    cfg = ExperimentConfig.load(_config_file(tmp_path, [
-        {"id": "r1", "arena": "r1", "algo": "rbf_sarsa"},
-        {"id": "r2", "arena": "r4", "algo": "rbf_sarsa"}]))
+    cfg = ExperimentConfig.load(
+        _config_file(
+            tmp_path,
+            [
+                {"id": "r1", "arena": "r1", "algo": "rbf_sarsa"},
+                {"id": "r2", "arena": "r4", "algo": "rbf_sarsa"},
+            ],
+        )
+    )
     # Execute
     res = run(cfg, tmp_path / "out", progress=None)
     # Assert: the agent carried its parameters and wrote the same FedAvg into both robots
@@ -76,17 +94,24 @@ def test_an_outside_learner_federates_with_equal_parameters_after_every_share(
     assert "averaged by FedAvg" in summary
 
 
-def test_an_outside_learner_joins_a_grid_federation_with_a_qlearning_robot(
-        tmp_path: Path) -> None:
-    cfg = ExperimentConfig.load(_config_file(tmp_path, [
-        {"id": "r1", "arena": "r1", "algo": "qlearning"},
-        {"id": "r2", "arena": "r4", "algo": "rbf_sarsa"}], federation="grid"))
+def test_an_outside_learner_joins_a_grid_federation_with_a_qlearning_robot(tmp_path: Path) -> None:
+    cfg = ExperimentConfig.load(
+        _config_file(
+            tmp_path,
+            [
+                {"id": "r1", "arena": "r1", "algo": "qlearning"},
+                {"id": "r2", "arena": "r4", "algo": "rbf_sarsa"},
+            ],
+            federation="grid",
+        )
+    )
     res = run(cfg, tmp_path / "out", progress=None)
     out = tmp_path / "out"
     assert res.ok and res.agents_finished == {"fed_grid": 3}, (res.crashed, diagnose(out))
     rows = rounds_csv(out)
     assert [(r["round"], r["visited"], r["error"]) for r in rows] == [
-        (str(k), "r1 r2", "") for k in (1, 2, 3)]
+        (str(k), "r1 r2", "") for k in (1, 2, 3)
+    ]
     # the outside learner's grid view, rebuilt from its parameters after each share, is near
     # the table the agent wrote into the Q-learning robot (it was distilled towards it)
     cls = load_class(f"{tmp_path / 'my_learner.py'}:RbfSarsa")
@@ -95,20 +120,24 @@ def test_an_outside_learner_joins_a_grid_federation_with_a_qlearning_robot(
         aggregate = np.load(out / "tables" / "history" / f"r1_it{it}.npy")
         learner.set_params(np.load(out / "params" / "history" / f"r2_it{it}.npy"))
         view = grid_table(learner, Discretiser())
-        before = np.sqrt(np.mean(aggregate ** 2))
+        before = np.sqrt(np.mean(aggregate**2))
         after = np.sqrt(np.mean((view - aggregate) ** 2))
         assert after < 0.5 * before, (it, after, before)
 
 
-@pytest.mark.parametrize("entry, said", [
-    ("missing.py:RbfSarsa", "does not exist"),
-    ("my_learner.py:Nothing", "has no Nothing"),
-    ("json:JSONDecoder", "is not a subclass of dfrl.robots.approx.FunctionLearner"),
-    ("no_such_module_here:X", "importing no_such_module_here failed"),
-    ("my_learner.py", "expected 'module:Class'"),
-])
-def test_a_bad_learner_entry_is_a_located_config_error(tmp_path: Path, entry: str,
-                                                       said: str) -> None:
+@pytest.mark.parametrize(
+    "entry, said",
+    [
+        ("missing.py:RbfSarsa", "does not exist"),
+        ("my_learner.py:Nothing", "has no Nothing"),
+        ("json:JSONDecoder", "is not a subclass of dfrl.robots.approx.FunctionLearner"),
+        ("no_such_module_here:X", "importing no_such_module_here failed"),
+        ("my_learner.py", "expected 'module:Class'"),
+    ],
+)
+def test_a_bad_learner_entry_is_a_located_config_error(
+    tmp_path: Path, entry: str, said: str
+) -> None:
     path = _config_file(tmp_path, [{"id": "r1", "arena": "r1", "algo": "qlearning"}])
     data = json.loads(path.read_text())
     data["learners"] = {"mine": entry}
@@ -134,9 +163,14 @@ def test_a_builtin_name_and_an_unknown_algo_are_refused(tmp_path: Path) -> None:
 def test_a_learner_without_q_model_is_refused_by_a_grid_federation(tmp_path: Path) -> None:
     source = tmp_path / "plain.py"
     source.write_text(EXAMPLE.read_text().replace("    def q_model(self)", "    def _no(self)"))
-    path = _config_file(tmp_path, [{"id": "r1", "arena": "r1", "algo": "qlearning"},
-                                   {"id": "r2", "arena": "r4", "algo": "plain"}],
-                        federation="grid")
+    path = _config_file(
+        tmp_path,
+        [
+            {"id": "r1", "arena": "r1", "algo": "qlearning"},
+            {"id": "r2", "arena": "r4", "algo": "plain"},
+        ],
+        federation="grid",
+    )
     data = json.loads(path.read_text())
     data["learners"] = {"plain": "plain.py:RbfSarsa"}
     path.write_text(json.dumps(data))

@@ -1,5 +1,6 @@
 """Function learners in a federated run (real processes): the agent carries parameter vectors
 and writes the same FedAvg back into every robot, reproducibly in sync mode."""
+
 from __future__ import annotations
 
 import csv
@@ -63,8 +64,7 @@ def _assert_federated(out: Path, agent: str, rounds: int, robots: tuple[str, ...
         # after each write (the last: the saved parameters')
         cur = read_metrics(out / "metrics.csv")[rid]
         assert len(set(cur["iteration"].tolist())) == len(cur)
-        assert cur["iteration"][cur["shared"] > 0].tolist() == \
-            [int(s["iteration"]) for s in shares]
+        assert cur["iteration"][cur["shared"] > 0].tolist() == [int(s["iteration"]) for s in shares]
         assert cur["q_sum"][cur["shared"] > 0].tolist() == [float(s["q_sum"]) for s in shares]
         assert cur["q_sum"][-1] == float(final.sum())
     assert not (out / "tables").exists()
@@ -111,23 +111,40 @@ def test_linear_federation_with_live_evaluations(tmp_path: Path) -> None:
             rows = list(csv.DictReader(fh))
         assert [int(r["iteration"]) for r in rows] == [100, 200]
         assert all(int(r["steps"]) == 50 for r in rows)
-    assert "last greedy evaluation (iteration 200, 50 steps)" in \
-        (tmp_path / "summary.md").read_text()
+    assert (
+        "last greedy evaluation (iteration 200, 50 steps)" in (tmp_path / "summary.md").read_text()
+    )
 
 
 def test_tabular_and_dqn_side_by_side(tmp_path: Path) -> None:
     # one agent per algorithm: max over the Q-tables, FedAvg over the networks
-    robots = (RobotSpec("r1", "r1", "qlearning"), RobotSpec("r2", "r4", "dqn"),
-              RobotSpec("r3", "r2", "dqn"), RobotSpec("r4", "r3", "qlearning"))
-    cfg = small_config(robots=robots, iterations=200, respite=100, method="max",
-                       methods={"dqn": "average"}, trainer=_DQN)
+    robots = (
+        RobotSpec("r1", "r1", "qlearning"),
+        RobotSpec("r2", "r4", "dqn"),
+        RobotSpec("r3", "r2", "dqn"),
+        RobotSpec("r4", "r3", "qlearning"),
+    )
+    cfg = small_config(
+        robots=robots,
+        iterations=200,
+        respite=100,
+        method="max",
+        methods={"dqn": "average"},
+        trainer=_DQN,
+    )
     res = run(cfg, tmp_path, progress=None)
     assert res.ok and res.agents_finished == {"fed_qlearning": 2, "fed_dqn": 2}
     rows = rounds_csv(tmp_path)
     assert {(r["agent"], r["method"], r["visited"]) for r in rows} == {
-        ("fed_qlearning", "max", "r1 r4"), ("fed_dqn", "average", "r2 r3")}
+        ("fed_qlearning", "max", "r1 r4"),
+        ("fed_dqn", "average", "r2 r3"),
+    }
     assert all(r["all_equal"] == "true" for r in rows)
     assert sorted(p.name for p in (tmp_path / "tables").glob("*.npy")) == [
-        "r1.npy", "r1.visits.npy", "r4.npy", "r4.visits.npy"]
+        "r1.npy",
+        "r1.visits.npy",
+        "r4.npy",
+        "r4.visits.npy",
+    ]
     assert sorted(p.name for p in (tmp_path / "params").glob("*.npy")) == ["r2.npy", "r3.npy"]
     assert "carries" not in json.loads((tmp_path / "launch_fed_qlearning.json").read_text())

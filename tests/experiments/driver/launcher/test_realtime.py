@@ -1,6 +1,7 @@
 """The shipped ``realtime`` config (5 robots, rtf 1.0, async, 4 rounds) completes every round
 (issue 8: a node quiet past the worker pool's idle timeout used to drop the agent after
 round 1). About 2.5 minutes of wall time: slow."""
+
 from __future__ import annotations
 
 import time

@@ -1,4 +1,5 @@
 """Acting on a running experiment from outside: injecting a method (``dfrl inject``)."""
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -1,5 +1,6 @@
 """The robot interface: both kinds of robot satisfy it, and the launcher's roster drives
 robots through it alone (a scripted robot stands in for a process or a robot host)."""
+
 from __future__ import annotations
 
 import io
@@ -16,8 +17,7 @@ from dfrl.experiments.driver.launcher.events import EVENTS_FILE
 from dfrl.experiments.driver.launcher.remote_robots import RemoteRobot, StatusPoller
 from dfrl.experiments.driver.launcher.reporter import Reporter
 from dfrl.experiments.driver.launcher.robot_roster import RobotRoster
-from dfrl.experiments.driver.launcher.robots import (Progress, Robot, RobotStatus,
-                                                     await_ready)
+from dfrl.experiments.driver.launcher.robots import Progress, Robot, RobotStatus, await_ready
 from dfrl.experiments.errors import ExperimentError
 from dfrl.experiments.robot_host.config import RobotConfig
 from dfrl.experiments.robot_host.lines import Evaluation, Sample
@@ -44,8 +44,9 @@ class ScriptedRobot:
 
     def start(self) -> None:
         self.calls.append("start")
-        self.now = RobotStatus(address=("127.0.0.1", 7001), iteration=0, shares=0, done=False,
-                               running=True, pid=4242)
+        self.now = RobotStatus(
+            address=("127.0.0.1", 7001), iteration=0, shares=0, done=False, running=True, pid=4242
+        )
 
     def status(self) -> RobotStatus:
         return self.now
@@ -59,8 +60,15 @@ class ScriptedRobot:
 
     def stop(self, timeout_s: float) -> bool:
         self.calls.append(f"stop {timeout_s:.0f}")
-        self.now = RobotStatus(self.now.address, self.now.iteration, self.now.shares,
-                               self.now.done, running=False, exit_code=0, pid=self.now.pid)
+        self.now = RobotStatus(
+            self.now.address,
+            self.now.iteration,
+            self.now.shares,
+            self.now.done,
+            running=False,
+            exit_code=0,
+            pid=self.now.pid,
+        )
         return True
 
     def gather(self, out: Path) -> list[str]:
@@ -79,9 +87,13 @@ def events(out: Path) -> list[dict]:
 def test_both_kinds_of_robot_are_robots(tmp_path: Path) -> None:
     spec = RobotSpec("r1", "r1")
     child = RobotChild(spec, RobotConfig(robot="r1", out_dir=str(tmp_path)), tmp_path)
-    remote = RemoteRobot(RobotSpec("r2", "r1", robot_host="127.0.0.1:7001"),
-                         RobotConfig(robot="r2", out_dir="."), console=None,  # type: ignore[arg-type]
-                         experiment="e", poller=StatusPoller())
+    remote = RemoteRobot(
+        RobotSpec("r2", "r1", robot_host="127.0.0.1:7001"),
+        RobotConfig(robot="r2", out_dir="."),
+        console=None,  # type: ignore[arg-type]
+        experiment="e",
+        poller=StatusPoller(),
+    )
     assert isinstance(child, Robot) and isinstance(remote, Robot)
     assert isinstance(ScriptedRobot("r3"), Robot)
     # made, not started: nothing runs, no address, no process
@@ -99,8 +111,16 @@ def test_roster_reports_a_crash_once_and_keeps_its_exit_code(tmp_path: Path) -> 
         roster.add(r)
     await_ready([r1, r2], timeout_s=1.0)
     # Execute: r2's process dies with exit code 3; the roster looks twice
-    r2.now = RobotStatus(("127.0.0.1", 7001), 40, 0, False, running=False,
-                         lost="process exited with code 3", exit_code=3, pid=4242)
+    r2.now = RobotStatus(
+        ("127.0.0.1", 7001),
+        40,
+        0,
+        False,
+        running=False,
+        lost="process exited with code 3",
+        exit_code=3,
+        pid=4242,
+    )
     roster.check()
     roster.check()
     # Assert
@@ -117,8 +137,9 @@ def test_roster_says_a_lost_robot_host_and_its_return(tmp_path: Path) -> None:
     r = ScriptedRobot("r1", robot_host="10.0.0.7:7001")
     r.start()
     roster.add(r)
-    r.now = RobotStatus(("10.0.0.7", 7001), 50, 0, False, running=False,
-                        lost="unreachable for 11 s: timeout")
+    r.now = RobotStatus(
+        ("10.0.0.7", 7001), 50, 0, False, running=False, lost="unreachable for 11 s: timeout"
+    )
     roster.check()
     r.now = RobotStatus(("10.0.0.7", 7001), 60, 0, False, running=True)
     roster.check()
@@ -130,9 +151,16 @@ def test_roster_says_a_lost_robot_host_and_its_return(tmp_path: Path) -> None:
 
 def _silent(rid: str, it: int, since: float, answered: float) -> RobotStatus:
     """A robot host's status while its polls fail (silent since ``since``)."""
-    return RobotStatus(("10.0.0.7", 7001), it, 0, False, running=False,
-                       lost=f"unreachable for 11 s: {rid} timeout", silent_since=since,
-                       answered_at=answered)
+    return RobotStatus(
+        ("10.0.0.7", 7001),
+        it,
+        0,
+        False,
+        running=False,
+        lost=f"unreachable for 11 s: {rid} timeout",
+        silent_since=since,
+        answered_at=answered,
+    )
 
 
 def test_roster_waits_out_its_own_partition(tmp_path: Path) -> None:
@@ -187,21 +215,22 @@ def test_roster_loses_them_after_the_partition_wait(tmp_path: Path) -> None:
     for r in robots:
         r.start()
         roster.add(r)
-        r.now = _silent(r.spec.id, 20, 1.0, 0.5)      # silent for long (monotonic 1.0)
+        r.now = _silent(r.spec.id, 20, 1.0, 0.5)  # silent for long (monotonic 1.0)
     roster.check()
     assert sorted(roster.lost()) == ["r1", "r2"] and not roster.partitioned()
     assert "count as lost from now on" in said.getvalue()
 
 
 def test_roster_records_a_stall_when_the_robot_moves_again(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setattr(robot_roster, "STALL_S", 0.0)
     roster = RobotRoster(tmp_path, Reporter(tmp_path, None))
     r = ScriptedRobot("r1")
     r.start()
     roster.add(r)
-    roster.check()          # iteration 0 seen
-    roster.check()          # no progress since: stalled
+    roster.check()  # iteration 0 seen
+    roster.check()  # no progress since: stalled
     assert roster.stalls() == []
     r.now = RobotStatus(r.now.address, 5, 0, False, running=True)
     roster.check()
@@ -216,14 +245,22 @@ def test_roster_turns_progress_into_view_events(tmp_path: Path) -> None:
         roster.add(r)
     sample = Sample("r1", 10, 0.1, 0.2, 0.3, 4.0, 5.0)
     local.pending = Progress(sample=sample, evals=[Evaluation("r1", 10, 1.0, 0.5, 0.25)])
-    remote.pending = Progress(sample=sample._replace(robot="r2"), error="KeyError: 'data'",
-                              outages=[(1.0, 2.0, "timeout")])
+    remote.pending = Progress(
+        sample=sample._replace(robot="r2"),
+        error="KeyError: 'data'",
+        outages=[(1.0, 2.0, "timeout")],
+    )
     roster.show_progress()
-    roster.show_progress()                   # nothing new: no new events
+    roster.show_progress()  # nothing new: no new events
     kinds = [(e["kind"], e.get("robot")) for e in events(tmp_path)]
     # a robot on another host: its samples also stand for its curves (progress events)
-    assert kinds == [("eval", "r1"), ("pose", "r1"), ("pose", "r2"), ("progress", "r2"),
-                     ("error", None)]
+    assert kinds == [
+        ("eval", "r1"),
+        ("pose", "r1"),
+        ("pose", "r2"),
+        ("progress", "r2"),
+        ("error", None),
+    ]
     assert len(roster.stalls()) == 1 and "r2 unreachable" in roster.stalls()[0]
 
 
@@ -241,16 +278,21 @@ def test_roster_stops_every_robot_and_gathers_their_files(tmp_path: Path) -> Non
     # every robot is asked first, then each is waited for
     assert local.calls == ["start", "request_stop", "stop 15"]
     assert roster.gathered() == {"r2": ["logs/x.err"]}
-    assert roster.gather_errors() == ["files of r3 not gathered: r3: logs/r3.err came back "
-                                      "with 0 of 10 bytes"]
-    roster.kill_all()                        # nothing runs any more: no robot counts as killed
+    assert roster.gather_errors() == [
+        "files of r3 not gathered: r3: logs/r3.err came back with 0 of 10 bytes"
+    ]
+    roster.kill_all()  # nothing runs any more: no robot counts as killed
     assert all(c.startswith("stop") for c in (local.calls[-1], remote.calls[-1]))
 
 
 def test_await_ready_says_which_robot_did_not_start(tmp_path: Path) -> None:
     r = ScriptedRobot("r1")
-    r.now = RobotStatus(None, 0, 0, False, running=False, lost="process exited with code 1",
-                        exit_code=1, pid=4242)
-    with pytest.raises(ExperimentError, match=r"robot r1 did not start \(exit code 1\): "
-                                              "Traceback: boom"):
+    r.now = RobotStatus(
+        None, 0, 0, False, running=False, lost="process exited with code 1", exit_code=1, pid=4242
+    )
+    with pytest.raises(
+        ExperimentError,
+        match=r"robot r1 did not start \(exit code 1\): "
+        "Traceback: boom",
+    ):
         await_ready([r], timeout_s=5.0)

@@ -1,4 +1,5 @@
 """run(config, out) on real processes: robot nodes on loopback and the Prolog agent."""
+
 from __future__ import annotations
 
 import csv
@@ -24,13 +25,23 @@ def test_two_robot_smoke_run(tmp_path: Path) -> None:
     cfg = small_config()
     res = run(cfg, tmp_path, progress=None)
     assert res.ok, (res.crashed, res.agents_finished)
-    for name in ("config.json", "nodes.json", "metrics.csv", "rounds.csv", "summary.md",
-                 "q_sum.png", "cumulative_reward.png", "curves.png"):
+    for name in (
+        "config.json",
+        "nodes.json",
+        "metrics.csv",
+        "rounds.csv",
+        "summary.md",
+        "q_sum.png",
+        "cumulative_reward.png",
+        "curves.png",
+    ):
         assert (tmp_path / name).is_file(), name
     assert (tmp_path / "q_sum.png").stat().st_size > 10_000
     # config.json: the config resolved (every seed, every trainer setting), which runs the same
-    assert ExperimentConfig.from_dict(json.loads((tmp_path / "config.json").read_text())) == \
-        cfg.resolved()
+    assert (
+        ExperimentConfig.from_dict(json.loads((tmp_path / "config.json").read_text()))
+        == cfg.resolved()
+    )
     nodes = json.loads((tmp_path / "nodes.json").read_text())
     assert [n["robot"] for n in nodes["nodes"]] == ["r1", "r2"]
     assert all(n["host"] == "127.0.0.1" and n["port"] > 0 for n in nodes["nodes"])
@@ -38,7 +49,7 @@ def test_two_robot_smoke_run(tmp_path: Path) -> None:
     assert list(curves) == ["r1", "r2"]
     with open(tmp_path / "metrics.csv", newline="") as fh:
         keys = [(r["robot"], int(r["iteration"])) for r in csv.DictReader(fh)]
-    assert len(keys) == len(set(keys)) == 400          # one row per robot and iteration
+    assert len(keys) == len(set(keys)) == 400  # one row per robot and iteration
     summary = (tmp_path / "summary.md").read_text()
     for rid, cur in curves.items():
         assert cur["iteration"].tolist() == list(range(1, 201))
@@ -55,7 +66,7 @@ def test_two_robot_smoke_run(tmp_path: Path) -> None:
         assert np.array_equal(cur["q_sum_before_share"][marked], own["q_sum"][marked])
         assert np.array_equal(cur["q_sum"][~marked], own["q_sum"][~marked])
         assert np.isnan(cur["q_sum_before_share"][~marked]).all()
-        assert (cur["q_sum"][marked] != own["q_sum"][marked]).all()     # the shares moved it
+        assert (cur["q_sum"][marked] != own["q_sum"][marked]).all()  # the shares moved it
         assert cur["q_sum"][-1] > 0 and cur["cumulative_reward"][-1] > 0
         # numbers agree: the curve and the summary end with the saved table's sum
         table = np.load(tmp_path / "tables" / f"{rid}.npy")
@@ -69,12 +80,14 @@ def test_two_robot_smoke_run(tmp_path: Path) -> None:
         assert r["digest_r1"] == r["digest_r2"] and len(r["digest_r1"]) == 64
         assert r["visited"] == "r1 r2" and r["method"] == "average" and int(r["hops"]) == 2
         assert int(r["bytes"]) > 0 and float(r["end"]) > float(r["start"])
-    assert len({r["digest_r1"] for r in rows}) == 4       # the tables moved on between rounds
+    assert len({r["digest_r1"] for r in rows}) == 4  # the tables moved on between rounds
     summary = (tmp_path / "summary.md").read_text()
     assert "4/4" in summary
     # after each share both robots hold the average: the same sum in their shared rows
-    assert curves["r1"]["q_sum"][curves["r1"]["shared"] > 0].tolist() == \
-        curves["r2"]["q_sum"][curves["r2"]["shared"] > 0].tolist()
+    assert (
+        curves["r1"]["q_sum"][curves["r1"]["shared"] > 0].tolist()
+        == curves["r2"]["q_sum"][curves["r2"]["shared"] > 0].tolist()
+    )
 
 
 def test_output_folder_is_claimed_once(tmp_path: Path) -> None:
@@ -124,15 +137,18 @@ def test_itinerary_forward_then_backward_on_three_processes(tmp_path: Path) -> N
             shares[robot] = [float(r["wall_time"]) for r in csv.DictReader(fh)]
         assert len(shares[robot]) == 2
     for k, row in enumerate(rows):
-        assert row["visited"] == "r1 r2 r3" and int(row["hops"]) == 4   # 2 forward, 2 back
+        assert row["visited"] == "r1 r2 r3" and int(row["hops"]) == 4  # 2 forward, 2 back
         assert row["all_equal"] == "true"
         # the aggregate is written into r3 first, then r2, then r1 on the way back
         assert shares["r3"][k] < shares["r2"][k] < shares["r1"][k]
 
 
 def test_heterogeneous_one_agent_per_algorithm(tmp_path: Path) -> None:
-    robots = (RobotSpec("r1", "r1", "qlearning"), RobotSpec("r2", "r4", "sarsa"),
-              RobotSpec("r3", "r2", "qlearning"))
+    robots = (
+        RobotSpec("r1", "r1", "qlearning"),
+        RobotSpec("r2", "r4", "sarsa"),
+        RobotSpec("r3", "r2", "qlearning"),
+    )
     res = run(small_config(robots=robots, methods={"sarsa": "max"}), tmp_path, progress=None)
     assert res.ok
     assert res.agents_finished == {"fed_qlearning": 4, "fed_sarsa": 4}
@@ -157,7 +173,7 @@ def test_async_mode_with_real_time_factor(tmp_path: Path) -> None:
     assert all(r["all_equal"] == "true" for r in rows)
     curves = read_metrics(tmp_path / "metrics.csv")
     for rid, cur in curves.items():
-        assert cur["iteration"].tolist() == list(range(1, 101))      # one row per iteration
+        assert cur["iteration"].tolist() == list(range(1, 101))  # one row per iteration
         # async: writes land at whatever iteration the robot is at; each is counted in its row
         with open(tmp_path / f"shares_{rid}.csv", newline="") as fh:
             its = [int(w["iteration"]) for w in csv.DictReader(fh)]
@@ -171,8 +187,7 @@ def test_crashed_robot_is_reported_and_results_still_written(tmp_path: Path) -> 
     import os
     import signal
 
-    cfg = small_config(3, iterations=1500, respite=100, rtf=20.0, timeout_s=90,
-                       skip_after_s=1.5)
+    cfg = small_config(3, iterations=1500, respite=100, rtf=20.0, timeout_s=90, skip_after_s=1.5)
     t, box = run_in_thread(cfg, tmp_path)
     wait_rounds(tmp_path, "fed_qlearning", 2)
     nodes = json.loads((tmp_path / "nodes.json").read_text())
@@ -186,8 +201,8 @@ def test_crashed_robot_is_reported_and_results_still_written(tmp_path: Path) -> 
     assert "CRASHED" in (tmp_path / "summary.md").read_text()
     rows = rounds_csv(tmp_path)
     assert rows[0]["visited"] == "r1 r2 r3"
-    assert rows[-1]["visited"] == "r1 r3"          # the agent skips the dead stop
-    assert "skip_after 1.5 s" in rows[-1]["skipped"]    # within the config's skip time
+    assert rows[-1]["visited"] == "r1 r3"  # the agent skips the dead stop
+    assert "skip_after 1.5 s" in rows[-1]["skipped"]  # within the config's skip time
     assert rows[-1]["all_equal"] == "true"
     curves = read_metrics(tmp_path / "metrics.csv")
     assert len(set(curves["r1"]["iteration"].tolist())) == 1500

@@ -1,6 +1,7 @@
 """Real runs (robot processes, agents): the tidy tables load into pandas in one line and pivot
 on their keys for a chain, a tree, a grid and a parameters federation; a run's config.json
 (the resolved config) runs the same experiment again, metrics byte for byte."""
+
 from __future__ import annotations
 
 import csv
@@ -42,18 +43,19 @@ def _assert_tidy(out: Path, cfg: ExperimentConfig, agent: str) -> None:
     assert len(steps) == len(robots) * cfg.iterations
     for name in ("steps", "shares", "rounds"):
         t = tables[name]
-        assert {(r.robot, r.algo, r.arena) for r in t.itertuples()} == \
-            {(rid, *where[rid]) for rid in robots}, name
+        assert {(r.robot, r.algo, r.arena) for r in t.itertuples()} == {
+            (rid, *where[rid]) for rid in robots
+        }, name
     assert set(steps["agent"]) == {agent} and set(tables["shares"]["agent"]) == {agent}
     # steps: the q_sum curves of metrics.csv, a column per robot
     wide = steps.pivot(index="iteration", columns="robot", values="q_sum")
-    metrics = pd.read_csv(out / "metrics.csv").pivot(index="iteration", columns="robot",
-                                                     values="q_sum")
+    metrics = pd.read_csv(out / "metrics.csv").pivot(
+        index="iteration", columns="robot", values="q_sum"
+    )
     assert wide.equals(metrics)
     shared = steps[steps["phase"] == "share"]
     assert sorted(set(shared["iteration"])) == [cfg.respite, 2 * cfg.respite]
-    assert shared.groupby("robot")["round"].apply(list).to_dict() == \
-        {rid: [1, 2] for rid in robots}
+    assert shared.groupby("robot")["round"].apply(list).to_dict() == {rid: [1, 2] for rid in robots}
     # shares: a write per robot per round, the digest the wide rounds.csv has
     by_round = tables["shares"].pivot(index="round", columns="robot", values="digest")
     rounds = tables["rounds"].pivot(index=["agent", "round"], columns="robot", values="digest")
@@ -74,8 +76,7 @@ def test_chain_tidy_and_rerun_from_its_config(tmp_path: Path) -> None:
     written = json.loads((first / "config.json").read_text())
     assert [r["seed"] for r in written["robots"]] == [1, 2]
     assert written["trainer"]["learner"]["alpha"] > 0 and written["trainer"]["learner"]["gamma"]
-    assert set(written["trainer"]["learner"]["epsilon"]) == {"kind", "start", "end",
-                                                             "decay_steps"}
+    assert set(written["trainer"]["learner"]["epsilon"]) == {"kind", "start", "end", "decay_steps"}
     made_by = json.loads((first / "provenance.json").read_text())
     assert set(PACKAGES) <= set(made_by) and made_by["swipl"] and made_by["command"]
     assert made_by["git"]["commit"] or made_by["git"]["note"]
@@ -84,10 +85,19 @@ def test_chain_tidy_and_rerun_from_its_config(tmp_path: Path) -> None:
 
     assert cli.main(["run", str(first / "config.json"), "--out", str(again)]) == 0
     # Assert: the same config, the same curves and steps, byte for byte
-    for name in ("config.json", "metrics.csv", "metrics_r1.csv", "metrics_r2.csv",
-                 "tidy/steps.csv", "tables/r1.npy", "tables/r2.npy"):
-        assert (first / name).read_bytes() == (again / name).read_bytes(), \
-            (name, diagnose(first, again))
+    for name in (
+        "config.json",
+        "metrics.csv",
+        "metrics_r1.csv",
+        "metrics_r2.csv",
+        "tidy/steps.csv",
+        "tables/r1.npy",
+        "tables/r2.npy",
+    ):
+        assert (first / name).read_bytes() == (again / name).read_bytes(), (
+            name,
+            diagnose(first, again),
+        )
     # control: the shares' wall times differ, so the byte comparison can fail
     assert (first / "tidy/shares.csv").read_bytes() != (again / "tidy/shares.csv").read_bytes()
 

@@ -7,6 +7,7 @@ folder is reported with where it came from. Real processes, real mutual TLS.
 Join comes before inject: an injected method is loaded into the nodes ``nodes.json`` lists at
 that moment, so a robot that joins later would not have it.
 """
+
 from __future__ import annotations
 
 import json
@@ -21,25 +22,32 @@ from dfrl.experiments.tools.certs import init_ca, make_node
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
 from dfrl.platform_pl import DFRL_AGENT_DIR
 
-from .helpers import (diagnose, rounds_csv, run_in_thread, small_config, stop_agents,
-                      wait_rounds)
+from .helpers import diagnose, rounds_csv, run_in_thread, small_config, stop_agents, wait_rounds
 from dfrl.experiments.processes import find_swipl
 
-pytestmark = [pytest.mark.skipif(find_swipl() is None, reason="needs swipl"),
-              pytest.mark.skipif(shutil.which("openssl") is None, reason="needs openssl")]
+pytestmark = [
+    pytest.mark.skipif(find_swipl() is None, reason="needs swipl"),
+    pytest.mark.skipif(shutil.which("openssl") is None, reason="needs openssl"),
+]
 
 MEDIAN = DFRL_AGENT_DIR / "examples" / "median_method.pl"
 AGENT = "fed_qlearning"
 
 
 def _dfrl(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "dfrl", *args], cwd=cwd, capture_output=True,
-                          text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "dfrl", *args], cwd=cwd, capture_output=True, text=True, timeout=120
+    )
 
 
 def _start_dfrl(*args: str, cwd: Path) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "dfrl", *args], cwd=cwd, text=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    return subprocess.Popen(
+        [sys.executable, "-m", "dfrl", *args],
+        cwd=cwd,
+        text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
 
 
 def test_inject_and_join_with_tls_from_a_copied_results_folder(tmp_path: Path) -> None:
@@ -61,8 +69,7 @@ def test_inject_and_join_with_tls_from_a_copied_results_folder(tmp_path: Path) -
     def copy_results() -> None:
         info = json.loads((out / "nodes.json").read_text(encoding="utf-8"))
         assert info["tls"] == str(node_dir.resolve())
-        (copied / "nodes.json").write_text(json.dumps({**info, "tls": str(gone)}),
-                                           encoding="utf-8")
+        (copied / "nodes.json").write_text(json.dumps({**info, "tls": str(gone)}), encoding="utf-8")
         shutil.copy2(out / "secret.token", copied)  # the run's token (mode 0600) goes along
 
     copy_results()
@@ -85,12 +92,17 @@ def test_inject_and_join_with_tls_from_a_copied_results_folder(tmp_path: Path) -
         stdout, stderr = proc.communicate(timeout=120)
         if with_tls:
             assert proc.returncode == 2, stdout + stderr
-            assert f"dfrl {name}: --tls: {bad} is not a node TLS directory: missing " \
-                   "node.crt, node.key" in stderr and "nothing was sent" in stderr, stderr
+            assert (
+                f"dfrl {name}: --tls: {bad} is not a node TLS directory: missing node.crt, node.key"
+                in stderr
+                and "nothing was sent" in stderr
+            ), stderr
         else:
             assert proc.returncode == 1, stdout + stderr
-            assert f"{copied / 'nodes.json'} names the TLS folder {gone}, not usable here" in \
-                stderr and "--tls DIR" in stderr, stderr
+            assert (
+                f"{copied / 'nodes.json'} names the TLS folder {gone}, not usable here" in stderr
+                and "--tls DIR" in stderr
+            ), stderr
     assert read_rounds_log(out / f"rounds_{AGENT}.log", AGENT).controls == []
     # ... with --tls DIR: the robot joins; then (from a fresh copy that lists r3, so that the
     # method reaches its node too) the method is applied

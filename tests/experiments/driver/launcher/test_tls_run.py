@@ -3,6 +3,7 @@ every robot node spawned on this host speak mutual TLS with DIR's certificate; a
 the same results as a plaintext run with the same seed; a missing or incomplete TLS folder is
 refused with exit status 2 before anything starts.
 """
+
 from __future__ import annotations
 
 import json
@@ -23,8 +24,10 @@ from dfrl.experiments.driver.launcher import join_robot, run
 from .helpers import diagnose, rounds_csv, run_in_thread, small_config, wait_rounds
 from dfrl.experiments.processes import find_swipl
 
-pytestmark = [pytest.mark.skipif(find_swipl() is None, reason="needs swipl"),
-              pytest.mark.skipif(shutil.which("openssl") is None, reason="needs openssl")]
+pytestmark = [
+    pytest.mark.skipif(find_swipl() is None, reason="needs swipl"),
+    pytest.mark.skipif(shutil.which("openssl") is None, reason="needs openssl"),
+]
 
 
 @pytest.fixture(scope="module")
@@ -52,8 +55,10 @@ def _first_bytes(out: Path, box: dict[str, Any], timeout_s: float = 60.0) -> dic
     assert info.get("nodes"), f"no nodes.json with nodes within {timeout_s} s: {box}"
     ports = {n["robot"]: int(n["port"]) for n in info["nodes"]}
     ports["console"] = int(info["console"][1])
-    socks = {name: socket.create_connection(("127.0.0.1", port), timeout=5)
-             for name, port in ports.items()}          # all at once: the run is short
+    socks = {
+        name: socket.create_connection(("127.0.0.1", port), timeout=5)
+        for name, port in ports.items()
+    }  # all at once: the run is short
     seen = {}
     try:
         time.sleep(1.5)
@@ -97,22 +102,26 @@ def test_tls_run_equals_the_plaintext_run(tmp_path: Path, node_dir: Path) -> Non
     for rid in ("r1", "r2"):
         spawned = json.loads((tmp_path / "tls" / "nodes" / f"{rid}.json").read_text())
         assert spawned["tls"] == str(node_dir.resolve())
-    assert json.loads((tmp_path / "tls" / "nodes.json").read_text())["tls"] == \
-        str(node_dir.resolve())
+    assert json.loads((tmp_path / "tls" / "nodes.json").read_text())["tls"] == str(
+        node_dir.resolve()
+    )
     # same seed, sync mode: the same learning, share for share
-    assert (tmp_path / "plain/metrics.csv").read_bytes() == \
-        (tmp_path / "tls/metrics.csv").read_bytes(), detail
+    assert (tmp_path / "plain/metrics.csv").read_bytes() == (
+        tmp_path / "tls/metrics.csv"
+    ).read_bytes(), detail
     for rid in ("r1", "r2"):
-        assert (tmp_path / "plain/tables" / f"{rid}.npy").read_bytes() == \
-            (tmp_path / "tls/tables" / f"{rid}.npy").read_bytes(), rid
+        assert (tmp_path / "plain/tables" / f"{rid}.npy").read_bytes() == (
+            tmp_path / "tls/tables" / f"{rid}.npy"
+        ).read_bytes(), rid
     rows_plain, rows_tls = rounds_csv(tmp_path / "plain"), rounds_csv(tmp_path / "tls")
     assert len(rows_tls) == 4 and all(r["all_equal"] == "true" for r in rows_tls), detail
     for key in ("visited", "digest_r1", "digest_r2"):
         assert [r[key] for r in rows_plain] == [r[key] for r in rows_tls], key
 
 
-def test_run_refuses_an_incomplete_tls_folder_before_starting(tmp_path: Path,
-                                                              node_dir: Path) -> None:
+def test_run_refuses_an_incomplete_tls_folder_before_starting(
+    tmp_path: Path, node_dir: Path
+) -> None:
     partial = tmp_path / "partial"
     partial.mkdir()
     shutil.copy(node_dir / "ca.crt", partial)
@@ -123,23 +132,28 @@ def test_run_refuses_an_incomplete_tls_folder_before_starting(tmp_path: Path,
 
 
 def _dfrl(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "dfrl", *args], cwd=cwd, capture_output=True,
-                          text=True, timeout=60)
+    return subprocess.run(
+        [sys.executable, "-m", "dfrl", *args], cwd=cwd, capture_output=True, text=True, timeout=60
+    )
 
 
 @pytest.mark.parametrize("command", [["run", "demo"], ["demo"]], ids=["run", "demo"])
-def test_cli_bad_tls_folder_exits_2_and_starts_nothing(tmp_path: Path, node_dir: Path,
-                                                       command: list[str]) -> None:
+def test_cli_bad_tls_folder_exits_2_and_starts_nothing(
+    tmp_path: Path, node_dir: Path, command: list[str]
+) -> None:
     partial = tmp_path / "partial"
     partial.mkdir()
     shutil.copy(node_dir / "node.key", partial)
-    for tls, missing in ((tmp_path / "absent", "ca.crt, node.crt, node.key"),
-                         (partial, "ca.crt, node.crt")):
+    for tls, missing in (
+        (tmp_path / "absent", "ca.crt, node.crt, node.key"),
+        (partial, "ca.crt, node.crt"),
+    ):
         out = tmp_path / f"out-{tls.name}"
         done = _dfrl(*command, "--tls", str(tls), "--out", str(out), cwd=tmp_path)
         assert done.returncode == 2, done.stderr
-        assert f"missing {missing}" in done.stderr and "nothing was started" in done.stderr, \
+        assert f"missing {missing}" in done.stderr and "nothing was started" in done.stderr, (
             done.stderr
+        )
         assert "dfrl certs node" in done.stderr, done.stderr
         assert not out.exists()
     assert not (tmp_path / "results").exists()
@@ -165,7 +179,8 @@ def test_join_reaches_a_tls_run_with_its_folder(tmp_path: Path, node_dir: Path) 
     res = box.get("res") or pytest.fail(f"run failed: {box.get('exc')!r}")
     assert res.ok, diagnose(tmp_path)
     assert entry["robot"] == "r3" and entry["joined"] is True
-    assert json.loads((tmp_path / "nodes" / "r3.json").read_text())["tls"] == \
-        str(node_dir.resolve())
+    assert json.loads((tmp_path / "nodes" / "r3.json").read_text())["tls"] == str(
+        node_dir.resolve()
+    )
     visited = [r["visited"] for r in rounds_csv(tmp_path)]
     assert "r1 r2 r3" in visited and visited[0] == "r1 r2"

@@ -2,6 +2,7 @@
 them a minute (``--clone-limit``, default 60): too few, and most rounds skip robots. The
 driver now reads the host's limit from its status and refuses it before anything starts,
 naming the option; the control is the same run on a host started with enough."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -19,12 +20,13 @@ from .helpers import diagnose, robot_service, small_config
 pytestmark = pytest.mark.skipif(find_swipl() is None, reason="swipl not installed")
 
 
-
 def _tree_config(port: int):
     cfg = small_config(2, iterations=200, respite=100, token=1111)
-    return cfg.replace(itinerary="tree", fanout=2,
-                       robots=(cfg.robots[0], RobotSpec("r2", "r4",
-                                                        robot_host=f"127.0.0.1:{port}")))
+    return cfg.replace(
+        itinerary="tree",
+        fanout=2,
+        robots=(cfg.robots[0], RobotSpec("r2", "r4", robot_host=f"127.0.0.1:{port}")),
+    )
 
 
 def test_a_host_short_of_clones_is_refused_before_the_run(tmp_path: Path) -> None:
@@ -32,9 +34,13 @@ def test_a_host_short_of_clones_is_refused_before_the_run(tmp_path: Path) -> Non
     try:
         cfg = _tree_config(port)
         needs = clone_limit(cfg)
-        with pytest.raises(ExperimentError,
-                           match=(rf"robot host 127.0.0.1:{port} admits 60 clones a minute, and "
-                                  rf"this tree itinerary needs {needs} .*--clone-limit {needs}")):
+        with pytest.raises(
+            ExperimentError,
+            match=(
+                rf"robot host 127.0.0.1:{port} admits 60 clones a minute, and "
+                rf"this tree itinerary needs {needs} .*--clone-limit {needs}"
+            ),
+        ):
             run(cfg, tmp_path / "out", progress=None)
     finally:
         svc.terminate()

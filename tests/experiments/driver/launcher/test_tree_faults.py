@@ -10,6 +10,7 @@ agent busy): the copy at r2 is lost with it; the root finds r2's node gone at it
 them new copies if r2's never got there), so that round too misses r2 only, unless an adopted
 copy is lost as well (then its robots are skipped that round and said so).
 """
+
 from __future__ import annotations
 
 import os
@@ -31,11 +32,20 @@ ARENAS = ("r1", "r4", "r2", "r3", "r5", "r1")
 
 def test_tree_run_completes_when_a_clone_host_is_killed(tmp_path: Path) -> None:
     # Prepare: 6 rounds of 100 iterations at rtf 8 (0.8 s of robot time each)
-    cfg = ExperimentConfig(name="tree_kill",
-                           robots=tuple(RobotSpec(f"r{i + 1}", a) for i, a in enumerate(ARENAS)),
-                           iterations=600, respite=100, seed=5, mode="sync", rtf=8.0,
-                           timeout_s=120, skip_after_s=1.0, tolerate_lost_robots=3,
-                           itinerary="tree", fanout=2)
+    cfg = ExperimentConfig(
+        name="tree_kill",
+        robots=tuple(RobotSpec(f"r{i + 1}", a) for i, a in enumerate(ARENAS)),
+        iterations=600,
+        respite=100,
+        seed=5,
+        mode="sync",
+        rtf=8.0,
+        timeout_s=120,
+        skip_after_s=1.0,
+        tolerate_lost_robots=3,
+        itinerary="tree",
+        fanout=2,
+    )
     launcher, runner, box = launcher_in_thread(cfg, tmp_path)
     wait_rounds(tmp_path, "fed_qlearning", 1)
     # Execute: kill r2, the robot process under the root's first clone

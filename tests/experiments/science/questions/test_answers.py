@@ -1,5 +1,6 @@
 """The questions judged from evaluations: controls checked before L, Holm within each
 question, located errors on bad rows, and ``dfrl paper --from`` re-judging a folder."""
+
 import csv
 import subprocess
 import sys
@@ -9,9 +10,13 @@ import numpy as np
 import pytest
 
 from dfrl.experiments.science.questions.answers import answer
-from dfrl.experiments.science.questions.evaluations import (COLUMNS, Evaluation,
-                                                            EvaluationsError, read_evaluations,
-                                                            write_evaluations)
+from dfrl.experiments.science.questions.evaluations import (
+    COLUMNS,
+    Evaluation,
+    EvaluationsError,
+    read_evaluations,
+    write_evaluations,
+)
 
 ARENAS = ("r1", "r2", "r3")
 
@@ -29,8 +34,14 @@ def _study(levels: dict[str, float], seeds=(1, 2, 3, 4, 5), spread=0.05, rng_see
     return out
 
 
-LEARNT = {"untrained": 0.0, "standalone/qlearning": 0.8, "control/standalone/qlearning": 0.0,
-          "qlearning/average": 0.85, "control/qlearning/average": 0.0, "qlearning/max": 0.8}
+LEARNT = {
+    "untrained": 0.0,
+    "standalone/qlearning": 0.8,
+    "control/standalone/qlearning": 0.0,
+    "qlearning/average": 0.85,
+    "control/qlearning/average": 0.0,
+    "qlearning/max": 0.8,
+}
 
 
 def test_a_learner_against_controls_that_learn_nothing_holds():
@@ -59,7 +70,9 @@ def test_without_a_control_l_cannot_be_judged_but_f_t_m_are():
     ans = answer(_study(levels))
     assert all(v.startswith("cannot judge (no learning control") for v in ans.learns().values())
     assert [a.row.label for a in ans.questions["F"]] == [
-        "qlearning/average - standalone/qlearning", "qlearning/max - standalone/qlearning"]
+        "qlearning/average - standalone/qlearning",
+        "qlearning/max - standalone/qlearning",
+    ]
     assert [a.row.role for a in ans.questions["T"]] == ["held_out", "held_out"]
     assert [a.row.label for a in ans.questions["M"]] == ["qlearning: average - max"]
 
@@ -77,8 +90,11 @@ def test_bad_rows_are_located(tmp_path: Path):
     write_evaluations(path, _study({"untrained": 0.0}, seeds=(1,)))
     assert len(read_evaluations(path)) == 6
     lines = path.read_text().splitlines()
-    lines[3] = lines[3].replace(",own,", ",sideways,") if ",own," in lines[3] else \
-        lines[3].replace(",held_out,", ",sideways,")
+    lines[3] = (
+        lines[3].replace(",own,", ",sideways,")
+        if ",own," in lines[3]
+        else lines[3].replace(",held_out,", ",sideways,")
+    )
     path.write_text("\n".join(lines) + "\n")
     with pytest.raises(EvaluationsError, match=r"evaluations.csv:4: role must be one of"):
         read_evaluations(path)
@@ -94,8 +110,9 @@ def test_bad_rows_are_located(tmp_path: Path):
 
 
 def _dfrl(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "dfrl", *args], capture_output=True, text=True,
-                          timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "dfrl", *args], capture_output=True, text=True, timeout=120
+    )
 
 
 def test_paper_from_rejudges_a_folder_and_runs_nothing(tmp_path: Path):
@@ -111,7 +128,7 @@ def test_paper_from_rejudges_a_folder_and_runs_nothing(tmp_path: Path):
     assert f and all(float(x["delta"]) == 0.2 for x in f)
     by_seed = (tmp_path / "contrasts_by_seed.csv").read_text().splitlines()
     assert by_seed[0] == "question,contrast,seed,a,b,difference" and len(by_seed) > 20
-    assert not list(tmp_path.glob("seed*"))          # nothing ran
+    assert not list(tmp_path.glob("seed*"))  # nothing ran
 
 
 def test_paper_from_refuses_bad_input_with_its_location(tmp_path: Path):

@@ -1,10 +1,11 @@
 """A paired contrast's interval, verdict and power (scipy and statsmodels underneath), on
 numbers worked by hand."""
+
 import math
 
 import pytest
 
-from dfrl.experiments.science.questions.contrast import (Contrast, Outcome, judge_family)
+from dfrl.experiments.science.questions.contrast import Contrast, Outcome, judge_family
 
 
 def _c(a, b, side="above", delta=0.1):
@@ -63,7 +64,7 @@ def test_a_veto_is_cannot_judge_and_leaves_the_family():
     a = _c([0.12, 0.2, 0.05, 0.15, 0.1], [0.0] * 5)
     j = judge_family([a, a], ["its control learns", ""])
     assert j[0].outcome is Outcome.CANNOT_JUDGE and "its control learns" in j[0].words()
-    assert j[1].p_adjusted == pytest.approx(j[1].contrast.p)   # a family of one
+    assert j[1].p_adjusted == pytest.approx(j[1].contrast.p)  # a family of one
 
 
 def test_power_falls_with_n_and_seeds_needed_reaches_delta():
@@ -71,9 +72,11 @@ def test_power_falls_with_n_and_seeds_needed_reaches_delta():
     n = c.seeds_needed()
     assert n is not None and n > 5
     at = Contrast(tuple(range(n)), tuple([0.0] * n), tuple([0.0] * n), "above", 0.05)
+
     # the same spread at n and n - 1 pairs: D(n) <= delta < D(n - 1)
     def d(k):
         return c._effect_size(k) * c.sd
+
     assert d(n) <= 0.05 < d(n - 1)
     assert at.n == n
 

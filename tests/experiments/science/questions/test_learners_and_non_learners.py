@@ -13,6 +13,7 @@ Own-arena scores measured (R1/R2 per seed): 0.64/0.84, 0.76/0.78, 0.73/0.82, 0.7
 sometimes settles on turning in place (score 0), which is why the learner is judged on the mean
 over arenas and seeds, not on one run.
 """
+
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -20,8 +21,12 @@ import numpy as np
 import pytest
 
 from dfrl.experiments.science.questions.evaluations import Evaluation, write_evaluations
-from dfrl.experiments.science.reproduce import (EVAL_SEED, PaperOptions, control_trainer,
-                                                untrained_table)
+from dfrl.experiments.science.reproduce import (
+    EVAL_SEED,
+    PaperOptions,
+    control_trainer,
+    untrained_table,
+)
 from dfrl.experiments.science.studies.history import COLLISION_COST
 from dfrl.robots.evaluation import PolicyKind, evaluate_policy
 from dfrl.robots.batched.training import BatchedTrainer
@@ -54,18 +59,32 @@ def _evaluations(kind: str, seed: int, arena: str, q: np.ndarray | None) -> list
     cfg = _configs("trained", seed, arena)
     if kind == "untrained":
         q = untrained_table(seed, arena, (81, 3))
-    elif kind == "untrained2":          # another untrained table: a non-learner fed as real
+    elif kind == "untrained2":  # another untrained table: a non-learner fed as real
         q = untrained_table(seed + 100, arena, (81, 3))
     elif q is None:
         q = np.zeros((81, 3))
     out = []
     for where, role in ((arena, "own"), ("h1", "held_out")):
-        r = evaluate_policy(cfg.replace(arena=where),
-                            PolicyKind.RANDOM if kind == "random" else PolicyKind.GREEDY,
-                            STEPS, EVAL_SEED + seed, q_table=q, episode_steps=EPISODE)
-        out.append((kind, seed, arena, where, role,
-                    r.progress - COLLISION_COST * r.collisions_per_1000,
-                    r.collisions_per_1000, r.progress))
+        r = evaluate_policy(
+            cfg.replace(arena=where),
+            PolicyKind.RANDOM if kind == "random" else PolicyKind.GREEDY,
+            STEPS,
+            EVAL_SEED + seed,
+            q_table=q,
+            episode_steps=EPISODE,
+        )
+        out.append(
+            (
+                kind,
+                seed,
+                arena,
+                where,
+                role,
+                r.progress - COLLISION_COST * r.collisions_per_1000,
+                r.collisions_per_1000,
+                r.progress,
+            )
+        )
     return out
 
 
@@ -73,8 +92,12 @@ def _evaluations(kind: str, seed: int, arena: str, q: np.ndarray | None) -> list
 def measured() -> dict[str, list[tuple]]:
     learnt = _learnt()
     with ProcessPoolExecutor(2) as pool:
-        futs = [pool.submit(_evaluations, k, s, a, learnt.get((k, s, a)))
-                for k in KINDS for s in SEEDS for a in ARENAS]
+        futs = [
+            pool.submit(_evaluations, k, s, a, learnt.get((k, s, a)))
+            for k in KINDS
+            for s in SEEDS
+            for a in ARENAS
+        ]
         rows = [r for f in futs for r in f.result()]
     return {k: [r for r in rows if r[0] == k] for k in KINDS}
 
@@ -83,10 +106,15 @@ def _folder(tmp: Path, as_real: str, measured: dict[str, list[tuple]]) -> Path:
     """A study folder whose ``standalone/qlearning`` is ``as_real`` (the untrained table may
     be both that and itself)."""
     evals = []
-    for kind, run in ((as_real, "standalone/qlearning"),
-                      ("control", "control/standalone/qlearning"), ("untrained", "untrained")):
-        evals += [Evaluation(run, seed, arena, arena, ITERATIONS, where, role, score, coll, prog)
-                  for (_k, seed, arena, where, role, score, coll, prog) in measured[kind]]
+    for kind, run in (
+        (as_real, "standalone/qlearning"),
+        ("control", "control/standalone/qlearning"),
+        ("untrained", "untrained"),
+    ):
+        evals += [
+            Evaluation(run, seed, arena, arena, ITERATIONS, where, role, score, coll, prog)
+            for (_k, seed, arena, where, role, score, coll, prog) in measured[kind]
+        ]
     d = tmp / as_real
     d.mkdir()
     write_evaluations(d / "evaluations.csv", evals)
@@ -99,6 +127,7 @@ def _judge(d: Path) -> str:
     import io
 
     from dfrl.experiments.cli import main
+
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
         assert main(["paper", "--from", str(d), "--resamples", "200"]) == 0

@@ -1,5 +1,6 @@
 """``dfrl paper`` end to end with tiny budgets: real federated runs, the controls, the table
 history, evaluations, band figures, the questions' files and a report (slow)."""
+
 import csv
 import json
 
@@ -8,38 +9,72 @@ import pytest
 from dfrl.experiments.science.questions.evaluations import read_evaluations
 from dfrl.experiments.science.reproduce import PaperOptions, rejudge, reproduce_paper
 
-FEDERATED = ["qlearning/average", "qlearning/max", "qlearning/visit_average", "sarsa/average",
-             "sarsa/max"]
-CONDITIONS = FEDERATED + ["control/qlearning/average", "control/sarsa/average",
-                          "standalone/qlearning", "control/standalone/qlearning",
-                          "standalone/sarsa", "control/standalone/sarsa", "untrained",
-                          "reference/zero_table"]
+FEDERATED = [
+    "qlearning/average",
+    "qlearning/max",
+    "qlearning/visit_average",
+    "sarsa/average",
+    "sarsa/max",
+]
+CONDITIONS = FEDERATED + [
+    "control/qlearning/average",
+    "control/sarsa/average",
+    "standalone/qlearning",
+    "control/standalone/qlearning",
+    "standalone/sarsa",
+    "control/standalone/sarsa",
+    "untrained",
+    "reference/zero_table",
+]
 
 
 @pytest.mark.slow
 def test_tiny_paper(tmp_path):
-    opts = PaperOptions(seeds=2, iterations=400, respite=200, points=2, eval_steps=100,
-                        episode_steps=50)
+    opts = PaperOptions(
+        seeds=2, iterations=400, respite=200, points=2, eval_steps=100, episode_steps=50
+    )
     rep = reproduce_paper(tmp_path, opts, progress=None)
     assert rep.ok
     assert sorted(rep.runs) == sorted(CONDITIONS)
     assert all(len(v) == 2 for v in rep.runs.values())
     assert sorted(rep.runs["control/standalone/qlearning"][0].arenas) == [
-        "r1", "r2", "r3", "r4", "r5"]
-    hist = sorted(p.name for p in (tmp_path / "seed1" / "paper_qlearning_average" / "tables"
-                                   / "history").glob("r1_*.npy"))
+        "r1",
+        "r2",
+        "r3",
+        "r4",
+        "r5",
+    ]
+    hist = sorted(
+        p.name
+        for p in (tmp_path / "seed1" / "paper_qlearning_average" / "tables" / "history").glob(
+            "r1_*.npy"
+        )
+    )
     assert hist == ["r1_it200.npy", "r1_it400.npy"]
-    for run in ("control_sarsa_average", "paper_qlearning_visit_average", "untrained",
-                "zero_table"):
+    for run in (
+        "control_sarsa_average",
+        "paper_qlearning_visit_average",
+        "untrained",
+        "zero_table",
+    ):
         ev = (tmp_path / "seed2" / run / "evaluations.csv").read_text()
         assert ev.startswith("robot,iteration,arena,role") and ",h2,held_out," in ev
     # the study's evaluations: every condition, both seeds, own and held-out rows
     evals = read_evaluations(tmp_path / "evaluations.csv")
     assert {e.run for e in evals} == set(CONDITIONS)
-    assert {(e.seed, e.role) for e in evals} == {(1, "own"), (1, "held_out"), (2, "own"),
-                                                 (2, "held_out")}
+    assert {(e.seed, e.role) for e in evals} == {
+        (1, "own"),
+        (1, "held_out"),
+        (2, "own"),
+        (2, "held_out"),
+    }
     assert {e.robot_arena for e in evals if e.run == "qlearning/average"} == {
-        "r1", "r2", "r3", "r4", "r5"}
+        "r1",
+        "r2",
+        "r3",
+        "r4",
+        "r5",
+    }
     # 2 seeds: every row cannot be judged; the questions and checks are all there
     text = rep.report.read_text()
     for head in ("### Checks", "### L. Do the robots learn?", "### F.", "### T.", "### M."):
@@ -67,7 +102,12 @@ def test_tiny_paper(tmp_path):
         tidy = list(csv.DictReader(fh))
     assert list(tidy[0]) == ["run", "seed", "condition", "robot", "iteration", "metric", "value"]
     assert {r["condition"] for r in tidy} == {
-        "federated", "standalone", "control federated", "control standalone", "untrained",
-        "reference zero table"}
+        "federated",
+        "standalone",
+        "control federated",
+        "control standalone",
+        "untrained",
+        "reference zero table",
+    }
     assert {"q_sum", "score@h1"} <= {r["metric"] for r in tidy}
     assert max(int(r["iteration"]) for r in tidy) == 400

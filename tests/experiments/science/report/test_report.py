@@ -1,4 +1,5 @@
 """Curve statistics on hand-computed curves, and the figures of a tiny results folder."""
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -1,4 +1,5 @@
 """In-process federation: aggregation maths by hand, determinism with seeds."""
+
 import numpy as np
 import pytest
 
@@ -7,8 +8,11 @@ from dfrl.robots.training import TrainerConfig
 from dfrl.experiments.processes import find_swipl
 
 # the same three tables as the Prolog check of platform_pl/dfrl_agent/examples/max_visited.pl
-Q = [np.array([[1.0, -2.0], [0.0, 5.0]]), np.array([[0.0, -1.0], [2.0, 7.0]]),
-     np.array([[0.5, -3.0], [4.0, 0.0]])]
+Q = [
+    np.array([[1.0, -2.0], [0.0, 5.0]]),
+    np.array([[0.0, -1.0], [2.0, 7.0]]),
+    np.array([[0.5, -3.0], [4.0, 0.0]]),
+]
 W = [np.array([[3, 4], [0, 1]]), np.array([[0, 2], [0, 1]]), np.array([[1, 5], [0, 0]])]
 
 
@@ -30,7 +34,7 @@ def test_max_visited_ignores_unvisited_entries():
     assert np.allclose(AGGREGATIONS["max_visited"](Q, W), [[1.0, -1.0], [2.0, 7.0]])
     danger = [np.array([[-2.0]]), np.array([[0.0]])]
     seen = [np.array([[5]]), np.array([[0]])]
-    assert AGGREGATIONS["max"](danger, seen)[0, 0] == 0.0          # the ratchet
+    assert AGGREGATIONS["max"](danger, seen)[0, 0] == 0.0  # the ratchet
     assert AGGREGATIONS["max_visited"](danger, seen)[0, 0] == -2.0  # what was learnt
 
 
@@ -61,13 +65,28 @@ def test_prolog_max_visited_matches_python():
     if swipl is None:
         pytest.skip("swipl not installed")
     root = Path(__file__).resolve().parents[4] / "platform_pl" / "dfrl_agent"
-    tables = ",".join(f"qtable_visits([2,2],{json.dumps(q.ravel().tolist())},"
-                      f"{json.dumps(w.ravel().tolist())})" for q, w in zip(Q, W))
-    goal = (f"dfrl_agent:aggregate_tables(max_visited,[{tables}],qtable(_,V)),"
-            "format('~w~n',[V])")
-    out = subprocess.run([swipl, "-q", "-g", f"use_module('{root / 'dfrl_agent'}')",
-                          "-g", f"consult('{root / 'examples' / 'max_visited'}')",
-                          "-g", goal, "-t", "halt"], capture_output=True, text=True, timeout=60)
+    tables = ",".join(
+        f"qtable_visits([2,2],{json.dumps(q.ravel().tolist())},{json.dumps(w.ravel().tolist())})"
+        for q, w in zip(Q, W)
+    )
+    goal = f"dfrl_agent:aggregate_tables(max_visited,[{tables}],qtable(_,V)),format('~w~n',[V])"
+    out = subprocess.run(
+        [
+            swipl,
+            "-q",
+            "-g",
+            f"use_module('{root / 'dfrl_agent'}')",
+            "-g",
+            f"consult('{root / 'examples' / 'max_visited'}')",
+            "-g",
+            goal,
+            "-t",
+            "halt",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode == 0, out.stderr
     got = json.loads(out.stdout.strip().splitlines()[-1])
     assert np.allclose(np.reshape(got, (2, 2)), AGGREGATIONS["max_visited"](Q, W))

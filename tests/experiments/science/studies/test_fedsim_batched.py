@@ -1,6 +1,7 @@
 """The federation on the batched simulator: stepped in chunks, it is the federation stepped one
 iteration at a time; observers, snapshots and the final share as in fedsim.federate; the
 simulator chosen by name."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -8,8 +9,11 @@ import pytest
 
 from dfrl.experiments.science.studies import fedsim, simulators
 from dfrl.experiments.science.studies.fedsim import AGGREGATIONS
-from dfrl.experiments.science.studies.fedsim_batched import (federate_batched, in_turn_batched,
-                                                             next_stop)
+from dfrl.experiments.science.studies.fedsim_batched import (
+    federate_batched,
+    in_turn_batched,
+    next_stop,
+)
 from dfrl.robots.batched.training import SIM_NAME, BatchedTrainer, BatchError
 from dfrl.robots.training import TrainerConfig
 
@@ -37,9 +41,15 @@ def one_at_a_time(configs, iterations, respite, method):
 @pytest.mark.parametrize("method", ["average", "visit_average"])
 def test_chunks_are_one_iteration_at_a_time(method: str) -> None:
     seen: list[int] = []
-    fed = federate_batched(CFGS, 230, 50, method, snapshot_every=1,
-                           observe=lambda it, robots: seen.append(it) or False,
-                           observe_every=40)
+    fed = federate_batched(
+        CFGS,
+        230,
+        50,
+        method,
+        snapshot_every=1,
+        observe=lambda it, robots: seen.append(it) or False,
+        observe_every=40,
+    )
     bt, q_sum, reward, snaps = one_at_a_time(CFGS, 230, 50, method)
     assert seen == [40, 80, 120, 160, 200]
     assert np.array_equal(fed.table, bt.q[0]) and np.array_equal(fed.visits, bt.visits.sum(0))
@@ -61,8 +71,8 @@ def test_observers_see_the_robots_after_the_share() -> None:
     fed = federate_batched(CFGS, 300, 100, observe=observe, observe_every=50)
     assert sorted(looks) == [50, 100, 150, 200] and fed.iterations == 200
     assert fed.q_sum.shape == fed.reward.shape == (2, 200)
-    assert not np.array_equal(*looks[50])          # between shares the robots differ
-    assert np.array_equal(*looks[100])             # a share gives both the average
+    assert not np.array_equal(*looks[50])  # between shares the robots differ
+    assert np.array_equal(*looks[100])  # a share gives both the average
     # the final share is optional, as in fedsim.federate: shares at 100 and 200 only
     apart = federate_batched(CFGS, 250, 100, final_share=False, snapshot_every=1)
     assert sorted(apart.snapshots) == [100, 200]
@@ -73,7 +83,7 @@ def test_observers_see_the_robots_after_the_share() -> None:
 def test_initial_table_and_what_cannot_be_batched() -> None:
     start = np.full((81, 3), 0.5)
     fed = federate_batched(CFGS[:1], 10, 100, initial=start, final_share=False)
-    assert (fed.table[fed.visits == 0] == 0.5).all()     # what was never updated started there
+    assert (fed.table[fed.visits == 0] == 0.5).all()  # what was never updated started there
     assert (fed.table[fed.visits > 0] != 0.5).any()
     with pytest.raises(BatchError, match="not batched"):
         federate_batched([CFGS[0].replace(algo="dqn")], 10, 5)

@@ -2,6 +2,7 @@
 process (fed_replicas.run_replica over fedsim.federate) give the same files bit for bit: every
 robot's final table and visit counts, its table history at every share and ``metrics.csv``
 (the sum of Q and the cumulative reward of every robot at every iteration, as ``repr``)."""
+
 from __future__ import annotations
 
 import json
@@ -14,8 +15,12 @@ from dfrl.experiments.driver.config import ExperimentConfig, RobotSpec, resolve_
 from dfrl.experiments.driver.launcher import run
 from dfrl.experiments.processes import find_swipl
 from dfrl.experiments.driver.results.metrics import read_metrics
-from dfrl.experiments.science.fed_replicas import (REPLICA_LINE, replica_job,
-                                                   replica_problems, run_replica)
+from dfrl.experiments.science.fed_replicas import (
+    REPLICA_LINE,
+    replica_job,
+    replica_problems,
+    run_replica,
+)
 from dfrl.experiments.science.paper_runs import recorded_wall
 from dfrl.experiments.science.reproduce import PaperOptions, paper_configs
 from dfrl.experiments.science.studies.fedsim import AGGREGATIONS
@@ -34,10 +39,13 @@ def differences(driver: Path, replica: Path) -> list[str]:
     out = []
     a, b = history_tables(driver), history_tables(replica)
     if {r: sorted(f) for r, f in a.items()} != {r: sorted(f) for r, f in b.items()}:
-        out.append(f"history: driver {({r: sorted(f) for r, f in a.items()})} "
-                   f"!= replica {({r: sorted(f) for r, f in b.items()})}")
-    pairs = [(f"history {r} it {it}", a[r][it], b[r][it])
-             for r in a for it in a[r] if it in b.get(r, {})]
+        out.append(
+            f"history: driver { ({r: sorted(f) for r, f in a.items()}) } "
+            f"!= replica { ({r: sorted(f) for r, f in b.items()}) }"
+        )
+    pairs = [
+        (f"history {r} it {it}", a[r][it], b[r][it]) for r in a for it in a[r] if it in b.get(r, {})
+    ]
     for rid in sorted(a):
         for suffix in (".npy", ".visits.npy"):
             name = f"tables/{rid}{suffix}"
@@ -53,8 +61,11 @@ def differences(driver: Path, replica: Path) -> list[str]:
     m_b = (replica / "metrics.csv").read_text().splitlines()
     if m_a != m_b:
         first = next((i for i, (x, y) in enumerate(zip(m_a, m_b)) if x != y), None)
-        where = (f"line {first + 1}: {m_a[first]!r} != {m_b[first]!r}" if first is not None
-                 else "one is longer")
+        where = (
+            f"line {first + 1}: {m_a[first]!r} != {m_b[first]!r}"
+            if first is not None
+            else "one is longer"
+        )
         out.append(f"metrics.csv: {len(m_a)} vs {len(m_b)} lines, first difference {where}")
     return out
 
@@ -80,8 +91,11 @@ def test_paper_run_and_replica_are_bit_identical(tmp_path: Path, key: str) -> No
     off-policy reference, the shuffled-reward control), and the third built-in method on
     Q-learning: five robots in r1..r5, 600 iterations, a share every 100 (six shares), seed 2."""
     configs = dict(paper_configs(SHORT, 2))
-    cfg = (configs[key] if key in configs else
-           configs["qlearning/average"].replace(method=key, name=f"qlearning_{key}"))
+    cfg = (
+        configs[key]
+        if key in configs
+        else configs["qlearning/average"].replace(method=key, name=f"qlearning_{key}")
+    )
     driver, replica = run_both(cfg.replace(timeout_s=600), tmp_path)
     assert sorted(history_tables(driver)["r5"]) == [100, 200, 300, 400, 500, 600]
     assert differences(driver, replica) == []
@@ -107,8 +121,9 @@ def test_replica_refuses_what_it_cannot_replicate() -> None:
     assert replica_problems(base) == []
     assert any(p.startswith("mode") for p in replica_problems(base.replace(mode="async")))
     assert any(p.startswith("itinerary") for p in replica_problems(base.replace(itinerary="tree")))
-    mixed = base.replace(robots=(RobotSpec("r1", "r1", "qlearning"),
-                                 RobotSpec("r2", "r2", "sarsa")))
+    mixed = base.replace(
+        robots=(RobotSpec("r1", "r1", "qlearning"), RobotSpec("r2", "r2", "sarsa"))
+    )
     assert any("one algorithm" in p for p in replica_problems(mixed))
     with pytest.raises(ValueError, match="async"):
         run_replica(base.replace(mode="async"), Path("/nonexistent/never-written"))

@@ -1,4 +1,5 @@
 """Evaluation points, table history files, and determinism of an evaluated standalone run."""
+
 import numpy as np
 
 from dfrl.experiments.science.standalone import evaluated_job
@@ -29,5 +30,8 @@ def test_evaluated_standalone_run_is_deterministic(tmp_path):
         rows.append(read_rows(tmp_path / str(k) / "evaluations.csv"))
     assert rows[0] == rows[1]
     assert [(r["iteration"], r["arena"], r["role"]) for r in rows[0]] == [
-        (150, "r1", "own"), (300, "r1", "own"), (300, "h1", "held_out")]   # held-out: the last
+        (150, "r1", "own"),
+        (300, "r1", "own"),
+        (300, "h1", "held_out"),
+    ]  # held-out: the last
     assert all(r["steps"] == 100 for r in rows[0])

@@ -1,4 +1,5 @@
 """The sweep runs real training and evaluation; tiny budgets here."""
+
 from __future__ import annotations
 
 import pytest
@@ -14,10 +15,15 @@ def _base() -> dict:
 def test_settings_one_factor_at_a_time_and_grid() -> None:
     f = {"learner.alpha": [0.1, 0.4], "learner.gamma": [0.9]}
     assert [s.name for s in settings(f)] == [
-        "base", "learner.alpha=0.1", "learner.alpha=0.4", "learner.gamma=0.9"]
+        "base",
+        "learner.alpha=0.1",
+        "learner.alpha=0.4",
+        "learner.gamma=0.9",
+    ]
     assert [s.changes for s in settings(f, "grid")][1:] == [
         (("learner.alpha", 0.1), ("learner.gamma", 0.9)),
-        (("learner.alpha", 0.4), ("learner.gamma", 0.9))]
+        (("learner.alpha", 0.4), ("learner.gamma", 0.9)),
+    ]
 
 
 def test_unknown_field_fails_before_any_run() -> None:

@@ -2,6 +2,7 @@
 or given) and the paired bootstrap of censored times to the threshold, on hand-computed
 numbers; the unpaired bootstrap of the same phases as the control that cannot see the
 effect."""
+
 from __future__ import annotations
 
 import json
@@ -12,11 +13,18 @@ import pytest
 
 from dfrl.experiments.cli import main
 from dfrl.experiments.cli.transfer import thresholds_arg
-from dfrl.experiments.science.transfer.claims import (censored_difference, claim,
-                                                      paired_censored_difference)
+from dfrl.experiments.science.transfer.claims import (
+    censored_difference,
+    claim,
+    paired_censored_difference,
+)
 from dfrl.experiments.science.transfer.study import StudyOptions
-from dfrl.experiments.science.transfer.thresholds import (level_points, reference_job,
-                                                          threshold_from, thresholds_for)
+from dfrl.experiments.science.transfer.thresholds import (
+    level_points,
+    reference_job,
+    threshold_from,
+    thresholds_for,
+)
 
 FED, CTRL = "federated_average", "standalone_r1"
 BUDGET = 2000.0
@@ -56,9 +64,18 @@ def rows(ctrl_seeds=(1, 2, 3)) -> list[dict]:
     for cond, h1, seeds in ((FED, FED_H1, (1, 2, 3)), (CTRL, CTRL_H1, ctrl_seeds)):
         for s, t in zip(seeds, h1):
             for arena, time, ok in (("h1", t, True), ("h2", BUDGET, False)):
-                out.append({"condition": cond, "source_seed": s, "pair_seed": s,
-                            "arena": arena, "target_seed": 1, "collisions_per_1000": 1.0,
-                            "time_to_threshold": time, "reached": ok})
+                out.append(
+                    {
+                        "condition": cond,
+                        "source_seed": s,
+                        "pair_seed": s,
+                        "arena": arena,
+                        "target_seed": 1,
+                        "collisions_per_1000": 1.0,
+                        "time_to_threshold": time,
+                        "reached": ok,
+                    }
+                )
     return out
 
 
@@ -81,7 +98,9 @@ def test_paired_needs_the_same_seeds():
 def test_derived_threshold_by_hand():
     th = threshold_from("h2", [0.4, 0.6, 0.8], 0.75, 8000)
     assert th.value == pytest.approx(0.45) and th.level == pytest.approx(0.6)
-    assert not th.given and th.origin().startswith("0.75 x 0.6 = 0.45 (the mean level of 3 reference")
+    assert not th.given and th.origin().startswith(
+        "0.75 x 0.6 = 0.45 (the mean level of 3 reference"
+    )
     assert level_points(8000) == [4000, 5000, 6000, 7000, 8000]
     for levels, fraction in (([], 0.75), ([0.5, math.nan], 0.75), ([0.5], 0.0), ([0.5], 1.5)):
         with pytest.raises(ValueError):
@@ -106,8 +125,10 @@ def test_threshold_options():
     assert StudyOptions(targets=("h1", "h2")).given_thresholds() == {}
     with pytest.raises(ValueError, match="not among the target arenas"):
         StudyOptions(targets=("h1",), arena_thresholds=(("h2", 0.3),))
-    assert thresholds_arg(["0.5", "h2=0.3"]) == {"threshold": 0.5,
-                                                 "arena_thresholds": (("h2", 0.3),)}
+    assert thresholds_arg(["0.5", "h2=0.3"]) == {
+        "threshold": 0.5,
+        "arena_thresholds": (("h2", 0.3),),
+    }
     with pytest.raises(ValueError, match="neither"):
         thresholds_arg(["h2=high"])
     with pytest.raises(ValueError, match="one SCORE"):
@@ -120,12 +141,47 @@ def test_study_uses_each_arenas_threshold(tmp_path, capsys):
     every learning phase records its arena's, its time is the first of two evaluations in a
     row at or above it, and the report lists both."""
     out = tmp_path / "study"
-    assert main(["transfer-study", "--seeds", "1", "2", "3", "--targets", "h1", "h2",
-                 "--iterations", "40", "--respite", "20", "--learn", "60", "--eval-every", "20",
-                 "--eval-steps", "20", "--resamples", "200", "--jobs", "2", "--sim", "pybullet",
-                 "--threshold", "h2=0.05", "--threshold-iterations", "40",
-                 "--threshold-runs", "2", "--threshold-fraction", "0.5",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "transfer-study",
+                "--seeds",
+                "1",
+                "2",
+                "3",
+                "--targets",
+                "h1",
+                "h2",
+                "--iterations",
+                "40",
+                "--respite",
+                "20",
+                "--learn",
+                "60",
+                "--eval-every",
+                "20",
+                "--eval-steps",
+                "20",
+                "--resamples",
+                "200",
+                "--jobs",
+                "2",
+                "--sim",
+                "pybullet",
+                "--threshold",
+                "h2=0.05",
+                "--threshold-iterations",
+                "40",
+                "--threshold-runs",
+                "2",
+                "--threshold-fraction",
+                "0.5",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     doc = json.loads((out / "transfer_study.json").read_text())
     level = sum(reference_job("h1", k, 40, 20, 200) for k in (1, 2)) / 2
     want = {"h1": 0.5 * level, "h2": 0.05}

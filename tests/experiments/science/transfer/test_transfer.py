@@ -1,4 +1,5 @@
 """Transfer experiment: smoke test of ``dfrl transfer``, shape checks, determinism."""
+
 from __future__ import annotations
 
 import csv
@@ -49,15 +50,34 @@ def setup(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     return tmp / "r1" / "q_table.npy", arena
 
 
-def test_command_json_output_and_files(setup: tuple[Path, Path], tmp_path: Path,
-                                       capsys: pytest.CaptureFixture[str]) -> None:
+def test_command_json_output_and_files(
+    setup: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     # Prepare
     table, arena = setup
     out = tmp_path / "out"
     # Execute
-    rc = main(["transfer", "--init", str(table), "--arena", str(arena), "--iterations", "150",
-               "--seeds", "1", "2", "--eval-steps", "100", "--jobs", "1", "--out", str(out),
-               "--json"])
+    rc = main(
+        [
+            "transfer",
+            "--init",
+            str(table),
+            "--arena",
+            str(arena),
+            "--iterations",
+            "150",
+            "--seeds",
+            "1",
+            "2",
+            "--eval-steps",
+            "100",
+            "--jobs",
+            "1",
+            "--out",
+            str(out),
+            "--json",
+        ]
+    )
     # Assert
     assert rc == 0
     doc = json.loads(capsys.readouterr().out)
@@ -66,7 +86,11 @@ def test_command_json_output_and_files(setup: tuple[Path, Path], tmp_path: Path,
     assert doc["trainer_config"]["arena"] == str(arena)
     assert doc["trainer_config"]["iterations"] == 150
     assert [(r["seed"], r["condition"]) for r in doc["runs"]] == [
-        (1, "init"), (1, "zero"), (2, "init"), (2, "zero")]
+        (1, "init"),
+        (1, "zero"),
+        (2, "init"),
+        (2, "zero"),
+    ]
     for r in doc["runs"]:
         assert r["iterations"] == 150 and r["head_steps"] == 150 and r["head10_steps"] == 15
         assert r["collisions_per_1000"] == pytest.approx(1000 * r["collisions"] / 150)
@@ -89,10 +113,29 @@ def test_command_json_output_and_files(setup: tuple[Path, Path], tmp_path: Path,
     assert cfg["transfer"]["seeds"] == [1, 2] and cfg["trainer"]["algo"] == "qlearning"
 
 
-def test_command_readable_table(setup: tuple[Path, Path], capsys: pytest.CaptureFixture[str]) -> None:
+def test_command_readable_table(
+    setup: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
     table, arena = setup
-    rc = main(["transfer", "--init", str(table), "--arena", str(arena), "--iterations", "100",
-               "--seed", "1", "--eval-steps", "0", "--algo", "sarsa", "--jobs", "1"])
+    rc = main(
+        [
+            "transfer",
+            "--init",
+            str(table),
+            "--arena",
+            str(arena),
+            "--iterations",
+            "100",
+            "--seed",
+            "1",
+            "--eval-steps",
+            "0",
+            "--algo",
+            "sarsa",
+            "--jobs",
+            "1",
+        ]
+    )
     text = capsys.readouterr().out
     assert rc == 0
     assert "into l6_test: sarsa, 100 iterations x 1 seeds" in text
@@ -102,8 +145,9 @@ def test_command_readable_table(setup: tuple[Path, Path], capsys: pytest.Capture
 
 def test_same_seeds_give_identical_results(setup: tuple[Path, Path]) -> None:
     table, arena = setup
-    cfg = TransferConfig(init=str(table), arena=str(arena), iterations=120, seeds=(3, 4),
-                         eval_steps=60, jobs=1)
+    cfg = TransferConfig(
+        init=str(table), arena=str(arena), iterations=120, seeds=(3, 4), eval_steps=60, jobs=1
+    )
     a = run(cfg)
     b = run(TransferConfig(**{**cfg.to_dict(), "seeds": (3, 4), "jobs": 2}))
     for ra, rb in zip(a.runs, b.runs):
@@ -114,15 +158,31 @@ def test_same_seeds_give_identical_results(setup: tuple[Path, Path]) -> None:
         np.testing.assert_array_equal(ra.curve_reward, rb.curve_reward)
     # the two conditions really start differently
     init, zero = a.runs[0], a.runs[1]
-    assert (init.cumulative_reward, init.collisions) != (zero.cumulative_reward, zero.collisions) \
-        or init.initial_eval_collisions_per_1000 != zero.initial_eval_collisions_per_1000
+    assert (init.cumulative_reward, init.collisions) != (
+        zero.cumulative_reward,
+        zero.collisions,
+    ) or init.initial_eval_collisions_per_1000 != zero.initial_eval_collisions_per_1000
 
 
-def test_mismatched_levels_give_a_clear_error(setup: tuple[Path, Path],
-                                              capsys: pytest.CaptureFixture[str]) -> None:
+def test_mismatched_levels_give_a_clear_error(
+    setup: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
     table, arena = setup
-    rc = main(["transfer", "--init", str(table), "--arena", str(arena), "--iterations", "10",
-               "--seed", "1", "--levels", "2"])
+    rc = main(
+        [
+            "transfer",
+            "--init",
+            str(table),
+            "--arena",
+            str(arena),
+            "--iterations",
+            "10",
+            "--seed",
+            "1",
+            "--levels",
+            "2",
+        ]
+    )
     err = capsys.readouterr().err
     assert rc == 2
     assert "table shape (81, 3) does not fit the trainer" in err
@@ -133,8 +193,11 @@ def test_bare_table_of_the_wrong_shape(tmp_path: Path, setup: tuple[Path, Path])
     _, arena = setup
     bare = tmp_path / "bare.npy"
     np.save(bare, np.zeros((27, 3)))
-    with pytest.raises(ValueError, match=r"table shape \(27, 3\) does not fit the trainer.*"
-                                         r"need shape \(81, 3\).*no sidecar"):
+    with pytest.raises(
+        ValueError,
+        match=r"table shape \(27, 3\) does not fit the trainer.*"
+        r"need shape \(81, 3\).*no sidecar",
+    ):
         run(TransferConfig(init=str(bare), arena=str(arena), iterations=10, seeds=(1,)))
 
 
@@ -142,8 +205,9 @@ def test_bare_table_of_the_right_shape_runs(tmp_path: Path, setup: tuple[Path, P
     table, arena = setup
     bare = tmp_path / "bare.npy"
     np.save(bare, load_table(table).q)
-    res = run(TransferConfig(init=str(bare), arena=str(arena), iterations=20, seeds=(1,),
-                             eval_steps=0))
+    res = run(
+        TransferConfig(init=str(bare), arena=str(arena), iterations=20, seeds=(1,), eval_steps=0)
+    )
     assert res.table.sidecar is False and res.trainer_config.algo == "qlearning"
     assert math.isnan(res.runs[0].eval_collisions_per_1000)
 
@@ -154,8 +218,11 @@ def test_unknown_action_names_and_missing_files(tmp_path: Path, setup: tuple[Pat
     odd = TableMeta(**{**meta.__dict__, "actions": ["go", "left", "right"]})
     save_table(tmp_path / "odd", load_table(table).q, odd)
     with pytest.raises(ValueError, match="match no action set"):
-        run(TransferConfig(init=str(tmp_path / "odd.npy"), arena=str(arena), iterations=10,
-                           seeds=(1,)))
+        run(
+            TransferConfig(
+                init=str(tmp_path / "odd.npy"), arena=str(arena), iterations=10, seeds=(1,)
+            )
+        )
     with pytest.raises(ValueError, match="no such table"):
         run(TransferConfig(init=str(tmp_path / "nope.npy"), arena=str(arena), iterations=10))
     with pytest.raises(ValueError, match="unknown arena"):
@@ -164,8 +231,24 @@ def test_unknown_action_names_and_missing_files(tmp_path: Path, setup: tuple[Pat
 
 def test_same_arena_warning(setup: tuple[Path, Path], capsys: pytest.CaptureFixture[str]) -> None:
     table, _ = setup
-    rc = main(["transfer", "--init", str(table), "--arena", "r1", "--iterations", "20",
-               "--seed", "1", "--eval-steps", "0", "--jobs", "1", "--json"])
+    rc = main(
+        [
+            "transfer",
+            "--init",
+            str(table),
+            "--arena",
+            "r1",
+            "--iterations",
+            "20",
+            "--seed",
+            "1",
+            "--eval-steps",
+            "0",
+            "--jobs",
+            "1",
+            "--json",
+        ]
+    )
     captured = capsys.readouterr()
     assert rc == 0 and json.loads(captured.out)["same_arena"] is True
     assert "warning" in captured.err
@@ -181,12 +264,24 @@ def test_aggregate_and_ratio_by_hand() -> None:
     def fake(seed: int, cond: str, value: float) -> RunResult:
         z = np.zeros(1)
         vals = {m: value for m in METRICS}
-        return RunResult(seed=seed, condition=cond, iterations=1, collisions=0, head_steps=1,
-                         head10_steps=1, respawns=0, wall_time=0.0, curve_iteration=z,
-                         curve_collisions=z, curve_reward=z, **vals)
+        return RunResult(
+            seed=seed,
+            condition=cond,
+            iterations=1,
+            collisions=0,
+            head_steps=1,
+            head10_steps=1,
+            respawns=0,
+            wall_time=0.0,
+            curve_iteration=z,
+            curve_collisions=z,
+            curve_reward=z,
+            **vals,
+        )
 
-    summary, ratio = summarise([fake(1, "init", 1.0), fake(1, "zero", 4.0),
-                                fake(2, "init", 3.0), fake(2, "zero", 4.0)])
+    summary, ratio = summarise(
+        [fake(1, "init", 1.0), fake(1, "zero", 4.0), fake(2, "init", 3.0), fake(2, "zero", 4.0)]
+    )
     assert summary["init"]["collisions_per_1000"].mean == 2.0
     assert summary["zero"]["collisions_per_1000"].std == 0.0
     assert ratio["collisions_per_1000"] == 0.5

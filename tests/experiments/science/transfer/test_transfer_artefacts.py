@@ -1,6 +1,7 @@
 """``dfrl transfer-study`` without artefacts (issue 34), on hand-computed numbers: no phase at
 the threshold from the start (the floor), the score while learning where the time cannot
 see, no verdict from a degenerate interval, learning-phase seeds of each source seed's own."""
+
 from __future__ import annotations
 
 import math
@@ -9,26 +10,41 @@ import numpy as np
 import pytest
 
 from dfrl.experiments.science.statistics import holm
-from dfrl.experiments.science.transfer.claims import (CensoredDifference, claim, claims,
-                                                      degenerate)
-from dfrl.experiments.science.transfer.study import (PHASE_EVAL_OFFSET, StudyOptions,
-                                                     pair_seed, phase_seeds, with_times)
+from dfrl.experiments.science.transfer.claims import CensoredDifference, claim, claims, degenerate
+from dfrl.experiments.science.transfer.study import (
+    PHASE_EVAL_OFFSET,
+    StudyOptions,
+    pair_seed,
+    phase_seeds,
+    with_times,
+)
 from dfrl.experiments.science.transfer.thresholds import Threshold, lift, time_to_threshold
 
 FED, CTRL = "federated_average", "standalone_r1"
 GRID = [0, 100, 200, 300, 400]
 
 
-def phase(condition: str, seed: int, scores: list[float], collisions: float = 1.0,
-          arena: str = "h1") -> dict:
+def phase(
+    condition: str, seed: int, scores: list[float], collisions: float = 1.0, arena: str = "h1"
+) -> dict:
     """A learning-phase row as :func:`target_job` writes it (before :func:`with_times`)."""
     curve = list(zip(GRID, scores))
     area = sum((b - a) * (x + y) / 2 for (a, x), (b, y) in zip(curve, curve[1:])) / GRID[-1]
     train, ev = phase_seeds(seed, 1)
-    return {"condition": condition, "source_seed": seed, "pair_seed": seed, "arena": arena,
-            "target_seed": 1, "phase_seed": train, "eval_seed": ev,
-            "collisions_per_1000": collisions, "score_auc": area, "start_score": scores[0],
-            "scores": curve, "collisions": [(g, 0) for g in GRID]}
+    return {
+        "condition": condition,
+        "source_seed": seed,
+        "pair_seed": seed,
+        "arena": arena,
+        "target_seed": 1,
+        "phase_seed": train,
+        "eval_seed": ev,
+        "collisions_per_1000": collisions,
+        "score_auc": area,
+        "start_score": scores[0],
+        "scores": curve,
+        "collisions": [(g, 0) for g in GRID],
+    }
 
 
 # -- the floor ---------------------------------------------------------------------------------
@@ -40,8 +56,7 @@ def test_lift_puts_the_threshold_above_every_start():
     # Assert: just above 0.62, the base kept for the report
     assert th.value == np.nextafter(0.62, 1.0) and th.value > 0.62 and th.base == 0.5
     assert th.lifted and th.best_start == 0.62 and th.phases == 3
-    assert "lifted to just above 0.62, the best iteration-0 score of the 3 learning" in \
-        th.origin()
+    assert "lifted to just above 0.62, the best iteration-0 score of the 3 learning" in th.origin()
     # a phase that starts at the best start and stays there never reaches it: at the base
     # threshold it had the time 0 without learning anything
     flat = [(0, 0.62), (100, 0.62), (200, 0.62)]
@@ -69,8 +84,10 @@ def test_no_phase_has_the_time_zero_after_with_times():
     rows = [phase(FED, 1, [0.6, 0.7, 0.8, 0.8, 0.8]), phase(CTRL, 1, [0.55, 0.55, 0.6, 0.6, 0.6])]
     timed, lifted = with_times(rows, {"h1": Threshold("h1", 0.5, True)}, confirm=2, budget=400)
     assert lifted["h1"].value == np.nextafter(0.6, 1.0)
-    assert [(r["time_to_threshold"], r["reached"]) for r in timed] == [(100.0, True),
-                                                                      (400.0, False)]
+    assert [(r["time_to_threshold"], r["reached"]) for r in timed] == [
+        (100.0, True),
+        (400.0, False),
+    ]
     assert all(r["threshold_base"] == 0.5 and r["start_score"] < r["threshold"] for r in timed)
 
 
@@ -105,11 +122,13 @@ def test_the_score_while_learning_sees_what_the_time_cannot():
 def test_degenerate_intervals_by_hand():
     zero = CensoredDifference(5.0, 5.0, 5.0, 3, "exact", np.array([[5.0, 5.0], [4.0, 6.0]]))
     assert degenerate(zero) == "zero width: every resample's difference is 5"
-    same = CensoredDifference(-100.0, -math.inf, -100.0, 3, "at most",
-                              np.array([[-math.inf, -100.0]] * 4))
+    same = CensoredDifference(
+        -100.0, -math.inf, -100.0, 3, "at most", np.array([[-math.inf, -100.0]] * 4)
+    )
     assert degenerate(same) == "every resample gives the same difference, [-inf, -100]"
-    spread = CensoredDifference(-100.0, -200.0, 50.0, 3, "exact",
-                                np.array([[-200.0, -200.0], [50.0, 50.0]]))
+    spread = CensoredDifference(
+        -100.0, -200.0, 50.0, 3, "exact", np.array([[-200.0, -200.0], [50.0, 50.0]])
+    )
     assert degenerate(spread) is None
 
 
@@ -117,8 +136,11 @@ def every_condition(collisions: dict[str, list[float]]) -> list[dict]:
     """Rows of every condition of the default options, three seeds, after :func:`with_times`
     (a threshold reached by no phase, so the times are censored)."""
     opts = StudyOptions(source_seeds=(1, 2, 3), targets=("h1",))
-    rows = [phase(c, s, [0.1, 0.2, 0.3, 0.3, 0.3], collisions[c][s - 1])
-            for c in opts.conditions for s in (1, 2, 3)]
+    rows = [
+        phase(c, s, [0.1, 0.2, 0.3, 0.3, 0.3], collisions[c][s - 1])
+        for c in opts.conditions
+        for s in (1, 2, 3)
+    ]
     return with_times(rows, {"h1": Threshold("h1", 0.9, True)}, 2, 400)[0]
 
 
@@ -128,9 +150,10 @@ def test_a_degenerate_claim_has_no_p_and_leaves_the_holm_family():
     0: zero width too) are adjusted among themselves only."""
     opts = StudyOptions(source_seeds=(1, 2, 3), targets=("h1",))
     fed = [5.0, 6.0, 7.0]
-    coll = {c: [x + 1.0 + (k * 0.3 * i if c != "standalone_r1" else 0.0)
-                for i, x in enumerate(fed)]
-            for k, c in enumerate(opts.conditions)}
+    coll = {
+        c: [x + 1.0 + (k * 0.3 * i if c != "standalone_r1" else 0.0) for i, x in enumerate(fed)]
+        for k, c in enumerate(opts.conditions)
+    }
     coll[FED] = fed
     found = claims(every_condition(coll), opts, resamples=200)
     by = {(c.measure, c.control): c for c in found}
@@ -140,14 +163,17 @@ def test_a_degenerate_claim_has_no_p_and_leaves_the_holm_family():
     assert r1.to_dict()["p_holm"] is None and r1.to_dict()["reason"].startswith("zero width")
     judged = [c for c in found if c.family == "primary" and not math.isnan(c.judgement.p)]
     assert [c.control for c in judged] == [f"standalone_r{k}" for k in (2, 3, 4, 5)] + ["zeros"]
-    assert [c.judgement.p_adjusted for c in judged] == \
-        pytest.approx(holm([c.judgement.p for c in judged]))
+    assert [c.judgement.p_adjusted for c in judged] == pytest.approx(
+        holm([c.judgement.p for c in judged])
+    )
     scores = [c for c in found if c.measure == "score_auc"]
     assert all(c.words().startswith("cannot judge (zero width") for c in scores)
     # every time censored on both sides: each resample allows any difference
     times = [c for c in found if c.measure == "time_to_threshold"]
-    assert all(c.words() == "cannot judge (every resample gives the same difference, "
-                            "[-inf, inf])" for c in times)
+    assert all(
+        c.words() == "cannot judge (every resample gives the same difference, [-inf, inf])"
+        for c in times
+    )
 
 
 # -- learning-phase seeds ----------------------------------------------------------------------
@@ -156,13 +182,13 @@ def test_phase_seeds_are_the_source_seeds_own():
     seeds: no two (source seed, target seed) share a training or an evaluation seed."""
     opts = StudyOptions(source_seeds=(1, 2, 3))
     assert phase_seeds(1, 1) == (1_001_001, 1_001_501)
-    assert {phase_seeds(pair_seed(c, 2, opts), 1) for c in opts.conditions} == \
-        {phase_seeds(2, 1)}
+    assert {phase_seeds(pair_seed(c, 2, opts), 1) for c in opts.conditions} == {phase_seeds(2, 1)}
     seeds = [x for s in range(40) for t in range(PHASE_EVAL_OFFSET) for x in phase_seeds(s, t)]
     assert len(set(seeds)) == len(seeds)
     unpaired = StudyOptions(source_seeds=(1, 2, 3), unpaired=True)
-    assert phase_seeds(pair_seed(CTRL, 1, unpaired), 1) != phase_seeds(pair_seed(FED, 1,
-                                                                                 unpaired), 1)
+    assert phase_seeds(pair_seed(CTRL, 1, unpaired), 1) != phase_seeds(
+        pair_seed(FED, 1, unpaired), 1
+    )
     for bad in ((PHASE_EVAL_OFFSET,), (-1,)):
         with pytest.raises(ValueError, match="target seeds"):
             StudyOptions(target_seeds=bad)

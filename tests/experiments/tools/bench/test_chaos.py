@@ -1,4 +1,5 @@
 """The chaos benchmark against real node processes: no agent lost, doubled or left unsettled."""
+
 from __future__ import annotations
 
 import json
@@ -15,7 +16,7 @@ pytestmark = pytest.mark.skipif(find_swipl() is None, reason="swipl not installe
 def check(report: dict, faults: int) -> None:
     assert report["faults"] == faults
     assert (report["lost"], report["doubled"], report["unsettled"]) == (0, 0, 0), report
-    assert report["moves"] > faults                       # the agents kept moving
+    assert report["moves"] > faults  # the agents kept moving
     assert sum(k["faults"] for k in report["by_kind"].values()) == faults
     assert all(k["hit"] == k["faults"] for k in report["by_kind"].values()), report
 

@@ -1,4 +1,5 @@
 """The fault proxy with a real echo server and a real platform node (no mocks)."""
+
 from __future__ import annotations
 
 import socket
@@ -109,7 +110,7 @@ def test_delay_applies_to_both_directions(echo: tuple[str, int]) -> None:
             assert read_frame(s) == (b"T", b"b")
             slow = time.monotonic() - t0
     assert fast < 0.1
-    assert 0.3 <= slow < 1.0, slow          # 0.15 s each way
+    assert 0.3 <= slow < 1.0, slow  # 0.15 s each way
 
 
 def test_delay_from_the_start_records_and_counts_connections(echo: tuple[str, int]) -> None:
@@ -117,10 +118,10 @@ def test_delay_from_the_start_records_and_counts_connections(echo: tuple[str, in
         for _ in range(2):
             with client(proxy) as s:
                 t0 = time.monotonic()
-                s.sendall(b"not a frame at all")    # raw bytes pass (and are recorded) too
+                s.sendall(b"not a frame at all")  # raw bytes pass (and are recorded) too
                 assert read_exact(s, 18) == b"not a frame at all"
                 assert 0.2 <= time.monotonic() - t0 < 1.0
-        assert proxy.captured_bytes() == b"not a frame at all" * 4     # up and down, twice
+        assert proxy.captured_bytes() == b"not a frame at all" * 4  # up and down, twice
         assert proxy.connections == 2
     with FaultProxy(echo) as quiet, client(quiet) as s:
         s.sendall(frame(b"a"))
@@ -167,8 +168,8 @@ def test_stall_keeps_the_connection_open_and_silent(echo: tuple[str, int]) -> No
             s.sendall(frame(b"1"))
             s.settimeout(0.8)
             with pytest.raises(socket.timeout):
-                s.recv(1)                    # stalled: nothing, and not closed
-            proxy.cut()                      # a cut ends the stall
+                s.recv(1)  # stalled: nothing, and not closed
+            proxy.cut()  # a cut ends the stall
             s.settimeout(2)
             with pytest.raises((ConnectionError, OSError)):
                 read_frame(s)
@@ -196,8 +197,9 @@ def test_cut_refuses_until_mend(echo: tuple[str, int]) -> None:
 
 @pytest.mark.skipif(SWIPL is None, reason="swipl not installed")
 def test_platform_node_behind_the_proxy() -> None:
-    node = subprocess.Popen([SWIPL, "-q", str(PLATFORM_DIR / "node_main.pl")],
-                            stdout=subprocess.PIPE, text=True)
+    node = subprocess.Popen(
+        [SWIPL, "-q", str(PLATFORM_DIR / "node_main.pl")], stdout=subprocess.PIPE, text=True
+    )
     try:
         assert node.stdout is not None
         line = node.stdout.readline()

@@ -1,4 +1,5 @@
 """The hop probes (platform_pl/hop_probe.pl) and ``dfrl bench migrate --timeline``."""
+
 from __future__ import annotations
 
 import json
@@ -22,10 +23,19 @@ def _agent_move_body(probe: str | None) -> str:
     if probe is not None:
         env[migrate.PROBE_ENV] = probe
     done = subprocess.run(
-        [find_swipl(), "-q", "-g",
-         "use_module(platform_pl/tartarus), clause(migration:agent_move(_,_,_), B), "
-         "portray_clause(B), halt"],
-        cwd=REPO, env=env, capture_output=True, text=True, timeout=60)
+        [
+            find_swipl(),
+            "-q",
+            "-g",
+            "use_module(platform_pl/tartarus), clause(migration:agent_move(_,_,_), B), "
+            "portray_clause(B), halt",
+        ],
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert done.returncode == 0, done.stderr
     return done.stdout
 
@@ -45,17 +55,37 @@ def test_timeline_follows_the_hand_over_in_causal_order() -> None:
     run = hop_timeline.measure(0, 12, warmup=2)
     at = _at(run.points)
     expected = set(hop_timeline.SOURCE_POINTS) | {
-        "frame_arrived (transfer)", "frame_read (transfer)", "checked", "installed", "staged",
-        "replied (transfer)", "frame_arrived (commit)", "frame_read (commit)", "activated",
-        "dispatched", "run_started", "bounds_entering", "handler_called"}
+        "frame_arrived (transfer)",
+        "frame_read (transfer)",
+        "checked",
+        "installed",
+        "staged",
+        "replied (transfer)",
+        "frame_arrived (commit)",
+        "frame_read (commit)",
+        "activated",
+        "dispatched",
+        "run_started",
+        "bounds_entering",
+        "handler_called",
+    }
     assert expected <= set(at), sorted(expected - set(at))
     assert all(p.hops >= 5 for p in run.points)
     chains = [
         # one thread each: stamped in this order
         ["move_called", "prepared", "transfer_sent", "answer_read", "committed", "commit_sent"],
-        ["frame_arrived (transfer)", "frame_read (transfer)", "checked", "installed", "staged",
-         "replied (transfer)", "frame_arrived (commit)", "frame_read (commit)", "activated",
-         "dispatched"],
+        [
+            "frame_arrived (transfer)",
+            "frame_read (transfer)",
+            "checked",
+            "installed",
+            "staged",
+            "replied (transfer)",
+            "frame_arrived (commit)",
+            "frame_read (commit)",
+            "activated",
+            "dispatched",
+        ],
         ["run_started", "bounds_entering", "handler_called"],
         # across processes and threads: a frame is read after it was begun, an answer after
         # the request was handled, the agent started after it was activated
@@ -85,8 +115,23 @@ def test_timeline_of_no_stamps_is_empty_and_a_bad_line_is_located(tmp_path: Path
 def test_timeline_on_the_command_line(capsys: pytest.CaptureFixture[str]) -> None:
     from dfrl.experiments.cli import main
 
-    assert main(["bench", "migrate", "--floats", "1000", "--hops", "6", "--warmup", "1",
-                 "--timeline", "--json"]) == 0
+    assert (
+        main(
+            [
+                "bench",
+                "migrate",
+                "--floats",
+                "1000",
+                "--hops",
+                "6",
+                "--warmup",
+                "1",
+                "--timeline",
+                "--json",
+            ]
+        )
+        == 0
+    )
     row = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     points = [p["point"] for p in row["timeline"]["points"]]
     assert points[0] == "move_called" and "handler_called" in points

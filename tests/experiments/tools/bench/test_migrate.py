@@ -1,5 +1,6 @@
 """``dfrl bench migrate`` on real processes, tiny budget: the hop, the naive text hop beside it,
 and the step trace."""
+
 from __future__ import annotations
 
 import json
@@ -16,8 +17,12 @@ pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 def test_migrate_json_has_the_naive_hop_and_its_ratio(capsys: pytest.CaptureFixture[str]) -> None:
     from dfrl.experiments.cli import main
 
-    assert main(["bench", "migrate", "--floats", "0", "20000", "--hops", "3", "--warmup", "1",
-                 "--json"]) == 0
+    assert (
+        main(
+            ["bench", "migrate", "--floats", "0", "20000", "--hops", "3", "--warmup", "1", "--json"]
+        )
+        == 0
+    )
     rows = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.strip()]
     assert [r["floats"] for r in rows] == [0, 20000]
     for r in rows:
@@ -66,7 +71,7 @@ def test_packed_payload_costs_less_than_a_list() -> None:
     packed = migrate.run(50000, 6, warmup=1, naive=False, payload="packed")
     listed = migrate.run(50000, 6, warmup=1, naive=False, payload="list")
     assert packed.payload == "packed" and listed.payload == "list"
-    assert packed.native is True        # setup.sh built the foreign libraries
+    assert packed.native is True  # setup.sh built the foreign libraries
     assert packed.cpu_ms_per_hop is not None and listed.cpu_ms_per_hop is not None
     assert packed.cpu_ms_per_hop * 2 < listed.cpu_ms_per_hop, (packed, listed)
 
@@ -86,15 +91,27 @@ def test_phase_breakdown_orders_the_steps_of_a_hand_over(tmp_path: Path) -> None
     assert (tmp_path / "home.jsonl").exists() and (tmp_path / "peer.jsonl").exists()
     phases = migrate.phase_breakdown(tmp_path, warmup=1)
     by = {(p.step, p.side): p for p in phases}
-    for key in [("export", "source"), ("write(transfer)", "source"),
-                ("read(transfer)", "destination"), ("check", "destination"),
-                ("install", "destination"), ("custody_commit", "source"),
-                ("write(commit)", "source"), ("activate", "destination"),
-                ("agent_run", "destination")]:
+    for key in [
+        ("export", "source"),
+        ("write(transfer)", "source"),
+        ("read(transfer)", "destination"),
+        ("check", "destination"),
+        ("install", "destination"),
+        ("custody_commit", "source"),
+        ("write(commit)", "source"),
+        ("activate", "destination"),
+        ("agent_run", "destination"),
+    ]:
         assert key in by, (key, sorted(by))
-    order = [by[k].median_start_ms for k in [("export", "source"), ("install", "destination"),
-                                              ("custody_commit", "source"),
-                                              ("activate", "destination")]]
+    order = [
+        by[k].median_start_ms
+        for k in [
+            ("export", "source"),
+            ("install", "destination"),
+            ("custody_commit", "source"),
+            ("activate", "destination"),
+        ]
+    ]
     assert order == sorted(order)
     # the handler starts within the hop the agent measured (same clock, one process each side)
     assert by[("agent_run", "destination")].median_start_ms <= r.max_ms + 1.0
@@ -106,14 +123,32 @@ def test_phase_breakdown_of_an_empty_folder_is_empty(tmp_path: Path) -> None:
 
 
 def test_migrate_tls_prints_its_cost_beside_the_naive_hop(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     from dfrl.experiments.cli import main
     from dfrl.experiments.tools import certs
 
     certs.init_ca(tmp_path / "ca")
     certs.make_node("bench", tmp_path / "ca", tmp_path / "node")
-    assert main(["bench", "migrate", "--floats", "100", "--hops", "2", "--warmup", "0",
-                 "--rounds", "2", "--tls", str(tmp_path / "node")]) == 0
+    assert (
+        main(
+            [
+                "bench",
+                "migrate",
+                "--floats",
+                "100",
+                "--hops",
+                "2",
+                "--warmup",
+                "0",
+                "--rounds",
+                "2",
+                "--tls",
+                str(tmp_path / "node"),
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "TLS cost" in out and "naive text hop" in out and "ratio" in out
     cost = float(out.split("TLS cost")[1].split("%")[0])
@@ -121,14 +156,17 @@ def test_migrate_tls_prints_its_cost_beside_the_naive_hop(
     # two rounds: each round's cost, and the interval of their mean around that mean
     rounds = out.split("  rounds ")[1].split(";")[0].split(", ")
     assert len(rounds) == 2 and all(r.endswith("%") for r in rounds)
-    low, high = (float(x.rstrip("%")) for x in
-                 out.split("95% interval ")[1].split("  ")[0].split(" to "))
+    low, high = (
+        float(x.rstrip("%")) for x in out.split("95% interval ")[1].split("  ")[0].split(" to ")
+    )
     mean = float(out.split("; mean ")[1].split("%")[0])
     assert low <= mean <= high
-    assert "records: straight to the socket" in out   # setup.sh built native/tls_direct.c
+    assert "records: straight to the socket" in out  # setup.sh built native/tls_direct.c
     # control: a folder without the node's files is refused before any process starts
-    assert main(["bench", "migrate", "--floats", "100", "--hops", "2",
-                 "--tls", str(tmp_path / "ca")]) == 2
+    assert (
+        main(["bench", "migrate", "--floats", "100", "--hops", "2", "--tls", str(tmp_path / "ca")])
+        == 2
+    )
 
 
 def test_against_another_checkout_alternates_their_hops(tmp_path: Path) -> None:
@@ -138,14 +176,17 @@ def test_against_another_checkout_alternates_their_hops(tmp_path: Path) -> None:
     other = tmp_path / "other"
     (other / "experiments" / "tools" / "bench").mkdir(parents=True)
     text = migrate.SCRIPT.read_text().replace(
-        "'../../../platform_pl/", f"'{root.as_posix()}/platform_pl/")
+        "'../../../platform_pl/", f"'{root.as_posix()}/platform_pl/"
+    )
     (other / "experiments" / "tools" / "bench" / "bench_migrate.pl").write_text(text)
     handler = (migrate.SCRIPT.parent / "bench_hop_handler.pl").read_text()
     assert "Ms is (Now - T0) * 1000," in handler
     (other / "experiments" / "tools" / "bench" / "bench_hop_handler.pl").write_text(
-        handler.replace("Ms is (Now - T0) * 1000,", "Ms is 1000.0 + 0 * (Now - T0),"))
+        handler.replace("Ms is (Now - T0) * 1000,", "Ms is 1000.0 + 0 * (Now - T0),")
+    )
     (other / "experiments" / "tools" / "bench" / "step_trace.pl").write_text(
-        (migrate.SCRIPT.parent / "step_trace.pl").read_text())
+        (migrate.SCRIPT.parent / "step_trace.pl").read_text()
+    )
     cmp = migrate.compare_checkouts(100, 2, other, runs=2, warmup=0)
     assert cmp.runs == 2 and len(cmp.this_runs_ms) == 2 and len(cmp.other_runs_ms) == 2
     assert cmp.other_runs_ms == [1000.0, 1000.0]
@@ -165,20 +206,39 @@ def test_against_on_the_command_line(tmp_path: Path, capsys: pytest.CaptureFixtu
     from dfrl.experiments.cli import main
 
     root = Path(migrate.SCRIPT).parents[3]
-    assert main(["bench", "migrate", "--floats", "0", "--hops", "2", "--warmup", "0",
-                 "--rounds", "1", "--against", str(root)]) == 0
+    assert (
+        main(
+            [
+                "bench",
+                "migrate",
+                "--floats",
+                "0",
+                "--hops",
+                "2",
+                "--warmup",
+                "0",
+                "--rounds",
+                "1",
+                "--against",
+                str(root),
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "this/against" in out and "naive ratio" in out
-    assert main(["bench", "migrate", "--floats", "0", "--hops", "2",
-                 "--against", str(tmp_path)]) == 2
+    assert (
+        main(["bench", "migrate", "--floats", "0", "--hops", "2", "--against", str(tmp_path)]) == 2
+    )
 
 
 def test_hop_figures_reads_arrival_lines_and_the_older_format() -> None:
-    new = ("NATIVE true true true\nARRIVAL - 10 0.5\nARRIVAL 1.5 20 0.7\nARRIVAL 2.5 10 0.9\n"
-           "ARRIVAL - 20 1.1\nARRIVALS_END\n")
-    assert migrate._hop_figures(new) == ([1.5, 2.5], [[10, 0.5], [20, 0.7], [10, 0.9],
-                                                      [20, 1.1]])
-    old = "CPU_S [[10, 0.5], [20, 0.7]]\nLATENCIES_MS [1.5]\n"     # a checkout before ARRIVAL
+    new = (
+        "NATIVE true true true\nARRIVAL - 10 0.5\nARRIVAL 1.5 20 0.7\nARRIVAL 2.5 10 0.9\n"
+        "ARRIVAL - 20 1.1\nARRIVALS_END\n"
+    )
+    assert migrate._hop_figures(new) == ([1.5, 2.5], [[10, 0.5], [20, 0.7], [10, 0.9], [20, 1.1]])
+    old = "CPU_S [[10, 0.5], [20, 0.7]]\nLATENCIES_MS [1.5]\n"  # a checkout before ARRIVAL
     assert migrate._hop_figures(old) == ([1.5], [[10, 0.5], [20, 0.7]])
     # control: output that ended before its figures did is no result
     assert migrate._hop_figures(new.replace("ARRIVALS_END\n", "")) is None
@@ -218,10 +278,15 @@ def test_paired_ratio_is_a_t_interval_on_the_logs() -> None:
     assert one.mean == pytest.approx(2.0) and math.isnan(one.low) and math.isnan(one.high)
 
 
-@pytest.mark.parametrize("a, b, match", [([1.0, 2.0], [1.0], "equal counts"),
-                                         ([], [], "no pairs"),
-                                         ([1.0, 0.0], [1.0, 1.0], "positive"),
-                                         ([1.0, float("nan")], [1.0, 1.0], "positive")])
+@pytest.mark.parametrize(
+    "a, b, match",
+    [
+        ([1.0, 2.0], [1.0], "equal counts"),
+        ([], [], "no pairs"),
+        ([1.0, 0.0], [1.0, 1.0], "positive"),
+        ([1.0, float("nan")], [1.0, 1.0], "positive"),
+    ],
+)
 def test_paired_ratio_refuses_bad_runs(a: list[float], b: list[float], match: str) -> None:
     with pytest.raises(ValueError, match=match):
         migrate.paired_ratio(a, b)

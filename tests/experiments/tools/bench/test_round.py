@@ -1,4 +1,5 @@
 """``dfrl bench round`` on real processes, tiny budget."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -20,20 +21,19 @@ def test_bench_round_smoke() -> None:
     assert r["hop_floats"] == 400
     assert 0 < r["hop_median_ms"] < 5000
     assert r["round_over_hops"] == pytest.approx(
-        r["median_ms"] / (r["hops"] * r["hop_median_ms"]), rel=0.01)
+        r["median_ms"] / (r["hops"] * r["hop_median_ms"]), rel=0.01
+    )
 
 
 def test_bench_round_without_hops_leaves_the_hop_fields_empty() -> None:
     r = bench(entries=200, actions=4, robots=2, rounds=1, warmup=0, hop_hops=0)
     assert r["hop_median_ms"] is None and r["round_over_hops"] is None
-    assert "steps" not in r             # the control of the traced run below: no trace asked
+    assert "steps" not in r  # the control of the traced run below: no trace asked
 
 
 def test_a_traced_round_times_each_robots_steps(tmp_path: Path) -> None:
-    r = bench(entries=200, actions=4, robots=2, rounds=2, warmup=1, hop_hops=0,
-              trace_dir=tmp_path)
-    assert sorted(p.name for p in tmp_path.glob("*.jsonl")) == ["robot-r1.jsonl",
-                                                                "robot-r2.jsonl"]
+    r = bench(entries=200, actions=4, robots=2, rounds=2, warmup=1, hop_hops=0, trace_dir=tmp_path)
+    assert sorted(p.name for p in tmp_path.glob("*.jsonl")) == ["robot-r1.jsonl", "robot-r2.jsonl"]
     steps = {s["step"]: s for s in r["steps"]}
     # every robot is read once on the way out and written once on the way back, each round
     assert steps["bridge_call"]["calls"] == 2 * 2 * r["total_rounds"], steps
@@ -44,12 +44,33 @@ def test_a_traced_round_times_each_robots_steps(tmp_path: Path) -> None:
     assert r["all_equal_rounds"] == r["total_rounds"]
 
 
-def test_bench_round_command_takes_a_list_of_robot_counts(capsys: pytest.CaptureFixture[str]) -> None:
+def test_bench_round_command_takes_a_list_of_robot_counts(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
     import json
 
     from dfrl.experiments.cli import main
 
-    assert main(["bench", "round", "--entries", "200", "--robots", "2", "3", "--rounds", "2",
-                 "--warmup", "0", "--hop-hops", "2", "--json"]) == 0
+    assert (
+        main(
+            [
+                "bench",
+                "round",
+                "--entries",
+                "200",
+                "--robots",
+                "2",
+                "3",
+                "--rounds",
+                "2",
+                "--warmup",
+                "0",
+                "--hop-hops",
+                "2",
+                "--json",
+            ]
+        )
+        == 0
+    )
     rows = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.strip()]
     assert [r["robots"] for r in rows] == [2, 3]

@@ -1,5 +1,6 @@
 """``dfrl bench round --learner dqn|linear``: robots hold a network's parameter vector, the agent
 carries parameters (FedAvg weighted by samples); real processes, tiny budget."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -62,21 +63,25 @@ def test_a_bench_robot_has_a_table_or_params_not_both() -> None:
         RobotConfig.from_dict({**base, "bench_table": [10, 4], "bench_params": {"samples": 5}})
     assert info.value.problems == [
         "bench_params: a benchmark robot holds a bench table or bench params, not both "
-        "(drop bench_table or bench_params)"]
+        "(drop bench_table or bench_params)"
+    ]
     with pytest.raises(ConfigError) as info:
         RobotConfig.from_dict({**base, "algo": "qlearning", "bench_params": {"samples": -1}})
     assert info.value.problems == [
         "bench_params: expected {\"samples\": N}, N an integer >= 0, got {'samples': -1}",
         "bench_params: algo 'qlearning' is a tabular learner, it has no network; bench params "
-        "need a function learner (linear, dqn)"]
+        "need a function learner (linear, dqn)",
+    ]
     # controls: either one alone is accepted
-    assert RobotConfig.from_dict({**base, "bench_params": {"samples": 5}}).bench_params == \
-        {"samples": 5}
+    assert RobotConfig.from_dict({**base, "bench_params": {"samples": 5}}).bench_params == {
+        "samples": 5
+    }
     assert RobotConfig.from_dict({**base, "bench_table": [10, 4]}).bench_params is None
 
 
 def test_round_command_refuses_a_table_size_for_a_network(
-        capsys: pytest.CaptureFixture[str]) -> None:
+    capsys: pytest.CaptureFixture[str],
+) -> None:
     from dfrl.experiments.cli import main
 
     assert main(["bench", "round", "--learner", "dqn", "--entries", "200", "--json"]) == 2

@@ -1,4 +1,5 @@
 """``dfrl bench scale`` on a tiny budget: real robot processes, the real agent."""
+
 from __future__ import annotations
 
 import json
@@ -12,9 +13,26 @@ pytestmark = pytest.mark.skipif(find_swipl() is None, reason="needs swipl")
 
 
 def test_scale_benchmark_reports_each_point() -> None:
-    out = subprocess.run([sys.executable, "-m", "dfrl", "bench", "scale", "--robots", "2", "3",
-                          "--iterations", "200", "--respite", "100", "--json"],
-                         capture_output=True, text=True, timeout=240)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "dfrl",
+            "bench",
+            "scale",
+            "--robots",
+            "2",
+            "3",
+            "--iterations",
+            "200",
+            "--respite",
+            "100",
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=240,
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     r = json.loads(out.stdout)
     assert [p["robots"] for p in r["points"]] == [2, 3]

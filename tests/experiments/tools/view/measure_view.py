@@ -9,6 +9,7 @@
   (started, and settled after its start-up, before the run begins); medians of PAIRS pairs
   (default 4).
 """
+
 from __future__ import annotations
 
 import json
@@ -30,8 +31,14 @@ from .helpers import append, browser_paths, chrome, round_line, write_run
 STATS = "return window.dfrlView.stats"
 
 
-def synthetic(out: Path, robots: int = 32, iterations: int = 8000, respite: int = 500,
-              upto: int | None = None, t0: float | None = None) -> None:
+def synthetic(
+    out: Path,
+    robots: int = 32,
+    iterations: int = 8000,
+    respite: int = 500,
+    upto: int | None = None,
+    t0: float | None = None,
+) -> None:
     """Metrics, shares and the round log of a fake sync run up to iteration ``upto``."""
     ids = tuple(f"r{i + 1}" for i in range(robots))
     if not (out / "config.json").exists():
@@ -41,14 +48,18 @@ def synthetic(out: Path, robots: int = 32, iterations: int = 8000, respite: int 
     t0 = time.time() if t0 is None else t0
     done = _done.get(out, 0)
     for i, rid in enumerate(ids):
-        q = [f"{rid},{k},{k * 0.01 + rng.random():.6f},{k * 0.02:.6f},0\n"
-             for k in range(done + 1, upto + 1)]
+        q = [
+            f"{rid},{k},{k * 0.01 + rng.random():.6f},{k * 0.02:.6f},0\n"
+            for k in range(done + 1, upto + 1)
+        ]
         append(out / f"metrics_{rid}.csv", "".join(q))
     for k in range(done // respite + 1, upto // respite + 1):
         t = t0 + k
         for i, rid in enumerate(ids):
-            append(out / f"shares_{rid}.csv",
-                   f"{rid},{k},{k * respite},{t + 0.5 - i * 0.01},d,{k},fed_qlearning,1\n")
+            append(
+                out / f"shares_{rid}.csv",
+                f"{rid},{k},{k * respite},{t + 0.5 - i * 0.01},d,{k},fed_qlearning,1\n",
+            )
         append(out / "rounds_fed_qlearning.log", round_line(k, list(ids), t))
     _done[out] = upto
 
@@ -64,7 +75,7 @@ def page(browser: tuple[str, str]) -> dict[str, Any]:
         (out / "summary.md").write_text("done\n")
         t = time.perf_counter()
         view = start_view(out)
-        for _ in range(3000):                        # until the first read is done (30 s)
+        for _ in range(3000):  # until the first read is done (30 s)
             if any(e["kind"] == "run_end" for e in view.source.events):
                 break
             time.sleep(0.01)
@@ -84,7 +95,8 @@ def page(browser: tuple[str, str]) -> dict[str, Any]:
             res["finished_apply_us_per_event"] = round(1000 * s["applyMs"] / s["received"], 2)
             res["finished_render_ms"] = round(s["renderMs"] / max(1, s["renders"]), 2)
             res["points_drawn"] = drv.execute_script(
-                "return Number(document.getElementById('chart-q').dataset.points)")
+                "return Number(document.getElementById('chart-q').dataset.points)"
+            )
         finally:
             drv.quit()
             view.close()
@@ -158,8 +170,9 @@ def settle(pid: int, quiet_s: float = 0.02, every_s: float = 0.5, limit_s: float
     return time.perf_counter() - t0
 
 
-def demo_once(with_view: bool, browser: tuple[str, str] | None, out: Path,
-              cpu: dict[str, float] | None = None) -> float:
+def demo_once(
+    with_view: bool, browser: tuple[str, str] | None, out: Path, cpu: dict[str, float] | None = None
+) -> float:
     from dfrl.experiments.driver.config import ExperimentConfig, resolve_config
     from dfrl.experiments.driver.launcher.experiment import run
 
@@ -181,7 +194,7 @@ def demo_once(with_view: bool, browser: tuple[str, str] | None, out: Path,
         wall = time.perf_counter() - t
         assert res.ok
         if cpu is not None:
-            cpu["run"] = _cpu_self_children() - c0     # launcher, robots, console (+ view)
+            cpu["run"] = _cpu_self_children() - c0  # launcher, robots, console (+ view)
         if drv is not None:
             s = drv.execute_script(STATS)
             assert s["received"] > 100, s
@@ -206,20 +219,33 @@ def overhead(browser: tuple[str, str], pairs: int = 4) -> dict[str, Any]:
             on.append(demo_once(True, browser, Path(tmp) / f"on{k}", c2))
             cpu_off.append(c1)
             cpu_on.append(c2)
-        same = all((Path(tmp) / f"off{k}/metrics.csv").read_bytes()
-                   == (Path(tmp) / f"on{k}/metrics.csv").read_bytes() for k in range(pairs))
+        same = all(
+            (Path(tmp) / f"off{k}/metrics.csv").read_bytes()
+            == (Path(tmp) / f"on{k}/metrics.csv").read_bytes()
+            for k in range(pairs)
+        )
     m_off, m_on = statistics.median(off), statistics.median(on)
-    return {"without_view_s": [round(x, 2) for x in off], "with_view_s": [round(x, 2) for x in on],
-            "median_without_s": round(m_off, 2), "median_with_s": round(m_on, 2),
-            "overhead_pct": round(100 * (m_on - m_off) / m_off, 1), "same_metrics": same,
-            "cpu_run_without_s": [round(c["run"], 2) for c in cpu_off],
-            "cpu_run_with_view_s": [round(c["run"], 2) for c in cpu_on],
-            "cpu_browser_s": [round(c["browser"], 2) for c in cpu_on],
-            "cpu_view_poll_s": [round(c["view_poll"], 3) for c in cpu_on],
-            "cpu_overhead_pct": round(100 * statistics.median(
+    return {
+        "without_view_s": [round(x, 2) for x in off],
+        "with_view_s": [round(x, 2) for x in on],
+        "median_without_s": round(m_off, 2),
+        "median_with_s": round(m_on, 2),
+        "overhead_pct": round(100 * (m_on - m_off) / m_off, 1),
+        "same_metrics": same,
+        "cpu_run_without_s": [round(c["run"], 2) for c in cpu_off],
+        "cpu_run_with_view_s": [round(c["run"], 2) for c in cpu_on],
+        "cpu_browser_s": [round(c["browser"], 2) for c in cpu_on],
+        "cpu_view_poll_s": [round(c["view_poll"], 3) for c in cpu_on],
+        "cpu_overhead_pct": round(
+            100
+            * statistics.median(
                 (c2["browser"] + c2["run"] - c1["run"]) / c1["run"]
-                for c1, c2 in zip(cpu_off, cpu_on)), 1),
-            "load_before": os.getloadavg()}
+                for c1, c2 in zip(cpu_off, cpu_on)
+            ),
+            1,
+        ),
+        "load_before": os.getloadavg(),
+    }
 
 
 def screenshot(browser: tuple[str, str], path: Path, at_round: int = 10) -> dict[str, Any]:
@@ -236,23 +262,24 @@ def screenshot(browser: tuple[str, str], path: Path, at_round: int = 10) -> dict
             drv = chrome(*browser, height=900)
             try:
                 drv.get(view.url)
-                thread = threading.Thread(target=lambda: box.update(res=run(cfg, out, progress=None)),
-                                          daemon=True)
+                thread = threading.Thread(
+                    target=lambda: box.update(res=run(cfg, out, progress=None)), daemon=True
+                )
                 thread.start()
-                for _ in range(1200):                       # 120 s at most
+                for _ in range(1200):  # 120 s at most
                     rnd = drv.execute_script(
                         "const r = document.querySelector('.agent-line .round');"
-                        "return r ? Number(r.dataset.round) : 0")
+                        "return r ? Number(r.dataset.round) : 0"
+                    )
                     if rnd >= at_round or not thread.is_alive():
                         break
                     time.sleep(0.1)
-                time.sleep(0.6)                              # the frame after that one
+                time.sleep(0.6)  # the frame after that one
                 drv.save_screenshot(str(path))
             finally:
                 drv.quit()
             thread.join(120)
-    return {"screenshot": str(path), "round": rnd, "ok": bool(box.get("res") and
-                                                             box["res"].ok)}
+    return {"screenshot": str(path), "round": rnd, "ok": bool(box.get("res") and box["res"].ok)}
 
 
 def main(argv: list[str]) -> int:

@@ -4,6 +4,7 @@ counter advances, the curves gain points, and a robot killed with SIGKILL is sho
 Chromium and its driver come from Debian's packages (scripts/browser-setup.sh, run here when
 they are missing); the test is skipped, saying why, only when they cannot be installed.
 """
+
 from __future__ import annotations
 
 import os
@@ -50,8 +51,9 @@ def browser() -> tuple[str, str]:
     return paths
 
 
-def test_page_follows_a_run_and_shows_a_killed_robot_dead(tmp_path: Path,
-                                                          browser: tuple[str, str]) -> None:
+def test_page_follows_a_run_and_shows_a_killed_robot_dead(
+    tmp_path: Path, browser: tuple[str, str]
+) -> None:
     out = tmp_path / "run"
     cfg = small_config(2, iterations=2400, respite=100, rtf=10.0, timeout_s=120)
     launcher = Launcher(cfg, out, progress=None)
@@ -97,16 +99,16 @@ def test_page_follows_a_run_and_shows_a_killed_robot_dead(tmp_path: Path,
     assert final["robots"].get("r2") == "dead", final
     positions = {tuple(s["agent"][2:4]) for s in samples if s["agent"]}
     phases = {s["agent"][1] for s in samples if s["agent"]}
-    assert len(positions) >= 2, positions                 # the agent moved between nodes
+    assert len(positions) >= 2, positions  # the agent moved between nodes
     assert {"forward", "backward"} & phases, phases
     rounds = [s["round"] for s in samples]
     assert rounds[0] <= 1 and max(rounds) >= 4 and rounds == sorted(rounds)
     points = [s["points"] for s in samples]
-    assert points[-1] > points[0] and len(set(points)) >= 3   # the curves grew, in steps
+    assert points[-1] > points[0] and len(set(points)) >= 3  # the curves grew, in steps
     assert final["stats"]["firstPaintMs"] is not None
     assert (tmp_path / "view.png").stat().st_size > 20_000
     res = box["res"]
-    assert "r2" in res.crashed                            # the launcher saw the kill too
+    assert "r2" in res.crashed  # the launcher saw the kill too
 
 
 PAGE = """
@@ -137,15 +139,20 @@ slider.dispatchEvent(new Event('input'));
 """
 
 
-def test_page_stays_responsive_for_a_finished_32_robot_run(tmp_path: Path,
-                                                           browser: tuple[str, str]) -> None:
+def test_page_stays_responsive_for_a_finished_32_robot_run(
+    tmp_path: Path, browser: tuple[str, str]
+) -> None:
     """``dfrl view`` of a finished 32-robot run as large as a real one (8,000 iterations,
     16 rounds, every hop, two poses a second per robot): the page draws every robot, its
     arena and its pose within a bound, and a replay move across the whole run stays quick."""
     out = tmp_path / "r32"
     finished_run(out, robots=32)
-    proc = subprocess.Popen([sys.executable, "-m", "dfrl.experiments", "view", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "dfrl.experiments", "view", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         line = proc.stdout.readline()
         found = re.search(r" at (http://\S+) ", line)
@@ -157,8 +164,12 @@ def test_page_stays_responsive_for_a_finished_32_robot_run(tmp_path: Path,
             driver.get(found.group(1))
             s = driver.execute_script(PAGE)
             while time.monotonic() - t0 < 60:
-                if s["status"] == "finished" and s["robots"] == 32 and s["posed"] == 32 \
-                        and s["round"] == 16:
+                if (
+                    s["status"] == "finished"
+                    and s["robots"] == 32
+                    and s["posed"] == 32
+                    and s["round"] == 16
+                ):
                     break
                 time.sleep(0.1)
                 s = driver.execute_script(PAGE)
@@ -177,11 +188,13 @@ def test_page_stays_responsive_for_a_finished_32_robot_run(tmp_path: Path,
         proc.terminate()
         proc.wait(timeout=10)
     half = moves[f"{total // 2}-state"]
-    assert moves["0-state"]["robots"] == 0                      # before the first event
+    assert moves["0-state"]["robots"] == 0  # before the first event
     assert 0 < half["round"] < 16 and 0 < half["points"] < s["points"], half
     assert moves[f"{total}-state"]["round"] == 16
-    print(f"32 robots: all shown after {shown_s:.2f} s; replay moves (ms): "
-          f"{[round(moves[k]) for k in (0, total // 2, total)]}")
+    print(
+        f"32 robots: all shown after {shown_s:.2f} s; replay moves (ms): "
+        f"{[round(moves[k]) for k in (0, total // 2, total)]}"
+    )
     assert shown_s < 20.0, shown_s
     assert max(moves[k] for k in (0, total // 2, total)) < 3000, moves
 
@@ -198,14 +211,16 @@ return {status: document.getElementById('run-status').dataset.status,
 
 
 @pytest.mark.parametrize("itinerary", ["tree", "chain"])
-def test_a_tree_agents_copies_are_drawn_at_their_robots(tmp_path: Path, browser: tuple[str, str],
-                                                        itinerary: str) -> None:
+def test_a_tree_agents_copies_are_drawn_at_their_robots(
+    tmp_path: Path, browser: tuple[str, str], itinerary: str
+) -> None:
     """A finished tree run's page draws the last round's copies, one hollow mark at every
     robot but the root, having written their tables; the agent's own mark stays at the root.
     The control, the same run as a chain, draws no copy."""
     out = tmp_path / itinerary
     cfg = small_config(3, iterations=300, respite=100, itinerary=itinerary)
     from dfrl.experiments.driver.launcher import run
+
     assert run(cfg, out, progress=None).ok
     with start_view(out) as view:
         driver = chrome(*browser)
@@ -216,7 +231,7 @@ def test_a_tree_agents_copies_are_drawn_at_their_robots(tmp_path: Path, browser:
             while time.monotonic() < deadline and (s["status"] != "finished" or s["round"] < 3):
                 time.sleep(0.1)
                 s = driver.execute_script(CLONES)
-            time.sleep(0.5)                       # the frames after the last events
+            time.sleep(0.5)  # the frames after the last events
             s = driver.execute_script(CLONES)
         finally:
             driver.quit()

@@ -1,6 +1,7 @@
 """Robots' poses and curves reach the live view during a real run: a local robot through its
 ``DFRL_SAMPLE`` lines, a robot on a ``dfrl robot`` service through the fetch of its lines
 file over the platform (the channel its status already travels)."""
+
 from __future__ import annotations
 
 import json
@@ -30,16 +31,39 @@ def test_local_and_remote_robots_report_poses_and_progress(tmp_path: Path) -> No
     port = _free_port()
     (tmp_path / "svc").mkdir()
     svc = subprocess.Popen(
-        [sys.executable, "-m", "dfrl.experiments", "robot", "--host", "127.0.0.1",
-         "--port", str(port), "--token", str(TOKEN), "--workdir", str(tmp_path / "svc")],
-        stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        [
+            sys.executable,
+            "-m",
+            "dfrl.experiments",
+            "robot",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(port),
+            "--token",
+            str(TOKEN),
+            "--workdir",
+            str(tmp_path / "svc"),
+        ],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         line = svc.stdout.readline()
         assert "listening on" in line, line + svc.stderr.read()
-        cfg = ExperimentConfig(name="samples", iterations=600, respite=200, seed=1,
-                               mode="sync", rtf=6.0, token=TOKEN, timeout_s=120,
-                               robots=(RobotSpec("r1", "r1"),
-                                       RobotSpec("r2", "r4", robot_host=f"127.0.0.1:{port}")))
+        cfg = ExperimentConfig(
+            name="samples",
+            iterations=600,
+            respite=200,
+            seed=1,
+            mode="sync",
+            rtf=6.0,
+            token=TOKEN,
+            timeout_s=120,
+            robots=(RobotSpec("r1", "r1"), RobotSpec("r2", "r4", robot_host=f"127.0.0.1:{port}")),
+        )
         res = run(cfg, tmp_path / "out", progress=None)
         assert res.ok, res
     finally:
@@ -54,9 +78,9 @@ def test_local_and_remote_robots_report_poses_and_progress(tmp_path: Path) -> No
         its = [p["iteration"] for p in poses]
         assert its == sorted(its) and its[-1] == 600, its
         assert all(-1.0 < p["x"] < 1.0 and -1.0 < p["y"] < 1.0 for p in poses)
-        assert len({(p["x"], p["y"]) for p in poses}) >= 2          # it drove
+        assert len({(p["x"], p["y"]) for p in poses}) >= 2  # it drove
     progress = [e for e in events if e["kind"] == "progress"]
-    assert {e["robot"] for e in progress} == {"r2"}                  # the remote one only
+    assert {e["robot"] for e in progress} == {"r2"}  # the remote one only
     assert progress[-1]["iteration"] == 600 and progress[-1]["q_sum"] != 0.0
     assert not [e for e in events if e["kind"] == "error"], events
     # the agent is seen at the remote robot too (its DFRL_EVENT lines come with its samples):

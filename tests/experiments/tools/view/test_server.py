@@ -1,5 +1,6 @@
 """The view server on a real run: the event stream carries every round and hop of the
 rounds log, in order, live and when replayed; the page and its assets are served."""
+
 from __future__ import annotations
 
 import json
@@ -30,10 +31,11 @@ def _check_stream(events: list[dict], out: Path, agent: str = "fed_qlearning") -
         hops = [e["seq"] for e in events if e["kind"] == "hop" and e["round"] == rec.round]
         assert max(hops) < ev["seq"]
     shares = [e for e in events if e["kind"] == "share"]
-    assert len(shares) == 8                           # 2 robots x 4 rounds
+    assert len(shares) == 8  # 2 robots x 4 rounds
     for rid in ("r1", "r2"):
-        pts = [p for e in events if e["kind"] == "metrics" and e["robot"] == rid
-               for p in e["points"]]
+        pts = [
+            p for e in events if e["kind"] == "metrics" and e["robot"] == rid for p in e["points"]
+        ]
         assert pts[-1][0] == 200
     assert events[-1]["kind"] in ("run_end", "robot_state")
 
@@ -49,8 +51,8 @@ def test_live_stream_of_a_real_run_and_its_replay(tmp_path: Path) -> None:
         _check_stream(live, out)
         # a client arriving later gets the same history
         again = read_stream(view.url, lambda ev: len(ev) >= len(live), 10)
-        assert [e["seq"] for e in again[:len(live)]] == [e["seq"] for e in live]
-        assert [e["kind"] for e in again[:len(live)]] == [e["kind"] for e in live]
+        assert [e["seq"] for e in again[: len(live)]] == [e["seq"] for e in live]
+        assert [e["kind"] for e in again[: len(live)]] == [e["kind"] for e in live]
     # the finished run, served afresh (dfrl view): same rounds and hops, in order
     with start_view(out) as view:
         replay = read_stream(view.url, lambda ev: any(e["kind"] == "run_end" for e in ev), 10)
@@ -75,7 +77,7 @@ def test_page_assets_json_and_resume(tmp_path: Path) -> None:
         req = urllib.request.Request(view.url + "events", headers={"Last-Event-ID": "4"})
         with urllib.request.urlopen(req, timeout=5) as resp:
             line = resp.readline()
-            while not line.startswith(b"data: "):     # retry:, blank, id: lines first
+            while not line.startswith(b"data: "):  # retry:, blank, id: lines first
                 line = resp.readline()
         assert json.loads(line[6:])[0]["seq"] == 5
     assert view.closed
@@ -85,5 +87,6 @@ def test_cli_view_refuses_a_folder_without_config(tmp_path: Path) -> None:
     from dfrl.experiments.cli import view as cli_view
 
     import argparse
+
     ns = argparse.Namespace(results_dir=str(tmp_path), host="127.0.0.1", port=0)
     assert cli_view.cmd_view(ns) == 2
