@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# The gates CI runs before the tests: ruff (lint), mypy (types), import-linter (the import
-# arrows between packages and rooms) and the Prolog load graph. Installs what is missing (the
-# extra "dev" holds the tools), runs every gate even after one failed, and exits 1 if any
-# found something. Settings: pyproject.toml ([tool.ruff], [tool.mypy], [tool.importlinter]).
+# The gates CI runs before the tests: ruff (lint, and the layout `ruff format` gives), mypy
+# (types), import-linter (the import arrows between packages and rooms) and the Prolog load
+# graph. Installs what is missing (the extra "dev" holds the tools), runs every gate even after
+# one failed, and exits 1 if any found something. Settings: pyproject.toml ([tool.ruff],
+# [tool.mypy], [tool.importlinter]).
 #
 # The Prolog gate (scripts/prolog_graph.py): load cycles, platform modules naming the dFRL
 # application, modules over 500 lines.
@@ -29,6 +30,7 @@ gate() {   # gate NAME COMMAND...: run one gate, say its verdict, remember a fai
 }
 
 gate ruff ruff check --no-cache "${PACKAGES[@]}"
+gate ruff-format ruff format --check --no-cache "${PACKAGES[@]}"
 gate mypy python scripts/typecheck.py
 gate import-linter python scripts/import_contracts.py
 gate prolog-graph python scripts/prolog_graph.py

@@ -82,6 +82,20 @@ def test_ruff_fails_on_an_unused_import_naming_the_file(tmp_path: Path) -> None:
     assert "robots/unused.py" in done.stdout and "F401" in done.stdout
 
 
+def test_ruff_format_check_fails_on_a_file_laid_out_by_hand_naming_it(tmp_path: Path) -> None:
+    text = '"""Laid out by hand."""\n\nVALUES = {  "a":1,\n           "b":2}\n'
+    root = _project(tmp_path, {"robots/by_hand.py": text})
+    done = _run(sys.executable, "-m", "ruff", "format", "--check", "--no-cache", "robots", cwd=root)
+    assert done.returncode == 1 and "robots/by_hand.py" in done.stdout, done.stdout
+    # control: the same file once formatted passes
+    assert (
+        _run(sys.executable, "-m", "ruff", "format", "--no-cache", "robots", cwd=root).returncode
+        == 0
+    )
+    done = _run(sys.executable, "-m", "ruff", "format", "--check", "--no-cache", "robots", cwd=root)
+    assert done.returncode == 0, done.stdout
+
+
 def test_mypy_follows_dfrl_to_the_folders_and_fails_naming_the_file(tmp_path: Path) -> None:
     # the error is only seen if dfrl.robots.counts resolves to robots/counts.py
     root = _project(
