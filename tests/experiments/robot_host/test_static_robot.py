@@ -23,8 +23,8 @@ class RecordingBridge:
     def __init__(self) -> None:
         self.registered: dict[str, tuple[Any, Any, str]] = {}
 
-    def register_robot(self, robot: str, table: Any, *, shape: Any, algorithm: str) -> None:
-        self.registered[robot] = (table, shape, algorithm)
+    def register_robot(self, robot: str, table: Any, *, shape: Any, algo: str) -> None:
+        self.registered[robot] = (table, shape, algo)
 
     def unregister_robot(self, robot: str) -> None:
         del self.registered[robot]
@@ -67,11 +67,11 @@ def test_training_serves_what_its_static_source_gives(tmp_path: Path) -> None:
     assert run.open() is None
     assert bridge.registered == {}  # opening offers nothing yet
     run.register()
-    table, shape, algorithm = bridge.registered["r1"]
+    table, shape, algo = bridge.registered["r1"]
     table.set_params(np.ones(6))  # an agent's write
     run.close()
     # Assert: served as given, not simulated, and what the agents left it saved at close
-    assert shape is None and algorithm == "dqn" and not run.simulated
+    assert shape is None and algo == "dqn" and not run.simulated
     assert bridge.registered == {}
     assert np.array_equal(np.load(tmp_path / "params" / "r1.npy"), np.ones(6))
     assert (tmp_path / "shares_r1.csv").is_file()
