@@ -6,7 +6,7 @@
 /** <module> Time stamps along a hop, compiled in only for the benchmark
 
 The platform's modules on the path of a hop (migration.pl,
-node_connection.pl, agent_execution.pl) mark points of it with the goal
+migration_arrival.pl, node_connection.pl, agent_execution.pl) mark points of it with the goal
 hop_probe(Point). When the process that loads the platform has the
 environment variable DFRL_HOP_PROBE set (to anything but `0`), each
 such goal is compiled to a call that records Point and the time
@@ -18,7 +18,7 @@ by bench_migrate.pl at the end) to show where a hop's time goes, at a
 cost of one assertz/1 a point (some 2 us) instead of the some 10 us a
 call of step_trace.pl's wrappers (library(prolog_wrap)) costs.
 
-Only the three modules above are expanded: code compiled in any other
+Only the four modules above are expanded: code compiled in any other
 module (an agent's, a user's) keeps hop_probe/1 as a plain call, which
 records nothing unless the variable is set.
 */
@@ -31,6 +31,7 @@ probing :-
     V \== '0'.
 
 probed_module(migration).
+probed_module(migration_arrival).
 probed_module(node_connection).
 probed_module(agent_execution).
 
