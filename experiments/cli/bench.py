@@ -1,6 +1,7 @@
-"""``dfrl bench migrate|sim|round|bridge|chaos|scale|hostile|fuzz``: run a benchmark and print its
-figures (JSON with ``--json``). The benchmarks themselves are :mod:`dfrl.experiments.tools.bench`;
-``hostile``'s options and output are :mod:`.bench_hostile`."""
+"""``dfrl bench migrate|sim|round|bridge|chaos|scale|hostile|fuzz|vs-flower``: run a benchmark and
+print its figures (JSON with ``--json``). The benchmarks themselves are
+:mod:`dfrl.experiments.tools.bench`; ``hostile``'s options and output are :mod:`.bench_hostile`,
+``vs-flower``'s :mod:`.bench_vs_flower`."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from dfrl.experiments.cli import bench_faults, bench_fidelity, bench_hostile
+from dfrl.experiments.cli import bench_faults, bench_fidelity, bench_hostile, bench_vs_flower
 from dfrl.experiments.science import fidelity
 from dfrl.experiments.tools.bench import (
     bridge,
@@ -23,7 +24,7 @@ from dfrl.experiments.tools.bench import (
     migrate,
     round as round_bench,
 )
-from dfrl.experiments.tools.bench import faults, fuzz, scale, sim
+from dfrl.experiments.tools.bench import faults, fuzz, scale, sim, vs_flower
 
 
 # -- migrate ---------------------------------------------------------------------------------
@@ -714,6 +715,7 @@ BENCHMARKS = {
     "faults": (faults, bench_faults.add_arguments, bench_faults.cmd),
     "fuzz": (fuzz, add_fuzz_arguments, cmd_fuzz),
     "sim-fidelity": (fidelity, bench_fidelity.add_arguments, bench_fidelity.cmd),
+    "vs-flower": (vs_flower, bench_vs_flower.add_arguments, bench_vs_flower.cmd),
 }
 
 
