@@ -355,6 +355,15 @@ def add_round_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--warmup", type=int, default=3, help="untimed rounds first")
     parser.add_argument("--method", default="average", help="aggregation method")
     parser.add_argument(
+        "--itinerary",
+        choices=list(round_bench.ITINERARIES),
+        default="chain",
+        help="the agent walks the robots and back (chain) or clones itself over a tree",
+    )
+    parser.add_argument(
+        "--fanout", type=int, default=2, help="children per stop of a tree itinerary"
+    )
+    parser.add_argument(
         "--hop-hops",
         type=int,
         default=20,
@@ -413,6 +422,8 @@ def cmd_round(args: argparse.Namespace) -> int:
                 args.hop_hops,
                 args.learner,
                 trace,
+                itinerary=args.itinerary,
+                fanout=args.fanout,
             )
         except (RuntimeError, ValueError) as exc:
             print(f"dfrl bench round: {n} robots: {exc}", file=sys.stderr)
@@ -427,7 +438,7 @@ def cmd_round(args: argparse.Namespace) -> int:
             )
             held = "tables" if "entries" in r else "parameters"
             print(
-                f"{r['robots']} nodes, {what}, {r['method']}: one round "
+                f"{r['robots']} nodes, {what}, {r['method']}, {r['itinerary']}: one round "
                 f"(forward + backward, {r['hops']} hops, {r['bytes_carried']} bytes carried) "
                 f"median {r['median_ms']} ms, p90 {r['p90_ms']} ms over {r['rounds']} rounds "
                 f"(target < {round_bench.TARGET_MS:g} ms); identical {held} after "
