@@ -49,6 +49,9 @@ from dfrl.experiments.tools.bench.traced_robot import MODULE as TRACED_ROBOT
 
 TARGET_MS = 50.0
 
+#: the token of the benchmark's console node and agent (and of a tree's robots)
+TOKEN = 1111
+
 #: ``itinerary`` values: the agent walks the robots and back, or clones itself over a tree
 ITINERARIES = ("chain", "tree")
 
@@ -130,8 +133,13 @@ def bench(
                 if params
                 else {"bench_table": [states, actions]}
             )
-            if itinerary == "tree":  # a tree's copies are clones: admit them
+            if itinerary == "tree":
+                # a tree's copies are clones: admit them; and a clone hands its table to its
+                # parent in a message, which a node without a token takes only up to
+                # max_text_frame_size (4,096 bytes): the robots get the run's token, as in
+                # dfrl run
                 bench_of["clone_limit"] = fanout * TREE_ROUNDS_PER_S * 60
+                bench_of["token"] = TOKEN
             cfg = RobotConfig(
                 robot=spec.id, out_dir=str(out), seed=i, events=False, progress_every=0, **bench_of
             )
@@ -150,7 +158,7 @@ def bench(
             "rounds": total,
             "rest_s": 0.0,
             "rounds_log": str(log),
-            "token": 1111,
+            "token": TOKEN,
             "timeout_s": 60.0,
             "itinerary": [
                 {"host": a[0], "port": a[1], "robot": ch.spec.id}
@@ -164,7 +172,7 @@ def bench(
         if params:
             launch["carries"] = "params"  # FedAvg of parameter vectors, as in dfrl run
         t0 = time.monotonic()
-        with open_console(1111, out / "logs" / "console.err") as console:
+        with open_console(TOKEN, out / "logs" / "console.err") as console:
             launch_agent(console, launch)
         deadline = time.monotonic() + max(120.0, total * 2.0)
         agent_log = read_rounds_log(log, "bench")
