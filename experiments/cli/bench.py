@@ -1,6 +1,7 @@
-"""``dfrl bench migrate|sim|round|bridge|chaos|scale|hostile|fuzz``: run a benchmark and print its
-figures (JSON with ``--json``). The benchmarks themselves are :mod:`dfrl.experiments.tools.bench`;
-``hostile``'s options and output are :mod:`.bench_hostile`."""
+"""``dfrl bench migrate|sim|round|bridge|chaos|scale|hostile|fuzz|vs-flower``: run a benchmark and
+print its figures (JSON with ``--json``). The benchmarks themselves are
+:mod:`dfrl.experiments.tools.bench`; ``hostile``'s options and output are :mod:`.bench_hostile`,
+``vs-flower``'s :mod:`.bench_vs_flower`."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from dfrl.experiments.cli import bench_faults, bench_fidelity, bench_hostile
+from dfrl.experiments.cli import bench_faults, bench_fidelity, bench_hostile, bench_vs_flower
 from dfrl.experiments.science import fidelity
 from dfrl.experiments.tools.bench import (
     bridge,
@@ -23,7 +24,7 @@ from dfrl.experiments.tools.bench import (
     migrate,
     round as round_bench,
 )
-from dfrl.experiments.tools.bench import faults, fuzz, scale, sim
+from dfrl.experiments.tools.bench import faults, fuzz, scale, sim, vs_flower
 
 
 # -- migrate ---------------------------------------------------------------------------------
@@ -354,6 +355,15 @@ def add_round_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--warmup", type=int, default=3, help="untimed rounds first")
     parser.add_argument("--method", default="average", help="aggregation method")
     parser.add_argument(
+        "--itinerary",
+        choices=list(round_bench.ITINERARIES),
+        default="chain",
+        help="the agent walks the robots and back (chain) or clones itself over a tree",
+    )
+    parser.add_argument(
+        "--fanout", type=int, default=2, help="children per stop of a tree itinerary"
+    )
+    parser.add_argument(
         "--hop-hops",
         type=int,
         default=20,
@@ -412,6 +422,8 @@ def cmd_round(args: argparse.Namespace) -> int:
                 args.hop_hops,
                 args.learner,
                 trace,
+                itinerary=args.itinerary,
+                fanout=args.fanout,
             )
         except (RuntimeError, ValueError) as exc:
             print(f"dfrl bench round: {n} robots: {exc}", file=sys.stderr)
@@ -426,7 +438,7 @@ def cmd_round(args: argparse.Namespace) -> int:
             )
             held = "tables" if "entries" in r else "parameters"
             print(
-                f"{r['robots']} nodes, {what}, {r['method']}: one round "
+                f"{r['robots']} nodes, {what}, {r['method']}, {r['itinerary']}: one round "
                 f"(forward + backward, {r['hops']} hops, {r['bytes_carried']} bytes carried) "
                 f"median {r['median_ms']} ms, p90 {r['p90_ms']} ms over {r['rounds']} rounds "
                 f"(target < {round_bench.TARGET_MS:g} ms); identical {held} after "
@@ -714,6 +726,7 @@ BENCHMARKS = {
     "faults": (faults, bench_faults.add_arguments, bench_faults.cmd),
     "fuzz": (fuzz, add_fuzz_arguments, cmd_fuzz),
     "sim-fidelity": (fidelity, bench_fidelity.add_arguments, bench_fidelity.cmd),
+    "vs-flower": (vs_flower, bench_vs_flower.add_arguments, bench_vs_flower.cmd),
 }
 
 

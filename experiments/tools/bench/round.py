@@ -21,6 +21,10 @@ parameter vector with the layout of that learner's network, built by the learner
 offers), learnt from :func:`bench_samples` samples; the agent carries parameter vectors
 (``"carries": "params"``, FedAvg weighted by samples), as in a ``dfrl run`` with such robots.
 Every robot saves what it holds at the end as ``params/<robot>.npy`` under ``out``.
+
+With ``itinerary="tree"`` the agent clones itself over a tree of fan-out ``fanout`` instead of
+walking the chain (as ``dfrl run`` with ``"itinerary": "tree"``); the robots' nodes then admit
+the clones of :data:`~dfrl.experiments.driver.launcher.spawn.TREE_ROUNDS_PER_S` rounds a second.
 """
 
 from __future__ import annotations
@@ -37,12 +41,19 @@ from dfrl.experiments.robot_host.config import RobotConfig
 from dfrl.experiments.driver.launcher.agents import launch_agent, open_console
 from dfrl.experiments.driver.launcher.children import RobotChild
 from dfrl.experiments.driver.launcher.robots import await_ready
+from dfrl.experiments.driver.launcher.spawn import TREE_ROUNDS_PER_S
 from dfrl.experiments.driver.results.agent_log import read_rounds_log
 from dfrl.experiments.driver.results.rounds import count_equal, read_shares, write_rounds_csv
 from dfrl.experiments.tools.bench.step_trace import ENV as STEP_TRACE_ENV, step_summary
 from dfrl.experiments.tools.bench.traced_robot import MODULE as TRACED_ROBOT
 
 TARGET_MS = 50.0
+
+#: the token of the benchmark's console node and agent (and of a tree's robots)
+TOKEN = 1111
+
+#: ``itinerary`` values: the agent walks the robots and back, or clones itself over a tree
+ITINERARIES = ("chain", "tree")
 
 #: ``learner`` values: ``table`` (a random Q-table, the default) or a function learner's name
 LEARNERS = ("table", "linear", "dqn")
@@ -74,6 +85,8 @@ def bench(
     hop_hops: int = 20,
     learner: str = "table",
     trace_dir: Path | None = None,
+    itinerary: str = "chain",
+    fanout: int = 2,
 ) -> dict:
     """Run the benchmark; return its figures. ``hop_hops``: how many migrate hops to time
     beside the round (0: none; the hop fields are then None). ``learner``: one of
@@ -81,17 +94,23 @@ def bench(
     ``trace_dir``: every robot process times the platform's steps (:mod:`.step_trace`) and
     writes them there (``robot-<id>.jsonl``); the result then holds ``steps``, the sum per
     step. A traced round is slower (some 20 us per traced call): its ``median_ms`` is not
-    the untraced figure.
+    the untraced figure. ``itinerary``: one of :data:`ITINERARIES`; ``fanout``: a tree's
+    children per stop.
 
     Raises
     ------
     ValueError
-        ``entries`` is not a multiple of ``actions``; an unknown ``learner``.
+        ``entries`` is not a multiple of ``actions``; an unknown ``learner`` or ``itinerary``;
+        a tree's ``fanout`` under 2.
     RuntimeError
         A node did not start, the agent could not be launched or did not finish in time.
     """
     if learner not in LEARNERS:
         raise ValueError(f"--learner {learner!r}: known learners are {', '.join(LEARNERS)}")
+    if itinerary not in ITINERARIES:
+        raise ValueError(f"itinerary {itinerary!r}: use {' or '.join(ITINERARIES)}")
+    if itinerary == "tree" and fanout < 2:
+        raise ValueError(f"fanout {fanout}: a tree needs at least 2")
     params = learner != "table"
     if not params and entries % actions:
         raise ValueError(f"--entries {entries} is not a multiple of --actions {actions}")
@@ -114,6 +133,13 @@ def bench(
                 if params
                 else {"bench_table": [states, actions]}
             )
+            if itinerary == "tree":
+                # a tree's copies are clones: admit them; and a clone hands its table to its
+                # parent in a message, which a node without a token takes only up to
+                # max_text_frame_size (4,096 bytes): the robots get the run's token, as in
+                # dfrl run
+                bench_of["clone_limit"] = fanout * TREE_ROUNDS_PER_S * 60
+                bench_of["token"] = TOKEN
             cfg = RobotConfig(
                 robot=spec.id, out_dir=str(out), seed=i, events=False, progress_every=0, **bench_of
             )
@@ -132,7 +158,7 @@ def bench(
             "rounds": total,
             "rest_s": 0.0,
             "rounds_log": str(log),
-            "token": 1111,
+            "token": TOKEN,
             "timeout_s": 60.0,
             "itinerary": [
                 {"host": a[0], "port": a[1], "robot": ch.spec.id}
@@ -140,10 +166,13 @@ def bench(
                 if (a := ch.status().address)
             ],
         }
+        if itinerary != "chain":
+            launch["itinerary_kind"] = itinerary
+            launch["fanout"] = fanout
         if params:
             launch["carries"] = "params"  # FedAvg of parameter vectors, as in dfrl run
         t0 = time.monotonic()
-        with open_console(1111, out / "logs" / "console.err") as console:
+        with open_console(TOKEN, out / "logs" / "console.err") as console:
             launch_agent(console, launch)
         deadline = time.monotonic() + max(120.0, total * 2.0)
         agent_log = read_rounds_log(log, "bench")
@@ -183,6 +212,8 @@ def bench(
         "robots": robots,
         **what,
         "method": method,
+        "itinerary": itinerary,
+        **({"fanout": fanout} if itinerary == "tree" else {}),
         "rounds": len(timed),
         "warmup": warmup,
         "median_ms": round(statistics.median(ms), 2),

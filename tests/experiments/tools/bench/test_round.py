@@ -31,6 +31,19 @@ def test_bench_round_without_hops_leaves_the_hop_fields_empty() -> None:
     assert "steps" not in r  # the control of the traced run below: no trace asked
 
 
+def test_bench_round_over_a_tree() -> None:
+    # 900 floats: a clone's table (7,200 bytes) is over what a node without a token takes in a
+    # message (4,096 bytes): the tree's robots hold the run's token
+    r = bench(entries=900, actions=3, robots=3, rounds=2, warmup=1, hop_hops=0, itinerary="tree")
+    assert r["itinerary"] == "tree" and r["fanout"] == 2 and r["rounds"] == 2, r
+    assert r["all_equal_rounds"] == r["total_rounds"] == 3, r
+    assert not r["log_problems"] and 0 < r["median_ms"] < 5000
+    with pytest.raises(ValueError, match="fanout 1"):
+        bench(entries=120, actions=3, robots=3, itinerary="tree", fanout=1)
+    with pytest.raises(ValueError, match="ring"):
+        bench(entries=120, actions=3, robots=3, itinerary="ring")
+
+
 def test_a_traced_round_times_each_robots_steps(tmp_path: Path) -> None:
     r = bench(entries=200, actions=4, robots=2, rounds=2, warmup=1, hop_hops=0, trace_dir=tmp_path)
     assert sorted(p.name for p in tmp_path.glob("*.jsonl")) == ["robot-r1.jsonl", "robot-r2.jsonl"]
