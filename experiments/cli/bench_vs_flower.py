@@ -25,7 +25,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=list(vs_flower.SIZES),
         help="floats each client and robot holds, one comparison per size",
     )
-    parser.add_argument("--robots", type=int, default=5, help="Flower clients = dFRL robots")
+    parser.add_argument(
+        "--robots",
+        type=int,
+        nargs="+",
+        default=[5],
+        help="Flower clients = dFRL robots, one comparison per count (default 5)",
+    )
     parser.add_argument(
         "--pairs", type=int, default=3, help="alternating Flower and dFRL runs per size"
     )
@@ -40,13 +46,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--fanout", type=int, default=2, help="children per stop of a tree itinerary"
     )
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument(
+        "--json", action="store_true", help="print one JSON object per robot count, one a line"
+    )
 
 
 def _interval(e: dict) -> str:
     if e["ratio_low"] is None:
         return "(one pair: no interval)"
     return f"(95% interval {e['ratio_low']:.2f} to {e['ratio_high']:.2f})"
+
+
+def _show(r: dict, as_json: bool) -> None:
+    """One robot count's comparison: a JSON line, or a table."""
+    if as_json:
+        print(json.dumps(r), flush=True)
+        return
+    print(
+        f"{r['robots']} clients/robots, Flower {r['flower_version']} FedAvg (gRPC) against "
+        f"dFRL {r['itinerary']}; median of {r['rounds']} rounds per run, "
+        f"geometric means over the pairs"
+    )
+    print(f"{'floats':>7}  {'held':<18} {'Flower ms':>9} {'dFRL ms':>9} {'dFRL/Flower':>11}")
+    for e in r["sizes"]:
+        print(
+            f"{e['floats']:>7}  {e['payload']:<18} {e['flower_ms']:>9.2f} "
+            f"{e['dfrl_ms']:>9.2f} {e['ratio']:>11.2f} {_interval(e)}"
+        )
 
 
 def cmd(args: argparse.Namespace) -> int:
@@ -63,38 +89,29 @@ def cmd(args: argparse.Namespace) -> int:
                 flush=True,
             )
 
-    try:
-        r = vs_flower.bench(
-            tuple(args.sizes),
-            args.robots,
-            args.pairs,
-            args.rounds,
-            args.warmup,
-            args.itinerary,
-            args.fanout,
-            progress=progress,
-        )
-    except ValueError as exc:
-        print(f"{NAME}: {exc}", file=sys.stderr)
-        return 2
-    except RuntimeError as exc:  # ExperimentError is a RuntimeError
-        print(f"{NAME}: {exc}", file=sys.stderr)
-        return 1
-    if args.json:
-        print(json.dumps(r), flush=True)
-    else:
-        print(
-            f"{r['robots']} clients/robots, Flower {r['flower_version']} FedAvg (gRPC) against "
-            f"dFRL {r['itinerary']}; median of {r['rounds']} rounds per run, "
-            f"geometric means over the pairs"
-        )
-        print(f"{'floats':>7}  {'held':<18} {'Flower ms':>9} {'dFRL ms':>9} {'dFRL/Flower':>11}")
-        for e in r["sizes"]:
-            print(
-                f"{e['floats']:>7}  {e['payload']:<18} {e['flower_ms']:>9.2f} "
-                f"{e['dfrl_ms']:>9.2f} {e['ratio']:>11.2f} {_interval(e)}"
+    problems: list[str] = []
+    for robots in args.robots:
+        try:
+            r = vs_flower.bench(
+                tuple(args.sizes),
+                robots,
+                args.pairs,
+                args.rounds,
+                args.warmup,
+                args.itinerary,
+                args.fanout,
+                progress=progress,
             )
-    problems = [f"{e['floats']} floats: {x}" for e in r["sizes"] for x in e["problems"]]
+        except ValueError as exc:
+            print(f"{NAME}: {exc}", file=sys.stderr)
+            return 2
+        except RuntimeError as exc:  # ExperimentError is a RuntimeError
+            print(f"{NAME}: {exc}", file=sys.stderr)
+            return 1
+        _show(r, args.json)
+        problems += [
+            f"{robots} robots, {e['floats']} floats: {x}" for e in r["sizes"] for x in e["problems"]
+        ]
     for problem in problems:
         print(f"{NAME}: {problem}", file=sys.stderr)
     return 1 if problems else 0
