@@ -157,6 +157,9 @@ def check_experiment(data: Any, resources: bool = True) -> list[str]:
         from dfrl.robots.plugins import section_problems
 
         out += section_problems(data["learners"])
+    # the learners this config may name: built in, installed, or in its own ``learners``
+    # section (not one another config registered earlier in this process)
+    algos = config_algorithms(data.get("learners"))
     robots = data.get("robots", [])
     entries: list[tuple[str, Any]] = []
     if isinstance(robots, list):
@@ -167,14 +170,13 @@ def check_experiment(data: Any, resources: bool = True) -> list[str]:
         out += check_keys(f"joins[{i}]", j, JOIN_RULES, required=("robot",))
         if isinstance(j, dict) and isinstance(j.get("robot"), dict):
             entries.append((f"joins[{i}].robot", j["robot"]))
-    out += check_robots(entries, resources)
+    out += check_robots(entries, resources, algos)
     if data.get("federation") == GRID:
         out += check_federation(data)
     else:
         out += check_params_methods(data, entries)
     methods = data.get("methods", {})
     if isinstance(methods, dict):
-        algos = known_algorithms()
         for algo, method in methods.items():
             if algo not in algos:
                 out.append(unknown_value(f"methods.{algo}", "algorithm", algo, algos))
@@ -184,15 +186,33 @@ def check_experiment(data: Any, resources: bool = True) -> list[str]:
     return out + check_eval_every(data)
 
 
-def check_robots(entries: list[tuple[str, Any]], resources: bool) -> list[str]:
+def config_algorithms(section: Any) -> list[str]:
+    """The learners a config may name: the built-in ones, the installed plug-ins and those of
+    its own ``learners`` section (``section``, registered by :func:`check_experiment` first)."""
+    from dfrl.robots.learners import LEARNERS
+    from dfrl.robots.plugins import installed
+
+    own = [str(name) for name in section] if isinstance(section, dict) else []
+    return sorted({*LEARNERS, *installed(), *own})
+
+
+def check_robots(
+    entries: list[tuple[str, Any]], resources: bool, algos: list[str] | None = None
+) -> list[str]:
     """Problems of robot entries ``(key path, JSON form)``: each one's keys, id, robot host
-    and (``resources``) arena; ids and robot hosts unique across all of them."""
+    and (``resources``) arena; ids and robot hosts unique across all of them. ``algos``: the
+    learners they may name (default: every learner known in this process, as for a robot that
+    joins a running experiment, whose config registered its plug-ins)."""
+    rules = ROBOT_RULES
+    if algos is not None:
+        names = list(algos)
+        rules = {**ROBOT_RULES, "algo": Rule(str, choices=lambda: names, what="algorithm")}
     out: list[str] = []
     arenas: dict[str, str | None] = {}
     ids: dict[str, str] = {}
     hosts: dict[str, str] = {}
     for path, r in entries:
-        out += check_keys(path, r, ROBOT_RULES, required=("id", "arena"), renamed=ROBOT_RENAMED)
+        out += check_keys(path, r, rules, required=("id", "arena"), renamed=ROBOT_RENAMED)
         if not isinstance(r, dict):
             continue
         rid, host = r.get("id"), r.get("robot_host")

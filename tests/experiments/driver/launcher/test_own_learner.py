@@ -177,3 +177,23 @@ def test_a_learner_without_q_model_is_refused_by_a_grid_federation(tmp_path: Pat
     with pytest.raises(ConfigError) as err:
         ExperimentConfig.load(path)
     assert "robots[1].algo: plain has no q_model()" in str(err.value), str(err.value)
+
+
+def test_a_config_names_only_its_own_plug_ins_not_those_an_earlier_config_registered(
+    tmp_path: Path,
+) -> None:
+    # Prepare: a config with a learners section registers rbf_sarsa in this process
+    ExperimentConfig.load(
+        _config_file(tmp_path, [{"id": "r1", "arena": "r1", "algo": "rbf_sarsa"}])
+    )
+    assert "rbf_sarsa" in plugins.plugin_names()
+    # Execute: another config names rbf_sarsa without a learners section of its own
+    data = {"robots": [{"id": "r1", "arena": "r1", "algo": "rbf_sarsa"}]}
+    with pytest.raises(ConfigError) as err:
+        ExperimentConfig.from_dict(data)
+    # Assert: refused, located (whether it checks depends on the config, not the process)
+    assert "robots[0].algo: unknown algorithm 'rbf_sarsa'" in str(err.value), str(err.value)
+    # control: with its own learners section the same robot is accepted
+    ExperimentConfig.load(
+        _config_file(tmp_path, [{"id": "r1", "arena": "r1", "algo": "rbf_sarsa"}])
+    )
