@@ -251,7 +251,7 @@ def dfrl_run(
         itinerary=itinerary,
         fanout=fanout,
     )
-    problems = list(r["log_problems"])
+    problems = list(r["log_problems"]) + [f"skipped: {s}" for s in r["skipped"]]
     if r["all_equal_rounds"] < r["total_rounds"]:
         problems.append(
             f"robots differed after {r['total_rounds'] - r['all_equal_rounds']} of "
