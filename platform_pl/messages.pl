@@ -82,8 +82,11 @@ agent_post(Address, Agent, Handler, Link, Args) :-
 %
 %   As agent_post/5. Options: tokens(List), the tokens to prove to a
 %   remote platform (default: the current node's), connect_timeout(S),
-%   reply_timeout(S). For a process without a node of its own (a shell
-%   command sending a control event).
+%   reply_timeout(S), kind(Kind) (transport_request/4; default `auto`:
+%   a binary frame once the tokens are proved, so that a message that
+%   carries packed vectors, e.g. the tables of a tree round, is not
+%   escaped and parsed as text). For a process without a node of its
+%   own (a shell command sending a control event).
 %
 %   @error permission_error(access, platform, Address) if the remote
 %   platform accepts none of the tokens.
@@ -101,7 +104,7 @@ agent_post(Address0, Agent, Handler, Link, Args, Options) :-
         transport_request(Address, post(Agent, Handler, Link, Args), _, Options1)
     ).
 
-request_options([connect_timeout(CT), reply_timeout(RT)]) :-
+request_options([connect_timeout(CT), reply_timeout(RT), kind(auto)]) :-
     (   catch(current_node(Node), _, fail)
     ->  node_option(Node, connect_timeout, CT),
         node_option(Node, reply_timeout, RT)

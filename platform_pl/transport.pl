@@ -68,7 +68,13 @@ them and makes requests.
 %                       (node:requires_authentication/1): the current
 %                       node's tokens
 %     - action(+Action) the permission error's action if they are refused
-%     - kind(+Kind)     text (default) or binary
+%     - kind(+Kind)     text (default), binary, or auto: binary on a
+%                       connection that proves tokens (a node decodes a
+%                       binary frame only from an authenticated peer),
+%                       else text. A term that carries packed vectors
+%                       (float_vectors.pl) costs ~10 bytes a float in
+%                       binary, but its text escapes every byte and is
+%                       parsed by read_term/3 (1 MB: ~200 ms a side).
 %     - fresh(true)     use a new connection and close it afterwards
 
 transport_request(Address0, Request, Result, Options) :-
@@ -82,6 +88,9 @@ transport_request(Address0, Request, Result, Options) :-
     ->  msort(Tokens, Key)
     ;   Key = none
     ),
+    option(kind(Kind0), Options, text),
+    request_kind(Kind0, Key, Kind),
+    ReqOptions = [kind(Kind)|Options],
     (   option(fresh(true), Options)
     ->  setup_call_cleanup(
             transport_open(Address, Conn, Options),
@@ -90,11 +99,11 @@ transport_request(Address0, Request, Result, Options) :-
               ;   option(action(Action), Options, access),
                   transport_auth(Conn, Key, Action)
               ),
-              request_on(Conn, Request, Reply, Options)
+              request_on(Conn, Request, Reply, ReqOptions)
             ),
             transport_close(Conn))
     ;   pool_acquire(Address, Key, Conn, Options),
-        catch(request_on(Conn, Request, Reply, Options), E,
+        catch(request_on(Conn, Request, Reply, ReqOptions), E,
               ( transport_discard(Conn), throw(E) )),
         (   Reply = ok(_)
         ->  transport_release(Conn)
@@ -117,6 +126,14 @@ own_tokens(Tokens) :-
                  node:node_property(N, tokens(Ts)),
                  member(T, Ts) ), Tokens0),
     sort(Tokens0, Tokens).
+
+request_kind(auto, Key, Kind) :-
+    !,
+    (   ( Key == none ; Key == [] )
+    ->  Kind = text
+    ;   Kind = binary
+    ).
+request_kind(Kind, _, Kind).
 
 request_on(Conn, Request, Reply, Options) :-
     option(kind(Kind), Options, text),

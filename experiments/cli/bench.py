@@ -460,11 +460,13 @@ def cmd_round(args: argparse.Namespace) -> int:
                 )
         for problem in r["log_problems"]:
             print(f"dfrl bench round: agent log: {problem}", file=sys.stderr)
-        if r["all_equal_rounds"] < r["total_rounds"] or r["log_problems"]:
+        for skip in r["skipped"]:
+            print(f"dfrl bench round: skipped: {skip}", file=sys.stderr)
+        if r["all_equal_rounds"] < r["total_rounds"] or r["log_problems"] or r["skipped"]:
             print(
                 f"dfrl bench round: {n} robots: tables differed after "
                 f"{r['total_rounds'] - r['all_equal_rounds']} of {r['total_rounds']} rounds, "
-                f"or the agent's log had problems",
+                f"or the agent's log had problems, or rounds skipped robots",
                 file=sys.stderr,
             )
             status = 1

@@ -154,8 +154,10 @@ kid_at(C, kid(C, _, _)).
 
 %!  tree_poll(+Node, +Key, +Kinds, +Peers, +Deadline, -Msg) is semidet.
 %
-%   Msg, of one of Kinds, about one of Peers, as soon as Node has it
-%   (looked for every 5 ms); fails at the time Deadline.
+%   Msg, of one of Kinds, about one of Peers, as soon as Node has it;
+%   fails at the time Deadline. The wait wakes when box/3 changes
+%   (thread_wait/2): it was a 5 ms sleep between looks, up to 5 ms a
+%   wait, six waits along a round of two levels.
 
 %   The wait is parked (agent_bounds:bounds_park/1): it holds no run
 %   slot, and counts against agent_idle_limit, not agent_wall_limit.
@@ -168,10 +170,19 @@ poll(Node, Key, Kinds, Peers, Deadline, Msg) :-
         take_msg(Node, Key, Kind, Peers, Msg)
     ->  true
     ;   get_time(Now),
-        Now < Deadline
-    ->  sleep(0.005),
-        poll(Node, Key, Kinds, Peers, Deadline, Msg)
+        Now < Deadline,
+        thread_wait(has_msg(Node, Key, Kinds, Peers),
+                    [deadline(Deadline), wait_preds([box/3])])
+    ->  poll(Node, Key, Kinds, Peers, Deadline, Msg)   % (another may take it first)
     ).
+
+has_msg(Node, Key, Kinds, Peers) :-
+    box(Node, Key, Msg),
+    functor(Msg, Kind, _),
+    memberchk(Kind, Kinds),
+    arg(1, Msg, C),
+    memberchk(kid(C, _, _), Peers),
+    !.
 
 take_msg(Node, Key, Kind, Peers, Msg) :-
     box(Node, Key, Msg),

@@ -1,12 +1,15 @@
 /*  plunit tests of the buffers of the platform's connections (transport.pl,
     node_connection.pl, tls.pl): a large frame moves through 64 KiB
     buffers once the peer is authenticated, an unauthenticated connection
-    keeps the default 4 KiB.
+    keeps the default 4 KiB; a request of kind(auto) goes as a binary
+    frame once tokens are proved (a packed vector costs 10 bytes a float,
+    not its escaped text).
     Run: swipl -g run_tests -t halt test_transport.pl
 */
 :- use_module('../../platform_pl/tartarus').
 :- use_module('../../platform_pl/transport').
 :- use_module('../../platform_pl/node_ctx', [ctx_input/2]).
+:- use_module('../../platform_pl/float_vectors', [vector_packed/2, vector_floats/2]).
 :- use_module(library(plunit)).
 
 :- multifile node:platform_request/4.
@@ -16,6 +19,10 @@
 node:platform_request(test_input_buffer, Ctx, ok(Size), true) :-
     ctx_input(Ctx, In),
     stream_property(In, buffer_size(Size)).
+%   Another: the length of the floats of a packed vector it carries.
+node:platform_request(test_vector_length(V), _, ok(N), true) :-
+    vector_floats(V, Fs),
+    length(Fs, N).
 
 :- begin_tests(connection_buffers).
 
@@ -58,3 +65,32 @@ test(server_input_buffer_grows_at_authentication, [cleanup(node_stop(N))]) :-
     assertion(Pong = ok(pong(_))).
 
 :- end_tests(connection_buffers).
+
+:- begin_tests(request_kind).
+
+%   A node that takes frames of at most 150,000 bytes: a packed vector of
+%   10,000 floats (~100 KB) fits in a binary frame, not in its text (every
+%   byte of the packed string escaped: ~300 KB). A message that carries a
+%   tree round's table (dfrl_tree_msg.pl) is sent with kind(auto).
+test(auto_is_binary_with_tokens, [cleanup(node_stop(N))]) :-
+    node_start(localhost:0, N, [token(k), default(false), max_frame_size(150000)]),
+    node_property(N, address(Address)),
+    numlist(1, 10000, Is),
+    maplist([I, F]>>(F is I / 7.0), Is, Fs),
+    vector_packed(Fs, V),
+    transport_request(Address, test_vector_length(V), Len,
+                      [tokens([k]), kind(auto), fresh(true)]),
+    assertion(Len == 10000),
+    catch(transport_request(Address, test_vector_length(V), _,
+                            [tokens([k]), kind(text), fresh(true)]),
+          E, true),
+    assertion(E = error(wire_error(too_large(_, 150000)), _)).
+
+%   Without tokens to prove there is no binary frame: auto is text.
+test(auto_is_text_without_tokens, [cleanup(node_stop(N))]) :-
+    node_start(localhost:0, N, [token(k), default(false)]),
+    node_property(N, address(Address)),
+    transport_request(Address, ping, Pong, [kind(auto), fresh(true)]),
+    assertion(Pong = pong(_)).
+
+:- end_tests(request_kind).

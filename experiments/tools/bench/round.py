@@ -233,6 +233,10 @@ def bench(
         "target_ms": TARGET_MS,
         "log_problems": agent_log.unreadable
         + [f"round {a.round} aborted: {a.error}" for a in agent_log.aborted],
+        # a robot the round left out (a tree's lost clone): the round measured is smaller
+        "skipped": [
+            f"round {r.round}: {s.robot}: {s.reason}" for r in agent_log.rounds for s in r.skipped
+        ],
         "meets_target": statistics.median(ms) < TARGET_MS,
     }
     if trace_dir is not None:
