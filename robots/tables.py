@@ -1,11 +1,13 @@
 """Q-table files: ``NAME.npy`` (the array) + ``NAME.json`` (what it means) [+ ``NAME.visits.npy``].
 
 The ``.npy`` holds the float64 array of shape ``(n_states, n_actions)``. The JSON sidecar holds
-``format`` (``"dfrl-qtable/1"``), ``shape``, ``dtype``, ``algo``, ``arena``, ``seed``,
-``iterations``, ``actions`` (names by column index), ``state`` (the discretisation, see
-:meth:`dfrl.robots.state.Discretiser.describe`) and free ``extra`` fields. The optional
+``format`` (``"dfrl-qtable/2"``; ``/1`` files, which say ``algorithm``, still load), ``shape``,
+``dtype``, ``algo``, ``arena``, ``seed``, ``iterations``, ``actions`` (names by column index),
+``state`` (the discretisation, see :meth:`dfrl.robots.state.Discretiser.describe`) and free
+``extra`` fields. The optional
 ``NAME.visits.npy`` holds the int64 update counts of each entry. A sidecar written before the
-learner's name was called ``algo`` everywhere names it ``algorithm``; it still loads.
+learner's name was called ``algo`` everywhere (format ``/1``) names it ``algorithm``; it still
+loads, and a dfrl that knows only ``/1`` refuses a ``/2`` file by its format.
 """
 
 from __future__ import annotations
@@ -19,7 +21,11 @@ import numpy as np
 
 from dfrl.robots.learners import validate_table
 
-TABLE_FORMAT = "dfrl-qtable/1"
+#: the sidecar's format written now; /2 names the learner ``algo`` (/1 said ``algorithm``), so a
+#: dfrl that knows only /1 refuses a new file by its format instead of failing on a missing key
+TABLE_FORMAT = "dfrl-qtable/2"
+#: the formats read: this one and the one before
+TABLE_FORMATS = ("dfrl-qtable/1", TABLE_FORMAT)
 
 
 @dataclass(frozen=True)
@@ -130,9 +136,10 @@ def load_table(path: str | Path) -> LoadedTable:
     if not js.exists():
         raise ValueError(f"{npy}: missing sidecar {js.name} describing the table")
     doc = json.loads(js.read_text(encoding="utf-8"))
-    if doc.get("format") != TABLE_FORMAT:
+    if doc.get("format") not in TABLE_FORMATS:
         raise ValueError(
-            f"{js}: unknown table format {doc.get('format')!r}, expected {TABLE_FORMAT!r}"
+            f"{js}: unknown table format {doc.get('format')!r}, expected one of "
+            f"{', '.join(TABLE_FORMATS)}"
         )
     q = validate_table(np.load(npy, allow_pickle=False), tuple(doc["shape"]))
     meta = TableMeta(
@@ -149,7 +156,9 @@ def load_table(path: str | Path) -> LoadedTable:
 
 
 # -- parameter files (function-approximation learners) -------------------------------------
-PARAMS_FORMAT = "dfrl-params/1"
+#: as TABLE_FORMAT: /2 names the learner ``algo``, /1 ``algorithm``; both are read
+PARAMS_FORMAT = "dfrl-params/2"
+PARAMS_FORMATS = ("dfrl-params/1", PARAMS_FORMAT)
 
 
 @dataclass(frozen=True)
@@ -229,8 +238,10 @@ def load_params(path: str | Path) -> LoadedParams:
 
     npy, js, _ = _paths(path)
     doc = json.loads(js.read_text(encoding="utf-8"))
-    if doc.get("format") != PARAMS_FORMAT:
-        raise ValueError(f"{js}: format {doc.get('format')!r}, expected {PARAMS_FORMAT!r}")
+    if doc.get("format") not in PARAMS_FORMATS:
+        raise ValueError(
+            f"{js}: format {doc.get('format')!r}, expected one of {', '.join(PARAMS_FORMATS)}"
+        )
     layout = [(str(n), tuple(int(d) for d in s)) for n, s in doc["layout"]]
     vec = validate_params(np.load(npy, allow_pickle=False), layout)
     meta = ParamsMeta(

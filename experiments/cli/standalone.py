@@ -447,9 +447,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
         return _fail(str(exc))
     table = str(args.table) if args.table is not None else None
     from dfrl.robots.learners import is_tabular
-    from dfrl.robots.tables import PARAMS_FORMAT, sidecar_format
+    from dfrl.robots.tables import PARAMS_FORMATS, sidecar_format
 
-    if table is not None and sidecar_format(args.table) == PARAMS_FORMAT:
+    if table is not None and sidecar_format(args.table) in PARAMS_FORMATS:
         return _eval_function_learner(args, cfg, args.table)
     if table is None and not is_tabular(cfg.algo):
         return _eval_function_learner(args, cfg, None)

@@ -34,7 +34,7 @@ crash leaves either the old or the new checkpoint, never a torn one.
 The final tables (``tables/<robot>.npy``, ``.json``, ``.visits.npy``, in the format of
 :mod:`dfrl.robots.tables`) are replaced the same way by :func:`save_table_atomically`, a
 function learner's final parameters (``params/<robot>.npy`` + ``.json``, format
-``dfrl-params/1``) by :func:`save_params_atomically`.
+``dfrl-params/2``) by :func:`save_params_atomically`.
 """
 
 from __future__ import annotations

@@ -132,6 +132,7 @@ def test_sidecar_names_the_learner_algo_and_one_saying_algorithm_still_loads(
     save_table(tmp_path / "new", q, TableMeta("sarsa", "r4", 3, 100, ["a", "b"], {}))
     doc = json.loads((tmp_path / "new.json").read_text())
     assert doc["algo"] == "sarsa" and "algorithm" not in doc
+    assert doc["format"] == "dfrl-qtable/2"
     # a sidecar written by hand the way dfrl wrote them before (key "algorithm")
     np.save(tmp_path / "old.npy", q)
     (tmp_path / "old.json").write_text(
@@ -153,6 +154,11 @@ def test_sidecar_names_the_learner_algo_and_one_saying_algorithm_still_loads(
     old = load_table(tmp_path / "old.npy")
     assert old.meta == TableMeta("qlearning", "r1", 7, 50, ["a", "b"], {"n_states": 2})
     np.testing.assert_array_equal(old.q, q)
+    # a format this dfrl does not know is refused, naming the file and the formats it reads
+    doc = json.loads((tmp_path / "old.json").read_text())
+    (tmp_path / "old.json").write_text(json.dumps({**doc, "format": "dfrl-qtable/9"}))
+    with pytest.raises(ValueError, match="old.json: unknown table format 'dfrl-qtable/9'"):
+        load_table(tmp_path / "old.npy")
 
 
 def test_params_sidecar_saying_algorithm_still_loads(tmp_path: Path) -> None:

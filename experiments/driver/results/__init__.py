@@ -22,7 +22,7 @@ Layout (see ``experiments/README.md``)::
     nodes/<robot>.json     node configs; logs/<robot>.err, logs/launch_<agent>.out
     tables/<robot>.npy     final tables (robots.tables format)
     params/<robot>.npy     a function learner's (linear, dqn) final parameters instead
-                           (+ .json, format dfrl-params/1)
+                           (+ .json, format dfrl-params/2)
     checkpoint/<robot>.npy each robot's last checkpoint (table or parameters)
     tensorboard/           with ``--tensorboard``: event files from the CSVs (:mod:`.tensorboard`)
     tidy/                  steps.csv, shares.csv, rounds.csv: long tables, unique keys

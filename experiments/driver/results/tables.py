@@ -1,7 +1,7 @@
 """The saved tables of a results folder: their sums (what the summary reports), the check that
 each is whole, and tables kept from the robots' last checkpoints. A function learner (``linear``,
 ``dqn``) saves its parameter vector as ``params/<robot>.npy`` (+ ``.json``, format
-``dfrl-params/1``) instead of a table: everything here treats it as its table (the sum is the
+``dfrl-params/2``) instead of a table: everything here treats it as its table (the sum is the
 sum of the parameters).
 
 A robot process writes ``tables/<robot>.npy`` at its end and again after a share that comes

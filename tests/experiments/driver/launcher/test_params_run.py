@@ -56,7 +56,7 @@ def _assert_federated(out: Path, agent: str, rounds: int, robots: tuple[str, ...
         final = np.load(out / "params" / f"{rid}.npy")
         assert final.ndim == 1 and table_digest(final) == digests[-1]
         side = json.loads((out / "params" / f"{rid}.json").read_text())
-        assert side["format"] == "dfrl-params/1"
+        assert side["format"] == "dfrl-params/2"
         cp = load_checkpoint(out / "checkpoint", rid)
         assert cp.q is None and table_digest(cp.params) == digests[-1]
         assert (out / "params" / "history" / f"{rid}_it{cp.iteration}.npy").is_file()
