@@ -72,8 +72,8 @@ from pathlib import Path
 from typing import Any
 
 from dfrl.experiments import processes
-from dfrl.experiments.science.statistics import interval
 from dfrl.experiments.tools.bench import round as round_bench
+from dfrl.experiments.tools.bench.migrate import paired_ratio
 
 #: the sizes of issue 38: the paper's table, a dqn network, two larger vectors
 SIZES = (243, 4931, 20000, 100000)
@@ -268,13 +268,11 @@ def dfrl_run(
 
 
 def ratio_interval(pairs: list[tuple[float, float]]) -> tuple[float, float | None, float | None]:
-    """The geometric mean of the pairs' ``dfrl / flower`` and its 95% t interval (from the
-    logarithms; None, None for one pair). ``pairs``: (flower_ms, dfrl_ms) each."""
-    logs = [math.log(d / f) for f, d in pairs]
-    iv = interval(logs)
-    if math.isnan(iv.half):
-        return math.exp(iv.mean), None, None
-    return math.exp(iv.mean), math.exp(iv.low), math.exp(iv.high)
+    """The geometric mean of the pairs' ``dfrl / flower`` and its 95% t interval (None, None for
+    one pair): :func:`.migrate.paired_ratio`, as ``dfrl bench migrate --against`` compares two
+    checkouts. ``pairs``: (flower_ms, dfrl_ms) each."""
+    r = paired_ratio([d for _, d in pairs], [f for f, _ in pairs])
+    return (r.mean, None, None) if math.isnan(r.low) else (r.mean, r.low, r.high)
 
 
 def _geomean(values: list[float]) -> float:
