@@ -32,6 +32,12 @@ seed(transfer, transfer('mig-7f3a', move, node('127.0.0.1', 40001, [id(peer)]),
                         1)) :-
     floats(100, Fs),
     fast_term_serialized(Fs, Packed).
+%   a message to an agent, binary since agent_post/5 sends binary frames on an authenticated
+%   connection: a tree clone's table handed to its parent (a packed vector)
+seed(post, post(platform, dfrl_tree_msg, link('mig-7f3a'),
+                [msg(key(fr, 3), up(c1, [r2-fts(Packed)]))])) :-
+    floats(100, Fs),
+    fast_term_serialized(Fs, Packed).
 seed(numbers, fuzz(numbers, [0, 1, -1, 127, 128, -129, 65535, 72057594037927935,
                              72057594037927936, -72057594037927937, Big, NegBig],
                    [1.5, -0.0, 1.0e300, 5.0e-324])) :-
